@@ -1,0 +1,190 @@
+"""The scene description: plain Python and numpy data, no rendering backend.
+
+The parser (:mod:`drpt.scene.parser`) turns a scene file into a :class:`Scene`;
+the renderer and the Mitsuba exporter only read it. Everything is flattened
+into world space at load time: ``Transform`` and nested ``Group`` blocks are
+applied, OBJ faces are triangulated and *unwelded* (every triangle carries its
+own three corners), and materials are referenced by index into
+:attr:`Scene.materials`.
+
+Conventions
+-----------
+* Right-handed world space, no preferred up axis (the camera's ``up`` decides).
+* ``PerspectiveCamera.fov`` is the *full* field of view in degrees measured
+  across the image's **vertical** axis (height); the horizontal extent follows
+  from the aspect ratio. The exporter sets Mitsuba's ``fov_axis="y"`` to match.
+* ``OrthographicCamera.size`` is the full world-space height of the view.
+* Colors are linear RGB floats.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+Vec3 = tuple[float, float, float]
+
+
+# --------------------------------------------------------------------- camera
+@dataclass
+class PerspectiveCamera:
+    center: Vec3
+    direction: Vec3  # need not be normalized
+    up: Vec3  # need not be orthogonal to direction
+    fov: float  # full vertical field of view, degrees, in (0, 180)
+
+
+@dataclass
+class OrthographicCamera:
+    center: Vec3
+    direction: Vec3
+    up: Vec3
+    size: float  # full vertical extent of the view, world units
+
+
+Camera = PerspectiveCamera | OrthographicCamera
+
+
+# ------------------------------------------------------------------ materials
+@dataclass
+class Material:
+    """One material, from an MTL ``newmtl`` or a ``Materials{}`` entry.
+
+    Fields keep the file's own meaning; the renderer decides how to use them.
+    ``None`` means "not given in the file".
+    """
+
+    name: str
+    kd: Vec3 = (0.8, 0.8, 0.8)  # diffuse albedo (MTL Kd / diffuseColor)
+    ks: Vec3 = (0.0, 0.0, 0.0)  # specular color (MTL Ks / specularColor)
+    ns: float = 1.0  # Phong exponent (MTL Ns / exponent)
+    emission: Vec3 = (0.0, 0.0, 0.0)  # radiance (MTL Ke, Le or ke)
+    roughness: float | None = None  # seed's Roughness, PBR Pr
+    metalness: float | None = None  # seed's Mentalness, PBR Pm
+    ior: float | None = None  # MTL Ni / indexOfRefraction
+    dissolve: float = 1.0  # MTL d, or 1 - Tr
+    illum: int | None = None  # MTL illum model
+    reflective: Vec3 = (0.0, 0.0, 0.0)  # 6.837 reflectiveColor
+    transparent: Vec3 = (0.0, 0.0, 0.0)  # 6.837 transparentColor
+    map_kd: Path | None = None  # diffuse texture, absolute path
+    origin: str = ""  # "file:line" where it was defined, for messages
+
+    @property
+    def is_emissive(self) -> bool:
+        return max(self.emission) > 0.0
+
+
+# ------------------------------------------------------------------- geometry
+@dataclass
+class Triangles:
+    """All triangles of the scene, world space, unwelded.
+
+    ``positions[f, k]`` is corner ``k`` of face ``f``. The geometric normal is
+    ``cross(p1 - p0, p2 - p0)`` (counter-clockwise winding is the front).
+    ``normals`` holds unit per-corner shading normals; it is ``None`` when no
+    face of the scene had any, and faces without their own normals get their
+    geometric normal. ``uvs`` is ``None`` when no face had texture
+    coordinates; faces without get (0, 0).
+    """
+
+    positions: np.ndarray  # (F, 3, 3) float64
+    material: np.ndarray  # (F,) int32, index into Scene.materials
+    normals: np.ndarray | None = None  # (F, 3, 3) float64
+    uvs: np.ndarray | None = None  # (F, 3, 2) float64
+
+    def __len__(self) -> int:
+        return int(self.positions.shape[0])
+
+    @staticmethod
+    def empty() -> "Triangles":
+        return Triangles(np.zeros((0, 3, 3)), np.zeros(0, np.int32))
+
+
+@dataclass
+class Spheres:
+    center: np.ndarray  # (S, 3) float64
+    radius: np.ndarray  # (S,) float64
+    material: np.ndarray  # (S,) int32
+
+    def __len__(self) -> int:
+        return int(self.radius.shape[0])
+
+    @staticmethod
+    def empty() -> "Spheres":
+        return Spheres(np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int32))
+
+
+@dataclass
+class Planes:
+    """Infinite planes ``dot(normal, x) == offset`` (two-sided)."""
+
+    normal: np.ndarray  # (P, 3) float64, unit
+    offset: np.ndarray  # (P,) float64
+    material: np.ndarray  # (P,) int32
+
+    def __len__(self) -> int:
+        return int(self.offset.shape[0])
+
+    @staticmethod
+    def empty() -> "Planes":
+        return Planes(np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int32))
+
+
+# --------------------------------------------------------------------- lights
+@dataclass
+class PointLight:
+    position: Vec3
+    color: Vec3  # intensity (W/sr-like units)
+    attenuation: Vec3 = (1.0, 0.0, 0.0)  # constant, linear, quadratic
+
+
+@dataclass
+class DirectionalLight:
+    direction: Vec3  # direction the light travels
+    color: Vec3  # irradiance on a surface facing the light
+
+
+@dataclass
+class Skybox:
+    path: Path  # lat-long .hdr or .exr, absolute path
+    radius: float = 1000.0  # the seed's R
+
+
+Light = PointLight | DirectionalLight | Skybox
+
+
+@dataclass
+class Background:
+    color: Vec3 = (0.0, 0.0, 0.0)  # radiance of rays that escape
+    ambient: Vec3 = (0.0, 0.0, 0.0)  # Whitted ambient term
+
+
+# ---------------------------------------------------------------------- scene
+@dataclass
+class Scene:
+    path: Path  # the scene file
+    camera: Camera
+    materials: list[Material]
+    triangles: Triangles = field(default_factory=Triangles.empty)
+    spheres: Spheres = field(default_factory=Spheres.empty)
+    planes: Planes = field(default_factory=Planes.empty)
+    lights: list[Light] = field(default_factory=list)
+    background: Background = field(default_factory=Background)
+
+    @property
+    def emissive_materials(self) -> list[int]:
+        return [i for i, m in enumerate(self.materials) if m.is_emissive]
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """World-space bounding box of all bounded geometry (planes excluded)."""
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        if len(self.triangles):
+            p = self.triangles.positions.reshape(-1, 3)
+            lo, hi = np.minimum(lo, p.min(0)), np.maximum(hi, p.max(0))
+        if len(self.spheres):
+            c, r = self.spheres.center, self.spheres.radius[:, None]
+            lo, hi = np.minimum(lo, (c - r).min(0)), np.maximum(hi, (c + r).max(0))
+        return lo, hi
