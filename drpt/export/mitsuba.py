@@ -1,0 +1,588 @@
+"""The drpt :class:`~drpt.scene.model.Scene` as a Mitsuba 3 scene.
+
+Two outputs of one description, built by the same code so they cannot drift:
+
+* :func:`to_mitsuba_dict` -- a dict for ``mi.load_dict``; triangle meshes are
+  ``mi.Mesh`` objects filled in memory from numpy (needs a Mitsuba variant
+  set, e.g. ``mi.set_variant("llvm_ad_rgb")``).
+* :func:`write_xml` -- a Mitsuba XML file (``version="3.0.0"``) plus one binary
+  little-endian PLY per material in a folder ``<xml stem>_meshes`` beside it
+  (referenced by relative path, which ``mi.load_file`` resolves against the
+  XML's folder). Writing needs numpy only, not Mitsuba.
+
+Both give the same scene, and both list emitters in one fixed order
+(top-level lights, then the area emitters of shapes in document order), so
+with the same ``seed`` the dict and ``mi.load_file(xml, optimize=False)``
+render the same image sample for sample. The default ``optimize=True`` of
+``mi.load_file`` merges meshes whose BSDFs are identical (in Mitsuba 3.9 the
+plane ``rectangle`` counts as a mesh and becomes float32 triangles) and
+orders the area emitters of meshes nondeterministically: same expectation,
+other random numbers. Every transform is written as an explicit 4x4 matrix.
+
+Equivalences (each one checked by ``tests/test_export.py``)
+-----------------------------------------------------------
+Camera
+    drpt maps pixel ``(x, y)`` (continuous, from the top-left, pixel centers
+    at +0.5) to ``d = normalize(f + sx*r + sy*u)`` with ``f = normalize(dir)``,
+    ``r = normalize(cross(f, up))``, ``u = cross(r, f)``, ``t = tan(fov/2)``,
+    ``sx = (2x/W - 1) t W/H``, ``sy = (1 - 2y/H) t``. Mitsuba's ``look_at``
+    puts camera-space +x along ``cross(up, f)`` (= ``-r``, the image's
+    *left*) and its film x grows to the image's right, so the plain
+    ``look_at(center, center + f, up)`` matrix reproduces drpt exactly, no
+    mirroring. ``fov_axis="y"`` makes ``fov`` the full vertical angle.
+    ``orthographic``: Mitsuba's unit view spans camera x in [-1, 1] and
+    y in [-H/W, H/W], so ``to_world = look_at @ scale(s, s, 1)`` with
+    ``s = size * W / (2H)`` gives a full vertical extent of ``size``.
+    ``near_clip``/``far_clip`` are derived from the scene size (tiny / beyond
+    the exported planes).
+Film, sampler, integrator
+    ``hdrfilm`` (``rgb``, ``float32``, ``box`` reconstruction filter, so a
+    pixel is the plain average of its samples), ``independent`` sampler with
+    ``sample_count`` and ``seed``, ``path`` integrator with ``max_depth``
+    (-1 infinite, 1 emitters seen directly, 2 direct lighting), ``rr_depth``,
+    ``hide_emitters=False``.
+Materials
+    Every material is ``twosided(diffuse(reflectance=kd))``: drpt surfaces
+    are two-sided, Mitsuba BSDFs one-sided. Only diffuse + emission for now;
+    the other fields are ignored. ``map_kd`` becomes a ``bitmap`` texture
+    (``filter_type="bilinear"``, ``wrap_mode="repeat"``, sRGB-decoded for
+    8-bit files as Mitsuba does by default) and replaces ``kd``. A textured
+    mesh without uvs gets explicit uv (0, 0) (drpt's lookup; Mitsuba would
+    otherwise use barycentrics). Textures on spheres/planes use Mitsuba's
+    own parameterization, not yet matched to drpt's.
+Texture coordinates
+    drpt stores uvs as written in the OBJ file: ``v = 0`` is the *bottom* row
+    of the image. Mitsuba's bitmap lookup has ``v = 0`` at the *top* row
+    (first row in memory); its OBJ loader flips ``v -> 1 - v`` on load, but
+    in-memory meshes and PLY files are used as given. The exporter therefore
+    writes ``(u, 1 - v)`` both in memory and in the PLY files.
+Emission
+    A material with emission > 0 gives its mesh (and each sphere/plane using
+    it) an ``area`` emitter with ``radiance = emission``. Mitsuba's area
+    emitter is ONE-sided: ``eval`` returns radiance only when
+    ``cos_theta(si.wi) > 0`` with ``wi`` in the *shading* frame, and light
+    sampling (``sample_direction``/``pdf_direction``) accepts only
+    ``dot(d, n) < 0`` with ``n`` from ``Mesh::sample_position``: the
+    barycentric interpolation of the *vertex normals* when the mesh has them,
+    else the geometric normal ``cross(p1 - p0, p2 - p0)``. So a triangle
+    emits toward the side its interpolated shading normal points to (its
+    counter-clockwise front when it has no normals). drpt must emit only
+    from that same side. Spheres emit outward; planes toward ``normal``.
+Planes
+    Mitsuba has no infinite plane: each becomes a ``rectangle`` with
+    half-size ``1e3 * L`` (``L`` = diagonal of the box of all bounded
+    geometry and the camera, at least 1), centered at the projection of that
+    box's center onto the plane, with ``+z`` (the rectangle's normal) along
+    the plane's ``normal``.
+Lights
+    ``PointLight`` -> ``point`` (``intensity = color``). Mitsuba falls off
+    with the physical inverse square only; drpt's ``attenuation``
+    ``(c, l, q)`` divides on top of that by ``c + l d + q d^2``, so only
+    ``(1, 0, 0)`` is equivalent: others are exported as ``(1, 0, 0)`` with a
+    warning. ``DirectionalLight`` -> ``directional`` (``direction`` = the
+    direction light travels, ``irradiance = color``). ``Skybox`` ->
+    ``envmap`` with an identity ``to_world`` and a warning (the orientation
+    match is not settled yet). ``Background.color`` non-zero -> ``constant``
+    emitter, only when there is no ``Skybox``. ``Background.ambient`` (a
+    Whitted term) has no Mitsuba equivalent and is ignored.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import warnings
+from dataclasses import dataclass
+from os import PathLike
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from drpt.errors import DrptError
+from drpt.scene.model import (
+    DirectionalLight,
+    Material,
+    OrthographicCamera,
+    PerspectiveCamera,
+    PointLight,
+    Scene,
+    Skybox,
+)
+
+__all__ = ["to_mitsuba_dict", "write_xml", "look_at_matrix", "PLANE_SCALE"]
+
+#: Half-size of an exported plane rectangle, in units of the scene diagonal.
+PLANE_SCALE = 1e3
+
+
+# --------------------------------------------------------- value wrappers
+# The scene is first described with these small typed values so that the
+# dict and the XML writers render the very same description.
+@dataclass(frozen=True)
+class _RGB:
+    value: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class _Point:
+    value: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class _Vector:
+    value: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class _Matrix:
+    value: np.ndarray  # (4, 4)
+
+
+@dataclass
+class _MeshData:
+    """One triangle mesh (all faces of one material), unwelded."""
+
+    name: str
+    positions: np.ndarray  # (F, 3, 3)
+    normals: np.ndarray | None  # (F, 3, 3)
+    uvs: np.ndarray | None  # (F, 3, 2), already in Mitsuba's convention
+    bsdf: dict
+    emitter: dict | None
+
+    def arrays(self):
+        f = self.positions.shape[0]
+        pos = self.positions.reshape(-1, 3).astype(np.float32)
+        faces = np.arange(3 * f, dtype=np.uint32).reshape(f, 3)
+        nrm = None if self.normals is None else self.normals.reshape(-1, 3).astype(np.float32)
+        uv = None if self.uvs is None else self.uvs.reshape(-1, 2).astype(np.float32)
+        return pos, faces, nrm, uv
+
+
+_TAGS = {
+    "perspective": "sensor", "orthographic": "sensor",
+    "hdrfilm": "film", "box": "rfilter", "independent": "sampler",
+    "path": "integrator",
+    "twosided": "bsdf", "diffuse": "bsdf",
+    "area": "emitter", "point": "emitter", "directional": "emitter",
+    "envmap": "emitter", "constant": "emitter",
+    "sphere": "shape", "rectangle": "shape", "ply": "shape",
+    "bitmap": "texture",
+}
+
+
+# ------------------------------------------------------------ geometry
+def _normalize(v) -> np.ndarray:
+    v = np.asarray(v, dtype=np.float64)
+    n = np.linalg.norm(v)
+    if not n > 0:
+        raise DrptError(f"cannot export: zero-length vector {tuple(v)}")
+    return v / n
+
+
+def look_at_matrix(origin, target, up) -> np.ndarray:
+    """Mitsuba's ``ScalarTransform4f().look_at(origin, target, up)`` as numpy.
+
+    Columns: camera +x = ``normalize(cross(up, dir))`` (the image's left),
+    +y = ``cross(dir, x)``, +z = ``dir``, translation = ``origin``.
+    """
+    origin = np.asarray(origin, dtype=np.float64)
+    d = _normalize(np.asarray(target, dtype=np.float64) - origin)
+    left = np.cross(_normalize(up), d)
+    if not np.linalg.norm(left) > 1e-12:
+        raise DrptError("cannot export camera: 'up' is parallel to the view direction")
+    left = left / np.linalg.norm(left)
+    new_up = np.cross(d, left)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, new_up, d, origin
+    return m
+
+
+def _frame_matrix(center, normal, half_size) -> np.ndarray:
+    """Rectangle to_world: [-1,1]^2 x {0} -> plane, +z -> normal."""
+    n = _normalize(normal)
+    a = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
+    t = _normalize(np.cross(a, n))
+    b = np.cross(n, t)  # (t, b, n) right-handed: cross(t, b) = n
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = t * half_size, b * half_size, n, center
+    return m
+
+
+def _extent(scene: Scene) -> tuple[np.ndarray, float]:
+    """Center and diagonal (>= 1) of bounded geometry plus the camera."""
+    lo, hi = scene.bounds()
+    cam = np.asarray(scene.camera.center, dtype=np.float64)
+    lo, hi = np.minimum(lo, cam), np.maximum(hi, cam)
+    return 0.5 * (lo + hi), max(float(np.linalg.norm(hi - lo)), 1.0)
+
+
+def _f3(v) -> tuple[float, float, float]:
+    a = [float(x) for x in v]
+    if len(a) != 3 or not all(math.isfinite(x) for x in a):
+        raise DrptError(f"cannot export: bad 3-vector {v!r}")
+    return (a[0], a[1], a[2])
+
+
+# ------------------------------------------------------ the description
+def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
+              rr_depth: int, seed: int) -> dict:
+    if int(width) <= 0 or int(height) <= 0:
+        raise DrptError(f"image size must be positive, got {width}x{height}")
+    if int(spp) <= 0:
+        raise DrptError(f"samples per pixel must be positive, got {spp}")
+    width, height = int(width), int(height)
+    center, diag = _extent(scene)
+    plane_half = PLANE_SCALE * diag
+    cam_dist = float(np.linalg.norm(np.asarray(scene.camera.center) - center))
+    far_clip = 10.0 * (plane_half + cam_dist + diag)
+    near_clip = 1e-6 * diag
+
+    out: dict[str, Any] = {"type": "scene"}
+    out["integrator"] = {
+        "type": "path",
+        "max_depth": int(max_depth),
+        "rr_depth": int(rr_depth),
+        "hide_emitters": False,
+    }
+
+    cam = scene.camera
+    origin = np.asarray(_f3(cam.center))
+    fwd = _normalize(_f3(cam.direction))
+    to_world = look_at_matrix(origin, origin + fwd, _f3(cam.up))
+    sensor: dict[str, Any]
+    if isinstance(cam, PerspectiveCamera):
+        if not 0.0 < float(cam.fov) < 180.0:
+            raise DrptError(f"cannot export camera: fov {cam.fov} not in (0, 180)")
+        sensor = {"type": "perspective", "fov_axis": "y", "fov": float(cam.fov)}
+    elif isinstance(cam, OrthographicCamera):
+        if not float(cam.size) > 0.0:
+            raise DrptError(f"cannot export camera: size {cam.size} must be positive")
+        s = float(cam.size) * width / (2.0 * height)
+        to_world = to_world @ np.diag([s, s, 1.0, 1.0])
+        sensor = {"type": "orthographic"}
+    else:  # pragma: no cover - model has only these two
+        raise DrptError(f"cannot export camera of type {type(cam).__name__}")
+    sensor["near_clip"] = near_clip
+    sensor["far_clip"] = far_clip
+    sensor["to_world"] = _Matrix(to_world)
+    sensor["film"] = {
+        "type": "hdrfilm",
+        "width": width,
+        "height": height,
+        "pixel_format": "rgb",
+        "component_format": "float32",
+        "rfilter": {"type": "box"},
+    }
+    sensor["sampler"] = {"type": "independent", "sample_count": int(spp), "seed": int(seed)}
+    out["sensor"] = sensor
+
+    # -- materials
+    bsdfs = [_bsdf(m) for m in scene.materials]
+    emitters = [
+        {"type": "area", "radiance": _RGB(_f3(m.emission))} if m.is_emissive else None
+        for m in scene.materials
+    ]
+    nmat = len(scene.materials)
+
+    def check_mat(idx: np.ndarray, what: str) -> None:
+        if idx.size and (idx.min() < 0 or idx.max() >= nmat):
+            raise DrptError(f"cannot export: {what} references a material index out of range")
+
+    # -- triangle meshes, one per material
+    tri = scene.triangles
+    if len(tri):
+        check_mat(tri.material, "a triangle")
+        for mi_ in np.unique(tri.material):
+            sel = tri.material == mi_
+            uvs = None
+            if tri.uvs is not None:
+                uvs = tri.uvs[sel].copy()
+            elif scene.materials[mi_].map_kd is not None:
+                # drpt looks textures up at uv (0, 0) without uvs; Mitsuba
+                # would use barycentrics, so give it explicit zeros.
+                uvs = np.zeros((int(sel.sum()), 3, 2))
+            if uvs is not None:
+                uvs[..., 1] = 1.0 - uvs[..., 1]  # OBJ v=0 bottom -> Mitsuba v=0 top
+            name = _mesh_name(int(mi_), scene.materials[mi_])
+            out[f"mesh_{name}"] = _MeshData(
+                name=name,
+                positions=tri.positions[sel],
+                normals=None if tri.normals is None else tri.normals[sel],
+                uvs=uvs,
+                bsdf=bsdfs[mi_],
+                emitter=emitters[mi_],
+            )
+
+    # -- spheres
+    sph = scene.spheres
+    check_mat(sph.material, "a sphere")
+    for i in range(len(sph)):
+        r = float(sph.radius[i])
+        if not r > 0:
+            raise DrptError(f"cannot export sphere {i}: radius {r} must be positive")
+        shape = {"type": "sphere", "center": _Point(_f3(sph.center[i])), "radius": r,
+                 "bsdf": bsdfs[sph.material[i]]}
+        if emitters[sph.material[i]] is not None:
+            shape["emitter"] = emitters[sph.material[i]]
+        out[f"sphere_{i}"] = shape
+
+    # -- planes
+    pl = scene.planes
+    check_mat(pl.material, "a plane")
+    for i in range(len(pl)):
+        n = _normalize(pl.normal[i])
+        d = float(pl.offset[i]) / float(np.linalg.norm(pl.normal[i]))
+        p0 = center - (float(n @ center) - d) * n
+        shape = {"type": "rectangle", "to_world": _Matrix(_frame_matrix(p0, n, plane_half)),
+                 "bsdf": bsdfs[pl.material[i]]}
+        if emitters[pl.material[i]] is not None:
+            shape["emitter"] = emitters[pl.material[i]]
+        out[f"plane_{i}"] = shape
+
+    # -- lights
+    has_sky = any(isinstance(light, Skybox) for light in scene.lights)
+    for i, light in enumerate(scene.lights):
+        if isinstance(light, PointLight):
+            att = tuple(float(a) for a in light.attenuation)
+            if att != (1.0, 0.0, 0.0):
+                warnings.warn(
+                    f"point light {i}: attenuation {att} has no Mitsuba equivalent "
+                    "(Mitsuba's point light falls off with inverse square only, which "
+                    "matches drpt's (1, 0, 0)); exported as (1, 0, 0)",
+                    stacklevel=3,
+                )
+            out[f"light_{i}"] = {"type": "point", "position": _Point(_f3(light.position)),
+                                 "intensity": _RGB(_f3(light.color))}
+        elif isinstance(light, DirectionalLight):
+            out[f"light_{i}"] = {"type": "directional",
+                                 "direction": _Vector(tuple(_normalize(_f3(light.direction)))),
+                                 "irradiance": _RGB(_f3(light.color))}
+        elif isinstance(light, Skybox):
+            # orientation fixed in issue 4
+            if not Path(light.path).is_file():
+                raise DrptError(f"skybox image {light.path} not found")
+            warnings.warn(
+                f"skybox {light.path}: exported as a Mitsuba envmap with an identity "
+                "to_world; its orientation relative to drpt is not verified yet",
+                stacklevel=3,
+            )
+            out[f"light_{i}"] = {"type": "envmap", "filename": str(Path(light.path).resolve()),
+                                 "to_world": _Matrix(np.eye(4))}
+        else:  # pragma: no cover
+            raise DrptError(f"cannot export light of type {type(light).__name__}")
+    bg = _f3(scene.background.color)
+    if max(bg) > 0.0 and not has_sky:
+        out["background"] = {"type": "constant", "radiance": _RGB(bg)}
+    # Top-level emitters first, then shapes (whose area emitters Mitsuba
+    # lists after all top-level ones anyway): one fixed order for both outputs.
+    head = {k: v for k, v in out.items() if not _is_shape(v)}
+    shapes = {k: v for k, v in out.items() if _is_shape(v)}
+    return {**head, **shapes}
+
+
+def _is_shape(node: Any) -> bool:
+    return isinstance(node, _MeshData) or (isinstance(node, dict) and _TAGS.get(node.get("type")) == "shape")
+
+
+def _mesh_name(index: int, m: Material) -> str:
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", m.name or "")[:40].strip("_.")
+    return f"{index:03d}_{safe}" if safe else f"{index:03d}"
+
+
+def _bsdf(m: Material) -> dict:
+    if m.map_kd is not None:
+        if not Path(m.map_kd).is_file():
+            raise DrptError(f"material {m.name!r} ({m.origin or '?'}): texture {m.map_kd} not found")
+        refl: Any = {"type": "bitmap", "filename": str(Path(m.map_kd).resolve()),
+                     "filter_type": "bilinear", "wrap_mode": "repeat"}
+    else:
+        refl = _RGB(_f3(m.kd))
+    return {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": refl}}
+
+
+# ---------------------------------------------------------------- dict
+def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
+                    max_depth: int = -1, rr_depth: int = 5, seed: int = 0) -> dict:
+    """The scene as a dict for ``mi.load_dict`` (a Mitsuba variant must be set).
+
+    Triangle meshes are in-memory ``mi.Mesh`` objects (one per material),
+    the rest are plain plugin dicts. See the module docs for the mapping.
+    """
+    import mitsuba as mi
+
+    if mi.variant() is None:
+        raise DrptError("Mitsuba has no variant set; call mi.set_variant('llvm_ad_rgb') first")
+    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed)
+    # Shapes and top-level emitters are instantiated here, in document order.
+    # load_dict would otherwise put the ready-made mi.Mesh objects before
+    # everything else, while mi.load_file(..., optimize=False) keeps the XML's
+    # document order. Emitter order decides which light a sample picks, so
+    # this keeps dict and XML renders sample for sample.
+    out: dict[str, Any] = {}
+    for key, node in desc.items():
+        if key in ("type", "integrator", "sensor"):
+            out[key] = _to_dict(node, mi)
+        elif isinstance(node, _MeshData):
+            out[key] = _build_mesh(node, mi)
+        else:
+            out[key] = mi.load_dict(_to_dict(node, mi))
+    return out
+
+
+def _to_dict(node: Any, mi) -> Any:
+    if isinstance(node, dict):
+        return {k: _to_dict(v, mi) for k, v in node.items()}
+    if isinstance(node, _RGB):
+        return {"type": "rgb", "value": list(node.value)}
+    if isinstance(node, _Point):
+        return mi.ScalarPoint3f(*node.value)
+    if isinstance(node, _Vector):
+        return mi.ScalarVector3f(*node.value)
+    if isinstance(node, _Matrix):
+        return mi.ScalarTransform4f(np.asarray(node.value, dtype=np.float64))
+    if isinstance(node, _MeshData):
+        return _build_mesh(node, mi)
+    return node
+
+
+def _build_mesh(md: _MeshData, mi):
+    pos, faces, nrm, uv = md.arrays()
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(_to_dict(md.bsdf, mi))
+    if md.emitter is not None:
+        props["emitter"] = mi.load_dict(_to_dict(md.emitter, mi))
+    mesh = mi.Mesh(md.name, pos.shape[0], faces.shape[0], props,
+                   has_vertex_normals=nrm is not None,
+                   has_vertex_texcoords=uv is not None)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(pos.ravel())
+    params["faces"] = mi.UInt32(faces.ravel())
+    if nrm is not None:
+        params["vertex_normals"] = mi.Float(nrm.ravel())
+    if uv is not None:
+        params["vertex_texcoords"] = mi.Float(uv.ravel())
+    params.update()
+    return mesh
+
+
+# ----------------------------------------------------------------- XML
+def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: int,
+              spp: int, max_depth: int = -1, rr_depth: int = 5, seed: int = 0) -> Path:
+    """Write the scene as Mitsuba 3 XML plus PLY meshes; return the XML path.
+
+    Meshes go to ``<stem>_meshes/<index>_<material>.ply`` beside the XML
+    (binary little endian, unwelded per-corner vertices, ``nx ny nz`` and
+    ``u v`` when the scene has them). The file loads with ``mi.load_file``.
+    """
+    xml_path = Path(out_xml_path)
+    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed)
+    mesh_dir = xml_path.parent / f"{xml_path.stem}_meshes"
+    try:
+        xml_path.parent.mkdir(parents=True, exist_ok=True)
+        lines = ['<?xml version="1.0" encoding="utf-8"?>',
+                 "<!-- written by drpt.export.mitsuba -->",
+                 '<scene version="3.0.0">']
+        for key, node in desc.items():
+            if key == "type":
+                continue
+            if isinstance(node, _MeshData):
+                mesh_dir.mkdir(parents=True, exist_ok=True)
+                ply = mesh_dir / f"{node.name}.ply"
+                _write_ply(ply, *node.arrays())
+                lines += _xml_mesh(node, f"{mesh_dir.name}/{ply.name}", key, 1)
+            else:
+                lines += _xml_plugin(node, None, key, 1)
+        lines.append("</scene>")
+        xml_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    except OSError as e:
+        raise DrptError(f"{xml_path}: cannot write Mitsuba scene: {e.strerror or e}") from e
+    return xml_path
+
+
+def _fmt(x: float) -> str:
+    return repr(float(x))
+
+
+def _xml_plugin(node: dict, name: str | None, ident: str | None, depth: int) -> list[str]:
+    pad = "    " * depth
+    ptype = node["type"]
+    tag = _TAGS[ptype]
+    attrs = f"type={quoteattr(ptype)}"
+    if name is not None:
+        attrs += f" name={quoteattr(name)}"
+    if ident is not None and tag in ("shape", "emitter", "sensor", "integrator"):
+        attrs += f" id={quoteattr(ident)}"
+    lines = [f"{pad}<{tag} {attrs}>"]
+    for k, v in node.items():
+        if k != "type":
+            lines += _xml_value(k, v, depth + 1)
+    lines.append(f"{pad}</{tag}>")
+    return lines
+
+
+def _xml_value(k: str, v: Any, depth: int) -> list[str]:
+    pad = "    " * depth
+    n = quoteattr(k)
+    if isinstance(v, dict):
+        # Nested plugins that are property values (textures) carry a name;
+        # children such as bsdf/emitter/film/sampler/rfilter need none.
+        tag = _TAGS[v["type"]]
+        named = tag == "texture" or k not in ("bsdf", "emitter", "film", "sampler", "rfilter")
+        return _xml_plugin(v, k if named else None, None, depth)
+    if isinstance(v, bool):
+        return [f'{pad}<boolean name={n} value="{str(v).lower()}"/>']
+    if isinstance(v, (int, np.integer)):
+        return [f'{pad}<integer name={n} value="{int(v)}"/>']
+    if isinstance(v, (float, np.floating)):
+        return [f'{pad}<float name={n} value="{_fmt(v)}"/>']
+    if isinstance(v, str):
+        return [f"{pad}<string name={n} value={quoteattr(v)}/>"]
+    if isinstance(v, _RGB):
+        return [f'{pad}<rgb name={n} value="{", ".join(_fmt(c) for c in v.value)}"/>']
+    if isinstance(v, (_Point, _Vector)):
+        tag = "point" if isinstance(v, _Point) else "vector"
+        x, y, z = (_fmt(c) for c in v.value)
+        return [f'{pad}<{tag} name={n} x="{x}" y="{y}" z="{z}"/>']
+    if isinstance(v, _Matrix):
+        vals = " ".join(_fmt(c) for c in np.asarray(v.value).ravel())
+        return [f"{pad}<transform name={n}>", f'{pad}    <matrix value="{vals}"/>',
+                f"{pad}</transform>"]
+    raise TypeError(f"cannot write {k}={v!r} to Mitsuba XML")  # pragma: no cover
+
+
+def _xml_mesh(md: _MeshData, rel_path: str, ident: str, depth: int) -> list[str]:
+    node: dict[str, Any] = {"type": "ply", "filename": rel_path}
+    if md.normals is None:
+        node["face_normals"] = True  # don't let the loader invent smooth normals
+    node["bsdf"] = md.bsdf
+    if md.emitter is not None:
+        node["emitter"] = md.emitter
+    return _xml_plugin(node, None, ident, depth)
+
+
+def _write_ply(path: Path, pos: np.ndarray, faces: np.ndarray,
+               nrm: np.ndarray | None, uv: np.ndarray | None) -> None:
+    """Binary little-endian PLY: float32 vertex props, uchar/uint32 face list."""
+    nv, nf = pos.shape[0], faces.shape[0]
+    props = ["x", "y", "z"]
+    cols = [pos]
+    if nrm is not None:
+        props += ["nx", "ny", "nz"]
+        cols.append(nrm)
+    if uv is not None:
+        props += ["u", "v"]
+        cols.append(uv)
+    vert = np.ascontiguousarray(np.concatenate(cols, axis=1), dtype="<f4")
+    header = ["ply", "format binary_little_endian 1.0", "comment written by drpt",
+              f"element vertex {nv}"]
+    header += [f"property float {p}" for p in props]
+    header += [f"element face {nf}", "property list uchar uint vertex_indices", "end_header"]
+    face_rec = np.zeros(nf, dtype=[("n", "u1"), ("idx", "<u4", (3,))])
+    face_rec["n"] = 3
+    face_rec["idx"] = faces
+    with open(path, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode("ascii"))
+        f.write(vert.tobytes())
+        f.write(face_rec.tobytes())
