@@ -1,0 +1,211 @@
+"""Wavefront MTL material library parser.
+
+Grammar accepted (one statement per line; keywords case-insensitive; ``#``
+starts a comment anywhere on a line; blank lines ignored)::
+
+    newmtl NAME                 start a material (NAME may contain spaces)
+    Kd r g b | Kd v             diffuse color (one value means gray)
+    Ks r g b | Ks v             specular color
+    Ke/Le r g b | v             emitted radiance (``ke`` too: case-insensitive)
+    Ns v                        Phong exponent
+    Ni v                        index of refraction
+    d v  [or d -halo v]         dissolve (opacity)
+    Tr v                        transparency: dissolve = 1 - v
+    illum n                     illumination model (integer)
+    Roughness v | Pr v          roughness (the seed's keyword, PBR extension)
+    Mentalness v | Metalness v | Pm v
+                                metalness (the seed spells it "Mentalness")
+    map_Kd [options] FILE       diffuse texture, relative to the MTL file
+
+Ignored silently: ``Ka``, ``Tf``, ``sharpness``. Other ``map_*`` and texture
+statements (``bump``, ``disp``, ``decal``, ``refl``, ``norm``) and unknown
+statements are ignored with one warning per keyword and file. ``map_Kd``
+options (``-s u v w``, ``-o``, ``-t``, ``-mm``, ``-bm``, ``-boost``,
+``-texres``, ``-clamp``, ``-blendu``, ``-blendv``, ``-cc``, ``-imfchan``,
+``-type``) are skipped with a warning; any other ``-option`` is an error.
+
+Errors (:class:`~drpt.errors.SceneError` at the MTL file and line): a
+statement before any ``newmtl``, a bad or non-finite number, a wrong number of
+values, a missing texture file. Each :class:`Material` gets
+``origin = "file:line"`` of its ``newmtl``. A name defined twice in one file
+warns; the later definition wins.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+from ..errors import SceneError
+from .model import Material
+from .tokens import parse_number, read_text
+
+# map_* options and how many arguments each takes.
+_MAP_OPTIONS = {
+    "-s": 3, "-o": 3, "-t": 3, "-mm": 2, "-bm": 1, "-boost": 1, "-texres": 1,
+    "-clamp": 1, "-blendu": 1, "-blendv": 1, "-cc": 1, "-imfchan": 1, "-type": 1,
+}
+_IGNORED = {"ka", "tf", "sharpness"}
+_OTHER_MAPS = {"bump", "disp", "decal", "refl", "norm"}
+
+
+def _numbers(args: list[str], path: Path, line: int, key: str) -> list[float]:
+    out = []
+    for a in args:
+        v = parse_number(a)
+        if v is None:
+            raise SceneError(path, line, f"{key}: expected a finite number, found '{a}'")
+        out.append(v)
+    return out
+
+
+def _color(args: list[str], path: Path, line: int, key: str) -> tuple[float, float, float]:
+    if args and args[0].lower() in ("spectral", "xyz"):
+        raise SceneError(path, line, f"{key} {args[0]} colors are not supported; give r g b")
+    vals = _numbers(args, path, line, key)
+    if len(vals) == 1:
+        return (vals[0], vals[0], vals[0])
+    if len(vals) == 3:
+        return (vals[0], vals[1], vals[2])
+    raise SceneError(path, line, f"{key}: expected 1 or 3 numbers, found {len(vals)}")
+
+
+def _scalar(args: list[str], path: Path, line: int, key: str) -> float:
+    vals = _numbers(args, path, line, key)
+    if len(vals) != 1:
+        raise SceneError(path, line, f"{key}: expected 1 number, found {len(vals)}")
+    return vals[0]
+
+
+def texture_path(args: list[str], base: Path, path: Path, line: int, key: str) -> Path:
+    """Resolve a ``map_*`` statement's file name (after skipping options).
+
+    ``base`` is the directory names are relative to; errors are reported at
+    ``path``:``line``. The file must exist.
+    """
+    i = 0
+    skipped = []
+    while i < len(args) and args[i].startswith("-") and parse_number(args[i]) is None:
+        opt = args[i].lower()
+        if opt not in _MAP_OPTIONS:
+            raise SceneError(path, line, f"{key}: unsupported option '{args[i]}'")
+        skipped.append(args[i])
+        i += 1
+        if opt in ("-s", "-o", "-t"):  # 1 to 3 numbers
+            k = 0
+            while k < 3 and i < len(args) - 1 and parse_number(args[i]) is not None:
+                i += 1
+                k += 1
+            if k == 0:
+                raise SceneError(path, line, f"{key}: option '{opt}' needs 1 to 3 numbers")
+        else:
+            n = _MAP_OPTIONS[opt]
+            if len(args) - i < n:
+                raise SceneError(path, line, f"{key}: option '{opt}' needs {n} value(s)")
+            i += n
+    if i >= len(args):
+        raise SceneError(path, line, f"{key}: missing file name")
+    if skipped:
+        warnings.warn(f"{path}:{line}: {key} options {' '.join(skipped)} are ignored", stacklevel=2)
+    name = " ".join(args[i:])
+    tex = (base / name).resolve()
+    if not tex.is_file() and "\\" in name:
+        alt = (base / name.replace("\\", "/")).resolve()
+        if alt.is_file():
+            tex = alt
+    if not tex.is_file():
+        raise SceneError(path, line, f"texture file not found: {tex}")
+    return tex
+
+
+def apply_field(mat: Material, key: str, args: list[str], path: Path, line: int,
+                base: Path, warned: set[str] | None = None) -> Material:
+    """Apply one MTL statement (``key`` lower-case) to ``mat``; return the new material.
+
+    Shared with the scene parser, which accepts MTL-style fields inside
+    ``Material``/``PhongMaterial`` blocks. Unknown keys warn (once per key if
+    ``warned`` is given) and leave ``mat`` unchanged.
+    """
+    if key == "kd":
+        return replace(mat, kd=_color(args, path, line, "Kd"))
+    if key == "ks":
+        return replace(mat, ks=_color(args, path, line, "Ks"))
+    if key in ("ke", "le"):
+        return replace(mat, emission=_color(args, path, line, key))
+    if key == "ns":
+        return replace(mat, ns=_scalar(args, path, line, "Ns"))
+    if key == "ni":
+        return replace(mat, ior=_scalar(args, path, line, "Ni"))
+    if key == "d":
+        if args and args[0].lower() == "-halo":
+            args = args[1:]
+        return replace(mat, dissolve=_scalar(args, path, line, "d"))
+    if key == "tr":
+        return replace(mat, dissolve=1.0 - _scalar(args, path, line, "Tr"))
+    if key == "illum":
+        if len(args) != 1 or not args[0].lstrip("+-").isdigit():
+            raise SceneError(path, line, f"illum: expected one integer, found '{' '.join(args)}'")
+        return replace(mat, illum=int(args[0]))
+    if key in ("roughness", "pr"):
+        return replace(mat, roughness=_scalar(args, path, line, key))
+    if key in ("mentalness", "metalness", "pm"):
+        return replace(mat, metalness=_scalar(args, path, line, key))
+    if key == "map_kd":
+        return replace(mat, map_kd=texture_path(args, base, path, line, "map_Kd"))
+    if key in _IGNORED:
+        return mat
+    if warned is None or key not in warned:
+        if warned is not None:
+            warned.add(key)
+        kind = "texture" if key.startswith("map_") or key in _OTHER_MAPS else "statement"
+        warnings.warn(f"{path}:{line}: MTL {kind} '{key}' is not supported and is ignored",
+                      stacklevel=3)
+    return mat
+
+
+def parse_mtl_text(text: str, path: Path) -> dict[str, Material]:
+    """Parse MTL ``text`` (already read from ``path``); see the module docstring."""
+    path = Path(path)
+    base = path.parent
+    materials: dict[str, Material] = {}
+    current: Material | None = None
+    warned: set[str] = set()
+
+    def close():
+        if current is not None:
+            materials[current.name] = current
+
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        hash_at = raw.find("#")
+        if hash_at >= 0:
+            raw = raw[:hash_at]
+        parts = raw.split()
+        if not parts:
+            continue
+        key = parts[0].lower()
+        if key == "newmtl":
+            if len(parts) < 2:
+                raise SceneError(path, lineno, "newmtl without a material name")
+            close()
+            name = " ".join(parts[1:])
+            if name in materials:
+                warnings.warn(f"{path}:{lineno}: material '{name}' is defined again; "
+                              "the later definition wins", stacklevel=2)
+            current = Material(name=name, origin=f"{path}:{lineno}")
+            continue
+        if current is None:
+            raise SceneError(path, lineno, f"'{parts[0]}' before any 'newmtl'")
+        current = apply_field(current, key, parts[1:], path, lineno, base, warned)
+    close()
+    return materials
+
+
+def load_mtl(path: str | Path, *, ref: tuple[Path, int] | None = None) -> dict[str, Material]:
+    """Read and parse the MTL file at ``path``.
+
+    Returns the materials by name, in file order. ``ref`` is the (file, line)
+    that named this library, where a missing file is reported.
+    """
+    path = Path(path).resolve()
+    return parse_mtl_text(read_text(path, ref=ref, what="MTL file"), path)

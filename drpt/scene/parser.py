@@ -1,0 +1,714 @@
+"""Loader for drpt's text scene format (descended from MIT 6.837's).
+
+:func:`load_scene` reads a scene file and returns a world-space
+:class:`~drpt.scene.model.Scene`. Pure Python and numpy, no rendering backend.
+
+Grammar
+-------
+Tokens are whitespace separated; ``{``/``}`` are tokens even when glued to a
+word; ``#`` and ``//`` start comments (see :mod:`drpt.scene.tokens`). Keywords
+are case-sensitive. ``v3`` below means three finite numbers, ``[..]`` optional.
+Fields inside a block may come in any order, each at most once. ::
+
+    scene      := block*          (a camera and a Group are required, every
+                                   block at most once, in any order)
+    block      := PerspectiveCamera { center v3 direction v3 up v3 angle deg }
+                | OrthographicCamera { center v3 direction v3 up v3 size s }
+                | Background { [color v3] [ambientLight v3] }
+                | Lights { numLights N light* }
+                | Materials { numMaterials N material* }
+                | Group
+    light      := DirectionalLight { direction v3 color v3 }
+                | PointLight { position v3 color v3 [attenuation c l q] }
+                | Skybox { FILE [R r] }                  (R defaults to 1000)
+    material   := Material { field* } | PhongMaterial { field* }
+       fields:    diffuseColor v3  specularColor v3  exponent e
+                  reflectiveColor v3  transparentColor v3  indexOfRefraction n
+                  texture FILE
+                  and MTL statements (case-insensitive), each taking the values
+                  after it on the same line, up to the next field name:
+                  Kd Ks Ke Le Ns Ni d Tr illum Roughness Mentalness Pr Pm map_Kd
+    Group      := Group { numObjects N (MaterialIndex i | object)* }
+    object     := Group
+                | Sphere { center v3 radius r [mtl NAME] }
+                | Plane { normal v3 offset d [mtl NAME] }       dot(n, x) = d
+                | Triangle { vertex0 v3 vertex1 v3 vertex2 v3 [mtl NAME] }
+                | TriangleMesh { obj_file FILE }
+                | Transform { op* object }
+    op         := Translate v3 | Scale v3 | UniformScale s
+                | XRotate deg | YRotate deg | ZRotate deg
+                | Rotate { [axis] v3 [angle] deg } | Rotate v3 deg
+                | Matrix { 16 numbers, row-major, last row 0 0 0 1 }
+
+Semantics
+---------
+* ``numObjects`` counts objects only (``MaterialIndex`` is not counted) and
+  must match, like ``numLights`` and ``numMaterials``; a mismatch is an error
+  at the block's line. (The seed's scene files all match.)
+* Cameras: ``angle`` is the full vertical field of view, in (0, 180);
+  ``size`` > 0; ``direction`` and ``up`` non-zero and not parallel.
+* Transform operations compose left to right, ``M = Op1 @ Op2 @ ...``, and
+  nest as ``M_parent @ M`` (6.837 semantics). Triangles and meshes get their
+  positions transformed and normals by the inverse-transpose; a mirroring
+  transform swaps corners to keep the winding's front side outside. Spheres
+  stay spheres under similarities, otherwise they are tessellated (1984
+  triangles, smooth normals) with a warning. Planes transform exactly.
+* Materials: ``MaterialIndex i`` selects entry ``i`` of the ``Materials``
+  block for the objects after it in the same Group and in the Groups and
+  Transforms nested in it (it does not leak out of its Group). Objects
+  with no material get a built-in material named ``"default"`` (kd 0.8).
+  ``mtl NAME`` looks NAME up among all MTL libraries loaded anywhere in the
+  scene (resolved after the whole file is read, so forward references work;
+  if several libraries define NAME differently the first loaded wins, with a
+  warning). OBJ faces use their ``usemtl`` material, or the current
+  material when they have none.
+* ``Scene.materials`` lists each material object once: all ``Materials``
+  block entries first, in file order (so ``MaterialIndex i`` is
+  ``Scene.materials[i]``), then MTL materials and ``"default"`` in order of
+  first use. Unused MTL materials are left out.
+* File names are relative to the file naming them and stored as absolute
+  paths; missing files are errors at the referencing line. Skybox files are
+  checked after the geometry, so a scene missing both its OBJ and its sky
+  reports the OBJ.
+
+Every mistake raises :class:`~drpt.errors.SceneError` with the file and line.
+"""
+
+from __future__ import annotations
+
+import difflib
+import warnings
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..errors import SceneError
+from . import transform as tf
+from .model import (
+    Background,
+    DirectionalLight,
+    Material,
+    OrthographicCamera,
+    PerspectiveCamera,
+    Planes,
+    PointLight,
+    Scene,
+    Skybox,
+    Spheres,
+    Triangles,
+)
+from .mtl import apply_field
+from .obj import MtlCache, ObjMesh, geometric_normals, load_obj
+from .tokens import Token, TokenStream, read_text
+
+__all__ = ["load_scene", "DEFAULT_MATERIAL_NAME"]
+
+DEFAULT_MATERIAL_NAME = "default"
+
+_TOP_BLOCKS = ("PerspectiveCamera", "OrthographicCamera", "Background", "Lights", "Materials", "Group")
+_OBJECTS = ("Group", "Sphere", "Plane", "Triangle", "TriangleMesh", "Transform")
+_LIGHTS = ("DirectionalLight", "PointLight", "Skybox")
+_OPS = ("Translate", "Scale", "UniformScale", "XRotate", "YRotate", "ZRotate", "Rotate", "Matrix")
+_KNOWN = set(_TOP_BLOCKS + _OBJECTS + _LIGHTS + _OPS + ("MaterialIndex", "Material", "PhongMaterial"))
+_MTL_KEYS = {"kd", "ks", "ke", "le", "ns", "ni", "d", "tr", "illum", "roughness", "mentalness",
+             "metalness", "pr", "pm", "map_kd"}
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Load the scene file at ``path`` into a world-space :class:`Scene`.
+
+    Raises :class:`~drpt.errors.SceneError` (file, line, message) for any
+    problem in the scene or in the OBJ, MTL and image files it names.
+    Non-fatal oddities (ignored OBJ/MTL statements, tessellated spheres) are
+    reported with :func:`warnings.warn`.
+    """
+    path = Path(path).resolve()
+    text = read_text(path, what="scene file")
+    return _Parser(path, text).parse()
+
+
+# ------------------------------------------------------------ material refs
+@dataclass(frozen=True)
+class _ByIndex:
+    index: int
+    line: int
+
+
+@dataclass(frozen=True)
+class _ByName:
+    name: str
+    line: int
+
+
+_Ref = Material | _ByIndex | _ByName | None  # None: the default material
+
+
+def _hint(word: str, choices) -> str:
+    close = difflib.get_close_matches(word, list(choices), n=1)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
+class _Parser:
+    def __init__(self, path: Path, text: str):
+        self.path = path
+        self.base = path.parent
+        self.ts = TokenStream(path, text)
+        self.camera = None
+        self.background = Background()
+        self.lights: list = []
+        self.block_materials: list[Material] = []
+        self.seen: dict[str, int] = {}
+        self.skyboxes: list[tuple[Path, int]] = []
+        self.mtl_cache: MtlCache = {}
+        self.obj_cache: dict[Path, ObjMesh] = {}
+        # geometry, material references are indices into self.refs
+        self.refs: list[_Ref] = []
+        self._ref_ids: dict[object, int] = {}
+        self.tri_chunks: list[tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray]] = []
+        self.sph: list[tuple[np.ndarray, float, int]] = []
+        self.pln: list[tuple[np.ndarray, float, int]] = []
+
+    # ------------------------------------------------------------ helpers
+    def error(self, line: int | None, message: str) -> SceneError:
+        return SceneError(self.path, line, message)
+
+    def ref(self, r: _Ref) -> int:
+        key = id(r) if isinstance(r, Material) else r
+        i = self._ref_ids.get(key)
+        if i is None:
+            i = self._ref_ids[key] = len(self.refs)
+            self.refs.append(r)
+        return i
+
+    def fields(self, name: str, opened: Token, readers: dict[str, Callable[[Token], object]],
+               extra: Callable[[Token], bool] | None = None) -> dict[str, tuple[object, int]]:
+        """Read ``{ field value ... }``. ``readers`` maps field names to
+        functions reading the value; ``extra`` may consume other tokens
+        (returns False to reject). Returns ``{field: (value, line)}``."""
+        self.ts.expect("{", f"after '{name}'")
+        out: dict[str, tuple[object, int]] = {}
+        while True:
+            tok = self.ts.next(f"a field or '}}' to close {name} (opened at line {opened.line})")
+            if tok.text == "}":
+                return out
+            reader = readers.get(tok.text)
+            if reader is None:
+                if extra is not None and extra(tok):
+                    continue
+                raise self.unknown(tok, f"field in {name}", readers)
+            if tok.text in out:
+                raise self.error(tok.line, f"'{tok.text}' given twice in {name}")
+            out[tok.text] = (reader(tok), tok.line)
+
+    def unknown(self, tok: Token, what: str, choices) -> SceneError:
+        if tok.text == "{":
+            return self.error(tok.line, f"unexpected '{{' where a {what} was expected")
+        msg = f"unknown {what} '{tok.text}'"
+        if tok.text in _KNOWN:
+            msg += " (is a '}' missing before it?)"
+        else:
+            msg += _hint(tok.text, choices)
+        choices = list(choices)
+        if choices:
+            msg += "; expected one of: " + ", ".join(choices)
+        return self.error(tok.line, msg)
+
+    def require(self, got: dict, name: str, opened: Token, keys) -> None:
+        for k in keys:
+            if k not in got:
+                raise self.error(opened.line, f"{name} is missing '{k}'")
+
+    def vec(self, what):
+        return lambda tok: self.ts.vec3(what)
+
+    def num(self, what):
+        return lambda tok: self.ts.number(what)
+
+    def word(self, what):
+        return lambda tok: self.ts.word(what)
+
+    def count(self, keyword: str, block: str, opened: Token) -> int:
+        tok = self.ts.next(f"'{keyword}' in {block}")
+        if tok.text != keyword:
+            raise self.error(tok.line, f"{block} must start with '{keyword} N', found '{tok.text}'")
+        n = self.ts.integer(keyword)
+        if n < 0:
+            raise self.error(tok.line, f"{keyword} must not be negative")
+        return n
+
+    def check_count(self, keyword: str, block: str, opened: Token, declared: int, found: int, what: str):
+        if declared != found:
+            raise self.error(opened.line, f"{block} declares {keyword} {declared} but contains {found} {what}")
+
+    def file_ref(self, tok: Token) -> Path:
+        return (self.base / tok.text).resolve()
+
+    # ------------------------------------------------------------ top level
+    def parse(self) -> Scene:
+        ts = self.ts
+        while not ts.at_end():
+            tok = ts.next("a block")
+            if tok.text not in _TOP_BLOCKS:
+                if tok.text in _OBJECTS or tok.text in ("MaterialIndex",):
+                    raise self.error(tok.line, f"'{tok.text}' must be inside a Group block")
+                raise self.unknown(tok, "block", _TOP_BLOCKS)
+            kind = "camera" if tok.text.endswith("Camera") else tok.text
+            if kind in self.seen:
+                raise self.error(tok.line, f"a second {kind} block (the first is at line {self.seen[kind]})")
+            self.seen[kind] = tok.line
+            if kind == "camera":
+                self.parse_camera(tok)
+            elif kind == "Background":
+                self.parse_background(tok)
+            elif kind == "Lights":
+                self.parse_lights(tok)
+            elif kind == "Materials":
+                self.parse_materials(tok)
+            else:
+                self.parse_group(tok, tf.identity(), None)
+        if self.camera is None:
+            raise self.error(ts.last_line, "no camera: add a PerspectiveCamera or OrthographicCamera block")
+        if "Group" not in self.seen:
+            raise self.error(ts.last_line, "no Group block: the scene has no geometry")
+        materials, index = self.resolve_materials()
+        for sky, line in self.skyboxes:
+            if not sky.is_file():
+                raise self.error(line, f"skybox file not found: {sky}")
+        return Scene(
+            path=self.path,
+            camera=self.camera,
+            materials=materials,
+            triangles=self.build_triangles(index),
+            spheres=self.build_spheres(index),
+            planes=self.build_planes(index),
+            lights=self.lights,
+            background=self.background,
+        )
+
+    # --------------------------------------------------------------- camera
+    def parse_camera(self, opened: Token) -> None:
+        persp = opened.text == "PerspectiveCamera"
+        last = "angle" if persp else "size"
+        got = self.fields(opened.text, opened, {
+            "center": self.vec("center"),
+            "direction": self.vec("direction"),
+            "up": self.vec("up"),
+            last: self.num(last),
+        })
+        self.require(got, opened.text, opened, ("center", "direction", "up", last))
+        d = np.array(got["direction"][0])
+        u = np.array(got["up"][0])
+        if not np.linalg.norm(d) > 0:
+            raise self.error(got["direction"][1], "camera direction has zero length")
+        if not np.linalg.norm(u) > 0:
+            raise self.error(got["up"][1], "camera up has zero length")
+        if np.linalg.norm(np.cross(d / np.linalg.norm(d), u / np.linalg.norm(u))) < 1e-6:
+            raise self.error(got["up"][1], "camera up is parallel to its direction")
+        value, line = got[last]
+        if persp:
+            if not 0.0 < value < 180.0:
+                raise self.error(line, f"camera angle must be in (0, 180) degrees, got {value:g}")
+            self.camera = PerspectiveCamera(got["center"][0], got["direction"][0], got["up"][0], value)
+        else:
+            if not value > 0.0:
+                raise self.error(line, f"camera size must be positive, got {value:g}")
+            self.camera = OrthographicCamera(got["center"][0], got["direction"][0], got["up"][0], value)
+
+    def parse_background(self, opened: Token) -> None:
+        got = self.fields("Background", opened, {
+            "color": self.vec("color"), "ambientLight": self.vec("ambientLight")})
+        self.background = Background(
+            color=got.get("color", ((0.0, 0.0, 0.0), 0))[0],
+            ambient=got.get("ambientLight", ((0.0, 0.0, 0.0), 0))[0],
+        )
+
+    # --------------------------------------------------------------- lights
+    def parse_lights(self, opened: Token) -> None:
+        ts = self.ts
+        ts.expect("{", "after 'Lights'")
+        n = self.count("numLights", "Lights", opened)
+        found = 0
+        while True:
+            tok = ts.next(f"a light or '}}' to close Lights (opened at line {opened.line})")
+            if tok.text == "}":
+                break
+            if tok.text == "DirectionalLight":
+                got = self.fields(tok.text, tok, {"direction": self.vec("direction"), "color": self.vec("color")})
+                self.require(got, tok.text, tok, ("direction", "color"))
+                if not np.linalg.norm(got["direction"][0]) > 0:
+                    raise self.error(got["direction"][1], "light direction has zero length")
+                self.lights.append(DirectionalLight(got["direction"][0], got["color"][0]))
+            elif tok.text == "PointLight":
+                got = self.fields(tok.text, tok, {"position": self.vec("position"), "color": self.vec("color"),
+                                                  "attenuation": self.vec("attenuation")})
+                self.require(got, tok.text, tok, ("position", "color"))
+                att, line = got.get("attenuation", ((1.0, 0.0, 0.0), tok.line))
+                if min(att) < 0 or max(att) <= 0:
+                    raise self.error(line, "attenuation must be non-negative and not all zero")
+                self.lights.append(PointLight(got["position"][0], got["color"][0], att))
+            elif tok.text == "Skybox":
+                self.parse_skybox(tok)
+            else:
+                raise self.unknown(tok, "light", _LIGHTS)
+            found += 1
+        self.check_count("numLights", "Lights", opened, n, found, "lights")
+
+    def parse_skybox(self, opened: Token) -> None:
+        ts = self.ts
+        ts.expect("{", "after 'Skybox'")
+        file_tok = None
+        radius = 1000.0
+        while True:
+            tok = ts.next(f"a file name, 'R' or '}}' to close Skybox (opened at line {opened.line})")
+            if tok.text == "}":
+                break
+            if tok.text == "R":
+                radius = ts.number("Skybox R")
+                if not radius > 0:
+                    raise self.error(tok.line, f"Skybox R must be positive, got {radius:g}")
+            elif tok.text == "{":
+                raise self.error(tok.line, "unexpected '{' in Skybox")
+            elif file_tok is None:
+                file_tok = tok
+            else:
+                raise self.error(tok.line, f"Skybox takes one file name; unexpected '{tok.text}'"
+                                 + (" (is a '}' missing before it?)" if tok.text in _KNOWN else ""))
+        if file_tok is None:
+            raise self.error(opened.line, "Skybox needs a file name, e.g. 'Skybox { sky.hdr R 1000 }'")
+        p = self.file_ref(file_tok)
+        self.skyboxes.append((p, file_tok.line))
+        self.lights.append(Skybox(p, radius))
+
+    # ------------------------------------------------------------ materials
+    def parse_materials(self, opened: Token) -> None:
+        ts = self.ts
+        ts.expect("{", "after 'Materials'")
+        n = self.count("numMaterials", "Materials", opened)
+        while True:
+            tok = ts.next(f"a material or '}}' to close Materials (opened at line {opened.line})")
+            if tok.text == "}":
+                break
+            if tok.text not in ("Material", "PhongMaterial"):
+                raise self.unknown(tok, "material type", ("Material", "PhongMaterial"))
+            self.block_materials.append(self.parse_material(tok, len(self.block_materials)))
+        self.check_count("numMaterials", "Materials", opened, n, len(self.block_materials), "materials")
+
+    def parse_material(self, opened: Token, i: int) -> Material:
+        mat = Material(name=f"material_{i}", origin=f"{self.path}:{opened.line}")
+        ts = self.ts
+
+        def texture(tok):
+            return self.texture_file(ts.word("texture file name"))
+
+        def mtl_style(tok: Token) -> bool:
+            nonlocal mat
+            key = tok.text.lower()
+            if key not in _MTL_KEYS:
+                return False
+            # Values: the rest of the line, up to a brace or the next field name.
+            args = []
+            while ((nxt := ts.peek()) is not None and nxt.line == tok.line and nxt.text not in ("{", "}")
+                   and nxt.text.lower() not in _MTL_KEYS and nxt.text not in readers):
+                args.append(ts.next("value").text)
+            mat = apply_field(mat, key, args, self.path, tok.line, self.base)
+            return True
+
+        readers = {
+            "diffuseColor": self.vec("diffuseColor"),
+            "specularColor": self.vec("specularColor"),
+            "exponent": self.num("exponent"),
+            "reflectiveColor": self.vec("reflectiveColor"),
+            "transparentColor": self.vec("transparentColor"),
+            "indexOfRefraction": self.num("indexOfRefraction"),
+            "texture": texture,
+        }
+        got = self.fields(opened.text, opened, readers, extra=mtl_style)
+        names = {"diffuseColor": "kd", "specularColor": "ks", "exponent": "ns", "reflectiveColor": "reflective",
+                 "transparentColor": "transparent", "indexOfRefraction": "ior", "texture": "map_kd"}
+        return replace(mat, **{names[k]: v for k, (v, _) in got.items()})
+
+    def texture_file(self, tok: Token) -> Path:
+        p = self.file_ref(tok)
+        if not p.is_file():
+            raise self.error(tok.line, f"texture file not found: {p}")
+        return p
+
+    # -------------------------------------------------------------- objects
+    def parse_group(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
+        ts = self.ts
+        ts.expect("{", "after 'Group'")
+        n = self.count("numObjects", "Group", opened)
+        found = 0
+        while True:
+            tok = ts.next(f"an object or '}}' to close Group (opened at line {opened.line})")
+            if tok.text == "}":
+                break
+            if tok.text == "MaterialIndex":
+                i = ts.integer("MaterialIndex")
+                if i < 0:
+                    raise self.error(tok.line, f"MaterialIndex {i} is negative")
+                current = _ByIndex(i, tok.line)
+                continue
+            self.parse_object(tok, m, current)
+            found += 1
+        self.check_count("numObjects", "Group", opened, n, found, "objects")
+
+    def parse_object(self, tok: Token, m: np.ndarray, current: _Ref) -> None:
+        kind = tok.text
+        if kind == "Group":
+            self.parse_group(tok, m, current)
+        elif kind == "Transform":
+            self.parse_transform(tok, m, current)
+        elif kind == "Sphere":
+            self.parse_sphere(tok, m, current)
+        elif kind == "Plane":
+            self.parse_plane(tok, m, current)
+        elif kind == "Triangle":
+            self.parse_triangle(tok, m, current)
+        elif kind == "TriangleMesh":
+            self.parse_mesh(tok, m, current)
+        else:
+            raise self.unknown(tok, "object", _OBJECTS)
+
+    def material_of(self, got: dict, current: _Ref) -> _Ref:
+        if "mtl" in got:
+            name, line = got["mtl"]
+            return _ByName(name.text, line)
+        return current
+
+    def check_matrix(self, m: np.ndarray, opened: Token) -> None:
+        if not tf.is_invertible(m):
+            raise self.error(opened.line, f"the Transform around this {opened.text} is singular (not invertible)")
+
+    def parse_sphere(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
+        got = self.fields("Sphere", opened, {"center": self.vec("center"), "radius": self.num("radius"),
+                                             "mtl": self.word("material name")})
+        self.require(got, "Sphere", opened, ("center", "radius"))
+        radius, rline = got["radius"]
+        if not radius > 0:
+            raise self.error(rline, f"sphere radius must be positive, got {radius:g}")
+        center = np.array(got["center"][0], dtype=np.float64)
+        ref = self.ref(self.material_of(got, current))
+        if tf.is_identity(m):
+            self.sph.append((center, radius, ref))
+            return
+        self.check_matrix(m, opened)
+        s = tf.similarity_scale(m)
+        if s is not None:
+            self.sph.append((tf.transform_points(m, center), radius * s, ref))
+            return
+        p, n = tf.tessellate_sphere(center, radius)
+        p, n, _ = tf.transform_triangles(m, p, n)
+        warnings.warn(f"{self.path}:{opened.line}: Sphere under a non-uniform Transform was "
+                      f"tessellated into {len(p)} triangles", stacklevel=2)
+        self.tri_chunks.append((p, n, None, np.full(len(p), ref, np.int64)))
+
+    def parse_plane(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
+        got = self.fields("Plane", opened, {"normal": self.vec("normal"), "offset": self.num("offset"),
+                                            "mtl": self.word("material name")})
+        self.require(got, "Plane", opened, ("normal", "offset"))
+        n = np.array(got["normal"][0], dtype=np.float64)
+        length = float(np.linalg.norm(n))
+        if not length > 0:
+            raise self.error(got["normal"][1], "plane normal has zero length")
+        n, d = n / length, got["offset"][0] / length
+        if not tf.is_identity(m):
+            self.check_matrix(m, opened)
+            n, d = tf.transform_plane(m, n, d)
+        self.pln.append((n, d, self.ref(self.material_of(got, current))))
+
+    def parse_triangle(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
+        got = self.fields("Triangle", opened, {"vertex0": self.vec("vertex0"), "vertex1": self.vec("vertex1"),
+                                               "vertex2": self.vec("vertex2"), "mtl": self.word("material name")})
+        self.require(got, "Triangle", opened, ("vertex0", "vertex1", "vertex2"))
+        p = np.array([[got["vertex0"][0], got["vertex1"][0], got["vertex2"][0]]], dtype=np.float64)
+        if not tf.is_identity(m):
+            self.check_matrix(m, opened)
+            p, _, _ = tf.transform_triangles(m, p, None)
+        self.tri_chunks.append((p, None, None, np.array([self.ref(self.material_of(got, current))], np.int64)))
+
+    def parse_mesh(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
+        got = self.fields("TriangleMesh", opened, {"obj_file": self.word("OBJ file name")})
+        self.require(got, "TriangleMesh", opened, ("obj_file",))
+        name_tok, line = got["obj_file"]
+        p = self.file_ref(name_tok)
+        mesh = self.obj_cache.get(p)
+        if mesh is None:
+            mesh = self.obj_cache[p] = load_obj(p, ref=(self.path, line), mtl_cache=self.mtl_cache)
+        if not len(mesh):
+            warnings.warn(f"{self.path}:{line}: {p.name} has no faces", stacklevel=2)
+            return
+        # face_material == -1 (no usemtl) picks the table's last entry.
+        # Register materials in the order faces first use them; slot -1 (no
+        # usemtl) is the current material and indexes the table's last entry.
+        mats = mesh.face_materials()
+        table = np.full(len(mats) + 1, -1, np.int64)
+        _, first = np.unique(mesh.face_material, return_index=True)
+        for slot in mesh.face_material[np.sort(first)]:
+            table[slot] = self.ref(mats[slot] if slot >= 0 else current)
+        refs = table[mesh.face_material]
+        pos, nrm, uvs = mesh.positions, mesh.normals, mesh.uvs
+        if not tf.is_identity(m):
+            self.check_matrix(m, opened)
+            pos, nrm, flipped = tf.transform_triangles(m, pos, nrm)
+            if flipped and uvs is not None:
+                uvs = uvs[:, [0, 2, 1]]
+        self.tri_chunks.append((pos, nrm, uvs, refs))
+
+    # ------------------------------------------------------------ transform
+    def parse_transform(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
+        ts = self.ts
+        ts.expect("{", "after 'Transform'")
+        local = tf.identity()
+        has_object = False
+        while True:
+            tok = ts.next(f"a transform operation, an object or '}}' to close Transform (opened at line {opened.line})")
+            t = tok.text
+            if t == "}":
+                break
+            if t in _OPS:
+                if has_object:
+                    raise self.error(tok.line, f"'{t}' after the Transform's object: operations come first")
+                local = local @ self.parse_op(tok)
+            elif t in _OBJECTS:
+                if has_object:
+                    raise self.error(tok.line, f"a Transform holds exactly one object; found a second one, '{t}'"
+                                     " (wrap several objects in a Group)")
+                self.parse_object(tok, m @ local, current)
+                has_object = True
+            else:
+                raise self.unknown(tok, "transform operation or object", _OPS + _OBJECTS)
+        if not has_object:
+            raise self.error(opened.line, "Transform has no object")
+
+    def parse_op(self, tok: Token) -> np.ndarray:
+        ts = self.ts
+        t = tok.text
+        if t == "Translate":
+            return tf.translate(*ts.vec3("Translate"))
+        if t == "Scale":
+            s = ts.vec3("Scale")
+            if 0.0 in s:
+                raise self.error(tok.line, "Scale by zero makes the transform singular")
+            return tf.scale(*s)
+        if t == "UniformScale":
+            s = ts.number("UniformScale")
+            if s == 0.0:
+                raise self.error(tok.line, "UniformScale 0 makes the transform singular")
+            return tf.scale(s, s, s)
+        if t in ("XRotate", "YRotate", "ZRotate"):
+            deg = ts.number(t)
+            return {"X": tf.rotate_x, "Y": tf.rotate_y, "Z": tf.rotate_z}[t[0]](deg)
+        if t == "Rotate":
+            return self.parse_rotate(tok)
+        # Matrix
+        ts.expect("{", "after 'Matrix'")
+        vals = [ts.number(f"Matrix element {k + 1} of 16") for k in range(16)]
+        end = ts.next("'}' to close Matrix")
+        if end.text != "}":
+            raise self.error(end.line, f"Matrix takes exactly 16 numbers; expected '}}', found '{end.text}'")
+        mat = np.array(vals, dtype=np.float64).reshape(4, 4)
+        if not np.allclose(mat[3], (0.0, 0.0, 0.0, 1.0), rtol=0.0, atol=1e-12):
+            raise self.error(tok.line, "Matrix: the last row must be 0 0 0 1 (projective matrices are not supported)")
+        if not tf.is_invertible(mat):
+            raise self.error(tok.line, "Matrix is singular (not invertible)")
+        return mat
+
+    def parse_rotate(self, tok: Token) -> np.ndarray:
+        ts = self.ts
+        braced = ts.peek() is not None and ts.peek().text == "{"
+        if braced:
+            ts.next("'{'")
+        axis = deg = None
+        for _ in range(2):
+            nxt = ts.peek()
+            if nxt is not None and nxt.text == "axis":
+                ts.next("axis")
+                axis = ts.vec3("Rotate axis")
+            elif nxt is not None and nxt.text == "angle":
+                ts.next("angle")
+                deg = ts.number("Rotate angle")
+            elif axis is None:
+                axis = ts.vec3("Rotate axis")
+            elif deg is None:
+                deg = ts.number("Rotate angle")
+        if axis is None or deg is None:
+            raise self.error(tok.line, "Rotate needs an axis and an angle")
+        if braced:
+            end = ts.next("'}' to close Rotate")
+            if end.text != "}":
+                raise self.error(end.line, f"expected '}}' to close Rotate, found '{end.text}'")
+        if not np.linalg.norm(axis) > 0:
+            raise self.error(tok.line, "Rotate axis has zero length")
+        return tf.rotate_axis(axis, deg)
+
+    # ------------------------------------------------------------ assembly
+    def resolve_materials(self) -> tuple[list[Material], np.ndarray]:
+        """Turn self.refs into (Scene.materials, ref -> material index)."""
+        named: dict[str, Material] = {}
+        for lib_path, lib in self.mtl_cache.items():
+            for name, mat in lib.items():
+                first = named.setdefault(name, mat)
+                if first is not mat and replace(first, origin="") != replace(mat, origin=""):
+                    warnings.warn(f"{mat.origin}: material '{name}' is also defined at {first.origin}; "
+                                  "'mtl' references use the first", stacklevel=3)
+        default = None
+        resolved: list[Material] = []
+        for r in self.refs:
+            if isinstance(r, _ByIndex):
+                if r.index >= len(self.block_materials):
+                    have = (f"the Materials block defines {len(self.block_materials)}"
+                            if "Materials" in self.seen else "there is no Materials block")
+                    raise self.error(r.line, f"MaterialIndex {r.index} is out of range ({have})")
+                r = self.block_materials[r.index]
+            elif isinstance(r, _ByName):
+                if r.name not in named:
+                    libs = ", ".join(p.name for p in self.mtl_cache) or "none loaded"
+                    raise self.error(r.line, f"unknown material '{r.name}' (MTL libraries: {libs})"
+                                     + _hint(r.name, named))
+                r = named[r.name]
+            elif r is None:
+                if default is None:
+                    default = Material(name=DEFAULT_MATERIAL_NAME, kd=(0.8, 0.8, 0.8), origin="built-in default")
+                r = default
+            resolved.append(r)
+        materials = list(self.block_materials)
+        ids = {id(mat): i for i, mat in enumerate(materials)}
+        index = np.zeros(len(resolved), np.int32)
+        for k, mat in enumerate(resolved):
+            if id(mat) not in ids:
+                ids[id(mat)] = len(materials)
+                materials.append(mat)
+            index[k] = ids[id(mat)]
+        return materials, index
+
+    def build_triangles(self, index: np.ndarray) -> Triangles:
+        if not self.tri_chunks:
+            return Triangles.empty()
+        pos = np.concatenate([c[0] for c in self.tri_chunks]).astype(np.float64, copy=False)
+        mat = index[np.concatenate([c[3] for c in self.tri_chunks])].astype(np.int32)
+        normals = uvs = None
+        if any(c[1] is not None for c in self.tri_chunks):
+            normals = np.concatenate([
+                c[1] if c[1] is not None else np.repeat(geometric_normals(c[0])[:, None], 3, axis=1)
+                for c in self.tri_chunks])
+        if any(c[2] is not None for c in self.tri_chunks):
+            uvs = np.concatenate([c[2] if c[2] is not None else np.zeros((len(c[0]), 3, 2))
+                                  for c in self.tri_chunks])
+        return Triangles(positions=pos, material=mat, normals=normals, uvs=uvs)
+
+    def build_spheres(self, index: np.ndarray) -> Spheres:
+        if not self.sph:
+            return Spheres.empty()
+        return Spheres(center=np.array([s[0] for s in self.sph], np.float64).reshape(-1, 3),
+                       radius=np.array([s[1] for s in self.sph], np.float64),
+                       material=index[[s[2] for s in self.sph]].astype(np.int32))
+
+    def build_planes(self, index: np.ndarray) -> Planes:
+        if not self.pln:
+            return Planes.empty()
+        return Planes(normal=np.array([p[0] for p in self.pln], np.float64).reshape(-1, 3),
+                      offset=np.array([p[1] for p in self.pln], np.float64),
+                      material=index[[p[2] for p in self.pln]].astype(np.int32))
