@@ -1,0 +1,26 @@
+"""Pure Dr.Jit ray/primitive intersection tests (LLVM backend types).
+
+Every function works on wide arrays, has no side effects and never returns
+NaN: a miss is ``hit == False`` with ``t == inf``. Hits require
+``0 < t < tmax`` (``tmin < t`` for spheres, default ``tmin = 0``); ``t`` is in
+units of the (not necessarily normalized) ray direction.
+
+* :func:`intersect_triangle` -- Möller–Trumbore on ``(p0, e1, e2)``.
+* :func:`intersect_triangle_watertight` -- Woop et al. 2013 on vertices,
+  watertight across shared edges and vertices; :class:`RayPrep` holds its
+  per-ray constants.
+* :func:`intersect_sphere` -- Ray Tracing Gems precision-improved quadratic.
+* :func:`intersect_plane` -- two-sided infinite plane.
+"""
+
+from .plane import intersect_plane
+from .sphere import intersect_sphere
+from .triangle import RayPrep, intersect_triangle, intersect_triangle_watertight
+
+__all__ = [
+    "RayPrep",
+    "intersect_plane",
+    "intersect_sphere",
+    "intersect_triangle",
+    "intersect_triangle_watertight",
+]

@@ -1,0 +1,200 @@
+"""BVH builder and traversal against the brute-force reference.
+
+Kernels are few and batches wide: each scene is checked with one large batch
+of rays per query kind, in both symbolic and evaluated loop modes.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import numpy as np
+import pytest
+from drjit.llvm import Array3f, Float
+
+from drpt.accel import build_accel
+from drpt.accel.bvh_build import build_bvh, check_bvh
+from drpt.scene import model as M
+
+INF = float("inf")
+
+
+def make_scene(tris=None, spheres=None, planes=None):
+    kw = {}
+    if tris is not None:
+        kw["triangles"] = M.Triangles(np.asarray(tris, np.float64), np.zeros(len(tris), np.int32))
+    if spheres is not None:
+        c, r = spheres
+        kw["spheres"] = M.Spheres(np.asarray(c, np.float64), np.asarray(r, np.float64),
+                                  np.zeros(len(r), np.int32))
+    if planes is not None:
+        n, off = planes
+        kw["planes"] = M.Planes(np.asarray(n, np.float64), np.asarray(off, np.float64),
+                                np.zeros(len(off), np.int32))
+    cam = M.PerspectiveCamera((0, 0, 0), (0, 0, 1), (0, 1, 0), 40.0)
+    return M.Scene(path=None, camera=cam, materials=[M.Material("m")], **kw)
+
+
+def soup(rng, F, scale=1.0, size=0.5):
+    p = rng.random((F, 3, 3)) * 10
+    p[:, 1:] = p[:, :1] + rng.normal(size=(F, 2, 3)) * size
+    return p * scale
+
+
+def icosphere(level=2):
+    t = (1 + 5**0.5) / 2
+    v = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]],
+                 np.float64)
+    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9],
+                  [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2],
+                  [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10],
+                  [8, 6, 7], [9, 8, 1]])
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    for _ in range(level):
+        verts = list(map(tuple, v))
+        index = {}
+
+        def mid(a, b):
+            key = (min(a, b), max(a, b))
+            if key not in index:
+                m = (np.asarray(verts[a]) + verts[b]) / 2
+                verts.append(tuple(m / np.linalg.norm(m)))
+                index[key] = len(verts) - 1
+            return index[key]
+
+        nf = []
+        for a, b, c in f:
+            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
+            nf += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+        v, f = np.asarray(verts), np.asarray(nf)
+    return v, f
+
+
+def rays(o, d):
+    o = np.asarray(o, np.float32)
+    d = np.asarray(d, np.float32)
+    return Array3f(*o.T), Array3f(*d.T)
+
+
+@pytest.fixture(params=[True, False], ids=["symbolic", "evaluated"])
+def loop_mode(request):
+    with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, request.param):
+        yield request.param
+
+
+def compare(scene, o, d, tmax=INF, method="sah", leaf_size=4, check_occ=True):
+    """BVH closest hit and occlusion vs brute force; returns the BVH hit (numpy)."""
+    O, D = rays(o, d)
+    T = Float(np.broadcast_to(np.float32(tmax), (len(o),)).copy())
+    bvh = build_accel(scene, "bvh", method=method, leaf_size=leaf_size)
+    ref = build_accel(scene, "brute")
+    h, g = bvh.intersect(O, D, T), ref.intersect(O, D, T)
+    ht, gt = h.t.numpy(), g.t.numpy()
+    hv, gv = h.valid.numpy(), g.valid.numpy()
+    assert np.array_equal(hv, gv)
+    assert np.allclose(ht[hv], gt[gv], rtol=1e-5, atol=0)
+    assert np.isinf(ht[~hv]).all()
+    hp, gp = h.prim.numpy(), g.prim.numpy()
+    diff = hp != gp
+    # different primitives only at ties (shared edges/vertices, copies): t agrees
+    assert np.allclose(ht[diff], gt[diff], rtol=1e-5, atol=0)
+    assert not np.isnan(h.u.numpy()).any() and not np.isnan(h.v.numpy()).any()
+    same = ~diff & hv
+    assert np.allclose(h.u.numpy()[same], g.u.numpy()[same], atol=1e-5)
+    if check_occ:
+        occ = bvh.occluded(O, D, T).numpy()
+        assert np.array_equal(occ, hv)
+    return ht, hp, hv, bvh
+
+
+# ------------------------------------------------------------------ builder only
+@pytest.mark.parametrize("method", ["sah", "median"])
+def test_builder_invariants(method):
+    rng = np.random.default_rng(0)
+    for N in (1, 2, 3, 7, 1000):
+        p = soup(rng, N)
+        b = build_bvh(p.min(1), p.max(1), method=method, max_leaf=4)
+        check_bvh(b, p.min(1), p.max(1))
+        assert b.node_count.max() <= 4
+
+
+def test_builder_identical_and_tiny_boxes():
+    rng = np.random.default_rng(1)
+    p = np.repeat(soup(rng, 1), 100_000, axis=0)
+    b = build_bvh(p.min(1), p.max(1), max_leaf=4)
+    check_bvh(b, p.min(1), p.max(1))
+    assert b.depth <= 64 and b.node_count.max() <= 4
+    pts = rng.random((5000, 3)) * 1e-4  # zero-size boxes
+    b = build_bvh(pts, pts, max_leaf=2)
+    check_bvh(b, pts, pts)
+
+
+# ------------------------------------------------------------- traversal vs brute
+def test_random_soup_spheres_plane(loop_mode):
+    rng = np.random.default_rng(2)
+    tris = soup(rng, 3000)
+    tris[:20, 2] = tris[:20, 1]  # degenerate (zero-area) triangles
+    sc = make_scene(tris, (rng.random((40, 3)) * 10, rng.random(40) * 0.5 + 0.05),
+                    ([[0, 1, 0]], [-0.25]))
+    R = 6000
+    o = rng.random((R, 3)) * 12 - 1
+    d = rng.normal(size=(R, 3))
+    d[:1000] = np.eye(3)[rng.integers(0, 3, 1000)] * rng.choice([-1, 1], (1000, 1))  # axis-parallel
+    tmax = np.where(rng.random(R) < 0.3, rng.random(R) * 5, INF)
+    for method in ("sah", "median"):
+        ht, hp, hv, bvh = compare(sc, o, d, tmax, method=method)
+        assert hv.mean() > 0.3
+        assert bvh.stats["max_depth"] <= 64 and bvh.nbytes > 0
+    # primitive ids cover all three kinds
+    F, S = 3000, 40
+    assert (hp[hv] < F).any() and ((hp[hv] >= F) & (hp[hv] < F + S)).any() and (hp[hv] == F + S).any()
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1e4])
+def test_scaled_scenes(scale):
+    rng = np.random.default_rng(3)
+    sc = make_scene(soup(rng, 2000, scale), (rng.random((10, 3)) * 10 * scale, rng.random(10) * scale))
+    R = 4000
+    compare(sc, rng.random((R, 3)) * 10 * scale, rng.normal(size=(R, 3)), check_occ=False)
+
+
+def test_watertight_closed_mesh(loop_mode):
+    v, f = icosphere(3)  # 1280 faces sharing vertices bitwise
+    rng = np.random.default_rng(4)
+    v = v * 3 + np.float64([0.1, -0.2, 0.3])
+    sc = make_scene(v[f])
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    w = rng.random((len(e), 1))
+    targets = np.concatenate([v, (v[e[:, 0]] + v[e[:, 1]]) / 2, v[e[:, 0]] * w + v[e[:, 1]] * (1 - w)])
+    centers = np.float64([0.1, -0.2, 0.3]) + rng.normal(size=(4, 3)) * 0.3
+    o = np.repeat(centers, len(targets), axis=0)
+    d = np.tile(targets, (4, 1)) - o
+    ht, hp, hv, _ = compare(sc, o, d, check_occ=False)
+    assert hv.all(), f"{(~hv).sum()} rays leaked through the closed mesh"
+    assert np.allclose(ht, 1.0, atol=2e-2)  # hits at the targets (up to faceting)
+
+
+def test_rays_starting_on_surfaces():
+    rng = np.random.default_rng(5)
+    tris = soup(rng, 500)
+    sc = make_scene(tris, (rng.random((5, 3)) * 10, rng.random(5) + 0.2))
+    bary = rng.dirichlet([1, 1, 1], 500)
+    o = np.einsum("fk,fkc->fc", bary, tris.astype(np.float32).astype(np.float64))
+    d = rng.normal(size=(500, 3))
+    ht, hp, hv, _ = compare(sc, o, d)
+    assert (ht[hv] > 0).all()
+
+
+def test_single_triangle_and_copies():
+    tri = np.float64([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]])
+    R = 1000
+    rng = np.random.default_rng(6)
+    o = np.column_stack([rng.random(R) * 1.2 - 0.1, rng.random(R) * 1.2 - 0.1, np.full(R, 2.0)])
+    d = np.tile([0.0, 0.0, -1.0], (R, 1))
+    expect = (o[:, 0] >= 0) & (o[:, 1] >= 0) & (o[:, 0] + o[:, 1] <= 1)
+    for n in (1, 100_000):
+        sc = make_scene(np.repeat(tri, n, axis=0))
+        ht, hp, hv, bvh = compare(sc, o, d, check_occ=(n == 1))
+        border = np.abs(o[:, 0] + o[:, 1] - 1) < 1e-6
+        assert np.array_equal(hv[~border], expect[~border])
+        assert np.allclose(ht[hv], 2.0)
