@@ -1,0 +1,202 @@
+"""Command line: ``python -m drpt <command> ...``.
+
+``render`` accepts modern options and, unchanged, the seed renderer's own
+flags (``-input scene.txt -size 800 800 -output x.tga -spp 64 -MonteCarlo
+-cook_torrance -RR_cutdown 0.6 -Gamma 2.2 -SpatialTree -resolution 5
+-SAHeuristic 2000 -gui``). With ``-input`` the seed's defaults apply (Whitted
+ray tracing, Phong shading, uniform grid); otherwise drpt's (MIS path
+tracing, BVH). A flag whose feature is not built yet says so in one line.
+
+User mistakes print one line and exit with status 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .errors import DrptError
+
+# Features that are accepted but arrive in later work, with the issue that
+# brings them. The message is printed once, in one line.
+LATER = {
+    "whitted": "the Whitted integrator lands with issue 4; rendering with the MIS path tracer",
+    "grid": "the uniform grid (3D-DDA) lands with issue 5; using the SAH BVH",
+    "phong": "Phong specular lobes land with issue 3; rendering diffuse (Kd) only",
+    "cook-torrance": "Cook-Torrance lobes land with issue 3; rendering diffuse (Kd) only",
+    "sah-threshold": "BVH build variants (-SAHeuristic, -resolution) land with issue 5; using full binned SAH",
+    "gui": "drpt has no OpenGL preview (-gui): it renders straight to the output file",
+    "skybox": "environment lighting (Skybox) lands with issue 4; the sky is black for now",
+    "point": "point and directional lights land with issue 4; they are ignored for now",
+}
+
+
+def _note(key: str) -> None:
+    print(f"drpt: note: {LATER[key]}", file=sys.stderr)
+
+
+def _add_render_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", nargs="?", help="scene file (the seed's text format)")
+    p.add_argument("--input", "-input", dest="input", help="scene file (seed flag)")
+    p.add_argument("--output", "-output", "-o", dest="output",
+                   help="image to write: .exr (linear float32), .png or .tga (gamma); "
+                        "default <scene>.png")
+    p.add_argument("--size", "-size", nargs=2, type=int, metavar=("W", "H"), default=None,
+                   help="image size in pixels (default 512 512)")
+    p.add_argument("--spp", "-spp", type=int, default=None, help="samples per pixel (default 64)")
+    p.add_argument("--max-depth", type=int, default=-1,
+                   help="longest path in segments, Mitsuba's convention: 1 = emitters only, "
+                        "2 = direct light, -1 = unbounded (default)")
+    p.add_argument("--rr-depth", type=int, default=5,
+                   help="depth at which Russian roulette starts (default 5)")
+    p.add_argument("--rr-prob", type=float, default=None,
+                   help="fixed path continuation probability for Russian roulette "
+                        "(default: adaptive, min(throughput, 0.95))")
+    p.add_argument("-RR_cutdown", dest="rr_cutdown", type=float, default=None,
+                   help="seed flag: fixed continuation probability p at every bounce")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--accel", choices=["bvh", "grid", "brute"], default=None,
+                   help="acceleration structure (default bvh)")
+    p.add_argument("-SpatialTree", dest="spatial_tree", action="store_true",
+                   help="seed flag: use the BVH (the seed's default is the grid)")
+    p.add_argument("-resolution", dest="resolution", type=int, default=None,
+                   help="seed flag: grid cells per axis, or BVH minimum leaf size")
+    p.add_argument("-SAHeuristic", "-SAH", dest="sah_threshold", type=int, default=None,
+                   help="seed flag: use SAH only in nodes with <= 2K primitives")
+    p.add_argument("--integrator", choices=["path", "whitted"], default=None,
+                   help="path (MIS path tracing, default) or whitted")
+    p.add_argument("-MonteCarlo", dest="monte_carlo", action="store_true",
+                   help="seed flag: Monte Carlo path tracing (the seed's default is Whitted)")
+    p.add_argument("--bsdf", choices=["diffuse", "phong", "cook-torrance"], default=None,
+                   help="how MTL materials are read")
+    p.add_argument("-cook_torrance", dest="cook_torrance", action="store_true",
+                   help="seed flag: Cook-Torrance shading")
+    p.add_argument("--gamma", "-Gamma", dest="gamma", type=float, default=2.2,
+                   help="display gamma for .png/.tga (default 2.2)")
+    p.add_argument("-gui", dest="gui", action="store_true", help="seed flag: OpenGL preview")
+    p.add_argument("--max-lanes", type=int, default=1 << 21,
+                   help="samples traced at once; bounds memory (default 2097152)")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+
+
+def _positive(name: str, value: int | float | None) -> None:
+    if value is not None and value <= 0:
+        raise DrptError(f"{name} must be positive, got {value}")
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from .backend import ensure_llvm
+    from .imageio import write_image
+    from .render.integrators.path import PathOptions
+    from .render.renderer import RenderOptions, Renderer
+    from .scene import load_scene
+    from .scene.model import DirectionalLight, PointLight, Skybox
+
+    scene_path = args.scene or args.input
+    if not scene_path:
+        raise DrptError("no scene given: drpt render SCENE (or -input SCENE)")
+    if args.scene and args.input:
+        raise DrptError("give the scene once, either as SCENE or as -input")
+    seed_mode = args.input is not None
+
+    width, height = args.size or (512, 512)
+    spp = args.spp if args.spp is not None else 64
+    _positive("size", min(width, height))
+    _positive("spp", spp)
+    _positive("--max-lanes", args.max_lanes)
+    if args.max_depth == 0 or args.max_depth < -1:
+        raise DrptError(f"--max-depth must be -1 (unbounded) or >= 1, got {args.max_depth}")
+    if not (args.gamma > 0):
+        raise DrptError(f"gamma must be positive, got {args.gamma}")
+    rr_prob = args.rr_prob
+    rr_depth = args.rr_depth
+    if args.rr_cutdown is not None:
+        rr_prob, rr_depth = args.rr_cutdown, 1
+    if rr_prob is not None and not (0.0 < rr_prob <= 1.0):
+        raise DrptError(f"Russian roulette probability must be in (0, 1], got {rr_prob}")
+
+    integrator = args.integrator or ("path" if (args.monte_carlo or not seed_mode) else "whitted")
+    accel = args.accel or ("bvh" if (args.spatial_tree or not seed_mode) else "grid")
+    bsdf = args.bsdf or ("cook-torrance" if args.cook_torrance else ("phong" if seed_mode else "diffuse"))
+    if integrator == "whitted":
+        _note("whitted")
+    if accel == "grid":
+        _note("grid")
+        accel = "bvh"
+    if bsdf in ("phong", "cook-torrance"):
+        _note(bsdf)
+    if args.sah_threshold is not None or (args.resolution is not None and accel == "bvh"):
+        _note("sah-threshold")
+    if args.gui:
+        _note("gui")
+
+    output = Path(args.output) if args.output else Path(Path(scene_path).stem + ".png")
+    scene = load_scene(scene_path)
+    if any(isinstance(light, Skybox) for light in scene.lights):
+        _note("skybox")
+    if any(isinstance(light, (PointLight, DirectionalLight)) for light in scene.lights):
+        _note("point")
+
+    ensure_llvm()
+    opts = RenderOptions(width=width, height=height, spp=spp, seed=args.seed, accel=accel,
+                         path=PathOptions(max_depth=args.max_depth, rr_depth=rr_depth,
+                                          rr_prob=rr_prob),
+                         max_lanes=args.max_lanes, progress=not args.quiet)
+    result = Renderer(scene, opts).render()
+    if result.nonfinite:
+        print(f"drpt: warning: {result.nonfinite} samples were NaN/Inf and were set to 0",
+              file=sys.stderr)
+    write_image(output, result.image, gamma=args.gamma)
+    print(f"{output}: {width}x{height}, {spp} spp, {result.seconds:.2f} s "
+          f"(+{result.build_seconds:.2f} s build), "
+          f"{result.samples_per_second / 1e6:.2f} Msamples/s")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from .export.mitsuba import write_xml
+    from .scene import load_scene
+
+    scene = load_scene(args.scene)
+    width, height = args.size
+    write_xml(scene, Path(args.output), width=width, height=height, spp=args.spp,
+              max_depth=args.max_depth)
+    print(f"{args.output}: Mitsuba 3 scene written")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="drpt", description=__doc__.split("\n")[0],
+                                     allow_abbrev=False)
+    sub = parser.add_subparsers(dest="command", required=True)
+    render = sub.add_parser("render", help="render a scene to an image", allow_abbrev=False)
+    _add_render_args(render)
+    render.set_defaults(func=cmd_render)
+
+    export = sub.add_parser("export", help="write the scene as Mitsuba 3 XML plus meshes",
+                            allow_abbrev=False)
+    export.add_argument("scene")
+    export.add_argument("output", help="the .xml file to write (meshes go beside it)")
+    export.add_argument("--size", nargs=2, type=int, default=(512, 512), metavar=("W", "H"))
+    export.add_argument("--spp", type=int, default=64)
+    export.add_argument("--max-depth", type=int, default=-1)
+    export.set_defaults(func=cmd_export)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except DrptError as e:
+        print(f"drpt: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("drpt: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

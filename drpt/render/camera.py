@@ -1,0 +1,64 @@
+"""Camera ray generation.
+
+A pixel position ``(x, y)`` is continuous, measured from the image's top-left
+corner (pixel ``(i, j)`` covers ``[i, i+1) x [j, j+1)``). With
+``f = normalize(direction)``, ``r = normalize(cross(f, up))`` and
+``u = cross(r, f)``:
+
+* perspective: ``d = normalize(f + sx*r + sy*u)`` where
+  ``sx = (2x/W - 1) * tan(fov/2) * W/H`` and ``sy = (1 - 2y/H) * tan(fov/2)``;
+  ``fov`` is the full *vertical* field of view;
+* orthographic: origin ``center + sx*r + sy*u`` with ``sx = (2x/W - 1) *
+  size/2 * W/H``, ``sy = (1 - 2y/H) * size/2``, direction ``f``.
+
+The Mitsuba exporter reproduces exactly this mapping.
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import numpy as np
+from drjit.llvm import Array3f, Float
+
+from ..errors import DrptError
+from ..scene.model import Camera, OrthographicCamera, PerspectiveCamera
+
+
+def camera_basis(cam: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit forward, right and up vectors of a camera (numpy, float64)."""
+    f = np.asarray(cam.direction, float)
+    up = np.asarray(cam.up, float)
+    if np.linalg.norm(f) == 0.0:
+        raise DrptError("camera direction has zero length")
+    f = f / np.linalg.norm(f)
+    r = np.cross(f, up)
+    if np.linalg.norm(r) < 1e-9 * max(np.linalg.norm(up), 1e-30):
+        raise DrptError("camera up vector is parallel to its direction")
+    r = r / np.linalg.norm(r)
+    return f, r, np.cross(r, f)
+
+
+class RayCamera:
+    def __init__(self, cam: Camera, width: int, height: int):
+        self.width, self.height = width, height
+        f, r, u = camera_basis(cam)
+        self.orthographic = isinstance(cam, OrthographicCamera)
+        if isinstance(cam, PerspectiveCamera):
+            half_h = math.tan(math.radians(cam.fov) / 2.0)
+        else:
+            half_h = cam.size / 2.0
+        half_w = half_h * width / height
+        self.center = Array3f(*map(float, cam.center))
+        self.f = Array3f(*map(float, f))
+        self.r = Array3f(*map(float, r * half_w))  # pre-scaled by the half extents
+        self.u = Array3f(*map(float, u * half_h))
+
+    def ray(self, x: Float, y: Float) -> tuple[Array3f, Array3f]:
+        """World-space ray (origin, unit direction) through pixel position (x, y)."""
+        sx = 2.0 * x / self.width - 1.0
+        sy = 1.0 - 2.0 * y / self.height
+        if self.orthographic:
+            return self.center + self.r * sx + self.u * sy, Array3f(self.f)
+        return Array3f(self.center), dr.normalize(self.f + self.r * sx + self.u * sy)

@@ -1,0 +1,139 @@
+"""Turns a scene into an image: passes of samples, a box filter, a progress bar.
+
+Work is cut into passes of at most ``max_lanes`` samples (one Dr.Jit lane
+each), so memory stays bounded at any image size and sample count: a pass
+covers a band of rows with ``k`` samples per pixel (``k`` as large as the
+budget allows). Lanes are ordered pixel-major, so the ``k`` samples of a
+pixel are adjacent and ``dr.block_sum`` averages them (a box filter: samples
+are uniform over the pixel's square). Each sample draws from its own PCG32
+stream, selected by ``(seed, pass, lane)``, so a render is deterministic for
+a given seed and pass layout.
+
+Pass parameters that change between passes (row offset, seed, ``k``) are
+opaque JIT values: the megakernel is compiled once per render.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import drjit as dr
+import numpy as np
+from drjit.llvm import Bool, Float, PCG32, UInt32, UInt64
+
+from ..scene.model import Scene
+from .camera import RayCamera
+from .integrators.path import PathIntegrator, PathOptions
+from .lights.area import AreaLights
+from .material import MaterialTable
+from .spawn import RayOffset
+from .surface import SurfaceData
+
+
+@dataclass
+class RenderOptions:
+    width: int = 256
+    height: int = 256
+    spp: int = 16
+    seed: int = 0
+    accel: str = "bvh"
+    path: PathOptions = field(default_factory=PathOptions)
+    max_lanes: int = 1 << 21
+    progress: bool = True
+
+
+@dataclass
+class RenderResult:
+    image: np.ndarray  # (H, W, 3) float32, linear radiance
+    seconds: float
+    build_seconds: float
+    samples: int
+    nonfinite: int  # samples discarded because they were NaN/Inf (should be 0)
+
+    @property
+    def samples_per_second(self) -> float:
+        return self.samples / max(self.seconds, 1e-9)
+
+
+def _mix_seed(seed: int, index: int) -> int:
+    """A 64-bit hash (splitmix64) of (seed, index), for PCG32 initial states."""
+    z = (seed * 0x9E3779B97F4A7C15 + index + 1) & 0xFFFFFFFFFFFFFFFF
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & 0xFFFFFFFFFFFFFFFF
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & 0xFFFFFFFFFFFFFFFF
+    return z ^ (z >> 31)
+
+
+def plan_passes(width: int, height: int, spp: int, max_lanes: int) -> list[tuple[int, int, int, int]]:
+    """Passes as (first sample, samples per pixel, first row, rows)."""
+    pixels = width * height
+    if pixels * 1 <= max_lanes:
+        k = max(1, min(spp, max_lanes // pixels))
+        rows = height
+    else:
+        k = 1
+        rows = max(1, max_lanes // width)
+    passes = []
+    for s0 in range(0, spp, k):
+        kk = min(k, spp - s0)
+        for r0 in range(0, height, rows):
+            passes.append((s0, kk, r0, min(rows, height - r0)))
+    return passes
+
+
+class Renderer:
+    def __init__(self, scene: Scene, options: RenderOptions):
+        from ..accel import build_accel
+
+        self.scene, self.opt = scene, options
+        t0 = time.perf_counter()
+        self.accel = build_accel(scene, kind=options.accel)
+        self.surfaces = SurfaceData(scene)
+        self.materials = MaterialTable(scene)
+        self.lights = AreaLights(scene, self.surfaces)
+        self.camera = RayCamera(scene.camera, options.width, options.height)
+        self.integrator = PathIntegrator(
+            self.accel, self.surfaces, self.materials, self.lights, RayOffset(scene),
+            scene.background.color, options.path)
+        self.build_seconds = time.perf_counter() - t0
+
+    def _pass(self, pass_index: int, k: int, r0: int, rows: int) -> np.ndarray:
+        W = self.opt.width
+        n = rows * W * k
+        lane = dr.arange(UInt32, n)
+        kk = dr.opaque(UInt32, k)
+        pixel = lane // kk
+        x = pixel % W
+        y = pixel // W + dr.opaque(UInt32, r0)
+        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
+                    initseq=dr.opaque(UInt64, pass_index * self.opt.max_lanes))
+        fx = Float(x) + rng.next_float32()
+        fy = Float(y) + rng.next_float32()
+        o, d = self.camera.ray(fx, fy)
+        L = self.integrator.sample(rng, o, d, Bool(True))
+        bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
+        L = dr.select(bad, 0.0, L)
+        sums = [dr.block_sum(c, k) for c in (L.x, L.y, L.z)]
+        nbad = dr.sum(UInt32(bad))
+        dr.eval(sums, nbad)
+        img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)
+        return img, int(nbad[0])
+
+    def render(self) -> RenderResult:
+        from tqdm import tqdm
+
+        W, H, spp = self.opt.width, self.opt.height, self.opt.spp
+        passes = plan_passes(W, H, spp, self.opt.max_lanes)
+        acc = np.zeros((H, W, 3), np.float64)
+        nonfinite = 0
+        t0 = time.perf_counter()
+        with tqdm(total=W * H * spp, unit="spl", unit_scale=True, disable=not self.opt.progress,
+                  desc="render", leave=False) as bar:
+            for i, (s0, k, r0, rows) in enumerate(passes):
+                img, nbad = self._pass(i, k, r0, rows)
+                acc[r0:r0 + rows] += img
+                nonfinite += nbad
+                bar.update(rows * W * k)
+        seconds = time.perf_counter() - t0
+        image = (acc / spp).astype(np.float32)
+        return RenderResult(image, seconds, self.build_seconds, W * H * spp, nonfinite)

@@ -1,0 +1,54 @@
+"""Sample warps and local frames: maps from the unit square to directions
+and points, each with its density. Pure Dr.Jit, usable inside symbolic loops.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+from drjit.llvm import Array2f, Array3f, Float
+
+INV_PI = 1.0 / dr.pi
+
+
+def square_to_cosine_hemisphere(u: Array2f) -> Array3f:
+    """Cosine-weighted direction around +z (Malley: concentric disk, lifted)."""
+    # Concentric map of the square to the unit disk (no clumping at the rim).
+    a = 2.0 * u.x - 1.0
+    b = 2.0 * u.y - 1.0
+    use_a = dr.abs(a) > dr.abs(b)
+    r = dr.select(use_a, a, b)
+    phi = dr.select(use_a, (dr.pi / 4.0) * (b / a), (dr.pi / 2.0) - (dr.pi / 4.0) * (a / b))
+    phi = dr.select((a == 0) & (b == 0), 0.0, phi)
+    s, c = dr.sincos(phi)
+    x, y = r * c, r * s
+    z = dr.safe_sqrt(1.0 - x * x - y * y)
+    return Array3f(x, y, z)
+
+
+def cosine_hemisphere_pdf(cos_theta: Float) -> Float:
+    return dr.maximum(cos_theta, 0.0) * INV_PI
+
+
+def square_to_uniform_triangle(u: Array2f) -> Array2f:
+    """Uniform barycentrics (b1, b2) on a triangle; b0 = 1 - b1 - b2."""
+    t = dr.safe_sqrt(1.0 - u.x)
+    return Array2f(1.0 - t, t * u.y)
+
+
+class Frame:
+    """Orthonormal frame (s, t, n); ``to_local``/``to_world`` rotate vectors."""
+
+    def __init__(self, n: Array3f):
+        # Duff et al. 2017, "Building an orthonormal basis, revisited".
+        sign = dr.copysign(1.0, n.z)
+        a = -1.0 / (sign + n.z)
+        b = n.x * n.y * a
+        self.s = Array3f(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x)
+        self.t = Array3f(b, sign + n.y * n.y * a, -n.y)
+        self.n = n
+
+    def to_local(self, v: Array3f) -> Array3f:
+        return Array3f(dr.dot(v, self.s), dr.dot(v, self.t), dr.dot(v, self.n))
+
+    def to_world(self, v: Array3f) -> Array3f:
+        return self.s * v.x + self.t * v.y + self.n * v.z
