@@ -23,8 +23,11 @@ from .errors import DrptError
 LATER = {
     "whitted": "the Whitted integrator lands with issue 4; rendering with the MIS path tracer",
     "grid": "the uniform grid (3D-DDA) lands with issue 5; using the SAH BVH",
-    "phong": "Phong specular lobes land with issue 3; rendering diffuse (Kd) only",
-    "cook-torrance": "Cook-Torrance lobes land with issue 3; rendering diffuse (Kd) only",
+    "phong": "Phong specular lobes, glass and mirrors land with issue 3; "
+             "rendering these materials diffuse (Kd) only",
+    "cook-torrance": "Cook-Torrance lobes, glass and mirrors land with issue 3; "
+                     "rendering these materials diffuse (Kd) only",
+    "texture": "textures (map_Kd) land with issue 3; using the material's Kd",
     "sah-threshold": "BVH build variants (-SAHeuristic, -resolution) land with issue 5; using full binned SAH",
     "gui": "drpt has no OpenGL preview (-gui): it renders straight to the output file",
     "skybox": "environment lighting (Skybox) lands with issue 4; the sky is black for now",
@@ -69,7 +72,8 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("-MonteCarlo", dest="monte_carlo", action="store_true",
                    help="seed flag: Monte Carlo path tracing (the seed's default is Whitted)")
     p.add_argument("--bsdf", choices=["diffuse", "phong", "cook-torrance"], default=None,
-                   help="how MTL materials are read")
+                   help="how MTL materials are read: phong (Kd, Ks, Ns; default) or "
+                        "cook-torrance (Kd, Roughness, Metalness); diffuse uses Kd only")
     p.add_argument("-cook_torrance", dest="cook_torrance", action="store_true",
                    help="seed flag: Cook-Torrance shading")
     p.add_argument("--gamma", "-Gamma", dest="gamma", type=float, default=2.2,
@@ -78,6 +82,23 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-lanes", type=int, default=1 << 21,
                    help="samples traced at once; bounds memory (default 2097152)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+
+
+def _has_specular(scene) -> bool:
+    return any(max(m.ks) > 0 or m.metalness is not None or m.roughness is not None
+               or m.dissolve < 1 or max(m.reflective) > 0 or max(m.transparent) > 0
+               or m.illum in (3, 4, 5, 6, 7) for m in scene.materials)
+
+
+def _check_output(output: Path) -> None:
+    """Fail before rendering, not after, on an output drpt cannot write."""
+    from .imageio import WRITE_EXTENSIONS
+
+    if output.suffix.lower() not in WRITE_EXTENSIONS:
+        raise DrptError(f"{output}: unsupported image type '{output.suffix}' "
+                        f"(use one of {', '.join(sorted(WRITE_EXTENSIONS))})")
+    if not output.parent.exists() and str(output.parent) != "":
+        raise DrptError(f"{output}: folder {output.parent} does not exist")
 
 
 def _positive(name: str, value: int | float | None) -> None:
@@ -118,21 +139,24 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     integrator = args.integrator or ("path" if (args.monte_carlo or not seed_mode) else "whitted")
     accel = args.accel or ("bvh" if (args.spatial_tree or not seed_mode) else "grid")
-    bsdf = args.bsdf or ("cook-torrance" if args.cook_torrance else ("phong" if seed_mode else "diffuse"))
+    bsdf = args.bsdf or ("cook-torrance" if args.cook_torrance else "phong")
     if integrator == "whitted":
         _note("whitted")
     if accel == "grid":
         _note("grid")
         accel = "bvh"
-    if bsdf in ("phong", "cook-torrance"):
-        _note(bsdf)
     if args.sah_threshold is not None or (args.resolution is not None and accel == "bvh"):
         _note("sah-threshold")
     if args.gui:
         _note("gui")
 
     output = Path(args.output) if args.output else Path(Path(scene_path).stem + ".png")
+    _check_output(output)
     scene = load_scene(scene_path)
+    if bsdf != "diffuse" and _has_specular(scene):
+        _note(bsdf)
+    if any(m.map_kd is not None for m in scene.materials):
+        _note("texture")
     if any(isinstance(light, Skybox) for light in scene.lights):
         _note("skybox")
     if any(isinstance(light, (PointLight, DirectionalLight)) for light in scene.lights):

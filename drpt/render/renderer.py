@@ -46,6 +46,7 @@ class RenderOptions:
 @dataclass
 class RenderResult:
     image: np.ndarray  # (H, W, 3) float32, linear radiance
+    variance: np.ndarray  # (H, W, 3) float32, estimated variance of each pixel's mean
     seconds: float
     build_seconds: float
     samples: int
@@ -114,10 +115,12 @@ class Renderer:
         bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
         L = dr.select(bad, 0.0, L)
         sums = [dr.block_sum(c, k) for c in (L.x, L.y, L.z)]
+        sqsums = [dr.block_sum(c * c, k) for c in (L.x, L.y, L.z)]
         nbad = dr.sum(UInt32(bad))
-        dr.eval(sums, nbad)
+        dr.eval(sums, sqsums, nbad)
         img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)
-        return img, int(nbad[0])
+        sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, 3)
+        return img, sq, int(nbad[0])
 
     def render(self) -> RenderResult:
         from tqdm import tqdm
@@ -125,15 +128,20 @@ class Renderer:
         W, H, spp = self.opt.width, self.opt.height, self.opt.spp
         passes = plan_passes(W, H, spp, self.opt.max_lanes)
         acc = np.zeros((H, W, 3), np.float64)
+        acc2 = np.zeros((H, W, 3), np.float64)
         nonfinite = 0
         t0 = time.perf_counter()
         with tqdm(total=W * H * spp, unit="spl", unit_scale=True, disable=not self.opt.progress,
                   desc="render", leave=False) as bar:
             for i, (s0, k, r0, rows) in enumerate(passes):
-                img, nbad = self._pass(i, k, r0, rows)
+                img, sq, nbad = self._pass(i, k, r0, rows)
                 acc[r0:r0 + rows] += img
+                acc2[r0:r0 + rows] += sq
                 nonfinite += nbad
                 bar.update(rows * W * k)
         seconds = time.perf_counter() - t0
-        image = (acc / spp).astype(np.float32)
-        return RenderResult(image, seconds, self.build_seconds, W * H * spp, nonfinite)
+        mean = acc / spp
+        # Unbiased sample variance of one sample, divided by spp: variance of the mean.
+        var = np.maximum(acc2 / spp - mean * mean, 0.0) * spp / max(spp - 1, 1) / spp
+        return RenderResult(mean.astype(np.float32), var.astype(np.float32), seconds,
+                            self.build_seconds, W * H * spp, nonfinite)

@@ -1,0 +1,113 @@
+"""The command line (drpt/cli.py): seed flags, outputs, user errors."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import SCENES
+from drpt.cli import main
+from drpt.imageio import read_image
+
+CORNELL = str(SCENES / "cornellbox" / "cornellbox.txt")
+
+
+def run(args):
+    return subprocess.run([sys.executable, "-m", "drpt", *args], capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_all_seed_flags_as_written_in_the_report(tmp_path, capsys):
+    out = tmp_path / "x.tga"
+    code = main(["render", "-input", CORNELL, "-size", "16", "12", "-output", str(out),
+                 "-spp", "2", "-MonteCarlo", "-cook_torrance", "-RR_cutdown", "0.6",
+                 "-Gamma", "2.2", "-SpatialTree", "-resolution", "5", "-SAH", "2000", "-gui"])
+    assert code == 0
+    img = read_image(out, linear=False)
+    assert img.shape == (12, 16, 3) and img.max() > 0
+    err = capsys.readouterr().err
+    # Features that come later are announced, once each, in one line.
+    assert "-SAHeuristic" in err and "-gui" in err
+    assert err.count("\n") == len([line for line in err.splitlines() if line.startswith("drpt: note:")])
+
+
+def test_seed_defaults_announce_whitted_and_grid(tmp_path, capsys):
+    assert main(["render", "-input", CORNELL, "-size", "4", "4", "-spp", "1",
+                 "-output", str(tmp_path / "a.png"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "Whitted" in err and "grid" in err
+
+
+@pytest.mark.parametrize("size, spp", [((1, 1), 1), ((7, 3), 1), ((3, 9), 5)])
+def test_tiny_and_non_square_images(tmp_path, size, spp):
+    out = tmp_path / "img.exr"
+    assert main(["render", CORNELL, "--size", *map(str, size), "--spp", str(spp),
+                 "--output", str(out), "--quiet"]) == 0
+    img = read_image(out)
+    assert img.shape == (size[1], size[0], 3)
+    assert np.all(np.isfinite(img)) and np.all(img >= 0)
+
+
+def test_max_lanes_smaller_than_a_row_still_renders_everything(tmp_path):
+    # Bounded memory: passes of 3 lanes for a 5x5 image (square: every pixel
+    # sees the inside of the box, so a skipped pixel would stay black).
+    a = tmp_path / "a.exr"
+    assert main(["render", CORNELL, "--size", "5", "5", "--spp", "4", "-o", str(a),
+                 "--quiet", "--max-lanes", "3"]) == 0
+    assert np.all(read_image(a).sum(2) > 0)
+
+
+def test_same_seed_same_image(tmp_path):
+    a, b = tmp_path / "a.exr", tmp_path / "b.exr"
+    for out in (a, b):
+        assert main(["render", CORNELL, "--size", "8", "8", "--spp", "4", "--seed", "5",
+                     "-o", str(out), "--quiet"]) == 0
+    assert np.array_equal(read_image(a), read_image(b))
+    c = tmp_path / "c.exr"
+    main(["render", CORNELL, "--size", "8", "8", "--spp", "4", "--seed", "6", "-o", str(c), "--quiet"])
+    assert not np.array_equal(read_image(a), read_image(c))
+
+
+def test_one_line_summary(tmp_path):
+    r = run(["render", CORNELL, "--size", "8", "8", "--spp", "1", "-o", str(tmp_path / "s.png"), "--quiet"])
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.strip().splitlines()
+    assert len(lines) == 1 and "Msamples/s" in lines[0] and " s " in lines[0]
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["render", "missing.txt"], "missing.txt"),
+    (["render", CORNELL, "--spp", "0"], "spp must be positive"),
+    (["render", CORNELL, "--size", "0", "5"], "size must be positive"),
+    (["render", CORNELL, "-o", "out.jpg"], "unsupported image type"),
+    (["render", CORNELL, "-o", "/nonexistent/dir/x.png"], "does not exist"),
+    (["render", CORNELL, "--max-depth", "0"], "--max-depth"),
+    (["render", CORNELL, "-RR_cutdown", "1.5"], "Russian roulette"),
+    (["render"], "no scene given"),
+])
+def test_user_errors_exit_2_with_one_line(tmp_path, args, needle):
+    r = run(args)
+    assert r.returncode == 2
+    assert needle in r.stderr and "Traceback" not in r.stderr
+    assert r.stderr.strip().count("\n") == 0
+
+
+def test_malformed_scene_names_file_and_line(tmp_path):
+    bad = tmp_path / "bad.txt"
+    bad.write_text("PerspectiveCamera {\n  center 0 0 1\n  direction 0 0 -1\n  up 0 1 0\n  angle sixty\n}\n")
+    out = tmp_path / "never.png"
+    r = run(["render", str(bad), "-o", str(out)])
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert f"{bad}:5" in r.stderr
+    assert not out.exists()
+
+
+def test_export_writes_loadable_xml(tmp_path):
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("llvm_ad_rgb")
+    xml = tmp_path / "cb.xml"
+    assert main(["export", CORNELL, str(xml), "--size", "16", "16", "--spp", "4"]) == 0
+    scene = mi.load_file(str(xml))
+    img = np.asarray(mi.render(scene))
+    assert img.shape == (16, 16, 3) and img.mean() > 0

@@ -1,0 +1,98 @@
+"""drpt against Mitsuba 3 on the bundled Cornell box.
+
+Two statistics, both with fixed seeds:
+
+* relMSE = mean over pixels and channels of (x - ref)^2 / (ref^2 + 1e-2),
+  the usual relative MSE. It measures noise plus bias; the bound 0.01 is
+  the issue's ("well under 0.01"); drpt measures ~7e-4 at 128x128, 256 spp.
+* block z-scores: the image is cut into 16x16-pixel blocks; for each block
+  and channel z = (mean_drpt - mean_ref) / sqrt(var_drpt + var_ref), with
+  variances from drpt's per-pixel variance estimate (the reference's is the
+  same per-sample variance over its own spp). Unbiased renderers give z ~
+  N(0, 1); we require max |z| < 4.5 over all 192 blocks (a false alarm
+  probability of ~1e-3 under normality). A bias of 1-2% in a bright region
+  fails this; noise does not.
+"""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import REPO, SCENES
+from drpt.cli import main
+from drpt.imageio import read_image
+from drpt.render.integrators.path import PathOptions
+from drpt.render.renderer import RenderOptions, Renderer
+from drpt.scene import load_scene
+
+sys.path.insert(0, str(REPO / "reference"))
+from make_references import REFERENCES, reference_path  # noqa: E402
+
+CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
+
+
+def rel_mse(x, ref):
+    return float(np.mean((x - ref) ** 2 / (ref**2 + 1e-2)))
+
+
+def block_z(x, var_x, ref, var_ref, block=16):
+    H, W, C = x.shape
+
+    def blk(a):
+        return a.reshape(H // block, block, W // block, block, C).mean((1, 3))
+
+    n = block * block
+    var = blk(var_x) / n + blk(var_ref) / n
+    return (blk(x) - blk(ref)) / np.sqrt(var)
+
+
+@pytest.fixture(scope="module")
+def reference():
+    _, w, h, spp, depth = REFERENCES["cornellbox"]
+    return read_image(reference_path("cornellbox")), spp
+
+
+def test_seed_flags_render_matches_mitsuba_reference(tmp_path, reference, capsys):
+    ref, _ = reference
+    out = tmp_path / "cornell.exr"
+    code = main(["render", "-input", str(CORNELL), "-size", "128", "128", "-output", str(out),
+                 "-spp", "256", "-MonteCarlo", "-SpatialTree", "--quiet"])
+    assert code == 0
+    img = read_image(out)
+    assert img.shape == ref.shape and np.all(np.isfinite(img))
+    assert rel_mse(img, ref) < 0.01
+    # The whole-image mean is a 4M-sample average: within 0.5% per channel.
+    assert np.allclose(img.mean((0, 1)), ref.mean((0, 1)), rtol=5e-3)
+    assert "Msamples/s" in capsys.readouterr().out
+
+
+def test_no_bias_against_mitsuba_reference(reference):
+    ref, ref_spp = reference
+    spp = 64
+    r = Renderer(load_scene(CORNELL), RenderOptions(width=128, height=128, spp=spp, seed=7,
+                                                    progress=False)).render()
+    z = block_z(r.image, r.variance, ref, r.variance * spp / ref_spp)
+    assert np.abs(z).max() < 4.5, np.abs(z).max()
+    # Negative control: the same statistic flags a 2% brightness bias.
+    z_biased = block_z(r.image * 1.02, r.variance * 1.02**2, ref, r.variance * spp / ref_spp)
+    assert np.abs(z_biased).max() > 4.5
+
+
+def test_live_mitsuba_export_agrees_at_fixed_depth():
+    # Non-square, truncated depth (exercises the depth convention), Mitsuba
+    # rendered now from the in-memory export.
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("llvm_ad_rgb")
+    from drpt.export.mitsuba import to_mitsuba_dict
+
+    scene = load_scene(CORNELL)
+    W, H, spp = 64, 48, 256
+    for depth in (2, 3):
+        r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, seed=3, progress=False,
+                                          path=PathOptions(max_depth=depth))).render()
+        ms = mi.load_dict(to_mitsuba_dict(scene, W, H, spp, max_depth=depth, seed=3))
+        ref = np.asarray(mi.render(ms, spp=spp, seed=3), dtype=np.float32)
+        z = block_z(r.image, r.variance, ref, r.variance, block=16)
+        assert np.abs(z).max() < 4.5, (depth, np.abs(z).max())
