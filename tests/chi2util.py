@@ -3,6 +3,9 @@
 
 from __future__ import annotations
 
+import os
+import tempfile
+
 import numpy as np
 
 
@@ -54,5 +57,12 @@ def run_chi2(sample, pdf, sample_dim=2, sample_count=400_000, res=61, seed=0):
 
     test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
                          sample_dim=sample_dim, sample_count=sample_count, res=res, seed=seed)
-    ok = test.run()
+    # On failure Mitsuba writes chi2_data.py into the working directory.
+    cwd = os.getcwd()
+    with tempfile.TemporaryDirectory() as tmp:
+        os.chdir(tmp)
+        try:
+            ok = test.run()
+        finally:
+            os.chdir(cwd)
     return ok, test.messages
