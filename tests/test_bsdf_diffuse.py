@@ -7,10 +7,11 @@ import pytest
 from drjit.llvm import Array2f, Array3f, Float
 
 from drpt.render.bsdf import diffuse
+from drpt.render.bsdf.diffuse import DiffuseParams
 
 from chi2util import run_chi2
 
-KD = Array3f(0.7, 0.5, 0.2)
+KD = DiffuseParams(Array3f(0.7, 0.5, 0.2))
 
 
 def _dir(theta_deg):
@@ -21,8 +22,8 @@ def _dir(theta_deg):
 @pytest.mark.parametrize("theta", [0.0, 45.0, 89.9999])
 def test_sampling_matches_pdf(theta):
     wi = _dir(theta)
-    ok, msg = run_chi2(lambda u: diffuse.sample(KD, Array3f(wi.x, wi.y, wi.z), u)[0],
-                       lambda w: diffuse.pdf(Array3f(wi.x, wi.y, wi.z), w))
+    ok, msg = run_chi2(lambda u: diffuse.sample(KD, Array3f(wi.x, wi.y, wi.z), Float(0.5), u).wo,
+                       lambda w: diffuse.pdf(KD, Array3f(wi.x, wi.y, wi.z), w))
     assert ok, msg
 
 
@@ -31,7 +32,8 @@ def test_weight_is_eval_over_pdf_and_reciprocal():
     n = 10000
     u = Array2f(rng.random((2, n)).astype(np.float32))
     wi = dr.normalize(Array3f(0.3, -0.2, 0.9))
-    wo, weight, pdf, valid = diffuse.sample(KD, wi, u)
+    bs = diffuse.sample(KD, wi, Float(0.5), u)
+    wo, weight, pdf, valid = bs.wo, bs.weight, bs.pdf, bs.valid
     f = diffuse.eval(KD, wi, wo)
     w = np.array(weight)
     assert np.all(np.array(valid))
@@ -47,7 +49,7 @@ def test_furnace_albedo_one():
     # Reflected energy for kd = 1: the weights average to exactly 1.
     rng = np.random.default_rng(3)
     u = Array2f(rng.random((2, 100_000)).astype(np.float32))
-    _, weight, _, _ = diffuse.sample(Array3f(1.0), Array3f(0.0, 0.0, 1.0), u)
+    weight = diffuse.sample(DiffuseParams(Array3f(1.0)), Array3f(0.0, 0.0, 1.0), Float(0.5), u).weight
     assert np.allclose(np.array(weight).mean(axis=1), 1.0, atol=1e-6)
 
 
@@ -55,8 +57,9 @@ def test_below_surface_is_zero_not_nan():
     wi = Array3f(0.0, 0.0, -1.0)  # viewer below: the lobe is zero
     wo = Array3f(0.0, 0.6, 0.8)
     assert np.all(np.array(diffuse.eval(KD, wi, wo)) == 0)
-    assert np.array(diffuse.pdf(wi, wo))[0] == 0
-    _, weight, pdf, valid = diffuse.sample(KD, wi, Array2f(0.3, 0.7))
+    assert np.array(diffuse.pdf(KD, wi, wo))[0] == 0
+    bs = diffuse.sample(KD, wi, Float(0.5), Array2f(0.3, 0.7))
+    weight, pdf, valid = bs.weight, bs.pdf, bs.valid
     assert not bool(valid[0]) and np.array(pdf)[0] == 0 and np.all(np.array(weight) == 0)
     grazing = Array3f(1.0, 0.0, 1e-6)
     v = np.array(diffuse.eval(KD, grazing, grazing))

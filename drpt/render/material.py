@@ -1,40 +1,86 @@
 """Materials on the device: per-material parameters and the BSDF dispatch.
 
-Every surface is two-sided: the shading frame is flipped to the viewer's
-side before a lobe is evaluated. Emission is one-sided: a material with
-``emission`` radiates only toward the front, the side its shading normal
-(equal to the geometric normal for flat faces) points to — the same rule as
-Mitsuba's ``area`` emitter.
+Each scene material becomes one BSDF (:func:`drpt.shading.interpret` decides
+which, the same function the Mitsuba exporter uses). Only the kinds the
+scene has are traced: a diffuse-only scene compiles no Phong, GGX or glass
+code; a scene without textures compiles no texture lookups; a single kind
+needs no per-lane dispatch at all. With several kinds, each present lobe is
+evaluated under its own mask and the results are merged with ``select``.
 
-This issue's renderer models every material by its diffuse albedo ``kd``;
-specular lobes (Phong, Cook-Torrance, glass, mirror) arrive with the
-materials work and will be traced only when a scene has them.
+Sidedness: reflective lobes (diffuse, Phong, Cook-Torrance, mirror) are
+two-sided: their shading frame is flipped to the viewer's side. The
+dielectric sees the unflipped frame (``+z`` = shading normal = outside).
+Emission is one-sided: a material with ``emission`` radiates only toward the
+side its shading normal points to, as Mitsuba's ``area`` emitter does.
 """
 
 from __future__ import annotations
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array2f, Array3f, Bool, Float
+from drjit.llvm import Array2f, Array3f, Bool, Float, UInt32
 
+from ..shading import BSDFSpec, interpret
 from ..scene.model import Scene
-from .bsdf import diffuse
+from .bsdf import BSDFSample
 from .surface import Interaction, _vec
 from .warp import Frame
 
 
+def _lobe(kind: str):
+    if kind == "diffuse":
+        from .bsdf import diffuse as m
+    elif kind == "phong":
+        from .bsdf import phong as m
+    elif kind == "cook_torrance":
+        from .bsdf import cook_torrance as m
+    elif kind == "dielectric":
+        from .bsdf import dielectric as m
+    elif kind == "mirror":
+        from .bsdf import mirror as m
+    else:  # pragma: no cover - interpret() only returns the kinds above
+        raise ValueError(kind)
+    return m
+
+
 class MaterialTable:
-    def __init__(self, scene: Scene):
-        mats = scene.materials
-        self.kd = _vec(np.array([m.kd for m in mats], float))
-        self.emission = _vec(np.array([m.emission for m in mats], float))
-        self.has_emission = any(m.is_emissive for m in mats)
+    def __init__(self, scene: Scene, mode: str = "phong"):
+        self.specs: list[BSDFSpec] = [interpret(m, mode) for m in scene.materials]
+        self.notes = [n for s in self.specs for n in s.notes]
+        self.kinds = sorted({s.kind for s in self.specs})
+        kinds = np.array([self.kinds.index(s.kind) for s in self.specs], np.uint32)
+        self.kind = UInt32(kinds)
+        self.emission = _vec(np.array([m.emission for m in scene.materials], float))
+        self.has_emission = any(m.is_emissive for m in scene.materials)
 
-    def frame(self, si: Interaction) -> tuple[Frame, Bool]:
-        """Shading frame facing the viewer, and whether the viewer was behind ns."""
-        flip = dr.dot(si.ns, si.wi) < 0.0
-        return Frame(dr.select(flip, -si.ns, si.ns)), flip
+        def col(name):
+            return _vec(np.array([getattr(s, name) for s in self.specs], float))
 
+        def num(name):
+            return Float(np.array([getattr(s, name) for s in self.specs], np.float32))
+
+        self.kd = col("kd")
+        if "phong" in self.kinds or "mirror" in self.kinds:
+            self.ks, self.ns = col("ks"), num("ns")
+        if "cook_torrance" in self.kinds:
+            self.alpha, self.metalness = num("alpha"), num("metalness")
+        if "dielectric" in self.kinds:
+            self.ior = num("ior")
+
+        # Textures (map_Kd) on triangles with uvs; one id per material, or -1.
+        self.textures = None
+        paths = sorted({s.texture for s in self.specs if s.texture is not None}, key=str)
+        if paths and scene.triangles.uvs is not None:
+            from .texture import TextureSet
+
+            self.textures = TextureSet(paths)
+            tex = [paths.index(s.texture) if s.texture is not None else -1 for s in self.specs]
+            self.tex_id = UInt32(np.array(tex, np.int64).astype(np.uint32))
+        elif paths:
+            self.notes.append("textures need texture coordinates (OBJ vt); "
+                              "using Kd where a mesh has none")
+
+    # ------------------------------------------------------------------
     def emitted(self, si: Interaction) -> Array3f:
         """Radiance leaving ``si`` toward ``si.wi`` (zero on back faces)."""
         if not self.has_emission:
@@ -43,14 +89,78 @@ class MaterialTable:
         front = si.valid & (dr.dot(si.ns, si.wi) > 0.0)
         return dr.select(front, le, 0.0)
 
-    def eval_pdf(self, si: Interaction, frame: Frame, wo: Array3f) -> tuple[Array3f, Float]:
-        """``f * cos`` and the sampling density (solid angle) for world ``wo``."""
-        kd = dr.gather(Array3f, self.kd, si.material, si.valid)
-        wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
-        return diffuse.eval(kd, wi_l, wo_l), diffuse.pdf(wi_l, wo_l)
+    def is_specular_only(self) -> bool:
+        return all(k in ("dielectric", "mirror") for k in self.kinds)
 
-    def sample(self, si: Interaction, frame: Frame, u: Array2f):
-        """Sample ``wo``: (world wo, weight f*cos/pdf, pdf, valid)."""
-        kd = dr.gather(Array3f, self.kd, si.material, si.valid)
-        wo_l, weight, pdf, valid = diffuse.sample(kd, frame.to_local(si.wi), u)
-        return frame.to_world(wo_l), weight, pdf, valid & si.valid
+    def _base_color(self, si: Interaction, active: Bool) -> Array3f:
+        kd = dr.gather(Array3f, self.kd, si.material, active)
+        if self.textures is not None:
+            tid = dr.gather(UInt32, self.tex_id, si.material, active)
+            textured = active & (tid != 0xFFFFFFFF)
+            kd = dr.select(textured, self.textures.lookup(tid, si.uv, textured), kd)
+        return kd
+
+    def _params(self, kind: str, si: Interaction, active: Bool):
+        m = si.material
+        if kind == "diffuse":
+            from .bsdf.diffuse import DiffuseParams
+
+            return DiffuseParams(self._base_color(si, active))
+        if kind == "phong":
+            from .bsdf.phong import PhongParams
+
+            return PhongParams(self._base_color(si, active), dr.gather(Array3f, self.ks, m, active),
+                               dr.gather(Float, self.ns, m, active))
+        if kind == "cook_torrance":
+            from .bsdf.cook_torrance import CookTorranceParams
+
+            return CookTorranceParams(self._base_color(si, active),
+                                      dr.gather(Float, self.alpha, m, active),
+                                      dr.gather(Float, self.metalness, m, active))
+        if kind == "dielectric":
+            from .bsdf.dielectric import DielectricParams
+
+            return DielectricParams(dr.gather(Float, self.ior, m, active))
+        from .bsdf.mirror import MirrorParams
+
+        return MirrorParams(dr.gather(Array3f, self.ks, m, active))
+
+    def _cases(self, si: Interaction):
+        """(kind, lane mask, local frame) for each kind present."""
+        flip = dr.dot(si.ns, si.wi) < 0.0
+        two_sided = Frame(dr.select(flip, -si.ns, si.ns))
+        if len(self.kinds) == 1:
+            kind_of = None
+        else:
+            kind_of = dr.gather(UInt32, self.kind, si.material, si.valid)
+        for i, kind in enumerate(self.kinds):
+            mask = si.valid if kind_of is None else si.valid & (kind_of == i)
+            frame = Frame(si.ns) if kind == "dielectric" else two_sided
+            yield kind, mask, frame
+
+    # ------------------------------------------------------------------
+    def eval_pdf(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float]:
+        """``f * |cos|`` and the sampling density (solid angle) for world ``wo``."""
+        f, pdf = Array3f(0.0), Float(0.0)
+        for kind, mask, frame in self._cases(si):
+            if kind in ("dielectric", "mirror"):
+                continue  # delta lobes: nothing to evaluate
+            lobe = _lobe(kind)
+            p = self._params(kind, si, mask)
+            wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
+            f = dr.select(mask, lobe.eval(p, wi_l, wo_l), f)
+            pdf = dr.select(mask, lobe.pdf(p, wi_l, wo_l), pdf)
+        return f, pdf
+
+    def sample(self, si: Interaction, u1: Float, u2: Array2f) -> tuple[Array3f, BSDFSample]:
+        """Sample a world direction; returns it and the local :class:`BSDFSample`."""
+        out = BSDFSample()
+        wo = Array3f(0.0, 0.0, 1.0)
+        for kind, mask, frame in self._cases(si):
+            lobe = _lobe(kind)
+            p = self._params(kind, si, mask)
+            bs = lobe.sample(p, frame.to_local(si.wi), u1, u2)
+            out = dr.select(mask, bs, out)
+            wo = dr.select(mask, frame.to_world(bs.wo), wo)
+        out.valid &= si.valid
+        return wo, out

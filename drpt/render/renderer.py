@@ -38,6 +38,7 @@ class RenderOptions:
     spp: int = 16
     seed: int = 0
     accel: str = "bvh"
+    bsdf: str = "phong"  # how MTL materials are read, see drpt.shading
     path: PathOptions = field(default_factory=PathOptions)
     max_lanes: int = 1 << 21
     progress: bool = True
@@ -89,8 +90,8 @@ class Renderer:
         self.scene, self.opt = scene, options
         t0 = time.perf_counter()
         self.accel = build_accel(scene, kind=options.accel)
-        self.surfaces = SurfaceData(scene)
-        self.materials = MaterialTable(scene)
+        self.materials = MaterialTable(scene, options.bsdf)
+        self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None)
         self.lights = AreaLights(scene, self.surfaces)
         self.camera = RayCamera(scene.camera, options.width, options.height)
         self.integrator = PathIntegrator(

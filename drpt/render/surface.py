@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array3f, Bool, Float, UInt32
+from drjit.llvm import Array2f, Array3f, Bool, Float, UInt32
 
 from ..scene.model import Scene
 
@@ -31,7 +31,7 @@ class Interaction:
     Mitsuba. ``wi`` points from the hit back along the incoming ray.
     """
 
-    def __init__(self, valid, t, p, ng, ns, prim, material, wi):
+    def __init__(self, valid, t, p, ng, ns, prim, material, wi, uv=None):
         self.valid: Bool = valid
         self.t: Float = t
         self.p: Array3f = p
@@ -40,13 +40,14 @@ class Interaction:
         self.prim: UInt32 = prim
         self.material: UInt32 = material
         self.wi: Array3f = wi
+        self.uv: Array2f = uv if uv is not None else Array2f(0.0, 0.0)  # OBJ convention
 
     def is_triangle(self, n_triangles: int) -> Bool:
         return self.valid & (self.prim < n_triangles)
 
 
 class SurfaceData:
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene, with_uv: bool = False):
         tris, sph, pl = scene.triangles, scene.spheres, scene.planes
         self.n_tri, self.n_sph, self.n_pl = len(tris), len(sph), len(pl)
         if self.n_tri:
@@ -55,6 +56,12 @@ class SurfaceData:
             self.e1 = _vec(p[:, 1] - p[:, 0])
             self.e2 = _vec(p[:, 2] - p[:, 0])
             self.has_normals = tris.normals is not None
+            self.has_uv = with_uv and tris.uvs is not None
+            if self.has_uv:
+                uv = np.asarray(tris.uvs, np.float32)
+                self.uv0, self.uv1, self.uv2 = (
+                    Array2f(np.ascontiguousarray(uv[:, k, 0]), np.ascontiguousarray(uv[:, k, 1]))
+                    for k in range(3))
             if self.has_normals:
                 self.n0, self.n1, self.n2 = (_vec(tris.normals[:, k]) for k in range(3))
         if self.n_sph:
@@ -73,6 +80,7 @@ class SurfaceData:
         p = o + d * t
         ng = Array3f(0.0, 0.0, 1.0)
         ns = Array3f(0.0, 0.0, 1.0)
+        uv = None
         if self.n_tri:
             is_tri = valid & (prim < self.n_tri)
             i = dr.select(is_tri, prim, 0)
@@ -93,6 +101,10 @@ class SurfaceData:
                 ns = dr.select(is_tri, sn, ns)
             else:
                 ns = dr.select(is_tri, n, ns)
+            if self.has_uv:
+                uv = (dr.gather(Array2f, self.uv0, i, is_tri) * (1.0 - u - v)
+                      + dr.gather(Array2f, self.uv1, i, is_tri) * u
+                      + dr.gather(Array2f, self.uv2, i, is_tri) * v)
         if self.n_sph:
             is_sph = valid & (prim >= self.n_tri) & (prim < self.n_tri + self.n_sph)
             j = dr.select(is_sph, prim - self.n_tri, 0)
@@ -110,4 +122,4 @@ class SurfaceData:
             ng = dr.select(is_pl, n, ng)
             ns = dr.select(is_pl, n, ns)
         material = dr.gather(UInt32, self.material, prim, valid)
-        return Interaction(valid, t, p, ng, ns, prim, material, -d)
+        return Interaction(valid, t, p, ng, ns, prim, material, -d, uv)

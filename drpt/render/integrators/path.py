@@ -12,7 +12,13 @@ directly visible emitters, ``2`` adds direct lighting, ``-1`` is unbounded
 rr_depth``: by default a path continues with probability
 ``min(max(throughput), 0.95)``; with ``rr_prob`` set (the seed's
 ``-RR_cutdown``) it continues with that fixed probability. Surviving paths are
-divided by the probability, so neither choice adds bias.
+divided by the probability, so neither choice adds bias. As in Mitsuba, the
+adaptive probability uses the throughput times ``eta^2`` (the relative IORs
+crossed), so paths inside glass are not killed for their radiance scaling.
+
+Delta lobes (glass, mirrors) have nothing to evaluate: next-event estimation
+contributes nothing there and the emitter their ray hits counts in full
+(``prev_delta``). A scene of only delta materials traces no NEE code.
 """
 
 from __future__ import annotations
@@ -57,14 +63,16 @@ class PathIntegrator:
         accel, mats, lights, offset = self.accel, self.materials, self.lights, self.offset
         opt = self.opt
         has_lights = lights.count > 0
+        has_nee = has_lights and not mats.is_specular_only()
         has_background = max(self.background) > 0.0
         inf = dr.largest(Float)
 
         L = Array3f(0.0)
         beta = Array3f(1.0)
+        eta = Float(1.0)  # product of relative IORs crossed (Russian roulette)
         depth = UInt32(0)
         prev_pdf = Float(1.0)  # solid-angle pdf of the BSDF sample that led here
-        prev_delta = Bool(True)  # camera rays are not MIS-weighted
+        prev_delta = Bool(True)  # camera rays and delta bounces are not MIS-weighted
         active = Bool(active)
 
         while active:
@@ -75,7 +83,7 @@ class PathIntegrator:
             hit_emitter = active & si.valid
             le = mats.emitted(si)
             w = Float(1.0)
-            if has_lights:
+            if has_nee:
                 pdf_a = lights.pdf_area(si.prim, hit_emitter)
                 sees_light = hit_emitter & (pdf_a > 0.0)
                 pdf_l = dr.select(sees_light, pdf_a * dr.square(si.t) / dr.abs(dr.dot(si.ng, d)), 0.0)
@@ -87,12 +95,11 @@ class PathIntegrator:
             active_next = active & si.valid
             if opt.max_depth >= 0:
                 active_next &= depth + 1 < opt.max_depth
-            frame, _ = mats.frame(si)
 
             # ---- next-event estimation
             u_sel = rng.next_float32()
             u_light = Array2f(rng.next_float32(), rng.next_float32())
-            if has_lights:
+            if has_nee:
                 ls = lights.sample(u_sel, u_light, active_next)
                 to_light = ls.p - si.p
                 dist2 = dr.squared_norm(to_light)
@@ -100,7 +107,7 @@ class PathIntegrator:
                 wo = to_light / dist
                 front = dr.dot(ls.n, wo) < 0.0  # the light emits toward us
                 cos_light = dr.abs(dr.dot(ls.ng, wo))
-                f, pdf_b = mats.eval_pdf(si, frame, wo)
+                f, pdf_b = mats.eval_pdf(si, wo)
                 ok = active_next & front & (cos_light > 0.0) & (ls.pdf_area > 0.0) & (dr.max(f) > 0.0)
                 pdf_light = ls.pdf_area * dist2 / cos_light
                 so = offset.origin(si.p, si.ng, wo)
@@ -110,11 +117,13 @@ class PathIntegrator:
                 L += dr.select(ok, beta * f * ls.le * (power_heuristic(pdf_light, pdf_b) / pdf_light), 0.0)
 
             # ---- BSDF sampling: continue the path
+            u_lobe = rng.next_float32()
             u_bsdf = Array2f(rng.next_float32(), rng.next_float32())
-            wo, weight, pdf, valid = mats.sample(si, frame, u_bsdf)
-            beta *= weight
-            prev_pdf = pdf
-            prev_delta = Bool(False)
+            wo, bs = mats.sample(si, u_lobe, u_bsdf)
+            beta *= bs.weight
+            eta *= bs.eta
+            prev_pdf = bs.pdf
+            prev_delta = Bool(bs.delta)
             o = offset.origin(si.p, si.ng, wo)
             d = Array3f(wo)
             depth += 1
@@ -124,10 +133,10 @@ class PathIntegrator:
             if opt.rr_prob is not None:
                 q = Float(opt.rr_prob)
             else:
-                q = dr.minimum(dr.max(beta), 0.95)
+                q = dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
             rr_on = depth >= opt.rr_depth
             survive = u_rr < q
             beta = dr.select(rr_on, beta / q, beta)
-            active = active_next & valid & (~rr_on | survive) & (dr.max(beta) > 0.0)
+            active = active_next & bs.valid & (~rr_on | survive) & (dr.max(beta) > 0.0)
 
         return L
