@@ -111,7 +111,7 @@ Group {
     assert s.background.color == (0.1, 0.2, 0.3) and s.background.ambient == (0.01, 0.02, 0.03)
     d, p1, p2, sky = s.lights
     assert isinstance(d, DirectionalLight) and d.direction == (-1, -1, -1)
-    assert isinstance(p1, PointLight) and p1.attenuation == (1.0, 0.0, 0.0)
+    assert isinstance(p1, PointLight) and p1.attenuation == (0.0, 0.0, 1.0)  # physical default
     assert p2.attenuation == (1.0, 0.5, 0.25)
     assert isinstance(sky, Skybox) and sky.path == (tmp_path / "sky.hdr").resolve() and sky.radius == 1000.0
     m0, m1, m2 = s.materials  # block entries, in order; no default needed

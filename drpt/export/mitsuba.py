@@ -75,10 +75,11 @@ Planes
     box's center onto the plane, with ``+z`` (the rectangle's normal) along
     the plane's ``normal``.
 Lights
-    ``PointLight`` -> ``point`` (``intensity = color``). Mitsuba falls off
-    with the physical inverse square only; drpt's ``attenuation``
-    ``(c, l, q)`` divides on top of that by ``c + l d + q d^2``, so only
-    ``(1, 0, 0)`` is equivalent: others are exported as ``(1, 0, 0)`` with a
+    ``PointLight`` -> ``point``. drpt's irradiance is
+    ``color / (c + l d + q d^2)`` (6.837); Mitsuba's point light falls off
+    with the inverse square only, so ``(0, 0, q)`` is exported exactly as
+    ``intensity = color / q`` and any other attenuation as the nearest
+    inverse-square light ``color / (c + l + q)`` (equal at distance 1) with a
     warning. ``DirectionalLight`` -> ``directional`` (``direction`` = the
     direction light travels, ``irradiance = color``). ``Skybox`` ->
     ``envmap`` with an identity ``to_world`` and a warning (the orientation
@@ -345,16 +346,19 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
     has_sky = any(isinstance(light, Skybox) for light in scene.lights)
     for i, light in enumerate(scene.lights):
         if isinstance(light, PointLight):
-            att = tuple(float(a) for a in light.attenuation)
-            if att != (1.0, 0.0, 0.0):
+            c, l, q = (float(a) for a in light.attenuation)
+            if c == 0.0 and l == 0.0:
+                scale = 1.0 / q
+            else:
+                scale = 1.0 / (c + l + q)
                 warnings.warn(
-                    f"point light {i}: attenuation {att} has no Mitsuba equivalent "
-                    "(Mitsuba's point light falls off with inverse square only, which "
-                    "matches drpt's (1, 0, 0)); exported as (1, 0, 0)",
+                    f"point light {i}: attenuation {(c, l, q)} has no Mitsuba equivalent "
+                    "(Mitsuba's point light falls off with the inverse square only); "
+                    f"exported as intensity color/{c + l + q:g}, equal at distance 1",
                     stacklevel=3,
                 )
             out[f"light_{i}"] = {"type": "point", "position": _Point(_f3(light.position)),
-                                 "intensity": _RGB(_f3(light.color))}
+                                 "intensity": _RGB(tuple(scale * x for x in _f3(light.color)))}
         elif isinstance(light, DirectionalLight):
             out[f"light_{i}"] = {"type": "directional",
                                  "direction": _Vector(tuple(_normalize(_f3(light.direction)))),

@@ -26,6 +26,7 @@ from ..scene.model import Scene
 from .camera import RayCamera
 from .integrators.path import PathIntegrator, PathOptions
 from .lights.area import AreaLights
+from .lights.delta import DeltaLights
 from .material import MaterialTable
 from .spawn import RayOffset
 from .surface import SurfaceData
@@ -96,7 +97,7 @@ class Renderer:
         self.camera = RayCamera(scene.camera, options.width, options.height)
         self.integrator = PathIntegrator(
             self.accel, self.surfaces, self.materials, self.lights, RayOffset(scene),
-            scene.background.color, options.path)
+            scene.background.color, options.path, DeltaLights(scene))
         self.build_seconds = time.perf_counter() - t0
 
     def _pass(self, pass_index: int, k: int, r0: int, rows: int) -> np.ndarray:

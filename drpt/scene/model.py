@@ -135,9 +135,13 @@ class Planes:
 # --------------------------------------------------------------------- lights
 @dataclass
 class PointLight:
+    """Isotropic point light: irradiance ``color / (c + l*d + q*d^2)`` at distance
+    ``d`` on a surface facing it (the 6.837 formula). The default (0, 0, 1)
+    is the physical inverse-square law, ``color`` then being the intensity."""
+
     position: Vec3
-    color: Vec3  # intensity (W/sr-like units)
-    attenuation: Vec3 = (1.0, 0.0, 0.0)  # constant, linear, quadratic
+    color: Vec3
+    attenuation: Vec3 = (0.0, 0.0, 1.0)  # constant, linear, quadratic
 
 
 @dataclass

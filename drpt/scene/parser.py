@@ -344,7 +344,8 @@ class _Parser:
                 got = self.fields(tok.text, tok, {"position": self.vec("position"), "color": self.vec("color"),
                                                   "attenuation": self.vec("attenuation")})
                 self.require(got, tok.text, tok, ("position", "color"))
-                att, line = got.get("attenuation", ((1.0, 0.0, 0.0), tok.line))
+                # No attenuation given: physical inverse-square falloff.
+                att, line = got.get("attenuation", ((0.0, 0.0, 1.0), tok.line))
                 if min(att) < 0 or max(att) <= 0:
                     raise self.error(line, "attenuation must be non-negative and not all zero")
                 self.lights.append(PointLight(got["position"][0], got["color"][0], att))

@@ -29,6 +29,7 @@ import drjit as dr
 from drjit.llvm import Array2f, Array3f, Bool, Float, PCG32, UInt32
 
 from ..lights.area import AreaLights
+from ..lights.delta import DeltaLights
 from ..material import MaterialTable
 from ..surface import SurfaceData
 from ..spawn import RayOffset
@@ -48,11 +49,13 @@ def power_heuristic(a: Float, b: Float) -> Float:
 
 class PathIntegrator:
     def __init__(self, accel, surfaces: SurfaceData, materials: MaterialTable,
-                 lights: AreaLights, offset: RayOffset, background, options: PathOptions):
+                 lights: AreaLights, offset: RayOffset, background, options: PathOptions,
+                 delta_lights: DeltaLights | None = None):
         self.accel = accel
         self.surfaces = surfaces
         self.materials = materials
         self.lights = lights
+        self.delta_lights = delta_lights
         self.offset = offset
         self.background = tuple(float(c) for c in background)
         self.opt = options
@@ -63,7 +66,9 @@ class PathIntegrator:
         accel, mats, lights, offset = self.accel, self.materials, self.lights, self.offset
         opt = self.opt
         has_lights = lights.count > 0
-        has_nee = has_lights and not mats.is_specular_only()
+        smooth = not mats.is_specular_only()
+        has_nee = has_lights and smooth
+        delta = self.delta_lights if (smooth and self.delta_lights and self.delta_lights.count) else None
         has_background = max(self.background) > 0.0
         inf = dr.largest(Float)
 
@@ -115,6 +120,14 @@ class PathIntegrator:
                 blocked = accel.occluded(so, wo, shadow_tmax, ok)
                 ok &= ~blocked
                 L += dr.select(ok, beta * f * ls.le * (power_heuristic(pdf_light, pdf_b) / pdf_light), 0.0)
+
+            if delta is not None:
+                for dl in delta.samples(si.p):
+                    f, _ = mats.eval_pdf(si, dl.wo)
+                    ok = active_next & (dr.max(f) > 0.0) & (dr.max(dl.irradiance) > 0.0)
+                    so = offset.origin(si.p, si.ng, dl.wo)
+                    ok &= ~accel.occluded(so, dl.wo, dl.dist * (1.0 - 2.0**-12), ok)
+                    L += dr.select(ok, beta * f * dl.irradiance, 0.0)
 
             # ---- BSDF sampling: continue the path
             u_lobe = rng.next_float32()
