@@ -21,7 +21,6 @@ from .errors import DrptError
 # Features that are accepted but arrive in later work, with the issue that
 # brings them. The message is printed once, in one line.
 LATER = {
-    "whitted": "the Whitted integrator lands with issue 4; rendering with the MIS path tracer",
     "grid": "the uniform grid (3D-DDA) lands with issue 5; using the SAH BVH",
     "phong": "Phong specular lobes, glass and mirrors land with issue 3; "
              "rendering these materials diffuse (Kd) only",
@@ -31,7 +30,6 @@ LATER = {
     "sah-threshold": "BVH build variants (-SAHeuristic, -resolution) land with issue 5; using full binned SAH",
     "gui": "drpt has no OpenGL preview (-gui): it renders straight to the output file",
     "skybox": "environment lighting (Skybox) lands with issue 4; the sky is black for now",
-    "point": "point and directional lights land with issue 4; they are ignored for now",
 }
 
 
@@ -112,7 +110,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from .render.integrators.path import PathOptions
     from .render.renderer import RenderOptions, Renderer
     from .scene import load_scene
-    from .scene.model import DirectionalLight, PointLight, Skybox
+    from .scene.model import Skybox
 
     scene_path = args.scene or args.input
     if not scene_path:
@@ -140,8 +138,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     integrator = args.integrator or ("path" if (args.monte_carlo or not seed_mode) else "whitted")
     accel = args.accel or ("bvh" if (args.spatial_tree or not seed_mode) else "grid")
     bsdf = args.bsdf or ("cook-torrance" if args.cook_torrance else "phong")
-    if integrator == "whitted":
-        _note("whitted")
     if accel == "grid":
         _note("grid")
         accel = "bvh"
@@ -159,11 +155,10 @@ def cmd_render(args: argparse.Namespace) -> int:
         _note("texture")
     if any(isinstance(light, Skybox) for light in scene.lights):
         _note("skybox")
-    if any(isinstance(light, (PointLight, DirectionalLight)) for light in scene.lights):
-        _note("point")
 
     ensure_llvm()
     opts = RenderOptions(width=width, height=height, spp=spp, seed=args.seed, accel=accel,
+                         bsdf=bsdf, integrator=integrator,
                          path=PathOptions(max_depth=args.max_depth, rr_depth=rr_depth,
                                           rr_prob=rr_prob),
                          max_lanes=args.max_lanes, progress=not args.quiet)

@@ -27,6 +27,9 @@ from .surface import Interaction, _vec
 from .warp import Frame
 
 
+DELTA_KINDS = ("dielectric", "mirror")
+
+
 def _lobe(kind: str):
     if kind == "diffuse":
         from .bsdf import diffuse as m
@@ -45,10 +48,17 @@ def _lobe(kind: str):
 
 class MaterialTable:
     def __init__(self, scene: Scene, mode: str = "phong"):
-        self.specs: list[BSDFSpec] = [interpret(m, mode) for m in scene.materials]
+        # Materials no primitive uses stay out of the kernels entirely.
+        used = np.zeros(len(scene.materials), bool)
+        for prims in (scene.triangles, scene.spheres, scene.planes):
+            used[np.asarray(prims.material, np.int64)] = True
+        self.specs: list[BSDFSpec] = [
+            interpret(m, mode) if u else BSDFSpec("diffuse", kd=(0.0, 0.0, 0.0))
+            for m, u in zip(scene.materials, used)]
         self.notes = [n for s in self.specs for n in s.notes]
-        self.kinds = sorted({s.kind for s in self.specs})
-        kinds = np.array([self.kinds.index(s.kind) for s in self.specs], np.uint32)
+        self.kinds = sorted({s.kind for s, u in zip(self.specs, used) if u}) or ["diffuse"]
+        kinds = np.array([self.kinds.index(s.kind) if s.kind in self.kinds else 0
+                          for s in self.specs], np.uint32)
         self.kind = UInt32(kinds)
         self.emission = _vec(np.array([m.emission for m in scene.materials], float))
         self.has_emission = any(m.is_emissive for m in scene.materials)
@@ -90,7 +100,24 @@ class MaterialTable:
         return dr.select(front, le, 0.0)
 
     def is_specular_only(self) -> bool:
-        return all(k in ("dielectric", "mirror") for k in self.kinds)
+        return all(k in DELTA_KINDS for k in self.kinds)
+
+    def is_delta(self, si: Interaction) -> Bool:
+        """Lanes whose material is a delta lobe (glass, mirror)."""
+        ids = [i for i, k in enumerate(self.kinds) if k in DELTA_KINDS]
+        if not ids:
+            return Bool(False)
+        if len(ids) == len(self.kinds):
+            return Bool(si.valid)
+        kind_of = dr.gather(UInt32, self.kind, si.material, si.valid)
+        mask = Bool(False)
+        for i in ids:
+            mask |= kind_of == i
+        return si.valid & mask
+
+    def diffuse_color(self, si: Interaction, active: Bool) -> Array3f:
+        """The diffuse color (Kd or its texture), e.g. for an ambient term."""
+        return self._base_color(si, active)
 
     def _base_color(self, si: Interaction, active: Bool) -> Array3f:
         kd = dr.gather(Array3f, self.kd, si.material, active)

@@ -25,6 +25,7 @@ from drjit.llvm import Bool, Float, PCG32, UInt32, UInt64
 from ..scene.model import Scene
 from .camera import RayCamera
 from .integrators.path import PathIntegrator, PathOptions
+from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lights.area import AreaLights
 from .lights.delta import DeltaLights
 from .material import MaterialTable
@@ -40,6 +41,7 @@ class RenderOptions:
     seed: int = 0
     accel: str = "bvh"
     bsdf: str = "phong"  # how MTL materials are read, see drpt.shading
+    integrator: str = "path"  # "path" (MIS path tracing) or "whitted"
     path: PathOptions = field(default_factory=PathOptions)
     max_lanes: int = 1 << 21
     progress: bool = True
@@ -95,9 +97,16 @@ class Renderer:
         self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None)
         self.lights = AreaLights(scene, self.surfaces)
         self.camera = RayCamera(scene.camera, options.width, options.height)
-        self.integrator = PathIntegrator(
-            self.accel, self.surfaces, self.materials, self.lights, RayOffset(scene),
-            scene.background.color, options.path, DeltaLights(scene))
+        offset, delta = RayOffset(scene), DeltaLights(scene)
+        if options.integrator == "whitted":
+            depth = options.path.max_depth
+            self.integrator = WhittedIntegrator(
+                self.accel, self.surfaces, self.materials, self.lights, delta, offset,
+                scene.background, WhittedOptions(max_depth=depth if depth > 0 else 16))
+        else:
+            self.integrator = PathIntegrator(
+                self.accel, self.surfaces, self.materials, self.lights, offset,
+                scene.background.color, options.path, delta)
         self.build_seconds = time.perf_counter() - t0
 
     def _pass(self, pass_index: int, k: int, r0: int, rows: int) -> np.ndarray:

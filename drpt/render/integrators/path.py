@@ -33,6 +33,7 @@ from ..lights.delta import DeltaLights
 from ..material import MaterialTable
 from ..surface import SurfaceData
 from ..spawn import RayOffset
+from .common import DirectLight, power_heuristic
 
 
 @dataclass
@@ -40,11 +41,6 @@ class PathOptions:
     max_depth: int = -1
     rr_depth: int = 5
     rr_prob: float | None = None  # fixed continuation probability, or adaptive
-
-
-def power_heuristic(a: Float, b: Float) -> Float:
-    a2, b2 = a * a, b * b
-    return dr.select(a2 > 0.0, a2 / (a2 + b2), 0.0)
 
 
 class PathIntegrator:
@@ -56,6 +52,7 @@ class PathIntegrator:
         self.materials = materials
         self.lights = lights
         self.delta_lights = delta_lights
+        self.direct = DirectLight(accel, materials, lights, delta_lights, offset)
         self.offset = offset
         self.background = tuple(float(c) for c in background)
         self.opt = options
@@ -68,7 +65,7 @@ class PathIntegrator:
         has_lights = lights.count > 0
         smooth = not mats.is_specular_only()
         has_nee = has_lights and smooth
-        delta = self.delta_lights if (smooth and self.delta_lights and self.delta_lights.count) else None
+        delta = self.direct.delta_lights if smooth else None
         has_background = max(self.background) > 0.0
         inf = dr.largest(Float)
 
@@ -105,29 +102,9 @@ class PathIntegrator:
             u_sel = rng.next_float32()
             u_light = Array2f(rng.next_float32(), rng.next_float32())
             if has_nee:
-                ls = lights.sample(u_sel, u_light, active_next)
-                to_light = ls.p - si.p
-                dist2 = dr.squared_norm(to_light)
-                dist = dr.sqrt(dist2)
-                wo = to_light / dist
-                front = dr.dot(ls.n, wo) < 0.0  # the light emits toward us
-                cos_light = dr.abs(dr.dot(ls.ng, wo))
-                f, pdf_b = mats.eval_pdf(si, wo)
-                ok = active_next & front & (cos_light > 0.0) & (ls.pdf_area > 0.0) & (dr.max(f) > 0.0)
-                pdf_light = ls.pdf_area * dist2 / cos_light
-                so = offset.origin(si.p, si.ng, wo)
-                shadow_tmax = dr.norm(ls.p - so) * (1.0 - 2.0**-12)
-                blocked = accel.occluded(so, wo, shadow_tmax, ok)
-                ok &= ~blocked
-                L += dr.select(ok, beta * f * ls.le * (power_heuristic(pdf_light, pdf_b) / pdf_light), 0.0)
-
+                L += beta * self.direct.area(si, u_sel, u_light, active_next, mis=True)
             if delta is not None:
-                for dl in delta.samples(si.p):
-                    f, _ = mats.eval_pdf(si, dl.wo)
-                    ok = active_next & (dr.max(f) > 0.0) & (dr.max(dl.irradiance) > 0.0)
-                    so = offset.origin(si.p, si.ng, dl.wo)
-                    ok &= ~accel.occluded(so, dl.wo, dl.dist * (1.0 - 2.0**-12), ok)
-                    L += dr.select(ok, beta * f * dl.irradiance, 0.0)
+                L += beta * self.direct.delta(si, active_next)
 
             # ---- BSDF sampling: continue the path
             u_lobe = rng.next_float32()
