@@ -42,10 +42,9 @@ def render_both(scene, W, H, spp, max_depth=-1, bsdf="phong", seed=1):
 
     r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, seed=seed, bsdf=bsdf,
                                       progress=False, path=PathOptions(max_depth=max_depth))).render()
-    kwargs = {"bsdf": bsdf} if bsdf != "phong" else {}
     per = max(1, spp // BATCHES)
     ms = mi.load_dict(to_mitsuba_dict(scene, W, H, per, max_depth=max_depth, seed=seed + 100,
-                                      **kwargs))
+                                      bsdf=bsdf))
     runs = np.stack([np.asarray(mi.render(ms, spp=per, seed=seed + 100 + 7919 * k), np.float64)
                      for k in range(BATCHES)])
     ref = runs.mean(0)

@@ -42,9 +42,15 @@ Film, sampler, integrator
     (-1 infinite, 1 emitters seen directly, 2 direct lighting), ``rr_depth``,
     ``hide_emitters=False``.
 Materials
-    Every material is ``twosided(diffuse(reflectance=kd))``: drpt surfaces
-    are two-sided, Mitsuba BSDFs one-sided. Only diffuse + emission for now;
-    the other fields are ignored. ``map_kd`` becomes a ``bitmap`` texture
+    Each material goes through :func:`drpt.shading.interpret` (the same
+    call the renderer makes, with the same ``bsdf`` mode) and becomes the
+    Mitsuba counterpart of its kind: ``diffuse`` -> ``twosided(diffuse)``,
+    ``phong`` -> ``twosided(drpt_phong)`` (a registered plugin,
+    :mod:`drpt.export.mitsuba_phong`), ``cook_torrance`` ->
+    :mod:`drpt.export.mitsuba_cook_torrance`, ``dielectric`` and ``mirror``
+    -> :mod:`drpt.export.mitsuba_specular`. Reflective BSDFs are wrapped in
+    ``twosided`` (drpt surfaces are two-sided, Mitsuba BSDFs one-sided);
+    the dielectric is not. ``map_kd`` becomes a ``bitmap`` texture
     (``filter_type="bilinear"``, ``wrap_mode="repeat"``, sRGB-decoded for
     8-bit files as Mitsuba does by default) and replaces ``kd``. A textured
     mesh without uvs gets explicit uv (0, 0) (drpt's lookup; Mitsuba would
@@ -102,6 +108,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from drpt.errors import DrptError
+from drpt.shading import interpret
 from drpt.scene.model import (
     DirectionalLight,
     Material,
@@ -165,7 +172,9 @@ _TAGS = {
     "perspective": "sensor", "orthographic": "sensor",
     "hdrfilm": "film", "box": "rfilter", "independent": "sampler",
     "path": "integrator",
-    "twosided": "bsdf", "diffuse": "bsdf",
+    "twosided": "bsdf", "diffuse": "bsdf", "drpt_phong": "bsdf", "principled": "bsdf",
+    "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf",
+    "plastic": "bsdf", "roughplastic": "bsdf",
     "area": "emitter", "point": "emitter", "directional": "emitter",
     "envmap": "emitter", "constant": "emitter",
     "sphere": "shape", "rectangle": "shape", "ply": "shape",
@@ -228,7 +237,7 @@ def _f3(v) -> tuple[float, float, float]:
 
 # ------------------------------------------------------ the description
 def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
-              rr_depth: int, seed: int) -> dict:
+              rr_depth: int, seed: int, bsdf: str = "phong") -> dict:
     if int(width) <= 0 or int(height) <= 0:
         raise DrptError(f"image size must be positive, got {width}x{height}")
     if int(spp) <= 0:
@@ -280,7 +289,7 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
     out["sensor"] = sensor
 
     # -- materials
-    bsdfs = [_bsdf(m) for m in scene.materials]
+    bsdfs = [_bsdf(m, bsdf) for m in scene.materials]
     emitters = [
         {"type": "area", "radiance": _RGB(_f3(m.emission))} if m.is_emissive else None
         for m in scene.materials
@@ -395,20 +404,44 @@ def _mesh_name(index: int, m: Material) -> str:
     return f"{index:03d}_{safe}" if safe else f"{index:03d}"
 
 
-def _bsdf(m: Material) -> dict:
-    if m.map_kd is not None:
-        if not Path(m.map_kd).is_file():
-            raise DrptError(f"material {m.name!r} ({m.origin or '?'}): texture {m.map_kd} not found")
-        refl: Any = {"type": "bitmap", "filename": str(Path(m.map_kd).resolve()),
-                     "filter_type": "bilinear", "wrap_mode": "repeat"}
+def _texture(m: Material) -> dict:
+    if not Path(m.map_kd).is_file():
+        raise DrptError(f"material {m.name!r} ({m.origin or '?'}): texture {m.map_kd} not found")
+    return {"type": "bitmap", "filename": str(Path(m.map_kd).resolve()),
+            "filter_type": "bilinear", "wrap_mode": "repeat"}
+
+
+def _plain(node: Any) -> Any:
+    """Lobe exporters speak plain Mitsuba dicts; turn their rgb values into _RGB."""
+    if isinstance(node, dict):
+        if node.get("type") == "rgb":
+            return _RGB(_f3(node["value"]))
+        return {k: _plain(v) for k, v in node.items()}
+    return node
+
+
+def _bsdf(m: Material, mode: str) -> dict:
+    """The Mitsuba BSDF for what drpt renders of ``m`` (see drpt.shading)."""
+    spec = interpret(m, mode)
+    if spec.kind == "diffuse":
+        refl: Any = _texture(m) if spec.texture is not None else _RGB(_f3(spec.kd))
+        return {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": refl}}
+    if spec.kind == "phong":
+        from .mitsuba_phong import to_mitsuba
+    elif spec.kind == "cook_torrance":
+        from .mitsuba_cook_torrance import to_mitsuba
     else:
-        refl = _RGB(_f3(m.kd))
-    return {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": refl}}
+        from .mitsuba_specular import to_mitsuba
+    node = _plain(to_mitsuba(spec))
+    if spec.texture is not None:
+        _texture(m)  # fail early on a missing file
+    return node
 
 
 # ---------------------------------------------------------------- dict
 def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
-                    max_depth: int = -1, rr_depth: int = 5, seed: int = 0) -> dict:
+                    max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
+                    bsdf: str = "phong") -> dict:
     """The scene as a dict for ``mi.load_dict`` (a Mitsuba variant must be set).
 
     Triangle meshes are in-memory ``mi.Mesh`` objects (one per material),
@@ -418,7 +451,10 @@ def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
 
     if mi.variant() is None:
         raise DrptError("Mitsuba has no variant set; call mi.set_variant('llvm_ad_rgb') first")
-    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed)
+    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf)
+    from .mitsuba_phong import register
+
+    register()  # drpt_phong, in case a material needs it
     # Shapes and top-level emitters are instantiated here, in document order.
     # load_dict would otherwise put the ready-made mi.Mesh objects before
     # everything else, while mi.load_file(..., optimize=False) keeps the XML's
@@ -473,15 +509,20 @@ def _build_mesh(md: _MeshData, mi):
 
 # ----------------------------------------------------------------- XML
 def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: int,
-              spp: int, max_depth: int = -1, rr_depth: int = 5, seed: int = 0) -> Path:
+              spp: int, max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
+              bsdf: str = "phong") -> Path:
     """Write the scene as Mitsuba 3 XML plus PLY meshes; return the XML path.
+
+    Phong materials use the ``drpt_phong`` plugin, which Mitsuba knows only
+    after ``drpt.export.mitsuba_phong.register()`` (call it before
+    ``mi.load_file``).
 
     Meshes go to ``<stem>_meshes/<index>_<material>.ply`` beside the XML
     (binary little endian, unwelded per-corner vertices, ``nx ny nz`` and
     ``u v`` when the scene has them). The file loads with ``mi.load_file``.
     """
     xml_path = Path(out_xml_path)
-    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed)
+    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf)
     mesh_dir = xml_path.parent / f"{xml_path.stem}_meshes"
     try:
         xml_path.parent.mkdir(parents=True, exist_ok=True)
