@@ -1,0 +1,352 @@
+"""Environment light: an HDR latitude-longitude map infinitely far away.
+
+Direction <-> image mapping (Mitsuba 3's ``envmap`` with identity ``to_world``)
+------------------------------------------------------------------------------
+World +Y is up. A unit world direction ``d`` (pointing from the scene toward
+the sky, i.e. the direction a ray escapes in) maps to
+
+* ``u = atan2(d.x, -d.z) / (2 pi)``, wrapped into ``[0, 1)`` -- ``u = 0`` is
+  toward -Z, ``u = 1/4`` toward +X, ``u = 1/2`` toward +Z, ``u = 3/4``
+  toward -X (``u`` grows left to right in the image);
+* ``v = acos(d.y) / pi`` -- ``v = 0`` straight up (+Y), ``v = 1`` straight
+  down; image row 0 is the top (``v = 0``).
+
+Inverse: ``d = (sin(2 pi u) sin(pi v), cos(pi v), -cos(2 pi u) sin(pi v))``.
+
+Where the texels sit (the bilinear lookup, exactly Mitsuba 3.9's
+``EnvironmentMapEmitter::eval_spectrum``) for a ``W x H`` image:
+
+* columns are *texel centered* and periodic: column ``i`` is at
+  ``u = (i + 0.5) / W``; between column ``W-1`` and column ``0`` (across
+  ``u = 0``) the lookup interpolates through the wrap (Mitsuba stores an
+  extra column equal to column 0);
+* rows are *vertex centered*: row ``j`` is at ``v = j / (H - 1)``, so row 0
+  *is* the north pole and row ``H-1`` the south pole (the whole first row
+  collapses onto the +Y direction; which of its texels is seen straight up
+  follows ``atan2`` of the two tiny components, as in Mitsuba).
+
+So with ``x = frac(u - 0.5/W) * W`` and ``y = v * (H - 1)``, the radiance is
+the bilinear blend of texels ``(floor(x), floor(y))`` .. ``(floor(x)+1,
+floor(y)+1)`` (column ``W`` = column 0, indices clamped to ``W-1`` /
+``H-2``), times ``scale``. Maps Mitsuba refuses (narrower than 2 or shorter
+than 3 texels) work here too: ``H = 1`` is constant in ``v``, ``W = 1``
+constant in ``u``. One deliberate difference: Mitsuba wraps ``v`` with
+``v - floor(v)`` as well, so the exact direction ``(0, -1, 0)`` (when
+``acos`` returns exactly pi) reads the *north* pole row; drpt clamps and
+reads the south pole row (a set of measure zero).
+
+``d`` must be unit length; like Mitsuba, the lookup does not renormalise
+it. This was verified against Mitsuba 3.9.1 by evaluating its ``envmap``
+emitter at 50 000 random directions (agreement to ~2e-6 relative, float32
+``atan2``/``acos`` rounding) and by rendering maps with one marked texel
+through a ``perspective`` camera (``tests/test_envmap.py``);
+the matching Mitsuba emitter is ``envmap`` with ``to_world`` = identity
+(:func:`drpt.export.mitsuba_envmap.to_mitsuba`).
+
+Sampling
+--------
+The sampling grid is the grid of *bilinear patches*: cell ``(j, i)``
+(``j < max(H-1, 1)`` latitude bands, ``i < W`` columns) covers ``x`` in
+``[i, i+1)`` and ``y`` in ``[j, j+1)``, where ``eval`` blends the four texels
+at its corners. Its weight is ``max(luminance of the 4 corners) * Omega_j``
+(``Omega_j = (2 pi / W) (cos theta_j - cos theta_{j+1})``, the cell's solid
+angle), so the weight is positive wherever ``eval`` can be. Rows are picked
+from a marginal CDF, columns from that row's conditional CDF (float32 CDFs,
+``dr.binary_search``); inside the cell ``u`` is uniform and ``cos theta`` is
+uniform (an equal-area split, computed as ``1 -/+ cos theta`` so it stays
+accurate near the poles). The density is therefore piecewise constant in
+*solid angle*::
+
+    pdf(d) = P(row) P(col | row) / Omega_cell
+
+which equals ``p(u, v) / (2 pi^2 sin theta)`` for the induced density
+``p(u, v)`` on the unit square. Because ``cos theta`` rather than ``theta``
+is uniform within a band, there is no ``1 / sin theta`` factor: the pdf is
+bounded (at most ``1 / min Omega``) at and near the poles and needs no clamp.
+
+``P(row)`` and ``P(col | row)`` are the differences of the *stored float32*
+CDF values, so ``pdf`` is the density the sampler realises (to float32
+rounding of the table), whatever the rounding of the sums. To keep every
+positive cell representable in float32, a positive cell weight is raised to
+at least ``1e-6`` of its row total (and a positive row to ``1e-6`` of the
+total) -- this only moves a negligible amount of probability toward nearly
+black cells. Luminances are normalised by the brightest cell first, so
+texels more than ~1e-29 times dimmer than the brightest may underflow to a
+zero weight (irrelevant for real maps).
+
+:meth:`EnvironmentLight.sample` returns ``(d, eval(d), pdf(d))`` computed
+from ``d`` itself, so they agree bit for bit with :meth:`eval` and
+:meth:`pdf`. A sample that lands (by round-off) exactly on the edge of a
+zero-weight cell reads pdf 0 and radiance 0; callers skip pdf-0 samples
+(about 1 in 10^6 samples on maps with black regions, none otherwise).
+
+Input sanitising: NaN, +-Inf and negative channel values are set to 0 and
+the affected texels counted in :attr:`EnvironmentLight.warnings`. A gray
+image is replicated to RGB, an alpha channel is dropped. ``scale`` multiplies
+the radiance (like Mitsuba's ``scale``), not the sampling density.
+"""
+
+from __future__ import annotations
+
+import math
+from os import PathLike
+from pathlib import Path
+
+import drjit as dr
+import numpy as np
+from drjit.llvm import Array2f, Array3f, Bool, Float, UInt32
+
+from ...errors import DrptError
+
+__all__ = ["EnvironmentLight", "sanitize_image", "check_radius", "LUMINANCE"]
+
+#: Luminance weights of linear sRGB / Rec. 709 (Mitsuba's ``luminance()``).
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+#: Minimum weight of a positive cell relative to its row (and of a positive
+#: row relative to the total), so that float32 CDFs never lose it.
+CDF_FLOOR = 1e-6
+
+_ONE_MINUS_EPS = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
+
+
+def sanitize_image(image) -> tuple[np.ndarray, int]:
+    """``(H, W, 3)`` float32 C-contiguous ``image`` with NaN/Inf/negative
+    values set to 0 (a copy when anything is changed; the input is never
+    modified), and the number of texels that had such a value.
+
+    Accepts ``(H, W)``, ``(H, W, 1)`` (gray), ``(H, W, 2)`` (gray + alpha),
+    ``(H, W, 3)`` and ``(H, W, 4)`` (alpha dropped).
+    """
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim == 2:
+        img = img[:, :, None]
+    if img.ndim != 3 or img.shape[0] < 1 or img.shape[1] < 1 or img.shape[2] not in (1, 2, 3, 4):
+        raise DrptError(f"environment map must be an (H, W, 1|3|4) image, got shape {img.shape}")
+    if img.shape[2] <= 2:
+        img = np.repeat(img[:, :, :1], 3, axis=2)
+    else:
+        img = img[:, :, :3]
+    img = np.ascontiguousarray(img, dtype=np.float32)
+    lo, hi = img.min(), img.max()  # NaN propagates into both
+    if lo >= 0.0 and np.isfinite(hi):
+        return img, 0  # may share memory with the input (never written)
+    img = img.copy()
+    with np.errstate(invalid="ignore"):
+        bad = ~(img >= 0.0) | ~np.isfinite(img)  # NaN fails >= 0
+    count = int(np.count_nonzero(bad.any(axis=2)))
+    img[bad] = 0.0
+    return img, count
+
+
+def check_radius(scene_bounds_lo, scene_bounds_hi, radius) -> str | None:
+    """A warning message if geometry reaches beyond the skybox radius, else None.
+
+    drpt puts the environment map infinitely far away; the seed renderer
+    used a sky sphere of radius ``R`` centered at the world origin, which
+    would hide (or cut) geometry farther than ``R`` from the origin. Bounds
+    are the axis-aligned box of the *bounded* geometry; non-finite
+    coordinates (infinite planes) and empty boxes (lo > hi) are ignored.
+    """
+    lo = np.asarray(scene_bounds_lo, dtype=np.float64).reshape(3)
+    hi = np.asarray(scene_bounds_hi, dtype=np.float64).reshape(3)
+    R = float(radius)
+    if not np.all(lo <= hi):
+        return None
+    ext = np.maximum(np.abs(lo), np.abs(hi))
+    ext = np.where(np.isfinite(ext), ext, 0.0)
+    reach = float(np.linalg.norm(ext))  # farthest box corner from the origin
+    if not (math.isfinite(R) and R > 0.0):
+        return (f"skybox radius {R:g} is not a positive number; the environment map is "
+                "treated as infinitely far away")
+    if reach > R:
+        return (f"skybox radius {R:g}: geometry reaches up to {reach:g} from the origin; "
+                "drpt treats the environment map as infinitely far away, so geometry "
+                "beyond the sky sphere stays visible (the seed renderer would hide it)")
+    return None
+
+
+class EnvironmentLight:
+    """Infinitely distant light from a lat-long RGB radiance map (see module docs)."""
+
+    def __init__(self, image, scale: float = 1.0, name: str = "environment map"):
+        scale = float(scale)
+        if not (math.isfinite(scale) and scale >= 0.0):
+            raise DrptError(f"{name}: scale must be a finite number >= 0, got {scale}")
+        img, bad = sanitize_image(image)
+        self.name = name
+        self.scale = scale
+        self.warnings: list[str] = []
+        if bad:
+            self.warnings.append(f"{name}: {bad} NaN/Inf/negative texel{'s' if bad != 1 else ''} "
+                                 "set to 0")
+        H, W = img.shape[:2]
+        self.height, self.width = H, W
+        ny = max(H - 1, 1)  # latitude bands (bilinear patch rows)
+        self._ny = ny
+
+        # Texel data; the lookup wraps column W to column 0 (Mitsuba stores
+        # that extra column) and a single row serves as its own neighbor.
+        self._data = Float(img.ravel())
+        self._half_texel = 0.5 / W
+
+        # -- sampling tables (host side, float32 arrays, float64 scalars)
+        lum = img[:, :, 0] * np.float32(LUMINANCE[0])
+        lum += img[:, :, 1] * np.float32(LUMINANCE[1])
+        lum += img[:, :, 2] * np.float32(LUMINANCE[2])
+        cell = np.maximum(lum, np.roll(lum, -1, axis=1))  # max over columns i, i+1
+        if H > 1:
+            cell = np.maximum(cell[:-1], cell[1:], out=cell[:-1])  # and rows j, j+1
+        del lum
+        peak = float(cell.max())
+        if peak > 0.0:
+            cell *= np.float32(1.0 / peak)  # no float32 overflow in the sums
+        theta = np.arange(ny + 1) * (math.pi / ny)
+        # 1 - cos(theta) and 1 + cos(theta), accurate near either pole
+        one_minus_cos = 2.0 * np.sin(0.5 * theta) ** 2
+        one_plus_cos = 2.0 * np.cos(0.5 * theta) ** 2
+        dcos = 2.0 * np.sin(0.5 * (theta[:-1] + theta[1:])) * math.sin(0.5 * math.pi / ny)
+        omega = (2.0 * math.pi / W) * dcos  # solid angle of a cell in band j
+        w = cell
+        w *= omega[:, None].astype(np.float32)
+        self.is_black = not (scale > 0.0 and np.any(w > 0.0))
+
+        north = 0.5 * (theta[:-1] + theta[1:]) <= 0.5 * math.pi
+        t0 = np.where(north, one_minus_cos[:-1], one_plus_cos[:-1])
+        dt = np.where(north, one_minus_cos[1:] - one_minus_cos[:-1],
+                      one_plus_cos[1:] - one_plus_cos[:-1])
+        self._t0 = Float(t0.astype(np.float32))
+        self._dt = Float(dt.astype(np.float32))
+        self._north = Bool(north)
+
+        if self.is_black:
+            pdf = np.zeros((ny, W), np.float32)
+            self._cdf_rows = Float(np.zeros(ny, np.float32))
+            self._cdf_cols = Float(np.zeros(ny * W, np.float32))
+        else:
+            row_sum = w.sum(axis=1, dtype=np.float64)
+            cdf_cols, p_cols = _float32_cdf(w, row_sum[:, None])
+            cdf_rows, p_rows = _float32_cdf(row_sum[None, :].astype(np.float32),
+                                            row_sum.sum())
+            pdf = p_cols
+            pdf *= (p_rows[0] / omega).astype(np.float32)[:, None]
+            self._cdf_rows = Float(cdf_rows[0])
+            self._cdf_cols = Float(cdf_cols.ravel())
+        self._pdf = Float(pdf.ravel())
+
+    @classmethod
+    def from_file(cls, path: str | PathLike, scale: float = 1.0) -> "EnvironmentLight":
+        """Load a lat-long ``.hdr``/``.exr``/... map (``SceneError`` if unreadable)."""
+        from ...imageio import read_image
+
+        return cls(read_image(path), scale=scale, name=Path(path).name)
+
+    # ------------------------------------------------------------ lookup
+    def _lookup(self, d: Array3f):
+        """Cell (ix, iy) and bilinear weights (fx, fy) of a unit direction
+        (not renormalised, exactly as Mitsuba's lookup)."""
+        u = dr.atan2(d.x, -d.z) * (1.0 / (2.0 * math.pi))
+        v = dr.safe_acos(d.y) * (1.0 / math.pi)
+        x = u - self._half_texel
+        x = (x - dr.floor(x)) * self.width
+        y = v * self._ny
+        ix = dr.minimum(UInt32(x), self.width - 1)
+        iy = dr.minimum(UInt32(y), self._ny - 1)
+        return ix, iy, x - Float(ix), y - Float(iy)
+
+    def _eval_cell(self, ix, iy, fx, fy, active) -> Array3f:
+        W = self.width
+        ix1 = dr.select(ix + 1 < W, ix + 1, 0)  # periodic in u
+        r0 = iy * W
+        r1 = dr.minimum(iy + 1, self.height - 1) * W
+        v00 = dr.gather(Array3f, self._data, r0 + ix, active)
+        v10 = dr.gather(Array3f, self._data, r0 + ix1, active)
+        v01 = dr.gather(Array3f, self._data, r1 + ix, active)
+        v11 = dr.gather(Array3f, self._data, r1 + ix1, active)
+        gx, gy = 1.0 - fx, 1.0 - fy
+        v0 = dr.fma(gx, v00, fx * v10)
+        v1 = dr.fma(gx, v01, fx * v11)
+        return dr.fma(gy, v0, fy * v1) * self.scale
+
+    def _pdf_cell(self, ix, iy, active) -> Float:
+        return dr.gather(Float, self._pdf, iy * self.width + ix, active)
+
+    # ------------------------------------------------------------ public
+    def eval(self, d: Array3f, active=True) -> Array3f:
+        """Radiance arriving from unit world direction ``d`` (toward the sky)."""
+        active = Bool(active)
+        ix, iy, fx, fy = self._lookup(d)
+        return dr.select(active, self._eval_cell(ix, iy, fx, fy, active), 0.0)
+
+    def pdf(self, d: Array3f, active=True) -> Float:
+        """Solid-angle density with which :meth:`sample` returns ``d``."""
+        active = Bool(active)
+        ix, iy, _, _ = self._lookup(d)
+        return dr.select(active, self._pdf_cell(ix, iy, active), 0.0)
+
+    def eval_pdf(self, d: Array3f, active=True) -> tuple[Array3f, Float]:
+        """``(eval(d), pdf(d))`` with one lookup."""
+        active = Bool(active)
+        ix, iy, fx, fy = self._lookup(d)
+        le = dr.select(active, self._eval_cell(ix, iy, fx, fy, active), 0.0)
+        return le, dr.select(active, self._pdf_cell(ix, iy, active), 0.0)
+
+    def sample(self, u: Array2f, active=True) -> tuple[Array3f, Array3f, Float]:
+        """Direction ``d`` toward the sky, its radiance ``eval(d)`` and ``pdf(d)``.
+
+        ``pdf == 0`` (and radiance 0) for a black map or inactive lanes; the
+        caller must skip those. ``u`` in ``[0, 1)^2``.
+        """
+        active = Bool(active)
+        if self.is_black:
+            z = dr.zeros(Float, dr.width(u))
+            return Array3f(z, z + 1.0, z), Array3f(z, z, z), z
+        ny, W = self._ny, self.width
+        # row from the marginal CDF, column from that row's conditional CDF
+        cr = self._cdf_rows
+        row = dr.binary_search(0, ny - 1, lambda i: dr.gather(Float, cr, i) <= u.y)
+        row = dr.minimum(row, ny - 1)
+        hi = dr.gather(Float, cr, row)
+        lo = dr.select(row > 0, dr.gather(Float, cr, dr.maximum(row, 1) - 1), 0.0)
+        sy = dr.clip((u.y - lo) / (hi - lo), 0.0, _ONE_MINUS_EPS)
+
+        cc = self._cdf_cols
+        base = row * W
+        col = dr.binary_search(0, W - 1, lambda i: dr.gather(Float, cc, base + i) <= u.x)
+        col = dr.minimum(col, W - 1)
+        hi = dr.gather(Float, cc, base + col)
+        lo = dr.select(col > 0, dr.gather(Float, cc, base + dr.maximum(col, 1) - 1), 0.0)
+        sx = dr.clip((u.x - lo) / (hi - lo), 0.0, _ONE_MINUS_EPS)
+
+        # cos(theta) uniform within the band, via t = 1 -/+ cos(theta)
+        t = dr.fma(sy, dr.gather(Float, self._dt, row), dr.gather(Float, self._t0, row))
+        north = dr.gather(Bool, self._north, row)
+        cos_t = dr.select(north, 1.0 - t, t - 1.0)
+        sin_t = dr.safe_sqrt(t * (2.0 - t))
+        uu = (Float(col) + sx + 0.5) / W
+        uu = dr.select(uu >= 1.0, uu - 1.0, uu)
+        sin_p, cos_p = dr.sincos(uu * (2.0 * math.pi))
+        d = Array3f(sin_p * sin_t, cos_t, -cos_p * sin_t)
+        le, pdf = self.eval_pdf(d, active)
+        le = dr.select(pdf > 0.0, le, 0.0)
+        return d, le, pdf
+
+
+def _float32_cdf(w: np.ndarray, total) -> tuple[np.ndarray, np.ndarray]:
+    """Row-wise float32 CDFs of non-negative float32 weights ``w`` (rows with
+    zero total give zeros; ``w`` is overwritten), and the probabilities the
+    stored CDFs realise (their float32 differences).
+
+    Positive weights are raised to ``CDF_FLOOR * total`` so each keeps a
+    positive float32 increment (at least ~8 ulps of the running sum). The
+    CDF is the running sum divided by its own last entry, so from a row's
+    last positive weight on it is exactly 1.
+    """
+    floor = (CDF_FLOOR * np.asarray(total, np.float64)).astype(np.float32)
+    np.maximum(w, np.where(w > 0.0, floor, np.float32(0.0)), out=w)
+    cdf = np.cumsum(w, axis=1, out=w)
+    s = cdf[:, -1:].copy()
+    s[s == 0.0] = 1.0  # empty rows stay all zero
+    cdf /= s
+    p = np.diff(cdf, axis=1, prepend=np.float32(0.0))
+    return cdf, p
