@@ -88,8 +88,8 @@ Lights
     inverse-square light ``color / (c + l + q)`` (equal at distance 1) with a
     warning. ``DirectionalLight`` -> ``directional`` (``direction`` = the
     direction light travels, ``irradiance = color``). ``Skybox`` ->
-    ``envmap`` with an identity ``to_world`` and a warning (the orientation
-    match is not settled yet). ``Background.color`` non-zero -> ``constant``
+    ``envmap`` through :mod:`drpt.export.mitsuba_envmap` (identity
+    ``to_world``: drpt's direction/uv mapping is Mitsuba's, verified there). ``Background.color`` non-zero -> ``constant``
     emitter, only when there is no ``Skybox``. ``Background.ambient`` (a
     Whitted term) has no Mitsuba equivalent and is ignored.
 """
@@ -373,16 +373,11 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                                  "direction": _Vector(tuple(_normalize(_f3(light.direction)))),
                                  "irradiance": _RGB(_f3(light.color))}
         elif isinstance(light, Skybox):
-            # orientation fixed in issue 4
-            if not Path(light.path).is_file():
-                raise DrptError(f"skybox image {light.path} not found")
-            warnings.warn(
-                f"skybox {light.path}: exported as a Mitsuba envmap with an identity "
-                "to_world; its orientation relative to drpt is not verified yet",
-                stacklevel=3,
-            )
-            out[f"light_{i}"] = {"type": "envmap", "filename": str(Path(light.path).resolve()),
-                                 "to_world": _Matrix(np.eye(4))}
+            from .mitsuba_envmap import to_mitsuba as envmap_to_mitsuba
+
+            node = envmap_to_mitsuba(light)
+            node["to_world"] = _Matrix(node["to_world"])
+            out[f"light_{i}"] = node
         else:  # pragma: no cover
             raise DrptError(f"cannot export light of type {type(light).__name__}")
     bg = _f3(scene.background.color)

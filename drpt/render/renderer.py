@@ -22,12 +22,13 @@ import drjit as dr
 import numpy as np
 from drjit.llvm import Bool, Float, PCG32, UInt32, UInt64
 
-from ..scene.model import Scene
+from ..scene.model import Scene, Skybox
 from .camera import RayCamera
 from .integrators.path import PathIntegrator, PathOptions
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lights.area import AreaLights
 from .lights.delta import DeltaLights
+from .lights.envmap import EnvironmentLight, check_radius
 from .material import MaterialTable
 from .spawn import RayOffset
 from .surface import SurfaceData
@@ -98,15 +99,27 @@ class Renderer:
         self.lights = AreaLights(scene, self.surfaces)
         self.camera = RayCamera(scene.camera, options.width, options.height)
         offset, delta = RayOffset(scene), DeltaLights(scene)
+        self.env = None
+        self.warnings: list[str] = list(self.materials.notes)
+        skies = [light for light in scene.lights if isinstance(light, Skybox)]
+        if skies:
+            if len(skies) > 1:
+                self.warnings.append(f"{len(skies)} Skybox lights: using the first")
+            self.env = EnvironmentLight.from_file(skies[0].path)
+            self.warnings += self.env.warnings
+            lo, hi = scene.bounds()
+            msg = check_radius(lo, hi, skies[0].radius)
+            if msg:
+                self.warnings.append(msg)
         if options.integrator == "whitted":
             depth = options.path.max_depth
             self.integrator = WhittedIntegrator(
                 self.accel, self.surfaces, self.materials, self.lights, delta, offset,
-                scene.background, WhittedOptions(max_depth=depth if depth > 0 else 16))
+                scene.background, WhittedOptions(max_depth=depth if depth > 0 else 16), self.env)
         else:
             self.integrator = PathIntegrator(
                 self.accel, self.surfaces, self.materials, self.lights, offset,
-                scene.background.color, options.path, delta)
+                scene.background.color, options.path, delta, self.env)
         self.build_seconds = time.perf_counter() - t0
 
     def _pass(self, pass_index: int, k: int, r0: int, rows: int) -> np.ndarray:

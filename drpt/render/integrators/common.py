@@ -6,6 +6,8 @@ from the emitters, each estimator with its own shadow ray:
 * ``area``: one point on an emissive triangle (chosen by power), weighted
   by the power heuristic against BSDF sampling when ``mis`` is set;
 * ``delta``: every point and directional light;
+* ``env``: one direction from the environment map (by luminance), MIS
+  weighted against BSDF sampling when ``mis`` is set;
 
 Each returns the contribution ``f * |cos| * L / pdf`` (times the MIS weight)
 for lanes where it applies and zero elsewhere; none can return NaN.
@@ -25,10 +27,11 @@ def power_heuristic(a: Float, b: Float) -> Float:
 
 
 class DirectLight:
-    def __init__(self, accel, materials, area_lights, delta_lights, offset):
+    def __init__(self, accel, materials, area_lights, delta_lights, offset, env=None):
         self.accel, self.mats, self.offset = accel, materials, offset
         self.area_lights = area_lights if area_lights.count > 0 else None
         self.delta_lights = delta_lights if (delta_lights and delta_lights.count) else None
+        self.env = env if (env is not None and not env.is_black) else None
 
     def area(self, si, u_sel: Float, u2: Array2f, active: Bool, mis: bool) -> Array3f:
         ls = self.area_lights.sample(u_sel, u2, active)
@@ -54,3 +57,12 @@ class DirectLight:
             ok &= ~self.accel.occluded(so, dl.wo, dl.dist * SHADOW_SHRINK, ok)
             total += dr.select(ok, f * dl.irradiance, 0.0)
         return total
+
+    def env_light(self, si, u2: Array2f, active: Bool, mis: bool) -> Array3f:
+        wo, radiance, pdf_l = self.env.sample(u2, active)
+        f, pdf_b = self.mats.eval_pdf(si, wo)
+        ok = active & (pdf_l > 0.0) & (dr.max(f) > 0.0)
+        so = self.offset.origin(si.p, si.ng, wo)
+        ok &= ~self.accel.occluded(so, wo, Float(dr.inf), ok)
+        w = power_heuristic(pdf_l, pdf_b) if mis else Float(1.0)
+        return dr.select(ok, f * radiance * (w / dr.maximum(pdf_l, 1e-30)), 0.0)

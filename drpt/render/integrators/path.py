@@ -1,8 +1,9 @@
 """Unidirectional path tracing with next-event estimation and MIS.
 
 At every vertex the path gathers light two ways: a point sampled on an
-emissive triangle (next-event estimation, with a shadow ray) and the emitter
-the next BSDF-sampled ray happens to hit. Both estimates are weighted by the
+emissive triangle and a direction sampled on the environment map
+(next-event estimation, with shadow rays), and the emitter or sky the next
+BSDF-sampled ray happens to hit. Both estimates are weighted by the
 power heuristic, so glossy and diffuse surfaces, small and large lights are
 all handled without fireflies from the "wrong" strategy.
 
@@ -46,13 +47,13 @@ class PathOptions:
 class PathIntegrator:
     def __init__(self, accel, surfaces: SurfaceData, materials: MaterialTable,
                  lights: AreaLights, offset: RayOffset, background, options: PathOptions,
-                 delta_lights: DeltaLights | None = None):
+                 delta_lights: DeltaLights | None = None, env=None):
         self.accel = accel
         self.surfaces = surfaces
         self.materials = materials
         self.lights = lights
         self.delta_lights = delta_lights
-        self.direct = DirectLight(accel, materials, lights, delta_lights, offset)
+        self.direct = DirectLight(accel, materials, lights, delta_lights, offset, env)
         self.offset = offset
         self.background = tuple(float(c) for c in background)
         self.opt = options
@@ -66,7 +67,8 @@ class PathIntegrator:
         smooth = not mats.is_specular_only()
         has_nee = has_lights and smooth
         delta = self.direct.delta_lights if smooth else None
-        has_background = max(self.background) > 0.0
+        env = self.direct.env
+        has_background = max(self.background) > 0.0 and env is None
         inf = dr.largest(Float)
 
         L = Array3f(0.0)
@@ -93,6 +95,11 @@ class PathIntegrator:
             L += dr.select(hit_emitter, beta * le * w, 0.0)
             if has_background:
                 L += dr.select(active & ~si.valid, beta * Array3f(*self.background), 0.0)
+            if env is not None:
+                escaped = active & ~si.valid
+                le_env, pdf_env = env.eval_pdf(d, escaped)
+                w_env = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_env))
+                L += dr.select(escaped, beta * le_env * w_env, 0.0)
 
             active_next = active & si.valid
             if opt.max_depth >= 0:
@@ -105,6 +112,9 @@ class PathIntegrator:
                 L += beta * self.direct.area(si, u_sel, u_light, active_next, mis=True)
             if delta is not None:
                 L += beta * self.direct.delta(si, active_next)
+            u_env = Array2f(rng.next_float32(), rng.next_float32())
+            if env is not None and smooth:
+                L += beta * self.direct.env_light(si, u_env, active_next, mis=True)
 
             # ---- BSDF sampling: continue the path
             u_lobe = rng.next_float32()

@@ -6,11 +6,13 @@ stops at the first other surface, where it gathers
 
 * ``ambient * Kd`` (the scene's ``Background{ambientLight}``),
 * direct light from every point and directional light, one sample on an
-  emissive triangle (chosen by power), each with a shadow ray,
+  emissive triangle (chosen by power), one direction on the environment
+  map (by luminance), each with a shadow ray,
 
 shaded with the material's full BSDF (so Phong materials show highlights).
 Emitters seen directly or through mirrors and glass count with their own
-radiance; rays that escape see the background color.
+radiance; rays that escape see the environment map, or else the
+background color.
 
 Refraction: instead of spawning both a reflected and a refracted ray, the
 dielectric picks one with probability equal to its Fresnel weight; with
@@ -45,9 +47,9 @@ class WhittedOptions:
 
 class WhittedIntegrator:
     def __init__(self, accel, surfaces, materials, area_lights, delta_lights, offset,
-                 background, options: WhittedOptions):
+                 background, options: WhittedOptions, env=None):
         self.accel, self.surfaces, self.materials, self.offset = accel, surfaces, materials, offset
-        self.direct = DirectLight(accel, materials, area_lights, delta_lights, offset)
+        self.direct = DirectLight(accel, materials, area_lights, delta_lights, offset, env)
         self.background = tuple(float(c) for c in background.color)
         self.ambient = tuple(float(c) for c in background.ambient)
         self.opt = options
@@ -56,7 +58,8 @@ class WhittedIntegrator:
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:
         mats, direct = self.materials, self.direct
         max_depth = self.opt.max_depth if self.opt.max_depth > 0 else 16
-        has_background = max(self.background) > 0.0
+        env = direct.env
+        has_background = max(self.background) > 0.0 and env is None
         has_ambient = max(self.ambient) > 0.0
         has_area = direct.area_lights is not None
         has_delta = direct.delta_lights is not None
@@ -72,6 +75,8 @@ class WhittedIntegrator:
             L += dr.select(active & si.valid, beta * mats.emitted(si), 0.0)
             if has_background:
                 L += dr.select(active & ~si.valid, beta * Array3f(*self.background), 0.0)
+            if env is not None:
+                L += dr.select(active & ~si.valid, beta * env.eval(d, active & ~si.valid), 0.0)
 
             delta = mats.is_delta(si)
             shade = active & si.valid & ~delta & (depth + 1 < max_depth)
@@ -83,6 +88,9 @@ class WhittedIntegrator:
                 L += beta * direct.area(si, u_sel, u_light, shade, mis=False)
             if has_delta:
                 L += beta * direct.delta(si, shade)
+            u_env = Array2f(rng.next_float32(), rng.next_float32())
+            if env is not None:
+                L += beta * direct.env_light(si, u_env, shade, mis=False)
 
             # Follow mirrors and glass; stop everywhere else.
             u_lobe = rng.next_float32()
