@@ -22,14 +22,8 @@ from .errors import DrptError
 # brings them. The message is printed once, in one line.
 LATER = {
     "grid": "the uniform grid (3D-DDA) lands with issue 5; using the SAH BVH",
-    "phong": "Phong specular lobes, glass and mirrors land with issue 3; "
-             "rendering these materials diffuse (Kd) only",
-    "cook-torrance": "Cook-Torrance lobes, glass and mirrors land with issue 3; "
-                     "rendering these materials diffuse (Kd) only",
-    "texture": "textures (map_Kd) land with issue 3; using the material's Kd",
     "sah-threshold": "BVH build variants (-SAHeuristic, -resolution) land with issue 5; using full binned SAH",
     "gui": "drpt has no OpenGL preview (-gui): it renders straight to the output file",
-    "skybox": "environment lighting (Skybox) lands with issue 4; the sky is black for now",
 }
 
 
@@ -82,12 +76,6 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
 
 
-def _has_specular(scene) -> bool:
-    return any(max(m.ks) > 0 or m.metalness is not None or m.roughness is not None
-               or m.dissolve < 1 or max(m.reflective) > 0 or max(m.transparent) > 0
-               or m.illum in (3, 4, 5, 6, 7) for m in scene.materials)
-
-
 def _check_output(output: Path) -> None:
     """Fail before rendering, not after, on an output drpt cannot write."""
     from .imageio import WRITE_EXTENSIONS
@@ -110,7 +98,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     from .render.integrators.path import PathOptions
     from .render.renderer import RenderOptions, Renderer
     from .scene import load_scene
-    from .scene.model import Skybox
 
     scene_path = args.scene or args.input
     if not scene_path:
@@ -149,12 +136,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     output = Path(args.output) if args.output else Path(Path(scene_path).stem + ".png")
     _check_output(output)
     scene = load_scene(scene_path)
-    if bsdf != "diffuse" and _has_specular(scene):
-        _note(bsdf)
-    if any(m.map_kd is not None for m in scene.materials):
-        _note("texture")
-    if any(isinstance(light, Skybox) for light in scene.lights):
-        _note("skybox")
 
     ensure_llvm()
     opts = RenderOptions(width=width, height=height, spp=spp, seed=args.seed, accel=accel,
@@ -162,7 +143,10 @@ def cmd_render(args: argparse.Namespace) -> int:
                          path=PathOptions(max_depth=args.max_depth, rr_depth=rr_depth,
                                           rr_prob=rr_prob),
                          max_lanes=args.max_lanes, progress=not args.quiet)
-    result = Renderer(scene, opts).render()
+    renderer = Renderer(scene, opts)
+    for message in renderer.warnings:
+        print(f"drpt: warning: {message}", file=sys.stderr)
+    result = renderer.render()
     if result.nonfinite:
         print(f"drpt: warning: {result.nonfinite} samples were NaN/Inf and were set to 0",
               file=sys.stderr)
