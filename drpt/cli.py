@@ -68,6 +68,9 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
                         "cook-torrance (Kd, Roughness, Metalness); diffuse uses Kd only")
     p.add_argument("-cook_torrance", dest="cook_torrance", action="store_true",
                    help="seed flag: Cook-Torrance shading")
+    p.add_argument("--env-sampling", choices=["luminance", "uniform"], default="luminance",
+                   help="how sky directions are sampled: by luminance (default) or uniformly "
+                        "over the sphere (for comparison)")
     p.add_argument("--gamma", "-Gamma", dest="gamma", type=float, default=2.2,
                    help="display gamma for .png/.tga (default 2.2)")
     p.add_argument("-gui", dest="gui", action="store_true", help="seed flag: OpenGL preview")
@@ -139,7 +142,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     ensure_llvm()
     opts = RenderOptions(width=width, height=height, spp=spp, seed=args.seed, accel=accel,
-                         bsdf=bsdf, integrator=integrator,
+                         bsdf=bsdf, integrator=integrator, env_sampling=args.env_sampling,
                          path=PathOptions(max_depth=args.max_depth, rr_depth=rr_depth,
                                           rr_prob=rr_prob),
                          max_lanes=args.max_lanes, progress=not args.quiet)

@@ -68,6 +68,16 @@ def test_max_lanes_smaller_than_a_row_still_renders_everything(tmp_path):
     assert np.all(read_image(a).sum(2) > 0)
 
 
+def test_passes_of_different_sizes(tmp_path):
+    # 4x4 at 3 spp with 32 lanes: a pass of 2 spp (32 lanes), then one of 1
+    # spp (16 lanes). Long-lived constants must not keep the first width.
+    out = tmp_path / "p.exr"
+    assert main(["render", CORNELL, "--size", "4", "4", "--spp", "3", "-o", str(out),
+                 "--quiet", "--max-lanes", "32"]) == 0  # raised a size mismatch before
+    img = read_image(out)
+    assert np.all(np.isfinite(img)) and img.mean() > 0.05
+
+
 def test_same_seed_same_image(tmp_path):
     a, b = tmp_path / "a.exr", tmp_path / "b.exr"
     for out in (a, b):

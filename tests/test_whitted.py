@@ -61,3 +61,23 @@ def test_ambient_term_adds_ambient_times_kd(tmp_path):
     assert np.all(coverage > -1e-4) and np.all(coverage < 1 + 1e-4)
     assert np.allclose(coverage[..., 0], coverage[..., 1], atol=1e-4)
     assert (coverage[..., 0] > 1 - 1e-4).mean() > 0.1  # pixels fully on the sphere
+
+
+def test_mirror_scene_matches_mitsuba_path_at_depth_3(tmp_path):
+    # Point light, one convex diffuse sphere, one mirror sphere, black
+    # background: Mitsuba's paths of up to 3 segments are exactly Whitted's
+    # (camera -> diffuse -> light, camera -> mirror -> diffuse -> light).
+    s = load(tmp_path, mirror=True)
+    w = render(s, "whitted", 3, spp=128)
+    _, ref, ref_var = render_both(s, 48, 32, 128, max_depth=3)
+    assert w.image.mean() > 0.01
+    assert_agree(w, ref, ref_var)
+
+
+def test_mirror_reflection_is_seen(tmp_path):
+    # With the mirror, Whitted at depth 3 sees the diffuse sphere in it:
+    # more light than at depth 2 (where the mirror shows only black).
+    s = load(tmp_path, mirror=True)
+    d2 = render(s, "whitted", 2, spp=16).image.sum()
+    d3 = render(s, "whitted", 3, spp=16).image.sum()
+    assert d3 > d2 * 1.01

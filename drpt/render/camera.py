@@ -50,10 +50,14 @@ class RayCamera:
         else:
             half_h = cam.size / 2.0
         half_w = half_h * width / height
-        self.center = Array3f(*map(float, cam.center))
-        self.f = Array3f(*map(float, f))
-        self.r = Array3f(*map(float, r * half_w))  # pre-scaled by the half extents
-        self.u = Array3f(*map(float, u * half_h))
+        # Opaque, not literals: in Dr.Jit 1.5, ``Float(0.0) * wide_array``
+        # resizes the literal 0 operand in place, so a camera basis with a
+        # zero component would keep the first pass's width and break the next
+        # pass of another size (tests/test_cli.py covers it).
+        self.center = dr.opaque(Array3f, tuple(map(float, cam.center)))
+        self.f = dr.opaque(Array3f, tuple(map(float, f)))
+        self.r = dr.opaque(Array3f, tuple(map(float, r * half_w)))  # scaled by half extents
+        self.u = dr.opaque(Array3f, tuple(map(float, u * half_h)))
 
     def ray(self, x: Float, y: Float) -> tuple[Array3f, Array3f]:
         """World-space ray (origin, unit direction) through pixel position (x, y)."""

@@ -28,7 +28,7 @@ from .integrators.path import PathIntegrator, PathOptions
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lights.area import AreaLights
 from .lights.delta import DeltaLights
-from .lights.envmap import EnvironmentLight, check_radius
+from .lights.envmap import EnvironmentLight, UniformSphereSampling, check_radius
 from .material import MaterialTable
 from .spawn import RayOffset
 from .surface import SurfaceData
@@ -43,6 +43,7 @@ class RenderOptions:
     accel: str = "bvh"
     bsdf: str = "phong"  # how MTL materials are read, see drpt.shading
     integrator: str = "path"  # "path" (MIS path tracing) or "whitted"
+    env_sampling: str = "luminance"  # or "uniform" (for comparison only)
     path: PathOptions = field(default_factory=PathOptions)
     max_lanes: int = 1 << 21
     progress: bool = True
@@ -107,6 +108,8 @@ class Renderer:
                 self.warnings.append(f"{len(skies)} Skybox lights: using the first")
             self.env = EnvironmentLight.from_file(skies[0].path)
             self.warnings += self.env.warnings
+            if options.env_sampling == "uniform":
+                self.env = UniformSphereSampling(self.env)
             lo, hi = scene.bounds()
             msg = check_radius(lo, hi, skies[0].radius)
             if msg:

@@ -350,3 +350,36 @@ def _float32_cdf(w: np.ndarray, total) -> tuple[np.ndarray, np.ndarray]:
     cdf /= s
     p = np.diff(cdf, axis=1, prepend=np.float32(0.0))
     return cdf, p
+
+
+class UniformSphereSampling:
+    """The same sky sampled uniformly over the sphere (pdf ``1 / 4 pi``).
+
+    Only for comparison: it shows what luminance importance sampling buys
+    (``python -m drpt render --env-sampling uniform``; benchmarks/env_sampling.py).
+    Same interface as :class:`EnvironmentLight`; radiance lookups delegate to it.
+    """
+
+    PDF = 1.0 / (4.0 * math.pi)
+
+    def __init__(self, env: EnvironmentLight):
+        self.env = env
+        self.is_black = env.is_black
+        self.warnings = env.warnings
+
+    def eval(self, d: Array3f, active=True) -> Array3f:
+        return self.env.eval(d, active)
+
+    def pdf(self, d: Array3f, active=True) -> Float:
+        return dr.select(Bool(active), Float(self.PDF), 0.0)
+
+    def eval_pdf(self, d: Array3f, active=True) -> tuple[Array3f, Float]:
+        return self.env.eval(d, active), self.pdf(d, active)
+
+    def sample(self, u: Array2f, active=True) -> tuple[Array3f, Array3f, Float]:
+        active = Bool(active)
+        z = 1.0 - 2.0 * u.y
+        r = dr.safe_sqrt(1.0 - z * z)
+        s, c = dr.sincos(2.0 * math.pi * u.x)
+        d = Array3f(r * c, z, r * s)
+        return d, self.eval(d, active), self.pdf(d, active)
