@@ -19,14 +19,16 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# name: (scene file, width, height, spp, max_depth)
+# name: (scene file, width, height, spp, max_depth, material mode)
 REFERENCES = {
-    "cornellbox": ("scenes/cornellbox/cornellbox.txt", 128, 128, 8192, -1),
+    "cornellbox": ("scenes/cornellbox/cornellbox.txt", 128, 128, 8192, -1, "phong"),
+    "newscene": ("scenes/newscene/newscene.txt", 96, 96, 4096, -1, "cook-torrance"),
+    "newscene_hard": ("scenes/newscene/newscene_hard.txt", 96, 96, 4096, -1, "cook-torrance"),
 }
 
 
 def reference_path(name: str) -> Path:
-    _, w, h, spp, depth = REFERENCES[name]
+    _, w, h, spp, depth, _ = REFERENCES[name]
     return ROOT / "reference" / f"{name}_{w}x{h}_{spp}spp_depth{depth}.exr"
 
 
@@ -38,9 +40,9 @@ def render_reference(name: str, seed: int = 12345) -> Path:
     from drpt.imageio import write_image
     from drpt.scene import load_scene
 
-    scene_file, w, h, spp, depth = REFERENCES[name]
+    scene_file, w, h, spp, depth, mode = REFERENCES[name]
     scene = load_scene(ROOT / scene_file)
-    ms = mi.load_dict(to_mitsuba_dict(scene, w, h, spp, max_depth=depth, seed=seed))
+    ms = mi.load_dict(to_mitsuba_dict(scene, w, h, spp, max_depth=depth, seed=seed, bsdf=mode))
     t0 = time.perf_counter()
     img = mi.render(ms, spp=spp, seed=seed)
     out = reference_path(name)

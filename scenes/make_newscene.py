@@ -56,6 +56,11 @@ newmtl sphere_gold
 Kd 0.9 0.75 0.3
 Roughness 0.2
 Mentalness 0.6
+# The seed's hard case: metalness and roughness both 0.9 (newscene_hard.txt)
+newmtl sphere_gold_hard
+Kd 0.9 0.75 0.3
+Roughness 0.9
+Mentalness 0.9
 """
 
 SCENE = """\
@@ -77,6 +82,10 @@ Group {
     Sphere { center -0.6 -0.2 0.1  radius 0.18  mtl sphere_gold }
 }
 """
+
+
+HARD = SCENE.replace("mtl sphere_gold }", "mtl sphere_gold_hard }").replace(
+    "# The seed's \"newscene\"", "# The seed's hard case (gold sphere: metalness 0.9, roughness 0.9) in its \"newscene\"")
 
 
 def quad(a, b, c, d):
@@ -139,6 +148,7 @@ def main(out: Path = Path(__file__).parent / "newscene") -> None:
     (out / "newscene.obj").write_text("\n".join(lines) + "\n")
     (out / "newscene.mtl").write_text(MTL)
     (out / "newscene.txt").write_text(SCENE)
+    (out / "newscene_hard.txt").write_text(HARD)
 
 
 if __name__ == "__main__":

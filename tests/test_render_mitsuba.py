@@ -42,7 +42,7 @@ def rel_mse(x, ref):
 
 @pytest.fixture(scope="module")
 def reference():
-    _, w, h, spp, depth = REFERENCES["cornellbox"]
+    _, w, h, spp, depth, _ = REFERENCES["cornellbox"]
     return read_image(reference_path("cornellbox")), spp
 
 
