@@ -167,7 +167,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     width, height = args.size
     write_xml(scene, Path(args.output), width=width, height=height, spp=args.spp,
-              max_depth=args.max_depth)
+              max_depth=args.max_depth, bsdf=args.bsdf)
     print(f"{args.output}: Mitsuba 3 scene written")
     return 0
 
@@ -187,6 +187,8 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--size", nargs=2, type=int, default=(512, 512), metavar=("W", "H"))
     export.add_argument("--spp", type=int, default=64)
     export.add_argument("--max-depth", type=int, default=-1)
+    export.add_argument("--bsdf", choices=["phong", "cook-torrance", "diffuse"], default="phong",
+                        help="how MTL materials are read (as for render)")
     export.set_defaults(func=cmd_export)
     return parser
 
