@@ -190,6 +190,10 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--bsdf", choices=["phong", "cook-torrance", "diffuse"], default="phong",
                         help="how MTL materials are read (as for render)")
     export.set_defaults(func=cmd_export)
+
+    from .compare import add_parser as add_compare_parser
+
+    add_compare_parser(sub)
     return parser
 
 
