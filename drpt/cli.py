@@ -194,6 +194,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .compare import add_parser as add_compare_parser
 
     add_compare_parser(sub)
+    from .profile import add_parser as add_profile_parser
+
+    add_profile_parser(sub)
     return parser
 
 
