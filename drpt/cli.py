@@ -21,7 +21,6 @@ from .errors import DrptError
 # Features that are accepted but arrive in later work, with the issue that
 # brings them. The message is printed once, in one line.
 LATER = {
-    "grid": "the uniform grid (3D-DDA) lands with issue 5; using the SAH BVH",
     "sah-threshold": "BVH build variants (-SAHeuristic, -resolution) land with issue 5; using full binned SAH",
     "gui": "drpt has no OpenGL preview (-gui): it renders straight to the output file",
 }
@@ -52,7 +51,8 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
                    help="seed flag: fixed continuation probability p at every bounce")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--accel", choices=["bvh", "grid", "brute"], default=None,
-                   help="acceleration structure (default bvh)")
+                   help="acceleration structure: bvh (default), grid (uniform grid, 3D-DDA; "
+                        "-resolution N cells per axis) or brute")
     p.add_argument("-SpatialTree", dest="spatial_tree", action="store_true",
                    help="seed flag: use the BVH (the seed's default is the grid)")
     p.add_argument("-resolution", dest="resolution", type=int, default=None,
@@ -128,9 +128,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     integrator = args.integrator or ("path" if (args.monte_carlo or not seed_mode) else "whitted")
     accel = args.accel or ("bvh" if (args.spatial_tree or not seed_mode) else "grid")
     bsdf = args.bsdf or ("cook-torrance" if args.cook_torrance else "phong")
-    if accel == "grid":
-        _note("grid")
-        accel = "bvh"
+    if args.resolution is not None and accel == "grid" and not 1 <= args.resolution <= 256:
+        raise DrptError(f"-resolution must be between 1 and 256 grid cells per axis, "
+                        f"got {args.resolution}")
     if args.sah_threshold is not None or (args.resolution is not None and accel == "bvh"):
         _note("sah-threshold")
     if args.gui:
@@ -142,6 +142,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     ensure_llvm()
     opts = RenderOptions(width=width, height=height, spp=spp, seed=args.seed, accel=accel,
+                         grid_resolution=args.resolution if accel == "grid" else None,
                          bsdf=bsdf, integrator=integrator, env_sampling=args.env_sampling,
                          path=PathOptions(max_depth=args.max_depth, rr_depth=rr_depth,
                                           rr_prob=rr_prob),

@@ -17,23 +17,28 @@ from __future__ import annotations
 
 from .brute import BruteForce
 from .bvh import BVH, INVALID, Hit
+from .grid import UniformGrid
 
-__all__ = ["BVH", "BruteForce", "Hit", "INVALID", "build_accel"]
+__all__ = ["BVH", "BruteForce", "Hit", "INVALID", "UniformGrid", "build_accel"]
 
 
 def build_accel(scene, kind: str = "bvh", method: str = "sah", leaf_size: int = 4,
-                bins: int = 16):
+                bins: int = 16, resolution: int | None = None):
     """Build the accelerator for ``scene``.
 
     Args:
         scene: a :class:`~drpt.scene.model.Scene`.
-        kind: ``"bvh"`` or ``"brute"``.
-        method: BVH split rule, ``"sah"`` or ``"median"`` (ignored for brute).
+        kind: ``"bvh"``, ``"grid"`` (uniform grid, 3D-DDA) or ``"brute"``.
+        method: BVH split rule, ``"sah"``, ``"sah_full"`` or ``"median"``.
         leaf_size: maximum primitives per BVH leaf.
         bins: SAH bins per axis.
+        resolution: grid cells per axis (the seed's ``-resolution``); ``None``
+            picks about two cells per primitive.
     """
     if kind == "bvh":
         return BVH(scene, method=method, leaf_size=leaf_size, bins=bins)
+    if kind == "grid":
+        return UniformGrid(scene, resolution=resolution)
     if kind == "brute":
         return BruteForce(scene)
-    raise ValueError(f"unknown accelerator kind {kind!r}; expected 'bvh' or 'brute'")
+    raise ValueError(f"unknown accelerator kind {kind!r}; expected 'bvh', 'grid' or 'brute'")

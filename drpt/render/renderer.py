@@ -41,6 +41,7 @@ class RenderOptions:
     spp: int = 16
     seed: int = 0
     accel: str = "bvh"
+    grid_resolution: int | None = None  # cells per axis for accel="grid" (None: automatic)
     bsdf: str = "phong"  # how MTL materials are read, see drpt.shading
     integrator: str = "path"  # "path" (MIS path tracing) or "whitted"
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
@@ -94,7 +95,7 @@ class Renderer:
 
         self.scene, self.opt = scene, options
         t0 = time.perf_counter()
-        self.accel = build_accel(scene, kind=options.accel)
+        self.accel = build_accel(scene, kind=options.accel, resolution=options.grid_resolution)
         self.materials = MaterialTable(scene, options.bsdf)
         self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None)
         self.lights = AreaLights(scene, self.surfaces)
