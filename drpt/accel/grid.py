@@ -32,7 +32,8 @@ ascending within a cell). If the box-overlap count exceeds ``MAX_REFS`` the
 automatic resolution is lowered (an explicit one raises ``ValueError``).
 
 Memory (``nbytes``): ``4 * (cells + 1)`` offsets + ``4 * refs`` + primitive
-data (``48 * F`` triangle vertices, ``16 * S`` spheres, ``16 * P`` planes).
+data (the BVH's triangle buffer, :func:`drpt.accel.bvh.triangle_buffer`;
+``16 * S`` spheres, ``16 * P`` planes).
 
 Traversal
 ---------
