@@ -15,72 +15,10 @@ from drpt.accel.brute import BruteForce
 from drpt.accel.grid import MAX_RES, UniformGrid, auto_resolution
 from drpt.scene import model as M
 
+from test_bvh import icosphere, loop_mode, make_scene, rays, soup  # noqa: F401 (fixture)
+
 INF = float("inf")
 RESOLUTIONS = [1, 7, None]
-
-
-def make_scene(tris=None, spheres=None, planes=None):
-    kw = {}
-    if tris is not None:
-        kw["triangles"] = M.Triangles(np.asarray(tris, np.float64), np.zeros(len(tris), np.int32))
-    if spheres is not None:
-        c, r = spheres
-        kw["spheres"] = M.Spheres(np.asarray(c, np.float64), np.asarray(r, np.float64),
-                                  np.zeros(len(r), np.int32))
-    if planes is not None:
-        n, off = planes
-        kw["planes"] = M.Planes(np.asarray(n, np.float64), np.asarray(off, np.float64),
-                                np.zeros(len(off), np.int32))
-    cam = M.PerspectiveCamera((0, 0, 0), (0, 0, 1), (0, 1, 0), 40.0)
-    return M.Scene(path=None, camera=cam, materials=[M.Material("m")], **kw)
-
-
-def soup(rng, F, scale=1.0, size=0.5):
-    p = rng.random((F, 3, 3)) * 10
-    p[:, 1:] = p[:, :1] + rng.normal(size=(F, 2, 3)) * size
-    return p * scale
-
-
-def icosphere(level=2):
-    t = (1 + 5**0.5) / 2
-    v = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
-                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]],
-                 np.float64)
-    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9],
-                  [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2],
-                  [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10],
-                  [8, 6, 7], [9, 8, 1]])
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    for _ in range(level):
-        verts = list(map(tuple, v))
-        index = {}
-
-        def mid(a, b):
-            key = (min(a, b), max(a, b))
-            if key not in index:
-                m = (np.asarray(verts[a]) + verts[b]) / 2
-                verts.append(tuple(m / np.linalg.norm(m)))
-                index[key] = len(verts) - 1
-            return index[key]
-
-        nf = []
-        for a, b, c in f:
-            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
-            nf += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-        v, f = np.asarray(verts), np.asarray(nf)
-    return v, f
-
-
-def rays(o, d):
-    o = np.asarray(o, np.float32)
-    d = np.asarray(d, np.float32)
-    return Array3f(*o.T), Array3f(*d.T)
-
-
-@pytest.fixture(params=[True, False], ids=["symbolic", "evaluated"])
-def loop_mode(request):
-    with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, request.param):
-        yield request.param
 
 
 def compare(scene, o, d, tmax=INF, resolutions=RESOLUTIONS, check_occ=True):
