@@ -1,7 +1,8 @@
 """Path-tracing throughput of drpt vs Mitsuba 3 on the bundled scenes, same run.
 
-Each renderer renders once to compile (warm-up), then once timed; the ratio
-is drpt samples/s over Mitsuba samples/s at equal size, spp and depth.
+Each renderer renders once to compile (warm-up), then three times timed (the
+best counts: the machine may be shared); the ratio is drpt samples/s over
+Mitsuba samples/s at equal size, spp and depth.
 
     .venv/bin/python benchmarks/render_vs_mitsuba.py [size] [spp]
 """
@@ -33,13 +34,17 @@ def main(size=256, spp=64):
             r = Renderer(scene, RenderOptions(width=size, height=size, spp=spp, bsdf=mode,
                                               progress=False, path=PathOptions(max_depth=depth)))
             r.render()
-            drpt_rate = r.render().samples_per_second
+            drpt_rate = max(r.render().samples_per_second for _ in range(3))
             ms = mi.load_dict(to_mitsuba_dict(scene, size, size, spp, max_depth=depth, bsdf=mode))
             dr.eval(mi.render(ms, spp=spp))
-            t0 = time.perf_counter()
-            dr.eval(mi.render(ms, spp=spp, seed=1))
-            dr.sync_thread()
-            mi_rate = size * size * spp / (time.perf_counter() - t0)
+            best = float("inf")
+            for seed in (1, 2, 3):
+                dr.sync_thread()
+                t0 = time.perf_counter()
+                dr.eval(mi.render(ms, spp=spp, seed=seed))
+                dr.sync_thread()
+                best = min(best, time.perf_counter() - t0)
+            mi_rate = size * size * spp / best
             print(f"| {Path(path).name} | {depth} | {drpt_rate / 1e6:.2f} | {mi_rate / 1e6:.2f} "
                   f"| {drpt_rate / mi_rate:.2f} |")
 

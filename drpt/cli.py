@@ -198,6 +198,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .profile import add_parser as add_profile_parser
 
     add_profile_parser(sub)
+    from .bench import add_parser as add_bench_parser
+
+    add_bench_parser(sub)
     return parser
 
 

@@ -1,0 +1,386 @@
+"""``python -m drpt bench [SCENE ...]``: ray and render throughput, drpt vs Mitsuba 3.
+
+For each scene and each acceleration structure (``--accel bvh,grid``) drpt's
+numbers are measured, and in the same run Mitsuba 3's (``llvm_ad_rgb``) on the
+exported scene, on the *same* rays:
+
+* build time (drpt: ``build_accel``; Mitsuba: ``mi.load_dict`` of the
+  exported scene, which includes its BVH build) and drpt's accel memory;
+* closest-hit Mrays/s on **primary** rays (camera rays through pixel centres
+  of a ~``--rays``-pixel image with the aspect of ``--size``) and on
+  **incoherent** rays (uniform random points inside the scene bounds, uniform
+  random directions, ``tmax`` = inf);
+* shadow-ray (``occluded`` / ``ray_test``) Mrays/s from the incoherent
+  origins to a second set of random points, ``tmax`` = distance between them;
+* path-tracing render seconds and samples/s at ``--size`` / ``--spp`` and
+  equal ``--max-depth``.
+
+Every kernel runs once before timing (compilation lands there), timers are
+bracketed by ``dr.sync_thread()``, and each number is the best of
+``--repeat`` (3) runs. Ratios are drpt / Mitsuba for throughputs (higher is
+better for drpt) and Mitsuba / drpt for times (build, render seconds), so a
+ratio above 1 always means drpt is faster.
+
+Outputs in ``--out`` (default ``bench/``): ``bench.md`` (the printed table),
+``bench.csv`` (one row per scene and accel) and ``bench.png`` (bar chart of
+the ratios).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DrptError
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_SCENES = [ROOT / "scenes" / "cornellbox" / "cornellbox.txt",
+                  ROOT / "scenes" / "newscene" / "newscene.txt"]
+# How MTL materials are read per default scene (others: phong).
+DEFAULT_BSDF = {"newscene.txt": "cook-torrance"}
+ACCELS = ("bvh", "grid", "brute")
+
+FIELDS = ["scene", "accel", "rays", "build_s", "accel_mib", "primary_mrays",
+          "incoherent_mrays", "shadow_mrays", "render_s", "msamples_s",
+          "mi_load_s", "mi_primary_mrays", "mi_incoherent_mrays", "mi_shadow_mrays",
+          "mi_render_s", "mi_msamples_s",
+          "ratio_build", "ratio_primary", "ratio_incoherent", "ratio_shadow", "ratio_render"]
+RATIOS = [("ratio_build", "build / load"), ("ratio_primary", "primary hit"),
+          ("ratio_incoherent", "incoherent hit"), ("ratio_shadow", "shadow"),
+          ("ratio_render", "render")]
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register the ``bench`` subcommand on an ``add_subparsers()`` object."""
+    p = subparsers.add_parser(
+        "bench", allow_abbrev=False,
+        help="ray and render throughput of drpt vs Mitsuba 3",
+        description="benchmark drpt's accelerators and path tracer against Mitsuba 3 "
+                    "on the same rays and scenes, in one run")
+    p.add_argument("scenes", nargs="*", metavar="SCENE",
+                   help="scene files (default: the bundled Cornell box and newscene)")
+    p.add_argument("--accel", default="bvh,grid",
+                   help="comma-separated accelerators: bvh, grid, brute (default bvh,grid)")
+    p.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), default=(256, 256),
+                   help="render size (default 256 256)")
+    p.add_argument("--spp", type=int, default=16, help="render samples per pixel (default 16)")
+    p.add_argument("--rays", type=int, default=1 << 20,
+                   help="rays per ray benchmark (default 1048576)")
+    p.add_argument("--max-depth", type=int, default=-1,
+                   help="longest path for the render benchmark, -1 unbounded (default)")
+    p.add_argument("--bsdf", choices=["phong", "cook-torrance", "diffuse"], default=None,
+                   help="how MTL materials are read (default: cook-torrance for newscene, "
+                        "phong otherwise)")
+    p.add_argument("--repeat", type=int, default=3, help="timed runs per number, best kept "
+                                                          "(default 3)")
+    p.add_argument("--seed", type=int, default=0, help="seed for the random rays (default 0)")
+    p.add_argument("--out", default="bench", help="output folder (default bench/)")
+    p.add_argument("--no-mitsuba", action="store_true", help="drpt numbers only")
+    p.set_defaults(func=main)
+    return p
+
+
+# --------------------------------------------------------------------------- timing
+
+def _best(fn, repeat: int) -> float:
+    """Best wall time of ``fn()`` (its results evaluated) after one warm-up call."""
+    import drjit as dr
+
+    dr.eval(fn())
+    dr.sync_thread()
+    best = math.inf
+    for _ in range(repeat):
+        dr.sync_thread()
+        t0 = time.perf_counter()
+        dr.eval(fn())
+        dr.sync_thread()
+        best = min(best, time.perf_counter() - t0)
+    return max(best, 1e-9)
+
+
+# --------------------------------------------------------------------------- rays
+
+def make_rays(scene, n: int, aspect: float, seed: int) -> dict[str, np.ndarray]:
+    """Primary, incoherent and shadow rays as float32 numpy arrays of shape (3, N)."""
+    import drjit as dr
+    from drjit.llvm import Float, UInt32
+
+    from .render.camera import RayCamera
+
+    h = max(1, round(math.sqrt(n / aspect)))
+    w = max(1, round(n / h))
+    idx = dr.arange(UInt32, w * h)
+    x = Float(idx % w) + 0.5
+    y = Float(idx // w) + 0.5
+    o, d = RayCamera(scene.camera, w, h).ray(x, y)
+    prim_o = np.array([o.x.numpy(), o.y.numpy(), o.z.numpy()], np.float32).reshape(3, -1)
+    prim_d = np.array([d.x.numpy(), d.y.numpy(), d.z.numpy()], np.float32)
+    prim_o = np.broadcast_to(prim_o, prim_d.shape).copy()
+
+    lo, hi = scene.bounds()
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        lo, hi = np.full(3, -1.0), np.full(3, 1.0)  # only planes: a unit box
+    rng = np.random.default_rng(seed)
+    p = lo[:, None] + (hi - lo)[:, None] * rng.random((3, n))
+    q = lo[:, None] + (hi - lo)[:, None] * rng.random((3, n))
+    v = rng.normal(size=(3, n))
+    v /= np.linalg.norm(v, axis=0, keepdims=True)
+    s = q - p
+    dist = np.linalg.norm(s, axis=0)
+    dist = np.maximum(dist, 1e-6)
+    return {"primary_o": prim_o, "primary_d": prim_d,
+            "inc_o": p.astype(np.float32), "inc_d": v.astype(np.float32),
+            "shadow_d": (s / dist).astype(np.float32),
+            "shadow_t": (dist * (1 - 1e-4)).astype(np.float32)}
+
+
+# --------------------------------------------------------------------------- drpt
+
+def bench_drpt(scene, accel_kind: str, rays: dict, bsdf: str, size, spp: int, max_depth: int,
+               repeat: int) -> dict:
+    import drjit as dr
+    from drjit.llvm import Array3f, Float
+
+    from .accel import build_accel
+    from .render.integrators.path import PathOptions
+    from .render.renderer import RenderOptions, Renderer
+
+    def a3(a):
+        v = Array3f(*(Float(c) for c in a))
+        dr.make_opaque(v)
+        return v
+
+    build = math.inf
+    for _ in range(repeat):
+        accel = build_accel(scene, kind=accel_kind)
+        build = min(build, accel.build_seconds)
+    po, pd = a3(rays["primary_o"]), a3(rays["primary_d"])
+    io, idr, sd = a3(rays["inc_o"]), a3(rays["inc_d"]), a3(rays["shadow_d"])
+    st = Float(rays["shadow_t"])
+    dr.make_opaque(st)
+    inf = Float(math.inf)
+    dr.eval(po, pd, io, idr, sd, st)
+
+    def hit(o, d):
+        h = accel.intersect(o, d, inf)
+        return h.t, h.prim
+
+    n_prim, n_inc = pd.shape[1], idr.shape[1]
+    t_prim = _best(lambda: hit(po, pd), repeat)
+    t_inc = _best(lambda: hit(io, idr), repeat)
+    t_shadow = _best(lambda: accel.occluded(io, sd, st), repeat)
+
+    W, H = size
+    r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, accel=accel_kind, bsdf=bsdf,
+                                      progress=False, path=PathOptions(max_depth=max_depth)))
+    r.render()  # warm-up: compilation
+    render_s = min(r.render().seconds for _ in range(repeat))
+    return {"rays": n_inc, "build_s": build, "accel_mib": accel.nbytes / 2**20,
+            "primary_mrays": n_prim / t_prim / 1e6, "incoherent_mrays": n_inc / t_inc / 1e6,
+            "shadow_mrays": n_inc / t_shadow / 1e6,
+            "render_s": render_s, "msamples_s": W * H * spp / render_s / 1e6}
+
+
+# --------------------------------------------------------------------------- Mitsuba
+
+def bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
+                  repeat: int) -> dict:
+    import drjit as dr
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_rgb")
+    from .export.mitsuba import to_mitsuba_dict
+
+    W, H = size
+    load = math.inf
+    for _ in range(repeat):
+        desc = to_mitsuba_dict(scene, W, H, spp, max_depth=max_depth, bsdf=bsdf)
+        dr.sync_thread()
+        t0 = time.perf_counter()
+        ms = mi.load_dict(desc)
+        dr.sync_thread()
+        load = min(load, time.perf_counter() - t0)
+
+    def ray(o, d, t=None):
+        r = mi.Ray3f(mi.Point3f(*(mi.Float(c) for c in o)),
+                     mi.Vector3f(*(mi.Float(c) for c in d)))
+        if t is not None:
+            r.maxt = mi.Float(t)
+        dr.make_opaque(r)
+        return r
+
+    rp = ray(rays["primary_o"], rays["primary_d"])
+    ri = ray(rays["inc_o"], rays["inc_d"])
+    rs = ray(rays["inc_o"], rays["shadow_d"], rays["shadow_t"])
+
+    def hit(r):
+        pi = ms.ray_intersect_preliminary(r)
+        return pi.t, pi.prim_index
+
+    n_prim, n_inc = rays["primary_d"].shape[1], rays["inc_d"].shape[1]
+    t_prim = _best(lambda: hit(rp), repeat)
+    t_inc = _best(lambda: hit(ri), repeat)
+    t_shadow = _best(lambda: ms.ray_test(rs), repeat)
+
+    dr.eval(mi.render(ms, spp=spp))  # warm-up
+    dr.sync_thread()
+    render_s = math.inf
+    for i in range(repeat):
+        t0 = time.perf_counter()
+        dr.eval(mi.render(ms, spp=spp, seed=i + 1))
+        dr.sync_thread()
+        render_s = min(render_s, time.perf_counter() - t0)
+    return {"mi_load_s": load, "mi_primary_mrays": n_prim / t_prim / 1e6,
+            "mi_incoherent_mrays": n_inc / t_inc / 1e6, "mi_shadow_mrays": n_inc / t_shadow / 1e6,
+            "mi_render_s": render_s, "mi_msamples_s": W * H * spp / render_s / 1e6}
+
+
+def _ratios(row: dict) -> None:
+    row["ratio_build"] = row["mi_load_s"] / row["build_s"]
+    row["ratio_primary"] = row["primary_mrays"] / row["mi_primary_mrays"]
+    row["ratio_incoherent"] = row["incoherent_mrays"] / row["mi_incoherent_mrays"]
+    row["ratio_shadow"] = row["shadow_mrays"] / row["mi_shadow_mrays"]
+    row["ratio_render"] = row["msamples_s"] / row["mi_msamples_s"]
+
+
+# --------------------------------------------------------------------------- output
+
+def _fmt(v) -> str:
+    if v is None or v == "":
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.3g}" if abs(v) < 100 else f"{v:.0f}"
+    return str(v)
+
+
+def format_table(rows: list[dict], mitsuba: bool) -> str:
+    cols = [("scene", "scene"), ("accel", "accel"), ("build_s", "build s"),
+            ("accel_mib", "accel MiB"), ("primary_mrays", "primary Mrays/s"),
+            ("incoherent_mrays", "incoherent Mrays/s"), ("shadow_mrays", "shadow Mrays/s"),
+            ("render_s", "render s"), ("msamples_s", "Msamples/s")]
+    lines = []
+    hdr = [c[1] for c in cols]
+    lines.append("| " + " | ".join(hdr) + " |")
+    lines.append("|" + "---|" * len(hdr))
+    for r in rows:
+        lines.append("| " + " | ".join(_fmt(r.get(k)) for k, _ in cols) + " |")
+    if mitsuba:
+        seen = set()
+        mcols = [("scene", "scene"), ("mi_load_s", "load s"),
+                 ("mi_primary_mrays", "primary Mrays/s"),
+                 ("mi_incoherent_mrays", "incoherent Mrays/s"),
+                 ("mi_shadow_mrays", "shadow Mrays/s"), ("mi_render_s", "render s"),
+                 ("mi_msamples_s", "Msamples/s")]
+        lines += ["", "Mitsuba 3 (llvm_ad_rgb), same rays and render settings:", "",
+                  "| " + " | ".join(c[1] for c in mcols) + " |", "|" + "---|" * len(mcols)]
+        for r in rows:
+            if r["scene"] not in seen:
+                seen.add(r["scene"])
+                lines.append("| " + " | ".join(_fmt(r.get(k)) for k, _ in mcols) + " |")
+        rcols = [("scene", "scene"), ("accel", "accel")] + list(RATIOS)
+        lines += ["", "drpt / Mitsuba (> 1: drpt faster; build compares Mitsuba's whole "
+                      "scene load):", "",
+                  "| " + " | ".join(c[1] for c in rcols) + " |", "|" + "---|" * len(rcols)]
+        for r in rows:
+            lines.append("| " + " | ".join(
+                f"{r[k]:.2f}x" if k.startswith("ratio") else str(r[k]) for k, _ in rcols) + " |")
+    return "\n".join(lines)
+
+
+def write_chart(rows: list[dict], path: Path, mitsuba: bool) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    keys = RATIOS if mitsuba else [("primary_mrays", "primary"),
+                                   ("incoherent_mrays", "incoherent"),
+                                   ("shadow_mrays", "shadow"), ("msamples_s", "render Msamples/s")]
+    width = 0.8 / max(len(rows), 1)
+    x = np.arange(len(keys))
+    for i, r in enumerate(rows):
+        ax.bar(x + (i - (len(rows) - 1) / 2) * width, [r[k] for k, _ in keys], width,
+               label=f"{r['scene']} / {r['accel']}")
+    ax.set_xticks(x, [label for _, label in keys])
+    if mitsuba:
+        ax.axhline(1.0, color="k", lw=0.8, ls="--")
+        ax.set_ylabel("drpt / Mitsuba 3 (> 1: drpt faster)")
+    else:
+        ax.set_ylabel("Mrays/s, Msamples/s")
+    ax.set_title("drpt bench")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------- command
+
+def main(args: argparse.Namespace) -> int:
+    """Run ``bench`` for parsed ``args``; user errors raise DrptError."""
+    from .backend import ensure_llvm
+    from .scene import load_scene
+
+    accels = [a.strip() for a in args.accel.split(",") if a.strip()]
+    if not accels:
+        raise DrptError("--accel: give at least one of bvh, grid, brute")
+    for a in accels:
+        if a not in ACCELS:
+            raise DrptError(f"--accel: unknown accelerator {a!r} (use {', '.join(ACCELS)})")
+    W, H = args.size
+    for name, v in (("--size", min(W, H)), ("--spp", args.spp), ("--rays", args.rays),
+                    ("--repeat", args.repeat)):
+        if v <= 0:
+            raise DrptError(f"{name} must be positive, got {v}")
+    if args.max_depth == 0 or args.max_depth < -1:
+        raise DrptError(f"--max-depth must be -1 (unbounded) or >= 1, got {args.max_depth}")
+    paths = [Path(s) for s in args.scenes] or DEFAULT_SCENES
+    for p in paths:
+        if not p.is_file():
+            raise DrptError(f"{p}: scene file not found")
+    out = Path(args.out)
+    ensure_llvm()
+    mitsuba = not args.no_mitsuba
+    if mitsuba:
+        try:
+            import mitsuba as mi  # noqa: F401
+        except ImportError as e:
+            raise DrptError(f"Mitsuba 3 is not installed ({e}); use --no-mitsuba") from e
+
+    rows = []
+    for path in paths:
+        scene = load_scene(path)
+        bsdf = args.bsdf or DEFAULT_BSDF.get(path.name, "phong")
+        rays = make_rays(scene, args.rays, W / H, args.seed)
+        mi_row = (bench_mitsuba(scene, rays, bsdf, (W, H), args.spp, args.max_depth, args.repeat)
+                  if mitsuba else {})
+        for kind in accels:
+            row = {"scene": path.stem, "accel": kind}
+            row.update(bench_drpt(scene, kind, rays, bsdf, (W, H), args.spp, args.max_depth,
+                                  args.repeat))
+            row.update(mi_row)
+            if mitsuba:
+                _ratios(row)
+            rows.append(row)
+
+    out.mkdir(parents=True, exist_ok=True)
+    table = format_table(rows, mitsuba)
+    settings = (f"{W}x{H}, {args.spp} spp, max depth {args.max_depth}, {args.rays} rays, "
+                f"best of {args.repeat}")
+    (out / "bench.md").write_text(f"# drpt bench\n\n{settings}\n\n{table}\n")
+    with open(out / "bench.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=FIELDS)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: r.get(k, "") for k in FIELDS})
+    write_chart(rows, out / "bench.png", mitsuba)
+    print(settings)
+    print(table)
+    print(f"{out}: bench.md, bench.csv, bench.png")
+    return 0

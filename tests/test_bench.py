@@ -1,0 +1,89 @@
+"""``drpt bench``: drpt vs Mitsuba 3 ray and render throughput, tables, CSV and chart."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+
+import pytest
+
+from drpt import bench
+from drpt.errors import DrptError
+
+from conftest import SCENES
+
+CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
+NUMBERS = ["build_s", "accel_mib", "primary_mrays", "incoherent_mrays", "shadow_mrays",
+           "render_s", "msamples_s", "mi_load_s", "mi_primary_mrays", "mi_incoherent_mrays",
+           "mi_shadow_mrays", "mi_render_s", "mi_msamples_s"]
+
+
+def _parse(argv):
+    parser = argparse.ArgumentParser(prog="drpt")
+    bench.add_parser(parser.add_subparsers(dest="command", required=True))
+    return parser.parse_args(["bench", *argv])
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    args = _parse([str(CORNELL), "--size", "16", "16", "--spp", "2", "--rays", "4096",
+                   "--accel", "bvh,grid", "--out", str(out)])
+    assert args.func is bench.main
+    rc = args.func(args)
+    with open(out / "bench.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    return rc, out, rows
+
+
+def test_defaults():
+    args = _parse([])
+    assert args.scenes == [] and args.accel == "bvh,grid" and args.out == "bench"
+    assert not args.no_mitsuba and args.bsdf is None
+    assert all(p.is_file() for p in bench.DEFAULT_SCENES)
+
+
+def test_writes_files(run):
+    rc, out, rows = run
+    assert rc == 0
+    for name in ("bench.md", "bench.csv", "bench.png"):
+        assert (out / name).stat().st_size > 0
+    assert "| cornellbox | bvh |" in (out / "bench.md").read_text()
+
+
+def test_csv_rows_positive_and_ratios_finite(run):
+    _, _, rows = run
+    assert [(r["scene"], r["accel"]) for r in rows] == [("cornellbox", "bvh"),
+                                                        ("cornellbox", "grid")]
+    for r in rows:
+        for k in NUMBERS:
+            assert float(r[k]) > 0, (k, r[k])
+        for k, _ in bench.RATIOS:
+            v = float(r[k])
+            assert math.isfinite(v) and v > 0, (k, r[k])
+
+
+def test_no_mitsuba(tmp_path):
+    args = _parse([str(CORNELL), "--size", "8", "8", "--spp", "1", "--rays", "1024",
+                   "--accel", "bvh", "--repeat", "1", "--no-mitsuba", "--out", str(tmp_path)])
+    assert args.func(args) == 0
+    with open(tmp_path / "bench.csv", newline="") as f:
+        (row,) = list(csv.DictReader(f))
+    assert float(row["primary_mrays"]) > 0 and row["ratio_render"] == ""
+    assert (tmp_path / "bench.png").exists()
+
+
+def test_missing_scene(tmp_path):
+    args = _parse([str(tmp_path / "nope.txt"), "--out", str(tmp_path / "o")])
+    with pytest.raises(DrptError, match="not found"):
+        args.func(args)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("argv", [["--accel", "kd"], ["--accel", ","], ["--spp", "0"],
+                                  ["--rays", "-1"], ["--max-depth", "0"]])
+def test_bad_options(tmp_path, argv):
+    args = _parse([str(CORNELL), *argv, "--out", str(tmp_path / "o")])
+    with pytest.raises(DrptError):
+        args.func(args)
