@@ -155,6 +155,30 @@ def test_sphere(sph_buf, idx, o, d, bt, active):
     return t, h & active
 
 
+def nearest_primitive(tri_buf, sph_buf, tri_idx, sph_idx, prim, prep: RayPrep, o, d,
+                      tri_on, sph_on, bt, bj, bu, bv):
+    """Test one triangle (lanes ``tri_on``) and/or one sphere (``sph_on``) and
+    keep the nearer hit: returns the updated closest-hit record
+    ``(bt, bj, bu, bv)`` (``bj = prim`` where a hit was kept) and ``hit_any``.
+    Absent buffers trace no code. Shared by every accelerator's loop."""
+    hit_any = Bool(False)
+    if tri_buf is not None:
+        t, u, v, h = test_triangle(tri_buf, tri_idx, prep, bt, tri_on)
+        bt = dr.select(h, t, bt)
+        bj = dr.select(h, prim, bj)
+        bu = dr.select(h, u, bu)
+        bv = dr.select(h, v, bv)
+        hit_any |= h
+    if sph_buf is not None:
+        t, h = test_sphere(sph_buf, sph_idx, o, d, bt, sph_on)
+        bt = dr.select(h, t, bt)
+        bj = dr.select(h, prim, bj)
+        bu = dr.select(h, 0.0, bu)
+        bv = dr.select(h, 0.0, bv)
+        hit_any |= h
+    return bt, bj, bu, bv, hit_any
+
+
 class BVH:
     """Triangles and spheres of a scene in one BVH; planes tested brute force.
 
@@ -328,21 +352,8 @@ class BVH:
             else:
                 idx = pi
                 tri_on = sph_on = pa
-            hit_any = Bool(False)
-            if tri_buf is not None:
-                t, u, v, h = test_triangle(tri_buf, idx, prep, bt, tri_on)
-                bt = dr.select(h, t, bt)
-                bj = dr.select(h, pi, bj)
-                bu = dr.select(h, u, bu)
-                bv = dr.select(h, v, bv)
-                hit_any |= h
-            if sph_buf is not None:
-                t, h = test_sphere(sph_buf, idx, o, d, bt, sph_on)
-                bt = dr.select(h, t, bt)
-                bj = dr.select(h, pi, bj)
-                bu = dr.select(h, 0.0, bu)
-                bv = dr.select(h, 0.0, bv)
-                hit_any |= h
+            bt, bj, bu, bv, hit_any = nearest_primitive(
+                tri_buf, sph_buf, idx, idx, pi, prep, o, d, tri_on, sph_on, bt, bj, bu, bv)
             pi = dr.select(pa, pi + 1, pi)
             if any_hit:
                 pe = dr.select(hit_any, pi, pe)

@@ -70,8 +70,7 @@ import numpy as np
 from drjit.llvm import Array3f, Bool, Float, Int32, UInt32
 
 from ..geometry.triangle import RayPrep
-from .bvh import INVALID, Hit, SceneGeometry, sphere_buffer, test_sphere, test_triangle, \
-    triangle_buffer
+from .bvh import INVALID, Hit, SceneGeometry, nearest_primitive, sphere_buffer, triangle_buffer
 
 MAX_RES = 256  # cells per axis (automatic and explicit resolutions)
 MAX_REFS = 1 << 26  # cap on primitive references (256 MB of uint32)
@@ -366,26 +365,13 @@ class UniformGrid:
             # ---- test one primitive of the current cell
             pa = alive & (pi < pe)
             ref = dr.gather(UInt32, refs, pi, pa)
-            hit_any = Bool(False)
             if mixed:
                 sph = ref >= F
                 tri_on, sph_on = pa & ~sph, pa & sph
             else:
                 tri_on = sph_on = pa
-            if tri_buf is not None:
-                t, u, v, h = test_triangle(tri_buf, ref, prep, bt, tri_on)
-                bt = dr.select(h, t, bt)
-                bj = dr.select(h, ref, bj)
-                bu = dr.select(h, u, bu)
-                bv = dr.select(h, v, bv)
-                hit_any |= h
-            if sph_buf is not None:
-                t, h = test_sphere(sph_buf, ref - F, o, d, bt, sph_on)
-                bt = dr.select(h, t, bt)
-                bj = dr.select(h, ref, bj)
-                bu = dr.select(h, 0.0, bu)
-                bv = dr.select(h, 0.0, bv)
-                hit_any |= h
+            bt, bj, bu, bv, hit_any = nearest_primitive(
+                tri_buf, sph_buf, ref, ref - F, ref, prep, o, d, tri_on, sph_on, bt, bj, bu, bv)
             pi = dr.select(pa, pi + 1, pi)
 
             # ---- cell exhausted: stop, or step to the next cell (3D-DDA)
