@@ -62,7 +62,7 @@ CI_Z = 3.0  # the 99.7% interval
 EXPECTED_OUTSIDE = 0.0027  # 2 (1 - Phi(3))
 
 __all__ = ["add_parser", "main", "default_cache_dir", "reference_key", "compare_images",
-           "compare_scene"]
+           "compare_scene", "check_reference_args", "get_reference"]
 
 
 # ------------------------------------------------------------------ parser
@@ -356,23 +356,11 @@ def render_reference(scene, settings: dict, progress: bool = True):
     return mean.astype(np.float32), var.astype(np.float32), seconds, load_seconds
 
 
-def compare_scene(scene_path: Path, out: Path, width: int = 128, height: int = 128,
-                  spp: int = 64, ref_spp: int = 1024, ref_batches: int = 8,
-                  bsdf: str = "phong", max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
-                  cache_dir: Path | None = None, progress: bool = True) -> dict:
-    """Render ``scene_path`` with drpt and Mitsuba (cached) and write the comparison."""
-    from . import metrics
-    from .backend import ensure_llvm
-    from .imageio import write_image
-    from .render.integrators.path import PathOptions
-    from .render.renderer import RenderOptions, Renderer
-    from .scene import load_scene
-
-    if min(width, height) <= 0:
-        raise DrptError(f"size must be positive, got {width}x{height}")
-    for name, v in (("--spp", spp), ("--ref-spp", ref_spp)):
-        if v <= 0:
-            raise DrptError(f"{name} must be positive, got {v}")
+def check_reference_args(ref_spp: int, ref_batches: int, max_depth: int, rr_depth: int,
+                         note: bool = True) -> int:
+    """Raise DrptError on bad reference settings; return the samples per batch."""
+    if ref_spp <= 0:
+        raise DrptError(f"--ref-spp must be positive, got {ref_spp}")
     if ref_batches < 2:
         raise DrptError(f"--ref-batches must be at least 2 (for a variance), got {ref_batches}")
     if ref_spp < ref_batches:
@@ -382,17 +370,35 @@ def compare_scene(scene_path: Path, out: Path, width: int = 128, height: int = 1
     if rr_depth <= 0:
         raise DrptError(f"--rr-depth must be positive, got {rr_depth}")
     per = -(-ref_spp // ref_batches)
-    if per * ref_batches != ref_spp:
+    if per * ref_batches != ref_spp and note:
         print(f"drpt: note: --ref-spp {ref_spp} is not a multiple of {ref_batches} batches; "
               f"using {per * ref_batches}", file=sys.stderr)
+    return per
 
-    scene = load_scene(scene_path)
-    _prepare_out(out)
+
+def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024,
+                  ref_batches: int = 8, bsdf: str = "phong", max_depth: int = -1,
+                  rr_depth: int = 5, seed: int = 0, cache_dir: Path | None = None,
+                  progress: bool = True):
+    """The Mitsuba reference of a loaded ``scene``: from the cache, or rendered (and cached).
+
+    Checks the settings, sets up Mitsuba (``llvm_ad_rgb``) and Dr.Jit's LLVM
+    backend. Returns ``(mean, var_of_mean, meta, cached, key, cache_file,
+    settings)``; ``meta`` holds the reference's render ``seconds``;
+    ``cache_file`` is ``<cache_dir>/<stem>_<key[:24]>.npz`` (``None``
+    without a cache). User mistakes raise DrptError.
+    """
+    from .backend import ensure_llvm
+
+    if min(width, height) <= 0:
+        raise DrptError(f"size must be positive, got {width}x{height}")
+    per = check_reference_args(ref_spp, ref_batches, max_depth, rr_depth)
+
     ensure_llvm()
     try:
         import mitsuba as mi
     except ImportError as e:
-        raise DrptError(f"compare SCENE needs Mitsuba 3 ('pip install mitsuba'): {e}") from e
+        raise DrptError(f"a Mitsuba reference needs Mitsuba 3 ('pip install mitsuba'): {e}") from e
     try:
         mi.set_variant("llvm_ad_rgb")
     except Exception as e:
@@ -402,7 +408,7 @@ def compare_scene(scene_path: Path, out: Path, width: int = 128, height: int = 1
                 "batches": int(ref_batches), "max_depth": int(max_depth),
                 "rr_depth": int(rr_depth), "bsdf": bsdf, "ref_seed": int(seed) + 100000}
     key = reference_key(scene, settings)
-    cache_file = None if cache_dir is None else Path(cache_dir) / f"{scene_path.stem}_{key[:24]}.npz"
+    cache_file = None if cache_dir is None else Path(cache_dir) / f"{stem}_{key[:24]}.npz"
     cached = _load_cached(cache_file) if cache_file is not None and cache_file.is_file() else None
     if cached is not None:
         ref, ref_var, meta = cached
@@ -415,6 +421,34 @@ def compare_scene(scene_path: Path, out: Path, width: int = 128, height: int = 1
             _save_cached(cache_file, ref, ref_var, meta)
     if not np.all(np.isfinite(ref)):
         raise DrptError("the Mitsuba reference has NaN/Inf pixels")
+    return ref, ref_var, meta, cached is not None, key, cache_file, settings
+
+
+def compare_scene(scene_path: Path, out: Path, width: int = 128, height: int = 128,
+                  spp: int = 64, ref_spp: int = 1024, ref_batches: int = 8,
+                  bsdf: str = "phong", max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
+                  cache_dir: Path | None = None, progress: bool = True) -> dict:
+    """Render ``scene_path`` with drpt and Mitsuba (cached) and write the comparison."""
+    from . import metrics
+    from .imageio import write_image
+    from .render.integrators.path import PathOptions
+    from .render.renderer import RenderOptions, Renderer
+    from .scene import load_scene
+
+    if min(width, height) <= 0:
+        raise DrptError(f"size must be positive, got {width}x{height}")
+    if spp <= 0:
+        raise DrptError(f"--spp must be positive, got {spp}")
+    check_reference_args(ref_spp, ref_batches, max_depth, rr_depth, note=False)
+    scene = load_scene(scene_path)
+    _prepare_out(out)
+    ref, ref_var, meta, cached, key, cache_file, settings = get_reference(
+        scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
+        bsdf=bsdf, max_depth=max_depth, rr_depth=rr_depth, seed=seed, cache_dir=cache_dir,
+        progress=progress)
+    import mitsuba as mi
+
+    per = settings["batch_spp"]
 
     opts = RenderOptions(width=width, height=height, spp=spp, seed=seed, bsdf=bsdf,
                          path=PathOptions(max_depth=max_depth, rr_depth=rr_depth),
@@ -446,7 +480,7 @@ def compare_scene(scene_path: Path, out: Path, width: int = 128, height: int = 1
         "reference": {"renderer": f"mitsuba {mi.__version__} llvm_ad_rgb path",
                       "spp": per * ref_batches, "batches": int(ref_batches),
                       "seed": settings["ref_seed"], "seconds": float(meta["seconds"]),
-                      "cached": cached is not None,
+                      "cached": cached,
                       "cache_file": None if cache_file is None else str(cache_file),
                       "key": key},
     }
