@@ -201,6 +201,12 @@ def build_parser() -> argparse.ArgumentParser:
     from .bench import add_parser as add_bench_parser
 
     add_bench_parser(sub)
+    from .converge import add_parser as add_converge_parser
+
+    add_converge_parser(sub)
+    from .knobs import add_parser as add_knobs_parser
+
+    add_knobs_parser(sub)
     return parser
 
 

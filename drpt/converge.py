@@ -1,0 +1,506 @@
+"""``python -m drpt converge``: error against samples and seconds, drpt vs Mitsuba 3.
+
+::
+
+    python -m drpt converge SCENE [--size W H] [--max-spp N] [--bsdf MODE]
+                                  [--max-depth D] [--rr-depth K] [--ref-spp M]
+                                  [--ref-batches B] [--levels E ...] [--seed S]
+                                  [--cache DIR | --no-cache] [--out DIR]
+
+drpt and Mitsuba (``llvm_ad_rgb``, ``path``, the exported scene) each render
+the scene at 1, 2, 4, ..., ``--max-spp`` samples per pixel, every level with
+its own seed (so the levels are independent estimates, not prefixes of one
+another). Each image is compared with a high-spp Mitsuba reference, the one
+``compare`` uses and caches (:func:`drpt.compare.get_reference`, same key, so
+a reference made by ``compare`` with the same settings is reused).
+
+Error
+    ``relMSE = mean((x - ref)^2 / (ref^2 + 0.01))`` (:func:`drpt.metrics.rel_mse`).
+    The reference is a finite-spp estimate itself: with ``x`` and ``ref``
+    independent, ``E[relMSE] ~= mean((var_x + var_ref + bias^2) / (ref^2 + 0.01))``,
+    so relMSE levels off at the *reference noise floor*
+    ``floor = mean(var_ref / (ref^2 + 0.01))``, ``var_ref`` being the variance
+    of the reference's mean estimated from its independent batches. The
+    curves, fits and ratios use ``excess relMSE = relMSE - floor``, which
+    falls as ``1/N`` for an unbiased renderer; raw relMSE and the floor are in
+    the CSV/JSON. A level whose excess is not positive (the render is as good
+    as the reference) is left out of the curves. MAE and SMAPE are recorded
+    too (they have floors of their own and are not corrected).
+
+Time
+    Wall seconds of the render call alone (drpt: :meth:`Renderer.render`,
+    which returns numpy arrays; Mitsuba: ``mi.render`` plus the copy to
+    numpy, which waits for the result). Excluded and reported separately:
+    scene loading, drpt's acceleration build (``build_seconds``), Mitsuba's
+    ``load_dict``, and kernel compilation: each renderer first renders one
+    1-spp warm-up image (discarded), which compiles its kernels; Dr.Jit then
+    reuses them at every spp (the sample count is not baked into either
+    renderer's kernels). drpt and Mitsuba render each level back to back, so
+    load from other processes perturbs both alike; their *ratios* are what
+    to read, absolute seconds depend on the machine's load.
+
+Ratios
+    *Equal-time error ratio*: drpt's excess relMSE divided by Mitsuba's at
+    the same seconds, each curve interpolated linearly in log-log; reported
+    at each drpt level whose time lies in Mitsuba's measured range, and as
+    the geometric mean over 9 log-spaced times across the overlap. Below 1:
+    drpt is more accurate for the same time.
+    *Time-to-error ratio*: for each ``--levels`` error ``e``, the seconds
+    each renderer needs to reach excess relMSE ``e`` (first crossing,
+    interpolated log-log between the levels around it), drpt / Mitsuba,
+    where both reach it. Below 1: drpt gets there sooner.
+
+Output in ``--out`` (default ``converge_<scene stem>/``): ``converge.csv``
+(one row per renderer and level), ``converge.json`` (settings, reference,
+levels, fitted slopes, ratios) and ``converge.png`` (excess relMSE against
+spp and against seconds, log-log, with a ``1/N`` line). A table goes to
+stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DrptError
+
+EPS = 1e-2  # relMSE's eps (drpt.metrics.rel_mse)
+DEFAULT_LEVELS = (1e-1, 3e-2, 1e-2)
+
+__all__ = ["add_parser", "main", "noise_floor", "excess_rel_mse", "loglog_slope",
+           "interp_loglog", "equal_time_ratios", "time_to_error", "time_to_error_ratios",
+           "converge_study", "spp_levels"]
+
+
+# ------------------------------------------------------------------ parser
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register the ``converge`` subcommand on an ``add_subparsers()`` object."""
+    p = subparsers.add_parser(
+        "converge", allow_abbrev=False,
+        help="error vs spp and vs seconds, drpt against Mitsuba 3",
+        description="render SCENE with drpt and Mitsuba 3 at 1, 2, 4, ... spp, measure the "
+                    "error against a cached high-spp Mitsuba reference and the time; report "
+                    "equal-time error and time-to-error ratios")
+    p.add_argument("scene", help="scene file")
+    p.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), default=(64, 64),
+                   help="image size (default 64 64)")
+    p.add_argument("--max-spp", type=int, default=256,
+                   help="largest samples per pixel; levels are the powers of 2 up to it "
+                        "(default 256)")
+    p.add_argument("--bsdf", choices=["phong", "cook-torrance", "diffuse"], default="phong",
+                   help="how MTL materials are read (as for render; default phong)")
+    p.add_argument("--max-depth", type=int, default=-1,
+                   help="longest path in segments, -1 unbounded (default)")
+    p.add_argument("--rr-depth", type=int, default=5,
+                   help="depth at which Russian roulette starts (default 5)")
+    p.add_argument("--ref-spp", type=int, default=4096,
+                   help="Mitsuba reference samples per pixel (default 4096)")
+    p.add_argument("--ref-batches", type=int, default=8,
+                   help="independent batches of the reference, for its variance (default 8)")
+    p.add_argument("--levels", type=float, nargs="+", default=list(DEFAULT_LEVELS),
+                   metavar="E", help="excess relMSE levels for the time-to-error ratio "
+                                     "(default 0.1 0.03 0.01)")
+    p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
+    p.add_argument("--out", default=None, help="output folder (default converge_<name>/)")
+    p.add_argument("--cache", default=None,
+                   help="reference cache folder (default ~/.cache/drpt/references)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="render the reference even if it is cached (and do not store it)")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress output")
+    p.set_defaults(func=main)
+    return p
+
+
+def main(args: argparse.Namespace) -> int:
+    from .compare import default_cache_dir
+
+    scene = Path(args.scene)
+    out = Path(args.out) if args.out else Path(f"converge_{scene.stem}")
+    cache = None if args.no_cache else (Path(args.cache) if args.cache else default_cache_dir())
+    report = converge_study(scene, out, width=args.size[0], height=args.size[1],
+                            max_spp=args.max_spp, bsdf=args.bsdf, max_depth=args.max_depth,
+                            rr_depth=args.rr_depth, ref_spp=args.ref_spp,
+                            ref_batches=args.ref_batches, levels=args.levels, seed=args.seed,
+                            cache_dir=cache, progress=not args.quiet)
+    print(format_table(report))
+    print(f"{out}: converge.csv, converge.json, converge.png")
+    return 0
+
+
+# ------------------------------------------------------------ statistics
+def noise_floor(ref, ref_var, eps: float = EPS) -> float:
+    """``mean(var_ref / (ref^2 + eps))``: the relMSE an exact image would get."""
+    ref = np.asarray(ref, np.float64)
+    return float(np.mean(np.asarray(ref_var, np.float64) / (ref * ref + eps)))
+
+
+def excess_rel_mse(x, ref, ref_var, eps: float = EPS) -> float:
+    """relMSE of ``x`` against ``ref`` minus the reference's noise floor."""
+    from .metrics import rel_mse
+
+    return rel_mse(x, ref, eps) - noise_floor(ref, ref_var, eps)
+
+
+def spp_levels(max_spp: int) -> list[int]:
+    """1, 2, 4, ... up to ``max_spp`` (``max_spp`` itself last if not a power of 2)."""
+    out, n = [], 1
+    while n < max_spp:
+        out.append(n)
+        n *= 2
+    out.append(int(max_spp))
+    return out
+
+
+def loglog_slope(n, e) -> tuple[float, float]:
+    """Least-squares slope of ``log e`` against ``log n`` and its standard error.
+
+    Points with ``e <= 0`` or non-finite are left out; ``nan`` with fewer
+    than 2 points (standard error ``nan`` with fewer than 3).
+    """
+    n, e = np.asarray(n, np.float64), np.asarray(e, np.float64)
+    ok = (n > 0) & (e > 0) & np.isfinite(e)
+    x, y = np.log(n[ok]), np.log(e[ok])
+    if x.size < 2 or np.ptp(x) == 0:
+        return float("nan"), float("nan")
+    A = np.stack([x, np.ones_like(x)], 1)
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    if x.size < 3:
+        return float(coef[0]), float("nan")
+    resid = y - A @ coef
+    s2 = float(resid @ resid) / (x.size - 2)
+    se = np.sqrt(s2 / float(((x - x.mean()) ** 2).sum()))
+    return float(coef[0]), float(se)
+
+
+def _curve(t, e):
+    """Positive, finite points of a curve sorted by ``t``, as logs."""
+    t, e = np.asarray(t, np.float64), np.asarray(e, np.float64)
+    ok = (t > 0) & (e > 0) & np.isfinite(t) & np.isfinite(e)
+    order = np.argsort(t[ok], kind="stable")
+    return np.log(t[ok][order]), np.log(e[ok][order])
+
+
+def interp_loglog(t, e, at) -> np.ndarray:
+    """``e(at)`` interpolated linearly in log-log; ``nan`` outside ``t``'s range."""
+    lt, le = _curve(t, e)
+    at = np.atleast_1d(np.asarray(at, np.float64))
+    out = np.full(at.shape, np.nan)
+    if lt.size == 0:
+        return out
+    la = np.log(np.where(at > 0, at, np.nan))
+    inside = (la >= lt[0]) & (la <= lt[-1])
+    out[inside] = np.exp(np.interp(la[inside], lt, le))
+    return out
+
+
+def equal_time_ratios(t_a, e_a, t_b, e_b, points: int = 9) -> dict:
+    """Error of ``a`` over error of ``b`` at equal seconds (log-log interpolation).
+
+    Returns ``{"at_a_times": [(t, ratio), ...]}`` for each of ``a``'s times
+    inside ``b``'s range, ``"overlap": (t0, t1)`` (``None`` if the curves do
+    not overlap in time), and ``"geomean"``: the geometric mean of the ratio
+    at ``points`` log-spaced times across the overlap (``nan`` without one).
+    """
+    la, _ = _curve(t_a, e_a)
+    lb, _ = _curve(t_b, e_b)
+    res = {"at_a_times": [], "overlap": None, "geomean": float("nan")}
+    if la.size == 0 or lb.size == 0:
+        return res
+    lo, hi = max(la[0], lb[0]), min(la[-1], lb[-1])
+    if lo > hi:
+        return res
+    res["overlap"] = (float(np.exp(lo)), float(np.exp(hi)))
+    grid = np.exp(np.linspace(lo, hi, points if hi > lo else 1))
+    r = interp_loglog(t_a, e_a, grid) / interp_loglog(t_b, e_b, grid)
+    res["geomean"] = float(np.exp(np.mean(np.log(r))))
+    ta = np.exp(la)
+    rb = interp_loglog(t_b, e_b, ta)
+    ra = interp_loglog(t_a, e_a, ta)
+    res["at_a_times"] = [(float(t), float(x / y)) for t, x, y in zip(ta, ra, rb)
+                         if np.isfinite(y)]
+    return res
+
+
+def time_to_error(t, e, level: float) -> float | None:
+    """Seconds at which the curve first reaches error ``level``, or ``None``.
+
+    Points are taken in the order of ``t``; the first point with
+    ``e <= level`` and the one before it are interpolated in log-log. A
+    curve that starts at or below ``level`` reaches it at its first time.
+    """
+    lt, le = _curve(t, e)
+    ll = np.log(level)
+    hit = np.nonzero(le <= ll)[0]
+    if hit.size == 0:
+        return None
+    i = int(hit[0])
+    if i == 0:
+        return float(np.exp(lt[0]))
+    f = (ll - le[i - 1]) / (le[i] - le[i - 1])
+    return float(np.exp(lt[i - 1] + f * (lt[i] - lt[i - 1])))
+
+
+def time_to_error_ratios(t_a, e_a, t_b, e_b, levels) -> list[dict]:
+    """For each level: seconds of ``a``, of ``b`` and ``a / b`` (``None`` where one never gets there)."""
+    rows = []
+    for level in levels:
+        sa, sb = time_to_error(t_a, e_a, level), time_to_error(t_b, e_b, level)
+        ratio = sa / sb if sa is not None and sb is not None else None
+        rows.append({"level": float(level), "seconds_a": sa, "seconds_b": sb, "ratio": ratio})
+    return rows
+
+
+# ------------------------------------------------------------ rendering
+def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf):
+    """A loaded Mitsuba scene and a ``render(spp, seed) -> (image, seconds)``."""
+    import mitsuba as mi
+
+    from .export.mitsuba import to_mitsuba_dict
+
+    t0 = time.perf_counter()
+    ms = mi.load_dict(to_mitsuba_dict(scene, width, height, 1, max_depth=max_depth,
+                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf))
+    load_seconds = time.perf_counter() - t0
+
+    def render(spp: int, s: int):
+        t = time.perf_counter()
+        img = np.asarray(mi.render(ms, spp=int(spp), seed=int(s)), np.float32)
+        return img[..., :3], time.perf_counter() - t
+
+    return render, load_seconds
+
+
+def make_drpt(scene, options):
+    """A built drpt Renderer and a ``render(spp, seed) -> (RenderResult)``."""
+    from .render.renderer import Renderer
+
+    renderer = Renderer(scene, options)
+
+    def render(spp: int, s: int):
+        renderer.opt.spp, renderer.opt.seed = int(spp), int(s)
+        return renderer.render()
+
+    return renderer, render
+
+
+def _log(progress: bool, msg: str) -> None:
+    if progress:
+        print(msg, file=sys.stderr, flush=True)
+
+
+def converge_study(scene_path: Path, out: Path, width: int = 64, height: int = 64,
+                   max_spp: int = 256, bsdf: str = "phong", max_depth: int = -1,
+                   rr_depth: int = 5, ref_spp: int = 4096, ref_batches: int = 8,
+                   levels=DEFAULT_LEVELS, seed: int = 0, cache_dir: Path | None = None,
+                   progress: bool = True) -> dict:
+    """Run the study (see the module docs); write the outputs; return the report."""
+    from . import metrics
+    from .compare import _prepare_out, _write_json, check_reference_args, get_reference
+    from .render.integrators.path import PathOptions
+    from .render.renderer import RenderOptions
+    from .scene import load_scene
+
+    scene_path = Path(scene_path)
+    if min(width, height) <= 0:
+        raise DrptError(f"size must be positive, got {width}x{height}")
+    if max_spp < 1:
+        raise DrptError(f"--max-spp must be positive, got {max_spp}")
+    if not levels or any(not (v > 0) for v in levels):
+        raise DrptError(f"--levels must be positive errors, got {list(levels)}")
+    check_reference_args(ref_spp, ref_batches, max_depth, rr_depth, note=False)
+    if ref_spp <= max_spp:
+        raise DrptError(f"--ref-spp ({ref_spp}) must exceed --max-spp ({max_spp}): the "
+                        "reference must be better than the renders it judges")
+    scene = load_scene(scene_path)
+    _prepare_out(out)
+    ref, ref_var, meta, cached, key, cache_file, settings = get_reference(
+        scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
+        bsdf=bsdf, max_depth=max_depth, rr_depth=rr_depth, seed=seed, cache_dir=cache_dir,
+        progress=progress)
+    import mitsuba as mi
+
+    floor = noise_floor(ref, ref_var)
+    opts = RenderOptions(width=width, height=height, spp=1, seed=seed, bsdf=bsdf,
+                         path=PathOptions(max_depth=max_depth, rr_depth=rr_depth),
+                         progress=False)
+    renderer, drpt_render = make_drpt(scene, opts)
+    for message in renderer.warnings:
+        print(f"drpt: warning: {message}", file=sys.stderr)
+    mits_render, mits_load = make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf)
+    # Warm-up: compiles both renderers' kernels (reused at every spp), discarded.
+    t = time.perf_counter()
+    drpt_render(1, seed + 999_999)
+    drpt_warm = time.perf_counter() - t
+    mits_warm = mits_render(1, seed + 999_999)[1]
+
+    rows = []
+    spps = spp_levels(max_spp)
+    for i, spp in enumerate(spps):
+        # Independent seeds per level and renderer; the reference uses
+        # seed + 100000 + 7919 k, so these never coincide with it.
+        r = drpt_render(spp, seed + 1 + i)
+        if r.nonfinite:
+            print(f"drpt: warning: {r.nonfinite} samples were NaN/Inf at {spp} spp",
+                  file=sys.stderr)
+        img_m, sec_m = mits_render(spp, seed + 200_000 + i)
+        for name, img, sec in (("drpt", r.image, r.seconds), ("mitsuba", img_m, sec_m)):
+            m = metrics.summary(img, ref)
+            rows.append({"renderer": name, "spp": int(spp), "seconds": float(sec),
+                         "rel_mse": m["rel_mse"], "floor": floor,
+                         "excess_rel_mse": m["rel_mse"] - floor, "mae": m["mae"],
+                         "smape": m["smape"]})
+        d, mm = rows[-2], rows[-1]
+        _log(progress, f"converge: {spp:>5} spp  drpt {d['seconds']:7.3f} s "
+                       f"{d['excess_rel_mse']:.3e}   mitsuba {mm['seconds']:7.3f} s "
+                       f"{mm['excess_rel_mse']:.3e}")
+
+    report = analyse(rows, levels)
+    report.update({
+        "scene": str(scene_path), "width": int(width), "height": int(height), "bsdf": bsdf,
+        "max_depth": int(max_depth), "rr_depth": int(rr_depth), "seed": int(seed),
+        "rows": rows,
+        "noise_floor": floor,
+        "noise_floor_note": "mean(var_ref / (ref^2 + 0.01)), var_ref from the reference's "
+                            "batches; subtracted from relMSE (excess_rel_mse)",
+        "timing_note": "render call only; excluded: scene load, drpt build "
+                       f"({renderer.build_seconds:.3f} s), Mitsuba load_dict ({mits_load:.3f} s) "
+                       f"and kernel compilation (1-spp warm-up render each: drpt "
+                       f"{drpt_warm:.3f} s, Mitsuba {mits_warm:.3f} s); drpt and Mitsuba "
+                       "alternate per level, so machine load affects both alike",
+        "drpt": {"build_seconds": renderer.build_seconds, "warmup_seconds": drpt_warm},
+        "mitsuba": {"version": mi.__version__, "load_seconds": mits_load,
+                    "warmup_seconds": mits_warm},
+        "reference": {"renderer": f"mitsuba {mi.__version__} llvm_ad_rgb path",
+                      "spp": settings["batch_spp"] * settings["batches"],
+                      "batches": settings["batches"], "seed": settings["ref_seed"],
+                      "seconds": float(meta["seconds"]), "cached": cached,
+                      "cache_file": None if cache_file is None else str(cache_file),
+                      "key": key},
+    })
+    write_csv(out / "converge.csv", rows)
+    _write_json(out / "converge.json", report)
+    plot(out / "converge.png", report)
+    return report
+
+
+def analyse(rows: list[dict], levels) -> dict:
+    """Slopes and ratios from the per-level rows (excess relMSE)."""
+    def curve(name):
+        rs = [r for r in rows if r["renderer"] == name]
+        return (np.array([r["spp"] for r in rs], float), np.array([r["seconds"] for r in rs]),
+                np.array([r["excess_rel_mse"] for r in rs]))
+
+    n_d, t_d, e_d = curve("drpt")
+    n_m, t_m, e_m = curve("mitsuba")
+    slopes = {}
+    for name, n, e in (("drpt", n_d, e_d), ("mitsuba", n_m, e_m)):
+        sel = n >= 4  # below ~4 spp relMSE is dominated by a few outlier pixels
+        if sel.sum() < 2:
+            sel = n > 0
+        s, se = loglog_slope(n[sel], e[sel])
+        slopes[name] = {"slope": s, "stderr": se, "from_spp": int(n[sel].min())}
+    eq = equal_time_ratios(t_d, e_d, t_m, e_m)
+    return {
+        "slopes": slopes,
+        "equal_time": {"ratio_geomean": eq["geomean"], "overlap_seconds": eq["overlap"],
+                       "at_drpt_times": [{"seconds": t, "ratio": r} for t, r in eq["at_a_times"]]},
+        "time_to_error": [{"level": row["level"], "drpt_seconds": row["seconds_a"],
+                           "mitsuba_seconds": row["seconds_b"], "ratio": row["ratio"]}
+                          for row in time_to_error_ratios(t_d, e_d, t_m, e_m, levels)],
+    }
+
+
+# ------------------------------------------------------------ output
+FIELDS = ["renderer", "spp", "seconds", "rel_mse", "floor", "excess_rel_mse", "mae", "smape"]
+
+
+def write_csv(path: Path, rows: list[dict], fields=FIELDS) -> None:
+    try:
+        with open(path, "w", newline="", encoding="utf-8") as f:
+            w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
+            w.writeheader()
+            w.writerows(rows)
+    except OSError as e:
+        raise DrptError(f"{path}: cannot write: {e.strerror or e}") from e
+
+
+def _fmt(x, spec=".3g", none="-"):
+    return none if x is None or (isinstance(x, float) and not np.isfinite(x)) else format(x, spec)
+
+
+def format_table(report: dict) -> str:
+    rows = report["rows"]
+    lines = [f"{'spp':>6}  {'drpt s':>8}  {'drpt err':>9}  {'Mitsuba s':>9}  "
+             f"{'Mits err':>9}  {'err ratio':>9}"]
+    d = [r for r in rows if r["renderer"] == "drpt"]
+    m = [r for r in rows if r["renderer"] == "mitsuba"]
+    for a, b in zip(d, m):
+        ratio = a["excess_rel_mse"] / b["excess_rel_mse"] if b["excess_rel_mse"] > 0 else None
+        lines.append(f"{a['spp']:>6}  {a['seconds']:>8.3f}  {_fmt(a['excess_rel_mse'], '.3e'):>9}  "
+                     f"{b['seconds']:>9.3f}  {_fmt(b['excess_rel_mse'], '.3e'):>9}  "
+                     f"{_fmt(ratio, '.3f'):>9}")
+    lines.append(f"error = relMSE - reference noise floor ({report['noise_floor']:.2e}); "
+                 "err ratio = drpt / Mitsuba at equal spp")
+    for name in ("drpt", "mitsuba"):
+        s = report["slopes"][name]
+        lines.append(f"{name} log-log slope (spp >= {s['from_spp']}): {_fmt(s['slope'], '.3f')} "
+                     f"+- {_fmt(s['stderr'], '.3f')} (1/N: -1)")
+    eq = report["equal_time"]
+    lines.append(f"equal-time error ratio drpt/Mitsuba: {_fmt(eq['ratio_geomean'], '.3f')} "
+                 "(geometric mean over the common time range)")
+    for row in report["time_to_error"]:
+        lines.append(f"time to error {row['level']:g}: drpt {_fmt(row['drpt_seconds'], '.3f')} s, "
+                     f"Mitsuba {_fmt(row['mitsuba_seconds'], '.3f')} s, ratio "
+                     f"{_fmt(row['ratio'], '.3f')}")
+    return "\n".join(lines)
+
+
+def plot(path: Path, report: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    rows = report["rows"]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True)
+    styles = {"drpt": dict(color="C0", marker="o"), "mitsuba": dict(color="C1", marker="s")}
+    for name, st in styles.items():
+        rs = [r for r in rows if r["renderer"] == name and r["excess_rel_mse"] > 0]
+        if not rs:
+            continue
+        n = np.array([r["spp"] for r in rs], float)
+        t = np.array([r["seconds"] for r in rs])
+        e = np.array([r["excess_rel_mse"] for r in rs])
+        label = "Mitsuba 3" if name == "mitsuba" else "drpt"
+        axes[0].plot(n, e, label=label, **st)
+        axes[1].plot(t, e, label=label, **st)
+        if name == "drpt":
+            # 1/N through the drpt points' geometric mean (spp >= 4 when there are some)
+            sel = n >= 4 if (n >= 4).sum() >= 2 else n > 0
+            c = float(np.exp(np.mean(np.log(e[sel] * n[sel]))))
+            axes[0].plot(n, c / n, "k--", lw=1, label="1/N")
+            ct = float(np.exp(np.mean(np.log(e[sel] * t[sel]))))
+            axes[1].plot(t, ct / t, "k--", lw=1, label="1/t")
+    for ax, xl in zip(axes, ("samples per pixel", "render seconds (compile excluded)")):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(xl)
+        ax.set_ylabel("relMSE - reference floor")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{Path(report['scene']).name} {report['width']}x{report['height']}, "
+                 f"{report['bsdf']}, depth {report['max_depth']}; reference "
+                 f"{report['reference']['spp']} spp (floor {report['noise_floor']:.1e})",
+                 fontsize=9)
+    try:
+        fig.savefig(path, dpi=100)
+    except OSError as e:
+        raise DrptError(f"{path}: cannot write: {e.strerror or e}") from e
+    finally:
+        plt.close(fig)

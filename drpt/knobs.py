@@ -1,0 +1,287 @@
+"""``python -m drpt knobs``: what each quality knob costs and buys, in one table.
+
+::
+
+    python -m drpt knobs SCENE [--size W H] [--spp N] [--bsdf MODE] [--ref-spp M]
+                               [--ref-batches B] [--knobs depth rr accel bsdf]
+                               [--depths D ...] [--rr-depths K ...] [--rr-probs P ...]
+                               [--repeats R] [--seed S] [--cache DIR | --no-cache] [--out DIR]
+
+Every row renders the scene with drpt at ``--spp`` and changes one knob from
+the default (BVH, ``--bsdf`` materials, unbounded depth, Russian roulette from
+depth 5 with the adaptive probability ``min(throughput, 0.95)``):
+
+``depth``  ``max_depth`` 2 (direct light only), 3, 5, 8 (``--depths``);
+``rr``     Russian roulette from depth 1, 3, 10 (``--rr-depths``, adaptive
+           probability); a fixed continuation probability 0.5, 0.8 from depth 1
+           (``--rr-probs``, the seed's ``-RR_cutdown``); and off (no roulette,
+           paths end after 64 segments: the energy beyond that is ~albedo^64);
+``accel``  the uniform grid instead of the BVH (same image up to float order);
+``bsdf``   the other material mode (Phong <-> Cook-Torrance). That changes the
+           scene, so that row is compared with its own reference.
+
+Columns: render seconds (the fastest of ``--repeats`` timed renders; the
+acceleration build and kernel compilation are excluded: a 1-spp warm-up
+render per row compiles its kernel first), samples/s, the error against the
+Mitsuba reference of the unbounded, unbiased scene (``excess relMSE``:
+relMSE minus the reference's noise floor, as in ``drpt converge``), the
+work-normalised error ``relMSE x seconds`` relative to the default row
+(``efficiency``: above 1 means a better trade than the default at equal
+time, as long as the row is unbiased), and the bias: the relative
+difference of the image means, ``(mean(x) - mean(ref)) / mean(ref)``, with
+its standard error ``sqrt(sum var_x + sum var_ref) / n / mean(ref)``
+(per-pixel variances of drpt and of the reference's batches). Rows whose
+difference is more than 3 standard errors are marked biased. Truncating
+the depth is biased (light is lost); Russian roulette is not (it only adds
+noise). ``bias relMSE`` is ``excess - mean(var_x / w)``: the part of the
+error that more samples will not remove (noisy; ~0 for unbiased rows).
+
+The references are the ones ``compare`` and ``converge`` cache
+(:func:`drpt.compare.get_reference`). Output in ``--out`` (default
+``knobs_<scene stem>/``): ``knobs.md`` (the table and these notes),
+``knobs.csv`` and ``knobs.json``. The table goes to stdout. Seconds depend on
+the machine's load; the ratios between rows are what to read.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DrptError
+
+KNOBS = ("depth", "rr", "accel", "bsdf")
+RR_OFF_DEPTH = 64
+
+__all__ = ["add_parser", "main", "Config", "configs", "knobs_study", "image_bias"]
+
+
+@dataclass
+class Config:
+    knob: str
+    setting: str
+    bsdf: str
+    accel: str = "bvh"
+    max_depth: int = -1
+    rr_depth: int = 5
+    rr_prob: float | None = None
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register the ``knobs`` subcommand on an ``add_subparsers()`` object."""
+    p = subparsers.add_parser(
+        "knobs", allow_abbrev=False,
+        help="time, error and bias of each quality knob (depth, RR, accel, material)",
+        description="render SCENE with drpt changing one quality knob at a time; report "
+                    "time, samples/s, error against a Mitsuba reference and bias")
+    p.add_argument("scene", help="scene file")
+    p.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), default=(64, 64),
+                   help="image size (default 64 64)")
+    p.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
+    p.add_argument("--bsdf", choices=["phong", "cook-torrance"], default="phong",
+                   help="material mode of the default row (default phong)")
+    p.add_argument("--ref-spp", type=int, default=4096,
+                   help="Mitsuba reference samples per pixel (default 4096)")
+    p.add_argument("--ref-batches", type=int, default=8,
+                   help="independent batches of the reference, for its variance (default 8)")
+    p.add_argument("--knobs", nargs="+", choices=KNOBS, default=list(KNOBS),
+                   help="which knobs to vary (default all)")
+    p.add_argument("--depths", type=int, nargs="+", default=[2, 3, 5, 8], metavar="D",
+                   help="max depths to try (default 2 3 5 8; unbounded is the default row)")
+    p.add_argument("--rr-depths", type=int, nargs="+", default=[1, 3, 10], metavar="K",
+                   help="Russian roulette start depths to try (default 1 3 10)")
+    p.add_argument("--rr-probs", type=float, nargs="+", default=[0.5, 0.8], metavar="P",
+                   help="fixed continuation probabilities to try (default 0.5 0.8)")
+    p.add_argument("--repeats", type=int, default=2,
+                   help="timed renders per row; the fastest counts (default 2)")
+    p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
+    p.add_argument("--out", default=None, help="output folder (default knobs_<name>/)")
+    p.add_argument("--cache", default=None,
+                   help="reference cache folder (default ~/.cache/drpt/references)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="render the references even if cached (and do not store them)")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress output")
+    p.set_defaults(func=main)
+    return p
+
+
+def main(args: argparse.Namespace) -> int:
+    from .compare import default_cache_dir
+
+    scene = Path(args.scene)
+    out = Path(args.out) if args.out else Path(f"knobs_{scene.stem}")
+    cache = None if args.no_cache else (Path(args.cache) if args.cache else default_cache_dir())
+    report = knobs_study(scene, out, width=args.size[0], height=args.size[1], spp=args.spp,
+                         bsdf=args.bsdf, ref_spp=args.ref_spp, ref_batches=args.ref_batches,
+                         knobs=args.knobs, depths=args.depths, rr_depths=args.rr_depths,
+                         rr_probs=args.rr_probs, repeats=args.repeats, seed=args.seed,
+                         cache_dir=cache, progress=not args.quiet)
+    print(report["markdown_table"])
+    print(f"{out}: knobs.md, knobs.csv, knobs.json")
+    return 0
+
+
+def configs(bsdf: str, knobs=KNOBS, depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
+            rr_probs=(0.5, 0.8)) -> list[Config]:
+    """The default row, then one row per knob setting."""
+    rows = [Config("default", "bvh, unbounded depth, RR from depth 5 (adaptive)", bsdf)]
+    if "depth" in knobs:
+        rows += [Config("max depth", str(d), bsdf, max_depth=d) for d in depths]
+    if "rr" in knobs:
+        rows += [Config("RR", f"from depth {k}, adaptive", bsdf, rr_depth=k)
+                 for k in rr_depths if k != 5]
+        rows += [Config("RR", f"from depth 1, fixed p = {p:g}", bsdf, rr_depth=1, rr_prob=p)
+                 for p in rr_probs]
+        rows.append(Config("RR", f"off (depth <= {RR_OFF_DEPTH})", bsdf,
+                           max_depth=RR_OFF_DEPTH, rr_depth=RR_OFF_DEPTH + 1))
+    if "accel" in knobs:
+        rows.append(Config("accel", "grid", bsdf, accel="grid"))
+    if "bsdf" in knobs:
+        other = "cook-torrance" if bsdf == "phong" else "phong"
+        rows.append(Config("material", f"{other} (own reference)", other))
+    return rows
+
+
+def image_bias(x, var_x, ref, var_ref) -> tuple[float, float]:
+    """Relative difference of the image means and its standard error."""
+    x, ref = np.asarray(x, np.float64), np.asarray(ref, np.float64)
+    m = float(ref.mean())
+    if m <= 0:
+        return float("nan"), float("nan")
+    n = x.size
+    diff = float(x.mean() - m) / m
+    se = float(np.sqrt(np.sum(var_x, dtype=np.float64) + np.sum(var_ref, dtype=np.float64))
+               / n / m)
+    return diff, se
+
+
+def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, spp: int = 64,
+                bsdf: str = "phong", ref_spp: int = 4096, ref_batches: int = 8, knobs=KNOBS,
+                depths=(2, 3, 5, 8), rr_depths=(1, 3, 10), rr_probs=(0.5, 0.8),
+                repeats: int = 2, seed: int = 0, cache_dir: Path | None = None,
+                progress: bool = True) -> dict:
+    """Run the study (see the module docs); write the outputs; return the report."""
+    from . import metrics
+    from .compare import _prepare_out, _write_json, check_reference_args, get_reference
+    from .converge import noise_floor, write_csv
+    from .render.integrators.path import PathOptions
+    from .render.renderer import RenderOptions, Renderer
+    from .scene import load_scene
+
+    scene_path = Path(scene_path)
+    if min(width, height) <= 0:
+        raise DrptError(f"size must be positive, got {width}x{height}")
+    if spp < 2:
+        raise DrptError(f"--spp must be at least 2 (for a variance), got {spp}")
+    if repeats < 1:
+        raise DrptError(f"--repeats must be positive, got {repeats}")
+    if any(d < 1 for d in depths):
+        raise DrptError(f"--depths must be >= 1, got {list(depths)}")
+    if any(k < 1 for k in rr_depths):
+        raise DrptError(f"--rr-depths must be >= 1, got {list(rr_depths)}")
+    if any(not (0.0 < p <= 1.0) for p in rr_probs):
+        raise DrptError(f"--rr-probs must be in (0, 1], got {list(rr_probs)}")
+    check_reference_args(ref_spp, ref_batches, -1, 5, note=False)
+    scene = load_scene(scene_path)
+    _prepare_out(out)
+
+    refs = {}
+
+    def reference(mode):
+        if mode not in refs:
+            ref, var, meta, cached, key, cache_file, settings = get_reference(
+                scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
+                bsdf=mode, max_depth=-1, rr_depth=5, seed=seed, cache_dir=cache_dir,
+                progress=progress)
+            refs[mode] = {"image": ref, "variance": var, "floor": noise_floor(ref, var),
+                          "info": {"spp": settings["batch_spp"] * settings["batches"],
+                                   "batches": settings["batches"], "cached": cached,
+                                   "seconds": float(meta["seconds"]), "key": key,
+                                   "cache_file": None if cache_file is None else str(cache_file)}}
+        return refs[mode]
+
+    rows = []
+    for i, c in enumerate(configs(bsdf, knobs, depths, rr_depths, rr_probs)):
+        ref = reference(c.bsdf)
+        opts = RenderOptions(width=width, height=height, spp=1, seed=seed + 999_999,
+                             accel=c.accel, bsdf=c.bsdf, progress=False,
+                             path=PathOptions(max_depth=c.max_depth, rr_depth=c.rr_depth,
+                                              rr_prob=c.rr_prob))
+        renderer = Renderer(scene, opts)
+        renderer.render()  # warm-up: compiles this row's kernel
+        renderer.opt.spp = spp
+        best, first = None, None
+        for k in range(repeats):
+            renderer.opt.seed = seed + 1 + i  # same seed per row: repeats time the same work
+            r = renderer.render()
+            first = first or r
+            best = r.seconds if best is None else min(best, r.seconds)
+        x, w = first.image, ref["image"].astype(np.float64) ** 2 + 1e-2
+        rel = metrics.rel_mse(x, ref["image"])
+        excess = rel - ref["floor"]
+        pred = float(np.mean(first.variance / w))
+        bias, bias_se = image_bias(x, first.variance, ref["image"], ref["variance"])
+        rows.append({
+            "knob": c.knob, "setting": c.setting, "bsdf": c.bsdf, "accel": c.accel,
+            "max_depth": c.max_depth, "rr_depth": c.rr_depth, "rr_prob": c.rr_prob,
+            "spp": int(spp), "seconds": best, "build_seconds": renderer.build_seconds,
+            "samples_per_second": width * height * spp / max(best, 1e-9),
+            "rel_mse": rel, "excess_rel_mse": excess, "noise_rel_mse": pred,
+            "bias_rel_mse": excess - pred, "mean_bias": bias, "mean_bias_se": bias_se,
+            "biased": bool(abs(bias) > 3 * bias_se), "nonfinite": int(first.nonfinite),
+        })
+        if progress:
+            print(f"knobs: {c.knob:>9} {c.setting:<42} {best:7.3f} s  excess relMSE "
+                  f"{excess:.3e}  bias {100 * bias:+.2f}% +- {100 * bias_se:.2f}%",
+                  file=sys.stderr, flush=True)
+    base = rows[0]["excess_rel_mse"] * rows[0]["seconds"]
+    for r in rows:
+        work = r["excess_rel_mse"] * r["seconds"]
+        r["efficiency"] = base / work if work > 0 else float("nan")
+
+    table = markdown_table(rows)
+    report = {
+        "scene": str(scene_path), "width": int(width), "height": int(height), "spp": int(spp),
+        "bsdf": bsdf, "repeats": int(repeats), "seed": int(seed), "rows": rows,
+        "references": {m: dict(r["info"], noise_floor=r["floor"]) for m, r in refs.items()},
+        "markdown_table": table,
+    }
+    fields = ["knob", "setting", "bsdf", "accel", "max_depth", "rr_depth", "rr_prob", "spp",
+              "seconds", "build_seconds", "samples_per_second", "rel_mse", "excess_rel_mse",
+              "noise_rel_mse", "bias_rel_mse", "efficiency", "mean_bias", "mean_bias_se",
+              "biased", "nonfinite"]
+    write_csv(out / "knobs.csv", rows, fields)
+    _write_json(out / "knobs.json", report)
+    doc = (f"# Quality knobs: {scene_path.name}, {width}x{height}, {spp} spp\n\n{table}\n\n"
+           + "\n".join(f"- reference ({m}): Mitsuba {r['info']['spp']} spp in "
+                       f"{r['info']['batches']} batches, noise floor {r['floor']:.1e}"
+                       for m, r in refs.items())
+           + "\n\n" + __doc__.split("\n\n", 2)[2])
+    try:
+        (out / "knobs.md").write_text(doc, encoding="utf-8")
+    except OSError as e:
+        raise DrptError(f"{out / 'knobs.md'}: cannot write: {e.strerror or e}") from e
+    return report
+
+
+def markdown_table(rows: list[dict]) -> str:
+    lines = ["| knob | setting | seconds | Msamples/s | excess relMSE | efficiency vs default "
+             "| mean bias (± s.e.) |",
+             "| --- | --- | ---: | ---: | ---: | ---: | --- |"]
+    for r in rows:
+        bias = f"{100 * r['mean_bias']:+.2f}% ± {100 * r['mean_bias_se']:.2f}%"
+        bias += " **biased**" if r["biased"] else ""
+        eff = r["efficiency"]
+        lines.append(f"| {r['knob']} | {r['setting']} | {r['seconds']:.2f} | "
+                     f"{r['samples_per_second'] / 1e6:.3f} | {r['excess_rel_mse']:.2e} | "
+                     f"{eff:.2f} | {bias} |" if np.isfinite(eff) else
+                     f"| {r['knob']} | {r['setting']} | {r['seconds']:.2f} | "
+                     f"{r['samples_per_second'] / 1e6:.3f} | {r['excess_rel_mse']:.2e} | - | "
+                     f"{bias} |")
+    return "\n".join(lines)
