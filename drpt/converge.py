@@ -46,9 +46,9 @@ Ratios
     the geometric mean over 9 log-spaced times across the overlap. Below 1:
     drpt is more accurate for the same time.
     *Time-to-error ratio*: for each ``--levels`` error ``e``, the seconds
-    each renderer needs to reach excess relMSE ``e`` (first crossing,
-    interpolated log-log between the levels around it), drpt / Mitsuba,
-    where both reach it. Below 1: drpt gets there sooner.
+    each renderer needs to reach excess relMSE ``e`` and stay there (the
+    crossing after its last level above ``e``, interpolated log-log), drpt /
+    Mitsuba, where both reach it. Below 1: drpt gets there sooner.
 
 Output in ``--out`` (default ``converge_<scene stem>/``): ``converge.csv``
 (one row per renderer and level), ``converge.json`` (settings, reference,
@@ -228,22 +228,26 @@ def equal_time_ratios(t_a, e_a, t_b, e_b, points: int = 9) -> dict:
 
 
 def time_to_error(t, e, level: float) -> float | None:
-    """Seconds at which the curve first reaches error ``level``, or ``None``.
+    """Seconds from which the curve stays at or below error ``level``, or ``None``.
 
-    Points are taken in the order of ``t``; the first point with
-    ``e <= level`` and the one before it are interpolated in log-log. A
-    curve that starts at or below ``level`` reaches it at its first time.
+    Points are taken in the order of ``t``. The last point above ``level``
+    and the one after it are interpolated in log-log (so a lucky low error
+    at few samples, followed by higher ones, does not count as reaching the
+    level). A curve entirely at or below ``level`` reaches it at its first
+    time; one that ends above it never does.
     """
     lt, le = _curve(t, e)
-    ll = np.log(level)
-    hit = np.nonzero(le <= ll)[0]
-    if hit.size == 0:
+    if lt.size == 0:
         return None
-    i = int(hit[0])
-    if i == 0:
+    ll = np.log(level)
+    above = np.nonzero(le > ll)[0]
+    if above.size == 0:
         return float(np.exp(lt[0]))
-    f = (ll - le[i - 1]) / (le[i] - le[i - 1])
-    return float(np.exp(lt[i - 1] + f * (lt[i] - lt[i - 1])))
+    i = int(above[-1])
+    if i == lt.size - 1:
+        return None
+    f = (ll - le[i]) / (le[i + 1] - le[i])
+    return float(np.exp(lt[i] + f * (lt[i + 1] - lt[i])))
 
 
 def time_to_error_ratios(t_a, e_a, t_b, e_b, levels) -> list[dict]:

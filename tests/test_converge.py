@@ -102,17 +102,20 @@ def test_equal_time_ratio_of_two_power_laws():
     assert res["overlap"] is None and math.isnan(res["geomean"]) and res["at_a_times"] == []
 
 
-def test_time_to_error_interpolates_first_crossing():
+def test_time_to_error_interpolates_the_crossing_it_stays_below():
     t = np.array([1.0, 2.0, 4.0, 8.0])
     e = 0.1 / t  # 0.1, 0.05, 0.025, 0.0125
     assert time_to_error(t, e, 0.05) == pytest.approx(2.0)
     assert time_to_error(t, e, 0.1 / 3) == pytest.approx(3.0, rel=1e-12)  # log-log exact
     assert time_to_error(t, e, 0.2) == pytest.approx(1.0)  # reached at the start
     assert time_to_error(t, e, 0.01) is None  # never reached
-    # a noisy curve: the first crossing counts, not a later dip back up
-    assert time_to_error([1, 2, 4, 8], [0.1, 0.04, 0.06, 0.02], 0.05) == pytest.approx(
-        math.exp(math.log(1) + (math.log(0.05) - math.log(0.1))
-                 / (math.log(0.04) - math.log(0.1)) * math.log(2)), rel=1e-12)
+    # A noisy curve: a lucky dip below the level at 2 s does not count, the
+    # crossing after the last point above it (4 s) does.
+    got = time_to_error([1, 2, 4, 8], [0.1, 0.04, 0.06, 0.02], 0.05)
+    want = math.exp(math.log(4) + (math.log(0.05) - math.log(0.06))
+                    / (math.log(0.02) - math.log(0.06)) * math.log(2))
+    assert got == pytest.approx(want, rel=1e-12)
+    assert time_to_error([1, 2, 4], [0.1, 0.01, 0.2], 0.05) is None  # ends above
 
 
 def test_time_to_error_ratios_where_both_reach():
