@@ -17,6 +17,19 @@ from drpt.scene import model as M
 
 INF = float("inf")
 
+# Build variants (keyword arguments of build_bvh / build_accel): full SAH, the
+# object median, the seed's threshold rule (-SAHeuristic K: SAH in nodes of at
+# most 2K primitives; K small enough that both halves of the rule run on the
+# test scenes) and minimum leaf sizes (the seed's -resolution with its BVH).
+VARIANTS = {
+    "sah": dict(method="sah"),
+    "median": dict(method="median"),
+    "threshold": dict(method="threshold", sah_threshold=64),
+    "threshold0": dict(method="threshold", sah_threshold=0),
+    "sah-minleaf5": dict(method="sah", min_leaf=5),
+    "threshold-minleaf3": dict(method="threshold", sah_threshold=64, min_leaf=3),
+}
+
 
 def make_scene(tris=None, spheres=None, planes=None):
     kw = {}
@@ -82,13 +95,24 @@ def loop_mode(request):
         yield request.param
 
 
-def compare(scene, o, d, tmax=INF, method="sah", leaf_size=4, check_occ=True):
-    """BVH closest hit and occlusion vs brute force; returns the BVH hit (numpy)."""
+def brute_hits(scene, o, d, tmax=INF):
+    """Brute-force closest hits (evaluated), to share between several BVHs."""
     O, D = rays(o, d)
     T = Float(np.broadcast_to(np.float32(tmax), (len(o),)).copy())
-    bvh = build_accel(scene, "bvh", method=method, leaf_size=leaf_size)
-    ref = build_accel(scene, "brute")
-    h, g = bvh.intersect(O, D, T), ref.intersect(O, D, T)
+    g = build_accel(scene, "brute").intersect(O, D, T)
+    dr.eval(g)
+    return g
+
+
+def compare(scene, o, d, tmax=INF, method="sah", leaf_size=4, check_occ=True, ref=None,
+            **build):
+    """BVH closest hit and occlusion vs brute force (``ref``: from
+    :func:`brute_hits`, computed when not given); returns the BVH hit (numpy)."""
+    O, D = rays(o, d)
+    T = Float(np.broadcast_to(np.float32(tmax), (len(o),)).copy())
+    bvh = build_accel(scene, "bvh", method=method, leaf_size=leaf_size, **build)
+    g = ref if ref is not None else brute_hits(scene, o, d, tmax)
+    h = bvh.intersect(O, D, T)
     ht, gt = h.t.numpy(), g.t.numpy()
     hv, gv = h.valid.numpy(), g.valid.numpy()
     assert np.array_equal(hv, gv)
@@ -108,24 +132,82 @@ def compare(scene, o, d, tmax=INF, method="sah", leaf_size=4, check_occ=True):
 
 
 # ------------------------------------------------------------------ builder only
-@pytest.mark.parametrize("method", ["sah", "median"])
-def test_builder_invariants(method):
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_builder_invariants(variant):
+    kw = VARIANTS[variant]
+    ml = kw.get("min_leaf", 1)
     rng = np.random.default_rng(0)
     for N in (1, 2, 3, 7, 1000):
         p = soup(rng, N)
-        b = build_bvh(p.min(1), p.max(1), method=method, max_leaf=4)
+        b = build_bvh(p.min(1), p.max(1), max_leaf=4, **kw)
         check_bvh(b, p.min(1), p.max(1))
-        assert b.node_count.max() <= 4
+        counts = b.node_count[b.node_count > 0]
+        assert counts.max() <= max(4, 2 * ml - 1)
+        # min_leaf honoured: no leaf smaller, unless the whole input is
+        assert counts.min() >= min(ml, N)
+        assert b.stats["min_leaf_prims"] == counts.min()
 
 
-def test_builder_identical_and_tiny_boxes():
+def _subtree_sizes(b):
+    """Primitives under every node (children follow parents in BFS order)."""
+    size = b.node_count.astype(np.int64)
+    for i in range(b.node_a.size - 1, -1, -1):
+        if size[i] == 0 and i != 1:
+            a = int(b.node_a[i])
+            size[i] = size[a] + size[a + 1]
+    return size
+
+
+def test_threshold_rule_median_above_2k_sah_below():
+    rng = np.random.default_rng(7)
+    p = soup(rng, 20000)
+    K = 100
+    b = build_bvh(p.min(1), p.max(1), method="threshold", sah_threshold=K)
+    check_bvh(b, p.min(1), p.max(1))
+    st = b.stats
+    assert 0 < st["sah_max_prims"] <= 2 * K < st["median_min_prims"]
+    assert st["sah_nodes"] > 0 and st["median_nodes"] > 0
+    # in the tree: every inner node above 2K splits at the object median, and
+    # the SAH below it does not (always)
+    size = _subtree_sizes(b)
+    inner = np.flatnonzero((b.node_count == 0) & (np.arange(size.size) != 1))
+    left = size[b.node_a[inner].astype(np.int64)]
+    big = size[inner] > 2 * K
+    assert big.sum() == st["median_nodes"]
+    assert np.array_equal(left[big], size[inner][big] // 2)
+    assert (left[~big] != size[inner][~big] // 2).mean() > 0.3
+    # K = 0 is the median everywhere (the seed's SAH_NUM=0), a huge K is SAH
+    m = build_bvh(p.min(1), p.max(1), method="median")
+    t0 = build_bvh(p.min(1), p.max(1), method="threshold", sah_threshold=0)
+    assert np.array_equal(t0.node_a, m.node_a) and np.array_equal(t0.prim_order, m.prim_order)
+    assert t0.stats["sah_nodes"] == 0
+    s = build_bvh(p.min(1), p.max(1), method="sah")
+    tb = build_bvh(p.min(1), p.max(1), method="threshold", sah_threshold=10**6)
+    assert np.array_equal(tb.node_a, s.node_a) and np.array_equal(tb.prim_order, s.prim_order)
+    assert s.stats["median_nodes"] == tb.stats["median_nodes"] == 0
+
+
+@pytest.mark.parametrize("kw", [dict(method="nope"), dict(method="sah", sah_threshold=5),
+                                dict(method="threshold", sah_threshold=-1),
+                                dict(method="median", min_leaf=0)])
+def test_builder_rejects_bad_options(kw):
+    p = soup(np.random.default_rng(8), 10)
+    with pytest.raises(ValueError):
+        build_bvh(p.min(1), p.max(1), **kw)
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_builder_identical_and_tiny_boxes(variant):
+    kw = VARIANTS[variant]
+    ml = kw.get("min_leaf", 1)
     rng = np.random.default_rng(1)
     p = np.repeat(soup(rng, 1), 100_000, axis=0)
-    b = build_bvh(p.min(1), p.max(1), max_leaf=4)
+    b = build_bvh(p.min(1), p.max(1), max_leaf=4, **kw)
     check_bvh(b, p.min(1), p.max(1))
-    assert b.depth <= 64 and b.node_count.max() <= 4
+    assert b.depth <= 64 and b.node_count.max() <= max(4, 2 * ml - 1)
+    assert b.node_count[b.node_count > 0].min() >= ml
     pts = rng.random((5000, 3)) * 1e-4  # zero-size boxes
-    b = build_bvh(pts, pts, max_leaf=2)
+    b = build_bvh(pts, pts, max_leaf=2, **kw)
     check_bvh(b, pts, pts)
 
 
@@ -141,8 +223,12 @@ def test_random_soup_spheres_plane(loop_mode):
     d = rng.normal(size=(R, 3))
     d[:1000] = np.eye(3)[rng.integers(0, 3, 1000)] * rng.choice([-1, 1], (1000, 1))  # axis-parallel
     tmax = np.where(rng.random(R) < 0.3, rng.random(R) * 5, INF)
-    for method in ("sah", "median"):
-        ht, hp, hv, bvh = compare(sc, o, d, tmax, method=method)
+    ref = brute_hits(sc, o, d, tmax)
+    # every build variant; the evaluated (wavefront) loop runs the same kernel
+    # on other data, so two variants (small and large leaves) cover it there
+    variants = VARIANTS if loop_mode else ["sah", "threshold-minleaf3"]
+    for name in variants:
+        ht, hp, hv, bvh = compare(sc, o, d, tmax, ref=ref, **VARIANTS[name])
         assert hv.mean() > 0.3
         assert bvh.stats["max_depth"] <= 64 and bvh.nbytes > 0
     # primitive ids cover all three kinds
@@ -198,3 +284,30 @@ def test_single_triangle_and_copies():
         border = np.abs(o[:, 0] + o[:, 1] - 1) < 1e-6
         assert np.array_equal(hv[~border], expect[~border])
         assert np.allclose(ht[hv], 2.0)
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_degenerate_input_builds_and_traverses(variant):
+    """100k copies of one triangle, and zero-area triangles, with every variant."""
+    tri = np.float64([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]])
+    rng = np.random.default_rng(9)
+    R = 64  # every ray that hits visits all copies: keep it small
+    o = np.column_stack([rng.random(R) * 1.2 - 0.1, rng.random(R) * 1.2 - 0.1, np.full(R, 2.0)])
+    d = np.tile([0.0, 0.0, -1.0], (R, 1))
+    expect = (o[:, 0] >= 0) & (o[:, 1] >= 0) & (o[:, 0] + o[:, 1] <= 1)
+    border = np.abs(o[:, 0] + o[:, 1] - 1) < 1e-6
+    bvh = build_accel(make_scene(np.repeat(tri, 100_000, axis=0)), "bvh", **VARIANTS[variant])
+    assert bvh.stats["max_depth"] <= 64
+    h = bvh.intersect(*rays(o, d), Float(INF))
+    hv = h.valid.numpy()
+    assert np.array_equal(hv[~border], expect[~border])
+    assert np.allclose(h.t.numpy()[hv], 2.0)
+    # zero-area triangles (collinear or collapsed) among a few real ones
+    flat = soup(rng, 3000)
+    flat[:1000, 2] = flat[:1000, 1]
+    flat[1000:2000, 2] = (flat[1000:2000, 0] + flat[1000:2000, 1]) / 2
+    flat[2000:2990, 1:] = flat[2000:2990, :1]
+    sc = make_scene(flat)
+    R = 2000
+    o, d = rng.random((R, 3)) * 12 - 1, rng.normal(size=(R, 3))
+    compare(sc, o, d, **VARIANTS[variant])

@@ -23,20 +23,29 @@ __all__ = ["BVH", "BruteForce", "Hit", "INVALID", "UniformGrid", "build_accel"]
 
 
 def build_accel(scene, kind: str = "bvh", method: str = "sah", leaf_size: int = 4,
-                bins: int = 16, resolution: int | None = None):
+                bins: int = 16, resolution: int | None = None, min_leaf: int = 1,
+                sah_threshold: int | None = None):
     """Build the accelerator for ``scene``.
 
     Args:
         scene: a :class:`~drpt.scene.model.Scene`.
         kind: ``"bvh"``, ``"grid"`` (uniform grid, 3D-DDA) or ``"brute"``.
-        method: BVH split rule, ``"sah"``, ``"sah_full"`` or ``"median"``.
+        method: BVH split rule (:mod:`drpt.accel.bvh_build`): ``"sah"``
+            (binned SAH, default), ``"median"`` (object median) or
+            ``"threshold"`` (the seed's rule: SAH in nodes of at most
+            ``2 * sah_threshold`` primitives, median above).
         leaf_size: maximum primitives per BVH leaf.
         bins: SAH bins per axis.
         resolution: grid cells per axis (the seed's ``-resolution``); ``None``
             picks about two cells per primitive.
+        min_leaf: minimum primitives per BVH leaf (the seed's ``-resolution``
+            with its BVH).
+        sah_threshold: ``K`` of ``method="threshold"`` (the seed's
+            ``-SAHeuristic``; ``None``: its default 2000).
     """
     if kind == "bvh":
-        return BVH(scene, method=method, leaf_size=leaf_size, bins=bins)
+        return BVH(scene, method=method, leaf_size=leaf_size, bins=bins, min_leaf=min_leaf,
+                   sah_threshold=sah_threshold)
     if kind == "grid":
         return UniformGrid(scene, resolution=resolution)
     if kind == "brute":

@@ -184,9 +184,11 @@ class BVH:
 
     Args:
         scene: the :class:`~drpt.scene.model.Scene`.
-        method: builder split rule (``"sah"``, ``"median"``).
+        method: builder split rule (``"sah"``, ``"median"``, ``"threshold"``).
         leaf_size: maximum primitives per leaf.
         bins: SAH bins.
+        min_leaf: minimum primitives per leaf (the seed's ``-resolution``).
+        sah_threshold: ``K`` of ``"threshold"`` (the seed's ``-SAHeuristic``).
 
     Attributes:
         build_seconds: host build time (bounds, BVH build and upload).
@@ -194,7 +196,8 @@ class BVH:
         stats: ``nodes``, ``leaves``, ``max_depth``, ... from the builder.
     """
 
-    def __init__(self, scene, method: str = "sah", leaf_size: int = 4, bins: int = 16):
+    def __init__(self, scene, method: str = "sah", leaf_size: int = 4, bins: int = 16,
+                 min_leaf: int = 1, sah_threshold: int | None = None):
         t0 = time.perf_counter()
         self.geo = geo = SceneGeometry(scene)
         F, S, N = geo.F, geo.S, geo.N
@@ -216,7 +219,8 @@ class BVH:
             lo = np.concatenate(los)
             hi = np.concatenate(his)
             b = build_bvh(round_down_f32(lo), round_up_f32(hi), method=method,
-                          max_leaf=leaf_size, bins=bins, max_depth=STACK_SIZE)
+                          max_leaf=leaf_size, bins=bins, max_depth=STACK_SIZE,
+                          min_leaf=min_leaf, sah_threshold=sah_threshold)
             self.stats = dict(b.stats)
             order = b.prim_order
             M = b.node_a.size

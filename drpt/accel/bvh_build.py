@@ -17,7 +17,7 @@ only sorts).
 
 Split rules (``method``):
 
-``"sah"``
+``"sah"`` (default)
     Binned surface area heuristic: per axis, centroids are put in ``bins``
     equal-width bins spanning the node's centroid extent; every boundary
     between non-empty bins is a candidate, scored
@@ -26,10 +26,40 @@ Split rules (``method``):
     ``C_i * N`` does not exceed the best split cost.
 ``"median"``
     Object median on the axis of largest centroid extent (``k = N // 2``),
-    leaves of at most ``max_leaf`` primitives.
+    leaves of at most ``max_leaf`` primitives. No cost is evaluated.
+``"threshold"``
+    The seed renderer's rule (its ``-SAHeuristic K``, report: "SAH is searched
+    only when the node holds at most SAH_NUM primitives... otherwise the naive
+    median split"; its pseudo-code searches when ``N / 2 <= SAH_NUM``): a node
+    with ``N <= 2 * sah_threshold`` primitives is split by ``"sah"`` above,
+    a larger one by ``"median"``. ``sah_threshold = 0`` is ``"median"``
+    everywhere (the seed's ``SAH_NUM=0`` column), a threshold of at least
+    ``N / 2`` is ``"sah"`` everywhere. The seed's default is 2000. Only the
+    small nodes pay for the SAH search, which is the point of the rule: the
+    large upper levels, where the search is most expensive, use the median.
+
+Minimum leaf size (``min_leaf``, the seed's ``-resolution`` with its BVH:
+"the minimal number of primitives in a box") applies to every rule: no leaf
+holds fewer than ``min_leaf`` primitives (unless the whole input does). A node
+with fewer than ``2 * min_leaf`` primitives is therefore a leaf; a larger node
+is only split so that both children hold at least ``min_leaf`` (SAH
+candidates outside that range are dropped; median splits satisfy it), and
+leaves may then hold up to ``max(max_leaf, 2 * min_leaf - 1)`` primitives,
+which becomes the effective ``max_leaf``. The default ``min_leaf = 1`` changes
+nothing.
 
 New rules only have to return ``(axis, k, leaf)`` per segment (see
 :func:`_choose_sah` / :func:`_choose_median`).
+
+Statistics
+----------
+``BVHArrays.stats`` records, besides the tree size: ``sah_nodes`` (nodes in
+which the SAH search ran), ``median_nodes`` (nodes split at the object median
+by the rule), ``sah_max_prims`` (largest node searched by SAH, 0 if none)
+and ``median_min_prims`` (smallest node split by the median rule, 0 if
+none), ``min_leaf_prims`` / ``max_leaf_prims`` (leaf sizes) and
+``build_seconds``. Forced and depth-guard splits (below) are not counted as
+rule splits.
 
 Forced splits and depth
 -----------------------
@@ -65,7 +95,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-METHODS = ("sah", "median")
+METHODS = ("sah", "median", "threshold")
+SEED_SAH_THRESHOLD = 2000  # the seed's default -SAHeuristic
 
 
 @dataclass
@@ -128,12 +159,14 @@ def _choose_median(ctx):
     n = ctx["n"]
     axis = np.argmax(ctx["cext"], axis=1)
     leaf = n <= ctx["max_leaf"]
+    ctx["median_mask"] = np.ones(ctx["nseg"], bool)
     return axis, n // 2, leaf
 
 
 def _choose_sah(ctx):
     """Binned SAH over all three axes (see module docstring)."""
-    n, nseg, bins = ctx["n"], ctx["nseg"], ctx["bins"]
+    n, nseg, bins, ml = ctx["n"], ctx["nseg"], ctx["bins"], ctx["min_leaf"]
+    ctx["sah_mask"] = np.ones(nseg, bool)
     best = np.full(nseg, np.inf)
     best_axis = np.zeros(nseg, np.int64)
     best_k = n // 2
@@ -165,6 +198,11 @@ def _choose_sah(ctx):
             continue
         cseg = gseg[cand]
         cnl = nl[cand]
+        if ml > 1:  # both children must keep at least min_leaf primitives
+            ok = (cnl >= ml) & (n[cseg] - cnl >= ml)
+            cand, cseg, cnl = cand[ok], cseg[ok], cnl[ok]
+            if cand.size == 0:
+                continue
         pc, sc = pre[cand], suf[cand + 1]
         cost = _area(pc[:, :3], -pc[:, 3:]) * cnl + _area(sc[:, :3], -sc[:, 3:]) * (n[cseg] - cnl)
         m = np.full(nseg, np.inf)
@@ -188,7 +226,36 @@ def _choose_sah(ctx):
     return axis, k, leaf
 
 
-_RULES = {"sah": _choose_sah, "median": _choose_median}
+def _sub_ctx(ctx, mask):
+    """The rule context restricted to the segments where ``mask`` is true."""
+    el = mask[ctx["seg"]]
+    remap = np.cumsum(mask) - 1
+    sub = dict(ctx)
+    sub.update(
+        n=ctx["n"][mask], nseg=int(mask.sum()), seg=remap[ctx["seg"][el]],
+        dat=[d[el] for d in ctx["dat"]], cent=[c[el] for c in ctx["cent"]],
+        cmin=ctx["cmin"][mask], cext=ctx["cext"][mask], area=ctx["area"][mask],
+    )
+    return sub
+
+
+def _choose_threshold(ctx):
+    """The seed's rule: SAH in nodes of at most ``2 * sah_threshold`` primitives,
+    object median above (see module docstring)."""
+    n = ctx["n"]
+    small = n <= 2 * ctx["sah_threshold"]
+    axis, k, leaf = _choose_median(ctx)
+    if small.any():
+        sub = ctx if small.all() else _sub_ctx(ctx, small)
+        a2, k2, l2 = _choose_sah(sub)
+        axis, k, leaf = axis.copy(), np.array(k, np.int64), leaf.copy()
+        axis[small], k[small], leaf[small] = a2, k2, l2
+    ctx["sah_mask"] = small
+    ctx["median_mask"] = ~small
+    return axis, k, leaf
+
+
+_RULES = {"sah": _choose_sah, "median": _choose_median, "threshold": _choose_threshold}
 
 
 # ------------------------------------------------------------------------ builder
@@ -199,6 +266,8 @@ def build_bvh(
     *,
     method: str = "sah",
     max_leaf: int = 4,
+    min_leaf: int = 1,
+    sah_threshold: int | None = None,
     bins: int = 16,
     max_depth: int = 64,
     traversal_cost: float = 1.0,
@@ -210,8 +279,15 @@ def build_bvh(
         lo, hi: ``(N, 3)`` primitive bounds (any float dtype; rounded outward
             to float32).
         centroids: ``(N, 3)`` split positions; default ``(lo + hi) / 2``.
-        method: ``"sah"`` or ``"median"``.
-        max_leaf: maximum primitives per leaf (>= 1).
+        method: ``"sah"``, ``"median"`` or ``"threshold"`` (module docstring).
+        max_leaf: maximum primitives per leaf (>= 1); raised to
+            ``2 * min_leaf - 1`` when smaller.
+        min_leaf: minimum primitives per leaf (>= 1; the seed's BVH
+            ``-resolution``).
+        sah_threshold: ``K`` of ``"threshold"`` (>= 0; the seed's
+            ``-SAHeuristic``): SAH in nodes of at most ``2K`` primitives.
+            ``None`` is the seed's default 2000; only valid with
+            ``"threshold"``.
         bins: SAH bins per axis.
         max_depth: hard depth limit (root = 0), must allow
             ``ceil(log2(N / max_leaf))`` levels.
@@ -222,13 +298,22 @@ def build_bvh(
     """
     if method not in _RULES:
         raise ValueError(f"unknown BVH build method {method!r}; expected one of {METHODS}")
+    if sah_threshold is not None and method != "threshold":
+        raise ValueError(f"sah_threshold only applies to method 'threshold', not {method!r}")
+    if sah_threshold is None:
+        sah_threshold = SEED_SAH_THRESHOLD
+    if int(sah_threshold) != sah_threshold or sah_threshold < 0:
+        raise ValueError(f"sah_threshold must be an integer >= 0, got {sah_threshold!r}")
+    if int(min_leaf) != min_leaf or min_leaf < 1:
+        raise ValueError(f"min_leaf must be an integer >= 1, got {min_leaf!r}")
+    sah_threshold, min_leaf = int(sah_threshold), int(min_leaf)
     t0 = time.perf_counter()
     lo = np.asarray(lo)
     hi = np.asarray(hi)
     N = lo.shape[0]
     if N == 0:
         raise ValueError("cannot build a BVH over zero primitives")
-    max_leaf = max(int(max_leaf), 1)
+    max_leaf = max(int(max_leaf), 1, 2 * min_leaf - 1)
     if math.ceil(math.log2(max(N / max_leaf, 1.0))) + 1 > max_depth:
         raise ValueError(f"max_depth={max_depth} too small for {N} primitives")
     lo32 = round_down_f32(lo)
@@ -268,6 +353,9 @@ def build_bvh(
     s_depth = np.zeros(1, np.int64)
     rule = _RULES[method]
     is_left = np.zeros(N, bool)
+    n_sah = n_median = 0
+    sah_max = 0
+    median_min = 0
 
     while s_start.size:
         nseg = s_start.size
@@ -297,20 +385,34 @@ def build_bvh(
         ctx = dict(
             n=s_n, nseg=nseg, seg=seg, dat=dd, cent=cc, cmin=cmin, cext=cext,
             area=_area(slo, shi), bins=int(bins), big=big,
-            max_leaf=max_leaf, ct=traversal_cost, ci=intersection_cost,
+            max_leaf=max_leaf, min_leaf=min_leaf, sah_threshold=sah_threshold,
+            ct=traversal_cost, ci=intersection_cost,
         )
         axis, k, leaf = rule(ctx)
         axis = np.asarray(axis, np.int64)
         k = np.asarray(k, np.int64)
-        leaf = np.asarray(leaf, bool) | (s_n <= 1)
+        # min_leaf: a node that cannot give both children min_leaf is a leaf
+        leaf = np.asarray(leaf, bool) | (s_n < 2 * min_leaf)
         # leaves larger than max_leaf are not allowed: force a split
         leaf &= s_n <= max_leaf
         # depth guard: switch to index-median splits near the depth limit
         need = np.ceil(np.log2(np.maximum(s_n / max_leaf, 1.0))).astype(np.int64)
         guard = ~leaf & (s_depth + need + 1 >= max_depth)
         k = np.where(guard, s_n // 2, k)
-        bad = ~leaf & ((k <= 0) | (k >= s_n))
+        bad = ~leaf & ((k < min_leaf) | (k > s_n - min_leaf))
         k = np.where(bad, s_n // 2, k)
+        # statistics of the rule's choices
+        if "sah_mask" in ctx:
+            sm = ctx["sah_mask"] & (s_n >= 2 * min_leaf)
+            if sm.any():
+                n_sah += int(sm.sum())
+                sah_max = max(sah_max, int(s_n[sm].max()))
+        if "median_mask" in ctx:
+            mm = ctx["median_mask"] & ~leaf & ~guard & ~bad
+            if mm.any():
+                n_median += int(mm.sum())
+                mmin = int(s_n[mm].min())
+                median_min = mmin if median_min == 0 else min(median_min, mmin)
 
         # leaves
         lf = np.flatnonzero(leaf)
@@ -369,6 +471,7 @@ def build_bvh(
         prim_order=ords[0],
         depth=max_d,
     )
+    counts = out.node_count[out.node_count > 0]
     out.stats = dict(
         nodes=M - 1 if M > 1 else M,
         leaves=n_leaves,
@@ -376,6 +479,14 @@ def build_bvh(
         prims=N,
         method=method,
         max_leaf=max_leaf,
+        min_leaf=min_leaf,
+        sah_threshold=sah_threshold if method == "threshold" else None,
+        sah_nodes=n_sah,
+        median_nodes=n_median,
+        sah_max_prims=sah_max,
+        median_min_prims=median_min,
+        min_leaf_prims=int(counts.min()),
+        max_leaf_prims=int(counts.max()),
         build_seconds=time.perf_counter() - t0,
     )
     return out

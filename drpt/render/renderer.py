@@ -42,6 +42,9 @@ class RenderOptions:
     seed: int = 0
     accel: str = "bvh"
     grid_resolution: int | None = None  # cells per axis for accel="grid" (None: automatic)
+    bvh_method: str = "sah"  # BVH split rule: "sah", "median" or "threshold" (accel="bvh")
+    sah_threshold: int | None = None  # K of bvh_method="threshold" (None: the seed's 2000)
+    bvh_min_leaf: int = 1  # minimum primitives per BVH leaf (the seed's -resolution)
     bsdf: str = "phong"  # how MTL materials are read, see drpt.shading
     integrator: str = "path"  # "path" (MIS path tracing) or "whitted"
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
@@ -95,7 +98,9 @@ class Renderer:
 
         self.scene, self.opt = scene, options
         t0 = time.perf_counter()
-        self.accel = build_accel(scene, kind=options.accel, resolution=options.grid_resolution)
+        self.accel = build_accel(scene, kind=options.accel, resolution=options.grid_resolution,
+                                 method=options.bvh_method, min_leaf=options.bvh_min_leaf,
+                                 sah_threshold=options.sah_threshold)
         self.materials = MaterialTable(scene, options.bsdf)
         self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None)
         self.lights = AreaLights(scene, self.surfaces)
