@@ -4,8 +4,10 @@
 flags (``-input scene.txt -size 800 800 -output x.tga -spp 64 -MonteCarlo
 -cook_torrance -RR_cutdown 0.6 -Gamma 2.2 -SpatialTree -resolution 5
 -SAHeuristic 2000 -gui``). With ``-input`` the seed's defaults apply (Whitted
-ray tracing, Phong shading, uniform grid); otherwise drpt's (MIS path
-tracing, BVH). A flag whose feature is not built yet says so in one line.
+ray tracing, Phong shading, uniform grid; with ``-SpatialTree`` its BVH rule,
+SAH only in nodes of at most ``2 * 2000`` primitives); otherwise drpt's (MIS
+path tracing, BVH with full binned SAH). A flag whose feature is not built yet
+says so in one line.
 
 User mistakes print one line and exit with status 2; no traceback.
 """
@@ -21,7 +23,6 @@ from .errors import DrptError
 # Features that are accepted but arrive in later work, with the issue that
 # brings them. The message is printed once, in one line.
 LATER = {
-    "sah-threshold": "BVH build variants (-SAHeuristic, -resolution) land with issue 5; using full binned SAH",
     "gui": "drpt has no OpenGL preview (-gui): it renders straight to the output file",
 }
 
@@ -53,12 +54,21 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--accel", choices=["bvh", "grid", "brute"], default=None,
                    help="acceleration structure: bvh (default), grid (uniform grid, 3D-DDA; "
                         "-resolution N cells per axis) or brute")
+    p.add_argument("--bvh", dest="bvh_method", metavar="sah|median|threshold", default=None,
+                   help="BVH split rule: sah (binned SAH everywhere, default), median (object "
+                        "median, fastest build) or threshold (the seed's: SAH only in nodes of "
+                        "at most 2K primitives, median above; K from --sah-threshold)")
+    p.add_argument("--sah-threshold", "-SAHeuristic", "-SAH", dest="sah_threshold",
+                   metavar="K", default=None,
+                   help="K of --bvh threshold (implies it; 0 = median everywhere; default 2000, "
+                        "the seed's)")
+    p.add_argument("--min-leaf", dest="min_leaf", metavar="N", default=None,
+                   help="minimum primitives per BVH leaf (default 1)")
     p.add_argument("-SpatialTree", dest="spatial_tree", action="store_true",
                    help="seed flag: use the BVH (the seed's default is the grid)")
-    p.add_argument("-resolution", dest="resolution", type=int, default=None,
-                   help="seed flag: grid cells per axis, or BVH minimum leaf size")
-    p.add_argument("-SAHeuristic", "-SAH", dest="sah_threshold", type=int, default=None,
-                   help="seed flag: use SAH only in nodes with <= 2K primitives")
+    p.add_argument("-resolution", dest="resolution", metavar="N", default=None,
+                   help="seed flag: grid cells per axis, or with the BVH its minimum leaf size "
+                        "(as --min-leaf)")
     p.add_argument("--integrator", choices=["path", "whitted"], default=None,
                    help="path (MIS path tracing, default) or whitted")
     p.add_argument("-MonteCarlo", dest="monte_carlo", action="store_true",
@@ -88,6 +98,55 @@ def _check_output(output: Path) -> None:
                         f"(use one of {', '.join(sorted(WRITE_EXTENSIONS))})")
     if not output.parent.exists() and str(output.parent) != "":
         raise DrptError(f"{output}: folder {output.parent} does not exist")
+
+
+def _int_flag(name: str, text: str | None) -> int | None:
+    """Parse an integer flag value; a bad one is a one-line DrptError."""
+    if text is None:
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        raise DrptError(f"{name} must be an integer, got {text!r}") from None
+
+
+def _bvh_options(args: argparse.Namespace, accel: str, seed_mode: bool) -> dict:
+    """RenderOptions fields for the BVH build rule from the render flags."""
+    from .accel.bvh_build import METHODS
+
+    resolution = _int_flag("-resolution", args.resolution)
+    k = _int_flag("--sah-threshold/-SAHeuristic", args.sah_threshold)
+    min_leaf = _int_flag("--min-leaf", args.min_leaf)
+    if accel != "bvh":
+        if args.bvh_method is not None or min_leaf is not None:
+            raise DrptError("--bvh and --min-leaf apply to the BVH only "
+                            "(--accel bvh, or -SpatialTree with -input)")
+        if k is not None:
+            print("drpt: note: -SAHeuristic applies to the BVH (-SpatialTree); "
+                  f"ignored with --accel {accel}", file=sys.stderr)
+        if resolution is not None and accel == "grid" and not 1 <= resolution <= 256:
+            raise DrptError(f"-resolution must be between 1 and 256 grid cells per axis, "
+                            f"got {resolution}")
+        return {"grid_resolution": resolution if accel == "grid" else None}
+    if args.bvh_method is not None and args.bvh_method not in METHODS:
+        raise DrptError(f"--bvh must be one of {', '.join(METHODS)}, got {args.bvh_method!r}")
+    # With -input the seed's default BVH is its threshold rule (-SAHeuristic 2000).
+    method = args.bvh_method or ("threshold" if (k is not None or seed_mode) else "sah")
+    if k is not None and method != "threshold":
+        raise DrptError(f"--sah-threshold/-SAHeuristic applies to --bvh threshold, "
+                        f"not --bvh {method}")
+    if k is not None and k < 0:
+        raise DrptError(f"--sah-threshold/-SAHeuristic must be >= 0, got {k}")
+    if min_leaf is not None and resolution is not None and min_leaf != resolution:
+        raise DrptError(f"--min-leaf {min_leaf} and -resolution {resolution} disagree: "
+                        "with the BVH both give the minimum leaf size, give one")
+    if min_leaf is None:
+        min_leaf = resolution
+    if min_leaf is not None and min_leaf < 1:
+        name = "--min-leaf" if args.min_leaf is not None else "-resolution"
+        raise DrptError(f"{name} (minimum primitives per BVH leaf) must be >= 1, got {min_leaf}")
+    return {"bvh_method": method, "sah_threshold": k,
+            "bvh_min_leaf": min_leaf if min_leaf is not None else 1}
 
 
 def _positive(name: str, value: int | float | None) -> None:
@@ -128,11 +187,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     integrator = args.integrator or ("path" if (args.monte_carlo or not seed_mode) else "whitted")
     accel = args.accel or ("bvh" if (args.spatial_tree or not seed_mode) else "grid")
     bsdf = args.bsdf or ("cook-torrance" if args.cook_torrance else "phong")
-    if args.resolution is not None and accel == "grid" and not 1 <= args.resolution <= 256:
-        raise DrptError(f"-resolution must be between 1 and 256 grid cells per axis, "
-                        f"got {args.resolution}")
-    if args.sah_threshold is not None or (args.resolution is not None and accel == "bvh"):
-        _note("sah-threshold")
+    accel_opts = _bvh_options(args, accel, seed_mode)
     if args.gui:
         _note("gui")
 
@@ -142,8 +197,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     ensure_llvm()
     opts = RenderOptions(width=width, height=height, spp=spp, seed=args.seed, accel=accel,
-                         grid_resolution=args.resolution if accel == "grid" else None,
-                         bsdf=bsdf, integrator=integrator, env_sampling=args.env_sampling,
+                         **accel_opts, bsdf=bsdf, integrator=integrator,
+                         env_sampling=args.env_sampling,
                          path=PathOptions(max_depth=args.max_depth, rr_depth=rr_depth,
                                           rr_prob=rr_prob),
                          max_lanes=args.max_lanes, progress=not args.quiet)

@@ -27,9 +27,51 @@ def test_all_seed_flags_as_written_in_the_report(tmp_path, capsys):
     img = read_image(out, linear=False)
     assert img.shape == (12, 16, 3) and img.max() > 0
     err = capsys.readouterr().err
-    # Features that come later are announced, once each, in one line.
-    assert "-SAHeuristic" in err and "-gui" in err
+    # Features that are not built (only -gui now) are announced once, in one line.
+    assert "-gui" in err and "SAH" not in err and "resolution" not in err
     assert err.count("\n") == len([line for line in err.splitlines() if line.startswith("drpt: note:")])
+    assert err.count("\n") == 1
+
+
+def _spy_options(monkeypatch):
+    import drpt.render.renderer as renderer
+
+    seen = []
+    real = renderer.Renderer.__init__
+
+    def spy(self, scene, options):
+        seen.append(options)
+        real(self, scene, options)
+
+    monkeypatch.setattr(renderer.Renderer, "__init__", spy)
+    return seen
+
+
+@pytest.mark.parametrize("args, expect", [
+    # the seed's flags as its report writes them: -SpatialTree picks its BVH,
+    # whose default is the threshold rule with K = 2000
+    (["-input", CORNELL, "-SpatialTree"], ("bvh", "threshold", None, 1)),
+    (["-input", CORNELL, "-SpatialTree", "-resolution", "5", "-SAH", "2000"],
+     ("bvh", "threshold", 2000, 5)),
+    (["-input", CORNELL, "-SpatialTree", "-SAHeuristic", "0"], ("bvh", "threshold", 0, 1)),
+    (["-input", CORNELL, "-resolution", "7"], ("grid", None, None, None)),
+    # modern flags; drpt's default is full SAH
+    ([CORNELL], ("bvh", "sah", None, 1)),
+    ([CORNELL, "--bvh", "median", "--min-leaf", "3"], ("bvh", "median", None, 3)),
+    ([CORNELL, "--sah-threshold", "50"], ("bvh", "threshold", 50, 1)),
+    ([CORNELL, "--bvh", "threshold", "-resolution", "2", "--min-leaf", "2"],
+     ("bvh", "threshold", None, 2)),
+])
+def test_bvh_flags(tmp_path, monkeypatch, capsys, args, expect):
+    seen = _spy_options(monkeypatch)
+    assert main(["render", *args, "-size", "4", "4", "-spp", "1",
+                 "-output", str(tmp_path / "a.png"), "--quiet"]) == 0
+    (o,) = seen
+    if expect[0] == "grid":
+        assert o.accel == "grid" and o.grid_resolution == 7
+    else:
+        assert (o.accel, o.bvh_method, o.sah_threshold, o.bvh_min_leaf) == expect
+    assert "drpt: note" not in capsys.readouterr().err
 
 
 def test_seed_defaults_are_whitted_and_grid(tmp_path, capsys, monkeypatch):
@@ -117,6 +159,15 @@ def test_one_line_summary(tmp_path):
     (["render", CORNELL, "--max-depth", "0"], "--max-depth"),
     (["render", CORNELL, "-RR_cutdown", "1.5"], "Russian roulette"),
     (["render"], "no scene given"),
+    (["render", CORNELL, "--bvh", "octree"], "--bvh must be one of"),
+    (["render", CORNELL, "--sah-threshold", "-3"], "must be >= 0"),
+    (["render", "-input", CORNELL, "-SpatialTree", "-SAHeuristic", "many"], "must be an integer"),
+    (["render", CORNELL, "--bvh", "median", "-SAH", "10"], "applies to --bvh threshold"),
+    (["render", CORNELL, "--min-leaf", "0"], "--min-leaf"),
+    (["render", "-input", CORNELL, "-SpatialTree", "-resolution", "-1"], "-resolution"),
+    (["render", "-input", CORNELL, "-resolution", "999"], "between 1 and 256"),
+    (["render", CORNELL, "--min-leaf", "2", "-resolution", "3"], "disagree"),
+    (["render", CORNELL, "--accel", "grid", "--bvh", "sah"], "apply to the BVH only"),
 ])
 def test_user_errors_exit_2_with_one_line(tmp_path, args, needle):
     r = run(args)
