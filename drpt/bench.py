@@ -2,7 +2,12 @@
 
 For each scene and each acceleration structure (``--accel bvh,grid``) drpt's
 numbers are measured, and in the same run Mitsuba 3's (``llvm_ad_rgb``) on the
-exported scene, on the *same* rays:
+exported scene, on the *same* rays. BVH build variants are accelerators of
+their own: ``bvh`` (binned SAH), ``bvh-median`` (object median, the seed's
+``SAH_NUM=0``) and ``bvh-threshold`` (the seed's rule, SAH only in nodes of at
+most ``2 * --sah-threshold`` primitives, default 2000), so the seed's table
+(grid vs BVH without SAH vs BVH with SAH) is
+``--accel grid,bvh-median,bvh-threshold,bvh``. Per accelerator:
 
 * build time (drpt: ``build_accel``; Mitsuba: ``mi.load_dict`` of the
   exported scene, which includes its BVH build) and drpt's accel memory;
@@ -43,7 +48,11 @@ DEFAULT_SCENES = [ROOT / "scenes" / "cornellbox" / "cornellbox.txt",
                   ROOT / "scenes" / "newscene" / "newscene.txt"]
 # How MTL materials are read per default scene (others: phong).
 DEFAULT_BSDF = {"newscene.txt": "cook-torrance"}
-ACCELS = ("bvh", "grid", "brute")
+# accelerator name -> (build_accel kind, BVH split rule)
+ACCEL_VARIANTS = {"bvh": ("bvh", "sah"), "bvh-median": ("bvh", "median"),
+                  "bvh-threshold": ("bvh", "threshold"), "grid": ("grid", None),
+                  "brute": ("brute", None)}
+ACCELS = tuple(ACCEL_VARIANTS)
 
 FIELDS = ["scene", "accel", "rays", "build_s", "accel_mib", "primary_mrays",
           "incoherent_mrays", "shadow_mrays", "render_s", "msamples_s",
@@ -65,7 +74,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("scenes", nargs="*", metavar="SCENE",
                    help="scene files (default: the bundled Cornell box and newscene)")
     p.add_argument("--accel", default="bvh,grid",
-                   help="comma-separated accelerators: bvh, grid, brute (default bvh,grid)")
+                   help="comma-separated accelerators: bvh (binned SAH), bvh-median, "
+                        "bvh-threshold (the seed's rule), grid, brute (default bvh,grid)")
+    p.add_argument("--sah-threshold", type=int, default=2000, metavar="K",
+                   help="K of bvh-threshold: SAH in nodes of at most 2K primitives "
+                        "(default 2000, the seed's)")
+    p.add_argument("--min-leaf", type=int, default=1, metavar="N",
+                   help="minimum primitives per leaf of the BVH variants (default 1)")
     p.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), default=(256, 256),
                    help="render size (default 256 256)")
     p.add_argument("--spp", type=int, default=16, help="render samples per pixel (default 16)")
@@ -141,8 +156,17 @@ def make_rays(scene, n: int, aspect: float, seed: int) -> dict[str, np.ndarray]:
 
 # --------------------------------------------------------------------------- drpt
 
-def bench_drpt(scene, accel_kind: str, rays: dict, bsdf: str, size, spp: int, max_depth: int,
-               repeat: int) -> dict:
+def accel_options(name: str, sah_threshold: int = 2000, min_leaf: int = 1) -> dict:
+    """RenderOptions fields (accel, BVH rule) for a ``--accel`` name."""
+    kind, method = ACCEL_VARIANTS[name]
+    if kind != "bvh":
+        return {"accel": kind}
+    return {"accel": kind, "bvh_method": method, "bvh_min_leaf": min_leaf,
+            "sah_threshold": sah_threshold if method == "threshold" else None}
+
+
+def bench_drpt(scene, accel_name: str, rays: dict, bsdf: str, size, spp: int, max_depth: int,
+               repeat: int, sah_threshold: int = 2000, min_leaf: int = 1) -> dict:
     import drjit as dr
     from drjit.llvm import Array3f, Float
 
@@ -155,9 +179,13 @@ def bench_drpt(scene, accel_kind: str, rays: dict, bsdf: str, size, spp: int, ma
         dr.make_opaque(v)
         return v
 
+    ao = accel_options(accel_name, sah_threshold, min_leaf)
+    build_kw = ({"method": ao["bvh_method"], "min_leaf": ao["bvh_min_leaf"],
+                 "sah_threshold": ao["sah_threshold"]} if ao["accel"] == "bvh" else {})
     build = math.inf
     for _ in range(repeat):
-        accel = build_accel(scene, kind=accel_kind)
+        accel = None  # free the previous build first (the grid can be large)
+        accel = build_accel(scene, kind=ao["accel"], **build_kw)
         build = min(build, accel.build_seconds)
     po, pd = a3(rays["primary_o"]), a3(rays["primary_d"])
     io, idr, sd = a3(rays["inc_o"]), a3(rays["inc_d"]), a3(rays["shadow_d"])
@@ -176,7 +204,7 @@ def bench_drpt(scene, accel_kind: str, rays: dict, bsdf: str, size, spp: int, ma
     t_shadow = _best(lambda: accel.occluded(io, sd, st), repeat)
 
     W, H = size
-    r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, accel=accel_kind, bsdf=bsdf,
+    r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, bsdf=bsdf, **ao,
                                       progress=False, path=PathOptions(max_depth=max_depth)))
     r.render()  # warm-up: compilation
     render_s = min(r.render().seconds for _ in range(repeat))
@@ -329,12 +357,14 @@ def main(args: argparse.Namespace) -> int:
 
     accels = [a.strip() for a in args.accel.split(",") if a.strip()]
     if not accels:
-        raise DrptError("--accel: give at least one of bvh, grid, brute")
+        raise DrptError(f"--accel: give at least one of {', '.join(ACCELS)}")
     for a in accels:
         if a not in ACCELS:
             raise DrptError(f"--accel: unknown accelerator {a!r} (use {', '.join(ACCELS)})")
+    if args.sah_threshold < 0:
+        raise DrptError(f"--sah-threshold must be >= 0, got {args.sah_threshold}")
     W, H = args.size
-    for name, v in (("--size", min(W, H)), ("--spp", args.spp), ("--rays", args.rays),
+    for name, v in (("--min-leaf", args.min_leaf), ("--size", min(W, H)), ("--spp", args.spp), ("--rays", args.rays),
                     ("--repeat", args.repeat)):
         if v <= 0:
             raise DrptError(f"{name} must be positive, got {v}")
@@ -363,7 +393,7 @@ def main(args: argparse.Namespace) -> int:
         for kind in accels:
             row = {"scene": path.stem, "accel": kind}
             row.update(bench_drpt(scene, kind, rays, bsdf, (W, H), args.spp, args.max_depth,
-                                  args.repeat))
+                                  args.repeat, args.sah_threshold, args.min_leaf))
             row.update(mi_row)
             if mitsuba:
                 _ratios(row)
@@ -373,6 +403,10 @@ def main(args: argparse.Namespace) -> int:
     table = format_table(rows, mitsuba)
     settings = (f"{W}x{H}, {args.spp} spp, max depth {args.max_depth}, {args.rays} rays, "
                 f"best of {args.repeat}")
+    if "bvh-threshold" in accels:
+        settings += f", bvh-threshold K = {args.sah_threshold}"
+    if args.min_leaf != 1 and any(a.startswith("bvh") for a in accels):
+        settings += f", BVH min leaf {args.min_leaf}"
     (out / "bench.md").write_text(f"# drpt bench\n\n{settings}\n\n{table}\n")
     with open(out / "bench.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=FIELDS)

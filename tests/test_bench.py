@@ -74,6 +74,30 @@ def test_no_mitsuba(tmp_path):
     assert (tmp_path / "bench.png").exists()
 
 
+def test_bvh_variants_as_accelerators(tmp_path, monkeypatch):
+    import drpt.render.renderer as renderer
+
+    seen = []
+    real = renderer.Renderer.__init__
+
+    def spy(self, scene, options):
+        seen.append((options.accel, options.bvh_method, options.sah_threshold,
+                     options.bvh_min_leaf))
+        real(self, scene, options)
+
+    monkeypatch.setattr(renderer.Renderer, "__init__", spy)
+    args = _parse([str(CORNELL), "--size", "8", "8", "--spp", "1", "--rays", "1024",
+                   "--accel", "bvh-median,bvh-threshold,bvh", "--sah-threshold", "3",
+                   "--min-leaf", "2", "--repeat", "1", "--no-mitsuba", "--out", str(tmp_path)])
+    assert args.func(args) == 0
+    with open(tmp_path / "bench.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["accel"] for r in rows] == ["bvh-median", "bvh-threshold", "bvh"]
+    assert all(float(r["primary_mrays"]) > 0 for r in rows)
+    assert seen == [("bvh", "median", None, 2), ("bvh", "threshold", 3, 2), ("bvh", "sah", None, 2)]
+    assert "bvh-threshold K = 3" in (tmp_path / "bench.md").read_text()
+
+
 def test_missing_scene(tmp_path):
     args = _parse([str(tmp_path / "nope.txt"), "--out", str(tmp_path / "o")])
     with pytest.raises(DrptError, match="not found"):
@@ -82,7 +106,9 @@ def test_missing_scene(tmp_path):
 
 
 @pytest.mark.parametrize("argv", [["--accel", "kd"], ["--accel", ","], ["--spp", "0"],
-                                  ["--rays", "-1"], ["--max-depth", "0"]])
+                                  ["--rays", "-1"], ["--max-depth", "0"],
+                                  ["--accel", "bvh-octree"], ["--sah-threshold", "-1"],
+                                  ["--min-leaf", "0"]])
 def test_bad_options(tmp_path, argv):
     args = _parse([str(CORNELL), *argv, "--out", str(tmp_path / "o")])
     with pytest.raises(DrptError):
