@@ -20,9 +20,11 @@ depth 5 with the adaptive probability ``min(throughput, 0.95)``):
 ``bsdf``   the other material mode (Phong <-> Cook-Torrance). That changes the
            scene, so that row is compared with its own reference.
 
-Columns: render seconds (the fastest of ``--repeats`` timed renders; the
-acceleration build and kernel compilation are excluded: a 1-spp warm-up
-render per row compiles its kernel first), samples/s, the error against the
+Columns: render seconds (the fastest of ``--repeats`` timed renders, taken
+round robin over the rows so that load from other processes spreads over
+all of them; the acceleration build and kernel compilation are excluded: a
+1-spp warm-up render per row compiles its kernel first), samples/s, the
+error (of the first render) against the
 Mitsuba reference of the unbounded, unbiased scene (``excess relMSE``:
 relMSE minus the reference's noise floor, as in ``drpt converge``), the
 work-normalised error ``relMSE x seconds`` relative to the default row
@@ -30,7 +32,9 @@ work-normalised error ``relMSE x seconds`` relative to the default row
 time, as long as the row is unbiased), and the bias: the relative
 difference of the image means, ``(mean(x) - mean(ref)) / mean(ref)``, with
 its standard error ``sqrt(sum var_x + sum var_ref) / n / mean(ref)``
-(per-pixel variances of drpt and of the reference's batches). Rows whose
+(per-pixel variances of drpt and of the reference's batches), from the mean
+of all ``--repeats`` renders (independent seeds, ``repeats x spp`` samples
+per pixel), so more repeats resolve smaller biases. Rows whose
 difference is more than 3 standard errors are marked biased. Truncating
 the depth is biased (light is lost); Russian roulette is not (it only adds
 noise). ``bias relMSE`` is ``excess - mean(var_x / w)``: the part of the
@@ -98,8 +102,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="Russian roulette start depths to try (default 1 3 10)")
     p.add_argument("--rr-probs", type=float, nargs="+", default=[0.5, 0.8], metavar="P",
                    help="fixed continuation probabilities to try (default 0.5 0.8)")
-    p.add_argument("--repeats", type=int, default=2,
-                   help="timed renders per row; the fastest counts (default 2)")
+    p.add_argument("--repeats", type=int, default=3,
+                   help="renders per row: the fastest time counts, all of them go into the "
+                        "bias estimate (default 3)")
     p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
     p.add_argument("--out", default=None, help="output folder (default knobs_<name>/)")
     p.add_argument("--cache", default=None,
@@ -164,7 +169,7 @@ def image_bias(x, var_x, ref, var_ref) -> tuple[float, float]:
 def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, spp: int = 64,
                 bsdf: str = "phong", ref_spp: int = 4096, ref_batches: int = 8, knobs=KNOBS,
                 depths=(2, 3, 5, 8), rr_depths=(1, 3, 10), rr_probs=(0.5, 0.8),
-                repeats: int = 2, seed: int = 0, cache_dir: Path | None = None,
+                repeats: int = 3, seed: int = 0, cache_dir: Path | None = None,
                 progress: bool = True) -> dict:
     """Run the study (see the module docs); write the outputs; return the report."""
     from . import metrics
@@ -206,9 +211,10 @@ def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, 
                                    "cache_file": None if cache_file is None else str(cache_file)}}
         return refs[mode]
 
-    rows = []
-    for i, c in enumerate(configs(bsdf, knobs, depths, rr_depths, rr_probs)):
-        ref = reference(c.bsdf)
+    cfgs = configs(bsdf, knobs, depths, rr_depths, rr_probs)
+    renderers = []
+    for c in cfgs:
+        reference(c.bsdf)
         opts = RenderOptions(width=width, height=height, spp=1, seed=seed + 999_999,
                              accel=c.accel, bsdf=c.bsdf, progress=False,
                              path=PathOptions(max_depth=c.max_depth, rr_depth=c.rr_depth,
@@ -216,17 +222,33 @@ def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, 
         renderer = Renderer(scene, opts)
         renderer.render()  # warm-up: compiles this row's kernel
         renderer.opt.spp = spp
-        best, first = None, None
-        for k in range(repeats):
-            renderer.opt.seed = seed + 1 + i  # same seed per row: repeats time the same work
-            r = renderer.render()
-            first = first or r
-            best = r.seconds if best is None else min(best, r.seconds)
+        renderers.append(renderer)
+    # Round robin over the rows, so load from other processes spreads over all of them.
+    results = [[] for _ in cfgs]
+    for k in range(repeats):
+        for i, renderer in enumerate(renderers):
+            renderer.opt.seed = seed + 1 + i + 1000 * k
+            results[i].append(renderer.render())
+            if progress:
+                print(f"\rknobs: repeat {k + 1}/{repeats}, row {i + 1}/{len(cfgs)}", end="",
+                      file=sys.stderr, flush=True)
+    if progress:
+        print(file=sys.stderr)
+
+    rows = []
+    for c, renderer, rs in zip(cfgs, renderers, results):
+        ref = refs[c.bsdf]
+        best = min(r.seconds for r in rs)
+        first = rs[0]
         x, w = first.image, ref["image"].astype(np.float64) ** 2 + 1e-2
         rel = metrics.rel_mse(x, ref["image"])
         excess = rel - ref["floor"]
         pred = float(np.mean(first.variance / w))
-        bias, bias_se = image_bias(x, first.variance, ref["image"], ref["variance"])
+        # The bias uses every repeat (independent seeds): the mean image of R
+        # renders, with variance of the mean var / R.
+        mean_img = np.mean([r.image for r in rs], axis=0)
+        mean_var = np.mean([r.variance for r in rs], axis=0) / len(rs)
+        bias, bias_se = image_bias(mean_img, mean_var, ref["image"], ref["variance"])
         rows.append({
             "knob": c.knob, "setting": c.setting, "bsdf": c.bsdf, "accel": c.accel,
             "max_depth": c.max_depth, "rr_depth": c.rr_depth, "rr_prob": c.rr_prob,
@@ -234,12 +256,9 @@ def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, 
             "samples_per_second": width * height * spp / max(best, 1e-9),
             "rel_mse": rel, "excess_rel_mse": excess, "noise_rel_mse": pred,
             "bias_rel_mse": excess - pred, "mean_bias": bias, "mean_bias_se": bias_se,
-            "biased": bool(abs(bias) > 3 * bias_se), "nonfinite": int(first.nonfinite),
+            "bias_spp": int(spp * len(rs)), "biased": bool(abs(bias) > 3 * bias_se),
+            "nonfinite": int(sum(r.nonfinite for r in rs)),
         })
-        if progress:
-            print(f"knobs: {c.knob:>9} {c.setting:<42} {best:7.3f} s  excess relMSE "
-                  f"{excess:.3e}  bias {100 * bias:+.2f}% +- {100 * bias_se:.2f}%",
-                  file=sys.stderr, flush=True)
     base = rows[0]["excess_rel_mse"] * rows[0]["seconds"]
     for r in rows:
         work = r["excess_rel_mse"] * r["seconds"]
@@ -255,7 +274,7 @@ def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, 
     fields = ["knob", "setting", "bsdf", "accel", "max_depth", "rr_depth", "rr_prob", "spp",
               "seconds", "build_seconds", "samples_per_second", "rel_mse", "excess_rel_mse",
               "noise_rel_mse", "bias_rel_mse", "efficiency", "mean_bias", "mean_bias_se",
-              "biased", "nonfinite"]
+              "bias_spp", "biased", "nonfinite"]
     write_csv(out / "knobs.csv", rows, fields)
     _write_json(out / "knobs.json", report)
     doc = (f"# Quality knobs: {scene_path.name}, {width}x{height}, {spp} spp\n\n{table}\n\n"
@@ -272,7 +291,7 @@ def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, 
 
 def markdown_table(rows: list[dict]) -> str:
     lines = ["| knob | setting | seconds | Msamples/s | excess relMSE | efficiency vs default "
-             "| mean bias (± s.e.) |",
+             f"| mean bias (± s.e., {rows[0]['bias_spp']} spp) |",
              "| --- | --- | ---: | ---: | ---: | ---: | --- |"]
     for r in rows:
         bias = f"{100 * r['mean_bias']:+.2f}% ± {100 * r['mean_bias_se']:.2f}%"
