@@ -30,7 +30,19 @@ missing EXR skips):
   fails; smaller biases are below what this test can see (measured ratios
   0.91-1.06).
 
-Runtime: ~4-8 s per scene on the 2-core machine (124 spp at <= 64x64).
+* fireflies: where the top 0.1% of values carry more than half of the
+  relMSE at some level (measured: showcase_day 0.67, showcase_dusk 0.99;
+  Cornell box and newscene <= 0.2), a single render's relMSE is not in its
+  1/N regime at these spp (rare caustic paths through glossy/specular
+  surfaces lit by a small bright source dominate; the per-sample
+  distribution is so heavy-tailed that relMSE grows with spp between
+  seeds). Mitsuba shows the same: on showcase_day at 128x72 and 64 spp
+  three seeds gave relMSE 1.5, 2.6 and 0.03 against the reference. There
+  the slope is printed but not asserted (the test ends in a skip saying
+  so, after the bias checks have passed; they hold there since drpt's
+  variance estimate sees the same fireflies as the error).
+
+Runtime: ~4-8 s per scene on the shared 2-core machine (124 spp at <= 64x64).
 """
 
 from __future__ import annotations
@@ -56,6 +68,7 @@ CORNELL = REPO / "scenes" / "cornellbox" / "cornellbox.txt"
 LEVELS = (4, 8, 16, 32, 64)
 SLOPE_TOL = 0.25
 BIAS_FRACTION = 0.25
+FIREFLY_SHARE = 0.5
 MAX_SIDE = 64
 
 
@@ -153,6 +166,8 @@ def test_error_falls_as_one_over_n(name):
     path = reference_path(name)
     if not path.is_file():
         pytest.skip(f"{path.name} is not committed")
+    if not (REPO / scene_file).is_file():
+        pytest.skip(f"{scene_file} is not present (generated scenes are git-ignored)")
     f = _factor(W, H)
     w, h = W // f, H // f
     ref = read_image(path)[..., :3].astype(np.float64)
@@ -168,22 +183,31 @@ def test_error_falls_as_one_over_n(name):
         res = r.render()
         assert res.nonfinite == 0 and np.all(np.isfinite(res.image))
         results[spp] = res
-    top = LEVELS[-1]
-    var_ref = results[top].variance * top / (ref_spp * f * f)
+    n_top = LEVELS[-1]
+    var_ref = results[n_top].variance * n_top / (ref_spp * f * f)
     floor = noise_floor(ref, var_ref)
-    excess = np.array([np.mean((results[n].image - ref) ** 2 / weight) - floor for n in LEVELS])
+    errors = [((results[n].image - ref) ** 2 / weight).ravel() for n in LEVELS]
+    excess = np.array([e.mean() - floor for e in errors])
+    top = max(1, errors[0].size // 1000)
+    shares = np.array([np.sort(e)[-top:].sum() / e.sum() for e in errors])
     pred = np.array([np.mean(results[n].variance / weight) for n in LEVELS])
     slope, se = loglog_slope(LEVELS, excess)
     b = excess[-1] - pred[-1]
-    extrapolated = excess[-1] * top / ref_spp + b
+    extrapolated = excess[-1] * n_top / ref_spp + b
     ratios = excess / pred
     print(f"{name} {w}x{h}: excess {np.array2string(excess, precision=4)}, "
           f"excess*N {np.array2string(excess * LEVELS, precision=3)}, slope {slope:.3f} "
           f"+- {se:.3f}, floor {floor:.2e}, excess/pred {np.array2string(ratios, precision=3)}, "
           f"bias^2 estimate {b:.2e}, extrapolated at {ref_spp} spp {extrapolated:.2e}")
-    assert abs(slope + 1.0) < SLOPE_TOL, slope
+    print(f"{name}: share of relMSE in the top 0.1% of values per level "
+          f"{np.array2string(shares, precision=2)}")
     assert b <= BIAS_FRACTION * excess[-1], (b, excess[-1])
     assert 0.85 <= ratios.mean() <= 1.15, ratios
+    if shares.max() > FIREFLY_SHARE:
+        pytest.skip(f"{name}: relMSE is firefly-dominated at these spp (top 0.1% of values "
+                    f"carry {shares.max():.0%} of it at some level; slope {slope:.2f}): no 1/N "
+                    "slope to check; the bias checks above passed")
+    assert abs(slope + 1.0) < SLOPE_TOL, slope
 
 
 # ------------------------------------------------------------ CLI smoke tests
