@@ -51,7 +51,7 @@ DEFAULT_BSDF = {"newscene.txt": "cook-torrance"}
 # accelerator name -> (build_accel kind, BVH split rule)
 ACCEL_VARIANTS = {"bvh": ("bvh", "sah"), "bvh-median": ("bvh", "median"),
                   "bvh-threshold": ("bvh", "threshold"), "grid": ("grid", None),
-                  "brute": ("brute", None)}
+                  "brute": ("brute", None), "bvh2": ("bvh2", "sah"), "bvh4": ("bvh4", "sah")}
 ACCELS = tuple(ACCEL_VARIANTS)
 
 FIELDS = ["scene", "accel", "rays", "build_s", "accel_mib", "primary_mrays",

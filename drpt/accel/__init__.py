@@ -17,9 +17,10 @@ from __future__ import annotations
 
 from .brute import BruteForce
 from .bvh import BVH, INVALID, Hit
+from .bvh4 import LEAF_MAX_COUNT, BVH4
 from .grid import UniformGrid
 
-__all__ = ["BVH", "BruteForce", "Hit", "INVALID", "UniformGrid", "build_accel"]
+__all__ = ["BVH", "BVH4", "BruteForce", "Hit", "INVALID", "UniformGrid", "build_accel"]
 
 
 def build_accel(scene, kind: str = "bvh", method: str = "sah", leaf_size: int = 4,
@@ -29,7 +30,9 @@ def build_accel(scene, kind: str = "bvh", method: str = "sah", leaf_size: int = 
 
     Args:
         scene: a :class:`~drpt.scene.model.Scene`.
-        kind: ``"bvh"``, ``"grid"`` (uniform grid, 3D-DDA) or ``"brute"``.
+        kind: ``"bvh4"`` (4-wide BVH, :mod:`drpt.accel.bvh4`), ``"bvh2"``
+            (binary BVH, :mod:`drpt.accel.bvh`), ``"bvh"`` (``"bvh2"`` for now),
+            ``"grid"`` (uniform grid, 3D-DDA) or ``"brute"``.
         method: BVH split rule (:mod:`drpt.accel.bvh_build`): ``"sah"``
             (binned SAH, default), ``"median"`` (object median) or
             ``"threshold"`` (the seed's rule: SAH in nodes of at most
@@ -43,11 +46,15 @@ def build_accel(scene, kind: str = "bvh", method: str = "sah", leaf_size: int = 
         sah_threshold: ``K`` of ``method="threshold"`` (the seed's
             ``-SAHeuristic``; ``None``: its default 2000).
     """
-    if kind == "bvh":
+    if kind == "bvh4":
+        return BVH4(scene, method=method, leaf_size=leaf_size, bins=bins, min_leaf=min_leaf,
+                    sah_threshold=sah_threshold)
+    if kind in ("bvh", "bvh2"):
         return BVH(scene, method=method, leaf_size=leaf_size, bins=bins, min_leaf=min_leaf,
                    sah_threshold=sah_threshold)
     if kind == "grid":
         return UniformGrid(scene, resolution=resolution)
     if kind == "brute":
         return BruteForce(scene)
-    raise ValueError(f"unknown accelerator kind {kind!r}; expected 'bvh', 'grid' or 'brute'")
+    raise ValueError(f"unknown accelerator kind {kind!r}; expected 'bvh', 'bvh2', 'bvh4', "
+                     "'grid' or 'brute'")

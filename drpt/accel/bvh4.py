@@ -1,0 +1,479 @@
+"""4-wide BVH: collapse of the binary BVH and its traversal in Dr.Jit.
+
+:class:`BVH4` has the interface of :class:`~drpt.accel.bvh.BVH` (same
+primitive ids, :class:`~drpt.accel.bvh.Hit` results, planes tested brute force
+before the traversal) and the same builder (:func:`~drpt.accel.bvh_build.build_bvh`
+with all its split rules); the binary tree is collapsed into a 4-wide one
+(:func:`collapse_bvh4`), which halves the number of loop iterations spent in
+inner nodes and tests four child boxes per iteration from six packet gathers.
+
+Traversal
+---------
+Everything happens in one ``dr.while_loop`` (symbolic by default; it also
+runs in evaluated mode, following :py:attr:`drjit.JitFlag.SymbolicLoops`).
+The root box is tested before the loop. Each iteration of a lane does, in
+this order:
+
+1. *node phase* (when the lane is not inside a leaf): pop an entry from the
+   lane's stack (two ``dr.alloc_local`` arrays, node reference and entry
+   distance) unless one is current; drop it if its entry distance exceeds the
+   closest hit. For an inner node, fetch the four child boxes with six
+   16-byte packet gathers and the four child references with one, slab-test
+   all four, sort the hits by entry distance (5-comparator network, misses
+   last), push the farther hits (farthest first) and continue with the
+   nearest. If the entry in hand is a leaf (popped, or the nearest child just
+   found), load its primitive range right away;
+2. *primitive phase* (when inside a leaf): test one primitive.
+
+Stack size: a lane at a node of depth ``k`` (root = 0) holds at most three
+entries per ancestor level, and a push round adds at most three, so
+``3 * (depth4 + 1)`` entries suffice; :func:`stack_entries` adds one spare.
+``BVH4.track_stack`` records the largest stack pointer of each query (tests).
+
+The crash of the first 4-wide BVH (commit ``bc77154``, reverted)
+-----------------------------------------------------------------
+What is ruled out or guarded against (``tests/test_bvh4.py``):
+
+* stack overflow: with ``track_stack`` the deepest stack on 100k identical
+  triangles is 29 entries of 43 (depth4 = 13); the bound above holds;
+* dangling host memory: Dr.Jit (LLVM) maps numpy memory without copying but
+  keeps a reference to the array (the aligned view and its base stay alive);
+* masked packet gathers: masked lanes read a static zero packet, never their
+  (possibly garbage) index;
+* packets past the end: every upload is followed by a 64-byte zero packet;
+* a Dr.Jit 1.5 hazard found on the way: in a symbolic loop,
+  ``Local.write(value, index, mask)`` whose ``index`` variable has size 1 is
+  rendered as one uniform row store at the largest index of the active
+  lanes, even when the lanes' values differ; a stack pointer created as a
+  Python scalar (``sp = UInt32(0)``) and written before being widened loses
+  entries and the lanes later pop uninitialized ``alloca`` memory (garbage
+  node indices). bc77154 widened ``sp`` before its writes, so this is not
+  proven to be its crash, but every loop variable here starts full width
+  (``dr.zeros(T, n)``) so the traversal cannot hit it.
+
+Device data (float32 or uint32, in BVH order, 64-byte aligned so that Dr.Jit
+emits packet gathers, see :func:`device_array`): per 4-wide node, 24 floats of
+child boxes in SoA order ``lo.x[4], lo.y[4], lo.z[4], hi.x[4], hi.y[4],
+hi.z[4]`` and 4 uint32 child references (an inner child's node index; a
+leaf's ``1 << 31 | (count - 1) << 27 | first``; ``0xFFFFFFFF`` for an unused
+slot); triangle vertices ``p0, p1, p2`` padded to 4 floats, ``12 * F`` floats
+read with three packet gathers and permuted to the ray's axes with selects
+(vertices, not edges: the watertight test needs bitwise identical shared
+vertices, see :mod:`drpt.geometry.triangle`); spheres as ``4 * S`` floats
+``[c.xyz, r]``; for mixed scenes a per-position uint32 code
+``local | is_sphere << 31``. Leaves hold at most 16 primitives and BVH
+positions need 27 bits (< 134M primitives).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import drjit as dr
+import numpy as np
+from drjit.llvm import Array3f, Array4f, Array4u, Bool, Float, UInt32
+
+from ..geometry.triangle import RayPrep, watertight_permuted
+from .bvh import (INVALID, STACK_SIZE, Hit, SceneGeometry, _nbytes, sphere_buffer,
+                  test_sphere)
+from .bvh_build import BVHArrays, _area, build_bvh, round_down_f32, round_up_f32
+
+_SLAB_EPS = 1.0 + 4.0 * 2.0**-24  # robust slab test (Ize 2013): widen t_far
+_INF = float("inf")
+_FLT_MAX = 3.4028234663852886e38
+
+LEAF_FLAG = 0x80000000
+LEAF_COUNT_SHIFT = 27
+LEAF_MAX_COUNT = 16  # count - 1 is stored in 4 bits
+LEAF_START_MASK = (1 << LEAF_COUNT_SHIFT) - 1
+EMPTY_REF = 0xFFFFFFFF
+PAD_BYTES = 64  # every upload is followed by (at least) one 64-byte packet of zeros
+
+
+# ------------------------------------------------------------------ uploads
+def device_array(cls, a: np.ndarray):
+    """Device copy of ``a`` (flattened), 64-byte aligned and zero padded.
+
+    Dr.Jit (LLVM) maps host memory without copying and marks a buffer that is
+    not 64-byte aligned as *unaligned*; packet gathers (``dr.gather(Array4f,
+    ...)``) from such a buffer silently fall back to one gather per component.
+    numpy only guarantees 16 bytes, so the data is placed at a 64-byte
+    boundary inside a larger numpy buffer (Dr.Jit keeps a reference to it),
+    followed by at least ``PAD_BYTES`` zero bytes so that no packet can end
+    past the allocation. Returns the device array (padding included) and
+    ``a.size``.
+    """
+    a = np.ascontiguousarray(a).reshape(-1)
+    nb = a.nbytes
+    raw = np.zeros(nb + PAD_BYTES + 64, np.uint8)
+    off = (-raw.ctypes.data) % 64
+    host = raw[off:off + nb + PAD_BYTES].view(a.dtype)
+    host[:a.size] = a
+    v = cls(host)
+    dr.eval(v)
+    return v, a.size
+
+
+def triangle_buffer4(positions: np.ndarray) -> np.ndarray:
+    """``(F, 3, 3)`` positions -> flat float32 ``[p0, 0, p1, 0, p2, 0]`` per
+    triangle (three 16-byte packets)."""
+    p = np.zeros((len(positions), 3, 4), np.float32)
+    p[:, :, :3] = np.asarray(positions, np.float32)
+    return p.reshape(-1)
+
+
+def _pick(v, k):
+    return dr.select(k == 0, v.x, dr.select(k == 1, v.y, v.z))
+
+
+def test_triangle4(tri_buf, idx, prep: RayPrep, bt, active):
+    """Watertight test of triangle ``idx`` of a :func:`triangle_buffer4`:
+    three packet gathers (one per vertex), permuted to ``prep``'s axes."""
+    base = idx * 3
+    p = [dr.gather(Array4f, tri_buf, base + k, active) for k in range(3)]
+    g = [_pick(q, k) for q in p for k in (prep.kx, prep.ky, prep.kz)]
+    t, u, v, h = watertight_permuted(prep, *g, bt)
+    return t, u, v, h & active
+
+
+# ------------------------------------------------------------------ collapse
+@dataclass
+class BVH4Arrays:
+    """A binary :class:`~drpt.accel.bvh_build.BVHArrays` collapsed to a 4-wide
+    tree (layout in :func:`collapse_bvh4`)."""
+
+    box: np.ndarray  # (K, 24) float32: lo.x[4], lo.y[4], lo.z[4], hi.x[4], hi.y[4], hi.z[4]
+    ref: np.ndarray  # (K, 4) uint32 child references
+    root_lo: np.ndarray  # (3,) float32
+    root_hi: np.ndarray  # (3,) float32
+    depth: int  # max depth of the 4-wide tree (root = 0)
+
+
+def stack_entries(depth4: int) -> int:
+    """Per-lane stack entries that a 4-wide tree of depth ``depth4`` needs
+    (see the module docstring), plus one spare."""
+    return 3 * (int(depth4) + 1) + 1
+
+
+def collapse_bvh4(b: BVHArrays) -> BVH4Arrays:
+    """Collapse a binary BVH into a 4-wide one (vectorized, level by level).
+
+    Every 4-wide node starts from an inner binary node with its two children
+    and, twice, replaces the inner child of largest surface area by its two
+    children, so it gets up to 4 children. Nodes are numbered breadth-first,
+    root = 0. Per node ``k``: ``box[k]`` holds the four child boxes in SoA
+    order (six 16-byte packets); ``ref[k]`` the four child references (an inner
+    child is its node index, bit 31 clear; a leaf is
+    ``LEAF_FLAG | (count - 1) << 27 | start``; an unused slot is ``EMPTY_REF``
+    with an empty box, lo = +inf, hi = -inf). A binary root that is a leaf
+    becomes a root with one leaf child.
+    """
+    a = b.node_a.astype(np.int64)
+    cnt = b.node_count.astype(np.int64)
+    M = a.size
+    if cnt.max(initial=0) > LEAF_MAX_COUNT:
+        raise ValueError(f"leaves hold at most {LEAF_MAX_COUNT} primitives")
+    if b.prim_order.size > LEAF_START_MASK + 1:
+        raise ValueError("too many primitives for the 4-wide BVH encoding")
+    area = _area(b.node_lo, b.node_hi)
+    root_leaf = bool(cnt[0] > 0 or M == 1)
+    boxes, refs = [], []
+    frontier = np.zeros(1, np.int64)
+    next_id = 1
+    depth = 0
+    while True:
+        if root_leaf:
+            C = np.full((1, 4), -1, np.int64)
+            C[0, 0] = 0
+        else:
+            K = frontier.size
+            C = np.full((K, 4), -1, np.int64)
+            C[:, 0] = a[frontier]
+            C[:, 1] = a[frontier] + 1
+            rows = np.arange(K)
+            for slot in (2, 3):
+                valid = C >= 0
+                inner = valid & (cnt[np.maximum(C, 0)] == 0)
+                ar = np.where(inner, area[np.maximum(C, 0)], -1.0)
+                j = np.argmax(ar, axis=1)
+                ok = ar[rows, j] >= 0
+                r, jj = rows[ok], j[ok]
+                x = C[r, jj]
+                C[r, jj] = a[x]
+                C[r, slot] = a[x] + 1
+        K = C.shape[0]
+        valid = C >= 0
+        Cs = np.maximum(C, 0)
+        is_leaf = valid & (cnt[Cs] > 0)
+        is_inner = valid & ~is_leaf
+        ref = np.full((K, 4), EMPTY_REF, np.int64)
+        n_inner = int(is_inner.sum())
+        ref[is_inner] = next_id + np.arange(n_inner)  # row-major = breadth-first
+        next_id += n_inner
+        ref[is_leaf] = LEAF_FLAG | ((cnt[Cs][is_leaf] - 1) << LEAF_COUNT_SHIFT) | a[Cs][is_leaf]
+        lo = np.where(valid[..., None], b.node_lo[Cs], np.float32(np.inf))
+        hi = np.where(valid[..., None], b.node_hi[Cs], np.float32(-np.inf))
+        box = np.concatenate([lo.transpose(0, 2, 1).reshape(K, 12),
+                              hi.transpose(0, 2, 1).reshape(K, 12)], 1)
+        boxes.append(box.astype(np.float32))
+        refs.append(ref.astype(np.uint32))
+        if root_leaf or n_inner == 0:
+            break
+        frontier = C[is_inner]
+        depth += 1
+    return BVH4Arrays(box=np.concatenate(boxes), ref=np.concatenate(refs),
+                      root_lo=b.node_lo[0].astype(np.float32),
+                      root_hi=b.node_hi[0].astype(np.float32), depth=depth)
+
+
+# ------------------------------------------------------------------ BVH4
+class BVH4:
+    """Triangles and spheres of a scene in a 4-wide BVH; planes brute force.
+
+    Args: as :class:`~drpt.accel.bvh.BVH` (``leaf_size`` is capped at 16).
+
+    Attributes:
+        build_seconds: host build time (bounds, BVH build, collapse, upload).
+        nbytes: bytes of device arrays.
+        stats: the builder's (binary tree) plus ``nodes4``, ``depth4`` and
+            ``stack`` (per-lane stack entries).
+        max_stack: after a query with ``track_stack = True``, the largest
+            stack pointer any lane reached (a UInt32 of size 1).
+    """
+
+    track_stack = False
+
+    def __init__(self, scene, method: str = "sah", leaf_size: int = 4, bins: int = 16,
+                 min_leaf: int = 1, sah_threshold: int | None = None):
+        t0 = time.perf_counter()
+        self.geo = geo = SceneGeometry(scene)
+        F, S, N = geo.F, geo.S, geo.N
+        self.has_tris, self.has_spheres = F > 0, S > 0
+        self.tri_buf = self.sph_buf = self.codes = None
+        self.node_box = self.node_ref = self.prim_ids = None
+        self.host_sizes = {}
+        self.max_stack = None
+        self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": 0}
+        self.stack_size = 0
+        if N:
+            los, his = [], []
+            if F:
+                p32 = np.asarray(scene.triangles.positions, np.float32).astype(np.float64)
+                los.append(p32.min(1))
+                his.append(p32.max(1))
+            if S:
+                c = np.asarray(scene.spheres.center, np.float64)
+                r = np.abs(np.asarray(scene.spheres.radius, np.float64))[:, None]
+                pad = r * 1e-5 + np.abs(c) * 1e-6
+                los.append(c - r - pad)
+                his.append(c + r + pad)
+            lo = np.concatenate(los)
+            hi = np.concatenate(his)
+            b = build_bvh(round_down_f32(lo), round_up_f32(hi), method=method,
+                          max_leaf=min(int(leaf_size), LEAF_MAX_COUNT), bins=bins,
+                          max_depth=STACK_SIZE, min_leaf=min_leaf,
+                          sah_threshold=sah_threshold)
+            self.stats = dict(b.stats)
+            order = b.prim_order
+            w = collapse_bvh4(b)
+            self.stack_size = stack_entries(w.depth)
+            self.stats.update(nodes4=int(w.ref.shape[0]), depth4=int(w.depth),
+                              stack=self.stack_size)
+            self.root_lo, self.root_hi = w.root_lo, w.root_hi
+            self.node_box = self._up("node_box", Float, w.box)
+            self.node_ref = self._up("node_ref", UInt32, w.ref)
+            self.prim_ids = self._up("prim_ids", UInt32, order.astype(np.uint32))
+            is_sph = order >= F
+            tri_order = order[~is_sph]
+            sph_order = order[is_sph] - F
+            if F:
+                self.tri_buf = self._up("tri_buf", Float, triangle_buffer4(
+                    scene.triangles.positions[tri_order]))
+            if S:
+                self.sph_buf = self._up("sph_buf", Float, sphere_buffer(
+                    scene.spheres.center[sph_order], scene.spheres.radius[sph_order]))
+            if F and S:
+                local = np.empty(N, np.int64)
+                local[~is_sph] = np.arange(tri_order.size)
+                local[is_sph] = np.arange(sph_order.size)
+                self.codes = self._up("codes", UInt32, (local | (is_sph.astype(np.int64) << 31))
+                                      .astype(np.uint32))
+        self.nbytes = _nbytes(self.node_box, self.node_ref, self.prim_ids, self.tri_buf,
+                              self.sph_buf, self.codes) + geo.plane_nbytes()
+        self.build_seconds = time.perf_counter() - t0
+
+    def _up(self, name, cls, a):
+        v, n = device_array(cls, a)
+        self.host_sizes[name] = n
+        return v
+
+    # ---------------------------------------------------------------- queries
+    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
+        """Closest hit with ``0 < t < tmax`` (see :mod:`drpt.accel.bvh`)."""
+        bt, bj, bu, bv = self._trace(o, d, tmax, active, any_hit=False)
+        geo = self.geo
+        valid = bj != INVALID
+        if geo.N:
+            in_bvh = valid & (bj < geo.N)
+            prim = dr.select(in_bvh, dr.gather(UInt32, self.prim_ids, bj, in_bvh), bj)
+        else:
+            prim = bj
+        return Hit(dr.select(valid, bt, _INF), prim, bu, bv, valid)
+
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
+        """Whether anything is hit with ``0 < t < tmax`` (any-hit, early exit)."""
+        _, bj, _, _ = self._trace(o, d, tmax, active, any_hit=True)
+        return bj != INVALID
+
+    # ------------------------------------------------------------- internals
+    def _trace(self, o, d, tmax, active, any_hit: bool):
+        o = Array3f(o)
+        d = Array3f(d)
+        active = Bool(active)
+        n = max(dr.width(o), dr.width(d), dr.width(tmax), dr.width(active))
+        bt = dr.select(active, Float(tmax), 0.0)
+        bj = UInt32(INVALID)
+        bu = Float(0)
+        bv = Float(0)
+        bt, bj = self.geo.intersect_planes(o, d, bt, bj, any_hit)
+        if not self.geo.N:
+            return bt, bj, bu, bv
+        if any_hit:
+            active &= bj == INVALID
+
+        inv_d = dr.rcp(d)
+        prep = RayPrep(o, d) if self.has_tris else None
+        node_box, node_ref = self.node_box, self.node_ref
+        tri_buf, sph_buf, codes = self.tri_buf, self.sph_buf, self.codes
+        mixed = codes is not None
+        track = bool(self.track_stack)
+
+        # root box (host constants)
+        rlo, rhi = self.root_lo, self.root_hi
+        ax = (float(rlo[0]) - o.x) * inv_d.x
+        bx = (float(rhi[0]) - o.x) * inv_d.x
+        ay = (float(rlo[1]) - o.y) * inv_d.y
+        by = (float(rhi[1]) - o.y) * inv_d.y
+        az = (float(rlo[2]) - o.z) * inv_d.z
+        bz = (float(rhi[2]) - o.z) * inv_d.z
+        tn = dr.fmax(dr.fmax(dr.fmax(dr.fmin(ax, bx), dr.fmin(ay, by)), dr.fmin(az, bz)), 0.0)
+        tf = dr.fmin(dr.fmin(dr.fmax(ax, bx), dr.fmax(ay, by)), dr.fmax(az, bz)) * _SLAB_EPS
+        h_root = active & (tn <= tf) & (tn <= bt * _SLAB_EPS)
+
+        # Every loop variable starts full width: a size-1 (Python scalar)
+        # stack pointer would make Dr.Jit 1.5 render the stack writes as
+        # uniform row stores (module docstring), the crash of bc77154.
+        cur = dr.select(h_root, dr.zeros(UInt32, n), UInt32(INVALID))
+        cur_t = dr.zeros(Float, n)
+        sp = dr.zeros(UInt32, n)
+        pi = dr.zeros(UInt32, n)
+        pe = dr.zeros(UInt32, n)
+        bt = bt + dr.zeros(Float, n)
+        bj = bj + dr.zeros(UInt32, n)
+        bu = dr.zeros(Float, n)
+        bv = dr.zeros(Float, n)
+        msp = dr.zeros(UInt32, n)
+        stk_n = dr.alloc_local(UInt32, self.stack_size)
+        stk_t = dr.alloc_local(Float, self.stack_size)
+
+        def cond(cur, cur_t, sp, stk_n, stk_t, pi, pe, bt, bj, bu, bv, msp):
+            return (pi < pe) | (cur != INVALID) | (sp > 0)
+
+        def body(cur, cur_t, sp, stk_n, stk_t, pi, pe, bt, bj, bu, bv, msp):
+            # ---- node phase
+            in_leaf = pi < pe
+            need_pop = ~in_leaf & (cur == INVALID) & (sp > 0)
+            sp = dr.select(need_pop, sp - 1, sp)
+            cur = dr.select(need_pop, stk_n.read(sp, need_pop), cur)
+            cur_t = dr.select(need_pop, stk_t.read(sp, need_pop), cur_t)
+            node_on = ~in_leaf & (cur != INVALID)
+            culled = node_on & (cur_t > bt * _SLAB_EPS)
+            node_on &= ~culled
+            inner = node_on & ((cur & LEAF_FLAG) == 0)
+            # four child boxes: six packet gathers of 4 floats (SoA)
+            b6 = cur * 6
+            lx = dr.gather(Array4f, node_box, b6, inner)
+            ly = dr.gather(Array4f, node_box, b6 + 1, inner)
+            lz = dr.gather(Array4f, node_box, b6 + 2, inner)
+            hx = dr.gather(Array4f, node_box, b6 + 3, inner)
+            hy = dr.gather(Array4f, node_box, b6 + 4, inner)
+            hz = dr.gather(Array4f, node_box, b6 + 5, inner)
+            ref = dr.gather(Array4u, node_ref, cur, inner)
+            lim = bt * _SLAB_EPS
+            key, val = [], []
+            for k in range(4):
+                ax = (lx[k] - o.x) * inv_d.x
+                bx = (hx[k] - o.x) * inv_d.x
+                ay = (ly[k] - o.y) * inv_d.y
+                by = (hy[k] - o.y) * inv_d.y
+                az = (lz[k] - o.z) * inv_d.z
+                bz = (hz[k] - o.z) * inv_d.z
+                tn = dr.fmax(dr.fmax(dr.fmax(dr.fmin(ax, bx), dr.fmin(ay, by)),
+                                     dr.fmin(az, bz)), 0.0)
+                tf = dr.fmin(dr.fmin(dr.fmax(ax, bx), dr.fmax(ay, by)), dr.fmax(az, bz)) * _SLAB_EPS
+                h = (tn <= tf) & (tn <= lim) & (ref[k] != EMPTY_REF)
+                key.append(dr.select(h, dr.minimum(tn, _FLT_MAX), _INF))
+                val.append(ref[k])
+            # sorting network: ascending entry distance, misses (inf) last
+            for i, j in ((0, 1), (2, 3), (0, 2), (1, 3), (1, 2)):
+                sw = key[j] < key[i]
+                key[i], key[j] = dr.select(sw, key[j], key[i]), dr.select(sw, key[i], key[j])
+                val[i], val[j] = dr.select(sw, val[j], val[i]), dr.select(sw, val[i], val[j])
+            # push the farther hits (farthest first), continue with the nearest
+            for k in (3, 2, 1):
+                m = inner & (key[k] < _INF)
+                stk_n.write(val[k], sp, m)
+                stk_t.write(key[k], sp, m)
+                sp = dr.select(m, sp + 1, sp)
+            if track:
+                msp = dr.maximum(msp, sp)
+            h0 = key[0] < _INF
+            cur = dr.select(inner, dr.select(h0, val[0], UInt32(INVALID)), cur)
+            cur_t = dr.select(inner, key[0], cur_t)
+            cur = dr.select(culled, UInt32(INVALID), cur)
+            # a leaf (popped, or the nearest child just found): load its range
+            leaf = node_on & (cur != INVALID) & ((cur & LEAF_FLAG) != 0)
+            start = cur & LEAF_START_MASK
+            pi = dr.select(leaf, start, pi)
+            pe = dr.select(leaf, start + ((cur >> LEAF_COUNT_SHIFT) & 15) + 1, pe)
+            cur = dr.select(leaf, UInt32(INVALID), cur)
+
+            # ---- primitive phase: one primitive of the current leaf
+            pa = pi < pe
+            if mixed:
+                code = dr.gather(UInt32, codes, pi, pa)
+                sph = (code >> 31) != 0
+                idx = code & 0x7FFFFFFF
+                tri_on, sph_on = pa & ~sph, pa & sph
+            else:
+                idx = pi
+                tri_on = sph_on = pa
+            hit_any = Bool(False)
+            if tri_buf is not None:
+                t, u, v, h = test_triangle4(tri_buf, idx, prep, bt, tri_on)
+                bt = dr.select(h, t, bt)
+                bj = dr.select(h, pi, bj)
+                bu = dr.select(h, u, bu)
+                bv = dr.select(h, v, bv)
+                hit_any |= h
+            if sph_buf is not None:
+                t, h = test_sphere(sph_buf, idx, o, d, bt, sph_on)
+                bt = dr.select(h, t, bt)
+                bj = dr.select(h, pi, bj)
+                bu = dr.select(h, 0.0, bu)
+                bv = dr.select(h, 0.0, bv)
+                hit_any |= h
+            pi = dr.select(pa, pi + 1, pi)
+            if any_hit:
+                pe = dr.select(hit_any, pi, pe)
+                sp = dr.select(hit_any, 0, sp)
+                cur = dr.select(hit_any, UInt32(INVALID), cur)
+            return cur, cur_t, sp, stk_n, stk_t, pi, pe, bt, bj, bu, bv, msp
+
+        state = (cur, cur_t, sp, stk_n, stk_t, pi, pe, bt, bj, bu, bv, msp)
+        state = dr.while_loop(state, cond, body, label="drpt_bvh4")
+        bt, bj, bu, bv, msp = state[7:]
+        if track:
+            self.max_stack = dr.max(msp)
+        return bt, bj, bu, bv
