@@ -2,18 +2,23 @@
 
 The builder works top-down and **level by level**: all nodes of one tree level
 are split at once with a handful of numpy calls on flat arrays, so the Python
-overhead is O(depth), not O(nodes). A million primitives build in a few
-seconds.
+overhead is O(depth), not O(nodes). The work per level is O(primitives not yet
+in a leaf); 510k triangles (the dining room) take ~8 s of CPU with ``"sah"``
+and ~3 s with ``"median"``.
 
 Algorithm
 ---------
-The primitives of a node form a contiguous *segment* of three index arrays,
-``ords[0..2]``, each holding the primitives sorted by centroid along one axis
-(within every segment). A split is described uniformly as ``(axis, k)``: the
-first ``k`` primitives of the segment in ``ords[axis]`` go to the left child.
-The partition is stable, so both children stay sorted along all three axes and
-no re-sorting is ever needed (the three ``argsort`` calls at the start are the
-only sorts).
+The primitives of a node form a contiguous *segment* of three index arrays
+``ids[0..2]`` (with their boxes and centroids alongside), each holding the
+primitives sorted by centroid along one axis (within every segment). A split
+is described uniformly as ``(axis, k)``: the first ``k`` primitives of the
+segment in ``ids[axis]`` go to the left child. The partition is stable, so
+both children stay sorted along all three axes and no re-sorting is ever
+needed (the three ``argsort`` calls at the start are the only sorts). These
+arrays hold only the *working set* (primitives not yet in a leaf), segment
+after segment: each level's partition scatters them into a second set of
+buffers, children in place of their parent, and drops the primitives of new
+leaves, whose final order is written to ``prim_order`` then.
 
 Split rules (``method``):
 
@@ -322,18 +327,25 @@ def build_bvh(
         cent = (lo32.astype(np.float64) + hi32) * 0.5
     else:
         cent = np.asarray(centroids, np.float64)
-    # Per axis, in that axis' sorted order: primitive ids, [lo, -hi] boxes
-    # and centroids. The partition keeps them in place (segment-local moves),
-    # so every level reads them almost sequentially.
+    # Working set, per axis in that axis' sorted order: primitive ids,
+    # [lo, -hi] boxes and centroids of the primitives not yet in a leaf, the
+    # segments of one level one after the other. Each level's partition
+    # scatters them (segment-local moves) into the other of two buffers,
+    # dropping the primitives that went into leaves.
     lohi = np.concatenate([lo32, -hi32], axis=1)
-    ords, dats, cens = [], [], []
+    ids, dd, cc = [], [], []
     for a in range(3):
         o = np.argsort(cent[:, a], kind="stable")
-        ords.append(o)
-        dats.append(lohi[o])
-        cens.append(cent[o, a])
+        ids.append(o)
+        dd.append(np.ascontiguousarray(lohi[o]))
+        cc.append(np.ascontiguousarray(cent[o, a]))
     big = 4.0 * float(np.abs(lohi).max()) + 1.0
     del lohi
+    bufs = (ids, dd, cc)  # full-size buffers holding the working set
+    spare = ([np.empty(N, np.int64) for _ in range(3)],
+             [np.empty((N, 6), np.float32) for _ in range(3)],
+             [np.empty(N, np.float64) for _ in range(3)])
+    prim_order = np.empty(N, np.int64)
 
     cap = 2 * N + 2
     node_lo = np.zeros((cap, 3), np.float32)
@@ -361,17 +373,8 @@ def build_bvh(
         nseg = s_start.size
         total = int(s_n.sum())
         seg = np.repeat(np.arange(nseg), s_n)
-        off = np.cumsum(s_n) - s_n  # local offset of each segment
+        off = np.cumsum(s_n) - s_n  # offset of each segment in the working set
         local = np.arange(total) - off[seg]
-        pos = s_start[seg] + local
-        if total == N and nseg == 1:
-            ids = [o.copy() for o in ords]
-            dd = [d.copy() for d in dats]
-            cc = [c.copy() for c in cens]
-        else:
-            ids = [o[pos] for o in ords]
-            dd = [np.take(d, pos, axis=0) for d in dats]
-            cc = [c[pos] for c in cens]
         last = off + s_n - 1
         cmin = np.stack([cc[a][off] for a in range(3)], 1)
         cmax = np.stack([cc[a][last] for a in range(3)], 1)
@@ -414,53 +417,66 @@ def build_bvh(
                 mmin = int(s_n[mm].min())
                 median_min = mmin if median_min == 0 else min(median_min, mmin)
 
-        # leaves
+        # leaves: their primitives reach their final positions
         lf = np.flatnonzero(leaf)
         node_a[s_node[lf]] = s_start[lf]
         node_count[s_node[lf]] = s_n[lf]
         n_leaves += lf.size
-
         sp = np.flatnonzero(~leaf)
         if sp.size == 0:
+            prim_order[s_start[seg] + local] = ids[0]
             break
+        all_split = lf.size == 0
+        if not all_split:
+            em = (~leaf)[seg]  # elements of split segments
+            lm = ~em
+            prim_order[(s_start[seg] + local)[lm]] = ids[0][lm]
+
         left = next_free + 2 * np.arange(sp.size)
         next_free += 2 * sp.size
         node_a[s_node[sp]] = left
         node_count[s_node[sp]] = 0
 
-        # partition the split segments (stable, in all three orders)
-        em = (~leaf)[seg]
-        all_split = bool(em.all())
-        sel_ = slice(None) if all_split else em
-        eseg = seg[sel_]
-        elocal = local[sel_]
-        epos = pos[sel_]
-        eax = axis[eseg]
-        ek = k[eseg]
-        first = elocal == 0
+        # partition the split segments (stable, in all three orders) into the
+        # spare buffers; leaf elements go past the end and are dropped
+        ns = s_n[sp]
+        total_split = int(ns.sum())
+        new_off = np.zeros(nseg, np.int64)
+        new_off[sp] = np.cumsum(ns) - ns
+        ek = k[seg]
+        goes_left = local < ek  # in the order of the segment's split axis
+        eax = axis[seg]
         for a in range(3):
             sel = eax == a
-            ida = ids[a][sel_][sel]
-            is_left[ida] = elocal[sel] < ek[sel]
+            is_left[ids[a][sel]] = goes_left[sel]
+        base = new_off[seg]
+        if not all_split:
+            trash = total_split + np.cumsum(lm) - 1
+        nids, ndd, ncc = spare
         for a in range(3):
-            ida = ids[a][sel_]
-            lft = is_left[ida]
+            lft = is_left[ids[a]]
             cl = np.cumsum(lft)
-            seg_before = np.zeros(nseg, np.int64)
-            seg_before[eseg[first]] = (cl - lft)[first]
-            lrank = cl - seg_before[eseg]  # inclusive count of lefts so far
-            newpos = epos - elocal + np.where(lft, lrank - 1, ek + (elocal - lrank))
-            ords[a][newpos] = ida
-            dats[a][newpos] = dd[a][sel_]
-            cens[a][newpos] = cc[a][sel_]
+            before = (cl - lft)[off]  # lefts before each segment
+            lrank = cl - before[seg]  # inclusive count of lefts in the segment so far
+            newpos = base + np.where(lft, lrank - 1, ek + (local - lrank))
+            if not all_split:
+                newpos = np.where(em, newpos, trash)
+            nids[a][newpos] = ids[a]
+            ndd[a][newpos] = dd[a]
+            ncc[a][newpos] = cc[a]
+        bufs, spare = spare, bufs
+        ids = [x[:total_split] for x in nids]
+        dd = [x[:total_split] for x in ndd]
+        cc = [x[:total_split] for x in ncc]
 
+        # children, left then right, in the order of the working set
         st = s_start[sp]
         kk = k[sp]
         dd_ = s_depth[sp] + 1
-        s_start = np.concatenate([st, st + kk])
-        s_n = np.concatenate([kk, s_n[sp] - kk])
-        s_node = np.concatenate([left, left + 1])
-        s_depth = np.concatenate([dd_, dd_])
+        s_start = np.stack([st, st + kk], 1).ravel()
+        s_n = np.stack([kk, ns - kk], 1).ravel()
+        s_node = np.stack([left, left + 1], 1).ravel()
+        s_depth = np.repeat(dd_, 2)
 
     M = next_free
     out = BVHArrays(
@@ -468,7 +484,7 @@ def build_bvh(
         node_hi=node_hi[:M].copy(),
         node_a=node_a[:M].copy(),
         node_count=node_count[:M].copy(),
-        prim_order=ords[0],
+        prim_order=prim_order,
         depth=max_d,
     )
     counts = out.node_count[out.node_count > 0]
