@@ -250,6 +250,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .compare import add_parser as add_compare_parser
 
     add_compare_parser(sub)
+    from .gallery import add_parser as add_gallery_parser
+
+    add_gallery_parser(sub)
     from .profile import add_parser as add_profile_parser
 
     add_profile_parser(sub)

@@ -1,0 +1,241 @@
+"""``python -m drpt gallery``: render every bundled scene, with its error against Mitsuba 3.
+
+::
+
+    python -m drpt gallery [--size W H | --scale K] [--spp N] [--scenes A,B,...]
+                           [--seed S] [--out DIR] [--quiet]
+
+The scenes are the entries of the committed reference table
+(``reference/make_references.py``, ``REFERENCES``): each names a bundled
+scene file and the material mode it is rendered with (``cornellbox`` and
+``cornellbox_ct`` are the Cornell box read as Phong and as Cook-Torrance).
+The dining room is generated first (``scenes/make_diningroom.py``, ~6 s) when
+``scenes/diningroom/`` is missing.
+
+Size
+    By default each scene is rendered at ``--scale`` (default 2) times the size
+    of its reference; ``--size W H`` renders every scene at ``W x H`` instead.
+Error against the reference
+    When the render's size is an integer multiple ``k`` of the reference's
+    (same ``k`` for both axes), the render is
+    box-downsampled by ``k`` (the mean of each ``k x k`` block) and compared
+    with the reference EXR. Both renderers use a box pixel filter, so the
+    downsampled render estimates exactly the reference's pixels. Otherwise
+    the error columns say ``n/a``. Columns (:mod:`drpt.metrics`): ``relMSE``
+    of the downsampled render; ``noise relMSE``, what relMSE an unbiased
+    render would show from its own noise alone, ``mean(var / (ref^2 +
+    0.01))`` with drpt's per-pixel variance estimate (so relMSE well above it
+    points to a bias); and the fraction of values outside the 99.7% interval
+    (``outside_ci`` with drpt's variance plus the reference's: measured from
+    its batches where ``reference/`` has a ``*_var.exr``, else drpt's
+    per-sample variance over the reference's spp; ~0.3% if unbiased, more
+    where samples are heavy-tailed, e.g. sunlight through glass, and drpt's
+    variance estimate at gallery spp misses the rare bright paths).
+
+Outputs in ``--out`` (default ``gallery/``): ``<name>.png`` (gamma 2.2),
+``gallery.md`` and ``gallery.html`` (each image with render time, build
+time, samples/s and the error columns) and ``gallery.json`` (the same
+numbers).
+"""
+
+from __future__ import annotations
+
+import argparse
+import html
+import importlib.util
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DrptError
+
+ROOT = Path(__file__).resolve().parents[1]
+REFERENCE_SCRIPT = ROOT / "reference" / "make_references.py"
+
+__all__ = ["add_parser", "main", "references", "downsample", "render_gallery"]
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register the ``gallery`` subcommand on an ``add_subparsers()`` object."""
+    p = subparsers.add_parser(
+        "gallery", allow_abbrev=False,
+        help="render every bundled scene to a gallery page with errors against Mitsuba 3",
+        description="render the bundled scenes (the entries of reference/make_references.py) "
+                    "and write PNGs plus gallery.md/.html with times and the error against "
+                    "each committed Mitsuba reference")
+    size = p.add_mutually_exclusive_group()
+    size.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), default=None,
+                      help="render every scene at W x H (default: --scale times the "
+                           "reference's size)")
+    size.add_argument("--scale", type=int, default=2,
+                      help="render each scene at this multiple of its reference's size "
+                           "(default 2)")
+    p.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
+    p.add_argument("--scenes", default=None,
+                   help="comma-separated subset of the scene names (default: all)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", default="gallery", help="output folder (default gallery/)")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bars")
+    p.set_defaults(func=main)
+    return p
+
+
+def references():
+    """The reference table module (``reference/make_references.py``)."""
+    if not REFERENCE_SCRIPT.is_file():
+        raise DrptError(f"{REFERENCE_SCRIPT}: not found; the gallery needs the repository "
+                        "checkout (scenes/ and reference/)")
+    spec = importlib.util.spec_from_file_location("drpt_make_references", REFERENCE_SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def downsample(img: np.ndarray, k: int) -> np.ndarray:
+    """Mean of each ``k x k`` pixel block (``H`` and ``W`` multiples of ``k``)."""
+    h, w = img.shape[:2]
+    return img.reshape(h // k, k, w // k, k, *img.shape[2:]).mean((1, 3))
+
+
+def _factor(size, ref_size) -> int | None:
+    (w, h), (rw, rh) = size, ref_size
+    if w % rw or h % rh or w // rw != h // rh:
+        return None
+    return w // rw
+
+
+def render_gallery(out: Path, names=None, size=None, scale: int = 2, spp: int = 64,
+                   seed: int = 0, progress: bool = True) -> list[dict]:
+    """Render ``names`` (default: every reference) into ``out``; returns one row per scene."""
+    from . import metrics
+    from .backend import ensure_llvm
+    from .imageio import read_image, write_image
+    from .render.integrators.path import PathOptions
+    from .render.renderer import RenderOptions, Renderer
+    from .scene import load_scene
+
+    refs = references()
+    table = refs.REFERENCES
+    names = list(table) if names is None else list(names)
+    unknown = [n for n in names if n not in table]
+    if unknown:
+        raise DrptError(f"unknown scene(s) {', '.join(unknown)}; choose from {', '.join(table)}")
+    if spp <= 0 or scale <= 0 or (size is not None and min(size) <= 0):
+        raise DrptError("--size, --scale and --spp must be positive")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise DrptError(f"{out}: cannot create output folder: {e.strerror or e}") from e
+
+    ensure_llvm()
+    rows = []
+    for name in names:
+        scene_file, rw, rh, ref_spp, depth, mode = table[name]
+        W, H = size if size is not None else (rw * scale, rh * scale)
+        t0 = time.perf_counter()
+        scene = load_scene(refs.scene_path(scene_file))
+        load_s = time.perf_counter() - t0
+        r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, seed=seed, bsdf=mode,
+                                          path=PathOptions(max_depth=depth),
+                                          progress=progress)).render()
+        if r.nonfinite:
+            print(f"drpt: warning: {name}: {r.nonfinite} samples were NaN/Inf and were set to 0",
+                  file=sys.stderr)
+        write_image(out / f"{name}.png", r.image)
+        row = {"name": name, "scene": scene_file, "bsdf": mode, "width": W, "height": H,
+               "spp": spp, "seconds": r.seconds, "build_seconds": r.build_seconds,
+               "load_seconds": load_s, "samples_per_second": r.samples_per_second,
+               "image": f"{name}.png", "reference": None}
+        k = _factor((W, H), (rw, rh))
+        ref_file = refs.reference_path(name)
+        if k is not None and ref_file.is_file():
+            ref = read_image(ref_file)[..., :3].astype(np.float64)
+            x = downsample(r.image.astype(np.float64), k)
+            # variance of a k x k block mean: the mean of the pixel variances / k^2
+            var = downsample(r.variance.astype(np.float64), k) / (k * k)
+            var_file = refs.variance_path(name)
+            if var_file.is_file():  # measured from the reference's batches
+                var_ref = read_image(var_file)[..., :3].astype(np.float64)
+            else:  # drpt's per-sample variance over the reference's spp
+                var_ref = var * (k * k * spp) / ref_spp
+            row["reference"] = {
+                "file": str(ref_file.relative_to(ROOT)), "width": rw, "height": rh,
+                "spp": ref_spp, "downsample": k,
+                "rel_mse": metrics.rel_mse(x, ref),
+                "noise_rel_mse": float(np.mean(var / (ref * ref + 1e-2))),
+                "outside_ci": metrics.outside_ci(x, var, ref, var_ref),
+            }
+        rows.append(row)
+        msg = f"{name}: {W}x{H}, {spp} spp, {r.seconds:.1f} s"
+        if row["reference"]:
+            msg += f", relMSE {row['reference']['rel_mse']:.2e}"
+        print(msg, flush=True)
+    _write_pages(out, rows)
+    return rows
+
+
+def _cells(row: dict) -> list[str]:
+    ref = row["reference"]
+    cells = [row["name"], row["bsdf"], f"{row['width']}x{row['height']}", str(row["spp"]),
+             f"{row['seconds']:.1f}", f"{row['build_seconds']:.1f}",
+             f"{row['samples_per_second'] / 1e6:.2f}"]
+    if ref is None:
+        cells += ["n/a", "n/a", "n/a", "no reference at this size"]
+    else:
+        cells += [f"{ref['rel_mse']:.2e}", f"{ref['noise_rel_mse']:.2e}",
+                  f"{100 * ref['outside_ci']:.2f}%",
+                  f"{ref['width']}x{ref['height']}, {ref['spp']} spp"
+                  + (f" (render / {ref['downsample']})" if ref["downsample"] > 1 else "")]
+    return cells
+
+
+HEADER = ["scene", "bsdf", "size", "spp", "render s", "build s", "Msamples/s", "relMSE",
+          "noise relMSE", "outside 99.7% CI", "Mitsuba reference"]
+EXPLAIN = ("Error columns compare the render, box-downsampled to the size of the committed "
+           "Mitsuba 3 reference (reference/), with that reference. *noise relMSE* is what an "
+           "unbiased render would show from its own noise (drpt's variance estimate); relMSE "
+           "well above it, or far more than ~0.3% of values outside the 99.7% interval, "
+           "points to a bias. Render time excludes the BVH build (build s) and scene loading.")
+
+
+def _write_pages(out: Path, rows: list[dict]) -> None:
+    md = ["# drpt gallery", "", EXPLAIN, "",
+          "| " + " | ".join(HEADER) + " |", "|" + " --- |" * len(HEADER)]
+    md += ["| " + " | ".join(_cells(r)) + " |" for r in rows]
+    md.append("")
+    for r in rows:
+        md += [f"## {r['name']}", "", f"![{r['name']}]({r['image']})", "",
+               f"`{r['scene']}`, `--bsdf {r['bsdf']}`, {r['width']}x{r['height']}, "
+               f"{r['spp']} spp: {r['seconds']:.1f} s, "
+               f"{r['samples_per_second'] / 1e6:.2f} Msamples/s", ""]
+    h = ["<!doctype html>", "<meta charset='utf-8'><title>drpt gallery</title>",
+         "<style>body{font-family:sans-serif}td,th{padding:2px 8px;text-align:right}"
+         "img{image-rendering:pixelated;width:384px}figure{display:inline-block}</style>",
+         "<h1>drpt gallery</h1>", f"<p>{html.escape(EXPLAIN)}</p>", "<table>",
+         "<tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in HEADER) + "</tr>"]
+    h += ["<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in _cells(r)) + "</tr>"
+          for r in rows]
+    h.append("</table>")
+    h += [f"<figure><img src='{html.escape(r['image'])}' alt='{html.escape(r['name'])}'>"
+          f"<figcaption>{html.escape(r['name'])}</figcaption></figure>" for r in rows]
+    try:
+        (out / "gallery.md").write_text("\n".join(md), encoding="utf-8")
+        (out / "gallery.html").write_text("\n".join(h) + "\n", encoding="utf-8")
+        (out / "gallery.json").write_text(json.dumps(rows, indent=2) + "\n", encoding="utf-8")
+    except OSError as e:
+        raise DrptError(f"{out}: cannot write: {e.strerror or e}") from e
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run ``gallery`` for parsed ``args``; user errors raise DrptError."""
+    names = None
+    if args.scenes:
+        names = [s.strip() for s in args.scenes.split(",") if s.strip()]
+    out = Path(args.out)
+    render_gallery(out, names=names, size=tuple(args.size) if args.size else None,
+                   scale=args.scale, spp=args.spp, seed=args.seed, progress=not args.quiet)
+    print(f"{out}: gallery.md, gallery.html, gallery.json and one PNG per scene")
+    return 0
