@@ -7,6 +7,10 @@ float32 RGB. Run from the repository root:
     .venv/bin/python reference/make_references.py            # all
     .venv/bin/python reference/make_references.py cornellbox # one
 
+References listed in ``BATCHES`` are rendered as independent batches and also
+write ``<name>_..._var.exr``, the per-pixel variance of the mean (the batches'
+spread), for tests whose own low-spp variance estimate is unreliable.
+
 The dining room (``scenes/diningroom/``, git-ignored) is generated first by
 ``scenes/make_diningroom.py`` at its default size when it is missing or was
 generated at another triangle count (:func:`scene_path`); the generator is
