@@ -28,28 +28,44 @@ this order:
 Stack size: a lane at a node of depth ``k`` (root = 0) holds at most three
 entries per ancestor level, and a push round adds at most three, so
 ``3 * (depth4 + 1)`` entries suffice; :func:`stack_entries` adds one spare.
-``BVH4.track_stack`` records the largest stack pointer of each query (tests).
+The stack is split into ``dr.alloc_local`` arrays of at most ``LOCAL_CHUNK``
+(32) entries (a deeper tree costs one masked read/write per extra array; the
+Cornell box and 100k identical triangles need one). ``BVH4.track_stack``
+records the largest stack pointer of each query (tests).
 
 The crash of the first 4-wide BVH (commit ``bc77154``, reverted)
 -----------------------------------------------------------------
-What is ruled out or guarded against (``tests/test_bvh4.py``):
+Reproduced (100k copies of one triangle, 1000 rays along -z, closest hit
+then occlusion): about 1 process in 10 dies with SIGSEGV in a packet gather
+of the JIT kernel on a Dr.Jit worker thread; both crashes whose query was
+logged were in the *occlusion* query (lanes diverge most there: half finish at their first hit, half
+traverse every node), at a wild address (a node index around 2**31 / 6, i.e.
+garbage ``cur``). Ruled out, with evidence:
 
-* stack overflow: with ``track_stack`` the deepest stack on 100k identical
-  triangles is 29 entries of 43 (depth4 = 13); the bound above holds;
-* dangling host memory: Dr.Jit (LLVM) maps numpy memory without copying but
-  keeps a reference to the array (the aligned view and its base stay alive);
-* masked packet gathers: masked lanes read a static zero packet, never their
-  (possibly garbage) index;
-* packets past the end: every upload is followed by a 64-byte zero packet;
-* a Dr.Jit 1.5 hazard found on the way: in a symbolic loop,
-  ``Local.write(value, index, mask)`` whose ``index`` variable has size 1 is
-  rendered as one uniform row store at the largest index of the active
-  lanes, even when the lanes' values differ; a stack pointer created as a
-  Python scalar (``sp = UInt32(0)``) and written before being widened loses
-  entries and the lanes later pop uninitialized ``alloca`` memory (garbage
-  node indices). bc77154 widened ``sp`` before its writes, so this is not
-  proven to be its crash, but every loop variable here starts full width
-  (``dr.zeros(T, n)``) so the traversal cannot hit it.
+* stack overflow: with ``track_stack`` the deepest stack was 29 entries of
+  43 (depth4 = 13 with bc77154's collapse); the bound above holds;
+* dangling host memory: Dr.Jit maps numpy memory without copying but keeps
+  a reference to the array; uploads copied into Dr.Jit-owned memory crashed
+  just as often (2 of 9 runs);
+* masked packet gathers: masked lanes read a static zero packet (checked in
+  the generated IR); packets past the end: uploads are padded by 64 bytes;
+* the Dr.Jit 1.5 local-array hazard below (bc77154 widened ``sp`` first).
+
+Not understood: it matches Dr.Jit issues #532 (``dr.alloc_local`` stacks
+larger than 128 bytes per lane crash the LLVM backend, DFS/BVH kernels) and
+#446 (LLVM-only garbage indices in a ``dr.Local`` BVH stack). What changed
+here, and 0 crashes since (see the commit log for run counts): bc77154's
+collapse broke ties between equal child areas towards the first child, so
+on identical boxes the 4-wide tree was lopsided (depth4 13, stacks of 29
+entries); ties now go to the shallower child (depth4 7, stack 25 entries,
+one array of <= 128 bytes per lane), and no local array exceeds 32 entries.
+
+Dr.Jit 1.5 hazard (avoided): in a symbolic loop, ``Local.write(value, index,
+mask)`` whose ``index`` variable has size 1 is rendered as one uniform row
+store at the largest index of the active lanes, even when the lanes' values
+differ; a stack pointer created as ``UInt32(0)`` and written before being
+widened loses entries (44 of 64 lanes in ``tests/test_bvh4.py``). Every loop
+variable here starts full width (``dr.zeros(T, n)``).
 
 Device data (float32 or uint32, in BVH order, 64-byte aligned so that Dr.Jit
 emits packet gathers, see :func:`device_array`): per 4-wide node, 24 floats of
@@ -160,8 +176,8 @@ def collapse_bvh4(b: BVHArrays) -> BVH4Arrays:
     """Collapse a binary BVH into a 4-wide one (vectorized, level by level).
 
     Every 4-wide node starts from an inner binary node with its two children
-    and, twice, replaces the inner child of largest surface area by its two
-    children, so it gets up to 4 children. Nodes are numbered breadth-first,
+    and, twice, replaces the inner child of largest surface area (on ties:
+    the shallower one) by its two children, so it gets up to 4 children. Nodes are numbered breadth-first,
     root = 0. Per node ``k``: ``box[k]`` holds the four child boxes in SoA
     order (six 16-byte packets); ``ref[k]`` the four child references (an inner
     child is its node index, bit 31 clear; a leaf is
@@ -192,16 +208,21 @@ def collapse_bvh4(b: BVHArrays) -> BVH4Arrays:
             C[:, 0] = a[frontier]
             C[:, 1] = a[frontier] + 1
             rows = np.arange(K)
+            lvl = np.ones((K, 4))  # binary levels below the 4-wide node
             for slot in (2, 3):
                 valid = C >= 0
                 inner = valid & (cnt[np.maximum(C, 0)] == 0)
-                ar = np.where(inner, area[np.maximum(C, 0)], -1.0)
+                # largest area first; on ties (e.g. identical boxes) the
+                # shallower child, so degenerate trees stay balanced
+                ar = np.where(inner, area[np.maximum(C, 0)] * (1.0 - 1e-7 * lvl), -1.0)
                 j = np.argmax(ar, axis=1)
                 ok = ar[rows, j] >= 0
                 r, jj = rows[ok], j[ok]
                 x = C[r, jj]
                 C[r, jj] = a[x]
                 C[r, slot] = a[x] + 1
+                lvl[r, jj] += 1
+                lvl[r, slot] = lvl[r, jj]
         K = C.shape[0]
         valid = C >= 0
         Cs = np.maximum(C, 0)
@@ -225,6 +246,34 @@ def collapse_bvh4(b: BVHArrays) -> BVH4Arrays:
     return BVH4Arrays(box=np.concatenate(boxes), ref=np.concatenate(refs),
                       root_lo=b.node_lo[0].astype(np.float32),
                       root_hi=b.node_hi[0].astype(np.float32), depth=depth)
+
+
+# ------------------------------------------------------------------ stack
+LOCAL_CHUNK = 32  # entries per dr.alloc_local array (128 bytes of 32-bit values)
+
+
+def _chunk_index(sp, m, c, n_chunks):
+    if n_chunks == 1:
+        return sp, m
+    mc = m & ((sp // LOCAL_CHUNK) == c)
+    return dr.select(mc, sp - c * LOCAL_CHUNK, 0), mc
+
+
+def _pop(stk, sp, m):
+    """Entry ``sp`` of a stack split into ``LOCAL_CHUNK``-entry local arrays."""
+    out = None
+    for c, arr in enumerate(stk):
+        i, mc = _chunk_index(sp, m, c, len(stk))
+        v = arr.read(i, mc)
+        out = v if out is None else dr.select(mc, v, out)
+    return out
+
+
+def _push(stk, value, sp, m):
+    """Write entry ``sp`` (lanes ``m``) of a split stack."""
+    for c, arr in enumerate(stk):
+        i, mc = _chunk_index(sp, m, c, len(stk))
+        arr.write(value, i, mc)
 
 
 # ------------------------------------------------------------------ BVH4
@@ -374,8 +423,10 @@ class BVH4:
         bu = dr.zeros(Float, n)
         bv = dr.zeros(Float, n)
         msp = dr.zeros(UInt32, n)
-        stk_n = dr.alloc_local(UInt32, self.stack_size)
-        stk_t = dr.alloc_local(Float, self.stack_size)
+        sizes = [min(LOCAL_CHUNK, self.stack_size - c) for c in
+                 range(0, self.stack_size, LOCAL_CHUNK)]
+        stk_n = tuple(dr.alloc_local(UInt32, z) for z in sizes)
+        stk_t = tuple(dr.alloc_local(Float, z) for z in sizes)
 
         def cond(cur, cur_t, sp, stk_n, stk_t, pi, pe, bt, bj, bu, bv, msp):
             return (pi < pe) | (cur != INVALID) | (sp > 0)
@@ -385,8 +436,8 @@ class BVH4:
             in_leaf = pi < pe
             need_pop = ~in_leaf & (cur == INVALID) & (sp > 0)
             sp = dr.select(need_pop, sp - 1, sp)
-            cur = dr.select(need_pop, stk_n.read(sp, need_pop), cur)
-            cur_t = dr.select(need_pop, stk_t.read(sp, need_pop), cur_t)
+            cur = dr.select(need_pop, _pop(stk_n, sp, need_pop), cur)
+            cur_t = dr.select(need_pop, _pop(stk_t, sp, need_pop), cur_t)
             node_on = ~in_leaf & (cur != INVALID)
             culled = node_on & (cur_t > bt * _SLAB_EPS)
             node_on &= ~culled
@@ -423,8 +474,8 @@ class BVH4:
             # push the farther hits (farthest first), continue with the nearest
             for k in (3, 2, 1):
                 m = inner & (key[k] < _INF)
-                stk_n.write(val[k], sp, m)
-                stk_t.write(key[k], sp, m)
+                _push(stk_n, val[k], sp, m)
+                _push(stk_t, key[k], sp, m)
                 sp = dr.select(m, sp + 1, sp)
             if track:
                 msp = dr.maximum(msp, sp)
