@@ -2,9 +2,11 @@
 
 Each renderer renders once to compile (warm-up), then three times timed (the
 best counts: the machine may be shared); the ratio is drpt samples/s over
-Mitsuba samples/s at equal size, spp and depth.
+Mitsuba samples/s at equal size, spp and depth. ``accels`` (comma-separated
+``build_accel`` kinds, default ``bvh``) renders with each accelerator in turn,
+next to the same Mitsuba timing, e.g. ``bvh2,bvh4`` for the binary and 4-wide BVH.
 
-    .venv/bin/python benchmarks/render_vs_mitsuba.py [size] [spp]
+    .venv/bin/python benchmarks/render_vs_mitsuba.py [size] [spp] [accels]
 """
 
 import sys
@@ -18,7 +20,7 @@ SCENES = [("scenes/cornellbox/cornellbox.txt", "phong"),
           ("scenes/newscene/newscene.txt", "cook-torrance")]
 
 
-def main(size=256, spp=64):
+def main(size=256, spp=64, accels="bvh"):
     import mitsuba as mi
 
     mi.set_variant("llvm_ad_rgb")
@@ -27,14 +29,18 @@ def main(size=256, spp=64):
     from drpt.render.renderer import RenderOptions, Renderer
     from drpt.scene import load_scene
 
-    print("| scene | depth | drpt Msamples/s | Mitsuba Msamples/s | ratio |\n|---|---|---|---|---|")
+    print("| scene | depth | accel | drpt Msamples/s | Mitsuba Msamples/s | ratio |\n"
+          "|---|---|---|---|---|---|")
     for path, mode in SCENES:
         scene = load_scene(ROOT / path)
         for depth in (8, -1):
-            r = Renderer(scene, RenderOptions(width=size, height=size, spp=spp, bsdf=mode,
-                                              progress=False, path=PathOptions(max_depth=depth)))
-            r.render()
-            drpt_rate = max(r.render().samples_per_second for _ in range(3))
+            rates = {}
+            for accel in accels.split(","):
+                r = Renderer(scene, RenderOptions(width=size, height=size, spp=spp, bsdf=mode,
+                                                  accel=accel, progress=False,
+                                                  path=PathOptions(max_depth=depth)))
+                r.render()
+                rates[accel] = max(r.render().samples_per_second for _ in range(3))
             ms = mi.load_dict(to_mitsuba_dict(scene, size, size, spp, max_depth=depth, bsdf=mode))
             dr.eval(mi.render(ms, spp=spp))
             best = float("inf")
@@ -45,9 +51,10 @@ def main(size=256, spp=64):
                 dr.sync_thread()
                 best = min(best, time.perf_counter() - t0)
             mi_rate = size * size * spp / best
-            print(f"| {Path(path).name} | {depth} | {drpt_rate / 1e6:.2f} | {mi_rate / 1e6:.2f} "
-                  f"| {drpt_rate / mi_rate:.2f} |")
+            for accel, rate in rates.items():
+                print(f"| {Path(path).name} | {depth} | {accel} | {rate / 1e6:.2f} "
+                      f"| {mi_rate / 1e6:.2f} | {rate / mi_rate:.2f} |")
 
 
 if __name__ == "__main__":
-    main(*(int(a) for a in sys.argv[1:3]))
+    main(*(int(a) for a in sys.argv[1:3]), *sys.argv[3:4])

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from .brute import BruteForce
 from .bvh import BVH, INVALID, Hit
-from .bvh4 import LEAF_MAX_COUNT, BVH4
+from .bvh4 import BVH4
 from .grid import UniformGrid
 
 __all__ = ["BVH", "BVH4", "BruteForce", "Hit", "INVALID", "UniformGrid", "build_accel"]
@@ -30,9 +30,11 @@ def build_accel(scene, kind: str = "bvh", method: str = "sah", leaf_size: int = 
 
     Args:
         scene: a :class:`~drpt.scene.model.Scene`.
-        kind: ``"bvh4"`` (4-wide BVH, :mod:`drpt.accel.bvh4`), ``"bvh2"``
-            (binary BVH, :mod:`drpt.accel.bvh`), ``"bvh"`` (``"bvh2"`` for now),
-            ``"grid"`` (uniform grid, 3D-DDA) or ``"brute"``.
+        kind: ``"bvh"`` (the binary BVH, :mod:`drpt.accel.bvh`; alias
+            ``"bvh2"``), ``"bvh4"`` (4-wide BVH, :mod:`drpt.accel.bvh4`: about
+            3x faster, but it still crashes sporadically on degenerate input,
+            see its docstring, so it is not the default), ``"grid"`` (uniform
+            grid, 3D-DDA) or ``"brute"``.
         method: BVH split rule (:mod:`drpt.accel.bvh_build`): ``"sah"``
             (binned SAH, default), ``"median"`` (object median) or
             ``"threshold"`` (the seed's rule: SAH in nodes of at most

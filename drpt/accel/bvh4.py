@@ -36,11 +36,11 @@ records the largest stack pointer of each query (tests).
 The crash of the first 4-wide BVH (commit ``bc77154``, reverted)
 -----------------------------------------------------------------
 Reproduced (100k copies of one triangle, 1000 rays along -z, closest hit
-then occlusion): about 1 process in 10 dies with SIGSEGV in a packet gather
-of the JIT kernel on a Dr.Jit worker thread; both crashes whose query was
-logged were in the *occlusion* query (lanes diverge most there: half finish at their first hit, half
-traverse every node), at a wild address (a node index around 2**31 / 6, i.e.
-garbage ``cur``). Ruled out, with evidence:
+then occlusion, 2 repetitions per process): about 1 process in 8-10 dies
+with SIGSEGV in a packet gather of the JIT kernel on a Dr.Jit worker thread
+(seen under gdb), at a wild address (a node index around 2**31 / 6, i.e. a
+garbage ``cur``), in the closest-hit or the occlusion query. Ruled out,
+with evidence:
 
 * stack overflow: with ``track_stack`` the deepest stack was 29 entries of
   43 (depth4 = 13 with bc77154's collapse); the bound above holds;
@@ -51,14 +51,17 @@ garbage ``cur``). Ruled out, with evidence:
   the generated IR); packets past the end: uploads are padded by 64 bytes;
 * the Dr.Jit 1.5 local-array hazard below (bc77154 widened ``sp`` first).
 
-Not understood: it matches Dr.Jit issues #532 (``dr.alloc_local`` stacks
-larger than 128 bytes per lane crash the LLVM backend, DFS/BVH kernels) and
-#446 (LLVM-only garbage indices in a ``dr.Local`` BVH stack). What changed
-here, and 0 crashes since (see the commit log for run counts): bc77154's
-collapse broke ties between equal child areas towards the first child, so
-on identical boxes the 4-wide tree was lopsided (depth4 13, stacks of 29
-entries); ties now go to the shallower child (depth4 7, stack 25 entries,
-one array of <= 128 bytes per lane), and no local array exceeds 32 entries.
+Not understood, and NOT fixed: it matches Dr.Jit issues #532
+(``dr.alloc_local`` stacks larger than 128 bytes per lane crash the LLVM
+backend, DFS/BVH kernels) and #446 (LLVM-only garbage indices in a
+``dr.Local`` BVH stack). Changed here without effect on it: ties between
+equal child areas now go to the shallower child (bc77154's collapse gave a
+lopsided tree on identical boxes: depth4 13, 43-entry stack; now depth4 7,
+25 entries, one local array of 100 bytes per lane), no local array exceeds
+32 entries, all loop state starts full width, uploads are padded. The
+reproducer still crashes 2 processes in 18 (once in the closest-hit query,
+once in the occlusion query). Hence :class:`BVH4` is opt-in
+(``build_accel(kind="bvh4")``), not the default.
 
 Dr.Jit 1.5 hazard (avoided): in a symbolic loop, ``Local.write(value, index,
 mask)`` whose ``index`` variable has size 1 is rendered as one uniform row
