@@ -18,7 +18,7 @@ from drpt.export.mitsuba import look_at_matrix
 from drpt.export.mitsuba_envmap import to_mitsuba
 from drpt.imageio import write_image
 from drpt.render.camera import RayCamera
-from drpt.render.lights.envmap import EnvironmentLight, check_radius
+from drpt.render.lights.envmap import LUMINANCE, EnvironmentLight, check_radius
 from drpt.scene import model
 
 from chi2util import mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
@@ -150,11 +150,19 @@ def test_chi2_sample_matches_pdf(name):
     assert ok, msg
 
 
+def _linear_cdf(a, b, x):
+    """CDF on [0, 1] of the density proportional to lerp(a, b, x)."""
+    tot = 0.5 * (a + b)
+    return np.where(tot > 0, (a * x + 0.5 * (b - a) * x * x) / np.where(tot > 0, tot, 1), x)
+
+
 @pytest.mark.parametrize("name", list(MAPS))
 def test_cells_sampled_with_table_probabilities(name):
-    """Quadrature-free check of the piecewise-constant scheme: cell counts
-    against P(cell) = pdf * solid angle (Pearson chi2, cells with >= 5
-    expected), and u and cos(theta) uniform within the cells (KS)."""
+    """Quadrature-free check of the scheme: cell counts against P(cell) =
+    cell density * solid angle (Pearson chi2, cells with >= 5 expected), and
+    inside the cells the exact bilinear density of the corner luminances:
+    its marginal CDF in ft (fraction of the band's cos theta range) and the
+    conditional CDF in fx, evaluated at the samples, are uniform (KS)."""
     from scipy import stats
 
     img = MAPS[name]()
@@ -179,9 +187,29 @@ def test_cells_sampled_with_table_probabilities(name):
     if m.sum() > 1:
         chi = ((count[m] - e[m]) ** 2 / e[m]).sum()
         assert stats.chi2.sf(chi, m.sum() - 1) > 1e-3, chi
-    fz = (cos_edges[iy] - d[1]) / (cos_edges[iy] - cos_edges[iy + 1])
-    assert stats.kstest(x - ix, "uniform").pvalue > 1e-3
-    assert stats.kstest(fz, "uniform").pvalue > 1e-3
+    lum = img.astype(np.float64) @ LUMINANCE
+    r1 = np.minimum(iy + 1, H - 1)
+    c00, c10 = lum[iy, ix], lum[iy, (ix + 1) % W]
+    c01, c11 = lum[r1, ix], lum[r1, (ix + 1) % W]
+    ft = np.clip((cos_edges[iy] - d[1]) / (cos_edges[iy] - cos_edges[iy + 1]), 0, 1)
+    fx = x - ix
+    u_t = _linear_cdf(c00 + c10, c01 + c11, ft)
+    u_x = _linear_cdf(c00 + (c01 - c00) * ft, c10 + (c11 - c10) * ft, fx)
+    assert stats.kstest(u_t, "uniform").pvalue > 1e-3
+    assert stats.kstest(u_x, "uniform").pvalue > 1e-3
+
+
+def test_light_sampling_weight_follows_the_radiance():
+    """Inside a cell the density follows the bilinear radiance, so the
+    luminance of eval / pdf is nearly constant. On the sun map its relative
+    variance is 2.6e-4; the previous piecewise-constant density (max of the
+    corners per cell) had 0.79 (and 0.29 vs Mitsuba's 4e-6 on the showcase
+    day sky, now 1e-6). What remains is the difference between ft (linear
+    in cos theta) and eval's fy (linear in theta)."""
+    light = EnvironmentLight(sun_map())
+    _, le, pdf = light.sample(uniform(400_000, 5))
+    w = (np.array(le, np.float64).T @ LUMINANCE) / np.array(pdf, np.float64)
+    assert w.var() / w.mean() ** 2 < 1e-3
 
 
 @pytest.mark.parametrize("name", list(MAPS))
