@@ -60,7 +60,11 @@ lopsided tree on identical boxes: depth4 13, 43-entry stack; now depth4 7,
 25 entries, one local array of 100 bytes per lane), no local array exceeds
 32 entries, all loop state starts full width, uploads are padded. The
 reproducer still crashes 2 processes in 18 (once in the closest-hit query,
-once in the occlusion query). Hence :class:`BVH4` is opt-in
+once in the occlusion query). With ``dr.set_thread_count(0)`` (kernels run
+on the calling thread only) it did not crash in 22 processes, which points
+at an interaction with Dr.Jit's worker threads (e.g. memory released while
+a kernel still runs) rather than at the traversal logic, but at this rate
+that is not proof. Hence :class:`BVH4` is opt-in
 (``build_accel(kind="bvh4")``), not the default.
 
 Dr.Jit 1.5 hazard (avoided): in a symbolic loop, ``Local.write(value, index,
