@@ -61,7 +61,7 @@ IMAGE_EXTENSIONS = (".exr", ".hdr", ".pfm", ".png", ".jpg", ".jpeg", ".tga")
 CI_Z = 3.0  # the 99.7% interval
 EXPECTED_OUTSIDE = 0.0027  # 2 (1 - Phi(3))
 
-__all__ = ["add_parser", "main", "default_cache_dir", "reference_key", "compare_images",
+__all__ = ["add_parser", "main", "add_reference_args", "cache_dir_from_args", "default_cache_dir", "reference_key", "compare_images",
            "compare_scene", "check_reference_args", "get_reference"]
 
 
@@ -78,11 +78,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), default=(128, 128),
                    help="image size (default 128 128)")
     p.add_argument("--spp", type=int, default=64, help="drpt samples per pixel (default 64)")
-    p.add_argument("--ref-spp", type=int, default=1024,
-                   help="Mitsuba reference samples per pixel (default 1024)")
-    p.add_argument("--ref-batches", type=int, default=8,
-                   help="independent Mitsuba renders the reference is split into, for its "
-                        "variance (default 8)")
+    add_reference_args(p, ref_spp=1024)
     p.add_argument("--bsdf", choices=["phong", "cook-torrance", "diffuse"], default="phong",
                    help="how MTL materials are read (as for render; default phong)")
     p.add_argument("--max-depth", type=int, default=-1,
@@ -92,10 +88,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0,
                    help="drpt seed (default 0); the reference uses seed + 100000")
     p.add_argument("--out", default=None, help="output folder (default compare_<name>/)")
-    p.add_argument("--cache", default=None,
-                   help="reference cache folder (default ~/.cache/drpt/references)")
-    p.add_argument("--no-cache", action="store_true",
-                   help="render the reference even if it is cached (and do not store it)")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
     p.set_defaults(func=main)
     return p
@@ -120,7 +112,7 @@ def main(args: argparse.Namespace) -> int:
             raise DrptError(f"{scene}: an image alone cannot be compared; give a scene file, "
                             "or two images (compare A B)")
         out = Path(args.out) if args.out else Path(f"compare_{scene.stem}")
-        cache = None if args.no_cache else (Path(args.cache) if args.cache else default_cache_dir())
+        cache = cache_dir_from_args(args)
         report = compare_scene(scene, out, width=args.size[0], height=args.size[1],
                                spp=args.spp, ref_spp=args.ref_spp, ref_batches=args.ref_batches,
                                bsdf=args.bsdf, max_depth=args.max_depth,
@@ -130,6 +122,28 @@ def main(args: argparse.Namespace) -> int:
     print(f"{out}: metrics.json, side_by_side.png"
           + (", drpt.exr, reference.exr" if report["mode"] == "scene" else ""))
     return 0
+
+
+def add_reference_args(p: argparse.ArgumentParser, ref_spp: int) -> None:
+    """The options of every command that judges renders against the cached
+    Mitsuba reference (compare, converge, knobs): its spp and batches, and
+    the cache (read back with :func:`cache_dir_from_args`)."""
+    p.add_argument("--ref-spp", type=int, default=ref_spp,
+                   help=f"Mitsuba reference samples per pixel (default {ref_spp})")
+    p.add_argument("--ref-batches", type=int, default=8,
+                   help="independent Mitsuba renders the reference is split into, for its "
+                        "variance (default 8)")
+    p.add_argument("--cache", default=None,
+                   help="reference cache folder (default ~/.cache/drpt/references)")
+    p.add_argument("--no-cache", action="store_true",
+                   help="render the reference even if it is cached (and do not store it)")
+
+
+def cache_dir_from_args(args: argparse.Namespace) -> Path | None:
+    """The reference cache folder the options name (None: do not cache)."""
+    if args.no_cache:
+        return None
+    return Path(args.cache) if args.cache else default_cache_dir()
 
 
 # ------------------------------------------------------------------ helpers

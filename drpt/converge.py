@@ -68,6 +68,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .compare import add_reference_args, cache_dir_from_args
 from .errors import DrptError
 
 EPS = 1e-2  # relMSE's eps (drpt.metrics.rel_mse)
@@ -99,30 +100,21 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="longest path in segments, -1 unbounded (default)")
     p.add_argument("--rr-depth", type=int, default=5,
                    help="depth at which Russian roulette starts (default 5)")
-    p.add_argument("--ref-spp", type=int, default=4096,
-                   help="Mitsuba reference samples per pixel (default 4096)")
-    p.add_argument("--ref-batches", type=int, default=8,
-                   help="independent batches of the reference, for its variance (default 8)")
     p.add_argument("--levels", type=float, nargs="+", default=list(DEFAULT_LEVELS),
                    metavar="E", help="excess relMSE levels for the time-to-error ratio "
                                      "(default 0.1 0.03 0.01)")
     p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
     p.add_argument("--out", default=None, help="output folder (default converge_<name>/)")
-    p.add_argument("--cache", default=None,
-                   help="reference cache folder (default ~/.cache/drpt/references)")
-    p.add_argument("--no-cache", action="store_true",
-                   help="render the reference even if it is cached (and do not store it)")
+    add_reference_args(p, ref_spp=4096)
     p.add_argument("--quiet", "-q", action="store_true", help="no progress output")
     p.set_defaults(func=main)
     return p
 
 
 def main(args: argparse.Namespace) -> int:
-    from .compare import default_cache_dir
-
     scene = Path(args.scene)
     out = Path(args.out) if args.out else Path(f"converge_{scene.stem}")
-    cache = None if args.no_cache else (Path(args.cache) if args.cache else default_cache_dir())
+    cache = cache_dir_from_args(args)
     report = converge_study(scene, out, width=args.size[0], height=args.size[1],
                             max_spp=args.max_spp, bsdf=args.bsdf, max_depth=args.max_depth,
                             rr_depth=args.rr_depth, ref_spp=args.ref_spp,

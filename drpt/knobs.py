@@ -58,6 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .compare import add_reference_args, cache_dir_from_args
 from .errors import DrptError
 
 KNOBS = ("depth", "rr", "accel", "bsdf")
@@ -90,10 +91,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
     p.add_argument("--bsdf", choices=["phong", "cook-torrance"], default="phong",
                    help="material mode of the default row (default phong)")
-    p.add_argument("--ref-spp", type=int, default=4096,
-                   help="Mitsuba reference samples per pixel (default 4096)")
-    p.add_argument("--ref-batches", type=int, default=8,
-                   help="independent batches of the reference, for its variance (default 8)")
     p.add_argument("--knobs", nargs="+", choices=KNOBS, default=list(KNOBS),
                    help="which knobs to vary (default all)")
     p.add_argument("--depths", type=int, nargs="+", default=[2, 3, 5, 8], metavar="D",
@@ -107,21 +104,16 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         "bias estimate (default 3)")
     p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
     p.add_argument("--out", default=None, help="output folder (default knobs_<name>/)")
-    p.add_argument("--cache", default=None,
-                   help="reference cache folder (default ~/.cache/drpt/references)")
-    p.add_argument("--no-cache", action="store_true",
-                   help="render the references even if cached (and do not store them)")
+    add_reference_args(p, ref_spp=4096)
     p.add_argument("--quiet", "-q", action="store_true", help="no progress output")
     p.set_defaults(func=main)
     return p
 
 
 def main(args: argparse.Namespace) -> int:
-    from .compare import default_cache_dir
-
     scene = Path(args.scene)
     out = Path(args.out) if args.out else Path(f"knobs_{scene.stem}")
-    cache = None if args.no_cache else (Path(args.cache) if args.cache else default_cache_dir())
+    cache = cache_dir_from_args(args)
     report = knobs_study(scene, out, width=args.size[0], height=args.size[1], spp=args.spp,
                          bsdf=args.bsdf, ref_spp=args.ref_spp, ref_batches=args.ref_batches,
                          knobs=args.knobs, depths=args.depths, rr_depths=args.rr_depths,
