@@ -21,3 +21,27 @@ def seed_dir() -> Path:
     if not (SEED / "scenes").is_dir():
         pytest.skip("../shared/seed is not present")
     return SEED
+
+
+@pytest.fixture(scope="session")
+def reference_scene(tmp_path_factory):
+    """``get(scene_file)``: the loaded scene of a ``REFERENCES`` entry, loaded once
+    per test session and shared (renderers do not modify scenes). A generated
+    scene that scenes/ lacks (the git-ignored dining room) is generated once
+    into a temporary folder (``make_references.scene_path``)."""
+    import sys
+
+    sys.path.insert(0, str(REPO / "reference"))
+    from make_references import scene_path
+
+    from drpt.scene import load_scene
+
+    out = tmp_path_factory.mktemp("generated_scenes")
+    loaded = {}
+
+    def get(scene_file: str):
+        if scene_file not in loaded:
+            loaded[scene_file] = load_scene(scene_path(scene_file, out))
+        return loaded[scene_file]
+
+    return get

@@ -33,7 +33,8 @@ is in its comment), so the tests can fail.
 
 The dining room (git-ignored, 510k triangles) is reused from scenes/diningroom
 when it is there at the reference's triangle count, else generated into a
-temporary folder.
+temporary folder; scenes are loaded once per session (the ``reference_scene``
+fixture in conftest.py, shared with test_converge.py).
 """
 
 import sys
@@ -44,11 +45,9 @@ import pytest
 from conftest import REPO
 from drpt.imageio import read_image
 from drpt.render.renderer import RenderOptions, Renderer
-from drpt.scene import load_scene
 
 sys.path.insert(0, str(REPO / "reference"))
-from make_references import (REFERENCES, reference_path, scene_path,  # noqa: E402
-                             variance_path)
+from make_references import REFERENCES, reference_path, variance_path  # noqa: E402
 
 ZMAX = 4.5
 # Blocks of directly seen sky have a pixel variance of ~1e-9 (only the sub-pixel
@@ -65,14 +64,13 @@ def blocks(a, block):
     return a.reshape(H // block, block, W // block, block, C).mean((1, 3))
 
 
-def render_and_z(name, spp, seed, block, scene_dir=None):
+def render_and_z(name, spp, seed, block, scene):
     """drpt at the reference's settings: (result, max |z|, z(scale, first_row)) where the
     last gives max |z| of the render with a brightness bias (negative controls)."""
     scene_file, W, H, ref_spp, depth, mode = REFERENCES[name]
     assert depth == -1
     ref = read_image(reference_path(name))
     assert ref.shape == (H, W, 3) and np.all(np.isfinite(ref))
-    scene = load_scene(scene_path(scene_file, scene_dir))
     r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, seed=seed, bsdf=mode,
                                       progress=False)).render()
     assert r.nonfinite == 0 and np.all(np.isfinite(r.image))
@@ -98,29 +96,31 @@ def render_and_z(name, spp, seed, block, scene_dir=None):
 
 
 @pytest.mark.slow
-def test_cornellbox_cook_torrance_matches_reference():
+def test_cornellbox_cook_torrance_matches_reference(reference_scene):
     # max |z| 2.4-3.7 over seeds 1-3; 2% bias: |z| > 5.6
-    r, z, z_of = render_and_z("cornellbox_ct", spp=64, seed=11, block=16)
+    r, z, z_of = render_and_z("cornellbox_ct", spp=64, seed=11, block=16,
+                              scene=reference_scene(REFERENCES["cornellbox_ct"][0]))
     assert z < ZMAX, z
     assert z_of(1.02) > ZMAX and z_of(0.98) > ZMAX  # negative control
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["showcase_day", "showcase_dusk"])
-def test_showcase_matches_reference(name):
+def test_showcase_matches_reference(name, reference_scene):
     # max |z| over seeds 1-5: day 1.9-2.6, dusk 2.6-4.2. Negative control: a 3% bias on
     # the car and ground alone (block rows 3.. of 9, below the horizon) gives |z| 6-9.
-    r, z, z_of = render_and_z(name, spp=64, seed=1, block=8)
+    r, z, z_of = render_and_z(name, spp=64, seed=1, block=8,
+                              scene=reference_scene(REFERENCES[name][0]))
     assert z < ZMAX, z
     assert z_of(1.03, first_row=3) > ZMAX and z_of(0.97, first_row=3) > ZMAX
 
 
 @pytest.mark.slow
-def test_diningroom_matches_reference(tmp_path_factory):
+def test_diningroom_matches_reference(reference_scene):
     # Slowest test of this file: generating (when scenes/diningroom is missing, ~6 s),
     # loading (~6-12 s) and the BVH build (~8-17 s) of 510k triangles; the 32-spp render
     # itself takes a few seconds. max |z| 1.7-2.0 over seeds 1-3; a 5% bias gives 6-8.
     r, z, z_of = render_and_z("diningroom", spp=32, seed=1, block=24,
-                              scene_dir=tmp_path_factory.mktemp("diningroom"))
+                              scene=reference_scene(REFERENCES["diningroom"][0]))
     assert z < ZMAX, z
     assert z_of(1.05) > ZMAX and z_of(0.95) > ZMAX  # negative control
