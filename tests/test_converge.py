@@ -39,9 +39,11 @@ missing EXR skips):
   distribution is so heavy-tailed that relMSE grows with spp between
   seeds). Mitsuba shows the same: on showcase_day at 128x72 and 64 spp
   three seeds gave relMSE 1.5, 2.6 and 0.03 against the reference. There
-  the slope is printed but not asserted (the test ends in a skip saying
-  so, after the bias checks have passed; they hold there since drpt's
-  variance estimate sees the same fireflies as the error).
+  the 1/N check is made on the typical pixel instead: the median over
+  pixels of the squared relative error must have a log-log slope within
+  SLOPE_TOL of -1 (measured: showcase_day -0.98 +- 0.04, showcase_dusk
+  -1.02 +- 0.02), after the bias checks above (which hold there since
+  drpt's variance estimate sees the same fireflies as the error).
 
 Runtime: 1-3 s per scene at light load, ~4-8 s under load (124 spp at <= 64x64);
 scenes come from the session-wide ``reference_scene`` fixture (conftest.py),
@@ -222,9 +224,18 @@ def test_error_falls_as_one_over_n(name, reference_scene):
     assert b <= BIAS_FRACTION * excess[-1], (b, excess[-1])
     assert 0.85 <= ratios.mean() <= 1.15, ratios
     if shares.max() > FIREFLY_SHARE:
-        pytest.skip(f"{name}: relMSE is firefly-dominated at these spp (top 0.1% of values "
-                    f"carry {shares.max():.0%} of it at some level; slope {slope:.2f}): no 1/N "
-                    "slope to check; the bias checks above passed")
+        # relMSE, a mean, is decided by a handful of rare, bright samples at these
+        # spp: its slope is noise (for Mitsuba too). The typical pixel's squared
+        # error, the median over pixels, still falls as 1/N if the estimator is
+        # consistent: check that instead (the reference's noise is ~1/64 of
+        # drpt's at the top level, a ~1.5% effect on the slope).
+        med = np.array([np.median(e) for e in errors])
+        mslope, mse = loglog_slope(LEVELS, med)
+        print(f"{name}: firefly-dominated (top 0.1% share {shares.max():.0%}); median "
+              f"squared error {np.array2string(med, precision=3)}, slope {mslope:.3f} "
+              f"+- {mse:.3f}")
+        assert abs(mslope + 1.0) < SLOPE_TOL, mslope
+        return
     assert abs(slope + 1.0) < SLOPE_TOL, slope
 
 
