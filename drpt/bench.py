@@ -50,7 +50,8 @@ DEFAULT_SCENES = [ROOT / "scenes" / "cornellbox" / "cornellbox.txt",
 DEFAULT_BSDF = {"newscene.txt": "cook-torrance"}
 # accelerator name -> (build_accel kind, BVH split rule)
 ACCEL_VARIANTS = {"bvh": ("bvh", "sah"), "bvh-median": ("bvh", "median"),
-                  "bvh-threshold": ("bvh", "threshold"), "grid": ("grid", None),
+                  "bvh-threshold": ("bvh", "threshold"), "bvh-morton": ("bvh", "morton"),
+                  "grid": ("grid", None),
                   "brute": ("brute", None), "bvh2": ("bvh2", "sah"), "bvh4": ("bvh4", "sah")}
 ACCELS = tuple(ACCEL_VARIANTS)
 
@@ -75,7 +76,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="scene files (default: the bundled Cornell box and newscene)")
     p.add_argument("--accel", default="bvh,grid",
                    help="comma-separated accelerators: bvh (binned SAH), bvh-median, "
-                        "bvh-threshold (the seed's rule), grid, brute (default bvh,grid)")
+                        "bvh-threshold (the seed's rule), bvh-morton (fast build), grid, brute "
+                        "(default bvh,grid)")
     p.add_argument("--sah-threshold", type=int, default=2000, metavar="K",
                    help="K of bvh-threshold: SAH in nodes of at most 2K primitives "
                         "(default 2000, the seed's)")

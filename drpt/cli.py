@@ -54,10 +54,12 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--accel", choices=["bvh", "grid", "brute"], default=None,
                    help="acceleration structure: bvh (default), grid (uniform grid, 3D-DDA; "
                         "-resolution N cells per axis) or brute")
-    p.add_argument("--bvh", dest="bvh_method", metavar="sah|median|threshold", default=None,
+    p.add_argument("--bvh", dest="bvh_method", metavar="sah|median|threshold|morton",
+                   default=None,
                    help="BVH split rule: sah (binned SAH everywhere, default), median (object "
-                        "median, fastest build) or threshold (the seed's: SAH only in nodes of "
-                        "at most 2K primitives, median above; K from --sah-threshold)")
+                        "median), threshold (the seed's: SAH only in nodes of at most 2K "
+                        "primitives, median above; K from --sah-threshold) or morton "
+                        "(Morton-ordered binned SAH: fastest build, for large scenes)")
     p.add_argument("--sah-threshold", "-SAHeuristic", "-SAH", dest="sah_threshold",
                    metavar="K", default=None,
                    help="K of --bvh threshold (implies it; 0 = median everywhere; default 2000, "

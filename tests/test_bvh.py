@@ -28,6 +28,7 @@ VARIANTS = {
     "threshold0": dict(method="threshold", sah_threshold=0),
     "sah-minleaf5": dict(method="sah", min_leaf=5),
     "threshold-minleaf3": dict(method="threshold", sah_threshold=64, min_leaf=3),
+    "morton": dict(method="morton"),
 }
 
 

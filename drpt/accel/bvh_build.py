@@ -43,6 +43,20 @@ Split rules (``method``):
     small nodes pay for the SAH search, which is the point of the rule: the
     large upper levels, where the search is most expensive, use the median.
 
+``"morton"``: Morton-ordered binned SAH (fast build, for large scenes)
+    Primitives are sorted once by the 30-bit Morton code of their centroid
+    (10 bits per axis in the centroid bounding box), so every node is a
+    contiguous segment of that one order. A segment of more than
+    ``MORTON_SMALL`` (16) primitives is cut into up to ``2**MORTON_BITS`` (8)
+    runs by the highest Morton bit in which its first and last codes differ
+    and the two bits below it (``searchsorted``); the runs act as SAH bins
+    (boxes from one ``np.minimum.reduceat`` per level, 7 candidates scored as
+    above). Smaller segments split at their highest differing Morton bit (an
+    LBVH split) down to leaves of at most ``min(max_leaf, MORTON_LEAF)`` (2)
+    primitives. One sort and no per-axis partitions: several times faster
+    to build than ``"sah"``, with slightly worse trees (measured in the
+    README). ``min_leaf`` must be 1.
+
 Minimum leaf size (``min_leaf``, the seed's ``-resolution`` with its BVH:
 "the minimal number of primitives in a box") applies to every rule: no leaf
 holds fewer than ``min_leaf`` primitives (unless the whole input does). A node
@@ -100,7 +114,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-METHODS = ("sah", "median", "threshold")
+METHODS = ("sah", "median", "threshold", "morton")
 SEED_SAH_THRESHOLD = 2000  # the seed's default -SAHeuristic
 
 
@@ -301,8 +315,10 @@ def build_bvh(
     Returns:
         :class:`BVHArrays` (layout in the module docstring).
     """
-    if method not in _RULES:
+    if method not in METHODS:
         raise ValueError(f"unknown BVH build method {method!r}; expected one of {METHODS}")
+    if method == "morton" and min_leaf != 1:
+        raise ValueError("min_leaf applies to 'sah', 'median' and 'threshold', not 'morton'")
     if sah_threshold is not None and method != "threshold":
         raise ValueError(f"sah_threshold only applies to method 'threshold', not {method!r}")
     if sah_threshold is None:
@@ -327,6 +343,18 @@ def build_bvh(
         cent = (lo32.astype(np.float64) + hi32) * 0.5
     else:
         cent = np.asarray(centroids, np.float64)
+    if method == "morton":
+        nlo, nhi, na, nc, order, max_d, n_leaves = _build_morton_sah(
+            lo32, hi32, cent, max_leaf, max_depth, traversal_cost, intersection_cost)
+        out = BVHArrays(node_lo=nlo, node_hi=nhi, node_a=na, node_count=nc,
+                        prim_order=order, depth=max_d)
+        counts = nc[nc > 0]
+        out.stats = dict(nodes=nlo.shape[0] - 1 if nlo.shape[0] > 1 else 1, leaves=n_leaves,
+                         max_depth=max_d, prims=N, method=method, max_leaf=max_leaf,
+                         min_leaf=1, min_leaf_prims=int(counts.min()),
+                         max_leaf_prims=int(counts.max()),
+                         build_seconds=time.perf_counter() - t0)
+        return out
     # Working set, per axis in that axis' sorted order: primitive ids,
     # [lo, -hi] boxes and centroids of the primitives not yet in a leaf, the
     # segments of one level one after the other. Each level's partition
@@ -533,3 +561,154 @@ def check_bvh(b: BVHArrays, lo: np.ndarray, hi: np.ndarray) -> None:
     prim = b.prim_order[posn]
     assert (round_down_f32(lo[prim]) >= b.node_lo[leaves[seg]]).all()
     assert (round_up_f32(hi[prim]) <= b.node_hi[leaves[seg]]).all()
+
+
+# ------------------------------------------------------- Morton-ordered SAH build
+def _morton30(cent: np.ndarray) -> np.ndarray:
+    """30-bit Morton codes (10 bits per axis) of points, in their bounding box."""
+    lo = cent.min(0)
+    ext = cent.max(0) - lo
+    scale = np.where(ext > 0, 1023.0 / np.where(ext > 0, ext, 1.0), 0.0)
+    q = np.clip(((cent - lo) * scale).astype(np.int64), 0, 1023)
+    code = np.zeros(len(cent), np.int64)
+    for bit in range(10):
+        for a in range(3):
+            code |= ((q[:, a] >> bit) & 1) << (3 * bit + (2 - a))
+    return code
+
+
+MORTON_BITS = 3  # Morton bits per SAH split: 2**3 = 8 groups, 7 candidates
+MORTON_SMALL = 16  # segments this small split at their Morton midpoint (no SAH)
+MORTON_LEAF = 2  # ... down to leaves of at most min(max_leaf, MORTON_LEAF) primitives
+
+
+def _build_morton_sah(lo32, hi32, cent, max_leaf, max_depth, ct, ci):
+    """Top-down binned SAH over Morton-ordered primitives (see build_bvh)."""
+    N = lo32.shape[0]
+    code = _morton30(cent)
+    order = np.argsort(code, kind="stable")
+    codes = code[order]
+    lohi = np.concatenate([lo32, -hi32], axis=1)[order].astype(np.float32)
+    lohi_x = np.concatenate([lohi, np.zeros((1, 6), np.float32)])  # reduceat pad row
+    G = 1 << MORTON_BITS  # groups per split: the next MORTON_BITS Morton bits
+    small_n = MORTON_SMALL
+
+    cap = 2 * N + 2
+    node_lo = np.zeros((cap, 3), np.float32)
+    node_hi = np.zeros((cap, 3), np.float32)
+    node_a = np.zeros(cap, np.uint32)
+    node_count = np.zeros(cap, np.uint32)
+    node_lo[1] = np.inf
+    node_hi[1] = -np.inf
+    next_free = 2
+    n_leaves = 0
+    max_d = 0
+    s_start = np.zeros(1, np.int64)
+    s_n = np.full(1, N, np.int64)
+    s_node = np.zeros(1, np.int64)
+    s_depth = np.zeros(1, np.int64)
+    while s_start.size:
+        srt = np.argsort(s_start, kind="stable")
+        s_start, s_n, s_node, s_depth = s_start[srt], s_n[srt], s_node[srt], s_depth[srt]
+        nseg = s_start.size
+        s_end = s_start + s_n
+        # group boundaries from the highest differing Morton bit down 3 bits
+        c0, c1 = codes[s_start], codes[s_end - 1]
+        x = c0 ^ c1
+        same = x == 0
+        hb = np.zeros(nseg, np.int64)
+        nz = ~same
+        hb[nz] = np.floor(np.log2(x[nz].astype(np.float64))).astype(np.int64)
+        # guard against float rounding of log2 near powers of two
+        hb = np.where((x >> hb) > 1, hb + 1, hb)
+        hb = np.where((x >> np.maximum(hb, 0)) == 0, hb - 1, hb)
+        prefix = (c0 >> (hb + 1)) << (hb + 1)
+        big = np.flatnonzero(s_n > small_n)
+        sml = np.flatnonzero(s_n <= small_n)
+        slo = np.empty((nseg, 3), np.float32)
+        shi = np.empty((nseg, 3), np.float32)
+        split_cost = np.full(nseg, np.inf)
+        kk_all = s_n // 2
+        has = np.zeros(nseg, bool)
+        if big.size:
+            nb = big.size
+            bs, be, bn = s_start[big], s_end[big], s_n[big]
+            hbb = hb[big]
+            low = np.maximum(hbb - (MORTON_BITS - 1), 0)
+            j = np.arange(1, G, dtype=np.int64)
+            vals = prefix[big, None] | ((j[None, :] << low[:, None])
+                                        & ((np.int64(2) << hbb[:, None]) - 1))
+            pos = np.searchsorted(codes, vals.ravel(), side="left").reshape(nb, G - 1)
+            pos = np.clip(pos, bs[:, None], be[:, None])
+            pos = np.maximum.accumulate(pos, axis=1)
+            B = np.concatenate([bs[:, None], pos, be[:, None]], axis=1)  # (nb, G+1)
+            gcnt = np.diff(B, axis=1)  # (nb, G)
+            gb = np.minimum.reduceat(lohi_x, B.ravel(), axis=0).reshape(nb, G + 1, 6)[:, :G]
+            gb = np.where((gcnt > 0)[..., None], gb, np.float32(np.inf))
+            # running min over the groups: explicit steps (an accumulate along
+            # a short strided axis is slow in numpy)
+            pre = np.empty_like(gb)
+            suf = np.empty_like(gb)
+            pre[:, 0] = gb[:, 0]
+            suf[:, G - 1] = gb[:, G - 1]
+            for g in range(1, G):
+                np.minimum(pre[:, g - 1], gb[:, g], out=pre[:, g])
+                np.minimum(suf[:, G - g], gb[:, G - 1 - g], out=suf[:, G - 1 - g])
+            sb = pre[:, -1]
+            slo[big], shi[big] = sb[:, :3], -sb[:, 3:]
+            nl = np.cumsum(gcnt, axis=1)[:, :-1]  # left counts after groups 0..G-2
+            cost = (_area(pre[:, :-1, :3], -pre[:, :-1, 3:]) * nl
+                    + _area(suf[:, 1:, :3], -suf[:, 1:, 3:]) * (bn[:, None] - nl))
+            ok = (nl > 0) & (nl < bn[:, None]) & ~same[big, None]
+            cost = np.where(ok, cost, np.inf)
+            jb = np.argmin(cost, axis=1)
+            best = cost[np.arange(nb), jb]
+            hb_ = np.isfinite(best)
+            has[big] = hb_
+            area = _area(slo[big], shi[big])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                split_cost[big] = ct + ci * np.where(area > 0, best / area, 0.0)
+            kk_all[big] = np.where(hb_, nl[np.arange(nb), jb], bn // 2)
+        if sml.size:
+            # small segments: LBVH split at the highest differing Morton bit
+            ss, se = s_start[sml], s_end[sml]
+            idx = np.stack([ss, se], 1).ravel()
+            sb = np.minimum.reduceat(lohi_x, idx, axis=0)[::2]
+            slo[sml], shi[sml] = sb[:, :3], -sb[:, 3:]
+            mid = np.searchsorted(codes, prefix[sml] | (np.int64(1) << np.maximum(hb[sml], 0)))
+            ks = mid - ss
+            oks = ~same[sml] & (ks > 0) & (ks < s_n[sml])
+            has[sml] = oks
+            kk_all[sml] = np.where(oks, ks, s_n[sml] // 2)
+            # small segments become leaves at min(max_leaf, MORTON_LEAF)
+            # primitives (split_cost = inf so far: leaf whenever n <= max_leaf)
+            split_cost[sml] = np.where(s_n[sml] > min(max_leaf, MORTON_LEAF), -np.inf, np.inf)
+        node_lo[s_node] = slo
+        node_hi[s_node] = shi
+        max_d = max(max_d, int(s_depth.max()))
+        leaf = (s_n <= 1) | ((s_n <= max_leaf) & (~has | (ci * s_n <= split_cost)))
+        leaf &= s_n <= max_leaf
+        k = kk_all
+        need = np.ceil(np.log2(np.maximum(s_n / max_leaf, 1.0))).astype(np.int64)
+        guard = ~leaf & (s_depth + need + 1 >= max_depth)
+        k = np.where(guard, s_n // 2, k)
+        k = np.where(~leaf & ((k <= 0) | (k >= s_n)), s_n // 2, k)
+
+        lf = np.flatnonzero(leaf)
+        node_a[s_node[lf]] = s_start[lf]
+        node_count[s_node[lf]] = s_n[lf]
+        n_leaves += lf.size
+        sp = np.flatnonzero(~leaf)
+        if sp.size == 0:
+            break
+        left = next_free + 2 * np.arange(sp.size)
+        next_free += 2 * sp.size
+        node_a[s_node[sp]] = left
+        node_count[s_node[sp]] = 0
+        st, kk, d1 = s_start[sp], k[sp], s_depth[sp] + 1
+        s_start = np.concatenate([st, st + kk])
+        s_n = np.concatenate([kk, s_n[sp] - kk])
+        s_node = np.concatenate([left, left + 1])
+        s_depth = np.concatenate([d1, d1])
+    return (node_lo[:next_free].copy(), node_hi[:next_free].copy(), node_a[:next_free].copy(),
+            node_count[:next_free].copy(), order, max_d, n_leaves)
