@@ -104,15 +104,13 @@ def test_collapse_invariants():
 def test_identical_boxes_collapse_balanced():
     """Equal child areas must not make the 4-wide tree lopsided: bc77154's
     collapse gave depth4 13 (stack 43 entries) on 100k identical triangles;
-    balanced, the tree has depth4 7 and the stack fits one local array of at
-    most LOCAL_CHUNK entries (this did not stop the sporadic crash)."""
-    from drpt.accel.bvh4 import LOCAL_CHUNK
-
+    balanced, the tree has depth4 7 and a stack of 25 entries (this alone did
+    not stop the sporadic crash)."""
     t = np.repeat(TRI, 100_000, axis=0)
     b = build_bvh(t.min(1), t.max(1), max_leaf=4)
     w = collapse_bvh4(b)
     assert w.depth <= (b.depth + 1) // 2
-    assert stack_entries(w.depth) <= LOCAL_CHUNK
+    assert stack_entries(w.depth) <= 25
 
 
 def test_split_stack_matches_brute(monkeypatch):

@@ -179,6 +179,40 @@ def nearest_primitive(tri_buf, sph_buf, tri_idx, sph_idx, prim, prep: RayPrep, o
     return bt, bj, bu, bv, hit_any
 
 
+
+def primitive_bounds(scene, F: int, S: int) -> tuple[np.ndarray, np.ndarray]:
+    """Float32 boxes, rounded outward, of a scene's ``F`` triangles then ``S``
+    spheres (BVH primitive ids ``0..F+S-1``); spheres padded against round-off."""
+    los, his = [], []
+    if F:
+        p32 = np.asarray(scene.triangles.positions, np.float32).astype(np.float64)
+        los.append(p32.min(1))
+        his.append(p32.max(1))
+    if S:
+        c = np.asarray(scene.spheres.center, np.float64)
+        r = np.abs(np.asarray(scene.spheres.radius, np.float64))[:, None]
+        pad = r * 1e-5 + np.abs(c) * 1e-6
+        los.append(c - r - pad)
+        his.append(c + r + pad)
+    return round_down_f32(np.concatenate(los)), round_up_f32(np.concatenate(his))
+
+
+def leaf_orders(order: np.ndarray, F: int):
+    """From the BVH's primitive order (position -> primitive id): the order of
+    the triangle buffer, of the sphere buffer, and for scenes with both, the
+    per-position code ``local index | sphere << 31`` (else None)."""
+    is_sph = order >= F
+    tri_order = order[~is_sph]
+    sph_order = order[is_sph] - F
+    codes = None
+    if tri_order.size and sph_order.size:
+        local = np.empty(order.size, np.int64)
+        local[~is_sph] = np.arange(tri_order.size)
+        local[is_sph] = np.arange(sph_order.size)
+        codes = (local | (is_sph.astype(np.int64) << 31)).astype(np.uint32)
+    return tri_order, sph_order, codes
+
+
 class BVH:
     """Triangles and spheres of a scene in one BVH; planes tested brute force.
 
@@ -205,20 +239,8 @@ class BVH:
         self.tri_buf = self.sph_buf = self.codes = None
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": 0}
         if N:
-            los, his = [], []
-            if F:
-                p32 = np.asarray(scene.triangles.positions, np.float32).astype(np.float64)
-                los.append(p32.min(1))
-                his.append(p32.max(1))
-            if S:
-                c = np.asarray(scene.spheres.center, np.float64)
-                r = np.abs(np.asarray(scene.spheres.radius, np.float64))[:, None]
-                pad = r * 1e-5 + np.abs(c) * 1e-6
-                los.append(c - r - pad)
-                his.append(c + r + pad)
-            lo = np.concatenate(los)
-            hi = np.concatenate(his)
-            b = build_bvh(round_down_f32(lo), round_up_f32(hi), method=method,
+            lo, hi = primitive_bounds(scene, F, S)
+            b = build_bvh(lo, hi, method=method,
                           max_leaf=leaf_size, bins=bins, max_depth=STACK_SIZE,
                           min_leaf=min_leaf, sah_threshold=sah_threshold)
             self.stats = dict(b.stats)
@@ -230,19 +252,14 @@ class BVH:
             self.node_box = Float(boxes.reshape(-1))
             self.node_ac = UInt32(np.stack([b.node_a, b.node_count], 1).reshape(-1))
             self.prim_ids = UInt32(order.astype(np.uint32))
-            is_sph = order >= F
-            tri_order = order[~is_sph]
-            sph_order = order[is_sph] - F
+            tri_order, sph_order, codes = leaf_orders(order, F)
             if F:
                 self.tri_buf = Float(triangle_buffer(scene.triangles.positions[tri_order]))
             if S:
                 self.sph_buf = Float(sphere_buffer(scene.spheres.center[sph_order],
                                                    scene.spheres.radius[sph_order]))
-            if F and S:
-                local = np.empty(N, np.int64)
-                local[~is_sph] = np.arange(tri_order.size)
-                local[is_sph] = np.arange(sph_order.size)
-                self.codes = UInt32((local | (is_sph.astype(np.int64) << 31)).astype(np.uint32))
+            if codes is not None:
+                self.codes = UInt32(codes)
         else:
             self.node_box = self.node_ac = self.prim_ids = None
         dr.eval(self.node_box, self.node_ac, self.prim_ids, self.tri_buf, self.sph_buf, self.codes)

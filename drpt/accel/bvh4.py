@@ -98,9 +98,9 @@ import numpy as np
 from drjit.llvm import Array3f, Array4f, Array4u, Bool, Float, UInt32
 
 from ..geometry.triangle import RayPrep, watertight_permuted
-from .bvh import (INVALID, STACK_SIZE, Hit, SceneGeometry, _nbytes, sphere_buffer,
-                  test_sphere)
-from .bvh_build import BVHArrays, _area, build_bvh, round_down_f32, round_up_f32
+from .bvh import (INVALID, STACK_SIZE, Hit, SceneGeometry, _nbytes, leaf_orders,
+                  primitive_bounds, sphere_buffer, test_sphere)
+from .bvh_build import BVHArrays, _area, build_bvh
 
 _SLAB_EPS = 1.0 + 4.0 * 2.0**-24  # robust slab test (Ize 2013): widen t_far
 _INF = float("inf")
@@ -256,7 +256,7 @@ def collapse_bvh4(b: BVHArrays) -> BVH4Arrays:
 
 
 # ------------------------------------------------------------------ stack
-LOCAL_CHUNK = 32  # entries per dr.alloc_local array (128 bytes of 32-bit values)
+LOCAL_CHUNK = 16  # entries per dr.alloc_local array (64 bytes of 32-bit values)
 
 
 def _chunk_index(sp, m, c, n_chunks):
@@ -313,20 +313,8 @@ class BVH4:
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": 0}
         self.stack_size = 0
         if N:
-            los, his = [], []
-            if F:
-                p32 = np.asarray(scene.triangles.positions, np.float32).astype(np.float64)
-                los.append(p32.min(1))
-                his.append(p32.max(1))
-            if S:
-                c = np.asarray(scene.spheres.center, np.float64)
-                r = np.abs(np.asarray(scene.spheres.radius, np.float64))[:, None]
-                pad = r * 1e-5 + np.abs(c) * 1e-6
-                los.append(c - r - pad)
-                his.append(c + r + pad)
-            lo = np.concatenate(los)
-            hi = np.concatenate(his)
-            b = build_bvh(round_down_f32(lo), round_up_f32(hi), method=method,
+            lo, hi = primitive_bounds(scene, F, S)
+            b = build_bvh(lo, hi, method=method,
                           max_leaf=min(int(leaf_size), LEAF_MAX_COUNT), bins=bins,
                           max_depth=STACK_SIZE, min_leaf=min_leaf,
                           sah_threshold=sah_threshold)
@@ -340,21 +328,15 @@ class BVH4:
             self.node_box = self._up("node_box", Float, w.box)
             self.node_ref = self._up("node_ref", UInt32, w.ref)
             self.prim_ids = self._up("prim_ids", UInt32, order.astype(np.uint32))
-            is_sph = order >= F
-            tri_order = order[~is_sph]
-            sph_order = order[is_sph] - F
+            tri_order, sph_order, codes = leaf_orders(order, F)
             if F:
                 self.tri_buf = self._up("tri_buf", Float, triangle_buffer4(
                     scene.triangles.positions[tri_order]))
             if S:
                 self.sph_buf = self._up("sph_buf", Float, sphere_buffer(
                     scene.spheres.center[sph_order], scene.spheres.radius[sph_order]))
-            if F and S:
-                local = np.empty(N, np.int64)
-                local[~is_sph] = np.arange(tri_order.size)
-                local[is_sph] = np.arange(sph_order.size)
-                self.codes = self._up("codes", UInt32, (local | (is_sph.astype(np.int64) << 31))
-                                      .astype(np.uint32))
+            if codes is not None:
+                self.codes = self._up("codes", UInt32, codes)
         self.nbytes = _nbytes(self.node_box, self.node_ref, self.prim_ids, self.tri_buf,
                               self.sph_buf, self.codes) + geo.plane_nbytes()
         self.build_seconds = time.perf_counter() - t0
