@@ -29,8 +29,8 @@ Stack size: a lane at a node of depth ``k`` (root = 0) holds at most three
 entries per ancestor level, and a push round adds at most three, so
 ``3 * (depth4 + 1)`` entries suffice; :func:`stack_entries` adds one spare.
 The stack is split into ``dr.alloc_local`` arrays of at most ``LOCAL_CHUNK``
-(32) entries (a deeper tree costs one masked read/write per extra array; the
-Cornell box and 100k identical triangles need one). ``BVH4.track_stack``
+(16) entries (a deeper tree costs one masked read/write per extra array; the
+Cornell box needs one, 100k identical triangles two: 16 + 9). ``BVH4.track_stack``
 records the largest stack pointer of each query (tests).
 
 The crash of the first 4-wide BVH (commit ``bc77154``, reverted)
@@ -64,8 +64,15 @@ once in the occlusion query). With ``dr.set_thread_count(0)`` (kernels run
 on the calling thread only) it did not crash in 22 processes, which points
 at an interaction with Dr.Jit's worker threads (e.g. memory released while
 a kernel still runs) rather than at the traversal logic, but at this rate
-that is not proof. Hence :class:`BVH4` is opt-in
-(``build_accel(kind="bvh4")``), not the default.
+that is not proof. Later, two concurrent process loops in one session
+(24 processes each): with the 25-entry stack in one local array (100 bytes
+per lane) 4 crashed; split into arrays of at most 16 entries (64 bytes),
+none did, nor in the runs after that. Hence ``LOCAL_CHUNK = 16``: the
+evidence is statistical (with 4/24 as the rate, 0 of 24 has probability
+~1%), the mechanism inside Dr.Jit is not known, and the binary BVH's
+64-entry (256-byte) arrays have never crashed. :class:`BVH4` therefore
+stays opt-in (``build_accel(kind="bvh4")``, ``--accel bvh4``), not the
+default.
 
 Dr.Jit 1.5 hazard (avoided): in a symbolic loop, ``Local.write(value, index,
 mask)`` whose ``index`` variable has size 1 is rendered as one uniform row
