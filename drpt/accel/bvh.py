@@ -286,19 +286,25 @@ class BVH:
         return bj != INVALID
 
     # ------------------------------------------------------------- internals
-    def _trace(self, o, d, tmax, active, any_hit: bool):
+    def _begin(self, o, d, tmax, active, any_hit: bool):
+        """Start of every query (shared with :class:`~drpt.accel.bvh4.BVH4`):
+        the rays as arrays, the planes tested brute force, the best hit so
+        far ``bt, bj, bu, bv``, and ``active`` without the rays an any-hit
+        query has already answered."""
         o = Array3f(o)
         d = Array3f(d)
         active = Bool(active)
         bt = dr.select(active, Float(tmax), 0.0)
         bj = UInt32(INVALID)
-        bu = Float(0)
-        bv = Float(0)
         bt, bj = self.geo.intersect_planes(o, d, bt, bj, any_hit)
-        if not self.geo.N:
-            return bt, bj, bu, bv
         if any_hit:
             active &= bj == INVALID
+        return o, d, active, bt, bj, Float(0), Float(0)
+
+    def _trace(self, o, d, tmax, active, any_hit: bool):
+        o, d, active, bt, bj, bu, bv = self._begin(o, d, tmax, active, any_hit)
+        if not self.geo.N:
+            return bt, bj, bu, bv
 
         inv_d = dr.rcp(d)
         prep = RayPrep(o, d) if self.has_tris else None

@@ -105,7 +105,7 @@ import numpy as np
 from drjit.llvm import Array3f, Array4f, Array4u, Bool, Float, UInt32
 
 from ..geometry.triangle import RayPrep, watertight_permuted
-from .bvh import (INVALID, STACK_SIZE, Hit, SceneGeometry, _nbytes, leaf_orders,
+from .bvh import (BVH, INVALID, STACK_SIZE, SceneGeometry, _nbytes, leaf_orders,
                   primitive_bounds, sphere_buffer, test_sphere)
 from .bvh_build import BVHArrays, _area, build_bvh
 
@@ -291,7 +291,7 @@ def _push(stk, value, sp, m):
 
 
 # ------------------------------------------------------------------ BVH4
-class BVH4:
+class BVH4(BVH):
     """Triangles and spheres of a scene in a 4-wide BVH; planes brute force.
 
     Args: as :class:`~drpt.accel.bvh.BVH` (``leaf_size`` is capped at 16).
@@ -353,39 +353,13 @@ class BVH4:
         self.host_sizes[name] = n
         return v
 
-    # ---------------------------------------------------------------- queries
-    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
-        """Closest hit with ``0 < t < tmax`` (see :mod:`drpt.accel.bvh`)."""
-        bt, bj, bu, bv = self._trace(o, d, tmax, active, any_hit=False)
-        geo = self.geo
-        valid = bj != INVALID
-        if geo.N:
-            in_bvh = valid & (bj < geo.N)
-            prim = dr.select(in_bvh, dr.gather(UInt32, self.prim_ids, bj, in_bvh), bj)
-        else:
-            prim = bj
-        return Hit(dr.select(valid, bt, _INF), prim, bu, bv, valid)
-
-    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
-        """Whether anything is hit with ``0 < t < tmax`` (any-hit, early exit)."""
-        _, bj, _, _ = self._trace(o, d, tmax, active, any_hit=True)
-        return bj != INVALID
-
+    # intersect() and occluded() are BVH's, around this class's _trace()
     # ------------------------------------------------------------- internals
     def _trace(self, o, d, tmax, active, any_hit: bool):
-        o = Array3f(o)
-        d = Array3f(d)
-        active = Bool(active)
-        n = max(dr.width(o), dr.width(d), dr.width(tmax), dr.width(active))
-        bt = dr.select(active, Float(tmax), 0.0)
-        bj = UInt32(INVALID)
-        bu = Float(0)
-        bv = Float(0)
-        bt, bj = self.geo.intersect_planes(o, d, bt, bj, any_hit)
+        o, d, active, bt, bj, bu, bv = self._begin(o, d, tmax, active, any_hit)
         if not self.geo.N:
             return bt, bj, bu, bv
-        if any_hit:
-            active &= bj == INVALID
+        n = max(dr.width(o), dr.width(d), dr.width(tmax), dr.width(active))
 
         inv_d = dr.rcp(d)
         prep = RayPrep(o, d) if self.has_tris else None
