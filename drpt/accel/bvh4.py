@@ -67,9 +67,9 @@ a kernel still runs) rather than at the traversal logic, but at this rate
 that is not proof. Later, two concurrent process loops in one session
 (24 processes each): with the 25-entry stack in one local array (100 bytes
 per lane) 4 crashed; split into arrays of at most 16 entries (64 bytes),
-none did, nor in the runs after that. Hence ``LOCAL_CHUNK = 16``: the
-evidence is statistical (with 4/24 as the rate, 0 of 24 has probability
-~1%), the mechanism inside Dr.Jit is not known, and the binary BVH's
+none did, nor did 48 more processes after that (72 in all). Hence
+``LOCAL_CHUNK = 16``: the evidence is statistical (with 4/24 as the rate,
+0 of 72 has probability ~2e-6), the mechanism inside Dr.Jit is not known, and the binary BVH's
 64-entry (256-byte) arrays have never crashed. :class:`BVH4` therefore
 stays opt-in (``build_accel(kind="bvh4")``, ``--accel bvh4``), not the
 default.
