@@ -156,14 +156,16 @@ def test_sphere(sph_buf, idx, o, d, bt, active):
 
 
 def nearest_primitive(tri_buf, sph_buf, tri_idx, sph_idx, prim, prep: RayPrep, o, d,
-                      tri_on, sph_on, bt, bj, bu, bv):
+                      tri_on, sph_on, bt, bj, bu, bv, tri_test=None):
     """Test one triangle (lanes ``tri_on``) and/or one sphere (``sph_on``) and
     keep the nearer hit: returns the updated closest-hit record
     ``(bt, bj, bu, bv)`` (``bj = prim`` where a hit was kept) and ``hit_any``.
-    Absent buffers trace no code. Shared by every accelerator's loop."""
+    Absent buffers trace no code. Shared by every accelerator's loop;
+    ``tri_test`` reads the triangle buffer's layout (default
+    :func:`test_triangle`, looked up at call time)."""
     hit_any = Bool(False)
     if tri_buf is not None:
-        t, u, v, h = test_triangle(tri_buf, tri_idx, prep, bt, tri_on)
+        t, u, v, h = (tri_test or test_triangle)(tri_buf, tri_idx, prep, bt, tri_on)
         bt = dr.select(h, t, bt)
         bj = dr.select(h, prim, bj)
         bu = dr.select(h, u, bu)
@@ -178,6 +180,18 @@ def nearest_primitive(tri_buf, sph_buf, tri_idx, sph_idx, prim, prep: RayPrep, o
         hit_any |= h
     return bt, bj, bu, bv, hit_any
 
+
+
+def leaf_primitive(codes, pi, pa):
+    """Buffer index and lane masks (triangle, sphere) of BVH position ``pi``
+    (lanes ``pa``): the position itself when the scene has one primitive kind,
+    else decoded from ``codes`` (``local index | sphere << 31``,
+    :func:`leaf_orders`)."""
+    if codes is None:
+        return pi, pa, pa
+    code = dr.gather(UInt32, codes, pi, pa)
+    sph = (code >> 31) != 0
+    return code & 0x7FFFFFFF, pa & ~sph, pa & sph
 
 
 def primitive_bounds(scene, F: int, S: int) -> tuple[np.ndarray, np.ndarray]:
@@ -310,7 +324,6 @@ class BVH:
         prep = RayPrep(o, d) if self.has_tris else None
         node_box, node_ac = self.node_box, self.node_ac
         tri_buf, sph_buf, codes = self.tri_buf, self.sph_buf, self.codes
-        mixed = codes is not None
 
         def slab(node, bt, mask):
             lo = dr.gather(Array4f, node_box, node * 2, mask)
@@ -371,14 +384,7 @@ class BVH:
 
             # ---- primitive phase
             pa = pi < pe
-            if mixed:
-                code = dr.gather(UInt32, codes, pi, pa)
-                sph = (code >> 31) != 0
-                idx = code & 0x7FFFFFFF
-                tri_on, sph_on = pa & ~sph, pa & sph
-            else:
-                idx = pi
-                tri_on = sph_on = pa
+            idx, tri_on, sph_on = leaf_primitive(codes, pi, pa)
             bt, bj, bu, bv, hit_any = nearest_primitive(
                 tri_buf, sph_buf, idx, idx, pi, prep, o, d, tri_on, sph_on, bt, bj, bu, bv)
             pi = dr.select(pa, pi + 1, pi)

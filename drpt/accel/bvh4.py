@@ -102,11 +102,11 @@ from dataclasses import dataclass
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array3f, Array4f, Array4u, Bool, Float, UInt32
+from drjit.llvm import Array3f, Array4f, Array4u, Float, UInt32
 
 from ..geometry.triangle import RayPrep, watertight_permuted
 from .bvh import (BVH, INVALID, STACK_SIZE, SceneGeometry, _nbytes, leaf_orders,
-                  primitive_bounds, sphere_buffer, test_sphere)
+                  leaf_primitive, nearest_primitive, primitive_bounds, sphere_buffer)
 from .bvh_build import BVHArrays, _area, build_bvh
 
 _SLAB_EPS = 1.0 + 4.0 * 2.0**-24  # robust slab test (Ize 2013): widen t_far
@@ -365,7 +365,6 @@ class BVH4(BVH):
         prep = RayPrep(o, d) if self.has_tris else None
         node_box, node_ref = self.node_box, self.node_ref
         tri_buf, sph_buf, codes = self.tri_buf, self.sph_buf, self.codes
-        mixed = codes is not None
         track = bool(self.track_stack)
 
         # root box (host constants)
@@ -462,29 +461,10 @@ class BVH4(BVH):
 
             # ---- primitive phase: one primitive of the current leaf
             pa = pi < pe
-            if mixed:
-                code = dr.gather(UInt32, codes, pi, pa)
-                sph = (code >> 31) != 0
-                idx = code & 0x7FFFFFFF
-                tri_on, sph_on = pa & ~sph, pa & sph
-            else:
-                idx = pi
-                tri_on = sph_on = pa
-            hit_any = Bool(False)
-            if tri_buf is not None:
-                t, u, v, h = test_triangle4(tri_buf, idx, prep, bt, tri_on)
-                bt = dr.select(h, t, bt)
-                bj = dr.select(h, pi, bj)
-                bu = dr.select(h, u, bu)
-                bv = dr.select(h, v, bv)
-                hit_any |= h
-            if sph_buf is not None:
-                t, h = test_sphere(sph_buf, idx, o, d, bt, sph_on)
-                bt = dr.select(h, t, bt)
-                bj = dr.select(h, pi, bj)
-                bu = dr.select(h, 0.0, bu)
-                bv = dr.select(h, 0.0, bv)
-                hit_any |= h
+            idx, tri_on, sph_on = leaf_primitive(codes, pi, pa)
+            bt, bj, bu, bv, hit_any = nearest_primitive(
+                tri_buf, sph_buf, idx, idx, pi, prep, o, d, tri_on, sph_on, bt, bj, bu, bv,
+                tri_test=test_triangle4)
             pi = dr.select(pa, pi + 1, pi)
             if any_hit:
                 pe = dr.select(hit_any, pi, pe)
