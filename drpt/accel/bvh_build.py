@@ -278,6 +278,18 @@ _RULES = {"sah": _choose_sah, "median": _choose_median, "threshold": _choose_thr
 
 
 # ------------------------------------------------------------------------ builder
+def _node_arrays(N: int):
+    """Node storage for ``N`` primitives (at most ``2N + 2`` nodes, layout in
+    the module docstring): boxes, ``node_a``, ``node_count``; node 1 is the
+    pad, an empty box that no ray can hit."""
+    cap = 2 * N + 2
+    node_lo = np.zeros((cap, 3), np.float32)
+    node_hi = np.zeros((cap, 3), np.float32)
+    node_lo[1] = np.inf
+    node_hi[1] = -np.inf
+    return node_lo, node_hi, np.zeros(cap, np.uint32), np.zeros(cap, np.uint32)
+
+
 def build_bvh(
     lo: np.ndarray,
     hi: np.ndarray,
@@ -375,14 +387,7 @@ def build_bvh(
              [np.empty(N, np.float64) for _ in range(3)])
     prim_order = np.empty(N, np.int64)
 
-    cap = 2 * N + 2
-    node_lo = np.zeros((cap, 3), np.float32)
-    node_hi = np.zeros((cap, 3), np.float32)
-    node_a = np.zeros(cap, np.uint32)
-    node_count = np.zeros(cap, np.uint32)
-    # pad node 1: an empty box that no ray can hit
-    node_lo[1] = np.inf
-    node_hi[1] = -np.inf
+    node_lo, node_hi, node_a, node_count = _node_arrays(N)
     next_free = 2
     n_leaves = 0
     max_d = 0
@@ -593,13 +598,7 @@ def _build_morton_sah(lo32, hi32, cent, max_leaf, max_depth, ct, ci):
     G = 1 << MORTON_BITS  # groups per split: the next MORTON_BITS Morton bits
     small_n = MORTON_SMALL
 
-    cap = 2 * N + 2
-    node_lo = np.zeros((cap, 3), np.float32)
-    node_hi = np.zeros((cap, 3), np.float32)
-    node_a = np.zeros(cap, np.uint32)
-    node_count = np.zeros(cap, np.uint32)
-    node_lo[1] = np.inf
-    node_hi[1] = -np.inf
+    node_lo, node_hi, node_a, node_count = _node_arrays(N)
     next_free = 2
     n_leaves = 0
     max_d = 0
