@@ -50,6 +50,7 @@ import os
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -61,7 +62,7 @@ IMAGE_EXTENSIONS = (".exr", ".hdr", ".pfm", ".png", ".jpg", ".jpeg", ".tga")
 CI_Z = 3.0  # the 99.7% interval
 EXPECTED_OUTSIDE = 0.0027  # 2 (1 - Phi(3))
 
-__all__ = ["add_parser", "main", "add_reference_args", "cache_dir_from_args", "default_cache_dir", "reference_key", "compare_images",
+__all__ = ["Reference", "add_parser", "main", "add_reference_args", "cache_dir_from_args", "default_cache_dir", "reference_key", "compare_images",
            "compare_scene", "check_reference_args", "get_reference"]
 
 
@@ -390,17 +391,39 @@ def check_reference_args(ref_spp: int, ref_batches: int, max_depth: int, rr_dept
     return per
 
 
+@dataclass
+class Reference:
+    """A Mitsuba reference image as :func:`get_reference` returns it."""
+
+    image: np.ndarray  # (H, W, 3) mean
+    variance: np.ndarray  # (H, W, 3) variance of the mean, from the batches
+    meta: dict  # holds the reference's render "seconds"
+    cached: bool  # read from the cache
+    key: str  # cache key (SHA-256 of the export and settings)
+    cache_file: Path | None  # <cache_dir>/<stem>_<key[:24]>.npz, None without a cache
+    settings: dict  # width, height, batch_spp, batches, max_depth, rr_depth, bsdf, ref_seed
+
+    def info(self) -> dict:
+        """What a report says about the reference (JSON-ready)."""
+        import mitsuba as mi
+
+        s = self.settings
+        return {"renderer": f"mitsuba {mi.__version__} llvm_ad_rgb path",
+                "spp": s["batch_spp"] * s["batches"], "batches": s["batches"],
+                "seed": s["ref_seed"], "seconds": float(self.meta["seconds"]),
+                "cached": self.cached,
+                "cache_file": None if self.cache_file is None else str(self.cache_file),
+                "key": self.key}
+
+
 def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024,
                   ref_batches: int = 8, bsdf: str = "phong", max_depth: int = -1,
                   rr_depth: int = 5, seed: int = 0, cache_dir: Path | None = None,
-                  progress: bool = True):
+                  progress: bool = True) -> Reference:
     """The Mitsuba reference of a loaded ``scene``: from the cache, or rendered (and cached).
 
     Checks the settings, sets up Mitsuba (``llvm_ad_rgb``) and Dr.Jit's LLVM
-    backend. Returns ``(mean, var_of_mean, meta, cached, key, cache_file,
-    settings)``; ``meta`` holds the reference's render ``seconds``;
-    ``cache_file`` is ``<cache_dir>/<stem>_<key[:24]>.npz`` (``None``
-    without a cache). User mistakes raise DrptError.
+    backend. User mistakes raise DrptError.
     """
     from .backend import ensure_llvm
 
@@ -435,7 +458,7 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
             _save_cached(cache_file, ref, ref_var, meta)
     if not np.all(np.isfinite(ref)):
         raise DrptError("the Mitsuba reference has NaN/Inf pixels")
-    return ref, ref_var, meta, cached is not None, key, cache_file, settings
+    return Reference(ref, ref_var, meta, cached is not None, key, cache_file, settings)
 
 
 def compare_scene(scene_path: Path, out: Path, width: int = 128, height: int = 128,
@@ -456,13 +479,11 @@ def compare_scene(scene_path: Path, out: Path, width: int = 128, height: int = 1
     check_reference_args(ref_spp, ref_batches, max_depth, rr_depth, note=False)
     scene = load_scene(scene_path)
     _prepare_out(out)
-    ref, ref_var, meta, cached, key, cache_file, settings = get_reference(
+    reference = get_reference(
         scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
         bsdf=bsdf, max_depth=max_depth, rr_depth=rr_depth, seed=seed, cache_dir=cache_dir,
         progress=progress)
-    import mitsuba as mi
-
-    per = settings["batch_spp"]
+    ref, ref_var = reference.image, reference.variance
 
     opts = RenderOptions(width=width, height=height, spp=spp, seed=seed, bsdf=bsdf,
                          path=PathOptions(max_depth=max_depth, rr_depth=rr_depth),
@@ -491,12 +512,7 @@ def compare_scene(scene_path: Path, out: Path, width: int = 128, height: int = 1
                            "the variances are estimated from few samples)",
         "drpt": {"spp": int(spp), "seed": int(seed), "seconds": result.seconds,
                  "build_seconds": result.build_seconds, "nonfinite": int(result.nonfinite)},
-        "reference": {"renderer": f"mitsuba {mi.__version__} llvm_ad_rgb path",
-                      "spp": per * ref_batches, "batches": int(ref_batches),
-                      "seed": settings["ref_seed"], "seconds": float(meta["seconds"]),
-                      "cached": cached,
-                      "cache_file": None if cache_file is None else str(cache_file),
-                      "key": key},
+        "reference": reference.info(),
     }
     write_image(out / "drpt.exr", result.image)
     write_image(out / "reference.exr", ref)

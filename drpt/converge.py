@@ -315,10 +315,11 @@ def converge_study(scene_path: Path, out: Path, width: int = 64, height: int = 6
                         "reference must be better than the renders it judges")
     scene = load_scene(scene_path)
     _prepare_out(out)
-    ref, ref_var, meta, cached, key, cache_file, settings = get_reference(
+    reference = get_reference(
         scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
         bsdf=bsdf, max_depth=max_depth, rr_depth=rr_depth, seed=seed, cache_dir=cache_dir,
         progress=progress)
+    ref, ref_var = reference.image, reference.variance
     import mitsuba as mi
 
     floor = noise_floor(ref, ref_var)
@@ -372,12 +373,7 @@ def converge_study(scene_path: Path, out: Path, width: int = 64, height: int = 6
         "drpt": {"build_seconds": renderer.build_seconds, "warmup_seconds": drpt_warm},
         "mitsuba": {"version": mi.__version__, "load_seconds": mits_load,
                     "warmup_seconds": mits_warm},
-        "reference": {"renderer": f"mitsuba {mi.__version__} llvm_ad_rgb path",
-                      "spp": settings["batch_spp"] * settings["batches"],
-                      "batches": settings["batches"], "seed": settings["ref_seed"],
-                      "seconds": float(meta["seconds"]), "cached": cached,
-                      "cache_file": None if cache_file is None else str(cache_file),
-                      "key": key},
+        "reference": reference.info(),
     })
     write_csv(out / "converge.csv", rows)
     _write_json(out / "converge.json", report)

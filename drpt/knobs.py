@@ -192,15 +192,12 @@ def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, 
 
     def reference(mode):
         if mode not in refs:
-            ref, var, meta, cached, key, cache_file, settings = get_reference(
+            r = get_reference(
                 scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
                 bsdf=mode, max_depth=-1, rr_depth=5, seed=seed, cache_dir=cache_dir,
                 progress=progress)
-            refs[mode] = {"image": ref, "variance": var, "floor": noise_floor(ref, var),
-                          "info": {"spp": settings["batch_spp"] * settings["batches"],
-                                   "batches": settings["batches"], "cached": cached,
-                                   "seconds": float(meta["seconds"]), "key": key,
-                                   "cache_file": None if cache_file is None else str(cache_file)}}
+            refs[mode] = {"image": r.image, "variance": r.variance,
+                          "floor": noise_floor(r.image, r.variance), "info": r.info()}
         return refs[mode]
 
     cfgs = configs(bsdf, knobs, depths, rr_depths, rr_probs)
