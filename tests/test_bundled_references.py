@@ -64,10 +64,11 @@ def blocks(a, block):
     return a.reshape(H // block, block, W // block, block, C).mean((1, 3))
 
 
-def render_and_z(name, spp, seed, block, scene):
+def render_and_z(name, spp, seed, block, reference_scene):
     """drpt at the reference's settings: (result, max |z|, z(scale, first_row)) where the
     last gives max |z| of the render with a brightness bias (negative controls)."""
     scene_file, W, H, ref_spp, depth, mode = REFERENCES[name]
+    scene = reference_scene(scene_file)
     assert depth == -1
     ref = read_image(reference_path(name))
     assert ref.shape == (H, W, 3) and np.all(np.isfinite(ref))
@@ -99,7 +100,7 @@ def render_and_z(name, spp, seed, block, scene):
 def test_cornellbox_cook_torrance_matches_reference(reference_scene):
     # max |z| 2.4-3.7 over seeds 1-3; 2% bias: |z| > 5.6
     r, z, z_of = render_and_z("cornellbox_ct", spp=64, seed=11, block=16,
-                              scene=reference_scene(REFERENCES["cornellbox_ct"][0]))
+                              reference_scene=reference_scene)
     assert z < ZMAX, z
     assert z_of(1.02) > ZMAX and z_of(0.98) > ZMAX  # negative control
 
@@ -110,7 +111,7 @@ def test_showcase_matches_reference(name, reference_scene):
     # max |z| over seeds 1-5: day 1.9-2.6, dusk 2.6-4.2. Negative control: a 3% bias on
     # the car and ground alone (block rows 3.. of 9, below the horizon) gives |z| 6-9.
     r, z, z_of = render_and_z(name, spp=64, seed=1, block=8,
-                              scene=reference_scene(REFERENCES[name][0]))
+                              reference_scene=reference_scene)
     assert z < ZMAX, z
     assert z_of(1.03, first_row=3) > ZMAX and z_of(0.97, first_row=3) > ZMAX
 
@@ -121,6 +122,6 @@ def test_diningroom_matches_reference(reference_scene):
     # loading (~6-12 s) and the BVH build (~8-17 s) of 510k triangles; the 32-spp render
     # itself takes a few seconds. max |z| 1.7-2.0 over seeds 1-3; a 5% bias gives 6-8.
     r, z, z_of = render_and_z("diningroom", spp=32, seed=1, block=24,
-                              scene=reference_scene(REFERENCES["diningroom"][0]))
+                              reference_scene=reference_scene)
     assert z < ZMAX, z
     assert z_of(1.05) > ZMAX and z_of(0.95) > ZMAX  # negative control
