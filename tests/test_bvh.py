@@ -1,5 +1,8 @@
 """BVH builder and traversal against the brute-force reference.
 
+``build_accel(kind="bvh")`` is the 4-wide BVH (:mod:`drpt.accel.bvh4`); the
+binary one (``"bvh2"``) is checked against brute force alongside it.
+
 Kernels are few and batches wide: each scene is checked with one large batch
 of rays per query kind, in both symbolic and evaluated loop modes.
 """
@@ -106,12 +109,13 @@ def brute_hits(scene, o, d, tmax=INF):
 
 
 def compare(scene, o, d, tmax=INF, method="sah", leaf_size=4, check_occ=True, ref=None,
-            **build):
-    """BVH closest hit and occlusion vs brute force (``ref``: from
+            kind="bvh", **build):
+    """BVH (``kind``: "bvh", the default 4-wide one, or "bvh2", the binary one)
+    closest hit and occlusion vs brute force (``ref``: from
     :func:`brute_hits`, computed when not given); returns the BVH hit (numpy)."""
     O, D = rays(o, d)
     T = Float(np.broadcast_to(np.float32(tmax), (len(o),)).copy())
-    bvh = build_accel(scene, "bvh", method=method, leaf_size=leaf_size, **build)
+    bvh = build_accel(scene, kind, method=method, leaf_size=leaf_size, **build)
     g = ref if ref is not None else brute_hits(scene, o, d, tmax)
     h = bvh.intersect(O, D, T)
     ht, gt = h.t.numpy(), g.t.numpy()
@@ -147,6 +151,27 @@ def test_builder_invariants(variant):
         # min_leaf honoured: no leaf smaller, unless the whole input is
         assert counts.min() >= min(ml, N)
         assert b.stats["min_leaf_prims"] == counts.min()
+
+
+def test_morton_codes_interleave_bits():
+    """Morton codes against the definition (bit k of x, y, z at 3k+2, 3k+1, 3k),
+    with a flat axis (quantized to 0)."""
+    from drpt.accel.bvh_build import _morton30
+
+    rng = np.random.default_rng(3)
+    c = rng.random((5000, 3)) * [1.0, 7.0, 0.01]
+    c[:, 1] = 2.5
+    c[0, 0], c[1, 0] = 0.0, 1.0  # both ends of x: q = 0 and 1023
+    ext = np.ptp(c, axis=0)
+    q = np.where(ext > 0, (c - c.min(0)) * 1023.0 / np.where(ext > 0, ext, 1.0), 0.0)
+    q = np.clip(q.astype(np.int64), 0, 1023)
+    expect = np.zeros(len(c), np.int64)
+    for bit in range(10):
+        for a in range(3):
+            expect |= ((q[:, a] >> bit) & 1) << (3 * bit + 2 - a)
+    codes = _morton30(c)
+    assert np.array_equal(codes, expect)
+    assert codes.max() < 2**30 and codes[1] & 0b100 << 27
 
 
 def _subtree_sizes(b):
@@ -226,10 +251,12 @@ def test_random_soup_spheres_plane(loop_mode):
     tmax = np.where(rng.random(R) < 0.3, rng.random(R) * 5, INF)
     ref = brute_hits(sc, o, d, tmax)
     # every build variant; the evaluated (wavefront) loop runs the same kernel
-    # on other data, so two variants (small and large leaves) cover it there
+    # on other data, so two variants (small and large leaves) cover it there,
+    # and the binary BVH
     variants = VARIANTS if loop_mode else ["sah", "threshold-minleaf3"]
-    for name in variants:
-        ht, hp, hv, bvh = compare(sc, o, d, tmax, ref=ref, **VARIANTS[name])
+    runs = [("bvh", v) for v in variants] + [("bvh2", v) for v in ("sah", "threshold-minleaf3")]
+    for kind, name in runs:
+        ht, hp, hv, bvh = compare(sc, o, d, tmax, ref=ref, kind=kind, **VARIANTS[name])
         assert hv.mean() > 0.3
         assert bvh.stats["max_depth"] <= 64 and bvh.nbytes > 0
     # primitive ids cover all three kinds

@@ -571,15 +571,24 @@ def check_bvh(b: BVHArrays, lo: np.ndarray, hi: np.ndarray) -> None:
 # ------------------------------------------------------- Morton-ordered SAH build
 def _morton30(cent: np.ndarray) -> np.ndarray:
     """30-bit Morton codes (10 bits per axis) of points, in their bounding box."""
-    lo = cent.min(0)
-    ext = cent.max(0) - lo
-    scale = np.where(ext > 0, 1023.0 / np.where(ext > 0, ext, 1.0), 0.0)
-    q = np.clip(((cent - lo) * scale).astype(np.int64), 0, 1023)
     code = np.zeros(len(cent), np.int64)
-    for bit in range(10):
-        for a in range(3):
-            code |= ((q[:, a] >> bit) & 1) << (3 * bit + (2 - a))
+    for a in range(3):  # one contiguous axis at a time (column reductions are slow)
+        c = np.ascontiguousarray(cent[:, a])
+        lo, hi = c.min(), c.max()
+        scale = 1023.0 / (hi - lo) if hi > lo else 0.0
+        q = ((c - lo) * scale).astype(np.int64)
+        np.clip(q, 0, 1023, out=q)
+        code |= _spread3(q) << (2 - a)
     return code
+
+
+def _spread3(v: np.ndarray) -> np.ndarray:
+    """Bits 0..9 of ``v`` moved to bits 0, 3, 6, ..., 27 (bit interleaving by
+    shifts and masks, four steps instead of a loop over the bits)."""
+    v = (v | (v << 16)) & 0x030000FF
+    v = (v | (v << 8)) & 0x0300F00F
+    v = (v | (v << 4)) & 0x030C30C3
+    return (v | (v << 2)) & 0x09249249
 
 
 MORTON_BITS = 3  # Morton bits per SAH split: 2**3 = 8 groups, 7 candidates
@@ -599,6 +608,9 @@ def _build_morton_sah(lo32, hi32, cent, max_leaf, max_depth, ct, ci):
     small_n = MORTON_SMALL
 
     node_lo, node_hi, node_a, node_count = _node_arrays(N)
+    node_depth = np.zeros(node_a.size, np.int64)
+    boxed = np.zeros(node_a.size, bool)  # box set by the SAH step (big segments)
+    boxed[1] = True  # the pad keeps its empty box
     next_free = 2
     n_leaves = 0
     max_d = 0
@@ -670,10 +682,7 @@ def _build_morton_sah(lo32, hi32, cent, max_leaf, max_depth, ct, ci):
             kk_all[big] = np.where(hb_, nl[np.arange(nb), jb], bn // 2)
         if sml.size:
             # small segments: LBVH split at the highest differing Morton bit
-            ss, se = s_start[sml], s_end[sml]
-            idx = np.stack([ss, se], 1).ravel()
-            sb = np.minimum.reduceat(lohi_x, idx, axis=0)[::2]
-            slo[sml], shi[sml] = sb[:, :3], -sb[:, 3:]
+            ss = s_start[sml]
             mid = np.searchsorted(codes, prefix[sml] | (np.int64(1) << np.maximum(hb[sml], 0)))
             ks = mid - ss
             oks = ~same[sml] & (ks > 0) & (ks < s_n[sml])
@@ -682,8 +691,12 @@ def _build_morton_sah(lo32, hi32, cent, max_leaf, max_depth, ct, ci):
             # small segments become leaves at min(max_leaf, MORTON_LEAF)
             # primitives (split_cost = inf so far: leaf whenever n <= max_leaf)
             split_cost[sml] = np.where(s_n[sml] > min(max_leaf, MORTON_LEAF), -np.inf, np.inf)
-        node_lo[s_node] = slo
-        node_hi[s_node] = shi
+        # boxes: big segments here (their SAH needed them anyway), small
+        # segments' subtrees bottom-up at the end (_refit_small)
+        node_lo[s_node[big]] = slo[big]
+        node_hi[s_node[big]] = shi[big]
+        boxed[s_node[big]] = True
+        node_depth[s_node] = s_depth
         max_d = max(max_d, int(s_depth.max()))
         leaf = (s_n <= 1) | ((s_n <= max_leaf) & (~has | (ci * s_n <= split_cost)))
         leaf &= s_n <= max_leaf
@@ -709,5 +722,29 @@ def _build_morton_sah(lo32, hi32, cent, max_leaf, max_depth, ct, ci):
         s_n = np.concatenate([kk, s_n[sp] - kk])
         s_node = np.concatenate([left, left + 1])
         s_depth = np.concatenate([d1, d1])
-    return (node_lo[:next_free].copy(), node_hi[:next_free].copy(), node_a[:next_free].copy(),
-            node_count[:next_free].copy(), order, max_d, n_leaves)
+    M = next_free
+    node_lo, node_hi, node_a, node_count = (node_lo[:M].copy(), node_hi[:M].copy(),
+                                            node_a[:M].copy(), node_count[:M].copy())
+    _refit_small(node_lo, node_hi, node_a, node_count, node_depth[:M], boxed[:M], lohi_x, max_d)
+    return node_lo, node_hi, node_a, node_count, order, max_d, n_leaves
+
+
+def _refit_small(node_lo, node_hi, node_a, node_count, depth, boxed, lohi_x, max_d):
+    """Boxes of the nodes the Morton builder left without one (``~boxed``):
+    leaves from their primitives (one ``reduceat``), inner nodes from their
+    children, deepest level first."""
+    leaves = np.flatnonzero((node_count > 0) & ~boxed)
+    if leaves.size:
+        a = node_a[leaves].astype(np.int64)
+        idx = np.stack([a, a + node_count[leaves]], 1).ravel()
+        sb = np.minimum.reduceat(lohi_x, idx, axis=0)[::2]
+        node_lo[leaves], node_hi[leaves] = sb[:, :3], -sb[:, 3:]
+    inner = np.flatnonzero((node_count == 0) & ~boxed)
+    inner = inner[inner != 1]  # the pad
+    d_in = depth[inner]
+    for d in range(max_d, -1, -1):
+        nodes = inner[d_in == d]
+        if nodes.size:
+            c = node_a[nodes].astype(np.int64)
+            node_lo[nodes] = np.minimum(node_lo[c], node_lo[c + 1])
+            node_hi[nodes] = np.maximum(node_hi[c], node_hi[c + 1])
