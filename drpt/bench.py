@@ -75,9 +75,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("scenes", nargs="*", metavar="SCENE",
                    help="scene files (default: the bundled Cornell box and newscene)")
     p.add_argument("--accel", default="bvh,grid",
-                   help="comma-separated accelerators: bvh (binned SAH), bvh-median, "
-                        "bvh-threshold (the seed's rule), bvh-morton (fast build), grid, brute "
-                        "(default bvh,grid)")
+                   help="comma-separated accelerators: bvh (4-wide BVH, binned SAH), "
+                        "bvh-median, bvh-threshold (the seed's rule), bvh-morton (fast build), "
+                        "bvh2 (binary BVH, binned SAH), grid, brute (default bvh,grid)")
     p.add_argument("--sah-threshold", type=int, default=2000, metavar="K",
                    help="K of bvh-threshold: SAH in nodes of at most 2K primitives "
                         "(default 2000, the seed's)")

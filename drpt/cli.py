@@ -51,11 +51,11 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("-RR_cutdown", dest="rr_cutdown", type=float, default=None,
                    help="seed flag: fixed continuation probability p at every bounce")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--accel", choices=["bvh", "bvh4", "grid", "brute"], default=None,
-                   help="acceleration structure: bvh (binary BVH, default), bvh4 (4-wide BVH: "
-                        "2-3x faster traversal, opt-in, see the README's Performance "
-                        "section), grid (uniform grid, 3D-DDA; -resolution N cells per axis) "
-                        "or brute")
+    p.add_argument("--accel", choices=["bvh", "bvh2", "bvh4", "grid", "brute"], default=None,
+                   help="acceleration structure: bvh (4-wide BVH, default; alias bvh4), "
+                        "bvh2 (the binary BVH it is collapsed from: 2-3x slower, for "
+                        "comparison), grid (uniform grid, 3D-DDA; -resolution N cells per "
+                        "axis) or brute")
     p.add_argument("--bvh", dest="bvh_method", metavar="sah|median|threshold|morton",
                    default=None,
                    help="BVH split rule: sah (binned SAH everywhere, default), median (object "
@@ -121,7 +121,7 @@ def _bvh_options(args: argparse.Namespace, accel: str, seed_mode: bool) -> dict:
     resolution = _int_flag("-resolution", args.resolution)
     k = _int_flag("--sah-threshold/-SAHeuristic", args.sah_threshold)
     min_leaf = _int_flag("--min-leaf", args.min_leaf)
-    if accel not in ("bvh", "bvh4"):
+    if accel not in ("bvh", "bvh2", "bvh4"):
         if args.bvh_method is not None or min_leaf is not None:
             raise DrptError("--bvh and --min-leaf apply to the BVH only "
                             "(--accel bvh, or -SpatialTree with -input)")

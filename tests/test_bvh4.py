@@ -201,8 +201,8 @@ def test_bvh4_vs_brute(sym):
 
 
 @pytest.mark.skipif(not os.environ.get("DRPT_STRESS"),
-                    reason="still segfaults about 1 process in 8 (drpt/accel/bvh4.py docstring); "
-                           "set DRPT_STRESS=1 to run")
+                    reason="slow (~30 s) stress test of the crash in drpt/accel/bvh4.py's "
+                           "docstring; set DRPT_STRESS=1 to run")
 def test_identical_triangles_repeated():
     """The bc77154 reproducer: 100k copies of one triangle, rays along -z,
     closest hit then occlusion, several times in one process."""

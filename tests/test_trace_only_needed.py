@@ -70,9 +70,10 @@ def test_untextured_scene_traces_no_texture_lookup(monkeypatch, tmp_path):
 
 
 def test_sphere_only_scene_traces_no_triangle_test(monkeypatch, tmp_path):
-    from drpt.accel import bvh
+    from drpt.accel import bvh, bvh4
 
     monkeypatch.setattr(bvh, "test_triangle", trap)
+    monkeypatch.setattr(bvh4, "test_triangle4", trap)
     (tmp_path / "s.txt").write_text(
         "PerspectiveCamera { center 0 0 3 direction 0 0 -1 up 0 1 0 angle 40 }\n"
         "Lights { numLights 1 PointLight { position 0 2 2 color 5 5 5 } }\n"

@@ -30,11 +30,11 @@ def build_accel(scene, kind: str = "bvh", method: str = "sah", leaf_size: int = 
 
     Args:
         scene: a :class:`~drpt.scene.model.Scene`.
-        kind: ``"bvh"`` (the binary BVH, :mod:`drpt.accel.bvh`; alias
-            ``"bvh2"``), ``"bvh4"`` (4-wide BVH, :mod:`drpt.accel.bvh4`: about
-            3x faster, but it still crashes sporadically on degenerate input,
-            see its docstring, so it is not the default), ``"grid"`` (uniform
-            grid, 3D-DDA) or ``"brute"``.
+        kind: ``"bvh"`` (the default: the 4-wide BVH,
+            :mod:`drpt.accel.bvh4`; alias ``"bvh4"``), ``"bvh2"`` (the binary
+            BVH it is collapsed from, :mod:`drpt.accel.bvh`: 2-3x slower to
+            trace, kept for comparison), ``"grid"`` (uniform grid, 3D-DDA) or
+            ``"brute"``.
         method: BVH split rule (:mod:`drpt.accel.bvh_build`): ``"sah"``
             (binned SAH, default), ``"median"`` (object median) or
             ``"threshold"`` (the seed's rule: SAH in nodes of at most
@@ -48,10 +48,10 @@ def build_accel(scene, kind: str = "bvh", method: str = "sah", leaf_size: int = 
         sah_threshold: ``K`` of ``method="threshold"`` (the seed's
             ``-SAHeuristic``; ``None``: its default 2000).
     """
-    if kind == "bvh4":
+    if kind in ("bvh", "bvh4"):
         return BVH4(scene, method=method, leaf_size=leaf_size, bins=bins, min_leaf=min_leaf,
                     sah_threshold=sah_threshold)
-    if kind in ("bvh", "bvh2"):
+    if kind == "bvh2":
         return BVH(scene, method=method, leaf_size=leaf_size, bins=bins, min_leaf=min_leaf,
                    sah_threshold=sah_threshold)
     if kind == "grid":

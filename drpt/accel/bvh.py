@@ -1,4 +1,8 @@
-"""BVH ray traversal in Dr.Jit (one symbolic loop, per-lane stack).
+"""Binary BVH ray traversal in Dr.Jit (one symbolic loop, per-lane stack).
+
+The default accelerator is the 4-wide BVH collapsed from this tree
+(:mod:`drpt.accel.bvh4`, which reuses this module's queries and leaf step);
+this one stays available as ``build_accel(kind="bvh2")`` / ``--accel bvh2``.
 
 :class:`BVH` holds the triangles and spheres of a :class:`~drpt.scene.model.Scene`
 in one bounding volume hierarchy (built by :mod:`drpt.accel.bvh_build`);

@@ -1,4 +1,5 @@
-"""4-wide BVH: collapse of the binary BVH and its traversal in Dr.Jit.
+"""4-wide BVH, drpt's default accelerator: collapse of the binary BVH and its
+traversal in Dr.Jit.
 
 :class:`BVH4` has the interface of :class:`~drpt.accel.bvh.BVH` (same
 primitive ids, :class:`~drpt.accel.bvh.Hit` results, planes tested brute force
@@ -51,28 +52,26 @@ with evidence:
   the generated IR); packets past the end: uploads are padded by 64 bytes;
 * the Dr.Jit 1.5 local-array hazard below (bc77154 widened ``sp`` first).
 
-Not understood, and NOT fixed: it matches Dr.Jit issues #532
+Not understood: it matches Dr.Jit issues #532
 (``dr.alloc_local`` stacks larger than 128 bytes per lane crash the LLVM
 backend, DFS/BVH kernels) and #446 (LLVM-only garbage indices in a
 ``dr.Local`` BVH stack). Changed here without effect on it: ties between
 equal child areas now go to the shallower child (bc77154's collapse gave a
 lopsided tree on identical boxes: depth4 13, 43-entry stack; now depth4 7,
-25 entries, one local array of 100 bytes per lane), no local array exceeds
-32 entries, all loop state starts full width, uploads are padded. The
-reproducer still crashes 2 processes in 18 (once in the closest-hit query,
-once in the occlusion query). With ``dr.set_thread_count(0)`` (kernels run
-on the calling thread only) it did not crash in 22 processes, which points
-at an interaction with Dr.Jit's worker threads (e.g. memory released while
-a kernel still runs) rather than at the traversal logic, but at this rate
-that is not proof. Later, two concurrent process loops in one session
-(24 processes each): with the 25-entry stack in one local array (100 bytes
-per lane) 4 crashed; split into arrays of at most 16 entries (64 bytes),
-none did, nor did 48 more processes after that (72 in all). Hence
-``LOCAL_CHUNK = 16``: the evidence is statistical (with 4/24 as the rate,
-0 of 72 has probability ~2e-6), the mechanism inside Dr.Jit is not known, and the binary BVH's
-64-entry (256-byte) arrays have never crashed. :class:`BVH4` therefore
-stays opt-in (``build_accel(kind="bvh4")``, ``--accel bvh4``), not the
-default.
+25 entries, one local array of 100 bytes per lane), all loop state starts
+full width, uploads are padded. The reproducer still crashed 2 processes in
+18. With ``dr.set_thread_count(0)`` it did not crash in 22 processes. What
+changed it is the size of the local arrays: in two concurrent process loops
+(24 processes each), the 25-entry stack in one array (100 bytes per lane)
+crashed 4 times, split into arrays of at most 16 entries (64 bytes) never.
+Hence ``LOCAL_CHUNK = 16``. With it, no crash since: 72 processes of the
+reproducer in the session that found it, then 126 closest-hit + occlusion
+query pairs on the reproducer (21 processes, 3 builds each) and the whole
+test suite with this BVH as the default, in the session that made it the
+default (``build_accel(kind="bvh")``). At the old rate (1 process in 6),
+0 of 93 processes has probability ~5e-8. The mechanism inside Dr.Jit is
+still not known; the binary BVH (``"bvh2"``, 64-entry arrays) never
+crashed. ``DRPT_STRESS=1 pytest tests/test_bvh4.py`` runs the reproducer.
 
 Dr.Jit 1.5 hazard (avoided): in a symbolic loop, ``Local.write(value, index,
 mask)`` whose ``index`` variable has size 1 is rendered as one uniform row
