@@ -203,9 +203,11 @@ def primitive_bounds(scene, F: int, S: int) -> tuple[np.ndarray, np.ndarray]:
     spheres (BVH primitive ids ``0..F+S-1``); spheres padded against round-off."""
     los, his = [], []
     if F:
-        p32 = np.asarray(scene.triangles.positions, np.float32).astype(np.float64)
-        los.append(p32.min(1))
-        his.append(p32.max(1))
+        p32 = np.asarray(scene.triangles.positions, np.float32)
+        # elementwise over the three vertices (a reduction over the middle
+        # axis of (F, 3, 3) is ~10x slower); min/max of float32 are exact
+        los.append(np.minimum(np.minimum(p32[:, 0], p32[:, 1]), p32[:, 2]).astype(np.float64))
+        his.append(np.maximum(np.maximum(p32[:, 0], p32[:, 1]), p32[:, 2]).astype(np.float64))
     if S:
         c = np.asarray(scene.spheres.center, np.float64)
         r = np.abs(np.asarray(scene.spheres.radius, np.float64))[:, None]

@@ -735,9 +735,13 @@ def _refit_small(node_lo, node_hi, node_a, node_count, depth, boxed, lohi_x, max
     children, deepest level first."""
     leaves = np.flatnonzero((node_count > 0) & ~boxed)
     if leaves.size:
+        # leaves are small: one row gather per slot (the last primitive
+        # repeated in short leaves) beats reduceat's per-segment cost
         a = node_a[leaves].astype(np.int64)
-        idx = np.stack([a, a + node_count[leaves]], 1).ravel()
-        sb = np.minimum.reduceat(lohi_x, idx, axis=0)[::2]
+        last = a + node_count[leaves].astype(np.int64) - 1
+        sb = lohi_x[a]
+        for j in range(1, int(node_count[leaves].max())):
+            np.minimum(sb, lohi_x[np.minimum(a + j, last)], out=sb)
         node_lo[leaves], node_hi[leaves] = sb[:, :3], -sb[:, 3:]
     inner = np.flatnonzero((node_count == 0) & ~boxed)
     inner = inner[inner != 1]  # the pad
