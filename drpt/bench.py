@@ -3,11 +3,12 @@
 For each scene and each acceleration structure (``--accel bvh,grid``) drpt's
 numbers are measured, and in the same run Mitsuba 3's (``llvm_ad_rgb``) on the
 exported scene, on the *same* rays. BVH build variants are accelerators of
-their own: ``bvh`` (binned SAH), ``bvh-median`` (object median, the seed's
+their own: ``bvh`` (drpt's default rule, ``auto``), ``bvh-sah`` (binned SAH
+everywhere), ``bvh-morton``, ``bvh-median`` (object median, the seed's
 ``SAH_NUM=0``) and ``bvh-threshold`` (the seed's rule, SAH only in nodes of at
 most ``2 * --sah-threshold`` primitives, default 2000), so the seed's table
 (grid vs BVH without SAH vs BVH with SAH) is
-``--accel grid,bvh-median,bvh-threshold,bvh``. Per accelerator:
+``--accel grid,bvh-median,bvh-threshold,bvh-sah``. Per accelerator:
 
 * build time (drpt: ``build_accel``; Mitsuba: ``mi.load_dict`` of the
   exported scene, which includes its BVH build) and drpt's accel memory;
@@ -49,10 +50,10 @@ DEFAULT_SCENES = [ROOT / "scenes" / "cornellbox" / "cornellbox.txt",
 # How MTL materials are read per default scene (others: phong).
 DEFAULT_BSDF = {"newscene.txt": "cook-torrance"}
 # accelerator name -> (build_accel kind, BVH split rule)
-ACCEL_VARIANTS = {"bvh": ("bvh", "sah"), "bvh-median": ("bvh", "median"),
+ACCEL_VARIANTS = {"bvh": ("bvh", "auto"), "bvh-sah": ("bvh", "sah"), "bvh-median": ("bvh", "median"),
                   "bvh-threshold": ("bvh", "threshold"), "bvh-morton": ("bvh", "morton"),
                   "grid": ("grid", None),
-                  "brute": ("brute", None), "bvh2": ("bvh2", "sah"), "bvh4": ("bvh4", "sah")}
+                  "brute": ("brute", None), "bvh2": ("bvh2", None), "bvh4": ("bvh4", None)}
 ACCELS = tuple(ACCEL_VARIANTS)
 
 FIELDS = ["scene", "accel", "rays", "build_s", "accel_mib", "primary_mrays",
@@ -75,9 +76,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("scenes", nargs="*", metavar="SCENE",
                    help="scene files (default: the bundled Cornell box and newscene)")
     p.add_argument("--accel", default="bvh,grid",
-                   help="comma-separated accelerators: bvh (4-wide BVH, binned SAH), "
-                        "bvh-median, bvh-threshold (the seed's rule), bvh-morton (fast build), "
-                        "bvh2 (binary BVH, binned SAH), grid, brute (default bvh,grid)")
+                   help="comma-separated accelerators: bvh (4-wide BVH, drpt's default "
+                        "build rule: SAH, or Morton SAH above 100k primitives), bvh-sah (full "
+                        "binned SAH), bvh-median, bvh-threshold (the seed's rule), bvh-morton "
+                        "(fast build), bvh2 (binary BVH, binned SAH), grid, brute "
+                        "(default bvh,grid)")
     p.add_argument("--sah-threshold", type=int, default=2000, metavar="K",
                    help="K of bvh-threshold: SAH in nodes of at most 2K primitives "
                         "(default 2000, the seed's)")

@@ -56,12 +56,13 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
                         "bvh2 (the binary BVH it is collapsed from: 2-3x slower, for "
                         "comparison), grid (uniform grid, 3D-DDA; -resolution N cells per "
                         "axis) or brute")
-    p.add_argument("--bvh", dest="bvh_method", metavar="sah|median|threshold|morton",
+    p.add_argument("--bvh", dest="bvh_method", metavar="auto|sah|median|threshold|morton",
                    default=None,
-                   help="BVH split rule: sah (binned SAH everywhere, default), median (object "
-                        "median), threshold (the seed's: SAH only in nodes of at most 2K "
-                        "primitives, median above; K from --sah-threshold) or morton "
-                        "(Morton-ordered binned SAH: fastest build, for large scenes)")
+                   help="BVH split rule: auto (default: sah up to 100k primitives, morton "
+                        "above), sah (binned SAH everywhere: best trees, slowest build), "
+                        "median (object median), threshold (the seed's: SAH only in nodes of "
+                        "at most 2K primitives, median above; K from --sah-threshold) or "
+                        "morton (Morton-ordered binned SAH: fastest build)")
     p.add_argument("--sah-threshold", "-SAHeuristic", "-SAH", dest="sah_threshold",
                    metavar="K", default=None,
                    help="K of --bvh threshold (implies it; 0 = median everywhere; default 2000, "
@@ -135,7 +136,7 @@ def _bvh_options(args: argparse.Namespace, accel: str, seed_mode: bool) -> dict:
     if args.bvh_method is not None and args.bvh_method not in METHODS:
         raise DrptError(f"--bvh must be one of {', '.join(METHODS)}, got {args.bvh_method!r}")
     # With -input the seed's default BVH is its threshold rule (-SAHeuristic 2000).
-    method = args.bvh_method or ("threshold" if (k is not None or seed_mode) else "sah")
+    method = args.bvh_method or ("threshold" if (k is not None or seed_mode) else "auto")
     if k is not None and method != "threshold":
         raise DrptError(f"--sah-threshold/-SAHeuristic applies to --bvh threshold, "
                         f"not --bvh {method}")

@@ -87,14 +87,15 @@ def test_bvh_variants_as_accelerators(tmp_path, monkeypatch):
 
     monkeypatch.setattr(renderer.Renderer, "__init__", spy)
     args = _parse([str(CORNELL), "--size", "8", "8", "--spp", "1", "--rays", "1024",
-                   "--accel", "bvh-median,bvh-threshold,bvh", "--sah-threshold", "3",
+                   "--accel", "bvh-median,bvh-threshold,bvh-sah,bvh", "--sah-threshold", "3",
                    "--min-leaf", "2", "--repeat", "1", "--no-mitsuba", "--out", str(tmp_path)])
     assert args.func(args) == 0
     with open(tmp_path / "bench.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    assert [r["accel"] for r in rows] == ["bvh-median", "bvh-threshold", "bvh"]
+    assert [r["accel"] for r in rows] == ["bvh-median", "bvh-threshold", "bvh-sah", "bvh"]
     assert all(float(r["primary_mrays"]) > 0 for r in rows)
-    assert seen == [("bvh", "median", None, 2), ("bvh", "threshold", 3, 2), ("bvh", "sah", None, 2)]
+    assert seen == [("bvh", "median", None, 2), ("bvh", "threshold", 3, 2), ("bvh", "sah", None, 2),
+                    ("bvh", "auto", None, 2)]
     assert "bvh-threshold K = 3" in (tmp_path / "bench.md").read_text()
 
 

@@ -153,6 +153,24 @@ def test_builder_invariants(variant):
         assert b.stats["min_leaf_prims"] == counts.min()
 
 
+def test_auto_rule_picks_sah_small_morton_large(monkeypatch):
+    """"auto" (the default) is full SAH up to AUTO_SAH_MAX primitives, the
+    Morton build above it, and SAH whenever min_leaf > 1 (Morton has none)."""
+    from drpt.accel import bvh_build
+
+    monkeypatch.setattr(bvh_build, "AUTO_SAH_MAX", 500)
+    rng = np.random.default_rng(5)
+    small, large = soup(rng, 500), soup(rng, 501)
+    assert build_bvh(small.min(1), small.max(1)).stats["method"] == "sah"
+    b = build_bvh(large.min(1), large.max(1))
+    check_bvh(b, large.min(1), large.max(1))
+    assert b.stats["method"] == "morton"
+    m = build_bvh(large.min(1), large.max(1), method="morton")
+    assert np.array_equal(b.prim_order, m.prim_order) and np.array_equal(b.node_a, m.node_a)
+    assert build_bvh(large.min(1), large.max(1), min_leaf=2).stats["method"] == "sah"
+    assert build_accel(make_scene(large), "bvh").stats["method"] == "morton"
+
+
 def test_morton_codes_interleave_bits():
     """Morton codes against the definition (bit k of x, y, z at 3k+2, 3k+1, 3k),
     with a flat axis (quantized to 0)."""

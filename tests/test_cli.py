@@ -56,7 +56,7 @@ def _spy_options(monkeypatch):
     (["-input", CORNELL, "-SpatialTree", "-SAHeuristic", "0"], ("bvh", "threshold", 0, 1)),
     (["-input", CORNELL, "-resolution", "7"], ("grid", None, None, None)),
     # modern flags; drpt's default is full SAH
-    ([CORNELL], ("bvh", "sah", None, 1)),
+    ([CORNELL], ("bvh", "auto", None, 1)),
     ([CORNELL, "--bvh", "median", "--min-leaf", "3"], ("bvh", "median", None, 3)),
     ([CORNELL, "--sah-threshold", "50"], ("bvh", "threshold", 50, 1)),
     ([CORNELL, "--bvh", "threshold", "-resolution", "2", "--min-leaf", "2"],

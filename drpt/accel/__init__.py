@@ -23,7 +23,7 @@ from .grid import UniformGrid
 __all__ = ["BVH", "BVH4", "BruteForce", "Hit", "INVALID", "UniformGrid", "build_accel"]
 
 
-def build_accel(scene, kind: str = "bvh", method: str = "sah", leaf_size: int = 4,
+def build_accel(scene, kind: str = "bvh", method: str = "auto", leaf_size: int = 4,
                 bins: int = 16, resolution: int | None = None, min_leaf: int = 1,
                 sah_threshold: int | None = None):
     """Build the accelerator for ``scene``.
@@ -35,10 +35,12 @@ def build_accel(scene, kind: str = "bvh", method: str = "sah", leaf_size: int = 
             BVH it is collapsed from, :mod:`drpt.accel.bvh`: 2-3x slower to
             trace, kept for comparison), ``"grid"`` (uniform grid, 3D-DDA) or
             ``"brute"``.
-        method: BVH split rule (:mod:`drpt.accel.bvh_build`): ``"sah"``
-            (binned SAH, default), ``"median"`` (object median) or
+        method: BVH split rule (:mod:`drpt.accel.bvh_build`): ``"auto"``
+            (default: ``"sah"`` up to 100k primitives, ``"morton"`` above),
+            ``"sah"`` (binned SAH), ``"median"`` (object median),
             ``"threshold"`` (the seed's rule: SAH in nodes of at most
-            ``2 * sah_threshold`` primitives, median above).
+            ``2 * sah_threshold`` primitives, median above) or ``"morton"``
+            (Morton-ordered binned SAH, fast build).
         leaf_size: maximum primitives per BVH leaf.
         bins: SAH bins per axis.
         resolution: grid cells per axis (the seed's ``-resolution``); ``None``

@@ -238,7 +238,8 @@ class BVH:
 
     Args:
         scene: the :class:`~drpt.scene.model.Scene`.
-        method: builder split rule (``"sah"``, ``"median"``, ``"threshold"``).
+        method: builder split rule (:data:`~drpt.accel.bvh_build.METHODS`;
+            default ``"auto"``: full SAH, or Morton SAH above 100k primitives).
         leaf_size: maximum primitives per leaf.
         bins: SAH bins.
         min_leaf: minimum primitives per leaf (the seed's ``-resolution``).
@@ -250,7 +251,7 @@ class BVH:
         stats: ``nodes``, ``leaves``, ``max_depth``, ... from the builder.
     """
 
-    def __init__(self, scene, method: str = "sah", leaf_size: int = 4, bins: int = 16,
+    def __init__(self, scene, method: str = "auto", leaf_size: int = 4, bins: int = 16,
                  min_leaf: int = 1, sah_threshold: int | None = None):
         t0 = time.perf_counter()
         self.geo = geo = SceneGeometry(scene)

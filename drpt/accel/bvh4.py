@@ -316,7 +316,7 @@ class BVH4(BVH):
 
     track_stack = False
 
-    def __init__(self, scene, method: str = "sah", leaf_size: int = 4, bins: int = 16,
+    def __init__(self, scene, method: str = "auto", leaf_size: int = 4, bins: int = 16,
                  min_leaf: int = 1, sah_threshold: int | None = None):
         t0 = time.perf_counter()
         self.geo = geo = SceneGeometry(scene)

@@ -42,7 +42,7 @@ class RenderOptions:
     seed: int = 0
     accel: str = "bvh"
     grid_resolution: int | None = None  # cells per axis for accel="grid" (None: automatic)
-    bvh_method: str = "sah"  # BVH split rule: "sah", "median" or "threshold" (accel="bvh")
+    bvh_method: str = "auto"  # BVH split rule, drpt.accel.bvh_build.METHODS (accel="bvh")
     sah_threshold: int | None = None  # K of bvh_method="threshold" (None: the seed's 2000)
     bvh_min_leaf: int = 1  # minimum primitives per BVH leaf (the seed's -resolution)
     bsdf: str = "phong"  # how MTL materials are read, see drpt.shading
