@@ -4,7 +4,7 @@ Each renderer renders once to compile (warm-up), then three times timed (the
 best counts: the machine may be shared); the ratio is drpt samples/s over
 Mitsuba samples/s at equal size, spp and depth. ``accels`` (comma-separated
 ``build_accel`` kinds, default ``bvh``) renders with each accelerator in turn,
-next to the same Mitsuba timing, e.g. ``bvh2,bvh4`` for the binary and 4-wide BVH.
+next to the same Mitsuba timing, e.g. ``bvh,bvh2`` for the 4-wide (default) and binary BVH.
 
     .venv/bin/python benchmarks/render_vs_mitsuba.py [size] [spp] [accels]
 """
