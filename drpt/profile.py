@@ -306,6 +306,39 @@ def _instrument(renderer, tracker: StageTracker) -> None:
 
     integ.sample = staged_sample
 
+    sequence = getattr(integ, "sample_sequence", None)
+    if sequence is None:
+        return
+    camera = "camera rays + RNG setup"
+
+    def staged_sequence(rng, camera_ray, count):
+        # The first camera rays are made before the loop and timed as their
+        # stage; the next paths' are made inside a symbolic conditional (path
+        # regeneration), where nothing can be evaluated, so their time stays
+        # in the loop's stage. The ray count is exact: one per sample.
+        import drjit as dr
+
+        first = [True]
+
+        def staged_camera(rng):
+            if not first[0]:
+                return camera_ray(rng)
+            first[0] = False
+            tracker.enter(camera, (rng,))
+            o, d = camera_ray(rng)
+            tracker.leave((rng, o, d))
+            return o, d
+
+        tracker.enter(INSTRUMENTATION, (count,))
+        tracker.stage(camera).rays += int(dr.sum(count)[0])
+        tracker.leave(None)
+        tracker.enter("integrator loop (throughput, RR, state)")
+        out = sequence(rng, staged_camera, count)
+        tracker.leave(out)
+        return out
+
+    integ.sample_sequence = staged_sequence
+
 
 # --------------------------------------------------------------------------- running
 

@@ -8,10 +8,15 @@ committed Mitsuba references (reference/make_references.py).
 * no speckles from the BSDF: a "speckle" is a pixel more than 4x (+0.05)
   brighter than its 3x3 median where the reference is not (white), or below
   1/4 of a median above 0.05 where the reference is not (black). The seed's
-  renders are full of both. Unidirectional path tracing still makes the odd
-  bright pixel from caustic paths (floor -> glossy sphere -> light): Mitsuba
-  shows ~0.4 per image here, drpt ~0.9 (8 seeds each, a difference within
-  Poisson noise), so we allow at most 3 white and no black speckles.
+  renders are full of both. Unidirectional path tracing at 64 spp still makes
+  a few of each by chance: the odd bright pixel from caustic paths (floor ->
+  glossy sphere -> light) and the odd dark pixel in a dim corner whose light
+  comes mostly through rare paths. Counted on newscene over 52 seeds: Mitsuba
+  0.62 white and 0.15 black per image, drpt 0.71 and 0.13. So the speckles of
+  four drpt renders (seeds 3-6) are added up and must stay at most 8 white
+  and 3 black (Poisson tail probabilities ~0.003 each at Mitsuba's rates); a
+  single image with "no black speckle" would fail one seed in seven for a
+  correct renderer, Mitsuba included.
 """
 
 import sys
@@ -63,7 +68,12 @@ def test_newscene_converges_to_mitsuba_without_speckles(name):
                                                              seed=3))), np.float32)
     assert rel_mse(r.image, ref) < 1.25 * rel_mse(mits, ref)
     white, black = speckles(r.image, ref)
-    assert white <= 3 and black == 0, (white, black)
+    for seed in (4, 5, 6):
+        img = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, seed=seed, bsdf=mode,
+                                            progress=False)).render().image
+        w, b = speckles(img, ref)
+        white, black = white + w, black + b
+    assert white <= 8 and black <= 3, (white, black)
 
 
 def test_speckle_detector_finds_speckles():
