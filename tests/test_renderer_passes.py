@@ -1,4 +1,4 @@
-"""Pass planning (drpt/render/renderer.py): every (pixel, sample) exactly once,
+"""Pass planning and path regeneration (drpt/render/renderer.py): every (pixel, sample) exactly once,
 never more than the lane budget at a time."""
 
 import numpy as np
@@ -15,3 +15,27 @@ def test_passes_cover_once_within_budget(w, h, spp, budget):
         assert rows * w * k <= max(budget, w)  # one row is the smallest unit
         count[r0:r0 + rows, s0:s0 + k] += 1
     assert np.all(count == 1)
+
+
+@pytest.mark.parametrize("spp,max_lanes,min_lanes", [(13, 1 << 21, 100), (13, 70, 100),
+                                                     (5, 1 << 21, 1), (64, 1 << 21, 1 << 14)])
+def test_every_pixel_gets_exactly_spp_samples(tmp_path, monkeypatch, spp, max_lanes, min_lanes):
+    """Path regeneration bookkeeping: with a constant sky and nothing in view
+    every sample is exactly 0.5, so the image is 0.5 with zero variance only
+    if each pixel's lanes together trace exactly ``spp`` samples, whatever the
+    lanes per pixel (``MIN_LANES``), the remainder split and the passes."""
+    from drpt.imageio import write_image
+    from drpt.render import renderer
+    from drpt.scene import load_scene
+
+    monkeypatch.setattr(renderer, "MIN_LANES", min_lanes)
+    write_image(tmp_path / "sky.exr", np.full((4, 8, 3), 0.5, np.float32))
+    (tmp_path / "s.txt").write_text(
+        "PerspectiveCamera { center 0 0 0 direction 0 0 -1 up 0 1 0 angle 30 }\n"
+        "Lights { numLights 1 Skybox { sky.exr } }\n"
+        "Group { numObjects 1 Sphere { center 0 0 50 radius 1 } }\n")  # behind the camera
+    r = renderer.Renderer(load_scene(tmp_path / "s.txt"), renderer.RenderOptions(
+        width=7, height=5, spp=spp, max_lanes=max_lanes, progress=False)).render()
+    assert r.samples == 7 * 5 * spp
+    assert np.array_equal(r.image, np.full((5, 7, 3), 0.5, np.float32))
+    assert np.all(r.variance == 0.0)
