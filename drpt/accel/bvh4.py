@@ -18,8 +18,11 @@ this order:
 1. *node phase* (when the lane is not inside a leaf): pop an entry from the
    lane's stack (two ``dr.alloc_local`` arrays, node reference and entry
    distance) unless one is current; drop it if its entry distance exceeds the
-   closest hit. For an inner node, fetch the four child boxes with six
-   16-byte packet gathers and the four child references with one, slab-test
+   closest hit. (Any-hit queries keep no distances: they end at their first
+   hit, so there is never a closer hit to compare with; without the second
+   array shadow rays are 1.07-1.35x faster, same-process A/B.) For an inner
+   node, fetch the four child boxes with six 16-byte packet gathers and the
+   four child references with one, slab-test
    all four, sort the hits by entry distance (5-comparator network, misses
    last), push the farther hits (farthest first) and continue with the
    nearest. If the entry in hand is a leaf (popped, or the nearest child just
@@ -111,7 +114,7 @@ from dataclasses import dataclass
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array3f, Array4f, Array4u, Float, UInt32
+from drjit.llvm import Array3f, Array4f, Array4u, Bool, Float, UInt32
 
 from ..geometry.triangle import RayPrep, watertight_permuted
 from .bvh import (BVH, INVALID, STACK_SIZE, SceneGeometry, _nbytes, leaf_orders,
@@ -404,7 +407,10 @@ class BVH4(BVH):
         sizes = [min(LOCAL_CHUNK, self.stack_size - c) for c in
                  range(0, self.stack_size, LOCAL_CHUNK)]
         stk_n = tuple(dr.alloc_local(UInt32, z) for z in sizes)
-        stk_t = tuple(dr.alloc_local(Float, z) for z in sizes)
+        # Entry distances let a popped subtree be skipped when a closer hit
+        # was found since its push; an any-hit query ends at its first hit,
+        # so it never skips one and keeps no distances.
+        stk_t = () if any_hit else tuple(dr.alloc_local(Float, z) for z in sizes)
 
         def cond(cur, cur_t, sp, stk_n, stk_t, pi, pe, bt, bj, bu, bv, msp):
             return (pi < pe) | (cur != INVALID) | (sp > 0)
@@ -415,10 +421,13 @@ class BVH4(BVH):
             need_pop = ~in_leaf & (cur == INVALID) & (sp > 0)
             sp = dr.select(need_pop, sp - 1, sp)
             cur = dr.select(need_pop, _pop(stk_n, sp, need_pop), cur)
-            cur_t = dr.select(need_pop, _pop(stk_t, sp, need_pop), cur_t)
             node_on = ~in_leaf & (cur != INVALID)
-            culled = node_on & (cur_t > bt * _SLAB_EPS)
-            node_on &= ~culled
+            if any_hit:
+                culled = Bool(False)
+            else:
+                cur_t = dr.select(need_pop, _pop(stk_t, sp, need_pop), cur_t)
+                culled = node_on & (cur_t > bt * _SLAB_EPS)
+                node_on &= ~culled
             inner = node_on & ((cur & LEAF_FLAG) == 0)
             # four child boxes: six packet gathers of 4 floats (SoA)
             b6 = cur * 6
@@ -453,7 +462,8 @@ class BVH4(BVH):
             for k in (3, 2, 1):
                 m = inner & (key[k] < _INF)
                 _push(stk_n, val[k], sp, m)
-                _push(stk_t, key[k], sp, m)
+                if not any_hit:
+                    _push(stk_t, key[k], sp, m)
                 sp = dr.select(m, sp + 1, sp)
             if track:
                 msp = dr.maximum(msp, sp)
