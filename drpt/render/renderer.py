@@ -145,7 +145,8 @@ class Renderer:
                 scene.background.color, options.path, delta, self.env)
         self.build_seconds = time.perf_counter() - t0
 
-    def _pass(self, pass_index: int, k: int, r0: int, rows: int) -> np.ndarray:
+    def _pass(self, pass_index: int, k: int, r0: int, rows: int
+              ) -> tuple[np.ndarray, np.ndarray, int]:
         """Sums of the ``k`` samples of each pixel of rows ``r0..r0+rows`` and of
         their squares, and the number of non-finite samples dropped."""
         W = self.opt.width
