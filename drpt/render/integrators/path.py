@@ -20,6 +20,10 @@ crossed), so paths inside glass are not killed for their radiance scaling.
 Delta lobes (glass, mirrors) have nothing to evaluate: next-event estimation
 contributes nothing there and the emitter their ray hits counts in full
 (``prev_delta``). A scene of only delta materials traces no NEE code.
+
+Two entry points run the same bounce (``_bounce``): ``sample`` traces one path
+per lane; ``sample_sequence``, which the renderer uses, traces several per
+lane one after another (path regeneration) and returns their sums.
 """
 
 from __future__ import annotations
