@@ -25,11 +25,11 @@ Split rules (``method``):
 ``"auto"`` (default)
     ``"sah"`` for up to ``AUTO_SAH_MAX`` (100k) primitives, ``"morton"``
     above (and ``"sah"`` whenever ``min_leaf > 1``, which ``"morton"`` does
-    not support). Full SAH costs ~19 us of single-threaded numpy per
-    primitive here (9.6 s for the 510k-triangle dining room, 14x Mitsuba's
-    whole scene load), the Morton build ~2.5 us (1.3 s) for trees that trace
-    0.78-0.86x as fast (README, Performance); 100k primitives keep the SAH
-    build under ~2 s. ``BVHArrays.stats["method"]`` is the rule that ran.
+    not support). Full SAH costs 13-19 us of single-threaded numpy per
+    primitive here (6.7-9.6 s for the 510k-triangle dining room, 11-14x
+    Mitsuba's whole scene load), the Morton build ~2.5 us (1.2 s) for trees
+    that trace 0.72-0.89x as fast (README, Performance); 100k primitives keep
+    the SAH build under ~2 s. ``BVHArrays.stats["method"]`` is the rule that ran.
 ``"sah"``
     Binned surface area heuristic: per axis, centroids are put in ``bins``
     equal-width bins spanning the node's centroid extent; every boundary
