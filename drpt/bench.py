@@ -79,7 +79,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="comma-separated accelerators: bvh (4-wide BVH, drpt's default "
                         "build rule: SAH, or Morton SAH above 100k primitives), bvh-sah (full "
                         "binned SAH), bvh-median, bvh-threshold (the seed's rule), bvh-morton "
-                        "(fast build), bvh2 (binary BVH, binned SAH), grid, brute "
+                        "(fast build), bvh2 (binary BVH, default build rule), grid, brute "
                         "(default bvh,grid)")
     p.add_argument("--sah-threshold", type=int, default=2000, metavar="K",
                    help="K of bvh-threshold: SAH in nodes of at most 2K primitives "
