@@ -82,11 +82,12 @@ changed it is the size of the local arrays: in two concurrent process loops
 (24 processes each), the 25-entry stack in one array (100 bytes per lane)
 crashed 4 times, split into arrays of at most 16 entries (64 bytes) never.
 Hence ``LOCAL_CHUNK = 16``. With it, no crash since: 72 processes of the
-reproducer in the session that found it, then 93 processes (3 builds and 6
-closest-hit + occlusion query pairs each, 68 of them with the symbolic-if
-phases above) and the whole test suite with this BVH as the default, in the
-session that made it the default (``build_accel(kind="bvh")``). At the old
-rate (1 process in 6), no crash in 165 processes has probability ~1e-13. The mechanism inside Dr.Jit is
+reproducer in the session that found it, then 171 processes (3 builds and 6
+closest-hit + occlusion query pairs each; 78 of them with the final
+traversal: symbolic-if phases, no distance stack) and the whole test suite
+with this BVH as the default, in the session that made it the default
+(``build_accel(kind="bvh")``). At the old rate (1 process in 6), no crash in
+243 processes has probability ~6e-20. The mechanism inside Dr.Jit is
 still not known; the binary BVH (``"bvh2"``, 64-entry arrays) never
 crashed. ``DRPT_STRESS=1 pytest tests/test_bvh4.py`` runs the reproducer.
 
