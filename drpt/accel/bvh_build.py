@@ -299,6 +299,31 @@ def _node_arrays(N: int):
     return node_lo, node_hi, np.zeros(cap, np.uint32), np.zeros(cap, np.uint32)
 
 
+def _depth_guard(s_n, s_depth, leaf, k, max_leaf: int, max_depth: int):
+    """Index-median splits (``k = n // 2``) for the split nodes that would
+    otherwise leave too few levels below them to stay within ``max_depth``
+    (module docstring, "Forced splits and depth"). Returns the new ``k`` and
+    the guarded nodes."""
+    need = np.ceil(np.log2(np.maximum(s_n / max_leaf, 1.0))).astype(np.int64)
+    guard = ~leaf & (s_depth + need + 1 >= max_depth)
+    return np.where(guard, s_n // 2, k), guard
+
+
+def _emit_level(node_a, node_count, s_start, s_n, s_node, leaf, next_free: int):
+    """Write one level's nodes: a leaf gets its primitive range, a split node
+    the index of its first child, the pair being allocated at ``next_free``.
+    Returns the leaf and split segment indices, the split nodes' first
+    children and the new ``next_free``."""
+    lf = np.flatnonzero(leaf)
+    node_a[s_node[lf]] = s_start[lf]
+    node_count[s_node[lf]] = s_n[lf]
+    sp = np.flatnonzero(~leaf)
+    left = next_free + 2 * np.arange(sp.size)
+    node_a[s_node[sp]] = left
+    node_count[s_node[sp]] = 0
+    return lf, sp, left, next_free + 2 * sp.size
+
+
 def build_bvh(
     lo: np.ndarray,
     hi: np.ndarray,
@@ -444,9 +469,7 @@ def build_bvh(
         # leaves larger than max_leaf are not allowed: force a split
         leaf &= s_n <= max_leaf
         # depth guard: switch to index-median splits near the depth limit
-        need = np.ceil(np.log2(np.maximum(s_n / max_leaf, 1.0))).astype(np.int64)
-        guard = ~leaf & (s_depth + need + 1 >= max_depth)
-        k = np.where(guard, s_n // 2, k)
+        k, guard = _depth_guard(s_n, s_depth, leaf, k, max_leaf, max_depth)
         bad = ~leaf & ((k < min_leaf) | (k > s_n - min_leaf))
         k = np.where(bad, s_n // 2, k)
         # statistics of the rule's choices
@@ -463,11 +486,9 @@ def build_bvh(
                 median_min = mmin if median_min == 0 else min(median_min, mmin)
 
         # leaves: their primitives reach their final positions
-        lf = np.flatnonzero(leaf)
-        node_a[s_node[lf]] = s_start[lf]
-        node_count[s_node[lf]] = s_n[lf]
+        lf, sp, left, next_free = _emit_level(node_a, node_count, s_start, s_n, s_node, leaf,
+                                              next_free)
         n_leaves += lf.size
-        sp = np.flatnonzero(~leaf)
         if sp.size == 0:
             prim_order[s_start[seg] + local] = ids[0]
             break
@@ -476,11 +497,6 @@ def build_bvh(
             em = (~leaf)[seg]  # elements of split segments
             lm = ~em
             prim_order[(s_start[seg] + local)[lm]] = ids[0][lm]
-
-        left = next_free + 2 * np.arange(sp.size)
-        next_free += 2 * sp.size
-        node_a[s_node[sp]] = left
-        node_count[s_node[sp]] = 0
 
         # partition the split segments (stable, in all three orders) into the
         # spare buffers; leaf elements go past the end and are dropped
@@ -712,23 +728,14 @@ def _build_morton_sah(lo32, hi32, cent, max_leaf, max_depth, ct, ci):
         max_d = max(max_d, int(s_depth.max()))
         leaf = (s_n <= 1) | ((s_n <= max_leaf) & (~has | (ci * s_n <= split_cost)))
         leaf &= s_n <= max_leaf
-        k = kk_all
-        need = np.ceil(np.log2(np.maximum(s_n / max_leaf, 1.0))).astype(np.int64)
-        guard = ~leaf & (s_depth + need + 1 >= max_depth)
-        k = np.where(guard, s_n // 2, k)
+        k, _ = _depth_guard(s_n, s_depth, leaf, kk_all, max_leaf, max_depth)
         k = np.where(~leaf & ((k <= 0) | (k >= s_n)), s_n // 2, k)
 
-        lf = np.flatnonzero(leaf)
-        node_a[s_node[lf]] = s_start[lf]
-        node_count[s_node[lf]] = s_n[lf]
+        lf, sp, left, next_free = _emit_level(node_a, node_count, s_start, s_n, s_node, leaf,
+                                              next_free)
         n_leaves += lf.size
-        sp = np.flatnonzero(~leaf)
         if sp.size == 0:
             break
-        left = next_free + 2 * np.arange(sp.size)
-        next_free += 2 * sp.size
-        node_a[s_node[sp]] = left
-        node_count[s_node[sp]] = 0
         st, kk, d1 = s_start[sp], k[sp], s_depth[sp] + 1
         s_start = np.concatenate([st, st + kk])
         s_n = np.concatenate([kk, s_n[sp] - kk])
