@@ -185,7 +185,6 @@ def nearest_primitive(tri_buf, sph_buf, tri_idx, sph_idx, prim, prep: RayPrep, o
     return bt, bj, bu, bv, hit_any
 
 
-
 def leaf_primitive(codes, pi, pa):
     """Buffer index and lane masks (triangle, sphere) of BVH position ``pi``
     (lanes ``pa``): the position itself when the scene has one primitive kind,

@@ -66,8 +66,8 @@ class PathIntegrator:
     @dr.syntax
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:
         """Radiance arriving at ``o`` from direction ``-d``, one sample per lane."""
-        L, beta, eta, depth, prev_pdf, prev_delta = self._start(Bool(active))
         active = Bool(active)
+        L, beta, eta, depth, prev_pdf, prev_delta = self._start(active)
         while active:
             o, d, L, beta, eta, depth, prev_pdf, prev_delta, active = self._bounce(
                 rng, o, d, L, beta, eta, depth, prev_pdf, prev_delta, active)
