@@ -3,7 +3,7 @@
 Each renderer renders once to compile (warm-up), then three times timed (the
 best counts: the machine may be shared); the ratio is drpt samples/s over
 Mitsuba samples/s at equal size, spp and depth. ``accels`` (comma-separated
-``build_accel`` kinds, default ``bvh``) renders with each accelerator in turn,
+``build_accel`` kinds, default ``auto``) renders with each accelerator in turn,
 next to the same Mitsuba timing, e.g. ``bvh,bvh2`` for the 4-wide (default) and binary BVH.
 
     .venv/bin/python benchmarks/render_vs_mitsuba.py [size] [spp] [accels]
@@ -20,7 +20,7 @@ SCENES = [("scenes/cornellbox/cornellbox.txt", "phong"),
           ("scenes/newscene/newscene.txt", "cook-torrance")]
 
 
-def main(size=256, spp=64, accels="bvh"):
+def main(size=256, spp=64, accels="auto"):
     import mitsuba as mi
 
     mi.set_variant("llvm_ad_rgb")

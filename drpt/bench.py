@@ -1,9 +1,11 @@
 """``python -m drpt bench [SCENE ...]``: ray and render throughput, drpt vs Mitsuba 3.
 
-For each scene and each acceleration structure (``--accel bvh,grid``) drpt's
-numbers are measured, and in the same run Mitsuba 3's (``llvm_ad_rgb``) on the
-exported scene, on the *same* rays. BVH build variants are accelerators of
-their own: ``bvh`` (drpt's default rule, ``auto``), ``bvh-sah`` (binned SAH
+For each scene and each acceleration structure (``--accel auto,bvh,grid``)
+drpt's numbers are measured, and in the same run Mitsuba 3's (``llvm_ad_rgb``)
+on the exported scene, on the *same* rays. ``auto`` is drpt's default choice
+(:func:`drpt.accel.resolve_kind`: ``inline`` for tiny scenes, else ``bvh``); it
+gets a row, labelled with its pick, only where that pick is not asked for
+already. BVH build variants are accelerators of their own: ``bvh`` (drpt's default rule, ``auto``), ``bvh-sah`` (binned SAH
 everywhere), ``bvh-morton``, ``bvh-median`` (object median, the seed's
 ``SAH_NUM=0``) and ``bvh-threshold`` (the seed's rule, SAH only in nodes of at
 most ``2 * --sah-threshold`` primitives, default 2000), so the seed's table
@@ -53,7 +55,7 @@ DEFAULT_BSDF = {"newscene.txt": "cook-torrance"}
 ACCEL_VARIANTS = {"bvh": ("bvh", "auto"), "bvh-sah": ("bvh", "sah"), "bvh-median": ("bvh", "median"),
                   "bvh-threshold": ("bvh", "threshold"), "bvh-morton": ("bvh", "morton"),
                   "grid": ("grid", None),
-                  "brute": ("brute", None), "bvh2": ("bvh2", None), "bvh4": ("bvh4", None)}
+                  "brute": ("brute", None), "inline": ("inline", None), "auto": ("auto", None), "bvh2": ("bvh2", None), "bvh4": ("bvh4", None)}
 ACCELS = tuple(ACCEL_VARIANTS)
 
 FIELDS = ["scene", "accel", "rays", "build_s", "accel_mib", "primary_mrays",
@@ -75,12 +77,15 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                     "on the same rays and scenes, in one run")
     p.add_argument("scenes", nargs="*", metavar="SCENE",
                    help="scene files (default: the bundled Cornell box and newscene)")
-    p.add_argument("--accel", default="bvh,grid",
-                   help="comma-separated accelerators: bvh (4-wide BVH, drpt's default "
+    p.add_argument("--accel", default="auto,bvh,grid",
+                   help="comma-separated accelerators: auto (drpt's default: inline for "
+                        "scenes of at most 64 primitives, else bvh; a row only where it "
+                        "differs from the other accelerators asked for), inline (primitives "
+                        "compiled into the kernel), bvh (4-wide BVH, drpt's default "
                         "build rule: SAH, or Morton SAH above 100k primitives), bvh-sah (full "
                         "binned SAH), bvh-median, bvh-threshold (the seed's rule), bvh-morton "
                         "(fast build), bvh2 (binary BVH, default build rule), grid, brute "
-                        "(default bvh,grid)")
+                        "(default auto,bvh,grid)")
     p.add_argument("--sah-threshold", type=int, default=2000, metavar="K",
                    help="K of bvh-threshold: SAH in nodes of at most 2K primitives "
                         "(default 2000, the seed's)")
@@ -357,6 +362,7 @@ def write_chart(rows: list[dict], path: Path, mitsuba: bool) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``bench`` for parsed ``args``; user errors raise DrptError."""
+    from .accel import resolve_kind
     from .backend import ensure_llvm
     from .scene import load_scene
 
@@ -396,7 +402,13 @@ def main(args: argparse.Namespace) -> int:
         mi_row = (bench_mitsuba(scene, rays, bsdf, (W, H), args.spp, args.max_depth, args.repeat)
                   if mitsuba else {})
         for kind in accels:
-            row = {"scene": path.stem, "accel": kind}
+            label = kind
+            if kind == "auto":
+                picked = resolve_kind(scene, "auto")
+                if picked in accels:
+                    continue  # its row is already there
+                label = f"auto ({picked})"
+            row = {"scene": path.stem, "accel": label}
             row.update(bench_drpt(scene, kind, rays, bsdf, (W, H), args.spp, args.max_depth,
                                   args.repeat, args.sah_threshold, args.min_leaf))
             row.update(mi_row)

@@ -51,8 +51,11 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("-RR_cutdown", dest="rr_cutdown", type=float, default=None,
                    help="seed flag: fixed continuation probability p at every bounce")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--accel", choices=["bvh", "bvh2", "bvh4", "grid", "brute"], default=None,
-                   help="acceleration structure: bvh (4-wide BVH, default; alias bvh4), "
+    p.add_argument("--accel", choices=["auto", "bvh", "bvh2", "bvh4", "grid", "inline", "brute"],
+                   default=None,
+                   help="acceleration structure: auto (default: inline up to 64 primitives, "
+                        "else bvh), inline (every primitive compiled into the kernel as "
+                        "constants), bvh (4-wide BVH; alias bvh4), "
                         "bvh2 (the binary BVH it is collapsed from: 2-3x slower, for "
                         "comparison), grid (uniform grid, 3D-DDA; -resolution N cells per "
                         "axis) or brute")
@@ -193,7 +196,13 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise DrptError(f"Russian roulette probability must be in (0, 1], got {rr_prob}")
 
     integrator = args.integrator or ("path" if (args.monte_carlo or not seed_mode) else "whitted")
-    accel = args.accel or ("bvh" if (args.spatial_tree or not seed_mode) else "grid")
+    # flags that shape a BVH ask for one rather than the inline accelerator
+    bvh_flags = any(f is not None for f in (args.bvh_method, args.min_leaf, args.sah_threshold,
+                                            args.resolution))
+    accel = args.accel or ("grid" if seed_mode and not args.spatial_tree
+                           else "bvh" if args.spatial_tree else "auto")
+    if accel == "auto" and bvh_flags:
+        accel = "bvh"
     bsdf = args.bsdf or ("cook-torrance" if args.cook_torrance else "phong")
     accel_opts = _bvh_options(args, accel, seed_mode)
     if args.gui:

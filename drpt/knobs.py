@@ -8,15 +8,18 @@
                                [--repeats R] [--seed S] [--cache DIR | --no-cache] [--out DIR]
 
 Every row renders the scene with drpt at ``--spp`` and changes one knob from
-the default (BVH, ``--bsdf`` materials, unbounded depth, Russian roulette from
-depth 5 with the adaptive probability ``min(throughput, 0.95)``):
+the default (``auto`` accelerator, ``--bsdf`` materials, unbounded depth,
+Russian roulette from depth 5 with the adaptive probability
+``min(throughput, 0.95)``):
 
 ``depth``  ``max_depth`` 2 (direct light only), 3, 5, 8 (``--depths``);
 ``rr``     Russian roulette from depth 1, 3, 10 (``--rr-depths``, adaptive
            probability); a fixed continuation probability 0.5, 0.8 from depth 1
            (``--rr-probs``, the seed's ``-RR_cutdown``); and off (no roulette,
            paths end after 64 segments: the energy beyond that is ~albedo^64);
-``accel``  the uniform grid instead of the BVH (same image up to float order);
+``accel``  the 4-wide BVH and the uniform grid instead of the default
+           (``auto``: inline for tiny scenes, else the BVH; same image up to
+           float order);
 ``bsdf``   the other material mode (Phong <-> Cook-Torrance). That changes the
            scene, so that row is compared with its own reference.
 
@@ -72,7 +75,7 @@ class Config:
     knob: str
     setting: str
     bsdf: str
-    accel: str = "bvh"
+    accel: str = "auto"
     max_depth: int = -1
     rr_depth: int = 5
     rr_prob: float | None = None
@@ -127,7 +130,7 @@ def main(args: argparse.Namespace) -> int:
 def configs(bsdf: str, knobs=KNOBS, depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
             rr_probs=(0.5, 0.8)) -> list[Config]:
     """The default row, then one row per knob setting."""
-    rows = [Config("default", "bvh, unbounded depth, RR from depth 5 (adaptive)", bsdf)]
+    rows = [Config("default", "auto accel, unbounded depth, RR from depth 5 (adaptive)", bsdf)]
     if "depth" in knobs:
         rows += [Config("max depth", str(d), bsdf, max_depth=d) for d in depths]
     if "rr" in knobs:
@@ -138,7 +141,7 @@ def configs(bsdf: str, knobs=KNOBS, depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
         rows.append(Config("RR", f"off (depth <= {RR_OFF_DEPTH})", bsdf,
                            max_depth=RR_OFF_DEPTH, rr_depth=RR_OFF_DEPTH + 1))
     if "accel" in knobs:
-        rows.append(Config("accel", "grid", bsdf, accel="grid"))
+        rows += [Config("accel", a, bsdf, accel=a) for a in ("bvh", "grid")]
     if "bsdf" in knobs:
         other = "cook-torrance" if bsdf == "phong" else "phong"
         rows.append(Config("material", f"{other} (own reference)", other))

@@ -353,6 +353,7 @@ class ProfileOptions:
     seed: int = 0
     max_lanes: int = 1 << 21
     repeat: int = 1  # timed renders per mode; the fastest is kept
+    accel: str = "auto"  # drpt.accel.build_accel kind
 
 
 def _renderer(scene, popt: ProfileOptions):
@@ -360,7 +361,7 @@ def _renderer(scene, popt: ProfileOptions):
     from .render.renderer import RenderOptions, Renderer
 
     ro = RenderOptions(width=popt.width, height=popt.height, spp=popt.spp, seed=popt.seed,
-                       bsdf=popt.bsdf, integrator=popt.integrator,
+                       bsdf=popt.bsdf, integrator=popt.integrator, accel=popt.accel,
                        path=PathOptions(max_depth=popt.max_depth), max_lanes=popt.max_lanes,
                        progress=False)
     return Renderer(scene, ro)
@@ -578,6 +579,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="longest path in segments (-1 = unbounded, default)")
     p.add_argument("--integrator", choices=["path", "whitted"], default="path")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--accel", choices=["auto", "bvh", "bvh2", "grid", "inline", "brute"],
+                   default="auto", help="accelerator (default auto: inline for scenes of at "
+                                        "most 64 primitives, else the 4-wide BVH)")
     p.add_argument("--repeat", type=int, default=1,
                    help="timed renders per mode after the warm-up; the fastest is reported")
     p.add_argument("--out", default=None,
@@ -601,9 +605,10 @@ def main(args: argparse.Namespace) -> int:
         raise DrptError(f"{out}: folder {out.parent} does not exist")
     popt = ProfileOptions(width=width, height=height, spp=args.spp, bsdf=args.bsdf,
                           integrator=args.integrator, max_depth=args.max_depth, seed=args.seed,
-                          repeat=args.repeat)
+                          repeat=args.repeat, accel=args.accel)
     results = run_profile(scene, popt)
-    head = f"{scene.name}: {width}x{height}, {args.spp} spp, {args.integrator}, {args.bsdf}"
+    head = (f"{scene.name}: {width}x{height}, {args.spp} spp, {args.integrator}, {args.bsdf}, "
+            f"accel {args.accel}")
     print(head)
     for r in results:
         print()

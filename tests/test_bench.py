@@ -39,7 +39,7 @@ def run(tmp_path_factory):
 
 def test_defaults():
     args = _parse([])
-    assert args.scenes == [] and args.accel == "bvh,grid" and args.out == "bench"
+    assert args.scenes == [] and args.accel == "auto,bvh,grid" and args.out == "bench"
     assert not args.no_mitsuba and args.bsdf is None
     assert all(p.is_file() for p in bench.DEFAULT_SCENES)
 

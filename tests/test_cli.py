@@ -55,8 +55,11 @@ def _spy_options(monkeypatch):
      ("bvh", "threshold", 2000, 5)),
     (["-input", CORNELL, "-SpatialTree", "-SAHeuristic", "0"], ("bvh", "threshold", 0, 1)),
     (["-input", CORNELL, "-resolution", "7"], ("grid", None, None, None)),
-    # modern flags; drpt's default is full SAH
-    ([CORNELL], ("bvh", "auto", None, 1)),
+    # modern flags; drpt's default accelerator is auto (inline for the Cornell
+    # box's 32 triangles), and BVH flags ask for the BVH
+    ([CORNELL], ("auto", "auto", None, 1)),
+    ([CORNELL, "--accel", "inline"], ("inline", "auto", None, 1)),
+    ([CORNELL, "--accel", "auto", "--bvh", "sah"], ("bvh", "sah", None, 1)),
     ([CORNELL, "--bvh", "median", "--min-leaf", "3"], ("bvh", "median", None, 3)),
     ([CORNELL, "--sah-threshold", "50"], ("bvh", "threshold", 50, 1)),
     ([CORNELL, "--bvh", "threshold", "-resolution", "2", "--min-leaf", "2"],

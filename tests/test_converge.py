@@ -293,8 +293,8 @@ def test_knobs_cli_smoke(tmp_path, capsys):
     with open(out / "knobs.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [(r["knob"], r["setting"]) for r in rows] == [
-        ("default", "bvh, unbounded depth, RR from depth 5 (adaptive)"), ("max depth", "2"),
-        ("accel", "grid")]
+        ("default", "auto accel, unbounded depth, RR from depth 5 (adaptive)"),
+        ("max depth", "2"), ("accel", "bvh"), ("accel", "grid")]
     assert all(float(r["seconds"]) > 0 and float(r["samples_per_second"]) > 0 for r in rows)
     # direct light only loses a lot of light: a clear, significant negative bias
     depth2 = rows[1]

@@ -24,7 +24,9 @@ def _parse(argv):
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("profile") / "cb.png"
-    args = _parse([str(CORNELL), "--size", "16", "16", "--spp", "2", "--out", str(out)])
+    # the BVH: its traversal loops are what the stage checks below look at
+    args = _parse([str(CORNELL), "--size", "16", "16", "--spp", "2", "--accel", "bvh",
+                   "--out", str(out)])
     assert args.func is profile.main
     rc = args.func(args)
     return rc, out, json.loads(out.with_suffix(".json").read_text())
@@ -33,7 +35,7 @@ def run(tmp_path_factory):
 def test_defaults():
     args = _parse(["x.txt"])
     assert tuple(args.size) == (128, 128) and args.spp == 16 and args.out is None
-    assert args.integrator == "path" and args.max_depth == -1
+    assert args.integrator == "path" and args.max_depth == -1 and args.accel == "auto"
 
 
 def test_writes_chart_and_json(run):
@@ -90,6 +92,18 @@ def test_wavefront_stages_are_consistent(run):
     assert sum(s["kernel_ms"] for s in st.values()) > 0
     # The traversal stages dominate the launch count (their loops run per iteration).
     assert st["closest-hit traversal"]["launches"] > st["BSDF sampling"]["launches"]
+
+
+def test_inline_accelerator_profile(tmp_path):
+    """The Cornell box's default (inline) accelerator: traversal has no loop,
+    so its stages launch no more kernels than shading, and still count rays."""
+    out = tmp_path / "cb.png"
+    assert profile.main(_parse([str(CORNELL), "--size", "8", "8", "--spp", "1",
+                                "--out", str(out)])) == 0
+    data = json.loads(out.with_suffix(".json").read_text())
+    st = {s["name"]: s for s in data["modes"]["wavefront"]["stages"]}
+    assert st["closest-hit traversal"]["rays"] >= 64 and st["shadow rays"]["rays"] > 0
+    assert st["closest-hit traversal"]["launches"] <= st["BSDF sampling"]["launches"] + 1
 
 
 def test_table_mentions_both_modes(run):

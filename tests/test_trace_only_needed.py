@@ -34,8 +34,8 @@ def assert_traced(fn, *args, **kwargs):
     pytest.fail("the trapped feature was not traced")
 
 
-def render(path, bsdf="phong"):
-    Renderer(load_scene(path), RenderOptions(width=4, height=4, spp=1, bsdf=bsdf,
+def render(path, bsdf="phong", accel="auto"):
+    Renderer(load_scene(path), RenderOptions(width=4, height=4, spp=1, bsdf=bsdf, accel=accel,
                                              progress=False)).render()
 
 
@@ -70,13 +70,15 @@ def test_untextured_scene_traces_no_texture_lookup(monkeypatch, tmp_path):
 
 
 def test_sphere_only_scene_traces_no_triangle_test(monkeypatch, tmp_path):
-    from drpt.accel import bvh, bvh4
+    from drpt.accel import bvh, bvh4, inline
 
     monkeypatch.setattr(bvh, "test_triangle", trap)
     monkeypatch.setattr(bvh4, "test_triangle4", trap)
+    monkeypatch.setattr(inline, "watertight_permuted", trap)
     (tmp_path / "s.txt").write_text(
         "PerspectiveCamera { center 0 0 3 direction 0 0 -1 up 0 1 0 angle 40 }\n"
         "Lights { numLights 1 PointLight { position 0 2 2 color 5 5 5 } }\n"
         "Group { numObjects 1 Sphere { center 0 0 0 radius 1 } }\n")
-    render(tmp_path / "s.txt")
-    assert_traced(render, CORNELL)
+    for accel in ("auto", "bvh"):  # auto: inline here
+        render(tmp_path / "s.txt", accel=accel)
+        assert_traced(render, CORNELL, accel=accel)

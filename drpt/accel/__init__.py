@@ -19,18 +19,36 @@ from .brute import BruteForce
 from .bvh import BVH, INVALID, Hit
 from .bvh4 import BVH4
 from .grid import UniformGrid
+from .inline import MAX_PRIMS as INLINE_MAX_PRIMS
+from .inline import InlineList
 
-__all__ = ["BVH", "BVH4", "BruteForce", "Hit", "INVALID", "UniformGrid", "build_accel"]
+__all__ = ["BVH", "BVH4", "BruteForce", "Hit", "INVALID", "InlineList", "UniformGrid",
+           "build_accel", "resolve_kind"]
+
+KINDS = ("auto", "bvh", "bvh2", "bvh4", "grid", "inline", "brute")
 
 
-def build_accel(scene, kind: str = "bvh", method: str = "auto", leaf_size: int = 4,
+def resolve_kind(scene, kind: str = "auto") -> str:
+    """The accelerator ``kind="auto"`` stands for: ``"inline"`` for scenes of at
+    most :data:`~drpt.accel.inline.MAX_PRIMS` primitives, else ``"bvh"``.
+    Other kinds are returned unchanged."""
+    if kind != "auto":
+        return kind
+    n = len(scene.triangles) + len(scene.spheres) + len(scene.planes)
+    return "inline" if n <= INLINE_MAX_PRIMS else "bvh"
+
+
+def build_accel(scene, kind: str = "auto", method: str = "auto", leaf_size: int = 4,
                 bins: int = 16, resolution: int | None = None, min_leaf: int = 1,
                 sah_threshold: int | None = None):
     """Build the accelerator for ``scene``.
 
     Args:
         scene: a :class:`~drpt.scene.model.Scene`.
-        kind: ``"bvh"`` (the default: the 4-wide BVH,
+        kind: ``"auto"`` (the default: ``"inline"`` for tiny scenes, else
+            ``"bvh"``, see :func:`resolve_kind`), ``"inline"`` (every
+            primitive's test compiled into the kernel with its data as
+            constants, :mod:`drpt.accel.inline`), ``"bvh"`` (the 4-wide BVH,
             :mod:`drpt.accel.bvh4`; alias ``"bvh4"``), ``"bvh2"`` (the binary
             BVH it is collapsed from, :mod:`drpt.accel.bvh`: 2-3x slower to
             trace, kept for comparison), ``"grid"`` (uniform grid, 3D-DDA) or
@@ -50,6 +68,7 @@ def build_accel(scene, kind: str = "bvh", method: str = "auto", leaf_size: int =
         sah_threshold: ``K`` of ``method="threshold"`` (the seed's
             ``-SAHeuristic``; ``None``: its default 2000).
     """
+    kind = resolve_kind(scene, kind)
     if kind in ("bvh", "bvh4"):
         return BVH4(scene, method=method, leaf_size=leaf_size, bins=bins, min_leaf=min_leaf,
                     sah_threshold=sah_threshold)
@@ -58,7 +77,8 @@ def build_accel(scene, kind: str = "bvh", method: str = "auto", leaf_size: int =
                    sah_threshold=sah_threshold)
     if kind == "grid":
         return UniformGrid(scene, resolution=resolution)
+    if kind == "inline":
+        return InlineList(scene)
     if kind == "brute":
         return BruteForce(scene)
-    raise ValueError(f"unknown accelerator kind {kind!r}; expected 'bvh', 'bvh2', 'bvh4', "
-                     "'grid' or 'brute'")
+    raise ValueError(f"unknown accelerator kind {kind!r}; expected one of {', '.join(KINDS)}")

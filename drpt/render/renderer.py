@@ -46,7 +46,7 @@ class RenderOptions:
     height: int = 256
     spp: int = 16
     seed: int = 0
-    accel: str = "bvh"
+    accel: str = "auto"  # drpt.accel.build_accel kind ("auto": inline for tiny scenes, else bvh)
     grid_resolution: int | None = None  # cells per axis for accel="grid" (None: automatic)
     bvh_method: str = "auto"  # BVH split rule, drpt.accel.bvh_build.METHODS (accel="bvh")
     sah_threshold: int | None = None  # K of bvh_method="threshold" (None: the seed's 2000)

@@ -1,0 +1,99 @@
+"""Inline accelerator for tiny scenes: every primitive compiled into the kernel.
+
+For a scene of a few dozen primitives (the Cornell box has 32 triangles) a
+BVH costs more than it saves: each traversal step is a handful of packet
+gathers, a stack and a branchy loop, and a ray visits several nodes and
+leaves anyway. :class:`InlineList` instead *traces* one test per primitive
+at Python time, with that primitive's float32 data as literal constants: the
+kernel has no loop, no gather and no memory reads for the geometry, and the
+16 lanes of a packet run the same straight-line code.
+
+It is exact: the tests are the accelerators' own (the watertight triangle
+test of :mod:`drpt.geometry.triangle` on the same float32 vertices, the
+sphere and plane tests), evaluated in the same order as
+:class:`~drpt.accel.brute.BruteForce`, so the two agree bit for bit.
+
+The code grows with the scene (about 80 vector instructions per triangle),
+hence :data:`MAX_PRIMS`; :func:`~drpt.accel.build_accel` picks this
+accelerator by itself (``kind="auto"``) only below that count. Each scene
+compiles its own kernels (the constants are part of the code).
+"""
+
+from __future__ import annotations
+
+import time
+
+import drjit as dr
+import numpy as np
+from drjit.llvm import Array3f, Bool, Float, UInt32
+
+from ..geometry.plane import intersect_plane
+from ..geometry.sphere import intersect_sphere
+from ..geometry.triangle import RayPrep, watertight_permuted
+from .bvh import INVALID, Hit, SceneGeometry
+
+#: Largest primitive count (triangles + spheres + planes) that ``kind="auto"``
+#: compiles inline; above it, the BVH. Measured crossover: see the README.
+MAX_PRIMS = 64
+
+
+class InlineList:
+    """Closest-hit and occlusion queries with the scene's primitives as constants.
+
+    Attributes: ``build_seconds``, ``nbytes`` (0: no device data), ``stats``.
+    """
+
+    def __init__(self, scene):
+        t0 = time.perf_counter()
+        geo = SceneGeometry(scene)
+        self.F, self.S, self.P = geo.F, geo.S, geo.P
+        as_floats = lambda a: np.asarray(a, np.float32).astype(np.float64).tolist()  # noqa: E731
+        self.tris = as_floats(np.asarray(scene.triangles.positions).reshape(-1, 3, 3)) if self.F else []
+        self.spheres = (list(zip(as_floats(scene.spheres.center), as_floats(scene.spheres.radius)))
+                        if self.S else [])
+        self.planes = (list(zip(as_floats(scene.planes.normal), as_floats(scene.planes.offset)))
+                       if self.P else [])
+        self.nbytes = 0
+        self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": self.F + self.S + self.P}
+        self.build_seconds = time.perf_counter() - t0
+
+    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
+        """Closest hit with ``0 < t < tmax``."""
+        bt, bj, bu, bv = self._trace(o, d, tmax, active)
+        valid = bj != INVALID
+        return Hit(dr.select(valid, bt, float("inf")), bj, bu, bv, valid)
+
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
+        """Whether anything is hit with ``0 < t < tmax``."""
+        return self._trace(o, d, tmax, active)[1] != INVALID
+
+    def _trace(self, o, d, tmax, active):
+        o, d, active = Array3f(o), Array3f(d), Bool(active)
+        bt = dr.select(active, Float(tmax), 0.0)
+        bj, bu, bv = UInt32(INVALID), Float(0), Float(0)
+        N = self.F + self.S
+        for k, (n, off) in enumerate(self.planes):
+            t, h = intersect_plane(o, d, Array3f(*n), Float(off), bt)
+            bt, bj = dr.select(h, t, bt), dr.select(h, N + k, bj)
+        if self.tris:
+            r = RayPrep(o, d)
+            # kx, ky follow kz (x->y->z->x), so two masks on kz pick every component
+            m0, m1 = r.kz == 0, r.kz == 1
+            for i, (p0, p1, p2) in enumerate(self.tris):
+                g = [_pick(m0, m1, p, shift) for p in (p0, p1, p2) for shift in (1, 2, 0)]
+                t, u, v, h = watertight_permuted(r, *g, bt)
+                bt, bj = dr.select(h, t, bt), dr.select(h, i, bj)
+                bu, bv = dr.select(h, u, bu), dr.select(h, v, bv)
+        for i, (c, rad) in enumerate(self.spheres):
+            t, h = intersect_sphere(o, d, Array3f(*c), Float(rad), bt)
+            bt, bj = dr.select(h, t, bt), dr.select(h, self.F + i, bj)
+            bu, bv = dr.select(h, 0.0, bu), dr.select(h, 0.0, bv)
+        return bt, bj, bu, bv
+
+
+def _pick(m0: Bool, m1: Bool, p, shift: int):
+    """``p[(kz + shift) % 3]`` for constant ``p`` and ``m0 = kz == 0``, ``m1 = kz == 1``."""
+    a, b, c = p[shift % 3], p[(1 + shift) % 3], p[(2 + shift) % 3]
+    if a == b == c:
+        return Float(a)
+    return dr.select(m0, Float(a), dr.select(m1, Float(b), Float(c)))

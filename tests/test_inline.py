@@ -1,0 +1,134 @@
+"""The inline accelerator (drpt.accel.inline) against brute force, and the
+``auto`` rule that picks it.
+
+Inline evaluates the very tests of BruteForce, in the same order, on the same
+float32 data (as constants instead of gathers), so the hits must agree *bit
+for bit*: t, primitive, u and v."""
+
+from __future__ import annotations
+
+import drjit as dr
+import numpy as np
+import pytest
+from drjit.llvm import Float
+from test_bvh import icosphere, loop_mode, make_scene, rays, soup  # noqa: F401 (fixture)
+
+from drpt.accel import InlineList, build_accel, resolve_kind
+from drpt.accel.inline import MAX_PRIMS
+
+INF = float("inf")
+
+
+def hits(accel, o, d, tmax=INF):
+    O, D = rays(o, d)
+    T = Float(np.broadcast_to(np.float32(tmax), (len(o),)).copy())
+    h = accel.intersect(O, D, T)
+    occ = accel.occluded(O, D, T)
+    dr.eval(h, occ)
+    return [x.numpy() for x in (h.t, h.prim, h.u, h.v, h.valid, occ)]
+
+
+def assert_same_as_brute(scene, o, d, tmax=INF):
+    got = hits(build_accel(scene, "inline"), o, d, tmax)
+    ref = hits(build_accel(scene, "brute"), o, d, tmax)
+    for name, a, b in zip(("t", "prim", "u", "v", "valid", "occluded"), got, ref):
+        assert np.array_equal(a, b), f"{name}: {(a != b).sum()} rays differ from brute force"
+    assert np.array_equal(got[5], got[4])  # occluded == hit for tmax-bounded rays
+    assert not np.isnan(got[2]).any() and not np.isnan(got[3]).any()
+    return got
+
+
+def test_soup_spheres_planes_bitwise_equal(loop_mode):
+    rng = np.random.default_rng(11)
+    tris = soup(rng, 40, size=1.5)
+    tris[:3, 2] = tris[:3, 1]  # degenerate (zero-area) triangles
+    sc = make_scene(tris, (rng.random((6, 3)) * 10, rng.random(6) + 0.2),
+                    ([[0, 1, 0], [1, 0, 0]], [-0.25, 11.0]))
+    R = 20000
+    o = rng.random((R, 3)) * 12 - 1
+    d = rng.normal(size=(R, 3))
+    d[:3000] = np.eye(3)[rng.integers(0, 3, 3000)] * rng.choice([-1, 1], (3000, 1))  # axis-parallel
+    tmax = np.where(rng.random(R) < 0.3, rng.random(R) * 5, INF)
+    t, prim, u, v, valid, occ = assert_same_as_brute(sc, o, d, tmax)
+    F, S = 40, 6
+    hit = prim[valid]
+    assert (hit < F).any() and ((hit >= F) & (hit < F + S)).any() and (hit >= F + S).any()
+    assert valid.mean() > 0.3 and (u[prim < F] > 0).any()
+
+
+def test_watertight_closed_mesh():
+    v, f = icosphere(1)  # 80 faces sharing vertices bitwise (inline even above MAX_PRIMS)
+    v = v * 3 + np.float64([0.1, -0.2, 0.3])
+    rng = np.random.default_rng(12)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    w = rng.random((len(e), 1))
+    targets = np.concatenate([v, (v[e[:, 0]] + v[e[:, 1]]) / 2, v[e[:, 0]] * w + v[e[:, 1]] * (1 - w)])
+    centers = np.float64([0.1, -0.2, 0.3]) + rng.normal(size=(4, 3)) * 0.3
+    o = np.repeat(centers, len(targets), axis=0)
+    d = np.tile(targets, (4, 1)) - o
+    t, _, _, _, valid, _ = assert_same_as_brute(make_scene(v[f]), o, d)
+    assert valid.all(), f"{(~valid).sum()} rays leaked through the closed mesh"
+    assert np.allclose(t, 1.0, atol=5e-2)
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1.0, 1e4])
+def test_scales_and_rays_on_surfaces(scale):
+    rng = np.random.default_rng(13)
+    tris = soup(rng, 30, scale, size=1.0)
+    sc = make_scene(tris, (rng.random((3, 3)) * 10 * scale, (rng.random(3) + 0.2) * scale))
+    bary = rng.dirichlet([1, 1, 1], 30)
+    on = np.einsum("fk,fkc->fc", bary, tris.astype(np.float32).astype(np.float64))
+    o = np.concatenate([on, rng.random((3000, 3)) * 10 * scale])
+    d = rng.normal(size=(len(o), 3))
+    t, _, _, _, valid, _ = assert_same_as_brute(sc, o, d)
+    assert (t[valid] > 0).all() and valid.any()
+
+
+def test_single_triangle_and_empty_scene():
+    tri = np.float64([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]])
+    rng = np.random.default_rng(14)
+    R = 2000
+    o = np.column_stack([rng.random(R) * 1.2 - 0.1, rng.random(R) * 1.2 - 0.1, np.full(R, 2.0)])
+    d = np.tile([0.0, 0.0, -1.0], (R, 1))
+    t, prim, _, _, valid, _ = assert_same_as_brute(make_scene(tri), o, d)
+    inside = (o[:, 0] > 1e-6) & (o[:, 1] > 1e-6) & (o[:, 0] + o[:, 1] < 1 - 1e-6)
+    assert valid[inside].all() and np.allclose(t[inside], 2.0) and (prim[valid] == 0).all()
+    # a scene with nothing inline: every ray misses
+    t, prim, _, _, valid, occ = hits(InlineList(make_scene(spheres=(np.zeros((0, 3)), np.zeros(0)))),
+                                     o, d)
+    assert not valid.any() and np.isinf(t).all() and not occ.any()
+
+
+def kernel_code(accel, o, d) -> str:
+    """LLVM IR of the kernels that run ``accel.intersect`` on these rays."""
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.kernel_history()
+        O, D = rays(o, d)
+        dr.make_opaque(O, D)
+        dr.eval(accel.intersect(O, D, Float(INF)))
+        ir = [k["ir"].getvalue() for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+    return "\n".join(ir)
+
+
+def test_inline_kernel_reads_no_geometry_memory():
+    """The point of inline: no gathers in the kernel (the data are constants);
+    the positive control is brute force on the same scene, which gathers."""
+    rng = np.random.default_rng(15)
+    sc = make_scene(soup(rng, 8), (rng.random((2, 3)) * 10, rng.random(2) + 0.2))
+    accel = build_accel(sc, "inline")
+    assert accel.nbytes == 0 and accel.stats["prims"] == 10
+    o, d = rng.random((64, 3)), rng.normal(size=(64, 3))
+    code = kernel_code(accel, o, d)
+    assert "define" in code and "gather" not in code
+    assert "gather" in kernel_code(build_accel(sc, "brute"), o, d)
+
+
+def test_auto_picks_inline_for_tiny_scenes_only():
+    rng = np.random.default_rng(16)
+    small = make_scene(soup(rng, MAX_PRIMS - 2), (rng.random((1, 3)), np.ones(1)), ([[0, 1, 0]], [0.0]))
+    big = make_scene(soup(rng, MAX_PRIMS + 1))
+    assert resolve_kind(small) == "inline" and isinstance(build_accel(small), InlineList)
+    assert resolve_kind(big) == "bvh" and not isinstance(build_accel(big), InlineList)
+    assert resolve_kind(small, "bvh") == "bvh" and resolve_kind(big, "inline") == "inline"
+    with pytest.raises(ValueError, match="unknown accelerator"):
+        build_accel(small, "kd")
