@@ -290,18 +290,24 @@ def test_scaled_scenes(scale):
     compare(sc, rng.random((R, 3)) * 10 * scale, rng.normal(size=(R, 3)), check_occ=False)
 
 
-def test_watertight_closed_mesh(loop_mode):
-    v, f = icosphere(3)  # 1280 faces sharing vertices bitwise
-    rng = np.random.default_rng(4)
+def closed_mesh_rays(level: int, seed: int):
+    """A closed icosphere (radius 3, faces sharing vertices bitwise) and rays
+    from four points inside it through its vertices, edge midpoints and random
+    edge points, reaching them at ``t = 1``: ``(triangles, o, d)``."""
+    v, f = icosphere(level)
+    rng = np.random.default_rng(seed)
     v = v * 3 + np.float64([0.1, -0.2, 0.3])
-    sc = make_scene(v[f])
     e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
     w = rng.random((len(e), 1))
     targets = np.concatenate([v, (v[e[:, 0]] + v[e[:, 1]]) / 2, v[e[:, 0]] * w + v[e[:, 1]] * (1 - w)])
     centers = np.float64([0.1, -0.2, 0.3]) + rng.normal(size=(4, 3)) * 0.3
     o = np.repeat(centers, len(targets), axis=0)
-    d = np.tile(targets, (4, 1)) - o
-    ht, hp, hv, _ = compare(sc, o, d, check_occ=False)
+    return v[f], o, np.tile(targets, (4, 1)) - o
+
+
+def test_watertight_closed_mesh(loop_mode):
+    tris, o, d = closed_mesh_rays(3, seed=4)  # 1280 faces
+    ht, hp, hv, _ = compare(make_scene(tris), o, d, check_occ=False)
     assert hv.all(), f"{(~hv).sum()} rays leaked through the closed mesh"
     assert np.allclose(ht, 1.0, atol=2e-2)  # hits at the targets (up to faceting)
 

@@ -11,7 +11,7 @@ import drjit as dr
 import numpy as np
 import pytest
 from drjit.llvm import Float
-from test_bvh import icosphere, loop_mode, make_scene, rays, soup  # noqa: F401 (fixture)
+from test_bvh import closed_mesh_rays, loop_mode, make_scene, rays, soup  # noqa: F401 (fixture)
 
 from drpt.accel import InlineList, build_accel, resolve_kind
 from drpt.accel.inline import MAX_PRIMS
@@ -57,16 +57,8 @@ def test_soup_spheres_planes_bitwise_equal(loop_mode):
 
 
 def test_watertight_closed_mesh():
-    v, f = icosphere(1)  # 80 faces sharing vertices bitwise (inline even above MAX_PRIMS)
-    v = v * 3 + np.float64([0.1, -0.2, 0.3])
-    rng = np.random.default_rng(12)
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    w = rng.random((len(e), 1))
-    targets = np.concatenate([v, (v[e[:, 0]] + v[e[:, 1]]) / 2, v[e[:, 0]] * w + v[e[:, 1]] * (1 - w)])
-    centers = np.float64([0.1, -0.2, 0.3]) + rng.normal(size=(4, 3)) * 0.3
-    o = np.repeat(centers, len(targets), axis=0)
-    d = np.tile(targets, (4, 1)) - o
-    t, _, _, _, valid, _ = assert_same_as_brute(make_scene(v[f]), o, d)
+    tris, o, d = closed_mesh_rays(1, seed=12)  # 80 faces (inline even above MAX_PRIMS)
+    t, _, _, _, valid, _ = assert_same_as_brute(make_scene(tris), o, d)
     assert valid.all(), f"{(~valid).sum()} rays leaked through the closed mesh"
     assert np.allclose(t, 1.0, atol=5e-2)
 

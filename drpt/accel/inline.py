@@ -30,15 +30,16 @@ from drjit.llvm import Array3f, Bool, Float, UInt32
 from ..geometry.plane import intersect_plane
 from ..geometry.sphere import intersect_sphere
 from ..geometry.triangle import RayPrep, watertight_permuted
-from .bvh import INVALID, Hit, SceneGeometry
+from .brute import BruteForce
+from .bvh import INVALID, SceneGeometry
 
 #: Largest primitive count (triangles + spheres + planes) that ``kind="auto"``
 #: compiles inline; above it, the BVH. Measured crossover: see the README.
 MAX_PRIMS = 64
 
 
-class InlineList:
-    """Closest-hit and occlusion queries with the scene's primitives as constants.
+class InlineList(BruteForce):
+    """Brute force's queries with the scene's primitives as constants.
 
     Attributes: ``build_seconds``, ``nbytes`` (0: no device data), ``stats``.
     """
@@ -47,7 +48,7 @@ class InlineList:
         t0 = time.perf_counter()
         geo = SceneGeometry(scene)
         self.F, self.S, self.P = geo.F, geo.S, geo.P
-        as_floats = lambda a: np.asarray(a, np.float32).astype(np.float64).tolist()  # noqa: E731
+        as_floats = _f32_values
         self.tris = as_floats(np.asarray(scene.triangles.positions).reshape(-1, 3, 3)) if self.F else []
         self.spheres = (list(zip(as_floats(scene.spheres.center), as_floats(scene.spheres.radius)))
                         if self.S else [])
@@ -57,16 +58,7 @@ class InlineList:
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": self.F + self.S + self.P}
         self.build_seconds = time.perf_counter() - t0
 
-    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
-        """Closest hit with ``0 < t < tmax``."""
-        bt, bj, bu, bv = self._trace(o, d, tmax, active)
-        valid = bj != INVALID
-        return Hit(dr.select(valid, bt, float("inf")), bj, bu, bv, valid)
-
-    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
-        """Whether anything is hit with ``0 < t < tmax``."""
-        return self._trace(o, d, tmax, active)[1] != INVALID
-
+    # intersect() and occluded() are BruteForce's, around this class's _trace()
     def _trace(self, o, d, tmax, active):
         o, d, active = Array3f(o), Array3f(d), Bool(active)
         bt = dr.select(active, Float(tmax), 0.0)
@@ -89,6 +81,11 @@ class InlineList:
             bt, bj = dr.select(h, t, bt), dr.select(h, self.F + i, bj)
             bu, bv = dr.select(h, 0.0, bu), dr.select(h, 0.0, bv)
         return bt, bj, bu, bv
+
+
+def _f32_values(a) -> list:
+    """``a`` rounded to float32 (the accelerators' data), as nested Python floats."""
+    return np.asarray(a, np.float32).astype(np.float64).tolist()
 
 
 def _pick(m0: Bool, m1: Bool, p, shift: int):
