@@ -124,3 +124,13 @@ def test_auto_picks_inline_for_tiny_scenes_only():
     assert resolve_kind(small, "bvh") == "bvh" and resolve_kind(big, "inline") == "inline"
     with pytest.raises(ValueError, match="unknown accelerator"):
         build_accel(small, "kd")
+
+
+def test_help_texts_state_the_limit():
+    """The CLI's, bench's and profile's help name the limit that resolve_kind uses."""
+    import inspect
+
+    from drpt import bench, cli, profile
+
+    for mod in (cli, bench, profile):
+        assert f"{MAX_PRIMS} primitives" in inspect.getsource(mod), mod.__name__
