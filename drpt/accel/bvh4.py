@@ -47,8 +47,18 @@ Stack size: a lane at a node of depth ``k`` (root = 0) holds at most three
 entries per ancestor level, and a push round adds at most three, so
 ``3 * (depth4 + 1)`` entries suffice; :func:`stack_entries` adds one spare.
 The stack is split into ``dr.alloc_local`` arrays of at most ``LOCAL_CHUNK``
-(16) entries (a deeper tree costs one masked read/write per extra array; the
-Cornell box needs one, 100k identical triangles two: 16 + 9). ``BVH4.track_stack``
+(16) entries (the Cornell box needs one, 100k identical triangles two: 16 +
+9, the dining room three or four). Every read and write of a local array with
+per-lane indices is a masked packet gather or scatter, paid even when its
+mask is empty; each one is therefore a symbolic if, taken only when some lane
+of the packet uses that array (:func:`_push`, :func:`_pop`). Against
+unconditional reads and writes, measured in one process on ``bench``'s rays
+(best of 3, three rounds; primary / incoherent / shadow): dining room
+1.35-1.43x / 1.19-1.28x / 1.17-1.31x (three arrays; with ``--bvh sah``, four:
+1.48-1.56x / 1.31-1.41x / 1.21-1.42x), and with one array, where only the
+pushes of third and fourth children (which few packets need) are skipped,
+Cornell box 1.19-1.21x / 1.08-1.16x / 1.08-1.14x, newscene 1.12-1.17x /
+1.09-1.10x / 0.96-1.15x. ``BVH4.track_stack``
 records the largest stack pointer of each query (tests).
 
 The crash of the first 4-wide BVH (commit ``bc77154``, reverted)
@@ -291,20 +301,38 @@ def _chunk_index(sp, m, c, n_chunks):
 
 
 def _pop(stk, sp, m):
-    """Entry ``sp`` of a stack split into ``LOCAL_CHUNK``-entry local arrays."""
-    out = None
+    """Entry ``sp`` (lanes ``m``) of a stack split into ``LOCAL_CHUNK``-entry
+    local arrays. A read with per-lane indices is a masked packet gather whose
+    cost is paid even when no lane is in the mask, so each array is read in a
+    symbolic if, taken only when some lane of the packet pops from it."""
+    out = dr.zeros(UInt32, dr.width(sp))
     for c, arr in enumerate(stk):
         i, mc = _chunk_index(sp, m, c, len(stk))
-        v = arr.read(i, mc)
-        out = v if out is None else dr.select(mc, v, out)
+
+        def read(arr, i, mc, out):
+            return dr.select(mc, arr.read(i, mc), out)
+
+        out = dr.if_stmt((arr, i, mc, out), mc, read, lambda arr, i, mc, out: out,
+                         label="drpt_bvh4_pop")
     return out
 
 
 def _push(stk, value, sp, m):
-    """Write entry ``sp`` (lanes ``m``) of a split stack."""
+    """Write entry ``sp`` (lanes ``m``) of a split stack; returns the arrays.
+    Each write (a masked packet scatter) is a symbolic if, taken only when
+    some lane of the packet pushes to that array: most packets skip the
+    arrays above the first, and the pushes of third and fourth children."""
+    out = []
     for c, arr in enumerate(stk):
         i, mc = _chunk_index(sp, m, c, len(stk))
-        arr.write(value, i, mc)
+
+        def write(arr, value, i, mc):
+            arr.write(value, i, mc)
+            return arr
+
+        out.append(dr.if_stmt((arr, value, i, mc), mc, write, lambda arr, value, i, mc: arr,
+                              label="drpt_bvh4_push"))
+    return tuple(out)
 
 
 # ------------------------------------------------------------------ BVH4
@@ -455,7 +483,7 @@ class BVH4(BVH):
             # push the farther hits (farthest first), continue with the nearest
             for k in (3, 2, 1):
                 m = inner & (key[k] < _INF)
-                _push(stk_n, val[k], sp, m)
+                stk_n = _push(stk_n, val[k], sp, m)
                 sp = dr.select(m, sp + 1, sp)
             if track:
                 msp = dr.maximum(msp, sp)
