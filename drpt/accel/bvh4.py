@@ -102,9 +102,10 @@ reproducer in the session that found it, then 171 processes (3 builds and 6
 closest-hit + occlusion query pairs each; 78 of them with the final
 traversal: symbolic-if phases, no distance stack) and the whole test suite
 with this BVH as the default, in the session that made it the default
-(``build_accel(kind="bvh")``), then 103 processes after the stack's reads
-and writes became symbolic ifs (100 on the final code). At the old rate (1
-process in 6), no crash in 346 processes has probability ~4e-28. The mechanism inside Dr.Jit is
+(``build_accel(kind="bvh")``), then 153 processes after the stack's reads
+and writes became symbolic ifs (50 with the register ``top`` as well). At
+the old rate (1 process in 6), no crash in 396 processes has probability
+~4e-32. The mechanism inside Dr.Jit is
 still not known; the binary BVH (``"bvh2"``, 64-entry arrays) never
 crashed. ``DRPT_STRESS=1 pytest tests/test_bvh4.py`` runs the reproducer.
 
