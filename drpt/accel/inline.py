@@ -31,7 +31,7 @@ from ..geometry.plane import intersect_plane
 from ..geometry.sphere import intersect_sphere
 from ..geometry.triangle import RayPrep, watertight_permuted
 from .brute import BruteForce
-from .bvh import INVALID, SceneGeometry
+from .bvh import INVALID
 
 #: Largest primitive count (triangles + spheres + planes) that ``kind="auto"``
 #: compiles inline; above it, the BVH. Measured crossover: see the README.
@@ -46,13 +46,11 @@ class InlineList(BruteForce):
 
     def __init__(self, scene):
         t0 = time.perf_counter()
-        geo = SceneGeometry(scene)
-        self.F, self.S, self.P = geo.F, geo.S, geo.P
-        as_floats = _f32_values
-        self.tris = as_floats(np.asarray(scene.triangles.positions).reshape(-1, 3, 3)) if self.F else []
-        self.spheres = (list(zip(as_floats(scene.spheres.center), as_floats(scene.spheres.radius)))
+        self.F, self.S, self.P = len(scene.triangles), len(scene.spheres), len(scene.planes)
+        self.tris = _f32(np.asarray(scene.triangles.positions).reshape(-1, 3, 3)) if self.F else []
+        self.spheres = (list(zip(_f32(scene.spheres.center), _f32(scene.spheres.radius)))
                         if self.S else [])
-        self.planes = (list(zip(as_floats(scene.planes.normal), as_floats(scene.planes.offset)))
+        self.planes = (list(zip(_f32(scene.planes.normal), _f32(scene.planes.offset)))
                        if self.P else [])
         self.nbytes = 0
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": self.F + self.S + self.P}
@@ -83,7 +81,7 @@ class InlineList(BruteForce):
         return bt, bj, bu, bv
 
 
-def _f32_values(a) -> list:
+def _f32(a) -> list:
     """``a`` rounded to float32 (the accelerators' data), as nested Python floats."""
     return np.asarray(a, np.float32).astype(np.float64).tolist()
 
