@@ -449,8 +449,12 @@ class BVH4(BVH):
                  range(0, self.stack_size, LOCAL_CHUNK)]
         stk_n = tuple(dr.alloc_local(UInt32, z) for z in sizes)
 
+        def nodes_left(cur, sp, top):
+            # a node in hand, or entries on the stack (register or arrays)
+            return (cur != INVALID) | (top != INVALID) | (sp > 0)
+
         def cond(cur, sp, stk_n, pi, pe, bt, bj, bu, bv, msp, top):
-            return (pi < pe) | (cur != INVALID) | (sp > 0) | (top != INVALID)
+            return (pi < pe) | nodes_left(cur, sp, top)
 
         def node_phase(cur, sp, stk_n, pi, pe, msp, bt, top):
             # ---- node phase
@@ -536,7 +540,7 @@ class BVH4(BVH):
         def body(cur, sp, stk_n, pi, pe, bt, bj, bu, bv, msp, top):
             # Each phase runs only when some lane of the SIMD packet needs it
             # (a symbolic if: a real branch in the LLVM kernel)
-            go_node = (pi >= pe) & ((cur != INVALID) | (sp > 0) | (top != INVALID))
+            go_node = (pi >= pe) & nodes_left(cur, sp, top)
             cur, sp, stk_n, pi, pe, msp, bt, top = dr.if_stmt(
                 (cur, sp, stk_n, pi, pe, msp, bt, top), go_node, node_phase, keep,
                 label="drpt_bvh4_node")
