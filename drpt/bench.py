@@ -5,8 +5,9 @@ drpt's numbers are measured, and in the same run Mitsuba 3's (``llvm_ad_rgb``)
 on the exported scene, on the *same* rays. ``auto`` is drpt's default choice
 (:func:`drpt.accel.resolve_kind`: ``inline`` for tiny scenes, else ``bvh``); it
 gets a row, labelled with its pick, only where that pick is not asked for
-already. BVH build variants are accelerators of their own: ``bvh`` (drpt's default rule, ``auto``), ``bvh-sah`` (binned SAH
-everywhere), ``bvh-morton``, ``bvh-median`` (object median, the seed's
+already. BVH build variants are accelerators of their own: ``bvh`` (drpt's
+default rule, ``auto``), ``bvh-sah`` (binned SAH everywhere), ``bvh-morton``,
+``bvh-median`` (object median, the seed's
 ``SAH_NUM=0``) and ``bvh-threshold`` (the seed's rule, SAH only in nodes of at
 most ``2 * --sah-threshold`` primitives, default 2000), so the seed's table
 (grid vs BVH without SAH vs BVH with SAH) is
@@ -52,10 +53,11 @@ DEFAULT_SCENES = [ROOT / "scenes" / "cornellbox" / "cornellbox.txt",
 # How MTL materials are read per default scene (others: phong).
 DEFAULT_BSDF = {"newscene.txt": "cook-torrance"}
 # accelerator name -> (build_accel kind, BVH split rule)
-ACCEL_VARIANTS = {"bvh": ("bvh", "auto"), "bvh-sah": ("bvh", "sah"), "bvh-median": ("bvh", "median"),
-                  "bvh-threshold": ("bvh", "threshold"), "bvh-morton": ("bvh", "morton"),
-                  "grid": ("grid", None),
-                  "brute": ("brute", None), "inline": ("inline", None), "auto": ("auto", None), "bvh2": ("bvh2", None), "bvh4": ("bvh4", None)}
+ACCEL_VARIANTS = {"auto": ("auto", None), "inline": ("inline", None),
+                  "bvh": ("bvh", "auto"), "bvh-sah": ("bvh", "sah"),
+                  "bvh-median": ("bvh", "median"), "bvh-threshold": ("bvh", "threshold"),
+                  "bvh-morton": ("bvh", "morton"), "bvh2": ("bvh2", None), "bvh4": ("bvh4", None),
+                  "grid": ("grid", None), "brute": ("brute", None)}
 ACCELS = tuple(ACCEL_VARIANTS)
 
 FIELDS = ["scene", "accel", "rays", "build_s", "accel_mib", "primary_mrays",

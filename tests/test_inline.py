@@ -86,8 +86,8 @@ def test_single_triangle_and_empty_scene():
     inside = (o[:, 0] > 1e-6) & (o[:, 1] > 1e-6) & (o[:, 0] + o[:, 1] < 1 - 1e-6)
     assert valid[inside].all() and np.allclose(t[inside], 2.0) and (prim[valid] == 0).all()
     # a scene with nothing inline: every ray misses
-    t, prim, _, _, valid, occ = hits(InlineList(make_scene(spheres=(np.zeros((0, 3)), np.zeros(0)))),
-                                     o, d)
+    empty = make_scene(spheres=(np.zeros((0, 3)), np.zeros(0)))
+    t, prim, _, _, valid, occ = hits(InlineList(empty), o, d)
     assert not valid.any() and np.isinf(t).all() and not occ.any()
 
 
@@ -117,7 +117,8 @@ def test_inline_kernel_reads_no_geometry_memory():
 
 def test_auto_picks_inline_for_tiny_scenes_only():
     rng = np.random.default_rng(16)
-    small = make_scene(soup(rng, MAX_PRIMS - 2), (rng.random((1, 3)), np.ones(1)), ([[0, 1, 0]], [0.0]))
+    small = make_scene(soup(rng, MAX_PRIMS - 2), (rng.random((1, 3)), np.ones(1)),
+                       ([[0, 1, 0]], [0.0]))
     big = make_scene(soup(rng, MAX_PRIMS + 1))
     assert resolve_kind(small) == "inline" and isinstance(build_accel(small), InlineList)
     assert resolve_kind(big) == "bvh" and not isinstance(build_accel(big), InlineList)
