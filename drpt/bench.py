@@ -7,6 +7,7 @@ on the exported scene, on the *same* rays. ``auto`` is drpt's default choice
 gets a row, labelled with its pick, only where that pick is not asked for
 already. BVH build variants are accelerators of their own: ``bvh`` (drpt's
 default rule, ``auto``), ``bvh-sah`` (binned SAH everywhere), ``bvh-morton``,
+``bvh-ploc`` (bottom-up clustering),
 ``bvh-median`` (object median, the seed's
 ``SAH_NUM=0``) and ``bvh-threshold`` (the seed's rule, SAH only in nodes of at
 most ``2 * --sah-threshold`` primitives, default 2000), so the seed's table
@@ -56,7 +57,8 @@ DEFAULT_BSDF = {"newscene.txt": "cook-torrance"}
 ACCEL_VARIANTS = {"auto": ("auto", None), "inline": ("inline", None),
                   "bvh": ("bvh", "auto"), "bvh-sah": ("bvh", "sah"),
                   "bvh-median": ("bvh", "median"), "bvh-threshold": ("bvh", "threshold"),
-                  "bvh-morton": ("bvh", "morton"), "bvh2": ("bvh2", None), "bvh4": ("bvh4", None),
+                  "bvh-morton": ("bvh", "morton"), "bvh-ploc": ("bvh", "ploc"),
+                  "bvh2": ("bvh2", None), "bvh4": ("bvh4", None),
                   "grid": ("grid", None), "brute": ("brute", None)}
 ACCELS = tuple(ACCEL_VARIANTS)
 
@@ -84,9 +86,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         "scenes of at most 64 primitives, else bvh; a row only where it "
                         "differs from the other accelerators asked for), inline (primitives "
                         "compiled into the kernel), bvh (4-wide BVH, drpt's default "
-                        "build rule: SAH, or Morton SAH above 100k primitives), bvh-sah (full "
+                        "build rule: SAH, or PLOC above 100k primitives), bvh-sah (full "
                         "binned SAH), bvh-median, bvh-threshold (the seed's rule), bvh-morton "
-                        "(fast build), bvh2 (binary BVH, default build rule), grid, brute "
+                        "(fast build), bvh-ploc (bottom-up clustering), bvh2 (binary BVH, "
+                        "default build rule), grid, brute "
                         "(default auto,bvh,grid)")
     p.add_argument("--sah-threshold", type=int, default=2000, metavar="K",
                    help="K of bvh-threshold: SAH in nodes of at most 2K primitives "

@@ -59,13 +59,14 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
                         "bvh2 (the binary BVH it is collapsed from: 2-3x slower, for "
                         "comparison), grid (uniform grid, 3D-DDA; -resolution N cells per "
                         "axis) or brute")
-    p.add_argument("--bvh", dest="bvh_method", metavar="auto|sah|median|threshold|morton",
+    p.add_argument("--bvh", dest="bvh_method", metavar="auto|sah|median|threshold|morton|ploc",
                    default=None,
-                   help="BVH split rule: auto (default: sah up to 100k primitives, morton "
+                   help="BVH build rule: auto (default: sah up to 100k primitives, ploc "
                         "above), sah (binned SAH everywhere: best trees, slowest build), "
                         "median (object median), threshold (the seed's: SAH only in nodes of "
-                        "at most 2K primitives, median above; K from --sah-threshold) or "
-                        "morton (Morton-ordered binned SAH: fastest build)")
+                        "at most 2K primitives, median above; K from --sah-threshold), "
+                        "morton (Morton-ordered binned SAH: fast build) or ploc (bottom-up "
+                        "clustering in Morton order: fast build, trees close to sah's)")
     p.add_argument("--sah-threshold", "-SAHeuristic", "-SAH", dest="sah_threshold",
                    metavar="K", default=None,
                    help="K of --bvh threshold (implies it; 0 = median everywhere; default 2000, "
@@ -153,9 +154,9 @@ def _bvh_options(args: argparse.Namespace, accel: str, seed_mode: bool) -> dict:
     if min_leaf is not None and min_leaf < 1:
         name = "--min-leaf" if args.min_leaf is not None else "-resolution"
         raise DrptError(f"{name} (minimum primitives per BVH leaf) must be >= 1, got {min_leaf}")
-    if method == "morton" and min_leaf not in (None, 1):
+    if method in ("morton", "ploc") and min_leaf not in (None, 1):
         raise DrptError("--min-leaf/-resolution applies to --bvh sah, median and threshold, "
-                        "not morton")
+                        f"not {method}")
     return {"bvh_method": method, "sah_threshold": k,
             "bvh_min_leaf": min_leaf if min_leaf is not None else 1}
 

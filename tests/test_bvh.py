@@ -32,6 +32,7 @@ VARIANTS = {
     "sah-minleaf5": dict(method="sah", min_leaf=5),
     "threshold-minleaf3": dict(method="threshold", sah_threshold=64, min_leaf=3),
     "morton": dict(method="morton"),
+    "ploc": dict(method="ploc"),
 }
 
 
@@ -153,9 +154,9 @@ def test_builder_invariants(variant):
         assert b.stats["min_leaf_prims"] == counts.min()
 
 
-def test_auto_rule_picks_sah_small_morton_large(monkeypatch):
-    """"auto" (the default) is full SAH up to AUTO_SAH_MAX primitives, the
-    Morton build above it, and SAH whenever min_leaf > 1 (Morton has none)."""
+def test_auto_rule_picks_sah_small_ploc_large(monkeypatch):
+    """"auto" (the default) is full SAH up to AUTO_SAH_MAX primitives, PLOC
+    above it, and SAH whenever min_leaf > 1 (PLOC has none)."""
     from drpt.accel import bvh_build
 
     monkeypatch.setattr(bvh_build, "AUTO_SAH_MAX", 500)
@@ -164,11 +165,11 @@ def test_auto_rule_picks_sah_small_morton_large(monkeypatch):
     assert build_bvh(small.min(1), small.max(1)).stats["method"] == "sah"
     b = build_bvh(large.min(1), large.max(1))
     check_bvh(b, large.min(1), large.max(1))
-    assert b.stats["method"] == "morton"
-    m = build_bvh(large.min(1), large.max(1), method="morton")
+    assert b.stats["method"] == "ploc"
+    m = build_bvh(large.min(1), large.max(1), method="ploc")
     assert np.array_equal(b.prim_order, m.prim_order) and np.array_equal(b.node_a, m.node_a)
     assert build_bvh(large.min(1), large.max(1), min_leaf=2).stats["method"] == "sah"
-    assert build_accel(make_scene(large), "bvh").stats["method"] == "morton"
+    assert build_accel(make_scene(large), "bvh").stats["method"] == "ploc"
 
 
 def test_morton_codes_interleave_bits():

@@ -65,6 +65,7 @@ def _spy_options(monkeypatch):
     ([CORNELL, "--bvh", "threshold", "-resolution", "2", "--min-leaf", "2"],
      ("bvh", "threshold", None, 2)),
     ([CORNELL, "--bvh", "morton"], ("bvh", "morton", None, 1)),
+    ([CORNELL, "--bvh", "ploc"], ("bvh", "ploc", None, 1)),
     ([CORNELL, "--accel", "bvh4", "--bvh", "median", "--min-leaf", "2"],
      ("bvh4", "median", None, 2)),
 ])
@@ -176,6 +177,7 @@ def test_one_line_summary(tmp_path):
     (["render", CORNELL, "--min-leaf", "2", "-resolution", "3"], "disagree"),
     (["render", CORNELL, "--accel", "grid", "--bvh", "sah"], "apply to the BVH only"),
     (["render", CORNELL, "--bvh", "morton", "--min-leaf", "2"], "not morton"),
+    (["render", CORNELL, "--bvh", "ploc", "-resolution", "2"], "not ploc"),
 ])
 def test_user_errors_exit_2_with_one_line(tmp_path, args, needle):
     r = run(args)

@@ -54,11 +54,12 @@ def build_accel(scene, kind: str = "auto", method: str = "auto", leaf_size: int 
             trace, kept for comparison), ``"grid"`` (uniform grid, 3D-DDA) or
             ``"brute"``.
         method: BVH split rule (:mod:`drpt.accel.bvh_build`): ``"auto"``
-            (default: ``"sah"`` up to 100k primitives, ``"morton"`` above),
+            (default: ``"sah"`` up to 100k primitives, ``"ploc"`` above),
             ``"sah"`` (binned SAH), ``"median"`` (object median),
             ``"threshold"`` (the seed's rule: SAH in nodes of at most
-            ``2 * sah_threshold`` primitives, median above) or ``"morton"``
-            (Morton-ordered binned SAH, fast build).
+            ``2 * sah_threshold`` primitives, median above), ``"morton"``
+            (Morton-ordered binned SAH, fast build) or ``"ploc"`` (bottom-up
+            clustering, fast build, trees close to SAH's).
         leaf_size: maximum primitives per BVH leaf.
         bins: SAH bins per axis.
         resolution: grid cells per axis (the seed's ``-resolution``); ``None``

@@ -238,7 +238,7 @@ class BVH:
     Args:
         scene: the :class:`~drpt.scene.model.Scene`.
         method: builder split rule (:data:`~drpt.accel.bvh_build.METHODS`;
-            default ``"auto"``: full SAH, or Morton SAH above 100k primitives).
+            default ``"auto"``: full SAH, or PLOC above 100k primitives).
         leaf_size: maximum primitives per leaf.
         bins: SAH bins.
         min_leaf: minimum primitives per leaf (the seed's ``-resolution``).

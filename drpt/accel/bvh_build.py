@@ -23,13 +23,14 @@ leaves, whose final order is written to ``prim_order`` then.
 Split rules (``method``):
 
 ``"auto"`` (default)
-    ``"sah"`` for up to ``AUTO_SAH_MAX`` (100k) primitives, ``"morton"``
-    above (and ``"sah"`` whenever ``min_leaf > 1``, which ``"morton"`` does
+    ``"sah"`` for up to ``AUTO_SAH_MAX`` (100k) primitives, ``"ploc"``
+    above (and ``"sah"`` whenever ``min_leaf > 1``, which ``"ploc"`` does
     not support). Full SAH costs 13-19 us of single-threaded numpy per
     primitive here (6.7-9.6 s for the 510k-triangle dining room, 11-14x
-    Mitsuba's whole scene load), the Morton build ~2.5 us (1.2 s) for trees
-    that trace 0.72-0.89x as fast (README, Performance); 100k primitives keep
-    the SAH build under ~2 s. ``BVHArrays.stats["method"]`` is the rule that ran.
+    Mitsuba's whole scene load); PLOC ~2 us (1.0-1.2 s) for trees that trace
+    about as fast, the Morton build about as long for trees that trace
+    0.72-0.89x as fast (README, Performance); 100k primitives keep the SAH
+    build under ~2 s. ``BVHArrays.stats["method"]`` is the rule that ran.
 ``"sah"``
     Binned surface area heuristic: per axis, centroids are put in ``bins``
     equal-width bins spanning the node's centroid extent; every boundary
@@ -64,6 +65,14 @@ Split rules (``method``):
     primitives. One sort and no per-axis partitions: several times faster
     to build than ``"sah"``, with slightly worse trees (measured in the
     README). ``min_leaf`` must be 1.
+
+``"ploc"``: bottom-up clustering (fast build, SAH-quality trees)
+    Parallel locally-ordered clustering (:mod:`drpt.accel.ploc`): Morton
+    order, then rounds merging every pair of mutually nearest clusters
+    (merged-box area) within 16 places in that order, leaves of up to
+    ``max_leaf`` primitives where the SAH prefers them. ``min_leaf`` must be
+    1. A tree deeper than ``max_depth`` (only on contrived inputs, e.g.
+    nested boxes) is rebuilt by ``"morton"``, and ``stats["method"]`` says so.
 
 Minimum leaf size (``min_leaf``, the seed's ``-resolution`` with its BVH:
 "the minimal number of primitives in a box") applies to every rule: no leaf
@@ -122,8 +131,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-METHODS = ("auto", "sah", "median", "threshold", "morton")
-AUTO_SAH_MAX = 100_000  # "auto": full SAH up to this many primitives, Morton SAH above
+METHODS = ("auto", "sah", "median", "threshold", "morton", "ploc")
+AUTO_SAH_MAX = 100_000  # "auto": full SAH up to this many primitives, PLOC above
 SEED_SAH_THRESHOLD = 2000  # the seed's default -SAHeuristic
 
 
@@ -344,8 +353,8 @@ def build_bvh(
         lo, hi: ``(N, 3)`` primitive bounds (any float dtype; rounded outward
             to float32).
         centroids: ``(N, 3)`` split positions; default ``(lo + hi) / 2``.
-        method: ``"auto"``, ``"sah"``, ``"median"``, ``"threshold"`` or
-            ``"morton"`` (module docstring).
+        method: ``"auto"``, ``"sah"``, ``"median"``, ``"threshold"``,
+            ``"morton"`` or ``"ploc"`` (module docstring).
         max_leaf: maximum primitives per leaf (>= 1); raised to
             ``2 * min_leaf - 1`` when smaller.
         min_leaf: minimum primitives per leaf (>= 1; the seed's BVH
@@ -364,8 +373,8 @@ def build_bvh(
     """
     if method not in METHODS:
         raise ValueError(f"unknown BVH build method {method!r}; expected one of {METHODS}")
-    if method == "morton" and min_leaf != 1:
-        raise ValueError("min_leaf applies to 'sah', 'median' and 'threshold', not 'morton'")
+    if method in ("morton", "ploc") and min_leaf != 1:
+        raise ValueError(f"min_leaf applies to 'sah', 'median' and 'threshold', not {method!r}")
     if sah_threshold is not None and method != "threshold":
         raise ValueError(f"sah_threshold only applies to method 'threshold', not {method!r}")
     if sah_threshold is None:
@@ -382,7 +391,7 @@ def build_bvh(
     if N == 0:
         raise ValueError("cannot build a BVH over zero primitives")
     if method == "auto":
-        method = "sah" if (N <= AUTO_SAH_MAX or min_leaf > 1) else "morton"
+        method = "sah" if (N <= AUTO_SAH_MAX or min_leaf > 1) else "ploc"
     max_leaf = max(int(max_leaf), 1, 2 * min_leaf - 1)
     if math.ceil(math.log2(max(N / max_leaf, 1.0))) + 1 > max_depth:
         raise ValueError(f"max_depth={max_depth} too small for {N} primitives")
@@ -392,9 +401,19 @@ def build_bvh(
         cent = (lo32.astype(np.float64) + hi32) * 0.5
     else:
         cent = np.asarray(centroids, np.float64)
+    built = None
+    if method == "ploc":
+        from .ploc import build_ploc
+
+        built = build_ploc(lo32, hi32, cent, max_leaf, max_depth, traversal_cost,
+                           intersection_cost)
+        if built is None:  # deeper than max_depth
+            method = "morton"
     if method == "morton":
-        nlo, nhi, na, nc, order, max_d, n_leaves = _build_morton_sah(
+        built = _build_morton_sah(
             lo32, hi32, cent, max_leaf, max_depth, traversal_cost, intersection_cost)
+    if built is not None:
+        nlo, nhi, na, nc, order, max_d, n_leaves = built
         out = BVHArrays(node_lo=nlo, node_hi=nhi, node_a=na, node_count=nc,
                         prim_order=order, depth=max_d)
         counts = nc[nc > 0]
