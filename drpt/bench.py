@@ -380,8 +380,8 @@ def main(args: argparse.Namespace) -> int:
     if args.sah_threshold < 0:
         raise DrptError(f"--sah-threshold must be >= 0, got {args.sah_threshold}")
     W, H = args.size
-    for name, v in (("--min-leaf", args.min_leaf), ("--size", min(W, H)), ("--spp", args.spp), ("--rays", args.rays),
-                    ("--repeat", args.repeat)):
+    for name, v in (("--min-leaf", args.min_leaf), ("--size", min(W, H)), ("--spp", args.spp),
+                    ("--rays", args.rays), ("--repeat", args.repeat)):
         if v <= 0:
             raise DrptError(f"{name} must be positive, got {v}")
     if args.max_depth == 0 or args.max_depth < -1:
