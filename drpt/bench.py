@@ -7,8 +7,7 @@ on the exported scene, on the *same* rays. ``auto`` is drpt's default choice
 gets a row, labelled with its pick, only where that pick is not asked for
 already. BVH build variants are accelerators of their own: ``bvh`` (drpt's
 default rule, ``auto``), ``bvh-sah`` (binned SAH everywhere), ``bvh-morton``,
-``bvh-ploc`` (bottom-up clustering),
-``bvh-median`` (object median, the seed's
+``bvh-ploc`` (bottom-up clustering), ``bvh-median`` (object median, the seed's
 ``SAH_NUM=0``) and ``bvh-threshold`` (the seed's rule, SAH only in nodes of at
 most ``2 * --sah-threshold`` primitives, default 2000), so the seed's table
 (grid vs BVH without SAH vs BVH with SAH) is

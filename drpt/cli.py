@@ -121,7 +121,7 @@ def _int_flag(name: str, text: str | None) -> int | None:
 
 def _bvh_options(args: argparse.Namespace, accel: str, seed_mode: bool) -> dict:
     """RenderOptions fields for the BVH build rule from the render flags."""
-    from .accel.bvh_build import METHODS
+    from .accel.bvh_build import METHODS, NO_MIN_LEAF
 
     resolution = _int_flag("-resolution", args.resolution)
     k = _int_flag("--sah-threshold/-SAHeuristic", args.sah_threshold)
@@ -154,7 +154,7 @@ def _bvh_options(args: argparse.Namespace, accel: str, seed_mode: bool) -> dict:
     if min_leaf is not None and min_leaf < 1:
         name = "--min-leaf" if args.min_leaf is not None else "-resolution"
         raise DrptError(f"{name} (minimum primitives per BVH leaf) must be >= 1, got {min_leaf}")
-    if method in ("morton", "ploc") and min_leaf not in (None, 1):
+    if method in NO_MIN_LEAF and min_leaf not in (None, 1):
         raise DrptError("--min-leaf/-resolution applies to --bvh sah, median and threshold, "
                         f"not {method}")
     return {"bvh_method": method, "sah_threshold": k,

@@ -71,8 +71,9 @@ Split rules (``method``):
     order, then rounds merging every pair of mutually nearest clusters
     (merged-box area) within 16 places in that order, leaves of up to
     ``max_leaf`` primitives where the SAH prefers them. ``min_leaf`` must be
-    1. A tree deeper than ``max_depth`` (only on contrived inputs, e.g.
-    nested boxes) is rebuilt by ``"morton"``, and ``stats["method"]`` says so.
+    1. Inputs that merge too slowly or give a tree deeper than ``max_depth``
+    (only contrived ones, e.g. nested boxes) are built by ``"morton"``
+    instead, and ``stats["method"]`` says so.
 
 Minimum leaf size (``min_leaf``, the seed's ``-resolution`` with its BVH:
 "the minimal number of primitives in a box") applies to every rule: no leaf
@@ -134,6 +135,7 @@ import numpy as np
 METHODS = ("auto", "sah", "median", "threshold", "morton", "ploc")
 AUTO_SAH_MAX = 100_000  # "auto": full SAH up to this many primitives, PLOC above
 SEED_SAH_THRESHOLD = 2000  # the seed's default -SAHeuristic
+NO_MIN_LEAF = ("morton", "ploc")  # rules that take no min_leaf (it must be 1)
 
 
 @dataclass
@@ -373,7 +375,7 @@ def build_bvh(
     """
     if method not in METHODS:
         raise ValueError(f"unknown BVH build method {method!r}; expected one of {METHODS}")
-    if method in ("morton", "ploc") and min_leaf != 1:
+    if method in NO_MIN_LEAF and min_leaf != 1:
         raise ValueError(f"min_leaf applies to 'sah', 'median' and 'threshold', not {method!r}")
     if sah_threshold is not None and method != "threshold":
         raise ValueError(f"sah_threshold only applies to method 'threshold', not {method!r}")
@@ -407,7 +409,7 @@ def build_bvh(
 
         built = build_ploc(lo32, hi32, cent, max_leaf, max_depth, traversal_cost,
                            intersection_cost)
-        if built is None:  # deeper than max_depth
+        if built is None:  # merged too slowly, or deeper than max_depth
             method = "morton"
     if method == "morton":
         built = _build_morton_sah(

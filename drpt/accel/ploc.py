@@ -40,7 +40,7 @@ import drjit as dr
 import numpy as np
 from drjit.llvm import Array4f, Float, UInt32, UInt64
 
-from .bvh_build import _area, _morton30, _node_arrays
+from .bvh_build import _area, _emit_level, _morton30, _node_arrays
 
 PLOC_RADIUS = 16  # neighbours searched on each side (the paper's r)
 # Give up (the caller falls back to another builder) on inputs that merge
@@ -138,13 +138,15 @@ def ploc_tree(lo32: np.ndarray, hi32: np.ndarray, order: np.ndarray, radius: int
     next_id = N
     batches = []
     while cid.size > 1:
+        if len(batches) >= MAX_ROUNDS:
+            return None
         n = cid.size
         nn = _nearest(box8, radius)
         ar = np.arange(n, dtype=np.int64)
         mutual = nn[nn] == ar
         i = np.flatnonzero(mutual & (ar < nn))
         j = nn[i]
-        if len(batches) >= MAX_ROUNDS or (n > SLOW_MIN_CLUSTERS and i.size * MIN_RATE_DIV < n):
+        if n > SLOW_MIN_CLUSTERS and i.size * MIN_RATE_DIV < n:
             return None
         new = slice(next_id, next_id + i.size)  # the new nodes' ids
         left[new] = cid[i]
@@ -216,15 +218,11 @@ def build_ploc(lo32, hi32, cent, max_leaf: int, max_depth: int, ct: float, ci: f
     while frontier.size:
         node_lo[out] = lo[frontier]
         node_hi[out] = hi[frontier]
-        lf = emitted[frontier]
-        node_a[out[lf]] = start[frontier[lf]]
-        node_count[out[lf]] = count[frontier[lf]]
-        n_leaves += int(lf.sum())
-        inner = frontier[~lf]
-        pair = next_free + 2 * np.arange(inner.size)
-        node_a[out[~lf]] = pair
-        node_count[out[~lf]] = 0
-        next_free += 2 * inner.size
+        lf, sp, pair, next_free = _emit_level(node_a, node_count, start[frontier],
+                                              count[frontier], out, emitted[frontier],
+                                              next_free)
+        n_leaves += lf.size
+        inner = frontier[sp]
         frontier = np.stack([left[inner], right[inner]], 1).ravel()
         out = np.stack([pair, pair + 1], 1).ravel()
     Mo = next_free
