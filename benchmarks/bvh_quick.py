@@ -12,7 +12,7 @@ import time
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array3f, Float
+from drjit.auto import Array3f, Float
 
 from drpt.accel import build_accel
 from drpt.scene import model as M

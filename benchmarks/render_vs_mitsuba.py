@@ -23,7 +23,8 @@ SCENES = [("scenes/cornellbox/cornellbox.txt", "phong"),
 def main(size=256, spp=64, accels="auto"):
     import mitsuba as mi
 
-    mi.set_variant("llvm_ad_rgb")
+    from drpt.backend import mitsuba_variant
+    mi.set_variant(mitsuba_variant())
     from drpt.export.mitsuba import to_mitsuba_dict
     from drpt.render.integrators.path import PathOptions
     from drpt.render.renderer import RenderOptions, Renderer

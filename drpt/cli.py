@@ -167,7 +167,7 @@ def _positive(name: str, value: int | float | None) -> None:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from .backend import ensure_llvm
+    from .backend import ensure
     from .imageio import write_image
     from .render.integrators.path import PathOptions
     from .render.renderer import RenderOptions, Renderer
@@ -213,7 +213,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     _check_output(output)
     scene = load_scene(scene_path)
 
-    ensure_llvm()
+    ensure()
     opts = RenderOptions(width=width, height=height, spp=spp, seed=args.seed, accel=accel,
                          **accel_opts, bsdf=bsdf, integrator=integrator,
                          env_sampling=args.env_sampling,
@@ -265,22 +265,22 @@ def build_parser() -> argparse.ArgumentParser:
                         help="how MTL materials are read (as for render)")
     export.set_defaults(func=cmd_export)
 
-    from .compare import add_parser as add_compare_parser
+    from .tools.compare import add_parser as add_compare_parser
 
     add_compare_parser(sub)
-    from .gallery import add_parser as add_gallery_parser
+    from .tools.gallery import add_parser as add_gallery_parser
 
     add_gallery_parser(sub)
-    from .profile import add_parser as add_profile_parser
+    from .tools.profile import add_parser as add_profile_parser
 
     add_profile_parser(sub)
-    from .bench import add_parser as add_bench_parser
+    from .tools.bench import add_parser as add_bench_parser
 
     add_bench_parser(sub)
-    from .converge import add_parser as add_converge_parser
+    from .tools.converge import add_parser as add_converge_parser
 
     add_converge_parser(sub)
-    from .knobs import add_parser as add_knobs_parser
+    from .tools.knobs import add_parser as add_knobs_parser
 
     add_knobs_parser(sub)
     return parser

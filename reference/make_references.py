@@ -119,7 +119,8 @@ def render_reference(name: str, seed: int = 12345) -> Path:
     import mitsuba as mi
     import numpy as np
 
-    mi.set_variant("llvm_ad_rgb")
+    from drpt.backend import mitsuba_variant
+    mi.set_variant(mitsuba_variant())
     from drpt.export.mitsuba import to_mitsuba_dict
     from drpt.imageio import write_image
     from drpt.scene import load_scene

@@ -1,4 +1,4 @@
-"""Adapters between drpt's samplers (drjit.llvm types) and Mitsuba's
+"""Adapters between drpt's samplers (drjit.auto types) and Mitsuba's
 ``mitsuba.chi2.ChiSquareTest`` (llvm_ad_rgb types), via numpy."""
 
 from __future__ import annotations
@@ -12,12 +12,13 @@ import numpy as np
 def mitsuba():
     import mitsuba as mi
 
-    mi.set_variant("llvm_ad_rgb")
+    from drpt.backend import mitsuba_variant
+    mi.set_variant(mitsuba_variant())
     return mi
 
 
 def to_drpt(v, cls):
-    from drjit.llvm import Float
+    from drjit.auto import Float
 
     a = np.array(v, dtype=np.float32)
     if a.ndim == 1:
@@ -39,13 +40,13 @@ def to_mitsuba_float(x):
 def run_chi2(sample, pdf, sample_dim=2, sample_count=400_000, res=61, seed=0):
     """Chi-square test of a direction sampler on the sphere.
 
-    ``sample(u: drjit.llvm ArrayNf) -> drjit.llvm Array3f`` and
-    ``pdf(w: drjit.llvm Array3f) -> drjit.llvm Float``. Mitsuba's test rejects
+    ``sample(u: drjit.auto ArrayNf) -> drjit.auto Array3f`` and
+    ``pdf(w: drjit.auto Array3f) -> drjit.auto Float``. Mitsuba's test rejects
     at significance 1% (after a Sidak correction for the number of tests it
     runs); returns (passed, message).
     """
     mi = mitsuba()
-    from drjit.llvm import Array2f, Array3f
+    from drjit.auto import Array2f, Array3f
 
     from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 

@@ -37,7 +37,8 @@ def render_both(scene, W, H, spp, max_depth=-1, bsdf="phong", seed=1):
     """(drpt RenderResult, Mitsuba mean image, Mitsuba variance of the mean)."""
     import mitsuba as mi
 
-    mi.set_variant("llvm_ad_rgb")
+    from drpt.backend import mitsuba_variant
+    mi.set_variant(mitsuba_variant())
     from drpt.export.mitsuba import to_mitsuba_dict
 
     r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, seed=seed, bsdf=bsdf,

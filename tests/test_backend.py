@@ -13,9 +13,9 @@ from drpt.errors import DrptError
 
 @pytest.fixture(autouse=True)
 def _reset():
-    backend._checked = False
+    backend._checked.clear()
     yield
-    backend._checked = False
+    backend._checked.clear()
 
 
 def test_old_llvm_is_refused_with_install_hint(monkeypatch):

@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from drpt import bench
+from drpt.tools import bench
 from drpt.errors import DrptError
 
 from conftest import SCENES

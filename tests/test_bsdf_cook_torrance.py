@@ -20,7 +20,7 @@ import tempfile
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Array2f, Array3f, Float, UInt32
+from drjit.auto import Array2f, Array3f, Float, UInt32
 
 from drpt.export.mitsuba_cook_torrance import to_mitsuba
 from drpt.render.bsdf import cook_torrance as ct

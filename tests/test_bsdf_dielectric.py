@@ -11,7 +11,7 @@ import math
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 
 from drpt.export.mitsuba_specular import to_mitsuba
 from drpt.render.bsdf import dielectric

@@ -4,7 +4,7 @@ the sample weight equals eval/pdf, energy is conserved, reciprocity holds."""
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 
 from drpt.render.bsdf import diffuse
 from drpt.render.bsdf.diffuse import DiffuseParams

@@ -7,7 +7,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 
 from drpt.export.mitsuba_specular import to_mitsuba
 from drpt.render.bsdf import mirror

@@ -11,7 +11,7 @@ import tempfile
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 
 from drpt.export import mitsuba_phong
 from drpt.render.bsdf import phong

@@ -12,7 +12,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Array3f, Float
+from drjit.auto import Array3f, Float
 
 from drpt.accel import build_accel
 from drpt.accel.bvh_build import build_bvh, check_bvh

@@ -8,7 +8,7 @@ import os
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Float, UInt32
+from drjit.auto import Float, UInt32
 
 from drpt.accel import build_accel
 from drpt.accel.bvh4 import (EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_START_MASK, PAD_BYTES,

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from drjit.llvm import Float
+from drjit.auto import Float
 
 from drpt.errors import DrptError
 from drpt.render.camera import RayCamera, camera_basis

@@ -198,7 +198,8 @@ def test_malformed_scene_names_file_and_line(tmp_path):
 
 def test_export_writes_loadable_xml(tmp_path):
     mi = pytest.importorskip("mitsuba")
-    mi.set_variant("llvm_ad_rgb")
+    from drpt.backend import mitsuba_variant
+    mi.set_variant(mitsuba_variant())
     xml = tmp_path / "cb.xml"
     assert main(["export", CORNELL, str(xml), "--size", "16", "16", "--spp", "4"]) == 0
     scene = mi.load_file(str(xml))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from drpt import metrics
-from drpt.compare import add_parser, main
+from drpt.tools.compare import add_parser, main
 from drpt.errors import DrptError
 from drpt.imageio import read_image, write_image
 

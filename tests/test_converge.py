@@ -65,8 +65,8 @@ import numpy as np
 import pytest
 
 from conftest import REPO
-from drpt import converge
-from drpt.converge import (equal_time_ratios, interp_loglog, loglog_slope, noise_floor,
+from drpt.tools import converge
+from drpt.tools.converge import (equal_time_ratios, interp_loglog, loglog_slope, noise_floor,
                            spp_levels, time_to_error, time_to_error_ratios)
 
 sys.path.insert(0, str(REPO / "reference"))
@@ -282,7 +282,7 @@ def test_converge_rejects_bad_arguments(tmp_path):
 @pytest.mark.mitsuba
 def test_knobs_cli_smoke(tmp_path, capsys):
     pytest.importorskip("mitsuba")
-    from drpt import knobs
+    from drpt.tools import knobs
 
     out = tmp_path / "kn"
     assert _run(knobs, CORNELL, "--size", "16", "16", "--spp", "8", "--ref-spp", "64",
@@ -305,7 +305,7 @@ def test_knobs_cli_smoke(tmp_path, capsys):
 
 
 def test_knobs_configs_and_bias():
-    from drpt.knobs import configs, image_bias
+    from drpt.tools.knobs import configs, image_bias
 
     rows = configs("phong")
     assert rows[0].knob == "default" and rows[0].max_depth == -1 and rows[0].rr_depth == 5

@@ -12,7 +12,7 @@ import warnings
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 
 from drpt.export.mitsuba import look_at_matrix
 from drpt.export.mitsuba_envmap import to_mitsuba

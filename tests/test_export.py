@@ -42,7 +42,8 @@ W, H = 64, 48
 @pytest.fixture(scope="module", autouse=True)
 def variant():
     try:
-        mi.set_variant("llvm_ad_rgb")
+        from drpt.backend import mitsuba_variant
+        mi.set_variant(mitsuba_variant())
     except Exception as e:  # pragma: no cover - no LLVM
         pytest.skip(f"Mitsuba llvm_ad_rgb unavailable: {e}")
 

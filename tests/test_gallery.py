@@ -5,7 +5,7 @@ import json
 import numpy as np
 
 from drpt.cli import main
-from drpt.gallery import downsample
+from drpt.tools.gallery import downsample
 from drpt.imageio import read_image
 
 

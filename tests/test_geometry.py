@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array3f, Float
+from drjit.auto import Array3f, Float
 
 from drpt.geometry import (intersect_plane, intersect_sphere, intersect_triangle,
                            intersect_triangle_watertight)

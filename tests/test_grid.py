@@ -9,7 +9,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Array3f, Float
+from drjit.auto import Array3f, Float
 
 from drpt.accel.brute import BruteForce
 from drpt.accel.grid import MAX_RES, UniformGrid, auto_resolution
@@ -192,7 +192,7 @@ def test_active_mask_and_copies():
     tri = np.float64([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]])
     sc = make_scene(np.repeat(tri, 1000, axis=0))  # 1000 identical copies in one cell
     O, D = rays([[0.2, 0.2, 1.0]] * 4, [[0, 0, -1]] * 4)
-    from drjit.llvm import Bool
+    from drjit.auto import Bool
     g = UniformGrid(sc)
     h = g.intersect(O, D, Float(INF), Bool([True, False, True, False]))
     assert h.valid.numpy().tolist() == [True, False, True, False]

@@ -10,7 +10,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Float
+from drjit.auto import Float
 from test_bvh import closed_mesh_rays, loop_mode, make_scene, rays, soup  # noqa: F401 (fixture)
 
 from drpt.accel import InlineList, build_accel, resolve_kind
@@ -131,7 +131,8 @@ def test_help_texts_state_the_limit():
     """The CLI's, bench's and profile's help name the limit that resolve_kind uses."""
     import inspect
 
-    from drpt import bench, cli, profile
+    from drpt import cli
+    from drpt.tools import bench, profile
 
     for mod in (cli, bench, profile):
         assert f"{MAX_PRIMS} primitives" in inspect.getsource(mod), mod.__name__

@@ -1,7 +1,7 @@
 """Emissive triangles as lights (drpt/render/lights/area.py)."""
 
 import numpy as np
-from drjit.llvm import Array2f, Bool, Float, UInt32
+from drjit.auto import Array2f, Bool, Float, UInt32
 from scipy import stats
 
 from drpt.render.lights.area import AreaLights

@@ -51,7 +51,8 @@ def rel_mse(x, ref):
 @pytest.mark.parametrize("name", ["newscene", "newscene_hard"])
 def test_newscene_converges_to_mitsuba_without_speckles(name):
     mi = pytest.importorskip("mitsuba")
-    mi.set_variant("llvm_ad_rgb")
+    from drpt.backend import mitsuba_variant
+    mi.set_variant(mitsuba_variant())
     from drpt.export.mitsuba import to_mitsuba_dict
 
     scene_file, W, H, ref_spp, depth, mode = REFERENCES[name]

@@ -3,7 +3,7 @@ regeneration (``sample_sequence``, what the renderer runs)."""
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Bool, Float, PCG32, UInt32
+from drjit.auto import Bool, Float, PCG32, UInt32
 
 from conftest import SCENES
 from drpt.render.renderer import RenderOptions, Renderer

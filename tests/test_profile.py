@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from drpt import profile
+from drpt.tools import profile
 from drpt.errors import DrptError
 
 from conftest import SCENES

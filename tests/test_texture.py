@@ -9,7 +9,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Array2f, Float, UInt32
+from drjit.auto import Array2f, Float, UInt32
 
 from drpt.errors import SceneError
 from drpt.imageio import srgb_to_linear, write_image

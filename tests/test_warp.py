@@ -3,7 +3,7 @@
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.llvm import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 from scipy import stats
 
 from drpt.render import warp

@@ -16,7 +16,7 @@ from __future__ import annotations
 import time
 
 import drjit as dr
-from drjit.llvm import Array3f, Bool, Float, UInt32
+from drjit.auto import Array3f, Bool, Float, UInt32
 
 from ..geometry.triangle import RayPrep
 from .bvh import INVALID, Hit, SceneGeometry, _nbytes, sphere_buffer, test_sphere, \

@@ -137,7 +137,7 @@ from dataclasses import dataclass
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array3f, Array4f, Array4u, Float, UInt32
+from drjit.auto import Array3f, Array4f, Array4u, Float, UInt32
 
 from ..geometry.triangle import RayPrep, watertight_permuted
 from .bvh import (BVH, INVALID, STACK_SIZE, SceneGeometry, _nbytes, leaf_orders,

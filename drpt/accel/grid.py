@@ -67,7 +67,7 @@ import time
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array3f, Bool, Float, Int32, UInt32
+from drjit.auto import Array3f, Bool, Float, Int32, UInt32
 
 from ..geometry.triangle import RayPrep
 from .bvh import INVALID, Hit, SceneGeometry, nearest_primitive, sphere_buffer, triangle_buffer

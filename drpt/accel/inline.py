@@ -25,7 +25,7 @@ import time
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array3f, Bool, Float, UInt32
+from drjit.auto import Array3f, Bool, Float, UInt32
 
 from ..geometry.plane import intersect_plane
 from ..geometry.sphere import intersect_sphere

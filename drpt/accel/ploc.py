@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array4f, Float, UInt32, UInt64
+from drjit.auto import Array4f, Float, UInt32, UInt64
 
 from .bvh_build import _area, _emit_level, _morton30, _node_arrays
 

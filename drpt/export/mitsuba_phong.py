@@ -24,7 +24,8 @@ and ``cos(theta_o) > 0``); :func:`to_mitsuba` wraps it in ``twosided``.
 
 Usage::
 
-    mi.set_variant("llvm_ad_rgb")
+    from drpt.backend import mitsuba_variant
+    mi.set_variant(mitsuba_variant())
     register()                     # idempotent, per variant
     bsdf = mi.load_dict(to_mitsuba(spec))
 

@@ -19,7 +19,7 @@ and never NaN.
 from __future__ import annotations
 
 import drjit as dr
-from drjit.llvm import Array3f, Bool, Float
+from drjit.auto import Array3f, Bool, Float
 
 _INF = float("inf")
 

@@ -31,7 +31,7 @@ Barycentrics: the hit point is ``p0 + u * (p1 - p0) + v * (p2 - p0)``.
 from __future__ import annotations
 
 import drjit as dr
-from drjit.llvm import Array3f, Bool, Float, UInt32
+from drjit.auto import Array3f, Bool, Float, UInt32
 
 _INF = float("inf")
 

@@ -20,7 +20,7 @@ import math
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array3f, Float
+from drjit.auto import Array3f, Float
 
 from ..errors import DrptError
 from ..scene.model import Camera, OrthographicCamera, PerspectiveCamera

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ..shading import BSDFSpec, interpret
 from ..scene.model import Scene

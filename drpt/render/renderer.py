@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Bool, Float, PCG32, UInt32, UInt64
+from drjit.auto import Bool, Float, PCG32, UInt32, UInt64
 
 from ..scene.model import Scene, Skybox
 from .camera import RayCamera

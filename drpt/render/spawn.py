@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array3f
+from drjit.auto import Array3f
 
 from ..scene.model import Scene
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ..scene.model import Scene
 

@@ -3,7 +3,7 @@
 Each image is read with :func:`drpt.imageio.read_image` (``linear=True``:
 8-bit sRGB is decoded to linear, float formats are taken as stored; alpha
 is dropped, a gray image is repeated to three channels) and uploaded as a
-``drjit.llvm.Texture2f`` with bilinear filtering (``FilterMode.Linear``)
+``drjit.auto.Texture2f`` with bilinear filtering (``FilterMode.Linear``)
 and repeat wrapping (``WrapMode.Repeat``), on which ``eval`` interpolates
 *after* the sRGB decoding, as Mitsuba's ``bitmap`` does.
 
@@ -36,7 +36,7 @@ from os import PathLike
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array2f, Array3f, Bool, Texture2f, TensorXf, UInt32
+from drjit.auto import Array2f, Array3f, Bool, Texture2f, TensorXf, UInt32
 
 from ..imageio import read_image
 

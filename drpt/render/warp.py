@@ -5,7 +5,7 @@ and points, each with its density. Pure Dr.Jit, usable inside symbolic loops.
 from __future__ import annotations
 
 import drjit as dr
-from drjit.llvm import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 
 INV_PI = 1.0 / dr.pi
 

@@ -29,7 +29,7 @@ including ``cos`` of 1e-6, roughness 0 and 1, and IOR 1.
 
 from __future__ import annotations
 
-from drjit.llvm import Array3f, Bool, Float
+from drjit.auto import Array3f, Bool, Float
 
 
 class BSDFSample:

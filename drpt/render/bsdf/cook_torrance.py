@@ -97,7 +97,7 @@ bounded (no fireflies from the BSDF itself).
 from __future__ import annotations
 
 import drjit as dr
-from drjit.llvm import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 
 from ..warp import INV_PI, square_to_cosine_hemisphere
 from . import BSDFSample

@@ -43,7 +43,7 @@ True (a Dirac lobe); ``eval`` and ``pdf`` are 0.
 from __future__ import annotations
 
 import drjit as dr
-from drjit.llvm import Array2f, Array3f, Bool, Float
+from drjit.auto import Array2f, Array3f, Bool, Float
 
 from . import BSDFSample
 

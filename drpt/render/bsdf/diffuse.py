@@ -9,7 +9,7 @@ material layer's job).
 from __future__ import annotations
 
 import drjit as dr
-from drjit.llvm import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 
 from ..warp import INV_PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
 from . import BSDFSample

@@ -41,7 +41,7 @@ Cosines down to 1e-6 (and exactly 0: ``G1 = 0``) give finite values.
 from __future__ import annotations
 
 import drjit as dr
-from drjit.llvm import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 
 #: Smallest GGX alpha used (Mitsuba 3's clamp for its microfacet plugins).
 ALPHA_MIN = 1e-4

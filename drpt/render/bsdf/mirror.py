@@ -11,7 +11,7 @@ with weight 0. Equals Mitsuba's ``conductor`` with ``material="none"``
 from __future__ import annotations
 
 import drjit as dr
-from drjit.llvm import Array2f, Array3f, Bool, Float
+from drjit.auto import Array2f, Array3f, Bool, Float
 
 from . import BSDFSample
 

@@ -32,7 +32,7 @@ must be above the surface (``wi.z > 0``), else everything is zero.
 from __future__ import annotations
 
 import drjit as dr
-from drjit.llvm import Array2f, Array3f, Bool, Float
+from drjit.auto import Array2f, Array3f, Bool, Float
 
 from ..warp import INV_PI, Frame, square_to_cosine_hemisphere
 from . import BSDFSample

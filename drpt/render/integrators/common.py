@@ -16,7 +16,7 @@ for lanes where it applies and zero elsewhere; none can return NaN.
 from __future__ import annotations
 
 import drjit as dr
-from drjit.llvm import Array2f, Array3f, Bool, Float
+from drjit.auto import Array2f, Array3f, Bool, Float
 
 SHADOW_SHRINK = 1.0 - 2.0**-12  # stop shadow rays just short of the light
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 import drjit as dr
-from drjit.llvm import Array2f, Array3f, Bool, Float, PCG32, UInt32
+from drjit.auto import Array2f, Array3f, Bool, Float, PCG32, UInt32
 
 from ..lights.area import AreaLights
 from ..lights.delta import DeltaLights

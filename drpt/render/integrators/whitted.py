@@ -34,7 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import drjit as dr
-from drjit.llvm import Array2f, Array3f, Bool, Float, PCG32, UInt32
+from drjit.auto import Array2f, Array3f, Bool, Float, PCG32, UInt32
 
 from .common import DirectLight
 

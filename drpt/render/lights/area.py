@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ...scene.model import Scene
 from ..warp import square_to_uniform_triangle

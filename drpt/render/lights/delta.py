@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array3f, Float
+from drjit.auto import Array3f, Float
 
 from ...scene.model import DirectionalLight, PointLight, Scene
 

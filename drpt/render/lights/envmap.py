@@ -106,7 +106,7 @@ from pathlib import Path
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ...errors import DrptError
 

@@ -11,7 +11,7 @@ drpt and Mitsuba (``llvm_ad_rgb``, ``path``, the exported scene) each render
 the scene at 1, 2, 4, ..., ``--max-spp`` samples per pixel, every level with
 its own seed (so the levels are independent estimates, not prefixes of one
 another). Each image is compared with a high-spp Mitsuba reference, the one
-``compare`` uses and caches (:func:`drpt.compare.get_reference`, same key, so
+``compare`` uses and caches (:func:`drpt.tools.compare.get_reference`, same key, so
 a reference made by ``compare`` with the same settings is reused).
 
 Error
@@ -69,7 +69,7 @@ from pathlib import Path
 import numpy as np
 
 from .compare import add_reference_args, cache_dir_from_args
-from .errors import DrptError
+from ..errors import DrptError
 
 EPS = 1e-2  # relMSE's eps (drpt.metrics.rel_mse)
 DEFAULT_LEVELS = (1e-1, 3e-2, 1e-2)
@@ -134,7 +134,7 @@ def noise_floor(ref, ref_var, eps: float = EPS) -> float:
 
 def excess_rel_mse(x, ref, ref_var, eps: float = EPS) -> float:
     """relMSE of ``x`` against ``ref`` minus the reference's noise floor."""
-    from .metrics import rel_mse
+    from ..metrics import rel_mse
 
     return rel_mse(x, ref, eps) - noise_floor(ref, ref_var, eps)
 
@@ -257,7 +257,7 @@ def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf):
     """A loaded Mitsuba scene and a ``render(spp, seed) -> (image, seconds)``."""
     import mitsuba as mi
 
-    from .export.mitsuba import to_mitsuba_dict
+    from ..export.mitsuba import to_mitsuba_dict
 
     t0 = time.perf_counter()
     ms = mi.load_dict(to_mitsuba_dict(scene, width, height, 1, max_depth=max_depth,
@@ -274,7 +274,7 @@ def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf):
 
 def make_drpt(scene, options):
     """A built drpt Renderer and a ``render(spp, seed) -> (RenderResult)``."""
-    from .render.renderer import Renderer
+    from ..render.renderer import Renderer
 
     renderer = Renderer(scene, options)
 
@@ -296,11 +296,11 @@ def converge_study(scene_path: Path, out: Path, width: int = 64, height: int = 6
                    levels=DEFAULT_LEVELS, seed: int = 0, cache_dir: Path | None = None,
                    progress: bool = True) -> dict:
     """Run the study (see the module docs); write the outputs; return the report."""
-    from . import metrics
+    from .. import metrics
     from .compare import _prepare_out, _write_json, check_reference_args, get_reference
-    from .render.integrators.path import PathOptions
-    from .render.renderer import RenderOptions
-    from .scene import load_scene
+    from ..render.integrators.path import PathOptions
+    from ..render.renderer import RenderOptions
+    from ..scene import load_scene
 
     scene_path = Path(scene_path)
     if min(width, height) <= 0:

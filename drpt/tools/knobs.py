@@ -44,7 +44,7 @@ noise). ``bias relMSE`` is ``excess - mean(var_x / w)``: the part of the
 error that more samples will not remove (noisy; ~0 for unbiased rows).
 
 The references are the ones ``compare`` and ``converge`` cache
-(:func:`drpt.compare.get_reference`). Output in ``--out`` (default
+(:func:`drpt.tools.compare.get_reference`). Output in ``--out`` (default
 ``knobs_<scene stem>/``): ``knobs.md`` (the table and these notes),
 ``knobs.csv`` and ``knobs.json``. The table goes to stdout. Seconds depend on
 the machine's load; the ratios between rows are what to read.
@@ -62,7 +62,7 @@ from pathlib import Path
 import numpy as np
 
 from .compare import add_reference_args, cache_dir_from_args
-from .errors import DrptError
+from ..errors import DrptError
 
 KNOBS = ("depth", "rr", "accel", "bsdf")
 RR_OFF_DEPTH = 64
@@ -167,12 +167,12 @@ def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, 
                 repeats: int = 3, seed: int = 0, cache_dir: Path | None = None,
                 progress: bool = True) -> dict:
     """Run the study (see the module docs); write the outputs; return the report."""
-    from . import metrics
+    from .. import metrics
     from .compare import _prepare_out, _write_json, check_reference_args, get_reference
     from .converge import noise_floor, write_csv
-    from .render.integrators.path import PathOptions
-    from .render.renderer import RenderOptions, Renderer
-    from .scene import load_scene
+    from ..render.integrators.path import PathOptions
+    from ..render.renderer import RenderOptions, Renderer
+    from ..scene import load_scene
 
     scene_path = Path(scene_path)
     if min(width, height) <= 0:

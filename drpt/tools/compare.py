@@ -55,7 +55,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DrptError
+from ..errors import DrptError
 
 CACHE_VERSION = 1
 IMAGE_EXTENSIONS = (".exr", ".hdr", ".pfm", ".png", ".jpg", ".jpeg", ".tga")
@@ -239,8 +239,8 @@ def format_table(report: dict) -> str:
 # ------------------------------------------------------------ image form
 def compare_images(a: Path, b: Path, out: Path) -> dict:
     """Compare image ``a`` with reference ``b``; write metrics.json and the PNG."""
-    from . import metrics
-    from .imageio import read_image
+    from .. import metrics
+    from ..imageio import read_image
 
     x = _rgb(read_image(a), a)
     ref = _rgb(read_image(b), b)
@@ -292,8 +292,8 @@ def reference_key(scene, settings: dict) -> str:
     """SHA-256 (hex) identifying a reference render; see the module docs."""
     import mitsuba as mi
 
-    from .export import mitsuba as export
-    from .scene.model import Skybox
+    from ..export import mitsuba as export
+    from ..scene.model import Skybox
 
     h = hashlib.sha256()
 
@@ -347,7 +347,7 @@ def render_reference(scene, settings: dict, progress: bool = True):
     """Mitsuba mean image, variance of the mean, and render seconds."""
     import mitsuba as mi
 
-    from .export.mitsuba import to_mitsuba_dict
+    from ..export.mitsuba import to_mitsuba_dict
 
     per, batches, seed = settings["batch_spp"], settings["batches"], settings["ref_seed"]
     t0 = time.perf_counter()
@@ -425,19 +425,20 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
     Checks the settings, sets up Mitsuba (``llvm_ad_rgb``) and Dr.Jit's LLVM
     backend. User mistakes raise DrptError.
     """
-    from .backend import ensure_llvm
+    from ..backend import ensure
 
     if min(width, height) <= 0:
         raise DrptError(f"size must be positive, got {width}x{height}")
     per = check_reference_args(ref_spp, ref_batches, max_depth, rr_depth)
 
-    ensure_llvm()
+    ensure()
     try:
         import mitsuba as mi
     except ImportError as e:
         raise DrptError(f"a Mitsuba reference needs Mitsuba 3 ('pip install mitsuba'): {e}") from e
     try:
-        mi.set_variant("llvm_ad_rgb")
+        from drpt.backend import mitsuba_variant
+        mi.set_variant(mitsuba_variant())
     except Exception as e:
         raise DrptError(f"Mitsuba has no usable 'llvm_ad_rgb' variant: {e}") from e
 
@@ -466,11 +467,11 @@ def compare_scene(scene_path: Path, out: Path, width: int = 128, height: int = 1
                   bsdf: str = "phong", max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
                   cache_dir: Path | None = None, progress: bool = True) -> dict:
     """Render ``scene_path`` with drpt and Mitsuba (cached) and write the comparison."""
-    from . import metrics
-    from .imageio import write_image
-    from .render.integrators.path import PathOptions
-    from .render.renderer import RenderOptions, Renderer
-    from .scene import load_scene
+    from .. import metrics
+    from ..imageio import write_image
+    from ..render.integrators.path import PathOptions
+    from ..render.renderer import RenderOptions, Renderer
+    from ..scene import load_scene
 
     if min(width, height) <= 0:
         raise DrptError(f"size must be positive, got {width}x{height}")

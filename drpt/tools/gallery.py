@@ -53,9 +53,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DrptError
+from ..errors import DrptError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 REFERENCE_SCRIPT = ROOT / "reference" / "make_references.py"
 
 __all__ = ["add_parser", "main", "references", "downsample", "render_gallery"]
@@ -113,12 +113,12 @@ def _factor(size, ref_size) -> int | None:
 def render_gallery(out: Path, names=None, size=None, scale: int = 2, spp: int = 64,
                    seed: int = 0, progress: bool = True) -> list[dict]:
     """Render ``names`` (default: every reference) into ``out``; returns one row per scene."""
-    from . import metrics
-    from .backend import ensure_llvm
-    from .imageio import read_image, write_image
-    from .render.integrators.path import PathOptions
-    from .render.renderer import RenderOptions, Renderer
-    from .scene import load_scene
+    from .. import metrics
+    from ..backend import ensure
+    from ..imageio import read_image, write_image
+    from ..render.integrators.path import PathOptions
+    from ..render.renderer import RenderOptions, Renderer
+    from ..scene import load_scene
 
     refs = references()
     table = refs.REFERENCES
@@ -133,7 +133,7 @@ def render_gallery(out: Path, names=None, size=None, scale: int = 2, spp: int = 
     except OSError as e:
         raise DrptError(f"{out}: cannot create output folder: {e.strerror or e}") from e
 
-    ensure_llvm()
+    ensure()
     rows = []
     for name in names:
         scene_file, rw, rh, ref_spp, depth, mode = table[name]

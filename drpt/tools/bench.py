@@ -45,9 +45,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DrptError
+from ..errors import DrptError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_SCENES = [ROOT / "scenes" / "cornellbox" / "cornellbox.txt",
                   ROOT / "scenes" / "newscene" / "newscene.txt"]
 # How MTL materials are read per default scene (others: phong).
@@ -137,9 +137,9 @@ def _best(fn, repeat: int) -> float:
 def make_rays(scene, n: int, aspect: float, seed: int) -> dict[str, np.ndarray]:
     """Primary, incoherent and shadow rays as float32 numpy arrays of shape (3, N)."""
     import drjit as dr
-    from drjit.llvm import Float, UInt32
+    from drjit.auto import Float, UInt32
 
-    from .render.camera import RayCamera
+    from ..render.camera import RayCamera
 
     h = max(1, round(math.sqrt(n / aspect)))
     w = max(1, round(n / h))
@@ -182,11 +182,11 @@ def accel_options(name: str, sah_threshold: int = 2000, min_leaf: int = 1) -> di
 def bench_drpt(scene, accel_name: str, rays: dict, bsdf: str, size, spp: int, max_depth: int,
                repeat: int, sah_threshold: int = 2000, min_leaf: int = 1) -> dict:
     import drjit as dr
-    from drjit.llvm import Array3f, Float
+    from drjit.auto import Array3f, Float
 
-    from .accel import build_accel
-    from .render.integrators.path import PathOptions
-    from .render.renderer import RenderOptions, Renderer
+    from ..accel import build_accel
+    from ..render.integrators.path import PathOptions
+    from ..render.renderer import RenderOptions, Renderer
 
     def a3(a):
         v = Array3f(*(Float(c) for c in a))
@@ -235,8 +235,9 @@ def bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
     import drjit as dr
     import mitsuba as mi
 
-    mi.set_variant("llvm_ad_rgb")
-    from .export.mitsuba import to_mitsuba_dict
+    from drpt.backend import mitsuba_variant
+    mi.set_variant(mitsuba_variant())
+    from ..export.mitsuba import to_mitsuba_dict
 
     W, H = size
     load = math.inf
@@ -366,9 +367,9 @@ def write_chart(rows: list[dict], path: Path, mitsuba: bool) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``bench`` for parsed ``args``; user errors raise DrptError."""
-    from .accel import resolve_kind
-    from .backend import ensure_llvm
-    from .scene import load_scene
+    from ..accel import resolve_kind
+    from ..backend import ensure
+    from ..scene import load_scene
 
     accels = [a.strip() for a in args.accel.split(",") if a.strip()]
     if not accels:
@@ -390,7 +391,7 @@ def main(args: argparse.Namespace) -> int:
         if not p.is_file():
             raise DrptError(f"{p}: scene file not found")
     out = Path(args.out)
-    ensure_llvm()
+    ensure()
     mitsuba = not args.no_mitsuba
     if mitsuba:
         try:

@@ -15,7 +15,7 @@ lands there and is reported apart; the timed render then runs with
 ``dr.JitFlag.KernelHistory`` on and every entry of ``dr.kernel_history()`` is
 kept (``execution_time``, ``codegen_time``, ``backend_time``, ``size``,
 ``operation_count``, ``type``, ``cache_hit``, ...). Peak memory comes from
-``dr.detail.malloc_watermark(JitBackend.LLVM)``.
+``dr.detail.malloc_watermark`` on drpt's backend.
 
 Stages
 ------
@@ -49,7 +49,7 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import DrptError
+from ..errors import DrptError
 
 INSTRUMENTATION = "instrumentation (ray counts, history reads)"
 TOP = "accumulation + readback"
@@ -226,7 +226,7 @@ class StageTracker:
 
     def count_rays(self, name: str, active, n_fallback: int) -> None:
         import drjit as dr
-        from drjit.llvm import Bool
+        from drjit.auto import Bool
 
         _eval(active)  # pending work of the caller stays with the caller
         self.enter(INSTRUMENTATION)
@@ -357,8 +357,8 @@ class ProfileOptions:
 
 
 def _renderer(scene, popt: ProfileOptions):
-    from .render.integrators.path import PathOptions
-    from .render.renderer import RenderOptions, Renderer
+    from ..render.integrators.path import PathOptions
+    from ..render.renderer import RenderOptions, Renderer
 
     ro = RenderOptions(width=popt.width, height=popt.height, spp=popt.spp, seed=popt.seed,
                        bsdf=popt.bsdf, integrator=popt.integrator, accel=popt.accel,
@@ -430,7 +430,9 @@ def profile_mode(scene, popt: ProfileOptions, symbolic: bool, staged: bool = Fal
                 run_entries = _history()
             if t < seconds:
                 seconds, entries = t, run_entries
-        peak = int(dr.detail.malloc_watermark(dr.JitBackend.LLVM))
+        from ..backend import jit_backend
+
+        peak = int(dr.detail.malloc_watermark(jit_backend()))
         result = ModeResult(mode, warmup, warm_backend, seconds, samples, peak, entries)
         if symbolic:
             result.stages = _megakernel_stages(entries, samples)
@@ -455,15 +457,15 @@ def profile_mode(scene, popt: ProfileOptions, symbolic: bool, staged: bool = Fal
 
 
 def run_profile(scene_path: str | Path, popt: ProfileOptions) -> list[ModeResult]:
-    from .backend import ensure_llvm
-    from .scene import load_scene
+    from ..backend import ensure
+    from ..scene import load_scene
 
     scene_path = Path(scene_path)
     if not scene_path.is_file():
         raise DrptError(f"{scene_path}: scene file not found")
     scene = load_scene(scene_path)
-    ensure_llvm()
-    from .render.renderer import plan_passes
+    ensure()
+    from ..render.renderer import plan_passes
 
     mk = profile_mode(scene, popt, True)
     wf = profile_mode(scene, popt, False, staged=True)
