@@ -18,8 +18,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_env_render import make  # noqa: E402
 
-from drpt.render.integrators.path import PathOptions  # noqa: E402
-from drpt.render.renderer import RenderOptions, Renderer  # noqa: E402
+from drpt.options import PathOptions  # noqa: E402
+from drpt.options import RenderOptions
+from drpt.render.renderer import Renderer  # noqa: E402
 
 
 def render(scene, spp, sampling, seed):

@@ -26,8 +26,9 @@ def main(size=256, spp=64, accels="auto"):
     from drpt.backend import mitsuba_variant
     mi.set_variant(mitsuba_variant())
     from drpt.export.mitsuba import to_mitsuba_dict
-    from drpt.render.integrators.path import PathOptions
-    from drpt.render.renderer import RenderOptions, Renderer
+    from drpt.options import PathOptions
+    from drpt.options import RenderOptions
+    from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
     print("| scene | depth | accel | drpt Msamples/s | Mitsuba Msamples/s | ratio |\n"

@@ -169,8 +169,9 @@ def _positive(name: str, value: int | float | None) -> None:
 def cmd_render(args: argparse.Namespace) -> int:
     from .backend import ensure
     from .imageio import write_image
-    from .render.integrators.path import PathOptions
-    from .render.renderer import RenderOptions, Renderer
+    from .options import PathOptions
+    from .options import RenderOptions
+    from .render.renderer import Renderer
     from .scene import load_scene
 
     scene_path = args.scene or args.input

@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from drpt.render.integrators.path import PathOptions
-from drpt.render.renderer import RenderOptions, Renderer
+from drpt.options import PathOptions
+from drpt.options import RenderOptions
+from drpt.render.renderer import Renderer
 
 
 def block_z(x, var_x, ref, var_ref, block=8):

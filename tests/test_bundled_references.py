@@ -44,7 +44,8 @@ import pytest
 
 from conftest import REPO
 from drpt.imageio import read_image
-from drpt.render.renderer import RenderOptions, Renderer
+from drpt.options import RenderOptions
+from drpt.render.renderer import Renderer
 
 sys.path.insert(0, str(REPO / "reference"))
 from make_references import REFERENCES, reference_path, variance_path  # noqa: E402

@@ -176,8 +176,9 @@ def _factor(w: int, h: int) -> int:
 @pytest.mark.parametrize("name", sorted(REFERENCES))
 def test_error_falls_as_one_over_n(name, reference_scene):
     from drpt.imageio import read_image
-    from drpt.render.integrators.path import PathOptions
-    from drpt.render.renderer import RenderOptions, Renderer
+    from drpt.options import PathOptions
+    from drpt.options import RenderOptions
+    from drpt.render.renderer import Renderer
 
     scene_file, W, H, ref_spp, depth, mode = REFERENCES[name]
     path = reference_path(name)

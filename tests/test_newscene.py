@@ -27,7 +27,8 @@ from scipy.ndimage import median_filter
 
 from conftest import REPO, SCENES
 from drpt.imageio import read_image
-from drpt.render.renderer import RenderOptions, Renderer
+from drpt.options import RenderOptions
+from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
 from render_check import block_z

@@ -6,7 +6,8 @@ import numpy as np
 from drjit.auto import Bool, Float, PCG32, UInt32
 
 from conftest import SCENES
-from drpt.render.renderer import RenderOptions, Renderer
+from drpt.options import RenderOptions
+from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
 W = H = 32

@@ -25,8 +25,9 @@ import pytest
 from conftest import REPO, SCENES
 from drpt.cli import main
 from drpt.imageio import read_image
-from drpt.render.integrators.path import PathOptions
-from drpt.render.renderer import RenderOptions, Renderer
+from drpt.options import PathOptions
+from drpt.options import RenderOptions
+from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 from render_check import assert_agree, block_z, render_both
 

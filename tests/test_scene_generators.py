@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from drpt.imageio import read_image
-from drpt.render.renderer import Renderer, RenderOptions
+from drpt.options import RenderOptions
+from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 from drpt.shading import interpret
 

@@ -272,8 +272,9 @@ def test_textured_render_matches_mitsuba(tmp_path):
     from drpt.scene import load_scene
     from render_check import assert_agree, render_both
 
-    from drpt.render.renderer import RenderOptions, Renderer
-    from drpt.render.integrators.path import PathOptions
+    from drpt.options import RenderOptions
+    from drpt.render.renderer import Renderer
+    from drpt.options import PathOptions
 
     rng = np.random.default_rng(12)
     floor = rng.integers(20, 256, size=(4, 6, 3), dtype=np.uint8)

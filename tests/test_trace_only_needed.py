@@ -6,7 +6,8 @@ raises, renders a scene without the feature (must work), then one with it
 import pytest
 
 from conftest import SCENES
-from drpt.render.renderer import RenderOptions, Renderer
+from drpt.options import RenderOptions
+from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
 CORNELL = SCENES / "cornellbox" / "cornellbox.txt"

@@ -7,8 +7,9 @@ light (see the module docstring). These tests use such scenes.
 
 import numpy as np
 
-from drpt.render.integrators.path import PathOptions
-from drpt.render.renderer import RenderOptions, Renderer
+from drpt.options import PathOptions
+from drpt.options import RenderOptions
+from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
 from render_check import assert_agree, block_z, render_both

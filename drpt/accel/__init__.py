@@ -18,12 +18,13 @@ from __future__ import annotations
 from .brute import BruteForce
 from .bvh import BVH, INVALID, Hit
 from .bvh4 import BVH4
+from .bvh_build import METHODS, NO_MIN_LEAF
 from .grid import UniformGrid
 from .inline import MAX_PRIMS as INLINE_MAX_PRIMS
 from .inline import InlineList
 
-__all__ = ["BVH", "BVH4", "BruteForce", "Hit", "INVALID", "InlineList", "UniformGrid",
-           "build_accel", "resolve_kind"]
+__all__ = ["BVH", "BVH4", "BruteForce", "Hit", "INVALID", "InlineList", "KINDS", "METHODS",
+           "NO_MIN_LEAF", "UniformGrid", "build_accel", "resolve_kind"]
 
 KINDS = ("auto", "bvh", "bvh2", "bvh4", "grid", "inline", "brute")
 

@@ -22,7 +22,7 @@ opaque JIT values: the megakernel is compiled once per render.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import drjit as dr
 import numpy as np
@@ -30,7 +30,8 @@ from drjit.auto import Bool, Float, PCG32, UInt32, UInt64
 
 from ..scene.model import Scene, Skybox
 from .camera import RayCamera
-from .integrators.path import PathIntegrator, PathOptions
+from ..options import RenderOptions
+from .integrators.path import PathIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lights.area import AreaLights
 from .lights.delta import DeltaLights
@@ -38,25 +39,6 @@ from .lights.envmap import EnvironmentLight, UniformSphereSampling, check_radius
 from .material import MaterialTable
 from .spawn import RayOffset
 from .surface import SurfaceData
-
-
-@dataclass
-class RenderOptions:
-    width: int = 256
-    height: int = 256
-    spp: int = 16
-    seed: int = 0
-    accel: str = "auto"  # drpt.accel.build_accel kind ("auto": inline for tiny scenes, else bvh)
-    grid_resolution: int | None = None  # cells per axis for accel="grid" (None: automatic)
-    bvh_method: str = "auto"  # BVH split rule, drpt.accel.bvh_build.METHODS (accel="bvh")
-    sah_threshold: int | None = None  # K of bvh_method="threshold" (None: the seed's 2000)
-    bvh_min_leaf: int = 1  # minimum primitives per BVH leaf (the seed's -resolution)
-    bsdf: str = "phong"  # how MTL materials are read, see drpt.shading
-    integrator: str = "path"  # "path" (MIS path tracing) or "whitted"
-    env_sampling: str = "luminance"  # or "uniform" (for comparison only)
-    path: PathOptions = field(default_factory=PathOptions)
-    max_lanes: int = 1 << 21
-    progress: bool = True
 
 
 @dataclass

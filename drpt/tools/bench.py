@@ -185,8 +185,9 @@ def bench_drpt(scene, accel_name: str, rays: dict, bsdf: str, size, spp: int, ma
     from drjit.auto import Array3f, Float
 
     from ..accel import build_accel
-    from ..render.integrators.path import PathOptions
-    from ..render.renderer import RenderOptions, Renderer
+    from ..options import PathOptions
+    from ..options import RenderOptions
+    from ..render.renderer import Renderer
 
     def a3(a):
         v = Array3f(*(Float(c) for c in a))

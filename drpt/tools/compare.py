@@ -469,8 +469,9 @@ def compare_scene(scene_path: Path, out: Path, width: int = 128, height: int = 1
     """Render ``scene_path`` with drpt and Mitsuba (cached) and write the comparison."""
     from .. import metrics
     from ..imageio import write_image
-    from ..render.integrators.path import PathOptions
-    from ..render.renderer import RenderOptions, Renderer
+    from ..options import PathOptions
+    from ..options import RenderOptions
+    from ..render.renderer import Renderer
     from ..scene import load_scene
 
     if min(width, height) <= 0:

@@ -298,7 +298,7 @@ def converge_study(scene_path: Path, out: Path, width: int = 64, height: int = 6
     """Run the study (see the module docs); write the outputs; return the report."""
     from .. import metrics
     from .compare import _prepare_out, _write_json, check_reference_args, get_reference
-    from ..render.integrators.path import PathOptions
+    from ..options import PathOptions
     from ..render.renderer import RenderOptions
     from ..scene import load_scene
 

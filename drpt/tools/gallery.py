@@ -116,8 +116,9 @@ def render_gallery(out: Path, names=None, size=None, scale: int = 2, spp: int = 
     from .. import metrics
     from ..backend import ensure
     from ..imageio import read_image, write_image
-    from ..render.integrators.path import PathOptions
-    from ..render.renderer import RenderOptions, Renderer
+    from ..options import PathOptions
+    from ..options import RenderOptions
+    from ..render.renderer import Renderer
     from ..scene import load_scene
 
     refs = references()

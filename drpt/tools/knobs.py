@@ -170,8 +170,9 @@ def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, 
     from .. import metrics
     from .compare import _prepare_out, _write_json, check_reference_args, get_reference
     from .converge import noise_floor, write_csv
-    from ..render.integrators.path import PathOptions
-    from ..render.renderer import RenderOptions, Renderer
+    from ..options import PathOptions
+    from ..options import RenderOptions
+    from ..render.renderer import Renderer
     from ..scene import load_scene
 
     scene_path = Path(scene_path)

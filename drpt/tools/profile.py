@@ -357,8 +357,9 @@ class ProfileOptions:
 
 
 def _renderer(scene, popt: ProfileOptions):
-    from ..render.integrators.path import PathOptions
-    from ..render.renderer import RenderOptions, Renderer
+    from ..options import PathOptions
+    from ..options import RenderOptions
+    from ..render.renderer import Renderer
 
     ro = RenderOptions(width=popt.width, height=popt.height, spp=popt.spp, seed=popt.seed,
                        bsdf=popt.bsdf, integrator=popt.integrator, accel=popt.accel,

@@ -39,14 +39,8 @@ from ..lights.delta import DeltaLights
 from ..material import MaterialTable
 from ..surface import SurfaceData
 from ..spawn import RayOffset
+from ...options import PathOptions
 from .common import DirectLight, power_heuristic
-
-
-@dataclass
-class PathOptions:
-    max_depth: int = -1
-    rr_depth: int = 5
-    rr_prob: float | None = None  # fixed continuation probability, or adaptive
 
 
 class PathIntegrator:
