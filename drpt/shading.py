@@ -1,8 +1,8 @@
 """How a scene's materials are read: from file fields to one BSDF per material.
 
 Backend-free. The renderer (:mod:`drpt.render.material`) and the Mitsuba
-exporter both call :func:`interpret`, so what drpt renders and what Mitsuba
-is given cannot drift apart.
+exporter both call :func:`interpret_scene`, so what drpt renders and what
+Mitsuba is given cannot drift apart.
 
 Rules, first match wins (``mode`` is ``"phong"`` — the seed's default — or
 ``"cook-torrance"`` — the seed's ``-cook_torrance``; ``"diffuse"`` forces
@@ -24,6 +24,12 @@ Lambertian everywhere):
    specular ``Ks`` with exponent ``Ns``.
 5. **diffuse** otherwise: ``Kd`` (or the texture).
 
+Textures: drpt looks a ``map_Kd`` up at the triangles' texture coordinates
+(OBJ ``vt``; faces without them read uv (0, 0)). In a scene without any
+texture coordinates there is nothing to look a texture up at, so
+:func:`interpret_scene` drops it: the material renders its ``Kd``, in drpt
+and in the exported Mitsuba scene alike, and a note names the material.
+
 Energy: a Phong material with ``Kd + Ks > 1`` in some channel (the course's
 Cornell box has ``Kd 1``, ``Ks 1``) would reflect more than it receives;
 both are scaled down by the same factor so that ``max(Kd + Ks) = 1``, and
@@ -36,7 +42,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .scene.model import Material, Vec3
+from .scene.model import Material, Scene, Vec3
 
 KINDS = ("diffuse", "phong", "cook_torrance", "dielectric", "mirror")
 MODES = ("phong", "cook-torrance", "diffuse")
@@ -53,6 +59,7 @@ class BSDFSpec:
     ior: float = 1.5
     texture: Path | None = None  # replaces kd where present
     notes: list[str] = field(default_factory=list)
+    dropped_texture: Path | None = None  # the map_Kd not used (no texture coordinates)
 
 
 def _positive(c: Vec3) -> bool:
@@ -93,3 +100,23 @@ def interpret(m: Material, mode: str = "phong") -> BSDFSpec:
                               f"than it receives; both scaled by 1/{total:g}")
         return spec
     return BSDFSpec("diffuse", kd=kd, texture=m.map_kd)
+
+
+def interpret_scene(scene: Scene, mode: str = "phong") -> list[BSDFSpec]:
+    """:func:`interpret` for every material of ``scene``, then the scene's
+    texture rule: without texture coordinates anywhere in the scene a texture
+    is dropped (``texture`` None, ``dropped_texture`` set, the material keeps
+    its ``Kd``) with a note naming the material."""
+    specs = [interpret(m, mode) for m in scene.materials]
+    if scene.triangles.uvs is None:
+        for m, spec in zip(scene.materials, specs):
+            if spec.texture is not None:
+                spec.dropped_texture, spec.texture = spec.texture, None
+                spec.notes.append(untextured_note(m))
+    return specs
+
+
+def untextured_note(m: Material) -> str:
+    """What is reported for a texture :func:`interpret_scene` drops."""
+    return (f"material '{m.name}': texture {Path(m.map_kd).name} needs texture coordinates "
+            "(OBJ vt) and the scene has none; using Kd")

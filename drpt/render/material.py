@@ -1,17 +1,20 @@
 """Materials on the device: per-material parameters and the BSDF dispatch.
 
-Each scene material becomes one BSDF (:func:`drpt.shading.interpret` decides
-which, the same function the Mitsuba exporter uses). Only the kinds the
+Each scene material becomes one BSDF (:func:`drpt.shading.interpret_scene`
+decides which, the same function the Mitsuba exporter uses), whose lobe
+module comes from :data:`drpt.render.bsdf.REGISTRY`. Only the kinds the
 scene has are traced: a diffuse-only scene compiles no Phong, GGX or glass
-code; a scene without textures compiles no texture lookups; a single kind
-needs no per-lane dispatch at all. With several kinds, each present lobe is
-evaluated under its own mask and the results are merged with ``select``.
+code (nor uploads their parameters); a scene without textures compiles no
+texture lookups; a single kind needs no per-lane dispatch at all. With
+several kinds, each present lobe is evaluated under its own mask and the
+results are merged with ``select``.
 
-Sidedness: reflective lobes (diffuse, Phong, Cook-Torrance, mirror) are
-two-sided: their shading frame is flipped to the viewer's side. The
-dielectric sees the unflipped frame (``+z`` = shading normal = outside).
-Emission is one-sided: a material with ``emission`` radiates only toward the
-side its shading normal points to, as Mitsuba's ``area`` emitter does.
+Sidedness: lobes registered ``TWO_SIDED`` (diffuse, Phong, Cook-Torrance,
+mirror) see their shading frame flipped to the viewer's side. The others
+(the dielectric) see the unflipped frame (``+z`` = shading normal =
+outside). Emission is one-sided: a material with ``emission`` radiates only
+toward the side its shading normal points to, as Mitsuba's ``area`` emitter
+does.
 """
 
 from __future__ import annotations
@@ -20,30 +23,13 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-from ..shading import BSDFSpec, interpret
+from ..shading import BSDFSpec, interpret_scene
 from ..scene.model import Scene
-from .bsdf import BSDFSample
+from .bsdf import BSDFSample, lobe
 from .surface import Interaction, _vec
 from .warp import Frame
 
-
-DELTA_KINDS = ("dielectric", "mirror")
-
-
-def _lobe(kind: str):
-    if kind == "diffuse":
-        from .bsdf import diffuse as m
-    elif kind == "phong":
-        from .bsdf import phong as m
-    elif kind == "cook_torrance":
-        from .bsdf import cook_torrance as m
-    elif kind == "dielectric":
-        from .bsdf import dielectric as m
-    elif kind == "mirror":
-        from .bsdf import mirror as m
-    else:  # pragma: no cover - interpret() only returns the kinds above
-        raise ValueError(kind)
-    return m
+_TYPES = {"rgb": Array3f, "float": Float}
 
 
 class MaterialTable:
@@ -53,10 +39,11 @@ class MaterialTable:
         for prims in (scene.triangles, scene.spheres, scene.planes):
             used[np.asarray(prims.material, np.int64)] = True
         self.specs: list[BSDFSpec] = [
-            interpret(m, mode) if u else BSDFSpec("diffuse", kd=(0.0, 0.0, 0.0))
-            for m, u in zip(scene.materials, used)]
+            spec if u else BSDFSpec("diffuse", kd=(0.0, 0.0, 0.0))
+            for spec, u in zip(interpret_scene(scene, mode), used)]
         self.notes = [n for s in self.specs for n in s.notes]
         self.kinds = sorted({s.kind for s, u in zip(self.specs, used) if u}) or ["diffuse"]
+        self.lobes = {k: lobe(k) for k in self.kinds}
         kinds = np.array([self.kinds.index(s.kind) if s.kind in self.kinds else 0
                           for s in self.specs], np.uint32)
         self.kind = UInt32(kinds)
@@ -70,25 +57,23 @@ class MaterialTable:
             return Float(np.array([getattr(s, name) for s in self.specs], np.float32))
 
         self.kd = col("kd")
-        if "phong" in self.kinds or "mirror" in self.kinds:
-            self.ks, self.ns = col("ks"), num("ns")
-        if "cook_torrance" in self.kinds:
-            self.alpha, self.metalness = num("alpha"), num("metalness")
-        if "dielectric" in self.kinds:
-            self.ior = num("ior")
+        # the parameters of the kinds present, one array per spec field
+        self._fields: dict[str, type] = {}
+        for m in self.lobes.values():
+            self._fields.update({name: _TYPES[t] for name, t in m.FIELDS.items()})
+        for name, t in self._fields.items():
+            setattr(self, name, col(name) if t is Array3f else num(name))
 
-        # Textures (map_Kd) on triangles with uvs; one id per material, or -1.
+        # Textures (map_Kd, kept by interpret_scene only where the scene has
+        # uvs); one id per material, or -1.
         self.textures = None
         paths = sorted({s.texture for s in self.specs if s.texture is not None}, key=str)
-        if paths and scene.triangles.uvs is not None:
+        if paths:
             from .texture import TextureSet
 
             self.textures = TextureSet(paths)
             tex = [paths.index(s.texture) if s.texture is not None else -1 for s in self.specs]
             self.tex_id = UInt32(np.array(tex, np.int64).astype(np.uint32))
-        elif paths:
-            self.notes.append("textures need texture coordinates (OBJ vt); "
-                              "using Kd where a mesh has none")
 
     # ------------------------------------------------------------------
     def emitted(self, si: Interaction) -> Array3f:
@@ -100,11 +85,11 @@ class MaterialTable:
         return dr.select(front, le, 0.0)
 
     def is_specular_only(self) -> bool:
-        return all(k in DELTA_KINDS for k in self.kinds)
+        return all(m.DELTA for m in self.lobes.values())
 
     def is_delta(self, si: Interaction) -> Bool:
         """Lanes whose material is a delta lobe (glass, mirror)."""
-        ids = [i for i, k in enumerate(self.kinds) if k in DELTA_KINDS]
+        ids = [i for i, k in enumerate(self.kinds) if self.lobes[k].DELTA]
         if not ids:
             return Bool(False)
         if len(ids) == len(self.kinds):
@@ -117,9 +102,10 @@ class MaterialTable:
 
     def diffuse_color(self, si: Interaction, active: Bool) -> Array3f:
         """The diffuse color (Kd or its texture), e.g. for an ambient term."""
-        return self._base_color(si, active)
+        return self.base_color(si, active)
 
-    def _base_color(self, si: Interaction, active: Bool) -> Array3f:
+    def base_color(self, si: Interaction, active: Bool) -> Array3f:
+        """Kd of the lanes' materials, or their texture at ``si.uv``."""
         kd = dr.gather(Array3f, self.kd, si.material, active)
         if self.textures is not None:
             tid = dr.gather(UInt32, self.tex_id, si.material, active)
@@ -127,33 +113,12 @@ class MaterialTable:
             kd = dr.select(textured, self.textures.lookup(tid, si.uv, textured), kd)
         return kd
 
-    def _params(self, kind: str, si: Interaction, active: Bool):
-        m = si.material
-        if kind == "diffuse":
-            from .bsdf.diffuse import DiffuseParams
-
-            return DiffuseParams(self._base_color(si, active))
-        if kind == "phong":
-            from .bsdf.phong import PhongParams
-
-            return PhongParams(self._base_color(si, active), dr.gather(Array3f, self.ks, m, active),
-                               dr.gather(Float, self.ns, m, active))
-        if kind == "cook_torrance":
-            from .bsdf.cook_torrance import CookTorranceParams
-
-            return CookTorranceParams(self._base_color(si, active),
-                                      dr.gather(Float, self.alpha, m, active),
-                                      dr.gather(Float, self.metalness, m, active))
-        if kind == "dielectric":
-            from .bsdf.dielectric import DielectricParams
-
-            return DielectricParams(dr.gather(Float, self.ior, m, active))
-        from .bsdf.mirror import MirrorParams
-
-        return MirrorParams(dr.gather(Array3f, self.ks, m, active))
+    def gather(self, field: str, si: Interaction, active: Bool):
+        """Spec ``field`` (one a present lobe's ``FIELDS`` names) of the lanes' materials."""
+        return dr.gather(self._fields[field], getattr(self, field), si.material, active)
 
     def _cases(self, si: Interaction):
-        """(kind, lane mask, local frame) for each kind present."""
+        """(lobe module, lane mask, local frame) for each kind present."""
         flip = dr.dot(si.ns, si.wi) < 0.0
         two_sided = Frame(dr.select(flip, -si.ns, si.ns))
         if len(self.kinds) == 1:
@@ -162,31 +127,29 @@ class MaterialTable:
             kind_of = dr.gather(UInt32, self.kind, si.material, si.valid)
         for i, kind in enumerate(self.kinds):
             mask = si.valid if kind_of is None else si.valid & (kind_of == i)
-            frame = Frame(si.ns) if kind == "dielectric" else two_sided
-            yield kind, mask, frame
+            frame = two_sided if self.lobes[kind].TWO_SIDED else Frame(si.ns)
+            yield self.lobes[kind], mask, frame
 
     # ------------------------------------------------------------------
     def eval_pdf(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float]:
         """``f * |cos|`` and the sampling density (solid angle) for world ``wo``."""
         f, pdf = Array3f(0.0), Float(0.0)
-        for kind, mask, frame in self._cases(si):
-            if kind in ("dielectric", "mirror"):
-                continue  # delta lobes: nothing to evaluate
-            lobe = _lobe(kind)
-            p = self._params(kind, si, mask)
+        for bsdf, mask, frame in self._cases(si):
+            if bsdf.DELTA:
+                continue  # nothing to evaluate
+            p = bsdf.params(self, si, mask)
             wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
-            f = dr.select(mask, lobe.eval(p, wi_l, wo_l), f)
-            pdf = dr.select(mask, lobe.pdf(p, wi_l, wo_l), pdf)
+            f = dr.select(mask, bsdf.eval(p, wi_l, wo_l), f)
+            pdf = dr.select(mask, bsdf.pdf(p, wi_l, wo_l), pdf)
         return f, pdf
 
     def sample(self, si: Interaction, u1: Float, u2: Array2f) -> tuple[Array3f, BSDFSample]:
         """Sample a world direction; returns it and the local :class:`BSDFSample`."""
         out = BSDFSample()
         wo = Array3f(0.0, 0.0, 1.0)
-        for kind, mask, frame in self._cases(si):
-            lobe = _lobe(kind)
-            p = self._params(kind, si, mask)
-            bs = lobe.sample(p, frame.to_local(si.wi), u1, u2)
+        for bsdf, mask, frame in self._cases(si):
+            p = bsdf.params(self, si, mask)
+            bs = bsdf.sample(p, frame.to_local(si.wi), u1, u2)
             out = dr.select(mask, bs, out)
             wo = dr.select(mask, frame.to_world(bs.wo), wo)
         out.valid &= si.valid

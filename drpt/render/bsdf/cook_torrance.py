@@ -110,6 +110,12 @@ ETA = 2.0 / (1.0 - (0.08 * SPECULAR) ** 0.5) - 1.0  # = 1.5
 ALPHA_MIN = 1e-3
 
 
+#: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
+FIELDS = {"alpha": "float", "metalness": "float"}
+DELTA = False
+TWO_SIDED = True
+
+
 class CookTorranceParams:
     """Per-lane parameters: ``base_color`` (Array3f), GGX ``alpha`` (Float in
     [0, 1]) and ``metalness`` (Float in [0, 1])."""
@@ -120,6 +126,12 @@ class CookTorranceParams:
         self.base_color = base_color if base_color is not None else Array3f(0.5)
         self.alpha = alpha if alpha is not None else Float(0.25)
         self.metalness = metalness if metalness is not None else Float(0.0)
+
+
+def params(table, si, active) -> CookTorranceParams:
+    """The parameters of the lanes' materials, gathered from the material table."""
+    return CookTorranceParams(table.base_color(si, active), table.gather("alpha", si, active),
+                              table.gather("metalness", si, active))
 
 
 def _schlick_weight(c: Float) -> Float:

@@ -48,6 +48,12 @@ from drjit.auto import Array2f, Array3f, Bool, Float
 from . import BSDFSample
 
 
+#: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
+FIELDS = {"ior": "float"}
+DELTA = True
+TWO_SIDED = False
+
+
 class DielectricParams:
     """``eta``: interior IOR over exterior IOR (exterior = vacuum, so the IOR)."""
 
@@ -55,6 +61,11 @@ class DielectricParams:
 
     def __init__(self, eta=None):
         self.eta = eta if eta is not None else Float(1.5)
+
+
+def params(table, si, active) -> DielectricParams:
+    """The parameters of the lanes' materials, gathered from the material table."""
+    return DielectricParams(table.gather("ior", si, active))
 
 
 def fresnel_dielectric(cos_i: Float, eta: Float):

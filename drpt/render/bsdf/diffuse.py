@@ -15,11 +15,22 @@ from ..warp import INV_PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
 from . import BSDFSample
 
 
+#: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
+FIELDS = {}
+DELTA = False
+TWO_SIDED = True
+
+
 class DiffuseParams:
     DRJIT_STRUCT = {"kd": Array3f}
 
     def __init__(self, kd=None):
         self.kd = kd if kd is not None else Array3f(0.5)
+
+
+def params(table, si, active) -> DiffuseParams:
+    """The parameters of the lanes' materials, gathered from the material table."""
+    return DiffuseParams(table.base_color(si, active))
 
 
 def eval(p: DiffuseParams, wi: Array3f, wo: Array3f) -> Array3f:

@@ -16,11 +16,22 @@ from drjit.auto import Array2f, Array3f, Bool, Float
 from . import BSDFSample
 
 
+#: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
+FIELDS = {"ks": "rgb"}
+DELTA = True
+TWO_SIDED = True
+
+
 class MirrorParams:
     DRJIT_STRUCT = {"r": Array3f}
 
     def __init__(self, r=None):
         self.r = r if r is not None else Array3f(1.0)
+
+
+def params(table, si, active) -> MirrorParams:
+    """The parameters of the lanes' materials, gathered from the material table."""
+    return MirrorParams(table.gather("ks", si, active))
 
 
 def eval(p: MirrorParams, wi: Array3f, wo: Array3f) -> Array3f:

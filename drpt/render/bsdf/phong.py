@@ -42,6 +42,12 @@ LUM = (0.2126, 0.7152, 0.0722)
 INV_TWO_PI = 0.5 / dr.pi
 
 
+#: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
+FIELDS = {"ks": "rgb", "ns": "float"}
+DELTA = False
+TWO_SIDED = True
+
+
 class PhongParams:
     """Per-lane Phong parameters: diffuse ``kd``, specular ``ks``, exponent ``ns >= 0``."""
 
@@ -51,6 +57,12 @@ class PhongParams:
         self.kd = kd if kd is not None else Array3f(0.0)
         self.ks = ks if ks is not None else Array3f(0.0)
         self.ns = ns if ns is not None else Float(1.0)
+
+
+def params(table, si, active) -> PhongParams:
+    """The parameters of the lanes' materials, gathered from the material table."""
+    return PhongParams(table.base_color(si, active), table.gather("ks", si, active),
+                       table.gather("ns", si, active))
 
 
 def _lum(c: Array3f) -> Float:
