@@ -235,6 +235,35 @@ def test_uv_orientation_matches_obj(tmp_path):
         assert bottom[1] > 0.5 and bottom[0] < 0.05, bottom
 
 
+def test_texture_without_uvs_is_kd_in_drpt_and_export(tmp_path):
+    """A map_Kd in a scene without texture coordinates: one rule
+    (drpt.shading.interpret_scene) drops the texture for both, so drpt and
+    the exported scene both render Kd (green here, the texture is red), and
+    both report the material."""
+    from PIL import Image
+
+    from drpt.options import PathOptions, RenderOptions
+    from drpt.render.renderer import Renderer
+
+    red = tmp_path / "red.png"
+    Image.fromarray(np.full((4, 4, 3), (255, 0, 0), np.uint8)).save(red)
+    cam = PerspectiveCamera((0.0, 0.0, 3.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0), 40.0)
+    tri = Triangles(quad([0, 0, 0], [0.6, 0, 0], [0, 0.6, 0]), np.zeros(2, np.int32))
+    mats = [Material("tex", kd=(0.0, 0.8, 0.0), map_kd=red)]
+    scene = make_scene(cam, mats, triangles=tri, lights=[PointLight((0, 0, 2), (4, 4, 4))])
+    with pytest.warns(UserWarning, match="material 'tex': texture red.png needs texture"):
+        mits = render_scene(scene, spp=4, max_depth=2)
+    r = Renderer(scene, RenderOptions(width=W, height=H, spp=4, path=PathOptions(max_depth=2),
+                                      progress=False))
+    assert any("material 'tex'" in w and "red.png" in w for w in r.warnings)
+    ours = r.render().image
+    for img in (mits, ours):
+        c = img[H // 2, W // 2]
+        assert c[1] > 0.1 and c[0] < 1e-3 * c[1], c
+    np.testing.assert_allclose(ours[H // 2 - 4:H // 2 + 4, W // 2 - 4:W // 2 + 4],
+                               mits[H // 2 - 4:H // 2 + 4, W // 2 - 4:W // 2 + 4], rtol=0.02)
+
+
 def test_plane_orientation_and_extent():
     """An emissive plane y = -1 with normal +y fills the lower half of the
     view toward the horizon; with normal -y (same plane) it is invisible."""

@@ -42,8 +42,8 @@ Film, sampler, integrator
     (-1 infinite, 1 emitters seen directly, 2 direct lighting), ``rr_depth``,
     ``hide_emitters=False``.
 Materials
-    Each material goes through :func:`drpt.shading.interpret` (the same
-    call the renderer makes, with the same ``bsdf`` mode) and becomes the
+    Each material goes through :func:`drpt.shading.interpret_scene` (the
+    same call the renderer makes, with the same ``bsdf`` mode) and becomes the
     Mitsuba counterpart of its kind: ``diffuse`` -> ``twosided(diffuse)``,
     ``phong`` -> ``twosided(drpt_phong)`` (a registered plugin,
     :mod:`drpt.export.mitsuba_phong`), ``cook_torrance`` ->
@@ -52,9 +52,12 @@ Materials
     ``twosided`` (drpt surfaces are two-sided, Mitsuba BSDFs one-sided);
     the dielectric is not. ``map_kd`` becomes a ``bitmap`` texture
     (``filter_type="bilinear"``, ``wrap_mode="repeat"``, sRGB-decoded for
-    8-bit files as Mitsuba does by default) and replaces ``kd``. A textured
-    mesh without uvs gets explicit uv (0, 0) (drpt's lookup; Mitsuba would
-    otherwise use barycentrics). Textures on spheres/planes use Mitsuba's
+    8-bit files as Mitsuba does by default) and replaces ``kd``. In a scene
+    with texture coordinates, faces without them get explicit uv (0, 0)
+    (drpt's lookup; Mitsuba would otherwise use barycentrics); in a scene
+    without any, ``interpret_scene`` drops the textures (both drpt and the
+    export use ``Kd``) and the export warns, naming each material whose
+    texture it dropped. Textures on spheres/planes use Mitsuba's
     own parameterization, not yet matched to drpt's.
 Texture coordinates
     drpt stores uvs as written in the OBJ file: ``v = 0`` is the *bottom* row
@@ -108,7 +111,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from drpt.errors import DrptError
-from drpt.shading import interpret
+from drpt.shading import BSDFSpec, interpret_scene, untextured_note
 from drpt.scene.model import (
     DirectionalLight,
     Material,
@@ -289,7 +292,13 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
     out["sensor"] = sensor
 
     # -- materials
-    bsdfs = [_bsdf(m, bsdf) for m in scene.materials]
+    specs = interpret_scene(scene, bsdf)
+    used = np.unique(np.concatenate([np.asarray(p.material, np.int64) for p in
+                                     (scene.triangles, scene.spheres, scene.planes)]))
+    for i in used:
+        if 0 <= i < len(specs) and specs[i].dropped_texture is not None:
+            warnings.warn(untextured_note(scene.materials[i]), stacklevel=3)
+    bsdfs = [_bsdf(m, spec) for m, spec in zip(scene.materials, specs)]
     emitters = [
         {"type": "area", "radiance": _RGB(_f3(m.emission))} if m.is_emissive else None
         for m in scene.materials
@@ -307,13 +316,8 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
         for mi_ in np.unique(tri.material):
             sel = tri.material == mi_
             uvs = None
-            if tri.uvs is not None:
+            if tri.uvs is not None:  # faces without uvs in the file hold zeros
                 uvs = tri.uvs[sel].copy()
-            elif scene.materials[mi_].map_kd is not None:
-                # drpt looks textures up at uv (0, 0) without uvs; Mitsuba
-                # would use barycentrics, so give it explicit zeros.
-                uvs = np.zeros((int(sel.sum()), 3, 2))
-            if uvs is not None:
                 uvs[..., 1] = 1.0 - uvs[..., 1]  # OBJ v=0 bottom -> Mitsuba v=0 top
             name = _mesh_name(int(mi_), scene.materials[mi_])
             out[f"mesh_{name}"] = _MeshData(
@@ -415,9 +419,8 @@ def _plain(node: Any) -> Any:
     return node
 
 
-def _bsdf(m: Material, mode: str) -> dict:
-    """The Mitsuba BSDF for what drpt renders of ``m`` (see drpt.shading)."""
-    spec = interpret(m, mode)
+def _bsdf(m: Material, spec: BSDFSpec) -> dict:
+    """The Mitsuba BSDF for what drpt renders of ``m`` (``spec``, see drpt.shading)."""
     if spec.kind == "diffuse":
         refl: Any = _texture(m) if spec.texture is not None else _RGB(_f3(spec.kd))
         return {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": refl}}
