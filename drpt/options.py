@@ -31,5 +31,5 @@ class RenderOptions:
     integrator: str = "path"  # "path" (MIS path tracing) or "whitted"
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
     path: PathOptions = field(default_factory=PathOptions)
-    max_lanes: int = 1 << 21
+    max_lanes: int | None = None  # samples traced at once (None: drpt.backend.policy().max_lanes)
     progress: bool = True

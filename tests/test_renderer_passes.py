@@ -23,12 +23,16 @@ def test_every_pixel_gets_exactly_spp_samples(tmp_path, monkeypatch, spp, max_la
     """Path regeneration bookkeeping: with a constant sky and nothing in view
     every sample is exactly 0.5, so the image is 0.5 with zero variance only
     if each pixel's lanes together trace exactly ``spp`` samples, whatever the
-    lanes per pixel (``MIN_LANES``), the remainder split and the passes."""
+    lanes per pixel (the policy's ``min_lanes``), the remainder split and the passes."""
+    import dataclasses
+
+    from drpt import backend
     from drpt.imageio import write_image
     from drpt.render import renderer
     from drpt.scene import load_scene
 
-    monkeypatch.setattr(renderer, "MIN_LANES", min_lanes)
+    policy = dataclasses.replace(backend.policy(), min_lanes=min_lanes)
+    monkeypatch.setattr(renderer, "policy", lambda: policy)
     write_image(tmp_path / "sky.exr", np.full((4, 8, 3), 0.5, np.float32))
     (tmp_path / "s.txt").write_text(
         "PerspectiveCamera { center 0 0 0 direction 0 0 -1 up 0 1 0 angle 30 }\n"

@@ -5,7 +5,8 @@ bounded at any image size and sample count: a pass covers a band of rows with
 ``k`` samples per pixel (``k`` as large as the budget allows). The path
 tracer runs them with *path regeneration*
 (:meth:`~drpt.render.integrators.path.PathIntegrator.sample_sequence`): each
-pixel gets ``m`` Dr.Jit lanes (``MIN_LANES`` below), each lane traces its
+pixel gets ``m`` Dr.Jit lanes (from ``drpt.backend.policy().min_lanes``,
+see :meth:`Renderer._pass`), each lane traces its
 share of the ``k`` samples one path after another and sums them, so a SIMD
 packet no longer waits for its longest path at every bounce (measured in one
 process against one sample per lane: Cornell box 1.17x, newscene 1.32x at
@@ -17,6 +18,10 @@ a render is deterministic for a given seed and pass layout.
 
 Pass parameters that change between passes (row offset, seed, ``k``) are
 opaque JIT values: the megakernel is compiled once per render.
+
+The scene goes to the device once, as a
+:class:`~drpt.render.scene.DeviceScene` (:attr:`Renderer.scene`), which the
+integrator queries; the renderer adds the camera and the passes.
 """
 
 from __future__ import annotations
@@ -28,17 +33,13 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Bool, Float, PCG32, UInt32, UInt64
 
-from ..scene.model import Scene, Skybox
+from ..backend import policy
+from ..scene.model import Scene
 from .camera import RayCamera
 from ..options import RenderOptions
 from .integrators.path import PathIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
-from .lights.area import AreaLights
-from .lights.delta import DeltaLights
-from .lights.envmap import EnvironmentLight, UniformSphereSampling, check_radius
-from .material import MaterialTable
-from .spawn import RayOffset
-from .surface import SurfaceData
+from .scene import DeviceScene
 
 
 @dataclass
@@ -53,14 +54,6 @@ class RenderResult:
     @property
     def samples_per_second(self) -> float:
         return self.samples / max(self.seconds, 1e-9)
-
-
-# Lanes per pass with path regeneration: a pixel gets m = ceil(MIN_LANES / pixels)
-# lanes (at most k), each running about k / m samples. Fewer, longer lanes
-# balance better (Cornell box, 64 spp, render seconds: 256x256 with m = 1, 2, 4,
-# 16: 8.7, 9.2, 9.8, 10.6; 64x64 at 256 spp with 4k, 8k, 16k, 64k lanes: 2.4,
-# 2.2, 1.9, 2.2), but too few lanes leave cores idle.
-MIN_LANES = 1 << 14
 
 
 def _mix_seed(seed: int, index: int) -> int:
@@ -90,42 +83,24 @@ def plan_passes(width: int, height: int, spp: int, max_lanes: int) -> list[tuple
 
 class Renderer:
     def __init__(self, scene: Scene, options: RenderOptions):
-        from ..accel import build_accel
-
-        self.scene, self.opt = scene, options
+        self.opt = options
         t0 = time.perf_counter()
-        self.accel = build_accel(scene, kind=options.accel, resolution=options.grid_resolution,
-                                 method=options.bvh_method, min_leaf=options.bvh_min_leaf,
-                                 sah_threshold=options.sah_threshold)
-        self.materials = MaterialTable(scene, options.bsdf)
-        self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None)
-        self.lights = AreaLights(scene, self.surfaces)
+        self.scene = DeviceScene(scene, options)
         self.camera = RayCamera(scene.camera, options.width, options.height)
-        offset, delta = RayOffset(scene), DeltaLights(scene)
-        self.env = None
-        self.warnings: list[str] = list(self.materials.notes)
-        skies = [light for light in scene.lights if isinstance(light, Skybox)]
-        if skies:
-            if len(skies) > 1:
-                self.warnings.append(f"{len(skies)} Skybox lights: using the first")
-            self.env = EnvironmentLight.from_file(skies[0].path)
-            self.warnings += self.env.warnings
-            if options.env_sampling == "uniform":
-                self.env = UniformSphereSampling(self.env)
-            lo, hi = scene.bounds()
-            msg = check_radius(lo, hi, skies[0].radius)
-            if msg:
-                self.warnings.append(msg)
+        self.warnings: list[str] = self.scene.warnings
         if options.integrator == "whitted":
             depth = options.path.max_depth
             self.integrator = WhittedIntegrator(
-                self.accel, self.surfaces, self.materials, self.lights, delta, offset,
-                scene.background, WhittedOptions(max_depth=depth if depth > 0 else 16), self.env)
+                self.scene, WhittedOptions(max_depth=depth if depth > 0 else 16))
         else:
-            self.integrator = PathIntegrator(
-                self.accel, self.surfaces, self.materials, self.lights, offset,
-                scene.background.color, options.path, delta, self.env)
+            self.integrator = PathIntegrator(self.scene, options.path)
         self.build_seconds = time.perf_counter() - t0
+
+    @property
+    def max_lanes(self) -> int:
+        """Samples traced at once: the option, else the backend's default."""
+        lanes = self.opt.max_lanes
+        return policy().max_lanes if lanes is None else lanes
 
     def _pass(self, pass_index: int, k: int, r0: int, rows: int
               ) -> tuple[np.ndarray, np.ndarray, int]:
@@ -134,9 +109,14 @@ class Renderer:
         W = self.opt.width
         pixels = rows * W
         sequential = hasattr(self.integrator, "sample_sequence")
-        # lanes per pixel: with path regeneration enough lanes to fill the
-        # machine (each runs about k / m samples), else one lane per sample
-        m = min(k, -(-MIN_LANES // pixels)) if sequential else k
+        # Lanes per pixel: with path regeneration m = ceil(min_lanes / pixels)
+        # (at most k), each running about k / m samples, else one lane per
+        # sample. Fewer, longer lanes balance better (LLVM, Cornell box, 64
+        # spp, render seconds: 256x256 with m = 1, 2, 4, 16: 8.7, 9.2, 9.8,
+        # 10.6; 64x64 at 256 spp with 4k, 8k, 16k, 64k lanes: 2.4, 2.2, 1.9,
+        # 2.2), but too few lanes leave the device idle.
+        min_lanes = policy().min_lanes
+        m = min(k, -(-min_lanes // pixels)) if sequential else k
         n = pixels * m
         lane = dr.arange(UInt32, n)
         mm, kk = dr.opaque(UInt32, m), dr.opaque(UInt32, k)
@@ -144,7 +124,7 @@ class Renderer:
         x = pixel % W
         y = pixel // W + dr.opaque(UInt32, r0)
         rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
-                    initseq=dr.opaque(UInt64, pass_index * self.opt.max_lanes))
+                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
 
         def camera_ray(rng):
             return self.camera.ray(Float(x) + rng.next_float32(), Float(y) + rng.next_float32())
@@ -176,7 +156,7 @@ class Renderer:
         from tqdm import tqdm
 
         W, H, spp = self.opt.width, self.opt.height, self.opt.spp
-        passes = plan_passes(W, H, spp, self.opt.max_lanes)
+        passes = plan_passes(W, H, spp, self.max_lanes)
         acc = np.zeros((H, W, 3), np.float64)
         acc2 = np.zeros((H, W, 3), np.float64)
         nonfinite = 0

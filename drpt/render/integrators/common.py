@@ -9,7 +9,8 @@ from the emitters, each estimator with its own shadow ray:
 * ``env``: one direction from the environment map (by luminance), MIS
   weighted against BSDF sampling when ``mis`` is set;
 
-Each returns the contribution ``f * |cos| * L / pdf`` (times the MIS weight)
+Each queries the scene (:class:`drpt.render.scene.DeviceScene`) for the
+emitter sample, the BSDF and the shadow ray, and returns the contribution ``f * |cos| * L / pdf`` (times the MIS weight)
 for lanes where it applies and zero elsewhere; none can return NaN.
 """
 
@@ -27,42 +28,38 @@ def power_heuristic(a: Float, b: Float) -> Float:
 
 
 class DirectLight:
-    def __init__(self, accel, materials, area_lights, delta_lights, offset, env=None):
-        self.accel, self.mats, self.offset = accel, materials, offset
-        self.area_lights = area_lights if area_lights.count > 0 else None
-        self.delta_lights = delta_lights if (delta_lights and delta_lights.count) else None
-        self.env = env if (env is not None and not env.is_black) else None
+    """The direct-light estimators of a :class:`~drpt.render.scene.DeviceScene`."""
+
+    def __init__(self, scene):
+        self.scene = scene
 
     def area(self, si, u_sel: Float, u2: Array2f, active: Bool, mis: bool) -> Array3f:
-        ls = self.area_lights.sample(u_sel, u2, active)
-        to_light = ls.p - si.p
-        dist2 = dr.squared_norm(to_light)
-        wo = to_light * dr.rsqrt(dist2)
-        front = dr.dot(ls.n, wo) < 0.0  # the light emits toward the shading point
-        cos_light = dr.abs(dr.dot(ls.ng, wo))
-        f, pdf_b = self.mats.eval_pdf(si, wo)
-        ok = active & front & (cos_light > 0.0) & (ls.pdf_area > 0.0) & (dr.max(f) > 0.0)
-        pdf_light = ls.pdf_area * dist2 / cos_light
-        so = self.offset.origin(si.p, si.ng, wo)
-        ok &= ~self.accel.occluded(so, wo, dr.norm(ls.p - so) * SHADOW_SHRINK, ok)
-        w = power_heuristic(pdf_light, pdf_b) if mis else Float(1.0)
-        return dr.select(ok, f * ls.le * (w / pdf_light), 0.0)
+        scene = self.scene
+        ls = scene.sample_area_emitter(si, u_sel, u2, active)
+        f, pdf_b = scene.eval_bsdf(si, ls.wo)
+        ok = ls.valid & (dr.max(f) > 0.0)
+        so = scene.spawn(si, ls.wo)
+        ok &= ~scene.occluded(so, ls.wo, dr.norm(ls.p - so) * SHADOW_SHRINK, ok)
+        w = power_heuristic(ls.pdf, pdf_b) if mis else Float(1.0)
+        return dr.select(ok, f * ls.le * (w / ls.pdf), 0.0)
 
     def delta(self, si, active: Bool) -> Array3f:
+        scene = self.scene
         total = Array3f(0.0)
-        for dl in self.delta_lights.samples(si.p):
-            f, _ = self.mats.eval_pdf(si, dl.wo)
+        for dl in scene.delta_emitters(si.p):
+            f, _ = scene.eval_bsdf(si, dl.wo)
             ok = active & (dr.max(f) > 0.0) & (dr.max(dl.irradiance) > 0.0)
-            so = self.offset.origin(si.p, si.ng, dl.wo)
-            ok &= ~self.accel.occluded(so, dl.wo, dl.dist * SHADOW_SHRINK, ok)
+            so = scene.spawn(si, dl.wo)
+            ok &= ~scene.occluded(so, dl.wo, dl.dist * SHADOW_SHRINK, ok)
             total += dr.select(ok, f * dl.irradiance, 0.0)
         return total
 
     def env_light(self, si, u2: Array2f, active: Bool, mis: bool) -> Array3f:
-        wo, radiance, pdf_l = self.env.sample(u2, active)
-        f, pdf_b = self.mats.eval_pdf(si, wo)
+        scene = self.scene
+        wo, radiance, pdf_l = scene.sample_environment(u2, active)
+        f, pdf_b = scene.eval_bsdf(si, wo)
         ok = active & (pdf_l > 0.0) & (dr.max(f) > 0.0)
-        so = self.offset.origin(si.p, si.ng, wo)
-        ok &= ~self.accel.occluded(so, wo, Float(dr.inf), ok)
+        so = scene.spawn(si, wo)
+        ok &= ~scene.occluded(so, wo, Float(dr.inf), ok)
         w = power_heuristic(pdf_l, pdf_b) if mis else Float(1.0)
         return dr.select(ok, f * radiance * (w / dr.maximum(pdf_l, 1e-30)), 0.0)

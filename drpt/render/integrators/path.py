@@ -21,9 +21,12 @@ Delta lobes (glass, mirrors) have nothing to evaluate: next-event estimation
 contributes nothing there and the emitter their ray hits counts in full
 (``prev_delta``). A scene of only delta materials traces no NEE code.
 
-Two entry points run the same bounce (``_bounce``): ``sample`` traces one path
+Two entry points run the same bounce (``_bounce(scene, state, rng) ->
+state``, the loop state a :class:`PathState`): ``sample`` traces one path
 per lane; ``sample_sequence``, which the renderer uses, traces several per
-lane one after another (path regeneration) and returns their sums.
+lane one after another (path regeneration) and returns their sums. Every
+question about the scene goes to the :class:`~drpt.render.scene.DeviceScene`;
+its feature flags decide at trace time which estimators are compiled.
 """
 
 from __future__ import annotations
@@ -34,38 +37,40 @@ from typing import Callable
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float, PCG32, UInt32
 
-from ..lights.area import AreaLights
-from ..lights.delta import DeltaLights
-from ..material import MaterialTable
-from ..surface import SurfaceData
-from ..spawn import RayOffset
 from ...options import PathOptions
+from ..scene import DeviceScene
 from .common import DirectLight, power_heuristic
 
 
+@dataclass
+class PathState:
+    """One path per lane, as the bounce loop carries it (a Dr.Jit loop state)."""
+
+    o: Array3f  # origin of the next ray
+    d: Array3f  # its unit direction
+    L: Array3f  # radiance gathered so far
+    beta: Array3f  # throughput: product of BSDF weights (and 1 / RR probabilities)
+    eta: Float  # product of the relative IORs crossed (for Russian roulette)
+    depth: UInt32  # segments traced
+    prev_pdf: Float  # BSDF density of the direction d (MIS of the emitter it hits)
+    prev_delta: Bool  # d came from a delta lobe (or the camera): no MIS
+    active: Bool
+
+
 class PathIntegrator:
-    def __init__(self, accel, surfaces: SurfaceData, materials: MaterialTable,
-                 lights: AreaLights, offset: RayOffset, background, options: PathOptions,
-                 delta_lights: DeltaLights | None = None, env=None):
-        self.accel = accel
-        self.surfaces = surfaces
-        self.materials = materials
-        self.lights = lights
-        self.delta_lights = delta_lights
-        self.direct = DirectLight(accel, materials, lights, delta_lights, offset, env)
-        self.offset = offset
-        self.background = tuple(float(c) for c in background)
+    def __init__(self, scene: DeviceScene, options: PathOptions):
+        self.scene = scene
+        self.direct = DirectLight(scene)
         self.opt = options
 
     @dr.syntax
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:
         """Radiance arriving at ``o`` from direction ``-d``, one sample per lane."""
-        active = Bool(active)
-        L, beta, eta, depth, prev_pdf, prev_delta = self._start(active)
-        while active:
-            o, d, L, beta, eta, depth, prev_pdf, prev_delta, active = self._bounce(
-                rng, o, d, L, beta, eta, depth, prev_pdf, prev_delta, active)
-        return L
+        scene = self.scene
+        state = self._start(o, d, Bool(active))
+        while state.active:
+            state = self._bounce(scene, state, rng)
+        return state.L
 
     @dr.syntax
     def sample_sequence(self, rng: PCG32, camera_ray: Callable, count: UInt32
@@ -82,97 +87,81 @@ class PathIntegrator:
         variance) and how many non-finite samples were dropped (counted, not
         added: there should be none).
         """
+        scene = self.scene
         left = UInt32(count)
-        active = left > 0
-        L, beta, eta, depth, prev_pdf, prev_delta = self._start(active)
         o, d = camera_ray(rng)
+        state = self._start(o, d, left > 0)
         acc, acc2 = Array3f(0.0), Array3f(0.0)
         dropped = UInt32(0)
         while left > 0:
-            o, d, L, beta, eta, depth, prev_pdf, prev_delta, active = self._bounce(
-                rng, o, d, L, beta, eta, depth, prev_pdf, prev_delta, active)
-            if ~active & (left > 0):  # the path ended: bank it, start the next
+            state = self._bounce(scene, state, rng)
+            if ~state.active & (left > 0):  # the path ended: bank it, start the next
+                L = state.L
                 finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
                 Lf = dr.select(finite, L, 0.0)
                 acc += Lf
                 acc2 += Lf * Lf
                 dropped += dr.select(finite, 0, 1)
                 left -= 1
-                active = left > 0
-                L, beta, eta, depth, prev_pdf, prev_delta = self._start(active)
                 o, d = camera_ray(rng)
+                state = self._start(o, d, left > 0)
         return acc, acc2, dropped
 
-    def _start(self, active: Bool):
-        """The state of a new path: radiance, throughput, IOR product,
-        depth, previous BSDF pdf, previous lobe delta (the camera ray is not
-        MIS weighted)."""
+    def _start(self, o: Array3f, d: Array3f, active: Bool) -> PathState:
+        """A new path along the ray ``(o, d)``: no radiance, throughput 1,
+        IOR product 1, depth 0, and no MIS for what the first ray hits (as
+        after a delta lobe)."""
         w = dr.width(active)
-        return (dr.zeros(Array3f, w), dr.full(Array3f, 1.0, w), dr.full(Float, 1.0, w),
-                dr.zeros(UInt32, w), dr.full(Float, 1.0, w), dr.full(Bool, True, w))
+        return PathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=dr.full(Array3f, 1.0, w),
+                         eta=dr.full(Float, 1.0, w), depth=dr.zeros(UInt32, w),
+                         prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
+                         active=Bool(active))
 
-    def _bounce(self, rng: PCG32, o: Array3f, d: Array3f, L: Array3f, beta: Array3f,
-                eta: Float, depth: UInt32, prev_pdf: Float, prev_delta: Bool, active: Bool):
-        """One vertex of the path: emission seen, next-event estimation, BSDF
-        sampling and Russian roulette. Returns the updated state (same order
-        as the arguments after ``rng``)."""
-        accel, mats, lights, offset = self.accel, self.materials, self.lights, self.offset
+    def _bounce(self, scene: DeviceScene, s: PathState, rng: PCG32) -> PathState:
+        """One vertex of the path: the emission the ray sees, next-event
+        estimation, BSDF sampling and Russian roulette."""
         opt = self.opt
-        has_lights = lights.count > 0
-        smooth = not mats.is_specular_only()
-        has_nee = has_lights and smooth
-        delta = self.direct.delta_lights if smooth else None
-        env = self.direct.env
-        has_background = max(self.background) > 0.0 and env is None
-        inf = dr.largest(Float)
-
-        hit = accel.intersect(o, d, Float(inf), active)
-        si = self.surfaces.interaction(o, d, hit)
+        nee = scene.has_area_lights and scene.has_smooth_bsdfs
+        si = scene.intersect(s.o, s.d, s.active)
 
         # ---- emitter hit by the previous ray (or seen by the camera)
-        hit_emitter = active & si.valid
-        le = mats.emitted(si)
+        hit_emitter = s.active & si.valid
+        le = scene.emitted(si)
         w = Float(1.0)
-        if has_nee:
-            pdf_a = lights.pdf_area(si.prim, hit_emitter)
-            sees_light = hit_emitter & (pdf_a > 0.0)
-            pdf_l = dr.select(sees_light, pdf_a * dr.square(si.t) / dr.abs(dr.dot(si.ng, d)), 0.0)
-            w = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_l))
-        L = L + dr.select(hit_emitter, beta * le * w, 0.0)
-        if has_background:
-            L = L + dr.select(active & ~si.valid, beta * Array3f(*self.background), 0.0)
-        if env is not None:
-            escaped = active & ~si.valid
-            le_env, pdf_env = env.eval_pdf(d, escaped)
-            w_env = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_env))
-            L = L + dr.select(escaped, beta * le_env * w_env, 0.0)
+        if nee:
+            pdf_l = scene.pdf_area_emitter(si, s.d, hit_emitter)
+            w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
+        L = s.L + dr.select(hit_emitter, s.beta * le * w, 0.0)
+        escaped = s.active & ~si.valid
+        if scene.has_background:
+            L = L + dr.select(escaped, s.beta * Array3f(*scene.background), 0.0)
+        if scene.has_environment:
+            le_env, pdf_env = scene.eval_pdf_environment(s.d, escaped)
+            w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env))
+            L = L + dr.select(escaped, s.beta * le_env * w_env, 0.0)
 
-        active_next = active & si.valid
+        active = s.active & si.valid
         if opt.max_depth >= 0:
-            active_next &= depth + 1 < opt.max_depth
+            active &= s.depth + 1 < opt.max_depth
 
         # ---- next-event estimation
         u_sel = rng.next_float32()
         u_light = Array2f(rng.next_float32(), rng.next_float32())
-        if has_nee:
-            L = L + beta * self.direct.area(si, u_sel, u_light, active_next, mis=True)
-        if delta is not None:
-            L = L + beta * self.direct.delta(si, active_next)
+        if nee:
+            L = L + s.beta * self.direct.area(si, u_sel, u_light, active, mis=True)
+        if scene.has_delta_lights and scene.has_smooth_bsdfs:
+            L = L + s.beta * self.direct.delta(si, active)
         u_env = Array2f(rng.next_float32(), rng.next_float32())
-        if env is not None and smooth:
-            L = L + beta * self.direct.env_light(si, u_env, active_next, mis=True)
+        if scene.has_environment and scene.has_smooth_bsdfs:
+            L = L + s.beta * self.direct.env_light(si, u_env, active, mis=True)
 
         # ---- BSDF sampling: continue the path
         u_lobe = rng.next_float32()
         u_bsdf = Array2f(rng.next_float32(), rng.next_float32())
-        wo, bs = mats.sample(si, u_lobe, u_bsdf)
-        beta = beta * bs.weight
-        eta = eta * bs.eta
-        prev_pdf = Float(bs.pdf)
-        prev_delta = Bool(bs.delta)
-        o = offset.origin(si.p, si.ng, wo)
-        d = Array3f(wo)
-        depth = depth + 1
+        wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
+        beta = s.beta * bs.weight
+        eta = s.eta * bs.eta
+        depth = s.depth + 1
 
         # ---- Russian roulette
         u_rr = rng.next_float32()
@@ -183,5 +172,7 @@ class PathIntegrator:
         rr_on = depth >= opt.rr_depth
         survive = u_rr < q
         beta = dr.select(rr_on, beta / q, beta)
-        active = active_next & bs.valid & (~rr_on | survive) & (dr.max(beta) > 0.0)
-        return o, d, L, beta, eta, depth, prev_pdf, prev_delta, active
+        active &= bs.valid & (~rr_on | survive) & (dr.max(beta) > 0.0)
+        return PathState(o=scene.spawn(si, wo), d=Array3f(wo), L=L, beta=beta, eta=eta,
+                         depth=depth, prev_pdf=Float(bs.pdf), prev_delta=Bool(bs.delta),
+                         active=active)

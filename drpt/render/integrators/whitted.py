@@ -34,8 +34,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import drjit as dr
-from drjit.auto import Array2f, Array3f, Bool, Float, PCG32, UInt32
+from drjit.auto import Array2f, Array3f, Bool, PCG32, UInt32
 
+from ..scene import DeviceScene
 from .common import DirectLight
 
 
@@ -46,58 +47,50 @@ class WhittedOptions:
 
 
 class WhittedIntegrator:
-    def __init__(self, accel, surfaces, materials, area_lights, delta_lights, offset,
-                 background, options: WhittedOptions, env=None):
-        self.accel, self.surfaces, self.materials, self.offset = accel, surfaces, materials, offset
-        self.direct = DirectLight(accel, materials, area_lights, delta_lights, offset, env)
-        self.background = tuple(float(c) for c in background.color)
-        self.ambient = tuple(float(c) for c in background.ambient)
+    def __init__(self, scene: DeviceScene, options: WhittedOptions):
+        self.scene = scene
+        self.direct = DirectLight(scene)
         self.opt = options
 
     @dr.syntax
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:
-        mats, direct = self.materials, self.direct
+        scene, direct = self.scene, self.direct
         max_depth = self.opt.max_depth if self.opt.max_depth > 0 else 16
-        env = direct.env
-        has_background = max(self.background) > 0.0 and env is None
-        has_ambient = max(self.ambient) > 0.0
-        has_area = direct.area_lights is not None
-        has_delta = direct.delta_lights is not None
-        inf = dr.largest(Float)
 
         L = Array3f(0.0)
         beta = Array3f(1.0)
         depth = UInt32(0)
         active = Bool(active)
         while active:
-            hit = self.accel.intersect(o, d, Float(inf), active)
-            si = self.surfaces.interaction(o, d, hit)
-            L += dr.select(active & si.valid, beta * mats.emitted(si), 0.0)
-            if has_background:
-                L += dr.select(active & ~si.valid, beta * Array3f(*self.background), 0.0)
-            if env is not None:
-                L += dr.select(active & ~si.valid, beta * env.eval(d, active & ~si.valid), 0.0)
+            si = scene.intersect(o, d, active)
+            L += dr.select(active & si.valid, beta * scene.emitted(si), 0.0)
+            if scene.has_background:
+                L += dr.select(active & ~si.valid, beta * Array3f(*scene.background), 0.0)
+            if scene.has_environment:
+                L += dr.select(active & ~si.valid,
+                               beta * scene.eval_environment(d, active & ~si.valid), 0.0)
 
-            delta = mats.is_delta(si)
+            delta = scene.is_delta(si)
             shade = active & si.valid & ~delta & (depth + 1 < max_depth)
-            if has_ambient:
-                L += dr.select(shade, beta * Array3f(*self.ambient) * mats.diffuse_color(si, shade), 0.0)
+            if scene.has_ambient:
+                L += dr.select(shade, beta * Array3f(*scene.ambient) * scene.diffuse_color(si, shade),
+                               0.0)
             u_sel = rng.next_float32()
             u_light = Array2f(rng.next_float32(), rng.next_float32())
-            if has_area:
+            if scene.has_area_lights:
                 L += beta * direct.area(si, u_sel, u_light, shade, mis=False)
-            if has_delta:
+            if scene.has_delta_lights:
                 L += beta * direct.delta(si, shade)
             u_env = Array2f(rng.next_float32(), rng.next_float32())
-            if env is not None:
+            if scene.has_environment:
                 L += beta * direct.env_light(si, u_env, shade, mis=False)
 
             # Follow mirrors and glass; stop everywhere else.
             u_lobe = rng.next_float32()
             u_dir = Array2f(rng.next_float32(), rng.next_float32())
-            wo, bs = mats.sample(si, u_lobe, u_dir)
+            wo, bs = scene.sample_bsdf(si, u_lobe, u_dir)
             beta *= bs.weight
-            o = self.offset.origin(si.p, si.ng, wo)
+            o = scene.spawn(si, wo)
             d = Array3f(wo)
             depth += 1
             active = (active & si.valid & delta & bs.valid & (depth < max_depth)
