@@ -23,16 +23,18 @@ Dr.Jit 1.5 records no label in the kernel history (``dr.set_label`` names
 variables for GraphViz only and does not reach the IR; ``dr.profile_range``
 marks the CPU timeline for external profilers), so kernels cannot be assigned
 to stages from the history alone. The stage split therefore comes from a
-third, *instrumented* wavefront render: the integrator's collaborators
-(accelerator, surfaces, materials, lights, direct-light estimators) are
-wrapped by proxies that evaluate each stage's inputs on entry and its outputs
-on exit, so each kernel is launched by exactly one stage; kernels are then
+third, *instrumented* wavefront render: the device scene's queries
+(closest hit, interaction, shadow rays, emission, BSDF and emitter sampling
+and evaluation: :data:`SCENE_STAGES`) and the direct-light estimators are
+replaced, on those instances, by wrappers that evaluate each stage's inputs
+on entry and its outputs on exit, so each kernel is launched by exactly one
+stage; kernels are then
 attributed to the innermost stage running when they were launched (exclusive
 times: a shadow ray inside next-event estimation counts as "shadow rays", not
 twice). ``LaunchBlocking`` is on in that run so wall-clock time also lands on
 the stage that launched the work. The extra evaluations make this run a bit
 slower than the plain wavefront run; both are reported. Rays per stage are
-the active lanes entering ``intersect``/``occluded`` (counted with
+the active lanes entering the closest-hit and shadow-ray queries (counted with
 ``dr.count`` under an "instrumentation" entry that is excluded from the stage
 sums). In megakernel mode the history can only be split by kernel: the fused
 path kernel and the small reduction / copy kernels around it.
@@ -238,58 +240,58 @@ class StageTracker:
         self.leave(None)
 
 
-class _Proxy:
-    """Forwards everything to ``target``; the listed methods run as stages."""
+#: The device scene's queries the staged run times (drpt.render.scene.DeviceScene):
+#: method -> (stage, index of its ``active`` argument where it traces rays, else None).
+SCENE_STAGES = {
+    "intersect_preliminary": ("closest-hit traversal", 2),
+    "occluded": ("shadow rays", 3),
+    "interaction": ("surface interaction", None),
+    "emitted": ("emission + MIS", None),
+    "pdf_area_emitter": ("emission + MIS", None),
+    "sample_bsdf": ("BSDF sampling", None),
+    "eval_bsdf": ("BSDF evaluation (NEE)", None),
+    "sample_area_emitter": ("light sampling", None),
+    "sample_environment": ("env lookups", None),
+    "eval_environment": ("env lookups", None),
+    "eval_pdf_environment": ("env lookups", None),
+}
+#: The direct-light estimators (drpt.render.integrators.common.DirectLight): what
+#: they do besides the scene queries above.
+DIRECT_STAGES = {"area": "NEE: area lights (rest)", "delta": "NEE: delta lights (rest)",
+                 "env_light": "NEE: environment (rest)"}
 
-    def __init__(self, target, tracker: StageTracker, methods: dict[str, str],
-                 rays: dict[str, int] | None = None):
-        self._target, self._tracker, self._methods = target, tracker, methods
-        self._rays = rays or {}  # method -> index of the `active` argument
 
-    def __getattr__(self, name):
-        attr = getattr(self._target, name)
-        if name not in self._methods or not callable(attr):
-            return attr
-        stage, tracker, ray_arg = self._methods[name], self._tracker, self._rays.get(name)
+def _staged(method, tracker: StageTracker, stage: str, ray_arg: int | None):
+    """``method`` run as ``stage``: inputs evaluated on entry, outputs on exit,
+    and the active lanes of argument ``ray_arg`` counted as rays."""
 
-        def wrapped(*args, **kwargs):
-            if ray_arg is not None:
-                import drjit as dr
+    def wrapped(*args, **kwargs):
+        if ray_arg is not None:
+            import drjit as dr
 
-                active = args[ray_arg] if len(args) > ray_arg else kwargs.get("active", True)
-                tracker.count_rays(stage, active, max(dr.width(args[0]), dr.width(args[1])))
-            tracker.enter(stage, (args, kwargs))
-            result = attr(*args, **kwargs)
-            tracker.leave(result)
-            return result
+            active = args[ray_arg] if len(args) > ray_arg else kwargs.get("active", True)
+            tracker.count_rays(stage, active, max(dr.width(args[0]), dr.width(args[1])))
+        tracker.enter(stage, (args, kwargs))
+        result = method(*args, **kwargs)
+        tracker.leave(result)
+        return result
 
-        return wrapped
+    return wrapped
+
+
+def _hook(obj, tracker: StageTracker, stages: dict[str, tuple[str, int | None]]) -> None:
+    """Replace ``obj``'s methods named in ``stages`` by staged ones (instance
+    attributes: the class, and every other instance, stay untouched)."""
+    for name, (stage, ray_arg) in stages.items():
+        setattr(obj, name, _staged(getattr(obj, name), tracker, stage, ray_arg))
 
 
 def _instrument(renderer, tracker: StageTracker) -> None:
-    """Wrap the integrator's collaborators (instance attributes only, modules untouched)."""
+    """Time the device scene's queries, the direct-light estimators and the
+    integrator's entry points as stages."""
+    _hook(renderer.scene, tracker, SCENE_STAGES)
     integ = renderer.integrator
-    accel_methods = {"intersect": "closest-hit traversal", "occluded": "shadow rays"}
-    accel_rays = {"intersect": 3, "occluded": 3}
-    mat_methods = {"emitted": "emission + MIS", "sample": "BSDF sampling",
-                   "eval_pdf": "BSDF evaluation (NEE)"}
-    integ.accel = _Proxy(integ.accel, tracker, accel_methods, accel_rays)
-    integ.surfaces = _Proxy(integ.surfaces, tracker, {"interaction": "surface interaction"})
-    integ.materials = _Proxy(integ.materials, tracker, mat_methods)
-    if hasattr(integ, "lights"):
-        integ.lights = _Proxy(integ.lights, tracker, {"pdf_area": "emission + MIS"})
-    direct = getattr(integ, "direct", None)
-    if direct is not None:
-        direct.accel = _Proxy(direct.accel, tracker, accel_methods, accel_rays)
-        direct.mats = _Proxy(direct.mats, tracker, mat_methods)
-        if direct.area_lights is not None:
-            direct.area_lights = _Proxy(direct.area_lights, tracker, {"sample": "light sampling"})
-        if direct.env is not None:
-            direct.env = _Proxy(direct.env, tracker, {"eval_pdf": "env lookups",
-                                                      "sample": "env lookups"})
-        integ.direct = _Proxy(direct, tracker, {"area": "NEE: area lights (rest)",
-                                                "delta": "NEE: delta lights (rest)",
-                                                "env_light": "NEE: environment (rest)"})
+    _hook(integ.direct, tracker, {k: (v, None) for k, v in DIRECT_STAGES.items()})
 
     sample = integ.sample
 
