@@ -420,7 +420,11 @@ def _plain(node: Any) -> Any:
 
 
 def _bsdf(m: Material, spec: BSDFSpec) -> dict:
-    """The Mitsuba BSDF for what drpt renders of ``m`` (``spec``, see drpt.shading)."""
+    """The Mitsuba BSDF for what drpt renders of ``m`` (``spec``, see drpt.shading).
+
+    A missing texture file is an error, also where the texture is dropped."""
+    if spec.dropped_texture is not None:
+        _texture(m)
     if spec.kind == "diffuse":
         refl: Any = _texture(m) if spec.texture is not None else _RGB(_f3(spec.kd))
         return {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": refl}}
