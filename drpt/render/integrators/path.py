@@ -32,7 +32,7 @@ its feature flags decide at trace time which estimators are compiled.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float, PCG32, UInt32
