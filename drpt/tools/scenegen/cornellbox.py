@@ -5,12 +5,14 @@ here by 1/100): white/red/green diffuse walls, two blocks, one area light
 under the ceiling. Every quad is wound so its normal faces into the room (or
 out of a block); the light faces down, since area lights emit one-sided.
 
-    python scenes/make_cornellbox.py      # rewrites the files next to it
+    python scenes/make_cornellbox.py      # rewrites scenes/cornellbox/
 """
 
 from pathlib import Path
 
 import numpy as np
+
+from . import SCENES
 
 S = 0.01  # mm -> scene units
 
@@ -81,7 +83,7 @@ def oriented(quad, toward=None, away=None, normal=None):
     return q[::-1] if flip else q
 
 
-def main(out: Path = Path(__file__).parent / "cornellbox") -> None:
+def main(out: Path = SCENES / "cornellbox") -> None:
     out.mkdir(exist_ok=True)
     room_center = (278, 274, 280)
     groups = [("white", [oriented(WALLS[k], toward=room_center) for k in ("floor", "ceiling", "back")]),
@@ -107,5 +109,10 @@ def main(out: Path = Path(__file__).parent / "cornellbox") -> None:
     (out / "cornellbox.txt").write_text(SCENE)
 
 
-if __name__ == "__main__":
+def cli(argv=None) -> None:
+    """``python scenes/make_cornellbox.py``: rewrite scenes/cornellbox/."""
     main()
+
+
+if __name__ == "__main__":
+    cli()

@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import SCENES
+
 DEFAULT_TRIANGLES = 500_000
 MIN_SEGMENTS = 6
 
@@ -528,7 +530,7 @@ def triangle_count(triangles: int = DEFAULT_TRIANGLES) -> int:
     return build(scale_for(triangles)).triangle_count
 
 
-def main(out: Path = Path(__file__).parent / "diningroom", triangles: int = DEFAULT_TRIANGLES) -> int:
+def main(out: Path = SCENES / "diningroom", triangles: int = DEFAULT_TRIANGLES) -> int:
     from PIL import Image
 
     out = Path(out)
@@ -542,12 +544,17 @@ def main(out: Path = Path(__file__).parent / "diningroom", triangles: int = DEFA
     return mesh.triangle_count
 
 
-if __name__ == "__main__":
+def cli(argv=None) -> None:
+    """``python scenes/make_diningroom.py [--out DIR]``."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "diningroom")
+    ap.add_argument("--out", type=Path, default=SCENES / "diningroom")
     ap.add_argument("--triangles", type=int, default=DEFAULT_TRIANGLES,
                     help=f"minimum triangle count (default {DEFAULT_TRIANGLES})")
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     t0 = time.perf_counter()
     n = main(a.out, a.triangles)
     print(f"{a.out}: {n} triangles in {time.perf_counter() - t0:.1f} s")
+
+
+if __name__ == "__main__":
+    cli()

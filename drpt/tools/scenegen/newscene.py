@@ -7,12 +7,14 @@ seed's report gives, with the Cook-Torrance materials it lists (Kd,
 Roughness, Mentalness). Render with ``--bsdf cook-torrance`` (the seed's
 ``-cook_torrance``).
 
-    python scenes/make_newscene.py      # rewrites the files next to it
+    python scenes/make_newscene.py      # rewrites scenes/newscene/
 """
 
 from pathlib import Path
 
 import numpy as np
+
+from . import SCENES
 
 MTL = """\
 # newscene materials for drpt. Walls: rough dielectric; blocks and spheres:
@@ -114,7 +116,7 @@ def outward(q, center):
     return q if np.dot(n, np.mean(q, 0) - center) > 0 else q[::-1]
 
 
-def main(out: Path = Path(__file__).parent / "newscene") -> None:
+def main(out: Path = SCENES / "newscene") -> None:
     out.mkdir(exist_ok=True)
     inward = np.zeros(3)
     groups = {
@@ -151,5 +153,10 @@ def main(out: Path = Path(__file__).parent / "newscene") -> None:
     (out / "newscene_hard.txt").write_text(HARD)
 
 
-if __name__ == "__main__":
+def cli(argv=None) -> None:
+    """``python scenes/make_newscene.py``: rewrite scenes/newscene/."""
     main()
+
+
+if __name__ == "__main__":
+    cli()

@@ -25,13 +25,12 @@ and are committed (OBJ about 1.9 MB, 29k triangles).
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from make_diningroom import Mesh, box, grid_faces, lathe, quad, superellipsoid  # noqa: E402
+from . import SCENES
+from .diningroom import Mesh, box, grid_faces, lathe, quad, superellipsoid
 
 SKY_SIZE = (512, 256)  # width, height of the lat-long skies
 
@@ -303,7 +302,7 @@ def build_car() -> Mesh:
     return m
 
 
-def main(out: Path = Path(__file__).parent / "showcase") -> int:
+def main(out: Path = SCENES / "showcase") -> int:
     from PIL import Image
 
     from drpt.imageio import write_image
@@ -322,9 +321,14 @@ def main(out: Path = Path(__file__).parent / "showcase") -> int:
     return mesh.triangle_count
 
 
-if __name__ == "__main__":
+def cli(argv=None) -> None:
+    """``python scenes/make_showcase.py [--out DIR]``."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "showcase")
-    a = ap.parse_args()
+    ap.add_argument("--out", type=Path, default=SCENES / "showcase")
+    a = ap.parse_args(argv)
     n = main(a.out)
     print(f"{a.out}: {n} triangles")
+
+
+if __name__ == "__main__":
+    cli()
