@@ -389,12 +389,11 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
 def main(argv: list[str] | None = None) -> int:
     """``reference/make_references.py [NAME ...]``: regenerate committed references."""
     names = list(sys.argv[1:] if argv is None else argv) or list(REFERENCES)
-    unknown = [n for n in names if n not in REFERENCES]
-    if unknown:
-        print(f"drpt: error: unknown reference(s) {', '.join(unknown)}; choose from "
-              f"{', '.join(REFERENCES)}", file=sys.stderr)
-        return 2
     try:
+        unknown = [n for n in names if n not in REFERENCES]
+        if unknown:
+            raise DrptError(f"unknown reference(s) {', '.join(unknown)}; choose from "
+                            f"{', '.join(REFERENCES)}")
         for name in names:
             render_committed(name)
     except DrptError as e:
