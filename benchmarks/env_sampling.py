@@ -1,6 +1,7 @@
 """Sky importance sampling vs uniform sphere sampling at equal spp.
 
-An env-lit glossy scene (the one in tests/test_env_render.py: a gradient sky
+An env-lit glossy scene (:mod:`drpt.tools.scenegen.envsun`, the one in
+tests/test_env_render.py: a gradient sky
 with a one-texel sun 2e4x brighter than the sky, a glossy Phong sphere, a
 matte sphere, a matte ground) is rendered by drpt with both sky samplers at
 the same spp and compared against a 1024-spp luminance-sampled reference.
@@ -10,17 +11,14 @@ the same spp and compared against a 1024-spp luminance-sampled reference.
 
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_env_render import make  # noqa: E402
-
-from drpt.options import PathOptions  # noqa: E402
-from drpt.options import RenderOptions
-from drpt.render.renderer import Renderer  # noqa: E402
+from drpt.options import PathOptions, RenderOptions
+from drpt.render.renderer import Renderer
+from drpt.scene import load_scene
+from drpt.tools.scenegen import envsun
 
 
 def render(scene, spp, sampling, seed):
@@ -31,9 +29,9 @@ def render(scene, spp, sampling, seed):
 
 
 def main(spp=16):
-    scene = make(Path(tempfile.mkdtemp()))
+    scene = load_scene(envsun.main(Path(tempfile.mkdtemp())))
     ref, _ = render(scene, 1024, "luminance", 99)
-    print(f"| sky sampling | spp | relMSE | time (s) |\n|---|---|---|---|")
+    print("| sky sampling | spp | relMSE | time (s) |\n|---|---|---|---|")
     out = {}
     for sampling in ("luminance", "uniform"):
         img, secs = render(scene, spp, sampling, 1)

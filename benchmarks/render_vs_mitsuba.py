@@ -3,8 +3,9 @@
 Each renderer renders once to compile (warm-up), then three times timed (the
 best counts: the machine may be shared); the ratio is drpt samples/s over
 Mitsuba samples/s at equal size, spp and depth. ``accels`` (comma-separated
-``build_accel`` kinds, default ``auto``) renders with each accelerator in turn,
-next to the same Mitsuba timing, e.g. ``bvh,bvh2`` for the 4-wide (default) and binary BVH.
+accelerator names of :func:`drpt.options.parse_accel`, default ``auto``) renders
+with each accelerator in turn, next to the same Mitsuba timing, e.g. ``bvh,bvh2``
+for the 4-wide (default) and binary BVH, or ``bvh-sah,bvh-ploc`` for two build rules.
 
     .venv/bin/python benchmarks/render_vs_mitsuba.py [size] [spp] [accels]
 """
@@ -21,15 +22,13 @@ SCENES = [("scenes/cornellbox/cornellbox.txt", "phong"),
 
 
 def main(size=256, spp=64, accels="auto"):
-    import mitsuba as mi
-
-    from drpt.backend import mitsuba_variant
-    mi.set_variant(mitsuba_variant())
+    from drpt.backend import set_mitsuba_variant
     from drpt.export.mitsuba import to_mitsuba_dict
-    from drpt.options import PathOptions
-    from drpt.options import RenderOptions
+    from drpt.options import PathOptions, RenderOptions, parse_accel, parse_accel_list
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
+
+    mi = set_mitsuba_variant()
 
     print("| scene | depth | accel | drpt Msamples/s | Mitsuba Msamples/s | ratio |\n"
           "|---|---|---|---|---|---|")
@@ -37,10 +36,12 @@ def main(size=256, spp=64, accels="auto"):
         scene = load_scene(ROOT / path)
         for depth in (8, -1):
             rates = {}
-            for accel in accels.split(","):
-                r = Renderer(scene, RenderOptions(width=size, height=size, spp=spp, bsdf=mode,
-                                                  accel=accel, progress=False,
-                                                  path=PathOptions(max_depth=depth)))
+            for accel in parse_accel_list(accels):
+                kind, rule = parse_accel(accel)
+                opts = RenderOptions(width=size, height=size, spp=spp, bsdf=mode, accel=kind,
+                                     bvh_method=rule or "auto", progress=False,
+                                     path=PathOptions(max_depth=depth)).validate()
+                r = Renderer(scene, opts)
                 r.render()
                 rates[accel] = max(r.render().samples_per_second for _ in range(3))
             ms = mi.load_dict(to_mitsuba_dict(scene, size, size, spp, max_depth=depth, bsdf=mode))

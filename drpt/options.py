@@ -1,12 +1,44 @@
 """Render options: what every command that renders passes to the renderer.
 
-:class:`RenderOptions` is built in one place from command-line flags
-(:mod:`drpt.cli`) and used by render and by every tool.
+:class:`RenderOptions` (with :class:`PathOptions`) is what the renderer
+takes. Every command builds it the same way:
+
+* :func:`add_render_flags` adds the shared render flags to a command's
+  parser (size, spp, seed, depths and Russian roulette, the accelerator and
+  its BVH rule, integrator, material mode, sky sampling, lanes, backend,
+  quiet; for ``render`` also the seed renderer's flags);
+* :func:`options_from_args` turns the parsed flags into a validated
+  :class:`RenderOptions`. Bad values raise :class:`~drpt.errors.DrptError`
+  (the command line prints it on one line and exits with status 2);
+  :meth:`RenderOptions.validate` makes the same checks for options built
+  in code.
+
+Accelerators are named by one vocabulary: a kind of
+:data:`drpt.accel.KINDS`, optionally with a BVH rule of
+:data:`drpt.accel.METHODS` joined by a dash, ``KIND-RULE`` (``bvh-sah`` is
+``--accel bvh --bvh sah``); :func:`parse_accel` reads it. ``drpt bench``
+takes a comma-separated list of such names.
+
+This module imports no kernel: the accelerator vocabulary is imported when a
+parser is built or options are checked, after the CLI chose the backend.
 """
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass, field
+
+from .errors import DrptError, note
+
+BSDF_MODES = ("phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
+INTEGRATORS = ("path", "whitted")
+ENV_SAMPLING = ("luminance", "uniform")
+BVH_KINDS = ("bvh", "bvh2", "bvh4")
+GRID_MAX_RESOLUTION = 256
+
+# Flag groups of add_render_flags; a command leaves out those that it sets itself.
+FLAGS = ("size", "spp", "seed", "max_depth", "rr_depth", "rr_prob", "accel", "integrator",
+         "bsdf", "env_sampling", "max_lanes", "backend", "quiet")
 
 
 @dataclass
@@ -33,3 +65,313 @@ class RenderOptions:
     path: PathOptions = field(default_factory=PathOptions)
     max_lanes: int | None = None  # samples traced at once (None: drpt.backend.policy().max_lanes)
     progress: bool = True
+
+    def validate(self) -> RenderOptions:
+        """Raise :class:`~drpt.errors.DrptError` on a value the renderer cannot
+        use (messages name the command-line flag); return ``self``."""
+        from .accel import KINDS, METHODS, NO_MIN_LEAF
+
+        if min(self.width, self.height) <= 0:
+            raise DrptError(f"size must be positive, got {min(self.width, self.height)}")
+        if self.spp <= 0:
+            raise DrptError(f"--spp must be positive, got {self.spp}")
+        if self.max_lanes <= 0:
+            raise DrptError(f"--max-lanes must be positive, got {self.max_lanes}")
+        p = self.path
+        if p.max_depth == 0 or p.max_depth < -1:
+            raise DrptError(f"--max-depth must be -1 (unbounded) or >= 1, got {p.max_depth}")
+        if p.rr_prob is not None and not (0.0 < p.rr_prob <= 1.0):
+            raise DrptError(f"Russian roulette probability must be in (0, 1], got {p.rr_prob}")
+        for name, value, allowed in (("--accel", self.accel, KINDS),
+                                     ("--bvh", self.bvh_method, METHODS),
+                                     ("--bsdf", self.bsdf, BSDF_MODES),
+                                     ("--integrator", self.integrator, INTEGRATORS),
+                                     ("--env-sampling", self.env_sampling, ENV_SAMPLING)):
+            if value not in allowed:
+                raise DrptError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
+        if self.accel == "grid" and self.grid_resolution is not None and \
+                not 1 <= self.grid_resolution <= GRID_MAX_RESOLUTION:
+            raise DrptError(f"-resolution must be between 1 and {GRID_MAX_RESOLUTION} grid cells "
+                            f"per axis, got {self.grid_resolution}")
+        if self.accel in ("auto", *BVH_KINDS):
+            k, method = self.sah_threshold, self.bvh_method
+            if k is not None and method != "threshold":
+                raise DrptError(f"--sah-threshold/-SAHeuristic applies to --bvh threshold, "
+                                f"not --bvh {method}")
+            if k is not None and k < 0:
+                raise DrptError(f"--sah-threshold/-SAHeuristic must be >= 0, got {k}")
+            if self.bvh_min_leaf < 1:
+                raise DrptError("--min-leaf/-resolution (minimum primitives per BVH leaf) must "
+                                f"be >= 1, got {self.bvh_min_leaf}")
+            if method in NO_MIN_LEAF and self.bvh_min_leaf != 1:
+                raise DrptError("--min-leaf/-resolution applies to --bvh sah, median and "
+                                f"threshold, not {method}")
+        return self
+
+
+# ------------------------------------------------------------------ accelerator names
+def parse_accel(spec: str) -> tuple[str, str | None]:
+    """``KIND`` or ``KIND-RULE`` -> ``(kind, rule or None)``.
+
+    ``KIND`` is one of :data:`drpt.accel.KINDS`; ``RULE``, one of
+    :data:`drpt.accel.METHODS`, is allowed after a BVH kind (``bvh``,
+    ``bvh2``, ``bvh4``): ``bvh-sah`` is ``--accel bvh --bvh sah``."""
+    from .accel import KINDS, METHODS
+
+    kind, dash, rule = spec.strip().partition("-")
+    if kind not in KINDS or (dash and (kind not in BVH_KINDS or rule not in METHODS)):
+        names = ", ".join(KINDS)
+        rules = "|".join(METHODS)
+        raise DrptError(f"--accel: unknown accelerator {spec!r} (use {names}, or "
+                        f"bvh-RULE with RULE {rules})")
+    return kind, (rule if dash else None)
+
+
+def parse_accel_list(text: str) -> list[str]:
+    """A comma-separated list of accelerator names (:func:`parse_accel`), checked."""
+    from .accel import KINDS
+
+    names = [a.strip() for a in text.split(",") if a.strip()]
+    if not names:
+        raise DrptError(f"--accel: give at least one of {', '.join(KINDS)}")
+    for name in names:
+        parse_accel(name)
+    return names
+
+
+class _AccelChoices(tuple):
+    """``--accel``'s argparse choices: lists the kinds, also accepts ``KIND-RULE``."""
+
+    def __contains__(self, value) -> bool:
+        try:
+            parse_accel(value)
+        except DrptError:
+            return False
+        return True
+
+
+# ------------------------------------------------------------------ flags
+def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bool = False,
+                     **defaults) -> None:
+    """Add the shared render flags to ``parser``.
+
+    Args:
+        omit: flag groups of :data:`FLAGS` the command sets itself (``"accel"``
+            is ``--accel``, ``--bvh``, ``--min-leaf``, ``--sah-threshold`` and
+            ``--resolution``).
+        seed_flags: also the seed renderer's spellings (``-size``, ``-spp``,
+            ``-RR_cutdown``, ``-SpatialTree``, ``-resolution``, ``-SAHeuristic``,
+            ``-MonteCarlo``, ``-cook_torrance``): ``drpt render`` only.
+        defaults: the command's defaults, by group: ``size`` (a pair), ``spp``,
+            ``seed``, ``max_depth``, ``rr_depth``, ``accel``, ``integrator``,
+            ``bsdf``, ``env_sampling``. ``None`` leaves the choice to
+            :func:`options_from_args` (e.g. the seed's defaults with ``-input``).
+    """
+    from .accel import KINDS, METHODS
+
+    unknown = set(omit) - set(FLAGS) | set(defaults) - set(FLAGS)
+    if unknown:
+        raise ValueError(f"unknown render flag groups {sorted(unknown)}")
+    d = {"size": (512, 512), "spp": 64, "seed": 0, "max_depth": -1, "rr_depth": 5,
+         "accel": None, "integrator": None, "bsdf": None, "env_sampling": "luminance"}
+    d.update(defaults)
+
+    def want(group: str) -> bool:
+        return group not in omit
+
+    def names(modern: str, seed: str | None = None) -> list[str]:
+        return [modern, seed] if seed_flags and seed else [modern]
+
+    if want("size"):
+        w, h = d["size"]
+        parser.add_argument(*names("--size", "-size"), dest="size", nargs=2, type=int,
+                            metavar=("W", "H"), default=(w, h),
+                            help=f"image size in pixels (default {w} {h})")
+    if want("spp"):
+        parser.add_argument(*names("--spp", "-spp"), dest="spp", type=int, default=d["spp"],
+                            help=f"samples per pixel (default {d['spp']})")
+    if want("max_depth"):
+        parser.add_argument("--max-depth", type=int, default=d["max_depth"],
+                            help="longest path in segments, Mitsuba's convention: 1 = emitters "
+                                 "only, 2 = direct light, -1 = unbounded "
+                                 f"(default {d['max_depth']})")
+    if want("rr_depth"):
+        parser.add_argument("--rr-depth", type=int, default=d["rr_depth"],
+                            help="depth at which Russian roulette starts "
+                                 f"(default {d['rr_depth']})")
+    if want("rr_prob"):
+        parser.add_argument("--rr-prob", type=float, default=None,
+                            help="fixed path continuation probability for Russian roulette "
+                                 "(default: adaptive, min(throughput, 0.95))")
+        if seed_flags:
+            parser.add_argument("-RR_cutdown", dest="rr_cutdown", type=float, default=None,
+                                help="seed flag: fixed continuation probability p at every "
+                                     "bounce")
+    if want("seed"):
+        parser.add_argument("--seed", type=int, default=d["seed"],
+                            help=f"random seed (default {d['seed']})")
+    if want("accel"):
+        parser.add_argument("--accel", choices=_AccelChoices(KINDS), default=d["accel"],
+                            metavar="{" + ",".join(KINDS) + "}",
+                            help="acceleration structure: auto (default: inline up to 64 "
+                                 "primitives, else bvh), inline (every primitive compiled into "
+                                 "the kernel as constants), bvh (4-wide BVH; alias bvh4), "
+                                 "bvh2 (the binary BVH it is collapsed from: 2-3x slower, for "
+                                 "comparison), grid (uniform grid, 3D-DDA; -resolution N cells "
+                                 "per axis) or brute; a BVH kind may name its build rule, "
+                                 "bvh-RULE (bvh-sah is --accel bvh --bvh sah)")
+        parser.add_argument("--bvh", dest="bvh_method", metavar="|".join(METHODS), default=None,
+                            help="BVH build rule: auto (default: sah up to 100k primitives, "
+                                 "ploc above), sah (binned SAH everywhere: best trees, slowest "
+                                 "build), median (object median), threshold (the seed's: SAH "
+                                 "only in nodes of at most 2K primitives, median above; K from "
+                                 "--sah-threshold), morton (Morton-ordered binned SAH: fast "
+                                 "build) or ploc (bottom-up clustering in Morton order: fast "
+                                 "build, trees close to sah's)")
+        parser.add_argument("--sah-threshold", *(["-SAHeuristic", "-SAH"] if seed_flags else []),
+                            dest="sah_threshold", metavar="K", default=None,
+                            help="K of --bvh threshold (implies it; 0 = median everywhere; "
+                                 "default 2000, the seed's)")
+        parser.add_argument("--min-leaf", dest="min_leaf", metavar="N", default=None,
+                            help="minimum primitives per BVH leaf (default 1)")
+        if seed_flags:
+            parser.add_argument("-SpatialTree", dest="spatial_tree", action="store_true",
+                                help="seed flag: use the BVH (the seed's default is the grid)")
+        parser.add_argument(*(["--resolution", "-resolution"] if seed_flags else
+                              ["--resolution"]), dest="resolution", metavar="N", default=None,
+                            help="grid cells per axis (--accel grid), or with the BVH its "
+                                 "minimum leaf size (as --min-leaf); the seed's -resolution")
+    if want("integrator"):
+        default = d["integrator"]
+        parser.add_argument("--integrator", choices=INTEGRATORS, default=default,
+                            help="path (MIS path tracing, default) or whitted")
+        if seed_flags:
+            parser.add_argument("-MonteCarlo", dest="monte_carlo", action="store_true",
+                                help="seed flag: Monte Carlo path tracing (the seed's default "
+                                     "is Whitted)")
+    if want("bsdf"):
+        default = d["bsdf"]
+        shown = default or "phong"
+        parser.add_argument("--bsdf", choices=("diffuse", "phong", "cook-torrance"),
+                            default=default,
+                            help="how MTL materials are read: phong (Kd, Ks, Ns) or "
+                                 "cook-torrance (Kd, Roughness, Metalness); diffuse uses Kd "
+                                 f"only (default {shown})")
+        if seed_flags:
+            parser.add_argument("-cook_torrance", dest="cook_torrance", action="store_true",
+                                help="seed flag: Cook-Torrance shading")
+    if want("env_sampling"):
+        parser.add_argument("--env-sampling", choices=ENV_SAMPLING, default=d["env_sampling"],
+                            help="how sky directions are sampled: by luminance (default) or "
+                                 "uniformly over the sphere (for comparison)")
+    if want("max_lanes"):
+        parser.add_argument("--max-lanes", type=int, default=None,
+                            help="samples traced at once; bounds memory (default: the "
+                                 "backend's, 2097152 on LLVM)")
+    if want("backend"):
+        from .backend import BACKENDS, ENV_VAR
+
+        parser.add_argument("--backend", choices=BACKENDS, default=None,
+                            help=f"Dr.Jit backend: llvm (CPU) or cuda (NVIDIA GPU); default "
+                                 f"${ENV_VAR}, else llvm")
+    if want("quiet"):
+        parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
+
+
+# ------------------------------------------------------------------ options
+def _int_flag(name: str, text) -> int | None:
+    """Parse an integer flag value; a bad one is a one-line DrptError."""
+    if text is None:
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        raise DrptError(f"{name} must be an integer, got {text!r}") from None
+
+
+def _accel_fields(args, accel: str, seed_mode: bool) -> dict:
+    """RenderOptions fields for the accelerator and the BVH build rule from the flags."""
+    resolution = _int_flag("-resolution", getattr(args, "resolution", None))
+    k = _int_flag("--sah-threshold/-SAHeuristic", getattr(args, "sah_threshold", None))
+    min_leaf = _int_flag("--min-leaf", getattr(args, "min_leaf", None))
+    method = getattr(args, "bvh_method", None)
+    kind, rule = parse_accel(accel)
+    if rule is not None:
+        if method is not None and method != rule:
+            raise DrptError(f"--accel {accel} and --bvh {method} disagree: give the rule once")
+        method = rule
+    if kind not in BVH_KINDS:
+        if method is not None or min_leaf is not None:
+            raise DrptError("--bvh and --min-leaf apply to the BVH only "
+                            "(--accel bvh, or -SpatialTree with -input)")
+        if k is not None:
+            note("-SAHeuristic applies to the BVH (-SpatialTree); "
+                 f"ignored with --accel {kind}")
+        return {"accel": kind, "grid_resolution": resolution if kind == "grid" else None}
+    from .accel import METHODS
+
+    if method is not None and method not in METHODS:
+        raise DrptError(f"--bvh must be one of {', '.join(METHODS)}, got {method!r}")
+    # With -input the seed's default BVH is its threshold rule (-SAHeuristic 2000).
+    method = method or ("threshold" if (k is not None or seed_mode) else "auto")
+    if min_leaf is not None and resolution is not None and min_leaf != resolution:
+        raise DrptError(f"--min-leaf {min_leaf} and -resolution {resolution} disagree: "
+                        "with the BVH both give the minimum leaf size, give one")
+    if min_leaf is None:
+        min_leaf = resolution
+    if min_leaf is not None and min_leaf < 1:
+        name = "--min-leaf" if getattr(args, "min_leaf", None) is not None else "-resolution"
+        raise DrptError(f"{name} (minimum primitives per BVH leaf) must be >= 1, got {min_leaf}")
+    return {"accel": kind, "bvh_method": method, "sah_threshold": k,
+            "bvh_min_leaf": min_leaf if min_leaf is not None else 1}
+
+
+def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
+                      **overrides) -> RenderOptions:
+    """The validated :class:`RenderOptions` the flags of :func:`add_render_flags` give.
+
+    Flags a command left out take :class:`RenderOptions`' defaults. With
+    ``seed_mode`` (``render -input``) the seed renderer's defaults apply:
+    Whitted ray tracing, the uniform grid, with ``-SpatialTree`` its BVH
+    rule (SAH in nodes of at most ``2 * 2000`` primitives). ``overrides``
+    replace fields afterwards (before validation). ``--backend`` selects
+    the backend (:func:`drpt.backend.select`; an error after kernels were
+    loaded on another one). User mistakes raise
+    :class:`~drpt.errors.DrptError`.
+    """
+    from dataclasses import replace
+
+    from . import backend
+
+    def get(name, default=None):
+        return getattr(args, name, default)
+
+    if get("backend") is not None:
+        backend.select(get("backend"))
+    base = RenderOptions()
+    width, height = get("size") or (base.width, base.height)
+    rr_prob, rr_depth = get("rr_prob"), get("rr_depth", base.path.rr_depth)
+    if get("rr_cutdown") is not None:
+        rr_prob, rr_depth = get("rr_cutdown"), 1
+    integrator = get("integrator") or ("path" if (get("monte_carlo") or not seed_mode)
+                                       else "whitted")
+    # flags that shape a BVH ask for one rather than the inline accelerator
+    bvh_flags = any(get(f) is not None for f in ("bvh_method", "min_leaf", "sah_threshold",
+                                                  "resolution"))
+    accel = get("accel") or ("grid" if seed_mode and not get("spatial_tree")
+                             else "bvh" if get("spatial_tree") else "auto")
+    if accel == "auto" and bvh_flags:
+        accel = "bvh"
+    fields = _accel_fields(args, accel, seed_mode)
+    bsdf = get("bsdf") or ("cook-torrance" if get("cook_torrance") else "phong")
+    max_lanes = get("max_lanes")
+    if max_lanes is None:
+        max_lanes = backend.policy().max_lanes
+    opts = RenderOptions(width=width, height=height, spp=get("spp", base.spp),
+                         seed=get("seed", base.seed), **fields, bsdf=bsdf,
+                         integrator=integrator,
+                         env_sampling=get("env_sampling", base.env_sampling),
+                         path=PathOptions(max_depth=get("max_depth", base.path.max_depth),
+                                          rr_depth=rr_depth, rr_prob=rr_prob),
+                         max_lanes=max_lanes, progress=not get("quiet", False))
+    return replace(opts, **overrides).validate()

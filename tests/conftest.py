@@ -28,13 +28,9 @@ def reference_scene(tmp_path_factory):
     """``get(scene_file)``: the loaded scene of a ``REFERENCES`` entry, loaded once
     per test session and shared (renderers do not modify scenes). A generated
     scene that scenes/ lacks (the git-ignored dining room) is generated once
-    into a temporary folder (``make_references.scene_path``)."""
-    import sys
-
-    sys.path.insert(0, str(REPO / "reference"))
-    from make_references import scene_path
-
+    into a temporary folder (:func:`drpt.tools.reference.scene_path`)."""
     from drpt.scene import load_scene
+    from drpt.tools.reference import scene_path
 
     out = tmp_path_factory.mktemp("generated_scenes")
     loaded = {}

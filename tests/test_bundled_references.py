@@ -1,5 +1,5 @@
 """Bundled scenes against their committed Mitsuba references
-(reference/make_references.py): the Cornell box read as Cook-Torrance, the
+(drpt.tools.reference): the Cornell box read as Cook-Torrance, the
 env-lit car showcase by day and at dusk, and the 510k-triangle dining room.
 
 Statistic (as in tests/test_render_mitsuba.py and test_newscene.py): drpt
@@ -37,18 +37,15 @@ temporary folder; scenes are loaded once per session (the ``reference_scene``
 fixture in conftest.py, shared with test_converge.py).
 """
 
-import sys
 
 import numpy as np
 import pytest
 
-from conftest import REPO
 from drpt.imageio import read_image
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
 
-sys.path.insert(0, str(REPO / "reference"))
-from make_references import REFERENCES, reference_path, variance_path  # noqa: E402
+from drpt.tools.reference import REFERENCES, reference_path, variance_path
 
 ZMAX = 4.5
 # Blocks of directly seen sky have a pixel variance of ~1e-9 (only the sub-pixel

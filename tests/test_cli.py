@@ -205,3 +205,87 @@ def test_export_writes_loadable_xml(tmp_path):
     scene = mi.load_file(str(xml))
     img = np.asarray(mi.render(scene))
     assert img.shape == (16, 16, 3) and img.mean() > 0
+
+
+# ------------------------------------------------------------ shared flags, every tool
+@pytest.mark.parametrize("args, needle", [
+    (["compare", CORNELL, "--spp", "0"], "--spp must be positive"),
+    (["compare", CORNELL, "--accel", "grid", "--min-leaf", "2"], "apply to the BVH only"),
+    (["converge", CORNELL, "--max-depth", "0"], "--max-depth"),
+    (["converge", CORNELL, "--rr-prob", "2"], "Russian roulette"),
+    (["knobs", CORNELL, "--spp", "1"], "at least 2"),
+    (["gallery", "--spp", "0"], "--spp must be positive"),
+    (["gallery", "--bvh", "ploc", "--min-leaf", "2"], "not ploc"),
+    (["bench", CORNELL, "--accel", "bvh-octree"], "unknown accelerator"),
+    (["bench", CORNELL, "--size", "0", "4"], "size must be positive"),
+    (["profile", CORNELL, "--bvh", "median", "--sah-threshold", "5"],
+     "applies to --bvh threshold"),
+    (["profile", CORNELL, "--max-lanes", "0"], "--max-lanes"),
+    (["render", CORNELL, "--accel", "bvh-sah", "--bvh", "median"], "disagree"),
+    (["render", CORNELL, "--backend", "metal"], "backend must be one of llvm, cuda"),
+])
+def test_tool_flag_errors_exit_2_with_one_line(args, needle):
+    r = run(args)
+    assert r.returncode == 2, r.stderr
+    assert needle in r.stderr and "Traceback" not in r.stderr
+    assert r.stderr.strip().count("\n") == 0
+
+
+def _has_cuda() -> bool:
+    import drjit as dr
+
+    return dr.has_backend(dr.JitBackend.CUDA)
+
+
+@pytest.mark.parametrize("how", ["flag", "env"])
+def test_backend_cuda_without_a_gpu_is_one_line(tmp_path, how):
+    if _has_cuda():
+        pytest.skip("this machine has a CUDA device")
+    import os
+
+    out = tmp_path / "never.png"
+    args = ["render", CORNELL, "--size", "4", "4", "--spp", "1", "-o", str(out)]
+    env = dict(os.environ)
+    if how == "flag":
+        args.append("--backend")
+        args.append("cuda")
+    else:
+        env["DRPT_BACKEND"] = "cuda"
+    r = subprocess.run([sys.executable, "-m", "drpt", *args], capture_output=True, text=True,
+                       timeout=300, env=env)
+    assert r.returncode == 2
+    assert "cuda" in r.stderr.lower() and "Traceback" not in r.stderr
+    assert r.stderr.strip().count("\n") == 0
+    assert not out.exists()
+
+
+def test_backend_flag_names_the_loaded_backend_in_process(tmp_path):
+    # in this process the kernels are loaded on LLVM: --backend llvm is fine
+    assert main(["render", CORNELL, "--size", "4", "4", "--spp", "1", "--backend", "llvm",
+                 "-o", str(tmp_path / "a.png"), "--quiet"]) == 0
+
+
+def test_scene_warnings_print_on_one_line_each(tmp_path):
+    import shutil
+
+    for f in (SCENES / "cornellbox").iterdir():
+        shutil.copy(f, tmp_path / f.name)
+    obj = tmp_path / "cornellbox.obj"
+    obj.write_text(obj.read_text() + "zz 1 2 3\n")
+    r = run(["render", str(tmp_path / "cornellbox.txt"), "--size", "4", "4", "--spp", "1",
+             "-o", str(tmp_path / "w.png"), "--quiet"])
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    assert lines and all(line.startswith("drpt: warning: ") for line in lines), r.stderr
+    assert any(f"{obj}:" in line and "'zz'" in line for line in lines)
+
+
+def test_warn_and_note_format(capsys):
+    from drpt.errors import note, warn
+
+    warn("two\nlines", file="a.txt", line=3)
+    warn("no place")
+    note("ignored", file="b.mtl")
+    assert capsys.readouterr().err.splitlines() == [
+        "drpt: warning: a.txt:3: two lines", "drpt: warning: no place",
+        "drpt: note: b.mtl: ignored"]

@@ -2,7 +2,7 @@
 the ratio computations of ``drpt converge``; converge/knobs CLI smoke tests.
 
 1/N test (``test_error_falls_as_one_over_n``), for every entry of
-``reference/make_references.py``'s REFERENCES (new entries are picked up; a
+``drpt.tools.reference.REFERENCES`` (new entries are picked up; a
 missing EXR skips):
 
 * the reference is box-downsampled by an integer factor ``f`` to at most
@@ -59,7 +59,6 @@ import argparse
 import csv
 import json
 import math
-import sys
 
 import numpy as np
 import pytest
@@ -69,18 +68,7 @@ from drpt.tools import converge
 from drpt.tools.converge import (equal_time_ratios, interp_loglog, loglog_slope, noise_floor,
                            spp_levels, time_to_error, time_to_error_ratios)
 
-sys.path.insert(0, str(REPO / "reference"))
-import make_references  # noqa: E402
-from make_references import REFERENCES, reference_path  # noqa: E402
-
-
-def variance_path(name):
-    """The reference's variance EXR (absent for references not rendered in batches)."""
-    fn = getattr(make_references, "variance_path", None)
-    if fn is not None:
-        return fn(name)
-    p = reference_path(name)
-    return p.with_name(p.stem + "_var.exr")
+from drpt.tools.reference import REFERENCES, reference_path, variance_path
 
 CORNELL = REPO / "scenes" / "cornellbox" / "cornellbox.txt"
 LEVELS = (4, 8, 16, 32, 64)

@@ -1,6 +1,6 @@
 """The seed's "newscene" (Cornell box + metal/rough spheres, Cook-Torrance)
 and its hard case (gold sphere at metalness 0.9, roughness 0.9) against
-committed Mitsuba references (reference/make_references.py).
+committed Mitsuba references (drpt.tools.reference).
 
 * no bias: 16x16 block z-scores against the 4096-spp reference, max < 4.5;
 * noise no worse than Mitsuba's: relMSE at 64 spp at most 1.25x that of a
@@ -19,13 +19,12 @@ committed Mitsuba references (reference/make_references.py).
   correct renderer, Mitsuba included.
 """
 
-import sys
 
 import numpy as np
 import pytest
 from scipy.ndimage import median_filter
 
-from conftest import REPO, SCENES
+from conftest import REPO
 from drpt.imageio import read_image
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
@@ -33,8 +32,7 @@ from drpt.scene import load_scene
 
 from render_check import block_z
 
-sys.path.insert(0, str(REPO / "reference"))
-from make_references import REFERENCES, reference_path  # noqa: E402
+from drpt.tools.reference import REFERENCES, reference_path
 
 
 def speckles(x, ref):

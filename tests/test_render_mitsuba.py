@@ -16,23 +16,19 @@ Two statistics, both with fixed seeds:
   fails this; noise does not.
 """
 
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import REPO, SCENES
+from conftest import SCENES
 from drpt.cli import main
 from drpt.imageio import read_image
-from drpt.options import PathOptions
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 from render_check import assert_agree, block_z, render_both
 
-sys.path.insert(0, str(REPO / "reference"))
-from make_references import REFERENCES, reference_path  # noqa: E402
+from drpt.tools.reference import REFERENCES, reference_path
 
 CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
 

@@ -1,12 +1,10 @@
-"""The procedural scene generators (scenes/make_diningroom.py, scenes/make_showcase.py):
+"""The procedural scene generators (drpt.tools.scenegen.diningroom and .showcase):
 they write loadable scenes with the promised content, the dining room's
 tessellation follows ``--triangles`` (and reaches 500k by default, counted in
 memory without writing it), and every scene renders finite, non-black pixels
 at a tiny size with Cook-Torrance."""
 
 from __future__ import annotations
-
-import importlib.util
 
 import numpy as np
 import pytest
@@ -17,24 +15,19 @@ from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 from drpt.shading import interpret
 
-from conftest import SCENES
-
-
-def _module(name: str):
-    spec = importlib.util.spec_from_file_location(name, SCENES / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
 
 @pytest.fixture(scope="module")
 def diningroom():
-    return _module("make_diningroom")
+    from drpt.tools.scenegen import diningroom
+
+    return diningroom
 
 
 @pytest.fixture(scope="module")
 def showcase():
-    return _module("make_showcase")
+    from drpt.tools.scenegen import showcase
+
+    return showcase
 
 
 def _tiny_render(scene) -> np.ndarray:

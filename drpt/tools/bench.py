@@ -1,17 +1,23 @@
 """``python -m drpt bench [SCENE ...]``: ray and render throughput, drpt vs Mitsuba 3.
 
 For each scene and each acceleration structure (``--accel auto,bvh,grid``)
-drpt's numbers are measured, and in the same run Mitsuba 3's (``llvm_ad_rgb``)
-on the exported scene, on the *same* rays. ``auto`` is drpt's default choice
+drpt's numbers are measured, and in the same run Mitsuba 3's (on drpt's
+backend: ``llvm_ad_rgb`` or ``cuda_ad_rgb``) on the exported scene, on the
+*same* rays. ``--accel`` takes a comma-separated list of the accelerator
+names every command uses (:func:`drpt.options.parse_accel`): a kind
+(``auto``, ``inline``, ``bvh``, ``bvh2``, ``bvh4``, ``grid``, ``brute``) or a
+BVH kind with its build rule, ``KIND-RULE``. ``auto`` is drpt's default choice
 (:func:`drpt.accel.resolve_kind`: ``inline`` for tiny scenes, else ``bvh``); it
 gets a row, labelled with its pick, only where that pick is not asked for
-already. BVH build variants are accelerators of their own: ``bvh`` (drpt's
-default rule, ``auto``), ``bvh-sah`` (binned SAH everywhere), ``bvh-morton``,
-``bvh-ploc`` (bottom-up clustering), ``bvh-median`` (object median, the seed's
-``SAH_NUM=0``) and ``bvh-threshold`` (the seed's rule, SAH only in nodes of at
-most ``2 * --sah-threshold`` primitives, default 2000), so the seed's table
-(grid vs BVH without SAH vs BVH with SAH) is
-``--accel grid,bvh-median,bvh-threshold,bvh-sah``. Per accelerator:
+already. ``bvh`` builds with drpt's default rule (``auto``), ``bvh-sah`` with
+binned SAH everywhere, ``bvh-morton``, ``bvh-ploc`` (bottom-up clustering),
+``bvh-median`` (object median, the seed's ``SAH_NUM=0``) and ``bvh-threshold``
+(the seed's rule, SAH only in nodes of at most ``2 * --sah-threshold``
+primitives, default 2000), so the seed's table (grid vs BVH without SAH vs
+BVH with SAH) is ``--accel grid,bvh-median,bvh-threshold,bvh-sah``. The other
+render flags are ``render``'s (:func:`drpt.options.add_render_flags`; ``--size``
+default 256 256, ``--spp`` 16; ``--seed`` also seeds the random rays). Per
+accelerator:
 
 * build time (drpt: ``build_accel``; Mitsuba: ``mi.load_dict`` of the
   exported scene, which includes its BVH build) and drpt's accel memory;
@@ -52,15 +58,6 @@ DEFAULT_SCENES = [ROOT / "scenes" / "cornellbox" / "cornellbox.txt",
                   ROOT / "scenes" / "newscene" / "newscene.txt"]
 # How MTL materials are read per default scene (others: phong).
 DEFAULT_BSDF = {"newscene.txt": "cook-torrance"}
-# accelerator name -> (build_accel kind, BVH split rule)
-ACCEL_VARIANTS = {"auto": ("auto", None), "inline": ("inline", None),
-                  "bvh": ("bvh", "auto"), "bvh-sah": ("bvh", "sah"),
-                  "bvh-median": ("bvh", "median"), "bvh-threshold": ("bvh", "threshold"),
-                  "bvh-morton": ("bvh", "morton"), "bvh-ploc": ("bvh", "ploc"),
-                  "bvh2": ("bvh2", None), "bvh4": ("bvh4", None),
-                  "grid": ("grid", None), "brute": ("brute", None)}
-ACCELS = tuple(ACCEL_VARIANTS)
-
 FIELDS = ["scene", "accel", "rays", "build_s", "accel_mib", "primary_mrays",
           "incoherent_mrays", "shadow_mrays", "render_s", "msamples_s",
           "mi_load_s", "mi_primary_mrays", "mi_incoherent_mrays", "mi_shadow_mrays",
@@ -73,6 +70,8 @@ RATIOS = [("ratio_build", "build / load"), ("ratio_primary", "primary hit"),
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``bench`` subcommand on an ``add_subparsers()`` object."""
+    from ..options import add_render_flags
+
     p = subparsers.add_parser(
         "bench", allow_abbrev=False,
         help="ray and render throughput of drpt vs Mitsuba 3",
@@ -88,26 +87,18 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         "build rule: SAH, or PLOC above 100k primitives), bvh-sah (full "
                         "binned SAH), bvh-median, bvh-threshold (the seed's rule), bvh-morton "
                         "(fast build), bvh-ploc (bottom-up clustering), bvh2 (binary BVH, "
-                        "default build rule), grid, brute "
+                        "default build rule; bvh2-RULE with a rule), grid, brute "
                         "(default auto,bvh,grid)")
     p.add_argument("--sah-threshold", type=int, default=2000, metavar="K",
                    help="K of bvh-threshold: SAH in nodes of at most 2K primitives "
                         "(default 2000, the seed's)")
     p.add_argument("--min-leaf", type=int, default=1, metavar="N",
                    help="minimum primitives per leaf of the BVH variants (default 1)")
-    p.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), default=(256, 256),
-                   help="render size (default 256 256)")
-    p.add_argument("--spp", type=int, default=16, help="render samples per pixel (default 16)")
+    add_render_flags(p, omit=("accel",), size=(256, 256), spp=16)
     p.add_argument("--rays", type=int, default=1 << 20,
                    help="rays per ray benchmark (default 1048576)")
-    p.add_argument("--max-depth", type=int, default=-1,
-                   help="longest path for the render benchmark, -1 unbounded (default)")
-    p.add_argument("--bsdf", choices=["phong", "cook-torrance", "diffuse"], default=None,
-                   help="how MTL materials are read (default: cook-torrance for newscene, "
-                        "phong otherwise)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per number, best kept "
                                                           "(default 3)")
-    p.add_argument("--seed", type=int, default=0, help="seed for the random rays (default 0)")
     p.add_argument("--out", default="bench", help="output folder (default bench/)")
     p.add_argument("--no-mitsuba", action="store_true", help="drpt numbers only")
     p.set_defaults(func=main)
@@ -170,23 +161,28 @@ def make_rays(scene, n: int, aspect: float, seed: int) -> dict[str, np.ndarray]:
 
 # --------------------------------------------------------------------------- drpt
 
-def accel_options(name: str, sah_threshold: int = 2000, min_leaf: int = 1) -> dict:
-    """RenderOptions fields (accel, BVH rule) for a ``--accel`` name."""
-    kind, method = ACCEL_VARIANTS[name]
-    if kind != "bvh":
-        return {"accel": kind}
-    return {"accel": kind, "bvh_method": method, "bvh_min_leaf": min_leaf,
-            "sah_threshold": sah_threshold if method == "threshold" else None}
+def accel_options(base, name: str, sah_threshold: int = 2000, min_leaf: int = 1):
+    """``base`` (a :class:`~drpt.options.RenderOptions`) with the accelerator
+    ``name`` (:func:`drpt.options.parse_accel`), validated; ``sah_threshold``
+    is the K of the threshold rule, ``min_leaf`` the BVH's minimum leaf."""
+    from dataclasses import replace
+
+    from ..options import BVH_KINDS, parse_accel
+
+    kind, method = parse_accel(name)
+    if kind not in BVH_KINDS:
+        return replace(base, accel=kind).validate()
+    method = method or "auto"
+    return replace(base, accel=kind, bvh_method=method, bvh_min_leaf=min_leaf,
+                   sah_threshold=sah_threshold if method == "threshold" else None).validate()
 
 
-def bench_drpt(scene, accel_name: str, rays: dict, bsdf: str, size, spp: int, max_depth: int,
-               repeat: int, sah_threshold: int = 2000, min_leaf: int = 1) -> dict:
+def bench_drpt(scene, options, rays: dict, repeat: int) -> dict:
+    """drpt's numbers for ``options`` (accelerator, render size, spp, depth, bsdf)."""
     import drjit as dr
     from drjit.auto import Array3f, Float
 
     from ..accel import build_accel
-    from ..options import PathOptions
-    from ..options import RenderOptions
     from ..render.renderer import Renderer
 
     def a3(a):
@@ -194,13 +190,13 @@ def bench_drpt(scene, accel_name: str, rays: dict, bsdf: str, size, spp: int, ma
         dr.make_opaque(v)
         return v
 
-    ao = accel_options(accel_name, sah_threshold, min_leaf)
-    build_kw = ({"method": ao["bvh_method"], "min_leaf": ao["bvh_min_leaf"],
-                 "sah_threshold": ao["sah_threshold"]} if ao["accel"] == "bvh" else {})
+    build_kw = ({"method": options.bvh_method, "min_leaf": options.bvh_min_leaf,
+                 "sah_threshold": options.sah_threshold}
+                if options.accel in ("bvh", "bvh2", "bvh4") else {})
     build = math.inf
     for _ in range(repeat):
         accel = None  # free the previous build first (the grid can be large)
-        accel = build_accel(scene, kind=ao["accel"], **build_kw)
+        accel = build_accel(scene, kind=options.accel, **build_kw)
         build = min(build, accel.build_seconds)
     po, pd = a3(rays["primary_o"]), a3(rays["primary_d"])
     io, idr, sd = a3(rays["inc_o"]), a3(rays["inc_d"]), a3(rays["shadow_d"])
@@ -218,9 +214,8 @@ def bench_drpt(scene, accel_name: str, rays: dict, bsdf: str, size, spp: int, ma
     t_inc = _best(lambda: hit(io, idr), repeat)
     t_shadow = _best(lambda: accel.occluded(io, sd, st), repeat)
 
-    W, H = size
-    r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, bsdf=bsdf, **ao,
-                                      progress=False, path=PathOptions(max_depth=max_depth)))
+    W, H, spp = options.width, options.height, options.spp
+    r = Renderer(scene, options)
     r.render()  # warm-up: compilation
     render_s = min(r.render().seconds for _ in range(repeat))
     return {"rays": n_inc, "build_s": build, "accel_mib": accel.nbytes / 2**20,
@@ -236,9 +231,10 @@ def bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
     import drjit as dr
     import mitsuba as mi
 
-    from drpt.backend import mitsuba_variant
-    mi.set_variant(mitsuba_variant())
+    from ..backend import set_mitsuba_variant
     from ..export.mitsuba import to_mitsuba_dict
+
+    set_mitsuba_variant()
 
     W, H = size
     load = math.inf
@@ -320,7 +316,9 @@ def format_table(rows: list[dict], mitsuba: bool) -> str:
                  ("mi_incoherent_mrays", "incoherent Mrays/s"),
                  ("mi_shadow_mrays", "shadow Mrays/s"), ("mi_render_s", "render s"),
                  ("mi_msamples_s", "Msamples/s")]
-        lines += ["", "Mitsuba 3 (llvm_ad_rgb), same rays and render settings:", "",
+        from ..backend import mitsuba_variant
+
+        lines += ["", f"Mitsuba 3 ({mitsuba_variant()}), same rays and render settings:", "",
                   "| " + " | ".join(c[1] for c in mcols) + " |", "|" + "---|" * len(mcols)]
         for r in rows:
             if r["scene"] not in seen:
@@ -368,25 +366,25 @@ def write_chart(rows: list[dict], path: Path, mitsuba: bool) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``bench`` for parsed ``args``; user errors raise DrptError."""
+    from dataclasses import replace
+
     from ..accel import resolve_kind
     from ..backend import ensure
+    from ..options import options_from_args, parse_accel_list
     from ..scene import load_scene
 
-    accels = [a.strip() for a in args.accel.split(",") if a.strip()]
-    if not accels:
-        raise DrptError(f"--accel: give at least one of {', '.join(ACCELS)}")
-    for a in accels:
-        if a not in ACCELS:
-            raise DrptError(f"--accel: unknown accelerator {a!r} (use {', '.join(ACCELS)})")
-    if args.sah_threshold < 0:
-        raise DrptError(f"--sah-threshold must be >= 0, got {args.sah_threshold}")
-    W, H = args.size
-    for name, v in (("--min-leaf", args.min_leaf), ("--size", min(W, H)), ("--spp", args.spp),
-                    ("--rays", args.rays), ("--repeat", args.repeat)):
+    # --accel, --sah-threshold and --min-leaf are bench's own (a list, and per-row values)
+    shared = argparse.Namespace(**{k: v for k, v in vars(args).items()
+                                   if k not in ("accel", "sah_threshold", "min_leaf")})
+    base = replace(options_from_args(shared), progress=False)
+    accels = parse_accel_list(args.accel)
+    # every row's options, and K and the minimum leaf even where no row uses them
+    accel_options(base, "bvh-threshold", args.sah_threshold, args.min_leaf)
+    row_options = {a: accel_options(base, a, args.sah_threshold, args.min_leaf) for a in accels}
+    W, H = base.width, base.height
+    for name, v in (("--rays", args.rays), ("--repeat", args.repeat)):
         if v <= 0:
             raise DrptError(f"{name} must be positive, got {v}")
-    if args.max_depth == 0 or args.max_depth < -1:
-        raise DrptError(f"--max-depth must be -1 (unbounded) or >= 1, got {args.max_depth}")
     paths = [Path(s) for s in args.scenes] or DEFAULT_SCENES
     for p in paths:
         if not p.is_file():
@@ -405,18 +403,18 @@ def main(args: argparse.Namespace) -> int:
         scene = load_scene(path)
         bsdf = args.bsdf or DEFAULT_BSDF.get(path.name, "phong")
         rays = make_rays(scene, args.rays, W / H, args.seed)
-        mi_row = (bench_mitsuba(scene, rays, bsdf, (W, H), args.spp, args.max_depth, args.repeat)
-                  if mitsuba else {})
-        for kind in accels:
-            label = kind
-            if kind == "auto":
+        mi_row = (bench_mitsuba(scene, rays, bsdf, (W, H), base.spp, base.path.max_depth,
+                                args.repeat) if mitsuba else {})
+        for name in accels:
+            label = name
+            if name == "auto":
                 picked = resolve_kind(scene, "auto")
                 if picked in accels:
                     continue  # its row is already there
                 label = f"auto ({picked})"
             row = {"scene": path.stem, "accel": label}
-            row.update(bench_drpt(scene, kind, rays, bsdf, (W, H), args.spp, args.max_depth,
-                                  args.repeat, args.sah_threshold, args.min_leaf))
+            row.update(bench_drpt(scene, replace(row_options[name], bsdf=bsdf), rays,
+                                  args.repeat))
             row.update(mi_row)
             if mitsuba:
                 _ratios(row)
@@ -424,7 +422,7 @@ def main(args: argparse.Namespace) -> int:
 
     out.mkdir(parents=True, exist_ok=True)
     table = format_table(rows, mitsuba)
-    settings = (f"{W}x{H}, {args.spp} spp, max depth {args.max_depth}, {args.rays} rays, "
+    settings = (f"{W}x{H}, {base.spp} spp, max depth {base.path.max_depth}, {args.rays} rays, "
                 f"best of {args.repeat}")
     if "bvh-threshold" in accels:
         settings += f", bvh-threshold K = {args.sah_threshold}"

@@ -2,16 +2,17 @@
 
 ::
 
-    python -m drpt converge SCENE [--size W H] [--max-spp N] [--bsdf MODE]
-                                  [--max-depth D] [--rr-depth K] [--ref-spp M]
-                                  [--ref-batches B] [--levels E ...] [--seed S]
+    python -m drpt converge SCENE [render flags] [--max-spp N] [--ref-spp M]
+                                  [--ref-batches B] [--levels E ...]
                                   [--cache DIR | --no-cache] [--out DIR]
 
-drpt and Mitsuba (``llvm_ad_rgb``, ``path``, the exported scene) each render
+The render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
+``--size`` default 64 64; no ``--spp``: the levels set it). drpt and Mitsuba
+(``path`` on drpt's backend, the exported scene) each render
 the scene at 1, 2, 4, ..., ``--max-spp`` samples per pixel, every level with
 its own seed (so the levels are independent estimates, not prefixes of one
 another). Each image is compared with a high-spp Mitsuba reference, the one
-``compare`` uses and caches (:func:`drpt.tools.compare.get_reference`, same key, so
+``compare`` uses and caches (:func:`drpt.tools.reference.get_reference`, same key, so
 a reference made by ``compare`` with the same settings is reused).
 
 Error
@@ -61,15 +62,19 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from .compare import add_reference_args, cache_dir_from_args
-from ..errors import DrptError
+from ..errors import DrptError, warn
+from .reference import (
+    add_reference_args,
+    cache_dir_from_args,
+    check_reference_args,
+    get_reference,
+)
 
 EPS = 1e-2  # relMSE's eps (drpt.metrics.rel_mse)
 DEFAULT_LEVELS = (1e-1, 3e-2, 1e-2)
@@ -82,6 +87,8 @@ __all__ = ["add_parser", "main", "noise_floor", "excess_rel_mse", "loglog_slope"
 # ------------------------------------------------------------------ parser
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``converge`` subcommand on an ``add_subparsers()`` object."""
+    from ..options import add_render_flags
+
     p = subparsers.add_parser(
         "converge", allow_abbrev=False,
         help="error vs spp and vs seconds, drpt against Mitsuba 3",
@@ -89,37 +96,28 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                     "error against a cached high-spp Mitsuba reference and the time; report "
                     "equal-time error and time-to-error ratios")
     p.add_argument("scene", help="scene file")
-    p.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), default=(64, 64),
-                   help="image size (default 64 64)")
+    add_render_flags(p, omit=("spp",), size=(64, 64))
     p.add_argument("--max-spp", type=int, default=256,
                    help="largest samples per pixel; levels are the powers of 2 up to it "
                         "(default 256)")
-    p.add_argument("--bsdf", choices=["phong", "cook-torrance", "diffuse"], default="phong",
-                   help="how MTL materials are read (as for render; default phong)")
-    p.add_argument("--max-depth", type=int, default=-1,
-                   help="longest path in segments, -1 unbounded (default)")
-    p.add_argument("--rr-depth", type=int, default=5,
-                   help="depth at which Russian roulette starts (default 5)")
     p.add_argument("--levels", type=float, nargs="+", default=list(DEFAULT_LEVELS),
                    metavar="E", help="excess relMSE levels for the time-to-error ratio "
                                      "(default 0.1 0.03 0.01)")
-    p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
     p.add_argument("--out", default=None, help="output folder (default converge_<name>/)")
     add_reference_args(p, ref_spp=4096)
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress output")
     p.set_defaults(func=main)
     return p
 
 
 def main(args: argparse.Namespace) -> int:
+    from ..options import options_from_args
+
+    options = options_from_args(args)
     scene = Path(args.scene)
     out = Path(args.out) if args.out else Path(f"converge_{scene.stem}")
-    cache = cache_dir_from_args(args)
-    report = converge_study(scene, out, width=args.size[0], height=args.size[1],
-                            max_spp=args.max_spp, bsdf=args.bsdf, max_depth=args.max_depth,
-                            rr_depth=args.rr_depth, ref_spp=args.ref_spp,
-                            ref_batches=args.ref_batches, levels=args.levels, seed=args.seed,
-                            cache_dir=cache, progress=not args.quiet)
+    report = converge_study(scene, out, options, max_spp=args.max_spp, ref_spp=args.ref_spp,
+                            ref_batches=args.ref_batches, levels=args.levels,
+                            cache_dir=cache_dir_from_args(args))
     print(format_table(report))
     print(f"{out}: converge.csv, converge.json, converge.png")
     return 0
@@ -290,29 +288,32 @@ def _log(progress: bool, msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
 
-def converge_study(scene_path: Path, out: Path, width: int = 64, height: int = 64,
-                   max_spp: int = 256, bsdf: str = "phong", max_depth: int = -1,
-                   rr_depth: int = 5, ref_spp: int = 4096, ref_batches: int = 8,
-                   levels=DEFAULT_LEVELS, seed: int = 0, cache_dir: Path | None = None,
-                   progress: bool = True) -> dict:
-    """Run the study (see the module docs); write the outputs; return the report."""
-    from .. import metrics
-    from .compare import _prepare_out, _write_json, check_reference_args, get_reference
-    from ..options import PathOptions
-    from ..render.renderer import RenderOptions
-    from ..scene import load_scene
+def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
+                   ref_spp: int = 4096, ref_batches: int = 8, levels=DEFAULT_LEVELS,
+                   cache_dir: Path | None = None) -> dict:
+    """Run the study (see the module docs) with drpt's ``options`` (a
+    :class:`~drpt.options.RenderOptions`; the levels set its spp and seed);
+    write the outputs; return the report."""
+    from dataclasses import replace
 
+    from .. import metrics
+    from .compare import _prepare_out, _write_json
+
+    options.validate()
     scene_path = Path(scene_path)
-    if min(width, height) <= 0:
-        raise DrptError(f"size must be positive, got {width}x{height}")
+    width, height, seed, bsdf = options.width, options.height, options.seed, options.bsdf
+    max_depth, rr_depth = options.path.max_depth, options.path.rr_depth
+    progress = options.progress
     if max_spp < 1:
         raise DrptError(f"--max-spp must be positive, got {max_spp}")
     if not levels or any(not (v > 0) for v in levels):
         raise DrptError(f"--levels must be positive errors, got {list(levels)}")
-    check_reference_args(ref_spp, ref_batches, max_depth, rr_depth, note=False)
+    check_reference_args(ref_spp, ref_batches, max_depth, rr_depth, announce=False)
     if ref_spp <= max_spp:
         raise DrptError(f"--ref-spp ({ref_spp}) must exceed --max-spp ({max_spp}): the "
                         "reference must be better than the renders it judges")
+    from ..scene import load_scene
+
     scene = load_scene(scene_path)
     _prepare_out(out)
     reference = get_reference(
@@ -323,12 +324,9 @@ def converge_study(scene_path: Path, out: Path, width: int = 64, height: int = 6
     import mitsuba as mi
 
     floor = noise_floor(ref, ref_var)
-    opts = RenderOptions(width=width, height=height, spp=1, seed=seed, bsdf=bsdf,
-                         path=PathOptions(max_depth=max_depth, rr_depth=rr_depth),
-                         progress=False)
-    renderer, drpt_render = make_drpt(scene, opts)
+    renderer, drpt_render = make_drpt(scene, replace(options, spp=1, progress=False))
     for message in renderer.warnings:
-        print(f"drpt: warning: {message}", file=sys.stderr)
+        warn(message)
     mits_render, mits_load = make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf)
     # Warm-up: compiles both renderers' kernels (reused at every spp), discarded.
     t = time.perf_counter()
@@ -343,8 +341,7 @@ def converge_study(scene_path: Path, out: Path, width: int = 64, height: int = 6
         # seed + 100000 + 7919 k, so these never coincide with it.
         r = drpt_render(spp, seed + 1 + i)
         if r.nonfinite:
-            print(f"drpt: warning: {r.nonfinite} samples were NaN/Inf at {spp} spp",
-                  file=sys.stderr)
+            warn(f"{r.nonfinite} samples were NaN/Inf at {spp} spp")
         img_m, sec_m = mits_render(spp, seed + 200_000 + i)
         for name, img, sec in (("drpt", r.image, r.seconds), ("mitsuba", img_m, sec_m)):
             m = metrics.summary(img, ref)

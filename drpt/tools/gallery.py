@@ -2,15 +2,17 @@
 
 ::
 
-    python -m drpt gallery [--size W H | --scale K] [--spp N] [--scenes A,B,...]
-                           [--seed S] [--out DIR] [--quiet]
+    python -m drpt gallery [--size W H | --scale K] [render flags] [--scenes A,B,...]
+                           [--out DIR]
 
 The scenes are the entries of the committed reference table
-(``reference/make_references.py``, ``REFERENCES``): each names a bundled
-scene file and the material mode it is rendered with (``cornellbox`` and
+(:data:`drpt.tools.reference.REFERENCES`): each names a bundled scene file
+and the material mode and depth it is rendered with (``cornellbox`` and
 ``cornellbox_ct`` are the Cornell box read as Phong and as Cook-Torrance).
-The dining room is generated first (``scenes/make_diningroom.py``, ~6 s) when
-``scenes/diningroom/`` is missing.
+The other render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
+``--spp`` default 64). The dining room is generated first
+(:mod:`drpt.tools.scenegen.diningroom`, ~6 s) when ``scenes/diningroom/`` is
+missing.
 
 Size
     By default each scene is rendered at ``--scale`` (default 2) times the size
@@ -45,30 +47,28 @@ from __future__ import annotations
 
 import argparse
 import html
-import importlib.util
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import DrptError
+from ..errors import DrptError, warn
+from . import reference as refs
 
-ROOT = Path(__file__).resolve().parents[2]
-REFERENCE_SCRIPT = ROOT / "reference" / "make_references.py"
-
-__all__ = ["add_parser", "main", "references", "downsample", "render_gallery"]
+__all__ = ["add_parser", "main", "downsample", "render_gallery"]
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``gallery`` subcommand on an ``add_subparsers()`` object."""
+    from ..options import add_render_flags
+
     p = subparsers.add_parser(
         "gallery", allow_abbrev=False,
         help="render every bundled scene to a gallery page with errors against Mitsuba 3",
-        description="render the bundled scenes (the entries of reference/make_references.py) "
-                    "and write PNGs plus gallery.md/.html with times and the error against "
-                    "each committed Mitsuba reference")
+        description="render the bundled scenes (the entries of drpt.tools.reference."
+                    "REFERENCES) and write PNGs plus gallery.md/.html with times and the "
+                    "error against each committed Mitsuba reference")
     size = p.add_mutually_exclusive_group()
     size.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), default=None,
                       help="render every scene at W x H (default: --scale times the "
@@ -76,25 +76,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     size.add_argument("--scale", type=int, default=2,
                       help="render each scene at this multiple of its reference's size "
                            "(default 2)")
-    p.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
+    add_render_flags(p, omit=("size", "bsdf", "max_depth"), spp=64)
     p.add_argument("--scenes", default=None,
                    help="comma-separated subset of the scene names (default: all)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default="gallery", help="output folder (default gallery/)")
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress bars")
     p.set_defaults(func=main)
     return p
-
-
-def references():
-    """The reference table module (``reference/make_references.py``)."""
-    if not REFERENCE_SCRIPT.is_file():
-        raise DrptError(f"{REFERENCE_SCRIPT}: not found; the gallery needs the repository "
-                        "checkout (scenes/ and reference/)")
-    spec = importlib.util.spec_from_file_location("drpt_make_references", REFERENCE_SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def downsample(img: np.ndarray, k: int) -> np.ndarray:
@@ -110,24 +97,26 @@ def _factor(size, ref_size) -> int | None:
     return w // rw
 
 
-def render_gallery(out: Path, names=None, size=None, scale: int = 2, spp: int = 64,
-                   seed: int = 0, progress: bool = True) -> list[dict]:
-    """Render ``names`` (default: every reference) into ``out``; returns one row per scene."""
+def render_gallery(out: Path, options, names=None, size=None, scale: int = 2) -> list[dict]:
+    """Render ``names`` (default: every reference) into ``out`` with drpt's
+    ``options`` (a :class:`~drpt.options.RenderOptions`; each scene sets the
+    size, material mode and depth); returns one row per scene."""
+    from dataclasses import replace
+
     from .. import metrics
     from ..backend import ensure
     from ..imageio import read_image, write_image
-    from ..options import PathOptions
-    from ..options import RenderOptions
     from ..render.renderer import Renderer
     from ..scene import load_scene
 
-    refs = references()
+    options.validate()
+    spp = options.spp
     table = refs.REFERENCES
     names = list(table) if names is None else list(names)
     unknown = [n for n in names if n not in table]
     if unknown:
         raise DrptError(f"unknown scene(s) {', '.join(unknown)}; choose from {', '.join(table)}")
-    if spp <= 0 or scale <= 0 or (size is not None and min(size) <= 0):
+    if scale <= 0 or (size is not None and min(size) <= 0):
         raise DrptError("--size, --scale and --spp must be positive")
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -142,12 +131,13 @@ def render_gallery(out: Path, names=None, size=None, scale: int = 2, spp: int = 
         t0 = time.perf_counter()
         scene = load_scene(refs.scene_path(scene_file))
         load_s = time.perf_counter() - t0
-        r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, seed=seed, bsdf=mode,
-                                          path=PathOptions(max_depth=depth),
-                                          progress=progress)).render()
+        renderer = Renderer(scene, replace(options, width=W, height=H, bsdf=mode,
+                                           path=replace(options.path, max_depth=depth)))
+        for message in renderer.warnings:
+            warn(f"{name}: {message}")
+        r = renderer.render()
         if r.nonfinite:
-            print(f"drpt: warning: {name}: {r.nonfinite} samples were NaN/Inf and were set to 0",
-                  file=sys.stderr)
+            warn(f"{name}: {r.nonfinite} samples were NaN/Inf and were set to 0")
         write_image(out / f"{name}.png", r.image)
         row = {"name": name, "scene": scene_file, "bsdf": mode, "width": W, "height": H,
                "spp": spp, "seconds": r.seconds, "build_seconds": r.build_seconds,
@@ -166,7 +156,7 @@ def render_gallery(out: Path, names=None, size=None, scale: int = 2, spp: int = 
             else:  # drpt's per-sample variance over the reference's spp
                 var_ref = var * (k * k * spp) / ref_spp
             row["reference"] = {
-                "file": str(ref_file.relative_to(ROOT)), "width": rw, "height": rh,
+                "file": str(ref_file.relative_to(refs.ROOT)), "width": rw, "height": rh,
                 "spp": ref_spp, "downsample": k,
                 "rel_mse": metrics.rel_mse(x, ref),
                 "noise_rel_mse": float(np.mean((var + var_ref) / (ref * ref + 1e-2))),
@@ -238,11 +228,14 @@ def _write_pages(out: Path, rows: list[dict]) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``gallery`` for parsed ``args``; user errors raise DrptError."""
+    from ..options import options_from_args
+
+    options = options_from_args(args)
     names = None
     if args.scenes:
         names = [s.strip() for s in args.scenes.split(",") if s.strip()]
     out = Path(args.out)
-    render_gallery(out, names=names, size=tuple(args.size) if args.size else None,
-                   scale=args.scale, spp=args.spp, seed=args.seed, progress=not args.quiet)
+    render_gallery(out, options, names=names, size=tuple(args.size) if args.size else None,
+                   scale=args.scale)
     print(f"{out}: gallery.md, gallery.html, gallery.json and one PNG per scene")
     return 0

@@ -2,10 +2,14 @@
 
 ::
 
-    python -m drpt knobs SCENE [--size W H] [--spp N] [--bsdf MODE] [--ref-spp M]
-                               [--ref-batches B] [--knobs depth rr accel bsdf]
+    python -m drpt knobs SCENE [render flags] [--ref-spp M] [--ref-batches B]
+                               [--knobs depth rr accel bsdf]
                                [--depths D ...] [--rr-depths K ...] [--rr-probs P ...]
-                               [--repeats R] [--seed S] [--cache DIR | --no-cache] [--out DIR]
+                               [--repeats R] [--cache DIR | --no-cache] [--out DIR]
+
+The render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
+``--size`` default 64 64, ``--spp`` 64) except the knobs it varies
+(``--max-depth``, ``--rr-depth``, ``--rr-prob``, ``--accel`` and the BVH's).
 
 Every row renders the scene with drpt at ``--spp`` and changes one knob from
 the default (``auto`` accelerator, ``--bsdf`` materials, unbounded depth,
@@ -44,7 +48,7 @@ noise). ``bias relMSE`` is ``excess - mean(var_x / w)``: the part of the
 error that more samples will not remove (noisy; ~0 for unbiased rows).
 
 The references are the ones ``compare`` and ``converge`` cache
-(:func:`drpt.tools.compare.get_reference`). Output in ``--out`` (default
+(:func:`drpt.tools.reference.get_reference`). Output in ``--out`` (default
 ``knobs_<scene stem>/``): ``knobs.md`` (the table and these notes),
 ``knobs.csv`` and ``knobs.json``. The table goes to stdout. Seconds depend on
 the machine's load; the ratios between rows are what to read.
@@ -53,16 +57,19 @@ the machine's load; the ratios between rows are what to read.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .compare import add_reference_args, cache_dir_from_args
 from ..errors import DrptError
+from .reference import (
+    add_reference_args,
+    cache_dir_from_args,
+    check_reference_args,
+    get_reference,
+)
 
 KNOBS = ("depth", "rr", "accel", "bsdf")
 RR_OFF_DEPTH = 64
@@ -83,17 +90,16 @@ class Config:
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``knobs`` subcommand on an ``add_subparsers()`` object."""
+    from ..options import add_render_flags
+
     p = subparsers.add_parser(
         "knobs", allow_abbrev=False,
         help="time, error and bias of each quality knob (depth, RR, accel, material)",
         description="render SCENE with drpt changing one quality knob at a time; report "
                     "time, samples/s, error against a Mitsuba reference and bias")
     p.add_argument("scene", help="scene file")
-    p.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), default=(64, 64),
-                   help="image size (default 64 64)")
-    p.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
-    p.add_argument("--bsdf", choices=["phong", "cook-torrance"], default="phong",
-                   help="material mode of the default row (default phong)")
+    add_render_flags(p, omit=("max_depth", "rr_depth", "rr_prob", "accel"), size=(64, 64),
+                     spp=64)
     p.add_argument("--knobs", nargs="+", choices=KNOBS, default=list(KNOBS),
                    help="which knobs to vary (default all)")
     p.add_argument("--depths", type=int, nargs="+", default=[2, 3, 5, 8], metavar="D",
@@ -105,23 +111,22 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--repeats", type=int, default=3,
                    help="renders per row: the fastest time counts, all of them go into the "
                         "bias estimate (default 3)")
-    p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
     p.add_argument("--out", default=None, help="output folder (default knobs_<name>/)")
     add_reference_args(p, ref_spp=4096)
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress output")
     p.set_defaults(func=main)
     return p
 
 
 def main(args: argparse.Namespace) -> int:
+    from ..options import options_from_args
+
+    options = options_from_args(args)
     scene = Path(args.scene)
     out = Path(args.out) if args.out else Path(f"knobs_{scene.stem}")
-    cache = cache_dir_from_args(args)
-    report = knobs_study(scene, out, width=args.size[0], height=args.size[1], spp=args.spp,
-                         bsdf=args.bsdf, ref_spp=args.ref_spp, ref_batches=args.ref_batches,
-                         knobs=args.knobs, depths=args.depths, rr_depths=args.rr_depths,
-                         rr_probs=args.rr_probs, repeats=args.repeats, seed=args.seed,
-                         cache_dir=cache, progress=not args.quiet)
+    report = knobs_study(scene, out, options, ref_spp=args.ref_spp,
+                         ref_batches=args.ref_batches, knobs=args.knobs, depths=args.depths,
+                         rr_depths=args.rr_depths, rr_probs=args.rr_probs,
+                         repeats=args.repeats, cache_dir=cache_dir_from_args(args))
     print(report["markdown_table"])
     print(f"{out}: knobs.md, knobs.csv, knobs.json")
     return 0
@@ -161,23 +166,27 @@ def image_bias(x, var_x, ref, var_ref) -> tuple[float, float]:
     return diff, se
 
 
-def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, spp: int = 64,
-                bsdf: str = "phong", ref_spp: int = 4096, ref_batches: int = 8, knobs=KNOBS,
-                depths=(2, 3, 5, 8), rr_depths=(1, 3, 10), rr_probs=(0.5, 0.8),
-                repeats: int = 3, seed: int = 0, cache_dir: Path | None = None,
-                progress: bool = True) -> dict:
-    """Run the study (see the module docs); write the outputs; return the report."""
+def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
+                ref_batches: int = 8, knobs=KNOBS, depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
+                rr_probs=(0.5, 0.8), repeats: int = 3, cache_dir: Path | None = None) -> dict:
+    """Run the study (see the module docs) from drpt's ``options`` (a
+    :class:`~drpt.options.RenderOptions`: size, spp, seed and material mode of
+    the default row; each row changes its knob); write the outputs; return
+    the report."""
+    from dataclasses import replace
+
     from .. import metrics
-    from .compare import _prepare_out, _write_json, check_reference_args, get_reference
-    from .converge import noise_floor, write_csv
     from ..options import PathOptions
-    from ..options import RenderOptions
     from ..render.renderer import Renderer
     from ..scene import load_scene
+    from .compare import _prepare_out, _write_json
+    from .converge import noise_floor, write_csv
 
+    options.validate()
+    width, height, spp, seed, bsdf = (options.width, options.height, options.spp,
+                                      options.seed, options.bsdf)
+    progress = options.progress
     scene_path = Path(scene_path)
-    if min(width, height) <= 0:
-        raise DrptError(f"size must be positive, got {width}x{height}")
     if spp < 2:
         raise DrptError(f"--spp must be at least 2 (for a variance), got {spp}")
     if repeats < 1:
@@ -188,7 +197,7 @@ def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, 
         raise DrptError(f"--rr-depths must be >= 1, got {list(rr_depths)}")
     if any(not (0.0 < p <= 1.0) for p in rr_probs):
         raise DrptError(f"--rr-probs must be in (0, 1], got {list(rr_probs)}")
-    check_reference_args(ref_spp, ref_batches, -1, 5, note=False)
+    check_reference_args(ref_spp, ref_batches, -1, 5, announce=False)
     scene = load_scene(scene_path)
     _prepare_out(out)
 
@@ -208,10 +217,9 @@ def knobs_study(scene_path: Path, out: Path, width: int = 64, height: int = 64, 
     renderers = []
     for c in cfgs:
         reference(c.bsdf)
-        opts = RenderOptions(width=width, height=height, spp=1, seed=seed + 999_999,
-                             accel=c.accel, bsdf=c.bsdf, progress=False,
-                             path=PathOptions(max_depth=c.max_depth, rr_depth=c.rr_depth,
-                                              rr_prob=c.rr_prob))
+        opts = replace(options, spp=1, seed=seed + 999_999, accel=c.accel, bsdf=c.bsdf,
+                       progress=False, path=PathOptions(max_depth=c.max_depth,
+                                                        rr_depth=c.rr_depth, rr_prob=c.rr_prob))
         renderer = Renderer(scene, opts)
         renderer.render()  # warm-up: compiles this row's kernel
         renderer.opt.spp = spp

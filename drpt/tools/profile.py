@@ -48,10 +48,11 @@ import json
 import sys
 import time
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from ..errors import DrptError
+from ..options import RenderOptions
 
 INSTRUMENTATION = "instrumentation (ray counts, history reads)"
 TOP = "accumulation + readback"
@@ -346,28 +347,38 @@ def _instrument(renderer, tracker: StageTracker) -> None:
 
 @dataclass
 class ProfileOptions:
-    width: int = 128
-    height: int = 128
-    spp: int = 16
-    bsdf: str = "phong"
-    integrator: str = "path"
-    max_depth: int = -1
-    seed: int = 0
-    max_lanes: int = 1 << 21
+    """What ``profile`` renders (``render``, a :class:`~drpt.options.RenderOptions`;
+    its progress bar is off) and how many timed renders per mode (``repeat``)."""
+
+    render: RenderOptions = field(default_factory=lambda: RenderOptions(width=128, height=128))
     repeat: int = 1  # timed renders per mode; the fastest is kept
-    accel: str = "auto"  # drpt.accel.build_accel kind
+
+    @property
+    def width(self) -> int:
+        return self.render.width
+
+    @property
+    def height(self) -> int:
+        return self.render.height
+
+    @property
+    def spp(self) -> int:
+        return self.render.spp
+
+    @property
+    def max_lanes(self) -> int:
+        return self.render.max_lanes
+
+    def as_dict(self) -> dict:
+        return {**asdict(self.render), "repeat": self.repeat}
 
 
 def _renderer(scene, popt: ProfileOptions):
-    from ..options import PathOptions
-    from ..options import RenderOptions
+    from dataclasses import replace
+
     from ..render.renderer import Renderer
 
-    ro = RenderOptions(width=popt.width, height=popt.height, spp=popt.spp, seed=popt.seed,
-                       bsdf=popt.bsdf, integrator=popt.integrator, accel=popt.accel,
-                       path=PathOptions(max_depth=popt.max_depth), max_lanes=popt.max_lanes,
-                       progress=False)
-    return Renderer(scene, ro)
+    return Renderer(scene, replace(popt.render, progress=False))
 
 
 FUSED = "fused megakernel (camera + whole path loop)"
@@ -573,20 +584,13 @@ def save_chart(results: list[ModeResult], out: Path, title: str) -> None:
 # --------------------------------------------------------------------------- command line
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
+    from ..options import add_render_flags
+
     p = subparsers.add_parser("profile", help="profile a render: megakernel vs wavefront, per stage",
                               description=__doc__.split("\n")[0], allow_abbrev=False)
     p.add_argument("scene", help="scene file")
-    p.add_argument("--size", nargs=2, type=int, default=(128, 128), metavar=("W", "H"),
-                   help="image size (default 128 128)")
-    p.add_argument("--spp", type=int, default=16, help="samples per pixel (default 16)")
-    p.add_argument("--bsdf", choices=["diffuse", "phong", "cook-torrance"], default="phong")
-    p.add_argument("--max-depth", type=int, default=-1,
-                   help="longest path in segments (-1 = unbounded, default)")
-    p.add_argument("--integrator", choices=["path", "whitted"], default="path")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--accel", choices=["auto", "bvh", "bvh2", "grid", "inline", "brute"],
-                   default="auto", help="accelerator (default auto: inline for scenes of at "
-                                        "most 64 primitives, else the 4-wide BVH)")
+    add_render_flags(p, size=(128, 128), spp=16, accel="auto", integrator="path",
+                     bsdf="phong")
     p.add_argument("--repeat", type=int, default=1,
                    help="timed renders per mode after the warm-up; the fastest is reported")
     p.add_argument("--out", default=None,
@@ -597,23 +601,22 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def main(args: argparse.Namespace) -> int:
-    width, height = args.size
-    if min(width, height) <= 0 or args.spp <= 0 or args.repeat <= 0:
-        raise DrptError("size, spp and --repeat must be positive")
-    if args.max_depth == 0 or args.max_depth < -1:
-        raise DrptError(f"--max-depth must be -1 (unbounded) or >= 1, got {args.max_depth}")
+    from ..options import options_from_args
+
+    options = options_from_args(args)
+    if args.repeat <= 0:
+        raise DrptError(f"--repeat must be positive, got {args.repeat}")
     scene = Path(args.scene)
     out = Path(args.out) if args.out else Path(f"profile_{scene.stem}.png")
     if out.suffix.lower() != ".png":
         raise DrptError(f"{out}: the chart is written as PNG (use a .png name)")
     if str(out.parent) not in ("", ".") and not out.parent.is_dir():
         raise DrptError(f"{out}: folder {out.parent} does not exist")
-    popt = ProfileOptions(width=width, height=height, spp=args.spp, bsdf=args.bsdf,
-                          integrator=args.integrator, max_depth=args.max_depth, seed=args.seed,
-                          repeat=args.repeat, accel=args.accel)
+    popt = ProfileOptions(render=options, repeat=args.repeat)
+    width, height = options.width, options.height
     results = run_profile(scene, popt)
-    head = (f"{scene.name}: {width}x{height}, {args.spp} spp, {args.integrator}, {args.bsdf}, "
-            f"accel {args.accel}")
+    head = (f"{scene.name}: {width}x{height}, {options.spp} spp, {options.integrator}, "
+            f"{options.bsdf}, accel {options.accel}")
     print(head)
     for r in results:
         print()
@@ -625,7 +628,7 @@ def main(args: argparse.Namespace) -> int:
           f"({wf.launches} vs {mk.launches} launches)")
     save_chart(results, out, head)
     js = out.with_suffix(".json")
-    data = {"scene": str(scene), "options": popt.__dict__,
+    data = {"scene": str(scene), "options": popt.as_dict(),
             "modes": {r.mode: r.as_dict() for r in results},
             "notes": "times in ms unless named *_seconds; stage times are exclusive; wavefront "
                      "stages come from an instrumented run (see drpt/profile.py)"}

@@ -1,0 +1,17 @@
+"""Procedural generators of the bundled scenes, one module per scene.
+
+Each module's ``main(out)`` writes its scene into folder ``out`` (default
+``scenes/<name>/`` of this checkout, :data:`SCENES`) and ``cli()`` is its
+command line, which ``scenes/make_<name>.py`` runs:
+
+* :mod:`.cornellbox` (``scenes/cornellbox/``), :mod:`.newscene`
+  (``scenes/newscene/``): small hand-built scenes, committed;
+* :mod:`.showcase` (``scenes/showcase/``): a car under a day and a dusk sky,
+  committed;
+* :mod:`.diningroom` (``scenes/diningroom/``, 510k triangles, git-ignored):
+  generated on demand (:func:`drpt.tools.reference.scene_path`).
+"""
+
+from pathlib import Path
+
+SCENES = Path(__file__).resolve().parents[3] / "scenes"
