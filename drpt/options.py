@@ -75,7 +75,7 @@ class RenderOptions:
             raise DrptError(f"size must be positive, got {min(self.width, self.height)}")
         if self.spp <= 0:
             raise DrptError(f"--spp must be positive, got {self.spp}")
-        if self.max_lanes <= 0:
+        if self.max_lanes is not None and self.max_lanes <= 0:
             raise DrptError(f"--max-lanes must be positive, got {self.max_lanes}")
         p = self.path
         if p.max_depth == 0 or p.max_depth < -1:
