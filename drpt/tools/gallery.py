@@ -54,6 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DrptError
+from .table import markdown_table
 
 ROOT = Path(__file__).resolve().parents[2]
 REFERENCE_SCRIPT = ROOT / "reference" / "make_references.py"
@@ -209,9 +210,7 @@ EXPLAIN = ("Error columns compare the render, box-downsampled to the size of the
 
 
 def _write_pages(out: Path, rows: list[dict]) -> None:
-    md = ["# drpt gallery", "", EXPLAIN, "",
-          "| " + " | ".join(HEADER) + " |", "|" + " --- |" * len(HEADER)]
-    md += ["| " + " | ".join(_cells(r)) + " |" for r in rows]
+    md = ["# drpt gallery", "", EXPLAIN, "", markdown_table(HEADER, [_cells(r) for r in rows])]
     md.append("")
     for r in rows:
         md += [f"## {r['name']}", "", f"![{r['name']}]({r['image']})", "",
