@@ -140,7 +140,8 @@ def test_hdr_rle_decode(tmp_path):
 def test_hdr_old_style_rle(tmp_path):
     w = 5
     px = [[200, 100, 50, 130], [1, 1, 1, 3], [10, 20, 30, 128]]  # repeat 3 times
-    data = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n" + f"-Y 1 +X {w}\n".encode() + bytes(sum(px, []))
+    data = (b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n" + f"-Y 1 +X {w}\n".encode()
+            + bytes(sum(px, [])))
     (tmp_path / "o.hdr").write_bytes(data)
     img = read_image(tmp_path / "o.hdr")
     assert img.shape == (1, w, 3)
@@ -205,7 +206,7 @@ def test_hdr_pfm_refusals(tmp_path):
     rgbe = bytes([128, 0, 0, 129, 0, 128, 0, 129])
     head = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n"
     (tmp_path / "up.hdr").write_bytes(head + b"+Y 2 +X 1\n" + rgbe)
-    with pytest.raises(SceneError, match=r"up\.hdr: unsupported .hdr resolution line '\+Y 2 \+X 1'"):
+    with pytest.raises(SceneError, match=r"up\.hdr: unsupported .hdr resolution line '\+Y 2"):
         read_image(tmp_path / "up.hdr")
     (tmp_path / "ok.hdr").write_bytes(head + b"-Y 2 +X 1\n" + rgbe)
     np.testing.assert_array_equal(read_image(tmp_path / "ok.hdr")[:, 0], [[1, 0, 0], [0, 1, 0]])
