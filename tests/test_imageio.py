@@ -149,6 +149,7 @@ def test_hdr_old_style_rle(tmp_path):
     assert img[0, 0, 0] == 200 * 2.0 ** -6
 
 
+@pytest.mark.mitsuba
 def test_seed_environment_hdr():
     if not ENV_HDR.is_file():
         pytest.skip("shared/seed/scenes/environment.hdr is not present")

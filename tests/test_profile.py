@@ -38,6 +38,7 @@ def test_defaults():
     assert args.integrator == "path" and args.max_depth == -1 and args.accel == "auto"
 
 
+@pytest.mark.slow
 def test_writes_chart_and_json(run):
     rc, out, data = run
     assert rc == 0
@@ -46,6 +47,7 @@ def test_writes_chart_and_json(run):
     assert data["options"]["width"] == 16 and data["options"]["spp"] == 2
 
 
+@pytest.mark.slow
 def test_both_modes_launch_kernels(run):
     _, _, data = run
     mk, wf = data["modes"]["megakernel"], data["modes"]["wavefront"]
@@ -67,6 +69,7 @@ def test_both_modes_launch_kernels(run):
     assert wf["jit_kernels"] > mk["jit_kernels"]
 
 
+@pytest.mark.slow
 def test_megakernel_stages_partition_the_history(run):
     _, _, data = run
     mk = data["modes"]["megakernel"]
@@ -77,6 +80,7 @@ def test_megakernel_stages_partition_the_history(run):
     assert fused and fused[0]["jit_kernels"] >= 1 and fused[0]["kernel_ms"] > 0
 
 
+@pytest.mark.slow
 def test_wavefront_stages_are_consistent(run):
     _, _, data = run
     wf = data["modes"]["wavefront"]
@@ -99,6 +103,7 @@ def test_wavefront_stages_are_consistent(run):
     assert st["closest-hit traversal"]["launches"] > st["BSDF sampling"]["launches"]
 
 
+@pytest.mark.slow
 def test_inline_accelerator_profile(tmp_path):
     """The Cornell box's default (inline) accelerator: traversal has no loop,
     so its stages launch no more kernels than shading, and still count rays."""
@@ -111,6 +116,7 @@ def test_inline_accelerator_profile(tmp_path):
     assert st["closest-hit traversal"]["launches"] <= st["BSDF sampling"]["launches"] + 1
 
 
+@pytest.mark.slow
 def test_table_mentions_both_modes(run):
     _, _, data = run
     # format_table works on the in-memory results; rebuild one from the JSON-side numbers.
