@@ -177,9 +177,10 @@ def _bitmap_class():
 
 def _mitsuba_message(e: Exception) -> str:
     """Mitsuba's exception text on one line, without its ``[Class]`` tags
-    and the quoted file name (the caller's message starts with it)."""
+    and the quoted file name (the caller's message starts with it), nor the
+    ``: Success`` (errno 0) it appends when a file ends early."""
     text = " ".join(str(e).split())
-    return re.sub(r'\[[A-Za-z:]+\]\s*|"[^"]*":\s*', "", text).strip()
+    return re.sub(r'\[[A-Za-z:]+\]\s*|"[^"]*":\s*|:\s*Success$', "", text).strip()
 
 
 # ------------------------------------------------------------------ reading
@@ -288,10 +289,11 @@ def _read_bitmap(path: Path, ext: str) -> np.ndarray:
     except RuntimeError as e:
         img = _read_rgbe_old_rle(path) if ext == ".hdr" else None
         if img is None:
-            raise SceneError(path, None, f"cannot read {ext} image: {_mitsuba_message(e)}") from e
+            raise SceneError(path, None, f"cannot read {ext} image (truncated or corrupt): "
+                             f"{_mitsuba_message(e)}") from e
         return img
-    fmt = bmp.pixel_format()
-    if fmt not in (fmt.RGB, fmt.Y):  # e.g. FORMAT=32-bit_rle_xyze
+    fmt, formats = bmp.pixel_format(), _bitmap_class().PixelFormat
+    if fmt not in (formats.RGB, formats.Y):  # e.g. FORMAT=32-bit_rle_xyze
         raise SceneError(path, None, f"unsupported {ext} pixel format {fmt.name} "
                          "(only RGB or gray; .hdr: only FORMAT=32-bit_rle_rgbe)")
     return np.array(bmp, dtype=np.float32)
