@@ -8,9 +8,10 @@ top of the image.
 * ``.exr`` -- linear float32, channels ``R``, ``G``, ``B`` (ZIP compressed,
   lossless), written with the ``OpenEXR`` package. Reading it back gives the
   exact same float32 values.
-* ``.hdr`` -- Radiance RGBE, flat (uncompressed) scanlines, ``-Y H +X W``.
-* ``.pfm`` -- Portable Float Map (``PF``, little endian, rows stored bottom to
-  top as the format requires).
+* ``.hdr`` -- Radiance RGBE (``-Y H +X W``, negative values clamped to 0)
+  and ``.pfm`` -- Portable Float Map (``PF``, little endian, scale ``-1``,
+  rows stored bottom to top as the format requires), both written by
+  Mitsuba 3's ``Bitmap``.
 * ``.png`` / ``.tga`` -- 8-bit tonemapped: ``round(255 * clamp(x, 0, 1) **
   (1 / gamma))`` per channel (a plain power curve, *not* the sRGB curve),
   written with Pillow.
@@ -28,14 +29,17 @@ Returns an ``(H, W, C)`` float32 array, row 0 at the top, ``C`` in
 
 * ``.exr`` -- float values as stored (half or float channels; ``R,G,B[,A]``
   or a single ``Y`` channel).
-* ``.hdr`` -- Radiance RGBE (``32-bit_rle_rgbe``): flat scanlines, new-style
-  ("adaptive") run-length encoded scanlines and old-style RLE repeat pixels
-  are all decoded. A pixel ``(r, g, b, e)`` becomes ``(r, g, b) * 2**(e -
-  136)`` (``0`` when ``e == 0``), the same convention as Mitsuba 3's
-  ``Bitmap`` (no half-step mantissa offset), so a texel read here equals the
-  one Mitsuba reads. The ``EXPOSURE`` header is ignored, as Mitsuba does.
-  Orientations ``-Y H +X W`` (standard) and ``+Y H +X W`` are supported.
-* ``.pfm`` -- ``PF`` (RGB) or ``Pf`` (gray), either endianness.
+* ``.hdr`` -- Radiance RGBE (``FORMAT=32-bit_rle_rgbe``), read by Mitsuba
+  3's ``Bitmap``: flat and ("adaptive") run-length encoded scanlines, rows
+  from the top (``-Y H +X W``; other orientations are refused). A pixel
+  ``(r, g, b, e)`` becomes ``(r, g, b) * 2**(e - 136)`` (``0`` when
+  ``e == 0``), so a texel read here is the one Mitsuba's emitters and
+  textures read. The ``EXPOSURE`` header is ignored, as Mitsuba does.
+  Old-style RLE (repeat pixels ``(1, 1, 1, k)``), which Mitsuba does not
+  decode, is decoded by :func:`_read_rgbe_old_rle`.
+* ``.pfm`` -- ``PF`` (RGB) or ``Pf`` (gray), either endianness, read by
+  Mitsuba's ``Bitmap``, which multiplies the values by the magnitude of
+  the header's scale (``1`` in files drpt writes).
 * ``.png``, ``.jpg``, ``.jpeg``, ``.tga`` -- with Pillow. 8-bit (16-bit)
   channels become floats in ``[0, 1]`` by dividing by 255 (65535). With
   ``linear=True`` (the default) color channels are then decoded from sRGB
@@ -44,8 +48,11 @@ Returns an ``(H, W, C)`` float32 array, row 0 at the top, ``C`` in
   decoded. ``linear=False`` returns the encoded values. Palette images are
   expanded; gray+alpha becomes RGBA.
 
-A missing, unreadable or malformed file raises
-``SceneError(path, None, message)``.
+A missing, unreadable, truncated or malformed file raises
+``SceneError(path, None, message)``, a one-line message naming the file.
+
+Mitsuba is imported on the first ``.hdr`` or ``.pfm`` (about 0.3 s); its
+``Bitmap`` needs no variant, so none is set.
 """
 
 from __future__ import annotations
@@ -120,10 +127,8 @@ def write_image(path: str | PathLike, rgb: np.ndarray, gamma: float = 2.2) -> No
     try:
         if ext == ".exr":
             _write_exr(path, img)
-        elif ext == ".hdr":
-            _write_hdr(path, img)
-        elif ext == ".pfm":
-            _write_pfm(path, img)
+        elif ext in (".hdr", ".pfm"):
+            _write_bitmap(path, img)
         else:
             _write_ldr(path, img, gamma, "PNG" if ext == ".png" else "TGA")
     except OSError as e:
@@ -150,35 +155,32 @@ def _write_ldr(path: Path, img: np.ndarray, gamma: float, fmt: str) -> None:
     Image.fromarray(u8, "RGB").save(path, format=fmt)
 
 
-def _float_to_rgbe(img: np.ndarray) -> np.ndarray:
-    """(H, W, 3) float -> (H, W, 4) uint8 RGBE (negative values clamp to 0)."""
-    img = np.maximum(img.astype(np.float64), 0.0)
-    v = img.max(axis=2)
-    mant, exp = np.frexp(v)  # v = mant * 2**exp, mant in [0.5, 1)
-    ok = v >= 1e-32
-    scale = np.where(ok, mant * 256.0 / np.where(ok, v, 1.0), 0.0)
-    out = np.zeros(img.shape[:2] + (4,), np.uint8)
-    out[..., :3] = np.clip(np.floor(img * scale[..., None]), 0, 255).astype(np.uint8)
-    out[..., 3] = np.where(ok, np.clip(exp + 128, 0, 255), 0).astype(np.uint8)
-    return out
+def _write_bitmap(path: Path, img: np.ndarray) -> None:
+    """``.hdr`` (negative values clamped to 0 first) or ``.pfm``, by Mitsuba."""
+    if path.suffix.lower() == ".hdr":
+        img = np.maximum(img, 0.0)
+    try:
+        _bitmap_class()(np.ascontiguousarray(img, dtype=np.float32)).write(str(path))
+    except RuntimeError as e:
+        raise DrptError(f"{path}: cannot write image: {_mitsuba_message(e)}") from e
 
 
-def _write_hdr(path: Path, img: np.ndarray) -> None:
-    h, w = img.shape[:2]
-    header = (
-        b"#?RADIANCE\n# written by drpt\nFORMAT=32-bit_rle_rgbe\n\n"
-        + f"-Y {h} +X {w}\n".encode()
-    )
-    with open(path, "wb") as f:
-        f.write(header)
-        f.write(_float_to_rgbe(img).tobytes())
+def _bitmap_class():
+    """``mitsuba.Bitmap``, imported on first use (about 0.3 s).
+
+    ``Bitmap`` belongs to Mitsuba's core library, so no variant is set: the
+    global variant stays what the rest of the program chose."""
+    import mitsuba
+
+    return mitsuba.Bitmap
 
 
-def _write_pfm(path: Path, img: np.ndarray) -> None:
-    h, w = img.shape[:2]
-    with open(path, "wb") as f:
-        f.write(f"PF\n{w} {h}\n-1.0\n".encode())
-        f.write(np.ascontiguousarray(img[::-1], dtype="<f4").tobytes())
+def _mitsuba_message(e: Exception) -> str:
+    """Mitsuba's exception text on one line, without its ``[Class]`` tags
+    and the quoted file name (the caller's message starts with it), nor the
+    ``: Success`` (errno 0) it appends when a file ends early."""
+    text = " ".join(str(e).split())
+    return re.sub(r'\[[A-Za-z:]+\]\s*|"[^"]*":\s*|:\s*Success$', "", text).strip()
 
 
 # ------------------------------------------------------------------ reading
@@ -202,10 +204,8 @@ def read_image(path: str | PathLike, linear: bool = True) -> np.ndarray:
     try:
         if ext == ".exr":
             img = _read_exr(path)
-        elif ext == ".hdr":
-            img = _read_hdr(path)
-        elif ext == ".pfm":
-            img = _read_pfm(path)
+        elif ext in (".hdr", ".pfm"):
+            img = _read_bitmap(path, ext)
         else:
             img = _read_ldr(path, linear)
     except SceneError:
@@ -267,155 +267,90 @@ def _read_ldr(path: Path, linear: bool) -> np.ndarray:
     return a
 
 
-_RES_RE = re.compile(rb"^([-+])Y\s+(\d+)\s+\+X\s+(\d+)\s*$")
+# The first bytes of each float format Mitsuba reads for us: checked first,
+# so that a PNG named ``x.hdr`` is refused rather than decoded as a PNG.
+_MAGIC = {".hdr": (b"#?RADIANCE", b"#?RGBE"), ".pfm": (b"PF", b"Pf")}
+_KIND = {".hdr": "a Radiance .hdr file (missing '#?RADIANCE')",
+         ".pfm": "a .pfm file (expected 'PF' or 'Pf')"}
 
 
-def _read_hdr(path: Path) -> np.ndarray:
-    data = path.read_bytes()
-    if not (data.startswith(b"#?RADIANCE") or data.startswith(b"#?RGBE")):
-        raise SceneError(path, None, "not a Radiance .hdr file (missing '#?RADIANCE')")
-    # Header: lines until an empty line, then the resolution line.
-    pos = data.find(b"\n") + 1
-    fmt = None
-    while True:
-        end = data.find(b"\n", pos)
-        if end < 0:
-            raise SceneError(path, None, "truncated .hdr header")
-        line = data[pos:end].strip()
-        pos = end + 1
-        if not line:
-            break
-        if line.startswith(b"FORMAT="):
-            fmt = line[7:].decode("ascii", "replace")
-    if fmt is not None and fmt != "32-bit_rle_rgbe":
-        raise SceneError(path, None, f"unsupported .hdr FORMAT {fmt!r} (only 32-bit_rle_rgbe)")
-    end = data.find(b"\n", pos)
-    m = _RES_RE.match(data[pos:end if end >= 0 else len(data)])
-    if not m:
-        res = data[pos:end].decode("ascii", "replace")
-        raise SceneError(path, None, f"unsupported .hdr resolution line {res!r}")
-    flip = m.group(1) == b"+"
-    h, w = int(m.group(2)), int(m.group(3))
-    if h <= 0 or w <= 0:
-        raise SceneError(path, None, f"bad .hdr size {w}x{h}")
-    pos = end + 1
-    buf = np.frombuffer(data, np.uint8, offset=pos) if pos < len(data) else np.zeros(0, np.uint8)
-    rgbe = _decode_rgbe_scanlines(buf, w, h, path)
-    if flip:
-        rgbe = rgbe[::-1]
-    return _rgbe_to_float(rgbe)
-
-
-def _rgbe_to_float(rgbe: np.ndarray) -> np.ndarray:
-    e = rgbe[..., 3].astype(np.int32)
-    scale = np.where(e > 0, np.ldexp(np.float32(1.0), e - 136), np.float32(0.0)).astype(np.float32)
-    return rgbe[..., :3].astype(np.float32) * scale[..., None]
-
-
-def _decode_rgbe_scanlines(buf: np.ndarray, w: int, h: int, path: Path) -> np.ndarray:
-    n = buf.size
-    # Fast path: the whole body is flat RGBE (no RLE of any kind).
-    if n == w * h * 4 and not _is_new_rle(buf, 0, w):
-        flat = buf.reshape(h, w, 4)
-        if not np.any((flat[..., 0] == 1) & (flat[..., 1] == 1) & (flat[..., 2] == 1)):
-            return flat
-    out = np.empty((h, w, 4), np.uint8)
-    pos = 0
-    for y in range(h):
-        if _is_new_rle(buf, pos, w):
-            pos += 4
-            for c in range(4):
-                row = out[y, :, c]
-                x = 0
-                while x < w:
-                    if pos >= n:
-                        raise SceneError(path, None, f"truncated .hdr data at scanline {y}")
-                    count = int(buf[pos])
-                    pos += 1
-                    if count > 128:
-                        count -= 128
-                        if count > w - x or pos >= n:
-                            raise SceneError(path, None, f"bad RLE run in .hdr scanline {y}")
-                        row[x:x + count] = buf[pos]
-                        pos += 1
-                    else:
-                        if count == 0 or count > w - x or pos + count > n:
-                            raise SceneError(path, None, f"bad RLE dump in .hdr scanline {y}")
-                        row[x:x + count] = buf[pos:pos + count]
-                        pos += count
-                    x += count
-        else:
-            pos = _decode_flat_scanline(buf, pos, out[y], w, path, y)
-    return out
-
-
-def _is_new_rle(buf: np.ndarray, pos: int, w: int) -> bool:
-    if not (8 <= w <= 0x7FFF) or pos + 4 > buf.size:
-        return False
-    return (
-        buf[pos] == 2 and buf[pos + 1] == 2 and not (buf[pos + 2] & 0x80)
-        and (int(buf[pos + 2]) << 8 | int(buf[pos + 3])) == w
-    )
-
-
-def _decode_flat_scanline(buf, pos, row, w, path, y) -> int:
-    """Flat pixels, possibly with old-style RLE repeat markers (1,1,1,n)."""
-    n = buf.size
-    if pos + 4 * w > n:
-        chunk = None
-    else:
-        chunk = buf[pos:pos + 4 * w].reshape(w, 4)
-        if not np.any((chunk[:, 0] == 1) & (chunk[:, 1] == 1) & (chunk[:, 2] == 1)):
-            row[:] = chunk
-            return pos + 4 * w
-    # Old-style RLE: (1, 1, 1, k) repeats the previous pixel k << shift times.
-    x, shift = 0, 0
-    while x < w:
-        if pos + 4 > n:
-            raise SceneError(path, None, f"truncated .hdr data at scanline {y}")
-        px = buf[pos:pos + 4]
-        pos += 4
-        if px[0] == 1 and px[1] == 1 and px[2] == 1:
-            if x == 0:
-                raise SceneError(path, None, f"bad old-style RLE in .hdr scanline {y}")
-            count = int(px[3]) << shift
-            if count > w - x:
-                raise SceneError(path, None, f"bad old-style RLE in .hdr scanline {y}")
-            row[x:x + count] = row[x - 1]
-            x += count
-            shift += 8
-        else:
-            row[x] = px
-            x += 1
-            shift = 0
-    return pos
-
-
-def _read_pfm(path: Path) -> np.ndarray:
-    data = path.read_bytes()
-    tokens: list[bytes] = []
-    pos = 0
-    while len(tokens) < 4:  # "PF"/"Pf", width, height, scale
-        while pos < len(data) and data[pos:pos + 1].isspace():
-            pos += 1
-        start = pos
-        while pos < len(data) and not data[pos:pos + 1].isspace():
-            pos += 1
-        if start == pos:
-            raise SceneError(path, None, "truncated .pfm header")
-        tokens.append(data[start:pos])
-    pos += 1  # the single whitespace byte after the scale
-    kind = tokens[0]
-    if kind not in (b"PF", b"Pf"):
-        raise SceneError(path, None, "not a .pfm file (expected 'PF' or 'Pf')")
-    c = 3 if kind == b"PF" else 1
+def _read_bitmap(path: Path, ext: str) -> np.ndarray:
+    """``.hdr`` or ``.pfm`` with ``mitsuba.Bitmap``; old-style RLE ``.hdr``
+    (which it does not decode) with :func:`_read_rgbe_old_rle`."""
+    with open(path, "rb") as f:
+        head = f.read(16)
+    if not head.startswith(_MAGIC[ext]):
+        raise SceneError(path, None, f"not {_KIND[ext]}")
     try:
-        w, h, scale = int(tokens[1]), int(tokens[2]), float(tokens[3])
-    except ValueError:
-        raise SceneError(path, None, "bad .pfm header") from None
-    dtype = "<f4" if scale < 0 else ">f4"
-    count = w * h * c
-    if len(data) - pos < 4 * count:
-        raise SceneError(path, None, "truncated .pfm data")
-    a = np.frombuffer(data, dtype, count=count, offset=pos).reshape(h, w, c)
-    return a[::-1].astype(np.float32)
+        bmp = _bitmap_class()(str(path))
+    except MemoryError as e:  # std::bad_alloc: a corrupt size in the header
+        raise SceneError(path, None, f"cannot read {ext} image: its size does not fit "
+                         "in memory (corrupt header?)") from e
+    except RuntimeError as e:
+        img = _read_rgbe_old_rle(path) if ext == ".hdr" else None
+        if img is None:
+            raise SceneError(path, None, f"cannot read {ext} image (truncated or corrupt): "
+                             f"{_mitsuba_message(e)}") from e
+        return img
+    fmt, formats = bmp.pixel_format(), _bitmap_class().PixelFormat
+    if fmt not in (formats.RGB, formats.Y):  # e.g. FORMAT=32-bit_rle_xyze
+        raise SceneError(path, None, f"unsupported {ext} pixel format {fmt.name} "
+                         "(only RGB or gray; .hdr: only FORMAT=32-bit_rle_rgbe)")
+    return np.array(bmp, dtype=np.float32)
+
+
+_RES_RE = re.compile(rb"-Y\s+(\d+)\s+\+X\s+(\d+)\s*")
+
+
+def _read_rgbe_old_rle(path: Path) -> np.ndarray | None:
+    """Decode an RGBE file whose scanlines are flat pixels with old-style
+    run-length records, or return ``None`` when the file is not one.
+
+    In the old encoding (Radiance before 1991) a pixel ``(1, 1, 1, k)``
+    repeats the previous pixel ``k << s`` times, where ``s`` grows by 8 for
+    each repeat record directly before it. Readers built on Walter's
+    ``rgbe.c`` (Mitsuba's among them) decode such files as flat pixels and
+    so run out of data; this decoder is only called after Mitsuba failed.
+    A scanline in the new RLE encoding (``2, 2, w >> 8, w & 255``) means
+    the file is not old-style: ``None``, and Mitsuba's error is reported.
+    """
+    data = path.read_bytes()
+    header, sep, rest = data.partition(b"\n\n")
+    res, nl, body = rest.partition(b"\n")
+    if not (sep and nl):
+        return None
+    m = _RES_RE.fullmatch(res)
+    if not m:
+        line = res.decode("ascii", "replace")
+        raise SceneError(path, None, f"unsupported .hdr resolution line {line!r} "
+                         "(only '-Y H +X W', rows from the top)")
+    h, w = int(m.group(1)), int(m.group(2))
+    px = np.frombuffer(body, np.uint8, count=len(body) // 4 * 4).reshape(-1, 4)
+    if len(px) < h:  # fewer records than scanlines: truncated
+        return None
+    repeat = (px[:, 0] == 1) & (px[:, 1] == 1) & (px[:, 2] == 1)
+    new_rle = (px[:, 0] == 2) & (px[:, 1] == 2) & ((px[:, 2].astype(np.int32) << 8 | px[:, 3]) == w)
+    out = np.empty((h, w, 4), np.uint8)
+    i = 0
+    for y in range(h):
+        if i < len(px) and new_rle[i] and 8 <= w <= 0x7FFF:
+            return None
+        x, shift = 0, 0
+        while x < w:
+            if i >= len(px):
+                return None  # truncated
+            if repeat[i]:
+                count = int(px[i, 3]) << shift
+                if x == 0 or count > w - x:
+                    return None
+                out[y, x:x + count] = out[y, x - 1]
+                x += count
+                shift += 8
+            else:
+                out[y, x] = px[i]
+                x += 1
+                shift = 0
+            i += 1
+    e = out[..., 3].astype(np.int32)
+    scale = np.where(e > 0, np.ldexp(np.float32(1.0), e - 136), np.float32(0.0))
+    return out[..., :3].astype(np.float32) * scale[..., None].astype(np.float32)

@@ -44,6 +44,8 @@ def test_defaults():
     assert all(p.is_file() for p in bench.DEFAULT_SCENES)
 
 
+@pytest.mark.slow
+@pytest.mark.mitsuba
 def test_writes_files(run):
     rc, out, rows = run
     assert rc == 0
@@ -52,6 +54,8 @@ def test_writes_files(run):
     assert "| cornellbox | bvh |" in (out / "bench.md").read_text()
 
 
+@pytest.mark.slow
+@pytest.mark.mitsuba
 def test_csv_rows_positive_and_ratios_finite(run):
     _, _, rows = run
     assert [(r["scene"], r["accel"]) for r in rows] == [("cornellbox", "bvh"),

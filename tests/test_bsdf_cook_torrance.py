@@ -83,6 +83,7 @@ def _chi2(sample_func, pdf_func, dim, res, ires, sample_count=200_000):
     return ok, test.messages
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("alpha", ALPHAS)
 @pytest.mark.parametrize("theta", ANGLES)
 def test_vndf_sampling_matches_pdf(theta, alpha):
@@ -124,6 +125,7 @@ def _lobe_sampler(p, theta, half_vector=False):
     return sample_func, pdf_func
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("alpha", ALPHAS)
 @pytest.mark.parametrize("theta", ANGLES)
 def test_sampling_matches_pdf(theta, alpha):
@@ -136,6 +138,7 @@ def test_sampling_matches_pdf(theta, alpha):
     assert ok, msg
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("theta", ANGLES)
 def test_sampling_matches_pdf_half_vector(theta):
     # Sharp lobes seen through h = normalize(wi + wo), where they are ~alpha wide.
@@ -161,6 +164,7 @@ def _mi_si(mi, wi):
     return si
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("base,metal,alpha", MI_CASES)
 def test_eval_and_pdf_equal_mitsuba_principled(base, metal, alpha):
     mi = mitsuba()
@@ -209,6 +213,7 @@ def test_eval_and_pdf_equal_mitsuba_principled(base, metal, alpha):
     assert (p_d > 0).sum() > n // 3
 
 
+@pytest.mark.mitsuba
 def test_export_is_twosided_principled_and_matches_both_sides():
     mi = mitsuba()
     spec = BSDFSpec("cook_torrance", kd=HARD[0], alpha=HARD[2], metalness=HARD[1])
@@ -269,6 +274,7 @@ def _albedo_mitsuba(mi, base, metal, alpha, theta, n=400_000, seed=8):
     return w.mean(axis=1), w.std(axis=1) / np.sqrt(n)
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("base,metal,alpha", [((1.0, 1.0, 1.0), 0.0, 1.0), ((1.0, 1.0, 1.0), 0.5, 0.2),
                                               (HARD[0], HARD[1], HARD[2]),
                                               ((0.9, 0.2, 0.5), 1.0, 0.05)])

@@ -228,6 +228,7 @@ def test_eval_pdf_are_zero():
 
 
 # ------------------------------------------------------------------ Mitsuba
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("n", [1.0, 1.33, 1.5, 2.5])
 def test_equals_mitsuba_dielectric(n):
     mi = mitsuba()

@@ -19,6 +19,7 @@ def _dir(theta_deg):
     return Array3f(float(np.sin(t)), 0.0, float(np.cos(t)))
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("theta", [0.0, 45.0, 89.9999])
 def test_sampling_matches_pdf(theta):
     wi = _dir(theta)

@@ -97,6 +97,7 @@ def test_export_dicts():
         to_mitsuba(BSDFSpec("dielectric", ior=float("nan")))
 
 
+@pytest.mark.mitsuba
 def test_equals_mitsuba_conductor():
     mi = mitsuba()
     n = 10_000

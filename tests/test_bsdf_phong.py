@@ -91,6 +91,7 @@ def _tilt(theta):
     return np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("theta,ns", CHI2_GRID)
 def test_drpt_sampling_matches_pdf(theta, ns):
     p = _params(ns=ns)
@@ -116,6 +117,7 @@ def test_drpt_sampling_matches_pdf(theta, ns):
     assert ok, msg
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("theta,ns", [(0.0, 1.0), (60.0, 10.0), (85.0, 100.0), (89.9, 1000.0),
                                       (30.0, 1000.0)])
 def test_mitsuba_plugin_sampling_matches_pdf(theta, ns):
@@ -131,6 +133,7 @@ def test_mitsuba_plugin_sampling_matches_pdf(theta, ns):
 
 
 # ----------------------------------------------- drpt vs Mitsuba: eval, pdf
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("ns", [0.0, 1.0, 7.5, 100.0, 1000.0])
 @pytest.mark.parametrize("kd,ks", [(KD, KS), ((0.0, 0.0, 0.0), (0.9, 0.7, 0.5)),
                                    ((0.6, 0.5, 0.4), (0.0, 0.0, 0.0))])
@@ -186,6 +189,7 @@ def test_eval_pdf_match_mitsuba(ns, kd, ks):
     assert (p_d > 0).sum() > n // 3
 
 
+@pytest.mark.mitsuba
 def test_mitsuba_plugin_weight_and_contexts():
     mi = mitsuba()
     bsdf = _mi_bsdf(mi, ns=20.0)
@@ -367,6 +371,7 @@ def test_params_gather_per_lane():
 
 
 # ------------------------------------------------------- Mitsuba: plugin
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("ns", [0.0, 1.0, 1e4, 1e6])
 @pytest.mark.parametrize("kd,ks", [(KD, KS), ((0.0,) * 3, (1.0,) * 3), ((1.0,) * 3, (0.0,) * 3)])
 def test_mitsuba_plugin_extremes_finite(ns, kd, ks):
@@ -388,6 +393,7 @@ def test_mitsuba_plugin_extremes_finite(ns, kd, ks):
     assert np.allclose(np.array(kd_diffuse)[:, 0], kd)
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("ns", [2.0, 1e3, 1e6])
 def test_same_random_numbers_same_directions(ns):
     # Same lobe choice and the same warps (concentric cosine map, Duff frame):
@@ -409,6 +415,7 @@ def test_same_random_numbers_same_directions(ns):
         assert np.allclose(np.array(w_m)[:, both], np.array(bs_d.weight)[:, both], rtol=1e-3)
 
 
+@pytest.mark.mitsuba
 def test_register_idempotent_and_to_mitsuba():
     mi = mitsuba()
     mitsuba_phong.register()
@@ -423,6 +430,7 @@ def test_register_idempotent_and_to_mitsuba():
         mitsuba_phong.to_mitsuba(BSDFSpec("diffuse"))
 
 
+@pytest.mark.mitsuba
 def test_twosided_python_bsdf_mirrors_back_side():
     mi = mitsuba()
     mitsuba_phong.register()
@@ -469,6 +477,7 @@ def _sphere_scene(mi, material, spp=16, res=24):
     }
 
 
+@pytest.mark.mitsuba
 def test_mitsuba_render_twosided_phong():
     mi = mitsuba()
     mitsuba_phong.register()

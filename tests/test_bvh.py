@@ -257,6 +257,7 @@ def test_builder_identical_and_tiny_boxes(variant):
 
 
 # ------------------------------------------------------------- traversal vs brute
+@pytest.mark.slow
 def test_random_soup_spheres_plane(loop_mode):
     rng = np.random.default_rng(2)
     tris = soup(rng, 3000)
@@ -306,6 +307,7 @@ def closed_mesh_rays(level: int, seed: int):
     return v[f], o, np.tile(targets, (4, 1)) - o
 
 
+@pytest.mark.slow
 def test_watertight_closed_mesh(loop_mode):
     tris, o, d = closed_mesh_rays(3, seed=4)  # 1280 faces
     ht, hp, hv, _ = compare(make_scene(tris), o, d, check_occ=False)
@@ -324,6 +326,7 @@ def test_rays_starting_on_surfaces():
     assert (ht[hv] > 0).all()
 
 
+@pytest.mark.slow
 def test_single_triangle_and_copies():
     """One triangle against brute force; a million copies of it (every ray that
     hits visits them all: few rays) build and traverse, closest hit and any hit."""
@@ -349,6 +352,7 @@ def test_single_triangle_and_copies():
         assert np.allclose(ht[hv], 2.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_degenerate_input_builds_and_traverses(variant):
     """100k copies of one triangle, and zero-area triangles, with every variant."""

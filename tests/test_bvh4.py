@@ -171,6 +171,7 @@ def test_uploads_padded():
     assert bvh.host_sizes["node_box"] == 24 * bvh.stats["nodes4"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sym", [True, False], ids=["symbolic", "evaluated"])
 def test_bvh4_vs_brute(sym):
     rng = np.random.default_rng(8)

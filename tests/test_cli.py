@@ -196,6 +196,7 @@ def test_malformed_scene_names_file_and_line(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.mitsuba
 def test_export_writes_loadable_xml(tmp_path):
     mi = pytest.importorskip("mitsuba")
     from drpt.backend import mitsuba_variant

@@ -93,6 +93,8 @@ def test_bad_inputs_raise(tmp_path):
         run(pa, pb, "--out", tmp_path / "file")
 
 
+@pytest.mark.slow
+@pytest.mark.mitsuba
 def test_scene_against_cached_mitsuba_reference(tmp_path, capsys):
     cache, out = tmp_path / "cache", tmp_path / "out"
     args = [CORNELL, "--size", "24", "24", "--spp", "16", "--ref-spp", "64",

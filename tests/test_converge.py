@@ -237,6 +237,7 @@ def _run(module, *argv: str) -> int:
     return args.func(args)
 
 
+@pytest.mark.slow
 @pytest.mark.mitsuba
 def test_converge_cli_smoke(tmp_path, capsys):
     pytest.importorskip("mitsuba")
@@ -268,6 +269,7 @@ def test_converge_rejects_bad_arguments(tmp_path):
         _run(converge, CORNELL, "--levels", "0", "--out", tmp_path / "o")
 
 
+@pytest.mark.slow
 @pytest.mark.mitsuba
 def test_knobs_cli_smoke(tmp_path, capsys):
     pytest.importorskip("mitsuba")

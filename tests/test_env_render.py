@@ -66,17 +66,21 @@ def make(tmp_path, mtl="glossy", point=False):
     return load_scene(p)
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("mtl, bsdf", [("glossy", "phong"), ("ct_metal", "cook-torrance")])
 def test_env_lit_glossy_scene_matches_mitsuba(tmp_path, mtl, bsdf):
     r, ref, ref_var = render_both(make(tmp_path, mtl), 48, 32, 128, max_depth=5, bsdf=bsdf)
     assert_agree(r, ref, ref_var)
 
 
+@pytest.mark.mitsuba
 def test_env_and_point_light_match_mitsuba(tmp_path):
     r, ref, ref_var = render_both(make(tmp_path, point=True), 48, 32, 128, max_depth=5)
     assert_agree(r, ref, ref_var)
 
 
+@pytest.mark.slow
+@pytest.mark.mitsuba
 def test_seed_cornellbox_skybox_and_area_light_match_mitsuba(seed_dir):
     scene = load_scene(seed_dir / "scenes" / "cornellbox.txt")
     r, ref, ref_var = render_both(scene, 32, 32, 128, max_depth=6)

@@ -140,6 +140,7 @@ MAPS = {
 
 
 # ------------------------------------------------------------ sampling
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("name", [m for m in MAPS if m != "bright_poles"])
 def test_chi2_sample_matches_pdf(name):
     # bright_poles is left to the exact test below: its pdf is concentrated
@@ -156,6 +157,7 @@ def _linear_cdf(a, b, x):
     return np.where(tot > 0, (a * x + 0.5 * (b - a) * x * x) / np.where(tot > 0, tot, 1), x)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(MAPS))
 def test_cells_sampled_with_table_probabilities(name):
     """Quadrature-free check of the scheme: cell counts against P(cell) =
@@ -289,6 +291,7 @@ def mitsuba_eval(emitter_desc, d):
     return np.array(e.eval(si))
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("name", ["gradient", "sun", "one_texel", "tiny_2x2", "bright_poles"])
 def test_eval_equals_mitsuba_envmap(tmp_path, name):
     img = MAPS[name]()
@@ -338,6 +341,7 @@ def texel_direction(i, j, W, H):
     return np.array([math.sin(p) * math.sin(t), math.cos(t), -math.cos(p) * math.sin(t)])
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("texel, offset, up", [
     ((3, 5), (0.15, 0.1, 0.0), (0, 1, 0)),  # column 3, row 5
     ((17, 9), (-0.1, 0.0, 0.2), (0.2, 1, 0.1)),
@@ -436,6 +440,7 @@ def test_nan_inf_negative_texels_are_zeroed_and_reported():
     assert EnvironmentLight(np.ones((4, 8, 3), np.float32)).warnings == []
 
 
+@pytest.mark.mitsuba
 def test_from_file_names_the_file_and_export_fixes_a_copy(tmp_path):
     img = gradient_map(8, 16)
     img[2, 5] = -3.0

@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from drpt.cli import main
 from drpt.tools.gallery import downsample
@@ -16,6 +17,7 @@ def test_downsample_is_block_mean():
     assert np.allclose(d[1, 2], a[2:4, 4:6].mean((0, 1)))
 
 
+@pytest.mark.slow
 def test_gallery_cli_with_and_without_reference(tmp_path, capsys):
     out = tmp_path / "g"
     # --scale 1: rendered at the reference's 128x128, so the error column is filled

@@ -76,6 +76,7 @@ def test_auto_resolution_and_csr():
 
 
 # ------------------------------------------------------------ traversal vs brute
+@pytest.mark.slow
 def test_random_soup_spheres_plane(loop_mode):
     rng = np.random.default_rng(2)
     tris = soup(rng, 3000)
@@ -99,6 +100,7 @@ def test_random_soup_spheres_plane(loop_mode):
     assert (gp[gv] == F + S).any()
 
 
+@pytest.mark.slow
 def test_large_triangles_span_many_cells(loop_mode):
     # big triangles crossing many cells + small ones: a hit found beyond the
     # current cell's exit must not stop the walk
@@ -116,6 +118,7 @@ def test_large_triangles_span_many_cells(loop_mode):
         UniformGrid.skip_empty = True
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scale", [1e-4, 1e4])
 def test_scaled_scenes(scale):
     rng = np.random.default_rng(3)
@@ -127,6 +130,7 @@ def test_scaled_scenes(scale):
     compare(sc, o, d)
 
 
+@pytest.mark.slow
 def test_watertight_closed_mesh(loop_mode):
     v, f = icosphere(3)  # 1280 faces sharing vertices bitwise
     rng = np.random.default_rng(4)
@@ -148,6 +152,7 @@ def test_watertight_closed_mesh(loop_mode):
         assert UniformGrid(sc, resolution=res).intersect(O, D, Float(INF)).valid.numpy().all()
 
 
+@pytest.mark.slow
 def test_rays_starting_on_surfaces():
     rng = np.random.default_rng(5)
     tris = soup(rng, 500)
@@ -159,6 +164,7 @@ def test_rays_starting_on_surfaces():
     assert (gt[gv] > 0).all()
 
 
+@pytest.mark.slow
 def test_single_triangle_flat_box(loop_mode):
     tri = np.float64([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]])  # flat scene box (z extent 0)
     R = 1000

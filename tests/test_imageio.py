@@ -140,7 +140,8 @@ def test_hdr_rle_decode(tmp_path):
 def test_hdr_old_style_rle(tmp_path):
     w = 5
     px = [[200, 100, 50, 130], [1, 1, 1, 3], [10, 20, 30, 128]]  # repeat 3 times
-    data = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n" + f"-Y 1 +X {w}\n".encode() + bytes(sum(px, []))
+    data = (b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n" + f"-Y 1 +X {w}\n".encode()
+            + bytes(sum(px, [])))
     (tmp_path / "o.hdr").write_bytes(data)
     img = read_image(tmp_path / "o.hdr")
     assert img.shape == (1, w, 3)
@@ -148,6 +149,7 @@ def test_hdr_old_style_rle(tmp_path):
     assert img[0, 0, 0] == 200 * 2.0 ** -6
 
 
+@pytest.mark.mitsuba
 def test_seed_environment_hdr():
     if not ENV_HDR.is_file():
         pytest.skip("shared/seed/scenes/environment.hdr is not present")
@@ -190,11 +192,43 @@ def test_read_errors(tmp_path):
         read_image(tmp_path / "a.gif")
     for name in ("bad.exr", "bad.png", "bad.hdr", "bad.pfm", "bad.jpg"):
         (tmp_path / name).write_bytes(b"not an image at all")
-        with pytest.raises(SceneError):
+        with pytest.raises(SceneError) as ei:
             read_image(tmp_path / name)
+        assert str(ei.value).startswith(str(tmp_path / name) + ": ") and "\n" not in str(ei.value)
     # truncated RLE .hdr
     _rle_hdr(tmp_path / "t.hdr", np.full((4, 20, 4), 130, np.uint8))
     data = (tmp_path / "t.hdr").read_bytes()
     (tmp_path / "t.hdr").write_bytes(data[: len(data) - 10])
     with pytest.raises(SceneError, match="hdr"):
         read_image(tmp_path / "t.hdr")
+
+
+def test_hdr_pfm_refusals(tmp_path):
+    rgbe = bytes([128, 0, 0, 129, 0, 128, 0, 129])
+    head = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n"
+    (tmp_path / "up.hdr").write_bytes(head + b"+Y 2 +X 1\n" + rgbe)
+    with pytest.raises(SceneError, match=r"up\.hdr: unsupported .hdr resolution line '\+Y 2"):
+        read_image(tmp_path / "up.hdr")
+    (tmp_path / "ok.hdr").write_bytes(head + b"-Y 2 +X 1\n" + rgbe)
+    np.testing.assert_array_equal(read_image(tmp_path / "ok.hdr")[:, 0], [[1, 0, 0], [0, 1, 0]])
+    (tmp_path / "xyz.hdr").write_bytes(head.replace(b"rgbe", b"xyze") + b"-Y 2 +X 1\n" + rgbe)
+    with pytest.raises(SceneError, match="XYZ"):
+        read_image(tmp_path / "xyz.hdr")
+    (tmp_path / "huge.hdr").write_bytes(head + b"-Y 1000000 +X 1000000\n" + rgbe)
+    with pytest.raises(SceneError, match="huge.hdr: .*memory"):
+        read_image(tmp_path / "huge.hdr")
+    # content must match the extension: a PNG named .pfm is refused
+    Image.fromarray(np.zeros((2, 2, 3), np.uint8)).save(tmp_path / "p.png")
+    (tmp_path / "p.pfm").write_bytes((tmp_path / "p.png").read_bytes())
+    with pytest.raises(SceneError, match="not a .pfm file"):
+        read_image(tmp_path / "p.pfm")
+
+
+@pytest.mark.mitsuba
+def test_float_formats_leave_mitsuba_variant(tmp_path):
+    import mitsuba as mi
+
+    before = mi.variant()
+    write_image(tmp_path / "a.hdr", _img())
+    read_image(tmp_path / "a.hdr")
+    assert mi.variant() == before

@@ -1,6 +1,7 @@
 """Point and directional lights (drpt/render/lights/delta.py), against Mitsuba."""
 
 import numpy as np
+import pytest
 
 from drpt.scene import load_scene
 
@@ -32,6 +33,7 @@ def scene(tmp_path, *lights):
     return load_scene(p)
 
 
+@pytest.mark.mitsuba
 def test_point_light_matches_mitsuba(tmp_path):
     s = scene(tmp_path, "PointLight { position 2 4 2  color 20 20 20 }")
     r, ref, ref_var = render_both(s, 48, 32, 64)
@@ -39,6 +41,7 @@ def test_point_light_matches_mitsuba(tmp_path):
     assert_agree(r, ref, ref_var)
 
 
+@pytest.mark.mitsuba
 def test_directional_and_scaled_point_light_match_mitsuba(tmp_path):
     s = scene(tmp_path, "DirectionalLight { direction -1 -2 -1  color 1.5 1.4 1.2 }",
               "PointLight { position -2 3 1  color 10 10 10  attenuation 0 0 2 }")

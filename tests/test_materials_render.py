@@ -12,6 +12,8 @@ from drpt.scene import load_scene
 
 from render_check import assert_agree, render_both
 
+pytestmark = pytest.mark.mitsuba
+
 MTL = """
 newmtl white
 Kd 0.7 0.7 0.7

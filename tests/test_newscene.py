@@ -47,6 +47,8 @@ def rel_mse(x, ref):
     return float(np.mean((x - ref) ** 2 / (ref**2 + 1e-2)))
 
 
+@pytest.mark.slow
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("name", ["newscene", "newscene_hard"])
 def test_newscene_converges_to_mitsuba_without_speckles(name):
     mi = pytest.importorskip("mitsuba")

@@ -3,6 +3,7 @@ regeneration (``sample_sequence``, what the renderer runs)."""
 
 import drjit as dr
 import numpy as np
+import pytest
 from drjit.auto import Bool, Float, PCG32, UInt32
 
 from conftest import SCENES
@@ -43,6 +44,7 @@ def test_first_regenerated_path_is_the_single_path():
     assert (L.numpy() > 0).mean() > 0.5  # most values are lit: a real comparison
 
 
+@pytest.mark.slow
 def test_sequence_mean_matches_independent_paths():
     """k paths one after another in a lane estimate the same image as k lanes
     with one path each (newscene, Cook-Torrance): per color channel, the image

@@ -43,6 +43,7 @@ def reference():
     return read_image(reference_path("cornellbox")), spp
 
 
+@pytest.mark.slow
 def test_seed_flags_render_matches_mitsuba_reference(tmp_path, reference, capsys):
     ref, _ = reference
     out = tmp_path / "cornell.exr"
@@ -70,6 +71,8 @@ def test_no_bias_against_mitsuba_reference(reference):
     assert np.abs(z_biased).max() > 4.5
 
 
+@pytest.mark.slow
+@pytest.mark.mitsuba
 def test_live_mitsuba_export_agrees_at_fixed_depth():
     # Non-square, truncated depth (exercises the depth convention), Mitsuba
     # rendered now from the in-memory export.

@@ -55,6 +55,7 @@ def light_scene(tmp_path, n):
     return load_scene(d / "s.txt")
 
 
+@pytest.mark.slow
 def test_many_emissive_triangles_are_not_noisier(tmp_path):
     opts = RenderOptions(width=32, height=24, spp=32, progress=False, path=PathOptions(max_depth=2))
     few = Renderer(light_scene(tmp_path, 1), opts).render()
@@ -65,6 +66,7 @@ def test_many_emissive_triangles_are_not_noisier(tmp_path):
     assert 0.8 < ratio < 1.25, ratio
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["cornellbox.txt", "newscene.txt"])
 def test_seed_scenes_render_in_whitted_mode(seed_dir, tmp_path, name, capsys):
     out = tmp_path / "w.png"

@@ -52,6 +52,7 @@ def test_diningroom_triangle_counts_scale(diningroom):
     assert diningroom.triangle_count() >= 500_000  # built in memory, not written
 
 
+@pytest.mark.slow
 def test_diningroom_scene(diningroom, tmp_path):
     n = diningroom.main(tmp_path, triangles=20_000)
     assert 20_000 <= n <= 22_000
@@ -82,6 +83,7 @@ def test_diningroom_scene(diningroom, tmp_path):
     _tiny_render(scene)
 
 
+@pytest.mark.slow
 def test_showcase_scenes(showcase, tmp_path):
     n = showcase.main(tmp_path)
     assert (tmp_path / "showcase.obj").stat().st_size < 2_200_000

@@ -186,6 +186,7 @@ def test_bad_files_name_the_file(tmp_path):
         TextureSet([bad_exr])
 
 
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("kind", ["png", "exr", "gray", "rgba"])
 def test_equals_mitsuba_bitmap(kind, exr, png, tmp_path):
     from PIL import Image
@@ -264,6 +265,7 @@ Group {
 """
 
 
+@pytest.mark.mitsuba
 def test_textured_render_matches_mitsuba(tmp_path):
     """Two textures (PNG on the floor with uvs beyond [0, 1], EXR on the back
     wall) rendered by drpt and by Mitsuba through the exporter."""

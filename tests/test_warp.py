@@ -11,6 +11,7 @@ from drpt.render import warp
 from chi2util import run_chi2
 
 
+@pytest.mark.mitsuba
 def test_cosine_hemisphere_chi2():
     ok, msg = run_chi2(warp.square_to_cosine_hemisphere,
                        lambda w: warp.cosine_hemisphere_pdf(w.z))
@@ -57,6 +58,7 @@ def test_frame_orthonormal_roundtrip(n):
     assert np.allclose(np.array(f.to_local(Array3f(*map(float, n)))).ravel(), [0, 0, 1], atol=1e-6)
 
 
+@pytest.mark.mitsuba
 def test_chi2_harness_rejects_a_wrong_pdf():
     # Negative control: the cosine sampler against the uniform-hemisphere pdf.
     ok, _ = run_chi2(warp.square_to_cosine_hemisphere,

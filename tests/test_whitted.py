@@ -6,6 +6,7 @@ light (see the module docstring). These tests use such scenes.
 """
 
 import numpy as np
+import pytest
 
 from drpt.options import PathOptions
 from drpt.options import RenderOptions
@@ -64,6 +65,7 @@ def test_ambient_term_adds_ambient_times_kd(tmp_path):
     assert (coverage[..., 0] > 1 - 1e-4).mean() > 0.1  # pixels fully on the sphere
 
 
+@pytest.mark.mitsuba
 def test_mirror_scene_matches_mitsuba_path_at_depth_3(tmp_path):
     # Point light, one convex diffuse sphere, one mirror sphere, black
     # background: Mitsuba's paths of up to 3 segments are exactly Whitted's

@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DrptError
+from .table import markdown_table
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_SCENES = [ROOT / "scenes" / "cornellbox" / "cornellbox.txt",
@@ -303,14 +304,9 @@ def format_table(rows: list[dict], mitsuba: bool) -> str:
             ("accel_mib", "accel MiB"), ("primary_mrays", "primary Mrays/s"),
             ("incoherent_mrays", "incoherent Mrays/s"), ("shadow_mrays", "shadow Mrays/s"),
             ("render_s", "render s"), ("msamples_s", "Msamples/s")]
-    lines = []
-    hdr = [c[1] for c in cols]
-    lines.append("| " + " | ".join(hdr) + " |")
-    lines.append("|" + "---|" * len(hdr))
-    for r in rows:
-        lines.append("| " + " | ".join(_fmt(r.get(k)) for k, _ in cols) + " |")
+    lines = [markdown_table([t for _, t in cols], ([_fmt(r.get(k)) for k, _ in cols] for r in rows),
+                            padded_rule=False)]
     if mitsuba:
-        seen = set()
         mcols = [("scene", "scene"), ("mi_load_s", "load s"),
                  ("mi_primary_mrays", "primary Mrays/s"),
                  ("mi_incoherent_mrays", "incoherent Mrays/s"),
@@ -318,19 +314,21 @@ def format_table(rows: list[dict], mitsuba: bool) -> str:
                  ("mi_msamples_s", "Msamples/s")]
         from ..backend import mitsuba_variant
 
-        lines += ["", f"Mitsuba 3 ({mitsuba_variant()}), same rays and render settings:", "",
-                  "| " + " | ".join(c[1] for c in mcols) + " |", "|" + "---|" * len(mcols)]
+        first = []  # each scene's first row: Mitsuba's numbers do not depend on the accel
         for r in rows:
-            if r["scene"] not in seen:
-                seen.add(r["scene"])
-                lines.append("| " + " | ".join(_fmt(r.get(k)) for k, _ in mcols) + " |")
+            if all(f["scene"] != r["scene"] for f in first):
+                first.append(r)
+        lines += ["", f"Mitsuba 3 ({mitsuba_variant()}), same rays and render settings:", "",
+                  markdown_table([t for _, t in mcols],
+                                 ([_fmt(r.get(k)) for k, _ in mcols] for r in first),
+                                 padded_rule=False)]
         rcols = [("scene", "scene"), ("accel", "accel")] + list(RATIOS)
         lines += ["", "drpt / Mitsuba (> 1: drpt faster; build compares Mitsuba's whole "
                       "scene load):", "",
-                  "| " + " | ".join(c[1] for c in rcols) + " |", "|" + "---|" * len(rcols)]
-        for r in rows:
-            lines.append("| " + " | ".join(
-                f"{r[k]:.2f}x" if k.startswith("ratio") else str(r[k]) for k, _ in rcols) + " |")
+                  markdown_table([t for _, t in rcols],
+                                 ([f"{r[k]:.2f}x" if k.startswith("ratio") else str(r[k])
+                                   for k, _ in rcols] for r in rows),
+                                 padded_rule=False)]
     return "\n".join(lines)
 
 

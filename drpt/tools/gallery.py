@@ -55,6 +55,7 @@ import numpy as np
 
 from ..errors import DrptError, warn
 from . import reference as refs
+from .table import markdown_table
 
 __all__ = ["add_parser", "main", "downsample", "render_gallery"]
 
@@ -199,9 +200,7 @@ EXPLAIN = ("Error columns compare the render, box-downsampled to the size of the
 
 
 def _write_pages(out: Path, rows: list[dict]) -> None:
-    md = ["# drpt gallery", "", EXPLAIN, "",
-          "| " + " | ".join(HEADER) + " |", "|" + " --- |" * len(HEADER)]
-    md += ["| " + " | ".join(_cells(r)) + " |" for r in rows]
+    md = ["# drpt gallery", "", EXPLAIN, "", markdown_table(HEADER, [_cells(r) for r in rows])]
     md.append("")
     for r in rows:
         md += [f"## {r['name']}", "", f"![{r['name']}]({r['image']})", "",

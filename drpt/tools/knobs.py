@@ -70,6 +70,7 @@ from .reference import (
     check_reference_args,
     get_reference,
 )
+from . import table as _table
 
 KNOBS = ("depth", "rr", "accel", "bsdf")
 RR_OFF_DEPTH = 64
@@ -291,17 +292,14 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
 
 
 def markdown_table(rows: list[dict]) -> str:
-    lines = ["| knob | setting | seconds | Msamples/s | excess relMSE | efficiency vs default "
-             f"| mean bias (± s.e., {rows[0]['bias_spp']} spp) |",
-             "| --- | --- | ---: | ---: | ---: | ---: | --- |"]
+    header = ["knob", "setting", "seconds", "Msamples/s", "excess relMSE",
+              "efficiency vs default", f"mean bias (± s.e., {rows[0]['bias_spp']} spp)"]
+    cells = []
     for r in rows:
         bias = f"{100 * r['mean_bias']:+.2f}% ± {100 * r['mean_bias_se']:.2f}%"
         bias += " **biased**" if r["biased"] else ""
         eff = r["efficiency"]
-        lines.append(f"| {r['knob']} | {r['setting']} | {r['seconds']:.2f} | "
-                     f"{r['samples_per_second'] / 1e6:.3f} | {r['excess_rel_mse']:.2e} | "
-                     f"{eff:.2f} | {bias} |" if np.isfinite(eff) else
-                     f"| {r['knob']} | {r['setting']} | {r['seconds']:.2f} | "
-                     f"{r['samples_per_second'] / 1e6:.3f} | {r['excess_rel_mse']:.2e} | - | "
-                     f"{bias} |")
-    return "\n".join(lines)
+        cells.append([r["knob"], r["setting"], f"{r['seconds']:.2f}",
+                      f"{r['samples_per_second'] / 1e6:.3f}", f"{r['excess_rel_mse']:.2e}",
+                      f"{eff:.2f}" if np.isfinite(eff) else "-", bias])
+    return _table.markdown_table(header, cells, align="--rrrr-")
