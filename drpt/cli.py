@@ -121,7 +121,7 @@ def _int_flag(name: str, text: str | None) -> int | None:
 
 def _bvh_options(args: argparse.Namespace, accel: str, seed_mode: bool) -> dict:
     """RenderOptions fields for the BVH build rule from the render flags."""
-    from .accel.bvh_build import METHODS, NO_MIN_LEAF
+    from .accel import METHODS, NO_MIN_LEAF
 
     resolution = _int_flag("-resolution", args.resolution)
     k = _int_flag("--sah-threshold/-SAHeuristic", args.sah_threshold)

@@ -13,7 +13,7 @@ from drjit.auto import Float, UInt32
 from drpt.accel import build_accel
 from drpt.accel.bvh4 import (EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_START_MASK, PAD_BYTES,
                              BVH4, collapse_bvh4, stack_entries)
-from drpt.accel.bvh_build import build_bvh
+from drpt.accel.build import build_bvh
 
 from test_bvh import brute_hits, make_scene, rays, soup
 

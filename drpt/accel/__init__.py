@@ -18,7 +18,7 @@ from __future__ import annotations
 from .brute import BruteForce
 from .bvh import BVH, INVALID, Hit
 from .bvh4 import BVH4
-from .bvh_build import METHODS, NO_MIN_LEAF
+from .build import METHODS, NO_MIN_LEAF
 from .grid import UniformGrid
 from .inline import MAX_PRIMS as INLINE_MAX_PRIMS
 from .inline import InlineList
@@ -54,7 +54,7 @@ def build_accel(scene, kind: str = "auto", method: str = "auto", leaf_size: int 
             BVH it is collapsed from, :mod:`drpt.accel.bvh`: 2-3x slower to
             trace, kept for comparison), ``"grid"`` (uniform grid, 3D-DDA) or
             ``"brute"``.
-        method: BVH split rule (:mod:`drpt.accel.bvh_build`): ``"auto"``
+        method: BVH split rule (:mod:`drpt.accel.build`): ``"auto"``
             (default: ``"sah"`` up to 100k primitives, ``"ploc"`` above),
             ``"sah"`` (binned SAH), ``"median"`` (object median),
             ``"threshold"`` (the seed's rule: SAH in nodes of at most

@@ -5,7 +5,7 @@ The default accelerator is the 4-wide BVH collapsed from this tree
 this one stays available as ``build_accel(kind="bvh2")`` / ``--accel bvh2``.
 
 :class:`BVH` holds the triangles and spheres of a :class:`~drpt.scene.model.Scene`
-in one bounding volume hierarchy (built by :mod:`drpt.accel.bvh_build`);
+in one bounding volume hierarchy (built by :func:`~drpt.accel.build.build_bvh`);
 planes are unbounded and are tested by brute force for every ray, before the
 traversal, so that a near plane already shortens it.
 
@@ -41,7 +41,7 @@ Each iteration of a lane does, in this order:
 Device data (float32, in BVH order for coherent gathers): node boxes as
 ``8 * M`` floats ``[lo.xyz, 0, hi.xyz, 0]`` read with two ``Array4f``
 gathers; node links as ``2 * M`` uint32 ``[a, count]`` (layout of
-:class:`~drpt.accel.bvh_build.BVHArrays`); triangle vertices ``p0, p1, p2`` as
+:class:`~drpt.accel.tree.BVHArrays`); triangle vertices ``p0, p1, p2`` as
 ``9 * F`` floats (vertices, not edges, because the watertight test needs
 bitwise identical shared vertices, see :mod:`drpt.geometry.triangle`);
 spheres as ``4 * S`` floats ``[c.xyz, r]``. When the scene mixes triangles and
@@ -60,7 +60,8 @@ from drjit.auto import Array3f, Array4f, Bool, Float, UInt32
 from ..geometry.plane import intersect_plane
 from ..geometry.sphere import intersect_sphere
 from ..geometry.triangle import RayPrep, watertight_permuted
-from .bvh_build import build_bvh, round_down_f32, round_up_f32
+from .build import build_bvh
+from .tree import round_down_f32, round_up_f32
 
 INVALID = 0xFFFFFFFF
 STACK_SIZE = 64
@@ -237,7 +238,7 @@ class BVH:
 
     Args:
         scene: the :class:`~drpt.scene.model.Scene`.
-        method: builder split rule (:data:`~drpt.accel.bvh_build.METHODS`;
+        method: builder split rule (:data:`~drpt.accel.build.METHODS`;
             default ``"auto"``: full SAH, or PLOC above 100k primitives).
         leaf_size: maximum primitives per leaf.
         bins: SAH bins.

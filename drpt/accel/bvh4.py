@@ -3,7 +3,7 @@ traversal in Dr.Jit.
 
 :class:`BVH4` has the interface of :class:`~drpt.accel.bvh.BVH` (same
 primitive ids, :class:`~drpt.accel.bvh.Hit` results, planes tested brute force
-before the traversal) and the same builder (:func:`~drpt.accel.bvh_build.build_bvh`
+before the traversal) and the same builder (:func:`~drpt.accel.build.build_bvh`
 with all its split rules); the binary tree is collapsed into a 4-wide one
 (:func:`collapse_bvh4`), which halves the number of loop iterations spent in
 inner nodes and tests four child boxes per iteration from six packet gathers.
@@ -142,7 +142,8 @@ from drjit.auto import Array3f, Array4f, Array4u, Float, UInt32
 from ..geometry.triangle import RayPrep, watertight_permuted
 from .bvh import (BVH, INVALID, STACK_SIZE, SceneGeometry, _nbytes, leaf_orders,
                   leaf_primitive, nearest_primitive, primitive_bounds, sphere_buffer)
-from .bvh_build import BVHArrays, _area, build_bvh
+from .build import build_bvh
+from .tree import BVHArrays, box_area
 
 _SLAB_EPS = 1.0 + 4.0 * 2.0**-24  # robust slab test (Ize 2013): widen t_far
 _INF = float("inf")
@@ -205,7 +206,7 @@ def test_triangle4(tri_buf, idx, prep: RayPrep, bt, active):
 # ------------------------------------------------------------------ collapse
 @dataclass
 class BVH4Arrays:
-    """A binary :class:`~drpt.accel.bvh_build.BVHArrays` collapsed to a 4-wide
+    """A binary :class:`~drpt.accel.tree.BVHArrays` collapsed to a 4-wide
     tree (layout in :func:`collapse_bvh4`)."""
 
     box: np.ndarray  # (K, 24) float32: lo.x[4], lo.y[4], lo.z[4], hi.x[4], hi.y[4], hi.z[4]
@@ -241,7 +242,7 @@ def collapse_bvh4(b: BVHArrays) -> BVH4Arrays:
         raise ValueError(f"leaves hold at most {LEAF_MAX_COUNT} primitives")
     if b.prim_order.size > LEAF_START_MASK + 1:
         raise ValueError("too many primitives for the 4-wide BVH encoding")
-    area = _area(b.node_lo, b.node_hi)
+    area = box_area(b.node_lo, b.node_hi)
     root_leaf = bool(cnt[0] > 0 or M == 1)
     boxes, refs = [], []
     frontier = np.zeros(1, np.int64)
