@@ -3,7 +3,7 @@
 :func:`build_accel` returns an object with
 
 * ``intersect(o, d, tmax, active=True) -> Hit`` -- closest hit with
-  ``0 < t < tmax`` (:class:`~drpt.accel.bvh.Hit`: ``t`` = inf and
+  ``0 < t < tmax`` (:class:`~drpt.accel.protocol.Hit`: ``t`` = inf and
   ``prim`` = 0xFFFFFFFF on a miss, ``u, v`` triangle barycentrics, ``valid``);
 * ``occluded(o, d, tmax, active=True) -> Bool`` -- any hit with ``0 < t < tmax``;
 * ``build_seconds``, ``nbytes`` (device bytes) and ``stats`` (``nodes``,
@@ -16,12 +16,13 @@ Global primitive ids: triangles ``0..F-1``, spheres ``F..F+S-1``, planes
 from __future__ import annotations
 
 from .brute import BruteForce
-from .bvh import BVH, INVALID, Hit
+from .bvh import BVH
 from .bvh4 import BVH4
 from .build import METHODS, NO_MIN_LEAF
 from .grid import UniformGrid
 from .inline import MAX_PRIMS as INLINE_MAX_PRIMS
 from .inline import InlineList
+from .protocol import INVALID, Hit
 
 __all__ = ["BVH", "BVH4", "BruteForce", "Hit", "INVALID", "InlineList", "KINDS", "METHODS",
            "NO_MIN_LEAF", "UniformGrid", "build_accel", "resolve_kind"]

@@ -30,15 +30,14 @@ from drjit.auto import Array3f, Bool, Float, UInt32
 from ..geometry.plane import intersect_plane
 from ..geometry.sphere import intersect_sphere
 from ..geometry.triangle import RayPrep, watertight_permuted
-from .brute import BruteForce
-from .bvh import INVALID
+from .protocol import INVALID, Hit
 
 #: Largest primitive count (triangles + spheres + planes) that ``kind="auto"``
 #: compiles inline; above it, the BVH. Measured crossover: see the README.
 MAX_PRIMS = 64
 
 
-class InlineList(BruteForce):
+class InlineList:
     """Brute force's queries with the scene's primitives as constants.
 
     Attributes: ``build_seconds``, ``nbytes`` (0: no device data), ``stats``.
@@ -56,7 +55,17 @@ class InlineList(BruteForce):
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": self.F + self.S + self.P}
         self.build_seconds = time.perf_counter() - t0
 
-    # intersect() and occluded() are BruteForce's, around this class's _trace()
+    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
+        """Closest hit with ``0 < t < tmax``."""
+        bt, bj, bu, bv = self._trace(o, d, tmax, active)
+        valid = bj != INVALID
+        return Hit(dr.select(valid, bt, float("inf")), bj, bu, bv, valid)
+
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
+        """Whether anything is hit with ``0 < t < tmax``."""
+        _, bj, _, _ = self._trace(o, d, tmax, active)
+        return bj != INVALID
+
     def _trace(self, o, d, tmax, active):
         o, d, active = Array3f(o), Array3f(d), Bool(active)
         bt = dr.select(active, Float(tmax), 0.0)
