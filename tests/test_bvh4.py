@@ -117,9 +117,12 @@ def test_identical_boxes_collapse_balanced():
 
 def test_split_stack_matches_brute(monkeypatch):
     """Stacks longer than one local array (forced tiny chunks) stay correct."""
+    import dataclasses
+
     import drpt.accel.bvh4 as m
 
-    monkeypatch.setattr(m, "LOCAL_CHUNK", 4)
+    monkeypatch.setitem(backend.POLICIES, backend.name(),
+                        dataclasses.replace(backend.policy(), local_chunk=4))
     rng = np.random.default_rng(9)
     sc = make_scene(soup(rng, 400))
     R = 2000

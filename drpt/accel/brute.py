@@ -20,7 +20,7 @@ from drjit.auto import Array3f, Bool, Float, UInt32
 
 from ..geometry.triangle import RayPrep
 from .primitives import SceneGeometry, test_sphere, test_triangle
-from .protocol import INVALID, Hit
+from .protocol import INVALID, AccelParams, Hit
 
 
 class BruteForce:
@@ -38,6 +38,11 @@ class BruteForce:
         self.nbytes = geo.nbytes()
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": geo.N}
         self.build_seconds = time.perf_counter() - t0
+
+    @classmethod
+    def from_params(cls, scene, p: AccelParams) -> BruteForce:
+        """The registry's constructor (:mod:`drpt.accel.registry`)."""
+        return cls(scene)
 
     def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
         """Closest hit with ``0 < t < tmax``."""

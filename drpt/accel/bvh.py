@@ -49,7 +49,7 @@ from .build import build_bvh
 from .device import SLAB_EPS, device_array, nbytes
 from .device import slab as box_slab
 from .primitives import SceneGeometry, leaf_primitive, nearest_primitive, primitive_bounds
-from .protocol import INVALID, Hit
+from .protocol import INVALID, AccelParams, Hit
 
 STACK_SIZE = 64
 
@@ -97,6 +97,12 @@ class BVH:
             geo.upload_primitives(scene, b.prim_order)
         self.nbytes = nbytes(self.node_box, self.node_ac) + geo.nbytes()
         self.build_seconds = time.perf_counter() - t0
+
+    @classmethod
+    def from_params(cls, scene, p: AccelParams) -> BVH:
+        """The registry's constructor (:mod:`drpt.accel.registry`)."""
+        return cls(scene, method=p.method, leaf_size=p.leaf_size, bins=p.bins,
+                   min_leaf=p.min_leaf, sah_threshold=p.sah_threshold)
 
     # ---------------------------------------------------------------- queries
     def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:

@@ -55,8 +55,9 @@ incoherent / shadow), newscene 1.33x / 1.09x / 1.05x, dining room 1.08x /
 Stack size: a lane at a node of depth ``k`` (root = 0) holds at most three
 entries per ancestor level, and a push round adds at most three, so
 ``3 * (depth4 + 1)`` entries suffice; :func:`stack_entries` adds one spare.
-The stack is split into ``dr.alloc_local`` arrays of at most ``LOCAL_CHUNK``
-(16) entries (see "Local arrays of at most 16 entries" below): the Cornell box
+The stack is split into ``dr.alloc_local`` arrays of at most ``local_chunk``
+entries (:class:`drpt.backend.Policy`, read at trace time; 16 on both
+backends, see "Local arrays of at most 16 entries" below): the Cornell box
 needs one, 100k identical triangles two (16 + 9), the dining room three or
 four. Every read and write of a local array with
 per-lane indices is a masked packet gather or scatter, paid even when its
@@ -84,7 +85,7 @@ of the local arrays: in two concurrent loops of 24 reproducer processes, the
 25-entry stack in one array crashed 4 times, split into arrays of at most 16
 entries (64 bytes) never; split, it has not crashed in 396 reproducer
 processes (at 1 crash in 6, the probability of that is ~4e-32) nor in the
-test suite. Hence ``LOCAL_CHUNK = 16``.
+test suite. Hence ``local_chunk = 16`` (:class:`drpt.backend.Policy`).
 Ruled out, with evidence:
 
 * stack overflow: with ``track_stack`` the deepest stack was 29 entries of
@@ -130,6 +131,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array3f, Array4f, Array4u, Bool, Float, UInt32
 
+from .. import backend
 from ..geometry.triangle import RayPrep, watertight_permuted
 from .build import build_bvh
 from .bvh import STACK_SIZE
@@ -137,7 +139,7 @@ from .bvh4_nodes import (EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_MAX_COUNT,
                          LEAF_START_MASK, collapse_bvh4)
 from .device import SLAB_EPS, device_array, nbytes, slab
 from .primitives import SceneGeometry, leaf_primitive, nearest_primitive, primitive_bounds
-from .protocol import INVALID, Hit
+from .protocol import INVALID, AccelParams, Hit
 
 _INF = float("inf")
 _FLT_MAX = 3.4028234663852886e38
@@ -167,9 +169,6 @@ def test_triangle4(tri_buf, idx, prep: RayPrep, bt, active):
 
 
 # ------------------------------------------------------------------ stack
-LOCAL_CHUNK = 16  # entries per dr.alloc_local array (64 bytes of 32-bit values)
-
-
 def stack_entries(depth4: int) -> int:
     """Per-lane stack entries that a 4-wide tree of depth ``depth4`` needs
     (see the module docstring), plus one spare."""
@@ -271,6 +270,12 @@ class BVH4:
         self.nbytes = nbytes(self.node_box, self.node_ref) + geo.nbytes()
         self.build_seconds = time.perf_counter() - t0
 
+    @classmethod
+    def from_params(cls, scene, p: AccelParams) -> BVH4:
+        """The registry's constructor (:mod:`drpt.accel.registry`)."""
+        return cls(scene, method=p.method, leaf_size=p.leaf_size, bins=p.bins,
+                   min_leaf=p.min_leaf, sah_threshold=p.sah_threshold)
+
     # ---------------------------------------------------------------- queries
     def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
         """Closest hit with ``0 < t < tmax``."""
@@ -313,7 +318,7 @@ class BVH4:
         bv = dr.zeros(Float, n)
         msp = dr.zeros(UInt32, n)
         top = dr.full(UInt32, INVALID, n)  # the stack's top entry, in a register
-        chunk = LOCAL_CHUNK
+        chunk = backend.policy().local_chunk
         sizes = [min(chunk, self.stack_size - c) for c in
                  range(0, self.stack_size, chunk)]
         stk_n = tuple(dr.alloc_local(UInt32, z) for z in sizes)

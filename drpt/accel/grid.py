@@ -75,7 +75,7 @@ from drjit.auto import Array3f, Bool, Float, Int32, UInt32
 from ..geometry.triangle import RayPrep
 from .device import device_array, nbytes, slab
 from .primitives import SceneGeometry, nearest_primitive
-from .protocol import INVALID, Hit
+from .protocol import INVALID, AccelParams, Hit
 
 MAX_RES = 256  # cells per axis (automatic and explicit resolutions)
 MAX_REFS = 1 << 26  # cap on primitive references (256 MB of uint32)
@@ -275,6 +275,11 @@ class UniformGrid:
                 "max_refs_per_cell": int(counts.max()) if counts.size else 0})
         self.nbytes = nbytes(self.offsets, self.refs) + geo.nbytes()
         self.build_seconds = time.perf_counter() - t0
+
+    @classmethod
+    def from_params(cls, scene, p: AccelParams) -> UniformGrid:
+        """The registry's constructor (:mod:`drpt.accel.registry`)."""
+        return cls(scene, resolution=p.resolution)
 
     # ---------------------------------------------------------------- queries
     def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:

@@ -14,9 +14,12 @@ sphere and plane tests), evaluated in the same order as
 :class:`~drpt.accel.brute.BruteForce`, so the two agree bit for bit.
 
 The code grows with the scene (about 80 vector instructions per triangle),
-hence :data:`MAX_PRIMS`; :func:`~drpt.accel.build_accel` picks this
-accelerator by itself (``kind="auto"``) only below that count. Each scene
-compiles its own kernels (the constants are part of the code).
+hence a limit: :func:`~drpt.accel.build_accel` picks this accelerator by
+itself (``kind="auto"``, :func:`~drpt.accel.registry.resolve_kind`) only for
+scenes of at most ``inline_max_prims`` primitives (triangles + spheres +
+planes; :class:`drpt.backend.Policy`, 64 on both backends; measured
+crossover: see the README). Each scene compiles its own kernels (the
+constants are part of the code).
 """
 
 from __future__ import annotations
@@ -30,11 +33,7 @@ from drjit.auto import Array3f, Bool, Float, UInt32
 from ..geometry.plane import intersect_plane
 from ..geometry.sphere import intersect_sphere
 from ..geometry.triangle import RayPrep, watertight_permuted
-from .protocol import INVALID, Hit
-
-#: Largest primitive count (triangles + spheres + planes) that ``kind="auto"``
-#: compiles inline; above it, the BVH. Measured crossover: see the README.
-MAX_PRIMS = 64
+from .protocol import INVALID, AccelParams, Hit
 
 
 class InlineList:
@@ -54,6 +53,11 @@ class InlineList:
         self.nbytes = 0
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": self.F + self.S + self.P}
         self.build_seconds = time.perf_counter() - t0
+
+    @classmethod
+    def from_params(cls, scene, p: AccelParams) -> InlineList:
+        """The registry's constructor (:mod:`drpt.accel.registry`)."""
+        return cls(scene)
 
     def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
         """Closest hit with ``0 < t < tmax``."""
