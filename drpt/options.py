@@ -56,7 +56,7 @@ class RenderOptions:
     seed: int = 0
     accel: str = "auto"  # drpt.accel.build_accel kind ("auto": inline for tiny scenes, else bvh)
     grid_resolution: int | None = None  # cells per axis for accel="grid" (None: automatic)
-    bvh_method: str = "auto"  # BVH split rule, drpt.accel.bvh_build.METHODS (accel="bvh")
+    bvh_method: str = "auto"  # BVH split rule, drpt.accel.METHODS (accel="bvh")
     sah_threshold: int | None = None  # K of bvh_method="threshold" (None: the seed's 2000)
     bvh_min_leaf: int = 1  # minimum primitives per BVH leaf (the seed's -resolution)
     bsdf: str = "phong"  # how MTL materials are read, see drpt.shading

@@ -15,7 +15,8 @@ import pytest
 from drjit.auto import Array3f, Float
 
 from drpt.accel import build_accel
-from drpt.accel.bvh_build import build_bvh, check_bvh
+from drpt.accel.build import build_bvh
+from drpt.accel.tree import check_bvh
 from drpt.scene import model as M
 
 INF = float("inf")
@@ -157,9 +158,9 @@ def test_builder_invariants(variant):
 def test_auto_rule_picks_sah_small_ploc_large(monkeypatch):
     """"auto" (the default) is full SAH up to AUTO_SAH_MAX primitives, PLOC
     above it, and SAH whenever min_leaf > 1 (PLOC has none)."""
-    from drpt.accel import bvh_build
+    import drpt.accel.build as build_rules
 
-    monkeypatch.setattr(bvh_build, "AUTO_SAH_MAX", 500)
+    monkeypatch.setattr(build_rules, "AUTO_SAH_MAX", 500)
     rng = np.random.default_rng(5)
     small, large = soup(rng, 500), soup(rng, 501)
     assert build_bvh(small.min(1), small.max(1)).stats["method"] == "sah"
@@ -175,7 +176,7 @@ def test_auto_rule_picks_sah_small_ploc_large(monkeypatch):
 def test_morton_codes_interleave_bits():
     """Morton codes against the definition (bit k of x, y, z at 3k+2, 3k+1, 3k),
     with a flat axis (quantized to 0)."""
-    from drpt.accel.bvh_build import _morton30
+    from drpt.accel.tree import morton30
 
     rng = np.random.default_rng(3)
     c = rng.random((5000, 3)) * [1.0, 7.0, 0.01]
@@ -188,7 +189,7 @@ def test_morton_codes_interleave_bits():
     for bit in range(10):
         for a in range(3):
             expect |= ((q[:, a] >> bit) & 1) << (3 * bit + 2 - a)
-    codes = _morton30(c)
+    codes = morton30(c)
     assert np.array_equal(codes, expect)
     assert codes.max() < 2**30 and codes[1] & 0b100 << 27
 

@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 from drjit.auto import Float, UInt32
 
+from drpt import backend
 from drpt.accel import build_accel
-from drpt.accel.bvh4 import (EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_START_MASK, PAD_BYTES,
-                             BVH4, collapse_bvh4, stack_entries)
-from drpt.accel.bvh_build import build_bvh
+from drpt.accel.build import build_bvh
+from drpt.accel.bvh4 import BVH4, stack_entries
+from drpt.accel.bvh4_nodes import (EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_START_MASK,
+                                   collapse_bvh4)
 
 from test_bvh import brute_hits, make_scene, rays, soup
 
@@ -115,9 +117,12 @@ def test_identical_boxes_collapse_balanced():
 
 def test_split_stack_matches_brute(monkeypatch):
     """Stacks longer than one local array (forced tiny chunks) stay correct."""
+    import dataclasses
+
     import drpt.accel.bvh4 as m
 
-    monkeypatch.setattr(m, "LOCAL_CHUNK", 4)
+    monkeypatch.setitem(backend.POLICIES, backend.name(),
+                        dataclasses.replace(backend.policy(), local_chunk=4))
     rng = np.random.default_rng(9)
     sc = make_scene(soup(rng, 400))
     R = 2000
@@ -164,8 +169,9 @@ def test_uploads_padded():
     rng = np.random.default_rng(5)
     c = rng.random((7, 3)) * 10
     bvh = BVH4(make_scene(soup(rng, 300), spheres=(c, np.full(7, 0.3))))
+    PAD_BYTES = backend.policy().align_bytes
     for name, n in bvh.host_sizes.items():
-        buf = getattr(bvh, name)
+        buf = getattr(bvh.geo if name in bvh.geo.host_sizes else bvh, name)
         assert dr.width(buf) * 4 >= n * 4 + PAD_BYTES, name
     assert bvh.host_sizes["tri_buf"] == 12 * 300 and bvh.host_sizes["sph_buf"] == 4 * 7
     assert bvh.host_sizes["node_box"] == 24 * bvh.stats["nodes4"]

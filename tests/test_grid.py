@@ -65,7 +65,7 @@ def test_auto_resolution_and_csr():
     assert set(refs.tolist()) == set(range(5000))  # every primitive registered
     import drjit as dr
 
-    tri_bytes = 4 * dr.width(g.tri_buf)  # the BVH's triangle buffer layout
+    tri_bytes = 4 * dr.width(g.geo.tri_buf)  # the BVH's triangle buffer layout
     assert tri_bytes >= 36 * 5000
     assert g.nbytes == 4 * (off.size + refs.size) + tri_bytes
     # caps: per-axis maximum, flat boxes get one cell across

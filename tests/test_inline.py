@@ -14,7 +14,9 @@ from drjit.auto import Float
 from test_bvh import closed_mesh_rays, loop_mode, make_scene, rays, soup  # noqa: F401 (fixture)
 
 from drpt.accel import InlineList, build_accel, resolve_kind
-from drpt.accel.inline import MAX_PRIMS
+from drpt.backend import policy
+
+MAX_PRIMS = policy().inline_max_prims
 
 INF = float("inf")
 

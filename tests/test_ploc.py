@@ -1,4 +1,4 @@
-"""PLOC builder (drpt.accel.ploc): the nearest-neighbour kernel against a
+"""PLOC builder (drpt.accel.build_ploc): the nearest-neighbour kernel against a
 numpy reference, the tie rule, the give-up rules and the quality of its trees.
 
 Closest-hit agreement with brute force, the tree invariants and degenerate
@@ -11,8 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drpt.accel import ploc
-from drpt.accel.bvh_build import _area, build_bvh, check_bvh
+from drpt.accel import build_ploc as ploc
+from drpt.accel.build import build_bvh
+from drpt.accel.tree import box_area, check_bvh
 
 
 def box8(lo, hi):
@@ -64,7 +65,8 @@ def test_identical_boxes_merge_in_pairs():
     n = 4096
     lo = np.zeros((n, 3), np.float32)
     hi = np.ones((n, 3), np.float32)
-    left, right, _, _, batches = ploc.ploc_tree(lo, hi, np.arange(n))
+    t = ploc.ploc_tree(lo, hi, np.arange(n))
+    left, right, batches = t.left, t.right, t.batches
     assert [e - s for s, e in batches] == [n >> k for k in range(1, 13)]
     depth = np.zeros(2 * n - 1, np.int64)
     for s, e in reversed(batches):
@@ -80,7 +82,8 @@ def test_tree_structure():
     lo = (c - rng.random((n, 3))).astype(np.float32)
     hi = (c + rng.random((n, 3))).astype(np.float32)
     order = rng.permutation(n)
-    left, right, blo, bhi, batches = ploc.ploc_tree(lo, hi, order)
+    t = ploc.ploc_tree(lo, hi, order)
+    left, right, blo, bhi, batches = t.left, t.right, t.lo, t.hi, t.batches
     inner = np.arange(n, 2 * n - 1)
     kids = np.concatenate([left[inner], right[inner]])
     assert np.array_equal(np.sort(kids), np.arange(2 * n - 2))
@@ -93,7 +96,7 @@ def test_tree_structure():
 
 def sah_cost(b, ct=1.0, ci=1.0):
     """SAH cost of a binary BVHArrays tree, relative to its root's area."""
-    a = _area(b.node_lo, b.node_hi)
+    a = box_area(b.node_lo, b.node_hi)
     inner = np.flatnonzero(b.node_count == 0)
     inner = inner[inner != 1]
     leaves = b.node_count > 0

@@ -71,9 +71,9 @@ def test_untextured_scene_traces_no_texture_lookup(monkeypatch, tmp_path):
 
 
 def test_sphere_only_scene_traces_no_triangle_test(monkeypatch, tmp_path):
-    from drpt.accel import bvh, bvh4, inline
+    from drpt.accel import bvh4, inline, primitives
 
-    monkeypatch.setattr(bvh, "test_triangle", trap)
+    monkeypatch.setattr(primitives, "test_triangle", trap)
     monkeypatch.setattr(bvh4, "test_triangle4", trap)
     monkeypatch.setattr(inline, "watertight_permuted", trap)
     (tmp_path / "s.txt").write_text(

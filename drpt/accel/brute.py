@@ -1,4 +1,4 @@
-"""Brute-force reference intersector (same interface as :class:`~drpt.accel.bvh.BVH`).
+"""Brute-force reference intersector (an :class:`~drpt.accel.protocol.Accelerator`).
 
 Every ray tests every primitive: one ``dr.while_loop`` per primitive kind
 (triangles, spheres, planes) over the scene arrays in their original order.
@@ -8,7 +8,7 @@ identical inputs the two agree bit for bit up to ties between primitives at
 equal ``t``. Meant for tests and tiny scenes: cost is ``O(rays * prims)``.
 
 Hits count for ``0 < t < tmax``; ids follow the global id space of
-:mod:`drpt.accel.bvh` (triangles, then spheres, then planes).
+:mod:`drpt.accel.protocol` (triangles, then spheres, then planes).
 """
 
 from __future__ import annotations
@@ -19,32 +19,34 @@ import drjit as dr
 from drjit.auto import Array3f, Bool, Float, UInt32
 
 from ..geometry.triangle import RayPrep
-from .bvh import INVALID, Hit, SceneGeometry, _nbytes, sphere_buffer, test_sphere, \
-    test_triangle, triangle_buffer
+from .primitives import SceneGeometry, test_sphere, test_triangle
+from .protocol import INVALID, AccelParams, Hit
 
 
 class BruteForce:
     """Reference accelerator: loops over all primitives.
 
-    Attributes: ``build_seconds``, ``nbytes``, ``stats`` (like :class:`BVH`).
+    Attributes: ``build_seconds``, ``nbytes``, ``stats`` (as every
+    :class:`~drpt.accel.protocol.Accelerator`), ``geo`` (the
+    :class:`~drpt.accel.primitives.SceneGeometry`, in the scene's order).
     """
 
     def __init__(self, scene):
         t0 = time.perf_counter()
         self.geo = geo = SceneGeometry(scene)
-        self.tri_buf = Float(triangle_buffer(scene.triangles.positions)) if geo.F else None
-        self.sph_buf = (Float(sphere_buffer(scene.spheres.center, scene.spheres.radius))
-                        if geo.S else None)
-        dr.eval(self.tri_buf, self.sph_buf)
-        self.nbytes = _nbytes(self.tri_buf, self.sph_buf) + geo.plane_nbytes()
+        geo.upload_primitives(scene)
+        self.nbytes = geo.nbytes()
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": geo.N}
         self.build_seconds = time.perf_counter() - t0
 
+    @classmethod
+    def from_params(cls, scene, p: AccelParams) -> BruteForce:
+        """The registry's constructor (:mod:`drpt.accel.registry`)."""
+        return cls(scene)
+
     def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
         """Closest hit with ``0 < t < tmax``."""
-        bt, bj, bu, bv = self._trace(o, d, tmax, active)
-        valid = bj != INVALID
-        return Hit(dr.select(valid, bt, float("inf")), bj, bu, bv, valid)
+        return self.geo.hit(*self._trace(o, d, tmax, active))
 
     def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
         """Whether anything is hit with ``0 < t < tmax``."""
@@ -57,8 +59,8 @@ class BruteForce:
         bt = dr.select(active, Float(tmax), 0.0)
         bj, bu, bv = UInt32(INVALID), Float(0), Float(0)
         bt, bj = geo.intersect_planes(o, d, bt, bj, False)
-        if self.tri_buf is not None:
-            tri_buf, prep, F = self.tri_buf, RayPrep(o, d), geo.F
+        if geo.tri_buf is not None:
+            tri_buf, prep, F = geo.tri_buf, RayPrep(o, d), geo.F
 
             def body(i, bt, bj, bu, bv):
                 t, u, v, h = test_triangle(tri_buf, i, prep, bt, Bool(True))
@@ -67,8 +69,8 @@ class BruteForce:
 
             _, bt, bj, bu, bv = dr.while_loop((UInt32(0), bt, bj, bu, bv),
                                               lambda i, *_: i < F, body, label="drpt_brute_tri")
-        if self.sph_buf is not None:
-            sph_buf, F, S = self.sph_buf, geo.F, geo.S
+        if geo.sph_buf is not None:
+            sph_buf, F, S = geo.sph_buf, geo.F, geo.S
 
             def body(i, bt, bj, bu, bv):
                 t, h = test_sphere(sph_buf, i, o, d, bt, Bool(True))

@@ -1,27 +1,16 @@
 """Binary BVH ray traversal in Dr.Jit (one symbolic loop, per-lane stack).
 
-The default accelerator is the 4-wide BVH collapsed from this tree
-(:mod:`drpt.accel.bvh4`, which reuses this module's queries and leaf step);
-this one stays available as ``build_accel(kind="bvh2")`` / ``--accel bvh2``.
+The default accelerator is the 4-wide BVH collapsed from the same binary tree
+(:mod:`drpt.accel.bvh4`); this one stays available as
+``build_accel(kind="bvh2")`` / ``--accel bvh2``.
 
 :class:`BVH` holds the triangles and spheres of a :class:`~drpt.scene.model.Scene`
-in one bounding volume hierarchy (built by :mod:`drpt.accel.bvh_build`);
-planes are unbounded and are tested by brute force for every ray, before the
-traversal, so that a near plane already shortens it.
-
-Primitive ids
--------------
-One global id space, in the *original* order of the scene arrays: triangles
-``0 .. F-1``, spheres ``F .. F+S-1``, planes ``F+S .. F+S+P-1``.
-
-Results
--------
-:class:`Hit` fields: ``t`` (``inf`` when there is no hit), ``prim``
-(``0xFFFFFFFF`` when there is no hit), ``u, v`` (triangle barycentrics with
-``p = p0 + u (p1 - p0) + v (p2 - p0)``, zero for spheres, planes and misses)
-and ``valid``. Only hits with ``0 < t < tmax`` count (strictly positive, so a
-ray starting exactly on a surface does not report ``t == 0``; rounding may
-still give tiny positive ``t`` there, so callers offset spawned rays).
+in one bounding volume hierarchy (built by :func:`~drpt.accel.build.build_bvh`,
+any of its split rules); planes are unbounded and are tested by brute force
+for every ray, before the traversal, so that a near plane already shortens it
+(:class:`~drpt.accel.primitives.SceneGeometry`). Primitive ids and
+:class:`~drpt.accel.protocol.Hit` results are those of
+:mod:`drpt.accel.protocol`.
 
 Traversal
 ---------
@@ -33,20 +22,18 @@ Each iteration of a lane does, in this order:
    lane's stack (``dr.alloc_local``, 64 entries; the builder caps the depth
    at 64, and ordered traversal pushes at most one entry per level) unless
    one is current; drop it if its entry distance exceeds the closest hit;
-   for an inner node, intersect both children's boxes (adjacent records),
-   continue with the nearer one and push the farther one; for a leaf, load
-   its primitive range;
-2. *primitive phase* (when inside a leaf): test one primitive.
+   for an inner node, intersect both children's boxes (adjacent records,
+   :func:`~drpt.accel.device.slab`), continue with the nearer one and push
+   the farther one; for a leaf, load its primitive range;
+2. *primitive phase* (when inside a leaf): test one primitive
+   (:func:`~drpt.accel.primitives.nearest_primitive`).
 
-Device data (float32, in BVH order for coherent gathers): node boxes as
-``8 * M`` floats ``[lo.xyz, 0, hi.xyz, 0]`` read with two ``Array4f``
-gathers; node links as ``2 * M`` uint32 ``[a, count]`` (layout of
-:class:`~drpt.accel.bvh_build.BVHArrays`); triangle vertices ``p0, p1, p2`` as
-``9 * F`` floats (vertices, not edges, because the watertight test needs
-bitwise identical shared vertices, see :mod:`drpt.geometry.triangle`);
-spheres as ``4 * S`` floats ``[c.xyz, r]``. When the scene mixes triangles and
-spheres, a per-position uint32 code ``local | is_sphere << 31`` selects the
-test. Code for absent primitive kinds is not traced at all.
+Device data (float32, in BVH order for coherent gathers; uploads by
+:func:`~drpt.accel.device.device_array`): node boxes as ``8 * M`` floats
+``[lo.xyz, 0, hi.xyz, 0]`` read with two ``Array4f`` gathers; node links as
+``2 * M`` uint32 ``[a, count]`` (layout of
+:class:`~drpt.accel.tree.BVHArrays`); the primitive buffers of
+:mod:`drpt.accel.primitives` in BVH order.
 """
 
 from __future__ import annotations
@@ -57,187 +44,22 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array3f, Array4f, Bool, Float, UInt32
 
-from ..geometry.plane import intersect_plane
-from ..geometry.sphere import intersect_sphere
-from ..geometry.triangle import RayPrep, watertight_permuted
-from .bvh_build import build_bvh, round_down_f32, round_up_f32
+from ..geometry.triangle import RayPrep
+from .build import build_bvh
+from .device import SLAB_EPS, device_array, nbytes
+from .device import slab as box_slab
+from .primitives import SceneGeometry, leaf_primitive, nearest_primitive, primitive_bounds
+from .protocol import INVALID, AccelParams, Hit
 
-INVALID = 0xFFFFFFFF
 STACK_SIZE = 64
-_SLAB_EPS = 1.0 + 4.0 * 2.0**-24  # robust slab test (Ize 2013): widen t_far
-
-
-class Hit:
-    """Closest-hit record (a Dr.Jit PyTree: works with ``dr.select``, loops...)."""
-
-    DRJIT_STRUCT = {"t": Float, "prim": UInt32, "u": Float, "v": Float, "valid": Bool}
-
-    def __init__(self, t=None, prim=None, u=None, v=None, valid=None):
-        self.t = t if t is not None else Float(float("inf"))
-        self.prim = prim if prim is not None else UInt32(INVALID)
-        self.u = u if u is not None else Float(0)
-        self.v = v if v is not None else Float(0)
-        self.valid = valid if valid is not None else Bool(False)
-
-    def __repr__(self):
-        return f"Hit(t={self.t}, prim={self.prim}, u={self.u}, v={self.v}, valid={self.valid})"
-
-
-def _nbytes(*arrays) -> int:
-    n = 0
-    for a in arrays:
-        if a is not None:
-            n += dr.width(a) * (8 if "64" in type(a).__name__ else 4)
-    return n
-
-
-class SceneGeometry:
-    """Device copies shared by the accelerators: counts and plane arrays."""
-
-    def __init__(self, scene):
-        self.F = len(scene.triangles)
-        self.S = len(scene.spheres)
-        self.P = len(scene.planes)
-        self.N = self.F + self.S
-        if self.P:
-            n = np.asarray(scene.planes.normal, np.float32)
-            self.plane_n = Array3f(n[:, 0], n[:, 1], n[:, 2])
-            self.plane_o = Float(np.asarray(scene.planes.offset, np.float32))
-        else:
-            self.plane_n = self.plane_o = None
-
-    def plane_nbytes(self) -> int:
-        return 16 * self.P
-
-    def intersect_planes(self, o, d, bt, bj, any_hit: bool):
-        """Test all planes; return updated ``(bt, bj)`` with ``bj = N + k``."""
-        if not self.P:
-            return bt, bj
-        pn, po, N, P = self.plane_n, self.plane_o, self.N, self.P
-
-        def cond(k, bt, bj):
-            return k < P
-
-        def body(k, bt, bj):
-            n = dr.gather(Array3f, pn, k)
-            off = dr.gather(Float, po, k)
-            t, h = intersect_plane(o, d, n, off, bt)
-            bt = dr.select(h, t, bt)
-            bj = dr.select(h, N + k, bj)
-            return k + 1, bt, bj
-
-        _, bt, bj = dr.while_loop((UInt32(0), bt, bj), cond, body, label="drpt_planes")
-        return bt, bj
-
-
-def triangle_buffer(positions: np.ndarray) -> np.ndarray:
-    """``(F, 3, 3)`` positions -> flat float32 ``[p0, p1, p2]`` per triangle."""
-    return np.ascontiguousarray(np.asarray(positions, np.float32).reshape(-1))
-
-
-def sphere_buffer(center: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    c = np.asarray(center, np.float32)
-    r = np.asarray(radius, np.float32)[:, None]
-    return np.ascontiguousarray(np.concatenate([c, r], 1).reshape(-1))
-
-
-def test_triangle(tri_buf, idx, prep: RayPrep, bt, active):
-    """Watertight test of triangle ``idx`` of a flat vertex buffer."""
-    base = idx * 9
-    g = [
-        dr.gather(Float, tri_buf, base + (3 * v) + k, active)
-        for v in range(3)
-        for k in (prep.kx, prep.ky, prep.kz)
-    ]
-    t, u, v, h = watertight_permuted(prep, *g, bt)
-    return t, u, v, h & active
-
-
-def test_sphere(sph_buf, idx, o, d, bt, active):
-    s = dr.gather(Array4f, sph_buf, idx, active)
-    t, h = intersect_sphere(o, d, Array3f(s.x, s.y, s.z), s.w, bt)
-    return t, h & active
-
-
-def nearest_primitive(tri_buf, sph_buf, tri_idx, sph_idx, prim, prep: RayPrep, o, d,
-                      tri_on, sph_on, bt, bj, bu, bv, tri_test=None):
-    """Test one triangle (lanes ``tri_on``) and/or one sphere (``sph_on``) and
-    keep the nearer hit: returns the updated closest-hit record
-    ``(bt, bj, bu, bv)`` (``bj = prim`` where a hit was kept) and ``hit_any``.
-    Absent buffers trace no code. Shared by every accelerator's loop;
-    ``tri_test`` reads the triangle buffer's layout (default
-    :func:`test_triangle`, looked up at call time)."""
-    hit_any = Bool(False)
-    if tri_buf is not None:
-        t, u, v, h = (tri_test or test_triangle)(tri_buf, tri_idx, prep, bt, tri_on)
-        bt = dr.select(h, t, bt)
-        bj = dr.select(h, prim, bj)
-        bu = dr.select(h, u, bu)
-        bv = dr.select(h, v, bv)
-        hit_any |= h
-    if sph_buf is not None:
-        t, h = test_sphere(sph_buf, sph_idx, o, d, bt, sph_on)
-        bt = dr.select(h, t, bt)
-        bj = dr.select(h, prim, bj)
-        bu = dr.select(h, 0.0, bu)
-        bv = dr.select(h, 0.0, bv)
-        hit_any |= h
-    return bt, bj, bu, bv, hit_any
-
-
-def leaf_primitive(codes, pi, pa):
-    """Buffer index and lane masks (triangle, sphere) of BVH position ``pi``
-    (lanes ``pa``): the position itself when the scene has one primitive kind,
-    else decoded from ``codes`` (``local index | sphere << 31``,
-    :func:`leaf_orders`)."""
-    if codes is None:
-        return pi, pa, pa
-    code = dr.gather(UInt32, codes, pi, pa)
-    sph = (code >> 31) != 0
-    return code & 0x7FFFFFFF, pa & ~sph, pa & sph
-
-
-def primitive_bounds(scene, F: int, S: int) -> tuple[np.ndarray, np.ndarray]:
-    """Float32 boxes, rounded outward, of a scene's ``F`` triangles then ``S``
-    spheres (BVH primitive ids ``0..F+S-1``); spheres padded against round-off."""
-    los, his = [], []
-    if F:
-        p32 = np.asarray(scene.triangles.positions, np.float32)
-        # elementwise over the three vertices (a reduction over the middle
-        # axis of (F, 3, 3) is ~10x slower); min/max of float32 are exact
-        los.append(np.minimum(np.minimum(p32[:, 0], p32[:, 1]), p32[:, 2]).astype(np.float64))
-        his.append(np.maximum(np.maximum(p32[:, 0], p32[:, 1]), p32[:, 2]).astype(np.float64))
-    if S:
-        c = np.asarray(scene.spheres.center, np.float64)
-        r = np.abs(np.asarray(scene.spheres.radius, np.float64))[:, None]
-        pad = r * 1e-5 + np.abs(c) * 1e-6
-        los.append(c - r - pad)
-        his.append(c + r + pad)
-    return round_down_f32(np.concatenate(los)), round_up_f32(np.concatenate(his))
-
-
-def leaf_orders(order: np.ndarray, F: int):
-    """From the BVH's primitive order (position -> primitive id): the order of
-    the triangle buffer, of the sphere buffer, and for scenes with both, the
-    per-position code ``local index | sphere << 31`` (else None)."""
-    is_sph = order >= F
-    tri_order = order[~is_sph]
-    sph_order = order[is_sph] - F
-    codes = None
-    if tri_order.size and sph_order.size:
-        local = np.empty(order.size, np.int64)
-        local[~is_sph] = np.arange(tri_order.size)
-        local[is_sph] = np.arange(sph_order.size)
-        codes = (local | (is_sph.astype(np.int64) << 31)).astype(np.uint32)
-    return tri_order, sph_order, codes
 
 
 class BVH:
-    """Triangles and spheres of a scene in one BVH; planes tested brute force.
+    """Triangles and spheres of a scene in one binary BVH; planes tested brute force.
 
     Args:
         scene: the :class:`~drpt.scene.model.Scene`.
-        method: builder split rule (:data:`~drpt.accel.bvh_build.METHODS`;
+        method: builder split rule (:data:`~drpt.accel.build.METHODS`;
             default ``"auto"``: full SAH, or PLOC above 100k primitives).
         leaf_size: maximum primitives per leaf.
         bins: SAH bins.
@@ -248,6 +70,8 @@ class BVH:
         build_seconds: host build time (bounds, BVH build and upload).
         nbytes: bytes of device arrays.
         stats: ``nodes``, ``leaves``, ``max_depth``, ... from the builder.
+        geo: the :class:`~drpt.accel.primitives.SceneGeometry` (planes and
+            primitive buffers in BVH order).
     """
 
     def __init__(self, scene, method: str = "auto", leaf_size: int = 4, bins: int = 16,
@@ -256,7 +80,7 @@ class BVH:
         self.geo = geo = SceneGeometry(scene)
         F, S, N = geo.F, geo.S, geo.N
         self.has_tris, self.has_spheres = F > 0, S > 0
-        self.tri_buf = self.sph_buf = self.codes = None
+        self.node_box = self.node_ac = None
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": 0}
         if N:
             lo, hi = primitive_bounds(scene, F, S)
@@ -264,41 +88,26 @@ class BVH:
                           max_leaf=leaf_size, bins=bins, max_depth=STACK_SIZE,
                           min_leaf=min_leaf, sah_threshold=sah_threshold)
             self.stats = dict(b.stats)
-            order = b.prim_order
             M = b.node_a.size
             boxes = np.zeros((M, 8), np.float32)
             boxes[:, 0:3] = b.node_lo
             boxes[:, 4:7] = b.node_hi
-            self.node_box = Float(boxes.reshape(-1))
-            self.node_ac = UInt32(np.stack([b.node_a, b.node_count], 1).reshape(-1))
-            self.prim_ids = UInt32(order.astype(np.uint32))
-            tri_order, sph_order, codes = leaf_orders(order, F)
-            if F:
-                self.tri_buf = Float(triangle_buffer(scene.triangles.positions[tri_order]))
-            if S:
-                self.sph_buf = Float(sphere_buffer(scene.spheres.center[sph_order],
-                                                   scene.spheres.radius[sph_order]))
-            if codes is not None:
-                self.codes = UInt32(codes)
-        else:
-            self.node_box = self.node_ac = self.prim_ids = None
-        dr.eval(self.node_box, self.node_ac, self.prim_ids, self.tri_buf, self.sph_buf, self.codes)
-        self.nbytes = _nbytes(self.node_box, self.node_ac, self.prim_ids, self.tri_buf,
-                              self.sph_buf, self.codes) + geo.plane_nbytes()
+            self.node_box = device_array(Float, boxes)
+            self.node_ac = device_array(UInt32, np.stack([b.node_a, b.node_count], 1))
+            geo.upload_primitives(scene, b.prim_order)
+        self.nbytes = nbytes(self.node_box, self.node_ac) + geo.nbytes()
         self.build_seconds = time.perf_counter() - t0
+
+    @classmethod
+    def from_params(cls, scene, p: AccelParams) -> BVH:
+        """The registry's constructor (:mod:`drpt.accel.registry`)."""
+        return cls(scene, method=p.method, leaf_size=p.leaf_size, bins=p.bins,
+                   min_leaf=p.min_leaf, sah_threshold=p.sah_threshold)
 
     # ---------------------------------------------------------------- queries
     def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
-        """Closest hit with ``0 < t < tmax`` (see module docstring)."""
-        bt, bj, bu, bv = self._trace(o, d, tmax, active, any_hit=False)
-        geo = self.geo
-        valid = bj != INVALID
-        if geo.N:
-            in_bvh = valid & (bj < geo.N)
-            prim = dr.select(in_bvh, dr.gather(UInt32, self.prim_ids, bj, in_bvh), bj)
-        else:
-            prim = bj
-        return Hit(dr.select(valid, bt, float("inf")), prim, bu, bv, valid)
+        """Closest hit with ``0 < t < tmax``."""
+        return self.geo.hit(*self._trace(o, d, tmax, active, any_hit=False))
 
     def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
         """Whether anything is hit with ``0 < t < tmax`` (any-hit, early exit)."""
@@ -306,43 +115,21 @@ class BVH:
         return bj != INVALID
 
     # ------------------------------------------------------------- internals
-    def _begin(self, o, d, tmax, active, any_hit: bool):
-        """Start of every query (shared with :class:`~drpt.accel.bvh4.BVH4`):
-        the rays as arrays, the planes tested brute force, the best hit so
-        far ``bt, bj, bu, bv``, and ``active`` without the rays an any-hit
-        query has already answered."""
-        o = Array3f(o)
-        d = Array3f(d)
-        active = Bool(active)
-        bt = dr.select(active, Float(tmax), 0.0)
-        bj = UInt32(INVALID)
-        bt, bj = self.geo.intersect_planes(o, d, bt, bj, any_hit)
-        if any_hit:
-            active &= bj == INVALID
-        return o, d, active, bt, bj, Float(0), Float(0)
-
     def _trace(self, o, d, tmax, active, any_hit: bool):
-        o, d, active, bt, bj, bu, bv = self._begin(o, d, tmax, active, any_hit)
+        o, d, active, bt, bj, bu, bv = self.geo.begin_query(o, d, tmax, active, any_hit)
         if not self.geo.N:
             return bt, bj, bu, bv
 
         inv_d = dr.rcp(d)
         prep = RayPrep(o, d) if self.has_tris else None
         node_box, node_ac = self.node_box, self.node_ac
-        tri_buf, sph_buf, codes = self.tri_buf, self.sph_buf, self.codes
+        tri_buf, sph_buf, codes = self.geo.tri_buf, self.geo.sph_buf, self.geo.codes
 
         def slab(node, bt, mask):
             lo = dr.gather(Array4f, node_box, node * 2, mask)
             hi = dr.gather(Array4f, node_box, node * 2 + 1, mask)
-            ax = (lo.x - o.x) * inv_d.x
-            bx = (hi.x - o.x) * inv_d.x
-            ay = (lo.y - o.y) * inv_d.y
-            by = (hi.y - o.y) * inv_d.y
-            az = (lo.z - o.z) * inv_d.z
-            bz = (hi.z - o.z) * inv_d.z
-            tn = dr.fmax(dr.fmax(dr.fmax(dr.fmin(ax, bx), dr.fmin(ay, by)), dr.fmin(az, bz)), 0.0)
-            tf = dr.fmin(dr.fmin(dr.fmax(ax, bx), dr.fmax(ay, by)), dr.fmax(az, bz)) * _SLAB_EPS
-            return tn, mask & (tn <= tf) & (tn <= bt * _SLAB_EPS)
+            tn, tf = box_slab(lo, hi, o, inv_d)
+            return tn, mask & (tn <= tf) & (tn <= bt * SLAB_EPS)
 
         t_root, h_root = slab(UInt32(0), bt, active)
         cur = dr.select(h_root, UInt32(0), UInt32(INVALID))
@@ -364,7 +151,7 @@ class BVH:
             cur = dr.select(need_pop, stk_n.read(sp, need_pop), cur)
             cur_t = dr.select(need_pop, stk_t.read(sp, need_pop), cur_t)
             node_on = ~in_leaf & (cur != INVALID)
-            culled = node_on & (cur_t > bt * _SLAB_EPS)
+            culled = node_on & (cur_t > bt * SLAB_EPS)
             node_on &= ~culled
             a = dr.gather(UInt32, node_ac, cur * 2, node_on)
             cnt = dr.gather(UInt32, node_ac, cur * 2 + 1, node_on)

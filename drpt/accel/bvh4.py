@@ -1,12 +1,15 @@
-"""4-wide BVH, drpt's default accelerator: collapse of the binary BVH and its
-traversal in Dr.Jit.
+"""4-wide BVH, drpt's default accelerator: traversal in Dr.Jit of the binary
+BVH collapsed to four children per node.
 
-:class:`BVH4` has the interface of :class:`~drpt.accel.bvh.BVH` (same
-primitive ids, :class:`~drpt.accel.bvh.Hit` results, planes tested brute force
-before the traversal) and the same builder (:func:`~drpt.accel.bvh_build.build_bvh`
-with all its split rules); the binary tree is collapsed into a 4-wide one
-(:func:`collapse_bvh4`), which halves the number of loop iterations spent in
-inner nodes and tests four child boxes per iteration from six packet gathers.
+:class:`BVH4` has the interface of every accelerator
+(:class:`~drpt.accel.protocol.Accelerator`; same primitive ids and
+:class:`~drpt.accel.protocol.Hit` results, planes tested brute force before
+the traversal by its :class:`~drpt.accel.primitives.SceneGeometry`). It builds
+the binary tree with :func:`~drpt.accel.build.build_bvh` (all its split
+rules) and collapses it (:func:`~drpt.accel.bvh4_nodes.collapse_bvh4`, node
+layout in :mod:`drpt.accel.bvh4_nodes`), which halves the number of loop
+iterations spent in inner nodes and tests four child boxes per iteration
+from six packet gathers.
 
 Traversal
 ---------
@@ -52,9 +55,11 @@ incoherent / shadow), newscene 1.33x / 1.09x / 1.05x, dining room 1.08x /
 Stack size: a lane at a node of depth ``k`` (root = 0) holds at most three
 entries per ancestor level, and a push round adds at most three, so
 ``3 * (depth4 + 1)`` entries suffice; :func:`stack_entries` adds one spare.
-The stack is split into ``dr.alloc_local`` arrays of at most ``LOCAL_CHUNK``
-(16) entries (the Cornell box needs one, 100k identical triangles two: 16 +
-9, the dining room three or four). Every read and write of a local array with
+The stack is split into ``dr.alloc_local`` arrays of at most ``local_chunk``
+entries (:class:`drpt.backend.Policy`, read at trace time; 16 on both
+backends, see "Local arrays of at most 16 entries" below): the Cornell box
+needs one, 100k identical triangles two (16 + 9), the dining room three or
+four. Every read and write of a local array with
 per-lane indices is a masked packet gather or scatter, paid even when its
 mask is empty; each one is therefore a symbolic if, taken only when some lane
 of the packet uses that array (:func:`_push`, :func:`_pop`). Against
@@ -67,47 +72,38 @@ Cornell box 1.19-1.21x / 1.08-1.16x / 1.08-1.14x, newscene 1.12-1.17x /
 1.09-1.10x / 0.96-1.15x. ``BVH4.track_stack``
 records the largest stack pointer of each query (tests).
 
-The crash of the first 4-wide BVH (commit ``bc77154``, reverted)
------------------------------------------------------------------
-Reproduced (100k copies of one triangle, 1000 rays along -z, closest hit
-then occlusion, 2 repetitions per process): about 1 process in 8-10 dies
-with SIGSEGV in a packet gather of the JIT kernel on a Dr.Jit worker thread
-(seen under gdb), at a wild address (a node index around 2**31 / 6, i.e. a
-garbage ``cur``), in the closest-hit or the occlusion query. Ruled out,
-with evidence:
+Local arrays of at most 16 entries
+----------------------------------
+With the whole stack in one ``dr.alloc_local`` array of 25 entries (100
+bytes per lane), Dr.Jit 1.5's LLVM backend crashes sporadically on the
+reproducer (100k copies of one triangle, 1000 rays along -z, closest hit
+then occlusion, 2 repetitions per process; ``DRPT_STRESS=1 pytest
+tests/test_bvh4.py``): about 1 process in 6-10 dies with SIGSEGV in a packet
+gather of the JIT kernel on a Dr.Jit worker thread, at a wild address (a node
+index around 2**31 / 6, i.e. a garbage ``cur``). What decides it is the size
+of the local arrays: in two concurrent loops of 24 reproducer processes, the
+25-entry stack in one array crashed 4 times, split into arrays of at most 16
+entries (64 bytes) never; split, it has not crashed in 396 reproducer
+processes (at 1 crash in 6, the probability of that is ~4e-32) nor in the
+test suite. Hence ``local_chunk = 16`` (:class:`drpt.backend.Policy`).
+Ruled out, with evidence:
 
 * stack overflow: with ``track_stack`` the deepest stack was 29 entries of
-  43 (depth4 = 13 with bc77154's collapse); the bound above holds;
+  43 on a lopsided tree (now 25 at most, :mod:`drpt.accel.bvh4_nodes`); the
+  bound above holds;
 * dangling host memory: Dr.Jit maps numpy memory without copying but keeps
   a reference to the array; uploads copied into Dr.Jit-owned memory crashed
-  just as often (2 of 9 runs);
+  just as often;
 * masked packet gathers: masked lanes read a static zero packet (checked in
-  the generated IR); packets past the end: uploads are padded by 64 bytes;
-* the Dr.Jit 1.5 local-array hazard below (bc77154 widened ``sp`` first).
+  the generated IR); packets past the end: uploads are padded by 64 bytes
+  (:func:`~drpt.accel.device.device_array`);
+* the Dr.Jit 1.5 local-array hazard below.
 
-Not understood: it matches Dr.Jit issues #532
-(``dr.alloc_local`` stacks larger than 128 bytes per lane crash the LLVM
-backend, DFS/BVH kernels) and #446 (LLVM-only garbage indices in a
-``dr.Local`` BVH stack). Changed here without effect on it: ties between
-equal child areas now go to the shallower child (bc77154's collapse gave a
-lopsided tree on identical boxes: depth4 13, 43-entry stack; now depth4 7,
-25 entries, one local array of 100 bytes per lane), all loop state starts
-full width, uploads are padded. The reproducer still crashed 2 processes in
-18. With ``dr.set_thread_count(0)`` it did not crash in 22 processes. What
-changed it is the size of the local arrays: in two concurrent process loops
-(24 processes each), the 25-entry stack in one array (100 bytes per lane)
-crashed 4 times, split into arrays of at most 16 entries (64 bytes) never.
-Hence ``LOCAL_CHUNK = 16``. With it, no crash since: 72 processes of the
-reproducer in the session that found it, then 171 processes (3 builds and 6
-closest-hit + occlusion query pairs each; 78 of them with the final
-traversal: symbolic-if phases, no distance stack) and the whole test suite
-with this BVH as the default, in the session that made it the default
-(``build_accel(kind="bvh")``), then 153 processes after the stack's reads
-and writes became symbolic ifs (50 with the register ``top`` as well). At
-the old rate (1 process in 6), no crash in 396 processes has probability
-~4e-32. The mechanism inside Dr.Jit is
-still not known; the binary BVH (``"bvh2"``, 64-entry arrays) never
-crashed. ``DRPT_STRESS=1 pytest tests/test_bvh4.py`` runs the reproducer.
+It matches Dr.Jit issues #532 (``dr.alloc_local`` stacks larger than 128
+bytes per lane crash the LLVM backend, DFS/BVH kernels) and #446 (LLVM-only
+garbage indices in a ``dr.Local`` BVH stack); with ``dr.set_thread_count(0)``
+it did not crash either. The mechanism inside Dr.Jit is not known; the binary
+BVH (``"bvh2"``, 64-entry arrays) never crashed.
 
 Dr.Jit 1.5 hazard (avoided): in a symbolic loop, ``Local.write(value, index,
 mask)`` whose ``index`` variable has size 1 is rendered as one uniform row
@@ -116,70 +112,40 @@ differ; a stack pointer created as ``UInt32(0)`` and written before being
 widened loses entries (44 of 64 lanes in ``tests/test_bvh4.py``). Every loop
 variable here starts full width (``dr.zeros(T, n)``).
 
-Device data (float32 or uint32, in BVH order, 64-byte aligned so that Dr.Jit
-emits packet gathers, see :func:`device_array`): per 4-wide node, 24 floats of
-child boxes in SoA order ``lo.x[4], lo.y[4], lo.z[4], hi.x[4], hi.y[4],
-hi.z[4]`` and 4 uint32 child references (an inner child's node index; a
-leaf's ``1 << 31 | (count - 1) << 27 | first``; ``0xFFFFFFFF`` for an unused
-slot); triangle vertices ``p0, p1, p2`` padded to 4 floats, ``12 * F`` floats
-read with three packet gathers and permuted to the ray's axes with selects
-(vertices, not edges: the watertight test needs bitwise identical shared
-vertices, see :mod:`drpt.geometry.triangle`); spheres as ``4 * S`` floats
-``[c.xyz, r]``; for mixed scenes a per-position uint32 code
-``local | is_sphere << 31``. Leaves hold at most 16 primitives and BVH
-positions need 27 bits (< 134M primitives).
+Device data (float32 or uint32, in BVH order, uploaded 64-byte aligned and
+zero padded by :func:`~drpt.accel.device.device_array` so that Dr.Jit emits
+packet gathers): the nodes of :mod:`drpt.accel.bvh4_nodes` (``box``: 24
+floats, ``ref``: 4 uint32 per node); triangle vertices ``p0, p1, p2`` padded
+to 4 floats, ``12 * F`` floats read with three packet gathers and permuted
+to the ray's axes with selects (:func:`triangle_buffer4`; vertices, not
+edges: the watertight test needs bitwise identical shared vertices, see
+:mod:`drpt.geometry.triangle`); the spheres and, for mixed scenes, the
+per-position codes of :mod:`drpt.accel.primitives`.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array3f, Array4f, Array4u, Float, UInt32
+from drjit.auto import Array3f, Array4f, Array4u, Bool, Float, UInt32
 
+from .. import backend
 from ..geometry.triangle import RayPrep, watertight_permuted
-from .bvh import (BVH, INVALID, STACK_SIZE, SceneGeometry, _nbytes, leaf_orders,
-                  leaf_primitive, nearest_primitive, primitive_bounds, sphere_buffer)
-from .bvh_build import BVHArrays, _area, build_bvh
+from .build import build_bvh
+from .bvh import STACK_SIZE
+from .bvh4_nodes import (EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_MAX_COUNT,
+                         LEAF_START_MASK, collapse_bvh4)
+from .device import SLAB_EPS, device_array, nbytes, slab
+from .primitives import SceneGeometry, leaf_primitive, nearest_primitive, primitive_bounds
+from .protocol import INVALID, AccelParams, Hit
 
-_SLAB_EPS = 1.0 + 4.0 * 2.0**-24  # robust slab test (Ize 2013): widen t_far
 _INF = float("inf")
 _FLT_MAX = 3.4028234663852886e38
 
-LEAF_FLAG = 0x80000000
-LEAF_COUNT_SHIFT = 27
-LEAF_MAX_COUNT = 16  # count - 1 is stored in 4 bits
-LEAF_START_MASK = (1 << LEAF_COUNT_SHIFT) - 1
-EMPTY_REF = 0xFFFFFFFF
-PAD_BYTES = 64  # every upload is followed by (at least) one 64-byte packet of zeros
 
-
-# ------------------------------------------------------------------ uploads
-def device_array(cls, a: np.ndarray):
-    """Device copy of ``a`` (flattened), 64-byte aligned and zero padded.
-
-    Dr.Jit (LLVM) maps host memory without copying and marks a buffer that is
-    not 64-byte aligned as *unaligned*; packet gathers (``dr.gather(Array4f,
-    ...)``) from such a buffer silently fall back to one gather per component.
-    numpy only guarantees 16 bytes, so the data is placed at a 64-byte
-    boundary inside a larger numpy buffer (Dr.Jit keeps a reference to it),
-    followed by at least ``PAD_BYTES`` zero bytes so that no packet can end
-    past the allocation. Returns the device array (padding included) and
-    ``a.size``.
-    """
-    a = np.ascontiguousarray(a).reshape(-1)
-    nb = a.nbytes
-    raw = np.zeros(nb + PAD_BYTES + 64, np.uint8)
-    off = (-raw.ctypes.data) % 64
-    host = raw[off:off + nb + PAD_BYTES].view(a.dtype)
-    host[:a.size] = a
-    v = cls(host)
-    dr.eval(v)
-    return v, a.size
-
-
+# ------------------------------------------------------------------ triangles
 def triangle_buffer4(positions: np.ndarray) -> np.ndarray:
     """``(F, 3, 3)`` positions -> flat float32 ``[p0, 0, p1, 0, p2, 0]`` per
     triangle (three 16-byte packets)."""
@@ -202,120 +168,28 @@ def test_triangle4(tri_buf, idx, prep: RayPrep, bt, active):
     return t, u, v, h & active
 
 
-# ------------------------------------------------------------------ collapse
-@dataclass
-class BVH4Arrays:
-    """A binary :class:`~drpt.accel.bvh_build.BVHArrays` collapsed to a 4-wide
-    tree (layout in :func:`collapse_bvh4`)."""
-
-    box: np.ndarray  # (K, 24) float32: lo.x[4], lo.y[4], lo.z[4], hi.x[4], hi.y[4], hi.z[4]
-    ref: np.ndarray  # (K, 4) uint32 child references
-    root_lo: np.ndarray  # (3,) float32
-    root_hi: np.ndarray  # (3,) float32
-    depth: int  # max depth of the 4-wide tree (root = 0)
-
-
+# ------------------------------------------------------------------ stack
 def stack_entries(depth4: int) -> int:
     """Per-lane stack entries that a 4-wide tree of depth ``depth4`` needs
     (see the module docstring), plus one spare."""
     return 3 * (int(depth4) + 1) + 1
 
 
-def collapse_bvh4(b: BVHArrays) -> BVH4Arrays:
-    """Collapse a binary BVH into a 4-wide one (vectorized, level by level).
-
-    Every 4-wide node starts from an inner binary node with its two children
-    and, twice, replaces the inner child of largest surface area (on ties:
-    the shallower one) by its two children, so it gets up to 4 children. Nodes are numbered breadth-first,
-    root = 0. Per node ``k``: ``box[k]`` holds the four child boxes in SoA
-    order (six 16-byte packets); ``ref[k]`` the four child references (an inner
-    child is its node index, bit 31 clear; a leaf is
-    ``LEAF_FLAG | (count - 1) << 27 | start``; an unused slot is ``EMPTY_REF``
-    with an empty box, lo = +inf, hi = -inf). A binary root that is a leaf
-    becomes a root with one leaf child.
-    """
-    a = b.node_a.astype(np.int64)
-    cnt = b.node_count.astype(np.int64)
-    M = a.size
-    if cnt.max(initial=0) > LEAF_MAX_COUNT:
-        raise ValueError(f"leaves hold at most {LEAF_MAX_COUNT} primitives")
-    if b.prim_order.size > LEAF_START_MASK + 1:
-        raise ValueError("too many primitives for the 4-wide BVH encoding")
-    area = _area(b.node_lo, b.node_hi)
-    root_leaf = bool(cnt[0] > 0 or M == 1)
-    boxes, refs = [], []
-    frontier = np.zeros(1, np.int64)
-    next_id = 1
-    depth = 0
-    while True:
-        if root_leaf:
-            C = np.full((1, 4), -1, np.int64)
-            C[0, 0] = 0
-        else:
-            K = frontier.size
-            C = np.full((K, 4), -1, np.int64)
-            C[:, 0] = a[frontier]
-            C[:, 1] = a[frontier] + 1
-            rows = np.arange(K)
-            lvl = np.ones((K, 4))  # binary levels below the 4-wide node
-            for slot in (2, 3):
-                valid = C >= 0
-                inner = valid & (cnt[np.maximum(C, 0)] == 0)
-                # largest area first; on ties (e.g. identical boxes) the
-                # shallower child, so degenerate trees stay balanced
-                ar = np.where(inner, area[np.maximum(C, 0)] * (1.0 - 1e-7 * lvl), -1.0)
-                j = np.argmax(ar, axis=1)
-                ok = ar[rows, j] >= 0
-                r, jj = rows[ok], j[ok]
-                x = C[r, jj]
-                C[r, jj] = a[x]
-                C[r, slot] = a[x] + 1
-                lvl[r, jj] += 1
-                lvl[r, slot] = lvl[r, jj]
-        K = C.shape[0]
-        valid = C >= 0
-        Cs = np.maximum(C, 0)
-        is_leaf = valid & (cnt[Cs] > 0)
-        is_inner = valid & ~is_leaf
-        ref = np.full((K, 4), EMPTY_REF, np.int64)
-        n_inner = int(is_inner.sum())
-        ref[is_inner] = next_id + np.arange(n_inner)  # row-major = breadth-first
-        next_id += n_inner
-        ref[is_leaf] = LEAF_FLAG | ((cnt[Cs][is_leaf] - 1) << LEAF_COUNT_SHIFT) | a[Cs][is_leaf]
-        lo = np.where(valid[..., None], b.node_lo[Cs], np.float32(np.inf))
-        hi = np.where(valid[..., None], b.node_hi[Cs], np.float32(-np.inf))
-        box = np.concatenate([lo.transpose(0, 2, 1).reshape(K, 12),
-                              hi.transpose(0, 2, 1).reshape(K, 12)], 1)
-        boxes.append(box.astype(np.float32))
-        refs.append(ref.astype(np.uint32))
-        if root_leaf or n_inner == 0:
-            break
-        frontier = C[is_inner]
-        depth += 1
-    return BVH4Arrays(box=np.concatenate(boxes), ref=np.concatenate(refs),
-                      root_lo=b.node_lo[0].astype(np.float32),
-                      root_hi=b.node_hi[0].astype(np.float32), depth=depth)
-
-
-# ------------------------------------------------------------------ stack
-LOCAL_CHUNK = 16  # entries per dr.alloc_local array (64 bytes of 32-bit values)
-
-
-def _chunk_index(sp, m, c, n_chunks):
+def _chunk_index(sp, m, c, n_chunks, chunk):
     if n_chunks == 1:
         return sp, m
-    mc = m & ((sp // LOCAL_CHUNK) == c)
-    return dr.select(mc, sp - c * LOCAL_CHUNK, 0), mc
+    mc = m & ((sp // chunk) == c)
+    return dr.select(mc, sp - c * chunk, 0), mc
 
 
-def _pop(stk, sp, m):
-    """Entry ``sp`` (lanes ``m``) of a stack split into ``LOCAL_CHUNK``-entry
+def _pop(stk, sp, m, chunk):
+    """Entry ``sp`` (lanes ``m``) of a stack split into ``chunk``-entry
     local arrays. A read with per-lane indices is a masked packet gather whose
     cost is paid even when no lane is in the mask, so each array is read in a
     symbolic if, taken only when some lane of the packet pops from it."""
     out = dr.zeros(UInt32, dr.width(sp))
     for c, arr in enumerate(stk):
-        i, mc = _chunk_index(sp, m, c, len(stk))
+        i, mc = _chunk_index(sp, m, c, len(stk), chunk)
 
         def read(arr, i, mc, out):
             return dr.select(mc, arr.read(i, mc), out)
@@ -325,14 +199,14 @@ def _pop(stk, sp, m):
     return out
 
 
-def _push(stk, value, sp, m):
+def _push(stk, value, sp, m, chunk):
     """Write entry ``sp`` (lanes ``m``) of a split stack; returns the arrays.
     Each write (a masked packet scatter) is a symbolic if, taken only when
     some lane of the packet pushes to that array: most packets skip the
     arrays above the first, and the pushes of third and fourth children."""
     out = []
     for c, arr in enumerate(stk):
-        i, mc = _chunk_index(sp, m, c, len(stk))
+        i, mc = _chunk_index(sp, m, c, len(stk), chunk)
 
         def write(arr, value, i, mc):
             arr.write(value, i, mc)
@@ -344,7 +218,7 @@ def _push(stk, value, sp, m):
 
 
 # ------------------------------------------------------------------ BVH4
-class BVH4(BVH):
+class BVH4:
     """Triangles and spheres of a scene in a 4-wide BVH; planes brute force.
 
     Args: as :class:`~drpt.accel.bvh.BVH` (``leaf_size`` is capped at 16).
@@ -354,6 +228,11 @@ class BVH4(BVH):
         nbytes: bytes of device arrays.
         stats: the builder's (binary tree) plus ``nodes4``, ``depth4`` and
             ``stack`` (per-lane stack entries).
+        geo: the :class:`~drpt.accel.primitives.SceneGeometry` (planes and
+            primitive buffers in BVH order, ``triangle_buffer4`` layout).
+        node_box, node_ref: the nodes of :mod:`drpt.accel.bvh4_nodes`.
+        host_sizes: entries of each upload without its padding (nodes and
+            ``geo``'s buffers).
         max_stack: after a query with ``track_stack = True``, the largest
             stack pointer any lane reached (a UInt32 of size 1).
     """
@@ -366,8 +245,7 @@ class BVH4(BVH):
         self.geo = geo = SceneGeometry(scene)
         F, S, N = geo.F, geo.S, geo.N
         self.has_tris, self.has_spheres = F > 0, S > 0
-        self.tri_buf = self.sph_buf = self.codes = None
-        self.node_box = self.node_ref = self.prim_ids = None
+        self.node_box = self.node_ref = None
         self.host_sizes = {}
         self.max_stack = None
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": 0}
@@ -379,37 +257,38 @@ class BVH4(BVH):
                           max_depth=STACK_SIZE, min_leaf=min_leaf,
                           sah_threshold=sah_threshold)
             self.stats = dict(b.stats)
-            order = b.prim_order
             w = collapse_bvh4(b)
             self.stack_size = stack_entries(w.depth)
             self.stats.update(nodes4=int(w.ref.shape[0]), depth4=int(w.depth),
                               stack=self.stack_size)
             self.root_lo, self.root_hi = w.root_lo, w.root_hi
-            self.node_box = self._up("node_box", Float, w.box)
-            self.node_ref = self._up("node_ref", UInt32, w.ref)
-            self.prim_ids = self._up("prim_ids", UInt32, order.astype(np.uint32))
-            tri_order, sph_order, codes = leaf_orders(order, F)
-            if F:
-                self.tri_buf = self._up("tri_buf", Float, triangle_buffer4(
-                    scene.triangles.positions[tri_order]))
-            if S:
-                self.sph_buf = self._up("sph_buf", Float, sphere_buffer(
-                    scene.spheres.center[sph_order], scene.spheres.radius[sph_order]))
-            if codes is not None:
-                self.codes = self._up("codes", UInt32, codes)
-        self.nbytes = _nbytes(self.node_box, self.node_ref, self.prim_ids, self.tri_buf,
-                              self.sph_buf, self.codes) + geo.plane_nbytes()
+            self.node_box = device_array(Float, w.box, padded=True)
+            self.node_ref = device_array(UInt32, w.ref, padded=True)
+            self.host_sizes.update(node_box=w.box.size, node_ref=w.ref.size)
+            geo.upload_primitives(scene, b.prim_order, triangle_buffer4, padded=True)
+            self.host_sizes.update(geo.host_sizes)
+        self.nbytes = nbytes(self.node_box, self.node_ref) + geo.nbytes()
         self.build_seconds = time.perf_counter() - t0
 
-    def _up(self, name, cls, a):
-        v, n = device_array(cls, a)
-        self.host_sizes[name] = n
-        return v
+    @classmethod
+    def from_params(cls, scene, p: AccelParams) -> BVH4:
+        """The registry's constructor (:mod:`drpt.accel.registry`)."""
+        return cls(scene, method=p.method, leaf_size=p.leaf_size, bins=p.bins,
+                   min_leaf=p.min_leaf, sah_threshold=p.sah_threshold)
 
-    # intersect() and occluded() are BVH's, around this class's _trace()
+    # ---------------------------------------------------------------- queries
+    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
+        """Closest hit with ``0 < t < tmax``."""
+        return self.geo.hit(*self._trace(o, d, tmax, active, any_hit=False))
+
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
+        """Whether anything is hit with ``0 < t < tmax`` (any-hit, early exit)."""
+        _, bj, _, _ = self._trace(o, d, tmax, active, any_hit=True)
+        return bj != INVALID
+
     # ------------------------------------------------------------- internals
     def _trace(self, o, d, tmax, active, any_hit: bool):
-        o, d, active, bt, bj, bu, bv = self._begin(o, d, tmax, active, any_hit)
+        o, d, active, bt, bj, bu, bv = self.geo.begin_query(o, d, tmax, active, any_hit)
         if not self.geo.N:
             return bt, bj, bu, bv
         n = max(dr.width(o), dr.width(d), dr.width(tmax), dr.width(active))
@@ -417,24 +296,18 @@ class BVH4(BVH):
         inv_d = dr.rcp(d)
         prep = RayPrep(o, d) if self.has_tris else None
         node_box, node_ref = self.node_box, self.node_ref
-        tri_buf, sph_buf, codes = self.tri_buf, self.sph_buf, self.codes
+        tri_buf, sph_buf, codes = self.geo.tri_buf, self.geo.sph_buf, self.geo.codes
         track = bool(self.track_stack)
 
         # root box (host constants)
-        rlo, rhi = self.root_lo, self.root_hi
-        ax = (float(rlo[0]) - o.x) * inv_d.x
-        bx = (float(rhi[0]) - o.x) * inv_d.x
-        ay = (float(rlo[1]) - o.y) * inv_d.y
-        by = (float(rhi[1]) - o.y) * inv_d.y
-        az = (float(rlo[2]) - o.z) * inv_d.z
-        bz = (float(rhi[2]) - o.z) * inv_d.z
-        tn = dr.fmax(dr.fmax(dr.fmax(dr.fmin(ax, bx), dr.fmin(ay, by)), dr.fmin(az, bz)), 0.0)
-        tf = dr.fmin(dr.fmin(dr.fmax(ax, bx), dr.fmax(ay, by)), dr.fmax(az, bz)) * _SLAB_EPS
-        h_root = active & (tn <= tf) & (tn <= bt * _SLAB_EPS)
+        rlo = [float(x) for x in self.root_lo]
+        rhi = [float(x) for x in self.root_hi]
+        tn, tf = slab(rlo, rhi, o, inv_d)
+        h_root = active & (tn <= tf) & (tn <= bt * SLAB_EPS)
 
         # Every loop variable starts full width: a size-1 (Python scalar)
         # stack pointer would make Dr.Jit 1.5 render the stack writes as
-        # uniform row stores (module docstring), the crash of bc77154.
+        # uniform row stores (module docstring).
         cur = dr.select(h_root, dr.zeros(UInt32, n), UInt32(INVALID))
         sp = dr.zeros(UInt32, n)
         pi = dr.zeros(UInt32, n)
@@ -445,8 +318,9 @@ class BVH4(BVH):
         bv = dr.zeros(Float, n)
         msp = dr.zeros(UInt32, n)
         top = dr.full(UInt32, INVALID, n)  # the stack's top entry, in a register
-        sizes = [min(LOCAL_CHUNK, self.stack_size - c) for c in
-                 range(0, self.stack_size, LOCAL_CHUNK)]
+        chunk = backend.policy().local_chunk
+        sizes = [min(chunk, self.stack_size - c) for c in
+                 range(0, self.stack_size, chunk)]
         stk_n = tuple(dr.alloc_local(UInt32, z) for z in sizes)
 
         def nodes_left(cur, sp, top):
@@ -464,7 +338,7 @@ class BVH4(BVH):
             from_mem = need_pop & (top == INVALID) & (sp > 0)
             sp = dr.select(from_mem, sp - 1, sp)
             cur = dr.select(from_top, top,
-                            dr.select(from_mem, _pop(stk_n, sp, from_mem), cur))
+                            dr.select(from_mem, _pop(stk_n, sp, from_mem, chunk), cur))
             top = dr.select(from_top, UInt32(INVALID), top)
             node_on = ~in_leaf & (cur != INVALID)
             inner = node_on & ((cur & LEAF_FLAG) == 0)
@@ -477,18 +351,10 @@ class BVH4(BVH):
             hy = dr.gather(Array4f, node_box, b6 + 4, inner)
             hz = dr.gather(Array4f, node_box, b6 + 5, inner)
             ref = dr.gather(Array4u, node_ref, cur, inner)
-            lim = bt * _SLAB_EPS
+            lim = bt * SLAB_EPS
             key, val = [], []
             for k in range(4):
-                ax = (lx[k] - o.x) * inv_d.x
-                bx = (hx[k] - o.x) * inv_d.x
-                ay = (ly[k] - o.y) * inv_d.y
-                by = (hy[k] - o.y) * inv_d.y
-                az = (lz[k] - o.z) * inv_d.z
-                bz = (hz[k] - o.z) * inv_d.z
-                tn = dr.fmax(dr.fmax(dr.fmax(dr.fmin(ax, bx), dr.fmin(ay, by)),
-                                     dr.fmin(az, bz)), 0.0)
-                tf = dr.fmin(dr.fmin(dr.fmax(ax, bx), dr.fmax(ay, by)), dr.fmax(az, bz)) * _SLAB_EPS
+                tn, tf = slab((lx[k], ly[k], lz[k]), (hx[k], hy[k], hz[k]), o, inv_d)
                 h = (tn <= tf) & (tn <= lim) & (ref[k] != EMPTY_REF)
                 key.append(dr.select(h, dr.minimum(tn, _FLT_MAX), _INF))
                 val.append(ref[k])
@@ -503,7 +369,7 @@ class BVH4(BVH):
             for k in (3, 2, 1):
                 m = inner & (key[k] < _INF)
                 spill = m & (top != INVALID)
-                stk_n = _push(stk_n, top, sp, spill)
+                stk_n = _push(stk_n, top, sp, spill, chunk)
                 sp = dr.select(spill, sp + 1, sp)
                 top = dr.select(m, val[k], top)
             if track:

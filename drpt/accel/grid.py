@@ -1,12 +1,13 @@
 """Uniform grid with 3D-DDA traversal (the seed renderer's "3DDDA" accelerator).
 
-Same interface as :class:`~drpt.accel.bvh.BVH`: ``intersect(o, d, tmax,
-active) -> Hit``, ``occluded(o, d, tmax, active) -> Bool``, ``build_seconds``,
-``nbytes`` and ``stats``, with the same global primitive ids (triangles
-``0..F-1``, spheres ``F..F+S-1``, planes ``F+S..``) and the same primitive tests
-(watertight triangles on ``[p0, p1, p2]`` buffers, precision-improved spheres),
-so closest hits agree with :class:`~drpt.accel.brute.BruteForce` up to ties at
-equal ``t``. Planes are unbounded and tested by brute force before the grid.
+An :class:`~drpt.accel.protocol.Accelerator` like the BVHs: ``intersect(o, d,
+tmax, active) -> Hit``, ``occluded(o, d, tmax, active) -> Bool``,
+``build_seconds``, ``nbytes`` and ``stats``, with the same global primitive ids
+(triangles ``0..F-1``, spheres ``F..F+S-1``, planes ``F+S..``) and the same
+primitive tests (watertight triangles on ``[p0, p1, p2]`` buffers,
+precision-improved spheres, :mod:`drpt.accel.primitives`), so closest hits
+agree with :class:`~drpt.accel.brute.BruteForce` up to ties at equal ``t``.
+Planes are unbounded and tested by brute force before the grid.
 
 Grid
 ----
@@ -32,14 +33,16 @@ ascending within a cell). If the box-overlap count exceeds ``MAX_REFS`` the
 automatic resolution is lowered (an explicit one raises ``ValueError``).
 
 Memory (``nbytes``): ``4 * (cells + 1)`` offsets + ``4 * refs`` + primitive
-data (the BVH's triangle buffer, :func:`drpt.accel.bvh.triangle_buffer`;
-``16 * S`` spheres, ``16 * P`` planes).
+data (the scene-order buffers of :class:`~drpt.accel.primitives.SceneGeometry`:
+``36 * F`` triangles, ``16 * S`` spheres, ``16 * P`` planes). Uploads are
+64-byte aligned (:func:`~drpt.accel.device.device_array`).
 
 Traversal
 ---------
 One ``dr.while_loop`` (symbolic or evaluated, following
 :py:attr:`drjit.JitFlag.SymbolicLoops`) per query. Before the loop: planes,
-then the ray's entry ``tn`` into the grid box (robust slab test), the entry
+then the ray's entry ``tn`` into the grid box (robust slab test,
+:func:`~drpt.accel.device.slab`, and ``tn`` before the closest plane hit), the entry
 point ``p = o + tn d`` and its cell (clamped to the grid). Amanatides & Woo
 3D-DDA: each iteration tests *one* primitive of the current cell (the
 reference at ``pi``); when the cell is exhausted, the lane stops if the closest
@@ -70,32 +73,17 @@ import numpy as np
 from drjit.auto import Array3f, Bool, Float, Int32, UInt32
 
 from ..geometry.triangle import RayPrep
-from .bvh import INVALID, Hit, SceneGeometry, nearest_primitive, sphere_buffer, triangle_buffer
+from .device import device_array, nbytes, slab
+from .primitives import SceneGeometry, nearest_primitive
+from .protocol import INVALID, AccelParams, Hit
 
 MAX_RES = 256  # cells per axis (automatic and explicit resolutions)
 MAX_REFS = 1 << 26  # cap on primitive references (256 MB of uint32)
 CELLS_PER_PRIM = 2.0  # automatic resolution: target cells per primitive
 MIN_THICKNESS = 1e-3  # flat boxes: minimum extent relative to the largest extent
 PAD_CELLS = 2.0**-8  # conservative registration: widen prim boxes by this many cells
-_SLAB_EPS = 1.0 + 4.0 * 2.0**-24
 _STOP_SLACK = 1.0 - 2.0**-19
 _INF = float("inf")
-
-
-def _upload(cls, a: np.ndarray):
-    """Device array from 64-byte aligned host memory (enables packet gathers)."""
-    a = np.ascontiguousarray(a)
-    raw = np.empty(a.nbytes + 64, np.uint8)
-    off = (-raw.ctypes.data) % 64
-    host = raw[off:off + a.nbytes].view(a.dtype)
-    host[:] = a.reshape(-1)
-    v = cls(host)
-    dr.eval(v)
-    return v
-
-
-def _nbytes(*arrays) -> int:
-    return sum(dr.width(a) * 4 for a in arrays if a is not None)
 
 
 def prim_bounds(scene) -> tuple[np.ndarray, np.ndarray]:
@@ -238,8 +226,8 @@ class UniformGrid:
                  cells_per_prim: float = CELLS_PER_PRIM):
         t0 = time.perf_counter()
         self.geo = geo = SceneGeometry(scene)
-        F, S, N = geo.F, geo.S, geo.N
-        self.tri_buf = self.sph_buf = self.offsets = self.refs = None
+        F, N = geo.F, geo.N
+        self.offsets = self.refs = None
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": N,
                       "resolution": (0, 0, 0), "cells": 0, "refs": 0}
         if N:
@@ -277,29 +265,26 @@ class UniformGrid:
             self.inv_w = tuple(float(np.float32(1.0) / x) for x in w32)
             self.box_lo = tuple(float(x) for x in glo.astype(np.float32))
             self.box_hi = tuple(float(x) for x in ghi.astype(np.float32))
-            self.offsets = _upload(UInt32, offsets)
-            self.refs = _upload(UInt32, refs) if refs.size else _upload(UInt32, np.zeros(1, np.uint32))
-            if F:
-                self.tri_buf = _upload(Float, triangle_buffer(scene.triangles.positions))
-            if S:
-                self.sph_buf = _upload(Float, sphere_buffer(scene.spheres.center,
-                                                            scene.spheres.radius))
+            self.offsets = device_array(UInt32, offsets)
+            self.refs = device_array(UInt32, refs if refs.size else np.zeros(1, np.uint32))
+            geo.upload_primitives(scene)
             self.stats.update({
                 "leaves": int(counts.size), "resolution": self.res, "cells": int(counts.size),
                 "refs": int(refs.size), "refs_per_prim": float(refs.size / N),
                 "empty_cells": int((counts == 0).sum()),
                 "max_refs_per_cell": int(counts.max()) if counts.size else 0})
-        dr.eval(self.offsets, self.refs, self.tri_buf, self.sph_buf)
-        self.nbytes = _nbytes(self.offsets, self.refs, self.tri_buf, self.sph_buf) \
-            + geo.plane_nbytes()
+        self.nbytes = nbytes(self.offsets, self.refs) + geo.nbytes()
         self.build_seconds = time.perf_counter() - t0
+
+    @classmethod
+    def from_params(cls, scene, p: AccelParams) -> UniformGrid:
+        """The registry's constructor (:mod:`drpt.accel.registry`)."""
+        return cls(scene, resolution=p.resolution)
 
     # ---------------------------------------------------------------- queries
     def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
         """Closest hit with ``0 < t < tmax``."""
-        bt, bj, bu, bv = self._trace(o, d, tmax, active, any_hit=False)
-        valid = bj != INVALID
-        return Hit(dr.select(valid, bt, _INF), bj, bu, bv, valid)
+        return self.geo.hit(*self._trace(o, d, tmax, active, any_hit=False))
 
     def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
         """Whether anything is hit with ``0 < t < tmax`` (stops at the first hit)."""
@@ -324,21 +309,15 @@ class UniformGrid:
             active &= bj == INVALID
 
         F = geo.F
-        tri_buf, sph_buf, offsets, refs = self.tri_buf, self.sph_buf, self.offsets, self.refs
+        tri_buf, sph_buf, offsets, refs = geo.tri_buf, geo.sph_buf, self.offsets, self.refs
         mixed = tri_buf is not None and sph_buf is not None
         prep = RayPrep(o, d) if tri_buf is not None else None
         inv_d = dr.rcp(d)
         res, lo, w, inv_w = self.res, self.lo, self.w, self.inv_w
 
         # entry into the grid box
-        blo, bhi = self.box_lo, self.box_hi
-        tn, tf = Float(0), Float(_INF)
-        for a in range(3):
-            ta = (blo[a] - o[a]) * inv_d[a]
-            tb = (bhi[a] - o[a]) * inv_d[a]
-            tn = dr.fmax(tn, dr.fmin(ta, tb))
-            tf = dr.fmin(tf, dr.fmax(ta, tb))
-        alive = active & (tn <= tf * _SLAB_EPS) & (tn < bt)
+        tn, tf = slab(self.box_lo, self.box_hi, o, inv_d)
+        alive = active & (tn <= tf) & (tn < bt)
         tn = dr.select(alive, tn, 0.0)
         p = o + tn * d
 

@@ -14,9 +14,12 @@ sphere and plane tests), evaluated in the same order as
 :class:`~drpt.accel.brute.BruteForce`, so the two agree bit for bit.
 
 The code grows with the scene (about 80 vector instructions per triangle),
-hence :data:`MAX_PRIMS`; :func:`~drpt.accel.build_accel` picks this
-accelerator by itself (``kind="auto"``) only below that count. Each scene
-compiles its own kernels (the constants are part of the code).
+hence a limit: :func:`~drpt.accel.build_accel` picks this accelerator by
+itself (``kind="auto"``, :func:`~drpt.accel.registry.resolve_kind`) only for
+scenes of at most ``inline_max_prims`` primitives (triangles + spheres +
+planes; :class:`drpt.backend.Policy`, 64 on both backends; measured
+crossover: see the README). Each scene compiles its own kernels (the
+constants are part of the code).
 """
 
 from __future__ import annotations
@@ -30,15 +33,10 @@ from drjit.auto import Array3f, Bool, Float, UInt32
 from ..geometry.plane import intersect_plane
 from ..geometry.sphere import intersect_sphere
 from ..geometry.triangle import RayPrep, watertight_permuted
-from .brute import BruteForce
-from .bvh import INVALID
-
-#: Largest primitive count (triangles + spheres + planes) that ``kind="auto"``
-#: compiles inline; above it, the BVH. Measured crossover: see the README.
-MAX_PRIMS = 64
+from .protocol import INVALID, AccelParams, Hit
 
 
-class InlineList(BruteForce):
+class InlineList:
     """Brute force's queries with the scene's primitives as constants.
 
     Attributes: ``build_seconds``, ``nbytes`` (0: no device data), ``stats``.
@@ -56,7 +54,22 @@ class InlineList(BruteForce):
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": self.F + self.S + self.P}
         self.build_seconds = time.perf_counter() - t0
 
-    # intersect() and occluded() are BruteForce's, around this class's _trace()
+    @classmethod
+    def from_params(cls, scene, p: AccelParams) -> InlineList:
+        """The registry's constructor (:mod:`drpt.accel.registry`)."""
+        return cls(scene)
+
+    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
+        """Closest hit with ``0 < t < tmax``."""
+        bt, bj, bu, bv = self._trace(o, d, tmax, active)
+        valid = bj != INVALID
+        return Hit(dr.select(valid, bt, float("inf")), bj, bu, bv, valid)
+
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
+        """Whether anything is hit with ``0 < t < tmax``."""
+        _, bj, _, _ = self._trace(o, d, tmax, active)
+        return bj != INVALID
+
     def _trace(self, o, d, tmax, active):
         o, d, active = Array3f(o), Array3f(d), Bool(active)
         bt = dr.select(active, Float(tmax), 0.0)

@@ -1,4 +1,5 @@
-"""Bottom-up BVH construction by parallel locally-ordered clustering (PLOC).
+"""Bottom-up BVH construction by parallel locally-ordered clustering (PLOC):
+the ``"ploc"`` rule of :func:`~drpt.accel.build.build_bvh`.
 
 Meister and Bittner's agglomerative build (IEEE TVCG 2018). Primitives are
 sorted along a Morton curve and become clusters; then, until one cluster is
@@ -25,22 +26,26 @@ always mutual, so every round merges at least once; the parity rule makes
 a run of identical clusters merge in pairs (halving it per round) rather
 than one pair at a time. Inputs that still merge slowly (nested boxes merge
 one pair per round) are given up on (``MAX_ROUNDS``, ``MIN_RATE_DIV``), and
-:func:`~drpt.accel.bvh_build.build_bvh` builds them by the Morton rule.
+:func:`~drpt.accel.build.build_bvh` builds them by the Morton rule
+(:mod:`~drpt.accel.build_morton`).
 
 The binary tree has one primitive per leaf. Subtrees of at most ``max_leaf``
 primitives become leaves where the SAH says a leaf is cheaper
 (``C_i N A <= C_t A + cost(left) + cost(right)``, bottom up), and the tree is
-laid out breadth-first as :class:`~drpt.accel.bvh_build.BVHArrays` (sibling
-pairs at even indices, each subtree's primitives contiguous).
+laid out breadth-first as :class:`~drpt.accel.tree.BVHArrays` (sibling
+pairs at even indices, each subtree's primitives contiguous). There is no
+``min_leaf``.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import drjit as dr
 import numpy as np
 from drjit.auto import Array4f, Float, UInt32, UInt64
 
-from .bvh_build import _area, _emit_level, _morton30, _node_arrays
+from .tree import BVHArrays, box_area, emit_level, morton30, node_arrays
 
 PLOC_RADIUS = 16  # neighbours searched on each side (the paper's r)
 # Give up (the caller falls back to another builder) on inputs that merge
@@ -103,7 +108,22 @@ def _nearest(box8: np.ndarray, radius: int) -> np.ndarray:
     return best_j.numpy().astype(np.int64)
 
 
-def ploc_tree(lo32: np.ndarray, hi32: np.ndarray, order: np.ndarray, radius: int = PLOC_RADIUS):
+@dataclass
+class ClusterTree:
+    """The binary tree of PLOC's merges over ``N`` primitives (``2N - 1``
+    nodes): node ``x < N`` is the leaf of primitive ``order[x]``; node
+    ``x >= N`` is inner, with children ``left[x]``, ``right[x]`` (both smaller
+    than ``x``); the root is the last node, ``2N - 2``."""
+
+    left: np.ndarray  # (2N - 1,) int64, -1 for leaves
+    right: np.ndarray  # (2N - 1,) int64, -1 for leaves
+    lo: np.ndarray  # (2N - 1, 3) float32 boxes
+    hi: np.ndarray  # (2N - 1, 3) float32
+    batches: list  # (start, stop) node id ranges created by each round, in order
+
+
+def ploc_tree(lo32: np.ndarray, hi32: np.ndarray, order: np.ndarray,
+              radius: int = PLOC_RADIUS) -> ClusterTree | None:
     """Binary tree over ``N`` primitives merged by PLOC.
 
     Args:
@@ -111,12 +131,8 @@ def ploc_tree(lo32: np.ndarray, hi32: np.ndarray, order: np.ndarray, radius: int
         order: ``(N,)`` the primitives in Morton order.
 
     Returns:
-        ``(left, right, lo, hi, batches)``: node ``x < N`` is the leaf of
-        primitive ``order[x]``; node ``x >= N`` is inner, with children
-        ``left[x]``, ``right[x]`` (both smaller than ``x``); ``lo``/``hi``
-        ``(2N - 1, 3)`` float32 boxes; ``batches`` the node id ranges created
-        by each round (the root is the last node, ``2N - 2``); ``None``
-        when the input merges too slowly (``MAX_ROUNDS``, ``MIN_RATE_DIV``).
+        The :class:`ClusterTree`, or ``None`` when the input merges too
+        slowly (``MAX_ROUNDS``, ``MIN_RATE_DIV``).
     """
     N = order.size
     M = 2 * N - 1
@@ -166,26 +182,24 @@ def ploc_tree(lo32: np.ndarray, hi32: np.ndarray, order: np.ndarray, radius: int
         cid = cid[keep]
         rec = rec[keep]
         box8 = rec.view(np.float32).reshape(-1, 8)
-    return left, right, lo, hi, batches
+    return ClusterTree(left=left, right=right, lo=lo, hi=hi, batches=batches)
 
 
-def build_ploc(lo32, hi32, cent, max_leaf: int, max_depth: int, ct: float, ci: float,
-               radius: int | None = None):
-    """PLOC tree in the layout of :class:`~drpt.accel.bvh_build.BVHArrays`.
-
-    Returns ``(node_lo, node_hi, node_a, node_count, prim_order, depth,
-    n_leaves)``, or ``None`` when the tree is deeper than ``max_depth`` or
-    the input merges too slowly (:func:`ploc_tree`).
+def ploc_bvh(lo32: np.ndarray, hi32: np.ndarray, cent: np.ndarray, max_leaf: int,
+             max_depth: int, ct: float, ci: float, radius: int | None = None) -> BVHArrays | None:
+    """PLOC tree in the layout of :class:`~drpt.accel.tree.BVHArrays`
+    (``stats``: ``leaves``), or ``None`` when the tree is deeper than
+    ``max_depth`` or the input merges too slowly (:func:`ploc_tree`).
     """
     N = lo32.shape[0]
-    order = np.argsort(_morton30(cent), kind="stable")
+    order = np.argsort(morton30(cent), kind="stable")
     tree = ploc_tree(lo32, hi32, order, PLOC_RADIUS if radius is None else radius)
     if tree is None:
         return None
-    left, right, lo, hi, batches = tree
+    left, right, lo, hi, batches = tree.left, tree.right, tree.lo, tree.hi, tree.batches
     M = 2 * N - 1
     count = np.ones(M, np.int64)
-    area = _area(lo, hi)
+    area = box_area(lo, hi)
     cost = ci * area
     collapse = np.ones(M, bool)
     for s, e in batches:  # bottom up: children come from earlier batches
@@ -210,7 +224,7 @@ def build_ploc(lo32, hi32, cent, max_leaf: int, max_depth: int, ct: float, ci: f
     max_d = int(depth[emitted].max())
     if max_d > max_depth:
         return None
-    node_lo, node_hi, node_a, node_count = _node_arrays(N)
+    node_lo, node_hi, node_a, node_count = node_arrays(N)
     frontier = np.array([M - 1], np.int64)  # tree ids, the root last
     out = np.zeros(1, np.int64)
     next_free = 2
@@ -218,7 +232,7 @@ def build_ploc(lo32, hi32, cent, max_leaf: int, max_depth: int, ct: float, ci: f
     while frontier.size:
         node_lo[out] = lo[frontier]
         node_hi[out] = hi[frontier]
-        lf, sp, pair, next_free = _emit_level(node_a, node_count, start[frontier],
+        lf, sp, pair, next_free = emit_level(node_a, node_count, start[frontier],
                                               count[frontier], out, emitted[frontier],
                                               next_free)
         n_leaves += lf.size
@@ -226,5 +240,6 @@ def build_ploc(lo32, hi32, cent, max_leaf: int, max_depth: int, ct: float, ci: f
         frontier = np.stack([left[inner], right[inner]], 1).ravel()
         out = np.stack([pair, pair + 1], 1).ravel()
     Mo = next_free
-    return (node_lo[:Mo].copy(), node_hi[:Mo].copy(), node_a[:Mo].copy(),
-            node_count[:Mo].copy(), prim_order, max_d, n_leaves)
+    return BVHArrays(node_lo=node_lo[:Mo].copy(), node_hi=node_hi[:Mo].copy(),
+                     node_a=node_a[:Mo].copy(), node_count=node_count[:Mo].copy(),
+                     prim_order=prim_order, depth=max_d, stats={"leaves": n_leaves})
