@@ -45,9 +45,8 @@ def run_chi2(sample, pdf, sample_dim=2, sample_count=400_000, res=61, seed=0):
     at significance 1% (after a Sidak correction for the number of tests it
     runs); returns (passed, message).
     """
-    mi = mitsuba()
+    mitsuba()
     from drjit.auto import Array2f, Array3f
-
     from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 
     def sample_func(u):

@@ -16,6 +16,15 @@ SEED = SHARED / "seed"
 SCENES = REPO / "scenes"
 
 
+@pytest.fixture(params=[True, False], ids=["symbolic", "evaluated"])
+def loop_mode(request):
+    """Run the test with Dr.Jit's loops symbolic (one kernel) and evaluated."""
+    import drjit as dr
+
+    with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, request.param):
+        yield request.param
+
+
 @pytest.fixture
 def seed_dir() -> Path:
     if not (SEED / "scenes").is_dir():

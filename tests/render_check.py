@@ -13,8 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drpt.options import PathOptions
-from drpt.options import RenderOptions
+from drpt.options import PathOptions, RenderOptions
 from drpt.render.renderer import Renderer
 
 

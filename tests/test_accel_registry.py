@@ -8,11 +8,11 @@ import dataclasses
 import drjit as dr
 import numpy as np
 from drjit.auto import UInt32
-from test_bvh import make_scene, soup
 
 from drpt import backend
 from drpt.accel import ACCELERATORS, KINDS, Accelerator, build_accel, resolve_kind
 from drpt.accel.device import device_array
+from test_bvh import make_scene, soup
 
 
 def test_kinds_come_from_the_table():

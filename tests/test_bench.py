@@ -8,10 +8,9 @@ import math
 
 import pytest
 
-from drpt.tools import bench
-from drpt.errors import DrptError
-
 from conftest import SCENES
+from drpt.errors import DrptError
+from drpt.tools import bench
 
 CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
 NUMBERS = ["build_s", "accel_mib", "primary_mrays", "incoherent_mrays", "shadow_mrays",

@@ -22,12 +22,11 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float, UInt32
 
+from chi2util import mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 from drpt.export.mitsuba_cook_torrance import to_mitsuba
 from drpt.render.bsdf import cook_torrance as ct
 from drpt.render.bsdf import microfacet as mf
 from drpt.shading import BSDFSpec
-
-from chi2util import mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 
 BASE = (0.8, 0.6, 0.4)
 HARD = ((0.9, 0.75, 0.3), 0.9, 0.9)  # the seed's hard case: base, metalness, alpha
@@ -68,7 +67,7 @@ ALPHAS = (0.01, 0.1, 0.5, 1.0)
 
 
 def _chi2(sample_func, pdf_func, dim, res, ires, sample_count=200_000):
-    mi = mitsuba()
+    mitsuba()
     from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 
     test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,

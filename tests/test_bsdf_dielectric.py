@@ -13,11 +13,10 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
+from chi2util import mitsuba
 from drpt.export.mitsuba_specular import to_mitsuba
 from drpt.render.bsdf import dielectric
 from drpt.shading import BSDFSpec
-
-from chi2util import mitsuba
 
 
 def _f(a):

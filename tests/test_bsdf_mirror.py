@@ -9,11 +9,10 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
+from chi2util import mitsuba
 from drpt.export.mitsuba_specular import to_mitsuba
 from drpt.render.bsdf import mirror
 from drpt.shading import BSDFSpec
-
-from chi2util import mitsuba
 
 R = (0.9, 0.6, 0.25)
 

@@ -13,11 +13,10 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
+from chi2util import mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 from drpt.export import mitsuba_phong
 from drpt.render.bsdf import phong
 from drpt.shading import BSDFSpec
-
-from chi2util import mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 
 KD = (0.25, 0.3, 0.15)
 KS = (0.5, 0.45, 0.6)  # max(kd + ks) = 0.75
@@ -54,7 +53,7 @@ def _mi_bsdf(mi, kd=KD, ks=KS, ns=10.0):
 def _chi2(sample_func, pdf_func, sample_count=200_000, res=61, ires=4):
     """Mitsuba's ChiSquareTest on the sphere; ``sample_func`` returns (wo, weight)
     (weight 0 = failed sample, left out of the histogram)."""
-    mi = mitsuba()
+    mitsuba()
     from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 
     test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
@@ -121,7 +120,7 @@ def test_drpt_sampling_matches_pdf(theta, ns):
 @pytest.mark.parametrize("theta,ns", [(0.0, 1.0), (60.0, 10.0), (85.0, 100.0), (89.9, 1000.0),
                                       (30.0, 1000.0)])
 def test_mitsuba_plugin_sampling_matches_pdf(theta, ns):
-    mi = mitsuba()
+    mitsuba()
     mitsuba_phong.register()
     from mitsuba.chi2 import BSDFAdapter
 

@@ -44,7 +44,6 @@ import pytest
 from drpt.imageio import read_image
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
-
 from drpt.tools.reference import REFERENCES, reference_path, variance_path
 
 ZMAX = 4.5

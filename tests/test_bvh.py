@@ -73,7 +73,7 @@ def icosphere(level=2):
         verts = list(map(tuple, v))
         index = {}
 
-        def mid(a, b):
+        def mid(a, b, verts=verts, index=index):
             key = (min(a, b), max(a, b))
             if key not in index:
                 m = (np.asarray(verts[a]) + verts[b]) / 2
@@ -93,12 +93,6 @@ def rays(o, d):
     o = np.asarray(o, np.float32)
     d = np.asarray(d, np.float32)
     return Array3f(*o.T), Array3f(*d.T)
-
-
-@pytest.fixture(params=[True, False], ids=["symbolic", "evaluated"])
-def loop_mode(request):
-    with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, request.param):
-        yield request.param
 
 
 def brute_hits(scene, o, d, tmax=INF):

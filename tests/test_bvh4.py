@@ -14,9 +14,7 @@ from drpt import backend
 from drpt.accel import build_accel
 from drpt.accel.build import build_bvh
 from drpt.accel.bvh4 import BVH4, stack_entries
-from drpt.accel.bvh4_nodes import (EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_START_MASK,
-                                   collapse_bvh4)
-
+from drpt.accel.bvh4_nodes import EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_START_MASK, collapse_bvh4
 from test_bvh import brute_hits, make_scene, rays, soup
 
 INF = float("inf")

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from drpt import metrics
-from drpt.tools.compare import add_parser, main
 from drpt.errors import DrptError
 from drpt.imageio import read_image, write_image
+from drpt.tools.compare import add_parser, main
 
 CORNELL = Path(__file__).resolve().parents[1] / "scenes" / "cornellbox" / "cornellbox.txt"
 

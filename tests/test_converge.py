@@ -65,9 +65,15 @@ import pytest
 
 from conftest import REPO
 from drpt.tools import converge
-from drpt.tools.converge import (equal_time_ratios, interp_loglog, loglog_slope, noise_floor,
-                           spp_levels, time_to_error, time_to_error_ratios)
-
+from drpt.tools.converge import (
+    equal_time_ratios,
+    interp_loglog,
+    loglog_slope,
+    noise_floor,
+    spp_levels,
+    time_to_error,
+    time_to_error_ratios,
+)
 from drpt.tools.reference import REFERENCES, reference_path, variance_path
 
 CORNELL = REPO / "scenes" / "cornellbox" / "cornellbox.txt"
@@ -164,8 +170,7 @@ def _factor(w: int, h: int) -> int:
 @pytest.mark.parametrize("name", sorted(REFERENCES))
 def test_error_falls_as_one_over_n(name, reference_scene):
     from drpt.imageio import read_image
-    from drpt.options import PathOptions
-    from drpt.options import RenderOptions
+    from drpt.options import PathOptions, RenderOptions
     from drpt.render.renderer import Renderer
 
     scene_file, W, H, ref_spp, depth, mode = REFERENCES[name]

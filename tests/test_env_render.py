@@ -8,7 +8,6 @@ import pytest
 
 from drpt.imageio import write_image
 from drpt.scene import load_scene
-
 from render_check import assert_agree, render_both
 
 
@@ -92,8 +91,7 @@ def test_sun_importance_sampling_beats_uniform_sphere_sampling(tmp_path):
     # Equal spp, same scene: sampling the sky by luminance must cut relMSE
     # by far (measured ~160x at 16 spp, benchmarks/env_sampling.py); we ask
     # for 10x so the fixed-seed test has a wide margin.
-    from drpt.options import PathOptions
-    from drpt.options import RenderOptions
+    from drpt.options import PathOptions, RenderOptions
     from drpt.render.renderer import Renderer
 
     scene = make(tmp_path)

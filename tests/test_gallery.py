@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from drpt.cli import main
-from drpt.tools.gallery import downsample
 from drpt.imageio import read_image
+from drpt.tools.gallery import downsample
 
 
 def test_downsample_is_block_mean():

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import drjit as dr
 import numpy as np
 from drjit.auto import Array3f, Float
 
-from drpt.geometry import (intersect_plane, intersect_sphere, intersect_triangle,
-                           intersect_triangle_watertight)
+from drpt.geometry import intersect_plane, intersect_sphere, intersect_triangle, intersect_triangle_watertight
 
 INF = float("inf")
 

@@ -9,13 +9,11 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.auto import Array3f, Float
+from drjit.auto import Float
 
 from drpt.accel.brute import BruteForce
 from drpt.accel.grid import MAX_RES, UniformGrid, auto_resolution
-from drpt.scene import model as M
-
-from test_bvh import icosphere, loop_mode, make_scene, rays, soup  # noqa: F401 (fixture)
+from test_bvh import icosphere, make_scene, rays, soup
 
 INF = float("inf")
 RESOLUTIONS = [1, 7, None]

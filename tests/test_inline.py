@@ -11,10 +11,10 @@ import drjit as dr
 import numpy as np
 import pytest
 from drjit.auto import Float
-from test_bvh import closed_mesh_rays, loop_mode, make_scene, rays, soup  # noqa: F401 (fixture)
 
 from drpt.accel import InlineList, build_accel, resolve_kind
 from drpt.backend import policy
+from test_bvh import closed_mesh_rays, make_scene, rays, soup
 
 MAX_PRIMS = policy().inline_max_prims
 

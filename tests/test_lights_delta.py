@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from drpt.scene import load_scene
-
 from render_check import assert_agree, render_both
 
 SCENE = """
@@ -53,8 +52,7 @@ def test_point_light_falloff_follows_attenuation(tmp_path):
     # Direct light only: doubling q halves the image exactly (same samples).
     a = scene(tmp_path, "PointLight { position 2 4 2  color 20 20 20  attenuation 0 0 1 }")
     b = scene(tmp_path, "PointLight { position 2 4 2  color 20 20 20  attenuation 0 0 2 }")
-    from drpt.options import PathOptions
-    from drpt.options import RenderOptions
+    from drpt.options import PathOptions, RenderOptions
     from drpt.render.renderer import Renderer
 
     opt = dict(width=16, height=16, spp=4, progress=False, path=PathOptions(max_depth=2))

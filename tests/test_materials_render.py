@@ -5,11 +5,9 @@ The scene: a floor, a back wall and a ceiling light (OBJ + MTL), one sphere
 of the material under test, a diffuse sphere beside it, max depth 6.
 """
 
-import numpy as np
 import pytest
 
 from drpt.scene import load_scene
-
 from render_check import assert_agree, render_both
 
 pytestmark = pytest.mark.mitsuba

@@ -71,7 +71,8 @@ def test_polygon_fan(tmp_path):
 def test_mixed_polygon_sizes_and_materials(tmp_path):
     (tmp_path / "a.mtl").write_text("newmtl red\nKd 1 0 0\n")
     (tmp_path / "b.mtl").write_text("newmtl blue\nKd 0 0 1\n")
-    text = "mtllib a.mtl b.mtl\n" + QUAD_V + "f 1 2 3 4\nusemtl blue\nf 1 2 3\nusemtl red\nf 4 3 2 1\nusemtl blue\nf 2 3 4\n"
+    text = ("mtllib a.mtl b.mtl\n" + QUAD_V
+            + "f 1 2 3 4\nusemtl blue\nf 1 2 3\nusemtl red\nf 4 3 2 1\nusemtl blue\nf 2 3 4\n")
     m = load_obj(write(tmp_path, text))
     assert len(m) == 2 + 1 + 2 + 1
     assert m.material_names == ["blue", "red"]

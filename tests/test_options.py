@@ -5,8 +5,15 @@ import argparse
 import pytest
 
 from drpt.errors import DrptError
-from drpt.options import (FLAGS, PathOptions, RenderOptions, add_render_flags,
-                          options_from_args, parse_accel, parse_accel_list)
+from drpt.options import (
+    FLAGS,
+    PathOptions,
+    RenderOptions,
+    add_render_flags,
+    options_from_args,
+    parse_accel,
+    parse_accel_list,
+)
 
 
 def _args(argv, **kw):

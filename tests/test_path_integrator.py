@@ -4,7 +4,7 @@ regeneration (``sample_sequence``, what the renderer runs)."""
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.auto import Bool, Float, PCG32, UInt32
+from drjit.auto import PCG32, Bool, Float, UInt32
 
 from conftest import SCENES
 from drpt.options import RenderOptions

@@ -7,10 +7,9 @@ import json
 
 import pytest
 
-from drpt.tools import profile
-from drpt.errors import DrptError
-
 from conftest import SCENES
+from drpt.errors import DrptError
+from drpt.tools import profile
 
 CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
 

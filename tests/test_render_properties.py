@@ -7,8 +7,7 @@ import pytest
 
 from drpt.cli import main
 from drpt.imageio import read_image, write_image
-from drpt.options import PathOptions
-from drpt.options import RenderOptions
+from drpt.options import PathOptions, RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 

@@ -6,9 +6,8 @@ import pytest
 from drjit.auto import Array2f, Array3f, Float
 from scipy import stats
 
-from drpt.render import warp
-
 from chi2util import run_chi2
+from drpt.render import warp
 
 
 @pytest.mark.mitsuba

@@ -8,12 +8,10 @@ light (see the module docstring). These tests use such scenes.
 import numpy as np
 import pytest
 
-from drpt.options import PathOptions
-from drpt.options import RenderOptions
+from drpt.options import PathOptions, RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-
-from render_check import assert_agree, block_z, render_both
+from render_check import assert_agree, render_both
 
 SCENE = """
 PerspectiveCamera {{ center 0 1.2 6  direction 0 -0.2 -1  up 0 1 0  angle 35 }}

@@ -135,8 +135,7 @@ from .. import backend
 from ..geometry.triangle import RayPrep, watertight_permuted
 from .build import build_bvh
 from .bvh import STACK_SIZE
-from .bvh4_nodes import (EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_MAX_COUNT,
-                         LEAF_START_MASK, collapse_bvh4)
+from .bvh4_nodes import EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_MAX_COUNT, LEAF_START_MASK, collapse_bvh4
 from .device import SLAB_EPS, device_array, nbytes, slab
 from .primitives import SceneGeometry, leaf_primitive, nearest_primitive, primitive_bounds
 from .protocol import INVALID, AccelParams, Hit

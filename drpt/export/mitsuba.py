@@ -92,8 +92,8 @@ Lights
     warning. ``DirectionalLight`` -> ``directional`` (``direction`` = the
     direction light travels, ``irradiance = color``). ``Skybox`` ->
     ``envmap`` through :mod:`drpt.export.mitsuba_envmap` (identity
-    ``to_world``: drpt's direction/uv mapping is Mitsuba's, verified there). ``Background.color`` non-zero -> ``constant``
-    emitter, only when there is no ``Skybox``. ``Background.ambient`` (a
+    ``to_world``: drpt's direction/uv mapping is Mitsuba's, verified there).
+    ``Background.color`` non-zero -> ``constant`` emitter, only when there is no ``Skybox``. ``Background.ambient`` (a
     Whitted term) has no Mitsuba equivalent and is ignored.
 """
 
@@ -111,7 +111,6 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from drpt.errors import DrptError
-from drpt.shading import BSDFSpec, interpret_scene, untextured_note
 from drpt.scene.model import (
     DirectionalLight,
     Material,
@@ -121,6 +120,7 @@ from drpt.scene.model import (
     Scene,
     Skybox,
 )
+from drpt.shading import BSDFSpec, interpret_scene, untextured_note
 
 __all__ = ["to_mitsuba_dict", "write_xml", "look_at_matrix", "PLANE_SCALE"]
 

@@ -168,7 +168,7 @@ def _make_class(mi, dr):
             callback.put("ks", self.ks, mi.ParamFlags.Differentiable)
             callback.put("ns", self.ns, mi.ParamFlags.NonDifferentiable)
 
-        def parameters_changed(self, keys=[]):
+        def parameters_changed(self, keys=None):
             pass
 
         def to_string(self):

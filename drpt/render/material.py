@@ -23,8 +23,8 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-from ..shading import BSDFSpec, interpret_scene
 from ..scene.model import Scene
+from ..shading import BSDFSpec, interpret_scene
 from .bsdf import BSDFSample, lobe
 from .surface import Interaction, _vec
 from .warp import Frame

@@ -31,12 +31,12 @@ from dataclasses import dataclass
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Bool, Float, PCG32, UInt32, UInt64
+from drjit.auto import PCG32, Bool, Float, UInt32, UInt64
 
 from ..backend import policy
+from ..options import RenderOptions
 from ..scene.model import Scene
 from .camera import RayCamera
-from ..options import RenderOptions
 from .integrators.path import PathIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .scene import DeviceScene
@@ -163,7 +163,7 @@ class Renderer:
         t0 = time.perf_counter()
         with tqdm(total=W * H * spp, unit="spl", unit_scale=True, disable=not self.opt.progress,
                   desc="render", leave=False) as bar:
-            for i, (s0, k, r0, rows) in enumerate(passes):
+            for i, (_s0, k, r0, rows) in enumerate(passes):
                 img, sq, nbad = self._pass(i, k, r0, rows)
                 acc[r0:r0 + rows] += img
                 acc2[r0:r0 + rows] += sq

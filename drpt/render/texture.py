@@ -36,7 +36,7 @@ from os import PathLike
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array2f, Array3f, Bool, Texture2f, TensorXf, UInt32
+from drjit.auto import Array2f, Array3f, Bool, TensorXf, Texture2f, UInt32
 
 from ..imageio import read_image
 

@@ -268,7 +268,7 @@ def parse_obj_text(text: str, path: Path, *, mtl_cache: MtlCache | None = None) 
         K.append(k)
 
     lineno = 0
-    for lineno, line in enumerate(lines, 1):
+    for lineno, line in enumerate(lines, 1):  # noqa: B007 (the error path reads it)
         if "#" in line:
             line = line[: line.index("#")]
         head = line[:2]

@@ -649,7 +649,7 @@ class _Parser:
     def resolve_materials(self) -> tuple[list[Material], np.ndarray]:
         """Turn self.refs into (Scene.materials, ref -> material index)."""
         named: dict[str, Material] = {}
-        for lib_path, lib in self.mtl_cache.items():
+        for _lib_path, lib in self.mtl_cache.items():
             for name, mat in lib.items():
                 first = named.setdefault(name, mat)
                 if first is not mat and replace(first, origin="") != replace(mat, origin=""):

@@ -64,13 +64,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DrptError
+from . import table as _table
 from .reference import (
     add_reference_args,
     cache_dir_from_args,
     check_reference_args,
     get_reference,
 )
-from . import table as _table
 
 KNOBS = ("depth", "rr", "accel", "bsdf")
 RR_OFF_DEPTH = 64

@@ -14,7 +14,6 @@ from drjit.auto import Array2f, Array3f, Float
 from ..warp import INV_PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
 from . import BSDFSample
 
-
 #: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
 FIELDS = {}
 DELTA = False

@@ -15,7 +15,6 @@ from drjit.auto import Array2f, Array3f, Bool, Float
 
 from . import BSDFSample
 
-
 #: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
 FIELDS = {"ks": "rgb"}
 DELTA = True

@@ -31,11 +31,11 @@ its feature flags decide at trace time which estimators are compiled.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import drjit as dr
-from drjit.auto import Array2f, Array3f, Bool, Float, PCG32, UInt32
+from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
 
 from ...options import PathOptions
 from ..scene import DeviceScene

@@ -34,7 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import drjit as dr
-from drjit.auto import Array2f, Array3f, Bool, PCG32, UInt32
+from drjit.auto import PCG32, Array2f, Array3f, Bool, UInt32
 
 from ..scene import DeviceScene
 from .common import DirectLight

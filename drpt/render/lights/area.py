@@ -19,8 +19,8 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ...scene.model import Scene
-from ..warp import square_to_uniform_triangle
 from ..surface import SurfaceData
+from ..warp import square_to_uniform_triangle
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 

@@ -275,7 +275,8 @@ def box(lo, hi):
     V = c[quads].reshape(-1, 3)
     n = np.cross(V[1::4] - V[0::4], V[2::4] - V[0::4])
     N = np.repeat(_normalize(n), 4, axis=0)
-    F = np.concatenate([np.arange(6)[:, None] * 4 + np.array([0, 1, 2]), np.arange(6)[:, None] * 4 + np.array([0, 2, 3])])
+    first = np.arange(6)[:, None] * 4
+    F = np.concatenate([first + np.array([0, 1, 2]), first + np.array([0, 2, 3])])
     return V, F, N
 
 
@@ -423,8 +424,10 @@ def build(s: float = 1.0) -> Mesh:
             m.add("brushed_steel", V + [x, 0, z], F)
             V, F = cylinder(0.04, 0.0, 0.01, nl)  # foot
             m.add("brushed_steel", V + [x, 0, z], F)
-    for lo, hi in [((-0.9, ty - 0.05, -0.4), (0.9, ty - 0.01, -0.36)), ((-0.9, ty - 0.05, 0.36), (0.9, ty - 0.01, 0.4)),
-                   ((-0.9, ty - 0.05, -0.4), (-0.86, ty - 0.01, 0.4)), ((0.86, ty - 0.05, -0.4), (0.9, ty - 0.01, 0.4))]:
+    for lo, hi in [((-0.9, ty - 0.05, -0.4), (0.9, ty - 0.01, -0.36)),
+                   ((-0.9, ty - 0.05, 0.36), (0.9, ty - 0.01, 0.4)),
+                   ((-0.9, ty - 0.05, -0.4), (-0.86, ty - 0.01, 0.4)),
+                   ((0.86, ty - 0.05, -0.4), (0.9, ty - 0.01, 0.4))]:
         m.add("brushed_steel", *box(lo, hi))
     top = ty + 0.02  # table surface
 
@@ -484,8 +487,9 @@ def build(s: float = 1.0) -> Mesh:
     m.add("ceramic", V + [bx, top, bz], F)
     rng = np.random.default_rng(3)
     fu, fv = seg(64, s), seg(32, s)
-    fruits = [(0.0, 0.0, 0.045, "fruit_orange"), (0.07, 0.02, 0.04, "fruit_red"), (-0.06, 0.04, 0.042, "fruit_green"),
-              (0.02, -0.07, 0.04, "fruit_red"), (-0.04, -0.05, 0.043, "fruit_orange"), (0.03, 0.065, 0.038, "fruit_green"),
+    fruits = [(0.0, 0.0, 0.045, "fruit_orange"), (0.07, 0.02, 0.04, "fruit_red"),
+              (-0.06, 0.04, 0.042, "fruit_green"), (0.02, -0.07, 0.04, "fruit_red"),
+              (-0.04, -0.05, 0.043, "fruit_orange"), (0.03, 0.065, 0.038, "fruit_green"),
               (0.0, 0.01, 0.04, "fruit_red")]
     for i, (fx, fz, r, mtl) in enumerate(fruits):
         V, F = superellipsoid(r, r * 0.92, r, 1.0, 1.0, fu, fv)

@@ -87,7 +87,8 @@ Group {
 
 
 HARD = SCENE.replace("mtl sphere_gold }", "mtl sphere_gold_hard }").replace(
-    "# The seed's \"newscene\"", "# The seed's hard case (gold sphere: metalness 0.9, roughness 0.9) in its \"newscene\"")
+    "# The seed's \"newscene\"",
+    "# The seed's hard case (gold sphere: metalness 0.9, roughness 0.9) in its \"newscene\"")
 
 
 def quad(a, b, c, d):
