@@ -162,8 +162,8 @@ def ensure() -> None:
         import drjit as dr
 
         if not dr.has_backend(dr.JitBackend.CUDA):
-            raise DrptError("--backend cuda: Dr.Jit found no CUDA device or driver on this "
-                            "machine (use --backend llvm)")
+            raise DrptError("backend cuda (--backend or DRPT_BACKEND): Dr.Jit found no CUDA "
+                            "device or driver on this machine (use llvm)")
     _checked.add(current)
 
 

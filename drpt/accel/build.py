@@ -10,7 +10,7 @@ Rules (``method``, :data:`METHODS`), each in the module of its name:
     primitive here (6.7-9.6 s for the 510k-triangle dining room, 11-14x
     Mitsuba's whole scene load); PLOC ~2 us (1.0-1.2 s) for trees that trace
     about as fast, the Morton build about as long for trees that trace
-    0.72-0.89x as fast (README, Performance); 100k primitives keep the SAH
+    0.72-0.89x as fast (``bench --accel bvh-sah,bvh-ploc,bvh-morton``); 100k primitives keep the SAH
     build under ~2 s. ``BVHArrays.stats["method"]`` is the rule that ran.
 ``"sah"``, ``"median"``, ``"threshold"``
     Top-down splits (binned SAH, object median, and the seed's rule: SAH in

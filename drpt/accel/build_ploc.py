@@ -16,7 +16,7 @@ left, every round
 
 The merge order is greedy on surface area in a neighbourhood, which gives
 trees that trace about as fast as a full binned SAH build's, for a fraction
-of its build time (README, Performance); Morton order only decides who is compared with whom.
+of its build time; Morton order only decides who is compared with whom.
 The dining room (510k triangles) takes 68 rounds and ~1 s.
 
 Ties (identical boxes: a million copies of one triangle) are broken by a

@@ -17,8 +17,8 @@ The code grows with the scene (about 80 vector instructions per triangle),
 hence a limit: :func:`~drpt.accel.build_accel` picks this accelerator by
 itself (``kind="auto"``, :func:`~drpt.accel.registry.resolve_kind`) only for
 scenes of at most ``inline_max_prims`` primitives (triangles + spheres +
-planes; :class:`drpt.backend.Policy`, 64 on both backends; measured
-crossover: see the README). Each scene compiles its own kernels (the
+planes; :class:`drpt.backend.Policy`, 64 on both backends: about where
+``bench --accel inline,bvh`` shows the BVH overtaking). Each scene compiles its own kernels (the
 constants are part of the code).
 """
 
