@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# drpt on Dr.Jit's CUDA backend, on a machine with an NVIDIA GPU (a few minutes):
+# drpt on Dr.Jit's CUDA backend, on a machine with an NVIDIA GPU (at most 7 minutes:
+# each step has its own time limit):
 #
 #   1. the render tests below with DRPT_BACKEND=cuda (drpt's kernels and the
 #      Mitsuba references they compare with, cuda_ad_rgb);
@@ -40,17 +41,17 @@ step() {  # step NAME SECONDS COMMAND...: run COMMAND with a time limit, stop on
     echo "   ($((SECONDS - t0)) s)"
 }
 
-step "render tests, DRPT_BACKEND=cuda" 300 \
+step "render tests, DRPT_BACKEND=cuda" 240 \
     env DRPT_BACKEND=cuda "$PY" -m pytest -q -x -p no:cacheprovider \
         tests/test_path_integrator.py tests/test_render_properties.py tests/test_whitted.py \
         tests/test_bundled_references.py
 
-step "drpt vs Mitsuba (cuda_ad_rgb) on the Cornell box" 90 \
+step "drpt vs Mitsuba (cuda_ad_rgb) on the Cornell box" 60 \
     "$PY" -m drpt compare "$CORNELL" --backend cuda --size 64 64 --spp 64 --ref-spp 1024 \
         --no-cache --out "$OUT/compare" --quiet
 
 for backend in cuda llvm; do
-    step "Cornell box samples/s, $backend" 90 \
+    step "Cornell box samples/s, $backend" 60 \
         "$PY" -m drpt bench "$CORNELL" --backend "$backend" --accel auto --no-mitsuba \
             --size 256 256 --spp 64 --rays 262144 --repeat 3 --out "$OUT/bench_$backend"
 done
