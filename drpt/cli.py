@@ -20,6 +20,7 @@ print one line each (:func:`drpt.errors.warn`).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import warnings
 from pathlib import Path
@@ -71,12 +72,14 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.scene and args.input:
         raise DrptError("give the scene once, either as SCENE or as -input")
     opts = options_from_args(args, seed_mode=args.input is not None)
-    if not (args.gamma > 0):
-        raise DrptError(f"gamma must be positive, got {args.gamma}")
+    if not (math.isfinite(args.gamma) and args.gamma > 0):
+        raise DrptError(f"--gamma must be a positive finite number, got {args.gamma}")
+    if args.output is not None and not args.output.strip():
+        raise DrptError("--output is empty: give an image file (.exr, .png, .tga, ...)")
     if args.gui:
         note(LATER["gui"])
 
-    output = Path(args.output) if args.output else Path(Path(scene_path).stem + ".png")
+    output = Path(args.output) if args.output is not None else Path(Path(scene_path).stem + ".png")
     _check_output(output)
     scene = load_scene(scene_path)
 
@@ -96,12 +99,18 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     from .export.mitsuba import write_xml
+    from .options import options_from_args
     from .scene import load_scene
 
+    opts = options_from_args(args)
+    if not args.output.strip():
+        raise DrptError("the output is empty: give the .xml file to write")
     scene = load_scene(args.scene)
-    width, height = args.size
-    write_xml(scene, Path(args.output), width=width, height=height, spp=args.spp,
-              max_depth=args.max_depth, bsdf=args.bsdf)
+    if len(scene.triangles) + len(scene.spheres) + len(scene.planes) == 0:
+        warn("the scene has no primitives (no triangles, spheres or planes): the Mitsuba "
+             "scene has no shapes, only its background or sky")
+    write_xml(scene, Path(args.output), width=opts.width, height=opts.height, spp=opts.spp,
+              max_depth=opts.path.max_depth, bsdf=opts.bsdf)
     print(f"{args.output}: Mitsuba 3 scene written")
     return 0
 
@@ -118,11 +127,11 @@ def build_parser() -> argparse.ArgumentParser:
                             allow_abbrev=False)
     export.add_argument("scene")
     export.add_argument("output", help="the .xml file to write (meshes go beside it)")
-    export.add_argument("--size", nargs=2, type=int, default=(512, 512), metavar=("W", "H"))
-    export.add_argument("--spp", type=int, default=64)
-    export.add_argument("--max-depth", type=int, default=-1)
-    export.add_argument("--bsdf", choices=["phong", "cook-torrance", "diffuse"], default="phong",
-                        help="how MTL materials are read (as for render)")
+    from .options import add_render_flags
+
+    # the flags of render that shape the Mitsuba scene, checked as render checks them
+    add_render_flags(export, omit=("seed", "rr_depth", "rr_prob", "accel", "integrator",
+                                   "env_sampling", "max_lanes", "backend", "quiet"))
     export.set_defaults(func=cmd_export)
 
     from .tools.compare import add_parser as add_compare_parser

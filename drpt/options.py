@@ -36,6 +36,14 @@ ENV_SAMPLING = ("luminance", "uniform")
 BVH_KINDS = ("bvh", "bvh2", "bvh4")
 GRID_MAX_RESOLUTION = 256
 
+# Limits of the numbers the renderer and the Mitsuba export hold (RenderOptions.validate):
+MAX_SIZE = 1 << 16  # pixels per side: pixel coordinates and their jitter are float32
+MAX_SPP = (1 << 32) - 1  # samples per pixel: Mitsuba's sample_count is 32-bit
+MAX_SAMPLES = 1 << 60  # width * height * spp: PCG32 sequence ids (pass * lanes + lane) stay < 2^63
+MAX_LANES = (1 << 32) - 1  # lanes per pass: lane ids are UInt32
+MAX_DEPTH = (1 << 32) - 1  # --max-depth, --rr-depth: path depths are UInt32
+MAX_SEED = (1 << 64) - 1  # the seed is hashed as a 64-bit integer
+
 # Flag groups of add_render_flags; a command leaves out those that it sets itself.
 FLAGS = ("size", "spp", "seed", "max_depth", "rr_depth", "rr_prob", "accel", "integrator",
          "bsdf", "env_sampling", "max_lanes", "backend", "quiet")
@@ -70,16 +78,30 @@ class RenderOptions:
         """Raise :class:`~drpt.errors.DrptError` on a value the renderer cannot
         use (messages name the command-line flag); return ``self``."""
         from .accel import KINDS, METHODS, NO_MIN_LEAF
+        from .accel.bvh4_nodes import LEAF_MAX_COUNT
 
         if min(self.width, self.height) <= 0:
             raise DrptError(f"size must be positive, got {min(self.width, self.height)}")
+        if max(self.width, self.height) > MAX_SIZE:
+            raise DrptError(f"size must be at most {MAX_SIZE} pixels per side, got "
+                            f"{self.width} {self.height}")
         if self.spp <= 0:
             raise DrptError(f"--spp must be positive, got {self.spp}")
-        if self.max_lanes is not None and self.max_lanes <= 0:
-            raise DrptError(f"--max-lanes must be positive, got {self.max_lanes}")
+        if self.spp > MAX_SPP:
+            raise DrptError(f"--spp must be at most {MAX_SPP}, got {self.spp}")
+        if self.width * self.height * self.spp > MAX_SAMPLES:
+            raise DrptError(f"width * height * spp must be at most 2^60, got "
+                            f"{self.width} * {self.height} * {self.spp}")
+        if self.max_lanes is not None and not 0 < self.max_lanes <= MAX_LANES:
+            raise DrptError(f"--max-lanes must be between 1 and {MAX_LANES}, got {self.max_lanes}")
+        if not 0 <= self.seed <= MAX_SEED:
+            raise DrptError(f"--seed must be between 0 and 2^64 - 1, got {self.seed}")
         p = self.path
-        if p.max_depth == 0 or p.max_depth < -1:
-            raise DrptError(f"--max-depth must be -1 (unbounded) or >= 1, got {p.max_depth}")
+        if p.max_depth == 0 or p.max_depth < -1 or p.max_depth > MAX_DEPTH:
+            raise DrptError(f"--max-depth must be -1 (unbounded) or between 1 and {MAX_DEPTH}, "
+                            f"got {p.max_depth}")
+        if not 0 <= p.rr_depth <= MAX_DEPTH:
+            raise DrptError(f"--rr-depth must be between 0 and {MAX_DEPTH}, got {p.rr_depth}")
         if p.rr_prob is not None and not (0.0 < p.rr_prob <= 1.0):
             raise DrptError(f"Russian roulette probability must be in (0, 1], got {p.rr_prob}")
         for name, value, allowed in (("--accel", self.accel, KINDS),
@@ -106,6 +128,13 @@ class RenderOptions:
             if method in NO_MIN_LEAF and self.bvh_min_leaf != 1:
                 raise DrptError("--min-leaf/-resolution applies to --bvh sah, median and "
                                 f"threshold, not {method}")
+            # leaves hold up to 2 * min_leaf - 1 primitives; a 4-wide BVH leaf at most 16
+            most = (LEAF_MAX_COUNT + 1) // 2
+            if self.accel != "bvh2" and self.bvh_min_leaf > most:
+                raise DrptError(f"--min-leaf/-resolution (minimum primitives per BVH leaf) must "
+                                f"be at most {most} with the 4-wide BVH (its leaves hold at most "
+                                f"{LEAF_MAX_COUNT}), got {self.bvh_min_leaf}; --accel bvh2 "
+                                "takes any")
         return self
 
 

@@ -26,6 +26,13 @@ is not black), ``has_background`` (a background color above 0 and no
 sky), ``has_ambient`` and ``has_smooth_bsdfs`` (some material is not a
 delta lobe: without one, next-event estimation is never traced).
 
+A scene without primitives (an empty ``Group``, an OBJ without faces) is
+drawn as its background or sky: the accelerator is built as for any scene
+(every kind answers "no hit" over zero primitives), the surface and
+material tables are stand-ins that answer every query as a miss
+(:class:`NoSurfaces`, :class:`NoMaterials`: Dr.Jit cannot gather from an
+empty array), and :attr:`DeviceScene.warnings` says so once.
+
 Each query is a method called through ``self``, so
 :mod:`drpt.tools.profile` can time it by replacing the method on an
 instance (:meth:`intersect` then counts as traversal plus interaction).
@@ -34,10 +41,12 @@ instance (:meth:`intersect` then counts as traversal plus interaction).
 from __future__ import annotations
 
 import drjit as dr
-from drjit.auto import Array2f, Array3f, Bool, Float
+from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
+from ..accel.protocol import INVALID
 from ..options import RenderOptions
 from ..scene.model import Scene, Skybox
+from .bsdf import BSDFSample
 from .lights.area import AreaLights
 from .lights.delta import DeltaLights
 from .lights.envmap import EnvironmentLight, UniformSphereSampling, check_radius
@@ -60,6 +69,52 @@ class EmitterSample:
         self.valid: Bool = valid
 
 
+EMPTY_SCENE_WARNING = ("the scene has no primitives (no triangles, spheres or planes): "
+                       "the image shows only its background or sky")
+
+
+class NoSurfaces:
+    """The surface data of a scene without primitives: every hit is a miss."""
+
+    def interaction(self, o: Array3f, d: Array3f, hit) -> Interaction:
+        n = dr.width(hit.valid)
+        return Interaction(dr.zeros(Bool, n), Float(hit.t), Array3f(o),
+                           dr.full(Array3f, [0.0, 0.0, 1.0], n), dr.full(Array3f, [0.0, 0.0, 1.0], n),
+                           dr.full(UInt32, INVALID, n), dr.zeros(UInt32, n), -d)
+
+
+class NoMaterials:
+    """The material table of a scene without primitives: nothing to shade or emit
+    (no lane ever hits a surface)."""
+
+    textures = None
+    notes: list[str] = []
+    has_emission = False
+
+    def is_specular_only(self) -> bool:
+        return True  # no BSDF to sample lights for: next-event estimation is not traced
+
+    def emitted(self, si: Interaction) -> Array3f:
+        return dr.zeros(Array3f, dr.width(si.valid))
+
+    def eval_pdf(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float]:
+        n = dr.width(si.valid)
+        return dr.zeros(Array3f, n), dr.zeros(Float, n)
+
+    def sample(self, si: Interaction, u1: Float, u2: Array2f) -> tuple[Array3f, BSDFSample]:
+        n = dr.width(si.valid)
+        up = dr.full(Array3f, [0.0, 0.0, 1.0], n)
+        return up, BSDFSample(wo=Array3f(up), weight=dr.zeros(Array3f, n), pdf=dr.zeros(Float, n),
+                              valid=dr.zeros(Bool, n), delta=dr.zeros(Bool, n),
+                              eta=dr.full(Float, 1.0, n))
+
+    def is_delta(self, si: Interaction) -> Bool:
+        return dr.zeros(Bool, dr.width(si.valid))
+
+    def diffuse_color(self, si: Interaction, active: Bool) -> Array3f:
+        return dr.zeros(Array3f, dr.width(si.valid))
+
+
 class DeviceScene:
     def __init__(self, scene: Scene, options: RenderOptions):
         from ..accel import build_accel
@@ -67,12 +122,18 @@ class DeviceScene:
         self.accel = build_accel(scene, kind=options.accel, resolution=options.grid_resolution,
                                  method=options.bvh_method, min_leaf=options.bvh_min_leaf,
                                  sah_threshold=options.sah_threshold)
-        self.materials = MaterialTable(scene, options.bsdf)
-        self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None)
+        self.is_empty = len(scene.triangles) + len(scene.spheres) + len(scene.planes) == 0
+        if self.is_empty:
+            self.materials, self.surfaces = NoMaterials(), NoSurfaces()
+        else:
+            self.materials = MaterialTable(scene, options.bsdf)
+            self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None)
         self.area_lights = AreaLights(scene, self.surfaces)
         self.delta_lights = DeltaLights(scene)
         self.offset = RayOffset(scene)
         self.warnings: list[str] = list(self.materials.notes)
+        if self.is_empty:
+            self.warnings.append(EMPTY_SCENE_WARNING)
         self.environment = None  # the sky as loaded (possibly black)
         skies = [light for light in scene.lights if isinstance(light, Skybox)]
         if skies:

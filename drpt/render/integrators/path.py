@@ -35,7 +35,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import drjit as dr
-from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import PCG32, Array2f, Array3f, Array3f64, Bool, Float, UInt32
 
 from ...options import PathOptions
 from ..scene import DeviceScene
@@ -73,8 +73,8 @@ class PathIntegrator:
         return state.L
 
     @dr.syntax
-    def sample_sequence(self, rng: PCG32, camera_ray: Callable, count: UInt32
-                        ) -> tuple[Array3f, Array3f, UInt32]:
+    def sample_sequence(self, rng: PCG32, camera_ray: Callable, count: UInt32, wide: bool = False
+                        ) -> tuple[Array3f | Array3f64, Array3f | Array3f64, UInt32]:
         """``count`` paths per lane, one after another (path regeneration).
 
         A lane starts a path at ``camera_ray(rng) -> (o, d)``; when the path
@@ -85,20 +85,24 @@ class PathIntegrator:
         on the Cornell box the longest path of 16 averages 1.6x the mean).
         Returns the sum of the samples, the sum of their squares (for the
         variance) and how many non-finite samples were dropped (counted, not
-        added: there should be none).
+        added: there should be none). The sums are float32, or with ``wide``
+        float64: samples are float32 and finite, but a sum of many (or a
+        square) of radiance near the float32 maximum is not (the renderer
+        traces a pass whose float32 sums overflowed again with ``wide``).
         """
         scene = self.scene
         left = UInt32(count)
         o, d = camera_ray(rng)
         state = self._start(o, d, left > 0)
-        acc, acc2 = Array3f(0.0), Array3f(0.0)
+        Sum = Array3f64 if wide else Array3f
+        acc, acc2 = Sum(0.0), Sum(0.0)
         dropped = UInt32(0)
         while left > 0:
             state = self._bounce(scene, state, rng)
             if ~state.active & (left > 0):  # the path ended: bank it, start the next
                 L = state.L
                 finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
-                Lf = dr.select(finite, L, 0.0)
+                Lf = Sum(dr.select(finite, L, 0.0))
                 acc += Lf
                 acc2 += Lf * Lf
                 dropped += dr.select(finite, 0, 1)

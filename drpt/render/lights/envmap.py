@@ -82,9 +82,12 @@ rounding of the table), whatever the rounding of the sums. To keep every
 positive cell representable in float32, a positive cell weight is raised to
 at least ``1e-6`` of its row total (and a positive row to ``1e-6`` of the
 total) -- this only moves a negligible amount of probability toward nearly
-black cells. Luminances are normalised by the brightest cell first, so
-texels more than ~1e-29 times dimmer than the brightest may underflow to a
-zero weight (irrelevant for real maps).
+black cells. Cell luminances are summed in float64 and normalised by the
+brightest cell before they are stored in float32, so texels up to the
+float32 maximum keep their weight; texels more than ~1e-40 times dimmer
+than the brightest may underflow to a zero weight (irrelevant for real
+maps). The kernels scale corner luminances before adding them, for the
+same reason.
 
 :meth:`EnvironmentLight.sample` returns ``(d, eval(d), pdf(d))`` computed
 from ``d`` itself, so they agree bit for bit with :meth:`eval` and
@@ -202,18 +205,16 @@ class EnvironmentLight:
         self._data = Float(img.ravel())
         self._half_texel = 0.5 / W
 
-        # -- sampling tables (host side, float32 arrays, float64 scalars)
-        lum = img[:, :, 0] * np.float32(LUMINANCE[0])
-        lum += img[:, :, 1] * np.float32(LUMINANCE[1])
-        lum += img[:, :, 2] * np.float32(LUMINANCE[2])
+        # -- sampling tables (host side: cell weights summed in float64, stored
+        # float32 relative to the brightest cell, so texels up to the float32
+        # maximum neither overflow nor vanish)
+        lum = img @ LUMINANCE  # float64
         # mean luminance of each bilinear patch's 4 corners = its mean luminance
         cell = lum + np.roll(lum, -1, axis=1)  # columns i, i+1
-        cell = cell[:-1] + cell[1:] if H > 1 else cell * np.float32(2.0)  # rows j, j+1
-        cell *= np.float32(0.25)
+        cell = cell[:-1] + cell[1:] if H > 1 else cell * 2.0  # rows j, j+1
         del lum
         peak = float(cell.max())
-        if peak > 0.0:
-            cell *= np.float32(1.0 / peak)  # no float32 overflow in the sums
+        cell = (cell / peak if peak > 0.0 else cell).astype(np.float32)
         theta = np.arange(ny + 1) * (math.pi / ny)
         # 1 - cos(theta) and 1 + cos(theta), accurate near either pole
         one_minus_cos = 2.0 * np.sin(0.5 * theta) ** 2
@@ -294,7 +295,8 @@ class EnvironmentLight:
     def _pdf_cell(self, corners, ix, iy, fx, ft, active) -> Float:
         """Cell density times the bilinear in-cell density ``q(fx, ft)``."""
         c00, c10, c01, c11 = (_luminance(c) for c in corners)
-        mean = 0.25 * ((c00 + c10) + (c01 + c11))
+        # each corner scaled first (exact): no overflow near the float32 maximum
+        mean = (0.25 * c00 + 0.25 * c10) + (0.25 * c01 + 0.25 * c11)
         q = dr.select(mean > 0.0, _bilerp(c00, c10, c01, c11, fx, ft) / mean, 0.0)
         return dr.gather(Float, self._pdf, iy * self.width + ix, active) * q
 
@@ -351,7 +353,8 @@ class EnvironmentLight:
         # ft (fraction of the band's cos(theta) range) from its linear
         # marginal, then fx from the linear conditional
         c00, c10, c01, c11 = (_luminance(c) for c in self._corners(col, row, active))
-        ft = _sample_linear(c00 + c10, c01 + c11, sy)
+        # halved sums (exact; _sample_linear is scale-free): no float32 overflow
+        ft = _sample_linear(0.5 * c00 + 0.5 * c10, 0.5 * c01 + 0.5 * c11, sy)
         fx = _sample_linear(dr.lerp(c00, c01, ft), dr.lerp(c10, c11, ft), sx)
         # t = 1 -/+ cos(theta), accurate near either pole
         t = dr.fma(ft, dr.gather(Float, self._dt, row), dr.gather(Float, self._t0, row))
