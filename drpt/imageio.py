@@ -48,8 +48,12 @@ Returns an ``(H, W, C)`` float32 array, row 0 at the top, ``C`` in
   decoded. ``linear=False`` returns the encoded values. Palette images are
   expanded; gray+alpha becomes RGBA.
 
-A missing, unreadable, truncated or malformed file raises
-``SceneError(path, None, message)``, a one-line message naming the file.
+A missing, unreadable, truncated or malformed file, or one that is not a
+regular file (a directory, FIFO, device or symbolic link loop), raises
+``SceneError(path, None, message)``, a one-line message naming the file;
+for a texture or sky named by a scene or MTL file
+(:class:`drpt.scene.files.NamedPath`) the error names that file and line
+instead, followed by the image's name.
 
 Mitsuba is imported on the first ``.hdr`` or ``.pfm`` (about 0.3 s); its
 ``Bitmap`` needs no variant, so none is set.
@@ -64,6 +68,7 @@ from pathlib import Path
 import numpy as np
 
 from drpt.errors import DrptError, SceneError
+from drpt.scene.files import check_input
 
 WRITE_EXTENSIONS = (".exr", ".png", ".tga", ".hdr", ".pfm")
 READ_EXTENSIONS = (".exr", ".hdr", ".pfm", ".png", ".jpg", ".jpeg", ".tga")
@@ -189,9 +194,23 @@ def read_image(path: str | PathLike, linear: bool = True) -> np.ndarray:
 
     ``linear`` only matters for 8/16-bit formats: decode their sRGB-encoded
     color channels to linear values. Raises :class:`SceneError` when the
-    file is missing, unreadable, malformed or of an unsupported type.
+    file is missing, not a regular file, unreadable, malformed or of an
+    unsupported type: at the file itself, or, for a
+    :class:`~drpt.scene.files.NamedPath` (a texture or sky named by a scene
+    or MTL file), at the line that named it, e.g. ``scene.txt:12: sky.hdr:
+    cannot read .hdr image (truncated or corrupt): ...``.
     """
+    named_at = getattr(path, "named_at", None)
     path = Path(path)
+    try:
+        return _read_image(path, linear)
+    except SceneError as e:
+        if named_at is None:
+            raise
+        raise SceneError(named_at[0], named_at[1], f"{path.name}: {e.message}") from e
+
+
+def _read_image(path: Path, linear: bool) -> np.ndarray:
     ext = _ext(path)
     if ext not in READ_EXTENSIONS:
         raise SceneError(
@@ -199,15 +218,15 @@ def read_image(path: str | PathLike, linear: bool = True) -> np.ndarray:
             f"cannot read images with extension {ext or '(none)'!r}; "
             f"supported: {', '.join(READ_EXTENSIONS)}",
         )
-    if not path.is_file():
-        raise SceneError(path, None, "image file not found")
+    check_input(path, what="image file")
     try:
-        if ext == ".exr":
-            img = _read_exr(path)
-        elif ext in (".hdr", ".pfm"):
-            img = _read_bitmap(path, ext)
-        else:
-            img = _read_ldr(path, linear)
+        with np.errstate(all="ignore"):
+            if ext == ".exr":
+                img = _read_exr(path)
+            elif ext in (".hdr", ".pfm"):
+                img = _read_bitmap(path, ext)
+            else:
+                img = _read_ldr(path, linear)
     except SceneError:
         raise
     except OSError as e:

@@ -33,11 +33,13 @@ warns; the later definition wins.
 
 from __future__ import annotations
 
+import os
 import warnings
 from dataclasses import replace
 from pathlib import Path
 
 from ..errors import SceneError
+from .files import check_input, named, resolve
 from .model import Material
 from .tokens import parse_number, read_text
 
@@ -82,7 +84,10 @@ def texture_path(args: list[str], base: Path, path: Path, line: int, key: str) -
     """Resolve a ``map_*`` statement's file name (after skipping options).
 
     ``base`` is the directory names are relative to; errors are reported at
-    ``path``:``line``. The file must exist.
+    ``path``:``line``. The file must be a regular file
+    (:func:`~drpt.scene.files.check_input`); it is returned as a
+    :class:`~drpt.scene.files.NamedPath` named at ``path``:``line``, where
+    problems found when the image is read are reported.
     """
     i = 0
     skipped = []
@@ -109,14 +114,13 @@ def texture_path(args: list[str], base: Path, path: Path, line: int, key: str) -
     if skipped:
         warnings.warn(f"{path}:{line}: {key} options {' '.join(skipped)} are ignored", stacklevel=2)
     name = " ".join(args[i:])
-    tex = (base / name).resolve()
-    if not tex.is_file() and "\\" in name:
-        alt = (base / name.replace("\\", "/")).resolve()
-        if alt.is_file():
+    tex = resolve(base / name)
+    if not os.path.lexists(tex) and "\\" in name:
+        alt = resolve(base / name.replace("\\", "/"))
+        if os.path.lexists(alt):
             tex = alt
-    if not tex.is_file():
-        raise SceneError(path, line, f"texture file not found: {tex}")
-    return tex
+    check_input(tex, ref=(path, line), what="texture file")
+    return named(tex, (path, line))
 
 
 def apply_field(mat: Material, key: str, args: list[str], path: Path, line: int,
@@ -207,5 +211,5 @@ def load_mtl(path: str | Path, *, ref: tuple[Path, int] | None = None) -> dict[s
     Returns the materials by name, in file order. ``ref`` is the (file, line)
     that named this library, where a missing file is reported.
     """
-    path = Path(path).resolve()
+    path = resolve(path)
     return parse_mtl_text(read_text(path, ref=ref, what="MTL file"), path)

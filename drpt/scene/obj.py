@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SceneError
+from .files import resolve
 from .model import Material
 from .mtl import load_mtl
 from .tokens import read_text
@@ -90,7 +91,7 @@ def load_obj(path: str | Path, *, ref: tuple[Path, int] | None = None,
     reported. ``mtl_cache`` maps absolute MTL paths to parsed libraries so a
     library shared by several OBJ files yields the same Material objects.
     """
-    path = Path(path).resolve()
+    path = resolve(path)
     text = read_text(path, ref=ref, what="OBJ file")
     return parse_obj_text(text, path, mtl_cache=mtl_cache)
 
@@ -120,7 +121,7 @@ def _mtllib(args: list[str], path: Path, lineno: int, cache: MtlCache) -> list[P
             names = [joined]
     out = []
     for name in names:
-        p = (base / name).resolve()
+        p = resolve(base / name)
         if p not in cache:
             cache[p] = load_mtl(p, ref=(path, lineno))
         out.append(p)

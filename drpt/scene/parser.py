@@ -86,6 +86,7 @@ import numpy as np
 
 from ..errors import SceneError
 from . import transform as tf
+from .files import check_input, named, resolve
 from .model import (
     Background,
     DirectionalLight,
@@ -124,7 +125,7 @@ def load_scene(path: str | Path) -> Scene:
     Non-fatal oddities (ignored OBJ/MTL statements, tessellated spheres) are
     reported with :func:`warnings.warn`.
     """
-    path = Path(path).resolve()
+    path = resolve(path)
     text = read_text(path, what="scene file")
     return _Parser(path, text).parse()
 
@@ -243,7 +244,7 @@ class _Parser:
             raise self.error(opened.line, f"{block} declares {keyword} {declared} but contains {found} {what}")
 
     def file_ref(self, tok: Token) -> Path:
-        return (self.base / tok.text).resolve()
+        return resolve(self.base / tok.text)
 
     # ------------------------------------------------------------ top level
     def parse(self) -> Scene:
@@ -274,8 +275,7 @@ class _Parser:
             raise self.error(ts.last_line, "no Group block: the scene has no geometry")
         materials, index = self.resolve_materials()
         for sky, line in self.skyboxes:
-            if not sky.is_file():
-                raise self.error(line, f"skybox file not found: {sky}")
+            check_input(sky, ref=(self.path, line), what="skybox file")
         return Scene(
             path=self.path,
             camera=self.camera,
@@ -378,7 +378,7 @@ class _Parser:
                                  + (" (is a '}' missing before it?)" if tok.text in _KNOWN else ""))
         if file_tok is None:
             raise self.error(opened.line, "Skybox needs a file name, e.g. 'Skybox { sky.hdr R 1000 }'")
-        p = self.file_ref(file_tok)
+        p = named(self.file_ref(file_tok), (self.path, file_tok.line))
         self.skyboxes.append((p, file_tok.line))
         self.lights.append(Skybox(p, radius))
 
@@ -432,9 +432,8 @@ class _Parser:
 
     def texture_file(self, tok: Token) -> Path:
         p = self.file_ref(tok)
-        if not p.is_file():
-            raise self.error(tok.line, f"texture file not found: {p}")
-        return p
+        check_input(p, ref=(self.path, tok.line), what="texture file")
+        return named(p, (self.path, tok.line))
 
     # -------------------------------------------------------------- objects
     def parse_group(self, opened: Token, m: np.ndarray, current: _Ref) -> None:

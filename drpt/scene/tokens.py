@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import SceneError
+from .files import read_bytes
 
 # A decimal number: optional sign, digits with an optional fraction, optional
 # exponent. Deliberately excludes "nan", "inf", hex and "1_000" (which Python's
@@ -41,19 +42,12 @@ class Token:
 def read_text(path: Path, *, ref: tuple[Path, int] | None = None, what: str = "file") -> str:
     """Read ``path`` as UTF-8 text; every failure becomes a :class:`SceneError`.
 
-    ``ref`` is the (file, line) that named ``path``; a missing or unreadable
-    file is reported there. Invalid UTF-8 is reported at the bad byte's line in
-    ``path`` itself.
+    ``ref`` is the (file, line) that named ``path``; a missing file, or one
+    that is not a regular file (see :func:`drpt.scene.files.check_input`),
+    is reported there. Invalid UTF-8 is reported at the bad byte's line in
+    ``path`` itself. ``/dev/null`` reads as empty text.
     """
-    where_path, where_line = ref if ref is not None else (path, None)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise SceneError(where_path, where_line, f"{what} not found: {path}") from None
-    except IsADirectoryError:
-        raise SceneError(where_path, where_line, f"{what} is a directory: {path}") from None
-    except OSError as e:
-        raise SceneError(where_path, where_line, f"cannot read {what} {path}: {e.strerror or e}") from None
+    data = read_bytes(path, ref=ref, what=what)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
