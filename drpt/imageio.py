@@ -48,7 +48,7 @@ Returns an ``(H, W, C)`` float32 array, row 0 at the top, ``C`` in
   decoded. ``linear=False`` returns the encoded values. Palette images are
   expanded; gray+alpha becomes RGBA.
 
-A missing, unreadable, truncated or malformed file, or one that is not a
+A missing, unreadable, truncated, malformed or empty (0 pixel) file, or one that is not a
 regular file (a directory, FIFO, device or symbolic link loop), raises
 ``SceneError(path, None, message)``, a one-line message naming the file;
 for a texture or sky named by a scene or MTL file
@@ -235,6 +235,8 @@ def _read_image(path: Path, linear: bool) -> np.ndarray:
         raise SceneError(path, None, f"cannot read image: {e}") from e
     if img.ndim == 2:
         img = img[..., None]
+    if img.size == 0:
+        raise SceneError(path, None, f"empty image ({img.shape[1]}x{img.shape[0]} pixels)")
     return np.ascontiguousarray(img, dtype=np.float32)
 
 

@@ -56,8 +56,12 @@ def named(path: str | PathLike, ref: Ref | None) -> Path:
 
 
 def resolve(path: str | PathLike) -> Path:
-    """The absolute, symlink-free form of ``path``; never raises (a loop stays unresolved)."""
-    return Path(os.path.realpath(os.fspath(path)))
+    """The absolute, symlink-free form of ``path``; never raises (a loop, or a
+    name with a NUL byte, stays unresolved and :func:`check_input` reports it)."""
+    try:
+        return Path(os.path.realpath(os.fspath(path)))
+    except ValueError:  # embedded NUL byte
+        return Path(os.path.abspath(os.fspath(path)))
 
 
 def _kind(mode: int) -> str | None:
@@ -75,7 +79,7 @@ def _kind(mode: int) -> str | None:
 
 
 def is_devnull(path: str | PathLike) -> bool:
-    return os.path.realpath(os.fspath(path)) == os.devnull
+    return resolve(path) == Path(os.devnull)
 
 
 def check_input(path: str | PathLike, *, ref: Ref | None = None, what: str = "file") -> None:
@@ -88,6 +92,11 @@ def check_input(path: str | PathLike, *, ref: Ref | None = None, what: str = "fi
         where_path, where_line, subject = ref[0], ref[1], f"{what} {path}"
     else:
         where_path, where_line, subject = path, None, what
+    if "\0" in os.fspath(path):
+        shown = os.fspath(path).replace("\0", "\\0")
+        subject = f"{what} {shown}" if ref is not None else what
+        raise SceneError(where_path if ref is not None else shown, where_line,
+                         f"{subject}: a file name cannot contain a NUL byte")
     try:
         st = os.stat(path)
     except FileNotFoundError:

@@ -24,9 +24,13 @@ options (``-s u v w``, ``-o``, ``-t``, ``-mm``, ``-bm``, ``-boost``,
 ``-texres``, ``-clamp``, ``-blendu``, ``-blendv``, ``-cc``, ``-imfchan``,
 ``-type``) are skipped with a warning; any other ``-option`` is an error.
 
+Negative colours: a negative ``Kd`` or ``Ks`` channel is clamped to 0 with
+a warning; negative emission (``Ke``/``Le``) is an error.
+
 Errors (:class:`~drpt.errors.SceneError` at the MTL file and line): a
 statement before any ``newmtl``, a bad or non-finite number, a wrong number of
-values, a missing texture file. Each :class:`Material` gets
+values, negative emission, a texture file that is missing or not a regular
+file. Each :class:`Material` gets
 ``origin = "file:line"`` of its ``newmtl``. A name defined twice in one file
 warns; the later definition wins.
 """
@@ -71,6 +75,23 @@ def _color(args: list[str], path: Path, line: int, key: str) -> tuple[float, flo
     if len(vals) == 3:
         return (vals[0], vals[1], vals[2])
     raise SceneError(path, line, f"{key}: expected 1 or 3 numbers, found {len(vals)}")
+
+
+def reflectance(color: tuple[float, float, float], path: Path, line: int, key: str) -> tuple[float, float, float]:
+    """``color`` with negative channels clamped to 0, with a warning at ``path``:``line``."""
+    if min(color) >= 0.0:
+        return color
+    warnings.warn(f"{path}:{line}: {key} {' '.join(f'{c:g}' for c in color)} has a negative channel; "
+                  "clamped to 0", stacklevel=3)
+    return tuple(max(c, 0.0) for c in color)
+
+
+def emission(color: tuple[float, float, float], path: Path, line: int, key: str) -> tuple[float, float, float]:
+    """``color`` if no channel is negative, else a :class:`SceneError` at ``path``:``line``."""
+    if min(color) < 0.0:
+        raise SceneError(path, line, f"{key} {' '.join(f'{c:g}' for c in color)}: emitted radiance "
+                         "must not be negative")
+    return color
 
 
 def _scalar(args: list[str], path: Path, line: int, key: str) -> float:
@@ -132,11 +153,11 @@ def apply_field(mat: Material, key: str, args: list[str], path: Path, line: int,
     ``warned`` is given) and leave ``mat`` unchanged.
     """
     if key == "kd":
-        return replace(mat, kd=_color(args, path, line, "Kd"))
+        return replace(mat, kd=reflectance(_color(args, path, line, "Kd"), path, line, "Kd"))
     if key == "ks":
-        return replace(mat, ks=_color(args, path, line, "Ks"))
+        return replace(mat, ks=reflectance(_color(args, path, line, "Ks"), path, line, "Ks"))
     if key in ("ke", "le"):
-        return replace(mat, emission=_color(args, path, line, key))
+        return replace(mat, emission=emission(_color(args, path, line, key), path, line, key))
     if key == "ns":
         return replace(mat, ns=_scalar(args, path, line, "Ns"))
     if key == "ni":

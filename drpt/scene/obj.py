@@ -46,6 +46,7 @@ from .files import resolve
 from .model import Material
 from .mtl import load_mtl
 from .tokens import read_text
+from .transform import normalize
 
 MtlCache = dict[Path, dict[str, Material]]
 
@@ -74,12 +75,17 @@ class ObjMesh:
 
 def geometric_normals(positions: np.ndarray) -> np.ndarray:
     """Unit ``cross(p1 - p0, p2 - p0)`` per face; (0, 0, 1) for zero-area faces."""
-    g = np.cross(positions[:, 1] - positions[:, 0], positions[:, 2] - positions[:, 0])
-    length = np.linalg.norm(g, axis=1)
-    ok = length > 0
+    with np.errstate(all="ignore"):  # huge coordinates: inf/nan, replaced below
+        g = np.cross(positions[:, 1] - positions[:, 0], positions[:, 2] - positions[:, 0])
+        length = np.linalg.norm(g, axis=1)
+    ok = (length > 0) & np.isfinite(length)
     out = np.zeros_like(g)
     out[:, 2] = 1.0
     out[ok] = g[ok] / length[ok, None]
+    bad = ~ok & (np.abs(g).max(axis=1) > 0)  # a length that overflowed (or nan)
+    if bad.any():
+        n = normalize(g[bad])
+        out[bad] = np.where(n.any(axis=1, keepdims=True), n, out[bad])
     return out
 
 
@@ -362,11 +368,9 @@ def parse_obj_text(text: str, path: Path, *, mtl_cache: MtlCache | None = None) 
     normals = None
     inn = cn[corners] - 1
     if len(corners) and (inn >= 0).any():
-        normals = Narr[np.maximum(inn, 0)]
-        length = np.linalg.norm(normals, axis=2)
-        ok = (inn >= 0) & (length > 0)
-        normals = np.where(ok[..., None], normals / np.where(ok, length, 1.0)[..., None],
-                           geometric_normals(positions)[:, None, :])
+        normals = normalize(Narr[np.maximum(inn, 0)])
+        ok = (inn >= 0) & normals.any(axis=2)
+        normals = np.where(ok[..., None], normals, geometric_normals(positions)[:, None, :])
 
     uvs = None
     itt = ct[corners] - 1

@@ -88,6 +88,7 @@ from ..errors import SceneError
 from . import transform as tf
 from .files import check_input, named, resolve
 from .model import (
+    MAX_COORDINATE,
     Background,
     DirectionalLight,
     Material,
@@ -100,7 +101,7 @@ from .model import (
     Spheres,
     Triangles,
 )
-from .mtl import apply_field
+from .mtl import apply_field, reflectance
 from .obj import MtlCache, ObjMesh, geometric_normals, load_obj
 from .tokens import Token, TokenStream, read_text
 
@@ -144,6 +145,19 @@ class _ByName:
 
 
 _Ref = Material | _ByIndex | _ByName | None  # None: the default material
+
+
+@dataclass
+class _Block:
+    """An open Group or Transform while its contents are read."""
+
+    opened: Token  # the 'Group' or 'Transform' keyword
+    m: np.ndarray  # the world matrix around the block
+    world: np.ndarray  # the world matrix of the objects in it (Transform: m @ local)
+    current: _Ref  # the material for objects without their own
+    declared: int = 0  # Group: numObjects
+    found: int = 0  # objects read (a Transform holds at most one)
+    local: np.ndarray | None = None  # Transform: its operations composed so far
 
 
 def _hint(word: str, choices) -> str:
@@ -298,13 +312,15 @@ class _Parser:
             last: self.num(last),
         })
         self.require(got, opened.text, opened, ("center", "direction", "up", last))
-        d = np.array(got["direction"][0])
-        u = np.array(got["up"][0])
-        if not np.linalg.norm(d) > 0:
+        for key in ("center", "direction", "up"):
+            self.check_extent(got[key][1], f"camera {key}", got[key][0])
+        d = tf.normalize(got["direction"][0])
+        u = tf.normalize(got["up"][0])
+        if not d.any():
             raise self.error(got["direction"][1], "camera direction has zero length")
-        if not np.linalg.norm(u) > 0:
+        if not u.any():
             raise self.error(got["up"][1], "camera up has zero length")
-        if np.linalg.norm(np.cross(d / np.linalg.norm(d), u / np.linalg.norm(u))) < 1e-6:
+        if np.linalg.norm(np.cross(d, u)) < 1e-6:
             raise self.error(got["up"][1], "camera up is parallel to its direction")
         value, line = got[last]
         if persp:
@@ -319,6 +335,8 @@ class _Parser:
     def parse_background(self, opened: Token) -> None:
         got = self.fields("Background", opened, {
             "color": self.vec("color"), "ambientLight": self.vec("ambientLight")})
+        for key, (value, line) in got.items():
+            self.check_light(line, f"Background {key}", value)
         self.background = Background(
             color=got.get("color", ((0.0, 0.0, 0.0), 0))[0],
             ambient=got.get("ambientLight", ((0.0, 0.0, 0.0), 0))[0],
@@ -337,13 +355,16 @@ class _Parser:
             if tok.text == "DirectionalLight":
                 got = self.fields(tok.text, tok, {"direction": self.vec("direction"), "color": self.vec("color")})
                 self.require(got, tok.text, tok, ("direction", "color"))
-                if not np.linalg.norm(got["direction"][0]) > 0:
+                if not tf.normalize(got["direction"][0]).any():
                     raise self.error(got["direction"][1], "light direction has zero length")
+                self.check_light(got["color"][1], "DirectionalLight color", got["color"][0])
                 self.lights.append(DirectionalLight(got["direction"][0], got["color"][0]))
             elif tok.text == "PointLight":
                 got = self.fields(tok.text, tok, {"position": self.vec("position"), "color": self.vec("color"),
                                                   "attenuation": self.vec("attenuation")})
                 self.require(got, tok.text, tok, ("position", "color"))
+                self.check_extent(got["position"][1], "PointLight position", got["position"][0])
+                self.check_light(got["color"][1], "PointLight color", got["color"][0])
                 # No attenuation given: physical inverse-square falloff.
                 att, line = got.get("attenuation", ((0.0, 0.0, 1.0), tok.line))
                 if min(att) < 0 or max(att) <= 0:
@@ -426,6 +447,9 @@ class _Parser:
             "texture": texture,
         }
         got = self.fields(opened.text, opened, readers, extra=mtl_style)
+        for key in ("diffuseColor", "specularColor", "reflectiveColor", "transparentColor"):
+            if key in got:
+                got[key] = (reflectance(got[key][0], self.path, got[key][1], key), got[key][1])
         names = {"diffuseColor": "kd", "specularColor": "ks", "exponent": "ns", "reflectiveColor": "reflective",
                  "transparentColor": "transparent", "indexOfRefraction": "ior", "texture": "map_kd"}
         return replace(mat, **{names[k]: v for k, (v, _) in got.items()})
@@ -436,41 +460,72 @@ class _Parser:
         return named(p, (self.path, tok.line))
 
     # -------------------------------------------------------------- objects
-    def parse_group(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
-        ts = self.ts
-        ts.expect("{", "after 'Group'")
-        n = self.count("numObjects", "Group", opened)
-        found = 0
-        while True:
-            tok = ts.next(f"an object or '}}' to close Group (opened at line {opened.line})")
-            if tok.text == "}":
-                break
-            if tok.text == "MaterialIndex":
-                i = ts.integer("MaterialIndex")
-                if i < 0:
-                    raise self.error(tok.line, f"MaterialIndex {i} is negative")
-                current = _ByIndex(i, tok.line)
-                continue
-            self.parse_object(tok, m, current)
-            found += 1
-        self.check_count("numObjects", "Group", opened, n, found, "objects")
+    def parse_group(self, root: Token, m: np.ndarray, current: _Ref) -> None:
+        """The top-level Group and everything nested in it.
 
-    def parse_object(self, tok: Token, m: np.ndarray, current: _Ref) -> None:
-        kind = tok.text
-        if kind == "Group":
-            self.parse_group(tok, m, current)
-        elif kind == "Transform":
-            self.parse_transform(tok, m, current)
-        elif kind == "Sphere":
-            self.parse_sphere(tok, m, current)
-        elif kind == "Plane":
-            self.parse_plane(tok, m, current)
-        elif kind == "Triangle":
-            self.parse_triangle(tok, m, current)
-        elif kind == "TriangleMesh":
-            self.parse_mesh(tok, m, current)
-        else:
-            raise self.unknown(tok, "object", _OBJECTS)
+        Groups and Transforms nest to any depth: open blocks are kept on an
+        explicit stack of :class:`_Block` (no recursion), and a leaf object
+        is read by its own method with the world matrix and current
+        material of the block around it."""
+        ts = self.ts
+        stack = [self.open_block(root, m, current)]
+        while stack:
+            top = stack[-1]
+            if top.opened.text == "Group":
+                tok = ts.next(f"an object or '}}' to close Group (opened at line {top.opened.line})")
+            else:
+                tok = ts.next("a transform operation, an object or '}' to close Transform "
+                              f"(opened at line {top.opened.line})")
+            t = tok.text
+            if t == "}":
+                self.close_block(stack.pop())
+                if stack:
+                    stack[-1].found += 1
+                continue
+            if top.opened.text == "Group":
+                if t == "MaterialIndex":
+                    i = ts.integer("MaterialIndex")
+                    if i < 0:
+                        raise self.error(tok.line, f"MaterialIndex {i} is negative")
+                    top.current = _ByIndex(i, tok.line)
+                    continue
+                if t not in _OBJECTS:
+                    raise self.unknown(tok, "object", _OBJECTS)
+            else:
+                if t in _OPS:
+                    if top.found:
+                        raise self.error(tok.line, f"'{t}' after the Transform's object: operations come first")
+                    top.local = tf.compose(top.local, self.parse_op(tok))
+                    top.world = tf.compose(top.m, top.local)
+                    if not tf.is_finite(top.world):
+                        raise self.error(tok.line, f"'{t}' makes the transform overflow (matrix entries beyond "
+                                         "the float64 range)")
+                    continue
+                if t not in _OBJECTS:
+                    raise self.unknown(tok, "transform operation or object", _OPS + _OBJECTS)
+                if top.found:
+                    raise self.error(tok.line, f"a Transform holds exactly one object; found a second one, '{t}'"
+                                     " (wrap several objects in a Group)")
+            if t in ("Group", "Transform"):
+                stack.append(self.open_block(tok, top.world, top.current))
+                continue
+            {"Sphere": self.parse_sphere, "Plane": self.parse_plane, "Triangle": self.parse_triangle,
+             "TriangleMesh": self.parse_mesh}[t](tok, top.world, top.current)
+            top.found += 1
+
+    def open_block(self, opened: Token, m: np.ndarray, current: _Ref) -> "_Block":
+        """Read a Group's ``{ numObjects N`` or a Transform's ``{``."""
+        self.ts.expect("{", f"after '{opened.text}'")
+        if opened.text == "Group":
+            n = self.count("numObjects", "Group", opened)
+            return _Block(opened, m, m, current, declared=n)
+        return _Block(opened, m, m, current, local=tf.identity())
+
+    def close_block(self, block: "_Block") -> None:
+        if block.opened.text == "Group":
+            self.check_count("numObjects", "Group", block.opened, block.declared, block.found, "objects")
+        elif not block.found:
+            raise self.error(block.opened.line, "Transform has no object")
 
     def material_of(self, got: dict, current: _Ref) -> _Ref:
         if "mtl" in got:
@@ -478,9 +533,23 @@ class _Parser:
             return _ByName(name.text, line)
         return current
 
+    def check_light(self, line: int, what: str, color) -> None:
+        """Light colours (and the background's radiance) must not be negative."""
+        if min(color) < 0.0:
+            raise self.error(line, f"{what} {' '.join(f'{c:g}' for c in color)} must not be negative")
+
+    def check_extent(self, line: int, what: str, *values) -> None:
+        """World-space coordinates must be within :data:`MAX_COORDINATE`."""
+        with np.errstate(all="ignore"):
+            big = max((float(np.abs(np.asarray(v, np.float64)).max()) for v in values if np.size(v)), default=0.0)
+        if not big <= MAX_COORDINATE:
+            raise self.error(line, f"{what} reaches {big:.3g} in world space, beyond drpt's limit of "
+                             f"{MAX_COORDINATE:g} (float32 rendering); scale the scene down")
+
     def check_matrix(self, m: np.ndarray, opened: Token) -> None:
         if not tf.is_invertible(m):
-            raise self.error(opened.line, f"the Transform around this {opened.text} is singular (not invertible)")
+            raise self.error(opened.line, f"the Transform around this {opened.text} is singular or nearly so "
+                             "(not invertible)")
 
     def parse_sphere(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
         got = self.fields("Sphere", opened, {"center": self.vec("center"), "radius": self.num("radius"),
@@ -492,15 +561,19 @@ class _Parser:
         center = np.array(got["center"][0], dtype=np.float64)
         ref = self.ref(self.material_of(got, current))
         if tf.is_identity(m):
+            self.check_extent(opened.line, "Sphere", np.abs(center) + radius)
             self.sph.append((center, radius, ref))
             return
         self.check_matrix(m, opened)
         s = tf.similarity_scale(m)
         if s is not None:
-            self.sph.append((tf.transform_points(m, center), radius * s, ref))
+            c = tf.transform_points(m, center)
+            self.check_extent(opened.line, "Sphere", np.abs(c) + radius * s)
+            self.sph.append((c, radius * s, ref))
             return
         p, n = tf.tessellate_sphere(center, radius)
         p, n, _ = tf.transform_triangles(m, p, n)
+        self.check_extent(opened.line, "Sphere", p)
         warnings.warn(f"{self.path}:{opened.line}: Sphere under a non-uniform Transform was "
                       f"tessellated into {len(p)} triangles", stacklevel=2)
         self.tri_chunks.append((p, n, None, np.full(len(p), ref, np.int64)))
@@ -510,13 +583,14 @@ class _Parser:
                                             "mtl": self.word("material name")})
         self.require(got, "Plane", opened, ("normal", "offset"))
         n = np.array(got["normal"][0], dtype=np.float64)
-        length = float(np.linalg.norm(n))
+        length = tf.length(n)
         if not length > 0:
             raise self.error(got["normal"][1], "plane normal has zero length")
-        n, d = n / length, got["offset"][0] / length
+        n, d = tf.normalize(n), got["offset"][0] / length
         if not tf.is_identity(m):
             self.check_matrix(m, opened)
             n, d = tf.transform_plane(m, n, d)
+        self.check_extent(opened.line, "Plane offset", d)
         self.pln.append((n, d, self.ref(self.material_of(got, current))))
 
     def parse_triangle(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
@@ -527,6 +601,7 @@ class _Parser:
         if not tf.is_identity(m):
             self.check_matrix(m, opened)
             p, _, _ = tf.transform_triangles(m, p, None)
+        self.check_extent(opened.line, "Triangle", p)
         self.tri_chunks.append((p, None, None, np.array([self.ref(self.material_of(got, current))], np.int64)))
 
     def parse_mesh(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
@@ -555,34 +630,10 @@ class _Parser:
             pos, nrm, flipped = tf.transform_triangles(m, pos, nrm)
             if flipped and uvs is not None:
                 uvs = uvs[:, [0, 2, 1]]
+        self.check_extent(line, f"{p.name}", pos)
         self.tri_chunks.append((pos, nrm, uvs, refs))
 
     # ------------------------------------------------------------ transform
-    def parse_transform(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
-        ts = self.ts
-        ts.expect("{", "after 'Transform'")
-        local = tf.identity()
-        has_object = False
-        while True:
-            tok = ts.next(f"a transform operation, an object or '}}' to close Transform (opened at line {opened.line})")
-            t = tok.text
-            if t == "}":
-                break
-            if t in _OPS:
-                if has_object:
-                    raise self.error(tok.line, f"'{t}' after the Transform's object: operations come first")
-                local = local @ self.parse_op(tok)
-            elif t in _OBJECTS:
-                if has_object:
-                    raise self.error(tok.line, f"a Transform holds exactly one object; found a second one, '{t}'"
-                                     " (wrap several objects in a Group)")
-                self.parse_object(tok, m @ local, current)
-                has_object = True
-            else:
-                raise self.unknown(tok, "transform operation or object", _OPS + _OBJECTS)
-        if not has_object:
-            raise self.error(opened.line, "Transform has no object")
-
     def parse_op(self, tok: Token) -> np.ndarray:
         ts = self.ts
         t = tok.text
@@ -640,7 +691,7 @@ class _Parser:
             end = ts.next("'}' to close Rotate")
             if end.text != "}":
                 raise self.error(end.line, f"expected '}}' to close Rotate, found '{end.text}'")
-        if not np.linalg.norm(axis) > 0:
+        if not tf.normalize(axis).any():
             raise self.error(tok.line, "Rotate axis has zero length")
         return tf.rotate_axis(axis, deg)
 
