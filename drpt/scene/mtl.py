@@ -157,7 +157,8 @@ def apply_field(mat: Material, key: str, args: list[str], path: Path, line: int,
     if key == "ks":
         return replace(mat, ks=reflectance(_color(args, path, line, "Ks"), path, line, "Ks"))
     if key in ("ke", "le"):
-        return replace(mat, emission=emission(_color(args, path, line, key), path, line, key))
+        name = key.capitalize()
+        return replace(mat, emission=emission(_color(args, path, line, name), path, line, name))
     if key == "ns":
         return replace(mat, ns=_scalar(args, path, line, "Ns"))
     if key == "ni":
