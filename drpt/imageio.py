@@ -61,7 +61,11 @@ Mitsuba is imported on the first ``.hdr`` or ``.pfm`` (about 0.3 s); its
 
 from __future__ import annotations
 
+import contextlib
+import io
+import os
 import re
+import sys
 from os import PathLike
 from pathlib import Path
 
@@ -240,11 +244,41 @@ def _read_image(path: Path, linear: bool) -> np.ndarray:
     return np.ascontiguousarray(img, dtype=np.float32)
 
 
+@contextlib.contextmanager
+def _quiet_library_output():
+    """Discard stdout and stderr (file descriptors 1 and 2 and Python's
+    ``sys.stdout``/``sys.stderr``) for the duration: the OpenEXR library
+    and its binding print their own lines about a corrupt file, and drpt
+    reports the problem in one line of its own."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = {}
+    try:
+        for fd in (1, 2):
+            try:
+                saved[fd] = os.dup(fd)
+            except OSError:  # not open: nothing to protect
+                continue
+            with open(os.devnull, "wb") as null:
+                os.dup2(null.fileno(), fd)
+        sink = io.StringIO()  # the Python binding prints through sys.stdout
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+            yield
+    finally:
+        for fd, copy in saved.items():
+            os.dup2(copy, fd)
+            os.close(copy)
+
+
 def _read_exr(path: Path) -> np.ndarray:
     import OpenEXR
 
-    f = OpenEXR.File(str(path), separate_channels=True)
-    ch = f.channels()
+    try:
+        with _quiet_library_output():
+            f = OpenEXR.File(str(path), separate_channels=True)
+            ch = f.channels()
+    except Exception as e:
+        raise SceneError(path, None, f"cannot read .exr image (truncated or corrupt): {e}") from e
     names = list(ch)
     if all(c in ch for c in "RGB"):
         order = ["R", "G", "B"] + (["A"] if "A" in ch else [])

@@ -339,3 +339,38 @@ def test_cli_corrupt_sky_is_one_line_at_the_skybox(tmp_path, capsys):
     assert main(["export", str(p), str(tmp_path / "out.xml")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"drpt: error: {p}:3: sky.png: cannot read image")
+
+
+def test_huge_camera_vectors_are_refused_by_magnitude(tmp_path):
+    cam = "PerspectiveCamera { center 0 0 5 direction 0 0 -1e308 up 0 1e308 0 angle 40 }\n"
+    e = error_of(load_scene, write(tmp_path / "scene.txt", cam + group(TRI)))
+    assert e.line == 1 and "camera direction has a component of 1e+308" in e.message
+
+
+def test_corrupt_exr_prints_nothing_but_the_error(tmp_path, capfd):
+    from drpt.imageio import read_image, write_image
+
+    rng = np.random.default_rng(1)
+    write_image(tmp_path / "t.exr", rng.random((256, 64, 3)).astype(np.float32))
+    data = (tmp_path / "t.exr").read_bytes()
+    (tmp_path / "t.exr").write_bytes(data[: len(data) * 2 // 3])
+    e = error_of(read_image, tmp_path / "t.exr")
+    assert "truncated or corrupt" in e.message
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""
+
+
+@pytest.mark.parametrize("sep", ["\v", "\f", "\x1c", "\x1d", "\x1e", "\x85", "\u2028", "\u2029"])
+def test_only_newlines_end_lines(tmp_path, sep):
+    from drpt.scene.tokens import tokenize
+
+    assert [t.line for t in tokenize(f"a{sep}{{\nb")] == [1, 1, 2]
+    write(tmp_path / "m.obj", f"v 0 0 0{sep}v x\n")
+    e = error_of(load_obj, tmp_path / "m.obj")
+    assert e.line == 1
+    write(tmp_path / "m.mtl", f"# c{sep}f 1 2 0\nKd 1\n")
+    e = error_of(load_mtl, tmp_path / "m.mtl")
+    assert e.line == 2 and "before any 'newmtl'" in e.message
+    write(tmp_path / "r.obj", "v 0 0 0\rv 1 0 0\r\nv 0 1 0\rf 1 2 4\r")
+    e = error_of(load_obj, tmp_path / "r.obj")
+    assert e.line == 4

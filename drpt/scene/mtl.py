@@ -45,7 +45,7 @@ from pathlib import Path
 from ..errors import SceneError
 from .files import check_input, named, resolve
 from .model import Material
-from .tokens import parse_number, read_text
+from .tokens import parse_number, read_text, split_lines
 
 # map_* options and how many arguments each takes.
 _MAP_OPTIONS = {
@@ -202,7 +202,7 @@ def parse_mtl_text(text: str, path: Path) -> dict[str, Material]:
         if current is not None:
             materials[current.name] = current
 
-    for lineno, raw in enumerate(text.splitlines(), 1):
+    for lineno, raw in enumerate(split_lines(text), 1):
         hash_at = raw.find("#")
         if hash_at >= 0:
             raw = raw[:hash_at]

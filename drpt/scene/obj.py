@@ -45,7 +45,7 @@ from ..errors import SceneError
 from .files import resolve
 from .model import Material
 from .mtl import load_mtl
-from .tokens import read_text
+from .tokens import read_text, split_lines
 from .transform import normalize
 
 MtlCache = dict[Path, dict[str, Material]]
@@ -188,7 +188,7 @@ def parse_obj_text(text: str, path: Path, *, mtl_cache: MtlCache | None = None) 
     for resolving ``mtllib``)."""
     path = Path(path)
     cache: MtlCache = {} if mtl_cache is None else mtl_cache
-    lines = text.splitlines()
+    lines = split_lines(text)
 
     # Everything is collected as strings and converted by numpy at the end.
     V: list[str] = []

@@ -313,7 +313,7 @@ class _Parser:
         })
         self.require(got, opened.text, opened, ("center", "direction", "up", last))
         for key in ("center", "direction", "up"):
-            self.check_extent(got[key][1], f"camera {key}", got[key][0])
+            self.check_extent(got[key][1], f"camera {key}", got[key][0], direction=key != "center")
         d = tf.normalize(got["direction"][0])
         u = tf.normalize(got["up"][0])
         if not d.any():
@@ -538,11 +538,17 @@ class _Parser:
         if min(color) < 0.0:
             raise self.error(line, f"{what} {' '.join(f'{c:g}' for c in color)} must not be negative")
 
-    def check_extent(self, line: int, what: str, *values) -> None:
-        """World-space coordinates must be within :data:`MAX_COORDINATE`."""
+    def check_extent(self, line: int, what: str, *values, direction: bool = False) -> None:
+        """World-space values must be within :data:`MAX_COORDINATE` (the
+        renderer's float32 arithmetic); ``direction``: a vector whose length
+        does not matter, for the message."""
         with np.errstate(all="ignore"):
             big = max((float(np.abs(np.asarray(v, np.float64)).max()) for v in values if np.size(v)), default=0.0)
         if not big <= MAX_COORDINATE:
+            if direction:
+                raise self.error(line, f"{what} has a component of {big:.3g}, beyond drpt's limit of "
+                                 f"{MAX_COORDINATE:g} (float32 rendering); its length does not matter: "
+                                 "give a shorter vector")
             raise self.error(line, f"{what} reaches {big:.3g} in world space, beyond drpt's limit of "
                              f"{MAX_COORDINATE:g} (float32 rendering); scale the scene down")
 
