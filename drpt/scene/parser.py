@@ -53,6 +53,19 @@ Semantics
   transform swaps corners to keep the winding's front side outside. Spheres
   stay spheres under similarities, otherwise they are tessellated (1984
   triangles, smooth normals) with a warning. Planes transform exactly.
+  Groups and Transforms nest to any depth (they are read with an explicit
+  stack, not by recursion). An operation that makes the composed matrix
+  overflow float64 is an error at its line; a singular (or numerically
+  singular) matrix is an error at the object it applies to.
+* Extent: world-space coordinates (vertices, sphere center plus radius,
+  plane offsets, the camera, point lights) must be at most
+  :data:`~drpt.scene.model.MAX_COORDINATE` (1e12) in magnitude, an error at
+  the object's line otherwise (the renderer works in float32).
+* Colours: negative light colours (``PointLight``/``DirectionalLight``
+  ``color``, ``Background`` ``color`` and ``ambientLight``) and negative
+  emission (``Ke``/``Le``) are errors; negative reflectances
+  (``diffuseColor``, ``specularColor``, ``reflectiveColor``,
+  ``transparentColor``, ``Kd``, ``Ks``) are clamped to 0 with a warning.
 * Materials: ``MaterialIndex i`` selects entry ``i`` of the ``Materials``
   block for the objects after it in the same Group and in the Groups and
   Transforms nested in it (it does not leak out of its Group). Objects
@@ -67,9 +80,13 @@ Semantics
   ``Scene.materials[i]``), then MTL materials and ``"default"`` in order of
   first use. Unused MTL materials are left out.
 * File names are relative to the file naming them and stored as absolute
-  paths; missing files are errors at the referencing line. Skybox files are
-  checked after the geometry, so a scene missing both its OBJ and its sky
-  reports the OBJ.
+  paths; a file that is missing or not a regular file (a directory, FIFO,
+  device, symbolic link loop; ``/dev/null`` reads as empty) is an error at
+  the referencing line (:mod:`drpt.scene.files`). Textures and the sky are
+  stored as :class:`~drpt.scene.files.NamedPath`, so that a corrupt image,
+  read only when rendering or exporting, is reported at that line too.
+  Skybox files are checked after the geometry, so a scene missing both its
+  OBJ and its sky reports the OBJ.
 
 Every mistake raises :class:`~drpt.errors.SceneError` with the file and line.
 """
