@@ -135,7 +135,7 @@ def test_huge_untransformed_geometry_is_an_error(tmp_path):
 def test_extreme_but_valid_vectors_load(tmp_path):
     """Huge or tiny direction vectors are only directions: no overflow, no warning."""
     cam = "PerspectiveCamera { center 0 0 5 direction 0 0 -1e12 up 0 1e-300 0 angle 45 }\n"
-    body = ("Lights { numLights 1 DirectionalLight { direction 1e300 -1e300 0 color 1 1 1 } }\n"
+    body = ("Lights { numLights 1 DirectionalLight { direction 1e-300 -1e-300 0 color 1 1 1 } }\n"
             + group("Plane { normal 0 1e300 0 offset 1e300 }",
                     "Transform { Rotate 1e-300 0 0 90 " + SPHERE + " }"))
     s = load_scene(write(tmp_path / "scene.txt", cam + body))
@@ -374,3 +374,16 @@ def test_only_newlines_end_lines(tmp_path, sep):
     write(tmp_path / "r.obj", "v 0 0 0\rv 1 0 0\r\nv 0 1 0\rf 1 2 4\r")
     e = error_of(load_obj, tmp_path / "r.obj")
     assert e.line == 4
+
+
+@pytest.mark.parametrize("light, line", [
+    ("Lights { numLights 1\nPointLight { position 0 0 0 color 1 1e39 1 } }", 3),
+    ("Lights { numLights 1\nDirectionalLight { direction 0 -1e300 0 color 1 1 1 } }", 3),
+    ("Materials { numMaterials 1\nMaterial { diffuseColor 1e300 1 1 } }", 3),
+    ("Materials { numMaterials 1\nMaterial { Ke 1e39 } }", 3),
+    ("Materials { numMaterials 1\nMaterial { exponent 1e300 } }", 3),
+    ("Materials { numMaterials 1\nMaterial { Ni -1e300 } }", 3),
+])
+def test_values_beyond_float32_are_errors(tmp_path, light, line):
+    e = error_of(load_scene, scene(tmp_path, light + "\n" + group(TRI)))
+    assert e.line == line and ("float32" in e.message)

@@ -25,7 +25,8 @@ options (``-s u v w``, ``-o``, ``-t``, ``-mm``, ``-bm``, ``-boost``,
 ``-type``) are skipped with a warning; any other ``-option`` is an error.
 
 Negative colours: a negative ``Kd`` or ``Ks`` channel is clamped to 0 with
-a warning; negative emission (``Ke``/``Le``) is an error.
+a warning; negative emission (``Ke``/``Le``) is an error, and so is a colour
+channel beyond float32's range (3.4e38).
 
 Errors (:class:`~drpt.errors.SceneError` at the MTL file and line): a
 statement before any ``newmtl``, a bad or non-finite number, a wrong number of
@@ -77,8 +78,22 @@ def _color(args: list[str], path: Path, line: int, key: str) -> tuple[float, flo
     raise SceneError(path, line, f"{key}: expected 1 or 3 numbers, found {len(vals)}")
 
 
+#: Largest colour channel the renderer can hold (float32's maximum).
+FLOAT32_MAX = 3.4028234663852886e38
+
+
+def check_range(color, path: Path, line: int, key: str) -> None:
+    """A :class:`SceneError` at ``path``:``line`` if a channel of ``color`` does
+    not fit float32 (it would become infinite in the renderer)."""
+    if max(abs(c) for c in color) > FLOAT32_MAX:
+        raise SceneError(path, line, f"{key} {' '.join(f'{c:g}' for c in color)}: beyond float32's "
+                         f"range ({FLOAT32_MAX:.3g}), which the renderer uses")
+
+
 def reflectance(color: tuple[float, float, float], path: Path, line: int, key: str) -> tuple[float, float, float]:
-    """``color`` with negative channels clamped to 0, with a warning at ``path``:``line``."""
+    """``color`` with negative channels clamped to 0, with a warning at ``path``:``line``
+    (:func:`check_range` first)."""
+    check_range(color, path, line, key)
     if min(color) >= 0.0:
         return color
     warnings.warn(f"{path}:{line}: {key} {' '.join(f'{c:g}' for c in color)} has a negative channel; "
@@ -87,7 +102,9 @@ def reflectance(color: tuple[float, float, float], path: Path, line: int, key: s
 
 
 def emission(color: tuple[float, float, float], path: Path, line: int, key: str) -> tuple[float, float, float]:
-    """``color`` if no channel is negative, else a :class:`SceneError` at ``path``:``line``."""
+    """``color`` if no channel is negative, else a :class:`SceneError` at ``path``:``line``
+    (:func:`check_range` first)."""
+    check_range(color, path, line, key)
     if min(color) < 0.0:
         raise SceneError(path, line, f"{key} {' '.join(f'{c:g}' for c in color)}: emitted radiance "
                          "must not be negative")
@@ -98,6 +115,7 @@ def _scalar(args: list[str], path: Path, line: int, key: str) -> float:
     vals = _numbers(args, path, line, key)
     if len(vals) != 1:
         raise SceneError(path, line, f"{key}: expected 1 number, found {len(vals)}")
+    check_range(vals, path, line, key)
     return vals[0]
 
 

@@ -66,6 +66,7 @@ Semantics
   emission (``Ke``/``Le``) are errors; negative reflectances
   (``diffuseColor``, ``specularColor``, ``reflectiveColor``,
   ``transparentColor``, ``Kd``, ``Ks``) are clamped to 0 with a warning.
+  Colours and material numbers beyond float32's range are errors.
 * Materials: ``MaterialIndex i`` selects entry ``i`` of the ``Materials``
   block for the objects after it in the same Group and in the Groups and
   Transforms nested in it (it does not leak out of its Group). Objects
@@ -118,7 +119,7 @@ from .model import (
     Spheres,
     Triangles,
 )
-from .mtl import apply_field, reflectance
+from .mtl import apply_field, check_range, reflectance
 from .obj import MtlCache, ObjMesh, geometric_normals, load_obj
 from .tokens import Token, TokenStream, read_text
 
@@ -258,6 +259,14 @@ class _Parser:
     def num(self, what):
         return lambda tok: self.ts.number(what)
 
+    def material_number(self, what):
+        """A material parameter: a finite number that fits float32."""
+        def read(tok):
+            value = self.ts.number(what)
+            check_range((value,), self.path, tok.line, what)
+            return value
+        return read
+
     def word(self, what):
         return lambda tok: self.ts.word(what)
 
@@ -375,6 +384,8 @@ class _Parser:
                 if not tf.normalize(got["direction"][0]).any():
                     raise self.error(got["direction"][1], "light direction has zero length")
                 self.check_light(got["color"][1], "DirectionalLight color", got["color"][0])
+                self.check_extent(got["direction"][1], "DirectionalLight direction", got["direction"][0],
+                                  direction=True)
                 self.lights.append(DirectionalLight(got["direction"][0], got["color"][0]))
             elif tok.text == "PointLight":
                 got = self.fields(tok.text, tok, {"position": self.vec("position"), "color": self.vec("color"),
@@ -457,10 +468,10 @@ class _Parser:
         readers = {
             "diffuseColor": self.vec("diffuseColor"),
             "specularColor": self.vec("specularColor"),
-            "exponent": self.num("exponent"),
+            "exponent": self.material_number("exponent"),
             "reflectiveColor": self.vec("reflectiveColor"),
             "transparentColor": self.vec("transparentColor"),
-            "indexOfRefraction": self.num("indexOfRefraction"),
+            "indexOfRefraction": self.material_number("indexOfRefraction"),
             "texture": texture,
         }
         got = self.fields(opened.text, opened, readers, extra=mtl_style)
@@ -551,7 +562,9 @@ class _Parser:
         return current
 
     def check_light(self, line: int, what: str, color) -> None:
-        """Light colours (and the background's radiance) must not be negative."""
+        """Light colours (and the background's radiance) must not be negative
+        and must fit float32."""
+        check_range(color, self.path, line, what)
         if min(color) < 0.0:
             raise self.error(line, f"{what} {' '.join(f'{c:g}' for c in color)} must not be negative")
 
@@ -594,7 +607,8 @@ class _Parser:
             self.check_extent(opened.line, "Sphere", np.abs(c) + radius * s)
             self.sph.append((c, radius * s, ref))
             return
-        p, n = tf.tessellate_sphere(center, radius)
+        with np.errstate(all="ignore"):  # an overflow is refused by check_extent
+            p, n = tf.tessellate_sphere(center, radius)
         p, n, _ = tf.transform_triangles(m, p, n)
         self.check_extent(opened.line, "Sphere", p)
         warnings.warn(f"{self.path}:{opened.line}: Sphere under a non-uniform Transform was "
