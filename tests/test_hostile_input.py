@@ -233,9 +233,18 @@ def test_dev_null_reads_as_empty(tmp_path):
     with pytest.warns(UserWarning, match="has no faces"):
         s = load_scene(scene(tmp_path, group("TriangleMesh { obj_file empty.obj }")))
     assert len(s.triangles) == 0
-    # the scene itself: an empty file (what it renders is the renderer's business)
-    e = error_of(load_scene, "/dev/null")
-    assert "not a regular file" not in e.message
+    # the scene itself: an empty scene, seen by a default camera
+    with pytest.warns(UserWarning, match="no blocks"):
+        s = load_scene("/dev/null")
+    assert len(s.triangles) == len(s.spheres) == len(s.planes) == 0 and s.camera is not None
+
+
+def test_a_scene_without_group_has_no_geometry(tmp_path):
+    s = load_scene(scene(tmp_path, "Background { color 1 1 1 }\n"))
+    assert len(s.triangles) == len(s.spheres) == len(s.planes) == 0
+    assert s.background.color == (1.0, 1.0, 1.0)
+    e = error_of(load_scene, write(tmp_path / "nocam.txt", "Background { color 1 1 1 }\n"))
+    assert "no camera" in e.message
 
 
 def test_nul_byte_in_a_file_name(tmp_path):

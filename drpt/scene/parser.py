@@ -10,8 +10,9 @@ word; ``#`` and ``//`` start comments (see :mod:`drpt.scene.tokens`). Keywords
 are case-sensitive. ``v3`` below means three finite numbers, ``[..]`` optional.
 Fields inside a block may come in any order, each at most once. ::
 
-    scene      := block*          (a camera and a Group are required, every
-                                   block at most once, in any order)
+    scene      := block*          (a camera is required unless the file has no
+                                   blocks at all; every block at most once,
+                                   in any order)
     block      := PerspectiveCamera { center v3 direction v3 up v3 angle deg }
                 | OrthographicCamera { center v3 direction v3 up v3 size s }
                 | Background { [color v3] [ambientLight v3] }
@@ -42,6 +43,10 @@ Fields inside a block may come in any order, each at most once. ::
 
 Semantics
 ---------
+* A scene without a ``Group`` has no geometry (the renderer shows the
+  background or sky, with a warning). A file with no blocks at all (an
+  empty file, ``/dev/null``) gets a default camera at the origin looking
+  down -Z, with a warning; otherwise a missing camera is an error.
 * ``numObjects`` counts objects only (``MaterialIndex`` is not counted) and
   must match, like ``numLights`` and ``numMaterials``; a mismatch is an error
   at the block's line. (The seed's scene files all match.)
@@ -309,10 +314,14 @@ class _Parser:
                 self.parse_materials(tok)
             else:
                 self.parse_group(tok, tf.identity(), None)
+        if self.camera is None and not self.seen:
+            # An empty file (/dev/null, only comments): nothing to frame, the
+            # image is the background whatever the view.
+            warnings.warn(f"{self.path}: the scene file has no blocks; it renders the background "
+                          "through a default camera", stacklevel=2)
+            self.camera = PerspectiveCamera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0), 45.0)
         if self.camera is None:
             raise self.error(ts.last_line, "no camera: add a PerspectiveCamera or OrthographicCamera block")
-        if "Group" not in self.seen:
-            raise self.error(ts.last_line, "no Group block: the scene has no geometry")
         materials, index = self.resolve_materials()
         for sky, line in self.skyboxes:
             check_input(sky, ref=(self.path, line), what="skybox file")
