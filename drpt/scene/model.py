@@ -16,8 +16,10 @@ Conventions
 * ``OrthographicCamera.size`` is the full world-space height of the view.
 * Colors are linear RGB floats.
 * World-space coordinates (vertices, sphere centers plus radii, plane
-  offsets, the camera and point lights) are at most :data:`MAX_COORDINATE`
-  in magnitude; the loader refuses larger ones.
+  offsets, the camera's center and point lights) are at most
+  :data:`MAX_COORDINATE` in magnitude; the loader refuses larger ones.
+  Direction vectors have components in [1e-12, 1e12] (others are stored
+  normalized).
 """
 
 from __future__ import annotations

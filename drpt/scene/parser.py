@@ -63,9 +63,11 @@ Semantics
   overflow float64 is an error at its line; a singular (or numerically
   singular) matrix is an error at the object it applies to.
 * Extent: world-space coordinates (vertices, sphere center plus radius,
-  plane offsets, the camera, point lights) must be at most
+  plane offsets, the camera's center, point lights) must be at most
   :data:`~drpt.scene.model.MAX_COORDINATE` (1e12) in magnitude, an error at
-  the object's line otherwise (the renderer works in float32).
+  the object's line otherwise (the renderer works in float32). Direction
+  vectors with a component beyond 1e12 (or all below 1e-12) are stored
+  normalized.
 * Colours: negative light colours (``PointLight``/``DirectionalLight``
   ``color``, ``Background`` ``color`` and ``ambientLight``) and negative
   emission (``Ke``/``Le``) are errors; negative reflectances
@@ -181,6 +183,16 @@ class _Block:
     declared: int = 0  # Group: numObjects
     found: int = 0  # objects read (a Transform holds at most one)
     local: np.ndarray | None = None  # Transform: its operations composed so far
+
+
+def _direction(v) -> tuple[float, float, float]:
+    """A direction as written, or normalized when float32 could not hold it
+    or its square (a component beyond 1e12, or all below 1e-12): its length
+    does not matter."""
+    big = max(abs(c) for c in v)
+    if 1e-12 <= big <= 1e12:
+        return v
+    return tuple(float(c) for c in tf.normalize(v))
 
 
 def _hint(word: str, choices) -> str:
@@ -347,8 +359,7 @@ class _Parser:
             last: self.num(last),
         })
         self.require(got, opened.text, opened, ("center", "direction", "up", last))
-        for key in ("center", "direction", "up"):
-            self.check_extent(got[key][1], f"camera {key}", got[key][0], direction=key != "center")
+        self.check_extent(got["center"][1], "camera center", got["center"][0])
         d = tf.normalize(got["direction"][0])
         u = tf.normalize(got["up"][0])
         if not d.any():
@@ -361,11 +372,13 @@ class _Parser:
         if persp:
             if not 0.0 < value < 180.0:
                 raise self.error(line, f"camera angle must be in (0, 180) degrees, got {value:g}")
-            self.camera = PerspectiveCamera(got["center"][0], got["direction"][0], got["up"][0], value)
+            self.camera = PerspectiveCamera(got["center"][0], _direction(got["direction"][0]),
+                                            _direction(got["up"][0]), value)
         else:
             if not value > 0.0:
                 raise self.error(line, f"camera size must be positive, got {value:g}")
-            self.camera = OrthographicCamera(got["center"][0], got["direction"][0], got["up"][0], value)
+            self.camera = OrthographicCamera(got["center"][0], _direction(got["direction"][0]),
+                                             _direction(got["up"][0]), value)
 
     def parse_background(self, opened: Token) -> None:
         got = self.fields("Background", opened, {
@@ -393,9 +406,7 @@ class _Parser:
                 if not tf.normalize(got["direction"][0]).any():
                     raise self.error(got["direction"][1], "light direction has zero length")
                 self.check_light(got["color"][1], "DirectionalLight color", got["color"][0])
-                self.check_extent(got["direction"][1], "DirectionalLight direction", got["direction"][0],
-                                  direction=True)
-                self.lights.append(DirectionalLight(got["direction"][0], got["color"][0]))
+                self.lights.append(DirectionalLight(_direction(got["direction"][0]), got["color"][0]))
             elif tok.text == "PointLight":
                 got = self.fields(tok.text, tok, {"position": self.vec("position"), "color": self.vec("color"),
                                                   "attenuation": self.vec("attenuation")})
@@ -577,17 +588,12 @@ class _Parser:
         if min(color) < 0.0:
             raise self.error(line, f"{what} {' '.join(f'{c:g}' for c in color)} must not be negative")
 
-    def check_extent(self, line: int, what: str, *values, direction: bool = False) -> None:
+    def check_extent(self, line: int, what: str, *values) -> None:
         """World-space values must be within :data:`MAX_COORDINATE` (the
-        renderer's float32 arithmetic); ``direction``: a vector whose length
-        does not matter, for the message."""
+        renderer's float32 arithmetic)."""
         with np.errstate(all="ignore"):
             big = max((float(np.abs(np.asarray(v, np.float64)).max()) for v in values if np.size(v)), default=0.0)
         if not big <= MAX_COORDINATE:
-            if direction:
-                raise self.error(line, f"{what} has a component of {big:.3g}, beyond drpt's limit of "
-                                 f"{MAX_COORDINATE:g} (float32 rendering); its length does not matter: "
-                                 "give a shorter vector")
             raise self.error(line, f"{what} reaches {big:.3g} in world space, beyond drpt's limit of "
                              f"{MAX_COORDINATE:g} (float32 rendering); scale the scene down")
 
