@@ -18,8 +18,8 @@ Conventions
 * World-space coordinates (vertices, sphere centers plus radii, plane
   offsets, the camera's center and point lights) are at most
   :data:`MAX_COORDINATE` in magnitude; the loader refuses larger ones.
-  Direction vectors have components in [1e-12, 1e12] (others are stored
-  normalized).
+  A direction vector's largest component is in [1e-12, 1e12] (others are
+  stored normalized).
 """
 
 from __future__ import annotations
