@@ -48,8 +48,12 @@ Returns an ``(H, W, C)`` float32 array, row 0 at the top, ``C`` in
   decoded. ``linear=False`` returns the encoded values. Palette images are
   expanded; gray+alpha becomes RGBA.
 
-A missing, unreadable, truncated or malformed file raises
-``SceneError(path, None, message)``, a one-line message naming the file.
+A missing, unreadable, truncated, malformed or empty (0 pixel) file, or one that is not a
+regular file (a directory, FIFO, device or symbolic link loop), raises
+``SceneError(path, None, message)``, a one-line message naming the file;
+for a texture or sky named by a scene or MTL file
+(:class:`drpt.scene.files.NamedPath`) the error names that file and line
+instead, followed by the image's name.
 
 Mitsuba is imported on the first ``.hdr`` or ``.pfm`` (about 0.3 s); its
 ``Bitmap`` needs no variant, so none is set.
@@ -57,13 +61,18 @@ Mitsuba is imported on the first ``.hdr`` or ``.pfm`` (about 0.3 s); its
 
 from __future__ import annotations
 
+import contextlib
+import io
+import os
 import re
+import sys
 from os import PathLike
 from pathlib import Path
 
 import numpy as np
 
 from drpt.errors import DrptError, SceneError
+from drpt.scene.files import check_input
 
 WRITE_EXTENSIONS = (".exr", ".png", ".tga", ".hdr", ".pfm")
 READ_EXTENSIONS = (".exr", ".hdr", ".pfm", ".png", ".jpg", ".jpeg", ".tga")
@@ -189,9 +198,23 @@ def read_image(path: str | PathLike, linear: bool = True) -> np.ndarray:
 
     ``linear`` only matters for 8/16-bit formats: decode their sRGB-encoded
     color channels to linear values. Raises :class:`SceneError` when the
-    file is missing, unreadable, malformed or of an unsupported type.
+    file is missing, not a regular file, unreadable, malformed or of an
+    unsupported type: at the file itself, or, for a
+    :class:`~drpt.scene.files.NamedPath` (a texture or sky named by a scene
+    or MTL file), at the line that named it, e.g. ``scene.txt:12: sky.hdr:
+    cannot read .hdr image (truncated or corrupt): ...``.
     """
+    named_at = getattr(path, "named_at", None)
     path = Path(path)
+    try:
+        return _read_image(path, linear)
+    except SceneError as e:
+        if named_at is None:
+            raise
+        raise SceneError(named_at[0], named_at[1], f"{path.name}: {e.message}") from e
+
+
+def _read_image(path: Path, linear: bool) -> np.ndarray:
     ext = _ext(path)
     if ext not in READ_EXTENSIONS:
         raise SceneError(
@@ -199,15 +222,15 @@ def read_image(path: str | PathLike, linear: bool = True) -> np.ndarray:
             f"cannot read images with extension {ext or '(none)'!r}; "
             f"supported: {', '.join(READ_EXTENSIONS)}",
         )
-    if not path.is_file():
-        raise SceneError(path, None, "image file not found")
+    check_input(path, what="image file")
     try:
-        if ext == ".exr":
-            img = _read_exr(path)
-        elif ext in (".hdr", ".pfm"):
-            img = _read_bitmap(path, ext)
-        else:
-            img = _read_ldr(path, linear)
+        with np.errstate(all="ignore"):
+            if ext == ".exr":
+                img = _read_exr(path)
+            elif ext in (".hdr", ".pfm"):
+                img = _read_bitmap(path, ext)
+            else:
+                img = _read_ldr(path, linear)
     except SceneError:
         raise
     except OSError as e:
@@ -216,14 +239,46 @@ def read_image(path: str | PathLike, linear: bool = True) -> np.ndarray:
         raise SceneError(path, None, f"cannot read image: {e}") from e
     if img.ndim == 2:
         img = img[..., None]
+    if img.size == 0:
+        raise SceneError(path, None, f"empty image ({img.shape[1]}x{img.shape[0]} pixels)")
     return np.ascontiguousarray(img, dtype=np.float32)
+
+
+@contextlib.contextmanager
+def _quiet_library_output():
+    """Discard stdout and stderr (file descriptors 1 and 2 and Python's
+    ``sys.stdout``/``sys.stderr``) for the duration: the OpenEXR library
+    and its binding print their own lines about a corrupt file, and drpt
+    reports the problem in one line of its own."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = {}
+    try:
+        for fd in (1, 2):
+            try:
+                saved[fd] = os.dup(fd)
+            except OSError:  # not open: nothing to protect
+                continue
+            with open(os.devnull, "wb") as null:
+                os.dup2(null.fileno(), fd)
+        sink = io.StringIO()  # the Python binding prints through sys.stdout
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+            yield
+    finally:
+        for fd, copy in saved.items():
+            os.dup2(copy, fd)
+            os.close(copy)
 
 
 def _read_exr(path: Path) -> np.ndarray:
     import OpenEXR
 
-    f = OpenEXR.File(str(path), separate_channels=True)
-    ch = f.channels()
+    try:
+        with _quiet_library_output():
+            f = OpenEXR.File(str(path), separate_channels=True)
+            ch = f.channels()
+    except Exception as e:
+        raise SceneError(path, None, f"cannot read .exr image (truncated or corrupt): {e}") from e
     names = list(ch)
     if all(c in ch for c in "RGB"):
         order = ["R", "G", "B"] + (["A"] if "A" in ch else [])

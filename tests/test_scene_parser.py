@@ -328,7 +328,6 @@ ERRORS = [
     (CAM + "Materials { numMaterials 1 Checkerboard { } }\n" + group(TRI), 2, "unknown material type"),
     (CAM + "Lights { numLights 1 SpotLight { } }\n" + group(TRI), 2, "unknown light"),
     (group(TRI), 4, "no camera"),
-    (CAM + "Background { color 1 1 1 }\n", 2, "no Group"),
     (CAM + CAM + group(TRI), 2, "second camera"),
     (G("MaterialIndex 0", TRI), 4, "MaterialIndex 0 is out of range (there is no Materials block)"),
     (CAM + "Materials { numMaterials 1 Material { } }\n" + group("MaterialIndex 1", TRI), 5,

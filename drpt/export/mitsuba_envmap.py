@@ -81,7 +81,7 @@ def to_mitsuba(skybox: Skybox, scale: float = 1.0, out_dir: str | PathLike | Non
     scale = float(scale)
     if not (np.isfinite(scale) and scale >= 0.0):
         raise DrptError(f"skybox {path}: scale must be finite and >= 0, got {scale}")
-    img, reasons = mitsuba_compatible_image(read_image(path))
+    img, reasons = mitsuba_compatible_image(read_image(skybox.path))  # errors at the Skybox line
     filename = path.resolve()
     if reasons:
         d = Path(out_dir) if out_dir is not None else Path(tempfile.mkdtemp(prefix="drpt_envmap_"))

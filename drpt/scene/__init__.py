@@ -2,7 +2,9 @@
 
 ``load_scene(path)`` reads drpt's text scene format (see :mod:`.parser` for
 the grammar) with its OBJ meshes (:mod:`.obj`) and MTL libraries (:mod:`.mtl`)
-into a world-space :class:`Scene`.
+into a world-space :class:`Scene`. Every input file is opened through
+:mod:`.files` (regular files only; files named by another file remember
+that file and line).
 """
 
 from .model import (

@@ -15,6 +15,11 @@ Conventions
   from the aspect ratio. The exporter sets Mitsuba's ``fov_axis="y"`` to match.
 * ``OrthographicCamera.size`` is the full world-space height of the view.
 * Colors are linear RGB floats.
+* World-space coordinates (vertices, sphere centers plus radii, plane
+  offsets, the camera's center and point lights) are at most
+  :data:`MAX_COORDINATE` in magnitude; the loader refuses larger ones.
+  A direction vector's largest component is in [1e-12, 1e12] (others are
+  stored normalized).
 """
 
 from __future__ import annotations
@@ -25,6 +30,11 @@ from pathlib import Path
 import numpy as np
 
 Vec3 = tuple[float, float, float]
+
+#: Largest world-space coordinate magnitude a scene may have. The renderer
+#: works in float32, and the watertight triangle test multiplies three
+#: coordinate differences: (2e12)^3 = 8e36 still fits below float32's 3.4e38.
+MAX_COORDINATE = 1e12
 
 
 # --------------------------------------------------------------------- camera

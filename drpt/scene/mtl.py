@@ -24,22 +24,29 @@ options (``-s u v w``, ``-o``, ``-t``, ``-mm``, ``-bm``, ``-boost``,
 ``-texres``, ``-clamp``, ``-blendu``, ``-blendv``, ``-cc``, ``-imfchan``,
 ``-type``) are skipped with a warning; any other ``-option`` is an error.
 
+Negative colours: a negative ``Kd`` or ``Ks`` channel is clamped to 0 with
+a warning; negative emission (``Ke``/``Le``) is an error, and so is a colour
+channel beyond float32's range (3.4e38).
+
 Errors (:class:`~drpt.errors.SceneError` at the MTL file and line): a
 statement before any ``newmtl``, a bad or non-finite number, a wrong number of
-values, a missing texture file. Each :class:`Material` gets
+values, negative emission, a texture file that is missing or not a regular
+file. Each :class:`Material` gets
 ``origin = "file:line"`` of its ``newmtl``. A name defined twice in one file
 warns; the later definition wins.
 """
 
 from __future__ import annotations
 
+import os
 import warnings
 from dataclasses import replace
 from pathlib import Path
 
 from ..errors import SceneError
+from .files import check_input, named, resolve
 from .model import Material
-from .tokens import parse_number, read_text
+from .tokens import parse_number, read_text, split_lines
 
 # map_* options and how many arguments each takes.
 _MAP_OPTIONS = {
@@ -71,10 +78,44 @@ def _color(args: list[str], path: Path, line: int, key: str) -> tuple[float, flo
     raise SceneError(path, line, f"{key}: expected 1 or 3 numbers, found {len(vals)}")
 
 
+#: Largest colour channel the renderer can hold (float32's maximum).
+FLOAT32_MAX = 3.4028234663852886e38
+
+
+def check_range(color, path: Path, line: int, key: str) -> None:
+    """A :class:`SceneError` at ``path``:``line`` if a channel of ``color`` does
+    not fit float32 (it would become infinite in the renderer)."""
+    if max(abs(c) for c in color) > FLOAT32_MAX:
+        raise SceneError(path, line, f"{key} {' '.join(f'{c:g}' for c in color)}: beyond float32's "
+                         f"range ({FLOAT32_MAX:.3g}), which the renderer uses")
+
+
+def reflectance(color: tuple[float, float, float], path: Path, line: int, key: str) -> tuple[float, float, float]:
+    """``color`` with negative channels clamped to 0, with a warning at ``path``:``line``
+    (:func:`check_range` first)."""
+    check_range(color, path, line, key)
+    if min(color) >= 0.0:
+        return color
+    warnings.warn(f"{path}:{line}: {key} {' '.join(f'{c:g}' for c in color)} has a negative channel; "
+                  "clamped to 0", stacklevel=3)
+    return tuple(max(c, 0.0) for c in color)
+
+
+def emission(color: tuple[float, float, float], path: Path, line: int, key: str) -> tuple[float, float, float]:
+    """``color`` if no channel is negative, else a :class:`SceneError` at ``path``:``line``
+    (:func:`check_range` first)."""
+    check_range(color, path, line, key)
+    if min(color) < 0.0:
+        raise SceneError(path, line, f"{key} {' '.join(f'{c:g}' for c in color)}: emitted radiance "
+                         "must not be negative")
+    return color
+
+
 def _scalar(args: list[str], path: Path, line: int, key: str) -> float:
     vals = _numbers(args, path, line, key)
     if len(vals) != 1:
         raise SceneError(path, line, f"{key}: expected 1 number, found {len(vals)}")
+    check_range(vals, path, line, key)
     return vals[0]
 
 
@@ -82,7 +123,10 @@ def texture_path(args: list[str], base: Path, path: Path, line: int, key: str) -
     """Resolve a ``map_*`` statement's file name (after skipping options).
 
     ``base`` is the directory names are relative to; errors are reported at
-    ``path``:``line``. The file must exist.
+    ``path``:``line``. The file must be a regular file
+    (:func:`~drpt.scene.files.check_input`); it is returned as a
+    :class:`~drpt.scene.files.NamedPath` named at ``path``:``line``, where
+    problems found when the image is read are reported.
     """
     i = 0
     skipped = []
@@ -109,14 +153,13 @@ def texture_path(args: list[str], base: Path, path: Path, line: int, key: str) -
     if skipped:
         warnings.warn(f"{path}:{line}: {key} options {' '.join(skipped)} are ignored", stacklevel=2)
     name = " ".join(args[i:])
-    tex = (base / name).resolve()
-    if not tex.is_file() and "\\" in name:
-        alt = (base / name.replace("\\", "/")).resolve()
-        if alt.is_file():
+    tex = resolve(base / name)
+    if not os.path.lexists(tex) and "\\" in name:
+        alt = resolve(base / name.replace("\\", "/"))
+        if os.path.lexists(alt):
             tex = alt
-    if not tex.is_file():
-        raise SceneError(path, line, f"texture file not found: {tex}")
-    return tex
+    check_input(tex, ref=(path, line), what="texture file")
+    return named(tex, (path, line))
 
 
 def apply_field(mat: Material, key: str, args: list[str], path: Path, line: int,
@@ -128,11 +171,12 @@ def apply_field(mat: Material, key: str, args: list[str], path: Path, line: int,
     ``warned`` is given) and leave ``mat`` unchanged.
     """
     if key == "kd":
-        return replace(mat, kd=_color(args, path, line, "Kd"))
+        return replace(mat, kd=reflectance(_color(args, path, line, "Kd"), path, line, "Kd"))
     if key == "ks":
-        return replace(mat, ks=_color(args, path, line, "Ks"))
+        return replace(mat, ks=reflectance(_color(args, path, line, "Ks"), path, line, "Ks"))
     if key in ("ke", "le"):
-        return replace(mat, emission=_color(args, path, line, key))
+        name = key.capitalize()
+        return replace(mat, emission=emission(_color(args, path, line, name), path, line, name))
     if key == "ns":
         return replace(mat, ns=_scalar(args, path, line, "Ns"))
     if key == "ni":
@@ -176,7 +220,7 @@ def parse_mtl_text(text: str, path: Path) -> dict[str, Material]:
         if current is not None:
             materials[current.name] = current
 
-    for lineno, raw in enumerate(text.splitlines(), 1):
+    for lineno, raw in enumerate(split_lines(text), 1):
         hash_at = raw.find("#")
         if hash_at >= 0:
             raw = raw[:hash_at]
@@ -207,5 +251,5 @@ def load_mtl(path: str | Path, *, ref: tuple[Path, int] | None = None) -> dict[s
     Returns the materials by name, in file order. ``ref`` is the (file, line)
     that named this library, where a missing file is reported.
     """
-    path = Path(path).resolve()
+    path = resolve(path)
     return parse_mtl_text(read_text(path, ref=ref, what="MTL file"), path)

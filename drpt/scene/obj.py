@@ -42,9 +42,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SceneError
+from .files import resolve
 from .model import Material
 from .mtl import load_mtl
-from .tokens import read_text
+from .tokens import read_text, split_lines
+from .transform import normalize
 
 MtlCache = dict[Path, dict[str, Material]]
 
@@ -73,12 +75,17 @@ class ObjMesh:
 
 def geometric_normals(positions: np.ndarray) -> np.ndarray:
     """Unit ``cross(p1 - p0, p2 - p0)`` per face; (0, 0, 1) for zero-area faces."""
-    g = np.cross(positions[:, 1] - positions[:, 0], positions[:, 2] - positions[:, 0])
-    length = np.linalg.norm(g, axis=1)
-    ok = length > 0
+    with np.errstate(all="ignore"):  # huge coordinates: inf/nan, replaced below
+        g = np.cross(positions[:, 1] - positions[:, 0], positions[:, 2] - positions[:, 0])
+        length = np.linalg.norm(g, axis=1)
+    ok = (length > 0) & np.isfinite(length)
     out = np.zeros_like(g)
     out[:, 2] = 1.0
     out[ok] = g[ok] / length[ok, None]
+    bad = ~ok & (np.abs(g).max(axis=1) > 0)  # a length that overflowed (or nan)
+    if bad.any():
+        n = normalize(g[bad])
+        out[bad] = np.where(n.any(axis=1, keepdims=True), n, out[bad])
     return out
 
 
@@ -90,7 +97,7 @@ def load_obj(path: str | Path, *, ref: tuple[Path, int] | None = None,
     reported. ``mtl_cache`` maps absolute MTL paths to parsed libraries so a
     library shared by several OBJ files yields the same Material objects.
     """
-    path = Path(path).resolve()
+    path = resolve(path)
     text = read_text(path, ref=ref, what="OBJ file")
     return parse_obj_text(text, path, mtl_cache=mtl_cache)
 
@@ -120,7 +127,7 @@ def _mtllib(args: list[str], path: Path, lineno: int, cache: MtlCache) -> list[P
             names = [joined]
     out = []
     for name in names:
-        p = (base / name).resolve()
+        p = resolve(base / name)
         if p not in cache:
             cache[p] = load_mtl(p, ref=(path, lineno))
         out.append(p)
@@ -181,7 +188,7 @@ def parse_obj_text(text: str, path: Path, *, mtl_cache: MtlCache | None = None) 
     for resolving ``mtllib``)."""
     path = Path(path)
     cache: MtlCache = {} if mtl_cache is None else mtl_cache
-    lines = text.splitlines()
+    lines = split_lines(text)
 
     # Everything is collected as strings and converted by numpy at the end.
     V: list[str] = []
@@ -361,11 +368,9 @@ def parse_obj_text(text: str, path: Path, *, mtl_cache: MtlCache | None = None) 
     normals = None
     inn = cn[corners] - 1
     if len(corners) and (inn >= 0).any():
-        normals = Narr[np.maximum(inn, 0)]
-        length = np.linalg.norm(normals, axis=2)
-        ok = (inn >= 0) & (length > 0)
-        normals = np.where(ok[..., None], normals / np.where(ok, length, 1.0)[..., None],
-                           geometric_normals(positions)[:, None, :])
+        normals = normalize(Narr[np.maximum(inn, 0)])
+        ok = (inn >= 0) & normals.any(axis=2)
+        normals = np.where(ok[..., None], normals, geometric_normals(positions)[:, None, :])
 
     uvs = None
     itt = ct[corners] - 1

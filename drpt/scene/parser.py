@@ -10,8 +10,9 @@ word; ``#`` and ``//`` start comments (see :mod:`drpt.scene.tokens`). Keywords
 are case-sensitive. ``v3`` below means three finite numbers, ``[..]`` optional.
 Fields inside a block may come in any order, each at most once. ::
 
-    scene      := block*          (a camera and a Group are required, every
-                                   block at most once, in any order)
+    scene      := block*          (a camera is required unless the file has no
+                                   blocks at all; every block at most once,
+                                   in any order)
     block      := PerspectiveCamera { center v3 direction v3 up v3 angle deg }
                 | OrthographicCamera { center v3 direction v3 up v3 size s }
                 | Background { [color v3] [ambientLight v3] }
@@ -42,6 +43,10 @@ Fields inside a block may come in any order, each at most once. ::
 
 Semantics
 ---------
+* A scene without a ``Group`` has no geometry (the renderer shows the
+  background or sky, with a warning). A file with no blocks at all (an
+  empty file, ``/dev/null``) gets a default camera at the origin looking
+  down -Z, with a warning; otherwise a missing camera is an error.
 * ``numObjects`` counts objects only (``MaterialIndex`` is not counted) and
   must match, like ``numLights`` and ``numMaterials``; a mismatch is an error
   at the block's line. (The seed's scene files all match.)
@@ -53,6 +58,22 @@ Semantics
   transform swaps corners to keep the winding's front side outside. Spheres
   stay spheres under similarities, otherwise they are tessellated (1984
   triangles, smooth normals) with a warning. Planes transform exactly.
+  Groups and Transforms nest to any depth (they are read with an explicit
+  stack, not by recursion). An operation that makes the composed matrix
+  overflow float64 is an error at its line; a singular (or numerically
+  singular) matrix is an error at the object it applies to.
+* Extent: world-space coordinates (vertices, sphere center plus radius,
+  plane offsets, the camera's center, point lights) must be at most
+  :data:`~drpt.scene.model.MAX_COORDINATE` (1e12) in magnitude, an error at
+  the object's line otherwise (the renderer works in float32). Direction
+  vectors with a component beyond 1e12 (or all below 1e-12) are stored
+  normalized.
+* Colours: negative light colours (``PointLight``/``DirectionalLight``
+  ``color``, ``Background`` ``color`` and ``ambientLight``) and negative
+  emission (``Ke``/``Le``) are errors; negative reflectances
+  (``diffuseColor``, ``specularColor``, ``reflectiveColor``,
+  ``transparentColor``, ``Kd``, ``Ks``) are clamped to 0 with a warning.
+  Colours and material numbers beyond float32's range are errors.
 * Materials: ``MaterialIndex i`` selects entry ``i`` of the ``Materials``
   block for the objects after it in the same Group and in the Groups and
   Transforms nested in it (it does not leak out of its Group). Objects
@@ -67,9 +88,13 @@ Semantics
   ``Scene.materials[i]``), then MTL materials and ``"default"`` in order of
   first use. Unused MTL materials are left out.
 * File names are relative to the file naming them and stored as absolute
-  paths; missing files are errors at the referencing line. Skybox files are
-  checked after the geometry, so a scene missing both its OBJ and its sky
-  reports the OBJ.
+  paths; a file that is missing or not a regular file (a directory, FIFO,
+  device, symbolic link loop; ``/dev/null`` reads as empty) is an error at
+  the referencing line (:mod:`drpt.scene.files`). Textures and the sky are
+  stored as :class:`~drpt.scene.files.NamedPath`, so that a corrupt image,
+  read only when rendering or exporting, is reported at that line too.
+  Skybox files are checked after the geometry, so a scene missing both its
+  OBJ and its sky reports the OBJ.
 
 Every mistake raises :class:`~drpt.errors.SceneError` with the file and line.
 """
@@ -86,7 +111,9 @@ import numpy as np
 
 from ..errors import SceneError
 from . import transform as tf
+from .files import check_input, named, resolve
 from .model import (
+    MAX_COORDINATE,
     Background,
     DirectionalLight,
     Material,
@@ -99,7 +126,7 @@ from .model import (
     Spheres,
     Triangles,
 )
-from .mtl import apply_field
+from .mtl import apply_field, check_range, reflectance
 from .obj import MtlCache, ObjMesh, geometric_normals, load_obj
 from .tokens import Token, TokenStream, read_text
 
@@ -124,7 +151,7 @@ def load_scene(path: str | Path) -> Scene:
     Non-fatal oddities (ignored OBJ/MTL statements, tessellated spheres) are
     reported with :func:`warnings.warn`.
     """
-    path = Path(path).resolve()
+    path = resolve(path)
     text = read_text(path, what="scene file")
     return _Parser(path, text).parse()
 
@@ -143,6 +170,29 @@ class _ByName:
 
 
 _Ref = Material | _ByIndex | _ByName | None  # None: the default material
+
+
+@dataclass
+class _Block:
+    """An open Group or Transform while its contents are read."""
+
+    opened: Token  # the 'Group' or 'Transform' keyword
+    m: np.ndarray  # the world matrix around the block
+    world: np.ndarray  # the world matrix of the objects in it (Transform: m @ local)
+    current: _Ref  # the material for objects without their own
+    declared: int = 0  # Group: numObjects
+    found: int = 0  # objects read (a Transform holds at most one)
+    local: np.ndarray | None = None  # Transform: its operations composed so far
+
+
+def _direction(v) -> tuple[float, float, float]:
+    """A direction as written, or normalized when float32 could not hold it
+    or its square (a component beyond 1e12, or all below 1e-12): its length
+    does not matter."""
+    big = max(abs(c) for c in v)
+    if 1e-12 <= big <= 1e12:
+        return v
+    return tuple(float(c) for c in tf.normalize(v))
 
 
 def _hint(word: str, choices) -> str:
@@ -226,6 +276,14 @@ class _Parser:
     def num(self, what):
         return lambda tok: self.ts.number(what)
 
+    def material_number(self, what):
+        """A material parameter: a finite number that fits float32."""
+        def read(tok):
+            value = self.ts.number(what)
+            check_range((value,), self.path, tok.line, what)
+            return value
+        return read
+
     def word(self, what):
         return lambda tok: self.ts.word(what)
 
@@ -243,7 +301,7 @@ class _Parser:
             raise self.error(opened.line, f"{block} declares {keyword} {declared} but contains {found} {what}")
 
     def file_ref(self, tok: Token) -> Path:
-        return (self.base / tok.text).resolve()
+        return resolve(self.base / tok.text)
 
     # ------------------------------------------------------------ top level
     def parse(self) -> Scene:
@@ -268,14 +326,17 @@ class _Parser:
                 self.parse_materials(tok)
             else:
                 self.parse_group(tok, tf.identity(), None)
+        if self.camera is None and not self.seen:
+            # An empty file (/dev/null, only comments): nothing to frame, the
+            # image is the background whatever the view.
+            warnings.warn(f"{self.path}: the scene file has no blocks; it renders the background "
+                          "through a default camera", stacklevel=2)
+            self.camera = PerspectiveCamera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0), 45.0)
         if self.camera is None:
             raise self.error(ts.last_line, "no camera: add a PerspectiveCamera or OrthographicCamera block")
-        if "Group" not in self.seen:
-            raise self.error(ts.last_line, "no Group block: the scene has no geometry")
         materials, index = self.resolve_materials()
         for sky, line in self.skyboxes:
-            if not sky.is_file():
-                raise self.error(line, f"skybox file not found: {sky}")
+            check_input(sky, ref=(self.path, line), what="skybox file")
         return Scene(
             path=self.path,
             camera=self.camera,
@@ -298,27 +359,32 @@ class _Parser:
             last: self.num(last),
         })
         self.require(got, opened.text, opened, ("center", "direction", "up", last))
-        d = np.array(got["direction"][0])
-        u = np.array(got["up"][0])
-        if not np.linalg.norm(d) > 0:
+        self.check_extent(got["center"][1], "camera center", got["center"][0])
+        d = tf.normalize(got["direction"][0])
+        u = tf.normalize(got["up"][0])
+        if not d.any():
             raise self.error(got["direction"][1], "camera direction has zero length")
-        if not np.linalg.norm(u) > 0:
+        if not u.any():
             raise self.error(got["up"][1], "camera up has zero length")
-        if np.linalg.norm(np.cross(d / np.linalg.norm(d), u / np.linalg.norm(u))) < 1e-6:
+        if np.linalg.norm(np.cross(d, u)) < 1e-6:
             raise self.error(got["up"][1], "camera up is parallel to its direction")
         value, line = got[last]
         if persp:
             if not 0.0 < value < 180.0:
                 raise self.error(line, f"camera angle must be in (0, 180) degrees, got {value:g}")
-            self.camera = PerspectiveCamera(got["center"][0], got["direction"][0], got["up"][0], value)
+            self.camera = PerspectiveCamera(got["center"][0], _direction(got["direction"][0]),
+                                            _direction(got["up"][0]), value)
         else:
             if not value > 0.0:
                 raise self.error(line, f"camera size must be positive, got {value:g}")
-            self.camera = OrthographicCamera(got["center"][0], got["direction"][0], got["up"][0], value)
+            self.camera = OrthographicCamera(got["center"][0], _direction(got["direction"][0]),
+                                             _direction(got["up"][0]), value)
 
     def parse_background(self, opened: Token) -> None:
         got = self.fields("Background", opened, {
             "color": self.vec("color"), "ambientLight": self.vec("ambientLight")})
+        for key, (value, line) in got.items():
+            self.check_light(line, f"Background {key}", value)
         self.background = Background(
             color=got.get("color", ((0.0, 0.0, 0.0), 0))[0],
             ambient=got.get("ambientLight", ((0.0, 0.0, 0.0), 0))[0],
@@ -337,13 +403,16 @@ class _Parser:
             if tok.text == "DirectionalLight":
                 got = self.fields(tok.text, tok, {"direction": self.vec("direction"), "color": self.vec("color")})
                 self.require(got, tok.text, tok, ("direction", "color"))
-                if not np.linalg.norm(got["direction"][0]) > 0:
+                if not tf.normalize(got["direction"][0]).any():
                     raise self.error(got["direction"][1], "light direction has zero length")
-                self.lights.append(DirectionalLight(got["direction"][0], got["color"][0]))
+                self.check_light(got["color"][1], "DirectionalLight color", got["color"][0])
+                self.lights.append(DirectionalLight(_direction(got["direction"][0]), got["color"][0]))
             elif tok.text == "PointLight":
                 got = self.fields(tok.text, tok, {"position": self.vec("position"), "color": self.vec("color"),
                                                   "attenuation": self.vec("attenuation")})
                 self.require(got, tok.text, tok, ("position", "color"))
+                self.check_extent(got["position"][1], "PointLight position", got["position"][0])
+                self.check_light(got["color"][1], "PointLight color", got["color"][0])
                 # No attenuation given: physical inverse-square falloff.
                 att, line = got.get("attenuation", ((0.0, 0.0, 1.0), tok.line))
                 if min(att) < 0 or max(att) <= 0:
@@ -378,7 +447,7 @@ class _Parser:
                                  + (" (is a '}' missing before it?)" if tok.text in _KNOWN else ""))
         if file_tok is None:
             raise self.error(opened.line, "Skybox needs a file name, e.g. 'Skybox { sky.hdr R 1000 }'")
-        p = self.file_ref(file_tok)
+        p = named(self.file_ref(file_tok), (self.path, file_tok.line))
         self.skyboxes.append((p, file_tok.line))
         self.lights.append(Skybox(p, radius))
 
@@ -419,59 +488,92 @@ class _Parser:
         readers = {
             "diffuseColor": self.vec("diffuseColor"),
             "specularColor": self.vec("specularColor"),
-            "exponent": self.num("exponent"),
+            "exponent": self.material_number("exponent"),
             "reflectiveColor": self.vec("reflectiveColor"),
             "transparentColor": self.vec("transparentColor"),
-            "indexOfRefraction": self.num("indexOfRefraction"),
+            "indexOfRefraction": self.material_number("indexOfRefraction"),
             "texture": texture,
         }
         got = self.fields(opened.text, opened, readers, extra=mtl_style)
+        for key in ("diffuseColor", "specularColor", "reflectiveColor", "transparentColor"):
+            if key in got:
+                got[key] = (reflectance(got[key][0], self.path, got[key][1], key), got[key][1])
         names = {"diffuseColor": "kd", "specularColor": "ks", "exponent": "ns", "reflectiveColor": "reflective",
                  "transparentColor": "transparent", "indexOfRefraction": "ior", "texture": "map_kd"}
         return replace(mat, **{names[k]: v for k, (v, _) in got.items()})
 
     def texture_file(self, tok: Token) -> Path:
         p = self.file_ref(tok)
-        if not p.is_file():
-            raise self.error(tok.line, f"texture file not found: {p}")
-        return p
+        check_input(p, ref=(self.path, tok.line), what="texture file")
+        return named(p, (self.path, tok.line))
 
     # -------------------------------------------------------------- objects
-    def parse_group(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
-        ts = self.ts
-        ts.expect("{", "after 'Group'")
-        n = self.count("numObjects", "Group", opened)
-        found = 0
-        while True:
-            tok = ts.next(f"an object or '}}' to close Group (opened at line {opened.line})")
-            if tok.text == "}":
-                break
-            if tok.text == "MaterialIndex":
-                i = ts.integer("MaterialIndex")
-                if i < 0:
-                    raise self.error(tok.line, f"MaterialIndex {i} is negative")
-                current = _ByIndex(i, tok.line)
-                continue
-            self.parse_object(tok, m, current)
-            found += 1
-        self.check_count("numObjects", "Group", opened, n, found, "objects")
+    def parse_group(self, root: Token, m: np.ndarray, current: _Ref) -> None:
+        """The top-level Group and everything nested in it.
 
-    def parse_object(self, tok: Token, m: np.ndarray, current: _Ref) -> None:
-        kind = tok.text
-        if kind == "Group":
-            self.parse_group(tok, m, current)
-        elif kind == "Transform":
-            self.parse_transform(tok, m, current)
-        elif kind == "Sphere":
-            self.parse_sphere(tok, m, current)
-        elif kind == "Plane":
-            self.parse_plane(tok, m, current)
-        elif kind == "Triangle":
-            self.parse_triangle(tok, m, current)
-        elif kind == "TriangleMesh":
-            self.parse_mesh(tok, m, current)
-        else:
-            raise self.unknown(tok, "object", _OBJECTS)
+        Groups and Transforms nest to any depth: open blocks are kept on an
+        explicit stack of :class:`_Block` (no recursion), and a leaf object
+        is read by its own method with the world matrix and current
+        material of the block around it."""
+        ts = self.ts
+        stack = [self.open_block(root, m, current)]
+        while stack:
+            top = stack[-1]
+            if top.opened.text == "Group":
+                tok = ts.next(f"an object or '}}' to close Group (opened at line {top.opened.line})")
+            else:
+                tok = ts.next("a transform operation, an object or '}' to close Transform "
+                              f"(opened at line {top.opened.line})")
+            t = tok.text
+            if t == "}":
+                self.close_block(stack.pop())
+                if stack:
+                    stack[-1].found += 1
+                continue
+            if top.opened.text == "Group":
+                if t == "MaterialIndex":
+                    i = ts.integer("MaterialIndex")
+                    if i < 0:
+                        raise self.error(tok.line, f"MaterialIndex {i} is negative")
+                    top.current = _ByIndex(i, tok.line)
+                    continue
+                if t not in _OBJECTS:
+                    raise self.unknown(tok, "object", _OBJECTS)
+            else:
+                if t in _OPS:
+                    if top.found:
+                        raise self.error(tok.line, f"'{t}' after the Transform's object: operations come first")
+                    top.local = tf.compose(top.local, self.parse_op(tok))
+                    top.world = tf.compose(top.m, top.local)
+                    if not tf.is_finite(top.world):
+                        raise self.error(tok.line, f"'{t}' makes the transform overflow (matrix entries beyond "
+                                         "the float64 range)")
+                    continue
+                if t not in _OBJECTS:
+                    raise self.unknown(tok, "transform operation or object", _OPS + _OBJECTS)
+                if top.found:
+                    raise self.error(tok.line, f"a Transform holds exactly one object; found a second one, '{t}'"
+                                     " (wrap several objects in a Group)")
+            if t in ("Group", "Transform"):
+                stack.append(self.open_block(tok, top.world, top.current))
+                continue
+            {"Sphere": self.parse_sphere, "Plane": self.parse_plane, "Triangle": self.parse_triangle,
+             "TriangleMesh": self.parse_mesh}[t](tok, top.world, top.current)
+            top.found += 1
+
+    def open_block(self, opened: Token, m: np.ndarray, current: _Ref) -> "_Block":
+        """Read a Group's ``{ numObjects N`` or a Transform's ``{``."""
+        self.ts.expect("{", f"after '{opened.text}'")
+        if opened.text == "Group":
+            n = self.count("numObjects", "Group", opened)
+            return _Block(opened, m, m, current, declared=n)
+        return _Block(opened, m, m, current, local=tf.identity())
+
+    def close_block(self, block: "_Block") -> None:
+        if block.opened.text == "Group":
+            self.check_count("numObjects", "Group", block.opened, block.declared, block.found, "objects")
+        elif not block.found:
+            raise self.error(block.opened.line, "Transform has no object")
 
     def material_of(self, got: dict, current: _Ref) -> _Ref:
         if "mtl" in got:
@@ -479,9 +581,26 @@ class _Parser:
             return _ByName(name.text, line)
         return current
 
+    def check_light(self, line: int, what: str, color) -> None:
+        """Light colours (and the background's radiance) must not be negative
+        and must fit float32."""
+        check_range(color, self.path, line, what)
+        if min(color) < 0.0:
+            raise self.error(line, f"{what} {' '.join(f'{c:g}' for c in color)} must not be negative")
+
+    def check_extent(self, line: int, what: str, *values) -> None:
+        """World-space values must be within :data:`MAX_COORDINATE` (the
+        renderer's float32 arithmetic)."""
+        with np.errstate(all="ignore"):
+            big = max((float(np.abs(np.asarray(v, np.float64)).max()) for v in values if np.size(v)), default=0.0)
+        if not big <= MAX_COORDINATE:
+            raise self.error(line, f"{what} reaches {big:.3g} in world space, beyond drpt's limit of "
+                             f"{MAX_COORDINATE:g} (float32 rendering); scale the scene down")
+
     def check_matrix(self, m: np.ndarray, opened: Token) -> None:
         if not tf.is_invertible(m):
-            raise self.error(opened.line, f"the Transform around this {opened.text} is singular (not invertible)")
+            raise self.error(opened.line, f"the Transform around this {opened.text} is singular or nearly so "
+                             "(not invertible)")
 
     def parse_sphere(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
         got = self.fields("Sphere", opened, {"center": self.vec("center"), "radius": self.num("radius"),
@@ -493,15 +612,20 @@ class _Parser:
         center = np.array(got["center"][0], dtype=np.float64)
         ref = self.ref(self.material_of(got, current))
         if tf.is_identity(m):
+            self.check_extent(opened.line, "Sphere", np.abs(center) + radius)
             self.sph.append((center, radius, ref))
             return
         self.check_matrix(m, opened)
         s = tf.similarity_scale(m)
         if s is not None:
-            self.sph.append((tf.transform_points(m, center), radius * s, ref))
+            c = tf.transform_points(m, center)
+            self.check_extent(opened.line, "Sphere", np.abs(c) + radius * s)
+            self.sph.append((c, radius * s, ref))
             return
-        p, n = tf.tessellate_sphere(center, radius)
+        with np.errstate(all="ignore"):  # an overflow is refused by check_extent
+            p, n = tf.tessellate_sphere(center, radius)
         p, n, _ = tf.transform_triangles(m, p, n)
+        self.check_extent(opened.line, "Sphere", p)
         warnings.warn(f"{self.path}:{opened.line}: Sphere under a non-uniform Transform was "
                       f"tessellated into {len(p)} triangles", stacklevel=2)
         self.tri_chunks.append((p, n, None, np.full(len(p), ref, np.int64)))
@@ -511,13 +635,14 @@ class _Parser:
                                             "mtl": self.word("material name")})
         self.require(got, "Plane", opened, ("normal", "offset"))
         n = np.array(got["normal"][0], dtype=np.float64)
-        length = float(np.linalg.norm(n))
+        length = tf.length(n)
         if not length > 0:
             raise self.error(got["normal"][1], "plane normal has zero length")
-        n, d = n / length, got["offset"][0] / length
+        n, d = tf.normalize(n), got["offset"][0] / length
         if not tf.is_identity(m):
             self.check_matrix(m, opened)
             n, d = tf.transform_plane(m, n, d)
+        self.check_extent(opened.line, "Plane offset", d)
         self.pln.append((n, d, self.ref(self.material_of(got, current))))
 
     def parse_triangle(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
@@ -528,6 +653,7 @@ class _Parser:
         if not tf.is_identity(m):
             self.check_matrix(m, opened)
             p, _, _ = tf.transform_triangles(m, p, None)
+        self.check_extent(opened.line, "Triangle", p)
         self.tri_chunks.append((p, None, None, np.array([self.ref(self.material_of(got, current))], np.int64)))
 
     def parse_mesh(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
@@ -556,34 +682,10 @@ class _Parser:
             pos, nrm, flipped = tf.transform_triangles(m, pos, nrm)
             if flipped and uvs is not None:
                 uvs = uvs[:, [0, 2, 1]]
+        self.check_extent(line, f"{p.name}", pos)
         self.tri_chunks.append((pos, nrm, uvs, refs))
 
     # ------------------------------------------------------------ transform
-    def parse_transform(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
-        ts = self.ts
-        ts.expect("{", "after 'Transform'")
-        local = tf.identity()
-        has_object = False
-        while True:
-            tok = ts.next(f"a transform operation, an object or '}}' to close Transform (opened at line {opened.line})")
-            t = tok.text
-            if t == "}":
-                break
-            if t in _OPS:
-                if has_object:
-                    raise self.error(tok.line, f"'{t}' after the Transform's object: operations come first")
-                local = local @ self.parse_op(tok)
-            elif t in _OBJECTS:
-                if has_object:
-                    raise self.error(tok.line, f"a Transform holds exactly one object; found a second one, '{t}'"
-                                     " (wrap several objects in a Group)")
-                self.parse_object(tok, m @ local, current)
-                has_object = True
-            else:
-                raise self.unknown(tok, "transform operation or object", _OPS + _OBJECTS)
-        if not has_object:
-            raise self.error(opened.line, "Transform has no object")
-
     def parse_op(self, tok: Token) -> np.ndarray:
         ts = self.ts
         t = tok.text
@@ -641,7 +743,7 @@ class _Parser:
             end = ts.next("'}' to close Rotate")
             if end.text != "}":
                 raise self.error(end.line, f"expected '}}' to close Rotate, found '{end.text}'")
-        if not np.linalg.norm(axis) > 0:
+        if not tf.normalize(axis).any():
             raise self.error(tok.line, "Rotate axis has zero length")
         return tf.rotate_axis(axis, deg)
 

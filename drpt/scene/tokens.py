@@ -9,6 +9,10 @@ Lexical rules
 * ``//`` starts a comment to the end of the line when it begins a token (so a
   path such as ``dir//file.obj`` is kept intact).
 * The file must be UTF-8 (a leading byte-order mark is ignored).
+* Lines end at ``\n``, ``\r\n`` or ``\r`` only (:func:`split_lines`): other
+  characters Python's ``str.splitlines`` breaks at (``\v``, ``\f``,
+  ``\x1c``-``\x1e``, ``\x85``, ``\u2028``, ``\u2029``) are whitespace
+  inside a line, so line numbers are those of editors and ``grep -n``.
 
 :class:`TokenStream` adds the typed readers the parser needs (numbers,
 vectors, counts); each raises :class:`~drpt.errors.SceneError` with the file
@@ -23,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import SceneError
+from .files import read_bytes
 
 # A decimal number: optional sign, digits with an optional fraction, optional
 # exponent. Deliberately excludes "nan", "inf", hex and "1_000" (which Python's
@@ -38,33 +43,38 @@ class Token:
     line: int
 
 
+def split_lines(text: str) -> list[str]:
+    """``text``'s lines, ended by ``\n``, ``\r\n`` or ``\r`` (like
+    ``str.splitlines`` for those three; no other character ends a line)."""
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    lines = text.split("\n")
+    if lines[-1] == "":
+        lines.pop()
+    return lines
+
+
 def read_text(path: Path, *, ref: tuple[Path, int] | None = None, what: str = "file") -> str:
     """Read ``path`` as UTF-8 text; every failure becomes a :class:`SceneError`.
 
-    ``ref`` is the (file, line) that named ``path``; a missing or unreadable
-    file is reported there. Invalid UTF-8 is reported at the bad byte's line in
-    ``path`` itself.
+    ``ref`` is the (file, line) that named ``path``; a missing file, or one
+    that is not a regular file (see :func:`drpt.scene.files.check_input`),
+    is reported there. Invalid UTF-8 is reported at the bad byte's line in
+    ``path`` itself. ``/dev/null`` reads as empty text.
     """
-    where_path, where_line = ref if ref is not None else (path, None)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise SceneError(where_path, where_line, f"{what} not found: {path}") from None
-    except IsADirectoryError:
-        raise SceneError(where_path, where_line, f"{what} is a directory: {path}") from None
-    except OSError as e:
-        raise SceneError(where_path, where_line, f"cannot read {what} {path}: {e.strerror or e}") from None
+    data = read_bytes(path, ref=ref, what=what)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
-        line = data[: e.start].count(b"\n") + 1
+        before = data[: e.start]
+        line = before.count(b"\n") + before.count(b"\r") - before.count(b"\r\n") + 1
         raise SceneError(path, line, f"not valid UTF-8 text (byte 0x{data[e.start]:02x})") from None
 
 
 def tokenize(text: str) -> list[Token]:
     """Split ``text`` into tokens following the module's lexical rules."""
     tokens: list[Token] = []
-    for lineno, line in enumerate(text.splitlines(), 1):
+    for lineno, line in enumerate(split_lines(text), 1):
         hash_at = line.find("#")
         if hash_at >= 0:
             line = line[:hash_at]
@@ -91,7 +101,7 @@ class TokenStream:
         self.path = path
         self.tokens = tokenize(text)
         self.pos = 0
-        self.last_line = max(1, text.count("\n") + (0 if text.endswith("\n") or not text else 1))
+        self.last_line = max(1, len(split_lines(text)))
 
     # ------------------------------------------------------------ basics
     def error(self, line: int | None, message: str) -> SceneError:

@@ -43,11 +43,10 @@ def rotate_axis(axis, degrees: float) -> np.ndarray:
     """Right-handed rotation by ``degrees`` about ``axis`` (need not be unit).
 
     Raises ``ValueError`` for a zero-length axis."""
-    a = np.asarray(axis, dtype=np.float64)
-    length = float(np.linalg.norm(a))
-    if not length > 0:
+    a = normalize(axis)
+    if not a.any():
         raise ValueError("rotation axis has zero length")
-    x, y, z = a / length
+    x, y, z = a
     t = math.radians(degrees)
     c, s = math.cos(t), math.sin(t)
     C = 1.0 - c
@@ -72,6 +71,28 @@ def rotate_z(degrees: float) -> np.ndarray:
     return rotate_axis((0.0, 0.0, 1.0), degrees)
 
 
+# Vectors and matrices whose largest entry lies in this range are handled
+# directly; outside it they are first divided by that entry, so that squares,
+# cubes and inverses stay within float64. (Inside it the results are the
+# plain formulas' own, bit for bit.)
+_PLAIN = (1e-90, 1e90)
+
+
+def _prescale(big: float) -> float:
+    """The divisor to apply first: 1 in the plain range, else ``big``."""
+    return 1.0 if _PLAIN[0] < big < _PLAIN[1] else big
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a @ b``; an overflow gives inf entries (see :func:`is_finite`), not a warning."""
+    with np.errstate(all="ignore"):
+        return a @ b
+
+
+def is_finite(m: np.ndarray) -> bool:
+    return bool(np.isfinite(m).all())
+
+
 def is_identity(m: np.ndarray) -> bool:
     return bool(np.array_equal(m, np.eye(4)))
 
@@ -82,24 +103,63 @@ def normal_matrix(m: np.ndarray) -> np.ndarray:
 
 
 def is_invertible(m: np.ndarray) -> bool:
+    """Whether the 3x3 part is finite and not (numerically) singular:
+    ``|det(A / s)| > 1e-12`` with ``s`` its largest entry, so the test does
+    not depend on the matrix's scale (and cannot overflow)."""
     a = m[:3, :3]
-    d = abs(float(np.linalg.det(a)))
+    if not is_finite(a):
+        return False
     s = float(np.abs(a).max())
-    return s > 0 and d > 1e-12 * s**3
+    if not s > 0:
+        return False
+    with np.errstate(all="ignore"):
+        return abs(float(np.linalg.det(a / s))) > 1e-12
 
 
 def transform_points(m: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Apply ``m`` to points of shape (..., 3)."""
-    return p @ m[:3, :3].T + m[:3, 3]
+    """Apply ``m`` to points of shape (..., 3); an overflow gives inf, not a warning."""
+    with np.errstate(all="ignore"):
+        return p @ m[:3, :3].T + m[:3, 3]
 
 
 def transform_normals(m: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Apply the inverse-transpose of ``m`` to normals (..., 3) and renormalize.
 
-    Normals that end up with zero length stay zero."""
-    out = n @ normal_matrix(m).T
-    length = np.linalg.norm(out, axis=-1, keepdims=True)
-    return np.divide(out, length, out=np.zeros_like(out), where=length > 0)
+    Normals that end up with zero length stay zero. The inverse is taken of
+    the matrix divided by its largest entry (the normals' directions do not
+    change), so huge or tiny scales neither overflow nor underflow."""
+    a = m[:3, :3] / _prescale(float(np.abs(m[:3, :3]).max()))
+    with np.errstate(all="ignore"):
+        out = n @ np.linalg.inv(a)  # rows times (A^-T)^T
+        length = np.linalg.norm(out, axis=-1, keepdims=True)
+    if np.isfinite(length).all() and (length[length > 0] > _PLAIN[0]).all():
+        return np.divide(out, length, out=np.zeros_like(out), where=length > 0)
+    return normalize(out)
+
+
+def length(v) -> float:
+    """Euclidean length of the vector ``v``, without overflow or underflow in between."""
+    v = np.asarray(v, dtype=np.float64)
+    big = float(np.abs(v).max()) if v.size else 0.0
+    if not (big > 0 and math.isfinite(big)):
+        return big
+    k = _prescale(big)
+    return k * float(np.linalg.norm(v / k))
+
+
+def normalize(v: np.ndarray) -> np.ndarray:
+    """Unit vectors along the last axis of ``v``; zero (or non-finite) ones become zero.
+
+    Each vector is divided by its largest component first, so lengths far
+    beyond sqrt(float64 max) neither overflow nor warn."""
+    v = np.asarray(v, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        big = np.abs(v).max(axis=-1, keepdims=True)
+        ok = (big > 0) & np.isfinite(big)
+        k = np.where((big > _PLAIN[0]) & (big < _PLAIN[1]), 1.0, big)
+        w = np.divide(v, k, out=np.zeros_like(v), where=ok)
+        length = np.linalg.norm(w, axis=-1, keepdims=True)
+        return np.divide(w, length, out=np.zeros_like(w), where=ok & (length > 0))
 
 
 def transform_triangles(m: np.ndarray, positions: np.ndarray, normals: np.ndarray | None):
@@ -109,7 +169,7 @@ def transform_triangles(m: np.ndarray, positions: np.ndarray, normals: np.ndarra
     caller must swap corners 1 and 2 of any other per-corner array (uvs)."""
     p = transform_points(m, positions)
     n = None if normals is None else transform_normals(m, normals)
-    flipped = bool(np.linalg.det(m[:3, :3]) < 0)
+    flipped = bool(np.linalg.det(m[:3, :3] / _prescale(float(np.abs(m[:3, :3]).max()))) < 0)
     if flipped:
         p = p[:, [0, 2, 1]]
         if n is not None:
@@ -121,22 +181,27 @@ def transform_plane(m: np.ndarray, normal, offset: float) -> tuple[np.ndarray, f
     """Transform the plane ``dot(normal, x) = offset`` (normal unit)."""
     n = np.asarray(normal, dtype=np.float64)
     point = transform_points(m, n * offset)
-    n2 = normal_matrix(m) @ n
-    n2 = n2 / np.linalg.norm(n2)
-    return n2, float(n2 @ point)
+    n2 = transform_normals(m, n)
+    with np.errstate(all="ignore"):
+        return n2, float(n2 @ point)
 
 
 def similarity_scale(m: np.ndarray, rtol: float = 1e-6) -> float | None:
     """The uniform scale factor if the 3x3 part of ``m`` is a similarity
     (``A^T A = s^2 I`` within ``rtol`` relative), else ``None``."""
     a = m[:3, :3]
+    big = float(np.abs(a).max())
+    if not (big > 0 and math.isfinite(big)):
+        return None
+    k = _prescale(big)  # the test is scale-free; this keeps A^T A finite
+    a = a / k
     g = a.T @ a
     s2 = float(np.trace(g)) / 3.0
     if not s2 > 0:
         return None
     if np.abs(g - s2 * np.eye(3)).max() > rtol * s2:
         return None
-    return math.sqrt(s2)
+    return k * math.sqrt(s2)
 
 
 def tessellate_sphere(center, radius: float, rings: int = 32, segments: int = 32):
