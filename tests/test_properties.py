@@ -141,15 +141,21 @@ def test_read_text_decodes_or_reports_a_line(data):
 
 # ----------------------------------------------------------- OBJ and MTL
 def _obj_line():
-    num = st.one_of(st.floats(width=32).map(repr), st.sampled_from(["1e308", "-1e999", "nan", "0", "-0", "1_0"]))
+    num = st.one_of(st.floats(width=32).map(repr), st.integers(-9, 9).map(str),
+                    st.sampled_from(["1e308", "-1e999", "nan", "0", "-0", "1_0"]))
     idx = st.one_of(st.integers(-6, 8).map(str), st.sampled_from(["4294967296", "-99999999999999999999", "x"]))
     corner = st.one_of(idx, st.tuples(idx, idx).map("/".join), st.tuples(idx, idx).map("//".join),
                        st.tuples(idx, idx, idx).map("/".join), st.sampled_from(["/", "//1", "1/2/3/4"]))
+    # mostly well-formed statements, so that the reader gets past the first line
     return st.one_of(
+        st.tuples(st.sampled_from(["v", "vn", "vt"]), st.lists(num, min_size=3, max_size=4)).map(
+            lambda a: [a[0], *a[1]]),
+        st.lists(idx, min_size=3, max_size=6).map(lambda c: ["f", *c]),
+        st.lists(corner, min_size=3, max_size=6).map(lambda c: ["f", *c]),
+        st.sampled_from([["usemtl", "m"], ["mtllib", "lib.mtl"], ["g", "x"], ["s", "1"], ["o"], ["#", "c"]]),
         st.tuples(st.sampled_from(["v", "vn", "vt"]), st.lists(num, max_size=8)).map(lambda a: [a[0], *a[1]]),
-        st.lists(corner, max_size=6).map(lambda c: ["f", *c]),
-        st.sampled_from([["usemtl", "m"], ["usemtl"], ["mtllib", "lib.mtl"], ["mtllib", "none.mtl"],
-                         ["mtllib"], ["g", "x"], ["s", "1"], ["o"], ["curv", "1"], ["#", "c"]]),
+        st.lists(corner, max_size=3).map(lambda c: ["f", *c]),
+        st.sampled_from([["usemtl"], ["usemtl", "nosuch"], ["mtllib", "none.mtl"], ["mtllib"], ["curv", "1"]]),
         st.text(max_size=20).map(lambda t: [t]),
     ).map(" ".join)
 
@@ -159,7 +165,7 @@ def _mtl_line():
     keys = ["newmtl", "Kd", "Ks", "Ke", "Ns", "Ni", "d", "Tr", "illum", "Roughness", "Mentalness", "Pm",
             "map_Kd", "bump", "Ka", "KD", "newmtl m"]
     return st.one_of(
-        st.tuples(st.sampled_from(keys), st.lists(num, max_size=4)).map(lambda a: " ".join([a[0], *a[1]])),
+        st.tuples(st.sampled_from(keys), st.lists(num, min_size=1, max_size=3)).map(lambda a: " ".join([a[0], *a[1]])),
         st.sampled_from(["map_Kd -s 1 1 1 tex.png", "map_Kd tex.png", "map_Kd missing.png", "map_Kd -bad x",
                          "map_Kd -o", "d -halo 0.5", "illum 2.5", "rgb spectral", "Kd spectral x.spd"]),
         st.text(max_size=20),
@@ -172,7 +178,8 @@ def _doc(line_strategy):
 
 
 any_obj = st.one_of(st.binary(max_size=300), _doc(_obj_line()))
-any_mtl = st.one_of(st.binary(max_size=300), _doc(_mtl_line()))
+any_mtl = st.one_of(st.binary(max_size=300), _doc(_mtl_line()),
+                    _doc(_mtl_line()).map(lambda b: b"newmtl m\n" + b))
 
 LIB = b"newmtl m\nKd 0.5 0.5 0.5\n"
 
