@@ -64,8 +64,47 @@ f 1//1 3//1 4//1
 f 1 2 3
 """
 
+# Every production of the scene grammar (drpt/scene/parser.py) in one file,
+# laid out beside the Cornell box's OBJ and MTL and the showcase's textures
+# and sky: the bundled scenes use only cameras, Lights/Skybox and Groups.
+GRAMMAR_SCENE = """\
+# every block and field of the scene format
+OrthographicCamera { center 0 0 10 direction 0 0 -1 up 0 1 0 size 5 }
+Background { color 0.1 0.2 0.3 ambientLight 0.01 0.01 0.01 }
+Lights {
+    numLights 3
+    DirectionalLight { direction -1 -1 -1 color 0.5 0.5 0.5 }
+    PointLight { position 0 4 0 color 10 10 10 attenuation 1 0.1 0.01 }
+    Skybox { sky_day.exr R 500 }
+}
+Materials {
+    numMaterials 3
+    Material { diffuseColor 0.8 0.1 0.1 }
+    PhongMaterial { diffuseColor 0.5 0.5 0.5 specularColor 0.3 0.3 0.3 exponent 40
+        reflectiveColor 0.1 0.1 0.1 transparentColor 0 0 0 indexOfRefraction 1.5 texture grille.png }
+    Material { Kd 0.2 0.3 0.4 Ks 0.1 Ns 20 Roughness 0.3 Mentalness 0.5 Ni 1.4 d 1 illum 2 map_Kd plate.png }
+}
+Group {
+    numObjects 7
+    MaterialIndex 0
+    Sphere { center 0 0 0 radius 1 }
+    Plane { normal 0 1 0 offset -1 mtl white }
+    Triangle { vertex0 0 0 0 vertex1 1 0 0 vertex2 0 1 0 mtl light }
+    TriangleMesh { obj_file cornellbox.obj }
+    Transform {
+        Translate 1 2 3 Scale 1 2 1 UniformScale 0.5 XRotate 10 YRotate 20 ZRotate 30
+        Rotate { axis 0 1 0 angle 45 } Rotate 1 0 0 15
+        Matrix { 1 0 0 0  0 1 0 0  0 0 1 0  0 0 0 1 }
+        Sphere { center 0 0 0 radius 0.5 }
+    }
+    Group { numObjects 1 MaterialIndex 2 Transform { Scale -1 1 1 TriangleMesh { obj_file cornellbox.obj } } }
+    Group { numObjects 1 MaterialIndex 1 Transform { Scale 1 2 3 Sphere { center 0 0 0 radius 1 } } }
+}
+"""
+
 # scene file loaded for a mutated dependency, per scene folder
-ENTRY = {"cornellbox": "cornellbox.txt", "newscene": "newscene.txt", "showcase": "showcase_day.txt"}
+ENTRY = {"cornellbox": "cornellbox.txt", "newscene": "newscene.txt", "showcase": "showcase_day.txt",
+         "grammar": "grammar.txt"}
 
 
 @dataclass(frozen=True)
@@ -86,7 +125,8 @@ def scene_cases(seeds: int = 3) -> list[Case]:
     cases = []
     texts = {"cornellbox": ["cornellbox.txt", "cornellbox.obj", "cornellbox.mtl"],
              "newscene": ["newscene.txt", "newscene_hard.txt", "newscene.obj", "newscene.mtl"],
-             "showcase": ["showcase_day.txt", "showcase_dusk.txt", "showcase.obj", "showcase.mtl"]}
+             "showcase": ["showcase_day.txt", "showcase_dusk.txt", "showcase.obj", "showcase.mtl"],
+             "grammar": ["grammar.txt"]}
     for folder, files in texts.items():
         for target in files:
             muts = TEXT_MUTATIONS + (BRACE_MUTATIONS if target.endswith(".txt") else ())
@@ -130,10 +170,15 @@ def build(case: Case, root: Path, images: Path) -> tuple[Path, Path]:
         shutil.copy(images / case.target, target)
         target.write_bytes(mutate_image(target.read_bytes(), case.target, case.mutation, rng))
         return target, target
-    src = SCENES / case.folder
-    for f in src.iterdir():
-        if f.is_file():
-            shutil.copy(f, root / f.name)
+    if case.folder == "grammar":
+        for f in ("cornellbox/cornellbox.obj", "cornellbox/cornellbox.mtl", "showcase/grille.png",
+                  "showcase/plate.png", "showcase/sky_day.exr"):
+            shutil.copy(SCENES / f, root)
+        (root / "grammar.txt").write_text(GRAMMAR_SCENE)
+    else:
+        for f in (SCENES / case.folder).iterdir():
+            if f.is_file():
+                shutil.copy(f, root / f.name)
     if case.folder == "showcase":
         (root / "showcase.obj").write_text(SHOWCASE_OBJ)
     entry = root / (case.target if case.target.endswith(".txt") else ENTRY[case.folder])

@@ -151,6 +151,8 @@ RENDER_CASES = [
     fz.Case("showcase", "showcase_day.txt", "extreme", 0),
     fz.Case("showcase", "sky_day.exr", "truncate", 0),
     fz.Case("showcase", "grille.png", "truncate", 0),
+    fz.Case("grammar", "grammar.txt", "none", 0),
+    fz.Case("grammar", "grammar.txt", "extreme", 2),
     fz.Case("extremes", "triangle_huge"),
     fz.Case("extremes", "sphere_radius_huge"),
     fz.Case("extremes", "pointlight_huge"),
