@@ -141,7 +141,8 @@ def scene_cases(seeds: int = 3) -> list[Case]:
 def image_cases(seeds: int = 4) -> list[Case]:
     return [Case("images", target, m, s)
             for target in ("grille.png", "plate.png", "small.hdr", "small.exr", "sky_day.exr")
-            for m in IMAGE_MUTATIONS for s in range(seeds if m not in ("empty",) else 1)]
+            for m in IMAGE_MUTATIONS for s in range(seeds if m not in ("empty",) else 1)
+            ] + [Case("images", "small.exr", "nonfinite", 0)]
 
 
 # ------------------------------------------------------------------ setup
@@ -274,6 +275,8 @@ def mutate_text(data: bytes, how: str, rng: random.Random) -> bytes:
 
 
 def mutate_image(data: bytes, name: str, how: str, rng: random.Random) -> bytes:
+    if how == "nonfinite":  # a well-formed .exr holding NaN, +-Inf, float32-max and negative texels
+        return _nonfinite_exr(rng)
     if how == "truncate":
         return data[: rng.randrange(len(data))]
     if how == "empty":
@@ -304,6 +307,21 @@ def mutate_image(data: bytes, name: str, how: str, rng: random.Random) -> bytes:
         box[2:] = np.int64(size % 2**31)
         return data[:at] + box.tobytes() + data[at + 16:]
     raise ValueError(how)
+
+
+def _nonfinite_exr(rng: random.Random) -> bytes:
+    import tempfile
+
+    import OpenEXR
+
+    rgb = np.ones((16, 32, 3), np.float32)
+    for value in (np.nan, np.inf, -np.inf, np.finfo(np.float32).max, -5.0, 1e-45):
+        rgb[rng.randrange(16), rng.randrange(32), rng.randrange(3)] = value
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "x.exr"
+        OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                     {"RGB": rgb}).write(str(path))
+        return path.read_bytes()
 
 
 # ---------------------------------------------------------------- contract

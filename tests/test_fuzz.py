@@ -150,6 +150,7 @@ RENDER_CASES = [
     fz.Case("newscene", "newscene.txt", "brace_drop", 1),
     fz.Case("showcase", "showcase_day.txt", "extreme", 0),
     fz.Case("showcase", "sky_day.exr", "truncate", 0),
+    fz.Case("showcase", "sky_day.exr", "nonfinite", 0),
     fz.Case("showcase", "grille.png", "truncate", 0),
     fz.Case("grammar", "grammar.txt", "none", 0),
     fz.Case("grammar", "grammar.txt", "extreme", 2),
