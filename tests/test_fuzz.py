@@ -1,0 +1,210 @@
+"""Fuzzing the readers with seeded mutations of the bundled inputs.
+
+Every case (see tests/fuzzutil.py) mutates one file of a bundled scene or
+one image and reads it in-process: :func:`drpt.scene.load_scene` for scene,
+OBJ and MTL files, :func:`drpt.imageio.read_image` for images. The input is
+either accepted or rejected with a :class:`~drpt.errors.DrptError` whose
+message is one line starting ``FILE:LINE:`` (``FILE:`` for images); any other
+exception, or a case running past ``CASE_SECONDS``, fails. An accepted
+scene holds only finite numbers; an accepted image has at least one pixel.
+Hand-written scenes at the ends of float64 (``fuzzutil.EXTREME_SCENES``)
+are held to the same rule, and the valid ones among them must load.
+
+A few cases also run ``python -m drpt render`` at 8x8, 1 spp, which must
+exit 0 with a finite image, or exit 2 with exactly one ``drpt: error:
+FILE:LINE: ...`` line (``FILE: ...`` for an image) and no image written;
+the other stderr lines may only be drpt's one-line warnings and notes.
+Never a traceback, never a hang.
+
+The test id is ``FOLDER/FILE-MUTATION-sSEED`` (``extremes/NAME`` for the
+hand-written scenes); ``pytest tests/test_fuzz.py -k
+'cornellbox.txt-truncate-s1'`` reruns one case. Cases that fail today
+because of a known defect are listed in ``KNOWN`` (in-process) and
+``KNOWN_RENDER`` (command line) and expected to fail, strictly: a fix
+makes them pass, and the entry must then go.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import fuzzutil as fz
+from drpt.imageio import read_image
+from drpt.scene import load_scene
+
+CASE_SECONDS = 5
+
+# the defects that make cases fail today; KNOWN*: case id -> defect
+F1 = "F1: a NUL byte in a file name raises ValueError (embedded null byte) from Path.resolve"
+F2 = "F2: nesting Group/Transform 600+ levels deep raises RecursionError in the scene parser"
+F3 = "F3: a referenced file that is a FIFO blocks load_scene forever (read_text opens it)"
+F4 = "F4: a referenced file in a symlink loop raises RuntimeError from Path.resolve"
+F5 = "F5: a .hdr whose header says -Y 0 +X 0 is read as an empty (0, 0, 3) image"
+F6 = "F6: a sphere under a 1e308 scale raises OverflowError in transform.is_invertible (s**3)"
+F8 = "F8: a camera direction/up of magnitude 1e308 is refused as 'parallel' (norm overflows)"
+F9 = "F9: OpenEXR prints its own lines to stderr for a corrupt .exr before drpt's one error line"
+F11 = "F11: a scene with no geometry crashes the renderer (jit_var_gather from an empty array)"
+KNOWN: dict[str, str] = {
+    "newscene/newscene_hard.txt-nul-s0": F1,
+    "showcase/showcase.obj-nul-s1": F1,
+    **{f"cornellbox/cornellbox.txt-{n}-s0": F2 for n in fz.NESTINGS},
+    "cornellbox/cornellbox.obj-ref_fifo-s0": F3,
+    "cornellbox/cornellbox.mtl-ref_fifo-s0": F3,
+    **{f"{t}-ref_symloop-s0": F4 for t in ("cornellbox/cornellbox.obj", "cornellbox/cornellbox.mtl",
+                                          "showcase/grille.png", "showcase/sky_day.exr")},
+    "images/small.hdr-huge_size-s1": F5,
+    "extremes/sphere_scale_overflow": F6,
+    "extremes/sphere_nonuniform_overflow": F6,
+    "extremes/camera_huge_direction": F8,
+}
+KNOWN_RENDER: dict[str, str] = {
+    "cornellbox/cornellbox.txt-group600-s0": F2,
+    "showcase/sky_day.exr-truncate-s0": F9,
+    "extremes/empty_group": F11,
+}
+
+
+@pytest.fixture(scope="module")
+def images(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("fuzz_images")
+    fz.make_images(folder)
+    return folder
+
+
+class CaseTimeout(BaseException):
+    """A case ran too long (a BaseException, so that no ``except Exception``
+    or ``except OSError`` in the code under test turns it into an error message)."""
+
+
+@contextlib.contextmanager
+def time_limit(seconds: float):
+    """Raise :class:`CaseTimeout` in the main thread after ``seconds`` (a
+    blocking ``open`` of a FIFO included: Python runs the handler and does not
+    retry the call when the handler raises)."""
+
+    def expire(signum, frame):
+        raise CaseTimeout(f"still running after {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def _params(cases, known=KNOWN):
+    out = []
+    for c in cases:
+        marks = [pytest.mark.xfail(strict=True, reason=known[c.id])] if c.id in known else []
+        out.append(pytest.param(c, id=c.id, marks=marks))
+    return out
+
+
+def _read(case: fz.Case, entry):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with time_limit(CASE_SECONDS):
+            if case.folder == "images":
+                img = read_image(entry)
+                assert img.ndim == 3 and img.shape[2] in (1, 3, 4) and img.dtype == np.float32
+                assert img.shape[0] >= 1 and img.shape[1] >= 1, f"accepted an empty {img.shape} image"
+                return img
+            scene = load_scene(entry)
+    fz.assert_finite(scene)
+    return scene
+
+
+@pytest.mark.parametrize("case", _params(fz.scene_cases() + fz.image_cases()))
+def test_reader_accepts_or_reports(case, tmp_path, images):
+    entry, _ = fz.build(case, tmp_path, images)
+    try:
+        _read(case, entry)
+    except Exception as e:  # the contract is checked on any exception
+        fz.check_error(e, tmp_path, image=case.folder == "images")
+
+
+# A few cases through the command line, chosen to cover acceptance, scene
+# errors, reference errors and images read only at render time.
+RENDER_CASES = [
+    fz.Case("cornellbox", "cornellbox.txt", "crlf", 0),
+    fz.Case("cornellbox", "cornellbox.txt", "utf8_bom", 0),
+    fz.Case("cornellbox", "cornellbox.txt", "extreme", 0),
+    fz.Case("cornellbox", "cornellbox.txt", "extreme", 1),
+    fz.Case("cornellbox", "cornellbox.txt", "truncate", 0),
+    fz.Case("cornellbox", "cornellbox.txt", "utf16", 0),
+    fz.Case("cornellbox", "cornellbox.txt", "group600", 0),
+    fz.Case("cornellbox", "cornellbox.obj", "extreme", 0),
+    fz.Case("cornellbox", "cornellbox.obj", "random_bytes", 1),
+    fz.Case("cornellbox", "cornellbox.mtl", "extreme", 1),
+    fz.Case("cornellbox", "cornellbox.obj", "ref_missing", 0),
+    fz.Case("newscene", "newscene.txt", "token_dup", 0),
+    fz.Case("newscene", "newscene.txt", "brace_drop", 1),
+    fz.Case("showcase", "showcase_day.txt", "extreme", 0),
+    fz.Case("showcase", "sky_day.exr", "truncate", 0),
+    fz.Case("showcase", "sky_day.exr", "nonfinite", 0),
+    fz.Case("showcase", "grille.png", "truncate", 0),
+    fz.Case("grammar", "grammar.txt", "none", 0),
+    fz.Case("grammar", "grammar.txt", "extreme", 2),
+    fz.Case("extremes", "triangle_huge"),
+    fz.Case("extremes", "sphere_radius_huge"),
+    fz.Case("extremes", "pointlight_huge"),
+    fz.Case("extremes", "camera_huge_center"),
+    fz.Case("extremes", "empty_group"),
+]
+
+
+def _build_render_case(case: fz.Case, root, images):
+    if case.folder == "extremes":
+        return fz.extreme_scene(case.target, root)
+    if case.target.endswith((".png", ".exr")):  # a damaged image beside an intact scene
+        entry, _ = fz.build(fz.Case(case.folder, fz.ENTRY[case.folder], "none", 0), root, images)
+        target = root / case.target
+        target.write_bytes(fz.mutate_image(target.read_bytes(), case.target, case.mutation,
+                                           fz.rng_for(case)))
+        return entry
+    return fz.build(case, root, images)[0]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", _params(RENDER_CASES, KNOWN_RENDER))
+def test_render_exits_cleanly(case, tmp_path, images):
+    entry = _build_render_case(case, tmp_path, images)
+    out = tmp_path / "out.exr"
+    proc = subprocess.run([sys.executable, "-m", "drpt", "render", str(entry), "--size", "8", "8",
+                           "--spp", "1", "-q", "-o", str(out)],
+                          capture_output=True, text=True, timeout=120)
+    err = proc.stderr.splitlines()
+    assert "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    if proc.returncode == 0:
+        img = read_image(out)
+        assert img.shape[:2] == (8, 8) and np.isfinite(img).all()
+        return
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    errors = [line for line in err if line.startswith("drpt: error: ")]
+    others = [line for line in err if not line.startswith(("drpt: error: ", "drpt: warning: ", "drpt: note: "))]
+    assert len(errors) == 1 and not others, proc.stderr
+    message = errors[0][len("drpt: error: "):]
+    image = case.target.endswith((".png", ".exr"))
+    fz.check_message(message, tmp_path, image=image)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("case", _params(fz.extreme_cases()))
+def test_extreme_numbers_accepted_or_reported(case, tmp_path):
+    entry = fz.extreme_scene(case.target, tmp_path)
+    if case.target in fz.MUST_ACCEPT:
+        _read(case, entry)
+        return
+    try:
+        _read(case, entry)
+    except Exception as e:
+        fz.check_error(e, tmp_path, image=False)
