@@ -41,34 +41,10 @@ from drpt.scene import load_scene
 
 CASE_SECONDS = 5
 
-# the defects that make cases fail today; KNOWN*: case id -> defect
-F1 = "F1: a NUL byte in a file name raises ValueError (embedded null byte) from Path.resolve"
-F2 = "F2: nesting Group/Transform 600+ levels deep raises RecursionError in the scene parser"
-F3 = "F3: a referenced file that is a FIFO blocks load_scene forever (read_text opens it)"
-F4 = "F4: a referenced file in a symlink loop raises RuntimeError from Path.resolve"
-F5 = "F5: a .hdr whose header says -Y 0 +X 0 is read as an empty (0, 0, 3) image"
-F6 = "F6: a sphere under a 1e308 scale raises OverflowError in transform.is_invertible (s**3)"
-F8 = "F8: a camera direction/up of magnitude 1e308 is refused as 'parallel' (norm overflows)"
-F9 = "F9: OpenEXR prints its own lines to stderr for a corrupt .exr before drpt's one error line"
-F11 = "F11: a scene with no geometry crashes the renderer (jit_var_gather from an empty array)"
-KNOWN: dict[str, str] = {
-    "newscene/newscene_hard.txt-nul-s0": F1,
-    "showcase/showcase.obj-nul-s1": F1,
-    **{f"cornellbox/cornellbox.txt-{n}-s0": F2 for n in fz.NESTINGS},
-    "cornellbox/cornellbox.obj-ref_fifo-s0": F3,
-    "cornellbox/cornellbox.mtl-ref_fifo-s0": F3,
-    **{f"{t}-ref_symloop-s0": F4 for t in ("cornellbox/cornellbox.obj", "cornellbox/cornellbox.mtl",
-                                          "showcase/grille.png", "showcase/sky_day.exr")},
-    "images/small.hdr-huge_size-s1": F5,
-    "extremes/sphere_scale_overflow": F6,
-    "extremes/sphere_nonuniform_overflow": F6,
-    "extremes/camera_huge_direction": F8,
-}
-KNOWN_RENDER: dict[str, str] = {
-    "cornellbox/cornellbox.txt-group600-s0": F2,
-    "showcase/sky_day.exr-truncate-s0": F9,
-    "extremes/empty_group": F11,
-}
+# the defects that make cases fail today; KNOWN*: case id -> defect (a strict
+# xfail each: the case turns red when the defect is fixed, and leaves the list)
+KNOWN: dict[str, str] = {}
+KNOWN_RENDER: dict[str, str] = {}
 
 
 @pytest.fixture(scope="module")

@@ -72,11 +72,8 @@ def test_tokens_are_located_within_the_text(text):
     _check_tokens(text)
 
 
-@pytest.mark.xfail(strict=True, reason="F7: tokenize numbers lines with str.splitlines, which also breaks "
-                                       "at \\v \\f \\x1c-\\x1e \\x85 \\u2028 \\u2029, so lines pass the "
-                                       "editor's count (a\\fb: 'b' on line 2 of a 1-line file)")
 @SETTINGS
-@given(scene_text.filter(lambda t: any(c in t for c in OTHER_BREAKS)))
+@given(st.tuples(scene_text, st.sampled_from(list(OTHER_BREAKS)), scene_text).map("".join))
 def test_tokens_are_located_with_any_line_separator(text):
     _check_tokens(text)
 
@@ -228,18 +225,12 @@ _SEPARATED = st.tuples(st.lists(st.sampled_from(["v 0 0 0", "f 1 2 3", "# c", ""
     lambda a: (a[1].join(a[0] + [a[2]])).encode())
 
 
-@pytest.mark.xfail(strict=True, reason="F7: the OBJ reader numbers lines with str.splitlines "
-                                       "(\\v, \\f, \\x1c, \\x85, \\u2028 ... end a line), so an error can "
-                                       "name a line past the file's last")
 @FEW
 @given(_SEPARATED)
 def test_obj_lines_with_any_separator(data):
     _read_or_report(data, "m.obj", load_obj)
 
 
-@pytest.mark.xfail(strict=True, reason="F7: the MTL reader numbers lines with str.splitlines "
-                                       "(\\v, \\f, \\x1c, \\x85, \\u2028 ... end a line), so an error can "
-                                       "name a line past the file's last")
 @FEW
 @given(_SEPARATED)
 def test_mtl_lines_with_any_separator(data):
