@@ -314,7 +314,7 @@ def _instrument(renderer, tracker: StageTracker) -> None:
         return
     camera = "camera rays + RNG setup"
 
-    def staged_sequence(rng, camera_ray, count):
+    def staged_sequence(rng, camera_ray, count, **kwargs):
         # The first camera rays are made before the loop and timed as their
         # stage; the next paths' are made inside a symbolic conditional (path
         # regeneration), where nothing can be evaluated, so their time stays
@@ -336,7 +336,7 @@ def _instrument(renderer, tracker: StageTracker) -> None:
         tracker.stage(camera).rays += int(dr.sum(count)[0])
         tracker.leave(None)
         tracker.enter("integrator loop (throughput, RR, state)")
-        out = sequence(rng, staged_camera, count)
+        out = sequence(rng, staged_camera, count, **kwargs)
         tracker.leave(out)
         return out
 
