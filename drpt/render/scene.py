@@ -5,13 +5,13 @@ and the :class:`~drpt.options.RenderOptions`. It holds the accelerator
 (:func:`drpt.accel.build_accel`), the per-primitive surface data
 (:class:`~drpt.render.surface.SurfaceData`), the materials
 (:class:`~drpt.render.material.MaterialTable`), the emitters (area, delta,
-environment: :mod:`drpt.render.lights`), the background and the ray offset
-(:class:`~drpt.render.spawn.RayOffset`), and answers the integrators'
-queries over wide Dr.Jit arrays:
+environment: :mod:`drpt.render.lights`) and the background, and answers the
+integrators' queries over wide Dr.Jit arrays:
 
 * geometry: :meth:`intersect` (closest hit and its interaction, from
   :meth:`intersect_preliminary` and :meth:`interaction`), :meth:`occluded`,
-  :meth:`spawn` (the origin of a ray leaving a surface);
+  :meth:`spawn` (the origin of a ray leaving a surface, moved off it by the
+  hit's own rounding-error bound, :mod:`drpt.render.spawn`);
 * materials: :meth:`emitted`, :meth:`eval_bsdf`, :meth:`sample_bsdf`,
   :meth:`is_delta`, :meth:`diffuse_color`;
 * emitters: :meth:`sample_area_emitter` and :meth:`pdf_area_emitter` (the
@@ -51,15 +51,17 @@ from .lights.area import AreaLights
 from .lights.delta import DeltaLights
 from .lights.envmap import EnvironmentLight, UniformSphereSampling, check_radius
 from .material import MaterialTable
-from .spawn import RayOffset
+from .spawn import origin as spawn_origin
 from .surface import Interaction, SurfaceData
 
 
 class EmitterSample:
-    """A direction from a shading point toward a sampled emitter point ``p``:
+    """A direction from a shading point toward a sampled emitter point:
     unit ``wo``, the radiance ``le`` arriving along it, its solid-angle
     density ``pdf`` and ``valid`` (the point faces the shading point and has
-    a positive density)."""
+    a positive density). ``p`` is the emitter point moved off the light
+    toward the shading point by its rounding-error bound
+    (:func:`drpt.render.spawn.origin`): the end of the shadow ray."""
 
     def __init__(self, wo, p, le, pdf, valid):
         self.wo: Array3f = wo
@@ -130,7 +132,6 @@ class DeviceScene:
             self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None)
         self.area_lights = AreaLights(scene, self.surfaces)
         self.delta_lights = DeltaLights(scene)
-        self.offset = RayOffset(scene)
         self.warnings: list[str] = list(self.materials.notes)
         if self.is_empty:
             self.warnings.append(EMPTY_SCENE_WARNING)
@@ -176,7 +177,7 @@ class DeviceScene:
 
     def spawn(self, si: Interaction, d: Array3f) -> Array3f:
         """The origin of a ray leaving ``si`` toward ``d`` without hitting it again."""
-        return self.offset.origin(si.p, si.ng, d)
+        return spawn_origin(si.p, si.ng, si.p_error, d)
 
     # ------------------------------------------------------------ materials
     def emitted(self, si: Interaction) -> Array3f:
@@ -213,7 +214,8 @@ class DeviceScene:
         cos_light = dr.abs(dr.dot(ls.ng, wo))
         valid = active & front & (cos_light > 0.0) & (ls.pdf_area > 0.0)
         pdf = ls.pdf_area * dist2 / cos_light
-        return EmitterSample(wo, ls.p, ls.le, pdf, valid)
+        p_end = spawn_origin(ls.p, ls.ng, ls.p_error, -wo)
+        return EmitterSample(wo, p_end, ls.le, pdf, valid)
 
     def pdf_area_emitter(self, si: Interaction, d: Array3f, active: Bool) -> Float:
         """The density :meth:`sample_area_emitter` has for the point ``si`` a

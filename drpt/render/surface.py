@@ -14,6 +14,7 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ..scene.model import Scene
+from .spawn import plane_error, plane_project, sphere_error, triangle_point
 
 
 def _vec(a: np.ndarray) -> Array3f:
@@ -29,9 +30,11 @@ class Interaction:
     shading normal (interpolated OBJ normals, else ``ng``). ``ns`` is not
     forced onto ``ng``'s side: it defines the front of an emitter, as in
     Mitsuba. ``wi`` points from the hit back along the incoming ray.
+    ``p_error`` bounds the distance of ``p`` from the primitive's float32
+    surface along ``ng`` (:mod:`drpt.render.spawn`; zero on a miss).
     """
 
-    def __init__(self, valid, t, p, ng, ns, prim, material, wi, uv=None):
+    def __init__(self, valid, t, p, ng, ns, prim, material, wi, uv=None, p_error=None):
         self.valid: Bool = valid
         self.t: Float = t
         self.p: Array3f = p
@@ -41,6 +44,7 @@ class Interaction:
         self.material: UInt32 = material
         self.wi: Array3f = wi
         self.uv: Array2f = uv if uv is not None else Array2f(0.0, 0.0)  # OBJ convention
+        self.p_error: Float = p_error if p_error is not None else Float(0.0)
 
     def is_triangle(self, n_triangles: int) -> Bool:
         return self.valid & (self.prim < n_triangles)
@@ -51,7 +55,9 @@ class SurfaceData:
         tris, sph, pl = scene.triangles, scene.spheres, scene.planes
         self.n_tri, self.n_sph, self.n_pl = len(tris), len(sph), len(pl)
         if self.n_tri:
-            p = tris.positions
+            # Edges of the float32 vertices the accelerators test, so that
+            # p0 + u e1 + v e2 is rounded from a point of that triangle.
+            p = np.asarray(tris.positions, np.float32).astype(np.float64)
             self.p0 = _vec(p[:, 0])
             self.e1 = _vec(p[:, 1] - p[:, 0])
             self.e2 = _vec(p[:, 2] - p[:, 0])
@@ -69,6 +75,7 @@ class SurfaceData:
             self.sph_r = Float(sph.radius.astype(np.float32))
         if self.n_pl:
             self.pl_n = _vec(pl.normal)
+            self.pl_o = Float(np.asarray(pl.offset, np.float32))
         mats = np.concatenate([tris.material, sph.material, pl.material]).astype(np.uint32)
         self.material = UInt32(mats)
 
@@ -80,6 +87,7 @@ class SurfaceData:
         p = o + d * t
         ng = Array3f(0.0, 0.0, 1.0)
         ns = Array3f(0.0, 0.0, 1.0)
+        err = Float(0.0)
         uv = None
         if self.n_tri:
             is_tri = valid & (prim < self.n_tri)
@@ -89,9 +97,10 @@ class SurfaceData:
             p0 = dr.gather(Array3f, self.p0, i, is_tri)
             u, v = hit.u, hit.v
             # Barycentric position is more accurate than o + t*d.
-            p = dr.select(is_tri, p0 + e1 * u + e2 * v, p)
-            n = dr.normalize(dr.cross(e1, e2))
+            pt, n, e = triangle_point(p0, e1, e2, u, v)
+            p = dr.select(is_tri, pt, p)
             ng = dr.select(is_tri, n, ng)
+            err = dr.select(is_tri, e, err)
             if self.has_normals:
                 sn = (dr.gather(Array3f, self.n0, i, is_tri) * (1.0 - u - v)
                       + dr.gather(Array3f, self.n1, i, is_tri) * u
@@ -114,12 +123,16 @@ class SurfaceData:
             p = dr.select(is_sph, c + n * r, p)  # re-project onto the sphere
             ng = dr.select(is_sph, n, ng)
             ns = dr.select(is_sph, n, ns)
+            err = dr.select(is_sph, sphere_error(p, r, n), err)
         if self.n_pl:
             first = self.n_tri + self.n_sph
             is_pl = valid & (prim >= first)
             k = dr.select(is_pl, prim - first, 0)
             n = dr.gather(Array3f, self.pl_n, k, is_pl)
+            off = dr.gather(Float, self.pl_o, k, is_pl)
+            p = dr.select(is_pl, plane_project(p, n, off), p)
             ng = dr.select(is_pl, n, ng)
             ns = dr.select(is_pl, n, ns)
+            err = dr.select(is_pl, plane_error(p, n, off), err)
         material = dr.gather(UInt32, self.material, prim, valid)
-        return Interaction(valid, t, p, ng, ns, prim, material, -d, uv)
+        return Interaction(valid, t, p, ng, ns, prim, material, -d, uv, err)

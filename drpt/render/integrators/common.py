@@ -19,7 +19,7 @@ from __future__ import annotations
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-SHADOW_SHRINK = 1.0 - 2.0**-12  # stop shadow rays just short of the light
+SHADOW_SHRINK = 1.0 - 2.0**-12  # stop shadow rays just short of their end point
 
 
 def power_heuristic(a: Float, b: Float) -> Float:
@@ -39,7 +39,9 @@ class DirectLight:
         f, pdf_b = scene.eval_bsdf(si, ls.wo)
         ok = ls.valid & (dr.max(f) > 0.0)
         so = scene.spawn(si, ls.wo)
-        ok &= ~scene.occluded(so, ls.wo, dr.norm(ls.p - so) * SHADOW_SHRINK, ok)
+        to = ls.p - so  # to the light point, both ends off their surfaces
+        dist = dr.norm(to)
+        ok &= ~scene.occluded(so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         w = power_heuristic(ls.pdf, pdf_b) if mis else Float(1.0)
         return dr.select(ok, f * ls.le * (w / ls.pdf), 0.0)
 

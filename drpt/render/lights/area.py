@@ -19,6 +19,7 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ...scene.model import Scene
+from ..spawn import triangle_point
 from ..surface import SurfaceData
 from ..warp import square_to_uniform_triangle
 
@@ -26,10 +27,11 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 class LightSample:
-    def __init__(self, p, n, ng, le, pdf_area, valid):
+    def __init__(self, p, n, ng, le, pdf_area, valid, p_error):
         self.p: Array3f = p  # point on the light
         self.n: Array3f = n  # its front (emitting) unit normal: the shading normal
         self.ng: Array3f = ng  # its unit geometric normal (for the area Jacobian)
+        self.p_error: Float = p_error  # bound on p's distance from the triangle along ng
         self.le: Array3f = le  # radiance emitted toward the front
         self.pdf_area: Float = pdf_area
         self.valid: Bool = valid
@@ -74,8 +76,7 @@ class AreaLights:
         e1 = dr.gather(Array3f, s.e1, face, active)
         e2 = dr.gather(Array3f, s.e2, face, active)
         b = square_to_uniform_triangle(u)
-        p = p0 + e1 * b.x + e2 * b.y
-        ng = dr.normalize(dr.cross(e1, e2))
+        p, ng, err = triangle_point(p0, e1, e2, b.x, b.y)
         n_front = ng
         if s.has_normals:
             sn = (dr.gather(Array3f, s.n0, face, active) * (1.0 - b.x - b.y)
@@ -85,7 +86,7 @@ class AreaLights:
             n_front = dr.select(len2 > 1e-20, sn * dr.rsqrt(len2), ng)
         le = dr.gather(Array3f, self.le, k, active)
         pdf = dr.gather(Float, self.pdf_area_table, face, active)
-        return LightSample(p, n_front, ng, le, pdf, active)
+        return LightSample(p, n_front, ng, le, pdf, active, err)
 
     def pdf_area(self, prim: UInt32, active: Bool) -> Float:
         """Area density with which :meth:`sample` picks a point on ``prim``."""
