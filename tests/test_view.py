@@ -306,3 +306,78 @@ def test_page_in_headless_chromium(tmp_path):
     img = np.asarray(Image.open(shot).convert("RGB")).astype(float)
     left = img[:, :300]  # the canvas, beside the control panel
     assert left.std() > 20.0
+
+
+def test_view_flags(capsys):
+    import argparse
+
+    from drpt.errors import DrptError
+    from drpt.options import add_view_flags, check_view_args
+
+    p = argparse.ArgumentParser()
+    add_view_flags(p)
+    check_view_args(p.parse_args([]))
+    assert capsys.readouterr().err == ""
+    check_view_args(p.parse_args(["--host", "0.0.0.0"]))
+    err = capsys.readouterr().err
+    assert err.startswith("drpt: warning:") and "0.0.0.0" in err and err.count("\n") == 1
+    for bad in (["--port", "70000"], ["--host", " "], ["--camera-out", ""]):
+        with pytest.raises(DrptError):
+            check_view_args(p.parse_args(bad))
+
+
+@pytest.mark.slow
+def test_view_command(tmp_path):
+    """``python -m drpt view`` prints its URL; the page's "render" writes
+    ``--output``, "save camera" writes ``--camera-out``; Ctrl-C ends it."""
+    pytest.importorskip("viser")
+    import signal
+    import sys
+
+    from drpt.scene import load_scene
+
+    out, cam_out = tmp_path / "v.png", tmp_path / "cam.txt"
+    proc = subprocess.Popen([sys.executable, "-m", "drpt", "view", str(CORNELL), "--size", "8", "8", "--spp", "1",
+                             "--port", "0", "-o", str(out), "--camera-out", str(cam_out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        url = None
+        for line in proc.stdout:
+            if line.startswith("drpt view: "):
+                url = line.split()[-1]
+                break
+        assert url and url.startswith("http://127.0.0.1:")
+        port = int(url.rsplit(":", 1)[1])
+        client = Client(port)
+        # the page's GUI handles are not reachable from here: find the buttons'
+        # ids in the GUI messages the server sends on connect
+        import msgspec
+        import zstandard
+
+        buttons = {}
+        end = time.monotonic() + 30
+        while len(buttons) < 2 and time.monotonic() < end:
+            raw = client.ws.recv(timeout=30)
+            n, c = int.from_bytes(raw[0:8], "little"), int.from_bytes(raw[8:16], "little")
+            inner = msgspec.msgpack.decode(zstandard.ZstdDecompressor().decompress(raw[16:16 + c],
+                                                                                   max_output_size=n))
+            for m in inner["messages"]:
+                if m["type"] == "GuiButtonMessage":
+                    buttons[m["props"]["label"]] = m["uuid"]
+        scene = load_scene(CORNELL)
+        moved = _moved(scene.camera, 0.5)
+        client.send_camera(moved, 8, 8)
+        client.frames(_full((8, 8)), timeout=30)
+        client.send(type="GuiUpdateMessage", uuid=buttons["save camera"], updates={"value": True})
+        client.send(type="GuiUpdateMessage", uuid=buttons["render"], updates={"value": True})
+        end = time.monotonic() + 60
+        while not (out.exists() and cam_out.exists()) and time.monotonic() < end:
+            time.sleep(0.1)
+        client.close()
+        assert out.exists()
+        (tmp_path / "s.txt").write_text(cam_out.read_text() + "Group { numObjects 0 }\n")
+        assert load_scene(tmp_path / "s.txt").camera == pose_round(moved)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=30)
+    assert proc.returncode == 130
