@@ -259,7 +259,7 @@ def test_gui_flag_renders_the_viewers_camera(tmp_path, monkeypatch):
     rc = []
     args = ["render", "-input", str(CORNELL), "-size", "16", "16", "-spp", "2", "-output", str(out),
             "-gui", "--port", "0", "--quiet", "-MonteCarlo"]
-    thread = threading.Thread(target=lambda: rc.append(main(args)))
+    thread = threading.Thread(target=lambda: rc.append(main(args)), daemon=True)
     thread.start()
     end = time.monotonic() + 120
     while not viewers and time.monotonic() < end:

@@ -260,14 +260,24 @@ class Viewer:
                 moving = time.perf_counter() - self._last_move < SETTLE_SECONDS
                 render_request, self._render_request = self._render_request, False
                 redisplay, self._redisplay = self._redisplay, False
-            opt = self.settings()
+            try:
+                opt = self.settings().validate()
+            except DrptError as e:  # a control's value the renderer refuses: say so, wait for another
+                self.status.content = f"**{e}**"
+                with self._lock:
+                    self._lock.wait(0.5)
+                continue
             scene_key = (opt.accel, opt.bvh_method)
             if renderer is None or scene_key != built_for:
                 self.status.content = f"building the {opt.accel} accelerator"
                 renderer = Renderer(self.scene_model, replace(opt, progress=False))
                 built_for, key = scene_key, None
             if render_request:
-                self._final_render(renderer, opt, camera)
+                try:
+                    self._final_render(renderer, opt, camera)
+                except (DrptError, OSError, ValueError) as e:
+                    self.progress.visible = False
+                    self.saved.content = f"**render failed: {e}**"
                 continue
             H = max(1, self.options.height // (MOVING_SCALE if moving else 1))
             W = max(1, round(H * aspect))
