@@ -3,7 +3,8 @@
 ``render`` accepts modern options and, unchanged, the seed renderer's own
 flags (``-input scene.txt -size 800 800 -output x.tga -spp 64 -MonteCarlo
 -cook_torrance -RR_cutdown 0.6 -Gamma 2.2 -SpatialTree -resolution 5
--SAHeuristic 2000 -gui``). With ``-input`` the seed's defaults apply (Whitted
+-SAHeuristic 2000 -gui``; ``-gui`` opens the viewer of ``drpt view`` first and
+renders with the camera the user left it at). With ``-input`` the seed's defaults apply (Whitted
 ray tracing, Phong shading, uniform grid; with ``-SpatialTree`` its BVH rule,
 SAH only in nodes of at most ``2 * 2000`` primitives); otherwise drpt's (MIS
 path tracing, the ``auto`` accelerator). A flag whose feature is not built yet
@@ -25,13 +26,8 @@ import sys
 import warnings
 from pathlib import Path
 
-from .errors import DrptError, note, showwarning, warn
-
-# Features that are accepted but arrive in later work, with the issue that
-# brings them. The message is printed once, in one line.
-LATER = {
-    "gui": "drpt has no OpenGL preview (-gui): it renders straight to the output file",
-}
+from .errors import DrptError, showwarning, warn
+from .options import check_view_args
 
 
 def _add_render_args(p: argparse.ArgumentParser) -> None:
@@ -45,7 +41,12 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     add_render_flags(p, seed_flags=True)
     p.add_argument("--gamma", "-Gamma", dest="gamma", type=float, default=2.2,
                    help="display gamma for .png/.tga (default 2.2)")
-    p.add_argument("-gui", dest="gui", action="store_true", help="seed flag: OpenGL preview")
+    p.add_argument("-gui", "--gui", dest="gui", action="store_true",
+                   help="seed flag: move the camera in the viewer (as drpt view) first; "
+                        "its \"render\" button (or closing the page) starts the render")
+    from .options import add_view_flags
+
+    add_view_flags(p)
 
 
 def _check_output(output: Path) -> None:
@@ -76,14 +77,15 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise DrptError(f"--gamma must be a positive finite number, got {args.gamma}")
     if args.output is not None and not args.output.strip():
         raise DrptError("--output is empty: give an image file (.exr, .png, .tga, ...)")
-    if args.gui:
-        note(LATER["gui"])
-
     output = Path(args.output) if args.output is not None else Path(Path(scene_path).stem + ".png")
     _check_output(output)
+    if args.gui:
+        check_view_args(args)
     scene = load_scene(scene_path)
 
     ensure()
+    if args.gui:
+        scene, opts = _gui(scene, opts, args)
     renderer = Renderer(scene, opts)
     for message in renderer.warnings:
         warn(message)
@@ -94,6 +96,53 @@ def cmd_render(args: argparse.Namespace) -> int:
     print(f"{output}: {opts.width}x{opts.height}, {opts.spp} spp, {result.seconds:.2f} s "
           f"(+{result.build_seconds:.2f} s build), "
           f"{result.samples_per_second / 1e6:.2f} Msamples/s")
+    return 0
+
+
+def _viewer(scene, opts, args, *, output: Path | None, final: bool):
+    try:
+        from .view.server import Viewer
+    except ImportError as e:
+        raise DrptError(f"the viewer needs viser: pip install -e '.[view]' ({e})") from None
+    camera_out = Path(args.camera_out) if args.camera_out else None
+    viewer = Viewer(scene, opts, host=args.host, port=args.port, output=output,
+                    camera_out=camera_out, gamma=args.gamma, final=final)
+    print(f"drpt view: {viewer.url}", flush=True)
+    return viewer
+
+
+def _gui(scene, opts, args):
+    """``render -gui``: the viewer until "render"; the scene with its camera
+    and the options with its integrator, depth and accelerator."""
+    from dataclasses import replace
+
+    viewer = _viewer(scene, opts, args, output=None, final=True)
+    try:
+        camera = viewer.wait()
+        settings = viewer.settings()
+    finally:
+        viewer.close()
+    return replace(scene, camera=camera), replace(settings, progress=opts.progress)
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from .backend import ensure
+    from .options import options_from_args
+    from .scene import load_scene
+
+    opts = options_from_args(args)
+    if not (math.isfinite(args.gamma) and args.gamma > 0):
+        raise DrptError(f"--gamma must be a positive finite number, got {args.gamma}")
+    check_view_args(args)
+    output = Path(args.output) if args.output else Path(Path(args.scene).stem + ".png")
+    _check_output(output)
+    scene = load_scene(args.scene)
+    ensure()
+    viewer = _viewer(scene, opts, args, output=output, final=False)
+    try:
+        viewer.wait()
+    finally:
+        viewer.close()
     return 0
 
 
@@ -122,6 +171,18 @@ def build_parser() -> argparse.ArgumentParser:
     render = sub.add_parser("render", help="render a scene to an image", allow_abbrev=False)
     _add_render_args(render)
     render.set_defaults(func=cmd_render)
+
+    view = sub.add_parser("view", help="look at a scene in the browser, progressively path traced",
+                          allow_abbrev=False)
+    view.add_argument("scene", help="scene file (the seed's text format)")
+    view.add_argument("--output", "-o", dest="output", default=None,
+                      help="image that the page's \"render\" writes (default <scene>.png)")
+    from .options import add_render_flags, add_view_flags
+
+    add_render_flags(view)
+    add_view_flags(view)
+    view.add_argument("--gamma", type=float, default=2.2, help="display gamma (default 2.2)")
+    view.set_defaults(func=cmd_view)
 
     export = sub.add_parser("export", help="write the scene as Mitsuba 3 XML plus meshes",
                             allow_abbrev=False)

@@ -28,7 +28,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 
-from .errors import DrptError, note
+from .errors import DrptError, note, warn
 
 BSDF_MODES = ("phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
 INTEGRATORS = ("path", "whitted")
@@ -404,3 +404,30 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                                           rr_depth=rr_depth, rr_prob=rr_prob),
                          max_lanes=max_lanes, progress=not get("quiet", False))
     return replace(opts, **overrides).validate()
+
+
+# ------------------------------------------------------------- view flags
+def add_view_flags(parser: argparse.ArgumentParser) -> None:
+    """The viewer's flags (``drpt view``, ``drpt render -gui``): where it
+    listens and where "save camera" writes. Paths come from the command line
+    only; the page cannot name one."""
+    parser.add_argument("--host", default="127.0.0.1",
+                        help="address the viewer listens on (default 127.0.0.1, this machine only)")
+    parser.add_argument("--port", type=int, default=8080,
+                        help="the viewer's port (default 8080; the next free one if taken)")
+    parser.add_argument("--camera-out", dest="camera_out", default=None,
+                        help="file that the viewer's \"save camera\" writes the camera block to "
+                             "(default: show it in the page and print it)")
+
+
+def check_view_args(args: argparse.Namespace) -> None:
+    """Refuse view flags the viewer cannot use; warn on an address beyond this machine."""
+    if not 0 <= args.port <= 65535:
+        raise DrptError(f"--port must be in 0..65535, got {args.port}")
+    if not args.host.strip():
+        raise DrptError("--host is empty: give an address such as 127.0.0.1")
+    if args.host not in ("127.0.0.1", "localhost", "::1"):
+        warn(f"the viewer listens on {args.host}: other machines that reach it can watch the "
+             "scene and start renders (drpt view has no login)")
+    if args.camera_out is not None and not args.camera_out.strip():
+        raise DrptError("--camera-out is empty: give the file to write the camera block to")

@@ -41,6 +41,16 @@ def camera_basis(cam: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 class RayCamera:
+    """Rays of a camera at an image size.
+
+    The camera's position and basis are opaque Dr.Jit values, kernel inputs:
+    a kernel traced with another camera of the same kind (perspective or
+    orthographic) and image size is the same kernel, found in Dr.Jit's
+    kernel cache, so moving the camera compiles nothing
+    (:mod:`drpt.render.progressive` relies on it). The image size is a
+    literal of the kernel (pixel indices divide by the width).
+    """
+
     def __init__(self, cam: Camera, width: int, height: int):
         self.width, self.height = width, height
         f, r, u = camera_basis(cam)

@@ -35,8 +35,9 @@ integrator queries; the renderer adds the camera and the passes.
 
 from __future__ import annotations
 
+import copy
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import drjit as dr
@@ -46,7 +47,7 @@ from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32, UInt64
 from ..backend import policy
 from ..errors import DrptError
 from ..options import RenderOptions
-from ..scene.model import Scene
+from ..scene.model import Camera, Scene
 from .camera import RayCamera
 from .integrators.path import PathIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
@@ -134,15 +135,32 @@ class Renderer:
         self.opt = options
         t0 = time.perf_counter()
         self.scene = DeviceScene(scene, options)
+        self.camera_model: Camera = scene.camera
         self.camera = RayCamera(scene.camera, options.width, options.height)
         self.warnings: list[str] = self.scene.warnings
+        self.integrator = self._make_integrator()
+        self.build_seconds = time.perf_counter() - t0
+
+    def _make_integrator(self):
+        options = self.opt
         if options.integrator == "whitted":
             depth = options.path.max_depth
-            self.integrator = WhittedIntegrator(
-                self.scene, WhittedOptions(max_depth=depth if depth > 0 else 16))
-        else:
-            self.integrator = PathIntegrator(self.scene, options.path)
-        self.build_seconds = time.perf_counter() - t0
+            return WhittedIntegrator(self.scene, WhittedOptions(max_depth=depth if depth > 0 else 16))
+        return PathIntegrator(self.scene, options.path)
+
+    def derive(self, options: RenderOptions, camera: Camera | None = None) -> Renderer:
+        """A renderer of the same device scene (nothing is built again) with
+        other per-render ``options`` (size, spp, seed, integrator, path
+        depths, lanes) and ``camera`` (default: this renderer's). The options
+        that shape the device scene (accelerator, material mode, sky
+        sampling) stay this renderer's. Renders equal those of a new
+        :class:`Renderer` of the scene with these options and camera."""
+        new = copy.copy(self)
+        new.opt = options.validate()
+        new.camera_model = self.camera_model if camera is None else camera
+        new.camera = RayCamera(new.camera_model, options.width, options.height)
+        new.integrator = new._make_integrator()
+        return new
 
     @property
     def max_lanes(self) -> int:
@@ -214,7 +232,9 @@ class Renderer:
         sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, 3)
         return img, sq, int(nbad[0])
 
-    def render(self) -> RenderResult:
+    def render(self, on_pass: Callable[[int, int], None] | None = None) -> RenderResult:
+        """The image at the options' size and spp. ``on_pass(done, total)``,
+        if given, is called after each pass with the samples traced so far."""
         from tqdm import tqdm
 
         W, H, spp = self.opt.width, self.opt.height, self.opt.spp
@@ -231,6 +251,8 @@ class Renderer:
                 acc2[r0:r0 + rows] += sq
                 nonfinite += nbad
                 bar.update(rows * W * k)
+                if on_pass is not None:
+                    on_pass(_s0 * H * W + (r0 + rows) * W * k, W * H * spp)
         seconds = time.perf_counter() - t0
         mean = acc / spp
         if mean.max() > np.finfo(np.float32).max:
