@@ -6,7 +6,8 @@ drawn) and sends the path-traced frame of
 :class:`~drpt.render.progressive.Progressive` as the background image
 behind it. The browser's camera controls (orbit, dolly, truck) update the
 camera: the path tracer starts over, at a quarter of the resolution while
-the camera moves and at the full preview size once it has been still for
+the camera moves (the first frame after every move is always such a fast
+one) and at the full preview size once it has been still for
 :data:`SETTLE_SECONDS`. The raster shows while the camera moves and the
 reduced frames refine, and hides when the full-size frame arrives.
 
@@ -252,12 +253,17 @@ class Viewer:
         built_for = None
         prog: Progressive | None = None
         key = None
+        shown_moving = None  # the camera generation of the last reduced frame published
         while True:
             with self._lock:
                 if self._stop or self._finished:
                     return
                 generation, camera, aspect = self._generation, self._camera, self._aspect
-                moving = time.perf_counter() - self._last_move < SETTLE_SECONDS
+                # moving: the camera moved within SETTLE_SECONDS, or no reduced frame
+                # of this camera is shown yet (the first frame after a move is the
+                # fast one, however long the move took to arrive)
+                moving = (time.perf_counter() - self._last_move < SETTLE_SECONDS
+                          or generation != shown_moving)
                 render_request, self._render_request = self._render_request, False
                 redisplay, self._redisplay = self._redisplay, False
             try:
@@ -301,6 +307,8 @@ class Viewer:
                     self._lock.wait(SETTLE_SECONDS if moving else 0.5)
                 continue
             self._publish(prog.step(), moving)
+            if moving:
+                shown_moving = generation
 
     def _publish(self, frame, moving: bool) -> None:
         rgb = display_image(frame.image, float(self.exposure.value), self.gamma)
