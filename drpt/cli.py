@@ -21,9 +21,7 @@ from __future__ import annotations
 
 import argparse
 import math
-import signal
 import sys
-import threading
 import warnings
 from pathlib import Path
 
@@ -97,15 +95,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise DrptError(f"--checkpoint-seconds must be >= 0, got {args.checkpoint_seconds}")
 
     ensure()
-    # SIGTERM stops the render as Ctrl-C does: the merged samples stay in a checkpoint
-    main_thread = threading.current_thread() is threading.main_thread()
-    old = signal.signal(signal.SIGTERM, _interrupt) if main_thread else None
-    try:
-        job = run(scene, opts, output, workers=args.workers, cluster=args.cluster,
-                  resume=args.resume, checkpoint_seconds=args.checkpoint_seconds)
-    finally:
-        if main_thread:
-            signal.signal(signal.SIGTERM, old)
+    job = run(scene, opts, output, workers=args.workers, cluster=args.cluster,
+              resume=args.resume, checkpoint_seconds=args.checkpoint_seconds)
     for message in job.warnings:
         warn(message)
     result = job.result
@@ -119,10 +110,6 @@ def cmd_render(args: argparse.Namespace) -> int:
     if opts.progress and (args.workers is not None or args.cluster is not None):
         print_workers(job)
     return 0
-
-
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
 
 
 def cmd_export(args: argparse.Namespace) -> int:

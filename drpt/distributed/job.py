@@ -13,7 +13,10 @@ is written (:func:`drpt.distributed.checkpoint.remove`).
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -52,6 +55,29 @@ class LocalEngine:
             yield r
 
 
+@contextlib.contextmanager
+def _stop_requests():
+    """Ctrl-C and SIGTERM ask the job to stop after the chunk in hand (a
+    KeyboardInterrupt inside a Dr.Jit trace would surface as a RuntimeError);
+    a second one stops at once. Yields a list that is non-empty once asked."""
+    asked: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield asked
+        return
+
+    def handler(signum, frame):
+        if asked:
+            raise KeyboardInterrupt
+        asked.append(signum)
+
+    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield asked
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
 @dataclass
 class WorkerStats:
     chunks: int = 0
@@ -73,6 +99,9 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         resume: bool = False, checkpoint_seconds: float = 30.0, connect_timeout: float = 5.0,
         on_chunk: Callable | None = None) -> Job:
     """Render ``scene`` with ``opts``; checkpoints go beside ``output``.
+
+    Ctrl-C or SIGTERM stops the job after the chunk in hand (a second one at
+    once) with a KeyboardInterrupt, after writing a checkpoint.
 
     ``workers`` starts a local Dask cluster of that many processes, ``cluster``
     joins the scheduler at that address, neither traces in this process.
@@ -108,7 +137,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     seen = set()
     build = 0.0
     try:
-        with engine, tqdm(total=W * H * spp, initial=W * H * merged.spp, unit="spl",
+        with _stop_requests() as asked, engine, tqdm(total=W * H * spp, initial=W * H * merged.spp, unit="spl",
                           unit_scale=True, disable=not opts.progress, desc="render",
                           leave=False) as bar:
             for r in engine.results(range(merged.next, chunks.count)):
@@ -125,6 +154,8 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
                 merged.push(r)
                 if on_chunk is not None:
                     on_chunk(merged, r, engine)
+                if asked:
+                    raise KeyboardInterrupt
                 now = time.perf_counter()
                 if not merged.done and now - last >= checkpoint_seconds:
                     save()
