@@ -165,6 +165,50 @@ def test_killed_worker_leaves_the_image_unchanged(tmp_path):
     assert sum(s.chunks for s in job.workers.values()) >= 24
 
 
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_lost_scheduler_is_one_error_and_keeps_the_samples(tmp_path):
+    pytest.importorskip("distributed")
+    from drpt.distributed.job import run
+    from drpt.errors import DrptError
+    from drpt.options import RenderOptions
+    from drpt.scene import load_scene
+
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    dask = Path(sys.executable).with_name("dask")
+    env = {**os.environ, "PYTHONPATH": str(REPO)}  # the scheduler unpickles the tasks too
+    scheduler = subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":")[-1],
+                                  "--no-dashboard"], env=env, stderr=subprocess.DEVNULL)
+    worker = subprocess.Popen([dask, "worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard"], env=env,
+                              stderr=subprocess.DEVNULL)
+    try:
+        opts = RenderOptions(width=16, height=16, spp=64, chunk_spp=1, progress=False)
+        scene = load_scene(SCENE)
+        out = tmp_path / "lost.exr"
+
+        def stop_scheduler(merged, result, engine):
+            if merged.next >= 3 and scheduler.poll() is None:
+                scheduler.kill()
+
+        with pytest.raises(DrptError, match="scheduler went away"):
+            run(scene, opts, out, cluster=address, connect_timeout=30, on_chunk=stop_scheduler)
+        state = json.loads(Path(str(out) + ".drpt-checkpoint.json").read_text())
+        assert state["next"] >= 3
+        resumed = run(scene, opts, out, resume=True).result.image
+        assert np.array_equal(resumed, run(scene, opts, tmp_path / "whole.exr").result.image)
+    finally:
+        for p in (worker, scheduler):
+            p.kill()
+            p.wait()
+
+
 def _always_fails(*args):
     raise RuntimeError("this chunk always fails")
 

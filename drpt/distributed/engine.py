@@ -20,6 +20,7 @@ compiled kernels) between chunks of the same scene and options
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 import os
@@ -67,10 +68,19 @@ TASK = trace_chunk
 def _lost(e: BaseException) -> bool:
     """Whether ``e`` means the scheduler (or the connection to it) is gone."""
     import asyncio
+    import concurrent.futures
 
     from distributed.comm.core import CommClosedError
 
-    return isinstance(e, (CommClosedError, OSError, TimeoutError, asyncio.CancelledError))
+    return isinstance(e, (CommClosedError, OSError, TimeoutError, asyncio.CancelledError,
+                          concurrent.futures.CancelledError))
+
+
+def _one_line(e: BaseException) -> str:
+    text = " ".join(f"{type(e).__name__}: {e}".split())
+    if "deserializ" in text:
+        text += " (the scheduler and every worker need this drpt installed, and its dependencies)"
+    return text
 
 
 class DaskEngine:
@@ -97,17 +107,27 @@ class DaskEngine:
     def __enter__(self) -> DaskEngine:
         from distributed import Client, LocalCluster
 
-        if self.address is not None:
-            try:
-                self.client = Client(self.address, timeout=self.connect_timeout)
-            except (OSError, TimeoutError, ValueError) as e:
-                raise DrptError(f"--cluster {self.address}: no Dask scheduler answered within "
-                                f"{self.connect_timeout:g} s ({type(e).__name__}: {e})") from None
-        else:
-            self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
-                                        processes=True, dashboard_address=None,
-                                        silence_logs=logging.ERROR)
-            self.client = Client(self.cluster)
+        # drpt reports lost workers, failed chunks and a lost scheduler itself, in one line
+        names = ["distributed"] + [n for n in logging.root.manager.loggerDict
+                                   if n.startswith("distributed.")]
+        self.log_levels = {n: logging.getLogger(n).level for n in names}
+        for n in names:
+            logging.getLogger(n).setLevel(logging.CRITICAL)
+        try:
+            if self.address is not None:
+                try:
+                    self.client = Client(self.address, timeout=self.connect_timeout)
+                except (OSError, TimeoutError, ValueError) as e:
+                    raise DrptError(f"--cluster {self.address}: no Dask scheduler answered within "
+                                    f"{self.connect_timeout:g} s ({_one_line(e)})") from None
+            else:
+                self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
+                                            processes=True, dashboard_address=None,
+                                            silence_logs=logging.ERROR)
+                self.client = Client(self.cluster)
+        except BaseException:
+            self.__exit__()
+            raise
         self.scene_future = self.client.scatter(self.scene, broadcast=True)
         return self
 
@@ -118,6 +138,8 @@ class DaskEngine:
                     thing.close()
                 except Exception:  # noqa: BLE001 - closing a lost connection
                     pass
+        for n, level in getattr(self, "log_levels", {}).items():
+            logging.getLogger(n).setLevel(level)
 
     @property
     def n_workers(self) -> int:
@@ -150,7 +172,7 @@ class DaskEngine:
                 if f.status == "error":
                     e = f.exception()
                     raise DrptError(f"chunk {i} failed {self.retries + 1} times on the workers: "
-                                    f"{type(e).__name__}: {e}")
+                                    f"{_one_line(e)}")
                 if f.status == "cancelled":
                     raise DrptError(f"the Dask scheduler went away (chunk {i} was cancelled)")
                 result = f.result()
@@ -159,7 +181,7 @@ class DaskEngine:
                 submit()
         except DrptError:
             raise
-        except Exception as e:
+        except (Exception, asyncio.CancelledError) as e:
             if _lost(e):
-                raise DrptError(f"the Dask scheduler went away ({type(e).__name__}: {e})") from None
+                raise DrptError(f"the Dask scheduler went away ({_one_line(e)})") from None
             raise
