@@ -15,7 +15,9 @@ Each task then carries the scene's hash, the options and a chunk index, and
 returns the chunk's float64 sums (48 bytes per pixel). A worker process keeps
 its :class:`~drpt.render.renderer.Renderer` (device scene, accelerator,
 compiled kernels) between chunks of the same scene and options
-(:func:`trace_chunk`).
+(:func:`trace_chunk`). Workers of a local cluster share the cores: Dr.Jit's
+thread pool in each gets ``cores // N`` threads; a ``dask worker`` started by
+hand keeps Dr.Jit's default, a thread per core of its machine.
 """
 
 from __future__ import annotations
@@ -59,6 +61,13 @@ def trace_chunk(key: str, scene, opts, index: int) -> ChunkResult:
         result.warnings = list(renderer.warnings)
         result.seconds += renderer.build_seconds
     return result
+
+
+def _share_cores(threads: int) -> None:
+    """Run on a local worker: Dr.Jit's thread pool takes its share of the cores."""
+    import drjit as dr
+
+    dr.set_thread_count(threads)
 
 
 # The function the workers run; tests replace it with one that fails.
@@ -125,6 +134,8 @@ class DaskEngine:
                                             processes=True, dashboard_address=None,
                                             silence_logs=logging.ERROR)
                 self.client = Client(self.cluster)
+                # one core per worker process (Dr.Jit would start a thread per core in each)
+                self.client.run(_share_cores, max(1, (os.cpu_count() or 1) // self.workers))
         except BaseException:
             self.__exit__()
             raise
