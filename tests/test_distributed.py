@@ -244,11 +244,11 @@ def test_bad_cluster_address_is_one_error_quickly(tmp_path, capsys):
 
 
 # ------------------------------------------------------------------ checkpoints
-SPP, CHUNK = 128, 4  # 32 chunks
+SPP, CHUNK = 256, 4  # 64 chunks: the render is still running when the signal comes
 
 
-def _interrupt(out, *flags):
-    """Start a render in a subprocess, SIGINT it once it wrote a checkpoint."""
+def _interrupt(out, *flags, sig=signal.SIGINT):
+    """Start a render in a subprocess, signal it once it wrote a checkpoint."""
     meta = Path(str(out) + ".drpt-checkpoint.json")
     cmd = [sys.executable, "-m", "drpt", "render", str(SCENE), *FLAGS, "--spp", str(SPP),
            "--chunk-spp", str(CHUNK),
@@ -257,24 +257,29 @@ def _interrupt(out, *flags):
     t0 = time.monotonic()
     while not meta.exists() and p.poll() is None and time.monotonic() - t0 < 120:
         time.sleep(0.02)
-    p.send_signal(signal.SIGINT)
+    p.send_signal(sig)
     _, err = p.communicate(timeout=120)
-    assert p.returncode == 130, err
-    assert "continue with --resume" in err
+    if sig == signal.SIGKILL:  # the periodic checkpoint is all there is
+        assert p.returncode == -signal.SIGKILL
+    else:
+        assert p.returncode == 130, err
+        assert "continue with --resume" in err
     state = json.loads(meta.read_text())
     assert 0 < state["next"] < state["chunks"]
     return state
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("first,then", [((), ("--workers", "2")), (("--workers", "2"), ())],
-                         ids=["plain-then-workers", "workers-then-plain"])
-def test_resume_after_an_interrupt_gives_the_uninterrupted_image(tmp_path, first, then):
+@pytest.mark.parametrize("sig,first,then", [(signal.SIGINT, (), ("--workers", "2")),
+                                           (signal.SIGTERM, ("--workers", "2"), ()),
+                                           (signal.SIGKILL, (), ())],
+                         ids=["ctrl-c-plain-then-workers", "sigterm-workers-then-plain", "sigkill-plain"])
+def test_resume_after_an_interrupt_gives_the_uninterrupted_image(tmp_path, sig, first, then):
     if "--workers" in first + then:
         pytest.importorskip("distributed")
     whole = _render(tmp_path, "whole", spp=SPP, chunk=CHUNK)
     out = tmp_path / "cut.exr"
-    _interrupt(out, *first)
+    _interrupt(out, *first, sig=sig)
     assert np.array_equal(whole, _render(tmp_path, "cut", "--resume", *then, spp=SPP, chunk=CHUNK))
     assert not list(tmp_path.glob("*.drpt-checkpoint*"))
 

@@ -3,7 +3,8 @@
 A checkpoint of the render to ``OUT`` is two files beside it, written
 atomically (a temporary file, then a rename): ``OUT.drpt-checkpoint.npz``
 holds the float64 sums of the merged chunks (``sum``, ``sumsq``) and
-``OUT.drpt-checkpoint.json`` says what they are: the scene's content hash
+``OUT.drpt-checkpoint.json`` says what they are (the .npz holds a copy, which
+is the one read back): the scene's content hash
 (:func:`scene_hash`), the render options (:func:`options_key`), the chunk
 count, the chunks merged (``0..next-1``), their samples per pixel and the
 NaN/Inf samples dropped. ``--resume`` accepts a checkpoint only for the
@@ -75,35 +76,42 @@ class Checkpoint:
 
 
 def save(output: Path, cp: Checkpoint) -> None:
+    """Write the checkpoint. The .npz holds the description too (``meta``)
+    and is what :func:`load` trusts, so a process killed between the two
+    renames leaves a consistent checkpoint; the .json is for people."""
     npz, meta = paths(output)
-    tmp = npz.with_name(npz.name + ".tmp.npz")
-    np.savez(tmp, sum=cp.sum, sumsq=cp.sumsq)
-    os.replace(tmp, npz)
     d = {k: v for k, v in asdict(cp).items() if k not in ("sum", "sumsq")}
     d["version"] = VERSION
+    text = json.dumps(d, indent=1, sort_keys=True)
+    tmp = npz.with_name(npz.name + ".tmp.npz")
+    np.savez(tmp, sum=cp.sum, sumsq=cp.sumsq, meta=np.array(text))
+    os.replace(tmp, npz)
     tmp = meta.with_name(meta.name + ".tmp")
-    tmp.write_text(json.dumps(d, indent=1, sort_keys=True))
+    tmp.write_text(text)
     os.replace(tmp, meta)
 
 
 def remove(output: Path) -> None:
     for p in paths(output):
         p.unlink(missing_ok=True)
+    # a .tmp file left by a process killed while writing
+    for p in paths(output):
+        for tmp in p.parent.glob(p.name + ".tmp*"):
+            tmp.unlink(missing_ok=True)
 
 
 def load(output: Path, scene_hash: str, options: dict, chunks: int) -> Checkpoint:
     """The checkpoint of ``output``, checked against this render: a missing,
     unreadable or foreign one (other scene, options or chunks) is a DrptError."""
     npz, meta = paths(output)
-    if not meta.exists() or not npz.exists():
-        raise DrptError(f"--resume: no checkpoint for {output} ({meta.name} and {npz.name} "
-                        "beside it)")
+    if not npz.exists():
+        raise DrptError(f"--resume: no checkpoint for {output} ({npz.name} beside it)")
     try:
-        d = json.loads(meta.read_text())
         with np.load(npz) as z:
             s, s2 = z["sum"], z["sumsq"]
+            d = json.loads(str(z["meta"]))
     except (OSError, ValueError, KeyError) as e:
-        raise DrptError(f"--resume: {meta}: unreadable checkpoint ({e})") from None
+        raise DrptError(f"--resume: {npz}: unreadable checkpoint ({e})") from None
     if d.get("version") != VERSION:
         raise DrptError(f"--resume: {meta}: checkpoint version {d.get('version')}, not {VERSION}")
     if d["scene_hash"] != scene_hash:

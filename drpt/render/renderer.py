@@ -43,7 +43,7 @@ integrator queries; the renderer adds the camera and the passes.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import drjit as dr
@@ -228,9 +228,11 @@ class Renderer:
         o = self.opt
         return plan_chunks(o.width, o.height, o.spp, self.max_lanes, o.chunk_spp)
 
-    def render_chunk(self, index: int) -> ChunkResult:
+    def render_chunk(self, index: int, on_pass: Callable[[int], None] | None = None) -> ChunkResult:
         """Sums of chunk ``index``'s samples and of their squares, per pixel
-        (float64): a pure function of the scene, the options and ``index``."""
+        (float64): a pure function of the scene, the options and ``index``.
+        ``on_pass(samples)``, if given, is called after each pass with the
+        samples of the chunk traced so far."""
         t0 = time.perf_counter()
         chunks = self.chunks
         plan = chunks.passes
@@ -244,12 +246,16 @@ class Renderer:
             acc[r0:r0 + rows] += img
             acc2[r0:r0 + rows] += sq
             nonfinite += nbad
+            if on_pass is not None:
+                on_pass((_s0 - chunks.spp_before(index)) * H * W + (r0 + rows) * W * k)
         return ChunkResult(index, chunks.spp_of(index), acc, acc2, nonfinite,
                            time.perf_counter() - t0)
 
-    def render(self) -> RenderResult:
-        """Every chunk in order (:meth:`render_chunk`), merged as a distributed
-        render merges them (:class:`~drpt.render.chunks.ChunkMerge`)."""
+    def render(self, on_pass: Callable[[int, int], None] | None = None) -> RenderResult:
+        """The image at the options' size and spp: every chunk in order
+        (:meth:`render_chunk`), merged as a distributed render merges them
+        (:class:`~drpt.render.chunks.ChunkMerge`). ``on_pass(done, total)``,
+        if given, is called after each pass with the samples traced so far."""
         from tqdm import tqdm
 
         W, H, spp = self.opt.width, self.opt.height, self.opt.spp
@@ -259,8 +265,14 @@ class Renderer:
         with tqdm(total=W * H * spp, unit="spl", unit_scale=True, disable=not self.opt.progress,
                   desc="render", leave=False) as bar:
             for c in range(chunks.count):
-                merged.push(self.render_chunk(c))
-                bar.update(W * H * chunks.spp_of(c))
+                before = W * H * chunks.spp_before(c)
+
+                def progress(done: int, before: int = before) -> None:
+                    bar.update(before + done - bar.n)
+                    if on_pass is not None:
+                        on_pass(before + done, W * H * spp)
+
+                merged.push(self.render_chunk(c, progress))
         return finish(merged, time.perf_counter() - t0, self.build_seconds)
 
 
