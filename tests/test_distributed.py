@@ -296,3 +296,16 @@ def test_resume_refuses_a_checkpoint_of_other_options(tmp_path, capsys):
     assert rc == 2 and len(err) == 1 and "other options (seed differ)" in err[0]
     rc = main(["render", str(SCENE), *FLAGS, "--spp", "8", "--resume", "-o", str(tmp_path / "none.exr")])
     assert rc == 2 and "no checkpoint" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("flags,message", [(["--workers", "0"], "--workers must be at least 1"),
+                                           (["--workers", "2", "--cluster", "tcp://127.0.0.1:9"], "not both"),
+                                           (["--chunk-spp", "0"], "--chunk-spp must be between"),
+                                           (["--checkpoint-seconds", "-1"], "--checkpoint-seconds must be")])
+def test_distributed_flag_errors_are_one_line(tmp_path, capsys, flags, message):
+    from drpt.cli import main
+
+    rc = main(["render", str(SCENE), *FLAGS, "--spp", "1", "-o", str(tmp_path / "x.exr"), *flags])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and message in err[0]
+    assert not (tmp_path / "x.exr").exists()

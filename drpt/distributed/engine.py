@@ -36,10 +36,14 @@ from ..render.chunks import ChunkResult
 _RENDERERS: dict[str, object] = {}
 
 
-def trace_chunk(key: str, scene, opts, index: int) -> ChunkResult:
+def trace_chunk(key: str, scene, opts, index: int, backend: str = "llvm") -> ChunkResult:
     """Run on a worker: chunk ``index`` of the render ``key`` (scene hash and
-    options). The first chunk of a render on a worker builds its renderer
-    (and returns the scene's warnings); later ones reuse it."""
+    options) on the coordinator's Dr.Jit ``backend``. The first chunk of a
+    render on a worker builds its renderer (and returns the scene's
+    warnings); later ones reuse it."""
+    from .. import backend as backends
+
+    backends.select(backend)
     from ..backend import ensure
     from ..render.renderer import Renderer
 
@@ -107,7 +111,11 @@ class DaskEngine:
         except ImportError:
             raise DrptError("--workers/--cluster need Dask distributed: "
                             "pip install 'drpt[cluster]' (or pip install distributed)") from None
-        self.scene, self.opts = scene, opts
+        from ..backend import name, policy
+
+        if opts.max_lanes is None:  # the coordinator's, not each worker's, default
+            opts = replace(opts, max_lanes=policy().max_lanes)
+        self.scene, self.opts, self.backend = scene, opts, name()
         self.key = scene_hash + json.dumps(repr(opts))
         self.workers, self.address = workers, address
         self.connect_timeout, self.retries = connect_timeout, retries
@@ -168,7 +176,7 @@ class DaskEngine:
             i = next(todo, None)
             if i is None:
                 return False
-            f = self.client.submit(TASK, self.key, self.scene_future, self.opts, i,
+            f = self.client.submit(TASK, self.key, self.scene_future, self.opts, i, self.backend,
                                    retries=self.retries, pure=False, priority=-i)
             index_of[f] = i
             ac.add(f)
