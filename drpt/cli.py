@@ -39,6 +39,9 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
                    help="image to write: .exr (linear float32), .png or .tga (gamma); "
                         "default <scene>.png")
     add_render_flags(p, seed_flags=True)
+    from .options import add_distributed_flags
+
+    add_distributed_flags(p)
     p.add_argument("--gamma", "-Gamma", dest="gamma", type=float, default=2.2,
                    help="display gamma for .png/.tga (default 2.2)")
     p.add_argument("-gui", "--gui", dest="gui", action="store_true",
@@ -62,9 +65,10 @@ def _check_output(output: Path) -> None:
 
 def cmd_render(args: argparse.Namespace) -> int:
     from .backend import ensure
+    from .distributed import checkpoint
+    from .distributed.job import print_workers, run
     from .imageio import write_image
     from .options import options_from_args
-    from .render.renderer import Renderer
     from .scene import load_scene
 
     scene_path = args.scene or args.input
@@ -83,19 +87,30 @@ def cmd_render(args: argparse.Namespace) -> int:
         check_view_args(args)
     scene = load_scene(scene_path)
 
+    if args.workers is not None and args.cluster is not None:
+        raise DrptError("give --workers N (a local cluster) or --cluster ADDRESS, not both")
+    if args.workers is not None and args.workers < 1:
+        raise DrptError(f"--workers must be at least 1, got {args.workers}")
+    if not (math.isfinite(args.checkpoint_seconds) and args.checkpoint_seconds >= 0):
+        raise DrptError(f"--checkpoint-seconds must be >= 0, got {args.checkpoint_seconds}")
+
     ensure()
     if args.gui:
         scene, opts = _gui(scene, opts, args)
-    renderer = Renderer(scene, opts)
-    for message in renderer.warnings:
+    job = run(scene, opts, output, workers=args.workers, cluster=args.cluster,
+              resume=args.resume, checkpoint_seconds=args.checkpoint_seconds)
+    for message in job.warnings:
         warn(message)
-    result = renderer.render()
+    result = job.result
     if result.nonfinite:
         warn(f"{result.nonfinite} samples were NaN/Inf and were set to 0")
     write_image(output, result.image, gamma=args.gamma)
+    checkpoint.remove(output)
     print(f"{output}: {opts.width}x{opts.height}, {opts.spp} spp, {result.seconds:.2f} s "
           f"(+{result.build_seconds:.2f} s build), "
           f"{result.samples_per_second / 1e6:.2f} Msamples/s")
+    if opts.progress and (args.workers is not None or args.cluster is not None):
+        print_workers(job)
     return 0
 
 

@@ -72,6 +72,7 @@ class RenderOptions:
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
     path: PathOptions = field(default_factory=PathOptions)
     max_lanes: int | None = None  # samples traced at once (None: drpt.backend.policy().max_lanes)
+    chunk_spp: int | None = None  # samples per pixel of a chunk (None: one pass step), drpt.render.chunks
     progress: bool = True
 
     def validate(self) -> RenderOptions:
@@ -94,6 +95,8 @@ class RenderOptions:
                             f"{self.width} * {self.height} * {self.spp}")
         if self.max_lanes is not None and not 0 < self.max_lanes <= MAX_LANES:
             raise DrptError(f"--max-lanes must be between 1 and {MAX_LANES}, got {self.max_lanes}")
+        if self.chunk_spp is not None and not 0 < self.chunk_spp <= MAX_SPP:
+            raise DrptError(f"--chunk-spp must be between 1 and {MAX_SPP}, got {self.chunk_spp}")
         if not 0 <= self.seed <= MAX_SEED:
             raise DrptError(f"--seed must be between 0 and 2^64 - 1, got {self.seed}")
         p = self.path
@@ -307,6 +310,26 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
         parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
 
 
+def add_distributed_flags(parser: argparse.ArgumentParser) -> None:
+    """``render``'s flags for chunked, distributed and resumable renders
+    (:mod:`drpt.distributed`): ``--workers``, ``--cluster``, ``--chunk-spp``,
+    ``--resume``, ``--checkpoint-seconds``."""
+    parser.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="render on a local Dask cluster of N worker processes (needs the "
+                             "'cluster' extra: pip install 'drpt[cluster]')")
+    parser.add_argument("--cluster", default=None, metavar="ADDRESS",
+                        help="render on the Dask scheduler at ADDRESS (tcp://host:8786)")
+    parser.add_argument("--chunk-spp", dest="chunk_spp", type=int, default=None, metavar="S",
+                        help="samples per pixel of a chunk, the unit of work of a distributed "
+                             "render and of checkpoints (default: one pass's samples); part of "
+                             "the image's identity, as --seed is")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue the render from the checkpoint beside --output")
+    parser.add_argument("--checkpoint-seconds", dest="checkpoint_seconds", type=float, default=30.0,
+                        metavar="T", help="write a checkpoint at most every T seconds while "
+                                          "rendering (default 30; 0: after every chunk)")
+
+
 # ------------------------------------------------------------------ options
 def _int_flag(name: str, text) -> int | None:
     """Parse an integer flag value; a bad one is a one-line DrptError."""
@@ -402,7 +425,8 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          env_sampling=get("env_sampling", base.env_sampling),
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),
                                           rr_depth=rr_depth, rr_prob=rr_prob),
-                         max_lanes=max_lanes, progress=not get("quiet", False))
+                         max_lanes=max_lanes, chunk_spp=get("chunk_spp"),
+                         progress=not get("quiet", False))
     return replace(opts, **overrides).validate()
 
 

@@ -28,6 +28,13 @@ image file holds) is an error.
 Pass parameters that change between passes (row offset, seed, ``k``) are
 opaque JIT values: the megakernel is compiled once per render.
 
+Passes are grouped into chunks (:mod:`drpt.render.chunks`): fixed groups
+of sample steps, each a pure function of the scene, the options and its
+index (:meth:`Renderer.render_chunk`), merged in chunk order.
+:meth:`Renderer.render` traces them one after another; a distributed render
+(:mod:`drpt.distributed`) traces them on other processes and merges them the
+same way, so both give the same image bit for bit.
+
 The scene goes to the device once, as a
 :class:`~drpt.render.scene.DeviceScene` (:attr:`Renderer.scene`), which the
 integrator queries; the renderer adds the camera and the passes.
@@ -49,6 +56,7 @@ from ..errors import DrptError
 from ..options import RenderOptions
 from ..scene.model import Camera, Scene
 from .camera import RayCamera
+from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
 from .integrators.path import PathIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .scene import DeviceScene
@@ -232,34 +240,70 @@ class Renderer:
         sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, 3)
         return img, sq, int(nbad[0])
 
+    @property
+    def chunks(self) -> ChunkPlan:
+        """The render's chunks (:func:`~drpt.render.chunks.plan_chunks`)."""
+        o = self.opt
+        return plan_chunks(o.width, o.height, o.spp, self.max_lanes, o.chunk_spp)
+
+    def render_chunk(self, index: int, on_pass: Callable[[int], None] | None = None) -> ChunkResult:
+        """Sums of chunk ``index``'s samples and of their squares, per pixel
+        (float64): a pure function of the scene, the options and ``index``.
+        ``on_pass(samples)``, if given, is called after each pass with the
+        samples of the chunk traced so far."""
+        t0 = time.perf_counter()
+        chunks = self.chunks
+        plan = chunks.passes
+        W, H = self.opt.width, self.opt.height
+        acc = np.zeros((H, W, 3), np.float64)
+        acc2 = np.zeros((H, W, 3), np.float64)
+        nonfinite = 0
+        for i in chunks.passes_of(index):
+            _s0, k, r0, rows = plan[i]
+            img, sq, nbad = self._pass(i, k, r0, rows)
+            acc[r0:r0 + rows] += img
+            acc2[r0:r0 + rows] += sq
+            nonfinite += nbad
+            if on_pass is not None:
+                on_pass((_s0 - chunks.spp_before(index)) * H * W + (r0 + rows) * W * k)
+        return ChunkResult(index, chunks.spp_of(index), acc, acc2, nonfinite,
+                           time.perf_counter() - t0)
+
     def render(self, on_pass: Callable[[int, int], None] | None = None) -> RenderResult:
-        """The image at the options' size and spp. ``on_pass(done, total)``,
+        """The image at the options' size and spp: every chunk in order
+        (:meth:`render_chunk`), merged as a distributed render merges them
+        (:class:`~drpt.render.chunks.ChunkMerge`). ``on_pass(done, total)``,
         if given, is called after each pass with the samples traced so far."""
         from tqdm import tqdm
 
         W, H, spp = self.opt.width, self.opt.height, self.opt.spp
-        plan = plan_passes(W, H, spp, self.max_lanes)
-        acc = np.zeros((H, W, 3), np.float64)
-        acc2 = np.zeros((H, W, 3), np.float64)
-        nonfinite = 0
+        chunks = self.chunks
+        merged = ChunkMerge(chunks)
         t0 = time.perf_counter()
         with tqdm(total=W * H * spp, unit="spl", unit_scale=True, disable=not self.opt.progress,
                   desc="render", leave=False) as bar:
-            for i, (_s0, k, r0, rows) in enumerate(plan):
-                img, sq, nbad = self._pass(i, k, r0, rows)
-                acc[r0:r0 + rows] += img
-                acc2[r0:r0 + rows] += sq
-                nonfinite += nbad
-                bar.update(rows * W * k)
-                if on_pass is not None:
-                    on_pass(_s0 * H * W + (r0 + rows) * W * k, W * H * spp)
-        seconds = time.perf_counter() - t0
-        mean = acc / spp
-        if mean.max() > np.finfo(np.float32).max:
-            y, x, _ = np.unravel_index(np.argmax(mean), mean.shape)
-            raise DrptError(f"pixel ({x}, {y}) averages {mean.max():.3g}, beyond the float32 "
-                            "maximum (3.4e38) of the image: scale the scene's emission down")
-        # Unbiased sample variance of one sample, divided by spp: variance of the mean.
-        var = np.maximum(acc2 / spp - mean * mean, 0.0) * spp / max(spp - 1, 1) / spp
-        return RenderResult(mean.astype(np.float32), var, seconds,
-                            self.build_seconds, W * H * spp, nonfinite)
+            for c in range(chunks.count):
+                before = W * H * chunks.spp_before(c)
+
+                def progress(done: int, before: int = before) -> None:
+                    bar.update(before + done - bar.n)
+                    if on_pass is not None:
+                        on_pass(before + done, W * H * spp)
+
+                merged.push(self.render_chunk(c, progress))
+        return finish(merged, time.perf_counter() - t0, self.build_seconds)
+
+
+def finish(merged: ChunkMerge, seconds: float, build_seconds: float) -> RenderResult:
+    """The image and variance of a finished merge."""
+    spp = merged.spp
+    H, W, _ = merged.sum.shape
+    mean = merged.sum / spp
+    if mean.max() > np.finfo(np.float32).max:
+        y, x, _ = np.unravel_index(np.argmax(mean), mean.shape)
+        raise DrptError(f"pixel ({x}, {y}) averages {mean.max():.3g}, beyond the float32 "
+                        "maximum (3.4e38) of the image: scale the scene's emission down")
+    # Unbiased sample variance of one sample, divided by spp: variance of the mean.
+    var = np.maximum(merged.sumsq / spp - mean * mean, 0.0) * spp / max(spp - 1, 1) / spp
+    return RenderResult(mean.astype(np.float32), var, seconds,
+                        build_seconds, W * H * spp, merged.nonfinite)

@@ -1,0 +1,206 @@
+"""Chunks traced on a Dask cluster: a local one or one at an address.
+
+Dask distributed is the engine: it is pure Python (``pip install``, no
+runtime of its own), starts a local cluster of worker processes in one call
+(``LocalCluster(n_workers=N, threads_per_worker=1, processes=True)``),
+joins a remote scheduler by address, runs a task again elsewhere when its
+worker dies, and has ``as_completed`` and a dashboard.
+
+What travels: the parsed scene (:class:`~drpt.scene.model.Scene`: geometry,
+materials, lights, camera; pickled) goes to every worker once
+(``client.scatter(..., broadcast=True)``; a worker that starts later copies
+it from a peer). Images the scene names (textures, the sky) are read by each
+worker from the same path, so across machines they must be on a shared path.
+Each task then carries the scene's hash, the options and a chunk index, and
+returns the chunk's float64 sums (48 bytes per pixel). A worker process keeps
+its :class:`~drpt.render.renderer.Renderer` (device scene, accelerator,
+compiled kernels) between chunks of the same scene and options
+(:func:`trace_chunk`). Workers of a local cluster share the cores: Dr.Jit's
+thread pool in each gets ``cores // N`` threads; a ``dask worker`` started by
+hand keeps Dr.Jit's default, a thread per core of its machine.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import replace
+
+from ..errors import DrptError
+from ..render.chunks import ChunkResult
+
+# Per worker process: the renderer of the last (scene hash, options) it traced.
+_RENDERERS: dict[str, object] = {}
+
+
+def trace_chunk(key: str, scene, opts, index: int, backend: str = "llvm") -> ChunkResult:
+    """Run on a worker: chunk ``index`` of the render ``key`` (scene hash and
+    options) on the coordinator's Dr.Jit ``backend``. The first chunk of a
+    render on a worker builds its renderer (and returns the scene's
+    warnings); later ones reuse it."""
+    from .. import backend as backends
+
+    backends.select(backend)
+    from ..backend import ensure
+    from ..render.renderer import Renderer
+
+    renderer = _RENDERERS.get(key)
+    new = renderer is None
+    if new:
+        _RENDERERS.clear()
+        ensure()
+        renderer = Renderer(scene, replace(opts, progress=False))
+        _RENDERERS[key] = renderer
+    result = renderer.render_chunk(index)
+    try:
+        from distributed import get_worker
+
+        result.worker = get_worker().address
+    except (ImportError, ValueError):
+        result.worker = f"pid {os.getpid()}"
+    if new:
+        result.warnings = list(renderer.warnings)
+        result.seconds += renderer.build_seconds
+    return result
+
+
+def _share_cores(threads: int) -> None:
+    """Run on a local worker: Dr.Jit's thread pool takes its share of the cores."""
+    import drjit as dr
+
+    dr.set_thread_count(threads)
+
+
+# The function the workers run; tests replace it with one that fails.
+TASK = trace_chunk
+
+
+def _lost(e: BaseException) -> bool:
+    """Whether ``e`` means the scheduler (or the connection to it) is gone."""
+    import asyncio
+    import concurrent.futures
+
+    from distributed.comm.core import CommClosedError
+
+    return isinstance(e, (CommClosedError, OSError, TimeoutError, asyncio.CancelledError,
+                          concurrent.futures.CancelledError))
+
+
+def _one_line(e: BaseException) -> str:
+    text = " ".join(f"{type(e).__name__}: {e}".split())
+    if "deserializ" in text:
+        text += " (the scheduler and every worker need this drpt installed, and its dependencies)"
+    return text
+
+
+class DaskEngine:
+    """Traces chunks on ``workers`` local worker processes or on the scheduler
+    at ``address``; :meth:`results` yields them as they finish.
+
+    A chunk whose task raised is tried ``retries`` more times, then stops the
+    render with a DrptError; one whose worker died runs on another worker
+    (Dask's own rule, up to ``distributed.scheduler.allowed-failures`` deaths)."""
+
+    def __init__(self, scene, scene_hash: str, opts, *, workers: int | None = None,
+                 address: str | None = None, connect_timeout: float = 5.0, retries: int = 2):
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            raise DrptError("--workers/--cluster need Dask distributed: "
+                            "pip install 'drpt[cluster]' (or pip install distributed)") from None
+        from ..backend import name, policy
+
+        if opts.max_lanes is None:  # the coordinator's, not each worker's, default
+            opts = replace(opts, max_lanes=policy().max_lanes)
+        self.scene, self.opts, self.backend = scene, opts, name()
+        self.key = scene_hash + json.dumps(repr(opts))
+        self.workers, self.address = workers, address
+        self.connect_timeout, self.retries = connect_timeout, retries
+        self.client = self.cluster = None
+
+    def __enter__(self) -> DaskEngine:
+        from distributed import Client, LocalCluster
+
+        # drpt reports lost workers, failed chunks and a lost scheduler itself, in one line
+        names = ["distributed"] + [n for n in logging.root.manager.loggerDict
+                                   if n.startswith("distributed.")]
+        self.log_levels = {n: logging.getLogger(n).level for n in names}
+        for n in names:
+            logging.getLogger(n).setLevel(logging.CRITICAL)
+        try:
+            if self.address is not None:
+                try:
+                    self.client = Client(self.address, timeout=self.connect_timeout)
+                except (OSError, TimeoutError, ValueError) as e:
+                    raise DrptError(f"--cluster {self.address}: no Dask scheduler answered within "
+                                    f"{self.connect_timeout:g} s ({_one_line(e)})") from None
+            else:
+                self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
+                                            processes=True, dashboard_address=None,
+                                            silence_logs=logging.ERROR)
+                self.client = Client(self.cluster)
+                # one core per worker process (Dr.Jit would start a thread per core in each)
+                self.client.run(_share_cores, max(1, (os.cpu_count() or 1) // self.workers))
+        except BaseException:
+            self.__exit__()
+            raise
+        self.scene_future = self.client.scatter(self.scene, broadcast=True)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for thing in (self.client, self.cluster):
+            if thing is not None:
+                try:
+                    thing.close()
+                except Exception:  # noqa: BLE001 - closing a lost connection
+                    pass
+        for n, level in getattr(self, "log_levels", {}).items():
+            logging.getLogger(n).setLevel(level)
+
+    @property
+    def n_workers(self) -> int:
+        return max(1, len(self.client.scheduler_info().get("workers", {})))
+
+    def results(self, todo: Iterable[int]) -> Iterator[ChunkResult]:
+        from distributed import as_completed
+
+        todo = iter(todo)
+        window = 4 * self.n_workers
+        index_of = {}
+        ac = as_completed()
+
+        def submit() -> bool:
+            i = next(todo, None)
+            if i is None:
+                return False
+            f = self.client.submit(TASK, self.key, self.scene_future, self.opts, i, self.backend,
+                                   retries=self.retries, pure=False, priority=-i)
+            index_of[f] = i
+            ac.add(f)
+            return True
+
+        for _ in range(window):
+            if not submit():
+                break
+        try:
+            for f in ac:
+                i = index_of.pop(f)
+                if f.status == "error":
+                    e = f.exception()
+                    raise DrptError(f"chunk {i} failed {self.retries + 1} times on the workers: "
+                                    f"{_one_line(e)}")
+                if f.status == "cancelled":
+                    raise DrptError(f"the Dask scheduler went away (chunk {i} was cancelled)")
+                result = f.result()
+                f.release()
+                yield result
+                submit()
+        except DrptError:
+            raise
+        except (Exception, asyncio.CancelledError) as e:
+            if _lost(e):
+                raise DrptError(f"the Dask scheduler went away ({_one_line(e)})") from None
+            raise

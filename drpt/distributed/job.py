@@ -1,0 +1,180 @@
+"""One render job: its chunks traced here or on Dask, merged in order,
+checkpointed, resumable.
+
+:func:`run` is what ``drpt render`` calls. Chunks come from an engine: in
+this process (:class:`LocalEngine`, chunk after chunk) or on Dask
+(:class:`~drpt.distributed.engine.DaskEngine`, in any order), and go to a
+:class:`~drpt.render.chunks.ChunkMerge`. The merged sums are written as a
+checkpoint (:mod:`.checkpoint`) every ``checkpoint_seconds`` and whenever the
+job stops before its end (Ctrl-C, SIGTERM, a failing chunk, a lost
+scheduler, any error in this process); the caller removes it once the image
+is written (:func:`drpt.distributed.checkpoint.remove`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..backend import policy
+from ..errors import note
+from ..render.chunks import ChunkMerge, ChunkResult, plan_chunks
+from . import checkpoint
+
+
+class LocalEngine:
+    """Chunks traced in this process, in order, by one :class:`Renderer`."""
+
+    def __init__(self, scene, opts):
+        from dataclasses import replace
+
+        from ..render.renderer import Renderer
+
+        self.renderer = Renderer(scene, replace(opts, progress=False))
+        self.sent_warnings = False
+
+    def __enter__(self) -> LocalEngine:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+    def results(self, todo: Iterable[int]) -> Iterator[ChunkResult]:
+        for i in todo:
+            r = self.renderer.render_chunk(i)
+            r.worker = "this process"
+            if not self.sent_warnings:
+                r.warnings, self.sent_warnings = list(self.renderer.warnings), True
+                r.seconds += self.renderer.build_seconds
+            yield r
+
+
+@contextlib.contextmanager
+def _stop_requests():
+    """Ctrl-C and SIGTERM ask the job to stop after the chunk in hand (a
+    KeyboardInterrupt inside a Dr.Jit trace would surface as a RuntimeError);
+    a second one stops at once. Yields a list that is non-empty once asked."""
+    asked: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield asked
+        return
+
+    def handler(signum, frame):
+        if asked:
+            raise KeyboardInterrupt
+        asked.append(signum)
+
+    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield asked
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+@dataclass
+class WorkerStats:
+    chunks: int = 0
+    samples: int = 0
+    seconds: float = 0.0
+
+
+@dataclass
+class Job:
+    """What :func:`run` returns besides the image."""
+
+    result: object  # RenderResult
+    workers: dict[str, WorkerStats] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    resumed_from: int = 0  # chunks merged by the checkpoint it resumed
+
+
+def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str | None = None,
+        resume: bool = False, checkpoint_seconds: float = 30.0, connect_timeout: float = 5.0,
+        on_chunk: Callable | None = None) -> Job:
+    """Render ``scene`` with ``opts``; checkpoints go beside ``output``.
+
+    Ctrl-C or SIGTERM stops the job after the chunk in hand (a second one at
+    once) with a KeyboardInterrupt, after writing a checkpoint.
+
+    ``workers`` starts a local Dask cluster of that many processes, ``cluster``
+    joins the scheduler at that address, neither traces in this process.
+    ``on_chunk(merge, result, engine)`` is called after each result arrives."""
+    from tqdm import tqdm
+
+    from ..render.renderer import finish
+
+    W, H, spp = opts.width, opts.height, opts.spp
+    max_lanes = policy().max_lanes if opts.max_lanes is None else opts.max_lanes
+    chunks = plan_chunks(W, H, spp, max_lanes, opts.chunk_spp)
+    key = checkpoint.scene_hash(scene)
+    okey = checkpoint.options_key(opts)
+    if resume:
+        cp = checkpoint.load(output, key, okey, chunks.count)
+        merged = ChunkMerge(chunks, cp.next, cp.sum, cp.sumsq, cp.nonfinite)
+    else:
+        merged = ChunkMerge(chunks)
+    job = Job(None, resumed_from=merged.next)
+
+    def save() -> None:
+        checkpoint.save(output, checkpoint.Checkpoint(key, okey, chunks.count, merged.next, merged.spp,
+                                                      merged.nonfinite, merged.sum, merged.sumsq))
+
+    if workers is None and cluster is None:
+        engine = LocalEngine(scene, opts)
+    else:
+        from .engine import DaskEngine
+
+        engine = DaskEngine(scene, key, opts, workers=workers, address=cluster,
+                            connect_timeout=connect_timeout)
+    t0 = last = time.perf_counter()
+    seen = set()
+    build = 0.0
+    try:
+        with _stop_requests() as asked, engine, tqdm(total=W * H * spp, initial=W * H * merged.spp, unit="spl",
+                          unit_scale=True, disable=not opts.progress, desc="render",
+                          leave=False) as bar:
+            for r in engine.results(range(merged.next, chunks.count)):
+                stats = job.workers.setdefault(r.worker, WorkerStats())
+                stats.chunks += 1
+                stats.samples += W * H * r.spp
+                stats.seconds += r.seconds
+                for w in r.warnings:
+                    if w not in job.warnings:
+                        job.warnings.append(w)
+                if r.index not in seen:
+                    seen.add(r.index)
+                    bar.update(W * H * r.spp)
+                merged.push(r)
+                if on_chunk is not None:
+                    on_chunk(merged, r, engine)
+                if asked:
+                    raise KeyboardInterrupt
+                now = time.perf_counter()
+                if not merged.done and now - last >= checkpoint_seconds:
+                    save()
+                    last = now
+    except BaseException:
+        if merged.next > job.resumed_from or resume:
+            save()
+            npz, _ = checkpoint.paths(output)
+            note(f"checkpoint {npz.name} kept: {merged.next} of {chunks.count} chunks "
+                 f"({merged.spp} of {spp} spp); continue with --resume")
+        raise
+    if isinstance(engine, LocalEngine):
+        build = engine.renderer.build_seconds
+    job.result = finish(merged, time.perf_counter() - t0, build)
+    return job
+
+
+def print_workers(job: Job, file=sys.stderr) -> None:
+    """Per-worker figures: chunks, samples and seconds each."""
+    for name, s in sorted(job.workers.items()):
+        print(f"  {name}: {s.chunks} chunks, {s.samples / 1e6:.3g} Msamples, {s.seconds:.2f} s",
+              file=file)

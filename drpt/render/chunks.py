@@ -1,0 +1,153 @@
+"""Chunks of a render: fixed groups of passes, and their exact merge.
+
+A render's passes (:class:`~drpt.render.renderer.PassPlan`) are grouped into
+*chunks*: chunk ``c`` is the sample steps ``[c * steps, (c + 1) * steps)``
+of the plan, each with all its bands of rows, so every chunk covers the
+whole image with the same number of samples per pixel (the last chunk may
+have fewer). A chunk is a pure function of the scene, the render options
+and its index: its passes keep their global pass indices, which select the
+PCG32 streams (:meth:`Renderer._trace_pass
+<drpt.render.renderer.Renderer._trace_pass>`), so a chunk traced twice, on
+any process or machine, gives the same arrays.
+
+:func:`plan_chunks` caps the plan's samples per pixel of a pass at the
+chunk size, so a small image can still be cut into many chunks. Without a
+chunk size a chunk is one sample step of the plan: then a render's passes,
+random numbers and float64 sums are the ones of a render that adds pass
+after pass (a pass's sums land in zeros, adding zeros is exact).
+
+:class:`ChunkMerge` adds chunk results in chunk order whatever order they
+arrive in (later ones wait in a buffer), so the float64 sums, and the image,
+do not depend on how many processes traced the chunks, in which order they
+finished, or how often one was traced again. :func:`merge` is the same for
+a finished list.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from .renderer import PassPlan
+
+
+@dataclass(frozen=True)
+class ChunkPlan:
+    """Chunk ``c`` is the passes ``passes_of(c)`` of :attr:`passes`: sample
+    steps ``[c * steps, (c + 1) * steps)``, every band of rows of each."""
+
+    passes: PassPlan
+    steps: int  # sample steps of the pass plan per chunk
+
+    @property
+    def sample_steps(self) -> int:
+        return -(-self.passes.spp // self.passes.k)
+
+    @property
+    def count(self) -> int:
+        return -(-self.sample_steps // self.steps)
+
+    def __len__(self) -> int:
+        return self.count
+
+    def passes_of(self, c: int) -> range:
+        if not 0 <= c < self.count:
+            raise IndexError(f"chunk {c} of {self.count}")
+        bands = self.passes.bands
+        return range(c * self.steps * bands, min((c + 1) * self.steps * bands, self.passes.count))
+
+    def spp_of(self, c: int) -> int:
+        """Samples per pixel of chunk ``c`` (the same at every pixel)."""
+        p = self.passes
+        s0 = c * self.steps * p.k
+        return min(self.steps * p.k, p.spp - s0)
+
+    def spp_before(self, c: int) -> int:
+        """Samples per pixel of chunks ``0..c-1``."""
+        return min(c * self.steps * self.passes.k, self.passes.spp)
+
+
+def plan_chunks(width: int, height: int, spp: int, max_lanes: int,
+                chunk_spp: int | None = None) -> ChunkPlan:
+    """The chunks of a render. A pass traces at most ``chunk_spp`` samples
+    per pixel, and a chunk is the most whole sample steps of the pass plan
+    that hold at most ``chunk_spp`` (at least one step); ``None`` is one
+    sample step of :func:`~drpt.render.renderer.plan_passes`' plan per chunk."""
+    from .renderer import plan_passes
+
+    plan = plan_passes(width, height, spp, max_lanes)
+    if chunk_spp is None:
+        return ChunkPlan(plan, 1)
+    plan = replace(plan, k=min(plan.k, chunk_spp))
+    return ChunkPlan(plan, max(1, chunk_spp // plan.k))
+
+
+@dataclass
+class ChunkResult:
+    """What one chunk returns: per-pixel sums of its samples and of their
+    squares (float64, ``(H, W, 3)``), and its samples per pixel ``spp`` (every
+    pixel has the same count)."""
+
+    index: int
+    spp: int
+    sum: np.ndarray
+    sumsq: np.ndarray
+    nonfinite: int = 0  # samples dropped as NaN/Inf
+    seconds: float = 0.0  # time the chunk took where it ran
+    worker: str = ""  # where it ran (a Dask worker's address; "" in process)
+    warnings: list[str] = field(default_factory=list)  # the scene's, from the first chunk a worker ran
+
+
+class ChunkMerge:
+    """Adds chunk results in chunk order: :meth:`push` takes them in any
+    order, keeps those that arrive early, and adds each when its turn comes.
+
+    ``next`` is the first chunk not merged yet; a merge can start from a
+    checkpoint's sums (``next``, ``sum``, ``sumsq``, ``nonfinite``)."""
+
+    def __init__(self, chunks: ChunkPlan, next: int = 0, sum: np.ndarray | None = None,
+                 sumsq: np.ndarray | None = None, nonfinite: int = 0):
+        p = chunks.passes
+        shape = (p.height, p.width, 3)
+        self.chunks = chunks
+        self.next = next
+        self.sum = np.zeros(shape, np.float64) if sum is None else np.array(sum, np.float64)
+        self.sumsq = np.zeros(shape, np.float64) if sumsq is None else np.array(sumsq, np.float64)
+        self.nonfinite = nonfinite
+        self.pending: dict[int, ChunkResult] = {}
+
+    @property
+    def done(self) -> bool:
+        return self.next >= self.chunks.count
+
+    @property
+    def spp(self) -> int:
+        """Samples per pixel merged so far."""
+        return self.chunks.spp_before(self.next)
+
+    def push(self, result: ChunkResult) -> list[int]:
+        """Take ``result``; return the chunks merged by it (none if it is early,
+        or a chunk merged before: a result traced twice is dropped)."""
+        if result.index >= self.next:
+            self.pending.setdefault(result.index, result)
+        merged = []
+        while self.next in self.pending:
+            r = self.pending.pop(self.next)
+            self.sum += r.sum
+            self.sumsq += r.sumsq
+            self.nonfinite += r.nonfinite
+            merged.append(self.next)
+            self.next += 1
+        return merged
+
+
+def merge(chunks: ChunkPlan, results: Iterable[ChunkResult]) -> ChunkMerge:
+    """The merge of ``results`` (any order), as :class:`ChunkMerge` adds them."""
+    m = ChunkMerge(chunks)
+    for r in results:
+        m.push(r)
+    return m
