@@ -2,7 +2,7 @@
 
 A displaced tessellated sphere (~500k triangles) is hit by ~1M random rays
 (origins on a surrounding sphere, aimed at jittered points near the centre).
-Run: /work/venv/bin/python benchmarks/bvh_quick.py [n_theta] [n_rays]
+Run: .venv/bin/python benchmarks/bvh_quick.py [n_theta] [n_rays]
 """
 
 from __future__ import annotations

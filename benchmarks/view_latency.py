@@ -20,10 +20,9 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
 DEFAULT_SCENES = [REPO / "scenes" / "cornellbox" / "cornellbox.txt",
-                  Path("/work/main/scenes/diningroom/diningroom.txt")]
+                  REPO / "scenes" / "diningroom" / "diningroom.txt"]  # python scenes/make_diningroom.py
 
 
 def main() -> int:

@@ -9,7 +9,7 @@ chunk costs beyond its share of the plain render:
 ``(workers * distributed seconds - plain seconds) / chunks``: scheduling, the
 transfer of the 48-byte-per-pixel sums, the merge, and idle workers at the end.
 
-Run: python benchmarks/distributed.py [--scene S] [--size W H] [--spp N] [--workers N]
+Run: python benchmarks/cluster_render.py [--scene S] [--size W H] [--spp N] [--workers N]
      [--chunks 1,4,16,64]
 """
 
@@ -17,17 +17,13 @@ from __future__ import annotations
 
 import argparse
 import logging
-import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-REPO = HERE.parent
-# this file's name is the Dask package's: import that one, and drpt from this checkout
-sys.path[:] = [str(REPO)] + [p for p in sys.path if Path(p or ".").resolve() != HERE]
+REPO = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
