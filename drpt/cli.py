@@ -98,9 +98,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.gui:
         scene, opts = _gui(scene, opts, args)
     job = run(scene, opts, output, workers=args.workers, cluster=args.cluster,
-              resume=args.resume, checkpoint_seconds=args.checkpoint_seconds)
-    for message in job.warnings:
-        warn(message)
+              resume=args.resume, checkpoint_seconds=args.checkpoint_seconds, on_warning=warn)
     result = job.result
     if result.nonfinite:
         warn(f"{result.nonfinite} samples were NaN/Inf and were set to 0")

@@ -97,7 +97,7 @@ class Job:
 
 def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str | None = None,
         resume: bool = False, checkpoint_seconds: float = 30.0, connect_timeout: float = 5.0,
-        on_chunk: Callable | None = None) -> Job:
+        on_chunk: Callable | None = None, on_warning: Callable[[str], None] | None = None) -> Job:
     """Render ``scene`` with ``opts``; checkpoints go beside ``output``.
 
     Ctrl-C or SIGTERM stops the job after the chunk in hand (a second one at
@@ -105,7 +105,10 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
 
     ``workers`` starts a local Dask cluster of that many processes, ``cluster``
     joins the scheduler at that address, neither traces in this process.
-    ``on_chunk(merge, result, engine)`` is called after each result arrives."""
+    ``on_chunk(merge, result, engine)`` is called after each result arrives;
+    ``on_warning(message)`` once for each of the scene's warnings, as soon as
+    it is known (before tracing in this process, with the first chunk from
+    workers)."""
     from tqdm import tqdm
 
     from ..render.renderer import finish
@@ -126,8 +129,16 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         checkpoint.save(output, checkpoint.Checkpoint(key, okey, chunks.count, merged.next, merged.spp,
                                                       merged.nonfinite, merged.sum, merged.sumsq))
 
+    def report(messages) -> None:
+        for w in messages:
+            if w not in job.warnings:
+                job.warnings.append(w)
+                if on_warning is not None:
+                    on_warning(w)
+
     if workers is None and cluster is None:
         engine = LocalEngine(scene, opts)
+        report(engine.renderer.warnings)
     else:
         from .engine import DaskEngine
 
@@ -145,9 +156,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
                 stats.chunks += 1
                 stats.samples += W * H * r.spp
                 stats.seconds += r.seconds
-                for w in r.warnings:
-                    if w not in job.warnings:
-                        job.warnings.append(w)
+                report(r.warnings)
                 if r.index not in seen:
                     seen.add(r.index)
                     bar.update(W * H * r.spp)
