@@ -381,3 +381,15 @@ def test_view_command(tmp_path):
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=30)
     assert proc.returncode == 130
+
+
+def test_plane_quad_lies_on_its_plane_around_the_centre():
+    pytest.importorskip("viser")
+    from drpt.view.server import plane_quad
+
+    n, offset, center = np.array([0.0, 2.0, 0.0]), -1.5, np.array([3.0, 7.0, -2.0])
+    v, f = plane_quad(n, offset, center, 10.0)
+    assert v.shape == (4, 3) and f.tolist() == [[0, 1, 2], [0, 2, 3]]
+    np.testing.assert_allclose(v @ (n / 2), offset, atol=1e-5)  # on dot(n, x) = offset
+    np.testing.assert_allclose(v.mean(0), [3.0, -1.5, -2.0], atol=1e-5)  # centre projected
+    np.testing.assert_allclose(np.linalg.norm(v[0] - v[2]), 20.0 * np.sqrt(2), rtol=1e-6)

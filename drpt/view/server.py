@@ -1,8 +1,8 @@
 """The viewer: a local viser server showing a progressively path-traced scene.
 
 :class:`Viewer` serves the scene's geometry as a raster preview (one
-``add_mesh_simple`` per material, spheres as icospheres; planes are not
-drawn) and sends the path-traced frame of
+``add_mesh_simple`` per material, spheres as icospheres, an infinite plane
+as a square ten times the size of the other geometry around it) and sends the path-traced frame of
 :class:`~drpt.render.progressive.Progressive` as the background image
 behind it. The browser's camera controls (orbit, dolly, truck) update the
 camera: the path tracer starts over, at a quarter of the resolution while
@@ -145,6 +145,17 @@ class Viewer:
                 color=_rgb(mats[int(sc.spheres.material[i])].kd),
                 position=tuple(float(c) for c in sc.spheres.center[i]), cast_shadow=False,
                 receive_shadow=False))
+        planes = sc.planes
+        if len(planes):
+            lo, hi = sc.bounds()
+            finite = bool(np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)))
+            center = (lo + hi) / 2 if finite else np.zeros(3)
+            half = 5.0 * max(float(np.linalg.norm(hi - lo)), 1e-6) if finite else 100.0
+            for i in range(len(planes)):
+                handles.append(self.server.scene.add_mesh_simple(
+                    f"/scene/plane_{i}", *plane_quad(planes.normal[i], planes.offset[i], center, half),
+                    color=_rgb(mats[int(planes.material[i])].kd), side="double", cast_shadow=False,
+                    receive_shadow=False))
         return handles
 
     def _connect(self, client) -> None:
@@ -344,6 +355,18 @@ def _basis(cam: Camera):
     from ..render.camera import camera_basis
 
     return camera_basis(cam)
+
+
+def plane_quad(normal, offset: float, center, half: float) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and faces of the square of half-size ``half`` on the plane
+    ``dot(normal, x) = offset``, centred on ``center`` projected onto it."""
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    c = np.asarray(center, float) - n * (np.dot(n, center) - offset)
+    a = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(n, a)
+    v = np.array([c + half * (sa * a + sb * b) for sa, sb in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+    return v.astype(np.float32), np.array([[0, 1, 2], [0, 2, 3]], np.uint32)
 
 
 def _rgb(c) -> tuple[int, int, int]:
