@@ -96,6 +96,9 @@ def _one_line(e: BaseException) -> str:
     return text
 
 
+RESUBMITS = 3  # times a chunk cancelled under a live scheduler is submitted again
+
+
 class DaskEngine:
     """Traces chunks on ``workers`` local worker processes or on the scheduler
     at ``address``; :meth:`results` yields them as they finish.
@@ -164,40 +167,78 @@ class DaskEngine:
     def n_workers(self) -> int:
         return max(1, len(self.client.scheduler_info().get("workers", {})))
 
+    def _scheduler_alive(self) -> bool:
+        """Whether the client is still connected to its scheduler (a lost
+        scheduler turns the status to connecting or closed within moments)."""
+        import time
+
+        for _ in range(5):
+            if self.client.status != "running":
+                return False
+            time.sleep(0.1)
+        return True
+
     def results(self, todo: Iterable[int]) -> Iterator[ChunkResult]:
+        """The chunks of ``todo`` as they finish. A chunk cancelled while the
+        scheduler still answers (a worker that died can take its tasks, or the
+        scene's copy, with it) is submitted again, up to ``RESUBMITS`` times."""
         from distributed import as_completed
 
         todo = iter(todo)
         window = 4 * self.n_workers
         index_of = {}
+        resubmitted: dict[int, int] = {}
         ac = as_completed()
 
-        def submit() -> bool:
-            i = next(todo, None)
-            if i is None:
-                return False
+        def submit(i: int) -> None:
+            if self.scene_future.status != "finished":  # its holders died: send the scene again
+                self.scene_future = self.client.scatter(self.scene, broadcast=True)
             f = self.client.submit(TASK, self.key, self.scene_future, self.opts, i, self.backend,
                                    retries=self.retries, pure=False, priority=-i)
             index_of[f] = i
             ac.add(f)
+
+        def submit_next() -> bool:
+            i = next(todo, None)
+            if i is None:
+                return False
+            submit(i)
             return True
 
+        def again(i: int, why: str) -> None:
+            """Submit chunk ``i`` once more, or stop: the scheduler is gone."""
+            if resubmitted.get(i, 0) < RESUBMITS and self._scheduler_alive():
+                resubmitted[i] = resubmitted.get(i, 0) + 1
+                submit(i)
+                return
+            raise DrptError(f"the Dask scheduler went away ({why})")
+
         for _ in range(window):
-            if not submit():
+            if not submit_next():
                 break
         try:
             for f in ac:
                 i = index_of.pop(f)
                 if f.status == "error":
                     e = f.exception()
-                    raise DrptError(f"chunk {i} failed {self.retries + 1} times on the workers: "
-                                    f"{_one_line(e)}")
+                    if not _lost(e):
+                        raise DrptError(f"chunk {i} failed {self.retries + 1} times on the workers: "
+                                        f"{_one_line(e)}")
+                    again(i, _one_line(e))
+                    continue
                 if f.status == "cancelled":
-                    raise DrptError(f"the Dask scheduler went away (chunk {i} was cancelled)")
-                result = f.result()
+                    again(i, f"chunk {i} was cancelled")
+                    continue
+                try:
+                    result = f.result()
+                except (Exception, asyncio.CancelledError) as e:
+                    if not _lost(e):
+                        raise
+                    again(i, _one_line(e))
+                    continue
                 f.release()
                 yield result
-                submit()
+                submit_next()
         except DrptError:
             raise
         except (Exception, asyncio.CancelledError) as e:
