@@ -177,9 +177,17 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with drpt's error format: one line, exit status 2 (argparse's
+    own prints the whole usage first)."""
+
+    def error(self, message: str):
+        print(f"drpt: error: {self.prog}: {message} (see {self.prog} --help)", file=sys.stderr)
+        sys.exit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="drpt", description=__doc__.split("\n")[0],
-                                     allow_abbrev=False)
+    parser = _Parser(prog="drpt", description=__doc__.split("\n")[0], allow_abbrev=False)
     sub = parser.add_subparsers(dest="command", required=True)
     render = sub.add_parser("render", help="render a scene to an image", allow_abbrev=False)
     _add_render_args(render)

@@ -288,3 +288,19 @@ def test_warn_and_note_format(capsys):
     assert capsys.readouterr().err.splitlines() == [
         "drpt: warning: a.txt:3: two lines", "drpt: warning: no place",
         "drpt: note: b.mtl: ignored"]
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["render", CORNELL, "--accel", "bvh-foo"], "invalid choice: 'bvh-foo'"),
+    (["render", CORNELL, "--spp", "abc"], "invalid int value: 'abc'"),
+    (["nosuch"], "invalid choice: 'nosuch'"),
+    ([], "required: command"),
+    (["bench", "--repeat"], "expected one argument"),
+])
+def test_flag_parsing_errors_are_one_line(capsys, args, needle):
+    # argparse's own error prints the whole usage; drpt's is one line, status 2
+    with pytest.raises(SystemExit) as e:
+        main(args)
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("drpt: error: drpt") and needle in err[0], err
