@@ -80,7 +80,8 @@ POLICIES = {
 }
 
 _name: str | None = None
-_checked: set[str] = set()
+_checked: set[str] = set()  # backends (and "llvm-version") that ensure() has checked
+_bad_env: str | None = None  # an unusable DRPT_BACKEND value, reported by ensure()
 
 
 def _kernels_imported() -> bool:
@@ -113,12 +114,9 @@ def select_from_env() -> None:
         select(os.environ.get(ENV_VAR, "llvm") or "llvm")
     except DrptError:
         # a bad value is reported by ensure(), from code that can print it
-        select("llvm")
         global _bad_env
+        select("llvm")
         _bad_env = os.environ.get(ENV_VAR)
-
-
-_bad_env: str | None = None
 
 
 def name() -> str:
