@@ -119,6 +119,7 @@ from drpt.scene.model import (
     PointLight,
     Scene,
     Skybox,
+    SpotLight,
 )
 from drpt.shading import BSDFSpec, interpret_scene, untextured_note
 
@@ -210,6 +211,13 @@ def look_at_matrix(origin, target, up) -> np.ndarray:
     m = np.eye(4)
     m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, new_up, d, origin
     return m
+
+
+def _any_perpendicular(d) -> tuple[float, float, float]:
+    """An up vector for ``look_at_matrix`` that is not parallel to ``d``."""
+    d = _normalize(d)
+    a = np.array([0.0, 1.0, 0.0]) if abs(d[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    return tuple(float(x) for x in a)
 
 
 def _frame_matrix(center, normal, half_size) -> np.ndarray:
@@ -376,10 +384,23 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
             out[f"light_{i}"] = {"type": "directional",
                                  "direction": _Vector(tuple(_normalize(_f3(light.direction)))),
                                  "irradiance": _RGB(_f3(light.color))}
+        elif isinstance(light, SpotLight):
+            m = look_at_matrix(_f3(light.position),
+                               tuple(a + b for a, b in zip(_f3(light.position), _f3(light.direction))),
+                               _any_perpendicular(_f3(light.direction)))
+            out[f"light_{i}"] = {"type": "spot", "to_world": _Matrix(m),
+                                 "intensity": _RGB(_f3(light.color)),
+                                 "cutoff_angle": float(light.cutoff_angle),
+                                 "beam_width": float(light.beam_width)}
         elif isinstance(light, Skybox):
             from .mitsuba_envmap import to_mitsuba as envmap_to_mitsuba
 
-            node = envmap_to_mitsuba(light)
+            node = envmap_to_mitsuba(light, scale=getattr(light, "scale", 1.0))
+            rotation = getattr(light, "rotation", None)
+            if rotation is not None:
+                m = np.eye(4)
+                m[:3, :3] = rotation
+                node["to_world"] = m @ node["to_world"]
             node["to_world"] = _Matrix(node["to_world"])
             out[f"light_{i}"] = node
         else:  # pragma: no cover

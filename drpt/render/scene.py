@@ -49,7 +49,7 @@ from ..scene.model import Scene, Skybox
 from .bsdf import BSDFSample
 from .lights.area import AreaLights
 from .lights.delta import DeltaLights
-from .lights.envmap import EnvironmentLight, UniformSphereSampling, check_radius
+from .lights.envmap import EnvironmentLight, RotatedEnvironment, UniformSphereSampling, check_radius
 from .material import MaterialTable
 from .spawn import origin as spawn_origin
 from .surface import Interaction, SurfaceData
@@ -140,10 +140,13 @@ class DeviceScene:
         if skies:
             if len(skies) > 1:
                 self.warnings.append(f"{len(skies)} Skybox lights: using the first")
-            self.environment = EnvironmentLight.from_file(skies[0].path)
+            sky = skies[0]
+            self.environment = EnvironmentLight.from_file(sky.path, scale=getattr(sky, "scale", 1.0))
             self.warnings += self.environment.warnings
             if options.env_sampling == "uniform":
                 self.environment = UniformSphereSampling(self.environment)
+            if getattr(sky, "rotation", None) is not None:
+                self.environment = RotatedEnvironment(self.environment, sky.rotation)
             lo, hi = scene.bounds()
             msg = check_radius(lo, hi, skies[0].radius)
             if msg:

@@ -161,18 +161,52 @@ class DirectionalLight:
 
 
 @dataclass
+class SpotLight:
+    """Mitsuba's ``spot``: a point light at ``position`` shining along
+    ``direction`` with intensity ``color`` inside a cone: full within
+    ``beam_width`` degrees of the axis, falling linearly in angle to 0 at
+    ``cutoff_angle`` degrees. Irradiance ``color * falloff / d^2``."""
+
+    position: Vec3
+    direction: Vec3  # the cone's axis, need not be normalized
+    color: Vec3
+    cutoff_angle: float = 20.0  # degrees
+    beam_width: float = 15.0  # degrees, at most cutoff_angle
+
+
+@dataclass
 class Skybox:
     path: Path  # lat-long .hdr or .exr, absolute path
     radius: float = 1000.0  # the seed's R
+    scale: float = 1.0  # radiance multiplier (Mitsuba envmap's scale)
+    #: 3x3 rotation from the map's frame to world (Mitsuba envmap's to_world); None: identity
+    rotation: np.ndarray | None = None
 
 
-Light = PointLight | DirectionalLight | Skybox
+Light = PointLight | DirectionalLight | SpotLight | Skybox
 
 
 @dataclass
 class Background:
     color: Vec3 = (0.0, 0.0, 0.0)  # radiance of rays that escape
     ambient: Vec3 = (0.0, 0.0, 0.0)  # Whitted ambient term
+
+
+@dataclass
+class RenderSettings:
+    """How the scene file says to render it (a Mitsuba XML's film, sampler,
+    integrator and filter); ``None``: the file does not say. Command-line
+    flags win over these (:func:`drpt.options.apply_scene_settings`)."""
+
+    width: int | None = None
+    height: int | None = None
+    spp: int | None = None
+    integrator: str | None = None  # a drpt integrator name ("path")
+    max_depth: int | None = None
+    rr_depth: int | None = None
+    hide_emitters: bool | None = None
+    rfilter: str | None = None  # reconstruction filter name: "box", "tent", "gaussian"
+    rfilter_params: dict = field(default_factory=dict)  # Mitsuba's names: radius, stddev
 
 
 # ---------------------------------------------------------------------- scene
@@ -186,6 +220,7 @@ class Scene:
     planes: Planes = field(default_factory=Planes.empty)
     lights: list[Light] = field(default_factory=list)
     background: Background = field(default_factory=Background)
+    settings: RenderSettings | None = None  # render settings the file gives (Mitsuba XML)
 
     @property
     def emissive_materials(self) -> list[int]:

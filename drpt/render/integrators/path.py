@@ -9,7 +9,8 @@ all handled without fireflies from the "wrong" strategy.
 
 Depth follows Mitsuba's ``path`` integrator: ``max_depth = 1`` shows only
 directly visible emitters, ``2`` adds direct lighting, ``-1`` is unbounded
-(Russian roulette ends paths). Russian roulette starts once ``depth >=
+(Russian roulette ends paths); ``hide_emitters`` (Mitsuba's) drops what the
+camera ray itself sees of emitters and the sky. Russian roulette starts once ``depth >=
 rr_depth``: by default a path continues with probability
 ``min(max(throughput), 0.95)``; with ``rr_prob`` set (the seed's
 ``-RR_cutdown``) it continues with that fixed probability. Surviving paths are
@@ -130,6 +131,8 @@ class PathIntegrator:
 
         # ---- emitter hit by the previous ray (or seen by the camera)
         hit_emitter = s.active & si.valid
+        if opt.hide_emitters:  # Mitsuba's hide_emitters: the camera sees no emitter or sky
+            hit_emitter &= s.depth > 0
         le = scene.emitted(si)
         w = Float(1.0)
         if nee:
@@ -137,6 +140,8 @@ class PathIntegrator:
             w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
         L = s.L + dr.select(hit_emitter, s.beta * le * w, 0.0)
         escaped = s.active & ~si.valid
+        if opt.hide_emitters:
+            escaped &= s.depth > 0
         if scene.has_background:
             L = L + dr.select(escaped, s.beta * Array3f(*scene.background), 0.0)
         if scene.has_environment:

@@ -445,3 +445,40 @@ class UniformSphereSampling:
         s, c = dr.sincos(2.0 * math.pi * u.x)
         d = Array3f(r * c, z, r * s)
         return d, self.eval(d, active), self.pdf(d, active)
+
+
+class RotatedEnvironment:
+    """An environment map turned by a rotation ``R`` (Mitsuba envmap's ``to_world``):
+    the radiance along world ``d`` is the map's along ``R^T d``; samples are the
+    map's turned by ``R``. Densities are unchanged (a rotation keeps solid angle).
+    Same interface as :class:`EnvironmentLight`."""
+
+    def __init__(self, env, rotation):
+        r = np.asarray(rotation, dtype=np.float64).reshape(3, 3)
+        if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+            raise DrptError("environment map rotation must be a rotation matrix")
+        self.env = env
+        self.is_black = env.is_black
+        self.warnings = env.warnings
+        self.rows = [tuple(float(x) for x in row) for row in r]  # R, row by row
+        self.cols = [tuple(float(x) for x in r[:, k]) for k in range(3)]  # rows of R^T
+
+    @staticmethod
+    def _apply(rows, d: Array3f) -> Array3f:
+        return Array3f(*(d.x * a + d.y * b + d.z * c for a, b, c in rows))
+
+    def to_map(self, d: Array3f) -> Array3f:
+        return self._apply(self.cols, d)
+
+    def eval(self, d: Array3f, active=True) -> Array3f:
+        return self.env.eval(self.to_map(d), active)
+
+    def pdf(self, d: Array3f, active=True) -> Float:
+        return self.env.pdf(self.to_map(d), active)
+
+    def eval_pdf(self, d: Array3f, active=True) -> tuple[Array3f, Float]:
+        return self.env.eval_pdf(self.to_map(d), active)
+
+    def sample(self, u: Array2f, active=True) -> tuple[Array3f, Array3f, Float]:
+        d, le, pdf = self.env.sample(u, active)
+        return self._apply(self.rows, d), le, pdf
