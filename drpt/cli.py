@@ -33,7 +33,7 @@ from .options import check_view_args
 def _add_render_args(p: argparse.ArgumentParser) -> None:
     from .options import add_render_flags
 
-    p.add_argument("scene", nargs="?", help="scene file (the seed's text format)")
+    p.add_argument("scene", nargs="?", help="scene file (the seed's text format, or Mitsuba XML: .xml)")
     p.add_argument("--input", "-input", dest="input", help="scene file (seed flag)")
     p.add_argument("--output", "-output", "-o", dest="output",
                    help="image to write: .exr (linear float32), .png or .tga (gamma); "
@@ -68,7 +68,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from .distributed import checkpoint
     from .distributed.job import print_workers, run
     from .imageio import write_image
-    from .options import options_from_args
+    from .options import apply_scene_settings, options_from_args
     from .scene import load_scene
 
     scene_path = args.scene or args.input
@@ -86,6 +86,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.gui:
         check_view_args(args)
     scene = load_scene(scene_path)
+    opts = apply_scene_settings(opts, scene, args)
 
     if args.workers is not None and args.cluster is not None:
         raise DrptError("give --workers N (a local cluster) or --cluster ADDRESS, not both")
@@ -140,7 +141,7 @@ def _gui(scene, opts, args):
 
 def cmd_view(args: argparse.Namespace) -> int:
     from .backend import ensure
-    from .options import options_from_args
+    from .options import apply_scene_settings, options_from_args
     from .scene import load_scene
 
     opts = options_from_args(args)
@@ -150,6 +151,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     output = Path(args.output) if args.output else Path(Path(args.scene).stem + ".png")
     _check_output(output)
     scene = load_scene(args.scene)
+    opts = apply_scene_settings(opts, scene, args)
     ensure()
     viewer = _viewer(scene, opts, args, output=output, final=False)
     try:
@@ -161,13 +163,14 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     from .export.mitsuba import write_xml
-    from .options import options_from_args
+    from .options import apply_scene_settings, options_from_args
     from .scene import load_scene
 
     opts = options_from_args(args)
     if not args.output.strip():
         raise DrptError("the output is empty: give the .xml file to write")
     scene = load_scene(args.scene)
+    opts = apply_scene_settings(opts, scene, args)
     if len(scene.triangles) + len(scene.spheres) + len(scene.planes) == 0:
         warn("the scene has no primitives (no triangles, spheres or planes): the Mitsuba "
              "scene has no shapes, only its background or sky")
@@ -195,7 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     view = sub.add_parser("view", help="look at a scene in the browser, progressively path traced",
                           allow_abbrev=False)
-    view.add_argument("scene", help="scene file (the seed's text format)")
+    view.add_argument("scene", help="scene file (the seed's text format, or Mitsuba XML: .xml)")
     view.add_argument("--output", "-o", dest="output", default=None,
                       help="image that the page's \"render\" writes (default <scene>.png)")
     from .options import add_render_flags, add_view_flags
@@ -265,7 +268,11 @@ def main(argv: list[str] | None = None) -> int:
         try:
             select_backend(argv)
             args = build_parser().parse_args(argv)
-            return args.func(args)
+            from .options import scene_flags
+            from .scene import xml_flags
+
+            with xml_flags(**scene_flags(args)):
+                return args.func(args)
         except DrptError as e:
             print(f"drpt: error: {e}", file=sys.stderr)
             return 2

@@ -46,7 +46,7 @@ MAX_SEED = (1 << 64) - 1  # the seed is hashed as a 64-bit integer
 
 # Flag groups of add_render_flags; a command leaves out those that it sets itself.
 FLAGS = ("size", "spp", "seed", "max_depth", "rr_depth", "rr_prob", "accel", "integrator",
-         "bsdf", "env_sampling", "max_lanes", "backend", "quiet")
+         "bsdf", "env_sampling", "max_lanes", "backend", "quiet", "scene")
 
 
 @dataclass
@@ -54,6 +54,7 @@ class PathOptions:
     max_depth: int = -1
     rr_depth: int = 5
     rr_prob: float | None = None  # fixed continuation probability, or adaptive
+    hide_emitters: bool = False  # camera rays do not see emitters or the sky (Mitsuba's hide_emitters)
 
 
 @dataclass
@@ -183,6 +184,23 @@ class _AccelChoices(tuple):
 
 
 # ------------------------------------------------------------------ flags
+class _Given(argparse._StoreAction):
+    """``store``, recording in ``namespace._given`` that the flag was on the command
+    line (so a scene file's own settings apply only where the user gave none)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        super().__call__(parser, namespace, values, option_string)
+        given = set(getattr(namespace, "_given", ()))
+        given.add(self.dest)
+        namespace._given = given
+
+
+def given_flags(args: argparse.Namespace) -> set[str]:
+    """The dests of the tracked render flags (size, spp, max_depth, rr_depth,
+    integrator) given on the command line."""
+    return set(getattr(args, "_given", ()))
+
+
 def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bool = False,
                      **defaults) -> None:
     """Add the shared render flags to ``parser``.
@@ -216,19 +234,19 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
 
     if want("size"):
         w, h = d["size"]
-        parser.add_argument(*names("--size", "-size"), dest="size", nargs=2, type=int,
+        parser.add_argument(*names("--size", "-size"), dest="size", nargs=2, type=int, action=_Given,
                             metavar=("W", "H"), default=(w, h),
                             help=f"image size in pixels (default {w} {h})")
     if want("spp"):
-        parser.add_argument(*names("--spp", "-spp"), dest="spp", type=int, default=d["spp"],
+        parser.add_argument(*names("--spp", "-spp"), dest="spp", type=int, default=d["spp"], action=_Given,
                             help=f"samples per pixel (default {d['spp']})")
     if want("max_depth"):
-        parser.add_argument("--max-depth", type=int, default=d["max_depth"],
+        parser.add_argument("--max-depth", type=int, default=d["max_depth"], action=_Given,
                             help="longest path in segments, Mitsuba's convention: 1 = emitters "
                                  "only, 2 = direct light, -1 = unbounded "
                                  f"(default {d['max_depth']})")
     if want("rr_depth"):
-        parser.add_argument("--rr-depth", type=int, default=d["rr_depth"],
+        parser.add_argument("--rr-depth", type=int, default=d["rr_depth"], action=_Given,
                             help="depth at which Russian roulette starts "
                                  f"(default {d['rr_depth']})")
     if want("rr_prob"):
@@ -275,7 +293,7 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                  "minimum leaf size (as --min-leaf); the seed's -resolution")
     if want("integrator"):
         default = d["integrator"]
-        parser.add_argument("--integrator", choices=INTEGRATORS, default=default,
+        parser.add_argument("--integrator", choices=INTEGRATORS, default=default, action=_Given,
                             help="path (MIS path tracing, default) or whitted")
         if seed_flags:
             parser.add_argument("-MonteCarlo", dest="monte_carlo", action="store_true",
@@ -308,6 +326,75 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                  f"${ENV_VAR}, else llvm")
     if want("quiet"):
         parser.add_argument("--quiet", "-q", action="store_true", help="no progress output")
+    if want("scene"):
+        add_scene_flags(parser)
+
+
+def add_scene_flags(parser: argparse.ArgumentParser) -> None:
+    """How a Mitsuba XML scene is read: ``-D name=value``, ``--ignore-unsupported``, ``--strict``."""
+    parser.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
+                        help="Mitsuba XML: the value of $NAME in the scene (repeatable)")
+    parser.add_argument("--ignore-unsupported", dest="ignore_unsupported", action="store_true",
+                        help="Mitsuba XML: render without the plugins drpt does not support (a "
+                             "warning each) instead of stopping")
+    parser.add_argument("--strict", action="store_true",
+                        help="Mitsuba XML: stop on parameters a plugin does not read (older "
+                             "exporters' files) instead of ignoring them with a warning")
+
+
+def scene_flags(args: argparse.Namespace) -> dict:
+    """``load_scene``'s keyword arguments from the flags of :func:`add_scene_flags`."""
+    from .scene.mitsuba import parse_defines
+
+    return {"defines": parse_defines(getattr(args, "defines", None)),
+            "ignore_unsupported": bool(getattr(args, "ignore_unsupported", False)),
+            "strict": bool(getattr(args, "strict", False))}
+
+
+def apply_scene_settings(opts: RenderOptions, scene, args: argparse.Namespace | None = None,
+                         on_warning=warn) -> RenderOptions:
+    """``opts`` with the render settings the scene file gives (a Mitsuba XML's film size,
+    sample count, integrator depths, ``hide_emitters``) where the command line gave none.
+
+    The reconstruction filter: drpt's renderer accumulates with a box filter; a file
+    asking for another (Mitsuba's default is gaussian) gets a warning until
+    :class:`RenderOptions` has a filter (then the hook below sets it)."""
+    from dataclasses import replace
+
+    st = getattr(scene, "settings", None)
+    if st is None:
+        return opts
+    given = given_flags(args) if args is not None else set()
+    if args is not None and getattr(args, "rr_cutdown", None) is not None:
+        given.add("rr_depth")  # the seed's -RR_cutdown sets it
+    if args is not None and getattr(args, "monte_carlo", False):
+        given.add("integrator")
+    fields: dict = {}
+    path: dict = {}
+    if "size" not in given and st.width is not None and st.height is not None:
+        fields["width"], fields["height"] = st.width, st.height
+    if "spp" not in given and st.spp is not None:
+        fields["spp"] = st.spp
+    if "integrator" not in given and st.integrator is not None:
+        fields["integrator"] = st.integrator
+    if "max_depth" not in given and st.max_depth is not None:
+        # Mitsuba's max_depth 0 renders black; drpt's smallest depth is 1 (emitters only)
+        path["max_depth"] = st.max_depth
+    if "rr_depth" not in given and st.rr_depth is not None:
+        path["rr_depth"] = st.rr_depth
+    if st.hide_emitters is not None:
+        path["hide_emitters"] = st.hide_emitters
+    if st.rfilter is not None and "filter" not in given:
+        if "filter" in RenderOptions.__dataclass_fields__:  # hook for reconstruction filters
+            fields["filter"] = st.rfilter
+        elif st.rfilter != "box":
+            on_warning(f"{scene.path}: the file asks for a '{st.rfilter}' reconstruction filter; "
+                       "drpt's renderer has only the box filter so far (the image is a little "
+                       "sharper than Mitsuba's)")
+    if path.get("max_depth") == 0:
+        raise DrptError(f"{scene.path}: max_depth 0 renders nothing (Mitsuba gives a black image)")
+    opts = replace(opts, path=replace(opts.path, **path), **fields)
+    return opts.validate()
 
 
 def add_distributed_flags(parser: argparse.ArgumentParser) -> None:

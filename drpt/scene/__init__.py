@@ -4,8 +4,13 @@
 the grammar) with its OBJ meshes (:mod:`.obj`) and MTL libraries (:mod:`.mtl`)
 into a world-space :class:`Scene`. Every input file is opened through
 :mod:`.files` (regular files only; files named by another file remember
-that file and line).
+that file and line). A file ending in ``.xml`` is a Mitsuba scene, read by
+:func:`.mitsuba.load_mitsuba_xml` (``defines`` fill its ``$name`` references).
 """
+
+import contextlib
+import contextvars
+from pathlib import Path
 
 from .model import (
     Background,
@@ -17,15 +22,51 @@ from .model import (
     PerspectiveCamera,
     Planes,
     PointLight,
+    RenderSettings,
     Scene,
     Skybox,
     Spheres,
+    SpotLight,
     Triangles,
 )
-from .parser import load_scene
+from .parser import load_scene as _load_drpt_scene
+
+#: load_scene's XML keyword arguments where a caller gives none (see :func:`xml_flags`)
+_XML_FLAGS: contextvars.ContextVar[dict | None] = contextvars.ContextVar("drpt_xml_flags", default=None)
+
+
+@contextlib.contextmanager
+def xml_flags(**flags):
+    """Within the block, :func:`load_scene` reads Mitsuba XML with these keyword
+    arguments (``defines``, ``ignore_unsupported``, ``strict``) unless given: the
+    command line sets them once for whichever command loads the scene."""
+    token = _XML_FLAGS.set(dict(flags))
+    try:
+        yield
+    finally:
+        _XML_FLAGS.reset(token)
+
+
+def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupported: bool | None = None,
+               strict: bool | None = None) -> Scene:
+    """Load a scene file: drpt's text format, or Mitsuba XML for a ``.xml`` file
+    (``defines``, ``ignore_unsupported`` and ``strict`` apply to XML only; ``None``
+    takes :func:`xml_flags`' value, else none / False)."""
+    if Path(path).suffix.lower() == ".xml":
+        from .mitsuba import load_mitsuba_xml
+
+        ctx = _XML_FLAGS.get() or {}
+        return load_mitsuba_xml(
+            path, ctx.get("defines") if defines is None else defines,
+            ignore_unsupported=bool(ctx.get("ignore_unsupported", False) if ignore_unsupported is None
+                                    else ignore_unsupported),
+            strict=bool(ctx.get("strict", False) if strict is None else strict))
+    return _load_drpt_scene(path)
+
 
 __all__ = [
     "load_scene",
+    "xml_flags",
     "Background",
     "Camera",
     "DirectionalLight",
@@ -35,8 +76,10 @@ __all__ = [
     "PerspectiveCamera",
     "Planes",
     "PointLight",
+    "RenderSettings",
     "Scene",
     "Skybox",
     "Spheres",
+    "SpotLight",
     "Triangles",
 ]

@@ -1,0 +1,95 @@
+"""Mitsuba 3 XML scenes (and 0.5/0.6 ones, which Mitsuba's parser upgrades), read into drpt.
+
+:func:`load_mitsuba_xml` reads the file through Mitsuba's own parser
+(``mitsuba.parser``: ``parse_file``, ``transform_upgrade``,
+``transform_resolve``; no XML is parsed here), fills ``$name`` from
+``defines`` (``-D name=value``), and maps the scene graph onto drpt's
+:class:`~drpt.scene.model.Scene`:
+
+========================  =====================================================
+Mitsuba                   drpt
+========================  =====================================================
+``perspective``           :class:`PerspectiveCamera`: ``to_world``'s origin,
+                          +z (direction) and +y (up); ``fov`` on any
+                          ``fov_axis`` (x, y, diagonal, smaller, larger) or
+                          ``focal_length``, converted to drpt's vertical fov
+                          for the film's aspect. A mirroring or scaling
+                          ``to_world`` is an error. ``principal_point_offset``
+                          and a film crop window need an off-axis camera
+                          window drpt does not have yet: unsupported.
+``thinlens``              a pinhole camera when ``aperture_radius`` is 0;
+                          otherwise unsupported until drpt has a thin lens
+``hdrfilm``               ``Scene.settings`` width, height; its ``rfilter``
+                          (box, tent, gaussian; default gaussian) as
+                          ``settings.rfilter``
+``independent`` (etc.)    ``settings.spp`` = ``sample_count`` (default 4);
+                          other samplers take their count too, with a note
+``path``                  ``settings``: max_depth, rr_depth, hide_emitters
+``direct``                ``path`` with max_depth 2 (the same expectation)
+``obj`` ``ply``           triangles, loaded by Mitsuba's own mesh loaders
+``serialized``            (:mod:`.geometry`): ``to_world``, ``face_normals``,
+``rectangle`` ``cube``    ``flip_normals``, ``flip_tex_coords``, ``shape_index``
+``sphere``                an analytic sphere (tessellated when flipped or not
+                          similarity-transformed)
+``disk`` ``cylinder``     tessellated (256 segments)
+``shapegroup``            flattened: each ``instance`` adds the group's shapes
+``instance``              under its ``to_world``
+``area``                  the shape's material's ``emission`` (radiance)
+``point``                 :class:`PointLight` (intensity, inverse square)
+``spot``                  :class:`SpotLight`
+``directional``           :class:`DirectionalLight` (irradiance)
+``constant``              ``Background.color`` (radiance of escaping rays)
+``envmap``                :class:`Skybox` with ``scale`` and ``rotation``
+``<bsdf>``                ``Material.bsdf``, a :class:`drpt.shading.BSDFSpec`
+                          tree (:mod:`.materials`); a shape without one gets
+                          Mitsuba's default (diffuse 0.5)
+``bitmap``                :class:`drpt.shading.Texture` on a texturable param
+========================  =====================================================
+
+Each distinct (BSDF node, area radiance) pair of shapes becomes one
+:class:`~drpt.scene.model.Material`, named after the BSDF's ``id``.
+
+Errors and warnings. Anything the parser refuses (malformed XML, an
+undefined ``$var``, an unresolved ``<ref>``, a value of the wrong syntax) and
+anything drpt refuses (a parameter of the wrong type, a missing mesh file,
+a plugin drpt cannot render: media, spectral data, other integrators,
+textures other than ``bitmap``, ...) raises a one-line
+:class:`~drpt.errors.SceneError` naming the XML file, the line Mitsuba's
+parser gives (``mitsuba.parser.file_location``) and the plugin. With
+``ignore_unsupported`` an unsupported plugin is left out (or replaced by the
+stated fallback) with a warning each. Parameters that a plugin does not
+read (files from older exporters: ``strict_normals`` on ``path``,
+``int_ior`` on ``roughconductor``) are listed in one warning; with
+``strict`` the first is an error. Parameters drpt reads but that change
+nothing in its image (film pixel formats, sampler seeds, clip planes) are
+read silently.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..model import Scene
+
+__all__ = ["load_mitsuba_xml", "parse_defines"]
+
+
+def load_mitsuba_xml(path: str | Path, defines: dict[str, str] | None = None, *,
+                     ignore_unsupported: bool = False, strict: bool = False) -> Scene:
+    """Read the Mitsuba XML scene at ``path`` (``$name`` from ``defines``)."""
+    from .reader import Reader
+
+    return Reader(path, defines, ignore_unsupported=ignore_unsupported, strict=strict).read()
+
+
+def parse_defines(items) -> dict[str, str]:
+    """``["name=value", ...]`` (the ``-D`` flags) as a dict; a malformed one is a DrptError."""
+    from ...errors import DrptError
+
+    out: dict[str, str] = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise DrptError(f"-D needs name=value, got {item!r}")
+        out[name.strip()] = value
+    return out

@@ -1,0 +1,203 @@
+"""Mitsuba ``<bsdf>`` and ``<texture>`` nodes as :class:`drpt.shading.BSDFSpec` trees.
+
+A BSDF node becomes ``BSDFSpec(kind, params, children, notes, origin)`` with
+``kind`` the Mitsuba plugin name and ``params`` under Mitsuba's parameter
+names (the vocabulary of :mod:`drpt.bsdf_kinds`), with one exception:
+``diffuse``'s ``reflectance`` is drpt's ``kd``. Values: RGB triples (from
+``<rgb>``, a uniform ``<spectrum>`` or a ``<float>`` on a color parameter),
+floats, strings (``material``, ``distribution``, named IORs such as
+``int_ior="water"``: the lobe resolves them), booleans, or
+:class:`~drpt.shading.Texture` for a ``bitmap`` on a parameter the kind
+allows to be textured (:data:`drpt.bsdf_kinds.TEXTURABLE`).
+
+Composites: ``twosided`` (one child; Mitsuba's two-child form, a different
+BSDF on each side, is not supported), ``blendbsdf`` (two children,
+``weight``), ``mask`` (one child, ``opacity``).
+
+What is refused (an "unsupported" error, or with ``--ignore-unsupported`` a
+warning and a fallback): BSDF plugins outside the vocabulary (``bumpmap``,
+``normalmap``, ``measured``, ``hair``, polarizers, ...; fallback: Mitsuba's
+default ``diffuse``, reflectance 0.5), texture plugins other than
+``bitmap`` (``checkerboard``, ``mesh_attribute``, volumes...; fallback: the
+texture's mean color where known, else 0.5), and ``bitmap`` settings drpt's
+texture lookup does not have (``raw``, a ``to_uv`` other than identity,
+``filter_type`` other than ``bilinear``, ``wrap_mode`` other than
+``repeat``; fallback: the setting is ignored). Parameters the plugin does
+not read (``int_ior`` on ``roughconductor``) are listed by
+:meth:`~drpt.scene.mitsuba.reader.Reader.unread` for one warning per node.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ... import bsdf_kinds
+from .nodes import Node
+
+try:  # the material redesign's classes, once they are on this branch
+    from ...shading import BSDFSpec, Texture  # type: ignore[attr-defined]
+
+    if "params" not in getattr(BSDFSpec, "__dataclass_fields__", {}):
+        raise ImportError
+except ImportError:  # until then, the same shape defined here
+    @dataclass
+    class BSDFSpec:  # type: ignore[no-redef]
+        kind: str
+        params: dict = field(default_factory=dict)
+        children: list = field(default_factory=list)
+        notes: list = field(default_factory=list)
+        origin: str = ""
+
+    @dataclass(frozen=True)
+    class Texture:  # type: ignore[no-redef]
+        path: Path
+
+
+#: Mitsuba's default BSDF for a shape without one.
+def default_bsdf() -> BSDFSpec:
+    return BSDFSpec("diffuse", {"kd": bsdf_kinds.GRAY}, [], [], "Mitsuba's default BSDF")
+
+
+#: Mitsuba parameter name -> drpt parameter name, per kind (all others keep their names).
+RENAMED = {"diffuse": {"reflectance": "kd"}}
+
+#: bitmap parameters drpt's texture supports only at these values.
+_BITMAP_FIXED = {"filter_type": "bilinear", "wrap_mode": "repeat", "raw": False}
+_BITMAP_SILENT = ("format", "accel")  # storage/acceleration choices: no effect on the image
+_SPECTRAL_OR_TEXTURE = frozenset({"eta", "k"})
+
+
+class Materials:
+    """Builds specs for a reader (shared between shapes: one spec per node)."""
+
+    def __init__(self, reader):
+        self.reader = reader
+        self.cache: dict[int, BSDFSpec] = {}
+
+    def spec(self, node: Node) -> BSDFSpec:
+        if node.index not in self.cache:
+            self.cache[node.index] = self._spec(node)
+        return self.cache[node.index]
+
+    def _spec(self, node: Node) -> BSDFSpec:
+        r = self.reader
+        kind = node.plugin
+        origin = node.where
+        if kind in bsdf_kinds.COMPOSITES:
+            want, params_def = bsdf_kinds.COMPOSITES[kind]
+            kids = [c for c in node.children() if c.kind == "bsdf"]
+            for c in node.children():
+                if c.kind != "bsdf":
+                    r.unsupported(c, f"{c.label} inside {node.label}")
+            if kind == "twosided" and len(kids) == 2:
+                r.unsupported(node, "twosided with two BSDFs (a different one on each side)")
+                kids = kids[:1]
+            if len(kids) != want:
+                raise node.error(f"{node.label} needs {want} nested BSDF{'s' if want > 1 else ''}, "
+                                 f"got {len(kids)}")
+            params = {}
+            for name in params_def:
+                if node.has(name):
+                    params[name] = self._value(node, kind, name, float(params_def[name]), texturable=True)
+            spec = BSDFSpec(kind, params, [self.spec(k) for k in kids], [], origin)
+        elif kind in bsdf_kinds.PARAMS and kind not in ("phong", "cook_torrance", "mirror", "null"):
+            renamed = RENAMED.get(kind, {})
+            to_mitsuba = {d: m for m, d in renamed.items()}
+            accepted = {to_mitsuba.get(d, d) for d in bsdf_kinds.PARAMS[kind]}
+            params = {}
+            for name in node.names():
+                if name not in accepted:
+                    continue  # left unread: the unused-parameter warning lists it
+                drpt_name = renamed.get(name, name)
+                default = bsdf_kinds.PARAMS[kind][drpt_name]
+                texturable = drpt_name in bsdf_kinds.TEXTURABLE.get(kind, ())
+                params[drpt_name] = self._value(node, kind, name, default, texturable)
+            spec = BSDFSpec(kind, params, [], [], origin)
+            for c in node.children():
+                r.unsupported(c, f"{c.label} inside {node.label}")
+        else:
+            r.unsupported(node, f"BSDF plugin '{kind}'", fallback="Mitsuba's default diffuse BSDF")
+            return BSDFSpec("diffuse", {"kd": bsdf_kinds.GRAY}, [],
+                            [f"{node.where}: unsupported BSDF '{kind}' replaced by diffuse 0.5"], origin)
+        r.check_unread(node)
+        return spec
+
+    # ------------------------------------------------------------ values
+    def _value(self, node: Node, kind: str, name: str, default: Any, texturable: bool) -> Any:
+        if node.is_ref(name):
+            tex = node.ref(name)
+            if tex.kind != "texture":
+                raise node.error(f"{node.label}: parameter '{name}' must be a value or a texture, "
+                                 f"got {tex.label}")
+            if not texturable:
+                raise node.error(f"{node.label}: parameter '{name}' cannot be a texture in drpt "
+                                 f"(give a constant value)")
+            return self.texture(tex, scalar=isinstance(default, float))
+        if isinstance(default, bool):
+            return node.bool(name)
+        if isinstance(default, str):
+            return node.str(name)
+        if isinstance(default, tuple):
+            return node.color(name)
+        if isinstance(default, float):
+            if name in ("int_ior", "ext_ior") and node._type(name) == "String":
+                return node.str(name)  # a named material ("water", "bk7"): the lobe resolves it
+            return node.float(name)
+        # no default: eta / k of conductors are spectra; alpha_u / alpha_v, principled eta floats
+        if name in _SPECTRAL_OR_TEXTURE and kind in ("conductor", "roughconductor"):
+            return node.color(name)
+        return node.float(name)
+
+    def texture(self, node: Node, scalar: bool = False) -> Any:
+        """A texture node as a parameter value: :class:`Texture` for ``bitmap``."""
+        r = self.reader
+        if node.plugin == "bitmap":
+            filename = node.str("filename")
+            if filename is None:
+                r.unsupported(node, "bitmap without 'filename' (in-memory data)",
+                              fallback="0.5")
+                return 0.5 if scalar else bsdf_kinds.GRAY
+            path = node.resolve_file(filename)
+            for key, value in _BITMAP_FIXED.items():
+                got = node.get(key)
+                if got is not None and got != value:
+                    r.unsupported(node, f"bitmap {key}={got!r} (drpt looks textures up with "
+                                  f"{key}={value!r})", fallback=f"{key}={value!r}")
+            if node.has("to_uv"):
+                m = node.transform("to_uv")
+                if not np.allclose(m, np.eye(4)):
+                    r.unsupported(node, "bitmap to_uv other than identity",
+                                  fallback="the identity")
+            for key in _BITMAP_SILENT:
+                node.get(key)
+            r.check_unread(node)
+            return Texture(path)
+        if node.plugin == "checkerboard":
+            c0 = node.color("color0", (0.4, 0.4, 0.4))
+            c1 = node.color("color1", (0.2, 0.2, 0.2))
+            node.get("to_uv")
+            mean = tuple(0.5 * (a + b) for a, b in zip(c0, c1))
+            r.unsupported(node, "texture 'checkerboard' (drpt's textures are image files)",
+                          fallback=f"its mean color {mean}")
+            return float(sum(mean) / 3) if scalar else mean
+        r.unsupported(node, f"texture plugin '{node.plugin}'", fallback="0.5")
+        return 0.5 if scalar else bsdf_kinds.GRAY
+
+
+def legacy_fields(spec: BSDFSpec) -> dict:
+    """Material fields (``kd``, ``map_kd``) for drpt's renderer before it reads
+    ``Material.bsdf``: a diffuse spec's reflectance, nothing for other kinds."""
+    if spec.kind == "twosided" and spec.children:
+        return legacy_fields(spec.children[0])
+    if spec.kind != "diffuse":
+        return {}
+    kd = spec.params.get("kd", bsdf_kinds.GRAY)
+    if isinstance(kd, tuple):
+        return {"kd": kd}
+    if isinstance(kd, Texture):
+        return {"map_kd": kd.path}
+    return {}

@@ -1,0 +1,567 @@
+"""The Mitsuba XML scene reader: from Mitsuba's scene graph to a drpt :class:`Scene`.
+
+See :mod:`drpt.scene.mitsuba` for what is supported and how each plugin maps.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ...errors import SceneError
+from ..model import (
+    MAX_COORDINATE,
+    Background,
+    DirectionalLight,
+    Material,
+    PerspectiveCamera,
+    PointLight,
+    RenderSettings,
+    Scene,
+    Skybox,
+    Spheres,
+    SpotLight,
+    Triangles,
+)
+from . import geometry as geo
+from .materials import BSDFSpec, Materials, default_bsdf, legacy_fields
+from .nodes import Node, State
+
+#: Parameters a plugin reads that change nothing drpt's image depends on
+#: (storage formats, noise-only choices, Mitsuba bookkeeping): read silently.
+_SILENT = {
+    "film": ("pixel_format", "component_format", "file_format", "banner", "compensate",
+             "sample_border"),
+    "sampler": ("seed",),
+    "integrator": ("samples_per_pass", "block_size", "emitter_samples", "bsdf_samples",
+                   "shading_samples"),
+    "sensor": ("near_clip", "far_clip", "shutter_open", "shutter_close"),
+    "shape": ("silhouette_sampling_weight",),
+    "emitter": ("sampling_weight", "mis_compensation"),
+}
+
+RFILTERS = {"box": (), "tent": ("radius",), "gaussian": ("stddev",)}
+SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
+FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
+
+
+def _material(name: str, origin: str, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
+    fields = legacy_fields(spec)
+    if "bsdf" in getattr(Material, "__dataclass_fields__", {}):
+        return Material(name, emission=emission, origin=origin, bsdf=spec, **fields)
+    m = Material(name, emission=emission, origin=origin, **fields)
+    m.bsdf = spec  # the material redesign's field, until it is on this branch
+    return m
+
+
+class Reader:
+    def __init__(self, path: str | Path, defines: dict[str, str] | None = None, *,
+                 ignore_unsupported: bool = False, strict: bool = False):
+        self.path = Path(path).expanduser().resolve()
+        if not self.path.is_file():
+            what = "not a regular file" if self.path.exists() else "no such file"
+            raise SceneError(path, None, what)
+        self.ignore_unsupported = ignore_unsupported
+        self.strict = strict
+        self.state = State(self.path, dict(defines or {}))
+        self.materials = Materials(self)
+        self.unread_params: list[str] = []
+        self.warnings: list[str] = []
+        # outputs
+        self.mat_list: list[Material] = []
+        self.mat_index: dict[tuple, int] = {}
+        self.meshes: list[tuple[geo.Mesh, int]] = []
+        self.spheres: list[tuple[np.ndarray, float, int]] = []
+        self.lights: list = []
+        self.background = (0.0, 0.0, 0.0)
+        self.camera = None
+        self.settings = RenderSettings()
+
+    # ------------------------------------------------------------ reporting
+    def warn(self, message: str) -> None:
+        self.warnings.append(message)
+
+    def unsupported(self, node: Node, what: str, fallback: str | None = None) -> None:
+        """Refuse ``what`` at ``node`` (a SceneError), or with ``--ignore-unsupported``
+        warn and go on (the caller uses ``fallback``, or leaves the node out)."""
+        if not self.ignore_unsupported:
+            raise node.error(f"unsupported {what} (--ignore-unsupported renders without it)")
+        self.warn(f"{node.where}: unsupported {what}: "
+                  + (f"using {fallback}" if fallback else "left out"))
+
+    def drpt_ignores(self, node: Node, name: str, why: str) -> None:
+        """A parameter the plugin reads that drpt does not honor."""
+        node.read.add(name)
+        self.unsupported(node, f"parameter '{name}' of {node.label} ({why})", fallback="its default")
+
+    def check_unread(self, node: Node) -> None:
+        silent = _SILENT.get(node.kind, ())
+        for name in silent:
+            node.get(name)
+        names = node.unread()
+        if not names:
+            return
+        listed = ", ".join(f"'{n}'" for n in names)
+        if self.strict:
+            raise node.error(f"{node.label} does not read parameter{'s' if len(names) > 1 else ''} "
+                             f"{listed} (without --strict drpt ignores them)")
+        self.unread_params.append(f"{listed} of {node.label} at {node.where}")
+
+    # ------------------------------------------------------------ the scene
+    def read(self) -> Scene:
+        root = self.state.root
+        sensors = []
+        integrators = []
+        for child in root.children():
+            kind = child.kind
+            if kind == "sensor":
+                sensors.append(child)
+            elif kind == "integrator":
+                integrators.append(child)
+            elif kind == "shape":
+                if child.plugin != "shapegroup":
+                    self.shape(child, np.eye(4))
+            elif kind == "emitter":
+                self.emitter(child)
+            elif kind in ("bsdf", "texture"):
+                pass  # definitions, read where a shape refers to them
+            else:
+                self.unsupported(child, f"{child.label}")
+        if not sensors:
+            raise SceneError(self.path, None, "the scene has no <sensor> (camera)")
+        if len(sensors) > 1:
+            self.warn(f"{sensors[1].where}: {len(sensors)} sensors: drpt renders the first "
+                      f"({sensors[0].where}), as Mitsuba's render() does by default")
+        self.sensor(sensors[0])
+        if integrators:
+            self.integrator(integrators[0])
+        self.check_unread(root)
+        scene = self._scene()
+        self._report()
+        return scene
+
+    def _report(self) -> None:
+        if self.unread_params:
+            self.warn(f"{self.path}: ignored parameters their plugins do not read (Mitsuba 3 would "
+                      f"refuse them; --strict makes this an error): {'; '.join(self.unread_params)}")
+        for w in self.warnings:
+            warnings.warn(w, stacklevel=3)
+
+    def _scene(self) -> Scene:
+        if self.meshes:
+            pos = np.concatenate([m.positions for m, _ in self.meshes])
+            mat = np.concatenate([np.full(len(m), k, np.int32) for m, k in self.meshes])
+            normals = None
+            if any(m.normals is not None for m, _ in self.meshes):
+                normals = np.concatenate([m.normals if m.normals is not None else _face_normals(m.positions)
+                                          for m, _ in self.meshes])
+            uvs = None
+            if any(m.uvs is not None for m, _ in self.meshes):
+                uvs = np.concatenate([m.uvs if m.uvs is not None else np.zeros((len(m), 3, 2))
+                                      for m, _ in self.meshes])
+            tris = Triangles(pos, mat, normals, uvs)
+            bad = ~np.isfinite(pos) | (np.abs(pos) > MAX_COORDINATE)
+            if bad.any():
+                raise SceneError(self.path, None, f"{int(bad.any(axis=(1, 2)).sum())} triangles have "
+                                 f"coordinates beyond {MAX_COORDINATE:g} or not finite")
+        else:
+            tris = Triangles.empty()
+        if self.spheres:
+            spheres = Spheres(np.array([c for c, _, _ in self.spheres], float),
+                              np.array([r for _, r, _ in self.spheres], float),
+                              np.array([k for _, _, k in self.spheres], np.int32))
+        else:
+            spheres = Spheres.empty()
+        scene = Scene(path=self.path, camera=self.camera, materials=self.mat_list, triangles=tris,
+                      spheres=spheres, lights=self.lights,
+                      background=Background(color=self.background), settings=self.settings)
+        return scene
+
+    # ------------------------------------------------------------ sensor
+    def sensor(self, node: Node) -> None:
+        if node.plugin not in ("perspective", "thinlens"):
+            self.unsupported(node, f"sensor '{node.plugin}' (drpt has a perspective camera)",
+                             fallback="a perspective camera")
+        film = sampler = None
+        for c in node.children():
+            if c.kind == "film":
+                film = c
+            elif c.kind == "sampler":
+                sampler = c
+            else:
+                self.unsupported(c, f"{c.label} inside {node.label}")
+        width, height = 768, 576  # Mitsuba's hdrfilm defaults
+        self.settings.rfilter, self.settings.rfilter_params = "gaussian", {"stddev": 0.5}
+        if film is not None:
+            width, height = self.film(film)
+        self.settings.width, self.settings.height = width, height
+        self.settings.spp = 4  # Mitsuba's default sampler
+        if sampler is not None:
+            if sampler.plugin not in SAMPLERS:
+                self.unsupported(sampler, f"sampler '{sampler.plugin}'", fallback="independent samples")
+            elif sampler.plugin != "independent":
+                self.warn(f"{sampler.where}: sampler '{sampler.plugin}': drpt draws independent "
+                          "samples (the same expectation, other noise)")
+            spp = sampler.int("sample_count", 4)
+            if spp is None or spp <= 0:
+                raise sampler.error(f"{sampler.label}: sample_count must be positive, got {spp}")
+            self.settings.spp = spp
+            self.check_unread(sampler)
+
+        aspect = width / height
+        if node.has("fov") and node.has("focal_length"):
+            raise node.error(f"{node.label}: give 'fov' or 'focal_length', not both")
+        if node.has("fov"):
+            fov = node.float("fov")
+            axis = (node.str("fov_axis", "x") or "x").lower()
+        else:
+            f = node.str("focal_length", "50mm") or "50mm"
+            try:
+                value = float(f[:-2] if f.endswith("mm") else f)
+            except ValueError:
+                raise node.error(f"{node.label}: focal_length must be like '50mm', got {f!r}") from None
+            fov = 2.0 * math.degrees(math.atan(math.hypot(36.0, 24.0) / (2.0 * value)))
+            axis = "diagonal"
+        if axis not in FOV_AXES:
+            raise node.error(f"{node.label}: fov_axis must be one of {', '.join(FOV_AXES)}, got {axis!r}")
+        fov_y = vertical_fov(fov, axis, aspect)
+        if not 0.0 < fov_y < 180.0 or not math.isfinite(fov_y):
+            raise node.error(f"{node.label}: field of view {fov:g} ({axis}) is not in (0, 180) degrees")
+        ppo = (node.float("principal_point_offset_x", 0.0), node.float("principal_point_offset_y", 0.0))
+        if ppo != (0.0, 0.0):
+            # needs an off-axis window in drpt's camera (drpt.render.camera)
+            self.unsupported(node, "principal_point_offset (drpt's camera has no off-axis window yet)",
+                             fallback="the centered principal point")
+        if node.plugin == "thinlens":
+            radius = node.float("aperture_radius", 0.0)
+            node.float("focus_distance")
+            if radius:
+                # hook: drpt.scene.model has no thin-lens camera yet (helper h6 adds one)
+                self.unsupported(node, "thinlens depth of field (drpt's camera is a pinhole for now)",
+                                 fallback="a pinhole camera")
+        m = node.transform("to_world")
+        self.camera = camera_from_matrix(node, m, fov_y)
+        self.check_unread(node)
+
+    def film(self, node: Node) -> tuple[int, int]:
+        if node.plugin != "hdrfilm":
+            self.unsupported(node, f"film '{node.plugin}'", fallback="an hdrfilm")
+        width = node.int("width", 768)
+        height = node.int("height", 576)
+        if width is None or height is None or width <= 0 or height <= 0:
+            raise node.error(f"{node.label}: width and height must be positive, got {width} x {height}")
+        cx, cy = node.int("crop_offset_x", 0), node.int("crop_offset_y", 0)
+        cw, ch = node.int("crop_width", width), node.int("crop_height", height)
+        if cx < 0 or cy < 0 or cw <= 0 or ch <= 0 or cx + cw > width or cy + ch > height:
+            raise node.error(f"{node.label}: crop window ({cx}, {cy}) + ({cw}, {ch}) is outside the "
+                             f"{width} x {height} film")
+        if (cx, cy, cw, ch) != (0, 0, width, height):
+            # needs an off-axis window in drpt's camera: the crop's rays are those of the full film
+            self.unsupported(node, "hdrfilm crop window (drpt's camera has no off-axis window yet)",
+                             fallback="the whole film")
+        for c in node.children():
+            if c.kind == "reconstructionfilter":
+                if c.plugin not in RFILTERS:
+                    self.unsupported(c, f"reconstruction filter '{c.plugin}'", fallback="gaussian")
+                    continue
+                params = {}
+                for name in RFILTERS[c.plugin]:
+                    v = c.float(name)
+                    if v is not None:
+                        if not (v > 0 and math.isfinite(v)):
+                            raise c.error(f"{c.label}: {name} must be positive, got {v}")
+                        params[name] = v
+                self.settings.rfilter, self.settings.rfilter_params = c.plugin, params
+                self.check_unread(c)
+            else:
+                self.unsupported(c, f"{c.label} inside {node.label}")
+        self.check_unread(node)
+        return width, height
+
+    # ------------------------------------------------------------ integrator
+    def integrator(self, node: Node) -> None:
+        s = self.settings
+        if node.plugin not in ("path", "direct"):
+            self.unsupported(node, f"integrator '{node.plugin}' (drpt has path and direct)",
+                             fallback="path")
+            return
+        s.integrator = "path"
+        if node.plugin == "path":
+            s.max_depth = node.int("max_depth", -1)
+            s.rr_depth = node.int("rr_depth", 5)
+            if s.max_depth is not None and s.max_depth < -1:
+                raise node.error(f"{node.label}: max_depth must be -1 or >= 0, got {s.max_depth}")
+            if s.rr_depth is not None and s.rr_depth <= 0:
+                raise node.error(f"{node.label}: rr_depth must be positive, got {s.rr_depth}")
+        else:
+            # Mitsuba's direct: emitters seen by the camera plus direct lighting, the same
+            # expectation as path with max_depth 2 (its sample counts only change the noise)
+            s.max_depth = 2
+            s.rr_depth = 5
+        s.hide_emitters = node.bool("hide_emitters", False)
+        if node.has("timeout"):
+            self.drpt_ignores(node, "timeout", "drpt renders all samples")
+        for c in node.children():
+            self.unsupported(c, f"{c.label} inside {node.label}")
+        self.check_unread(node)
+
+    # ------------------------------------------------------------ shapes
+    def _shape_parts(self, node: Node) -> tuple[BSDFSpec, Node | None, tuple]:
+        bsdf_node = None
+        spec = None
+        emission = (0.0, 0.0, 0.0)
+        for c in node.children():
+            if c.kind == "bsdf":
+                if spec is not None:
+                    raise c.error(f"{node.label} has more than one BSDF")
+                bsdf_node, spec = c, self.materials.spec(c)
+            elif c.kind == "emitter":
+                if c.plugin != "area":
+                    raise c.error(f"{c.label} cannot be attached to a shape (only 'area' can)")
+                emission = self.area(c)
+            else:
+                self.unsupported(c, f"{c.label} inside {node.label}")
+        for name in ("interior", "exterior"):
+            if node.is_ref(name):
+                self.unsupported(node.ref(name), f"{node.ref(name).label} ({name} of {node.label})")
+        if spec is None:
+            spec = default_bsdf()
+        return spec, bsdf_node, emission
+
+    def _material_index(self, spec: BSDFSpec, bsdf_node: Node | None, emission, shape: Node) -> int:
+        key = (bsdf_node.index if bsdf_node is not None else None, emission)
+        if key not in self.mat_index:
+            if bsdf_node is not None:
+                name = bsdf_node.id or f"{bsdf_node.plugin}@{bsdf_node.line}"
+                origin = bsdf_node.where
+            else:
+                name, origin = "default", shape.where
+            if max(emission) > 0:
+                name += "+area"
+            self.mat_index[key] = len(self.mat_list)
+            self.mat_list.append(_material(name, origin, spec, emission))
+        return self.mat_index[key]
+
+    def shape(self, node: Node, parent: np.ndarray) -> None:
+        plugin = node.plugin
+        if plugin == "instance":
+            groups = [c for c in node.children() if c.kind == "shape" and c.plugin == "shapegroup"]
+            if len(groups) != 1:
+                raise node.error(f"{node.label} needs one shapegroup, got {len(groups)}")
+            m = parent @ node.transform("to_world")
+            self.check_unread(node)
+            group = groups[0]
+            for c in group.children():
+                if c.kind != "shape":
+                    self.unsupported(c, f"{c.label} inside {group.label}")
+                elif c.plugin in ("shapegroup", "instance"):
+                    raise c.error(f"{c.label}: shapegroups cannot nest (as in Mitsuba)")
+                else:
+                    self.shape(c, m)
+            self.check_unread(group)
+            return
+        if plugin not in geo.MESH_PLUGINS + geo.ANALYTIC_PLUGINS:
+            self.unsupported(node, f"shape '{plugin}'")
+            return
+        spec, bsdf_node, emission = self._shape_parts(node)
+        k = self._material_index(spec, bsdf_node, emission, node)
+        m = parent @ node.transform("to_world")
+        _check_matrix(node, m)
+        if plugin in geo.MESH_PLUGINS:
+            mesh = geo.load_mesh(node, m)
+            if len(mesh):
+                self.meshes.append((mesh, k))
+            else:
+                self.warn(f"{node.where}: {node.label} has no faces")
+        elif plugin == "sphere":
+            center = node.vector("center", (0.0, 0.0, 0.0))
+            radius = node.float("radius", 1.0)
+            if not radius > 0:
+                raise node.error(f"{node.label}: radius must be positive, got {radius}")
+            flip = bool(node.bool("flip_normals", False))
+            local = geo.sphere_local(center, radius, m)
+            similar, scale = geo.is_similarity(local)
+            mirrored = np.linalg.det(local[:3, :3]) < 0
+            if similar and not (flip ^ mirrored):
+                self.spheres.append((local[:3, 3].copy(), scale, k))
+            else:
+                why = "flip_normals" if (flip ^ mirrored) else "a to_world that is not a similarity"
+                self.warn(f"{node.where}: {node.label} with {why} is tessellated "
+                          f"({geo.SPHERE_STACKS}x{geo.SPHERE_SLICES} quads)")
+                self.meshes.append((geo.tessellate_sphere(local, flip ^ mirrored), k))
+        elif plugin == "disk":
+            flip = bool(node.bool("flip_normals", False))
+            self.meshes.append((geo.tessellate_disk(m, flip), k))
+        elif plugin == "cylinder":
+            p0 = node.vector("p0", (0.0, 0.0, 0.0))
+            p1 = node.vector("p1", (0.0, 0.0, 1.0))
+            radius = node.float("radius", 1.0)
+            if not radius > 0 or np.allclose(p0, p1):
+                raise node.error(f"{node.label}: needs radius > 0 and p0 != p1")
+            flip = bool(node.bool("flip_normals", False))
+            local = m @ geo.cylinder_frame(p0, p1, radius)
+            self.meshes.append((geo.tessellate_cylinder(local, flip), k))
+        self.check_unread(node)
+
+    # ------------------------------------------------------------ emitters
+    def area(self, node: Node) -> tuple:
+        if node.is_ref("radiance"):
+            self.unsupported(node.ref("radiance"), "textured area emitter radiance",
+                             fallback="radiance 1")
+            return (1.0, 1.0, 1.0)
+        le = node.color("radiance", (1.0, 1.0, 1.0))
+        _nonnegative(node, "radiance", le)
+        self.check_unread(node)
+        return le
+
+    def emitter(self, node: Node) -> None:
+        p = node.plugin
+        m = node.transform("to_world") if node.has("to_world") else None
+        if p == "area":
+            raise node.error(f"{node.label} must be attached to a shape")
+        if p == "point":
+            if node.has("position") and m is not None:
+                raise node.error(f"{node.label}: give 'position' or 'to_world', not both")
+            pos = node.vector("position") or (tuple(m[:3, 3]) if m is not None else (0.0, 0.0, 0.0))
+            color = self._intensity(node, "intensity")
+            self.lights.append(PointLight(tuple(float(x) for x in pos), color))
+        elif p == "spot":
+            m = np.eye(4) if m is None else m
+            similar, _ = geo.is_similarity(m)
+            if not similar:
+                raise node.error(f"{node.label}: to_world must be a rotation and translation")
+            color = self._intensity(node, "intensity")
+            if node.is_ref("texture"):
+                self.unsupported(node.ref("texture"), "spot texture", fallback="no texture")
+            cutoff = node.float("cutoff_angle", 20.0)
+            beam = node.float("beam_width", cutoff * 0.75)
+            if not 0 < beam <= cutoff < 180:
+                raise node.error(f"{node.label}: needs 0 < beam_width <= cutoff_angle < 180, "
+                                 f"got {beam:g} and {cutoff:g}")
+            axis = m[:3, 2] / np.linalg.norm(m[:3, 2])
+            self.lights.append(SpotLight(tuple(float(x) for x in m[:3, 3]), tuple(float(x) for x in axis),
+                                         color, cutoff, beam))
+        elif p == "directional":
+            if node.has("direction") and m is not None:
+                raise node.error(f"{node.label}: give 'direction' or 'to_world', not both")
+            d = node.vector("direction")
+            if d is None:
+                d = tuple(m[:3, 2]) if m is not None else (0.0, 0.0, 1.0)
+            if not np.linalg.norm(d) > 0:
+                raise node.error(f"{node.label}: direction has zero length")
+            e = node.color("irradiance", (1.0, 1.0, 1.0)) if not node.is_ref("irradiance") else None
+            if e is None:
+                self.unsupported(node.ref("irradiance"), "textured irradiance", fallback="1")
+                e = (1.0, 1.0, 1.0)
+            _nonnegative(node, "irradiance", e)
+            self.lights.append(DirectionalLight(tuple(float(x) for x in d), e))
+        elif p == "constant":
+            if node.is_ref("radiance"):
+                self.unsupported(node.ref("radiance"), "textured constant emitter", fallback="1")
+                le = (1.0, 1.0, 1.0)
+            else:
+                le = node.color("radiance", (1.0, 1.0, 1.0))
+            _nonnegative(node, "radiance", le)
+            self._environment(node)
+            self.background = tuple(a + b for a, b in zip(self.background, le))
+        elif p == "envmap":
+            self._environment(node)
+            filename = node.str("filename")
+            if filename is None:
+                self.unsupported(node, "envmap without 'filename'")
+                return
+            path = node.resolve_file(filename)
+            scale = node.float("scale", 1.0)
+            if not (scale >= 0 and math.isfinite(scale)):
+                raise node.error(f"{node.label}: scale must be >= 0, got {scale}")
+            rot = None
+            if m is not None:
+                similar, s = geo.is_similarity(m)
+                r = m[:3, :3] / s if s else m[:3, :3]
+                if not similar or np.linalg.det(r) < 0:
+                    raise node.error(f"{node.label}: to_world must be a rotation (no scale or mirror)")
+                if not np.allclose(r, np.eye(3), atol=1e-12):
+                    rot = r
+            # Mitsuba's envmap is infinitely far; drpt's Skybox radius only feeds a warning
+            self.lights.append(Skybox(path, radius=1e30, scale=scale, rotation=rot))
+        else:
+            self.unsupported(node, f"emitter '{p}'")
+            return
+        self.check_unread(node)
+
+    def _environment(self, node: Node) -> None:
+        seen = getattr(self, "_env_node", None)
+        if seen is not None:
+            raise node.error(f"only one environment emitter per scene (as in Mitsuba; the first is "
+                             f"at {seen.where})")
+        self._env_node = node
+
+    def _intensity(self, node: Node, name: str) -> tuple:
+        if node.is_ref(name):
+            self.unsupported(node.ref(name), f"textured {name}", fallback="1")
+            return (1.0, 1.0, 1.0)
+        c = node.color(name, (1.0, 1.0, 1.0))
+        _nonnegative(node, name, c)
+        return c
+
+
+def _nonnegative(node: Node, name: str, c) -> None:
+    if not all(math.isfinite(x) and x >= 0 for x in c):
+        raise node.error(f"{node.label}: {name} must be finite and >= 0, got {tuple(c)}")
+
+
+def _check_matrix(node: Node, m: np.ndarray) -> None:
+    if not np.all(np.isfinite(m)):
+        raise node.error(f"{node.label}: to_world is not finite")
+    if abs(np.linalg.det(m[:3, :3])) < 1e-300:
+        raise node.error(f"{node.label}: to_world is singular")
+
+
+def _face_normals(p: np.ndarray) -> np.ndarray:
+    g = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    n = np.linalg.norm(g, axis=1, keepdims=True)
+    g = g / np.where(n > 0, n, 1.0)
+    return np.repeat(g[:, None, :], 3, axis=1)
+
+
+def vertical_fov(fov: float, axis: str, aspect: float) -> float:
+    """drpt's vertical field of view (degrees) for Mitsuba's ``fov`` along ``fov_axis``
+    on a film of ``aspect = width / height`` (Mitsuba's ``parse_fov``, then x to y)."""
+    if axis == "smaller":
+        axis = "y" if aspect > 1 else "x"
+    elif axis == "larger":
+        axis = "x" if aspect > 1 else "y"
+    t = math.tan(math.radians(fov) / 2.0)
+    if axis == "y":
+        ty = t
+    elif axis == "x":
+        ty = t / aspect
+    else:  # diagonal: the half diagonal is t, the half height t / sqrt(1 + aspect^2)
+        ty = t / math.sqrt(1.0 + aspect * aspect)
+    return math.degrees(2.0 * math.atan(ty))
+
+
+def camera_from_matrix(node: Node, m: np.ndarray, fov_y: float) -> PerspectiveCamera:
+    """drpt's camera for Mitsuba's camera-to-world matrix: Mitsuba looks along local
+    +z with +y up and +x to the image's *left* (``lookat`` builds columns ``(left, up,
+    forward)``), drpt along ``direction`` with ``right = direction x up``; the two agree
+    when the matrix is a rotation. A mirroring matrix (the image flipped left to
+    right) has no drpt counterpart."""
+    if not np.all(np.isfinite(m)):
+        raise node.error(f"{node.label}: to_world is not finite")
+    a = m[:3, :3]
+    lengths = np.linalg.norm(a, axis=0)
+    if not np.allclose(lengths, 1.0, atol=1e-4) or not np.allclose(a.T @ a, np.eye(3), atol=1e-4):
+        raise node.error(f"{node.label}: scale factors in the camera's to_world are not allowed "
+                         "(as in Mitsuba)")
+    if np.linalg.det(a) < 0:
+        raise node.error(f"{node.label}: the camera's to_world mirrors the image (a negative scale); "
+                         "drpt's camera cannot")
+    center = tuple(float(x) for x in m[:3, 3])
+    if max(abs(x) for x in center) > MAX_COORDINATE:
+        raise node.error(f"{node.label}: camera position beyond {MAX_COORDINATE:g}")
+    return PerspectiveCamera(center=center, direction=tuple(float(x) for x in a[:, 2]),
+                             up=tuple(float(x) for x in a[:, 1]), fov=float(fov_y))
