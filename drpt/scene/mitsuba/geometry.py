@@ -6,8 +6,9 @@
   ``shape_index``), so drpt gets exactly Mitsuba's vertices, faces, vertex
   normals (the file's, or the ones Mitsuba computes for a mesh without
   them unless ``face_normals``) and texture coordinates, in world space.
-  ``flip_normals`` (which Mitsuba applies when it intersects) is applied
-  here: the winding is reversed and the vertex normals negated, as Mitsuba's
+  ``flip_normals``: Mitsuba keeps the buffers as loaded and reports the flip
+  (``has_flipped_normals``), applying it when it intersects; drpt applies it
+  here, reversing the winding and negating the vertex normals as Mitsuba's
   ``Mesh::pack`` does.
 * ``sphere``: an analytic :class:`~drpt.scene.model.Spheres` entry when
   ``to_world`` is a similarity and the normals point out (``flip_normals``
@@ -106,7 +107,8 @@ def load_mesh(node: Node, to_world: np.ndarray) -> Mesh:
         value = get(name)
         if value is not None:
             d[name] = value
-    flip = bool(node.bool("flip_normals", False))
+    if node.bool("flip_normals", False):
+        d["flip_normals"] = True
     try:
         mesh = mi.load_dict(d)
     except RuntimeError as e:
@@ -121,8 +123,8 @@ def load_mesh(node: Node, to_world: np.ndarray) -> Mesh:
     uv = None
     if mesh.has_vertex_texcoords():
         uv = np.array(mesh.vertex_texcoords_buffer(), dtype=np.float64).reshape(-1, 2)
-    flip = flip or bool(mesh.has_flipped_normals())
-    return _indexed(p, faces, n, uv, flip and True)
+    # the buffers are as loaded; Mitsuba flips when it intersects (has_flipped_normals)
+    return _indexed(p, faces, n, uv, bool(mesh.has_flipped_normals()))
 
 
 # ------------------------------------------------------------ analytic shapes
