@@ -249,10 +249,25 @@ def test_unsupported_plugins_stop_or_are_left_out(tmp_path):
     ('<integrator type="volpath"/>', r"t.xml:3: unsupported integrator 'volpath'"),
     ('<shape type="sphere"><bsdf type="twosided"/></shape>',
      r"t.xml:3: bsdf 'twosided' needs 1 nested BSDF, got 0"),
+    ('<shape type="sphere"><bsdf type="twosided"><bsdf type="dielectric"/></bsdf></shape>',
+     r"t.xml:3: bsdf 'twosided': twosided cannot hold the transmissive BSDF 'dielectric'"),
 ])
 def test_bad_parameters_are_located_errors(tmp_path, body, message):
     with pytest.raises(SceneError, match=message):
         load_scene(_xml(tmp_path, body))
+
+
+def test_textured_sphere_is_tessellated_for_its_uvs():
+    s, warns = load("bsdfs")
+    # the spheres of 'matte' and 'car' have textures: tessellated, with Mitsuba's uvs
+    assert len(s.spheres) == 9 - 2
+    assert sum("a texture (drpt's analytic spheres have no uvs)" in w for w in warns) == 2
+    matte = [i for i, m in enumerate(s.materials) if m.name == "matte"][0]
+    sel = s.triangles.material == matte
+    p = s.triangles.positions[sel].reshape(-1, 3) - (1, 0, 0)
+    uv = s.triangles.uvs[sel].reshape(-1, 2)
+    theta = np.arccos(np.clip(p[:, 2] / 0.3, -1, 1))
+    assert np.allclose(1 - uv[:, 1], theta / np.pi, atol=1e-6)  # drpt's v is Mitsuba's 1 - v
 
 
 def test_mirrored_or_scaled_camera_is_refused(tmp_path):

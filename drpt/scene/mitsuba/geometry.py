@@ -13,8 +13,10 @@
 * ``sphere``: an analytic :class:`~drpt.scene.model.Spheres` entry when
   ``to_world`` is a similarity and the normals point out (``flip_normals``
   false, ``to_world`` not mirroring -- Mitsuba flips the normals of a
-  mirrored sphere); otherwise tessellated (:data:`SPHERE_STACKS` x
-  :data:`SPHERE_SLICES` quads, analytic vertex normals) with a warning.
+  mirrored sphere) and its BSDF has no texture (drpt's spheres have no
+  uvs); otherwise tessellated (:data:`SPHERE_STACKS` x
+  :data:`SPHERE_SLICES` quads, analytic vertex normals, Mitsuba's uvs
+  ``(phi / 2 pi, theta / pi)``) with a warning.
 * ``disk``: tessellated, a fan of :data:`DISK_SEGMENTS` triangles of the
   unit disk in the local ``z = 0`` plane, normal ``+z`` (area smaller than
   the circle's by a relative ``(2 pi / N)^2 / 6``, 1e-4), uv ``(r, phi /

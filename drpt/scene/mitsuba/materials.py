@@ -23,38 +23,21 @@ texture's mean color where known, else 0.5), and ``bitmap`` settings drpt's
 texture lookup does not have (``raw``, a ``to_uv`` other than identity,
 ``filter_type`` other than ``bilinear``, ``wrap_mode`` other than
 ``repeat``; fallback: the setting is ignored). Parameters the plugin does
-not read (``int_ior`` on ``roughconductor``) are listed by
-:meth:`~drpt.scene.mitsuba.reader.Reader.unread` for one warning per node.
+not read (``int_ior`` on ``roughconductor``) are left unread, for the
+reader's one warning listing them (:meth:`~drpt.scene.mitsuba.reader.Reader.check_unread`).
+A tree drpt's material layer refuses (:func:`drpt.shading.complete`:
+``twosided`` around a transmissive BSDF, ...) is an error at the BSDF's line.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ... import bsdf_kinds
+from ...shading import BSDFSpec, Texture, complete
 from .nodes import Node
-
-try:  # the material redesign's classes, once they are on this branch
-    from ...shading import BSDFSpec, Texture  # type: ignore[attr-defined]
-
-    if "params" not in getattr(BSDFSpec, "__dataclass_fields__", {}):
-        raise ImportError
-except ImportError:  # until then, the same shape defined here
-    @dataclass
-    class BSDFSpec:  # type: ignore[no-redef]
-        kind: str
-        params: dict = field(default_factory=dict)
-        children: list = field(default_factory=list)
-        notes: list = field(default_factory=list)
-        origin: str = ""
-
-    @dataclass(frozen=True)
-    class Texture:  # type: ignore[no-redef]
-        path: Path
 
 
 #: Mitsuba's default BSDF for a shape without one.
@@ -80,8 +63,19 @@ class Materials:
 
     def spec(self, node: Node) -> BSDFSpec:
         if node.index not in self.cache:
-            self.cache[node.index] = self._spec(node)
+            spec = self._spec(node)
+            self._check(node, spec)
+            self.cache[node.index] = spec
         return self.cache[node.index]
+
+    @staticmethod
+    def _check(node: Node, spec: BSDFSpec) -> None:
+        """drpt's own checks of a tree (:func:`drpt.shading.complete`: e.g. ``twosided``
+        around a transmissive BSDF), as located errors."""
+        try:
+            complete(spec)
+        except ValueError as e:
+            raise node.error(f"{node.label}: {e}") from None
 
     def _spec(self, node: Node) -> BSDFSpec:
         r = self.reader
@@ -136,7 +130,10 @@ class Materials:
             if not texturable:
                 raise node.error(f"{node.label}: parameter '{name}' cannot be a texture in drpt "
                                  f"(give a constant value)")
-            return self.texture(tex, scalar=isinstance(default, float))
+            scalar = not isinstance(default, tuple) and name not in _SPECTRAL_OR_TEXTURE
+            if default is None:  # alpha_u / alpha_v: the isotropic alpha's default
+                default = bsdf_kinds.PARAMS[kind].get("alpha", 0.1) if scalar else bsdf_kinds.GRAY
+            return self.texture(tex, scalar=scalar, fallback=default)
         if isinstance(default, bool):
             return node.bool(name)
         if isinstance(default, str):
@@ -152,8 +149,10 @@ class Materials:
             return node.color(name)
         return node.float(name)
 
-    def texture(self, node: Node, scalar: bool = False) -> Any:
-        """A texture node as a parameter value: :class:`Texture` for ``bitmap``."""
+    def texture(self, node: Node, scalar: bool = False, fallback: Any = None) -> Any:
+        """A texture node as a parameter value: :class:`Texture` for ``bitmap``, whose
+        ``fallback`` (the value where there are no texture coordinates) is the parameter's
+        default."""
         r = self.reader
         if node.plugin == "bitmap":
             filename = node.str("filename")
@@ -175,7 +174,9 @@ class Materials:
             for key in _BITMAP_SILENT:
                 node.get(key)
             r.check_unread(node)
-            return Texture(path)
+            if fallback is None:
+                fallback = 0.5 if scalar else bsdf_kinds.GRAY
+            return Texture(path, fallback)
         if node.plugin == "checkerboard":
             c0 = node.color("color0", (0.4, 0.4, 0.4))
             c1 = node.color("color1", (0.2, 0.2, 0.2))

@@ -49,12 +49,7 @@ FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
 
 
 def _material(name: str, origin: str, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
-    fields = legacy_fields(spec)
-    if "bsdf" in getattr(Material, "__dataclass_fields__", {}):
-        return Material(name, emission=emission, origin=origin, bsdf=spec, **fields)
-    m = Material(name, emission=emission, origin=origin, **fields)
-    m.bsdf = spec  # the material redesign's field, until it is on this branch
-    return m
+    return Material(name, emission=emission, origin=origin, bsdf=spec, **legacy_fields(spec))
 
 
 class Reader:
@@ -385,10 +380,12 @@ class Reader:
             local = geo.sphere_local(center, radius, m)
             similar, scale = geo.is_similarity(local)
             mirrored = np.linalg.det(local[:3, :3]) < 0
-            if similar and not (flip ^ mirrored):
+            textured = bool(spec.textures())
+            if similar and not (flip ^ mirrored) and not textured:
                 self.spheres.append((local[:3, 3].copy(), scale, k))
             else:
-                why = "flip_normals" if (flip ^ mirrored) else "a to_world that is not a similarity"
+                why = ("flip_normals" if (flip ^ mirrored) else "a to_world that is not a similarity"
+                       if not similar else "a texture (drpt's analytic spheres have no uvs)")
                 self.warn(f"{node.where}: {node.label} with {why} is tessellated "
                           f"({geo.SPHERE_STACKS}x{geo.SPHERE_SLICES} quads)")
                 self.meshes.append((geo.tessellate_sphere(local, flip ^ mirrored), k))
