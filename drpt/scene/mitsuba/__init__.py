@@ -42,7 +42,7 @@ Mitsuba                   drpt
 ``envmap``                :class:`Skybox` with ``scale`` and ``rotation``
 ``<bsdf>``                ``Material.bsdf``, a :class:`drpt.shading.BSDFSpec`
                           tree (:mod:`.materials`); a shape without one gets
-                          Mitsuba's default (diffuse 0.5)
+                          Mitsuba's default (diffuse 0.5; black on an emitter)
 ``bitmap``                :class:`drpt.shading.Texture` on a texturable param
 ========================  =====================================================
 

@@ -40,9 +40,11 @@ from ...shading import BSDFSpec, Texture, complete
 from .nodes import Node
 
 
-#: Mitsuba's default BSDF for a shape without one.
-def default_bsdf() -> BSDFSpec:
-    return BSDFSpec("diffuse", {"kd": bsdf_kinds.GRAY}, [], [], "Mitsuba's default BSDF")
+def default_bsdf(black: bool = False) -> BSDFSpec:
+    """Mitsuba's BSDF for a shape without one: diffuse 0.5, or 0 when the shape is an
+    area emitter (``Shape::Shape``)."""
+    kd = (0.0, 0.0, 0.0) if black else bsdf_kinds.GRAY
+    return BSDFSpec("diffuse", {"kd": kd}, [], [], "Mitsuba's default BSDF")
 
 
 #: Mitsuba parameter name -> drpt parameter name, per kind (all others keep their names).

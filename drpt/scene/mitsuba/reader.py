@@ -323,7 +323,8 @@ class Reader:
             if node.is_ref(name):
                 self.unsupported(node.ref(name), f"{node.ref(name).label} ({name} of {node.label})")
         if spec is None:
-            spec = default_bsdf()
+            # Mitsuba's default: diffuse 0.5, black on a shape with an area emitter
+            spec = default_bsdf(black=max(emission) > 0)
         return spec, bsdf_node, emission
 
     def _material_index(self, spec: BSDFSpec, bsdf_node: Node | None, emission, shape: Node) -> int:
