@@ -40,7 +40,7 @@ Film, sampler, integrator
     pixel is the plain average of its samples), ``independent`` sampler with
     ``sample_count`` and ``seed``, ``path`` integrator with ``max_depth``
     (-1 infinite, 1 emitters seen directly, 2 direct lighting), ``rr_depth``,
-    ``hide_emitters=False``.
+    ``hide_emitters`` (default false; a Mitsuba XML scene's own, through ``drpt export``).
 Materials
     Each material goes through :func:`drpt.shading.interpret_scene` (the
     same call the renderer makes, with the same ``bsdf`` mode) and becomes the
@@ -182,7 +182,7 @@ _TAGS = {
     "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf",
     "plastic": "bsdf", "roughplastic": "bsdf", "thindielectric": "bsdf", "roughdielectric": "bsdf",
     "mask": "bsdf", "null": "bsdf",
-    "area": "emitter", "point": "emitter", "directional": "emitter",
+    "area": "emitter", "point": "emitter", "directional": "emitter", "spot": "emitter",
     "envmap": "emitter", "constant": "emitter",
     "sphere": "shape", "rectangle": "shape", "ply": "shape",
     "bitmap": "texture",
@@ -251,7 +251,7 @@ def _f3(v) -> tuple[float, float, float]:
 
 # ------------------------------------------------------ the description
 def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
-              rr_depth: int, seed: int, bsdf: str = "auto") -> dict:
+              rr_depth: int, seed: int, bsdf: str = "auto", hide_emitters: bool = False) -> dict:
     if int(width) <= 0 or int(height) <= 0:
         raise DrptError(f"image size must be positive, got {width}x{height}")
     if int(spp) <= 0:
@@ -268,7 +268,7 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
         "type": "path",
         "max_depth": int(max_depth),
         "rr_depth": int(rr_depth),
-        "hide_emitters": False,
+        "hide_emitters": bool(hide_emitters),
     }
 
     cam = scene.camera
@@ -450,7 +450,7 @@ def _bsdf(spec: BSDFSpec) -> dict:
 # ---------------------------------------------------------------- dict
 def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
                     max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
-                    bsdf: str = "auto") -> dict:
+                    bsdf: str = "auto", hide_emitters: bool = False) -> dict:
     """The scene as a dict for ``mi.load_dict`` (a Mitsuba variant must be set).
 
     Triangle meshes are in-memory ``mi.Mesh`` objects (one per material),
@@ -460,7 +460,7 @@ def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
 
     if mi.variant() is None:
         raise DrptError("Mitsuba has no variant set; call mi.set_variant('llvm_ad_rgb') first")
-    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf)
+    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, hide_emitters)
     from .mitsuba_phong import register
 
     register()  # drpt_phong, in case a material needs it
@@ -519,7 +519,7 @@ def _build_mesh(md: _MeshData, mi):
 # ----------------------------------------------------------------- XML
 def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: int,
               spp: int, max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
-              bsdf: str = "auto") -> Path:
+              bsdf: str = "auto", hide_emitters: bool = False) -> Path:
     """Write the scene as Mitsuba 3 XML plus PLY meshes; return the XML path.
 
     Phong materials use the ``drpt_phong`` plugin, which Mitsuba knows only
@@ -531,7 +531,7 @@ def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: in
     ``u v`` when the scene has them). The file loads with ``mi.load_file``.
     """
     xml_path = Path(out_xml_path)
-    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf)
+    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, hide_emitters)
     mesh_dir = xml_path.parent / f"{xml_path.stem}_meshes"
     try:
         xml_path.parent.mkdir(parents=True, exist_ok=True)
