@@ -351,14 +351,24 @@ def scene_flags(args: argparse.Namespace) -> dict:
             "strict": bool(getattr(args, "strict", False))}
 
 
+def filter_spelling(name: str, params: dict) -> str:
+    """``--filter``'s spelling of a Mitsuba rfilter: ``box``, ``tent:radius=R``,
+    ``gaussian:stddev=S`` (Mitsuba's defaults when the file gives no parameter)."""
+    if name == "box" or not params:
+        return name
+    ((key, value),) = params.items()
+    return f"{name}:{key}={value!r}"
+
+
 def apply_scene_settings(opts: RenderOptions, scene, args: argparse.Namespace | None = None,
                          on_warning=warn) -> RenderOptions:
     """``opts`` with the render settings the scene file gives (a Mitsuba XML's film size,
     sample count, integrator depths, ``hide_emitters``) where the command line gave none.
 
-    The reconstruction filter: drpt's renderer accumulates with a box filter; a file
-    asking for another (Mitsuba's default is gaussian) gets a warning until
-    :class:`RenderOptions` has a filter (then the hook below sets it)."""
+    The reconstruction filter: with a ``filter`` field in :class:`RenderOptions`
+    (``--filter``) the file's rfilter is set there unless ``--filter`` was given;
+    without one drpt's renderer filters with a box, and a file asking for another
+    filter (Mitsuba's default is gaussian) gets a warning."""
     from dataclasses import replace
 
     st = getattr(scene, "settings", None)
@@ -384,9 +394,12 @@ def apply_scene_settings(opts: RenderOptions, scene, args: argparse.Namespace | 
         path["rr_depth"] = st.rr_depth
     if st.hide_emitters is not None:
         path["hide_emitters"] = st.hide_emitters
-    if st.rfilter is not None and "filter" not in given:
+    # --filter (once RenderOptions has a pixel filter): an explicit flag wins; an untracked
+    # flag counts as given when it is not the default box
+    filter_given = "filter" in given or getattr(args, "filter", None) not in (None, "box")
+    if st.rfilter is not None and not filter_given:
         if "filter" in RenderOptions.__dataclass_fields__:  # hook for reconstruction filters
-            fields["filter"] = st.rfilter
+            fields["filter"] = filter_spelling(st.rfilter, st.rfilter_params)
         elif st.rfilter != "box":
             on_warning(f"{scene.path}: the file asks for a '{st.rfilter}' reconstruction filter; "
                        "drpt's renderer has only the box filter so far (the image is a little "

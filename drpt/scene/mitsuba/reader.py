@@ -230,15 +230,21 @@ class Reader:
             # needs an off-axis window in drpt's camera (drpt.render.camera)
             self.unsupported(node, "principal_point_offset (drpt's camera has no off-axis window yet)",
                              fallback="the centered principal point")
+        lens = {}
         if node.plugin == "thinlens":
             radius = node.float("aperture_radius", 0.0)
-            node.float("focus_distance")
+            # Mitsuba's focus distance defaults to the far clip plane (1e4)
+            focus = node.float("focus_distance", node.float("far_clip", 1e4))
+            if not (radius >= 0 and math.isfinite(radius)) or not focus > 0:
+                raise node.error(f"{node.label}: needs aperture_radius >= 0 and focus_distance > 0")
             if radius:
-                # hook: drpt.scene.model has no thin-lens camera yet (helper h6 adds one)
-                self.unsupported(node, "thinlens depth of field (drpt's camera is a pinhole for now)",
-                                 fallback="a pinhole camera")
+                if "aperture_radius" in PerspectiveCamera.__dataclass_fields__:
+                    lens = {"aperture_radius": radius, "focus_distance": focus}
+                else:  # a drpt without a thin-lens camera
+                    self.unsupported(node, "thinlens depth of field (drpt's camera is a pinhole)",
+                                     fallback="a pinhole camera")
         m = node.transform("to_world")
-        self.camera = camera_from_matrix(node, m, fov_y)
+        self.camera = camera_from_matrix(node, m, fov_y, **lens)
         self.check_unread(node)
 
     def film(self, node: Node) -> tuple[int, int]:
@@ -542,7 +548,7 @@ def vertical_fov(fov: float, axis: str, aspect: float) -> float:
     return math.degrees(2.0 * math.atan(ty))
 
 
-def camera_from_matrix(node: Node, m: np.ndarray, fov_y: float) -> PerspectiveCamera:
+def camera_from_matrix(node: Node, m: np.ndarray, fov_y: float, **lens) -> PerspectiveCamera:
     """drpt's camera for Mitsuba's camera-to-world matrix: Mitsuba looks along local
     +z with +y up and +x to the image's *left* (``lookat`` builds columns ``(left, up,
     forward)``), drpt along ``direction`` with ``right = direction x up``; the two agree
@@ -562,4 +568,4 @@ def camera_from_matrix(node: Node, m: np.ndarray, fov_y: float) -> PerspectiveCa
     if max(abs(x) for x in center) > MAX_COORDINATE:
         raise node.error(f"{node.label}: camera position beyond {MAX_COORDINATE:g}")
     return PerspectiveCamera(center=center, direction=tuple(float(x) for x in a[:, 2]),
-                             up=tuple(float(x) for x in a[:, 1]), fov=float(fov_y))
+                             up=tuple(float(x) for x in a[:, 1]), fov=float(fov_y), **lens)
