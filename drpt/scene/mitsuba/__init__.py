@@ -18,10 +18,12 @@ Mitsuba                   drpt
                           and a film crop window need an off-axis camera
                           window drpt does not have yet: unsupported.
 ``thinlens``              a pinhole camera when ``aperture_radius`` is 0;
-                          otherwise unsupported until drpt has a thin lens
+                          else ``aperture_radius``/``focus_distance`` on the
+                          camera where drpt's camera has them (unsupported
+                          otherwise)
 ``hdrfilm``               ``Scene.settings`` width, height; its ``rfilter``
                           (box, tent, gaussian; default gaussian) as
-                          ``settings.rfilter``
+                          ``settings.rfilter``/``rfilter_params``
 ``independent`` (etc.)    ``settings.spp`` = ``sample_count`` (default 4);
                           other samplers take their count too, with a note
 ``path``                  ``settings``: max_depth, rr_depth, hide_emitters
