@@ -119,7 +119,7 @@ ROUGH = [
 
 
 def _rid(c):
-    m = c.get("material", "eta")
+    m = c.get("material", "eta" if "eta" in c else "")
     a = c.get("alpha", (c.get("alpha_u"), c.get("alpha_v")))
     return f"{m}-{c['distribution']}-{a}-{'vis' if c.get('sample_visible', True) else 'all'}"
 
@@ -442,6 +442,10 @@ def _funcs(rec, theta, pdf_rec=None):
     return sample_func, pdf_func
 
 
+def _cid(c):
+    return f"{c['distribution']}-{c.get('alpha', (c.get('alpha_u'), c.get('alpha_v')))}"
+
+
 CHI2 = [dict(distribution=d, **a) for d in ("beckmann", "ggx")
         for a in (dict(alpha=0.1), dict(alpha=0.5), dict(alpha_u=0.1, alpha_v=0.4))]
 
@@ -449,7 +453,7 @@ CHI2 = [dict(distribution=d, **a) for d in ("beckmann", "ggx")
 @pytest.mark.slow
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("theta", [0.0, 45.0, 80.0, 89.0])
-@pytest.mark.parametrize("case", CHI2, ids=_rid)
+@pytest.mark.parametrize("case", CHI2, ids=_cid)
 def test_chi2_visible(case, theta):
     ok, msg = _chi2(*_funcs(_record("roughconductor", _spec("roughconductor", material="Cu", **case)), theta))
     assert ok, msg
@@ -458,7 +462,7 @@ def test_chi2_visible(case, theta):
 @pytest.mark.slow
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("theta", [0.0, 60.0, 85.0])
-@pytest.mark.parametrize("case", CHI2, ids=_rid)
+@pytest.mark.parametrize("case", CHI2, ids=_cid)
 def test_chi2_all_normals(case, theta):
     p = _spec("roughconductor", material="Au", sample_visible=False, **case)
     ok, msg = _chi2(*_funcs(_record("roughconductor", p), theta))
