@@ -93,6 +93,7 @@ REGISTRY: dict[str, str] = {
     "cook_torrance": "cook_torrance",
     "dielectric": "dielectric",
     "mirror": "mirror",
+    "principled": "principled",
 }
 
 
