@@ -180,6 +180,7 @@ from drjit.auto import Array2f, Array3f, Bool, Float
 
 from ..warp import INV_PI, square_to_cosine_hemisphere
 from . import BSDFSample
+from . import microfacet as mf
 
 #: GGX widths are clamped to this (principled's ``max(0.001, ...)``).
 ALPHA_MIN = 1e-3
@@ -373,47 +374,17 @@ def _tint(c: Array3f) -> Array3f:
 
 
 def alphas(p: PrincipledParams):
-    """``(alpha_x, alpha_y)`` of the main GGX lobe."""
+    """``(alpha_x, alpha_y)`` of the main GGX lobe (``alpha_y`` None: isotropic)."""
     r2 = dr.square(p.roughness)
     if not p.lobes.anisotropic:
-        a = dr.maximum(ALPHA_MIN, r2)
-        return a, a
+        return dr.maximum(ALPHA_MIN, r2), None
     aspect = dr.sqrt(1.0 - 0.9 * p.anisotropic)
     return dr.maximum(ALPHA_MIN, r2 / aspect), dr.maximum(ALPHA_MIN, r2 * aspect)
 
 
-def ggx_D(m: Array3f, ax: Float, ay: Float) -> Float:
-    """Anisotropic GGX normal distribution (0 where ``D m.z <= 1e-20``)."""
-    t = dr.square(m.x / ax) + dr.square(m.y / ay) + dr.square(m.z)
-    d = dr.rcp(dr.pi * ax * ay * t * t)
-    return dr.select(d * m.z > 1e-20, d, 0.0)
-
-
-def ggx_G1(v: Array3f, m: Array3f, ax: Float, ay: Float) -> Float:
-    """Smith masking of anisotropic GGX (Mitsuba's ``smith_g1``)."""
-    xy = dr.square(ax * v.x) + dr.square(ay * v.y)
-    tan2 = xy / dr.square(v.z)
-    g = 2.0 / (1.0 + dr.sqrt(1.0 + tan2))
-    g = dr.select(xy == 0.0, 1.0, g)
-    return dr.select(dr.dot(v, m) * v.z <= 0.0, 0.0, g)
-
-
-def ggx_sample_visible(wi: Array3f, ax: Float, ay: Float, u: Array2f) -> Array3f:
-    """A normal of anisotropic GGX visible from ``wi`` (``wi.z > 0``), density
-    ``G1(wi) max(0, dot(wi, m)) D(m) / wi.z`` (Heitz 2018)."""
-    vh = dr.normalize(Array3f(ax * wi.x, ay * wi.y, wi.z))
-    lensq = vh.x * vh.x + vh.y * vh.y
-    inv = dr.rsqrt(dr.select(lensq > 0.0, lensq, 1.0))
-    t1 = dr.select(lensq > 0.0, Array3f(-vh.y * inv, vh.x * inv, 0.0), Array3f(1.0, 0.0, 0.0))
-    t2 = dr.cross(vh, t1)
-    r = dr.sqrt(u.x)
-    s_phi, c_phi = dr.sincos(2.0 * dr.pi * u.y)
-    p1 = r * c_phi
-    p2 = r * s_phi
-    s = 0.5 * (1.0 + vh.z)
-    p2 = (1.0 - s) * dr.safe_sqrt(1.0 - p1 * p1) + s * p2
-    nh = p1 * t1 + p2 * t2 + dr.safe_sqrt(1.0 - p1 * p1 - p2 * p2) * vh
-    return dr.normalize(Array3f(ax * nh.x, ay * nh.y, dr.maximum(nh.z, 0.0)))
+def distribution(p: PrincipledParams) -> mf.Distribution:
+    """The main lobe's GGX (visible-normal sampling), :class:`.microfacet.Distribution`."""
+    return mf.Distribution(False, *alphas(p))
 
 
 def _cc_alpha(p: PrincipledParams) -> Float:
@@ -477,7 +448,7 @@ class _Geometry:
         self.compat_r = ok & (dr.dot(wi, s) > 0.0) & (dr.dot(wo, s) > 0.0)
         self.compat_t = ok & (dr.dot(wi, s) > 0.0) & (dr.dot(wo, -s) > 0.0)
         self.F = fresnel(self.wi_h, p.eta)[0]
-        self.ax, self.ay = alphas(p)
+        self.dist = distribution(p)
         self.wi_up = dr.mulsign(wi, self.cos_i)
         self.one_m, self.brdf, self.bsdf = _weights(p)
 
@@ -488,8 +459,8 @@ def eval(p: PrincipledParams, wi: Array3f, wo: Array3f) -> Array3f:
     c = p.base_color
     abs_i, abs_o = dr.abs(g.cos_i), dr.abs(g.cos_o)
     safe_i = dr.select(g.active, abs_i, 1.0)
-    D = ggx_D(g.h, g.ax, g.ay)
-    G = ggx_G1(wi, g.h, g.ax, g.ay) * ggx_G1(wo, g.h, g.ax, g.ay)
+    D = g.dist.D(g.h)
+    G = g.dist.G(wi, wo, g.h)
     value = Array3f(0.0)
 
     # main specular reflection
@@ -567,8 +538,8 @@ def pdf(p: PrincipledParams, wi: Array3f, wo: Array3f) -> Float:
     lb = p.lobes
     pd, pc, pt, ps, ok = _probabilities(p, g.front, g.F, g.bsdf, g.brdf)
     safe_i = dr.select(g.active, dr.abs(g.cos_i), 1.0)
-    D = ggx_D(g.h, g.ax, g.ay)
-    g1 = ggx_G1(g.wi_up, g.h, g.ax, g.ay)
+    D = g.dist.D(g.h)
+    g1 = g.dist.G1(g.wi_up, g.h)
     refl = g.reflect & g.compat_r
     # D_wi'(h) / (4 |dot(wo, h)|), dot(wi, h) = dot(wo, h) cancelled (see the module docs)
     v = dr.select(refl, ps * (g1 * D / (4.0 * safe_i)), 0.0)
@@ -593,10 +564,9 @@ def sample(p: PrincipledParams, wi: Array3f, u1: Float, u2: Array2f) -> BSDFSamp
     active = cos_i != 0.0
     front = cos_i > 0.0
     _, brdf, bsdf = _weights(p)
-    ax, ay = alphas(p)
     wi_up = dr.mulsign(wi, cos_i)
     wi_up = dr.select(active, wi_up, Array3f(0.0, 0.0, 1.0))
-    n = ggx_sample_visible(wi_up, ax, ay, u2)
+    n = distribution(p).sample_visible_normal(wi_up, u2)
     F, cos_t, eta_it, eta_ti = fresnel(dr.dot(wi, n), p.eta)
     pd, pc, pt, ps, ok = _probabilities(p, front, F, bsdf, brdf)
     active &= ok
