@@ -110,7 +110,9 @@ SW(|wo.z|)``, ``c_d = dot(h, wo)``::
 
 (``r`` here is the roughness itself, not ``r^2``, and not clamped);
 
-sheen (front, ``reflect``, ``m < 1``, ``sheen > 0``; not gated by ``brdf``)::
+sheen (front, ``reflect``, ``m < 1``, ``sheen > 0``; not gated by ``brdf``,
+as in Mitsuba's JIT variants -- its scalar ones skip it when no lane has
+``brdf > 0``)::
 
     sheen (1 - m) SW(|c_d|) lerp(1, tint, sheen_tint) |wo.z|
 
@@ -141,6 +143,19 @@ where its compatibility mask holds. ``weight = eval / pdf`` at the returned
 the outside, ``1/eta`` from the inside) for a transmission, else 1;
 ``delta`` is False. A sample whose direction fails its lobe's side or
 compatibility test, or whose pdf is 0, is invalid (weight 0, pdf 0).
+
+Energy
+------
+principled does not conserve energy in general, exactly as Mitsuba's
+(``tests/test_bsdf_principled.py`` pins it against Mitsuba's albedo): the
+Burley diffuse is not reduced by the specular Fresnel and its
+retro-reflection grows at grazing angles (white, roughness 1: albedo 1.05 at
+normal incidence, 1.57 at 89 degrees), and the sheen and the clearcoat are
+added on top of everything else. It does conserve it for pure metals
+(``m = 1``: the weight is ``F G1(wo) <= 1`` per sample) and for the
+dielectric specular/transmission pair (reflected plus transmitted flux
+``<= 1`` once the radiance scaling ``1 / eta_it^2`` of a transmission is
+undone: ``weight * BSDFSample.eta^2``).
 
 Departures from Mitsuba (all tested)
 ------------------------------------
@@ -178,6 +193,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float
 
+from ...bsdf_kinds import defaults
 from ..warp import INV_PI, square_to_cosine_hemisphere
 from . import BSDFSample
 from . import microfacet as mf
@@ -293,6 +309,25 @@ class PrincipledParams:
         self.rate_clearcoat = f(rate_clearcoat, 1.0)
         if lobes is not None:
             self.lobes = lobes
+
+
+def from_params(params: dict, lobes: Lobes | None = None) -> PrincipledParams:
+    """A one-lane record straight from a spec's parameters (Mitsuba's names,
+    numbers only; missing ones at their defaults), through :func:`derive` --
+    what the material table produces for a material, without a table.
+    ``lobes=None`` traces the lobes these parameters need."""
+    prm = {**defaults("principled"), **params}
+    eta = derive(prm)["eta_ratio"]
+
+    def f(v):  # opaque: one kernel serves every parameter value
+        return dr.opaque(Float, float(v), 1)
+
+    vals = {n: f(prm[n]) for n in UNIT}
+    c = prm["base_color"]
+    return PrincipledParams(base_color=Array3f(f(c[0]), f(c[1]), f(c[2])), eta=f(eta),
+                            rate_diffuse=f(prm[RATES[0]]), rate_spec=f(prm[RATES[1]]),
+                            rate_clearcoat=f(prm[RATES[2]]),
+                            lobes=lobes if lobes is not None else lobes_of([prm]), **vals)
 
 
 #: record field -> lobe flag that needs it (others are always gathered)
