@@ -236,6 +236,8 @@ def test_lobes_of_follows_mitsubas_flags():
         **{**{f: False for f in pr.NONE.__dataclass_fields__}, "sheen": True})
     tex = object()  # a texture counts even if its values were 0 (Mitsuba's get_flag)
     assert pr.lobes_of([{"spec_trans": tex}]).spec_trans
+    assert not pr.lobes_of([{"spec_trans": np.float32(0.0), "sheen": 0}]).spec_trans
+    assert pr.lobes_of([{"sheen": np.float32(0.5)}]).sheen
     assert pr.lobes_of([CASES["all"]]) == pr.ALL
 
 
@@ -323,7 +325,8 @@ def test_derive_eta_rules():
 @pytest.mark.parametrize("bad", [{"roughness": 1.5}, {"metallic": -0.1}, {"clearcoat_gloss": 2.0},
                                  {"eta": -1.0}, {"eta": 0.0}, {"eta": "glass"}, {"eta": math.inf},
                                  {"specular": 13.0}, {"specular": -1.0},
-                                 {"clearcoat_sampling_rate": -1.0}, {"main_specular_sampling_rate": math.nan}])
+                                 {"clearcoat_sampling_rate": -1.0}, {"main_specular_sampling_rate": math.nan},
+                                 {"roughness": np.float32(1.5)}, {"eta": True}])
 def test_derive_refuses_bad_parameters(bad):
     with pytest.raises(ValueError, match="principled"):
         pr.derive({**defaults("principled"), **bad})

@@ -56,8 +56,8 @@ across the surface along the path)::
 
 ``F = F_diel(dot(wi, h); eta)`` the exact unpolarized dielectric Fresnel
 (:func:`fresnel`, Mitsuba's ``fresnel()`` operation for operation: 1 under
-total internal reflection and at ``c_h = 0``, 0 for ``eta = 1``). Micro/macro compatibility (``s = sign(wi.z)``):
-``dot(wi, s h) > 0`` and ``dot(wo, s h) > 0`` for reflection,
+total internal reflection and at ``c_h = 0``, 0 for ``eta = 1``).
+Micro/macro compatibility (``s = sign(wi.z)``): ``dot(wi, s h) > 0`` and ``dot(wo, s h) > 0`` for reflection,
 ``dot(wi, s h) > 0`` and ``dot(wo, -s h) > 0`` for refraction.
 
 ``D`` is anisotropic GGX, ``D(h) = 1 / (pi ax ay (h.x^2/ax^2 + h.y^2/ay^2
@@ -179,14 +179,17 @@ As Mitsuba's ``m_has_*`` flags: :func:`params` reads
 material of the scene has the parameter given non-zero (or as a texture):
 :class:`Lobes`. Without any ``clearcoat`` no clearcoat code is traced, etc.
 A lane whose own material has the parameter 0 gets the same value either
-way (every term is multiplied by its parameter), so one kernel serves all
-the scene's principled materials. Records built directly (tests) trace
-every lobe.
+way (every such term is multiplied by its parameter, or, for
+``anisotropic``, reduces to the isotropic widths), so one kernel serves all
+the scene's principled materials. A :class:`PrincipledParams` built directly
+traces every lobe unless given ``lobes``; :func:`from_params` builds one
+from a spec's parameters with the lobes they need.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, fields
 
 import drjit as dr
@@ -233,9 +236,14 @@ ALL = Lobes()
 NONE = Lobes(**{f.name: False for f in fields(Lobes)})
 
 
+def _number(v) -> bool:
+    """A plain number (Python or numpy), not a texture (nor a bool)."""
+    return isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+
+
 def _given(v) -> bool:
     """Mitsuba's ``get_flag``: a parameter counts unless it is the number 0 (a texture counts)."""
-    return not (isinstance(v, (int, float)) and not isinstance(v, bool) and float(v) == 0.0)
+    return not (_number(v) and float(v) == 0.0)
 
 
 def lobes_of(specs) -> Lobes:
@@ -250,23 +258,23 @@ def derive(params: dict) -> dict:
     parameters. Raises ``ValueError`` for a bad one."""
     for name in UNIT:
         v = params.get(name, 0.0)
-        if isinstance(v, (int, float)) and not (0.0 <= float(v) <= 1.0):
+        if _number(v) and not (0.0 <= float(v) <= 1.0):
             raise ValueError(f"principled: {name} = {v!r} is outside [0, 1]")
     for name in RATES:
         v = params.get(name, 1.0)
-        if not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0.0):
+        if not _number(v) or not (math.isfinite(v) and v >= 0.0):
             raise ValueError(f"principled: {name} = {v!r} must be a number >= 0")
     transmits = _given(params.get("spec_trans", 0.0))
     eta = params.get("eta")
     if eta is not None:
-        if not isinstance(eta, (int, float)) or not (math.isfinite(eta) and eta > 0.0):
+        if not _number(eta) or not (math.isfinite(eta) and eta > 0.0):
             raise ValueError(f"principled: eta = {eta!r} must be a number > 0")
         eta = float(eta)
         if transmits and eta == 1.0:
             eta = 1.001
     else:
         spec = params.get("specular", 0.5)
-        if not isinstance(spec, (int, float)) or not (0.0 <= spec < 12.5):
+        if not _number(spec) or not (0.0 <= spec < 12.5):
             raise ValueError(f"principled: specular = {spec!r} must be a number in [0, 12.5)")
         spec = np.float32(spec)
         if transmits and spec == 0.0:
