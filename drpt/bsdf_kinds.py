@@ -26,6 +26,7 @@ Python ``str``/``bool`` (decided when a kernel is traced).
 
 from __future__ import annotations
 
+import numbers
 from typing import Any
 
 #: Mitsuba's default index of refraction of its named media (``lookup_ior``).
@@ -94,16 +95,33 @@ COMPOSITES: dict[str, tuple[int, dict[str, Any]]] = {
     "mask": (1, {"opacity": 0.5}),
 }
 
-#: Kinds that transmit light: ``twosided`` refuses them, as Mitsuba's does. ``principled``
+#: Kinds that always transmit light: ``twosided`` refuses them, as Mitsuba's does. ``principled``
 #: is not listed: it transmits (and Mitsuba's ``twosided`` refuses it) exactly when its
 #: ``spec_trans`` is given and is not the number 0 -- a texture counts even if it is all 0
-#: (Mitsuba's ``get_flag``; :func:`drpt.render.bsdf.principled.lobes_of`), which
-#: :func:`drpt.shading.check` tests. Without transmission it is still one-sided (black from
-#: behind, its lobe sees the unflipped frame) unless wrapped in ``twosided``.
+#: (Mitsuba's ``get_flag``: :func:`given`). :func:`transmits` is the whole rule, which
+#: :func:`drpt.shading.complete` applies. Without transmission principled is still one-sided
+#: (black from behind: its lobe sees the unflipped frame) unless wrapped in ``twosided``.
 TRANSMISSIVE = frozenset({"dielectric", "thindielectric", "roughdielectric", "null"})
 
 LEAF_KINDS = tuple(PARAMS)
 ALL_KINDS = LEAF_KINDS + tuple(COMPOSITES)
+
+
+def given(v: Any) -> bool:
+    """Mitsuba's ``get_flag`` (``principled``): a parameter counts as given unless it
+    is absent (``None``) or the number 0; a texture counts whatever its values."""
+    if v is None:
+        return False
+    if isinstance(v, numbers.Real) and not isinstance(v, bool):
+        return float(v) != 0.0
+    return True
+
+
+def transmits(kind: str, params: dict[str, Any]) -> bool:
+    """Whether a leaf of ``kind`` with ``params`` has a transmission component
+    (what Mitsuba's ``twosided`` refuses): the :data:`TRANSMISSIVE` kinds, and
+    ``principled`` with ``spec_trans`` :func:`given`."""
+    return kind in TRANSMISSIVE or (kind == "principled" and given(params.get("spec_trans")))
 
 
 def defaults(kind: str) -> dict[str, Any]:

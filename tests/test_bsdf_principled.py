@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+from pathlib import Path
 
 import drjit as dr
 import numpy as np
@@ -30,9 +31,14 @@ import pytest
 from drjit.auto import Array2f, Array3f, Float, UInt32
 
 from chi2util import mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
-from drpt.bsdf_kinds import defaults
+from drpt.bsdf_kinds import defaults, transmits
+from drpt.export.mitsuba_bsdf import to_mitsuba
 from drpt.render.bsdf import REGISTRY, lobe
 from drpt.render.bsdf import principled as pr
+from drpt.render.material import MaterialTable
+from drpt.render.surface import Interaction
+from drpt.scene.model import Background, Material, PerspectiveCamera, Planes, Scene, Spheres, Triangles
+from drpt.shading import BSDFSpec, Texture, complete
 
 RED = (0.8, 0.2, 0.4)
 WHITE = (1.0, 1.0, 1.0)
@@ -139,6 +145,16 @@ def _theirs(mi, prm, wi, wo):
             np.array(bsdf.pdf(ctx, si, to_mitsuba_vec3(wo))))
 
 
+def _ratio_error(wi, wo):
+    """``|dot(wi, h) / dot(wo, h) - 1|`` in float32 for reflections (0 for the rest):
+    Mitsuba's main-reflection pdf carries this ratio, drpt's cancels it."""
+    reflect = wi[2] * wo[2] > 0
+    h = (wi + wo) / np.maximum(np.linalg.norm(wi + wo, axis=0), 1e-30)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.abs(np.sum(wi * h, axis=0) / np.sum(wo * h, axis=0) - 1.0)
+    return np.where(reflect & np.isfinite(ratio), ratio, 0.0)
+
+
 def _compare(prm, mi_prm=None, n=8000, seed=1):
     """Relative errors of drpt's eval/pdf (parameters ``prm``) against
     Mitsuba's (``mi_prm``, default the same): (eval, pdf on clean lanes, pdf
@@ -157,11 +173,7 @@ def _compare(prm, mi_prm=None, n=8000, seed=1):
     p_m = np.where(back0, 0.0, p_m)
     # Departure 2: the main reflection's pdf has dot(wi, h) / dot(wo, h) = 1
     # cancelled in drpt; Mitsuba's float32 ratio is off near wo ~ -wi.
-    reflect = wi[2] * wo[2] > 0
-    h = (wi + wo) / np.maximum(np.linalg.norm(wi + wo, axis=0), 1e-30)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.abs(np.sum(wi * h, axis=0) / np.sum(wo * h, axis=0) - 1.0)
-    ratio = np.where(reflect & np.isfinite(ratio), ratio, 0.0)
+    ratio = _ratio_error(wi, wo)
     clean = ratio < 1e-5
     ef = np.abs(f_d - f_m) / (np.abs(f_m) + 1e-7 * f_m.max())
     ep = np.abs(p_d - p_m) / (np.abs(p_m) + 1e-7 * p_m.max())
@@ -305,6 +317,85 @@ def test_params_gathers_only_the_needed_fields():
     t = _FakeTable(specs, {"roughness": 1.7, "sheen": -0.2})
     p = pr.params(t, UInt32([0, 1]), dr.full(dr.auto.Bool, True, 2))
     assert np.all(np.array(p.roughness) == 1.0) and np.all(np.array(p.sheen) == 0.0)
+
+
+# ------------------------------------------- through the material table
+def _scene(specs):
+    cam = PerspectiveCamera((0, 0, 5), (0, 0, -1), (0, 1, 0), 40.0)
+    mats = [Material(f"m{i}", bsdf=s) for i, s in enumerate(specs)]
+    pos = np.array([[[-1.0, -1, 0], [1, -1, 0], [1, 1, 0]]] * len(specs))
+    return Scene(Path("t.txt"), cam, mats, Triangles(pos, np.arange(len(specs), dtype=np.int32),
+                                                     uvs=np.zeros((len(specs), 3, 2))),
+                 Spheres.empty(), Planes.empty(), [], Background())
+
+
+def _interaction(wi, material):
+    n = wi.shape[1]
+    z = Array3f(dr.zeros(Float, n), dr.zeros(Float, n), dr.full(Float, 1.0, n))
+    return Interaction(dr.full(dr.auto.Bool, True, n), dr.full(Float, 1.0, n), dr.zeros(Array3f, n), z, z,
+                       dr.zeros(UInt32, n), UInt32(np.asarray(material, np.uint32)), to_drpt(wi, Array3f),
+                       dr.zeros(Array2f, n))
+
+
+@pytest.mark.mitsuba
+def test_material_table_renders_principled_as_mitsuba():
+    # Several principled materials (one-sided, twosided, transmissive, anisotropic)
+    # and a diffuse one in one table: derive(), the uploaded FIELDS, params() and
+    # the union of the lobes they need, against Mitsuba's plugins (exported).
+    mi = mitsuba()
+    leaves = [CASES["all"], CASES["clearcoat"], {**CASES["anisotropic"], "roughness": 0.3}, CASES["glass"]]
+    specs = [complete(BSDFSpec("principled", dict(p))) for p in leaves]
+    specs.append(complete(BSDFSpec("twosided", {}, [BSDFSpec("principled", dict(CASES["sheen"]))])))
+    specs.append(complete(BSDFSpec("diffuse", {"kd": (0.3, 0.4, 0.5)})))
+    table = MaterialTable(_scene(specs))
+    assert table.lobes["principled"] is pr
+    n = 3000
+    for m, spec in enumerate(specs):
+        wi, wo = _pairs(leaves[m] if m < len(leaves) else {}, n, 20 + m)
+        f, pdf = table.eval_pdf(_interaction(wi, np.full(n, m)), to_drpt(wo, Array3f))
+        ref = mi.load_dict(to_mitsuba(spec))
+        si = dr.zeros(mi.SurfaceInteraction3f, n)
+        si.wi = to_mitsuba_vec3(wi)
+        si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+        fm, pm = ref.eval_pdf(mi.BSDFContext(), si, to_mitsuba_vec3(wo))
+        f, fm, pdf, pm = np.array(f), np.array(fm), np.array(pdf), np.array(pm)
+        if spec.kind == "principled" and _bsdf_weight(spec.params) == 0:
+            pm = np.where(wi[2] < 0, 0.0, pm)  # the documented departure
+        np.testing.assert_allclose(f, fm, rtol=1e-4, atol=1e-6 * fm.max())
+        allowed = (2 * _ratio_error(wi, wo) + 1e-4) * pm + 1e-7 * pm.max()
+        assert np.all(np.abs(pdf - pm) <= allowed), m
+        assert (f.max(axis=0) > 0).mean() > 0.2
+    # sampling through the table: finite, weight = f / pdf of the mixture
+    mat = np.arange(6 * 2000) // 2000
+    wi = np.repeat(_dir_np(40.0)[:, None], mat.size, axis=1).astype(np.float32)
+    wi[2, ::2] *= -1  # half from behind
+    u = _uniform(mat.size, 3, 5)
+    si = _interaction(wi, mat)
+    wo, bs = table.sample(si, Float(u[0]), Array2f(u[1], u[2]))
+    f, pdf = table.eval_pdf(si, wo)
+    w, valid = np.array(bs.weight), np.array(bs.valid)
+    assert np.all(np.isfinite(w)) and valid.mean() > 0.3
+    ok = valid & (np.array(pdf) > 0)
+    np.testing.assert_allclose(w[:, ok], np.array(f)[:, ok] / np.array(pdf)[ok], rtol=1e-4)
+
+
+def test_twosided_refuses_transmitting_principled():
+    # Mitsuba's twosided refuses a BSDF with a transmission component: principled
+    # with spec_trans given non-zero (a texture counts), not with spec_trans = 0.
+    assert transmits("principled", {"spec_trans": 0.5}) and transmits("dielectric", {})
+    assert not transmits("principled", {"spec_trans": 0.0}) and not transmits("principled", {})
+    assert transmits("principled", {"spec_trans": Texture(Path("t.png"), 0.0)})
+    with pytest.raises(ValueError, match="transmissive BSDF 'principled'"):
+        complete(BSDFSpec("twosided", {}, [BSDFSpec("principled", {"spec_trans": 0.5})]))
+    complete(BSDFSpec("twosided", {}, [BSDFSpec("principled", {"spec_trans": 0.0})]))
+
+
+@pytest.mark.mitsuba
+def test_mitsubas_twosided_refuses_transmitting_principled_too():
+    mi = mitsuba()
+    with pytest.raises(RuntimeError, match="transmission"):
+        mi.load_dict({"type": "twosided", "bsdf": {"type": "principled", "spec_trans": 0.5}})
+    mi.load_dict({"type": "twosided", "bsdf": {"type": "principled", "spec_trans": 0.0}})
 
 
 # --------------------------------------------------------------- derive

@@ -196,7 +196,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from ...bsdf_kinds import defaults
+from ...bsdf_kinds import defaults, given
 from ..warp import INV_PI, square_to_cosine_hemisphere
 from . import BSDFSample
 from . import microfacet as mf
@@ -215,7 +215,7 @@ RATES = ("diffuse_reflectance_sampling_rate", "main_specular_sampling_rate", "cl
 FIELDS = {"base_color": "rgb", **{n: "float" for n in UNIT}, "eta_ratio": "float",
           **{n: "float" for n in RATES}}
 DELTA = False
-TWO_SIDED = False  # Mitsuba's principled has a back side of its own (see above)
+COLOR = "base_color"  # what the Whitted ambient term multiplies
 
 
 @dataclass(frozen=True)
@@ -241,9 +241,7 @@ def _number(v) -> bool:
     return isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
 
 
-def _given(v) -> bool:
-    """Mitsuba's ``get_flag``: a parameter counts unless it is the number 0 (a texture counts)."""
-    return not (_number(v) and float(v) == 0.0)
+_given = given  # Mitsuba's get_flag (drpt.bsdf_kinds.given)
 
 
 def lobes_of(specs) -> Lobes:
