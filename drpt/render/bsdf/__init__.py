@@ -102,6 +102,7 @@ REGISTRY: dict[str, str] = {
     "null": "null",
     "conductor": "conductor",
     "roughconductor": "roughconductor",
+    "principled": "principled",
 }
 
 
