@@ -74,6 +74,32 @@ def test_filter_flag_and_options(capsys):
         RenderOptions(filter="tent:radius=-2").validate()
 
 
+@pytest.mark.slow
+def test_filter_on_the_command_line(tmp_path):
+    """render and export take --filter; export writes the matching rfilter;
+    a bad value is one line, exit status 2, nothing written."""
+    import subprocess
+    import sys
+
+    from conftest import SCENES
+    from drpt.cli import main
+
+    scene = str(SCENES / "cornellbox" / "cornellbox.txt")
+    out = tmp_path / "g.exr"
+    assert main(["render", scene, "--size", "8", "6", "--spp", "2", "--filter", "gaussian",
+                 "-o", str(out), "--quiet"]) == 0 and out.is_file()
+    xml = tmp_path / "t.xml"
+    assert main(["export", scene, str(xml), "--size", "8", "6", "--spp", "1",
+                 "--filter", "tent:radius=1.5"]) == 0
+    text = xml.read_text()
+    assert '<rfilter type="tent">' in text and '<float name="radius" value="1.5"/>' in text
+    bad = tmp_path / "never.png"
+    r = subprocess.run([sys.executable, "-m", "drpt", "render", scene, "--filter", "mitchell",
+                        "-o", str(bad)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and r.stderr.strip().count("\n") == 0, r.stderr
+    assert "--filter: unknown filter 'mitchell'" in r.stderr and not bad.exists()
+
+
 @pytest.mark.parametrize("flt", [TENT, GAUSS, PixelFilter("tent", 2.5), PixelFilter("gaussian", 0.3)])
 def test_integral_is_the_integral_of_eval(flt):
     r = flt.radius
