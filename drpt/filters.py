@@ -16,12 +16,19 @@ as in Mitsuba; ``x`` is the offset from the pixel center in pixels)
 ``gaussian``  ``w(x) = max(0, exp(-x^2 / (2 s^2)) - exp(-r^2 / (2 s^2)))``,
               ``s = stddev`` (Mitsuba's default 0.5), ``r = 4 s``: the
               Gaussian shifted down to reach 0 at its cut-off radius.
-              Mitsuba's CUDA variants evaluate exactly this; its LLVM and
-              scalar variants a degree-9 polynomial fit of it (``gaussian.cpp``,
-              off by at most 4.2e-4 of the peak; the step response of the
-              normalized filter, the quantity an image shows at an edge,
-              differs by at most 4.3e-5 of the edge's contrast, measured at
-              stddev 0.25, 0.5 and 1). drpt uses the exact function.
+              Mitsuba's CUDA variants evaluate exactly this; on the CPU a
+              degree-9 polynomial fit of it (``gaussian.cpp``, off by at most
+              4.2e-4 of the peak; the step response of the normalized
+              filter, the quantity an image shows at an edge, differs by at
+              most 4.3e-5 of the edge's contrast, measured at stddev 0.25,
+              0.5 and 1). drpt uses the exact function.
+
+Mitsuba's JIT variants (``llvm_ad_rgb``, the reference here, and CUDA) call
+the filter's ``eval`` for every splat; only its scalar variants splat with
+a table (``eval_discretized``: 31 steps over ``[0, r)``, piecewise
+constant, ``MI_FILTER_RESOLUTION``). drpt follows the JIT variants. For
+the box filter Mitsuba's film skips the filter altogether: a sample counts
+in full in the pixel it falls in, as in drpt.
 
 What a pixel is
 ---------------

@@ -23,9 +23,10 @@ reaches. Interior pixels have ``T = [-r, r]``.
     - r^2) / (2 s^2))) * G_T / (G_T - b |T|)``, ``G_T`` and ``W_T = G_T - b |T|``
     the integrals of ``g`` and ``w`` over ``T`` (``G_T = s sqrt(pi / 2)
     (erf(hi / (s sqrt 2)) - erf(lo / (s sqrt 2)))``). The expectation is
-    exactly the truncated, normalized filter's; the weight lies in ``[0,
-    1.0012]`` (stddev 0.5: ``b = exp(-8) = 3.4e-4``) and has mean 1, so it adds
-    about 1e-3 to a sample's relative variance.
+    exactly the truncated, normalized filter's; the weight (``b = exp(-8) =
+    3.4e-4`` whatever the stddev) lies in ``[0, 1.00074]`` per axis (``[0,
+    1.0015]`` in 2-D) and has mean 1 and variance 7.1e-5 per axis, so it adds
+    about 1.4e-4 to a sample's relative variance.
 
 The 2-D weight is the product of the two axes' (``None``, for weight 1,
 when neither axis has one). The box filter is not handled here: the renderer
