@@ -93,6 +93,8 @@ REGISTRY: dict[str, str] = {
     "cook_torrance": "cook_torrance",
     "dielectric": "dielectric",
     "mirror": "mirror",
+    "thindielectric": "thindielectric",
+    "roughdielectric": "roughdielectric",
 }
 
 
