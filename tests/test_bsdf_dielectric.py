@@ -202,7 +202,7 @@ def test_index_matched_passes_straight_through():
     np.testing.assert_array_equal(f, 0.0)
 
 
-@pytest.mark.parametrize("n", [1.0, 1.0001, 1.5, 2.5])
+@pytest.mark.parametrize("n", [1.0, 1.0001, 1.5, 2.5, 4.0, 0.25])
 def test_extremes_are_finite(n):
     cos = np.array([1.0, -1.0, 1e-6, -1e-6, 0.0, -0.0, 1e-30, -1e-30, 0.5, -0.5])
     wi = _dirs_at(cos)
