@@ -66,7 +66,6 @@ from . import BSDFSample
 #: ``rel_ior`` from :func:`derive`, the tints from the spec's parameters.
 FIELDS = {"rel_ior": "float", "specular_reflectance": "rgb", "specular_transmittance": "rgb"}
 DELTA = True
-TWO_SIDED = False
 
 
 def derive(params: dict) -> dict:

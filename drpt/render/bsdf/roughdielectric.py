@@ -105,7 +105,6 @@ KIND = "roughdielectric"
 FIELDS = {"rel_ior": "float", "specular_reflectance": "rgb", "specular_transmittance": "rgb",
           "rd_alpha_u": "float", "rd_alpha_v": "float", "rd_beckmann": "float", "rd_visible": "float"}
 DELTA = False
-TWO_SIDED = False
 
 
 def _alpha(v, name: str) -> float:

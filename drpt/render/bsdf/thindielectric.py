@@ -38,7 +38,6 @@ __all__ = ["FIELDS", "DELTA", "derive", "params", "eval", "pdf", "sample", "refl
 #: Same per-material values as the dielectric: ``rel_ior`` (from :func:`derive`) and the tints.
 FIELDS = {"rel_ior": "float", "specular_reflectance": "rgb", "specular_transmittance": "rgb"}
 DELTA = True
-TWO_SIDED = False
 
 ThinDielectricParams = DielectricParams
 
