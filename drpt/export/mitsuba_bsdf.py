@@ -85,12 +85,15 @@ def _leaf(spec: BSDFSpec) -> dict:
         kind, p = adjust_dielectric(kind, p)
     out: dict[str, Any] = {"type": kind}
     skip = set()
+    if kind in ("conductor", "roughconductor"):
+        from ..conductors import mitsuba_ior
+
+        out.update({k: val(v) for k, v in mitsuba_ior(p).items()})
+        skip |= {"material", "eta", "k"}
     if p.get("alpha_u") is not None or p.get("alpha_v") is not None:
         skip.add("alpha")
     if p.get("eta") is not None:
-        skip |= {"material", "specular"}
-    if p.get("k") is not None:
-        skip.add("material")
+        skip.add("specular")
     for name, v in p.items():
         if v is None or name in skip:
             continue
