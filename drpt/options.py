@@ -5,8 +5,8 @@ takes. Every command builds it the same way:
 
 * :func:`add_render_flags` adds the shared render flags to a command's
   parser (size, spp, seed, depths and Russian roulette, the accelerator and
-  its BVH rule, integrator, material mode, sky sampling, lanes, backend,
-  quiet; for ``render`` also the seed renderer's flags);
+  its BVH rule, integrator, material mode, sky sampling, pixel filter,
+  lanes, backend, quiet; for ``render`` also the seed renderer's flags);
 * :func:`options_from_args` turns the parsed flags into a validated
   :class:`RenderOptions`. Bad values raise :class:`~drpt.errors.DrptError`
   (the command line prints it on one line and exits with status 2);
@@ -46,7 +46,7 @@ MAX_SEED = (1 << 64) - 1  # the seed is hashed as a 64-bit integer
 
 # Flag groups of add_render_flags; a command leaves out those that it sets itself.
 FLAGS = ("size", "spp", "seed", "max_depth", "rr_depth", "rr_prob", "accel", "integrator",
-         "bsdf", "env_sampling", "max_lanes", "backend", "quiet", "scene")
+         "bsdf", "env_sampling", "filter", "max_lanes", "backend", "quiet", "scene")
 
 
 @dataclass
@@ -71,6 +71,7 @@ class RenderOptions:
     bsdf: str = "auto"  # how MTL materials are read, see drpt.shading
     integrator: str = "path"  # "path" (MIS path tracing) or "whitted"
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
+    filter: str = "box"  # pixel reconstruction filter, drpt.filters.parse_filter's spelling
     path: PathOptions = field(default_factory=PathOptions)
     max_lanes: int | None = None  # samples traced at once (None: drpt.backend.policy().max_lanes)
     chunk_spp: int | None = None  # samples per pixel of a chunk (None: one pass step), drpt.render.chunks
@@ -115,6 +116,9 @@ class RenderOptions:
                                      ("--env-sampling", self.env_sampling, ENV_SAMPLING)):
             if value not in allowed:
                 raise DrptError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
+        from .filters import parse_filter
+
+        parse_filter(self.filter)  # raises DrptError on a bad --filter
         if self.accel == "grid" and self.grid_resolution is not None and \
                 not 1 <= self.grid_resolution <= GRID_MAX_RESOLUTION:
             raise DrptError(f"-resolution must be between 1 and {GRID_MAX_RESOLUTION} grid cells "
@@ -140,6 +144,13 @@ class RenderOptions:
                                 f"{LEAF_MAX_COUNT}), got {self.bvh_min_leaf}; --accel bvh2 "
                                 "takes any")
         return self
+
+    @property
+    def pixel_filter(self):
+        """The :class:`~drpt.filters.PixelFilter` that :attr:`filter` names."""
+        from .filters import parse_filter
+
+        return parse_filter(self.filter)
 
 
 # ------------------------------------------------------------------ accelerator names
@@ -197,7 +208,7 @@ class _Given(argparse._StoreAction):
 
 def given_flags(args: argparse.Namespace) -> set[str]:
     """The dests of the tracked render flags (size, spp, max_depth, rr_depth,
-    integrator) given on the command line."""
+    integrator, filter) given on the command line."""
     return set(getattr(args, "_given", ()))
 
 
@@ -214,7 +225,7 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
             ``-MonteCarlo``, ``-cook_torrance``): ``drpt render`` only.
         defaults: the command's defaults, by group: ``size`` (a pair), ``spp``,
             ``seed``, ``max_depth``, ``rr_depth``, ``accel``, ``integrator``,
-            ``bsdf``, ``env_sampling``. ``None`` leaves the choice to
+            ``bsdf``, ``env_sampling``, ``filter``. ``None`` leaves the choice to
             :func:`options_from_args` (e.g. the seed's defaults with ``-input``).
     """
     from .accel import KINDS, METHODS
@@ -223,7 +234,8 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
     if unknown:
         raise ValueError(f"unknown render flag groups {sorted(unknown)}")
     d = {"size": (512, 512), "spp": 64, "seed": 0, "max_depth": -1, "rr_depth": 5,
-         "accel": None, "integrator": None, "bsdf": None, "env_sampling": "luminance"}
+         "accel": None, "integrator": None, "bsdf": None, "env_sampling": "luminance",
+         "filter": "box"}
     d.update(defaults)
 
     def want(group: str) -> bool:
@@ -314,6 +326,13 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
         parser.add_argument("--env-sampling", choices=ENV_SAMPLING, default=d["env_sampling"],
                             help="how sky directions are sampled: by luminance (default) or "
                                  "uniformly over the sphere (for comparison)")
+    if want("filter"):
+        parser.add_argument("--filter", dest="filter", metavar="box|tent|gaussian", action=_Given,
+                            default=d["filter"],
+                            help="pixel reconstruction filter, Mitsuba's: box (the pixel's "
+                                 "square), tent[:radius=R] (R default 1) or gaussian[:stddev=S] "
+                                 "(S default 0.5; Mitsuba's default filter), by filter "
+                                 f"importance sampling (default {d['filter']})")
     if want("max_lanes"):
         parser.add_argument("--max-lanes", type=int, default=None,
                             help="samples traced at once; bounds memory (default: the "
@@ -360,15 +379,13 @@ def filter_spelling(name: str, params: dict) -> str:
     return f"{name}:{key}={value!r}"
 
 
-def apply_scene_settings(opts: RenderOptions, scene, args: argparse.Namespace | None = None,
-                         on_warning=warn) -> RenderOptions:
+def apply_scene_settings(opts: RenderOptions, scene,
+                         args: argparse.Namespace | None = None) -> RenderOptions:
     """``opts`` with the render settings the scene file gives (a Mitsuba XML's film size,
     sample count, integrator depths, ``hide_emitters``) where the command line gave none.
 
-    The reconstruction filter: with a ``filter`` field in :class:`RenderOptions`
-    (``--filter``) the file's rfilter is set there unless ``--filter`` was given;
-    without one drpt's renderer filters with a box, and a file asking for another
-    filter (Mitsuba's default is gaussian) gets a warning."""
+    The file's reconstruction filter (Mitsuba's default: gaussian) becomes
+    ``filter`` unless ``--filter`` was given."""
     from dataclasses import replace
 
     st = getattr(scene, "settings", None)
@@ -394,16 +411,8 @@ def apply_scene_settings(opts: RenderOptions, scene, args: argparse.Namespace | 
         path["rr_depth"] = st.rr_depth
     if st.hide_emitters is not None:
         path["hide_emitters"] = st.hide_emitters
-    # --filter (once RenderOptions has a pixel filter): an explicit flag wins; an untracked
-    # flag counts as given when it is not the default box
-    filter_given = "filter" in given or getattr(args, "filter", None) not in (None, "box")
-    if st.rfilter is not None and not filter_given:
-        if "filter" in RenderOptions.__dataclass_fields__:  # hook for reconstruction filters
-            fields["filter"] = filter_spelling(st.rfilter, st.rfilter_params)
-        elif st.rfilter != "box":
-            on_warning(f"{scene.path}: the file asks for a '{st.rfilter}' reconstruction filter; "
-                       "drpt's renderer has only the box filter so far (the image is a little "
-                       "sharper than Mitsuba's)")
+    if st.rfilter is not None and "filter" not in given:
+        fields["filter"] = filter_spelling(st.rfilter, st.rfilter_params)
     if path.get("max_depth") == 0:
         raise DrptError(f"{scene.path}: max_depth 0 renders nothing (Mitsuba gives a black image)")
     opts = replace(opts, path=replace(opts.path, **path), **fields)
@@ -523,6 +532,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          seed=get("seed", base.seed), **fields, bsdf=bsdf,
                          integrator=integrator,
                          env_sampling=get("env_sampling", base.env_sampling),
+                         filter=get("filter", base.filter),
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),
                                           rr_depth=rr_depth, rr_prob=rr_prob),
                          max_lanes=max_lanes, chunk_spp=get("chunk_spp"),

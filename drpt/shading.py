@@ -147,7 +147,7 @@ def complete(spec: BSDFSpec) -> BSDFSpec:
     children = [complete(c) for c in spec.children]
     if kind == "twosided":
         for c in children:
-            trans = [leaf.kind for leaf in c.leaves() if leaf.kind in bsdf_kinds.TRANSMISSIVE]
+            trans = [leaf.kind for leaf in c.leaves() if bsdf_kinds.transmits(leaf.kind, leaf.params)]
             if trans:
                 raise ValueError(f"twosided cannot hold the transmissive BSDF '{trans[0]}'")
     return replace(spec, params=params, children=children)

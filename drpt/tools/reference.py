@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DrptError, note, warn
+from ..filters import parse_filter
 
 ROOT = Path(__file__).resolve().parents[2]
 CACHE_VERSION = 1
@@ -165,21 +166,22 @@ def render_committed(name: str, seed: int = 12345) -> Path:
 # ------------------------------------------------------------ the batched render
 def render_batches(scene, width: int, height: int, batch_spp: int, batches: int, seed: int,
                    seed_step: int = 7919, max_depth: int = -1, rr_depth: int = 5,
-                   bsdf: str = "phong", progress: bool = True):
+                   bsdf: str = "phong", progress: bool = True, rfilter: str = "box"):
     """Mitsuba's ``path`` integrator on the exported ``scene``, ``batches`` times
     at ``batch_spp`` samples per pixel, batch ``k`` with seed ``seed + seed_step * k``.
 
     Returns the mean image, the per-pixel variance of the mean
     (``var(ddof=1) / batches``; zero for one batch), both float32, the
-    render seconds and the ``load_dict`` seconds. Mitsuba's variant must be
-    set (:func:`drpt.backend.set_mitsuba_variant`)."""
+    render seconds and the ``load_dict`` seconds. ``rfilter`` is the film's
+    pixel filter (``--filter``'s spelling). Mitsuba's variant must be set
+    (:func:`drpt.backend.set_mitsuba_variant`)."""
     import mitsuba as mi
 
     from ..export.mitsuba import to_mitsuba_dict
 
     t0 = time.perf_counter()
     ms = mi.load_dict(to_mitsuba_dict(scene, width, height, batch_spp, max_depth=max_depth,
-                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf))
+                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter))
     load_seconds = time.perf_counter() - t0
     runs = []
     t0 = time.perf_counter()
@@ -287,7 +289,8 @@ def reference_key(scene, settings: dict) -> str:
         export.write_xml(scene, Path(tmp) / "scene.xml", settings["width"],
                          settings["height"], settings["batch_spp"],
                          max_depth=settings["max_depth"], rr_depth=settings["rr_depth"],
-                         seed=settings["ref_seed"], bsdf=settings["bsdf"])
+                         seed=settings["ref_seed"], bsdf=settings["bsdf"],
+                         rfilter=settings.get("rfilter", "box"))
         for f in sorted(Path(tmp).rglob("*")):
             if f.is_file():
                 add("export:" + str(f.relative_to(tmp)), f.read_bytes())
@@ -343,7 +346,8 @@ class Reference:
         s = self.settings
         return {"renderer": f"mitsuba {mi.__version__} {mitsuba_variant()} path",
                 "spp": s["batch_spp"] * s["batches"], "batches": s["batches"],
-                "seed": s["ref_seed"], "seconds": float(self.meta["seconds"]),
+                "seed": s["ref_seed"], "rfilter": s.get("rfilter", "box"),
+                "seconds": float(self.meta["seconds"]),
                 "cached": self.cached,
                 "cache_file": None if self.cache_file is None else str(self.cache_file),
                 "key": self.key}
@@ -352,7 +356,7 @@ class Reference:
 def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024,
                   ref_batches: int = 8, bsdf: str = "phong", max_depth: int = -1,
                   rr_depth: int = 5, seed: int = 0, cache_dir: Path | None = None,
-                  progress: bool = True) -> Reference:
+                  progress: bool = True, rfilter: str = "box") -> Reference:
     """The Mitsuba reference of a loaded ``scene``: from the cache, or rendered (and cached).
 
     Checks the settings and sets up Mitsuba's variant on drpt's backend.
@@ -367,6 +371,9 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
     settings = {"width": int(width), "height": int(height), "batch_spp": per,
                 "batches": int(ref_batches), "max_depth": int(max_depth),
                 "rr_depth": int(rr_depth), "bsdf": bsdf, "ref_seed": int(seed) + 100000}
+    pixel_filter = parse_filter(rfilter)
+    if not pixel_filter.is_box:  # (box references keep the cache keys they always had)
+        settings["rfilter"] = str(pixel_filter)
     key = reference_key(scene, settings)
     cache_file = None if cache_dir is None else Path(cache_dir) / f"{stem}_{key[:24]}.npz"
     cached = _load_cached(cache_file) if cache_file is not None and cache_file.is_file() else None
@@ -377,7 +384,8 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
     if cached is None:
         ref, ref_var, secs, load_secs = render_batches(
             scene, width, height, per, int(ref_batches), settings["ref_seed"],
-            max_depth=max_depth, rr_depth=rr_depth, bsdf=bsdf, progress=progress)
+            max_depth=max_depth, rr_depth=rr_depth, bsdf=bsdf, progress=progress,
+            rfilter=settings.get("rfilter", "box"))
         meta = {"seconds": secs, "load_seconds": load_secs, "key": key, "settings": settings}
         if cache_file is not None:
             _save_cached(cache_file, ref, ref_var, meta)

@@ -100,6 +100,11 @@ REGISTRY: dict[str, str] = {
     "dielectric": "dielectric",
     "mirror": "mirror",
     "null": "null",
+    "conductor": "conductor",
+    "roughconductor": "roughconductor",
+    "principled": "principled",
+    "thindielectric": "thindielectric",
+    "roughdielectric": "roughdielectric",
 }
 
 

@@ -238,11 +238,7 @@ class Reader:
             if not (radius >= 0 and math.isfinite(radius)) or not focus > 0:
                 raise node.error(f"{node.label}: needs aperture_radius >= 0 and focus_distance > 0")
             if radius:
-                if "aperture_radius" in PerspectiveCamera.__dataclass_fields__:
-                    lens = {"aperture_radius": radius, "focus_distance": focus}
-                else:  # a drpt without a thin-lens camera
-                    self.unsupported(node, "thinlens depth of field (drpt's camera is a pinhole)",
-                                     fallback="a pinhole camera")
+                lens = {"aperture_radius": radius, "focus_distance": focus}
         m = node.transform("to_world")
         self.camera = camera_from_matrix(node, m, fov_y, **lens)
         self.check_unread(node)
