@@ -17,13 +17,12 @@ Mitsuba                   drpt
                           ``to_world`` is an error. ``principal_point_offset``
                           and a film crop window need an off-axis camera
                           window drpt does not have yet: unsupported.
-``thinlens``              a pinhole camera when ``aperture_radius`` is 0;
-                          else ``aperture_radius``/``focus_distance`` on the
-                          camera where drpt's camera has them (unsupported
-                          otherwise)
+``thinlens``              the camera's ``aperture_radius`` and
+                          ``focus_distance`` (default: far_clip, 1e4)
 ``hdrfilm``               ``Scene.settings`` width, height; its ``rfilter``
                           (box, tent, gaussian; default gaussian) as
-                          ``settings.rfilter``/``rfilter_params``
+                          ``settings.rfilter``/``rfilter_params``, which
+                          become ``--filter`` unless it is given
 ``independent`` (etc.)    ``settings.spp`` = ``sample_count`` (default 4);
                           other samplers take their count too, with a note
 ``path``                  ``settings``: max_depth, rr_depth, hide_emitters
