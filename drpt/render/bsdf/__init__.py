@@ -1,5 +1,6 @@
 """BSDF lobes, one module each: ``diffuse``, ``phong``, ``cook_torrance``
-(with ``microfacet`` for GGX), ``dielectric``, ``mirror``.
+(with ``microfacet`` for GGX), ``dielectric``, ``mirror``, ``plastic``,
+``roughplastic`` (its coating tables precomputed by ``roughplastic_tables``).
 
 :data:`REGISTRY` maps each kind of :class:`drpt.shading.BSDFSpec` to its
 module; :class:`drpt.render.material.MaterialTable` finds a kind's lobe
@@ -93,6 +94,8 @@ REGISTRY: dict[str, str] = {
     "cook_torrance": "cook_torrance",
     "dielectric": "dielectric",
     "mirror": "mirror",
+    "plastic": "plastic",
+    "roughplastic": "roughplastic",
 }
 
 
