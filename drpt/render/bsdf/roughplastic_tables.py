@@ -57,20 +57,31 @@ _INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
 _erf = np.vectorize(math.erf, otypes=[np.float64])
 
 
+_ERFINV_C1 = (1.50140941, 0.246640727, -0.00417768164, -0.00125372503, 0.00021858087,
+              -4.39150654e-06, -3.5233877e-06, 3.43273939e-07, 2.81022636e-08)
+_ERFINV_C2 = (2.83297682, 1.00167406, 0.00943887047, -0.0076224613, 0.00573950773,
+              -0.00367342844, 0.00134934322, 0.000100950558, -0.000200214257)
+
+
+def _horner(x, c):
+    r = np.full_like(x, c[-1])
+    for k in reversed(c[:-1]):
+        r *= x
+        r += k
+    return r
+
+
 def erfinv(x: np.ndarray) -> np.ndarray:
     """Dr.Jit's ``erfinv``: M. Giles, "Approximating the erfinv function"
     (GPU Computing Gems, 2011), the single-precision fit."""
+    x = np.asarray(x, np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         w = -np.log((1.0 - x) * (1.0 + x))
-        w1 = w - 2.5
-        w2 = np.sqrt(w) - 3.0
-    c1 = (1.50140941, 0.246640727, -0.00417768164, -0.00125372503, 0.00021858087,
-          -4.39150654e-06, -3.5233877e-06, 3.43273939e-07, 2.81022636e-08)
-    c2 = (2.83297682, 1.00167406, 0.00943887047, -0.0076224613, 0.00573950773,
-          -0.00367342844, 0.00134934322, 0.000100950558, -0.000200214257)
-    p1 = np.polynomial.polynomial.polyval(w1, c1)
-    p2 = np.polynomial.polynomial.polyval(w2, c2)
-    return np.where(w < 5.0, p1, p2) * x
+        p = _horner(w - 2.5, _ERFINV_C1)
+        tail = ~(w < 5.0)
+        if tail.any():
+            p[tail] = _horner(np.sqrt(w[tail]) - 3.0, _ERFINV_C2)
+    return p * x
 
 
 def fresnel(cos_i: np.ndarray, eta: float):
