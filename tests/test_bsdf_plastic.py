@@ -304,8 +304,9 @@ def test_fdr_internal():
 
 # ================================================================ tables
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("distr,alpha,eta", [("beckmann", 0.1, 1.49), ("ggx", 0.3, 1.49),
-                                             ("ggx", 0.02, 2.5), ("beckmann", 0.6, 0.7)])
+@pytest.mark.parametrize("distr,alpha,eta", [("beckmann", 0.1, 1.49), ("ggx", 0.02, 2.5),
+                                             pytest.param("ggx", 0.3, 1.49, marks=pytest.mark.slow),
+                                             pytest.param("beckmann", 0.6, 0.7, marks=pytest.mark.slow)])
 def test_tables_equal_mitsuba(distr, alpha, eta):
     """Recover Mitsuba's T(mu_j) and R_int from its eval (nonlinear, specular
     off, wi = normal, wo at the table's cosines) and compare with the numpy
@@ -534,8 +535,13 @@ def _albedo(kind, prm, theta, n=200_000):
     return quad, mc
 
 
-@pytest.mark.parametrize("eta", [1.0, 1.49, 2.0, 3.0, 4.0])
-@pytest.mark.parametrize("theta", [0.0, 60.0, 85.0])
+def _quick(cases, quick):
+    """``cases`` as params, those not in ``quick`` marked slow."""
+    return [c if c in quick else pytest.param(*c, marks=pytest.mark.slow) for c in cases]
+
+
+@pytest.mark.parametrize("eta,theta", _quick([(e, t) for e in (1.0, 1.49, 2.0, 3.0, 4.0) for t in (0.0, 60.0, 85.0)],
+                                             [(1.0, 0.0), (1.49, 60.0), (2.0, 85.0), (4.0, 0.0)]))
 def test_plastic_furnace(eta, theta):
     """White plastic: albedo 1 to the fit's accuracy (<= 1.003); the MC mean of the sampled weights agrees."""
     prm = {"int_ior": eta, "ext_ior": 1.0, "diffuse_reflectance": (1.0, 1.0, 1.0)}
@@ -560,8 +566,10 @@ def _mi_albedo(kind, prm, theta, n=200_000):
 
 
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("distr,alpha", [("beckmann", 0.1), ("ggx", 0.3), ("ggx", 1.0), ("beckmann", 0.01)])
-@pytest.mark.parametrize("theta", [0.0, 60.0, 85.0])
+@pytest.mark.parametrize("distr,alpha,theta", _quick(
+    [(d, a, t) for d, a in (("beckmann", 0.1), ("ggx", 0.3), ("ggx", 1.0), ("beckmann", 0.01))
+     for t in (0.0, 60.0, 85.0)],
+    [("beckmann", 0.1, 60.0), ("ggx", 0.3, 85.0), ("ggx", 1.0, 0.0), ("beckmann", 0.01, 0.0)]))
 def test_roughplastic_furnace(distr, alpha, theta):
     """White rough plastic: the albedo (mean of the sampled weights) is <= 1
     and equals Mitsuba's (its mean sample weight, independent samples) to 5
