@@ -51,7 +51,19 @@ cosine-weighted ``wo`` (``u2``). The density of either choice is the mixture::
 
 (``D_wi(H) / (4 wo.H)`` with ``wi.H = wo.H`` cancelled, as Mitsuba writes
 it), and ``weight = eval / pdf`` at the sampled ``wo``; a sample with
-``pdf = 0`` (below the surface) is invalid.
+``pdf = 0`` (below the surface) is invalid. The microfacet samplers and the
+cosine warp are Mitsuba's mappings, so the same ``(u1, u2)`` give Mitsuba's
+sample (to float32 rounding; ~5e-4 in the normal with ``sample_visible =
+False`` at small alphas, see :class:`.microfacet.Distribution`).
+
+Trace-time choices: :func:`params` looks at the scene's roughplastic specs
+(``table.specs_of``): one distribution, one ``sample_visible``, one
+``nonlinear`` -> Python constants, only that code traced; both present ->
+per-lane ``Bool``/float fields and both branches traced and selected.
+
+Mitsuba's ``pdf`` is not masked to the upper hemisphere (for ``wo.z < 0``
+it returns its specular term, and for ``wi.z < 0`` too with
+``sample_visible = False``); drpt's is 0 there, as both plugins' ``eval``.
 
 Where drpt differs from Mitsuba
 -------------------------------
@@ -198,7 +210,7 @@ def params(table, si, active) -> RoughPlasticParams:
         table.value("diffuse_reflectance", si, active), table.value("specular_reflectance", si, active),
         table.value("alpha", si, active), table.value("plastic_eta", si, active),
         table.value("plastic_specular_weight", si, active),
-        plastic._nonlinear_field(table, "roughplastic", si, active),
+        plastic.nonlinear_field(table, "roughplastic", si, active),
         table.value("roughplastic_internal_reflectance", si, active),
         lambda mu: table.table_lerp(TABLE, si, mu, active), beck, vis)
 
