@@ -130,6 +130,8 @@ def resolve_ior(value: Any, name: str = "ior") -> float:
         if key not in NAMED_IORS:
             raise ValueError(f"{name}: unknown IOR name {value!r} (known: {', '.join(NAMED_IORS)})")
         return NAMED_IORS[key]
+    if isinstance(value, bool):
+        raise ValueError(f"{name}: expected a number or an IOR name, got {value!r}")
     try:
         v = float(value)
     except (TypeError, ValueError):

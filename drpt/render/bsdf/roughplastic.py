@@ -34,8 +34,9 @@ dielectric Fresnel reflectance (:func:`.plastic.fresnel`)::
 visible-normal sampler is used there whatever ``sample_visible`` says, as in
 Mitsuba). ``T`` is a ``("table", 64)`` field read as Mitsuba's
 ``lerp_gather``: ``x = mu (N - 1)``, ``i = min(floor(x), N - 2)``,
-``T = lerp(t[i], t[i + 1], x - i)`` (:func:`lerp_table`; the material table's
-``table_lerp``), samples at ``mu = i / 63`` (the first at ``1e-6``).
+``T = lerp(t[i], t[i + 1], x - i)`` -- exactly the material table's
+``table_lerp`` for ``x`` in [0, 1] -- with samples at ``mu = i / 63`` (the
+first at ``1e-6``).
 
 Sampling (Mitsuba's)::
 
@@ -81,7 +82,7 @@ import math
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import Array2f, Array3f, Bool, Float
 
 from ...bsdf_kinds import PARAMS
 from ..warp import INV_PI, square_to_cosine_hemisphere
@@ -157,17 +158,6 @@ def derive(params: dict) -> dict:
 
 
 # ---------------------------------------------------------------- device side
-def lerp_table(data: Float, x: Float, n: int = RES, offset=0, active=True) -> Float:
-    """Mitsuba's ``lerp_gather``: linear interpolation of the ``n`` samples
-    ``data[offset : offset + n]`` (at ``x = i / (n - 1)``) at ``x`` in [0, 1]."""
-    x = Float(x) * float(n - 1)
-    i = dr.minimum(UInt32(dr.maximum(x, 0.0)), n - 2)
-    j = UInt32(offset) + i
-    v0 = dr.gather(Float, data, j, active)
-    v1 = dr.gather(Float, data, j + 1, active)
-    return dr.lerp(v0, v1, x - Float(i))
-
-
 class RoughPlasticParams:
     """Per-lane parameters: ``diffuse`` (rho_d), ``specular`` (k_s),
     ``alpha``, ``eta``, ``spec_weight`` (w), ``nonlinear`` (0/1),
