@@ -243,6 +243,7 @@ def test_registered_and_fields_complete():
         out = mod.derive({})
         for name in mod.FIELDS:
             assert name in out or name in PARAMS[kind], name
+        assert mod.COLOR == "diffuse_reflectance" and mod.COLOR in mod.FIELDS
     assert not pl.DELTA and not rp.DELTA
 
 

@@ -103,7 +103,8 @@ FIELDS = {
     "plastic_nonlinear": "float",
 }
 DELTA = False
-TWO_SIDED = False  # one-sided, as Mitsuba's plugin (the material layer's twosided flips)
+#: The field the Whitted ambient term multiplies (the diffuse base).
+COLOR = "diffuse_reflectance"
 
 #: Mitsuba 3's named IORs (``include/mitsuba/render/ior.h``, ``ior_data``: Hecht,
 #: Optics, 4th ed., 0-20 C, ~589 nm). TODO: use helper h2's shared IOR table once merged.

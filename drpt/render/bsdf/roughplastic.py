@@ -107,7 +107,8 @@ FIELDS = {
     TABLE: ("table", RES),
 }
 DELTA = False
-TWO_SIDED = False  # one-sided, as Mitsuba's plugin
+#: The field the Whitted ambient term multiplies (the diffuse base).
+COLOR = "diffuse_reflectance"
 
 
 # ---------------------------------------------------------------- host side
