@@ -18,8 +18,12 @@ and ``roughplastic`` plugins:
 * weight == eval / pdf on the smooth samples; finite, non-negative output at
   alpha 1e-4..1, IOR 1..4 (and 1/4), cos 1e-6; plastic's documented
   deviation from Mitsuba above eta = 2;
-* params() through a material table mixing distributions, sample_visible
-  and nonlinear per lane equals the per-material results.
+* params() through a stand-in table mixing distributions, sample_visible
+  and nonlinear per lane equals the per-material results; through the real
+  MaterialTable (textures, twosided, blendbsdf with plastic's Dirac part)
+  eval/pdf equal Mitsuba's exported plugins and sampling is consistent; the
+  table's table_lerp follows Mitsuba's lerp_gather;
+* (slow) spheres of plastic / roughplastic rendered by drpt and Mitsuba agree.
 
 Tolerances: eval/pdf to 2e-4 relative + 1e-6 absolute. The largest
 differences are float32 Fresnel rounding where ``1 - F`` is small (cos <
