@@ -1,5 +1,7 @@
 """BSDF lobes, one module each: ``diffuse``, ``phong``, ``cook_torrance``
-(with ``microfacet`` for GGX), ``dielectric``, ``mirror``, ``null``.
+(with ``microfacet`` for GGX), ``dielectric``, ``mirror``, ``null``,
+``plastic``, ``roughplastic`` (its coating tables precomputed by
+``roughplastic_tables``).
 
 :data:`REGISTRY` maps each leaf kind of :mod:`drpt.bsdf_kinds` to its
 module; :class:`drpt.render.material.MaterialTable` finds a kind's lobe
@@ -105,6 +107,8 @@ REGISTRY: dict[str, str] = {
     "principled": "principled",
     "thindielectric": "thindielectric",
     "roughdielectric": "roughdielectric",
+    "plastic": "plastic",
+    "roughplastic": "roughplastic",
 }
 
 
