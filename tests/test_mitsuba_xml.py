@@ -8,10 +8,11 @@ integrator), ``spot`` (spot light, ``hide_emitters``), ``envmap`` (rotated, scal
 ``textured`` (bitmap on obj and rectangle uvs), ``composites`` (blendbsdf with a texture
 weight, mask, twosided, dielectric), ``glossy`` (conductor, anisotropic roughconductor,
 named-IOR dielectric, thindielectric, roughdielectric, principled), ``lens`` (thinlens, a
-gaussian rfilter), ``bsdfs`` (every BSDF plugin of the vocabulary as a spec
-tree) and ``legacy06`` (a 0.6 file: camelCase names, serialized meshes, parameters the plugins
-do not read). Those of :data:`RENDER_CORPUS` are rendered here by drpt and by Mitsuba *from
-the same file* (block z-test, tests/render_check.py, and the z of the image mean).
+gaussian rfilter), ``bsdfs`` (every BSDF plugin of the vocabulary, with textures and
+composites) and ``legacy06`` (a 0.6 file: camelCase names, serialized meshes, parameters the
+plugins do not read). All but ``legacy06`` (which Mitsuba 3 itself refuses) are rendered here
+by drpt and by Mitsuba *from the same file* (block z-test, tests/render_check.py, and the z of
+the image mean).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from drpt.scene.model import DirectionalLight, PointLight, Skybox, SpotLight
 XML = Path(__file__).resolve().parent / "data" / "xml"
 #: corpus scenes of BSDFs drpt renders, z-tested against Mitsuba
 RENDER_CORPUS = ("sphere", "meshes", "instances", "spot", "envmap", "textured", "composites", "glossy",
-                 "lens")
+                 "lens", "bsdfs")
 
 
 def load(name: str, **kw):
