@@ -6,13 +6,15 @@ spheres, rectangles, an area light), ``meshes`` (obj, ply, serialized, cube, dis
 point light, constant), ``instances`` (shapegroup/instance, directional, the ``direct``
 integrator), ``spot`` (spot light, ``hide_emitters``), ``envmap`` (rotated, scaled map),
 ``textured`` (bitmap on obj and rectangle uvs), ``composites`` (blendbsdf with a texture
-weight, mask, twosided, dielectric), ``glossy`` (conductor, anisotropic roughconductor,
+weight, mask, twosided, dielectric), ``glossy`` (conductor, roughconductor,
 named-IOR dielectric, thindielectric, roughdielectric, principled), ``lens`` (thinlens, a
 gaussian rfilter), ``bsdfs`` (every BSDF plugin of the vocabulary, with textures and
 composites) and ``legacy06`` (a 0.6 file: camelCase names, serialized meshes, parameters the
 plugins do not read). All but ``legacy06`` (which Mitsuba 3 itself refuses) are rendered here
 by drpt and by Mitsuba *from the same file* (block z-test, tests/render_check.py, and the z of
-the image mean).
+the image mean); ``aniso`` (an anisotropic roughconductor on a sphere and a rectangle) is a
+known disagreement on the sphere (strict xfail: drpt's tangent frame on analytic spheres is
+not Mitsuba's dp/du).
 """
 
 from __future__ import annotations
@@ -167,8 +169,8 @@ def test_bsdf_specs():
     assert car.params["roughness"].path == tex and car.params["clearcoat"] == 1.0
     mix = spec_of(s, "mix")
     assert mix.kind == "blendbsdf" and mix.params == {"weight": 0.25}
-    assert [c.kind for c in mix.children] == ["conductor", "diffuse"]
-    assert mix.children[0] is gold  # a <ref> shares the referenced node's spec
+    assert [c.kind for c in mix.children] == ["roughconductor", "diffuse"]
+    assert mix.children[0].params == {"material": "Au", "alpha": 0.2}  # the <ref>'d 'satin'
     assert mix.children[1].params == {}  # Mitsuba's defaults: the lobe fills them in
     leaf = spec_of(s, "leaf")
     assert leaf.kind == "mask" and leaf.params == {"opacity": 0.7}
@@ -266,7 +268,7 @@ def test_bad_parameters_are_located_errors(tmp_path, body, message):
 def test_textured_sphere_is_tessellated_for_its_uvs():
     s, warns = load("bsdfs")
     # the spheres of 'matte' and 'car' have textures: tessellated, with Mitsuba's uvs
-    assert len(s.spheres) == 9 - 2
+    assert len(s.spheres) == 8 - 2
     assert sum("a texture (drpt's analytic spheres have no uvs)" in w for w in warns) == 2
     matte = [i for i, m in enumerate(s.materials) if m.name == "matte"][0]
     sel = s.triangles.material == matte
@@ -536,6 +538,18 @@ def _mean_z(r, ref, var):
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
+@pytest.mark.xfail(strict=True, reason="anisotropic BSDFs on analytic spheres: drpt's shading "
+                   "tangent is not Mitsuba's dp/du (the rectangle in the same scene agrees)")
+def test_anisotropic_roughconductor_on_a_sphere_renders_like_mitsuba():
+    from render_check import assert_agree
+
+    scene, _ = load("aniso")
+    r, ref, var = _render_both(scene, XML / "aniso.xml", 256)
+    assert_agree(r, ref, var, zmax=4.5)
+
+
+@pytest.mark.slow
+@pytest.mark.mitsuba
 @pytest.mark.parametrize("what", ["envmap rotation", "hide_emitters", "spot beam", "emitter bsdf",
                                   "pinhole for thinlens", "box for gaussian"])
 def test_negative_controls_fail_the_z_test(what):
@@ -577,14 +591,14 @@ def test_negative_controls_fail_the_z_test(what):
         f"{what}: max |z| = {np.abs(z).max():.2f}, mean z {zm} (should fail)"
 
 
-def _mitsuba_mean_var(path: Path, spp: int, seed: int):
+def _mitsuba_mean_var(path: Path, spp: int, seed: int, **defines):
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
 
     mi.set_variant(mitsuba_variant())
     batches = 8
-    ms = mi.load_file(str(path), optimize=False)
+    ms = mi.load_file(str(path), optimize=False, **defines)
     runs = np.stack([np.asarray(mi.render(ms, spp=spp // batches, seed=seed + 7919 * k),
                                 np.float64)[..., :3] for k in range(batches)])
     return runs.mean(0), runs.var(0, ddof=1) / batches
@@ -609,3 +623,32 @@ def test_export_of_an_imported_scene_renders_the_same_in_mitsuba(tmp_path, name)
     n = a.shape[0] * a.shape[1]
     zm = (a.mean((0, 1)) - b.mean((0, 1))) / np.sqrt(va.mean((0, 1)) / n + vb.mean((0, 1)) / n)
     assert np.abs(zm).max() < 4.0, zm
+
+
+@pytest.mark.slow
+@pytest.mark.mitsuba
+def test_mitsubas_blend_of_a_delta_and_a_smooth_lobe_is_biased():
+    """Why no corpus scene blends a delta lobe: Mitsuba 3.9's ``blendbsdf`` adds the delta
+    lobe's sample "pdf" (1) to the smooth lobe's density (blendbsdf.cpp, ``sample``), which is
+    biased. On a convex sphere under constant light the image is linear in the BSDF, so
+    ``blend(w)`` must equal ``(1 - w) blend(0) + w blend(1)``: drpt's does, Mitsuba's does not."""
+    from dataclasses import replace
+
+    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.render.renderer import Renderer
+
+    path = XML / "blend_delta.xml"
+    a, va = _mitsuba_mean_var(path, 1024, 1, weight="0")  # all conductor
+    b, vb = _mitsuba_mean_var(path, 1024, 2, weight="1")  # all diffuse
+    lin, vlin = 0.75 * a + 0.25 * b, 0.75 ** 2 * va + 0.25 ** 2 * vb
+    m, vm = _mitsuba_mean_var(path, 1024, 3)
+    scene, _ = load("blend_delta")
+    r = Renderer(scene, replace(apply_scene_settings(RenderOptions(progress=False, seed=4), scene),
+                                spp=1024)).render()
+    n = lin.shape[0] * lin.shape[1]
+
+    def mean_z(x, vx):
+        return (x.mean((0, 1)) - lin.mean((0, 1))) / np.sqrt(vx.mean((0, 1)) / n + vlin.mean((0, 1)) / n)
+
+    assert np.abs(mean_z(r.image.astype(np.float64), r.variance)).max() < 4.0
+    assert np.abs(mean_z(m, vm)).max() > 8.0  # Mitsuba's blend: about 1% darker in red
