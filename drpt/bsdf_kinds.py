@@ -26,6 +26,7 @@ Python ``str``/``bool`` (decided when a kernel is traced).
 
 from __future__ import annotations
 
+import numbers
 from typing import Any
 
 #: Mitsuba's default index of refraction of its named media (``lookup_ior``).
@@ -64,7 +65,7 @@ PARAMS: dict[str, dict[str, Any]] = {
     "principled": {"base_color": GRAY, "roughness": 0.5, "metallic": 0.0, "specular": 0.5,
                    "eta": None, "spec_tint": 0.0, "anisotropic": 0.0, "sheen": 0.0,
                    "sheen_tint": 0.0, "clearcoat": 0.0, "clearcoat_gloss": 0.0,
-                   "spec_trans": 0.0, "diffuse_reflectance_sampling_rate": 1.0,
+                   "spec_trans": 0.0, "flatness": 0.0, "diffuse_reflectance_sampling_rate": 1.0,
                    "main_specular_sampling_rate": 1.0, "clearcoat_sampling_rate": 1.0},
 }
 
@@ -82,9 +83,9 @@ TEXTURABLE: dict[str, frozenset[str]] = {
     "roughdielectric": frozenset({"specular_reflectance", "specular_transmittance"}),
     "plastic": frozenset({"diffuse_reflectance", "specular_reflectance"}),
     "roughplastic": frozenset({"diffuse_reflectance", "specular_reflectance"}),
-    "principled": frozenset({"base_color", "roughness", "metallic", "specular", "spec_tint",
-                             "anisotropic", "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss",
-                             "spec_trans"}),
+    # (Mitsuba reads principled's ``specular`` and ``eta`` as plain floats)
+    "principled": frozenset({"base_color", "roughness", "metallic", "spec_tint", "anisotropic", "sheen",
+                             "sheen_tint", "clearcoat", "clearcoat_gloss", "spec_trans", "flatness"}),
 }
 
 #: Kinds holding other specs: name -> (number of children, their parameters and defaults).
@@ -94,12 +95,33 @@ COMPOSITES: dict[str, tuple[int, dict[str, Any]]] = {
     "mask": (1, {"opacity": 0.5}),
 }
 
-#: Kinds that transmit light: ``twosided`` refuses them, as Mitsuba's does (``principled``
-#: transmits only with ``spec_trans > 0``, which :func:`drpt.shading.check` tests).
+#: Kinds that always transmit light: ``twosided`` refuses them, as Mitsuba's does. ``principled``
+#: is not listed: it transmits (and Mitsuba's ``twosided`` refuses it) exactly when its
+#: ``spec_trans`` is given and is not the number 0 -- a texture counts even if it is all 0
+#: (Mitsuba's ``get_flag``: :func:`given`). :func:`transmits` is the whole rule, which
+#: :func:`drpt.shading.complete` applies. Without transmission principled is still one-sided
+#: (black from behind: its lobe sees the unflipped frame) unless wrapped in ``twosided``.
 TRANSMISSIVE = frozenset({"dielectric", "thindielectric", "roughdielectric", "null"})
 
 LEAF_KINDS = tuple(PARAMS)
 ALL_KINDS = LEAF_KINDS + tuple(COMPOSITES)
+
+
+def given(v: Any) -> bool:
+    """Mitsuba's ``get_flag`` (``principled``): a parameter counts as given unless it
+    is absent (``None``) or the number 0; a texture counts whatever its values."""
+    if v is None:
+        return False
+    if isinstance(v, numbers.Real) and not isinstance(v, bool):
+        return float(v) != 0.0
+    return True
+
+
+def transmits(kind: str, params: dict[str, Any]) -> bool:
+    """Whether a leaf of ``kind`` with ``params`` has a transmission component
+    (what Mitsuba's ``twosided`` refuses): the :data:`TRANSMISSIVE` kinds, and
+    ``principled`` with ``spec_trans`` :func:`given`."""
+    return kind in TRANSMISSIVE or (kind == "principled" and given(params.get("spec_trans")))
 
 
 def defaults(kind: str) -> dict[str, Any]:

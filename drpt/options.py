@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 from .errors import DrptError, note, warn
 
-BSDF_MODES = ("phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
+BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
 INTEGRATORS = ("path", "whitted")
 ENV_SAMPLING = ("luminance", "uniform")
 BVH_KINDS = ("bvh", "bvh2", "bvh4")
@@ -67,7 +67,7 @@ class RenderOptions:
     bvh_method: str = "auto"  # BVH split rule, drpt.accel.METHODS (accel="bvh")
     sah_threshold: int | None = None  # K of bvh_method="threshold" (None: the seed's 2000)
     bvh_min_leaf: int = 1  # minimum primitives per BVH leaf (the seed's -resolution)
-    bsdf: str = "phong"  # how MTL materials are read, see drpt.shading
+    bsdf: str = "auto"  # how MTL materials are read, see drpt.shading
     integrator: str = "path"  # "path" (MIS path tracing) or "whitted"
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
     path: PathOptions = field(default_factory=PathOptions)
@@ -283,12 +283,12 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                      "is Whitted)")
     if want("bsdf"):
         default = d["bsdf"]
-        shown = default or "phong"
-        parser.add_argument("--bsdf", choices=("diffuse", "phong", "cook-torrance"),
-                            default=default,
-                            help="how MTL materials are read: phong (Kd, Ks, Ns) or "
-                                 "cook-torrance (Kd, Roughness, Metalness); diffuse uses Kd "
-                                 f"only (default {shown})")
+        shown = default or "auto; phong with -input"
+        parser.add_argument("--bsdf", choices=BSDF_MODES, default=default,
+                            help="how MTL materials are read: auto (each material's own statements "
+                                 "decide its model, see docs/scene-format.md), or one model for every "
+                                 "material: phong (Kd, Ks, Ns), cook-torrance (Kd, Roughness, Metalness), "
+                                 f"diffuse (Kd only) (default {shown})")
         if seed_flags:
             parser.add_argument("-cook_torrance", dest="cook_torrance", action="store_true",
                                 help="seed flag: Cook-Torrance shading")
@@ -415,7 +415,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
     if accel == "auto" and bvh_flags:
         accel = "bvh"
     fields = _accel_fields(args, accel, seed_mode)
-    bsdf = get("bsdf") or ("cook-torrance" if get("cook_torrance") else "phong")
+    bsdf = get("bsdf") or ("cook-torrance" if get("cook_torrance") else "phong" if seed_mode else "auto")
     max_lanes = get("max_lanes")
     if max_lanes is None:
         max_lanes = backend.policy().max_lanes

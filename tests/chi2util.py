@@ -66,3 +66,15 @@ def run_chi2(sample, pdf, sample_dim=2, sample_count=400_000, res=61, seed=0):
         finally:
             os.chdir(cwd)
     return ok, test.messages
+
+
+def export_bsdf(kind, two_sided=False, **params):
+    """drpt's Mitsuba dict (drpt.export.mitsuba_bsdf) of a ``kind`` spec with
+    ``params`` (defaults filled in), wrapped in ``twosided`` if asked."""
+    from drpt.export.mitsuba_bsdf import to_mitsuba
+    from drpt.shading import BSDFSpec, complete
+
+    spec = BSDFSpec(kind, params)
+    if two_sided:
+        spec = BSDFSpec("twosided", children=[spec])
+    return to_mitsuba(complete(spec))

@@ -1,5 +1,5 @@
 """Perfect mirror lobe (drpt/render/bsdf/mirror.py) and the specular exporter
-(drpt/export/mitsuba_specular.py): direction, weight, extremes, and equality
+(drpt/export/mitsuba_bsdf.py): direction, weight, extremes, and equality
 with Mitsuba's ``conductor`` (material="none", specular_reflectance)."""
 
 from __future__ import annotations
@@ -9,10 +9,8 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
-from chi2util import mitsuba
-from drpt.export.mitsuba_specular import to_mitsuba
+from chi2util import export_bsdf, mitsuba
 from drpt.render.bsdf import mirror
-from drpt.shading import BSDFSpec
 
 R = (0.9, 0.6, 0.25)
 
@@ -84,16 +82,18 @@ def test_eval_pdf_zero():
 
 
 def test_export_dicts():
-    d = to_mitsuba(BSDFSpec("mirror", ks=R))
-    assert d == {"type": "twosided", "material": {
+    from drpt.errors import DrptError
+
+    d = export_bsdf("mirror", True, ks=R)
+    assert d == {"type": "twosided", "bsdf_0": {
         "type": "conductor", "material": "none",
         "specular_reflectance": {"type": "rgb", "value": list(R)}}}
-    assert to_mitsuba(BSDFSpec("dielectric", ior=1.33)) == {
-        "type": "dielectric", "int_ior": 1.33, "ext_ior": 1.0}
-    with pytest.raises(ValueError):
-        to_mitsuba(BSDFSpec("diffuse"))
-    with pytest.raises(ValueError):
-        to_mitsuba(BSDFSpec("dielectric", ior=float("nan")))
+    assert export_bsdf("dielectric", int_ior=1.33, ext_ior=1.0) == {
+        "type": "dielectric", "int_ior": 1.33, "ext_ior": 1.0,
+        "specular_reflectance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
+        "specular_transmittance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}
+    with pytest.raises(DrptError):
+        export_bsdf("dielectric", int_ior=float("nan"))
 
 
 @pytest.mark.mitsuba
@@ -102,7 +102,7 @@ def test_equals_mitsuba_conductor():
     n = 10_000
     v = _sphere(n, 7).astype(np.float32)
     u = np.random.default_rng(8).random(n).astype(np.float32)
-    bsdf = mi.load_dict(to_mitsuba(BSDFSpec("mirror", ks=R)))
+    bsdf = mi.load_dict(export_bsdf("mirror", True, ks=R))
     si = dr.zeros(mi.SurfaceInteraction3f)
     si.wi = mi.Vector3f(v[0], v[1], v[2])
     bs, w = bsdf.sample(mi.BSDFContext(), si, mi.Float(u), mi.Point2f(u, u))
@@ -118,6 +118,6 @@ def test_equals_mitsuba_conductor():
     np.testing.assert_allclose(wo, mwo, atol=1e-7)
     np.testing.assert_allclose(out["weight"], mw, rtol=1e-6)
     # the bare conductor (one-sided) is zero below, as the lobe is
-    cond = mi.load_dict(to_mitsuba(BSDFSpec("mirror", ks=R))["material"])
+    cond = mi.load_dict(export_bsdf("mirror", ks=R))
     _, w1 = cond.sample(mi.BSDFContext(), si, mi.Float(u), mi.Point2f(u, u))
     np.testing.assert_allclose(_sample(v, u=u)["weight"], np.array(w1), rtol=1e-6)

@@ -13,10 +13,9 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
-from chi2util import mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
+from chi2util import export_bsdf, mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 from drpt.export import mitsuba_phong
 from drpt.render.bsdf import phong
-from drpt.shading import BSDFSpec
 
 KD = (0.25, 0.3, 0.15)
 KS = (0.5, 0.45, 0.6)  # max(kd + ks) = 0.75
@@ -419,22 +418,18 @@ def test_register_idempotent_and_to_mitsuba():
     mi = mitsuba()
     mitsuba_phong.register()
     mitsuba_phong.register()
-    spec = BSDFSpec("phong", kd=(0.3, 0.2, 0.1), ks=(0.5, 0.5, 0.5), ns=25.0)
-    d = mitsuba_phong.to_mitsuba(spec)
-    assert d["type"] == "twosided" and d["material"]["type"] == "drpt_phong"
-    assert d["material"]["ns"] == 25.0
+    d = export_bsdf("phong", True, kd=(0.3, 0.2, 0.1), ks=(0.5, 0.5, 0.5), ns=25.0)
+    assert d["type"] == "twosided" and d["bsdf_0"]["type"] == "drpt_phong"
+    assert d["bsdf_0"]["ns"] == 25.0
     bsdf = mi.load_dict(d)
     assert bsdf.flags() & int(mi.BSDFFlags.BackSide)  # twosided made it two-sided
-    with pytest.raises(ValueError):
-        mitsuba_phong.to_mitsuba(BSDFSpec("diffuse"))
 
 
 @pytest.mark.mitsuba
 def test_twosided_python_bsdf_mirrors_back_side():
     mi = mitsuba()
     mitsuba_phong.register()
-    spec = BSDFSpec("phong", kd=KD, ks=KS, ns=15.0)
-    two = mi.load_dict(mitsuba_phong.to_mitsuba(spec))
+    two = mi.load_dict(export_bsdf("phong", True, kd=KD, ks=KS, ns=15.0))
     one = _mi_bsdf(mi, KD, KS, 15.0)
     n = 5000
     wi = _sphere_dirs(n, 61).astype(np.float32)
@@ -481,7 +476,7 @@ def test_mitsuba_render_twosided_phong():
     mi = mitsuba()
     mitsuba_phong.register()
     # ks = 0: a convex object in a white furnace reflects exactly kd.
-    lam = mitsuba_phong.to_mitsuba(BSDFSpec("phong", kd=(0.5, 0.5, 0.5), ks=(0.0,) * 3, ns=10))
+    lam = export_bsdf("phong", True, kd=(0.5, 0.5, 0.5), ks=(0.0,) * 3, ns=10)
     ref = {"type": "twosided", "material": {"type": "diffuse",
                                              "reflectance": {"type": "rgb", "value": 0.5}}}
     img = np.array(mi.render(mi.load_dict(_sphere_scene(mi, lam)), seed=1))
@@ -499,8 +494,8 @@ def test_mitsuba_render_twosided_phong():
     assert ball.sum() > 100 and abs(img[ball].mean() - 0.5) < 0.01, img[ball].mean()
     # Glossy, energy conserving: finite, nothing brighter than the environment
     # (up to the variance of 16 spp).
-    shiny = mitsuba_phong.to_mitsuba(BSDFSpec("phong", kd=(0.2, 0.3, 0.1), ks=(0.7, 0.6, 0.8),
-                                              ns=50))
+    shiny = export_bsdf("phong", True, kd=(0.2, 0.3, 0.1), ks=(0.7, 0.6, 0.8),
+                        ns=50)
     img = np.array(mi.render(mi.load_dict(_sphere_scene(mi, shiny)), seed=2))
     assert np.all(np.isfinite(img)) and np.all(img >= 0)
     assert 0.3 < img.mean() <= 1.0 + 1e-3

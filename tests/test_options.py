@@ -37,7 +37,7 @@ def test_parse_accel():
 def test_defaults_match_render_options():
     o = options_from_args(_args([]))
     assert (o.width, o.height, o.spp, o.accel, o.bvh_method, o.integrator, o.bsdf) == (
-        512, 512, 64, "auto", "auto", "path", "phong")
+        512, 512, 64, "auto", "auto", "path", "auto")
     assert o.path == PathOptions() and o.max_lanes == 1 << 21 and o.progress
 
 

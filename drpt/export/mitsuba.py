@@ -120,7 +120,9 @@ from drpt.scene.model import (
     Scene,
     Skybox,
 )
-from drpt.shading import BSDFSpec, interpret_scene, untextured_note
+from drpt.shading import BSDFSpec, interpret_scene
+
+from .mitsuba_bsdf import to_mitsuba as bsdf_to_mitsuba
 
 __all__ = ["to_mitsuba_dict", "write_xml", "look_at_matrix", "PLANE_SCALE"]
 
@@ -177,7 +179,8 @@ _TAGS = {
     "path": "integrator",
     "twosided": "bsdf", "diffuse": "bsdf", "drpt_phong": "bsdf", "principled": "bsdf",
     "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf",
-    "plastic": "bsdf", "roughplastic": "bsdf",
+    "plastic": "bsdf", "roughplastic": "bsdf", "thindielectric": "bsdf", "roughdielectric": "bsdf",
+    "mask": "bsdf", "null": "bsdf",
     "area": "emitter", "point": "emitter", "directional": "emitter",
     "envmap": "emitter", "constant": "emitter",
     "sphere": "shape", "rectangle": "shape", "ply": "shape",
@@ -240,7 +243,7 @@ def _f3(v) -> tuple[float, float, float]:
 
 # ------------------------------------------------------ the description
 def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
-              rr_depth: int, seed: int, bsdf: str = "phong") -> dict:
+              rr_depth: int, seed: int, bsdf: str = "auto") -> dict:
     if int(width) <= 0 or int(height) <= 0:
         raise DrptError(f"image size must be positive, got {width}x{height}")
     if int(spp) <= 0:
@@ -296,9 +299,10 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
     used = np.unique(np.concatenate([np.asarray(p.material, np.int64) for p in
                                      (scene.triangles, scene.spheres, scene.planes)]))
     for i in used:
-        if 0 <= i < len(specs) and specs[i].dropped_texture is not None:
-            warnings.warn(untextured_note(scene.materials[i]), stacklevel=3)
-    bsdfs = [_bsdf(m, spec) for m, spec in zip(scene.materials, specs)]
+        if 0 <= i < len(specs):
+            for n in specs[i].notes:
+                warnings.warn(n, stacklevel=3)
+    bsdfs = [_bsdf(spec) for spec in specs]
     emitters = [
         {"type": "area", "radiance": _RGB(_f3(m.emission))} if m.is_emissive else None
         for m in scene.materials
@@ -403,13 +407,6 @@ def _mesh_name(index: int, m: Material) -> str:
     return f"{index:03d}_{safe}" if safe else f"{index:03d}"
 
 
-def _texture(m: Material) -> dict:
-    if not Path(m.map_kd).is_file():
-        raise DrptError(f"material {m.name!r} ({m.origin or '?'}): texture {m.map_kd} not found")
-    return {"type": "bitmap", "filename": str(Path(m.map_kd).resolve()),
-            "filter_type": "bilinear", "wrap_mode": "repeat"}
-
-
 def _plain(node: Any) -> Any:
     """Lobe exporters speak plain Mitsuba dicts; turn their rgb values into _RGB."""
     if isinstance(node, dict):
@@ -419,31 +416,20 @@ def _plain(node: Any) -> Any:
     return node
 
 
-def _bsdf(m: Material, spec: BSDFSpec) -> dict:
-    """The Mitsuba BSDF for what drpt renders of ``m`` (``spec``, see drpt.shading).
+def _bsdf(spec: BSDFSpec) -> dict:
+    """The Mitsuba BSDF for what drpt renders of a material (``spec``, see drpt.shading).
 
     A missing texture file is an error, also where the texture is dropped."""
-    if spec.dropped_texture is not None:
-        _texture(m)
-    if spec.kind == "diffuse":
-        refl: Any = _texture(m) if spec.texture is not None else _RGB(_f3(spec.kd))
-        return {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": refl}}
-    if spec.kind == "phong":
-        from .mitsuba_phong import to_mitsuba
-    elif spec.kind == "cook_torrance":
-        from .mitsuba_cook_torrance import to_mitsuba
-    else:
-        from .mitsuba_specular import to_mitsuba
-    node = _plain(to_mitsuba(spec))
-    if spec.texture is not None:
-        _texture(m)  # fail early on a missing file
-    return node
+    for path in spec.dropped:
+        if not Path(path).is_file():
+            raise DrptError(f"{spec.origin or 'material'}: texture {path} not found")
+    return _plain(bsdf_to_mitsuba(spec))
 
 
 # ---------------------------------------------------------------- dict
 def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
                     max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
-                    bsdf: str = "phong") -> dict:
+                    bsdf: str = "auto") -> dict:
     """The scene as a dict for ``mi.load_dict`` (a Mitsuba variant must be set).
 
     Triangle meshes are in-memory ``mi.Mesh`` objects (one per material),
@@ -512,7 +498,7 @@ def _build_mesh(md: _MeshData, mi):
 # ----------------------------------------------------------------- XML
 def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: int,
               spp: int, max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
-              bsdf: str = "phong") -> Path:
+              bsdf: str = "auto") -> Path:
     """Write the scene as Mitsuba 3 XML plus PLY meshes; return the XML path.
 
     Phong materials use the ``drpt_phong`` plugin, which Mitsuba knows only

@@ -35,10 +35,7 @@ Properties: ``kd``, ``ks`` (rgb or any texture; default 0.5 and 0), ``ns``
 
 from __future__ import annotations
 
-import math
-from typing import Any
-
-__all__ = ["register", "to_mitsuba", "PLUGIN_NAME"]
+__all__ = ["register", "PLUGIN_NAME"]
 
 PLUGIN_NAME = "drpt_phong"
 _LUM = (0.2126, 0.7152, 0.0722)
@@ -192,27 +189,3 @@ def register() -> None:
     cls = _make_class(mi, dr)
     mi.register_bsdf(PLUGIN_NAME, lambda props: cls(props))
     _REGISTERED[variant] = cls
-
-
-def to_mitsuba(spec: Any) -> dict:
-    """``twosided(drpt_phong)`` dict for a :class:`drpt.shading.BSDFSpec` of kind "phong".
-
-    A ``spec.texture`` replaces ``kd`` by a ``bitmap`` texture (Mitsuba's
-    defaults otherwise; uv conventions are the exporter's business)."""
-    if spec.kind != "phong":
-        raise ValueError(f"to_mitsuba: expected a 'phong' BSDFSpec, got {spec.kind!r}")
-    ns = float(spec.ns)
-    if not math.isfinite(ns) or ns < 0.0:
-        raise ValueError(f"to_mitsuba: bad Phong exponent {spec.ns!r}")
-    if spec.texture is not None:
-        kd: dict = {"type": "bitmap", "filename": str(spec.texture),
-                    "filter_type": "bilinear", "wrap_mode": "repeat"}
-    else:
-        kd = {"type": "rgb", "value": [float(x) for x in spec.kd]}
-    material = {
-        "type": PLUGIN_NAME,
-        "kd": kd,
-        "ks": {"type": "rgb", "value": [float(x) for x in spec.ks]},
-        "ns": ns,
-    }
-    return {"type": "twosided", "material": material}

@@ -1,81 +1,269 @@
-"""Materials on the device: per-material parameters and the BSDF dispatch.
+"""Materials on the device: per-material BSDF trees flattened into lobes, and the dispatch.
 
-Each scene material becomes one BSDF (:func:`drpt.shading.interpret_scene`
-decides which, the same function the Mitsuba exporter uses), whose lobe
-module comes from :data:`drpt.render.bsdf.REGISTRY`. Only the kinds the
-scene has are traced: a diffuse-only scene compiles no Phong, GGX or glass
-code (nor uploads their parameters); a scene without textures compiles no
-texture lookups; a single kind needs no per-lane dispatch at all. With
-several kinds, each present lobe is evaluated under its own mask and the
-results are merged with ``select``.
+Each scene material is a :class:`~drpt.shading.BSDFSpec` tree
+(:func:`drpt.shading.interpret_scene` decides it, the same function the
+Mitsuba exporter uses). The table flattens every tree into *components*:
+leaf lobes, each with a weight and a sidedness.
 
-Sidedness: lobes registered ``TWO_SIDED`` (diffuse, Phong, Cook-Torrance,
-mirror) see their shading frame flipped to the viewer's side. The others
-(the dielectric) see the unflipped frame (``+z`` = shading normal =
-outside). Emission is one-sided: a material with ``emission`` radiates only
-toward the side its shading normal points to, as Mitsuba's ``area`` emitter
-does.
+* ``twosided(x)``: ``x``'s components see the shading frame flipped to the
+  viewer's side (Mitsuba's ``twosided``); all other components see the
+  unflipped frame (``+z`` = shading normal = outside) and, being one-sided,
+  are black from behind unless they transmit.
+* ``blendbsdf(w; a, b)``: ``a``'s components weighted by ``1 - w``, ``b``'s by ``w``.
+* ``mask(o; x)``: a ``null`` component (the ray passes straight through)
+  weighted ``1 - o``, ``x``'s components by ``o``.
+
+Weights are constants or one texture (times a constant) per component. A
+material's components occupy *slots* ``0 .. K-1`` (``K`` = the most any
+material has). ``f`` and ``pdf`` are the weighted sums over the slots,
+exactly Mitsuba's ``blendbsdf``/``mask`` ``eval`` and ``pdf``. Sampling
+picks a slot by its weight (rescaling ``u1``), samples that component, and
+for a smooth sample returns the whole mixture's ``f / pdf`` and ``pdf``
+(one-sample MIS over the components: lower variance than the chosen
+component's own ratio, same expectation); a Dirac sample keeps the
+component's own weight (its selection probability cancels).
+
+Model only what the scene requires: only the lobe kinds present are traced
+(each under its own lane mask, merged with ``select``), only their fields
+are uploaded, a field is looked up in a texture only when some material
+gives it one, a scene where every material is one component (the usual
+case) has ``K = 1`` with no weights and no slot gathers, and a kind whose
+components are all two-sided (or all one-sided) flips without a per-lane
+test.
+
+Each lobe module (:mod:`drpt.render.bsdf`) reads its parameters through
+:meth:`MaterialTable.value`, :meth:`MaterialTable.table_lerp` and decides
+trace-time choices from :meth:`MaterialTable.specs_of`. Emission is
+per material and one-sided: it radiates only toward the side its shading
+normal points to, as Mitsuba's ``area`` emitter does.
 """
 
 from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
 
 import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ..scene.model import Scene
-from ..shading import BSDFSpec, interpret_scene
+from ..shading import BSDFSpec, Texture, interpret_scene
 from .bsdf import BSDFSample, lobe
 from .surface import Interaction, _vec
 from .warp import Frame
 
-_TYPES = {"rgb": Array3f, "float": Float}
+NONE = 0xFFFFFFFF
+
+
+@dataclass
+class _Component:
+    leaf: BSDFSpec
+    two_sided: bool
+    weight: float = 1.0
+    weight_texture: Texture | None = None  # weight *= tex (or 1 - tex when complement)
+    complement: bool = False
+
+
+def _flatten(spec: BSDFSpec, two_sided: bool = False, c: _Component | None = None) -> list[_Component]:
+    """The components of ``spec`` (a complete tree), in depth-first order."""
+    c = c or _Component(spec, False)
+    if spec.kind == "twosided":
+        if len(spec.children) == 2:
+            raise ValueError("twosided with a different BSDF on each side is not supported")
+        return _flatten(spec.children[0], True, c)
+    if spec.kind in ("blendbsdf", "mask"):
+        w = spec.params["weight" if spec.kind == "blendbsdf" else "opacity"]
+        if spec.kind == "mask":
+            parts = [(BSDFSpec("null"), True), (spec.children[0], False)]
+        else:
+            parts = [(spec.children[0], True), (spec.children[1], False)]
+        out = []
+        for child, complement in parts:
+            cc = copy.copy(c)
+            if isinstance(w, Texture):
+                if cc.weight_texture is not None:
+                    raise ValueError("nested blendbsdf/mask with more than one textured weight "
+                                     "are not supported")
+                cc.weight_texture, cc.complement = w, complement
+            else:
+                ww = min(max(float(w), 0.0), 1.0)
+                cc.weight *= (1.0 - ww) if complement else ww
+                if cc.weight == 0.0:
+                    continue
+            out += _flatten(child, two_sided, cc)
+        return out
+    return [_Component(spec, two_sided, c.weight, c.weight_texture, c.complement)]
+
+
+def _luminance(c: Array3f) -> Float:
+    return 0.212671 * c.x + 0.715160 * c.y + 0.072169 * c.z
 
 
 class MaterialTable:
-    def __init__(self, scene: Scene, mode: str = "phong"):
+    def __init__(self, scene: Scene, mode: str = "auto"):
         # Materials no primitive uses stay out of the kernels entirely.
         used = np.zeros(len(scene.materials), bool)
         for prims in (scene.triangles, scene.spheres, scene.planes):
             used[np.asarray(prims.material, np.int64)] = True
-        self.specs: list[BSDFSpec] = [
-            spec if u else BSDFSpec("diffuse", kd=(0.0, 0.0, 0.0))
-            for spec, u in zip(interpret_scene(scene, mode), used)]
-        self.notes = [n for s in self.specs for n in s.notes]
-        self.kinds = sorted({s.kind for s, u in zip(self.specs, used) if u}) or ["diffuse"]
+        black = BSDFSpec("diffuse", {"kd": (0.0, 0.0, 0.0)})
+        specs = interpret_scene(scene, mode)
+        self.specs: list[BSDFSpec] = [s if u else black for s, u in zip(specs, used)]
+        self.notes = [n for s, u in zip(specs, used) if u for n in s.notes]
+        comps: list[list[_Component]] = []
+        for s, m in zip(self.specs, scene.materials):
+            try:
+                comps.append(_flatten(s) or [_Component(black, False)])
+            except ValueError as e:
+                from ..errors import SceneError
+
+                raise SceneError(m.origin or scene.path, None, f"material '{m.name}': {e}") from None
+        if not comps:
+            comps = [[_Component(black, False)]]
+        self.K = max(len(c) for c in comps)
+        # rows: every component of every material, material by material
+        self.rows: list[_Component] = [c for cs in comps for c in cs]
+        self.kinds = sorted({c.leaf.kind for c in self.rows})
         self.lobes = {k: lobe(k) for k in self.kinds}
-        kinds = np.array([self.kinds.index(s.kind) if s.kind in self.kinds else 0
-                          for s in self.specs], np.uint32)
-        self.kind = UInt32(kinds)
-        self.emission = _vec(np.array([m.emission for m in scene.materials], float))
+        self._rows_of = {k: [i for i, c in enumerate(self.rows) if c.leaf.kind == k] for k in self.kinds}
+        kind_idx = np.array([self.kinds.index(c.leaf.kind) for c in self.rows], np.uint32)
+        self.kind = UInt32(kind_idx)
+        self.emission = _vec(np.array([m.emission for m in scene.materials], float)) \
+            if scene.materials else _vec(np.zeros((1, 3)))
         self.has_emission = any(m.is_emissive for m in scene.materials)
 
-        def col(name):
-            return _vec(np.array([getattr(s, name) for s in self.specs], float))
+        # sidedness, per kind: True / False when uniform, else a per-row array
+        self._two: dict[str, bool | Bool] = {}
+        for k, rows in self._rows_of.items():
+            flags = {self.rows[i].two_sided for i in rows}
+            if len(flags) == 1:
+                self._two[k] = flags.pop()
+            else:
+                self._two[k] = Bool(np.array([c.two_sided for c in self.rows], bool))
 
-        def num(name):
-            return Float(np.array([getattr(s, name) for s in self.specs], np.float32))
+        # slots (only when some material has several components)
+        self._slots = []
+        if self.K > 1:
+            start = np.cumsum([0] + [len(c) for c in comps[:-1]])
+            for j in range(self.K):
+                row = np.array([start[m] + j if j < len(cs) else NONE for m, cs in enumerate(comps)], np.int64)
+                w = np.array([cs[j].weight if j < len(cs) else 0.0 for cs in comps], np.float32)
+                texs = [cs[j].weight_texture if j < len(cs) else None for cs in comps]
+                comp = np.array([cs[j].complement if j < len(cs) else False for cs in comps], bool)
+                kinds = sorted({self.rows[r].leaf.kind for r in row if r != NONE})
+                self._slots.append({"row": UInt32(row.astype(np.uint32)), "w": Float(w), "tex": texs,
+                                    "complement": Bool(comp), "kinds": kinds,
+                                    "partial": bool((row == NONE).any())})
 
-        self.kd = col("kd")
-        # the parameters of the kinds present, one array per spec field
-        self._fields: dict[str, type] = {}
-        for m in self.lobes.values():
-            self._fields.update({name: _TYPES[t] for name, t in m.FIELDS.items()})
+        # per-row fields of the kinds present
+        values: list[dict] = [dict(c.leaf.params) for c in self.rows]
+        for k in self.kinds:
+            derive = getattr(self.lobes[k], "derive", None)
+            if derive is None:
+                continue
+            for i in self._rows_of[k]:
+                try:
+                    values[i].update(derive(dict(values[i])))
+                except ValueError as e:
+                    from ..errors import SceneError
+
+                    raise SceneError(self.rows[i].leaf.origin or scene.path, None, str(e)) from None
+        self._fields: dict[str, tuple] = {}
+        for k in self.kinds:
+            for name, t in self.lobes[k].FIELDS.items():
+                self._fields.setdefault(name, t)
+        textures: list = []
+
+        def tex_id(t: Texture) -> int:
+            if t.path not in textures:
+                textures.append(t.path)
+            return textures.index(t.path)
+
+        self._data: dict[str, object] = {}
+        self._tex: dict[str, UInt32] = {}
         for name, t in self._fields.items():
-            setattr(self, name, col(name) if t is Array3f else num(name))
+            vals = [v.get(name) for v in values]
+            if isinstance(t, tuple):  # ("table", N)
+                n = int(t[1])
+                arr = np.zeros((len(vals), n), np.float32)
+                for i, v in enumerate(vals):
+                    if v is not None:
+                        arr[i] = np.asarray(v, np.float32).reshape(n)
+                self._data[name] = Float(arr.ravel())
+                continue
+            width = 3 if t == "rgb" else 1
+            arr = np.zeros((len(vals), width))
+            tid = np.full(len(vals), NONE, np.int64)
+            for i, v in enumerate(vals):
+                if isinstance(v, Texture):
+                    tid[i] = tex_id(v)
+                    v = v.fallback
+                if v is None or isinstance(v, (str, bool)):
+                    continue
+                arr[i] = np.broadcast_to(np.asarray(v, float), (width,))
+            self._data[name] = _vec(arr) if width == 3 else Float(arr[:, 0].astype(np.float32))
+            if (tid != NONE).any():
+                self._tex[name] = UInt32(tid.astype(np.uint32))
+        for slot in self._slots:
+            ids = [tex_id(t) if t is not None else NONE for t in slot["tex"]]
+            slot["tex"] = UInt32(np.array(ids, np.int64).astype(np.uint32)) if any(
+                i != NONE for i in ids) else None
 
-        # Textures (map_Kd, kept by interpret_scene only where the scene has
-        # uvs); one id per material, or -1.
+        # Textures: one set for every textured field and weight.
         self.textures = None
-        paths = sorted({s.texture for s in self.specs if s.texture is not None}, key=str)
-        if paths:
+        if textures:
             from .texture import TextureSet
 
-            self.textures = TextureSet(paths)
-            tex = [paths.index(s.texture) if s.texture is not None else -1 for s in self.specs]
-            self.tex_id = UInt32(np.array(tex, np.int64).astype(np.uint32))
+            self.textures = TextureSet(textures)
+        # materials made only of Dirac lobes (glass, mirrors): Whitted follows them
+        delta = [all(self.lobes[c.leaf.kind].DELTA for c in cs) for cs in comps]
+        self._all_delta = all(delta)
+        self._mat_delta = None if (self._all_delta or not any(delta)) else Bool(np.array(delta, bool))
+        self._any_delta = any(delta)
 
-    # ------------------------------------------------------------------
+    # ------------------------------------------------------------------ parameters
+    def specs_of(self, kind: str) -> list[BSDFSpec]:
+        """The leaf specs of ``kind`` in the scene (host side), for trace-time choices."""
+        return [self.rows[i].leaf for i in self._rows_of.get(kind, [])]
+
+    def value(self, name: str, si: Interaction, active: Bool):
+        """Field ``name`` of the lanes' components (``si.material`` is the row):
+        Array3f for ``"rgb"``, Float for ``"float"``; a textured value is looked
+        up at ``si.uv`` (a float field reads the texture's luminance, as
+        Mitsuba's ``bitmap`` does for a scalar parameter)."""
+        t = self._fields[name]
+        cls = Array3f if t == "rgb" else Float
+        v = dr.gather(cls, self._data[name], si.material, active)
+        tid = self._tex.get(name)
+        if tid is not None:
+            ids = dr.gather(UInt32, tid, si.material, active)
+            textured = active & (ids != NONE)
+            looked = self.textures.lookup(ids, si.uv, textured)
+            v = dr.select(textured, looked if cls is Array3f else _luminance(looked), v)
+        return v
+
+    def gather(self, name: str, si: Interaction, active: Bool):
+        """Alias of :meth:`value`."""
+        return self.value(name, si, active)
+
+    def base_color(self, si: Interaction, active: Bool) -> Array3f:
+        """``kd`` of the lanes' components (or its texture)."""
+        return self.value("kd", si, active)
+
+    def table_lerp(self, name: str, si: Interaction, x: Float, active: Bool) -> Float:
+        """Linear interpolation of the ``("table", N)`` field ``name`` of the lanes'
+        components at ``x`` in [0, 1] (sample ``i`` at ``x = i / (N - 1)``; ``x``
+        clamped)."""
+        n = int(self._fields[name][1])
+        pos = dr.clip(Float(x), 0.0, 1.0) * (n - 1)
+        i0 = dr.minimum(UInt32(pos), n - 2)
+        frac = pos - Float(i0)
+        base = si.material * n + i0
+        a = dr.gather(Float, self._data[name], base, active)
+        b = dr.gather(Float, self._data[name], base + 1, active)
+        return dr.fma(frac, b - a, a)
+
+    # ------------------------------------------------------------------ emission
     def emitted(self, si: Interaction) -> Array3f:
         """Radiance leaving ``si`` toward ``si.wi`` (zero on back faces)."""
         if not self.has_emission:
@@ -88,69 +276,124 @@ class MaterialTable:
         return all(m.DELTA for m in self.lobes.values())
 
     def is_delta(self, si: Interaction) -> Bool:
-        """Lanes whose material is a delta lobe (glass, mirror)."""
-        ids = [i for i, k in enumerate(self.kinds) if self.lobes[k].DELTA]
-        if not ids:
+        """Lanes whose material has only Dirac lobes (glass, mirror)."""
+        if not self._any_delta:
             return Bool(False)
-        if len(ids) == len(self.kinds):
+        if self._all_delta:
             return Bool(si.valid)
-        kind_of = dr.gather(UInt32, self.kind, si.material, si.valid)
-        mask = Bool(False)
-        for i in ids:
-            mask |= kind_of == i
-        return si.valid & mask
+        return si.valid & dr.gather(Bool, self._mat_delta, si.material, si.valid)
 
     def diffuse_color(self, si: Interaction, active: Bool) -> Array3f:
-        """The diffuse color (Kd or its texture), e.g. for an ambient term."""
-        return self.base_color(si, active)
+        """The diffuse color of the lanes' first component (its kind's ``COLOR``
+        field, e.g. ``kd``), for the Whitted ambient term; 0 for kinds without one."""
+        out = Array3f(0.0)
+        for _, bsdf, mask, _, row_si in self._cases(si, 0):
+            name = getattr(bsdf, "COLOR", None)
+            if name is not None:
+                out = dr.select(mask & active, self.value(name, row_si, mask & active), out)
+        return out
 
-    def base_color(self, si: Interaction, active: Bool) -> Array3f:
-        """Kd of the lanes' materials, or their texture at ``si.uv``."""
-        kd = dr.gather(Array3f, self.kd, si.material, active)
-        if self.textures is not None:
-            tid = dr.gather(UInt32, self.tex_id, si.material, active)
-            textured = active & (tid != 0xFFFFFFFF)
-            kd = dr.select(textured, self.textures.lookup(tid, si.uv, textured), kd)
-        return kd
+    # ------------------------------------------------------------------ dispatch
+    def _slot(self, si: Interaction, j: int):
+        """(row-indexed interaction, weight or None, lanes with a component) of slot ``j``."""
+        if self.K == 1:
+            return si, None, si.valid
+        s = self._slots[j]
+        row = dr.gather(UInt32, s["row"], si.material, si.valid)
+        present = si.valid & (row != NONE) if s["partial"] else si.valid
+        w = dr.gather(Float, s["w"], si.material, present)
+        if s["tex"] is not None:
+            ids = dr.gather(UInt32, s["tex"], si.material, present)
+            textured = present & (ids != NONE)
+            t = _luminance(self.textures.lookup(ids, si.uv, textured))
+            comp = dr.gather(Bool, s["complement"], si.material, present)
+            w = dr.select(textured, w * dr.select(comp, 1.0 - t, t), w)
+        row_si = copy.copy(si)
+        row_si.material = row
+        return row_si, dr.select(present, w, 0.0), present
 
-    def gather(self, field: str, si: Interaction, active: Bool):
-        """Spec ``field`` (one a present lobe's ``FIELDS`` names) of the lanes' materials."""
-        return dr.gather(self._fields[field], getattr(self, field), si.material, active)
-
-    def _cases(self, si: Interaction):
-        """(lobe module, lane mask, local frame) for each kind present."""
-        flip = dr.dot(si.ns, si.wi) < 0.0
-        two_sided = Frame(dr.select(flip, -si.ns, si.ns))
+    def _cases(self, si: Interaction, j: int | None = None, row_si=None, present=None):
+        """(kind, lobe module, lane mask, local frame, row-indexed interaction) for each
+        kind of slot ``j`` (all kinds when ``j`` is None: ``row_si`` given)."""
+        if row_si is None:
+            row_si, _, present = self._slot(si, j)
+        kinds = self.kinds if (j is None or self.K == 1) else self._slots[j]["kinds"]
         if len(self.kinds) == 1:
             kind_of = None
         else:
-            kind_of = dr.gather(UInt32, self.kind, si.material, si.valid)
-        for i, kind in enumerate(self.kinds):
-            mask = si.valid if kind_of is None else si.valid & (kind_of == i)
-            frame = two_sided if self.lobes[kind].TWO_SIDED else Frame(si.ns)
-            yield self.lobes[kind], mask, frame
+            kind_of = dr.gather(UInt32, self.kind, row_si.material, present)
+        flip = dr.dot(si.ns, si.wi) < 0.0
+        flipped, plain = None, None
+        for kind in kinds:
+            i = self.kinds.index(kind)
+            mask = present if kind_of is None else present & (kind_of == i)
+            two = self._two[kind]
+            if two is True:
+                flipped = flipped or Frame(dr.select(flip, -si.ns, si.ns))
+                frame = flipped
+            elif two is False:
+                plain = plain or Frame(si.ns)
+                frame = plain
+            else:
+                f2 = dr.gather(Bool, two, row_si.material, mask) & flip
+                frame = Frame(dr.select(f2, -si.ns, si.ns))
+            yield kind, self.lobes[kind], mask, frame, row_si
 
     # ------------------------------------------------------------------
     def eval_pdf(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float]:
         """``f * |cos|`` and the sampling density (solid angle) for world ``wo``."""
         f, pdf = Array3f(0.0), Float(0.0)
-        for bsdf, mask, frame in self._cases(si):
-            if bsdf.DELTA:
-                continue  # nothing to evaluate
-            p = bsdf.params(self, si, mask)
-            wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
-            f = dr.select(mask, bsdf.eval(p, wi_l, wo_l), f)
-            pdf = dr.select(mask, bsdf.pdf(p, wi_l, wo_l), pdf)
+        for j in range(self.K):
+            row_si, w, present = self._slot(si, j)
+            for _, bsdf, mask, frame, rsi in self._cases(si, j, row_si, present):
+                if bsdf.DELTA:
+                    continue  # nothing to evaluate
+                p = bsdf.params(self, rsi, mask)
+                wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
+                fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
+                if w is None:
+                    f = dr.select(mask, fj, f)
+                    pdf = dr.select(mask, pj, pdf)
+                else:
+                    f = dr.select(mask, dr.fma(fj, w, f), f)
+                    pdf = dr.select(mask, dr.fma(pj, w, pdf), pdf)
         return f, pdf
 
     def sample(self, si: Interaction, u1: Float, u2: Array2f) -> tuple[Array3f, BSDFSample]:
         """Sample a world direction; returns it and the local :class:`BSDFSample`."""
+        if self.K == 1:
+            row_si, present = si, si.valid
+        else:
+            # pick a slot by its weight, reuse u1 rescaled within it
+            row = UInt32(NONE)
+            lo, chosen_w = Float(0.0), Float(1.0)
+            picked = Bool(False)
+            for j in range(self.K):
+                rsi, w, pres = self._slot(si, j)
+                take = pres & ~picked & ((u1 < lo + w) | Bool(j == self.K - 1)) & (w > 0.0)
+                row = dr.select(take, rsi.material, row)
+                u_rest = dr.select(take, (u1 - lo) / dr.select(w > 0.0, w, 1.0), 0.0)
+                chosen_w = dr.select(take, w, chosen_w)
+                u1 = dr.select(take, dr.clip(u_rest, 0.0, 0.99999994), u1)
+                picked |= take
+                lo = lo + w
+            row_si = copy.copy(si)
+            row_si.material = row
+            present = si.valid & picked
         out = BSDFSample()
         wo = Array3f(0.0, 0.0, 1.0)
-        for bsdf, mask, frame in self._cases(si):
-            p = bsdf.params(self, si, mask)
+        for _, bsdf, mask, frame, rsi in self._cases(si, None, row_si, present):
+            p = bsdf.params(self, rsi, mask)
             bs = bsdf.sample(p, frame.to_local(si.wi), u1, u2)
             out = dr.select(mask, bs, out)
             wo = dr.select(mask, frame.to_world(bs.wo), wo)
-        out.valid &= si.valid
+        out.valid &= present
+        if self.K > 1 and not self.is_specular_only():
+            # a smooth sample weighs the whole mixture: f_mix / pdf_mix
+            smooth = out.valid & ~out.delta
+            f, pdf = self.eval_pdf(si, wo)
+            ok = smooth & (pdf > 0.0)
+            out.weight = dr.select(smooth, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0), out.weight)
+            out.pdf = dr.select(smooth, pdf, out.pdf)
+            out.valid &= ~smooth | ok
         return wo, out

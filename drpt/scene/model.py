@@ -26,8 +26,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ..shading import BSDFSpec
 
 Vec3 = tuple[float, float, float]
 
@@ -80,6 +84,16 @@ class Material:
     transparent: Vec3 = (0.0, 0.0, 0.0)  # 6.837 transparentColor
     map_kd: Path | None = None  # diffuse texture, absolute path
     origin: str = ""  # "file:line" where it was defined, for messages
+    # the MTL transmission filter and the PBR extension (None: not given)
+    tf: Vec3 | None = None  # MTL Tf / Kt
+    sheen: float | None = None  # PBR Ps
+    clearcoat: float | None = None  # PBR Pc
+    clearcoat_roughness: float | None = None  # PBR Pcr
+    anisotropy: float | None = None  # PBR aniso
+    anisotropy_rotation: float | None = None  # PBR anisor
+    maps: dict[str, Path] = field(default_factory=dict)  # other map_* by lower-case key, e.g. "pr", "d"
+    given: frozenset[str] = frozenset()  # lower-case keys of the statements the file gave
+    bsdf: BSDFSpec | None = None  # an explicit BSDF (Mitsuba XML), used as given
 
     @property
     def is_emissive(self) -> bool:

@@ -11,22 +11,31 @@ starts a comment anywhere on a line; blank lines ignored)::
     Ni v                        index of refraction
     d v  [or d -halo v]         dissolve (opacity)
     Tr v                        transparency: dissolve = 1 - v
+    Tf r g b | Kt r g b         transmission filter (tints what passes through)
     illum n                     illumination model (integer)
     Roughness v | Pr v          roughness (the seed's keyword, PBR extension)
     Mentalness v | Metalness v | Pm v
                                 metalness (the seed spells it "Mentalness")
+    Ps v  Pc v  Pcr v           PBR sheen, clearcoat, clearcoat roughness
+    aniso v  anisor v           PBR anisotropy and its rotation
     map_Kd [options] FILE       diffuse texture, relative to the MTL file
+    map_Pr map_Pm map_d map_Ks map_Ps map_Pc map_Pcr map_Ke map_Ns [options] FILE
+                                textures of those parameters
 
-Ignored silently: ``Ka``, ``Tf``, ``sharpness``. Other ``map_*`` and texture
-statements (``bump``, ``disp``, ``decal``, ``refl``, ``norm``) and unknown
-statements are ignored with one warning per keyword and file. ``map_Kd``
-options (``-s u v w``, ``-o``, ``-t``, ``-mm``, ``-bm``, ``-boost``,
+How these statements become a BSDF is :mod:`drpt.shading`'s table. The
+parser keeps the file's own meaning and records which statements each
+material gave (``Material.given``).
+
+Ignored silently: ``Ka``, ``map_Ka``, ``sharpness``. Other texture
+statements (``bump``, ``map_bump``, ``disp``, ``decal``, ``refl``, ``norm``)
+and unknown statements are ignored with one warning per keyword and file.
+``map_*`` options (``-s u v w``, ``-o``, ``-t``, ``-mm``, ``-bm``, ``-boost``,
 ``-texres``, ``-clamp``, ``-blendu``, ``-blendv``, ``-cc``, ``-imfchan``,
 ``-type``) are skipped with a warning; any other ``-option`` is an error.
 
-Negative colours: a negative ``Kd`` or ``Ks`` channel is clamped to 0 with
-a warning; negative emission (``Ke``/``Le``) is an error, and so is a colour
-channel beyond float32's range (3.4e38).
+Negative colours: a negative ``Kd``, ``Ks`` or ``Tf`` channel is clamped to
+0 with a warning; negative emission (``Ke``/``Le``) is an error, and so is a
+colour channel beyond float32's range (3.4e38).
 
 Errors (:class:`~drpt.errors.SceneError` at the MTL file and line): a
 statement before any ``newmtl``, a bad or non-finite number, a wrong number of
@@ -53,8 +62,13 @@ _MAP_OPTIONS = {
     "-s": 3, "-o": 3, "-t": 3, "-mm": 2, "-bm": 1, "-boost": 1, "-texres": 1,
     "-clamp": 1, "-blendu": 1, "-blendv": 1, "-cc": 1, "-imfchan": 1, "-type": 1,
 }
-_IGNORED = {"ka", "tf", "sharpness"}
-_OTHER_MAPS = {"bump", "disp", "decal", "refl", "norm"}
+_IGNORED = {"ka", "map_ka", "sharpness"}
+_OTHER_MAPS = {"bump", "map_bump", "disp", "decal", "refl", "norm"}
+#: map_* statements kept in ``Material.maps`` (by the parameter's lower-case key)
+PARAM_MAPS = ("ks", "ns", "d", "pr", "pm", "ps", "pc", "pcr", "ke")
+# PBR scalars: key -> Material field
+_PBR_SCALARS = {"ps": "sheen", "pc": "clearcoat", "pcr": "clearcoat_roughness", "aniso": "anisotropy",
+                "anisor": "anisotropy_rotation"}
 
 
 def _numbers(args: list[str], path: Path, line: int, key: str) -> list[float]:
@@ -168,12 +182,34 @@ def apply_field(mat: Material, key: str, args: list[str], path: Path, line: int,
 
     Shared with the scene parser, which accepts MTL-style fields inside
     ``Material``/``PhongMaterial`` blocks. Unknown keys warn (once per key if
-    ``warned`` is given) and leave ``mat`` unchanged.
+    ``warned`` is given) and leave ``mat`` unchanged. A statement that is read
+    adds its key (``metalness`` as ``mentalness``, ``kt`` as ``tf``, ``le`` as
+    ``ke``) to ``mat.given``: the seed's ``Roughness``/``Mentalness`` stay
+    apart from the PBR extension's ``Pr``/``Pm``, which mean another model.
     """
+    new = _apply(mat, key, args, path, line, base)
+    if new is None:
+        if key in _IGNORED:
+            return mat
+        if warned is None or key not in warned:
+            if warned is not None:
+                warned.add(key)
+            kind = "texture" if key.startswith("map_") or key in _OTHER_MAPS else "statement"
+            warnings.warn(f"{path}:{line}: MTL {kind} '{key}' is not supported and is ignored",
+                          stacklevel=3)
+        return mat
+    canonical = {"metalness": "mentalness", "kt": "tf", "le": "ke"}
+    return replace(new, given=mat.given | {canonical.get(key, key)})
+
+
+def _apply(mat: Material, key: str, args: list[str], path: Path, line: int, base: Path) -> Material | None:
     if key == "kd":
         return replace(mat, kd=reflectance(_color(args, path, line, "Kd"), path, line, "Kd"))
     if key == "ks":
         return replace(mat, ks=reflectance(_color(args, path, line, "Ks"), path, line, "Ks"))
+    if key in ("tf", "kt"):
+        name = key.capitalize()
+        return replace(mat, tf=reflectance(_color(args, path, line, name), path, line, name))
     if key in ("ke", "le"):
         name = key.capitalize()
         return replace(mat, emission=emission(_color(args, path, line, name), path, line, name))
@@ -195,17 +231,14 @@ def apply_field(mat: Material, key: str, args: list[str], path: Path, line: int,
         return replace(mat, roughness=_scalar(args, path, line, key))
     if key in ("mentalness", "metalness", "pm"):
         return replace(mat, metalness=_scalar(args, path, line, key))
+    if key in _PBR_SCALARS:
+        return replace(mat, **{_PBR_SCALARS[key]: _scalar(args, path, line, key)})
     if key == "map_kd":
         return replace(mat, map_kd=texture_path(args, base, path, line, "map_Kd"))
-    if key in _IGNORED:
-        return mat
-    if warned is None or key not in warned:
-        if warned is not None:
-            warned.add(key)
-        kind = "texture" if key.startswith("map_") or key in _OTHER_MAPS else "statement"
-        warnings.warn(f"{path}:{line}: MTL {kind} '{key}' is not supported and is ignored",
-                      stacklevel=3)
-    return mat
+    if key.startswith("map_") and key[4:] in PARAM_MAPS:
+        tex = texture_path(args, base, path, line, key)
+        return replace(mat, maps={**mat.maps, key[4:]: tex})
+    return None
 
 
 def parse_mtl_text(text: str, path: Path) -> dict[str, Material]:

@@ -139,8 +139,8 @@ _OBJECTS = ("Group", "Sphere", "Plane", "Triangle", "TriangleMesh", "Transform")
 _LIGHTS = ("DirectionalLight", "PointLight", "Skybox")
 _OPS = ("Translate", "Scale", "UniformScale", "XRotate", "YRotate", "ZRotate", "Rotate", "Matrix")
 _KNOWN = set(_TOP_BLOCKS + _OBJECTS + _LIGHTS + _OPS + ("MaterialIndex", "Material", "PhongMaterial"))
-_MTL_KEYS = {"kd", "ks", "ke", "le", "ns", "ni", "d", "tr", "illum", "roughness", "mentalness",
-             "metalness", "pr", "pm", "map_kd"}
+_MTL_KEYS = {"kd", "ks", "ke", "le", "ns", "ni", "d", "tr", "tf", "kt", "illum", "roughness", "mentalness",
+             "metalness", "pr", "pm", "ps", "pc", "pcr", "aniso", "anisor", "map_kd"}
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -500,7 +500,10 @@ class _Parser:
                 got[key] = (reflectance(got[key][0], self.path, got[key][1], key), got[key][1])
         names = {"diffuseColor": "kd", "specularColor": "ks", "exponent": "ns", "reflectiveColor": "reflective",
                  "transparentColor": "transparent", "indexOfRefraction": "ior", "texture": "map_kd"}
-        return replace(mat, **{names[k]: v for k, (v, _) in got.items()})
+        given = {"diffuseColor": "kd", "specularColor": "ks", "exponent": "ns", "indexOfRefraction": "ni",
+                 "texture": "map_kd"}
+        return replace(mat, **{names[k]: v for k, (v, _) in got.items()},
+                       given=mat.given | {given[k] for k in got if k in given})
 
     def texture_file(self, tok: Token) -> Path:
         p = self.file_ref(tok)

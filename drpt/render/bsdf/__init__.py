@@ -1,12 +1,13 @@
 """BSDF lobes, one module each: ``diffuse``, ``phong``, ``cook_torrance``
-(with ``microfacet`` for GGX), ``dielectric``, ``mirror``.
+(with ``microfacet`` for GGX), ``dielectric``, ``mirror``, ``null``.
 
-:data:`REGISTRY` maps each kind of :class:`drpt.shading.BSDFSpec` to its
+:data:`REGISTRY` maps each leaf kind of :mod:`drpt.bsdf_kinds` to its
 module; :class:`drpt.render.material.MaterialTable` finds a kind's lobe
 there (:func:`lobe`) and traces only the kinds a scene has. A new BSDF is one
-module implementing :class:`BSDF` plus one entry in :data:`REGISTRY` (and the
-rule in :func:`drpt.shading.interpret` that produces its kind; the Mitsuba
-exporter needs its counterpart in :mod:`drpt.export`).
+module implementing :class:`BSDF`, one entry in :data:`REGISTRY`, its
+parameters in :data:`drpt.bsdf_kinds.PARAMS` (and, if MTL statements should
+produce it, a rule in :mod:`drpt.shading`; the Mitsuba exporter maps kinds
+named after a Mitsuba plugin by their names).
 
 The lobe interface
 ------------------
@@ -26,10 +27,11 @@ functions over wide Dr.Jit arrays:
     ratio of the Dirac terms).
 
 ``p`` is the lobe's parameter record (see each module), gathered per lane by
-:mod:`drpt.render.material`. Reflection-only lobes assume the material
-layer has flipped the frame to the viewer's side (``wi.z > 0``) and return
-zero otherwise; transmissive lobes (``dielectric``) see the unflipped frame
-and decide inside/outside from the sign of ``wi.z``.
+:mod:`drpt.render.material`. Sidedness is the material layer's: inside a
+``twosided`` spec the frame is flipped to the viewer's side (``wi.z > 0``);
+elsewhere the lobe sees the unflipped frame and behaves as the Mitsuba
+plugin does from behind (a reflective lobe returns zero when ``wi.z <= 0``;
+a transmissive one decides inside/outside from the sign of ``wi.z``).
 
 No lobe may return NaN or Inf, or a negative value, for any unit input,
 including ``cos`` of 1e-6, roughness 0 and 1, and IOR 1.
@@ -64,18 +66,22 @@ class BSDFSample:
 class BSDF(Protocol):
     """What a lobe module provides (module-level names; see the module docs).
 
-    ``FIELDS`` names the :class:`~drpt.shading.BSDFSpec` fields besides
-    ``kd`` the material table uploads per material when the kind is present
-    (``"rgb"`` or ``"float"``); ``params(table, si, active)`` gathers the
-    lobe's parameter record for the lanes' materials from it. ``DELTA``: a
-    Dirac lobe (``eval`` and ``pdf`` are 0, next-event estimation is skipped).
-    ``TWO_SIDED``: the material layer flips the shading frame to the viewer's
-    side before calling the lobe; else the lobe sees the unflipped frame.
+    ``FIELDS`` names the per-component values the material table uploads
+    when the kind is present: ``"rgb"``, ``"float"`` or ``("table", N)`` (N
+    samples over [0, 1], read with ``table.table_lerp``). A field's value is
+    the spec's parameter of that name or, when the module defines
+    ``derive(params) -> dict`` (host side, once per component, ``ValueError``
+    for a bad parameter), that function's output. ``params(table, si,
+    active)`` gathers the lobe's parameter record with ``table.value`` and
+    may decide what to trace from ``table.specs_of(kind)``. ``DELTA``: only
+    Dirac components (``eval`` and ``pdf`` are 0, next-event estimation is
+    skipped); a lobe mixing a Dirac and a smooth part sets ``delta`` per
+    sample instead. Optional ``COLOR``: the field the Whitted ambient term
+    multiplies.
     """
 
-    FIELDS: ClassVar[Mapping[str, str]]
+    FIELDS: ClassVar[Mapping[str, Any]]
     DELTA: ClassVar[bool]
-    TWO_SIDED: ClassVar[bool]
 
     def params(self, table: Any, si: Any, active: Bool) -> Any: ...
 
@@ -93,6 +99,10 @@ REGISTRY: dict[str, str] = {
     "cook_torrance": "cook_torrance",
     "dielectric": "dielectric",
     "mirror": "mirror",
+    "null": "null",
+    "conductor": "conductor",
+    "roughconductor": "roughconductor",
+    "principled": "principled",
 }
 
 

@@ -111,9 +111,10 @@ ALPHA_MIN = 1e-3
 
 
 #: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
-FIELDS = {"alpha": "float", "metalness": "float"}
+FIELDS = {"kd": "rgb", "alpha": "float", "metalness": "float"}
+#: The field the Whitted ambient term multiplies.
+COLOR = "kd"
 DELTA = False
-TWO_SIDED = True
 
 
 class CookTorranceParams:

@@ -48,9 +48,16 @@ from drjit.auto import Array2f, Array3f, Bool, Float
 from . import BSDFSample
 
 #: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
-FIELDS = {"ior": "float"}
+FIELDS = {"eta": "float"}
+
+
+def derive(params: dict) -> dict:
+    """``eta = int_ior / ext_ior`` (host side)."""
+    int_ior, ext_ior = float(params["int_ior"]), float(params["ext_ior"])
+    if not (int_ior > 0.0 and ext_ior > 0.0):
+        raise ValueError(f"dielectric: indices of refraction must be positive, got {int_ior:g}, {ext_ior:g}")
+    return {"eta": int_ior / ext_ior}
 DELTA = True
-TWO_SIDED = False
 
 
 class DielectricParams:
@@ -64,7 +71,7 @@ class DielectricParams:
 
 def params(table, si, active) -> DielectricParams:
     """The parameters of the lanes' materials, gathered from the material table."""
-    return DielectricParams(table.gather("ior", si, active))
+    return DielectricParams(table.value("eta", si, active))
 
 
 def fresnel_dielectric(cos_i: Float, eta: Float):

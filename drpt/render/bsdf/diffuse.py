@@ -15,9 +15,10 @@ from ..warp import INV_PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
 from . import BSDFSample
 
 #: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
-FIELDS = {}
+FIELDS = {"kd": "rgb"}
+#: The field the Whitted ambient term multiplies.
+COLOR = "kd"
 DELTA = False
-TWO_SIDED = True
 
 
 class DiffuseParams:

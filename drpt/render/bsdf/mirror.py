@@ -18,7 +18,6 @@ from . import BSDFSample
 #: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
 FIELDS = {"ks": "rgb"}
 DELTA = True
-TWO_SIDED = True
 
 
 class MirrorParams:

@@ -43,9 +43,10 @@ INV_TWO_PI = 0.5 / dr.pi
 
 
 #: Spec fields the material table uploads for this lobe (see :class:`drpt.render.bsdf.BSDF`).
-FIELDS = {"ks": "rgb", "ns": "float"}
+FIELDS = {"kd": "rgb", "ks": "rgb", "ns": "float"}
+#: The field the Whitted ambient term multiplies.
+COLOR = "kd"
 DELTA = False
-TWO_SIDED = True
 
 
 class PhongParams:
