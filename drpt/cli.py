@@ -172,7 +172,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         warn("the scene has no primitives (no triangles, spheres or planes): the Mitsuba "
              "scene has no shapes, only its background or sky")
     write_xml(scene, Path(args.output), width=opts.width, height=opts.height, spp=opts.spp,
-              max_depth=opts.path.max_depth, bsdf=opts.bsdf)
+              max_depth=opts.path.max_depth, bsdf=opts.bsdf, rfilter=opts.filter)
     print(f"{args.output}: Mitsuba 3 scene written")
     return 0
 

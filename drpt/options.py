@@ -5,8 +5,8 @@ takes. Every command builds it the same way:
 
 * :func:`add_render_flags` adds the shared render flags to a command's
   parser (size, spp, seed, depths and Russian roulette, the accelerator and
-  its BVH rule, integrator, material mode, sky sampling, lanes, backend,
-  quiet; for ``render`` also the seed renderer's flags);
+  its BVH rule, integrator, material mode, sky sampling, pixel filter,
+  lanes, backend, quiet; for ``render`` also the seed renderer's flags);
 * :func:`options_from_args` turns the parsed flags into a validated
   :class:`RenderOptions`. Bad values raise :class:`~drpt.errors.DrptError`
   (the command line prints it on one line and exits with status 2);
@@ -46,7 +46,7 @@ MAX_SEED = (1 << 64) - 1  # the seed is hashed as a 64-bit integer
 
 # Flag groups of add_render_flags; a command leaves out those that it sets itself.
 FLAGS = ("size", "spp", "seed", "max_depth", "rr_depth", "rr_prob", "accel", "integrator",
-         "bsdf", "env_sampling", "max_lanes", "backend", "quiet")
+         "bsdf", "env_sampling", "filter", "max_lanes", "backend", "quiet")
 
 
 @dataclass
@@ -70,6 +70,7 @@ class RenderOptions:
     bsdf: str = "auto"  # how MTL materials are read, see drpt.shading
     integrator: str = "path"  # "path" (MIS path tracing) or "whitted"
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
+    filter: str = "box"  # pixel reconstruction filter, drpt.filters.parse_filter's spelling
     path: PathOptions = field(default_factory=PathOptions)
     max_lanes: int | None = None  # samples traced at once (None: drpt.backend.policy().max_lanes)
     chunk_spp: int | None = None  # samples per pixel of a chunk (None: one pass step), drpt.render.chunks
@@ -114,6 +115,9 @@ class RenderOptions:
                                      ("--env-sampling", self.env_sampling, ENV_SAMPLING)):
             if value not in allowed:
                 raise DrptError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
+        from .filters import parse_filter
+
+        parse_filter(self.filter)  # raises DrptError on a bad --filter
         if self.accel == "grid" and self.grid_resolution is not None and \
                 not 1 <= self.grid_resolution <= GRID_MAX_RESOLUTION:
             raise DrptError(f"-resolution must be between 1 and {GRID_MAX_RESOLUTION} grid cells "
@@ -139,6 +143,13 @@ class RenderOptions:
                                 f"{LEAF_MAX_COUNT}), got {self.bvh_min_leaf}; --accel bvh2 "
                                 "takes any")
         return self
+
+    @property
+    def pixel_filter(self):
+        """The :class:`~drpt.filters.PixelFilter` that :attr:`filter` names."""
+        from .filters import parse_filter
+
+        return parse_filter(self.filter)
 
 
 # ------------------------------------------------------------------ accelerator names
@@ -196,7 +207,7 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
             ``-MonteCarlo``, ``-cook_torrance``): ``drpt render`` only.
         defaults: the command's defaults, by group: ``size`` (a pair), ``spp``,
             ``seed``, ``max_depth``, ``rr_depth``, ``accel``, ``integrator``,
-            ``bsdf``, ``env_sampling``. ``None`` leaves the choice to
+            ``bsdf``, ``env_sampling``, ``filter``. ``None`` leaves the choice to
             :func:`options_from_args` (e.g. the seed's defaults with ``-input``).
     """
     from .accel import KINDS, METHODS
@@ -205,7 +216,8 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
     if unknown:
         raise ValueError(f"unknown render flag groups {sorted(unknown)}")
     d = {"size": (512, 512), "spp": 64, "seed": 0, "max_depth": -1, "rr_depth": 5,
-         "accel": None, "integrator": None, "bsdf": None, "env_sampling": "luminance"}
+         "accel": None, "integrator": None, "bsdf": None, "env_sampling": "luminance",
+         "filter": "box"}
     d.update(defaults)
 
     def want(group: str) -> bool:
@@ -296,6 +308,13 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
         parser.add_argument("--env-sampling", choices=ENV_SAMPLING, default=d["env_sampling"],
                             help="how sky directions are sampled: by luminance (default) or "
                                  "uniformly over the sphere (for comparison)")
+    if want("filter"):
+        parser.add_argument("--filter", dest="filter", metavar="box|tent|gaussian",
+                            default=d["filter"],
+                            help="pixel reconstruction filter, Mitsuba's: box (the pixel's "
+                                 "square), tent[:radius=R] (R default 1) or gaussian[:stddev=S] "
+                                 "(S default 0.5; Mitsuba's default filter), by filter "
+                                 f"importance sampling (default {d['filter']})")
     if want("max_lanes"):
         parser.add_argument("--max-lanes", type=int, default=None,
                             help="samples traced at once; bounds memory (default: the "
@@ -423,6 +442,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          seed=get("seed", base.seed), **fields, bsdf=bsdf,
                          integrator=integrator,
                          env_sampling=get("env_sampling", base.env_sampling),
+                         filter=get("filter", base.filter),
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),
                                           rr_depth=rr_depth, rr_prob=rr_prob),
                          max_lanes=max_lanes, chunk_spp=get("chunk_spp"),

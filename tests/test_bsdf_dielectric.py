@@ -1,8 +1,10 @@
 """Smooth dielectric lobe (drpt/render/bsdf/dielectric.py): exact Fresnel
 (analytic values, Brewster, total internal reflection), Snell's law,
 reflection frequency = F, energy bookkeeping, extremes (IOR 1 and 2.5,
-grazing and exactly tangent wi, both sides), and sample-for-sample equality
-with Mitsuba's ``dielectric`` (int_ior = eta, ext_ior = 1)."""
+grazing and exactly tangent wi, both sides), the parameters (int_ior /
+ext_ior as numbers or Mitsuba's names, the two tints, gathered through a
+stand-in material table), and sample-for-sample equality with Mitsuba's
+``dielectric`` (several IOR pairs, eta < 1, tints) with a negative control."""
 
 from __future__ import annotations
 
@@ -11,12 +13,12 @@ import math
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.auto import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Bool, Float
 
 from chi2util import mitsuba
-from drpt.export.mitsuba_specular import to_mitsuba
+from dielectricutil import FakeTable, Spec
+from drpt import bsdf_kinds
 from drpt.render.bsdf import dielectric
-from drpt.shading import BSDFSpec
 
 
 def _f(a):
@@ -200,7 +202,7 @@ def test_index_matched_passes_straight_through():
     np.testing.assert_array_equal(f, 0.0)
 
 
-@pytest.mark.parametrize("n", [1.0, 1.0001, 1.5, 2.5])
+@pytest.mark.parametrize("n", [1.0, 1.0001, 1.5, 2.5, 4.0, 0.25])
 def test_extremes_are_finite(n):
     cos = np.array([1.0, -1.0, 1e-6, -1e-6, 0.0, -0.0, 1e-30, -1e-30, 0.5, -0.5])
     wi = _dirs_at(cos)
@@ -226,24 +228,98 @@ def test_eval_pdf_are_zero():
     assert np.all(np.array(dielectric.pdf(p, _v3(a), _v3(b))) == 0.0)
 
 
+# ------------------------------------------------------------------ parameters
+def test_derive_relative_ior():
+    assert dielectric.derive({"int_ior": 1.5, "ext_ior": 1.0}) == {"rel_ior": 1.5}
+    # Mitsuba's defaults (bk7 in air) and names, divided in float32 as Mitsuba does
+    d = dielectric.derive(bsdf_kinds.defaults("dielectric"))
+    assert d["rel_ior"] == float(np.float32(np.float32(1.5046) / np.float32(1.000277)))
+    assert dielectric.derive({"int_ior": "Water", "ext_ior": "vacuum"})["rel_ior"] == float(np.float32(1.333))
+    assert dielectric.derive({"int_ior": 1.0, "ext_ior": "water"})["rel_ior"] == pytest.approx(1 / 1.333, rel=1e-7)
+    for bad in ({"int_ior": -1.5, "ext_ior": 1.0}, {"int_ior": 0.0, "ext_ior": 1.0},
+                {"int_ior": 1.5, "ext_ior": float("nan")}, {"int_ior": "glas", "ext_ior": 1.0},
+                {"int_ior": 1.5, "ext_ior": float("inf")}, {"int_ior": None, "ext_ior": 1.0}):
+        with pytest.raises(ValueError):
+            dielectric.derive(bad)
+
+
+def test_fields_and_params_from_table():
+    assert dielectric.FIELDS == {"rel_ior": "float", "specular_reflectance": "rgb",
+                                 "specular_transmittance": "rgb"}
+    assert dielectric.DELTA
+    specs = [Spec("dielectric", {"int_ior": 1.5, "ext_ior": 1.0, "specular_reflectance": (0.5, 0.25, 1.0)}),
+             Spec("dielectric", {"int_ior": 2.0, "ext_ior": 1.0, "specular_transmittance": (0.1, 0.2, 0.3)})]
+    table = FakeTable(specs, dielectric)
+    p = dielectric.params(table, table.si([1, 0, 1]), Bool(True))
+    np.testing.assert_allclose(np.array(p.eta), [2.0, 1.5, 2.0])
+    np.testing.assert_allclose(np.array(p.r), [[1, 0.5, 1], [1, 0.25, 1], [1, 1, 1]])
+    np.testing.assert_allclose(np.array(p.t), [[0.1, 1, 0.1], [0.2, 1, 0.2], [0.3, 1, 0.3]], rtol=1e-6)
+    # all tints white: nothing gathered for them (constant 1)
+    table = FakeTable([Spec("dielectric", {"int_ior": 1.5, "ext_ior": 1.0})], dielectric)
+    p = dielectric.params(table, table.si([0, 0]), Bool(True))
+    assert table.asked == ["rel_ior"] and dr.width(p.r) == 1 and np.all(np.array(p.r) == 1.0)
+
+
+@pytest.mark.parametrize("n", [1.5, 2.5])
+def test_tints_scale_weights(n):
+    m = 4000
+    rng = np.random.default_rng(9)
+    v = rng.normal(size=(3, m))
+    v /= np.linalg.norm(v, axis=0)
+    u = rng.random(m)
+    r, t = (0.9, 0.5, 0.25), (0.2, 0.7, 1.0)
+    plain = _sample(n, v, u)
+    p = dielectric.DielectricParams(_f(np.full(m, n)), Array3f(*r), Array3f(*t))
+    bs = dielectric.sample(p, _v3(v), _f(u), Array2f(0.5, 0.5))
+    w = np.array(bs.weight)
+    np.testing.assert_array_equal(np.array(bs.wo), plain["wo"])
+    refl = plain["wo"][2] * v[2] > 0
+    np.testing.assert_allclose(w[:, refl], np.array(r)[:, None] * plain["weight"][:, refl], rtol=1e-6)
+    np.testing.assert_allclose(w[:, ~refl], np.array(t)[:, None] * plain["weight"][:, ~refl], rtol=1e-6)
+
+
 # ------------------------------------------------------------------ Mitsuba
+MITSUBA_CASES = [
+    {"int_ior": 1.0, "ext_ior": 1.0},
+    {"int_ior": 1.33, "ext_ior": 1.0},
+    {"int_ior": 1.5, "ext_ior": 1.0},
+    {"int_ior": 2.5, "ext_ior": 1.0},
+    {"int_ior": "bk7", "ext_ior": "air"},  # Mitsuba's defaults
+    {"int_ior": "air", "ext_ior": "water"},  # eta < 1: a bubble
+    {"int_ior": "diamond", "ext_ior": 1.2, "specular_reflectance": (0.9, 0.5, 0.2),
+     "specular_transmittance": (0.3, 0.6, 1.0)},
+]
+
+
+def _mitsuba_dict(params: dict) -> dict:
+    d = {"type": "dielectric"}
+    for k, v in params.items():
+        d[k] = {"type": "rgb", "value": list(v)} if isinstance(v, tuple) else v
+    return d
+
+
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("n", [1.0, 1.33, 1.5, 2.5])
-def test_equals_mitsuba_dielectric(n):
+@pytest.mark.parametrize("case", range(len(MITSUBA_CASES)))
+def test_equals_mitsuba_dielectric(case):
     mi = mitsuba()
+    params = MITSUBA_CASES[case]
+    full = {**bsdf_kinds.defaults("dielectric"), **params}
+    n = dielectric.derive(full)["rel_ior"]
     m = 10_000
-    rng = np.random.default_rng(int(n * 100))
+    rng = np.random.default_rng(100 + case)
     v = rng.normal(size=(3, m))
     v /= np.linalg.norm(v, axis=0)
     v[:, :6] = _dirs_at([1e-6, -1e-6, 1.0, -1.0, 0.0, 0.02])
     v = v.astype(np.float32)
     u = rng.random(m).astype(np.float32)
-    ours = _sample(n, v, u)
+    r, t = full["specular_reflectance"], full["specular_transmittance"]
+    p = dielectric.DielectricParams(_f(np.full(m, n)), Array3f(*r), Array3f(*t))
+    bs_o = dielectric.sample(p, _v3(v), _f(u), Array2f(0.5, 0.5))
+    ours = {k: np.broadcast_to(np.array(getattr(bs_o, k)), (3, m) if k in ("wo", "weight") else (m,))
+            for k in ("wo", "weight", "eta")}
 
-    spec = BSDFSpec("dielectric", ior=n)
-    d = to_mitsuba(spec)
-    assert d == {"type": "dielectric", "int_ior": n, "ext_ior": 1.0}
-    bsdf = mi.load_dict(d)
+    bsdf = mi.load_dict(_mitsuba_dict(params))
+    assert float(mi.traverse(bsdf)["eta"]) == n  # same float32 relative IOR
     si = dr.zeros(mi.SurfaceInteraction3f)
     si.wi = mi.Vector3f(v[0], v[1], v[2])
     bs, w = bsdf.sample(mi.BSDFContext(), si, mi.Float(u), mi.Point2f(0.5, 0.5))
@@ -269,3 +345,25 @@ def test_equals_mitsuba_dielectric(n):
     np.testing.assert_allclose(ours["eta"][same], np.array(bs.eta)[same], rtol=1e-6)
     assert np.all(np.array(bs.sampled_type)[same & ~m_refl] ==
                   int(mi.BSDFFlags.DeltaTransmission))
+    # the tints really reach the weights (not only white cases)
+    if r != bsdf_kinds.WHITE:
+        assert np.any(np.abs(mw[0, same & m_refl] - mw[2, same & m_refl]) > 0.1)
+
+
+@pytest.mark.mitsuba
+def test_mitsuba_comparison_catches_a_wrong_tint():
+    """Negative control: swapping the two tints (a plausible slip) is caught by
+    the comparison above (weights differ from Mitsuba's)."""
+    mi = mitsuba()
+    m = 2000
+    v = _dirs_at(np.linspace(-0.99, 0.99, m)).astype(np.float32)
+    u = np.random.default_rng(1).random(m).astype(np.float32)
+    r, t = (0.9, 0.5, 0.2), (0.3, 0.6, 1.0)
+    p = dielectric.DielectricParams(_f(np.full(m, 1.5)), Array3f(*t), Array3f(*r))  # swapped
+    w = np.array(dielectric.sample(p, _v3(v), _f(u), Array2f(0.5, 0.5)).weight)
+    bsdf = mi.load_dict(_mitsuba_dict({"int_ior": 1.5, "ext_ior": 1.0, "specular_reflectance": r,
+                                       "specular_transmittance": t}))
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    si.wi = mi.Vector3f(v[0], v[1], v[2])
+    _, mw = bsdf.sample(mi.BSDFContext(), si, mi.Float(u), mi.Point2f(0.5, 0.5))
+    assert not np.allclose(w, np.array(mw), rtol=2e-6, atol=1e-7)

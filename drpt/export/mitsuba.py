@@ -34,10 +34,18 @@ Camera
     y in [-H/W, H/W], so ``to_world = look_at @ scale(s, s, 1)`` with
     ``s = size * W / (2H)`` gives a full vertical extent of ``size``.
     ``near_clip``/``far_clip`` are derived from the scene size (tiny / beyond
-    the exported planes).
+    the exported planes). A perspective camera with an ``aperture_radius``
+    above 0 becomes ``thinlens`` with the same ``fov``/``fov_axis`` and
+    ``aperture_radius``, ``focus_distance``: Mitsuba's focal plane lies at
+    camera-space z = ``focus_distance``, drpt's at that distance along ``f``,
+    the same plane (:mod:`drpt.render.camera`).
 Film, sampler, integrator
-    ``hdrfilm`` (``rgb``, ``float32``, ``box`` reconstruction filter, so a
-    pixel is the plain average of its samples), ``independent`` sampler with
+    ``hdrfilm`` (``rgb``, ``float32``, the default ``sample_border=false``) with the
+    render's pixel filter as its ``rfilter`` (``rfilter=`` :func:`drpt.filters.parse_filter`'s
+    spelling: ``box``, the default, so a pixel is the plain average of its
+    samples; ``tent`` with its ``radius``, ``gaussian`` with its ``stddev``;
+    :mod:`drpt.filters` derives why drpt's filter importance sampling has
+    Mitsuba's splatting's expectation), ``independent`` sampler with
     ``sample_count`` and ``seed``, ``path`` integrator with ``max_depth``
     (-1 infinite, 1 emitters seen directly, 2 direct lighting), ``rr_depth``,
     ``hide_emitters=False``.
@@ -111,6 +119,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from drpt.errors import DrptError
+from drpt.filters import parse_filter
 from drpt.scene.model import (
     DirectionalLight,
     Material,
@@ -174,8 +183,9 @@ class _MeshData:
 
 
 _TAGS = {
-    "perspective": "sensor", "orthographic": "sensor",
-    "hdrfilm": "film", "box": "rfilter", "independent": "sampler",
+    "perspective": "sensor", "orthographic": "sensor", "thinlens": "sensor",
+    "hdrfilm": "film", "box": "rfilter", "tent": "rfilter", "gaussian": "rfilter",
+    "independent": "sampler",
     "path": "integrator",
     "twosided": "bsdf", "diffuse": "bsdf", "drpt_phong": "bsdf", "principled": "bsdf",
     "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf",
@@ -243,7 +253,8 @@ def _f3(v) -> tuple[float, float, float]:
 
 # ------------------------------------------------------ the description
 def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
-              rr_depth: int, seed: int, bsdf: str = "auto") -> dict:
+              rr_depth: int, seed: int, bsdf: str = "auto", rfilter: str = "box") -> dict:
+    pixel_filter = parse_filter(rfilter)
     if int(width) <= 0 or int(height) <= 0:
         raise DrptError(f"image size must be positive, got {width}x{height}")
     if int(spp) <= 0:
@@ -272,6 +283,13 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
         if not 0.0 < float(cam.fov) < 180.0:
             raise DrptError(f"cannot export camera: fov {cam.fov} not in (0, 180)")
         sensor = {"type": "perspective", "fov_axis": "y", "fov": float(cam.fov)}
+        if cam.aperture_radius > 0.0:
+            if cam.focus_distance is None or not float(cam.focus_distance) > 0.0:
+                raise DrptError(f"cannot export camera: a thin lens needs a positive focus "
+                                f"distance, got {cam.focus_distance}")
+            sensor = {"type": "thinlens", "fov_axis": "y", "fov": float(cam.fov),
+                      "aperture_radius": float(cam.aperture_radius),
+                      "focus_distance": float(cam.focus_distance)}
     elif isinstance(cam, OrthographicCamera):
         if not float(cam.size) > 0.0:
             raise DrptError(f"cannot export camera: size {cam.size} must be positive")
@@ -289,7 +307,7 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
         "height": height,
         "pixel_format": "rgb",
         "component_format": "float32",
-        "rfilter": {"type": "box"},
+        "rfilter": pixel_filter.to_mitsuba(),  # sample_border: Mitsuba's default, false
     }
     sensor["sampler"] = {"type": "independent", "sample_count": int(spp), "seed": int(seed)}
     out["sensor"] = sensor
@@ -429,7 +447,7 @@ def _bsdf(spec: BSDFSpec) -> dict:
 # ---------------------------------------------------------------- dict
 def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
                     max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
-                    bsdf: str = "auto") -> dict:
+                    bsdf: str = "auto", rfilter: str = "box") -> dict:
     """The scene as a dict for ``mi.load_dict`` (a Mitsuba variant must be set).
 
     Triangle meshes are in-memory ``mi.Mesh`` objects (one per material),
@@ -439,7 +457,7 @@ def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
 
     if mi.variant() is None:
         raise DrptError("Mitsuba has no variant set; call mi.set_variant('llvm_ad_rgb') first")
-    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf)
+    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter)
     from .mitsuba_phong import register
 
     register()  # drpt_phong, in case a material needs it
@@ -498,7 +516,7 @@ def _build_mesh(md: _MeshData, mi):
 # ----------------------------------------------------------------- XML
 def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: int,
               spp: int, max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
-              bsdf: str = "auto") -> Path:
+              bsdf: str = "auto", rfilter: str = "box") -> Path:
     """Write the scene as Mitsuba 3 XML plus PLY meshes; return the XML path.
 
     Phong materials use the ``drpt_phong`` plugin, which Mitsuba knows only
@@ -510,7 +528,7 @@ def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: in
     ``u v`` when the scene has them). The file loads with ``mi.load_file``.
     """
     xml_path = Path(out_xml_path)
-    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf)
+    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter)
     mesh_dir = xml_path.parent / f"{xml_path.stem}_meshes"
     try:
         xml_path.parent.mkdir(parents=True, exist_ok=True)

@@ -18,6 +18,9 @@ One node, one plugin (plain ``mi.load_dict`` dicts: RGB values as
   (:mod:`drpt.render.bsdf.cook_torrance`);
 * ``mirror`` -> ``conductor`` with ``material="none"`` and
   ``specular_reflectance = ks``;
+* ``dielectric``, ``thindielectric``, ``roughdielectric``: as their plugins,
+  after :func:`drpt.export.mitsuba_dielectrics.adjust` (an index-matched
+  ``roughdielectric``, which Mitsuba refuses, becomes ``dielectric``);
 * ``phong`` -> ``drpt_phong`` (:mod:`drpt.export.mitsuba_phong`, registered
   with ``mi.register_bsdf``: Mitsuba has no Phong).
 
@@ -33,6 +36,8 @@ from typing import Any
 from ..bsdf_kinds import COMPOSITES, PARAMS
 from ..errors import DrptError
 from ..shading import BSDFSpec, Texture
+from .mitsuba_dielectrics import KINDS as DIELECTRICS
+from .mitsuba_dielectrics import adjust as adjust_dielectric
 
 __all__ = ["to_mitsuba"]
 
@@ -76,6 +81,8 @@ def _leaf(spec: BSDFSpec) -> dict:
         return {"type": "null"}
     if kind not in PARAMS:
         raise DrptError(f"{spec.origin or 'material'}: BSDF kind '{kind}' has no Mitsuba counterpart")
+    if kind in DIELECTRICS:  # e.g. an index-matched roughdielectric -> dielectric
+        kind, p = adjust_dielectric(kind, p)
     out: dict[str, Any] = {"type": kind}
     skip = set()
     if kind in ("conductor", "roughconductor"):

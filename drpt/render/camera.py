@@ -9,7 +9,17 @@ corner (pixel ``(i, j)`` covers ``[i, i+1) x [j, j+1)``). With
   ``sx = (2x/W - 1) * tan(fov/2) * W/H`` and ``sy = (1 - 2y/H) * tan(fov/2)``;
   ``fov`` is the full *vertical* field of view;
 * orthographic: origin ``center + sx*r + sy*u`` with ``sx = (2x/W - 1) *
-  size/2 * W/H``, ``sy = (1 - 2y/H) * size/2``, direction ``f``.
+  size/2 * W/H``, ``sy = (1 - 2y/H) * size/2``, direction ``f``;
+* thin lens (a perspective camera with ``aperture_radius = A > 0`` and
+  ``focus_distance = F``), Mitsuba's ``thinlens``: the pinhole ray's point
+  on the focal plane, ``P = center + F * (f + sx*r + sy*u)`` (its distance
+  along ``f`` is ``F``), is seen from the lens point ``O = center + A * (-px
+  * r + py * u)``, ``(px, py) = square_to_uniform_disk_concentric(v)`` for
+  two more uniform numbers ``v``: origin ``O``, direction ``normalize(P -
+  O)``. ``-r`` is Mitsuba's camera-space x (its ``look_at`` x axis is
+  ``cross(up, f)``), so the lens point of a ``v`` is Mitsuba's too. Every ray
+  has weight 1, as in Mitsuba (its ``sample_ray`` returns the wavelength
+  weight only).
 
 The Mitsuba exporter reproduces exactly this mapping.
 """
@@ -20,10 +30,11 @@ import math
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 
 from ..errors import DrptError
 from ..scene.model import Camera, OrthographicCamera, PerspectiveCamera
+from .warp import square_to_uniform_disk_concentric
 
 
 def camera_basis(cam: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -45,10 +56,12 @@ class RayCamera:
 
     The camera's position and basis are opaque Dr.Jit values, kernel inputs:
     a kernel traced with another camera of the same kind (perspective or
-    orthographic) and image size is the same kernel, found in Dr.Jit's
-    kernel cache, so moving the camera compiles nothing
-    (:mod:`drpt.render.progressive` relies on it). The image size is a
-    literal of the kernel (pixel indices divide by the width).
+    orthographic, pinhole or thin lens) and image size is the same kernel,
+    found in Dr.Jit's kernel cache, so moving the camera (or changing its
+    aperture or focus) compiles nothing (:mod:`drpt.render.progressive`
+    relies on it). The image size is a literal of the kernel (pixel indices
+    divide by the width). :attr:`thin_lens` says whether :meth:`ray` needs
+    its ``lens`` sample.
     """
 
     def __init__(self, cam: Camera, width: int, height: int):
@@ -68,11 +81,27 @@ class RayCamera:
         self.f = dr.opaque(Array3f, tuple(map(float, f)))
         self.r = dr.opaque(Array3f, tuple(map(float, r * half_w)))  # scaled by half extents
         self.u = dr.opaque(Array3f, tuple(map(float, u * half_h)))
+        aperture = getattr(cam, "aperture_radius", 0.0)
+        self.thin_lens = isinstance(cam, PerspectiveCamera) and aperture > 0.0
+        if self.thin_lens:
+            if cam.focus_distance is None or not cam.focus_distance > 0.0:
+                raise DrptError(f"a thin-lens camera needs a positive focus distance, got "
+                                f"{cam.focus_distance}")
+            self.lens_x = dr.opaque(Array3f, tuple(map(float, -r * aperture)))
+            self.lens_y = dr.opaque(Array3f, tuple(map(float, u * aperture)))
+            self.focus = dr.opaque(Float, float(cam.focus_distance))
 
-    def ray(self, x: Float, y: Float) -> tuple[Array3f, Array3f]:
-        """World-space ray (origin, unit direction) through pixel position (x, y)."""
+    def ray(self, x: Float, y: Float, lens: Array2f | None = None) -> tuple[Array3f, Array3f]:
+        """World-space ray (origin, unit direction) through pixel position (x, y);
+        a thin lens also takes ``lens``, two uniform numbers that pick the point
+        on the lens (without them: the lens center, the pinhole ray)."""
         sx = 2.0 * x / self.width - 1.0
         sy = 1.0 - 2.0 * y / self.height
         if self.orthographic:
             return self.center + self.r * sx + self.u * sy, Array3f(self.f)
+        if self.thin_lens and lens is not None:
+            p = square_to_uniform_disk_concentric(lens)
+            offset = self.lens_x * p.x + self.lens_y * p.y
+            target = (self.f + self.r * sx + self.u * sy) * self.focus
+            return self.center + offset, dr.normalize(target - offset)
         return Array3f(self.center), dr.normalize(self.f + self.r * sx + self.u * sy)

@@ -171,7 +171,9 @@ class MaterialTable:
         self._fields: dict[str, tuple] = {}
         for k in self.kinds:
             for name, t in self.lobes[k].FIELDS.items():
-                self._fields.setdefault(name, t)
+                if self._fields.setdefault(name, t) != t:  # one namespace for every kind's fields
+                    raise TypeError(f"BSDF field '{name}' of '{k}' is {t}, another kind's is "
+                                    f"{self._fields[name]}")
         textures: list = []
 
         def tex_id(t: Texture) -> int:

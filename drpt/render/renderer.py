@@ -1,4 +1,4 @@
-"""Turns a scene into an image: passes of samples, a box filter, a progress bar.
+"""Turns a scene into an image: passes of samples, a pixel filter, a progress bar.
 
 Work is cut into passes of at most ``max_lanes`` samples, so memory stays
 bounded at any image size and sample count: a pass covers a band of rows with
@@ -12,7 +12,7 @@ packet no longer waits for its longest path at every bounce (measured in one
 process against one sample per lane: Cornell box 1.17x, newscene 1.32x at
 256x256, 64 spp). The Whitted integrator runs one sample per lane. Lanes are
 ordered pixel-major, so a pixel's lanes are adjacent and ``dr.block_sum``
-adds them (a box filter: samples are uniform over the pixel's square). Each
+adds them (a pixel is the mean of its own samples). Each
 lane draws from its own PCG32 stream, selected by ``(seed, pass, lane)``, so
 a render is deterministic for a given seed and pass layout.
 
@@ -24,6 +24,14 @@ themselves are finite) is traced again, with the same random numbers, with
 float64 sums (:meth:`Renderer._pass`), so such radiance averages correctly
 and other renders pay nothing for it. A pixel mean beyond float32 (which no
 image file holds) is an error.
+
+Where a pixel's sample lies is the pixel filter's business
+(``RenderOptions.filter``, :mod:`drpt.filters`): the box filter (the default)
+jitters it uniformly over the pixel square; ``tent`` and
+``gaussian`` draw it from the filter truncated to the image (filter
+importance sampling, :mod:`drpt.render.filter_sampling`), so each pixel
+still sums its own samples, independent of its neighbours', and its
+variance estimate below stays that of its own samples.
 
 Pass parameters that change between passes (row offset, seed, ``k``) are
 opaque JIT values: the megakernel is compiled once per render.
@@ -49,7 +57,7 @@ from dataclasses import dataclass
 
 import drjit as dr
 import numpy as np
-from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32, UInt64
+from drjit.auto import PCG32, Array2f, Array3f, Array3f64, Bool, Float, UInt32, UInt64
 
 from ..backend import policy
 from ..errors import DrptError
@@ -57,6 +65,7 @@ from ..options import RenderOptions
 from ..scene.model import Camera, Scene
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
+from .filter_sampling import sample_position
 from .integrators.path import PathIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .scene import DeviceScene
@@ -214,9 +223,7 @@ class Renderer:
         rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
                     initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
 
-        def camera_ray(rng):
-            return self.camera.ray(Float(x) + rng.next_float32(), Float(y) + rng.next_float32())
-
+        camera_ray = self._camera_ray(x, y)
         if sequential:
             j = lane % mm
             count = kk // mm + dr.select(j < kk % mm, 1, 0)
@@ -226,8 +233,10 @@ class Renderer:
             dr.eval(acc, acc2, bad)
             nbad = dr.sum(bad)
         else:
-            o, d = camera_ray(rng)
+            o, d, weight = camera_ray(rng)
             L = self.integrator.sample(rng, o, d, Bool(True))
+            if weight is not None:
+                L = L * weight
             dr.eval(L)
             bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
             acc = (Array3f64 if wide else Array3f)(dr.select(bad, 0.0, L))
@@ -239,6 +248,34 @@ class Renderer:
         img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)
         sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, 3)
         return img, sq, int(nbad[0])
+
+    def _camera_ray(self, x: UInt32, y: UInt32) -> Callable:
+        """``camera_ray(rng) -> (o, d, weight)`` for pixel column ``x`` and row
+        ``y``: a sample's position in the pixel (uniform in its square for the
+        box filter, else drawn from the pixel filter truncated to the image,
+        :mod:`~drpt.render.filter_sampling`), then for a thin lens its lens
+        point, then the camera ray. ``weight`` is the filter sample's weight,
+        ``None`` for 1 (the box and tent filters)."""
+        flt = self.opt.pixel_filter
+        W, H = self.opt.width, self.opt.height
+        camera = self.camera
+
+        def camera_ray(rng):
+            if flt.is_box:
+                px = Float(x) + rng.next_float32()
+                py = Float(y) + rng.next_float32()
+                weight = None
+            else:
+                u1 = rng.next_float32()
+                u2 = rng.next_float32()
+                px, py, weight = sample_position(flt, Float(x), Float(y), u1, u2, W, H)
+            lens = None
+            if camera.thin_lens:
+                lens = Array2f(rng.next_float32(), rng.next_float32())
+            o, d = camera.ray(px, py, lens)
+            return o, d, weight
+
+        return camera_ray
 
     @property
     def chunks(self) -> ChunkPlan:

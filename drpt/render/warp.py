@@ -10,9 +10,9 @@ from drjit.auto import Array2f, Array3f, Float
 INV_PI = 1.0 / dr.pi
 
 
-def square_to_cosine_hemisphere(u: Array2f) -> Array3f:
-    """Cosine-weighted direction around +z (Malley: concentric disk, lifted)."""
-    # Concentric map of the square to the unit disk (no clumping at the rim).
+def square_to_uniform_disk_concentric(u: Array2f) -> Array2f:
+    """Uniform point on the unit disk: Shirley and Chiu's concentric map (no
+    clumping at the rim), the mapping of Mitsuba's function of that name."""
     a = 2.0 * u.x - 1.0
     b = 2.0 * u.y - 1.0
     use_a = dr.abs(a) > dr.abs(b)
@@ -20,7 +20,13 @@ def square_to_cosine_hemisphere(u: Array2f) -> Array3f:
     phi = dr.select(use_a, (dr.pi / 4.0) * (b / a), (dr.pi / 2.0) - (dr.pi / 4.0) * (a / b))
     phi = dr.select((a == 0) & (b == 0), 0.0, phi)
     s, c = dr.sincos(phi)
-    x, y = r * c, r * s
+    return Array2f(r * c, r * s)
+
+
+def square_to_cosine_hemisphere(u: Array2f) -> Array3f:
+    """Cosine-weighted direction around +z (Malley: concentric disk, lifted)."""
+    p = square_to_uniform_disk_concentric(u)
+    x, y = p.x, p.y
     z = dr.safe_sqrt(1.0 - x * x - y * y)
     return Array3f(x, y, z)
 

@@ -44,10 +44,18 @@ MAX_COORDINATE = 1e12
 # --------------------------------------------------------------------- camera
 @dataclass
 class PerspectiveCamera:
+    """A pinhole camera, or with ``aperture_radius > 0`` a thin lens (depth of
+    field, Mitsuba's ``thinlens``): rays leave a disk of that radius around
+    ``center``, perpendicular to ``direction``, and those of one image point
+    meet on the plane ``focus_distance`` ahead of ``center`` (measured along
+    ``direction``), where the image is sharp."""
+
     center: Vec3
     direction: Vec3  # need not be normalized
     up: Vec3  # need not be orthogonal to direction
     fov: float  # full vertical field of view, degrees, in (0, 180)
+    aperture_radius: float = 0.0  # lens radius, world units; 0: a pinhole
+    focus_distance: float | None = None  # distance of the sharp plane; required with an aperture
 
 
 @dataclass

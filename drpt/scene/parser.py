@@ -13,7 +13,8 @@ Fields inside a block may come in any order, each at most once. ::
     scene      := block*          (a camera is required unless the file has no
                                    blocks at all; every block at most once,
                                    in any order)
-    block      := PerspectiveCamera { center v3 direction v3 up v3 angle deg }
+    block      := PerspectiveCamera { center v3 direction v3 up v3 angle deg
+                                      [apertureRadius a] [focusDistance f] }
                 | OrthographicCamera { center v3 direction v3 up v3 size s }
                 | Background { [color v3] [ambientLight v3] }
                 | Lights { numLights N light* }
@@ -52,6 +53,11 @@ Semantics
   at the block's line. (The seed's scene files all match.)
 * Cameras: ``angle`` is the full vertical field of view, in (0, 180);
   ``size`` > 0; ``direction`` and ``up`` non-zero and not parallel.
+  ``apertureRadius`` (>= 0, world units; 0, the default, is a pinhole) makes
+  the perspective camera a thin lens (depth of field, Mitsuba's
+  ``thinlens``), sharp at ``focusDistance`` (> 0, along ``direction``),
+  which it then requires; a ``focusDistance`` without an aperture has no
+  effect (a warning).
 * Transform operations compose left to right, ``M = Op1 @ Op2 @ ...``, and
   nest as ``M_parent @ M`` (6.837 semantics). Triangles and meshes get their
   positions transformed and normals by the inverse-transpose; a mirroring
@@ -352,12 +358,16 @@ class _Parser:
     def parse_camera(self, opened: Token) -> None:
         persp = opened.text == "PerspectiveCamera"
         last = "angle" if persp else "size"
-        got = self.fields(opened.text, opened, {
+        readers = {
             "center": self.vec("center"),
             "direction": self.vec("direction"),
             "up": self.vec("up"),
             last: self.num(last),
-        })
+        }
+        if persp:
+            readers["apertureRadius"] = self.num("apertureRadius")
+            readers["focusDistance"] = self.num("focusDistance")
+        got = self.fields(opened.text, opened, readers)
         self.require(got, opened.text, opened, ("center", "direction", "up", last))
         self.check_extent(got["center"][1], "camera center", got["center"][0])
         d = tf.normalize(got["direction"][0])
@@ -372,13 +382,33 @@ class _Parser:
         if persp:
             if not 0.0 < value < 180.0:
                 raise self.error(line, f"camera angle must be in (0, 180) degrees, got {value:g}")
+            aperture, focus = self.lens(got, opened)
             self.camera = PerspectiveCamera(got["center"][0], _direction(got["direction"][0]),
-                                            _direction(got["up"][0]), value)
+                                            _direction(got["up"][0]), value, aperture, focus)
         else:
             if not value > 0.0:
                 raise self.error(line, f"camera size must be positive, got {value:g}")
             self.camera = OrthographicCamera(got["center"][0], _direction(got["direction"][0]),
                                              _direction(got["up"][0]), value)
+
+    def lens(self, got: dict, opened: Token) -> tuple[float, float | None]:
+        """A PerspectiveCamera's ``(apertureRadius, focusDistance)``, checked."""
+        aperture, a_line = got.get("apertureRadius", (0.0, None))
+        focus, f_line = got.get("focusDistance", (None, None))
+        if not 0.0 <= aperture <= MAX_COORDINATE:
+            raise self.error(a_line, f"apertureRadius must be between 0 and {MAX_COORDINATE:g} "
+                                     f"(world units), got {aperture:g}")
+        if focus is not None and not 0.0 < focus <= MAX_COORDINATE:
+            raise self.error(f_line, f"focusDistance must be positive and at most "
+                                     f"{MAX_COORDINATE:g} (world units), got {focus:g}")
+        if aperture > 0.0 and focus is None:
+            raise self.error(a_line, "apertureRadius needs focusDistance: the distance, along "
+                                     "the camera direction, of the plane in focus")
+        if aperture == 0.0 and focus is not None:
+            warnings.warn(f"{self.path}:{f_line}: focusDistance has no effect without an "
+                          "apertureRadius above 0 (a pinhole camera is sharp everywhere)",
+                          stacklevel=2)
+        return aperture, focus
 
     def parse_background(self, opened: Token) -> None:
         got = self.fields("Background", opened, {

@@ -228,7 +228,7 @@ def bench_drpt(scene, options, rays: dict, repeat: int) -> dict:
 # --------------------------------------------------------------------------- Mitsuba
 
 def bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
-                  repeat: int) -> dict:
+                  repeat: int, rfilter: str = "box") -> dict:
     import drjit as dr
     import mitsuba as mi
 
@@ -240,7 +240,7 @@ def bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
     W, H = size
     load = math.inf
     for _ in range(repeat):
-        desc = to_mitsuba_dict(scene, W, H, spp, max_depth=max_depth, bsdf=bsdf)
+        desc = to_mitsuba_dict(scene, W, H, spp, max_depth=max_depth, bsdf=bsdf, rfilter=rfilter)
         dr.sync_thread()
         t0 = time.perf_counter()
         ms = mi.load_dict(desc)
@@ -402,7 +402,7 @@ def main(args: argparse.Namespace) -> int:
         bsdf = args.bsdf or DEFAULT_BSDF.get(path.name, "phong")
         rays = make_rays(scene, args.rays, W / H, args.seed)
         mi_row = (bench_mitsuba(scene, rays, bsdf, (W, H), base.spp, base.path.max_depth,
-                                args.repeat) if mitsuba else {})
+                                args.repeat, base.filter) if mitsuba else {})
         for name in accels:
             label = name
             if name == "auto":

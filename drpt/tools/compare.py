@@ -17,7 +17,8 @@ Scene form
     any change of the scene, its files, the exporter or a setting renders a
     new reference; otherwise it is reused). Then drpt renders the scene with
     the same settings (its own per-pixel variance comes with the render)
-    and the two are compared.
+    and the two are compared. ``--filter`` is both renders' pixel filter
+    (Mitsuba's film gets the same ``rfilter``).
 
     The fraction of pixel values outside the 99.7% interval is ~0.27% for an
     unbiased render only when the pixel errors are Gaussian with the
@@ -278,7 +279,7 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
     reference = get_reference(
         scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
         bsdf=bsdf, max_depth=max_depth, rr_depth=rr_depth, seed=seed, cache_dir=cache_dir,
-        progress=options.progress)
+        progress=options.progress, rfilter=options.filter)
     ref, ref_var = reference.image, reference.variance
 
     renderer = Renderer(scene, options)
@@ -295,7 +296,8 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
 
         c_mean, c_var, control_info = get_control(
             scene, scene_path.stem, width, height, spp, bsdf=bsdf, max_depth=max_depth,
-            rr_depth=rr_depth, seed=seed, cache_dir=cache_dir, progress=options.progress)
+            rr_depth=rr_depth, seed=seed, cache_dir=cache_dir, progress=options.progress,
+            rfilter=options.filter)
         summary["outside_ci_control"] = metrics.outside_ci(c_mean, c_var, ref, ref_var, CI_Z)
     report = {
         "mode": "scene",
@@ -305,6 +307,7 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
         "bsdf": bsdf,
         "max_depth": int(max_depth),
         "rr_depth": int(rr_depth),
+        "filter": str(options.pixel_filter),
         "metrics": summary,
         "outside_ci_expected": EXPECTED_OUTSIDE,
         "outside_ci_note": f"fraction of pixel channels with |drpt - ref| > {CI_Z:g} * "

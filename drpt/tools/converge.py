@@ -251,7 +251,7 @@ def time_to_error_ratios(t_a, e_a, t_b, e_b, levels) -> list[dict]:
 
 
 # ------------------------------------------------------------ rendering
-def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf):
+def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter="box"):
     """A loaded Mitsuba scene and a ``render(spp, seed) -> (image, seconds)``."""
     import mitsuba as mi
 
@@ -259,7 +259,7 @@ def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf):
 
     t0 = time.perf_counter()
     ms = mi.load_dict(to_mitsuba_dict(scene, width, height, 1, max_depth=max_depth,
-                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf))
+                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter))
     load_seconds = time.perf_counter() - t0
 
     def render(spp: int, s: int):
@@ -319,7 +319,7 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
     reference = get_reference(
         scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
         bsdf=bsdf, max_depth=max_depth, rr_depth=rr_depth, seed=seed, cache_dir=cache_dir,
-        progress=progress)
+        progress=progress, rfilter=options.filter)
     ref, ref_var = reference.image, reference.variance
     import mitsuba as mi
 
@@ -327,7 +327,8 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
     renderer, drpt_render = make_drpt(scene, replace(options, spp=1, progress=False))
     for message in renderer.warnings:
         warn(message)
-    mits_render, mits_load = make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf)
+    mits_render, mits_load = make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf,
+                                          options.filter)
     # Warm-up: compiles both renderers' kernels (reused at every spp), discarded.
     t = time.perf_counter()
     drpt_render(1, seed + 999_999)

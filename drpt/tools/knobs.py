@@ -209,7 +209,7 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
             r = get_reference(
                 scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
                 bsdf=mode, max_depth=-1, rr_depth=5, seed=seed, cache_dir=cache_dir,
-                progress=progress)
+                progress=progress, rfilter=options.filter)
             refs[mode] = {"image": r.image, "variance": r.variance,
                           "floor": noise_floor(r.image, r.variance), "info": r.info()}
         return refs[mode]

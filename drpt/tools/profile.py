@@ -328,9 +328,9 @@ def _instrument(renderer, tracker: StageTracker) -> None:
                 return camera_ray(rng)
             first[0] = False
             tracker.enter(camera, (rng,))
-            o, d = camera_ray(rng)
-            tracker.leave((rng, o, d))
-            return o, d
+            ray = camera_ray(rng)  # (o, d) or (o, d, filter weight or None)
+            tracker.leave((rng, *(v for v in ray if v is not None)))
+            return ray
 
         tracker.enter(INSTRUMENTATION, (count,))
         tracker.stage(camera).rays += int(dr.sum(count)[0])

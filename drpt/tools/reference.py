@@ -51,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DrptError, note, warn
+from ..filters import parse_filter
 
 ROOT = Path(__file__).resolve().parents[2]
 CACHE_VERSION = 1
@@ -172,21 +173,22 @@ def render_committed(name: str, seed: int = 12345) -> Path:
 # ------------------------------------------------------------ the batched render
 def render_batches(scene, width: int, height: int, batch_spp: int, batches: int, seed: int,
                    seed_step: int = 7919, max_depth: int = -1, rr_depth: int = 5,
-                   bsdf: str = "phong", progress: bool = True):
+                   bsdf: str = "phong", progress: bool = True, rfilter: str = "box"):
     """Mitsuba's ``path`` integrator on the exported ``scene``, ``batches`` times
     at ``batch_spp`` samples per pixel, batch ``k`` with seed ``seed + seed_step * k``.
 
     Returns the mean image, the per-pixel variance of the mean
     (``var(ddof=1) / batches``; zero for one batch), both float32, the
-    render seconds and the ``load_dict`` seconds. Mitsuba's variant must be
-    set (:func:`drpt.backend.set_mitsuba_variant`)."""
+    render seconds and the ``load_dict`` seconds. ``rfilter`` is the film's
+    pixel filter (``--filter``'s spelling). Mitsuba's variant must be set
+    (:func:`drpt.backend.set_mitsuba_variant`)."""
     import mitsuba as mi
 
     from ..export.mitsuba import to_mitsuba_dict
 
     t0 = time.perf_counter()
     ms = mi.load_dict(to_mitsuba_dict(scene, width, height, batch_spp, max_depth=max_depth,
-                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf))
+                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter))
     load_seconds = time.perf_counter() - t0
     runs = []
     t0 = time.perf_counter()
@@ -294,7 +296,8 @@ def reference_key(scene, settings: dict) -> str:
         export.write_xml(scene, Path(tmp) / "scene.xml", settings["width"],
                          settings["height"], settings["batch_spp"],
                          max_depth=settings["max_depth"], rr_depth=settings["rr_depth"],
-                         seed=settings["ref_seed"], bsdf=settings["bsdf"])
+                         seed=settings["ref_seed"], bsdf=settings["bsdf"],
+                         rfilter=settings.get("rfilter", "box"))
         for f in sorted(Path(tmp).rglob("*")):
             if f.is_file():
                 add("export:" + str(f.relative_to(tmp)), f.read_bytes())
@@ -350,7 +353,8 @@ class Reference:
         s = self.settings
         return {"renderer": f"mitsuba {mi.__version__} {mitsuba_variant()} path",
                 "spp": s["batch_spp"] * s["batches"], "batches": s["batches"],
-                "seed": s["ref_seed"], "seconds": float(self.meta["seconds"]),
+                "seed": s["ref_seed"], "rfilter": s.get("rfilter", "box"),
+                "seconds": float(self.meta["seconds"]),
                 "cached": self.cached,
                 "cache_file": None if self.cache_file is None else str(self.cache_file),
                 "key": self.key}
@@ -359,7 +363,7 @@ class Reference:
 def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024,
                   ref_batches: int = 8, bsdf: str = "phong", max_depth: int = -1,
                   rr_depth: int = 5, seed: int = 0, cache_dir: Path | None = None,
-                  progress: bool = True) -> Reference:
+                  progress: bool = True, rfilter: str = "box") -> Reference:
     """The Mitsuba reference of a loaded ``scene``: from the cache, or rendered (and cached).
 
     Checks the settings and sets up Mitsuba's variant on drpt's backend.
@@ -374,6 +378,9 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
     settings = {"width": int(width), "height": int(height), "batch_spp": per,
                 "batches": int(ref_batches), "max_depth": int(max_depth),
                 "rr_depth": int(rr_depth), "bsdf": bsdf, "ref_seed": int(seed) + 100000}
+    pixel_filter = parse_filter(rfilter)
+    if not pixel_filter.is_box:  # (box references keep the cache keys they always had)
+        settings["rfilter"] = str(pixel_filter)
     key = reference_key(scene, settings)
     cache_file = None if cache_dir is None else Path(cache_dir) / f"{stem}_{key[:24]}.npz"
     cached = _load_cached(cache_file) if cache_file is not None and cache_file.is_file() else None
@@ -384,7 +391,8 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
     if cached is None:
         ref, ref_var, secs, load_secs = render_batches(
             scene, width, height, per, int(ref_batches), settings["ref_seed"],
-            max_depth=max_depth, rr_depth=rr_depth, bsdf=bsdf, progress=progress)
+            max_depth=max_depth, rr_depth=rr_depth, bsdf=bsdf, progress=progress,
+            rfilter=settings.get("rfilter", "box"))
         meta = {"seconds": secs, "load_seconds": load_secs, "key": key, "settings": settings}
         if cache_file is not None:
             _save_cached(cache_file, ref, ref_var, meta)
@@ -395,14 +403,17 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
 
 def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
                           max_depth: int = -1, rr_depth: int = 5, bsdf: str = "phong",
-                          progress: bool = True):
+                          progress: bool = True, rfilter: str = "box"):
     """Mitsuba's ``path`` on the exported ``scene`` as ``spp`` renders of one sample per
     pixel (render ``k`` with seed ``seed + k``): the per-pixel mean and the variance of
     that mean estimated the way drpt estimates its own, ``var(samples, ddof=1) / spp``.
 
     Returns (mean, variance of the mean, seconds), float32 images. Mitsuba reports no
     per-sample variance for one render (its ``moment`` integrator records moments of XYZ,
-    not of RGB), hence the single-sample renders. Mitsuba's variant must be set."""
+    not of RGB), hence the single-sample renders. ``rfilter`` is the film's pixel filter
+    (with a splatting one, neighbouring pixels of a render are correlated; each pixel's
+    variance across the independent renders is still its own). Mitsuba's variant must be
+    set."""
     import mitsuba as mi
 
     from ..export.mitsuba import to_mitsuba_dict
@@ -410,7 +421,7 @@ def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
     if spp < 2:
         raise DrptError(f"a per-pixel variance needs at least 2 samples per pixel, got {spp}")
     ms = mi.load_dict(to_mitsuba_dict(scene, width, height, 1, max_depth=max_depth,
-                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf))
+                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter))
     s1 = np.zeros((height, width, 3))
     s2 = np.zeros((height, width, 3))
     t0 = time.perf_counter()
@@ -430,7 +441,7 @@ def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
 
 def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str = "phong",
                 max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
-                cache_dir: Path | None = None, progress: bool = True):
+                cache_dir: Path | None = None, progress: bool = True, rfilter: str = "box"):
     """Mitsuba at drpt's ``spp`` with drpt's per-pixel variance estimator
     (:func:`render_single_samples`, seed ``seed + 200000``), cached like a reference
     (key: the export and every setting, ``"control"`` among them).
@@ -442,7 +453,7 @@ def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str =
     _mitsuba()
     settings = {"control": True, "width": int(width), "height": int(height), "batch_spp": 1,
                 "spp": int(spp), "max_depth": int(max_depth), "rr_depth": int(rr_depth),
-                "bsdf": bsdf, "ref_seed": int(seed) + 200000}
+                "bsdf": bsdf, "ref_seed": int(seed) + 200000, "rfilter": str(parse_filter(rfilter))}
     key = reference_key(scene, settings)
     cache_file = None if cache_dir is None else Path(cache_dir) / f"{stem}_control_{key[:24]}.npz"
     cached = _load_cached(cache_file) if cache_file is not None and cache_file.is_file() else None
@@ -451,7 +462,7 @@ def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str =
     if cached is None:
         mean, var, secs = render_single_samples(
             scene, width, height, spp, settings["ref_seed"], max_depth=max_depth,
-            rr_depth=rr_depth, bsdf=bsdf, progress=progress)
+            rr_depth=rr_depth, bsdf=bsdf, progress=progress, rfilter=settings["rfilter"])
         meta = {"seconds": secs, "key": key, "settings": settings}
         if cache_file is not None:
             _save_cached(cache_file, mean, var, meta)

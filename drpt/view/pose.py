@@ -69,14 +69,18 @@ def camera_to_pose(cam: Camera) -> tuple[np.ndarray, np.ndarray, float]:
 
 def pose_to_camera(position, wxyz, fov: float, like: Camera) -> Camera:
     """The drpt camera of viser's pose: a :class:`PerspectiveCamera` with the
-    pose's vertical ``fov`` (radians), or, when ``like`` is orthographic,
-    ``like``'s size at the pose."""
+    pose's vertical ``fov`` (radians) and ``like``'s lens (aperture and focus
+    distance, when ``like`` is a thin lens), or, when ``like`` is
+    orthographic, ``like``'s size at the pose."""
     R = wxyz_to_matrix(wxyz)
     center = tuple(float(c) for c in position)
     direction = tuple(float(c) for c in R[:, 2])
     up = tuple(float(c) for c in -R[:, 1])
     if isinstance(like, OrthographicCamera):
         return replace(like, center=center, direction=direction, up=up)
+    if isinstance(like, PerspectiveCamera):
+        return replace(like, center=center, direction=direction, up=up,
+                       fov=math.degrees(float(fov)))
     return PerspectiveCamera(center, direction, up, math.degrees(float(fov)))
 
 
@@ -95,5 +99,8 @@ def camera_block(cam: Camera) -> str:
         head, last = "OrthographicCamera", f"    size {float(cam.size)!r}"
     else:
         head, last = "PerspectiveCamera", f"    angle {float(cam.fov)!r}"
+        if cam.aperture_radius > 0.0:
+            last += (f"\n    apertureRadius {float(cam.aperture_radius)!r}"
+                     f"\n    focusDistance {float(cam.focus_distance)!r}")
     return (f"{head} {{\n    center {v3(cam.center)}\n    direction {v3(cam.direction)}\n"
             f"    up {v3(cam.up)}\n{last}\n}}\n")

@@ -103,6 +103,8 @@ REGISTRY: dict[str, str] = {
     "conductor": "conductor",
     "roughconductor": "roughconductor",
     "principled": "principled",
+    "thindielectric": "thindielectric",
+    "roughdielectric": "roughdielectric",
 }
 
 

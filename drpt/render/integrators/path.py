@@ -77,7 +77,9 @@ class PathIntegrator:
                         ) -> tuple[Array3f | Array3f64, Array3f | Array3f64, UInt32]:
         """``count`` paths per lane, one after another (path regeneration).
 
-        A lane starts a path at ``camera_ray(rng) -> (o, d)``; when the path
+        A lane starts a path at ``camera_ray(rng) -> (o, d)`` or ``(o, d,
+        weight)`` (a pixel filter's sample weight, the path's initial
+        throughput; ``None`` for 1); when the path
         ends it adds the sample to its sums and starts the next one, until
         ``count`` are done. A SIMD packet of lanes therefore runs until its
         lanes' *total* work is done, instead of each bounce loop waiting for
@@ -92,8 +94,8 @@ class PathIntegrator:
         """
         scene = self.scene
         left = UInt32(count)
-        o, d = camera_ray(rng)
-        state = self._start(o, d, left > 0)
+        o, d, *weight = camera_ray(rng)
+        state = self._start(o, d, left > 0, *weight)
         Sum = Array3f64 if wide else Array3f
         acc, acc2 = Sum(0.0), Sum(0.0)
         dropped = UInt32(0)
@@ -107,16 +109,17 @@ class PathIntegrator:
                 acc2 += Lf * Lf
                 dropped += dr.select(finite, 0, 1)
                 left -= 1
-                o, d = camera_ray(rng)
-                state = self._start(o, d, left > 0)
+                o, d, *weight = camera_ray(rng)
+                state = self._start(o, d, left > 0, *weight)
         return acc, acc2, dropped
 
-    def _start(self, o: Array3f, d: Array3f, active: Bool) -> PathState:
-        """A new path along the ray ``(o, d)``: no radiance, throughput 1,
-        IOR product 1, depth 0, and no MIS for what the first ray hits (as
-        after a delta lobe)."""
+    def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> PathState:
+        """A new path along the ray ``(o, d)``: no radiance, throughput
+        ``weight`` (``None``: 1), IOR product 1, depth 0, and no MIS for what
+        the first ray hits (as after a delta lobe)."""
         w = dr.width(active)
-        return PathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=dr.full(Array3f, 1.0, w),
+        beta = dr.full(Array3f, 1.0, w) if weight is None else Array3f(weight, weight, weight)
+        return PathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=beta,
                          eta=dr.full(Float, 1.0, w), depth=dr.zeros(UInt32, w),
                          prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
                          active=Bool(active))
