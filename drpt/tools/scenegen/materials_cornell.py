@@ -10,38 +10,43 @@ objects, each a material kind that the MTL statements select (see
 object          MTL statements               read as (auto mode)
 =============== ============================ ============================================
 gold sphere     ``Kd 1 0.766 0.336``,        ``principled``, metallic 1, roughness 0.4
-(back left)     ``Pm 1``, ``Pr 0.4``         (GGX alpha 0.16)
+(back, right)   ``Pm 1``, ``Pr 0.4``         (GGX alpha 0.16)
 plastic box     ``Kd 0.1 0.3 0.8``,          ``principled``, metallic 0, roughness 0.3,
-(front right)   ``Pm 0``, ``Pr 0.3``         eta = ``Ni`` 1.5
+(front, left)   ``Pm 0``, ``Pr 0.3``         eta = ``Ni`` 1.5
 frosted glass   ``Ni 1.5``, ``Tf 0.7 0.85    ``roughdielectric`` GGX alpha 0.09,
-block (back     1``, ``Pr 0.3``, illum 4     ``specular_transmittance`` = Tf
-right)
+block (back,    1``, ``Pr 0.3``, illum 4     ``specular_transmittance`` = Tf
+left)
 water slab      ``Ni 1.33``, ``Tf 1 1 1``,   smooth ``dielectric``, IOR 1.33
-(front left)    ``Pr 0``, illum 7
+(front, right)  ``Pr 0``, illum 7
 walls, light    ``Kd``, ``Ks 0``, illum 1    ``diffuse`` (no PBR statements)
 =============== ============================ ============================================
 
-The MTL is written the way PBR-aware exporters (Blender's, with its PBR
-extensions on) write materials: ``Ns Ka Kd Ks Ke Ni d illum`` and then
-``Pr Pm Ps Pc Pcr aniso anisor``, with ``Tf`` for the transmissive ones. The
-walls and the light are written without the PBR statements (as a material
-with no specular exported without the extensions), so that they stay
-Lambertian: the room stays a Cornell box.
+The MTL is written the way PBR-aware exporters (Blender's with its PBR
+extensions on) write materials: ``Ns Ka Kd Ks Ke Ni d illum``, then ``Pr Pm
+Ps Pc Pcr aniso anisor``; the transmissive ones add the MTL standard's
+transmission filter ``Tf``. ``Ni`` (1.45, 1.5) is also principled's ``eta``.
+The walls and the light are written without the PBR statements (a material
+with no specular, exported without the extensions), so that they stay
+Lambertian and the room stays a Cornell box.
 
 Conductor variant (``materials_cornell_conductor.txt``): the sphere is
 ``gold_conductor``, ``illum 3`` with ``Ks 1 0.766 0.336``, ``Kd 0`` and
 ``Pr 0.2``: a ``roughconductor`` (GGX alpha 0.04, ``specular_reflectance`` =
 Ks, Mitsuba's ``material = "none"``: no Fresnel falloff).
 
-Geometry (scene units = 10 cm): the sphere (radius 0.85, 32 x 16 segments,
-smooth normals) touches the floor; the plastic box (1.4 cube, rotated -17
-degrees) and the glass block (1.3 x 2.4 x 1.3, rotated 20 degrees) stand
-on it; the water is a closed slab 0.35 deep whose top carries waves of
-amplitude 0.04 (12 x 12 quads, smooth normals). The glass block and the
-water slab float 0.01 above the floor, so that their closed bottoms do not
-coincide with it. Files: ``room.obj`` (walls, light, box, glass, water),
-``sphere_gold.obj``, ``sphere_conductor.obj``, ``materials_cornell.mtl``,
-``materials_cornell.txt``, ``materials_cornell_conductor.txt`` (~100 kB in all).
+Left and right are the image's: the camera looks along +z, so +x is the
+image's left (the red wall is at x = 5.5). Geometry, in scene units of
+10 cm: the sphere (radius 0.85, 32 x 16 segments, smooth normals) touches
+the floor; the plastic box (1.4 cube, rotated -17 degrees, open bottom)
+stands on it; the glass block (1.3 x 2.4 x 1.3, rotated 20 degrees) and the
+water, a closed slab 0.35 deep whose top carries waves of amplitude 0.04
+(12 x 12 quads, smooth normals), float 0.01 above it, so that their closed
+bottoms do not coincide with the floor. The glass, the water and the sphere
+are watertight (every edge shared by two faces, wound outward). Files:
+``room.obj`` (walls, light, box, glass, water), ``sphere_gold.obj``,
+``sphere_conductor.obj``, ``materials_cornell.mtl``,
+``materials_cornell.txt``, ``materials_cornell_conductor.txt`` (~120 kB in
+all).
 
     python scenes/make_materials_cornell.py OUT_DIR
 """
