@@ -27,8 +27,8 @@ Scene form
     breaks that at low spp: most pixels have not yet drawn the rare samples,
     sit below the reference and report a too small variance. Then the
     fraction is far above 0.27% with no bias at all (the seed's Cornell box
-    read as Cook-Torrance: ~3% at 64 spp, ~9% at 16 spp, Mitsuba against
-    itself). ``--control`` measures that level: Mitsuba rendered at drpt's
+    read as Cook-Torrance: 3.7% at 64 spp, 10% at 16 spp, Mitsuba against
+    itself at 128x128). ``--control`` measures that level: Mitsuba rendered at drpt's
     spp with drpt's variance estimator (:func:`~drpt.tools.reference.get_control`,
     cached) is judged against the reference with the same statistic; drpt
     is suspect when it reads clearly above the control. The converse does not
