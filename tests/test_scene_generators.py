@@ -109,3 +109,107 @@ def test_showcase_scenes(showcase, tmp_path):
         for name in ("grille", "plate"):
             assert read_image(mats[name].map_kd).std() > 0.01
         _tiny_render(scene)
+
+
+# ------------------------------------------- mixed-material test scenes (test_materials_mitsuba)
+def _auto_leaves(scene) -> dict:
+    """material name -> (kind of the outer node, its first leaf), auto mode, used materials only."""
+    used = set(np.unique(scene.triangles.material).tolist())
+    out = {}
+    for i, m in enumerate(scene.materials):
+        if i in used:
+            spec = interpret(m, "auto")
+            out[m.name] = (spec.kind, spec.leaves()[0])
+    return out
+
+
+def _edges_paired(positions) -> bool:
+    """Every edge of the triangles ``positions`` (F, 3, 3) is used exactly twice, once in
+    each direction: a closed, consistently wound (watertight) surface."""
+    keys = {}
+    for tri in np.round(positions, 6):
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            e = (tuple(tri[a]), tuple(tri[b]))
+            keys[e] = keys.get(e, 0) + 1
+    return all(n == 1 and keys.get((b, a)) == 1 for (a, b), n in keys.items())
+
+
+def test_materials_cornell_scene(tmp_path):
+    import warnings
+
+    from drpt.tools.scenegen import materials_cornell
+
+    files = materials_cornell.main(tmp_path)
+    assert sum(f.stat().st_size for f in files) < 150_000
+    mtl = (tmp_path / "materials_cornell.mtl").read_text()
+    for key in ("Ns", "Ka", "Kd", "Ks", "Ke", "Ni", "d", "illum", "Pr", "Pm", "Tf"):
+        assert f"\n{key} " in mtl, key
+    for name, sphere_kind in (("materials_cornell", "principled"), ("materials_cornell_conductor", "roughconductor")):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # every statement written is one drpt reads
+            scene = load_scene(tmp_path / f"{name}.txt")
+        kinds = _auto_leaves(scene)
+        for wall in ("white", "red", "green", "light"):
+            assert kinds[wall][0] == "twosided" and kinds[wall][1].kind == "diffuse"
+        assert kinds["light"][1]["kd"] == (0.0, 0.0, 0.0)
+        glass, water = kinds["frosted_glass"][1], kinds["water"][1]
+        assert kinds["frosted_glass"][0] == "roughdielectric" and glass["distribution"] == "ggx"
+        assert glass["alpha"] == pytest.approx(0.09) and glass["int_ior"] == 1.5
+        assert glass["specular_transmittance"] == (0.7, 0.85, 1.0)
+        assert kinds["water"][0] == "dielectric" and water["int_ior"] == 1.33
+        plastic = kinds["blue_plastic"][1]
+        assert plastic.kind == "principled" and plastic["metallic"] == 0 and plastic["roughness"] == 0.3
+        sphere = kinds["gold_conductor" if sphere_kind == "roughconductor" else "gold"][1]
+        assert sphere.kind == sphere_kind
+        if sphere_kind == "principled":
+            assert sphere["metallic"] == 1 and sphere["roughness"] == 0.4
+        else:
+            assert sphere["alpha"] == pytest.approx(0.04) and sphere["distribution"] == "ggx"
+        # the dielectrics and the sphere are closed and wound outward; the light faces down
+        tri = scene.triangles
+        names = [m.name for m in scene.materials]
+        for mat in ("frosted_glass", "water", "gold_conductor" if sphere_kind == "roughconductor" else "gold"):
+            closed = tri.positions[tri.material == names.index(mat)]
+            assert _edges_paired(closed), mat
+            flipped = closed.copy()
+            flipped[0] = closed[0, ::-1]  # one face wound inward
+            assert not _edges_paired(closed[1:]) and not _edges_paired(flipped)
+        li = tri.positions[tri.material == names.index("light")]
+        assert (np.cross(li[:, 1] - li[:, 0], li[:, 2] - li[:, 0])[:, 1] < 0).all()
+        # nothing intersects the floor: the dielectrics float 0.01 above it
+        for mat in ("frosted_glass", "water"):
+            assert tri.positions[tri.material == names.index(mat)][..., 1].min() == pytest.approx(0.01)
+
+
+def test_veach_mis_scene(tmp_path):
+    from drpt.tools.scenegen import veach_mis
+
+    files = veach_mis.main(tmp_path)
+    assert sum(f.stat().st_size for f in files) < 80_000
+    scene = load_scene(tmp_path / "veach_mis.txt")
+    kinds = _auto_leaves(scene)
+    alphas = [kinds[f"plate{k}"][1]["alpha"] for k in range(4)]
+    assert all(kinds[f"plate{k}"][1].kind == "roughconductor" for k in range(4))
+    assert np.allclose(alphas, [0.005, 0.02, 0.05, 0.1], rtol=1e-4)
+    assert kinds["base"][1].kind == "diffuse"
+    lights = [m for m in scene.materials if m.is_emissive]
+    radiance = [m.emission[0] for m in lights]
+    assert radiance == sorted(radiance, reverse=True) and 890 < radiance[0] < 910 and 1.2 < radiance[-1] < 1.25
+    # equal power: radiance * r^2 the same for each sphere (r from the triangles' extent)
+    tri = scene.triangles
+    names = [m.name for m in scene.materials]
+    radii = [np.ptp(tri.positions[tri.material == names.index(m.name)][..., 1]) / 2 for m in lights]
+    power = np.array(radiance) * np.array(radii) ** 2
+    assert np.allclose(power, power[0], rtol=1e-3)
+    # each plate mirrors the camera's ray through its center onto the middle of the light row
+    cam = np.asarray(scene.camera.center)
+    middle = np.array([0.0, veach_mis.LIGHT_Y, veach_mis.LIGHT_Z])
+    for k in range(4):
+        p = tri.positions[tri.material == names.index(f"plate{k}")]
+        c = p.reshape(-1, 3).mean(0)
+        n = np.cross(p[0, 1] - p[0, 0], p[0, 2] - p[0, 0])
+        n /= np.linalg.norm(n)
+        d = (c - cam) / np.linalg.norm(c - cam)
+        r = d - 2 * np.dot(d, n) * n
+        to_mid = (middle - c) / np.linalg.norm(middle - c)
+        assert np.dot(r, to_mid) > 0.9999

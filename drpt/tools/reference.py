@@ -26,6 +26,13 @@ Cached references (``compare``, ``converge``, ``knobs``)
     reference; otherwise it is reused.
 
 Both render through :func:`render_batches`.
+
+Control (``compare --control``)
+    :func:`get_control` renders Mitsuba at drpt's spp as single-sample renders,
+    so that its per-pixel variance is estimated exactly as drpt's is, and caches
+    it like a reference. Judged against the reference with the statistic
+    ``compare`` applies to drpt, it gives the level an unbiased renderer reaches
+    on that scene at that spp.
 """
 
 from __future__ import annotations
@@ -75,8 +82,8 @@ GENERATED = {
 
 __all__ = ["REFERENCES", "BATCHES", "GENERATED", "Reference", "add_reference_args",
            "cache_dir_from_args", "check_reference_args", "default_cache_dir",
-           "get_reference", "reference_key", "reference_path", "render_batches",
-           "render_committed", "scene_path", "variance_path"]
+           "get_control", "get_reference", "reference_key", "reference_path", "render_batches",
+           "render_committed", "render_single_samples", "scene_path", "variance_path"]
 
 
 # ------------------------------------------------------------ committed table
@@ -392,6 +399,79 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
     if not np.all(np.isfinite(ref)):
         raise DrptError("the Mitsuba reference has NaN/Inf pixels")
     return Reference(ref, ref_var, meta, cached is not None, key, cache_file, settings)
+
+
+def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
+                          max_depth: int = -1, rr_depth: int = 5, bsdf: str = "phong",
+                          progress: bool = True, rfilter: str = "box"):
+    """Mitsuba's ``path`` on the exported ``scene`` as ``spp`` renders of one sample per
+    pixel (render ``k`` with seed ``seed + k``): the per-pixel mean and the variance of
+    that mean estimated the way drpt estimates its own, ``var(samples, ddof=1) / spp``.
+
+    Returns (mean, variance of the mean, seconds), float32 images. Mitsuba reports no
+    per-sample variance for one render (its ``moment`` integrator records moments of XYZ,
+    not of RGB), hence the single-sample renders. ``rfilter`` is the film's pixel filter
+    (with a splatting one, neighbouring pixels of a render are correlated; each pixel's
+    variance across the independent renders is still its own). Mitsuba's variant must be
+    set."""
+    import mitsuba as mi
+
+    from ..export.mitsuba import to_mitsuba_dict
+
+    if spp < 2:
+        raise DrptError(f"a per-pixel variance needs at least 2 samples per pixel, got {spp}")
+    ms = mi.load_dict(to_mitsuba_dict(scene, width, height, 1, max_depth=max_depth,
+                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter))
+    s1 = np.zeros((height, width, 3))
+    s2 = np.zeros((height, width, 3))
+    t0 = time.perf_counter()
+    for k in range(spp):
+        x = np.asarray(mi.render(ms, spp=1, seed=seed + k), np.float64)[..., :3]
+        s1 += x
+        s2 += x * x
+        if progress:
+            print(f"\rcontrol: sample {k + 1}/{spp}", end="", file=sys.stderr, flush=True)
+    if progress:
+        print(file=sys.stderr)
+    seconds = time.perf_counter() - t0
+    mean = s1 / spp
+    var = np.maximum(s2 / spp - mean * mean, 0.0) * (spp / (spp - 1)) / spp
+    return mean.astype(np.float32), var.astype(np.float32), seconds
+
+
+def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str = "phong",
+                max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
+                cache_dir: Path | None = None, progress: bool = True, rfilter: str = "box"):
+    """Mitsuba at drpt's ``spp`` with drpt's per-pixel variance estimator
+    (:func:`render_single_samples`, seed ``seed + 200000``), cached like a reference
+    (key: the export and every setting, ``"control"`` among them).
+
+    ``compare --control`` measures it against the reference with the statistic it
+    applies to drpt: the fraction an unbiased renderer reaches on this scene at this
+    spp (0.27% only when the pixel errors are Gaussian; scenes with heavy-tailed
+    samples read far higher at low spp). Returns (mean, variance, info dict)."""
+    _mitsuba()
+    settings = {"control": True, "width": int(width), "height": int(height), "batch_spp": 1,
+                "spp": int(spp), "max_depth": int(max_depth), "rr_depth": int(rr_depth),
+                "bsdf": bsdf, "ref_seed": int(seed) + 200000, "rfilter": str(parse_filter(rfilter))}
+    key = reference_key(scene, settings)
+    cache_file = None if cache_dir is None else Path(cache_dir) / f"{stem}_control_{key[:24]}.npz"
+    cached = _load_cached(cache_file) if cache_file is not None and cache_file.is_file() else None
+    if cached is not None and cached[0].shape != (height, width, 3):
+        cached = None
+    if cached is None:
+        mean, var, secs = render_single_samples(
+            scene, width, height, spp, settings["ref_seed"], max_depth=max_depth,
+            rr_depth=rr_depth, bsdf=bsdf, progress=progress, rfilter=settings["rfilter"])
+        meta = {"seconds": secs, "key": key, "settings": settings}
+        if cache_file is not None:
+            _save_cached(cache_file, mean, var, meta)
+    else:
+        mean, var, meta = cached
+    info = {"spp": int(spp), "seed": settings["ref_seed"], "seconds": float(meta["seconds"]),
+            "cached": cached is not None,
+            "cache_file": None if cache_file is None else str(cache_file)}
+    return mean, var, info
 
 
 def main(argv: list[str] | None = None) -> int:
