@@ -64,7 +64,7 @@ REFERENCES = {
     # the Cornell box read as Cook-Torrance (no Roughness: the seed's 0.95, alpha 0.95^2, metalness 0)
     "cornellbox_ct": ("scenes/cornellbox/cornellbox.txt", 128, 128, 8192, -1, "cook-torrance"),
     "showcase_day": ("scenes/showcase/showcase_day.txt", 128, 72, 4096, -1, "cook-torrance"),
-    "showcase_dusk": ("scenes/showcase/showcase_dusk.txt", 128, 72, 4096, -1, "cook-torrance"),
+    "showcase_dusk": ("scenes/showcase/showcase_dusk.txt", 128, 72, 16384, -1, "cook-torrance"),
     "diningroom": ("scenes/diningroom/diningroom.txt", 96, 96, 4096, -1, "cook-torrance"),
 }
 
