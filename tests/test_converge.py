@@ -296,7 +296,7 @@ def test_knobs_cli_smoke(tmp_path, capsys):
     depth2 = rows[1]
     assert float(depth2["mean_bias"]) < -0.15 and depth2["biased"] == "True"
     data = json.loads((out / "knobs.json").read_text())
-    assert set(data["references"]) == {"phong"}
+    assert set(data["references"]) == {"auto"}
     assert (out / "knobs.md").read_text().startswith("# Quality knobs")
 
 

@@ -14,7 +14,9 @@ uninterrupted render has after the same chunks.
 
 from __future__ import annotations
 
+import copyreg
 import hashlib
+import io
 import json
 import os
 import pickle
@@ -29,15 +31,27 @@ SUFFIX = ".drpt-checkpoint"
 VERSION = 1
 
 
+def _sorted_set(s):
+    return (tuple, (tuple(sorted(s, key=repr)),))
+
+
 def scene_hash(scene) -> str:
     """SHA-256 of the scene's content: the parsed model (geometry, materials,
     lights, camera; pickled) and the bytes of the images it names (textures,
-    sky), which the renderer reads when it builds the device scene."""
-    h = hashlib.sha256(pickle.dumps(scene, protocol=4))
+    sky), which the renderer reads when it builds the device scene. Sets are
+    pickled as sorted tuples: their iteration order changes from one process
+    to the next (string hashing is randomized), their content does not."""
+    buf = io.BytesIO()
+    pickler = pickle.Pickler(buf, protocol=4)
+    pickler.dispatch_table = {**copyreg.dispatch_table, frozenset: _sorted_set, set: _sorted_set}
+    pickler.dump(scene)
+    h = hashlib.sha256(buf.getvalue())
     from ..scene.model import Skybox
 
-    images = sorted({str(m.map_kd) for m in scene.materials if m.map_kd is not None}
-                    | {str(light.path) for light in scene.lights if isinstance(light, Skybox)})
+    images = {str(m.map_kd) for m in scene.materials if m.map_kd is not None}
+    images |= {str(p) for m in scene.materials for p in m.maps.values()}
+    images |= {str(t.path) for m in scene.materials if m.bsdf is not None for t in m.bsdf.textures()}
+    images = sorted(images | {str(light.path) for light in scene.lights if isinstance(light, Skybox)})
     for name in images:
         h.update(name.encode())
         try:
