@@ -229,6 +229,15 @@ class RenderSettings:
     hide_emitters: bool | None = None
     rfilter: str | None = None  # reconstruction filter name: "box", "tent", "gaussian"
     rfilter_params: dict = field(default_factory=dict)  # Mitsuba's names: radius, stddev
+    #: Mitsuba's ``(fov, fov_axis)`` as the file gives them: an image size of another
+    #: aspect than the film's keeps the fov along that axis, as Mitsuba does
+    fov: tuple | None = None
+    #: the ``-D`` values the file was read with (``compare`` gives Mitsuba the same)
+    defines: dict = field(default_factory=dict)
+    #: parameters of the file their plugins do not read (older exporters' files), as
+    #: ``(node index in mitsuba.parser's state, plugin, name)``: ``compare`` drops them
+    #: before Mitsuba loads the file (Mitsuba 3 refuses them)
+    ignored: tuple = ()
 
 
 # ---------------------------------------------------------------------- scene

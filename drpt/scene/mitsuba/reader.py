@@ -64,6 +64,8 @@ class Reader:
         self.state = State(self.path, dict(defines or {}))
         self.materials = Materials(self)
         self.unread_params: list[str] = []
+        self.ignored: list[tuple[int, str, str]] = []
+        self.defines = {k: str(v) for k, v in (defines or {}).items()}
         self.warnings: list[str] = []
         # outputs
         self.mat_list: list[Material] = []
@@ -104,6 +106,7 @@ class Reader:
             raise node.error(f"{node.label} does not read parameter{'s' if len(names) > 1 else ''} "
                              f"{listed} (without --strict drpt ignores them)")
         self.unread_params.append(f"{listed} of {node.label} at {node.where}")
+        self.ignored.extend((node.index, node.plugin, n) for n in names)
 
     # ------------------------------------------------------------ the scene
     def read(self) -> Scene:
@@ -134,6 +137,8 @@ class Reader:
         if integrators:
             self.integrator(integrators[0])
         self.check_unread(root)
+        self.settings.defines = dict(self.defines)
+        self.settings.ignored = tuple(self.ignored)
         scene = self._scene()
         self._report()
         return scene
@@ -223,6 +228,7 @@ class Reader:
         if axis not in FOV_AXES:
             raise node.error(f"{node.label}: fov_axis must be one of {', '.join(FOV_AXES)}, got {axis!r}")
         fov_y = vertical_fov(fov, axis, aspect)
+        self.settings.fov = (fov, axis)
         if not 0.0 < fov_y < 180.0 or not math.isfinite(fov_y):
             raise node.error(f"{node.label}: field of view {fov:g} ({axis}) is not in (0, 180) degrees")
         ppo = (node.float("principal_point_offset_x", 0.0), node.float("principal_point_offset_y", 0.0))
@@ -412,7 +418,7 @@ class Reader:
             self.unsupported(node.ref("radiance"), "textured area emitter radiance",
                              fallback="radiance 1")
             return (1.0, 1.0, 1.0)
-        le = node.color("radiance", (1.0, 1.0, 1.0))
+        le = node.color("radiance", (1.0, 1.0, 1.0), emission=True)
         _nonnegative(node, "radiance", le)
         self.check_unread(node)
         return le
@@ -452,7 +458,7 @@ class Reader:
                 d = tuple(m[:3, 2]) if m is not None else (0.0, 0.0, 1.0)
             if not np.linalg.norm(d) > 0:
                 raise node.error(f"{node.label}: direction has zero length")
-            e = node.color("irradiance", (1.0, 1.0, 1.0)) if not node.is_ref("irradiance") else None
+            e = node.color("irradiance", (1.0, 1.0, 1.0), emission=True) if not node.is_ref("irradiance") else None
             if e is None:
                 self.unsupported(node.ref("irradiance"), "textured irradiance", fallback="1")
                 e = (1.0, 1.0, 1.0)
@@ -463,7 +469,7 @@ class Reader:
                 self.unsupported(node.ref("radiance"), "textured constant emitter", fallback="1")
                 le = (1.0, 1.0, 1.0)
             else:
-                le = node.color("radiance", (1.0, 1.0, 1.0))
+                le = node.color("radiance", (1.0, 1.0, 1.0), emission=True)
             _nonnegative(node, "radiance", le)
             self._environment(node)
             self.background = tuple(a + b for a, b in zip(self.background, le))
@@ -503,7 +509,7 @@ class Reader:
         if node.is_ref(name):
             self.unsupported(node.ref(name), f"textured {name}", fallback="1")
             return (1.0, 1.0, 1.0)
-        c = node.color(name, (1.0, 1.0, 1.0))
+        c = node.color(name, (1.0, 1.0, 1.0), emission=True)
         _nonnegative(node, name, c)
         return c
 
