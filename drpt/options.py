@@ -420,7 +420,7 @@ def apply_scene_settings(opts: RenderOptions, scene,
     opts = replace(opts, path=replace(opts.path, **path), **fields)
     fov = getattr(st, "fov", None)
     if (fov is not None and st.width and st.height and (opts.width, opts.height) != (st.width, st.height)
-            and hasattr(scene.camera, "fov")):
+            and hasattr(scene.camera, "fov") and getattr(scene.camera, "window", None) is None):
         # Mitsuba keeps the fov along fov_axis on a film of another aspect: so does drpt
         from .scene.mitsuba.reader import vertical_fov
 

@@ -143,3 +143,17 @@ def test_d65_constant_is_mitsubas():
     p = mi.traverse(s)
     (k,) = [k for k in p.keys() if k.endswith("intensity.value")]
     assert np.allclose(np.array(p[k]).ravel(), D65_RGB, rtol=1e-6)
+
+
+def test_compare_a_cropped_film(tmp_path):
+    report, x, ref = _compare(tmp_path, XML / "crop.xml", "--spp", "128", "--ref-spp", "512")
+    assert (report["width"], report["height"]) == (32, 24) and ref.shape == (24, 32, 3)
+    assert report["metrics"]["outside_ci"] < 0.03, report["metrics"]
+    assert _mean_rel(x, ref) < 0.01
+    from drpt.cli import main
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rc = main(["compare", str(XML / "crop.xml"), "--out", str(tmp_path / "s"), "--size", "64", "48",
+                   "--cache", str(tmp_path / "cache"), "-q"])
+    assert rc == 2  # Mitsuba cannot render the window at another size: one-line error

@@ -16,6 +16,7 @@ from ..model import (
     MAX_COORDINATE,
     Background,
     DirectionalLight,
+    FilmWindow,
     Material,
     PerspectiveCamera,
     PointLight,
@@ -194,10 +195,12 @@ class Reader:
             else:
                 self.unsupported(c, f"{c.label} inside {node.label}")
         width, height = 768, 576  # Mitsuba's hdrfilm defaults
+        crop = (0, 0, width, height)
         self.settings.rfilter, self.settings.rfilter_params = "gaussian", {"stddev": 0.5}
         if film is not None:
-            width, height = self.film(film)
-        self.settings.width, self.settings.height = width, height
+            width, height, crop = self.film(film)
+        # the image is the crop window (Mitsuba's output size); the fov is the film's
+        self.settings.width, self.settings.height = crop[2], crop[3]
         self.settings.spp = 4  # Mitsuba's default sampler
         if sampler is not None:
             if sampler.plugin not in SAMPLERS:
@@ -231,11 +234,14 @@ class Reader:
         self.settings.fov = (fov, axis)
         if not 0.0 < fov_y < 180.0 or not math.isfinite(fov_y):
             raise node.error(f"{node.label}: field of view {fov:g} ({axis}) is not in (0, 180) degrees")
-        ppo = (node.float("principal_point_offset_x", 0.0), node.float("principal_point_offset_y", 0.0))
-        if ppo != (0.0, 0.0):
-            # needs an off-axis window in drpt's camera (drpt.render.camera)
-            self.unsupported(node, "principal_point_offset (drpt's camera has no off-axis window yet)",
-                             fallback="the centered principal point")
+        ppo = (0.0, 0.0)
+        if node.plugin == "perspective":  # (Mitsuba's thinlens has none: it does not read them)
+            ppo = (node.float("principal_point_offset_x", 0.0), node.float("principal_point_offset_y", 0.0))
+            if not all(math.isfinite(v) for v in ppo):
+                raise node.error(f"{node.label}: principal_point_offset must be finite, got {ppo}")
+        window = None
+        if ppo != (0.0, 0.0) or crop != (0, 0, width, height):
+            window = FilmWindow(width, height, crop[0], crop[1], crop[2], crop[3], ppo[0], ppo[1])
         lens = {}
         if node.plugin == "thinlens":
             radius = node.float("aperture_radius", 0.0)
@@ -247,9 +253,11 @@ class Reader:
                 lens = {"aperture_radius": radius, "focus_distance": focus}
         m = node.transform("to_world")
         self.camera = camera_from_matrix(node, m, fov_y, **lens)
+        if window is not None:
+            self.camera.window = window
         self.check_unread(node)
 
-    def film(self, node: Node) -> tuple[int, int]:
+    def film(self, node: Node) -> tuple[int, int, tuple[int, int, int, int]]:
         if node.plugin != "hdrfilm":
             self.unsupported(node, f"film '{node.plugin}'", fallback="an hdrfilm")
         width = node.int("width", 768)
@@ -261,10 +269,6 @@ class Reader:
         if cx < 0 or cy < 0 or cw <= 0 or ch <= 0 or cx + cw > width or cy + ch > height:
             raise node.error(f"{node.label}: crop window ({cx}, {cy}) + ({cw}, {ch}) is outside the "
                              f"{width} x {height} film")
-        if (cx, cy, cw, ch) != (0, 0, width, height):
-            # needs an off-axis window in drpt's camera: the crop's rays are those of the full film
-            self.unsupported(node, "hdrfilm crop window (drpt's camera has no off-axis window yet)",
-                             fallback="the whole film")
         for c in node.children():
             if c.kind == "reconstructionfilter":
                 if c.plugin not in RFILTERS:
@@ -282,7 +286,7 @@ class Reader:
             else:
                 self.unsupported(c, f"{c.label} inside {node.label}")
         self.check_unread(node)
-        return width, height
+        return width, height, (cx, cy, cw, ch)
 
     # ------------------------------------------------------------ integrator
     def integrator(self, node: Node) -> None:
