@@ -385,7 +385,9 @@ def apply_scene_settings(opts: RenderOptions, scene,
     sample count, integrator depths, ``hide_emitters``) where the command line gave none.
 
     The file's reconstruction filter (Mitsuba's default: gaussian) becomes
-    ``filter`` unless ``--filter`` was given."""
+    ``filter`` unless ``--filter`` was given. An image size of another aspect
+    than the file's film refits ``scene.camera``'s vertical fov so that the fov
+    along the file's ``fov_axis`` stays (Mitsuba's behaviour for a resized film)."""
     from dataclasses import replace
 
     st = getattr(scene, "settings", None)
@@ -416,6 +418,13 @@ def apply_scene_settings(opts: RenderOptions, scene,
     if path.get("max_depth") == 0:
         raise DrptError(f"{scene.path}: max_depth 0 renders nothing (Mitsuba gives a black image)")
     opts = replace(opts, path=replace(opts.path, **path), **fields)
+    fov = getattr(st, "fov", None)
+    if (fov is not None and st.width and st.height and (opts.width, opts.height) != (st.width, st.height)
+            and hasattr(scene.camera, "fov") and getattr(scene.camera, "window", None) is None):
+        # Mitsuba keeps the fov along fov_axis on a film of another aspect: so does drpt
+        from .scene.mitsuba.reader import vertical_fov
+
+        scene.camera = replace(scene.camera, fov=vertical_fov(fov[0], fov[1], opts.width / opts.height))
     return opts.validate()
 
 

@@ -90,6 +90,23 @@ class Texture:
     fallback: Any = 0.0
 
 
+@dataclass(frozen=True)
+class Checkerboard(Texture):
+    """Mitsuba's ``checkerboard`` texture, procedural (no image): at ``(s, t) = to_uv
+    (u, v)``, with ``a = frac(s) > 1/2`` and ``b = frac(t) > 1/2``, ``color0`` where
+    ``a == b`` and ``color1`` elsewhere (an RGB parameter, Mitsuba's ``eval``); a
+    float parameter reads the channel mean of ``color0`` where ``a != b`` and of
+    ``color1`` elsewhere (Mitsuba's ``eval_1`` swaps the two, and reads an rgb
+    value's mean, not its luminance as a bitmap's). ``to_uv`` is a row-major
+    3x3 2D affine matrix, ``s = a00 u + a01 v + a02``: the XML's 4x4 transform's
+    2x2 block and x/y translation (Mitsuba's ``Transform4f -> Transform3f``)."""
+
+    path: Path | None = None
+    color0: tuple = (0.4, 0.4, 0.4)
+    color1: tuple = (0.2, 0.2, 0.2)
+    to_uv: tuple = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+
+
 @dataclass
 class BSDFSpec:
     """One node of a material's BSDF tree: a kind of :mod:`drpt.bsdf_kinds`,
@@ -319,8 +336,8 @@ def interpret_scene(scene: Scene, mode: str = "auto") -> list[BSDFSpec]:
                 for name, v in list(node.params.items()):
                     if isinstance(v, Texture):
                         node.params[name] = v.fallback
-                        spec.dropped.append(v.path)
-                        spec.notes.append(untextured_note(m, v.path))
+                        spec.dropped.append(v.path or "checkerboard")
+                        spec.notes.append(untextured_note(m, v.path or "checkerboard"))
     return specs
 
 

@@ -287,18 +287,17 @@ def test_mirrored_or_scaled_camera_is_refused(tmp_path):
             load_scene(p)
 
 
-def test_crop_window_is_unsupported_thin_lens_reaches_the_camera(tmp_path):
+def test_crop_window_and_thin_lens_reach_the_camera(tmp_path):
     p = tmp_path / "crop.xml"
     p.write_text('<scene version="3.0.0"><sensor type="thinlens"><float name="aperture_radius" value="0.1"/>'
                  '<film type="hdrfilm"><integer name="crop_width" value="10"/></film></sensor></scene>')
-    with pytest.raises(SceneError, match="unsupported hdrfilm crop window"):
-        load_scene(p)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        s = load_scene(p, ignore_unsupported=True)
-    msgs = [str(w.message) for w in caught]
-    assert len(msgs) == 1 and "crop window" in msgs[0]
-    assert (s.settings.width, s.settings.height) == (768, 576)  # Mitsuba's film defaults: the whole film
+        s = load_scene(p)
+    assert not caught
+    assert (s.settings.width, s.settings.height) == (10, 576)  # the crop of Mitsuba's default film
+    w = s.camera.window
+    assert (w.film_width, w.film_height, w.crop_size) == (768, 576, (10, 576))  # tests/test_film_window.py
     # Mitsuba's focus distance defaults to the far clip plane
     assert (s.camera.aperture_radius, s.camera.focus_distance) == (0.1, 1e4)
     assert s.settings.rfilter == "gaussian"  # the film's default filter

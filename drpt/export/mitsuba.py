@@ -307,13 +307,29 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
         sensor = {"type": "orthographic"}
     else:  # pragma: no cover - model has only these two
         raise DrptError(f"cannot export camera of type {type(cam).__name__}")
+    film_size = {"width": width, "height": height}
+    window = getattr(cam, "window", None)
+    if window is not None:
+        # the film's fov and aspect, the crop window as the image, the shift on the sensor
+        if tuple(window.crop_size) != (width, height):
+            raise DrptError(f"cannot export camera: its film window is {window.crop_size[0]}x"
+                            f"{window.crop_size[1]}, the image {width}x{height}")
+        film_size = {"width": window.film_width, "height": window.film_height}
+        if (window.offset_x, window.offset_y, *window.crop_size) != (0, 0, window.film_width,
+                                                                     window.film_height):
+            film_size.update(crop_offset_x=window.offset_x, crop_offset_y=window.offset_y,
+                             crop_width=width, crop_height=height)
+        if (window.shift_x, window.shift_y) != (0.0, 0.0):
+            if sensor["type"] != "perspective":
+                raise DrptError("cannot export camera: Mitsuba's thinlens has no principal point offset")
+            sensor["principal_point_offset_x"] = float(window.shift_x)
+            sensor["principal_point_offset_y"] = float(window.shift_y)
     sensor["near_clip"] = near_clip
     sensor["far_clip"] = far_clip
     sensor["to_world"] = _Matrix(to_world)
     sensor["film"] = {
         "type": "hdrfilm",
-        "width": width,
-        "height": height,
+        **film_size,
         "pixel_format": "rgb",
         "component_format": "float32",
         "rfilter": pixel_filter.to_mitsuba(),  # sample_border: Mitsuba's default, false

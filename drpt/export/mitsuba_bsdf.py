@@ -33,16 +33,31 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..bsdf_kinds import COMPOSITES, PARAMS
 from ..errors import DrptError
-from ..shading import BSDFSpec, Texture
+from ..shading import BSDFSpec, Checkerboard, Texture
 from .mitsuba_dielectrics import KINDS as DIELECTRICS
 from .mitsuba_dielectrics import adjust as adjust_dielectric
 
 __all__ = ["to_mitsuba"]
 
 
+def _to_uv(m):
+    """A 4x4 ``to_uv`` as the exporter writes transforms (its matrix wrapper)."""
+    from .mitsuba import _Matrix
+
+    return _Matrix(m)
+
+
 def _value(v: Any, origin: str) -> Any:
+    if isinstance(v, Checkerboard):
+        a = np.asarray(v.to_uv, float).reshape(3, 3)
+        m = np.eye(4)
+        m[:2, :2], m[:2, 3] = a[:2, :2], a[:2, 2]
+        return {"type": "checkerboard", "color0": _value(tuple(v.color0), origin),
+                "color1": _value(tuple(v.color1), origin), "to_uv": _to_uv(m)}
     if isinstance(v, Texture):
         if not Path(v.path).is_file():
             raise DrptError(f"{origin or 'material'}: texture {v.path} not found")

@@ -21,6 +21,15 @@ corner (pixel ``(i, j)`` covers ``[i, i+1) x [j, j+1)``). With
   has weight 1, as in Mitsuba (its ``sample_ray`` returns the wavelength
   weight only).
 
+A perspective camera's :class:`~drpt.scene.model.FilmWindow` (Mitsuba's
+crop window and principal point offset) replaces ``2x/W - 1`` by ``2u - 1``
+with ``u = u0 + (u1 - u0) x / W`` (and ``1 - 2y/H`` by ``1 - 2v``), ``(u0, v0,
+u1, v1)`` the window on the film (``FilmWindow.bounds``), and ``W/H`` in ``sx``
+by the film's aspect: the rays of Mitsuba's ``perspective_projection`` for a
+crop (its ``sample_ray`` adds the offset times ``film size / crop size`` to the
+crop's sample position, i.e. ``shift`` film widths). Without a window the
+kernel is the one it always was.
+
 The Mitsuba exporter reproduces exactly this mapping.
 """
 
@@ -72,7 +81,17 @@ class RayCamera:
             half_h = math.tan(math.radians(cam.fov) / 2.0)
         else:
             half_h = cam.size / 2.0
-        half_w = half_h * width / height
+        window = getattr(cam, "window", None) if isinstance(cam, PerspectiveCamera) else None
+        self.window = window
+        if window is None:
+            half_w = half_h * width / height
+        else:
+            # the fov is the whole film's; image position x of W maps to film position
+            # u = u0 + (u1 - u0) x / W, sx = 2 u - 1 (and sy = 1 - 2 v)
+            half_w = half_h * window.film_width / window.film_height
+            u0, v0, u1, v1 = window.bounds()
+            self.kx, self.bx = 2.0 * (u1 - u0) / width, 2.0 * u0 - 1.0
+            self.ky, self.by = -2.0 * (v1 - v0) / height, 1.0 - 2.0 * v0
         # Opaque, not literals: in Dr.Jit 1.5, ``Float(0.0) * wide_array``
         # resizes the literal 0 operand in place, so a camera basis with a
         # zero component would keep the first pass's width and break the next
@@ -95,8 +114,12 @@ class RayCamera:
         """World-space ray (origin, unit direction) through pixel position (x, y);
         a thin lens also takes ``lens``, two uniform numbers that pick the point
         on the lens (without them: the lens center, the pinhole ray)."""
-        sx = 2.0 * x / self.width - 1.0
-        sy = 1.0 - 2.0 * y / self.height
+        if self.window is None:
+            sx = 2.0 * x / self.width - 1.0
+            sy = 1.0 - 2.0 * y / self.height
+        else:
+            sx = x * self.kx + self.bx
+            sy = y * self.ky + self.by
         if self.orthographic:
             return self.center + self.r * sx + self.u * sy, Array3f(self.f)
         if self.thin_lens and lens is not None:

@@ -48,7 +48,7 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ..scene.model import Scene
-from ..shading import BSDFSpec, Texture, interpret_scene
+from ..shading import BSDFSpec, Checkerboard, Texture, interpret_scene
 from .bsdf import BSDFSample, lobe
 from .surface import Interaction, _vec
 from .warp import Frame
@@ -177,9 +177,10 @@ class MaterialTable:
         textures: list = []
 
         def tex_id(t: Texture) -> int:
-            if t.path not in textures:
-                textures.append(t.path)
-            return textures.index(t.path)
+            key = t if isinstance(t, Checkerboard) else t.path  # an image file, or the procedural texture
+            if key not in textures:
+                textures.append(key)
+            return textures.index(key)
 
         self._data: dict[str, object] = {}
         self._tex: dict[str, UInt32] = {}
@@ -240,7 +241,7 @@ class MaterialTable:
         if tid is not None:
             ids = dr.gather(UInt32, tid, si.material, active)
             textured = active & (ids != NONE)
-            looked = self.textures.lookup(ids, si.uv, textured)
+            looked = self.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f)
             v = dr.select(textured, looked if cls is Array3f else _luminance(looked), v)
         return v
 
@@ -307,7 +308,7 @@ class MaterialTable:
         if s["tex"] is not None:
             ids = dr.gather(UInt32, s["tex"], si.material, present)
             textured = present & (ids != NONE)
-            t = _luminance(self.textures.lookup(ids, si.uv, textured))
+            t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True))
             comp = dr.gather(Bool, s["complement"], si.material, present)
             w = dr.select(textured, w * dr.select(comp, 1.0 - t, t), w)
         row_si = copy.copy(si)

@@ -64,9 +64,13 @@ class TextureSet:
 
     def __init__(self, paths):
         self.paths = list(paths)
-        self.textures: list[Texture2f] = []
+        self.textures: list = []
         self.shapes: list[tuple[int, int]] = []
         for p in self.paths:
+            if not isinstance(p, (str, PathLike)):  # a procedural texture (drpt.shading.Checkerboard)
+                self.textures.append(_Checker(p))
+                self.shapes.append((0, 0))
+                continue
             img = load_rgb(p)
             self.shapes.append(img.shape[:2])
             self.textures.append(Texture2f(TensorXf(img), filter_mode=dr.FilterMode.Linear,
@@ -75,8 +79,10 @@ class TextureSet:
     def __len__(self) -> int:
         return len(self.textures)
 
-    def lookup(self, tex_id: UInt32, uv: Array2f, active: Bool = True) -> Array3f:
-        """Bilinear, repeat-wrapped linear RGB of texture ``tex_id`` at OBJ ``uv``.
+    def lookup(self, tex_id: UInt32, uv: Array2f, active: Bool = True, scalar: bool = False) -> Array3f:
+        """Bilinear, repeat-wrapped linear RGB of texture ``tex_id`` at OBJ ``uv``
+        (a procedural texture: its value there; ``scalar``: the one a float
+        parameter reads, whose luminance the caller takes).
 
         Lanes that are inactive or whose id is out of range give 0."""
         if not self.textures:
@@ -85,9 +91,39 @@ class TextureSet:
         pos = Array2f(uv.x, 1.0 - uv.y)
         if len(self.textures) == 1:
             m = active & (tex_id == 0)
-            return dr.select(m, self.textures[0].eval(pos, m), 0.0)
+            return dr.select(m, _eval(self.textures[0], pos, uv, m, scalar), 0.0)
         out = Array3f(0.0)
         for k, tex in enumerate(self.textures):
             m = active & (tex_id == k)
-            out = dr.select(m, tex.eval(pos, m), out)
+            out = dr.select(m, _eval(tex, pos, uv, m, scalar), out)
         return out
+
+
+def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool) -> Array3f:
+    if isinstance(tex, _Checker):
+        return tex.eval(pos, scalar)  # pos = (u, 1 - v): Mitsuba's uv
+    return Array3f(tex.eval(pos, active))
+
+
+class _Checker:
+    """Mitsuba's ``checkerboard`` (:class:`drpt.shading.Checkerboard`) at Mitsuba's uv,
+    ``(u, 1 - v)`` of drpt's OBJ-convention uv."""
+
+    def __init__(self, spec):
+        self.m = [float(x) for x in spec.to_uv]
+        self.c0 = tuple(float(x) for x in spec.color0)
+        self.c1 = tuple(float(x) for x in spec.color1)
+        # a float parameter reads a constant color's channel mean (Mitsuba's eval_1 of an
+        # rgb value), returned gray so that the caller's luminance keeps it
+        self.m0 = (sum(self.c0) / 3.0,) * 3
+        self.m1 = (sum(self.c1) / 3.0,) * 3
+
+    def eval(self, uv: Array2f, scalar: bool) -> Array3f:
+        m = self.m
+        s = uv.x * m[0] + uv.y * m[1] + m[2]
+        t = uv.x * m[3] + uv.y * m[4] + m[5]
+        a = (s - dr.floor(s)) > 0.5
+        b = (t - dr.floor(t)) > 0.5
+        if scalar:  # Mitsuba's eval_1 swaps the colors
+            return dr.select(a != b, Array3f(*self.m0), Array3f(*self.m1))
+        return dr.select(a == b, Array3f(*self.c0), Array3f(*self.c1))

@@ -42,6 +42,41 @@ MAX_COORDINATE = 1e12
 
 
 # --------------------------------------------------------------------- camera
+@dataclass(frozen=True)
+class FilmWindow:
+    """The part of the film an image shows, as Mitsuba's ``hdrfilm`` crop window
+    and ``perspective`` ``principal_point_offset`` define it.
+
+    The camera's ``fov`` belongs to the whole film of ``film_width x film_height``
+    pixels (its aspect); the image is the crop window of ``width x height`` pixels
+    at ``(offset_x, offset_y)``, shifted by ``(shift_x, shift_y)`` film widths and
+    heights (the principal point offset): image pixel position ``(x, y)`` of a
+    ``width x height`` image is the film position ``((offset_x + x) / film_width +
+    shift_x, (offset_y + y) / film_height + shift_y)`` in [0, 1]^2 coordinates
+    (:class:`drpt.render.camera.RayCamera`; another image size samples the same
+    window at that resolution)."""
+
+    film_width: int
+    film_height: int
+    offset_x: int = 0
+    offset_y: int = 0
+    width: int | None = None  # None: the film's
+    height: int | None = None
+    shift_x: float = 0.0
+    shift_y: float = 0.0
+
+    @property
+    def crop_size(self) -> tuple[int, int]:
+        return (self.width or self.film_width, self.height or self.film_height)
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(u0, v0, u1, v1)``: the window on the film, in [0, 1]^2 film coordinates."""
+        w, h = self.crop_size
+        u0 = self.offset_x / self.film_width + self.shift_x
+        v0 = self.offset_y / self.film_height + self.shift_y
+        return (u0, v0, u0 + w / self.film_width, v0 + h / self.film_height)
+
+
 @dataclass
 class PerspectiveCamera:
     """A pinhole camera, or with ``aperture_radius > 0`` a thin lens (depth of
@@ -56,6 +91,9 @@ class PerspectiveCamera:
     fov: float  # full vertical field of view, degrees, in (0, 180)
     aperture_radius: float = 0.0  # lens radius, world units; 0: a pinhole
     focus_distance: float | None = None  # distance of the sharp plane; required with an aperture
+    #: an off-center window of the film (Mitsuba's crop window, principal point offset); None:
+    #: the whole film, centered, of the image's aspect
+    window: FilmWindow | None = None
 
 
 @dataclass
@@ -229,6 +267,15 @@ class RenderSettings:
     hide_emitters: bool | None = None
     rfilter: str | None = None  # reconstruction filter name: "box", "tent", "gaussian"
     rfilter_params: dict = field(default_factory=dict)  # Mitsuba's names: radius, stddev
+    #: Mitsuba's ``(fov, fov_axis)`` as the file gives them: an image size of another
+    #: aspect than the film's keeps the fov along that axis, as Mitsuba does
+    fov: tuple | None = None
+    #: the ``-D`` values the file was read with (``compare`` gives Mitsuba the same)
+    defines: dict = field(default_factory=dict)
+    #: parameters of the file their plugins do not read (older exporters' files), as
+    #: ``(node index in mitsuba.parser's state, plugin, name)``: ``compare`` drops them
+    #: before Mitsuba loads the file (Mitsuba 3 refuses them)
+    ignored: tuple = ()
 
 
 # ---------------------------------------------------------------------- scene

@@ -125,7 +125,7 @@ def main(args: argparse.Namespace) -> int:
         out = Path(args.out) if args.out else Path(f"compare_{scene.stem}")
         report = compare_scene(scene, out, options, ref_spp=args.ref_spp,
                                ref_batches=args.ref_batches, cache_dir=cache_dir_from_args(args),
-                               control=args.control)
+                               control=args.control, args=args)
     print(format_table(report))
     print(f"{out}: metrics.json, side_by_side.png"
           + (", drpt.exr, reference.exr" if report["mode"] == "scene" else ""))
@@ -260,26 +260,41 @@ def compare_images(a: Path, b: Path, out: Path) -> dict:
 # ------------------------------------------------------------ scene form
 def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
                   ref_batches: int = 8, cache_dir: Path | None = None,
-                  control: bool = False) -> dict:
+                  control: bool = False, args=None) -> dict:
     """Render ``scene_path`` with drpt (``options``, a :class:`~drpt.options.RenderOptions`)
     and Mitsuba (cached, same size, depths, material mode and seed + 100000) and write the
     comparison. With ``control``, Mitsuba at drpt's spp is judged against the reference
-    by the same interval (``metrics["outside_ci_control"]``, ``report["control"]``)."""
+    by the same interval (``metrics["outside_ci_control"]``, ``report["control"]``).
+
+    A Mitsuba XML scene: with ``args`` (the parsed command line), the file's own
+    size, spp, depths, ``hide_emitters`` and filter apply where no flag was given
+    (:func:`~drpt.options.apply_scene_settings`), and Mitsuba renders the reference
+    from the file itself (:class:`~drpt.tools.xmlref.MitsubaXML`), not from drpt's
+    export: the same size, and the file's filter and integrator unless ``options``
+    differ from them."""
     from .. import metrics
     from ..imageio import write_image
     from ..render.renderer import Renderer
     from ..scene import load_scene
 
     options.validate()
+    scene = load_scene(scene_path)
+    source = None
+    if scene_path.suffix.lower() == ".xml":
+        from ..options import apply_scene_settings
+        from .xmlref import MitsubaXML
+
+        if args is not None:
+            options = apply_scene_settings(options, scene, args)
+        source = MitsubaXML.for_scene(scene, options)
     width, height, spp, seed = options.width, options.height, options.spp, options.seed
     bsdf, max_depth, rr_depth = options.bsdf, options.path.max_depth, options.path.rr_depth
     check_reference_args(ref_spp, ref_batches, max_depth, rr_depth, announce=False)
-    scene = load_scene(scene_path)
     _prepare_out(out)
     reference = get_reference(
         scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
         bsdf=bsdf, max_depth=max_depth, rr_depth=rr_depth, seed=seed, cache_dir=cache_dir,
-        progress=options.progress, rfilter=options.filter)
+        progress=options.progress, rfilter=options.filter, source=source)
     ref, ref_var = reference.image, reference.variance
 
     renderer = Renderer(scene, options)
@@ -297,7 +312,7 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
         c_mean, c_var, control_info = get_control(
             scene, scene_path.stem, width, height, spp, bsdf=bsdf, max_depth=max_depth,
             rr_depth=rr_depth, seed=seed, cache_dir=cache_dir, progress=options.progress,
-            rfilter=options.filter)
+            rfilter=options.filter, source=source)
         summary["outside_ci_control"] = metrics.outside_ci(c_mean, c_var, ref, ref_var, CI_Z)
     report = {
         "mode": "scene",

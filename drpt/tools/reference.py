@@ -23,7 +23,10 @@ Cached references (``compare``, ``converge``, ``knobs``)
     a SHA-256 of the exported Mitsuba scene, the exporter's source, the
     scene file, the size, mtime and path of every texture and sky image, the
     Mitsuba version and every render setting. Any change renders a new
-    reference; otherwise it is reused.
+    reference; otherwise it is reused. For a Mitsuba XML scene, ``compare``
+    passes a :class:`drpt.tools.xmlref.MitsubaXML` ``source``: Mitsuba then
+    renders the user's file itself, not drpt's export of it, keyed by the
+    file, its includes and dependencies (:meth:`~drpt.tools.xmlref.MitsubaXML.key`).
 
 Both render through :func:`render_batches`.
 
@@ -173,7 +176,7 @@ def render_committed(name: str, seed: int = 12345) -> Path:
 # ------------------------------------------------------------ the batched render
 def render_batches(scene, width: int, height: int, batch_spp: int, batches: int, seed: int,
                    seed_step: int = 7919, max_depth: int = -1, rr_depth: int = 5,
-                   bsdf: str = "phong", progress: bool = True, rfilter: str = "box"):
+                   bsdf: str = "phong", progress: bool = True, rfilter: str = "box", source=None):
     """Mitsuba's ``path`` integrator on the exported ``scene``, ``batches`` times
     at ``batch_spp`` samples per pixel, batch ``k`` with seed ``seed + seed_step * k``.
 
@@ -181,20 +184,22 @@ def render_batches(scene, width: int, height: int, batch_spp: int, batches: int,
     (``var(ddof=1) / batches``; zero for one batch), both float32, the
     render seconds and the ``load_dict`` seconds. ``rfilter`` is the film's
     pixel filter (``--filter``'s spelling). Mitsuba's variant must be set
-    (:func:`drpt.backend.set_mitsuba_variant`)."""
+    (:func:`drpt.backend.set_mitsuba_variant`).
+
+    With ``source`` (a :class:`drpt.tools.xmlref.MitsubaXML`), Mitsuba renders that
+    XML file instead of the export (the size, depths, material mode and filter
+    are then the source's)."""
     import mitsuba as mi
 
-    from ..export.mitsuba import to_mitsuba_dict
-
     t0 = time.perf_counter()
-    ms = mi.load_dict(to_mitsuba_dict(scene, width, height, batch_spp, max_depth=max_depth,
-                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter))
+    ms, integrator = _load(scene, width, height, batch_spp, max_depth, rr_depth, seed, bsdf,
+                           rfilter, source)
     load_seconds = time.perf_counter() - t0
     runs = []
     t0 = time.perf_counter()
     for k in range(batches):
-        runs.append(np.asarray(mi.render(ms, spp=batch_spp, seed=seed + seed_step * k),
-                               np.float64))
+        runs.append(_rgb(mi.render(ms, spp=batch_spp, seed=seed + seed_step * k,
+                                   integrator=integrator)))
         if progress:
             print(f"\rreference: batch {k + 1}/{batches}", end="", file=sys.stderr, flush=True)
     if progress:
@@ -204,6 +209,29 @@ def render_batches(scene, width: int, height: int, batch_spp: int, batches: int,
     mean = runs.mean(0)
     var = runs.var(0, ddof=1) / batches if batches > 1 else np.zeros_like(mean)
     return mean.astype(np.float32), var.astype(np.float32), seconds, load_seconds
+
+
+def _load(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter, source):
+    """``(mi.Scene, integrator or None)``: the export of ``scene``, or ``source``'s XML."""
+    import mitsuba as mi
+
+    if source is not None:
+        return source.load()
+    from ..export.mitsuba import to_mitsuba_dict
+
+    return mi.load_dict(to_mitsuba_dict(scene, width, height, spp, max_depth=max_depth,
+                                        rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter)), None
+
+
+def _rgb(image) -> np.ndarray:
+    """A Mitsuba render as (H, W, 3) float64 (an rgba film's alpha dropped, a
+    luminance film's channel repeated)."""
+    x = np.asarray(image, np.float64)
+    if x.ndim == 2:
+        x = x[..., None]
+    if x.shape[2] == 1 or x.shape[2] == 2:
+        return np.repeat(x[..., :1], 3, axis=2)
+    return x[..., :3]
 
 
 def _mitsuba():
@@ -343,6 +371,7 @@ class Reference:
     key: str  # cache key (SHA-256 of the export and settings)
     cache_file: Path | None  # <cache_dir>/<stem>_<key[:24]>.npz, None without a cache
     settings: dict  # width, height, batch_spp, batches, max_depth, rr_depth, bsdf, ref_seed
+    xml: dict | None = None  # rendered from the user's XML file: its edits (MitsubaXML.edits)
 
     def info(self) -> dict:
         """What a report says about the reference (JSON-ready)."""
@@ -351,7 +380,9 @@ class Reference:
         from ..backend import mitsuba_variant
 
         s = self.settings
-        return {"renderer": f"mitsuba {mi.__version__} {mitsuba_variant()} path",
+        return {"renderer": f"mitsuba {mi.__version__} {mitsuba_variant()} "
+                            + ("path" if self.xml is None else "on the XML file"),
+                "xml": self.xml,
                 "spp": s["batch_spp"] * s["batches"], "batches": s["batches"],
                 "seed": s["ref_seed"], "rfilter": s.get("rfilter", "box"),
                 "seconds": float(self.meta["seconds"]),
@@ -363,11 +394,13 @@ class Reference:
 def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024,
                   ref_batches: int = 8, bsdf: str = "phong", max_depth: int = -1,
                   rr_depth: int = 5, seed: int = 0, cache_dir: Path | None = None,
-                  progress: bool = True, rfilter: str = "box") -> Reference:
+                  progress: bool = True, rfilter: str = "box", source=None) -> Reference:
     """The Mitsuba reference of a loaded ``scene``: from the cache, or rendered (and cached).
 
     Checks the settings and sets up Mitsuba's variant on drpt's backend.
     The reference's seed is ``seed + 100000`` (batch ``k``: ``+ 7919 k``).
+    With ``source`` (a :class:`drpt.tools.xmlref.MitsubaXML`), Mitsuba renders
+    that XML file (keyed by :meth:`~drpt.tools.xmlref.MitsubaXML.key`), not the export.
     User mistakes raise DrptError.
     """
     if min(width, height) <= 0:
@@ -381,7 +414,7 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
     pixel_filter = parse_filter(rfilter)
     if not pixel_filter.is_box:  # (box references keep the cache keys they always had)
         settings["rfilter"] = str(pixel_filter)
-    key = reference_key(scene, settings)
+    key = reference_key(scene, settings) if source is None else source.key(settings)
     cache_file = None if cache_dir is None else Path(cache_dir) / f"{stem}_{key[:24]}.npz"
     cached = _load_cached(cache_file) if cache_file is not None and cache_file.is_file() else None
     if cached is not None:
@@ -392,19 +425,23 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
         ref, ref_var, secs, load_secs = render_batches(
             scene, width, height, per, int(ref_batches), settings["ref_seed"],
             max_depth=max_depth, rr_depth=rr_depth, bsdf=bsdf, progress=progress,
-            rfilter=settings.get("rfilter", "box"))
+            rfilter=settings.get("rfilter", "box"), source=source)
+        if ref.shape != (height, width, 3):
+            raise DrptError(f"the Mitsuba reference is {ref.shape[1]}x{ref.shape[0]}, drpt renders "
+                            f"{width}x{height}")
         meta = {"seconds": secs, "load_seconds": load_secs, "key": key, "settings": settings}
         if cache_file is not None:
             _save_cached(cache_file, ref, ref_var, meta)
     if not np.all(np.isfinite(ref)):
         raise DrptError("the Mitsuba reference has NaN/Inf pixels")
-    return Reference(ref, ref_var, meta, cached is not None, key, cache_file, settings)
+    return Reference(ref, ref_var, meta, cached is not None, key, cache_file, settings,
+                     None if source is None else source.edits())
 
 
 def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
                           max_depth: int = -1, rr_depth: int = 5, bsdf: str = "phong",
-                          progress: bool = True, rfilter: str = "box"):
-    """Mitsuba's ``path`` on the exported ``scene`` as ``spp`` renders of one sample per
+                          progress: bool = True, rfilter: str = "box", source=None):
+    """Mitsuba's ``path`` on the exported ``scene`` (or ``source``'s XML) as ``spp`` renders of one sample per
     pixel (render ``k`` with seed ``seed + k``): the per-pixel mean and the variance of
     that mean estimated the way drpt estimates its own, ``var(samples, ddof=1) / spp``.
 
@@ -416,17 +453,17 @@ def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
     set."""
     import mitsuba as mi
 
-    from ..export.mitsuba import to_mitsuba_dict
-
     if spp < 2:
         raise DrptError(f"a per-pixel variance needs at least 2 samples per pixel, got {spp}")
-    ms = mi.load_dict(to_mitsuba_dict(scene, width, height, 1, max_depth=max_depth,
-                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter))
+    ms, integrator = _load(scene, width, height, 1, max_depth, rr_depth, seed, bsdf, rfilter, source)
     s1 = np.zeros((height, width, 3))
     s2 = np.zeros((height, width, 3))
     t0 = time.perf_counter()
     for k in range(spp):
-        x = np.asarray(mi.render(ms, spp=1, seed=seed + k), np.float64)[..., :3]
+        x = _rgb(mi.render(ms, spp=1, seed=seed + k, integrator=integrator))
+        if x.shape != s1.shape:
+            raise DrptError(f"the Mitsuba control is {x.shape[1]}x{x.shape[0]}, drpt renders "
+                            f"{width}x{height}")
         s1 += x
         s2 += x * x
         if progress:
@@ -441,7 +478,8 @@ def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
 
 def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str = "phong",
                 max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
-                cache_dir: Path | None = None, progress: bool = True, rfilter: str = "box"):
+                cache_dir: Path | None = None, progress: bool = True, rfilter: str = "box",
+                source=None):
     """Mitsuba at drpt's ``spp`` with drpt's per-pixel variance estimator
     (:func:`render_single_samples`, seed ``seed + 200000``), cached like a reference
     (key: the export and every setting, ``"control"`` among them).
@@ -454,7 +492,7 @@ def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str =
     settings = {"control": True, "width": int(width), "height": int(height), "batch_spp": 1,
                 "spp": int(spp), "max_depth": int(max_depth), "rr_depth": int(rr_depth),
                 "bsdf": bsdf, "ref_seed": int(seed) + 200000, "rfilter": str(parse_filter(rfilter))}
-    key = reference_key(scene, settings)
+    key = reference_key(scene, settings) if source is None else source.key(settings)
     cache_file = None if cache_dir is None else Path(cache_dir) / f"{stem}_control_{key[:24]}.npz"
     cached = _load_cached(cache_file) if cache_file is not None and cache_file.is_file() else None
     if cached is not None and cached[0].shape != (height, width, 3):
@@ -462,7 +500,8 @@ def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str =
     if cached is None:
         mean, var, secs = render_single_samples(
             scene, width, height, spp, settings["ref_seed"], max_depth=max_depth,
-            rr_depth=rr_depth, bsdf=bsdf, progress=progress, rfilter=settings["rfilter"])
+            rr_depth=rr_depth, bsdf=bsdf, progress=progress, rfilter=settings["rfilter"],
+            source=source)
         meta = {"seconds": secs, "key": key, "settings": settings}
         if cache_file is not None:
             _save_cached(cache_file, mean, var, meta)

@@ -157,6 +157,8 @@ def internal_fdr(eta: float) -> float:
 def texture_mean(value: Any) -> float:
     """Mitsuba's ``Texture::mean`` of a parameter value: a float itself, the
     mean of an rgb triple's channels, a bitmap's mean linear luminance."""
+    if hasattr(value, "color0"):  # a checkerboard: Mitsuba's .5 (mean(color0) + mean(color1))
+        return 0.5 * (float(np.mean(value.color0)) + float(np.mean(value.color1)))
     path = getattr(value, "path", None)
     if path is not None:
         from ..texture import load_rgb

@@ -15,8 +15,8 @@ Mitsuba                   drpt
                           ``focal_length``, converted to drpt's vertical fov
                           for the film's aspect. A mirroring or scaling
                           ``to_world`` is an error. ``principal_point_offset``
-                          and a film crop window need an off-axis camera
-                          window drpt does not have yet: unsupported.
+                          and the film's crop window: the camera's
+                          :class:`~drpt.scene.model.FilmWindow`.
 ``thinlens``              the camera's ``aperture_radius`` and
                           ``focus_distance`` (default: far_clip, 1e4)
 ``hdrfilm``               ``Scene.settings`` width, height; its ``rfilter``
@@ -45,6 +45,7 @@ Mitsuba                   drpt
                           tree (:mod:`.materials`); a shape without one gets
                           Mitsuba's default (diffuse 0.5; black on an emitter)
 ``bitmap``                :class:`drpt.shading.Texture` on a texturable param
+``checkerboard``          :class:`drpt.shading.Checkerboard` (procedural)
 ========================  =====================================================
 
 Each distinct (BSDF node, area radiance) pair of shapes becomes one
@@ -54,7 +55,7 @@ Errors and warnings. Anything the parser refuses (malformed XML, an
 undefined ``$var``, an unresolved ``<ref>``, a value of the wrong syntax) and
 anything drpt refuses (a parameter of the wrong type, a missing mesh file,
 a plugin drpt cannot render: media, spectral data, other integrators,
-textures other than ``bitmap``, ...) raises a one-line
+textures other than ``bitmap`` and ``checkerboard``, ...) raises a one-line
 :class:`~drpt.errors.SceneError` naming the XML file, the line Mitsuba's
 parser gives (``mitsuba.parser.file_location``) and the plugin. With
 ``ignore_unsupported`` an unsupported plugin is left out (or replaced by the

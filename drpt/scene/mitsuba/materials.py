@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from ... import bsdf_kinds
-from ...shading import BSDFSpec, Texture, complete
+from ...shading import BSDFSpec, Checkerboard, Texture, complete
 from .nodes import Node
 
 
@@ -180,13 +180,20 @@ class Materials:
                 fallback = 0.5 if scalar else bsdf_kinds.GRAY
             return Texture(path, fallback)
         if node.plugin == "checkerboard":
+            for name in ("color0", "color1"):
+                if node.is_ref(name):
+                    raise node.error(f"{node.label}: {name} must be a color (drpt's checkerboard "
+                                     "takes no nested texture)")
             c0 = node.color("color0", (0.4, 0.4, 0.4))
             c1 = node.color("color1", (0.2, 0.2, 0.2))
-            node.get("to_uv")
-            mean = tuple(0.5 * (a + b) for a, b in zip(c0, c1))
-            r.unsupported(node, "texture 'checkerboard' (drpt's textures are image files)",
-                          fallback=f"its mean color {mean}")
-            return float(sum(mean) / 3) if scalar else mean
+            m = node.transform("to_uv")
+            r.check_unread(node)
+            if fallback is None:
+                fallback = 0.5 if scalar else bsdf_kinds.GRAY
+            # Mitsuba's Transform4f -> Transform3f: the 2x2 block and the translation (x, y)
+            uv = np.array([[m[0, 0], m[0, 1], m[0, 3]], [m[1, 0], m[1, 1], m[1, 3]], [0.0, 0.0, 1.0]])
+            return Checkerboard(fallback=fallback, color0=c0, color1=c1,
+                                to_uv=tuple(float(x) for x in uv.ravel()))
         r.unsupported(node, f"texture plugin '{node.plugin}'", fallback="0.5")
         return 0.5 if scalar else bsdf_kinds.GRAY
 
@@ -201,6 +208,6 @@ def legacy_fields(spec: BSDFSpec) -> dict:
     kd = spec.params.get("kd", bsdf_kinds.GRAY)
     if isinstance(kd, tuple):
         return {"kd": kd}
-    if isinstance(kd, Texture):
+    if isinstance(kd, Texture) and not isinstance(kd, Checkerboard):
         return {"map_kd": kd.path}
     return {}

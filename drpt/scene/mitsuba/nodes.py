@@ -25,6 +25,11 @@ from ...errors import SceneError
 
 VARIANT = "scalar_rgb"
 
+#: A uniform ``<spectrum value="1">`` on an emitter in Mitsuba 3's RGB variants: the
+#: D65 illuminant in linear sRGB (float32 values read from Mitsuba 3.9's point emitter;
+#: tests/test_mitsuba_xml.py checks them against the installed Mitsuba)
+D65_RGB = (1.204793930053711, 0.948291003704071, 0.9089160561561584)
+
 _LOCATION = re.compile(r"^(.*) \(line (\d+), col (\d+)\)$")
 _MESSAGE = re.compile(r"Error while loading (.+?) \(line (\d+), col \d+\): (.*)$", re.S)
 _XML_FAILED = re.compile(r'Parsing of XML file "(.+?)" failed: (.*) \(line (\d+), col \d+\)$', re.S)
@@ -232,11 +237,15 @@ class Node:
     def is_ref(self, name: str) -> bool:
         return self.has(name) and self._type(name) == "ResolvedReference"
 
-    def color(self, name: str, default=None) -> tuple[float, float, float] | None:
+    def color(self, name: str, default=None, *, emission: bool = False) -> tuple[float, float, float] | None:
         """An RGB triple from ``<rgb>``, a uniform ``<spectrum>`` or a ``<float>``.
 
         A spectrum given by wavelengths is refused (drpt renders in RGB; so
-        does Mitsuba's ``*_rgb`` variants' parser only for uniform values)."""
+        does Mitsuba's ``*_rgb`` variants' parser only for uniform values).
+        With ``emission`` (an emitter's radiance, intensity or irradiance), a
+        uniform ``<spectrum value="v">`` is what Mitsuba's RGB variants make of
+        it: ``v`` times the D65 illuminant in linear sRGB, :data:`D65_RGB`
+        (``<rgb>`` and ``<float>`` stay gray)."""
         if not self.has(name):
             return default
         t = self._type(name)
@@ -250,6 +259,8 @@ class Node:
             s = self.get(name)
             if s.is_uniform():
                 v = float(s.values[0])
+                if emission:
+                    return tuple(v * c for c in D65_RGB)
                 return (v, v, v)
             raise self.error(f"{self.label}: parameter '{name}' is a spectrum given by wavelengths: "
                              "unsupported (drpt renders in RGB; give <rgb> or a uniform value)")

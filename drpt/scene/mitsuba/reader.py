@@ -16,6 +16,7 @@ from ..model import (
     MAX_COORDINATE,
     Background,
     DirectionalLight,
+    FilmWindow,
     Material,
     PerspectiveCamera,
     PointLight,
@@ -64,6 +65,8 @@ class Reader:
         self.state = State(self.path, dict(defines or {}))
         self.materials = Materials(self)
         self.unread_params: list[str] = []
+        self.ignored: list[tuple[int, str, str]] = []
+        self.defines = {k: str(v) for k, v in (defines or {}).items()}
         self.warnings: list[str] = []
         # outputs
         self.mat_list: list[Material] = []
@@ -104,6 +107,7 @@ class Reader:
             raise node.error(f"{node.label} does not read parameter{'s' if len(names) > 1 else ''} "
                              f"{listed} (without --strict drpt ignores them)")
         self.unread_params.append(f"{listed} of {node.label} at {node.where}")
+        self.ignored.extend((node.index, node.plugin, n) for n in names)
 
     # ------------------------------------------------------------ the scene
     def read(self) -> Scene:
@@ -134,6 +138,8 @@ class Reader:
         if integrators:
             self.integrator(integrators[0])
         self.check_unread(root)
+        self.settings.defines = dict(self.defines)
+        self.settings.ignored = tuple(self.ignored)
         scene = self._scene()
         self._report()
         return scene
@@ -189,10 +195,12 @@ class Reader:
             else:
                 self.unsupported(c, f"{c.label} inside {node.label}")
         width, height = 768, 576  # Mitsuba's hdrfilm defaults
+        crop = (0, 0, width, height)
         self.settings.rfilter, self.settings.rfilter_params = "gaussian", {"stddev": 0.5}
         if film is not None:
-            width, height = self.film(film)
-        self.settings.width, self.settings.height = width, height
+            width, height, crop = self.film(film)
+        # the image is the crop window (Mitsuba's output size); the fov is the film's
+        self.settings.width, self.settings.height = crop[2], crop[3]
         self.settings.spp = 4  # Mitsuba's default sampler
         if sampler is not None:
             if sampler.plugin not in SAMPLERS:
@@ -223,13 +231,17 @@ class Reader:
         if axis not in FOV_AXES:
             raise node.error(f"{node.label}: fov_axis must be one of {', '.join(FOV_AXES)}, got {axis!r}")
         fov_y = vertical_fov(fov, axis, aspect)
+        self.settings.fov = (fov, axis)
         if not 0.0 < fov_y < 180.0 or not math.isfinite(fov_y):
             raise node.error(f"{node.label}: field of view {fov:g} ({axis}) is not in (0, 180) degrees")
-        ppo = (node.float("principal_point_offset_x", 0.0), node.float("principal_point_offset_y", 0.0))
-        if ppo != (0.0, 0.0):
-            # needs an off-axis window in drpt's camera (drpt.render.camera)
-            self.unsupported(node, "principal_point_offset (drpt's camera has no off-axis window yet)",
-                             fallback="the centered principal point")
+        ppo = (0.0, 0.0)
+        if node.plugin == "perspective":  # (Mitsuba's thinlens has none: it does not read them)
+            ppo = (node.float("principal_point_offset_x", 0.0), node.float("principal_point_offset_y", 0.0))
+            if not all(math.isfinite(v) for v in ppo):
+                raise node.error(f"{node.label}: principal_point_offset must be finite, got {ppo}")
+        window = None
+        if ppo != (0.0, 0.0) or crop != (0, 0, width, height):
+            window = FilmWindow(width, height, crop[0], crop[1], crop[2], crop[3], ppo[0], ppo[1])
         lens = {}
         if node.plugin == "thinlens":
             radius = node.float("aperture_radius", 0.0)
@@ -241,9 +253,11 @@ class Reader:
                 lens = {"aperture_radius": radius, "focus_distance": focus}
         m = node.transform("to_world")
         self.camera = camera_from_matrix(node, m, fov_y, **lens)
+        if window is not None:
+            self.camera.window = window
         self.check_unread(node)
 
-    def film(self, node: Node) -> tuple[int, int]:
+    def film(self, node: Node) -> tuple[int, int, tuple[int, int, int, int]]:
         if node.plugin != "hdrfilm":
             self.unsupported(node, f"film '{node.plugin}'", fallback="an hdrfilm")
         width = node.int("width", 768)
@@ -255,10 +269,6 @@ class Reader:
         if cx < 0 or cy < 0 or cw <= 0 or ch <= 0 or cx + cw > width or cy + ch > height:
             raise node.error(f"{node.label}: crop window ({cx}, {cy}) + ({cw}, {ch}) is outside the "
                              f"{width} x {height} film")
-        if (cx, cy, cw, ch) != (0, 0, width, height):
-            # needs an off-axis window in drpt's camera: the crop's rays are those of the full film
-            self.unsupported(node, "hdrfilm crop window (drpt's camera has no off-axis window yet)",
-                             fallback="the whole film")
         for c in node.children():
             if c.kind == "reconstructionfilter":
                 if c.plugin not in RFILTERS:
@@ -276,7 +286,7 @@ class Reader:
             else:
                 self.unsupported(c, f"{c.label} inside {node.label}")
         self.check_unread(node)
-        return width, height
+        return width, height, (cx, cy, cw, ch)
 
     # ------------------------------------------------------------ integrator
     def integrator(self, node: Node) -> None:
@@ -412,7 +422,7 @@ class Reader:
             self.unsupported(node.ref("radiance"), "textured area emitter radiance",
                              fallback="radiance 1")
             return (1.0, 1.0, 1.0)
-        le = node.color("radiance", (1.0, 1.0, 1.0))
+        le = node.color("radiance", (1.0, 1.0, 1.0), emission=True)
         _nonnegative(node, "radiance", le)
         self.check_unread(node)
         return le
@@ -452,7 +462,7 @@ class Reader:
                 d = tuple(m[:3, 2]) if m is not None else (0.0, 0.0, 1.0)
             if not np.linalg.norm(d) > 0:
                 raise node.error(f"{node.label}: direction has zero length")
-            e = node.color("irradiance", (1.0, 1.0, 1.0)) if not node.is_ref("irradiance") else None
+            e = node.color("irradiance", (1.0, 1.0, 1.0), emission=True) if not node.is_ref("irradiance") else None
             if e is None:
                 self.unsupported(node.ref("irradiance"), "textured irradiance", fallback="1")
                 e = (1.0, 1.0, 1.0)
@@ -463,7 +473,7 @@ class Reader:
                 self.unsupported(node.ref("radiance"), "textured constant emitter", fallback="1")
                 le = (1.0, 1.0, 1.0)
             else:
-                le = node.color("radiance", (1.0, 1.0, 1.0))
+                le = node.color("radiance", (1.0, 1.0, 1.0), emission=True)
             _nonnegative(node, "radiance", le)
             self._environment(node)
             self.background = tuple(a + b for a, b in zip(self.background, le))
@@ -503,7 +513,7 @@ class Reader:
         if node.is_ref(name):
             self.unsupported(node.ref(name), f"textured {name}", fallback="1")
             return (1.0, 1.0, 1.0)
-        c = node.color(name, (1.0, 1.0, 1.0))
+        c = node.color(name, (1.0, 1.0, 1.0), emission=True)
         _nonnegative(node, name, c)
         return c
 
