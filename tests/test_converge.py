@@ -44,6 +44,12 @@ missing EXR skips):
   SLOPE_TOL of -1 (measured: showcase_day -0.98 +- 0.04, showcase_dusk
   -1.02 +- 0.02), after the bias checks above (which hold there since
   drpt's variance estimate sees the same fireflies as the error).
+* HEAVY_TAILED references (showcase_dusk since its alphas became Roughness^2)
+  are left out of the 1/N test and checked at 4096 spp by region means
+  instead (``test_heavy_tailed_*``: the variance there is the larger of drpt's
+  own estimate and the reference's per-sample variance, see
+  ``heavy_tailed_z``; its control renders Mitsuba itself, and a biased
+  sharp lobe fails it).
 
 Runtime: 1-3 s per scene at light load, ~4-8 s under load (124 spp at <= 64x64);
 scenes come from the session-wide ``reference_scene`` fixture (conftest.py),
@@ -166,8 +172,16 @@ def _factor(w: int, h: int) -> int:
     return f
 
 
+#: References whose scene is too heavy-tailed for the 1/N check at LEVELS: the dusk sun
+#: reflected by chrome and paint at GGX alpha 1e-3 to 6e-3. At 4 to 64 spp a pixel's own
+#: variance estimate misses the rare, bright samples, so the excess over the predicted
+#: error grows with N (2.4x at 64 spp) although the image converges to the reference:
+#: test_heavy_tailed_reference_is_reached_at_high_spp checks that instead.
+HEAVY_TAILED = {"showcase_dusk"}
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", sorted(REFERENCES))
+@pytest.mark.parametrize("name", sorted(set(REFERENCES) - HEAVY_TAILED))
 def test_error_falls_as_one_over_n(name, reference_scene):
     from drpt.imageio import read_image
     from drpt.options import PathOptions, RenderOptions
@@ -231,6 +245,170 @@ def test_error_falls_as_one_over_n(name, reference_scene):
         assert abs(mslope + 1.0) < SLOPE_TOL, mslope
         return
     assert abs(slope + 1.0) < SLOPE_TOL, slope
+
+
+HEAVY_SPP = 4096
+HEAVY_SEED = 77  # the render whose own-variance region z read -10.6 (the worst of 6 seeds measured)
+
+
+def _heavy_reference(name):
+    """(factor f, reference mean, variance of its mean, samples per big pixel),
+    box-downsampled by 4 (a big pixel holds ``ref_spp * 16`` of Mitsuba's samples)."""
+    from drpt.imageio import read_image
+
+    _, W, H, ref_spp, _, _ = REFERENCES[name]
+    f = 4
+    w, h = W // f, H // f
+    ref = read_image(reference_path(name))[..., :3].astype(np.float64).reshape(h, f, w, f, 3).mean((1, 3))
+    var_ref = read_image(variance_path(name))[..., :3].astype(np.float64).reshape(h, f, w, f, 3).sum((1, 3))
+    return f, ref, var_ref / f**4, ref_spp * f * f
+
+
+def heavy_tailed_z(img, var_own, spp, ref, var_ref, n_ref, ry=6, rx=4):
+    """z of the mean of each of ``ry x rx`` regions (per channel), then of the whole
+    image (3 values), of ``img`` (``spp`` samples per pixel, its own estimate
+    ``var_own`` of its pixels' variance of the mean) against ``ref`` (``n_ref``
+    samples per pixel, variance of the mean ``var_ref``).
+
+    The variance of ``img``'s pixel is ``max(var_own, var_ref * n_ref / spp)``: the
+    larger of its own estimate and the reference's per-sample variance scaled to
+    ``spp``. On a heavy-tailed scene ``var_own`` misses the rare, bright samples at
+    ``spp`` (a 4096-spp render that saw none of them is below the mean *and*
+    reports a small variance, so ``(img - ref) / sqrt(var_own)`` reads a deficit
+    of 5-10 sigma: measured so on showcase_dusk for drpt AND for Mitsuba's own
+    4096-spp renders); the reference, 64x the samples, sees them. Where the
+    reference's estimate is the smaller (smooth sky: it averages 4x4 sub-pixels
+    rendered separately, a stratification that hides the spread of radiance inside
+    a big pixel, which ``img``'s samples do have) ``var_own`` is used."""
+    var = np.maximum(var_own, var_ref * n_ref / spp) + var_ref
+    h, w, _ = ref.shape
+    by, bx = h // ry, w // rx
+
+    def regions(a):
+        return a[:ry * by, :rx * bx].reshape(ry, by, rx, bx, 3).sum((1, 3))
+
+    z = regions(img - ref) / np.sqrt(regions(var))
+    whole = (img - ref).sum((0, 1)) / np.sqrt(var.sum((0, 1)))
+    return np.concatenate([z.ravel(), whole])
+
+
+def _own_variance_z(img, var_own, ref, var_ref, ry=6, rx=4):
+    """The same regions with ``img``'s own variance estimate only (the unsound
+    statistic, printed for comparison)."""
+    return heavy_tailed_z(img, var_own, 1, ref, var_ref, 0, ry, rx)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(HEAVY_TAILED))
+def test_heavy_tailed_reference_is_reached_at_high_spp(name, reference_scene):
+    """At 4096 spp (a 4x downsampled image) drpt agrees with the reference: the
+    mean of each of 6 x 4 regions and of the whole image, per channel, within 4
+    standard errors (:func:`heavy_tailed_z`; single pixels are not compared).
+
+    Why not drpt's own variance estimate: with it this render (seed 77) reads
+    region z down to -10.6 over the car body (max |z| 2.3-10.6 over 6 seeds), and
+    Mitsuba's own 4096-spp renders of the exported scene read 4.9-6.3 against
+    their reference (6 seeds), always a deficit, as drpt's: the statistic, not
+    the renderer. At 65536 spp drpt reads max |z| 2.5 by its own variance (1.8
+    by :func:`heavy_tailed_z`; whole image +0.36%, +0.14%, +0.03% in R, G, B),
+    Mitsuba 2.3 (2.3), and with max_depth 2 and 3 drpt agrees with a fresh
+    Mitsuba render at 4096 spp by its own variance (regions |z| < 1.7).
+    Measured with :func:`heavy_tailed_z` at 4096 spp: max |z| 1.5-2.5 for drpt
+    (6 seeds), 1.8-2.8 for Mitsuba (6 seeds).
+
+    Negative controls: the image 3% too bright fails (the sky), and so does a 5%
+    error confined to the heavy-tailed pixels (where the reference's variance
+    exceeds 4x drpt's own estimate: ~105 of 576 pixels, ~10% of the flux, the car
+    body and its reflections; measured z 5.4-8.9 for 5% over the 12 renders)."""
+    from drpt.options import PathOptions, RenderOptions
+    from drpt.render.renderer import Renderer
+
+    scene_file, _, _, _, depth, mode = REFERENCES[name]
+    f, ref, var_ref, n_ref = _heavy_reference(name)
+    h, w = ref.shape[:2]
+    r = Renderer(reference_scene(scene_file),
+                 RenderOptions(width=w, height=h, spp=HEAVY_SPP, bsdf=mode, seed=HEAVY_SEED, progress=False,
+                               path=PathOptions(max_depth=depth))).render()
+    assert r.nonfinite == 0
+    img, var = r.image.astype(np.float64), r.variance.astype(np.float64)
+    z = heavy_tailed_z(img, var, HEAVY_SPP, ref, var_ref, n_ref)
+    old = _own_variance_z(img, var, ref, var_ref)
+    print(f"{name}: region z max {np.abs(z).max():.2f}, whole image z {np.round(z[-3:], 2)}; "
+          f"with drpt's own variance only: max {np.abs(old).max():.2f}")
+    print(np.round(z[:-3].reshape(6, 4, 3), 1))
+    assert np.abs(z).max() < 4.0, np.abs(z).max()
+    assert np.abs(heavy_tailed_z(img * 1.03, var, HEAVY_SPP, ref, var_ref, n_ref)).max() > 4.0
+    heavy = (var_ref * n_ref / HEAVY_SPP).mean(-1, keepdims=True) > 4.0 * var.mean(-1, keepdims=True)
+    assert heavy.sum() >= 50, heavy.sum()
+    for k in (0.95, 1.05):
+        zk = heavy_tailed_z(np.where(heavy, img * k, img), var, HEAVY_SPP, ref, var_ref, n_ref)
+        assert np.abs(zk).max() > 4.0, (k, np.abs(zk).max())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(HEAVY_TAILED))
+def test_heavy_tailed_statistic_catches_a_biased_sharp_lobe(name, reference_scene, monkeypatch):
+    """Negative control of the kind of bias suspected on showcase_dusk: the
+    cook_torrance lobes sharper than alpha 0.01 (car paint 0.0064, chrome 1e-3)
+    reflect 10% too little (eval and sample weight x 0.9): :func:`heavy_tailed_z`
+    reads max |z| 7.9 (whole image -2.9% in R). Its power is limited at 4096 spp:
+    x 0.95 read 4.7, x 1.05 only 2.3 (undetected), the seed-77 render."""
+    import drjit as dr
+
+    from drpt.options import PathOptions, RenderOptions
+    from drpt.render.bsdf import cook_torrance as ct
+    from drpt.render.renderer import Renderer
+
+    eval0, sample0 = ct.eval, ct.sample
+
+    def k(p):
+        return dr.select(p.alpha < 0.01, 0.9, 1.0)
+
+    def biased_eval(p, wi, wo):
+        return eval0(p, wi, wo) * k(p)
+
+    def biased_sample(p, wi, u1, u2):
+        bs = sample0(p, wi, u1, u2)
+        bs.weight = bs.weight * k(p)
+        return bs
+
+    monkeypatch.setattr(ct, "eval", biased_eval)
+    monkeypatch.setattr(ct, "sample", biased_sample)
+    scene_file, _, _, _, depth, mode = REFERENCES[name]
+    f, ref, var_ref, n_ref = _heavy_reference(name)
+    h, w = ref.shape[:2]
+    r = Renderer(reference_scene(scene_file),
+                 RenderOptions(width=w, height=h, spp=HEAVY_SPP, bsdf=mode, seed=HEAVY_SEED, progress=False,
+                               path=PathOptions(max_depth=depth))).render()
+    z = heavy_tailed_z(r.image.astype(np.float64), r.variance.astype(np.float64), HEAVY_SPP, ref, var_ref, n_ref)
+    print(f"{name}, sharp lobes x 0.9: region z max {np.abs(z).max():.2f}, whole image z {np.round(z[-3:], 2)}")
+    assert np.abs(z).max() > 4.0, np.abs(z).max()
+
+
+@pytest.mark.slow
+@pytest.mark.mitsuba
+@pytest.mark.parametrize("name", sorted(HEAVY_TAILED))
+def test_heavy_tailed_statistic_passes_mitsuba_itself(name, reference_scene):
+    """The control of the test above: Mitsuba's own render of the exported scene
+    at the same size and spp (256 batches of 16 spp; the variance of the mean from
+    their spread), judged against its reference by :func:`heavy_tailed_z`, passes
+    the same bound. (By its own variance only it reads max |z| ~5-6: printed.)"""
+    from drpt.backend import set_mitsuba_variant
+    from drpt.tools.reference import render_batches
+
+    scene_file, _, _, _, depth, mode = REFERENCES[name]
+    f, ref, var_ref, n_ref = _heavy_reference(name)
+    h, w = ref.shape[:2]
+    set_mitsuba_variant()
+    batch = 16
+    mean, var, _, _ = render_batches(reference_scene(scene_file), w, h, batch, HEAVY_SPP // batch, 5,
+                                     max_depth=depth, bsdf=mode, progress=False)
+    mean, var = mean[..., :3].astype(np.float64), var[..., :3].astype(np.float64)
+    z = heavy_tailed_z(mean, var, HEAVY_SPP, ref, var_ref, n_ref)
+    old = _own_variance_z(mean, var, ref, var_ref)
+    print(f"{name} (Mitsuba): region z max {np.abs(z).max():.2f}, whole image z {np.round(z[-3:], 2)}; "
+          f"with its own variance only: max {np.abs(old).max():.2f}")
+    assert np.abs(z).max() < 4.0, np.abs(z).max()
 
 
 # ------------------------------------------------------------ CLI smoke tests
