@@ -245,7 +245,7 @@ def _seed(m: Material, mode: str, notes: list[str]) -> BSDFSpec:
 
 def _auto(m: Material, notes: list[str]) -> BSDFSpec:
     """Each material's own statements decide (the table in the module docs)."""
-    g = m.given
+    g = set(m.given)
     r = None if m.roughness is None else _clamp01(m.roughness, "Pr", m, notes)
     opaque_illum = m.illum in (0, 1, 2)
     see_through = ((_positive(m.tf) and not opaque_illum) or (m.dissolve < 1.0 and "ni" in g)

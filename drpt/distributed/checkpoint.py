@@ -14,9 +14,7 @@ uninterrupted render has after the same chunks.
 
 from __future__ import annotations
 
-import copyreg
 import hashlib
-import io
 import json
 import os
 import pickle
@@ -31,21 +29,13 @@ SUFFIX = ".drpt-checkpoint"
 VERSION = 1
 
 
-def _sorted_set(s):
-    return (tuple, (tuple(sorted(s, key=repr)),))
-
-
 def scene_hash(scene) -> str:
     """SHA-256 of the scene's content: the parsed model (geometry, materials,
     lights, camera; pickled) and the bytes of the images it names (textures,
-    sky), which the renderer reads when it builds the device scene. Sets are
-    pickled as sorted tuples: their iteration order changes from one process
-    to the next (string hashing is randomized), their content does not."""
-    buf = io.BytesIO()
-    pickler = pickle.Pickler(buf, protocol=4)
-    pickler.dispatch_table = {**copyreg.dispatch_table, frozenset: _sorted_set, set: _sorted_set}
-    pickler.dump(scene)
-    h = hashlib.sha256(buf.getvalue())
+    sky), which the renderer reads when it builds the device scene. The model
+    holds no sets: their pickled order changes from one process to the next
+    (string hashing is randomized), so the hash would too."""
+    h = hashlib.sha256(pickle.dumps(scene, protocol=4))
     from ..scene.model import Skybox
 
     images = {str(m.map_kd) for m in scene.materials if m.map_kd is not None}

@@ -138,7 +138,7 @@ class Material:
     anisotropy: float | None = None  # PBR aniso
     anisotropy_rotation: float | None = None  # PBR anisor
     maps: dict[str, Path] = field(default_factory=dict)  # other map_* by lower-case key, e.g. "pr", "d"
-    given: frozenset[str] = frozenset()  # lower-case keys of the statements the file gave
+    given: tuple[str, ...] = ()  # lower-case keys of the statements the file gave, sorted
     bsdf: BSDFSpec | None = None  # an explicit BSDF (Mitsuba XML), used as given
 
     @property

@@ -199,7 +199,7 @@ def apply_field(mat: Material, key: str, args: list[str], path: Path, line: int,
                           stacklevel=3)
         return mat
     canonical = {"metalness": "mentalness", "kt": "tf", "le": "ke"}
-    return replace(new, given=mat.given | {canonical.get(key, key)})
+    return replace(new, given=tuple(sorted(set(mat.given) | {canonical.get(key, key)})))
 
 
 def _apply(mat: Material, key: str, args: list[str], path: Path, line: int, base: Path) -> Material | None:

@@ -533,7 +533,7 @@ class _Parser:
         given = {"diffuseColor": "kd", "specularColor": "ks", "exponent": "ns", "indexOfRefraction": "ni",
                  "texture": "map_kd"}
         return replace(mat, **{names[k]: v for k, (v, _) in got.items()},
-                       given=mat.given | {given[k] for k in got if k in given})
+                       given=tuple(sorted(set(mat.given) | {given[k] for k in got if k in given})))
 
     def texture_file(self, tok: Token) -> Path:
         p = self.file_ref(tok)
