@@ -254,7 +254,8 @@ class WavefrontIntegrator:
         n = max(dr.width(o), dr.width(d), dr.width(active), dr.width(rng.state))
         timer = _Timer(self.stats)
         L = dr.zeros(Array3f, n)
-        s = WaveState(lane=dr.arange(UInt32, n), o=Array3f(o), d=Array3f(d),
+        s = WaveState(lane=dr.arange(UInt32, n), o=Array3f(o) + dr.zeros(Array3f, n),
+                      d=Array3f(d) + dr.zeros(Array3f, n),
                       beta=dr.full(Array3f, 1.0, n), eta=dr.full(Float, 1.0, n),
                       depth=dr.zeros(UInt32, n), prev_pdf=dr.full(Float, 1.0, n),
                       prev_delta=dr.full(Bool, True, n),
@@ -377,7 +378,8 @@ class WavefrontIntegrator:
         out, start = [], 0
         for q in range(nq):
             k = int(c[q])
-            out.append((dr.gather(UInt32, perm, dr.arange(UInt32, k) + start) if k else UInt32(), k))
+            out.append((dr.gather(UInt32, perm, dr.arange(UInt32, k) + dr.opaque(UInt32, start))
+                        if k else UInt32(), k))
             start += k
         return out
 
@@ -459,7 +461,7 @@ class WavefrontIntegrator:
             for (s2, lane, value, *_), start in zip(parts, offsets):
                 if s2 != slot:
                     continue
-                b = dr.gather(Bool, blocked, dr.arange(UInt32, dr.width(lane)) + start)
+                b = dr.gather(Bool, blocked, dr.arange(UInt32, dr.width(lane)) + dr.opaque(UInt32, start))
                 dr.scatter_add(L, dr.select(b, 0.0, value), lane)
             dr.eval(L)
         timer.done("shadow resolve", L, lanes=total)
