@@ -70,6 +70,7 @@ MORTON_BITS = 6  # per axis
 KEY_BITS = 3 + 3 * MORTON_BITS
 RADIX_BITS = 11
 
+OUTSIDE = "accumulation + readback (outside the passes' stages)"
 STAGES = ("compact + sort", "closest hit", "interaction", "emission", "partition", "shade",
           "shadow rays", "shadow resolve")
 
@@ -185,11 +186,20 @@ class _Timer:
         self.stats = stats
         if stats is not None:
             dr.sync_thread()
-            self._drain()
+            self._record(stats.stage(OUTSIDE), self._drain())  # the renderer's work before sample()
             self.t = time.perf_counter()
 
     def _drain(self) -> list:
         return dr.kernel_history() if self.stats.history else []
+
+    @staticmethod
+    def _record(st: WaveStage, hist: list) -> None:
+        for h in hist:
+            st.kernel_ms += float(h.get("execution_time", 0.0))
+            st.codegen_ms += float(h.get("codegen_time", 0.0))
+            st.launches += 1
+            st.jit_kernels += str(h["type"]).endswith("JIT")
+            st.lanes += int(h.get("size", 0))
 
     def done(self, name: str, *outputs, lanes: int = 0, rays: int = 0) -> None:
         arrays = []
@@ -207,13 +217,7 @@ class _Timer:
         st = self.stats.stage(name)
         st.wall_ms += (now - self.t) * 1e3
         st.rays += rays
-        hist = self._drain()
-        for h in hist:
-            st.kernel_ms += float(h.get("execution_time", 0.0))
-            st.codegen_ms += float(h.get("codegen_time", 0.0))
-            st.launches += 1
-            st.jit_kernels += str(h["type"]).endswith("JIT")
-            st.lanes += int(h.get("size", 0))
+        self._record(st, self._drain())
         if not self.stats.history:
             st.lanes += lanes
         self.t = time.perf_counter()
