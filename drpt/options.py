@@ -72,6 +72,7 @@ class RenderOptions:
     bsdf: str = "auto"  # how MTL materials are read, see drpt.shading
     integrator: str = "path"  # "path" (MIS path tracing) or "whitted"
     mode: str = "megakernel"  # path tracing as one fused kernel, or "wavefront" (a kernel per stage)
+    wavefront_tail: int = 0  # wavefront: finish in one fused loop once at most this many paths live
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
     filter: str = "box"  # pixel reconstruction filter, drpt.filters.parse_filter's spelling
     path: PathOptions = field(default_factory=PathOptions)
@@ -122,6 +123,8 @@ class RenderOptions:
         from .filters import parse_filter
 
         parse_filter(self.filter)  # raises DrptError on a bad --filter
+        if not 0 <= self.wavefront_tail <= MAX_LANES:
+            raise DrptError(f"--wavefront-tail must be between 0 and {MAX_LANES}, got {self.wavefront_tail}")
         if self.mode == "wavefront" and self.integrator != "path":
             raise DrptError(f"--mode wavefront runs the path integrator, not --integrator {self.integrator}")
         if self.accel == "grid" and self.grid_resolution is not None and \
@@ -322,6 +325,9 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                  "in one fused kernel) or wavefront (a kernel per stage and bounce: "
                                  "compacted, ray-sorted paths, per-material shading queues, batched "
                                  "shadow rays)")
+        parser.add_argument("--wavefront-tail", dest="wavefront_tail", type=int, default=0, metavar="N",
+                            help="with --mode wavefront: once at most N paths of a pass are alive, finish "
+                                 "them in one fused loop (default 0: every bounce as wavefront stages)")
     if want("bsdf"):
         default = d["bsdf"]
         shown = default or "auto; phong with -input"
@@ -542,6 +548,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
     opts = RenderOptions(width=width, height=height, spp=get("spp", base.spp),
                          seed=get("seed", base.seed), **fields, bsdf=bsdf,
                          integrator=integrator, mode=get("mode", base.mode),
+                         wavefront_tail=get("wavefront_tail", base.wavefront_tail),
                          env_sampling=get("env_sampling", base.env_sampling),
                          filter=get("filter", base.filter),
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),

@@ -66,18 +66,25 @@ def _lane_rays(r: Renderer, n: int, seed: int):
     return rng, o, d
 
 
+@pytest.mark.parametrize("tail", [0, 512])
 @pytest.mark.parametrize("name", ["cornell", "materials"])
-def test_same_paths_as_the_megakernel(scenes, name):
+def test_same_paths_as_the_megakernel(scenes, name, tail):
+    """With ``tail``, the last paths finish in one fused loop: still the same paths."""
     r = Renderer(scenes(name), _opts())
     n = 4096
     rng, o, d = _lane_rays(r, n, 5)
     L_mk = PathIntegrator(r.scene, r.opt.path).sample(rng, o, d, Bool(True))
     rng, o, d = _lane_rays(r, n, 5)
-    L_wf = wf.WavefrontIntegrator(r.scene, r.opt.path).sample(rng, o, d, Bool(True))
+    integ = wf.WavefrontIntegrator(r.scene, r.opt.path, tail=tail)
+    integ.stats = wf.WaveStats()
+    L_wf = integ.sample(rng, o, d, Bool(True))
     a, b = (np.stack([c.numpy() for c in (v.x, v.y, v.z)], -1) for v in (L_mk, L_wf))
     assert a.max() > 0.1  # lit
     assert np.all(np.isfinite(b))
     np.testing.assert_allclose(b, a, rtol=1e-4, atol=1e-6)
+    assert ("fused tail" in integ.stats.stages) == (tail > 0)
+    if tail:  # the wavefront ran the first bounces, the fused loop the rest
+        assert integ.stats.live[0][-1] <= tail < integ.stats.live[0][0]
 
 
 def _render(scene, **kw):
@@ -119,13 +126,16 @@ def test_negative_control_without_mis_is_caught(scenes, monkeypatch):
     assert z > ZMAX, z
 
 
-def test_deterministic_for_a_seed(scenes):
+@pytest.mark.parametrize("tail", [0, 256])
+def test_deterministic_for_a_seed(scenes, tail):
     scene = scenes("materials")
-    a = _render(scene, mode="wavefront", seed=9)
-    b = _render(scene, mode="wavefront", seed=9)
-    c = _render(scene, mode="wavefront", seed=10)
+    a = _render(scene, mode="wavefront", seed=9, wavefront_tail=tail)
+    b = _render(scene, mode="wavefront", seed=9, wavefront_tail=tail)
+    c = _render(scene, mode="wavefront", seed=10, wavefront_tail=tail)
     assert np.array_equal(a.image, b.image) and np.array_equal(a.variance, b.variance)
     assert not np.array_equal(a.image, c.image)
+    mk = _render(scene, seed=9)
+    assert np.array_equal(mk.image, _render(scene, seed=9).image)  # and the megakernel, for the record
 
 
 def test_compaction_keeps_exactly_the_live_paths(scenes, monkeypatch):
@@ -236,6 +246,8 @@ def test_mode_options():
         replace(_opts(), mode="wavefront", integrator="whitted").validate()
     with pytest.raises(DrptError, match="--mode"):
         replace(_opts(), mode="fused").validate()
+    with pytest.raises(DrptError, match="--wavefront-tail"):
+        replace(_opts(), mode="wavefront", wavefront_tail=-1).validate()
 
 
 def test_cli_render_wavefront(tmp_path):
@@ -243,5 +255,5 @@ def test_cli_render_wavefront(tmp_path):
 
     out = tmp_path / "wf.exr"
     assert main(["render", str(SCENES / "cornellbox/cornellbox.txt"), "--size", "8", "8", "--spp", "2",
-                 "--mode", "wavefront", "-q", "-o", str(out)]) == 0
+                 "--mode", "wavefront", "--wavefront-tail", "16", "-q", "-o", str(out)]) == 0
     assert out.is_file()

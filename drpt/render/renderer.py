@@ -165,7 +165,7 @@ class Renderer:
             depth = options.path.max_depth
             return WhittedIntegrator(self.scene, WhittedOptions(max_depth=depth if depth > 0 else 16))
         if options.mode == "wavefront":
-            return WavefrontIntegrator(self.scene, options.path)
+            return WavefrontIntegrator(self.scene, options.path, tail=options.wavefront_tail)
         return PathIntegrator(self.scene, options.path)
 
     def derive(self, options: RenderOptions, camera: Camera | None = None) -> Renderer:

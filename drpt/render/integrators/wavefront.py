@@ -65,6 +65,7 @@ from ...options import PathOptions
 from ..scene import DeviceScene
 from ..surface import Interaction
 from .common import DirectLight, ShadowQuery, power_heuristic
+from .path import PathIntegrator, PathState
 
 MORTON_BITS = 6  # per axis
 KEY_BITS = 3 + 3 * MORTON_BITS
@@ -235,13 +236,22 @@ class _Queue:
         self.direct = DirectLight(view)
 
 
+@dr.syntax
+def _fused_loop(integ: PathIntegrator, scene: DeviceScene, state: PathState, rng: PCG32) -> Array3f:
+    while state.active:
+        state = integ._bounce(scene, state, rng)
+    return state.L
+
+
 class WavefrontIntegrator:
     """Path tracing as a sequence of kernels per bounce (see the module docs)."""
 
-    def __init__(self, scene: DeviceScene, options: PathOptions, sort: bool = True):
+    def __init__(self, scene: DeviceScene, options: PathOptions, sort: bool = True, tail: int = 0):
         self.scene = scene
         self.opt = options
         self.sort = sort
+        self.tail = tail  # finish in one fused loop once at most this many paths live (0: never)
+        self._fused = PathIntegrator(scene, options)
         self.stats: WaveStats | None = None
         self.queues: list[_Queue] = []
         self._queue_of = None
@@ -273,12 +283,26 @@ class WavefrontIntegrator:
             if m == 0:
                 break
             live.append(m)
+            if m <= self.tail:
+                self._finish(s, L, timer)
+                break
             s, alive = self._bounce(s, L, timer)
         if self.stats is not None:
             self.stats.live.append(live)
         return L
 
     # ------------------------------------------------------------------ stages
+    def _finish(self, s: WaveState, L: Array3f, timer: _Timer) -> None:
+        """The last few paths in one fused loop of the megakernel's bounce (the
+        same random numbers in the same order), their radiance added at their lanes."""
+        m = dr.width(s.lane)
+        rng = PCG32()
+        rng.state, rng.inc = UInt64(s.rng_state), UInt64(s.rng_inc)
+        state = PathState(o=s.o, d=s.d, L=dr.zeros(Array3f, m), beta=s.beta, eta=s.eta, depth=s.depth,
+                          prev_pdf=s.prev_pdf, prev_delta=s.prev_delta, active=dr.full(Bool, True, m))
+        dr.scatter_add(L, _fused_loop(self._fused, self.scene, state, rng), s.lane)
+        timer.done("fused tail", L, lanes=m)
+
     def _compact(self, s: WaveState, alive: Bool, timer: _Timer) -> tuple[WaveState, int]:
         idx = dr.compress(alive)
         m = dr.width(idx)
