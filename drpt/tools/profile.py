@@ -117,6 +117,7 @@ class ModeResult:
     occupancy: dict = field(default_factory=dict)
     unsorted_seconds: float | None = None  # wavefront without the coherence sort (A/B)
     unsorted_stages: list[Stage] = field(default_factory=list)
+    tail_ab: dict = field(default_factory=dict)  # wavefront with the other fused-tail setting (A/B)
     passes: int | None = None
 
     @property
@@ -162,6 +163,7 @@ class ModeResult:
             "occupancy": self.occupancy,
             "unsorted_seconds": self.unsorted_seconds,
             "unsorted_stages": [s.as_dict() for s in self.unsorted_stages],
+            "tail_ab": self.tail_ab,
             "stages": [s.as_dict() for s in self.stages],
             "kernels": self.entries,
         }
@@ -348,7 +350,9 @@ def _wavefront_stages(renderer, sort: bool) -> tuple[list[Stage], float, list[li
     return list(stages.values()), staged, stats.live
 
 
-def profile_mode(scene, popt: ProfileOptions, mode: str) -> ModeResult:
+def profile_mode(scene, popt: ProfileOptions, mode: str, base=None) -> ModeResult:
+    """Profile ``mode`` (a renderer of its own, or derived from ``base``'s device
+    scene); the renderer stays on the result (``result.renderer``)."""
     from dataclasses import replace
 
     import drjit as dr
@@ -357,7 +361,7 @@ def profile_mode(scene, popt: ProfileOptions, mode: str) -> ModeResult:
 
     popt = replace(popt, render=replace(popt.render, mode=mode))
     samples = popt.width * popt.height * popt.spp
-    renderer = _renderer(scene, popt)
+    renderer = _renderer(scene, popt) if base is None else base.derive(replace(popt.render, progress=False))
     # Warm-up: compiles every kernel (or loads it from Dr.Jit's caches).
     with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
         dr.kernel_history_clear()
@@ -371,6 +375,7 @@ def profile_mode(scene, popt: ProfileOptions, mode: str) -> ModeResult:
     seconds, entries = _timed(renderer, popt.repeat)
     peak = int(dr.detail.malloc_watermark(jit_backend()))
     result = ModeResult(mode, warmup, warm_backend, seconds, samples, peak, entries)
+    result.renderer = renderer
     if mode == "megakernel":
         occ = _megakernel_counts(renderer)
         result.occupancy = occ
@@ -384,15 +389,37 @@ def profile_mode(scene, popt: ProfileOptions, mode: str) -> ModeResult:
                         "live_per_bounce": live[0] if live else [], "lane_bounces": lane_bounces,
                         "full_width_lane_bounces": full, "live_fraction": lane_bounces / max(full, 1),
                         "closest_hit_rays": rays.get("closest hit", 0), "shadow_rays": rays.get("shadow rays", 0)}
-    # A/B: the same renderer without the coherence sort (the image is the same, bit for bit)
-    renderer.integrator.sort = False
+    # A/B in one process, interleaved (the machine may be shared): the same renderer
+    # without the coherence sort (the same image, bit for bit) and with the other
+    # fused-tail setting; the best of ``repeat`` renders of each, the sorted render's
+    # runs included.
+    integ = renderer.integrator
+    base_tail = integ.tail
+    other_tail = TAIL_AB if base_tail == 0 else 0
+    variants = {"sorted": (True, base_tail), "unsorted": (False, base_tail), "tail": (True, other_tail)}
+    best = {"sorted": seconds, "unsorted": float("inf"), "tail": float("inf")}
     try:
-        renderer.render()  # compiles the unsorted path's few kernels
-        result.unsorted_seconds, _ = _timed(renderer, popt.repeat)
+        for name in ("unsorted", "tail"):  # warm-up: their few other kernels
+            integ.sort, integ.tail = variants[name]
+            renderer.render()
+        for _ in range(max(1, popt.repeat)):
+            for name, (srt, tl) in variants.items():
+                integ.sort, integ.tail = srt, tl
+                dr.sync_thread()
+                t0 = time.perf_counter()
+                renderer.render()
+                dr.sync_thread()
+                best[name] = min(best[name], time.perf_counter() - t0)
     finally:
-        renderer.integrator.sort = True
+        integ.sort, integ.tail = True, base_tail
+    result.seconds = best["sorted"]
+    result.unsorted_seconds = best["unsorted"]
+    result.tail_ab = {"tail": other_tail, "seconds": best["tail"], "render_tail": base_tail}
     result.unsorted_stages, _, _ = _wavefront_stages(renderer, sort=False)
     return result
+
+
+TAIL_AB = 16384  # the fused tail the A/B tries (paths left in a pass)
 
 
 def run_profile(scene_path: str | Path, popt: ProfileOptions, modes=MODES) -> list[ModeResult]:
@@ -408,9 +435,25 @@ def run_profile(scene_path: str | Path, popt: ProfileOptions, modes=MODES) -> li
     ensure()
     from ..render.renderer import plan_passes
 
-    out = [profile_mode(scene, popt, m) for m in modes]
+    out = []
+    for m in modes:  # one device scene: the wavefront renderer is derived from the first
+        out.append(profile_mode(scene, popt, m, out[0].renderer if out else None))
     for r in out:
         r.passes = len(plan_passes(popt.width, popt.height, popt.spp, popt.max_lanes))
+    if len(out) > 1:
+        # the modes against each other, interleaved (the machine may be shared): best of
+        # ``repeat`` more renders each, with each mode's earlier timed runs
+        import drjit as dr
+
+        for _ in range(max(1, popt.repeat)):
+            for r in out:
+                dr.sync_thread()
+                t0 = time.perf_counter()
+                r.renderer.render()
+                dr.sync_thread()
+                r.seconds = min(r.seconds, time.perf_counter() - t0)
+    for r in out:
+        del r.renderer
     return out
 
 
@@ -435,6 +478,10 @@ def verdict(results: list[ModeResult]) -> list[str]:
             parts.append(f"compaction + sort {srt.kernel_ms:.1f} ms vs compaction alone "
                          f"{un['compact + sort'].kernel_ms:.1f} ms")
         lines.append("; ".join(parts))
+    if wf is not None and wf.tail_ab:
+        ab = wf.tail_ab
+        lines.append(f"fused tail: --wavefront-tail {ab['render_tail']} {wf.seconds:.3f} s vs {ab['tail']} "
+                     f"{ab['seconds']:.3f} s ({ab['seconds'] / max(wf.seconds, 1e-12):.2f}x)")
     mk = by.get("megakernel")
     if mk is None or wf is None:
         return lines
@@ -503,6 +550,9 @@ def format_table(r: ModeResult) -> str:
         if r.unsorted_seconds:
             lines.append(f"  without the coherence sort: {r.unsorted_seconds:.3f} s "
                          f"({r.unsorted_seconds / max(r.seconds, 1e-12):.2f}x the sorted render)")
+        if r.tail_ab:
+            lines.append(f"  with --wavefront-tail {r.tail_ab['tail']} instead of {r.tail_ab['render_tail']}: "
+                         f"{r.tail_ab['seconds']:.3f} s ({r.tail_ab['seconds'] / max(r.seconds, 1e-12):.2f}x)")
     else:
         lines.append("  stages are fused into one kernel: split by kernel only; rays counted by an "
                      "instrumented render (closest hit + shadow)")
