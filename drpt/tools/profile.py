@@ -514,6 +514,13 @@ def verdict(results: list[ModeResult]) -> list[str]:
                f"kernel's lane-iterations) and run each BSDF's code on its own lanes, which outweighs the "
                f"state traffic and {wf.launches} launches")
     lines.append(f"  why: {why}")
+    ab = wf.tail_ab
+    if ab and ab.get("seconds"):
+        rel = ab["seconds"] / max(mk.seconds, 1e-12)
+        lines.append(f"  with --wavefront-tail {ab['tail']} (the last paths in one fused loop) the wavefront "
+                     f"takes {ab['seconds']:.3f} s, {rel:.2f}x the megakernel's time: "
+                     + ("the best mode measured here" if rel < 1 and faster is mk else
+                        "faster than without" if ab["seconds"] < wf.seconds else "no gain"))
     return lines
 
 
