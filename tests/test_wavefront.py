@@ -25,7 +25,7 @@ from dataclasses import replace
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.auto import PCG32, Array3f, Bool, Float, UInt32
+from drjit.auto import PCG32, Bool, Float, UInt32
 
 from conftest import SCENES
 from drpt.errors import DrptError
@@ -182,10 +182,7 @@ def test_rays_are_sorted_by_octant_then_morton(scenes, monkeypatch):
     def check(s, alive, timer):
         out, m = compact(s, alive, timer)
         if m > 1:
-            o = out.o
-            lo = Array3f(dr.min(o.x), dr.min(o.y), dr.min(o.z))
-            hi = Array3f(dr.max(o.x), dr.max(o.y), dr.max(o.z))
-            key = wf.ray_key(o, out.d, lo, hi).numpy().astype(np.int64)
+            key = wf.ray_key(out.o, out.d, *integ._bounds).numpy().astype(np.int64)
             assert np.all(np.diff(key) >= 0)
             octant = key >> (3 * wf.MORTON_BITS)
             checked.append(len(np.unique(octant)))

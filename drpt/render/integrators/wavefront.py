@@ -14,7 +14,10 @@ structure-of-arrays buffers (one Dr.Jit array per field of
    bounce are compacted (``dr.compress`` of their mask: no dead lanes) and
    reordered by a coherence key, direction octant (3 bits, most
    significant) then the Morton code of the ray origin quantised to a
-   ``2^6`` grid per axis over the live origins' bounds (18 bits): a stable
+   ``2^6`` grid per axis over the origins' bounds (those of the first
+   bounce's rays, which start on the surfaces, reused after: six
+   reductions once, not per bounce; later origins outside are clamped to
+   the grid's edge, which changes the order only) (18 bits): a stable
    least-significant-digit radix sort in Dr.Jit kernels
    (``dr.detail.block_mkperm``, the primitive under ``dr.argsort``, two
    passes of 11 and 10 bits); one gather applies compaction and order;
@@ -278,6 +281,7 @@ class WavefrontIntegrator:
         alive = Bool(active) | dr.zeros(Bool, n)
         timer.done("compact + sort", s, alive, L)
         live = []
+        self._bounds_from = 0
         while True:
             s, m = self._compact(s, alive, timer)
             if m == 0:
@@ -310,9 +314,12 @@ class WavefrontIntegrator:
             return s, 0
         if self.sort and m > 1:
             o, d = _take(s.o, idx), _take(s.d, idx)
-            lo = Array3f(dr.min(o.x), dr.min(o.y), dr.min(o.z))
-            hi = Array3f(dr.max(o.x), dr.max(o.y), dr.max(o.z))
-            key = ray_key(o, d, lo, hi)
+            if self._bounds_from < 2:  # the camera's origins, then the first hits': reused after
+                self._bounds = (Array3f(dr.min(o.x), dr.min(o.y), dr.min(o.z)),
+                                Array3f(dr.max(o.x), dr.max(o.y), dr.max(o.z)))
+                dr.eval(self._bounds)
+                self._bounds_from += 1
+            key = ray_key(o, d, *self._bounds)
             perm = sort_permutation(key, KEY_BITS)
             idx = dr.gather(UInt32, idx, perm)
         s = gather_state(s, idx)
