@@ -35,10 +35,12 @@ structure-of-arrays buffers (one Dr.Jit array per field of
    view of the material table): light sampling and BSDF evaluation for
    next-event estimation (queued as shadow queries), BSDF sampling, Russian
    roulette, and writes the next ray and path state;
-5. **shadow rays** (``shadow``): every queue's and estimator's shadow
-   queries with a non-zero contribution, compacted into one batch, traced by
-   the any-hit kernel; unoccluded contributions are added to the radiance
-   buffer in the megakernel's order (area, delta lights, environment).
+5. **shadow rays** (``shadow``): the queues write their shadow queries into
+   one buffer set per estimator slot (area, each delta light, environment)
+   at their paths' positions; those with a non-zero contribution are
+   compacted (one ``dr.compress`` per slot) into one batch, traced by the
+   any-hit kernel; unoccluded contributions are added to the radiance buffer
+   in the megakernel's order.
 
 Same estimator: every sample is the megakernel's ``sample`` function of the
 same random numbers, so images agree statistically with the megakernel's
@@ -375,7 +377,9 @@ class WavefrontIntegrator:
         ranges = self._partition(qid, nq)
         timer.done("partition", *(r[0] for r in ranges), lanes=n)
 
-        queries: list[list[tuple[UInt32, ShadowQuery]]] = []  # per estimator slot
+        # shadow queries, one buffer set per estimator slot (area, delta lights, env),
+        # written by every queue at its paths' positions
+        queries: list[ShadowQuery] = []
         dr.eval(nxt, alive)
         for queue, (idx, count) in zip(self.queues, ranges):
             if count == 0:
@@ -388,13 +392,18 @@ class WavefrontIntegrator:
                     dr.scatter(getattr(nxt, f.name), getattr(out, f.name), idx)
             dr.scatter(alive, live, idx)
             for slot, q in enumerate(found):
-                while len(queries) <= slot:
-                    queries.append([])
-                queries[slot].append((qs.lane, q))
-            timer.done("shade", nxt, alive, *found, lanes=count)
+                if slot == len(queries):
+                    buf = ShadowQuery(dr.zeros(Array3f, n), dr.zeros(Array3f, n), dr.zeros(Array3f, n),
+                                      dr.zeros(Float, n), dr.zeros(Bool, n))
+                    dr.eval(buf.value, buf.o, buf.d, buf.tmax, buf.ok)
+                    queries.append(buf)
+                buf = queries[slot]
+                for f in ("value", "o", "d", "tmax", "ok"):
+                    dr.scatter(getattr(buf, f), getattr(q, f), idx)
+            timer.done("shade", nxt, alive, *queries, lanes=count)
 
         # ---- shadow rays: one batch
-        self._shadow(queries, L, timer)
+        self._shadow(queries, s.lane, L, timer)
         return nxt, alive
 
     def _partition(self, qid: UInt32, nq: int) -> list[tuple[UInt32, int]]:
@@ -459,44 +468,37 @@ class WavefrontIntegrator:
                         rng_state=rng.state, rng_inc=rng.inc)
         return out, found, live
 
-    def _shadow(self, queries: list[list[tuple[UInt32, ShadowQuery]]], L: Array3f, timer: _Timer) -> None:
-        """Trace every queued shadow ray of the bounce as one batch (compacted to
-        the queries that can contribute), then add the unoccluded
-        contributions estimator by estimator (the megakernel's order: area,
+    def _shadow(self, queries: list[ShadowQuery], lanes: UInt32, L: Array3f, timer: _Timer) -> None:
+        """Trace the bounce's shadow queries (one per estimator slot and path) as
+        one batch, compacted to those that can contribute, then add the
+        unoccluded contributions slot by slot (the megakernel's order: area,
         delta lights, environment)."""
-        parts = []  # (slot, lane, value, o, d, tmax), compacted
-        for slot, items in enumerate(queries):
-            for lane, q in items:
-                idx = dr.compress(q.ok | dr.zeros(Bool, dr.width(lane)))
-                if dr.width(idx) == 0:
-                    continue
-                parts.append((slot, _take(lane, idx), _take(q.value, idx), _take(q.o, idx),
-                              _take(q.d, idx), _take(q.tmax, idx)))
-        if not parts:
+        if not queries:
+            return
+        picks = [dr.compress(q.ok) for q in queries]
+        counts = [dr.width(i) for i in picks]
+        total = sum(counts)
+        if total == 0:
             return
 
-        def cat(k):
-            vals = [p[k] for p in parts]
+        def batch(get):
+            vals = [_take(get(q), i) for q, i, k in zip(queries, picks, counts) if k]
             if len(vals) == 1:
                 return vals[0]
             if isinstance(vals[0], Array3f):
                 return Array3f(*(dr.concat([v[c] for v in vals]) for c in range(3)))
             return dr.concat(vals)
 
-        o, d, tmax = cat(3), cat(4), cat(5)
-        total = dr.width(tmax)
+        o, d, tmax = batch(lambda q: q.o), batch(lambda q: q.d), batch(lambda q: q.tmax)
         timer.done("shadow rays", o, d, tmax, lanes=total)
         blocked = self.scene.occluded(o, d, tmax, dr.full(Bool, True, total))
         timer.done("shadow rays", blocked, lanes=total, rays=total)
-        offsets, off = [], 0
-        for part in parts:
-            offsets.append(off)
-            off += dr.width(part[1])
-        for slot in range(len(queries)):
-            for (s2, lane, value, *_), start in zip(parts, offsets):
-                if s2 != slot:
-                    continue
-                b = dr.gather(Bool, blocked, dr.arange(UInt32, dr.width(lane)) + dr.opaque(UInt32, start))
-                dr.scatter_add(L, dr.select(b, 0.0, value), lane)
+        start = 0
+        for q, i, k in zip(queries, picks, counts):
+            if not k:
+                continue
+            b = blocked if k == total else dr.gather(Bool, blocked, dr.arange(UInt32, k) + dr.opaque(UInt32, start))
+            dr.scatter_add(L, dr.select(b, 0.0, _take(q.value, i)), _take(lanes, i))
             dr.eval(L)
+            start += k
         timer.done("shadow resolve", L, lanes=total)
