@@ -29,7 +29,7 @@ from drjit.auto import PCG32, Bool, Float, UInt32
 
 from conftest import SCENES
 from drpt.errors import DrptError
-from drpt.options import RenderOptions
+from drpt.options import PathOptions, RenderOptions
 from drpt.render.integrators import wavefront as wf
 from drpt.render.integrators.path import PathIntegrator
 from drpt.render.renderer import Renderer
@@ -42,12 +42,14 @@ BLOCK = 16  # 16 x 16 pixels at 256 spp: 65536 samples per block mean
 
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory):
-    from drpt.tools.scenegen import materials_cornell
+    from drpt.tools.scenegen import envsun, materials_cornell
 
     out = tmp_path_factory.mktemp("wavefront_scenes")
     materials_cornell.main(out)
     loaded = {"cornell": load_scene(SCENES / "cornellbox/cornellbox.txt"),
-              "materials": load_scene(out / "materials_cornell.txt")}
+              "materials": load_scene(out / "materials_cornell.txt"),
+              # a sky, a sun, a point light: three estimator slots per path (area-free)
+              "envsun": load_scene(envsun.main(out / "env", point=True))}
     return loaded.__getitem__
 
 
@@ -66,11 +68,17 @@ def _lane_rays(r: Renderer, n: int, seed: int):
     return rng, o, d
 
 
-@pytest.mark.parametrize("tail", [0, 512])
-@pytest.mark.parametrize("name", ["cornell", "materials"])
-def test_same_paths_as_the_megakernel(scenes, name, tail):
-    """With ``tail``, the last paths finish in one fused loop: still the same paths."""
-    r = Renderer(scenes(name), _opts())
+PATH_CASES = [("cornell", 0, {}), ("cornell", 512, {}), ("materials", 0, {}), ("materials", 512, {}),
+              ("envsun", 0, {}), ("cornell", 0, {"max_depth": 3, "hide_emitters": True}),
+              ("materials", 0, {"rr_prob": 0.7, "rr_depth": 1})]
+
+
+@pytest.mark.parametrize("name,tail,path", PATH_CASES,
+                         ids=[f"{n}-tail{t}-{'-'.join(p) or 'default'}" for n, t, p in PATH_CASES])
+def test_same_paths_as_the_megakernel(scenes, name, tail, path):
+    """With ``tail``, the last paths finish in one fused loop: still the same paths.
+    Also with a depth limit, hidden emitters, a fixed roulette probability."""
+    r = Renderer(scenes(name), _opts(path=PathOptions(**path)))
     n = 4096
     rng, o, d = _lane_rays(r, n, 5)
     L_mk = PathIntegrator(r.scene, r.opt.path).sample(rng, o, d, Bool(True))
@@ -236,6 +244,16 @@ def test_each_queue_runs_only_its_lobes(scenes, monkeypatch):
     r.render()
     assert ran and all(q is not None and k in q for q, k in ran), set(ran)
     assert {k for _, k in ran} == set(table.kinds)
+
+
+def test_empty_scene(tmp_path):
+    """No primitives: every camera ray escapes to the background; nothing to shade."""
+    (tmp_path / "e.txt").write_text("PerspectiveCamera { center 0 0 5 direction 0 0 -1 up 0 1 0 angle 45 }\n"
+                                    "Background { color 0.25 0.5 0.75 }\n")
+    scene = load_scene(tmp_path / "e.txt")
+    img = _render(scene, mode="wavefront").image
+    np.testing.assert_allclose(img, _render(scene).image)
+    np.testing.assert_allclose(img.reshape(-1, 3).mean(0), [0.25, 0.5, 0.75], rtol=1e-6)
 
 
 def test_mode_options():
