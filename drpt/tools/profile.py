@@ -245,22 +245,28 @@ def _simd_width() -> int:
     return 16 if "avx512f" in flags else 8 if "avx2" in flags else 4
 
 
-def _timed(renderer, repeat: int) -> tuple[float, list[dict]]:
-    """The fastest of ``repeat`` renders (the machine may be shared) and its history."""
+def _time_once(renderer) -> tuple[float, list[dict]]:
+    """One render's wall time and kernel history."""
     import drjit as dr
 
-    seconds, entries = float("inf"), []
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.sync_thread()
+        dr.kernel_history_clear()
+        t0 = time.perf_counter()
+        renderer.render()
+        dr.sync_thread()
+        t = time.perf_counter() - t0
+        return t, _history()
+
+
+def _timed(renderer, repeat: int) -> tuple[float, list[dict]]:
+    """The fastest of ``repeat`` renders (the machine may be shared) and its history."""
+    best = (float("inf"), [])
     for _ in range(max(1, repeat)):
-        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
-            dr.kernel_history_clear()
-            t0 = time.perf_counter()
-            renderer.render()
-            dr.sync_thread()
-            t = time.perf_counter() - t0
-            run_entries = _history()
-        if t < seconds:
-            seconds, entries = t, run_entries
-    return seconds, entries
+        run = _time_once(renderer)
+        if run[0] < best[0]:
+            best = run
+    return best
 
 
 def _megakernel_counts(renderer) -> dict:
@@ -377,11 +383,17 @@ def profile_mode(scene, popt: ProfileOptions, mode: str, base=None) -> ModeResul
     result = ModeResult(mode, warmup, warm_backend, seconds, samples, peak, entries)
     result.renderer = renderer
     if mode == "megakernel":
-        occ = _megakernel_counts(renderer)
-        result.occupancy = occ
-        result.stages = _megakernel_stages(entries, occ["closest_hit_rays"] + occ["shadow_rays"])
-        return result
-    result.stages, result.staged_seconds, live = _wavefront_stages(renderer, sort=True)
+        result.occupancy = _megakernel_counts(renderer)
+        return result  # its stages: from the fastest run's history (run_profile)
+    # the instrumented renders, sorted and unsorted interleaved; the fastest of each
+    staged = {True: None, False: None}
+    for _ in range(max(1, popt.repeat)):
+        for srt in (True, False):
+            run = _wavefront_stages(renderer, sort=srt)
+            if staged[srt] is None or run[1] < staged[srt][1]:
+                staged[srt] = run
+    result.stages, result.staged_seconds, live = staged[True]
+    result.unsorted_stages = staged[False][0]
     rays = {s.name: s.rays for s in result.stages}
     lane_bounces = sum(sum(v) for v in live)
     full = sum(len(v) * v[0] for v in live if v)
@@ -398,6 +410,7 @@ def profile_mode(scene, popt: ProfileOptions, mode: str, base=None) -> ModeResul
     other_tail = TAIL_AB if base_tail == 0 else 0
     variants = {"sorted": (True, base_tail), "unsorted": (False, base_tail), "tail": (True, other_tail)}
     best = {"sorted": seconds, "unsorted": float("inf"), "tail": float("inf")}
+    entries_of = {"sorted": entries}
     try:
         for name in ("unsorted", "tail"):  # warm-up: their few other kernels
             integ.sort, integ.tail = variants[name]
@@ -405,17 +418,14 @@ def profile_mode(scene, popt: ProfileOptions, mode: str, base=None) -> ModeResul
         for _ in range(max(1, popt.repeat)):
             for name, (srt, tl) in variants.items():
                 integ.sort, integ.tail = srt, tl
-                dr.sync_thread()
-                t0 = time.perf_counter()
-                renderer.render()
-                dr.sync_thread()
-                best[name] = min(best[name], time.perf_counter() - t0)
+                t, run_entries = _time_once(renderer)
+                if t < best[name]:
+                    best[name], entries_of[name] = t, run_entries
     finally:
         integ.sort, integ.tail = True, base_tail
-    result.seconds = best["sorted"]
+    result.seconds, result.entries = best["sorted"], entries_of["sorted"]
     result.unsorted_seconds = best["unsorted"]
     result.tail_ab = {"tail": other_tail, "seconds": best["tail"], "render_tail": base_tail}
-    result.unsorted_stages, _, _ = _wavefront_stages(renderer, sort=False)
     return result
 
 
@@ -443,17 +453,16 @@ def run_profile(scene_path: str | Path, popt: ProfileOptions, modes=MODES) -> li
     if len(out) > 1:
         # the modes against each other, interleaved (the machine may be shared): best of
         # ``repeat`` more renders each, with each mode's earlier timed runs
-        import drjit as dr
 
         for _ in range(max(1, popt.repeat)):
             for r in out:
-                dr.sync_thread()
-                t0 = time.perf_counter()
-                r.renderer.render()
-                dr.sync_thread()
-                r.seconds = min(r.seconds, time.perf_counter() - t0)
+                t, run_entries = _time_once(r.renderer)
+                if t < r.seconds:
+                    r.seconds, r.entries = t, run_entries
     for r in out:
         del r.renderer
+        if r.mode == "megakernel":
+            r.stages = _megakernel_stages(r.entries, r.occupancy["closest_hit_rays"] + r.occupancy["shadow_rays"])
     return out
 
 
