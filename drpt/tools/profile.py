@@ -510,18 +510,22 @@ def verdict(results: list[ModeResult]) -> list[str]:
                  f"kernels run live paths only ({wf.occupancy.get('lane_bounces', 0)} lane-bounces, "
                  f"{100 * wf.occupancy.get('live_fraction', 0):.1f}% of full-width bounces) but keep the path "
                  f"state in memory: peak {_mem(wf.peak_bytes)} vs {_mem(mk.peak_bytes)}")
+    gap = (wf.seconds - mk.seconds) * 1e3  # > 0: the megakernel wins
+    gap_k, gap_o = wf.kernel_ms - mk.kernel_ms, wf_outside - mk_outside
+    causes = {"kernel time": (gap_k, "the stages write and read the path state through memory, "
+                              "a cost the fused kernel's registers avoid"),
+              "time outside kernels": (gap_o, "every bounce traces each stage's Python code again and "
+                                       "launches and synchronises its kernels, also for the long tail "
+                                       "of bounces with few live paths")}
     if faster is mk:
-        if wf.kernel_ms >= mk.kernel_ms:
-            why = ("the wavefront's kernels alone take longer than the fused kernel: every stage boundary "
-                   "writes and reads the path state through memory, which costs more than the idle SIMD "
-                   f"lanes the fused kernel carries ({100 * (1 - occ):.0f}%)")
-        else:
-            why = (f"the wavefront's kernels are faster ({wf.kernel_ms:.1f} vs {mk.kernel_ms:.1f} ms) but its "
-                   f"{wf.launches} launches and synchronisations cost {wf_outside:.1f} ms outside kernels")
+        main_cause = max(causes, key=lambda k: causes[k][0])
+        why = (f"of the {gap:.1f} ms gap, {gap_k:.1f} ms is kernel time and {gap_o:.1f} ms time outside "
+               f"kernels; the larger, {main_cause}: {causes[main_cause][1]}; the wavefront's compaction "
+               f"saves the {100 * (1 - occ):.0f}% idle SIMD lanes of the fused kernel, which is less")
     else:
         why = (f"its kernels skip the megakernel's idle SIMD lanes ({100 * (1 - occ):.0f}% of the fused "
-               f"kernel's lane-iterations) and run each BSDF's code on its own lanes, which outweighs the "
-               f"state traffic and {wf.launches} launches")
+               f"kernel's lane-iterations) and run each BSDF's code on its own lanes: kernel time "
+               f"{-gap_k:.1f} ms less, against {gap_o:.1f} ms more outside kernels in {wf.launches} launches")
     lines.append(f"  why: {why}")
     ab = wf.tail_ab
     if ab and ab.get("seconds"):
