@@ -10,7 +10,7 @@ bounce loop runs in Python and every stage is its own evaluated kernel over
 structure-of-arrays buffers (one Dr.Jit array per field of
 :class:`WaveState`, ``n`` = the paths still alive):
 
-1. **compaction + ray sort** (``sort``): the live paths of the previous
+1. **compaction + ray sort** (stage ``compact + sort``): the live paths of the previous
    bounce are compacted (``dr.compress`` of their mask: no dead lanes) and
    reordered by a coherence key, direction octant (3 bits, most
    significant) then the Morton code of the ray origin quantised to a
@@ -21,8 +21,8 @@ structure-of-arrays buffers (one Dr.Jit array per field of
    least-significant-digit radix sort in Dr.Jit kernels
    (``dr.detail.block_mkperm``, the primitive under ``dr.argsort``, two
    passes of 11 and 10 bits); one gather applies compaction and order;
-2. **closest hit** (``trace``): the accelerator's closest-hit kernel, then
-   the surface interaction;
+2. **closest hit** (``closest hit``, ``interaction``): the accelerator's
+   closest-hit kernel, then the surface interaction;
 3. **emission** (``emission``): what the ray hit or escaped to, MIS-weighted
    against the previous BSDF sample, added to the path's radiance (a
    scatter-add into the pass-wide radiance buffer at the path's lane);
@@ -35,12 +35,23 @@ structure-of-arrays buffers (one Dr.Jit array per field of
    view of the material table): light sampling and BSDF evaluation for
    next-event estimation (queued as shadow queries), BSDF sampling, Russian
    roulette, and writes the next ray and path state;
-5. **shadow rays** (``shadow``): the queues write their shadow queries into
+5. **shadow rays** (``shadow rays``, ``shadow resolve``): the queues write their shadow queries into
    one buffer set per estimator slot (area, each delta light, environment)
    at their paths' positions; those with a non-zero contribution are
    compacted (one ``dr.compress`` per slot) into one batch, traced by the
    any-hit kernel; unoccluded contributions are added to the radiance buffer
    in the megakernel's order.
+
+With ``tail`` (``--wavefront-tail N``), once at most ``N`` paths of the pass
+are alive they finish in one symbolic loop of the megakernel's own bounce
+(``fused tail``): the long tail of bounces with few paths then costs one
+kernel instead of a bounce's launches each.
+
+The renderer runs this integrator with one path per lane (it has no
+``sample_sequence``), so for a seed its image is in general not the
+megakernel's (whose lanes regenerate paths on other streams); where the
+megakernel also runs one path per lane (a pass with at most ``min_lanes``
+samples), the images are the same.
 
 Same estimator: every sample is the megakernel's ``sample`` function of the
 same random numbers, so images agree statistically with the megakernel's
@@ -78,7 +89,7 @@ RADIX_BITS = 11
 
 OUTSIDE = "accumulation + readback (outside the passes' stages)"
 STAGES = ("compact + sort", "closest hit", "interaction", "emission", "partition", "shade",
-          "shadow rays", "shadow resolve")
+          "shadow rays", "shadow resolve", "fused tail")
 
 
 @dataclass
