@@ -216,7 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .options import add_render_flags
 
     # the flags of render that shape the Mitsuba scene, checked as render checks them
-    add_render_flags(export, omit=("seed", "rr_depth", "rr_prob", "accel", "integrator",
+    add_render_flags(export, omit=("seed", "rr_depth", "rr_prob", "accel", "integrator", "mode",
                                    "env_sampling", "max_lanes", "backend", "quiet"))
     export.set_defaults(func=cmd_export)
 

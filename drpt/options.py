@@ -32,6 +32,7 @@ from .errors import DrptError, note, warn
 
 BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
 INTEGRATORS = ("path", "whitted")
+MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
 BVH_KINDS = ("bvh", "bvh2", "bvh4")
 GRID_MAX_RESOLUTION = 256
@@ -45,7 +46,7 @@ MAX_DEPTH = (1 << 32) - 1  # --max-depth, --rr-depth: path depths are UInt32
 MAX_SEED = (1 << 64) - 1  # the seed is hashed as a 64-bit integer
 
 # Flag groups of add_render_flags; a command leaves out those that it sets itself.
-FLAGS = ("size", "spp", "seed", "max_depth", "rr_depth", "rr_prob", "accel", "integrator",
+FLAGS = ("size", "spp", "seed", "max_depth", "rr_depth", "rr_prob", "accel", "integrator", "mode",
          "bsdf", "env_sampling", "filter", "max_lanes", "backend", "quiet", "scene")
 
 
@@ -70,6 +71,8 @@ class RenderOptions:
     bvh_min_leaf: int = 1  # minimum primitives per BVH leaf (the seed's -resolution)
     bsdf: str = "auto"  # how MTL materials are read, see drpt.shading
     integrator: str = "path"  # "path" (MIS path tracing) or "whitted"
+    mode: str = "megakernel"  # path tracing as one fused kernel, or "wavefront" (a kernel per stage)
+    wavefront_tail: int = 0  # wavefront: finish in one fused loop once at most this many paths live
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
     filter: str = "box"  # pixel reconstruction filter, drpt.filters.parse_filter's spelling
     path: PathOptions = field(default_factory=PathOptions)
@@ -113,12 +116,17 @@ class RenderOptions:
                                      ("--bvh", self.bvh_method, METHODS),
                                      ("--bsdf", self.bsdf, BSDF_MODES),
                                      ("--integrator", self.integrator, INTEGRATORS),
+                                     ("--mode", self.mode, MODES),
                                      ("--env-sampling", self.env_sampling, ENV_SAMPLING)):
             if value not in allowed:
                 raise DrptError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
         from .filters import parse_filter
 
         parse_filter(self.filter)  # raises DrptError on a bad --filter
+        if not 0 <= self.wavefront_tail <= MAX_LANES:
+            raise DrptError(f"--wavefront-tail must be between 0 and {MAX_LANES}, got {self.wavefront_tail}")
+        if self.mode == "wavefront" and self.integrator != "path":
+            raise DrptError(f"--mode wavefront runs the path integrator, not --integrator {self.integrator}")
         if self.accel == "grid" and self.grid_resolution is not None and \
                 not 1 <= self.grid_resolution <= GRID_MAX_RESOLUTION:
             raise DrptError(f"-resolution must be between 1 and {GRID_MAX_RESOLUTION} grid cells "
@@ -311,6 +319,15 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
             parser.add_argument("-MonteCarlo", dest="monte_carlo", action="store_true",
                                 help="seed flag: Monte Carlo path tracing (the seed's default "
                                      "is Whitted)")
+    if want("mode"):
+        parser.add_argument("--mode", choices=MODES, default="megakernel",
+                            help="how the path tracer runs: megakernel (default: the whole path loop "
+                                 "in one fused kernel) or wavefront (a kernel per stage and bounce: "
+                                 "compacted, ray-sorted paths, per-material shading queues, batched "
+                                 "shadow rays)")
+        parser.add_argument("--wavefront-tail", dest="wavefront_tail", type=int, default=0, metavar="N",
+                            help="with --mode wavefront: once at most N paths of a pass are alive, finish "
+                                 "them in one fused loop (default 0: every bounce as wavefront stages)")
     if want("bsdf"):
         default = d["bsdf"]
         shown = default or "auto; phong with -input"
@@ -539,7 +556,8 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
         max_lanes = backend.policy().max_lanes
     opts = RenderOptions(width=width, height=height, spp=get("spp", base.spp),
                          seed=get("seed", base.seed), **fields, bsdf=bsdf,
-                         integrator=integrator,
+                         integrator=integrator, mode=get("mode", base.mode),
+                         wavefront_tail=get("wavefront_tail", base.wavefront_tail),
                          env_sampling=get("env_sampling", base.env_sampling),
                          filter=get("filter", base.filter),
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),

@@ -121,6 +121,9 @@ class MaterialTable:
         if not comps:
             comps = [[_Component(black, False)]]
         self.K = max(len(c) for c in comps)
+        # the lobe kinds of each material's components (host side: the wavefront
+        # integrator's shading queues group materials by them)
+        self.material_kinds: list[tuple[str, ...]] = [tuple(sorted({c.leaf.kind for c in cs})) for cs in comps]
         # rows: every component of every material, material by material
         self.rows: list[_Component] = [c for cs in comps for c in cs]
         self.kinds = sorted({c.leaf.kind for c in self.rows})
@@ -224,6 +227,18 @@ class MaterialTable:
         self._mat_delta = None if (self._all_delta or not any(delta)) else Bool(np.array(delta, bool))
         self._any_delta = any(delta)
 
+    _only: tuple[str, ...] | None = None  # a restricted view's kinds (see restricted)
+
+    def restricted(self, kinds) -> MaterialTable:
+        """A view of this table that traces only the lobes of ``kinds`` (same
+        data, nothing uploaded again), for lanes whose materials have only
+        components of those kinds: a wavefront shading queue runs only its
+        BSDFs' code. With one kind and one component per material, no lane
+        reads its kind."""
+        view = copy.copy(self)
+        view._only = tuple(k for k in self.kinds if k in set(kinds))
+        return view
+
     # ------------------------------------------------------------------ parameters
     def specs_of(self, kind: str) -> list[BSDFSpec]:
         """The leaf specs of ``kind`` in the scene (host side), for trace-time choices."""
@@ -321,7 +336,9 @@ class MaterialTable:
         if row_si is None:
             row_si, _, present = self._slot(si, j)
         kinds = self.kinds if (j is None or self.K == 1) else self._slots[j]["kinds"]
-        if len(self.kinds) == 1:
+        if self._only is not None:
+            kinds = [k for k in kinds if k in self._only]
+        if len(self.kinds) == 1 or (self._only is not None and len(self._only) == 1 and self.K == 1):
             kind_of = None
         else:
             kind_of = dr.gather(UInt32, self.kind, row_si.material, present)

@@ -67,6 +67,7 @@ from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
 from .filter_sampling import sample_position
 from .integrators.path import PathIntegrator
+from .integrators.wavefront import WavefrontIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .scene import DeviceScene
 
@@ -163,6 +164,8 @@ class Renderer:
         if options.integrator == "whitted":
             depth = options.path.max_depth
             return WhittedIntegrator(self.scene, WhittedOptions(max_depth=depth if depth > 0 else 16))
+        if options.mode == "wavefront":
+            return WavefrontIntegrator(self.scene, options.path, tail=options.wavefront_tail)
         return PathIntegrator(self.scene, options.path)
 
     def derive(self, options: RenderOptions, camera: Camera | None = None) -> Renderer:

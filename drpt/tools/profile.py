@@ -1,49 +1,49 @@
-"""``python -m drpt profile SCENE``: where a render spends its time, in two execution modes.
+"""``python -m drpt profile SCENE``: where a render spends its time, megakernel against wavefront.
 
-The same render (same options, same seed, same image) is run twice:
+The same render (same options, same seed) is run in both execution modes of
+the path tracer (``--mode both``, the default, or one of them):
 
-* **megakernel** (``dr.JitFlag.SymbolicLoops = True``, drpt's default): the
-  whole path loop, with the BVH traversal loops inside it, is traced once and
-  compiled into one fused kernel per pass;
-* **wavefront** (``SymbolicLoops = False``): Dr.Jit runs every loop in
-  *evaluated* mode, iteration by iteration from Python, launching kernels for
-  each iteration of each loop (path bounces and BVH traversal steps alike),
-  with the loop state written to memory in between.
+* **megakernel** (drpt's default): camera, the whole path loop, traversal and
+  shading fused into one kernel per pass (symbolic loops, path regeneration);
+* **wavefront** (:mod:`drpt.render.integrators.wavefront`): per bounce, the
+  live paths compacted and sorted for coherence, a closest-hit kernel,
+  emission, per-material shading queues, one batch of shadow rays; the path
+  state in memory between kernels.
 
 Each mode first renders once as a warm-up, so compilation (LLVM backend time)
-lands there and is reported apart; the timed render then runs with
-``dr.JitFlag.KernelHistory`` on and every entry of ``dr.kernel_history()`` is
-kept (``execution_time``, ``codegen_time``, ``backend_time``, ``size``,
-``operation_count``, ``type``, ``cache_hit``, ...). Peak memory comes from
+lands there and is reported apart; ``--repeat`` timed renders follow with
+``dr.JitFlag.KernelHistory`` on (the fastest counts) and every entry of
+``dr.kernel_history()`` is kept. Peak memory comes from
 ``dr.detail.malloc_watermark`` on drpt's backend.
 
-Stages
-------
-Dr.Jit 1.5 records no label in the kernel history (``dr.set_label`` names
-variables for GraphViz only and does not reach the IR; ``dr.profile_range``
-marks the CPU timeline for external profilers), so kernels cannot be assigned
-to stages from the history alone. The stage split therefore comes from a
-third, *instrumented* wavefront render: the device scene's queries
-(closest hit, interaction, shadow rays, emission, BSDF and emitter sampling
-and evaluation: :data:`SCENE_STAGES`) and the direct-light estimators are
-replaced, on those instances, by wrappers that evaluate each stage's inputs
-on entry and its outputs on exit, so each kernel is launched by exactly one
-stage; kernels are then
-attributed to the innermost stage running when they were launched (exclusive
-times: a shadow ray inside next-event estimation counts as "shadow rays", not
-twice). ``LaunchBlocking`` is on in that run so wall-clock time also lands on
-the stage that launched the work. The extra evaluations make this run a bit
-slower than the plain wavefront run; both are reported. Rays per stage are
-the active lanes entering the closest-hit and shadow-ray queries (counted with
-``dr.count`` under an "instrumentation" entry that is excluded from the stage
-sums). In megakernel mode the history can only be split by kernel: the fused
-path kernel and the small reduction / copy kernels around it.
+Stages, rays, lanes, occupancy
+------------------------------
+*Wavefront*: an instrumented render (:class:`~drpt.render.integrators.wavefront.WaveStats`)
+synchronises at every stage boundary and reads the kernel history there, so
+each kernel is attributed to the stage that launched it (Dr.Jit 1.5 records
+no labels); rays are the paths entering the closest-hit kernel and the
+shadow rays of the batches, exactly. Its kernels run only live paths
+(compaction: occupancy 1 by construction); what it saves is shown by the
+live paths per bounce against the pass width. A second timed render without
+the coherence sort gives the sort's effect (A/B in one process).
+
+*Megakernel*: the fused kernel cannot be split; its history is split by
+kernel (the path kernel and the accumulation kernels around it). An
+instrumented render counts, per lane, the loop iterations it ran and the
+shadow rays it traced (a scatter-add in the loop; not timed): rays are
+exact, and the SIMD occupancy is the useful lane-iterations over those the
+packets executed (a packet of ``W`` consecutive lanes runs until its
+longest lane is done; ``W`` = 16 with AVX-512, 8 with AVX2, read from the
+CPU flags: an assumption about Dr.Jit's LLVM vector width).
+
+The verdict says which mode is faster and why, from these numbers: kernel
+time against time outside kernels (launches, synchronisation, Python), the
+megakernel's occupancy, memory.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import sys
 import time
@@ -54,8 +54,7 @@ from pathlib import Path
 from ..errors import DrptError
 from ..options import RenderOptions
 
-INSTRUMENTATION = "instrumentation (ray counts, history reads)"
-TOP = "accumulation + readback"
+MODES = ("megakernel", "wavefront")
 
 
 # --------------------------------------------------------------------------- history helpers
@@ -114,7 +113,12 @@ class ModeResult:
     peak_bytes: int
     entries: list[dict]
     stages: list[Stage] = field(default_factory=list)
-    staged_seconds: float | None = None  # wall time of the instrumented run (wavefront)
+    staged_seconds: float | None = None  # wall time of the instrumented run
+    occupancy: dict = field(default_factory=dict)
+    unsorted_seconds: float | None = None  # wavefront without the coherence sort (A/B)
+    unsorted_stages: list[Stage] = field(default_factory=list)
+    tail_ab: dict = field(default_factory=dict)  # wavefront with the other fused-tail setting (A/B)
+    passes: int | None = None
 
     @property
     def kernel_ms(self) -> float:
@@ -155,192 +159,14 @@ class ModeResult:
             "codegen_ms": self.codegen_ms,
             "backend_ms": self.backend_ms,
             "peak_bytes": self.peak_bytes,
-            "passes": getattr(self, "passes", None),
+            "passes": self.passes,
+            "occupancy": self.occupancy,
+            "unsorted_seconds": self.unsorted_seconds,
+            "unsorted_stages": [s.as_dict() for s in self.unsorted_stages],
+            "tail_ab": self.tail_ab,
             "stages": [s.as_dict() for s in self.stages],
             "kernels": self.entries,
         }
-
-
-# --------------------------------------------------------------------------- stage tracking
-
-def _jit_leaves(obj, out: list, depth: int = 0) -> list:
-    """Dr.Jit arrays reachable from ``obj`` (tuples, lists, dicts, plain objects)."""
-    import drjit as dr
-
-    if depth > 4 or obj is None or isinstance(obj, (bool, int, float, str)):
-        return out
-    if isinstance(obj, dr.ArrayBase) or hasattr(type(obj), "DRJIT_STRUCT"):
-        out.append(obj)
-    elif isinstance(obj, (tuple, list)):
-        for x in obj:
-            _jit_leaves(x, out, depth + 1)
-    elif isinstance(obj, dict):
-        for x in obj.values():
-            _jit_leaves(x, out, depth + 1)
-    elif hasattr(obj, "__dict__") and type(obj).__module__.startswith("drpt."):
-        for x in vars(obj).values():
-            _jit_leaves(x, out, depth + 1)
-    elif type(obj).__name__ == "PCG32":
-        out.extend([obj.state, obj.inc])
-    return out
-
-
-def _eval(*objs) -> None:
-    import drjit as dr
-
-    leaves = _jit_leaves(objs, [])
-    if leaves:
-        dr.eval(*leaves)
-
-
-class StageTracker:
-    """Attributes kernel launches and wall time to the innermost running stage."""
-
-    def __init__(self):
-        self.stages: dict[str, Stage] = {}
-        self.stack = [TOP]
-        self.t = time.perf_counter()
-
-    def stage(self, name: str) -> Stage:
-        if name not in self.stages:
-            self.stages[name] = Stage(name)
-        return self.stages[name]
-
-    def flush(self) -> None:
-        import drjit as dr
-
-        dr.sync_thread()
-        now = time.perf_counter()
-        st = self.stage(self.stack[-1])
-        st.wall_ms += (now - self.t) * 1e3
-        st.add(_history())
-        self.t = time.perf_counter()
-        self.stage(INSTRUMENTATION).wall_ms += (self.t - now) * 1e3
-
-    def enter(self, name: str, args=()) -> None:
-        _eval(args)  # the inputs belong to the caller's stage
-        self.flush()
-        self.stack.append(name)
-
-    def leave(self, result) -> None:
-        _eval(result)
-        self.flush()
-        self.stack.pop()
-
-    def count_rays(self, name: str, active, n_fallback: int) -> None:
-        import drjit as dr
-        from drjit.auto import Bool
-
-        _eval(active)  # pending work of the caller stays with the caller
-        self.enter(INSTRUMENTATION)
-        if isinstance(active, Bool):
-            n = int(dr.count(active)[0]) if dr.width(active) > 1 else int(bool(active[0])) * n_fallback
-        else:
-            n = n_fallback if active else 0
-        self.stage(name).rays += n
-        self.leave(None)
-
-
-#: The device scene's queries the staged run times (drpt.render.scene.DeviceScene):
-#: method -> (stage, index of its ``active`` argument where it traces rays, else None).
-SCENE_STAGES = {
-    "intersect_preliminary": ("closest-hit traversal", 2),
-    "occluded": ("shadow rays", 3),
-    "interaction": ("surface interaction", None),
-    "emitted": ("emission + MIS", None),
-    "pdf_area_emitter": ("emission + MIS", None),
-    "sample_bsdf": ("BSDF sampling", None),
-    "eval_bsdf": ("BSDF evaluation (NEE)", None),
-    "sample_area_emitter": ("light sampling", None),
-    "sample_environment": ("env lookups", None),
-    "eval_environment": ("env lookups", None),
-    "eval_pdf_environment": ("env lookups", None),
-}
-#: The direct-light estimators (drpt.render.integrators.common.DirectLight): what
-#: they do besides the scene queries above.
-DIRECT_STAGES = {"area": "NEE: area lights (rest)", "delta": "NEE: delta lights (rest)",
-                 "env_light": "NEE: environment (rest)"}
-
-
-def _staged(method, tracker: StageTracker, stage: str, ray_arg: int | None):
-    """``method`` run as ``stage``: inputs evaluated on entry, outputs on exit,
-    and the active lanes of argument ``ray_arg`` counted as rays."""
-
-    def wrapped(*args, **kwargs):
-        if ray_arg is not None:
-            import drjit as dr
-
-            active = args[ray_arg] if len(args) > ray_arg else kwargs.get("active", True)
-            tracker.count_rays(stage, active, max(dr.width(args[0]), dr.width(args[1])))
-        tracker.enter(stage, (args, kwargs))
-        result = method(*args, **kwargs)
-        tracker.leave(result)
-        return result
-
-    return wrapped
-
-
-def _hook(obj, tracker: StageTracker, stages: dict[str, tuple[str, int | None]]) -> None:
-    """Replace ``obj``'s methods named in ``stages`` by staged ones (instance
-    attributes: the class, and every other instance, stay untouched)."""
-    for name, (stage, ray_arg) in stages.items():
-        setattr(obj, name, _staged(getattr(obj, name), tracker, stage, ray_arg))
-
-
-def _instrument(renderer, tracker: StageTracker) -> None:
-    """Time the device scene's queries, the direct-light estimators and the
-    integrator's entry points as stages."""
-    _hook(renderer.scene, tracker, SCENE_STAGES)
-    integ = renderer.integrator
-    _hook(integ.direct, tracker, {k: (v, None) for k, v in DIRECT_STAGES.items()})
-
-    sample = integ.sample
-
-    def staged_sample(rng, o, d, active, *rest):
-        import drjit as dr
-
-        tracker.enter("camera rays + RNG setup")
-        tracker.stage("camera rays + RNG setup").rays += max(dr.width(o), dr.width(d))
-        tracker.leave((rng, o, d, active))
-        tracker.enter("integrator loop (throughput, RR, state)")
-        L = sample(rng, o, d, active, *rest)
-        tracker.leave(L)
-        return L
-
-    integ.sample = staged_sample
-
-    sequence = getattr(integ, "sample_sequence", None)
-    if sequence is None:
-        return
-    camera = "camera rays + RNG setup"
-
-    def staged_sequence(rng, camera_ray, count, **kwargs):
-        # The first camera rays are made before the loop and timed as their
-        # stage; the next paths' are made inside a symbolic conditional (path
-        # regeneration), where nothing can be evaluated, so their time stays
-        # in the loop's stage. The ray count is exact: one per sample.
-        import drjit as dr
-
-        first = [True]
-
-        def staged_camera(rng):
-            if not first[0]:
-                return camera_ray(rng)
-            first[0] = False
-            tracker.enter(camera, (rng,))
-            ray = camera_ray(rng)  # (o, d) or (o, d, filter weight or None)
-            tracker.leave((rng, *(v for v in ray if v is not None)))
-            return ray
-
-        tracker.enter(INSTRUMENTATION, (count,))
-        tracker.stage(camera).rays += int(dr.sum(count)[0])
-        tracker.leave(None)
-        tracker.enter("integrator loop (throughput, RR, state)")
-        out = sequence(rng, staged_camera, count, **kwargs)
-        tracker.leave(out)
-        return out
-
-    integ.sample_sequence = staged_sequence
 
 
 # --------------------------------------------------------------------------- running
@@ -410,87 +236,305 @@ def _megakernel_stages(entries: list[dict], rays: int) -> list[Stage]:
     return out
 
 
-def profile_mode(scene, popt: ProfileOptions, symbolic: bool, staged: bool = False) -> ModeResult:
+def _simd_width() -> int:
+    """Float32 lanes of a CPU vector: 16 with AVX-512, 8 with AVX2 (Linux CPU flags), else 4."""
+    try:
+        flags = Path("/proc/cpuinfo").read_text().split()
+    except OSError:
+        return 8
+    return 16 if "avx512f" in flags else 8 if "avx2" in flags else 4
+
+
+def _time_once(renderer) -> tuple[float, list[dict]]:
+    """One render's wall time and kernel history."""
     import drjit as dr
 
-    mode = "megakernel" if symbolic else "wavefront"
-    # (dr.JitFlag.CompressLoops would drop finished lanes in wavefront mode, but Dr.Jit 1.5
-    # emits invalid LLVM IR for the BVH traversal loop with it: not offered.)
-    flags = [(dr.JitFlag.SymbolicLoops, symbolic)]
-    samples = popt.width * popt.height * popt.spp
-    with contextlib.ExitStack() as flag_stack:
-        for flag, value in flags:
-            flag_stack.enter_context(dr.scoped_set_flag(flag, value))
-        renderer = _renderer(scene, popt)
-        # Warm-up: compiles every kernel (or loads it from Dr.Jit's caches).
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.sync_thread()
+        dr.kernel_history_clear()
+        t0 = time.perf_counter()
+        renderer.render()
+        dr.sync_thread()
+        t = time.perf_counter() - t0
+        return t, _history()
+
+
+def _timed(renderer, repeat: int) -> tuple[float, list[dict]]:
+    """The fastest of ``repeat`` renders (the machine may be shared) and its history."""
+    best = (float("inf"), [])
+    for _ in range(max(1, repeat)):
+        run = _time_once(renderer)
+        if run[0] < best[0]:
+            best = run
+    return best
+
+
+def _megakernel_counts(renderer) -> dict:
+    """Per-lane loop iterations and shadow rays of one megakernel render,
+    counted by scatter-adds in the loop (instance wrappers; not timed)."""
+    import drjit as dr
+    import numpy as np
+    from drjit.auto import UInt32
+
+    integ, scene = renderer.integrator, renderer.scene
+    iters, shadows = [], []
+    seq, bounce, occluded = integ.sample_sequence, integ._bounce, scene.occluded
+    cur = {}
+
+    def counting_sequence(rng, camera_ray, count, **kw):
+        n = dr.width(count)
+        cur["n"] = n
+        cur["it"], cur["sh"] = dr.zeros(UInt32, n), dr.zeros(UInt32, n)
+        dr.eval(cur["it"], cur["sh"])
+        out = seq(rng, camera_ray, count, **kw)
+        dr.eval(out)
+        iters.append(cur["it"].numpy())
+        shadows.append(cur["sh"].numpy())
+        return out
+
+    def counting_bounce(sc, state, rng):
+        dr.scatter_add(cur["it"], UInt32(1), dr.arange(UInt32, cur["n"]), state.active)
+        return bounce(sc, state, rng)
+
+    def counting_occluded(o, d, tmax, active):
+        act = active | dr.zeros(dr.auto.Bool, cur["n"])
+        dr.scatter_add(cur["sh"], UInt32(1), dr.arange(UInt32, cur["n"]), act)
+        return occluded(o, d, tmax, active)
+
+    integ.sample_sequence, integ._bounce, scene.occluded = counting_sequence, counting_bounce, counting_occluded
+    try:
+        renderer.render()
+    finally:
+        del integ.sample_sequence, integ._bounce, scene.occluded
+    w = _simd_width()
+    useful = executed = 0
+    for c in iters:
+        c = c.astype(np.int64)
+        pad = (-len(c)) % w
+        packets = np.concatenate([c, np.zeros(pad, np.int64)]).reshape(-1, w)
+        useful += int(c.sum())
+        executed += int(packets.max(1).sum()) * w
+    lanes = sum(len(c) for c in iters)
+    return {"simd_width_assumed": w, "lanes": lanes, "lane_iterations": useful,
+            "executed_lane_iterations": executed, "occupancy": useful / max(executed, 1),
+            "max_iterations_per_lane": int(max((c.max() for c in iters), default=0)),
+            "mean_iterations_per_lane": useful / max(lanes, 1),
+            "closest_hit_rays": useful, "shadow_rays": int(sum(int(x.sum()) for x in shadows))}
+
+
+def _wavefront_stages(renderer, sort: bool) -> tuple[list[Stage], float, list[list[int]]]:
+    """Stages of one instrumented wavefront render, its wall time and the live
+    paths per bounce of each pass."""
+    import drjit as dr
+
+    from ..render.integrators.wavefront import OUTSIDE, WaveStats
+
+    integ = renderer.integrator
+    integ.sort = sort
+    integ.stats = WaveStats(history=True)
+    try:
         with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+            dr.sync_thread()
             dr.kernel_history_clear()
             t0 = time.perf_counter()
             renderer.render()
             dr.sync_thread()
-            warmup = time.perf_counter() - t0
-            warm_backend = sum(e["backend_ms"] for e in _history())
-        # Timed runs (the fastest is kept: the machine may be shared).
-        seconds, entries = float("inf"), []
-        dr.flush_malloc_cache()
-        dr.detail.malloc_clear_statistics()
-        for _ in range(max(1, popt.repeat)):
-            with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
-                dr.kernel_history_clear()
-                t0 = time.perf_counter()
-                renderer.render()
-                dr.sync_thread()
-                t = time.perf_counter() - t0
-                run_entries = _history()
-            if t < seconds:
-                seconds, entries = t, run_entries
-        from ..backend import jit_backend
+            staged = time.perf_counter() - t0
+            rest = _history()  # accumulation and readback after each pass
+        stats = integ.stats
+    finally:
+        integ.stats, integ.sort = None, True
+    stages = {}
+    for ws in stats.stages.values():
+        stages[ws.name] = Stage(ws.name, kernel_ms=ws.kernel_ms, wall_ms=ws.wall_ms, launches=ws.launches,
+                                jit_kernels=ws.jit_kernels, lanes=ws.lanes, rays=ws.rays,
+                                codegen_ms=ws.codegen_ms)
+    acc = stages.setdefault(OUTSIDE, Stage(OUTSIDE))
+    acc.add(rest)  # accumulation and readback after the last pass
+    # its wall time: what the stages inside sample() did not account for
+    acc.wall_ms = max(0.0, staged * 1e3 - sum(s.wall_ms for s in stages.values() if s is not acc))
+    return list(stages.values()), staged, stats.live
 
-        peak = int(dr.detail.malloc_watermark(jit_backend()))
-        result = ModeResult(mode, warmup, warm_backend, seconds, samples, peak, entries)
-        if symbolic:
-            result.stages = _megakernel_stages(entries, samples)
-        elif staged:
-            renderer = _renderer(scene, popt)
-            tracker = StageTracker()
-            _instrument(renderer, tracker)
-            with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True), \
-                    dr.scoped_set_flag(dr.JitFlag.LaunchBlocking, True):
-                renderer.render()  # warm-up of the instrumented kernels
-                dr.sync_thread()
-                dr.kernel_history_clear()
-                tracker.stages.clear()
-                t0 = tracker.t = time.perf_counter()
-                renderer.render()
-                tracker.flush()
-                result.staged_seconds = time.perf_counter() - t0
-            result.stages = [s for s in tracker.stages.values() if s.name != INSTRUMENTATION]
-            inst = tracker.stages.get(INSTRUMENTATION)
-            result.instrumentation = inst.as_dict() if inst else None
+
+def profile_mode(scene, popt: ProfileOptions, mode: str, base=None) -> ModeResult:
+    """Profile ``mode`` (a renderer of its own, or derived from ``base``'s device
+    scene); the renderer stays on the result (``result.renderer``)."""
+    from dataclasses import replace
+
+    import drjit as dr
+
+    from ..backend import jit_backend
+
+    popt = replace(popt, render=replace(popt.render, mode=mode))
+    samples = popt.width * popt.height * popt.spp
+    renderer = _renderer(scene, popt) if base is None else base.derive(replace(popt.render, progress=False))
+    # Warm-up: compiles every kernel (or loads it from Dr.Jit's caches).
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.kernel_history_clear()
+        t0 = time.perf_counter()
+        renderer.render()
+        dr.sync_thread()
+        warmup = time.perf_counter() - t0
+        warm_backend = sum(e["backend_ms"] for e in _history())
+    dr.flush_malloc_cache()
+    dr.detail.malloc_clear_statistics()
+    seconds, entries = _timed(renderer, popt.repeat)
+    peak = int(dr.detail.malloc_watermark(jit_backend()))
+    result = ModeResult(mode, warmup, warm_backend, seconds, samples, peak, entries)
+    result.renderer = renderer
+    if mode == "megakernel":
+        result.occupancy = _megakernel_counts(renderer)
+        return result  # its stages: from the fastest run's history (run_profile)
+    # the instrumented renders, sorted and unsorted interleaved; the fastest of each
+    staged = {True: None, False: None}
+    for _ in range(max(1, popt.repeat)):
+        for srt in (True, False):
+            run = _wavefront_stages(renderer, sort=srt)
+            if staged[srt] is None or run[1] < staged[srt][1]:
+                staged[srt] = run
+    result.stages, result.staged_seconds, live = staged[True]
+    result.unsorted_stages = staged[False][0]
+    rays = {s.name: s.rays for s in result.stages}
+    lane_bounces = sum(sum(v) for v in live)
+    full = sum(len(v) * v[0] for v in live if v)
+    result.occupancy = {"occupancy": 1.0, "bounces_per_pass": [len(v) for v in live],
+                        "live_per_bounce": live[0] if live else [], "lane_bounces": lane_bounces,
+                        "full_width_lane_bounces": full, "live_fraction": lane_bounces / max(full, 1),
+                        "closest_hit_rays": rays.get("closest hit", 0), "shadow_rays": rays.get("shadow rays", 0)}
+    # A/B in one process, interleaved (the machine may be shared): the same renderer
+    # without the coherence sort (the same image, bit for bit) and with the other
+    # fused-tail setting; the best of ``repeat`` renders of each, the sorted render's
+    # runs included.
+    integ = renderer.integrator
+    base_tail = integ.tail
+    other_tail = TAIL_AB if base_tail == 0 else 0
+    variants = {"sorted": (True, base_tail), "unsorted": (False, base_tail), "tail": (True, other_tail)}
+    best = {"sorted": seconds, "unsorted": float("inf"), "tail": float("inf")}
+    entries_of = {"sorted": entries}
+    try:
+        for name in ("unsorted", "tail"):  # warm-up: their few other kernels
+            integ.sort, integ.tail = variants[name]
+            renderer.render()
+        for _ in range(max(1, popt.repeat)):
+            for name, (srt, tl) in variants.items():
+                integ.sort, integ.tail = srt, tl
+                t, run_entries = _time_once(renderer)
+                if t < best[name]:
+                    best[name], entries_of[name] = t, run_entries
+    finally:
+        integ.sort, integ.tail = True, base_tail
+    result.seconds, result.entries = best["sorted"], entries_of["sorted"]
+    result.unsorted_seconds = best["unsorted"]
+    result.tail_ab = {"tail": other_tail, "seconds": best["tail"], "render_tail": base_tail}
     return result
 
 
-def run_profile(scene_path: str | Path, popt: ProfileOptions) -> list[ModeResult]:
+TAIL_AB = 16384  # the fused tail the A/B tries (paths left in a pass)
+
+
+def run_profile(scene_path: str | Path, popt: ProfileOptions, modes=MODES) -> list[ModeResult]:
     from ..backend import ensure
     from ..scene import load_scene
 
     scene_path = Path(scene_path)
     if not scene_path.is_file():
         raise DrptError(f"{scene_path}: scene file not found")
+    if popt.render.integrator != "path":
+        raise DrptError(f"profile compares the path tracer's modes, not --integrator {popt.render.integrator}")
     scene = load_scene(scene_path)
     ensure()
     from ..render.renderer import plan_passes
 
-    mk = profile_mode(scene, popt, True)
-    wf = profile_mode(scene, popt, False, staged=True)
-    mk.passes = wf.passes = len(plan_passes(popt.width, popt.height, popt.spp, popt.max_lanes))
-    # Both modes trace the same rays (same seed, same image): the wavefront run counted
-    # them, the fused kernel cannot. Credit the megakernel with those rays.
-    traced = sum(s.rays for s in wf.stages if s.name in ("closest-hit traversal", "shadow rays"))
-    for s in mk.stages:
-        if s.name == FUSED and traced:
-            s.rays = traced
-    return [mk, wf]
+    out = []
+    for m in modes:  # one device scene: the wavefront renderer is derived from the first
+        out.append(profile_mode(scene, popt, m, out[0].renderer if out else None))
+    for r in out:
+        r.passes = len(plan_passes(popt.width, popt.height, popt.spp, popt.max_lanes))
+    if len(out) > 1:
+        # the modes against each other, interleaved (the machine may be shared): best of
+        # ``repeat`` more renders each, with each mode's earlier timed runs
+
+        for _ in range(max(1, popt.repeat)):
+            for r in out:
+                t, run_entries = _time_once(r.renderer)
+                if t < r.seconds:
+                    r.seconds, r.entries = t, run_entries
+    for r in out:
+        del r.renderer
+        if r.mode == "megakernel":
+            r.stages = _megakernel_stages(r.entries, r.occupancy["closest_hit_rays"] + r.occupancy["shadow_rays"])
+    return out
+
+
+def verdict(results: list[ModeResult]) -> list[str]:
+    """Which mode wins on this scene and why, from the measured numbers."""
+    by = {r.mode: r for r in results}
+    lines = []
+    wf = by.get("wavefront")
+    if wf is not None and wf.unsorted_seconds:
+        st = {s.name: s for s in wf.stages}
+        un = {s.name: s for s in wf.unsorted_stages}
+        ch, chu = st.get("closest hit"), un.get("closest hit")
+        sh, shu = st.get("shadow rays"), un.get("shadow rays")
+        srt = st.get("compact + sort")
+        parts = [f"coherence sort: wavefront {wf.seconds:.3f} s sorted vs {wf.unsorted_seconds:.3f} s "
+                 f"unsorted ({wf.unsorted_seconds / max(wf.seconds, 1e-12):.2f}x)"]
+        if ch and chu:
+            parts.append(f"closest-hit kernels {ch.kernel_ms:.1f} vs {chu.kernel_ms:.1f} ms")
+        if sh and shu:
+            parts.append(f"shadow-ray kernels {sh.kernel_ms:.1f} vs {shu.kernel_ms:.1f} ms")
+        if srt and un.get("compact + sort"):
+            parts.append(f"compaction + sort {srt.kernel_ms:.1f} ms vs compaction alone "
+                         f"{un['compact + sort'].kernel_ms:.1f} ms")
+        lines.append("; ".join(parts))
+    if wf is not None and wf.tail_ab:
+        ab = wf.tail_ab
+        lines.append(f"fused tail: --wavefront-tail {ab['render_tail']} {wf.seconds:.3f} s vs {ab['tail']} "
+                     f"{ab['seconds']:.3f} s ({ab['seconds'] / max(wf.seconds, 1e-12):.2f}x)")
+    mk = by.get("megakernel")
+    if mk is None or wf is None:
+        return lines
+    faster, slower = (mk, wf) if mk.seconds <= wf.seconds else (wf, mk)
+    lines.append(f"{faster.mode} wins: {slower.seconds / max(faster.seconds, 1e-12):.2f}x faster "
+                 f"({mk.seconds:.3f} s megakernel, {wf.seconds:.3f} s wavefront, best of the timed runs)")
+    occ = mk.occupancy.get("occupancy", 0.0)
+    wf_outside = max(0.0, wf.seconds * 1e3 - wf.kernel_ms)
+    mk_outside = max(0.0, mk.seconds * 1e3 - mk.kernel_ms)
+    lines.append(f"  kernel time: megakernel {mk.kernel_ms:.1f} ms, wavefront {wf.kernel_ms:.1f} ms "
+                 f"({wf.kernel_ms / max(mk.kernel_ms, 1e-12):.2f}x); outside kernels (launches, syncs, "
+                 f"Python): {mk_outside:.1f} ms in {mk.launches} launches vs {wf_outside:.1f} ms in "
+                 f"{wf.launches} launches")
+    lines.append(f"  megakernel SIMD occupancy {100 * occ:.1f}% (W = {mk.occupancy.get('simd_width_assumed')}: "
+                 f"{mk.occupancy.get('executed_lane_iterations', 0) - mk.occupancy.get('lane_iterations', 0)} "
+                 f"idle lane-iterations of {mk.occupancy.get('executed_lane_iterations', 0)}); wavefront "
+                 f"kernels run live paths only ({wf.occupancy.get('lane_bounces', 0)} lane-bounces, "
+                 f"{100 * wf.occupancy.get('live_fraction', 0):.1f}% of full-width bounces) but keep the path "
+                 f"state in memory: peak {_mem(wf.peak_bytes)} vs {_mem(mk.peak_bytes)}")
+    gap = (wf.seconds - mk.seconds) * 1e3  # > 0: the megakernel wins
+    gap_k, gap_o = wf.kernel_ms - mk.kernel_ms, wf_outside - mk_outside
+    causes = {"kernel time": (gap_k, "the stages write and read the path state through memory, "
+                              "a cost the fused kernel's registers avoid"),
+              "time outside kernels": (gap_o, "every bounce traces each stage's Python code again and "
+                                       "launches and synchronises its kernels, also for the long tail "
+                                       "of bounces with few live paths")}
+    if faster is mk:
+        main_cause = max(causes, key=lambda k: causes[k][0])
+        why = (f"of the {gap:.1f} ms gap, {gap_k:.1f} ms is kernel time and {gap_o:.1f} ms time outside "
+               f"kernels; the larger, {main_cause}: {causes[main_cause][1]}; the wavefront's compaction "
+               f"saves the {100 * (1 - occ):.0f}% idle SIMD lanes of the fused kernel, which is less")
+    else:
+        why = (f"its kernels skip the megakernel's idle SIMD lanes ({100 * (1 - occ):.0f}% of the fused "
+               f"kernel's lane-iterations) and run each BSDF's code on its own lanes: kernel time "
+               f"{-gap_k:.1f} ms less, against {gap_o:.1f} ms more outside kernels in {wf.launches} launches")
+    lines.append(f"  why: {why}")
+    ab = wf.tail_ab
+    if ab and ab.get("seconds"):
+        rel = ab["seconds"] / max(mk.seconds, 1e-12)
+        lines.append(f"  with --wavefront-tail {ab['tail']} (the last paths in one fused loop) the wavefront "
+                     f"takes {ab['seconds']:.3f} s, {rel:.2f}x the megakernel's time: "
+                     + ("the best mode measured here" if rel < 1 and faster is mk else
+                        "faster than without" if ab["seconds"] < wf.seconds else "no gain"))
+    return lines
 
 
 # --------------------------------------------------------------------------- output
@@ -511,14 +555,35 @@ def format_table(r: ModeResult) -> str:
     lines.append(title)
     lines.append(f"  warm-up render {r.warmup_s:.2f} s (LLVM backend/compile {r.warmup_backend_ms:.0f} ms);"
                  f" timed run: codegen {r.codegen_ms:.1f} ms, backend {r.backend_ms:.1f} ms")
+    occ = r.occupancy
     if r.mode == "wavefront":
-        lines.append(f"  stages from an instrumented wavefront run ({r.staged_seconds:.3f} s wall, "
-                     "LaunchBlocking, stage boundaries evaluated); exclusive times")
+        staged = f"{r.staged_seconds:.3f} s" if r.staged_seconds is not None else "-"
+        lines.append(f"  stages from an instrumented wavefront run ({staged} wall, synchronised at "
+                     "every stage boundary); exclusive times")
+        if occ:
+            live = occ.get("live_per_bounce", [])
+            shown = ", ".join(str(x) for x in live[:8]) + (", ..." if len(live) > 8 else "")
+            lines.append(f"  occupancy: kernels run live paths only (compacted); live paths per bounce "
+                         f"(first pass) {shown}; {occ.get('lane_bounces', 0)} lane-bounces = "
+                         f"{100 * occ.get('live_fraction', 0):.1f}% of what full-width bounces would run; "
+                         f"rays: {occ.get('closest_hit_rays', 0)} closest hit, {occ.get('shadow_rays', 0)} shadow")
+        if r.unsorted_seconds:
+            lines.append(f"  without the coherence sort: {r.unsorted_seconds:.3f} s "
+                         f"({r.unsorted_seconds / max(r.seconds, 1e-12):.2f}x the sorted render)")
+        if r.tail_ab:
+            lines.append(f"  with --wavefront-tail {r.tail_ab['tail']} instead of {r.tail_ab['render_tail']}: "
+                         f"{r.tail_ab['seconds']:.3f} s ({r.tail_ab['seconds'] / max(r.seconds, 1e-12):.2f}x)")
     else:
-        lines.append("  stages are fused into one kernel: split by kernel only; its rays are "
-                     "those the wavefront run counted (same rays)")
+        lines.append("  stages are fused into one kernel: split by kernel only; rays counted by an "
+                     "instrumented render (closest hit + shadow)")
+        if occ:
+            lines.append(f"  occupancy: {100 * occ['occupancy']:.1f}% of the lane-iterations the SIMD packets "
+                         f"ran were live (W = {occ['simd_width_assumed']} assumed, {occ['lanes']} lanes, "
+                         f"{occ['mean_iterations_per_lane']:.1f} iterations per lane on average, "
+                         f"at most {occ['max_iterations_per_lane']}); rays: {occ['closest_hit_rays']} "
+                         f"closest hit, {occ['shadow_rays']} shadow")
         fused = next((s for s in r.stages if s.name == FUSED), None)
-        passes = getattr(r, "passes", 0)
+        passes = r.passes or 0
         if fused is not None and passes and fused.jit_kernels > passes:
             lines.append(f"  note: the path kernel ran {fused.jit_kernels} times for {passes} pass(es): "
                          "each of L.x, L.y, L.z and the NaN count is evaluated by its own "
@@ -536,10 +601,6 @@ def format_table(r: ModeResult) -> str:
     wall = f"{total_w:9.1f}" if total_w else "        -"
     lines.append(f"  {'total':44s} {sum(s.kernel_ms for s in r.stages):10.1f} {100.0:5.1f}% {wall} "
                  f"{sum(s.launches for s in r.stages):8d}")
-    inst = getattr(r, "instrumentation", None)
-    if inst:
-        lines.append(f"  (not in the stages: {inst['wall_ms']:.1f} ms wall, {inst['launches']} launches "
-                     "of profiler instrumentation: ray counting, history reads)")
     return "\n".join(lines)
 
 
@@ -552,7 +613,7 @@ def save_chart(results: list[ModeResult], out: Path, title: str) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(13, 5), gridspec_kw={"width_ratios": [1, 2.4]})
     ax = axes[0]
     names = [r.mode for r in results]
-    ax.bar(names, [r.seconds * 1e3 for r in results], color=["tab:blue", "tab:orange"],
+    ax.bar(names, [r.seconds * 1e3 for r in results], color=["tab:blue", "tab:orange"][:len(results)],
            label="wall")
     ax.bar(names, [r.kernel_ms for r in results], width=0.4, color="k", alpha=0.5,
            label="sum of kernel times")
@@ -589,8 +650,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("profile", help="profile a render: megakernel vs wavefront, per stage",
                               description=__doc__.split("\n")[0], allow_abbrev=False)
     p.add_argument("scene", help="scene file")
-    add_render_flags(p, size=(128, 128), spp=16, accel="auto", integrator="path",
+    add_render_flags(p, omit=("mode",), size=(128, 128), spp=16, accel="auto", integrator="path",
                      bsdf="phong")
+    p.add_argument("--mode", choices=("both", *MODES), default="both",
+                   help="the execution modes to profile (default both, with the verdict)")
     p.add_argument("--repeat", type=int, default=1,
                    help="timed renders per mode after the warm-up; the fastest is reported")
     p.add_argument("--out", default=None,
@@ -603,7 +666,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def main(args: argparse.Namespace) -> int:
     from ..options import options_from_args
 
-    options = options_from_args(args)
+    options = options_from_args(args, mode="megakernel")  # profile_mode sets each mode
     if args.repeat <= 0:
         raise DrptError(f"--repeat must be positive, got {args.repeat}")
     scene = Path(args.scene)
@@ -614,28 +677,25 @@ def main(args: argparse.Namespace) -> int:
         raise DrptError(f"{out}: folder {out.parent} does not exist")
     popt = ProfileOptions(render=options, repeat=args.repeat)
     width, height = options.width, options.height
-    results = run_profile(scene, popt)
+    modes = MODES if args.mode == "both" else (args.mode,)
+    results = run_profile(scene, popt, modes)
     head = (f"{scene.name}: {width}x{height}, {options.spp} spp, {options.integrator}, "
             f"{options.bsdf}, accel {options.accel}")
     print(head)
     for r in results:
         print()
         print(format_table(r))
-    mk, wf = results
-    faster = mk if mk.seconds <= wf.seconds else wf
-    slower = wf if faster is mk else mk
-    print(f"\n{faster.mode} is {slower.seconds / max(faster.seconds, 1e-12):.2f}x faster "
-          f"({wf.launches} vs {mk.launches} launches)")
+    found = verdict(results)
+    if found:
+        print()
+        print("\n".join(found))
     save_chart(results, out, head)
     js = out.with_suffix(".json")
     data = {"scene": str(scene), "options": popt.as_dict(),
             "modes": {r.mode: r.as_dict() for r in results},
+            "verdict": found,
             "notes": "times in ms unless named *_seconds; stage times are exclusive; wavefront "
-                     "stages come from an instrumented run (see drpt/profile.py)"}
-    for r in results:
-        inst = getattr(r, "instrumentation", None)
-        if inst:
-            data["modes"][r.mode]["instrumentation"] = inst
+                     "stages come from an instrumented run (see drpt/tools/profile.py)"}
     js.write_text(json.dumps(data, indent=1))
     print(f"{out} and {js} written")
     return 0
