@@ -51,21 +51,19 @@ Film, sampler, integrator
     ``hide_emitters`` (default false; a Mitsuba XML scene's own, through ``drpt export``).
 Materials
     Each material goes through :func:`drpt.shading.interpret_scene` (the
-    same call the renderer makes, with the same ``bsdf`` mode) and becomes the
-    Mitsuba counterpart of its kind: ``diffuse`` -> ``twosided(diffuse)``,
-    ``phong`` -> ``twosided(drpt_phong)`` (a registered plugin,
-    :mod:`drpt.export.mitsuba_phong`), ``cook_torrance`` ->
-    :mod:`drpt.export.mitsuba_cook_torrance`, ``dielectric`` and ``mirror``
-    -> :mod:`drpt.export.mitsuba_specular`. Reflective BSDFs are wrapped in
-    ``twosided`` (drpt surfaces are two-sided, Mitsuba BSDFs one-sided);
-    the dielectric is not. ``map_kd`` becomes a ``bitmap`` texture
+    same call the renderer makes, with the same ``bsdf`` mode), and
+    :mod:`drpt.export.mitsuba_bsdf` writes its BSDF tree node for node as
+    the Mitsuba plugins of the same names (``phong`` as ``drpt_phong``, a
+    registered plugin, :mod:`drpt.export.mitsuba_phong`). drpt's own
+    materials are wrapped in ``twosided`` by the interpretation, transmissive
+    ones are not. A texture parameter becomes a ``bitmap``
     (``filter_type="bilinear"``, ``wrap_mode="repeat"``, sRGB-decoded for
-    8-bit files as Mitsuba does by default) and replaces ``kd``. In a scene
+    8-bit files as Mitsuba does by default). In a scene
     with texture coordinates, faces without them get explicit uv (0, 0)
     (drpt's lookup; Mitsuba would otherwise use barycentrics); in a scene
-    without any, ``interpret_scene`` drops the textures (both drpt and the
-    export use ``Kd``) and the export warns, naming each material whose
-    texture it dropped. Textures on spheres/planes use Mitsuba's
+    without any, ``interpret_scene`` replaces each texture by its constant
+    value (both drpt and the export use it) and the export warns, naming
+    each material whose texture it dropped. Textures on spheres/planes use Mitsuba's
     own parameterization, not yet matched to drpt's.
 Texture coordinates
     drpt stores uvs as written in the OBJ file: ``v = 0`` is the *bottom* row

@@ -20,12 +20,12 @@ below) and ``metalness`` (Float, ``m`` in [0, 1]).
 
 Roughness-to-alpha mapping
 --------------------------
-drpt's parameter *is* the GGX ``alpha`` (:mod:`drpt.shading`: the scene
-file's ``Roughness``/``Pr`` taken as alpha directly, as the seed renderer's
-``sampleGGX`` does; ``alpha = sqrt(2 / (Ns + 2))`` when only ``Ns`` is given).
+drpt's parameter *is* the GGX ``alpha``; :mod:`drpt.shading` sets it to the
+seed's ``Roughness^2`` (the seed's parser stores ``Roughness * Roughness`` and
+its GGX squares that again), with ``Roughness = 0.95`` when absent.
 Principled's ``roughness`` is the *perceptual* roughness ``r`` with
-``alpha = r^2``, so the exporter (:mod:`drpt.export.mitsuba_cook_torrance`)
-writes ``roughness = sqrt(alpha)``. Inside the lobe:
+``alpha = r^2``, so the exporter (:mod:`drpt.export.mitsuba_bsdf`) writes
+``roughness = sqrt(alpha)``, i.e. the seed's ``Roughness``. Inside the lobe:
 
 * ``a = max(alpha, 1e-3)`` is the alpha of ``D`` and ``G`` (principled's
   clamp ``max(0.001, roughness^2)``), so alpha 0 renders as alpha 1e-3;
