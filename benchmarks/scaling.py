@@ -22,10 +22,11 @@ For each triangle count (default about 1k, 10k, 100k, 1M and 4M):
   warm-up excluded, the best of ``--repeat``;
 * ratios Mitsuba / drpt for times (> 1: drpt faster).
 
+One untimed run at 1k triangles comes first (one-time initialisation).
 Builds and loads run once per size (a 4M-triangle build is minutes of the
 budget). Before each size the script compares an estimate of the memory it
-needs (from the peak resident memory per triangle of the sizes before it,
-else a fixed 3 KiB per triangle) with ``MemAvailable`` and skips the size,
+needs (the growth of the peak resident memory per added triangle between
+the first size and the largest one so far, else a fixed 3 KiB per triangle) with ``MemAvailable`` and skips the size,
 printing why, if it does not fit. Prints a markdown table; timers are
 bracketed by ``dr.sync_thread()``. Measure on an idle machine
 (docs/performance.md).
@@ -218,8 +219,10 @@ def main(argv=None) -> list[dict]:
           f"render best of {a.repeat} after a warm-up, build and load once; load average at start: {_load()}",
           flush=True)
     rows = []
+    # one untimed run first: Dr.Jit's and Mitsuba's one-time initialisation is not the first size's
+    measure(1000, (16, 16), 1, 1, a.max_depth, a.accel, mitsuba)
+    first = None  # (triangles, peak RSS) of the first size measured
     per_tri = None
-    base = _peak_rss()
     for n in counts:
         need = int(n * (per_tri or FALLBACK_BYTES_PER_TRI))
         avail = _mem_available()
@@ -231,8 +234,11 @@ def main(argv=None) -> list[dict]:
             continue
         row = measure(n, tuple(a.size), a.spp, a.repeat, a.max_depth, a.accel, mitsuba)
         peak = _peak_rss()
-        if peak > base:
-            per_tri = max(per_tri or 0.0, (peak - base) / row["tris"])
+        if first is None:
+            first = (row["tris"], peak)
+        elif row["tris"] > first[0]:
+            # peak memory per added triangle (the fixed cost of the libraries excluded)
+            per_tri = max(per_tri or 0.0, (peak - first[1]) / (row["tris"] - first[0]))
         print(f"{row['tris']} triangles done: peak RSS {peak / 2**30:.2f} GiB, load {_load()}", flush=True)
         rows.append(row)
     print(f"load average at end: {_load()}")
