@@ -133,24 +133,7 @@ class PathIntegrator:
         si = scene.intersect(s.o, s.d, s.active)
 
         # ---- emitter hit by the previous ray (or seen by the camera)
-        hit_emitter = s.active & si.valid
-        if opt.hide_emitters:  # Mitsuba's hide_emitters: the camera sees no emitter or sky
-            hit_emitter &= s.depth > 0
-        le = scene.emitted(si)
-        w = Float(1.0)
-        if nee:
-            pdf_l = scene.pdf_area_emitter(si, s.d, hit_emitter)
-            w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
-        L = s.L + dr.select(hit_emitter, s.beta * le * w, 0.0)
-        escaped = s.active & ~si.valid
-        if opt.hide_emitters:
-            escaped &= s.depth > 0
-        if scene.has_background:
-            L = L + dr.select(escaped, s.beta * Array3f(*scene.background), 0.0)
-        if scene.has_environment:
-            le_env, pdf_env = scene.eval_pdf_environment(s.d, escaped)
-            w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env))
-            L = L + dr.select(escaped, s.beta * le_env * w_env, 0.0)
+        L = add_emission(scene, opt, si, s, s.L, s.active)
 
         active = s.active & si.valid
         if opt.max_depth >= 0:
@@ -167,24 +150,63 @@ class PathIntegrator:
         if scene.has_environment and scene.has_smooth_bsdfs:
             L = L + s.beta * self.direct.env_light(si, u_env, active, mis=True)
 
-        # ---- BSDF sampling: continue the path
-        u_lobe = rng.next_float32()
-        u_bsdf = Array2f(rng.next_float32(), rng.next_float32())
-        wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
-        beta = s.beta * bs.weight
-        eta = s.eta * bs.eta
-        depth = s.depth + 1
-
-        # ---- Russian roulette
-        u_rr = rng.next_float32()
-        if opt.rr_prob is not None:
-            q = Float(opt.rr_prob)
-        else:
-            q = dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
-        rr_on = depth >= opt.rr_depth
-        survive = u_rr < q
-        beta = dr.select(rr_on, beta / q, beta)
-        active &= bs.valid & (~rr_on | survive) & (dr.max(beta) > 0.0)
+        # ---- BSDF sampling and Russian roulette: continue the path
+        wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, rng)
+        active &= live
         return PathState(o=scene.spawn(si, wo), d=Array3f(wo), L=L, beta=beta, eta=eta,
                          depth=depth, prev_pdf=Float(bs.pdf), prev_delta=Bool(bs.delta),
                          active=active)
+
+
+def add_emission(scene: DeviceScene, opt: PathOptions, si, s, L: Array3f, active: Bool | None) -> Array3f:
+    """``L`` plus what the ray ``s.d`` of path state ``s`` sees at ``si``: the
+    emitter it hits (MIS-weighted against the previous BSDF sample unless that
+    was a delta lobe), or the background and the sky it escapes to, times
+    ``s.beta``. ``active`` masks the lanes (``None``: every lane is a live path).
+    Shared by the megakernel and the wavefront integrator: one estimator."""
+    nee = scene.has_area_lights and scene.has_smooth_bsdfs
+    hit_emitter = si.valid if active is None else active & si.valid
+    hit_emitter = Bool(hit_emitter)
+    if opt.hide_emitters:  # Mitsuba's hide_emitters: the camera sees no emitter or sky
+        hit_emitter &= s.depth > 0
+    le = scene.emitted(si)
+    w = Float(1.0)
+    if nee:
+        pdf_l = scene.pdf_area_emitter(si, s.d, hit_emitter)
+        w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
+    L = L + dr.select(hit_emitter, s.beta * le * w, 0.0)
+    escaped = ~si.valid if active is None else active & ~si.valid
+    if opt.hide_emitters:
+        escaped &= s.depth > 0
+    if scene.has_background:
+        L = L + dr.select(escaped, s.beta * Array3f(*scene.background), 0.0)
+    if scene.has_environment:
+        le_env, pdf_env = scene.eval_pdf_environment(s.d, escaped)
+        w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env))
+        L = L + dr.select(escaped, s.beta * le_env * w_env, 0.0)
+    return L
+
+
+def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32):
+    """Sample the BSDF at ``si`` and play Russian roulette for path state ``s``
+    (three random numbers: lobe, direction, roulette). Returns ``(wo, bs, beta,
+    eta, depth, live)``: the new direction and sample, the throughput (divided
+    by the survival probability where roulette played), the product of relative
+    IORs, the depth, and the lanes whose path goes on. Shared by the megakernel
+    and the wavefront integrator."""
+    u_lobe = rng.next_float32()
+    u_bsdf = Array2f(rng.next_float32(), rng.next_float32())
+    wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
+    beta = s.beta * bs.weight
+    eta = s.eta * bs.eta
+    depth = s.depth + 1
+    u_rr = rng.next_float32()
+    if opt.rr_prob is not None:
+        q = Float(opt.rr_prob)
+    else:
+        q = dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
+    rr_on = depth >= opt.rr_depth
+    survive = u_rr < q
+    beta = dr.select(rr_on, beta / q, beta)
+    live = bs.valid & (~rr_on | survive) & (dr.max(beta) > 0.0)
+    return wo, bs, beta, eta, depth, live

@@ -80,8 +80,8 @@ from drjit.auto import PCG32, Array2f, Array3f, Array3u, Bool, Float, UInt32, UI
 from ...options import PathOptions
 from ..scene import DeviceScene
 from ..surface import Interaction
-from .common import DirectLight, ShadowQuery, power_heuristic
-from .path import PathIntegrator, PathState
+from .common import DirectLight, ShadowQuery
+from .path import PathIntegrator, PathState, add_emission, continue_path
 
 MORTON_BITS = 6  # per axis
 KEY_BITS = 3 + 3 * MORTON_BITS
@@ -349,26 +349,8 @@ class WavefrontIntegrator:
         si = scene.interaction(s.o, s.d, hit)
         timer.done("interaction", si, lanes=n)
 
-        # ---- emission (as PathIntegrator._bounce)
-        nee = scene.has_area_lights and scene.has_smooth_bsdfs
-        hit_emitter = Bool(si.valid)
-        if opt.hide_emitters:
-            hit_emitter &= s.depth > 0
-        le = scene.emitted(si)
-        w = Float(1.0)
-        if nee:
-            pdf_l = scene.pdf_area_emitter(si, s.d, hit_emitter)
-            w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
-        add = dr.select(hit_emitter, s.beta * le * w, 0.0)
-        escaped = ~si.valid
-        if opt.hide_emitters:
-            escaped &= s.depth > 0
-        if scene.has_background:
-            add = add + dr.select(escaped, s.beta * Array3f(*scene.background), 0.0)
-        if scene.has_environment:
-            le_env, pdf_env = scene.eval_pdf_environment(s.d, escaped)
-            w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env))
-            add = add + dr.select(escaped, s.beta * le_env * w_env, 0.0)
+        # ---- emission (the megakernel's own code)
+        add = add_emission(scene, opt, si, s, dr.zeros(Array3f, n), None)
         dr.scatter_add(L, add, s.lane)
         cont = Bool(si.valid)
         if opt.max_depth >= 0:
@@ -459,21 +441,7 @@ class WavefrontIntegrator:
             q.value = s.beta * q.value
             q.ok = q.ok & (dr.max(q.value) != 0.0)
 
-        u_lobe = rng.next_float32()
-        u_bsdf = Array2f(rng.next_float32(), rng.next_float32())
-        wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
-        beta = s.beta * bs.weight
-        eta = s.eta * bs.eta
-        depth = s.depth + 1
-        u_rr = rng.next_float32()
-        if opt.rr_prob is not None:
-            q = Float(opt.rr_prob)
-        else:
-            q = dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
-        rr_on = depth >= opt.rr_depth
-        survive = u_rr < q
-        beta = dr.select(rr_on, beta / q, beta)
-        live = bs.valid & (~rr_on | survive) & (dr.max(beta) > 0.0)
+        wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, rng)
         out = WaveState(lane=s.lane, o=scene.spawn(si, wo), d=Array3f(wo), beta=beta, eta=eta,
                         depth=depth, prev_pdf=Float(bs.pdf), prev_delta=Bool(bs.delta),
                         rng_state=rng.state, rng_inc=rng.inc)
