@@ -47,7 +47,6 @@ def run_chi2(sample, pdf, sample_dim=2, sample_count=400_000, res=61, seed=0):
     """
     mitsuba()
     from drjit.auto import Array2f, Array3f
-    from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 
     def sample_func(u):
         return to_mitsuba_vec3(sample(to_drpt(u, Array2f)))
@@ -55,9 +54,20 @@ def run_chi2(sample, pdf, sample_dim=2, sample_count=400_000, res=61, seed=0):
     def pdf_func(w):
         return to_mitsuba_float(pdf(to_drpt(w, Array3f)))
 
-    test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
-                         sample_dim=sample_dim, sample_count=sample_count, res=res, seed=seed)
-    # On failure Mitsuba writes chi2_data.py into the working directory.
+    return spherical_chi2(sample_func, pdf_func, sample_dim=sample_dim, sample_count=sample_count,
+                          res=res, seed=seed)
+
+
+def spherical_chi2(sample_func, pdf_func, **kwargs):
+    """Mitsuba's ``ChiSquareTest`` on the sphere with Mitsuba-typed
+    ``sample_func``/``pdf_func`` and its other arguments (``sample_dim``,
+    ``sample_count``, ``res``, ``ires``, ``seed``), run in a temporary
+    directory (on failure Mitsuba writes chi2_data.py into the working
+    directory). Returns (passed, messages)."""
+    mitsuba()
+    from mitsuba.chi2 import ChiSquareTest, SphericalDomain
+
+    test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func, **kwargs)
     cwd = os.getcwd()
     with tempfile.TemporaryDirectory() as tmp:
         os.chdir(tmp)

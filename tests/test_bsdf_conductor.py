@@ -20,7 +20,6 @@ named materials' complex IORs):
 from __future__ import annotations
 
 import os
-import tempfile
 from types import SimpleNamespace
 
 import drjit as dr
@@ -28,7 +27,7 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float, UInt32
 
-from chi2util import mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
+from chi2util import mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 from drpt import conductors
 from drpt.bsdf_kinds import defaults
 from drpt.render.bsdf import REGISTRY, lobe
@@ -411,18 +410,8 @@ ROT = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])  # normal -> +y (peaks 
 
 def _chi2(sample_func, pdf_func, res=121, ires=8, sample_count=200_000):
     mitsuba()
-    from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 
-    test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
-                         sample_dim=2, sample_count=sample_count, res=res, ires=ires)
-    cwd = os.getcwd()
-    with tempfile.TemporaryDirectory() as tmp:
-        os.chdir(tmp)
-        try:
-            ok = test.run()
-        finally:
-            os.chdir(cwd)
-    return ok, test.messages
+    return spherical_chi2(sample_func, pdf_func, sample_dim=2, sample_count=sample_count, res=res, ires=ires)
 
 
 def _funcs(rec, theta, pdf_rec=None):

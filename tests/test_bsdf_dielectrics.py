@@ -33,15 +33,13 @@ agree except on a handful of pairs on a side boundary (``dot(wo, m) ~ 0``).
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 
 import drjit as dr
 import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from chi2util import export_bsdf, mitsuba
+from chi2util import export_bsdf, mitsuba, spherical_chi2
 from dielectricutil import FakeTable, Spec
 from drpt import bsdf_kinds
 from drpt.export.mitsuba_dielectrics import adjust
@@ -467,7 +465,6 @@ ROT = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
 
 def _chi2(p, wi_np, res, ires, sample_count=200_000, pdf_scale=None):
     mi = mitsuba()
-    from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 
     def sample_func(u):
         u = np.array(u, np.float32)
@@ -488,16 +485,7 @@ def _chi2(p, wi_np, res, ires, sample_count=200_000, pdf_scale=None):
             v = v * pdf_scale(w)
         return mi.Float(np.ascontiguousarray(v, np.float32))
 
-    test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
-                         sample_dim=3, sample_count=sample_count, res=res, ires=ires)
-    cwd = os.getcwd()
-    with tempfile.TemporaryDirectory() as tmp:  # a failure dumps chi2_data.py here
-        os.chdir(tmp)
-        try:
-            ok = test.run()
-        finally:
-            os.chdir(cwd)
-    return ok, test.messages
+    return spherical_chi2(sample_func, pdf_func, sample_dim=3, sample_count=sample_count, res=res, ires=ires)
 
 
 # ires (pdf sub-samples per cell per axis) must be high for these lobes: with (64, 4) at
