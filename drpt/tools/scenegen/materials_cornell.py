@@ -53,7 +53,6 @@ all).
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
@@ -185,11 +184,7 @@ def main(out: Path) -> list[Path]:
 
 def cli(argv=None) -> None:
     """``python scenes/make_materials_cornell.py OUT_DIR``."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", type=Path, help="folder to write the scene into")
-    a = ap.parse_args(argv)
-    files = main(a.out)
-    print(f"{a.out}: {', '.join(f.name for f in files)} ({sum(f.stat().st_size for f in files) // 1024} kB)")
+    meshes.folder_cli(main, __doc__.splitlines()[0], argv)
 
 
 if __name__ == "__main__":

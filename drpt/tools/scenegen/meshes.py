@@ -153,3 +153,18 @@ class ObjWriter:
 
     def text(self) -> str:
         return "\n".join(self.lines) + "\n"
+
+
+def folder_cli(main, description: str, argv=None) -> None:
+    """The command line of a generator whose ``main(out)`` needs the output
+    folder and returns the files it wrote: ``OUT_DIR``, then one line listing
+    them and their total size."""
+    import argparse
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("out", type=Path, help="folder to write the scene into")
+    a = ap.parse_args(argv)
+    files = main(a.out)
+    print(f"{a.out}: {', '.join(f.name for f in files)} ({sum(f.stat().st_size for f in files) // 1024} kB)")
+

@@ -31,7 +31,6 @@ of view 28 degrees; the scene is meant for 4:3 or square images at
 
 from __future__ import annotations
 
-import argparse
 import math
 from pathlib import Path
 
@@ -140,11 +139,7 @@ def main(out: Path) -> list[Path]:
 
 def cli(argv=None) -> None:
     """``python scenes/make_veach_mis.py OUT_DIR``."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", type=Path, help="folder to write the scene into")
-    a = ap.parse_args(argv)
-    files = main(a.out)
-    print(f"{a.out}: {', '.join(f.name for f in files)} ({sum(f.stat().st_size for f in files) // 1024} kB)")
+    meshes.folder_cli(main, __doc__.splitlines()[0], argv)
 
 
 if __name__ == "__main__":
