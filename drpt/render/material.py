@@ -260,14 +260,6 @@ class MaterialTable:
             v = dr.select(textured, looked if cls is Array3f else _luminance(looked), v)
         return v
 
-    def gather(self, name: str, si: Interaction, active: Bool):
-        """Alias of :meth:`value`."""
-        return self.value(name, si, active)
-
-    def base_color(self, si: Interaction, active: Bool) -> Array3f:
-        """``kd`` of the lanes' components (or its texture)."""
-        return self.value("kd", si, active)
-
     def table_lerp(self, name: str, si: Interaction, x: Float, active: Bool) -> Float:
         """Linear interpolation of the ``("table", N)`` field ``name`` of the lanes'
         components at ``x`` in [0, 1] (sample ``i`` at ``x = i / (N - 1)``; ``x``

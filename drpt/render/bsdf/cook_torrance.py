@@ -131,8 +131,8 @@ class CookTorranceParams:
 
 def params(table, si, active) -> CookTorranceParams:
     """The parameters of the lanes' materials, gathered from the material table."""
-    return CookTorranceParams(table.base_color(si, active), table.gather("alpha", si, active),
-                              table.gather("metalness", si, active))
+    return CookTorranceParams(table.value("kd", si, active), table.value("alpha", si, active),
+                              table.value("metalness", si, active))
 
 
 def _schlick_weight(c: Float) -> Float:

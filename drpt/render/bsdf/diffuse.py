@@ -30,7 +30,7 @@ class DiffuseParams:
 
 def params(table, si, active) -> DiffuseParams:
     """The parameters of the lanes' materials, gathered from the material table."""
-    return DiffuseParams(table.base_color(si, active))
+    return DiffuseParams(table.value("kd", si, active))
 
 
 def eval(p: DiffuseParams, wi: Array3f, wo: Array3f) -> Array3f:

@@ -29,7 +29,7 @@ class MirrorParams:
 
 def params(table, si, active) -> MirrorParams:
     """The parameters of the lanes' materials, gathered from the material table."""
-    return MirrorParams(table.gather("ks", si, active))
+    return MirrorParams(table.value("ks", si, active))
 
 
 def eval(p: MirrorParams, wi: Array3f, wo: Array3f) -> Array3f:

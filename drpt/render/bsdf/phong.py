@@ -62,8 +62,8 @@ class PhongParams:
 
 def params(table, si, active) -> PhongParams:
     """The parameters of the lanes' materials, gathered from the material table."""
-    return PhongParams(table.base_color(si, active), table.gather("ks", si, active),
-                       table.gather("ns", si, active))
+    return PhongParams(table.value("kd", si, active), table.value("ks", si, active),
+                       table.value("ns", si, active))
 
 
 def _lum(c: Array3f) -> Float:
