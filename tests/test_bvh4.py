@@ -172,7 +172,7 @@ def test_uploads_padded():
         buf = getattr(bvh.geo if name in bvh.geo.host_sizes else bvh, name)
         assert dr.width(buf) * 4 >= n * 4 + PAD_BYTES, name
     assert bvh.host_sizes["tri_buf"] == 12 * 300 and bvh.host_sizes["sph_buf"] == 4 * 7
-    assert bvh.host_sizes["node_box"] == 24 * bvh.stats["nodes4"]
+    assert bvh.host_sizes["node_rec"] == 32 * bvh.stats["nodes4"]
 
 
 @pytest.mark.slow

@@ -4,7 +4,7 @@
 (any split rule of :func:`~drpt.accel.build.build_bvh`) into a
 :class:`BVH4Arrays`, the node data that :mod:`drpt.accel.bvh4` traverses: a
 4-wide tree halves the number of loop iterations spent in inner nodes and
-tests four child boxes per iteration from six packet gathers.
+tests four child boxes per iteration from seven packet gathers.
 
 Layout: per 4-wide node, 24 floats of child boxes in SoA order ``lo.x[4],
 lo.y[4], lo.z[4], hi.x[4], hi.y[4], hi.z[4]`` (six 16-byte packets) and 4
@@ -13,6 +13,11 @@ leaf's ``LEAF_FLAG | (count - 1) << LEAF_COUNT_SHIFT | first``; ``EMPTY_REF``
 for an unused slot, with an empty box (lo = +inf, hi = -inf). Leaves hold at
 most ``LEAF_MAX_COUNT`` (16) primitives and BVH positions need 27 bits
 (< 134M primitives).
+
+On the device both are one record per node (:func:`node_records`): 32
+words, the 24 box floats, the 4 references (their bits stored as float32)
+and 4 zero words, 128 bytes, so that a node read touches two 64-byte cache
+lines (boxes and references in separate arrays touched three).
 
 Collapse: every 4-wide node starts from an inner binary node with its two
 children and, twice, replaces the inner child of largest surface area by its
@@ -47,6 +52,19 @@ class BVH4Arrays:
     root_lo: np.ndarray  # (3,) float32
     root_hi: np.ndarray  # (3,) float32
     depth: int  # max depth of the 4-wide tree (root = 0)
+
+
+RECORD_WORDS = 32  # words per device node record (node_records)
+
+
+def node_records(w: BVH4Arrays) -> np.ndarray:
+    """``(K, RECORD_WORDS)`` float32 device records of ``w``'s nodes: words
+    0-23 the child boxes, 24-27 the child references (uint32 bits viewed as
+    float32), 28-31 zero."""
+    rec = np.zeros((w.ref.shape[0], RECORD_WORDS), np.float32)
+    rec[:, :24] = w.box
+    rec[:, 24:28] = np.ascontiguousarray(w.ref, np.uint32).view(np.float32)
+    return rec
 
 
 def collapse_bvh4(b: BVHArrays) -> BVH4Arrays:
