@@ -28,7 +28,8 @@ this order:
    1.02-1.06x, newscene 0.94-1.08x / 1.02-1.05x / 0.98-1.03x).
    For an inner node, fetch the four child boxes and the four child
    references with seven 16-byte packet gathers from the node's 128-byte
-   record (:func:`~drpt.accel.bvh4_nodes.node_records`), slab-test all four, sort the hits by entry distance (5-comparator network, misses
+   record (:func:`~drpt.accel.bvh4_nodes.node_records`), slab-test all
+   four, sort the hits by entry distance (5-comparator network, misses
    last), push the farther hits (farthest first) and continue with the
    nearest. If the entry in hand is a leaf (popped, or the nearest child just
    found), load its primitive range right away;
@@ -147,8 +148,16 @@ from .. import backend
 from ..geometry.triangle import RayPrep, watertight_permuted
 from .build import build_bvh
 from .bvh import STACK_SIZE
-from .bvh4_nodes import (EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_MAX_COUNT, LEAF_START_MASK,
-                         RECORD_WORDS, collapse_bvh4, node_records)
+from .bvh4_nodes import (
+    EMPTY_REF,
+    LEAF_COUNT_SHIFT,
+    LEAF_FLAG,
+    LEAF_MAX_COUNT,
+    LEAF_START_MASK,
+    RECORD_WORDS,
+    collapse_bvh4,
+    node_records,
+)
 from .device import SLAB_EPS, device_array, nbytes, slab
 from .primitives import SceneGeometry, leaf_primitive, nearest_primitive, primitive_bounds
 from .protocol import INVALID, AccelParams, Hit
