@@ -39,13 +39,17 @@ this order:
 
 Two primitives per leaf iteration against one, and one node record against
 boxes and references in separate arrays (three cache lines per node read
-instead of two), each measured in one process on the dining room (510k
-triangles, ``bench``'s 262144 rays, median of 12 interleaved rounds, per-round
-ratios in brackets): together 1.06x [0.95-1.28] / 1.06x [0.98-1.11] / 1.05x
-[0.96-1.13] primary / incoherent / shadow; the record alone 1.01x / 1.05x /
-1.08x. Three and four primitives per iteration were slower than two
-(incoherent 0.90x and 0.86x of one, against 1.05x): lanes in short leaves
-idle through the longer step.
+instead of two), measured in one process with ``benchmarks/accel_ab.py``
+(``bench``'s 262144 rays, median of 12 interleaved rounds): on the dining room
+(510k triangles) 1.03-1.06x primary, 1.03-1.06x incoherent and 1.04-1.05x
+shadow rays over two runs; on small scenes forced onto the BVH within noise,
+except shadow rays on newscene (37 primitives), 0.87-0.89x, where the second
+test after an any-hit is wasted work (one primitive per iteration for any-hit
+queries only measured 0.96x on the dining room's shadow rays, so both kinds
+take two). Three and four primitives per iteration were slower than two
+(incoherent 0.90x and 0.86x of one): lanes in short leaves idle through the
+longer step.
+
 Children are only pushed when their box starts before the closest hit so
 far; popped entries are not checked again against a closer hit found since
 (which would need their entry distances on a second stack). Keeping those
