@@ -80,7 +80,7 @@ def main(argv: list[str]) -> None:
     first = {}
     for name, a in zip(names, accels):
         for q, f in queries.items():
-            _, out = _timed(lambda: f(a))
+            _, out = _timed(lambda f=f, a=a: f(a))
             got = out.numpy()
             ref = first.setdefault(q, got)
             if not np.array_equal(got, ref):
@@ -94,7 +94,7 @@ def main(argv: list[str]) -> None:
         for q, f in queries.items():
             dt = {}
             for i in order:
-                dt[i], _ = _timed(lambda: f(accels[i]))
+                dt[i], _ = _timed(lambda f=f, a=accels[i]: f(a))
                 best[(i, q)] = min(best[(i, q)], dt[i])
             for i in order:
                 ratios[(i, q)].append(dt[0] / dt[i])
