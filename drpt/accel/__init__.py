@@ -17,7 +17,9 @@ Modules, one idea each:
 
 * the kinds: :mod:`~drpt.accel.registry` (the kind table, ``"auto"``),
   :mod:`~drpt.accel.protocol` (the interface, ``Hit``, ``AccelParams``);
-* the accelerators: :mod:`~drpt.accel.bvh4` (4-wide BVH, the default),
+* the accelerators: :mod:`~drpt.accel.embree` (Embree 3's BVH queried from
+  the kernels, the default above 64 primitives on the CPU; its bindings in
+  :mod:`~drpt.accel.embree_lib`), :mod:`~drpt.accel.bvh4` (4-wide BVH, drpt's own),
   :mod:`~drpt.accel.bvh` (binary BVH), :mod:`~drpt.accel.grid`,
   :mod:`~drpt.accel.inline`, :mod:`~drpt.accel.brute`;
 * what they share: :mod:`~drpt.accel.primitives` (primitive buffers, planes,
@@ -32,10 +34,12 @@ Modules, one idea each:
 
 from __future__ import annotations
 
+from . import embree_lib
 from .brute import BruteForce
 from .build import AUTO_SAH_MAX, METHODS, NO_MIN_LEAF, SEED_SAH_THRESHOLD, build_bvh
 from .bvh import BVH
 from .bvh4 import BVH4
+from .embree import EmbreeAccel
 from .grid import UniformGrid
 from .inline import InlineList
 from .protocol import INVALID, Accelerator, AccelParams, Hit
@@ -43,4 +47,5 @@ from .registry import ACCELERATORS, KINDS, build_accel, resolve_kind
 
 __all__ = ["ACCELERATORS", "AUTO_SAH_MAX", "BVH", "BVH4", "INVALID", "KINDS", "METHODS",
            "NO_MIN_LEAF", "SEED_SAH_THRESHOLD", "AccelParams", "Accelerator", "BruteForce",
-           "Hit", "InlineList", "UniformGrid", "build_accel", "build_bvh", "resolve_kind"]
+           "EmbreeAccel", "Hit", "InlineList", "UniformGrid", "build_accel", "build_bvh",
+           "embree_lib", "resolve_kind"]

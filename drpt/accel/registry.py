@@ -15,6 +15,8 @@ from .. import backend
 from .brute import BruteForce
 from .bvh import BVH
 from .bvh4 import BVH4
+from .embree import EmbreeAccel
+from .embree_lib import reason as embree_unavailable
 from .grid import UniformGrid
 from .inline import InlineList
 from .protocol import Accelerator, AccelParams
@@ -24,6 +26,7 @@ ACCELERATORS: dict[str, Callable[..., Accelerator]] = {
     "bvh": BVH4.from_params,  # the 4-wide BVH, drpt.accel.bvh4
     "bvh2": BVH.from_params,  # the binary BVH it is collapsed from, drpt.accel.bvh
     "bvh4": BVH4.from_params,  # alias of "bvh"
+    "embree": EmbreeAccel.from_params,  # Embree 3 queried from the kernels, drpt.accel.embree
     "grid": UniformGrid.from_params,  # uniform grid, 3D-DDA, drpt.accel.grid
     "inline": InlineList.from_params,  # primitives compiled into the kernel, drpt.accel.inline
     "brute": BruteForce.from_params,  # every ray against every primitive, drpt.accel.brute
@@ -32,14 +35,21 @@ ACCELERATORS: dict[str, Callable[..., Accelerator]] = {
 KINDS = ("auto", *ACCELERATORS)
 
 
-def resolve_kind(scene, kind: str = "auto") -> str:
+def resolve_kind(scene, kind: str = "auto", bvh_rule: bool = False) -> str:
     """The accelerator ``kind="auto"`` stands for: ``"inline"`` for scenes of at
     most ``inline_max_prims`` primitives (:func:`drpt.backend.policy`, read at
-    each call), else ``"bvh"``. Other kinds are returned unchanged."""
+    each call); above, ``"embree"`` where it can run (the LLVM backend with
+    Embree 3 installed, :func:`drpt.accel.embree_lib.reason`) unless
+    ``bvh_rule`` (the caller asked for a BVH build rule or leaf size), else
+    ``"bvh"``. Other kinds are returned unchanged."""
     if kind != "auto":
         return kind
     n = len(scene.triangles) + len(scene.spheres) + len(scene.planes)
-    return "inline" if n <= backend.policy().inline_max_prims else "bvh"
+    if n <= backend.policy().inline_max_prims:
+        return "inline"
+    if not bvh_rule and embree_unavailable() is None:
+        return "embree"
+    return "bvh"
 
 
 def build_accel(scene, kind: str = "auto", method: str = "auto", leaf_size: int = 4,
@@ -50,7 +60,9 @@ def build_accel(scene, kind: str = "auto", method: str = "auto", leaf_size: int 
     Args:
         scene: a :class:`~drpt.scene.model.Scene`.
         kind: ``"auto"`` (the default: ``"inline"`` for tiny scenes, else
-            ``"bvh"``, see :func:`resolve_kind`), ``"inline"`` (every
+            ``"embree"`` where Embree 3 runs, else ``"bvh"``, see
+            :func:`resolve_kind`), ``"embree"`` (Embree 3's BVH queried from
+            the kernels, :mod:`drpt.accel.embree`), ``"inline"`` (every
             primitive's test compiled into the kernel with its data as
             constants, :mod:`drpt.accel.inline`), ``"bvh"`` (the 4-wide BVH,
             :mod:`drpt.accel.bvh4`; alias ``"bvh4"``), ``"bvh2"`` (the binary
@@ -73,7 +85,8 @@ def build_accel(scene, kind: str = "auto", method: str = "auto", leaf_size: int 
         sah_threshold: ``K`` of ``method="threshold"`` (the seed's
             ``-SAHeuristic``; ``None``: its default 2000).
     """
-    kind = resolve_kind(scene, kind)
+    bvh_rule = method != "auto" or min_leaf != 1 or sah_threshold is not None
+    kind = resolve_kind(scene, kind, bvh_rule)
     make = ACCELERATORS.get(kind)
     if make is None:
         raise ValueError(f"unknown accelerator kind {kind!r}; expected one of {', '.join(KINDS)}")
