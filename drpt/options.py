@@ -64,7 +64,7 @@ class RenderOptions:
     height: int = 256
     spp: int = 16
     seed: int = 0
-    accel: str = "auto"  # drpt.accel.build_accel kind ("auto": inline for tiny scenes, else bvh)
+    accel: str = "auto"  # drpt.accel.build_accel kind ("auto": inline for tiny scenes, else embree or bvh)
     grid_resolution: int | None = None  # cells per axis for accel="grid" (None: automatic)
     bvh_method: str = "auto"  # BVH split rule, drpt.accel.METHODS (accel="bvh")
     sah_threshold: int | None = None  # K of bvh_method="threshold" (None: the seed's 2000)
@@ -284,8 +284,10 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
         parser.add_argument("--accel", choices=_AccelChoices(KINDS), default=d["accel"],
                             metavar="{" + ",".join(KINDS) + "}",
                             help="acceleration structure: auto (default: inline up to 64 "
-                                 "primitives, else bvh), inline (every primitive compiled into "
-                                 "the kernel as constants), bvh (4-wide BVH; alias bvh4), "
+                                 "primitives, else embree on the CPU where Embree 3 is "
+                                 "installed, else bvh), inline (every primitive compiled into "
+                                 "the kernel as constants), embree (Embree 3's BVH queried "
+                                 "from the kernels), bvh (drpt's 4-wide BVH; alias bvh4), "
                                  "bvh2 (the binary BVH it is collapsed from: 2-3x slower, for "
                                  "comparison), grid (uniform grid, 3D-DDA; -resolution N cells "
                                  "per axis) or brute; a BVH kind may name its build rule, "

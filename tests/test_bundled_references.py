@@ -117,8 +117,10 @@ def test_showcase_matches_reference(name, reference_scene):
 def test_diningroom_matches_reference(reference_scene):
     # Slowest test of this file: generating (when scenes/diningroom is missing, ~6 s),
     # loading (~6-12 s) and the BVH build (~8-17 s) of 510k triangles; the 32-spp render
-    # itself takes a few seconds. max |z| 1.7-2.0 over seeds 1-3; a 5% bias gives 6-8.
-    r, z, z_of = render_and_z("diningroom", spp=32, seed=1, block=24,
+    # itself takes a few seconds. max |z| 1.6-2.1 over seeds 1-3 (embree and bvh alike);
+    # a 5% bias gives 4.4-6.1 brighter and 6.2-7.0 darker, seed 1 the weakest control
+    # (4.4-4.7), seed 2 5.9-6.1 and 6.6-6.7, hence seed 2.
+    r, z, z_of = render_and_z("diningroom", spp=32, seed=2, block=24,
                               reference_scene=reference_scene)
     assert z < ZMAX, z
     assert z_of(1.05) > ZMAX and z_of(0.95) > ZMAX  # negative control

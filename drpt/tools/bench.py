@@ -82,9 +82,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="scene files (default: the bundled Cornell box and newscene)")
     p.add_argument("--accel", default="auto,bvh,grid",
                    help="comma-separated accelerators: auto (drpt's default: inline for "
-                        "scenes of at most 64 primitives, else bvh; a row only where it "
-                        "differs from the other accelerators asked for), inline (primitives "
-                        "compiled into the kernel), bvh (4-wide BVH, drpt's default "
+                        "scenes of at most 64 primitives, else embree where Embree 3 is "
+                        "installed, else bvh; a row only where it differs from the other "
+                        "accelerators asked for), inline (primitives compiled into the "
+                        "kernel), embree (Embree 3's BVH), bvh (drpt's 4-wide BVH, default "
                         "build rule: SAH, or PLOC above 100k primitives), bvh-sah (full "
                         "binned SAH), bvh-median, bvh-threshold (the seed's rule), bvh-morton "
                         "(fast build), bvh-ploc (bottom-up clustering), bvh2 (binary BVH, "

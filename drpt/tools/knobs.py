@@ -22,8 +22,8 @@ Russian roulette from depth 5 with the adaptive probability
            (``--rr-probs``, the seed's ``-RR_cutdown``); and off (no roulette,
            paths end after 64 segments: the energy beyond that is ~albedo^64);
 ``accel``  the 4-wide BVH and the uniform grid instead of the default
-           (``auto``: inline for tiny scenes, else the BVH; same image up to
-           float order);
+           (``auto``: inline for tiny scenes, else Embree where installed, else
+           the BVH; same image up to float order);
 ``bsdf``   the other material mode (Phong <-> Cook-Torrance). That changes the
            scene, so that row is compared with its own reference.
 
