@@ -86,8 +86,8 @@ class EmbreeAccel:
 
     Attributes:
         build_seconds: host time of the upload and Embree's build.
-        nbytes: bytes of the vertex and sphere arrays handed to Embree (Embree's own
-            BVH memory is not reported by its API).
+        nbytes: bytes of the vertex and sphere arrays handed to Embree plus what
+            Embree allocated for the scene (its memory monitor, net of frees).
         stats: ``nodes``, ``leaves``, ``max_depth`` (0: Embree does not report them)
             and ``prims``.
         geo: the :class:`~drpt.accel.primitives.SceneGeometry` (planes).
@@ -102,6 +102,7 @@ class EmbreeAccel:
         self._arrays = []
         self.nbytes = 0
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": geo.N}
+        bytes0 = L.device_bytes
         esc = L.rtcNewScene(L.device)
         L.rtcSetSceneFlags(esc, lib.SCENE_FLAG_ROBUST)
         L.rtcSetSceneBuildQuality(esc, lib.BUILD_QUALITY_HIGH)
@@ -120,6 +121,7 @@ class EmbreeAccel:
             self._attach(esc, lib.GEOMETRY_SPHERE_POINT, 1,
                          [(lib.BUFFER_VERTEX, lib.FORMAT_FLOAT4, pts, 16, S)])
         L.rtcCommitScene(esc)
+        self.nbytes += L.device_bytes - bytes0
         err = L.rtcGetDeviceError(L.device)
         if err:
             L.rtcReleaseScene(esc)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import os
+import threading
 from functools import lru_cache
 
 import drjit as dr
@@ -95,6 +96,19 @@ class Lib:
         self.device = self.rtcNewDevice(f"threads={os.cpu_count() or 1}".encode())
         if not self.device:
             raise EmbreeUnavailable("rtcNewDevice failed")
+        # Embree's own allocations (its BVH), net of frees: its memory monitor callback
+        self.device_bytes = 0
+        lock = threading.Lock()  # Embree's build threads call the monitor
+
+        def monitor(_user, nbytes, _post):
+            with lock:
+                self.device_bytes += nbytes
+            return True
+
+        self._monitor = ctypes.CFUNCTYPE(ctypes.c_bool, vp, ctypes.c_ssize_t, ctypes.c_bool)(monitor)
+        emb.rtcSetDeviceMemoryMonitorFunction.restype = None
+        emb.rtcSetDeviceMemoryMonitorFunction.argtypes = [vp, vp, vp]
+        emb.rtcSetDeviceMemoryMonitorFunction(self.device, ctypes.cast(self._monitor, vp), None)
 
     def pointer(self, address: int) -> int:
         """A new Dr.Jit pointer variable (LLVM) holding ``address``; its index."""
