@@ -1,6 +1,6 @@
 """Binary BVH ray traversal in Dr.Jit (one symbolic loop, per-lane stack).
 
-The default accelerator is the 4-wide BVH collapsed from the same binary tree
+drpt's own large-scene accelerator is the 4-wide BVH collapsed from the same binary tree
 (:mod:`drpt.accel.bvh4`); this one stays available as
 ``build_accel(kind="bvh2")`` / ``--accel bvh2``.
 

@@ -1,5 +1,6 @@
-"""4-wide BVH, drpt's default accelerator: traversal in Dr.Jit of the binary
-BVH collapsed to four children per node.
+"""4-wide BVH, drpt's own accelerator (``--accel auto``'s choice on the CUDA
+backend and where Embree is missing, :mod:`drpt.accel.embree`): traversal in
+Dr.Jit of the binary BVH collapsed to four children per node.
 
 :class:`BVH4` has the interface of every accelerator
 (:class:`~drpt.accel.protocol.Accelerator`; same primitive ids and
