@@ -5,10 +5,10 @@ checkpointed, resumable.
 this process (:class:`LocalEngine`, chunk after chunk) or on Dask
 (:class:`~drpt.distributed.engine.DaskEngine`, in any order), and go to a
 :class:`~drpt.render.chunks.ChunkMerge`. The merged sums are written as a
-checkpoint (:mod:`.checkpoint`) every ``checkpoint_seconds`` and whenever the
-job stops before its end (Ctrl-C, SIGTERM, a failing chunk, a lost
-scheduler, any error in this process); the caller removes it once the image
-is written (:func:`drpt.distributed.checkpoint.remove`).
+checkpoint (:mod:`.checkpoint`) every ``checkpoint_seconds`` once the merged
+prefix of chunks has grown since the last one, and whenever the job stops
+before its end (Ctrl-C, SIGTERM, a failing chunk, a lost scheduler, any error
+in this process); the caller removes it once the image is written (:func:`drpt.distributed.checkpoint.remove`).
 """
 
 from __future__ import annotations
@@ -145,6 +145,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         engine = DaskEngine(scene, key, opts, workers=workers, address=cluster,
                             connect_timeout=connect_timeout)
     t0 = last = time.perf_counter()
+    saved = merged.next  # the merged prefix the last checkpoint holds
     seen = set()
     build = 0.0
     try:
@@ -166,9 +167,11 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
                 if asked:
                     raise KeyboardInterrupt
                 now = time.perf_counter()
-                if not merged.done and now - last >= checkpoint_seconds:
+                # a checkpoint holds the merged prefix of chunks: none is written
+                # before it grows (Dask's first result need not be chunk 0)
+                if not merged.done and merged.next > saved and now - last >= checkpoint_seconds:
                     save()
-                    last = now
+                    saved, last = merged.next, now
     except BaseException:
         if merged.next > job.resumed_from or resume:
             save()
