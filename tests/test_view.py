@@ -293,19 +293,29 @@ def test_page_in_headless_chromium(tmp_path):
     scene = _scene()
     viewer = Viewer(scene, RenderOptions(width=32, height=32, spp=2, progress=False), port=0)
     shot = tmp_path / "page.png"
+    stds = []
     try:
-        r = subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
-                            "--use-angle=swiftshader", "--window-size=640,480", "--virtual-time-budget=15000",
-                            f"--screenshot={shot}", viewer.url], capture_output=True, text=True, timeout=120)
-    except (OSError, subprocess.TimeoutExpired) as e:
-        pytest.skip(f"chromium cannot run here: {e}")
+        # A loaded machine can leave the page blank within Chromium's virtual time
+        # budget (seen once in a CI run): up to three screenshots, each with a longer
+        # budget; a page that never draws fails all three.
+        for budget in (15000, 30000, 60000):
+            try:
+                r = subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu",
+                                    "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
+                                    "--window-size=640,480", f"--virtual-time-budget={budget}",
+                                    f"--screenshot={shot}", viewer.url],
+                                   capture_output=True, text=True, timeout=120)
+            except (OSError, subprocess.TimeoutExpired) as e:
+                pytest.skip(f"chromium cannot run here: {e}")
+            if r.returncode != 0 or not shot.exists():
+                pytest.skip(f"chromium cannot run here: {r.stderr[-300:]}")
+            img = np.asarray(Image.open(shot).convert("RGB")).astype(float)
+            stds.append(img[:, :300].std())  # the canvas, beside the control panel
+            if stds[-1] > 20.0:
+                break
     finally:
         viewer.close()
-    if r.returncode != 0 or not shot.exists():
-        pytest.skip(f"chromium cannot run here: {r.stderr[-300:]}")
-    img = np.asarray(Image.open(shot).convert("RGB")).astype(float)
-    left = img[:, :300]  # the canvas, beside the control panel
-    assert left.std() > 20.0
+    assert stds[-1] > 20.0, stds
 
 
 def test_view_flags(capsys):
