@@ -27,12 +27,12 @@ import time
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array3f, Float
+from drjit.auto import Float
 
 from drpt.accel import build_accel
 from drpt.accel.registry import ACCELERATORS
 from drpt.scene import load_scene
-from drpt.tools.bench import make_rays
+from drpt.tools.bench import device_rays, make_rays
 
 
 def _variant(scene, name: str):
@@ -58,19 +58,8 @@ def main(argv: list[str]) -> None:
         sys.exit(__doc__.strip().splitlines()[-2])
     scene = load_scene(argv[0])
     n, rounds, names = int(argv[1]), int(argv[2]), argv[3:]
-    rays = make_rays(scene, n, 1.0, 0)
-
-    def a3(a):
-        v = Array3f(*(Float(c) for c in a))
-        dr.make_opaque(v)
-        return v
-
-    po, pd = a3(rays["primary_o"]), a3(rays["primary_d"])
-    io, idr, sd = a3(rays["inc_o"]), a3(rays["inc_d"]), a3(rays["shadow_d"])
-    st = Float(rays["shadow_t"])
-    dr.make_opaque(st)
+    po, pd, io, idr, sd, st = device_rays(make_rays(scene, n, 1.0, 0))
     inf = Float(math.inf)
-    dr.eval(po, pd, io, idr, sd, st)
     accels = [_variant(scene, v) for v in names]
     queries = {
         "primary": lambda a: a.intersect(po, pd, inf).prim,

@@ -40,7 +40,8 @@ def resolve_kind(scene, kind: str = "auto", bvh_rule: bool = False) -> str:
     most ``inline_max_prims`` primitives (:func:`drpt.backend.policy`, read at
     each call); above, ``"embree"`` where it can run (the LLVM backend with
     Embree 3 installed, :func:`drpt.accel.embree_lib.reason`) unless
-    ``bvh_rule`` (the caller asked for a BVH build rule or leaf size), else
+    ``bvh_rule`` (the caller asked for a BVH build rule, minimum leaf size or
+    SAH threshold), else
     ``"bvh"``. Other kinds are returned unchanged."""
     if kind != "auto":
         return kind

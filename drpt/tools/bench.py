@@ -179,18 +179,32 @@ def accel_options(base, name: str, sah_threshold: int = 2000, min_leaf: int = 1)
                    sah_threshold=sah_threshold if method == "threshold" else None).validate()
 
 
-def bench_drpt(scene, options, rays: dict, repeat: int) -> dict:
-    """drpt's numbers for ``options`` (accelerator, render size, spp, depth, bsdf)."""
+def device_rays(rays: dict) -> tuple:
+    """:func:`make_rays`'s rays as opaque, evaluated Dr.Jit arrays: primary
+    origins and directions, incoherent origins and directions, shadow
+    directions (from the incoherent origins) and shadow ``tmax``."""
     import drjit as dr
     from drjit.auto import Array3f, Float
-
-    from ..accel import build_accel
-    from ..render.renderer import Renderer
 
     def a3(a):
         v = Array3f(*(Float(c) for c in a))
         dr.make_opaque(v)
         return v
+
+    po, pd = a3(rays["primary_o"]), a3(rays["primary_d"])
+    io, idr, sd = a3(rays["inc_o"]), a3(rays["inc_d"]), a3(rays["shadow_d"])
+    st = Float(rays["shadow_t"])
+    dr.make_opaque(st)
+    dr.eval(po, pd, io, idr, sd, st)
+    return po, pd, io, idr, sd, st
+
+
+def bench_drpt(scene, options, rays: dict, repeat: int) -> dict:
+    """drpt's numbers for ``options`` (accelerator, render size, spp, depth, bsdf)."""
+    from drjit.auto import Float
+
+    from ..accel import build_accel
+    from ..render.renderer import Renderer
 
     build_kw = ({"method": options.bvh_method, "min_leaf": options.bvh_min_leaf,
                  "sah_threshold": options.sah_threshold}
@@ -200,12 +214,8 @@ def bench_drpt(scene, options, rays: dict, repeat: int) -> dict:
         accel = None  # free the previous build first (the grid can be large)
         accel = build_accel(scene, kind=options.accel, **build_kw)
         build = min(build, accel.build_seconds)
-    po, pd = a3(rays["primary_o"]), a3(rays["primary_d"])
-    io, idr, sd = a3(rays["inc_o"]), a3(rays["inc_d"]), a3(rays["shadow_d"])
-    st = Float(rays["shadow_t"])
-    dr.make_opaque(st)
+    po, pd, io, idr, sd, st = device_rays(rays)
     inf = Float(math.inf)
-    dr.eval(po, pd, io, idr, sd, st)
 
     def hit(o, d):
         h = accel.intersect(o, d, inf)
