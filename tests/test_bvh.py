@@ -95,6 +95,19 @@ def rays(o, d):
     return Array3f(*o.T), Array3f(*d.T)
 
 
+def mixed_scene_and_rays(seed=8, n_tris=600, n_sph=20, n_rays=3000):
+    """A soup of triangles, spheres and the plane z = -0.5, and random rays
+    ``(o, d)`` through it (numpy), all from one generator of ``seed``."""
+    rng = np.random.default_rng(seed)
+    tris = soup(rng, n_tris)
+    c = rng.random((n_sph, 3)) * 10
+    sc = make_scene(tris, spheres=(c, rng.random(n_sph) * 0.4 + 0.05),
+                    planes=([[0.0, 0.0, 1.0]], [-0.5]))
+    o = rng.random((n_rays, 3)) * 12 - 1
+    d = rng.normal(size=(n_rays, 3))
+    return sc, o, d, rng
+
+
 def brute_hits(scene, o, d, tmax=INF):
     """Brute-force closest hits (evaluated), to share between several BVHs."""
     O, D = rays(o, d)

@@ -15,7 +15,7 @@ from drpt.accel import build_accel
 from drpt.accel.build import build_bvh
 from drpt.accel.bvh4 import BVH4, stack_entries
 from drpt.accel.bvh4_nodes import EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_START_MASK, collapse_bvh4
-from test_bvh import brute_hits, make_scene, rays, soup
+from test_bvh import brute_hits, make_scene, mixed_scene_and_rays, rays, soup
 
 INF = float("inf")
 TRI = np.float64([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]])
@@ -178,14 +178,8 @@ def test_uploads_padded():
 @pytest.mark.slow
 @pytest.mark.parametrize("sym", [True, False], ids=["symbolic", "evaluated"])
 def test_bvh4_vs_brute(sym):
-    rng = np.random.default_rng(8)
-    tris = soup(rng, 600)
-    c = rng.random((20, 3)) * 10
-    sc = make_scene(tris, spheres=(c, rng.random(20) * 0.4 + 0.05),
-                    planes=([[0.0, 0.0, 1.0]], [-0.5]))
-    R = 3000
-    o = rng.random((R, 3)) * 12 - 1
-    d = rng.normal(size=(R, 3))
+    sc, o, d, rng = mixed_scene_and_rays()
+    R = len(o)
     O, D = rays(o, d)
     with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, sym):
         g = brute_hits(sc, o, d)

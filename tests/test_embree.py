@@ -12,18 +12,11 @@ from drjit.auto import Array3f, Bool, Float, UInt32
 from drpt.accel import build_accel, embree_lib, resolve_kind
 from drpt.accel.embree import EmbreeAccel
 from drpt.errors import DrptError
-from test_bvh import brute_hits, make_scene, rays, soup
+from test_bvh import brute_hits, make_scene, mixed_scene_and_rays, rays, soup
 
 INF = float("inf")
 needs_embree = pytest.mark.skipif(embree_lib.reason() is not None,
                                   reason=f"{embree_lib.reason()}")
-
-
-def _mixed_scene(rng, n_tris=600, n_sph=20, planes=True):
-    tris = soup(rng, n_tris)
-    c = rng.random((n_sph, 3)) * 10
-    return make_scene(tris, spheres=(c, rng.random(n_sph) * 0.4 + 0.05),
-                      planes=([[0.0, 0.0, 1.0]], [-0.5]) if planes else None)
 
 
 def _compare(h, g, tol=1e-5):
@@ -43,11 +36,8 @@ def _compare(h, g, tol=1e-5):
 @needs_embree
 @pytest.mark.parametrize("sym", [True, False], ids=["symbolic", "evaluated"])
 def test_embree_vs_brute(sym):
-    rng = np.random.default_rng(8)
-    sc = _mixed_scene(rng)
-    R = 3000
-    o = rng.random((R, 3)) * 12 - 1
-    d = rng.normal(size=(R, 3))
+    sc, o, d, rng = mixed_scene_and_rays()
+    R = len(o)
     O, D = rays(o, d)
     with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, sym):
         g = brute_hits(sc, o, d)
