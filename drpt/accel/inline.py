@@ -66,32 +66,44 @@ class InlineList:
         return Hit(dr.select(valid, bt, float("inf")), bj, bu, bv, valid)
 
     def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
-        """Whether anything is hit with ``0 < t < tmax``."""
-        _, bj, _, _ = self._trace(o, d, tmax, active)
-        return bj != INVALID
+        """Whether anything is hit with ``0 < t < tmax``: :meth:`intersect`'s
+        tests, each against ``tmax`` itself, or-ed (no running closest
+        distance, so the tests do not wait on each other)."""
+        bound = dr.select(Bool(active), Float(tmax), 0.0)
+        hit = Bool(False)
+        for _, test in self._tests(o, d):
+            hit |= test(bound)[3]
+        return hit
 
     def _trace(self, o, d, tmax, active):
-        o, d, active = Array3f(o), Array3f(d), Bool(active)
-        bt = dr.select(active, Float(tmax), 0.0)
+        bt = dr.select(Bool(active), Float(tmax), 0.0)
         bj, bu, bv = UInt32(INVALID), Float(0), Float(0)
+        for j, test in self._tests(o, d):
+            t, u, v, h = test(bt)
+            bt, bj = dr.select(h, t, bt), dr.select(h, j, bj)
+            bu, bv = dr.select(h, u, bu), dr.select(h, v, bv)
+        return bt, bj, bu, bv
+
+    def _tests(self, o, d):
+        """Each primitive's test, in brute force's order: ``(index, test)`` with
+        ``test(tmax) -> (t, u, v, hit)`` (``u = v = 0`` off triangles)."""
+        o, d = Array3f(o), Array3f(d)
         N = self.F + self.S
         for k, (n, off) in enumerate(self.planes):
-            t, h = intersect_plane(o, d, Array3f(*n), Float(off), bt)
-            bt, bj = dr.select(h, t, bt), dr.select(h, N + k, bj)
+            yield N + k, lambda b, n=n, off=off: _no_uv(*intersect_plane(o, d, Array3f(*n), Float(off), b))
         if self.tris:
             r = RayPrep(o, d)
             # kx, ky follow kz (x->y->z->x), so two masks on kz pick every component
             m0, m1 = r.kz == 0, r.kz == 1
             for i, (p0, p1, p2) in enumerate(self.tris):
                 g = [_pick(m0, m1, p, shift) for p in (p0, p1, p2) for shift in (1, 2, 0)]
-                t, u, v, h = watertight_permuted(r, *g, bt)
-                bt, bj = dr.select(h, t, bt), dr.select(h, i, bj)
-                bu, bv = dr.select(h, u, bu), dr.select(h, v, bv)
+                yield i, lambda b, g=g: watertight_permuted(r, *g, b)
         for i, (c, rad) in enumerate(self.spheres):
-            t, h = intersect_sphere(o, d, Array3f(*c), Float(rad), bt)
-            bt, bj = dr.select(h, t, bt), dr.select(h, self.F + i, bj)
-            bu, bv = dr.select(h, 0.0, bu), dr.select(h, 0.0, bv)
-        return bt, bj, bu, bv
+            yield self.F + i, lambda b, c=c, rad=rad: _no_uv(*intersect_sphere(o, d, Array3f(*c), Float(rad), b))
+
+
+def _no_uv(t: Float, hit: Bool) -> tuple[Float, Float, Float, Bool]:
+    return t, Float(0), Float(0), hit
 
 
 def _f32(a) -> list:
