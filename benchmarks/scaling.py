@@ -161,24 +161,26 @@ def measure(n_tris: int, size=(128, 128), spp: int = 4, repeat: int = 2, max_dep
     if mitsuba:
         import mitsuba as mi
 
+        from drpt import llvm_tuning
         from drpt.backend import set_mitsuba_variant
         from drpt.export.mitsuba import to_mitsuba_dict
 
         set_mitsuba_variant()
-        desc = to_mitsuba_dict(scene, W, H, spp, max_depth=max_depth, bsdf="phong")
-        dr.sync_thread()
-        t0 = time.perf_counter()
-        ms = mi.load_dict(desc)
-        dr.sync_thread()
-        row["mi_load_s"] = time.perf_counter() - t0
-        dr.eval(mi.render(ms, spp=spp))  # warm-up
-        dr.sync_thread()
-        best = math.inf
-        for i in range(repeat):
-            t0 = time.perf_counter()
-            dr.eval(mi.render(ms, spp=spp, seed=i + 1))
+        with llvm_tuning.dr_default():  # Mitsuba as it ships
+            desc = to_mitsuba_dict(scene, W, H, spp, max_depth=max_depth, bsdf="phong")
             dr.sync_thread()
-            best = min(best, time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            ms = mi.load_dict(desc)
+            dr.sync_thread()
+            row["mi_load_s"] = time.perf_counter() - t0
+            dr.eval(mi.render(ms, spp=spp))  # warm-up
+            dr.sync_thread()
+            best = math.inf
+            for i in range(repeat):
+                t0 = time.perf_counter()
+                dr.eval(mi.render(ms, spp=spp, seed=i + 1))
+                dr.sync_thread()
+                best = min(best, time.perf_counter() - t0)
         row["mi_render_s"] = best
         del ms, desc
         gc.collect()

@@ -19,6 +19,10 @@ Backend checks happen before anything is compiled:
 * CUDA: ``dr.set_backend("cuda")`` succeeds without a GPU; the first kernel
   would then fail. :func:`ensure` asks ``dr.has_backend`` first.
 
+Once LLVM passes, :func:`ensure` tunes how Dr.Jit compiles and launches
+kernels (:mod:`drpt.llvm_tuning`: hardware gathers on AMD Zen 3, smaller
+blocks of lanes).
+
 :class:`Policy` holds the constants tuned per backend (see :data:`POLICIES`).
 """
 
@@ -181,6 +185,9 @@ def ensure_llvm() -> None:
             f"on this CPU: {INSTALL_HINT}"
         )
     _checked.add("llvm-version")
+    from . import llvm_tuning
+
+    llvm_tuning.apply()
 
 
 def mitsuba_variant() -> str:

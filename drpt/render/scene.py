@@ -119,7 +119,10 @@ class NoMaterials:
 
 class DeviceScene:
     def __init__(self, scene: Scene, options: RenderOptions):
+        from .. import llvm_tuning
         from ..accel import build_accel
+
+        llvm_tuning.apply()  # as the CLI's backend check does, for API users too
 
         self.accel = build_accel(scene, kind=options.accel, resolution=options.grid_resolution,
                                  method=options.bvh_method, min_leaf=options.bvh_min_leaf,

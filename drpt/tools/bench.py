@@ -240,6 +240,16 @@ def bench_drpt(scene, options, rays: dict, repeat: int) -> dict:
 
 def bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
                   repeat: int, rfilter: str = "box") -> dict:
+    """Mitsuba's numbers, its kernels compiled for Dr.Jit's own LLVM target
+    (Mitsuba as it ships, not drpt's tuning of it: :mod:`drpt.llvm_tuning`)."""
+    from .. import llvm_tuning
+
+    with llvm_tuning.dr_default():
+        return _bench_mitsuba(scene, rays, bsdf, size, spp, max_depth, repeat, rfilter)
+
+
+def _bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
+                   repeat: int, rfilter: str) -> dict:
     import drjit as dr
     import mitsuba as mi
 

@@ -255,6 +255,7 @@ def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter=
     """A loaded Mitsuba scene and a ``render(spp, seed) -> (image, seconds)``."""
     import mitsuba as mi
 
+    from .. import llvm_tuning
     from ..export.mitsuba import to_mitsuba_dict
 
     t0 = time.perf_counter()
@@ -263,9 +264,10 @@ def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter=
     load_seconds = time.perf_counter() - t0
 
     def render(spp: int, s: int):
-        t = time.perf_counter()
-        img = np.asarray(mi.render(ms, spp=int(spp), seed=int(s)), np.float32)
-        return img[..., :3], time.perf_counter() - t
+        with llvm_tuning.dr_default():  # Mitsuba as it ships (see drpt.llvm_tuning)
+            t = time.perf_counter()
+            img = np.asarray(mi.render(ms, spp=int(spp), seed=int(s)), np.float32)
+            return img[..., :3], time.perf_counter() - t
 
     return render, load_seconds
 

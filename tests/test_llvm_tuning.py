@@ -1,0 +1,82 @@
+"""drpt's tuning of Dr.Jit's LLVM backend (drpt/llvm_tuning.py)."""
+
+import os
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drpt import backend, llvm_tuning
+from drpt.llvm_tuning import FEATURE, tuned_features
+
+ROOT = Path(__file__).resolve().parents[1]
+ZEN3 = "+avx,+avx2,+fma,-avx512f,+sse4.2"
+AVX512 = "+avx,+avx2,+fma,+avx512f,+avx512vl"
+
+
+@pytest.mark.parametrize("cpu, features, env, added", [
+    ("znver3", ZEN3, None, True),  # measured: hardware gathers pay
+    ("znver3", ZEN3, "0", False),  # the user keeps Dr.Jit's target
+    ("znver2", ZEN3, None, False),  # not measured: Dr.Jit's choice stays
+    ("znver2", ZEN3, "1", True),  # the user asks for it
+    ("skylake-avx512", AVX512, "1", False),  # AVX-512: LLVM uses gathers already
+    ("x86-64", "+sse4.2,-avx2", "1", False),  # no AVX2 gather instruction
+])
+def test_tuned_features(cpu, features, env, added):
+    out = tuned_features(cpu, features, env)
+    assert (out == features + "," + FEATURE) if added else (out == features)
+
+
+def test_tuning_is_not_added_twice():
+    once = tuned_features("znver3", ZEN3)
+    assert tuned_features("znver3", once, "1") == once
+
+
+def _llvm_or_skip():
+    backend.ensure()
+    if backend.name() != "llvm" or llvm_tuning.current() is None:
+        pytest.skip("needs Dr.Jit's LLVM backend and its tuning functions")
+
+
+def test_apply_tunes_once_and_dr_default_restores():
+    _llvm_or_skip()
+    tuned = llvm_tuning.apply()
+    assert tuned.block_size == llvm_tuning.BLOCK_SIZE
+    default = llvm_tuning._default
+    expected = tuned_features(default.cpu, default.features, os.environ.get(llvm_tuning.ENV_VAR))
+    assert tuned.features == expected and tuned.cpu == default.cpu
+    assert llvm_tuning.fast_gather() == (FEATURE in expected.split(","))
+    assert llvm_tuning.apply() == tuned == llvm_tuning.current()  # once: later calls keep it
+    with llvm_tuning.dr_default():
+        assert llvm_tuning.current() == default
+    assert llvm_tuning.current() == tuned
+
+
+def test_tuned_backend_renders_the_same_image_bit_for_bit():
+    """Only code generation and work splitting change: a render with AVX2
+    gather instructions and small blocks equals one with scalarized gathers and
+    Dr.Jit's blocks, bit for bit (a miscompile in either would show here)."""
+    _llvm_or_skip()
+    tuned = llvm_tuning.apply()
+    flags = tuned.features.split(",")
+    if "+avx2" not in flags or "+avx512f" in flags:
+        pytest.skip("the gather tuning applies to AVX2 CPUs without AVX-512")
+    from drpt.options import RenderOptions
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    scene = load_scene(ROOT / "scenes/cornellbox/cornellbox.txt")
+    opts = RenderOptions(width=24, height=24, spp=4, bsdf="phong", progress=False).validate()
+    renderer = Renderer(scene, opts)
+    plain = ",".join(f for f in flags if f != FEATURE)
+    images = []
+    try:
+        for s in (replace(tuned, features=plain, block_size=16384),
+                  replace(tuned, features=plain + "," + FEATURE, block_size=64)):
+            llvm_tuning._set(s)
+            images.append(renderer.render().image)
+    finally:
+        llvm_tuning._set(tuned)
+    assert images[0].max() > 0
+    assert np.array_equal(images[0], images[1])
