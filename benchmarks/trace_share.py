@@ -1,10 +1,12 @@
 """How much of a path-traced frame the ray queries take (not a test).
 
 Renders SCENE three ways, interleaved in one process, ROUNDS rounds: as is; with every
-closest-hit query traced twice (the second with a slightly shorter ``tmax``, so that
-Dr.Jit cannot merge the two, and the nearer hit kept: the same image); and with every
-shadow query traced twice. The extra time of each doubled render is the time of that
-kind of query in the frame. Prints the best and median render seconds of each.
+closest-hit query traced twice (the nearer hit kept: the same image); and with every
+shadow query traced twice. The second query's ray is the first's times an opaque 1.0,
+so Dr.Jit cannot merge the two (an inline accelerator's tests are straight-line code,
+which Dr.Jit's value numbering would otherwise share between equal queries). The extra
+time of each doubled render is the time of that kind of query in the frame. Prints the
+best and median render seconds of each.
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/trace_share.py SCENE [ROUNDS] [ACCEL] [SIZE] [SPP]
 (defaults 6, bvh, 150, 4; material mode cook-torrance).
@@ -16,7 +18,7 @@ import statistics
 import sys
 
 import drjit as dr
-from drjit.auto import Float
+from drjit.auto import Array3f, Float
 
 from drpt.options import RenderOptions
 from drpt.render import scene as device_scene
@@ -27,15 +29,21 @@ DeviceScene = device_scene.DeviceScene
 ONCE = (DeviceScene.intersect_preliminary, DeviceScene.occluded)
 
 
+def _copy(o, d):
+    """The ray ``(o, d)`` again, as new variables: times an opaque 1.0."""
+    one = dr.opaque(Float, 1.0)
+    return Array3f(o) * one, Array3f(d) * one
+
+
 def closest_twice(self, o, d, active):
     far = Float(dr.largest(Float))
     h1 = self.accel.intersect(o, d, far, active)
-    h2 = self.accel.intersect(o, d, far * 0.999, active)
+    h2 = self.accel.intersect(*_copy(o, d), far, active)
     return dr.select(h2.t < h1.t, h2, h1)
 
 
 def shadow_twice(self, o, d, tmax, active):
-    return self.accel.occluded(o, d, tmax, active) | self.accel.occluded(o, d, tmax * 0.99999, active)
+    return self.accel.occluded(o, d, tmax, active) | self.accel.occluded(*_copy(o, d), tmax, active)
 
 
 VARIANTS = {"as is": ONCE, "closest hit twice": (closest_twice, ONCE[1]),

@@ -133,8 +133,9 @@ def test_cropped_scene_renders_like_mitsuba():
 
 
 def test_kernel_op_count_unchanged_without_a_window():
-    """A camera without a window traces the kernel it always did (the Cornell box path kernel:
-    4610 operations, measured on main before the window existed)."""
+    """A camera without a window traces the same kernel as without window support (the
+    Cornell box path kernel: 4546 operations, the count of main's kernel; a change to that
+    kernel updates the count here)."""
     import drjit as dr
 
     from drpt.options import RenderOptions
@@ -151,4 +152,4 @@ def test_kernel_op_count_unchanged_without_a_window():
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     ops = sorted(k.get("operation_count", 0) for k in h if k.get("type") == dr.KernelType.JIT)
-    assert ops[-1] == 4610, ops[-3:]
+    assert ops[-1] == 4546, ops[-3:]
