@@ -1,11 +1,13 @@
 """drpt and Mitsuba 3 with and without drpt's tuning of Dr.Jit's LLVM backend (not a test).
 
 :mod:`drpt.llvm_tuning` adds LLVM's ``+fast-gather`` to Dr.Jit's target (AVX2
-gather instructions instead of scalarized gathers) and launches kernels in
-blocks of 4096 lanes instead of 16384. This script renders SCENE six ways,
+gather instructions instead of scalarized gathers), and the renderer launches
+its path kernel in blocks sized for the pass (``llvm_tuning.blocks_for``:
+blocks of 4096 lanes instead of 16384 at 256x256). This script renders SCENE six ways,
 interleaved in one process for ROUNDS rounds: drpt with Dr.Jit's own settings,
 with each of the two changes alone and with both; Mitsuba with Dr.Jit's own
-settings (as it ships) and with both. It prints each one's median seconds and
+settings (as it ships) and with the gather tuning (the block sizes are the
+renderer's). It prints each one's median seconds and
 medians of per-round ratios, and checks that drpt's images are bitwise equal.
 The gather tuning is forced on (``DRPT_FAST_GATHER=1``), so the script also
 measures CPUs where drpt does not turn it on by itself.
@@ -20,7 +22,6 @@ import os
 import statistics
 import sys
 import time
-from dataclasses import replace
 
 import drjit as dr
 import numpy as np
@@ -46,11 +47,13 @@ def main(argv: list[str]) -> None:
         sys.exit("this CPU or Dr.Jit has no AVX2 gather to tune (drpt.llvm_tuning)")
     tuned = llvm_tuning.current()
     default = llvm_tuning._default
+    per_launch = llvm_tuning.block_size_for
+    # name -> (target, block size rule of the renderer's path kernel)
     settings = {
-        "default": default,
-        "gather": replace(default, features=tuned.features),
-        "block": replace(default, block_size=tuned.block_size),
-        "tuned": tuned,
+        "default": (default, lambda n, threads, width: default.block_size),
+        "gather": (tuned, lambda n, threads, width: default.block_size),
+        "block": (default, per_launch),
+        "tuned": (tuned, per_launch),
     }
     print(f"target: {tuned.cpu}, load average: {os.getloadavg()[0]:.2f}")
     scene = load_scene(scene_path)
@@ -64,7 +67,9 @@ def main(argv: list[str]) -> None:
 
     def run(name: str, i: int) -> float:
         who, how = name.split()
-        llvm_tuning._set(settings[how])
+        target, rule = settings[how]
+        llvm_tuning._set(target)
+        llvm_tuning.block_size_for = rule
         try:
             if who == "drpt":
                 res = r.render()
@@ -77,6 +82,7 @@ def main(argv: list[str]) -> None:
             return time.perf_counter() - t0
         finally:
             llvm_tuning._set(tuned)
+            llvm_tuning.block_size_for = per_launch
 
     names = ["drpt default", "drpt gather", "drpt block", "drpt tuned",
              "mitsuba default", "mitsuba tuned"]

@@ -19,15 +19,20 @@ AVX2 CPU, ``0``: keep Dr.Jit's target). Images are bitwise the same.
 thread pool: ``2 * cores`` blocks up to 16384 lanes each, then blocks of
 ``jit_llvm_block_size()`` = 16384 lanes. A path-regeneration pass of a 256x256
 image is 65536 lanes: 4 blocks on 2 cores, and a core that finishes its second
-block first waits for the other (CPU utilization 1.86-1.94 of 2). :data:`BLOCK_SIZE`
-= 4096 lanes gives 16 blocks (utilization 1.97-1.98).
+block first waits for the other (CPU utilization 1.86-1.94 of 2). The
+renderer launches its path kernel inside :func:`blocks_for`, which sets the
+block size to the largest power of two (Dr.Jit's requirement) that gives each
+thread at least :data:`BLOCKS_PER_THREAD` blocks, at most 16384: 16 blocks of
+4096 lanes there (utilization 1.97-1.98). A fixed 4096 would split a pass of
+22500 lanes into 5 blocks and a short sixth (0.93x as fast on the dining room
+at 150x150).
 
 Measured with ``benchmarks/codegen_ab.py`` (2-core AMD EPYC, Zen 3; numbers in
 ``docs/performance.md``): the Cornell box renders 1.3-1.4x faster, newscene
 1.3x, the dining room (Embree) 1.2x.
 
-The settings are global to the process: Mitsuba's kernels compiled and launched
-in the same process get them too, and gain as well. :func:`dr_default` restores
+The target is global to the process: Mitsuba's kernels compiled in the same
+process get it too, and gain as well. :func:`dr_default` restores
 Dr.Jit's own settings for a block; ``bench`` and ``converge`` time Mitsuba
 inside it, as Mitsuba ships. Kernels are cached by their IR, which names the
 target, so kernels of the two targets never mix.
@@ -43,15 +48,16 @@ import contextlib
 import ctypes
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 #: LLVM CPU names where ``+fast-gather`` was measured to pay (AVX2 without AVX-512).
 FAST_GATHER_CPUS = ("znver3",)
 FEATURE = "+fast-gather"
 ENV_VAR = "DRPT_FAST_GATHER"
-#: Lanes per block of Dr.Jit's thread pool for drpt's kernels.
-BLOCK_SIZE = 4096
+#: Blocks of Dr.Jit's thread pool per thread, at least, for the renderer's path kernel.
+BLOCKS_PER_THREAD = 8
+MAX_BLOCK = 16384  # Dr.Jit's default block size
 
 
 @dataclass(frozen=True)
@@ -102,6 +108,34 @@ def current() -> Settings | None:
     return Settings(cpu.decode(), (lib.target_features() or b"").decode(), lib.block_size())
 
 
+def block_size_for(n: int, threads: int, width: int) -> int:
+    """The block size for a kernel of ``n`` lanes on ``threads`` threads with
+    packets of ``width`` lanes: the largest power of two, at most
+    :data:`MAX_BLOCK` and above ``width``, that makes at least
+    :data:`BLOCKS_PER_THREAD` blocks per thread."""
+    b = MAX_BLOCK
+    while b > 2 * width and n < b * BLOCKS_PER_THREAD * max(threads, 1):
+        b //= 2
+    return b
+
+
+@contextlib.contextmanager
+def blocks_for(n: int) -> Iterator[None]:
+    """Kernels launched inside the block (of ``n`` lanes) use
+    :func:`block_size_for`'s block size; a no-op off the LLVM backend."""
+    saved = current()
+    if saved is None:
+        yield
+        return
+    import drjit as dr
+
+    _set(replace(saved, block_size=block_size_for(n, dr.thread_count(), core().vector_width())))
+    try:
+        yield
+    finally:
+        _set(saved)
+
+
 def tuned_features(cpu: str, features: str, env: str | None = None) -> str:
     """``features`` with :data:`FEATURE` added where it pays (see the module
     docstring); ``env`` is the value of ``DRPT_FAST_GATHER`` (``None``: unset)."""
@@ -124,8 +158,7 @@ def apply() -> Settings | None:
     if now is None or _default is not None:
         return now
     _default = now
-    _set(Settings(now.cpu, tuned_features(now.cpu, now.features, os.environ.get(ENV_VAR)),
-                  BLOCK_SIZE))
+    _set(replace(now, features=tuned_features(now.cpu, now.features, os.environ.get(ENV_VAR))))
     return current()
 
 
@@ -150,6 +183,8 @@ def dr_default() -> Iterator[None]:
 
 
 def _set(s: Settings) -> None:
+    if s.block_size & (s.block_size - 1):
+        raise ValueError(f"block size {s.block_size} is not a power of two")  # C++ would abort
     lib = core()
     lib.set_target(s.cpu.encode(), s.features.encode(), lib.vector_width())
     lib.set_block_size(s.block_size)

@@ -42,10 +42,9 @@ def _llvm_or_skip():
 def test_apply_tunes_once_and_dr_default_restores():
     _llvm_or_skip()
     tuned = llvm_tuning.apply()
-    assert tuned.block_size == llvm_tuning.BLOCK_SIZE
     default = llvm_tuning._default
     expected = tuned_features(default.cpu, default.features, os.environ.get(llvm_tuning.ENV_VAR))
-    assert tuned.features == expected and tuned.cpu == default.cpu
+    assert tuned == replace(default, features=expected)  # the blocks are per launch
     assert llvm_tuning.fast_gather() == (FEATURE in expected.split(","))
     assert llvm_tuning.apply() == tuned == llvm_tuning.current()  # once: later calls keep it
     with llvm_tuning.dr_default():
@@ -53,7 +52,34 @@ def test_apply_tunes_once_and_dr_default_restores():
     assert llvm_tuning.current() == tuned
 
 
-def test_tuned_backend_renders_the_same_image_bit_for_bit():
+@pytest.mark.parametrize("n, threads, size", [
+    (65536, 2, 4096),  # 256x256 at one lane per pixel: 16 blocks
+    (22500, 2, 1024),  # 150x150: 22 blocks (4096 would leave a short sixth block)
+    (1 << 21, 2, 16384),  # a full pass: Dr.Jit's default block size
+    (65536, 16, 512),
+    (100, 2, 16),  # tiny: the smallest block Dr.Jit takes (a power of two above 8)
+])
+def test_block_size_for(n, threads, size):
+    b = llvm_tuning.block_size_for(n, threads, 8)
+    assert b == size and b & (b - 1) == 0 and b > 8
+    assert b in (llvm_tuning.MAX_BLOCK, 16) or -(-n // b) >= llvm_tuning.BLOCKS_PER_THREAD * threads
+
+
+def test_blocks_for_sets_and_restores_the_block_size():
+    _llvm_or_skip()
+    import drjit as dr
+
+    before = llvm_tuning.current()
+    with llvm_tuning.blocks_for(65536):
+        want = llvm_tuning.block_size_for(65536, dr.thread_count(), llvm_tuning.core().vector_width())
+        assert llvm_tuning.current() == replace(before, block_size=want)
+    assert llvm_tuning.current() == before
+    with pytest.raises(ValueError, match="power of two"):
+        llvm_tuning._set(replace(before, block_size=3000))  # would abort in C++
+    assert llvm_tuning.current() == before
+
+
+def test_tuned_backend_renders_the_same_image_bit_for_bit(monkeypatch):
     """Only code generation and work splitting change: a render with AVX2
     gather instructions and small blocks equals one with scalarized gathers and
     Dr.Jit's blocks, bit for bit (a miscompile in either would show here)."""
@@ -72,9 +98,9 @@ def test_tuned_backend_renders_the_same_image_bit_for_bit():
     plain = ",".join(f for f in flags if f != FEATURE)
     images = []
     try:
-        for s in (replace(tuned, features=plain, block_size=16384),
-                  replace(tuned, features=plain + "," + FEATURE, block_size=64)):
-            llvm_tuning._set(s)
+        for features, block in ((plain, 16384), (plain + "," + FEATURE, 16)):
+            llvm_tuning._set(replace(tuned, features=features))
+            monkeypatch.setattr(llvm_tuning, "block_size_for", lambda n, t, w, b=block: b)
             images.append(renderer.render().image)
     finally:
         llvm_tuning._set(tuned)

@@ -59,6 +59,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import PCG32, Array2f, Array3f, Array3f64, Bool, Float, UInt32, UInt64
 
+from .. import llvm_tuning
 from ..backend import policy
 from ..errors import DrptError
 from ..options import RenderOptions
@@ -232,15 +233,18 @@ class Renderer:
             count = kk // mm + dr.select(j < kk % mm, 1, 0)
             acc, acc2, bad = self.integrator.sample_sequence(rng, camera_ray, count, wide=wide)
             # evaluate the path loop once (the reductions below would each
-            # re-run it: measured 4.1x slower)
-            dr.eval(acc, acc2, bad)
+            # re-run it: measured 4.1x slower), in blocks that keep every
+            # thread busy to the end (drpt.llvm_tuning.blocks_for)
+            with llvm_tuning.blocks_for(n):
+                dr.eval(acc, acc2, bad)
             nbad = dr.sum(bad)
         else:
             o, d, weight = camera_ray(rng)
             L = self.integrator.sample(rng, o, d, Bool(True))
             if weight is not None:
                 L = L * weight
-            dr.eval(L)
+            with llvm_tuning.blocks_for(n):
+                dr.eval(L)
             bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
             acc = (Array3f64 if wide else Array3f)(dr.select(bad, 0.0, L))
             acc2 = acc * acc
