@@ -1,6 +1,6 @@
 """How Dr.Jit's LLVM backend compiles and launches drpt's kernels: drpt's tuning of it.
 
-Two process-wide settings of ``libdrjit-core``, both measured on drpt's renders:
+Two settings of ``libdrjit-core``, both measured on drpt's renders:
 
 **The code-generation target.** Dr.Jit compiles every LLVM kernel for the host:
 LLVM's name for the CPU and its feature string (``jit_llvm_target_cpu()``,
@@ -28,10 +28,11 @@ thread at least :data:`BLOCKS_PER_THREAD` blocks, at most 16384: 16 blocks of
 at 150x150).
 
 Measured with ``benchmarks/codegen_ab.py`` (2-core AMD EPYC, Zen 3; numbers in
-``docs/performance.md``): the Cornell box renders 1.3-1.4x faster, newscene
-1.3x, the dining room (Embree) 1.2x.
+``docs/performance.md``): with both, the Cornell box and newscene render
+1.4x faster, the dining room (Embree) 1.1x.
 
-The target is global to the process: Mitsuba's kernels compiled in the same
+The target is global to the process (the block size is set only around the
+path kernel's launch): Mitsuba's kernels compiled in the same
 process get it too, and gain as well. :func:`dr_default` restores
 Dr.Jit's own settings for a block; ``bench`` and ``converge`` time Mitsuba
 inside it, as Mitsuba ships. Kernels are cached by their IR, which names the
