@@ -238,6 +238,24 @@ def bench_drpt(scene, options, rays: dict, repeat: int) -> dict:
 
 # --------------------------------------------------------------------------- Mitsuba
 
+def mitsuba_rays(rays: dict) -> tuple:
+    """:func:`make_rays`'s primary, incoherent and shadow rays as Mitsuba
+    ``Ray3f`` (Mitsuba's variant must be set), evaluated."""
+    import drjit as dr
+    import mitsuba as mi
+
+    def ray(o, d, t=None):
+        r = mi.Ray3f(mi.Point3f(*(mi.Float(c) for c in o)),
+                     mi.Vector3f(*(mi.Float(c) for c in d)))
+        if t is not None:
+            r.maxt = mi.Float(t)
+        dr.make_opaque(r)
+        return r
+
+    return (ray(rays["primary_o"], rays["primary_d"]), ray(rays["inc_o"], rays["inc_d"]),
+            ray(rays["inc_o"], rays["shadow_d"], rays["shadow_t"]))
+
+
 def bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
                   repeat: int, rfilter: str = "box") -> dict:
     """Mitsuba's numbers, its kernels compiled for Dr.Jit's own LLVM target
@@ -268,17 +286,7 @@ def _bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
         dr.sync_thread()
         load = min(load, time.perf_counter() - t0)
 
-    def ray(o, d, t=None):
-        r = mi.Ray3f(mi.Point3f(*(mi.Float(c) for c in o)),
-                     mi.Vector3f(*(mi.Float(c) for c in d)))
-        if t is not None:
-            r.maxt = mi.Float(t)
-        dr.make_opaque(r)
-        return r
-
-    rp = ray(rays["primary_o"], rays["primary_d"])
-    ri = ray(rays["inc_o"], rays["inc_d"])
-    rs = ray(rays["inc_o"], rays["shadow_d"], rays["shadow_t"])
+    rp, ri, rs = mitsuba_rays(rays)
 
     def hit(r):
         pi = ms.ray_intersect_preliminary(r)
