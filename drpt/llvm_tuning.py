@@ -124,17 +124,18 @@ def block_size_for(n: int, threads: int, width: int) -> int:
 def blocks_for(n: int) -> Iterator[None]:
     """Kernels launched inside the block (of ``n`` lanes) use
     :func:`block_size_for`'s block size; a no-op off the LLVM backend."""
-    saved = current()
-    if saved is None:
+    lib = core()
+    if lib is None or not _llvm_ready():
         yield
         return
     import drjit as dr
 
-    _set(replace(saved, block_size=block_size_for(n, dr.thread_count(), core().vector_width())))
+    before = lib.block_size()
+    lib.set_block_size(block_size_for(n, dr.thread_count(), lib.vector_width()))
     try:
         yield
     finally:
-        _set(saved)
+        lib.set_block_size(before)
 
 
 def tuned_features(cpu: str, features: str, env: str | None = None) -> str:
