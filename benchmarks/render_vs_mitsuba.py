@@ -11,10 +11,7 @@ for the 4-wide (default) and binary BVH, or ``bvh-sah,bvh-ploc`` for two build r
 """
 
 import sys
-import time
 from pathlib import Path
-
-import drjit as dr
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = [("scenes/cornellbox/cornellbox.txt", "phong"),
@@ -28,6 +25,7 @@ def main(size=256, spp=64, accels="auto"):
     from drpt.options import PathOptions, RenderOptions, parse_accel, parse_accel_list
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
+    from drpt.tools.bench import mitsuba_render_seconds
 
     mi = set_mitsuba_variant()
 
@@ -47,14 +45,7 @@ def main(size=256, spp=64, accels="auto"):
                 rates[accel] = max(r.render().samples_per_second for _ in range(3))
             with llvm_tuning.dr_default():  # Mitsuba as it ships
                 ms = mi.load_dict(to_mitsuba_dict(scene, size, size, spp, max_depth=depth, bsdf=mode))
-                dr.eval(mi.render(ms, spp=spp))
-                best = float("inf")
-                for seed in (1, 2, 3):
-                    dr.sync_thread()
-                    t0 = time.perf_counter()
-                    dr.eval(mi.render(ms, spp=spp, seed=seed))
-                    dr.sync_thread()
-                    best = min(best, time.perf_counter() - t0)
+                best = mitsuba_render_seconds(ms, spp, 3)
             mi_rate = size * size * spp / best
             for accel, rate in rates.items():
                 print(f"| {Path(path).name} | {depth} | {accel} | {rate / 1e6:.2f} "

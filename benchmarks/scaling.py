@@ -164,6 +164,7 @@ def measure(n_tris: int, size=(128, 128), spp: int = 4, repeat: int = 2, max_dep
         from drpt import llvm_tuning
         from drpt.backend import set_mitsuba_variant
         from drpt.export.mitsuba import to_mitsuba_dict
+        from drpt.tools.bench import mitsuba_render_seconds
 
         set_mitsuba_variant()
         with llvm_tuning.dr_default():  # Mitsuba as it ships
@@ -173,15 +174,7 @@ def measure(n_tris: int, size=(128, 128), spp: int = 4, repeat: int = 2, max_dep
             ms = mi.load_dict(desc)
             dr.sync_thread()
             row["mi_load_s"] = time.perf_counter() - t0
-            dr.eval(mi.render(ms, spp=spp))  # warm-up
-            dr.sync_thread()
-            best = math.inf
-            for i in range(repeat):
-                t0 = time.perf_counter()
-                dr.eval(mi.render(ms, spp=spp, seed=i + 1))
-                dr.sync_thread()
-                best = min(best, time.perf_counter() - t0)
-        row["mi_render_s"] = best
+            row["mi_render_s"] = mitsuba_render_seconds(ms, spp, repeat)
         del ms, desc
         gc.collect()
     return row

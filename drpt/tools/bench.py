@@ -256,6 +256,23 @@ def mitsuba_rays(rays: dict) -> tuple:
             ray(rays["inc_o"], rays["shadow_d"], rays["shadow_t"]))
 
 
+def mitsuba_render_seconds(ms, spp: int, repeat: int) -> float:
+    """Best wall time of Mitsuba rendering scene ``ms`` at ``spp`` with seeds
+    ``1..repeat``, after one untimed render (compilation)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    dr.eval(mi.render(ms, spp=spp))  # warm-up
+    dr.sync_thread()
+    best = math.inf
+    for seed in range(1, repeat + 1):
+        t0 = time.perf_counter()
+        dr.eval(mi.render(ms, spp=spp, seed=seed))
+        dr.sync_thread()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
 def bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
                   repeat: int, rfilter: str = "box") -> dict:
     """Mitsuba's numbers, its kernels compiled for Dr.Jit's own LLVM target
@@ -297,14 +314,7 @@ def _bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
     t_inc = _best(lambda: hit(ri), repeat)
     t_shadow = _best(lambda: ms.ray_test(rs), repeat)
 
-    dr.eval(mi.render(ms, spp=spp))  # warm-up
-    dr.sync_thread()
-    render_s = math.inf
-    for i in range(repeat):
-        t0 = time.perf_counter()
-        dr.eval(mi.render(ms, spp=spp, seed=i + 1))
-        dr.sync_thread()
-        render_s = min(render_s, time.perf_counter() - t0)
+    render_s = mitsuba_render_seconds(ms, spp, repeat)
     return {"mi_load_s": load, "mi_primary_mrays": n_prim / t_prim / 1e6,
             "mi_incoherent_mrays": n_inc / t_inc / 1e6, "mi_shadow_mrays": n_inc / t_shadow / 1e6,
             "mi_render_s": render_s, "mi_msamples_s": W * H * spp / render_s / 1e6}
