@@ -106,3 +106,23 @@ def test_tuned_backend_renders_the_same_image_bit_for_bit(monkeypatch):
         llvm_tuning._set(tuned)
     assert images[0].max() > 0
     assert np.array_equal(images[0], images[1])
+
+
+def test_renderer_launches_its_path_kernel_in_sized_blocks(monkeypatch):
+    """Each pass's path kernel runs inside ``blocks_for`` with the pass's lane count."""
+    from drpt.options import RenderOptions
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    seen = []
+    real = llvm_tuning.blocks_for
+
+    def spy(n):
+        seen.append(n)
+        return real(n)
+
+    monkeypatch.setattr(llvm_tuning, "blocks_for", spy)
+    scene = load_scene(ROOT / "scenes/cornellbox/cornellbox.txt")
+    opts = RenderOptions(width=16, height=8, spp=2, bsdf="phong", progress=False).validate()
+    Renderer(scene, opts).render()
+    assert seen and all(n % (16 * 8) == 0 for n in seen)  # whole pixels' lanes, every pass
