@@ -1,0 +1,113 @@
+"""Mitsuba 3's own render-test scenes (``../shared/corpus/mitsuba-data``) rendered by drpt and
+z-tested against the shipped references the way Mitsuba's ``src/render/tests/test_renders.py``
+tests its own renders.
+
+The statistic (Mitsuba's): per pixel and channel, in XYZ,
+``z = |mean - ref| * sqrt(spp / max(ref_var, 1e-4))`` where ``ref_var`` is the reference's
+per-*sample* variance image (``refs/<name>_ref_rgb_var.exr``, written by Mitsuba's ``moment``
+integrator); two-sided p-values against the Sidak-corrected level
+``alpha = 1 - 0.99 ** (1 / pixels)``; the scene passes when at least 99.75% of the pixel
+channels have ``p > alpha``. The test assumes drpt's per-sample variance is close to Mitsuba's;
+at the low sample counts used here (a few hundred spp instead of Mitsuba's 2e6 / pixels) the
+test is weaker than Mitsuba's but still catches a wrong reading of the file (the negative
+controls in the corpus tests check that it does).
+
+Scenes are rendered *as authored*: no edits, the file's own film, filter, integrator and
+depths; only ``spp`` is passed (as the ``$spp`` define the corpus scenes declare, and as the
+sample count).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import SHARED
+
+CORPUS = SHARED / "corpus" / "mitsuba-data" / "tests" / "scenes"
+
+#: linear sRGB -> CIE XYZ (D65), the matrix of Mitsuba's ``srgb_to_xyz``; the test applies it
+#: to the images and (as Mitsuba's ``Bitmap.convert`` does) to the variance images alike
+SRGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423],
+                        [0.212671, 0.715160, 0.072169],
+                        [0.019334, 0.119193, 0.950227]])
+
+
+def corpus_scene(rel: str) -> Path:
+    """The corpus scene ``rel`` (relative to ``tests/scenes``); skips when absent."""
+    p = CORPUS / rel
+    if not p.is_file():
+        pytest.skip(f"../shared/corpus/mitsuba-data is not present ({rel})")
+    return p
+
+
+def reference_files(scene: Path) -> tuple[Path, Path]:
+    """``(ref, ref_var)`` for a ``test_<name>_<integrator>.xml`` (Mitsuba's naming rule)."""
+    stem = scene.stem.rsplit("_", 1)[0]
+    ref = scene.parent / "refs" / f"{stem}_ref_rgb.exr"
+    return ref, ref.with_name(f"{stem}_ref_rgb_var.exr")
+
+
+def _read(path: Path) -> np.ndarray:
+    from drpt.imageio import read_image
+
+    img = np.asarray(read_image(path), np.float64)
+    if img.ndim == 2:
+        img = img[..., None]
+    return img[..., :3]
+
+
+def to_xyz(rgb: np.ndarray) -> np.ndarray:
+    return rgb @ SRGB_TO_XYZ.T
+
+
+@dataclass
+class ZTest:
+    passed: bool
+    fraction: float  # of pixel channels with p > alpha
+    alpha: float
+    min_p: float
+    spp: int
+
+    def __str__(self) -> str:
+        return (f"{'pass' if self.passed else 'FAIL'}: {self.fraction:.4%} of pixel channels "
+                f"p > {self.alpha:.2e} (need 99.75%), min p {self.min_p:.2e}, {self.spp} spp")
+
+
+def z_test(image_rgb: np.ndarray, spp: int, ref_rgb: np.ndarray, ref_var_rgb: np.ndarray,
+           significance: float = 0.01) -> ZTest:
+    """Mitsuba's render-test z-test of a drpt image (linear RGB, ``(H, W, 3)``) rendered at
+    ``spp`` against a reference and its per-sample variance (both linear RGB)."""
+    img = to_xyz(np.asarray(image_rgb, np.float64)[..., :3])
+    ref = to_xyz(ref_rgb)
+    var = np.maximum(to_xyz(ref_var_rgb), 1e-4)
+    z = np.abs(img - ref) * np.sqrt(spp / var)
+    p = np.array([math.erfc(v / math.sqrt(2.0)) for v in z.ravel()]).reshape(z.shape)
+    pixels = img.shape[0] * img.shape[1]
+    alpha = 1.0 - (1.0 - significance) ** (1.0 / pixels)
+    ok = p > alpha
+    frac = float(np.count_nonzero(ok)) / (3 * pixels)
+    return ZTest(frac >= 0.9975, frac, alpha, float(p.min()), spp)
+
+
+def render_as_authored(scene_path: Path, spp: int, seed: int = 0, **defines):
+    """drpt's render of the corpus file at ``spp`` (RenderResult), the file's own settings."""
+    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    scene = load_scene(scene_path, defines={"spp": str(spp), **defines})
+    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=seed), scene), spp=spp)
+    return Renderer(scene, opts).render()
+
+
+def check_scene(rel: str, spp: int, seed: int = 0, **defines) -> ZTest:
+    """Render corpus scene ``rel`` as authored and z-test it against its reference."""
+    path = corpus_scene(rel)
+    ref, var = reference_files(path)
+    result = render_as_authored(path, spp, seed, **defines)
+    return z_test(result.image, spp, _read(ref), _read(var))
