@@ -181,7 +181,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         raise
     if isinstance(engine, LocalEngine):
         build = engine.renderer.build_seconds
-    job.result = finish(merged, time.perf_counter() - t0, build)
+    job.result = finish(merged, time.perf_counter() - t0, build, opts.integrator == "ptracer")
     return job
 
 

@@ -39,7 +39,7 @@ import math
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Bool, Float
 
 from ..errors import DrptError
 from ..scene.model import Camera, OrthographicCamera, PerspectiveCamera
@@ -128,3 +128,30 @@ class RayCamera:
             target = (self.f + self.r * sx + self.u * sy) * self.focus
             return self.center + offset, dr.normalize(target - offset)
         return Array3f(self.center), dr.normalize(self.f + self.r * sx + self.u * sy)
+
+    def connect(self, p: Array3f) -> tuple[Float, Float, Array3f, Float, Float, Bool]:
+        """The camera seen from world points ``p`` (light tracing's connection to the sensor,
+        Mitsuba's perspective ``sample_direction``): ``(x, y, wc, dist, importance, valid)``
+        with ``(x, y)`` the pixel position ``p`` projects to, ``wc`` the unit direction from
+        ``p`` toward the camera's center, ``dist`` the distance, and ``importance`` the
+        sensor's importance per unit area at ``p``, ``W_e / dist^2``, where
+        ``W_e = 1 / (A cos^3 theta)`` for a film of area ``A`` on the plane at distance 1
+        (``theta``: the angle between ``-wc`` and the view direction). ``valid`` is False
+        where ``p`` is behind the camera or outside the image. Pinhole cameras only (no crop
+        window)."""
+        v = p - self.center
+        dist = dr.norm(v)
+        z = dr.dot(v, self.f)
+        inv_z = dr.rcp(z)
+        half_w2 = dr.squared_norm(self.r)
+        half_h2 = dr.squared_norm(self.u)
+        sx = dr.dot(v, self.r) / half_w2 * inv_z
+        sy = dr.dot(v, self.u) / half_h2 * inv_z
+        x = (sx + 1.0) * (0.5 * self.width)
+        y = (1.0 - sy) * (0.5 * self.height)
+        valid = (z > 0.0) & (x >= 0.0) & (x < self.width) & (y >= 0.0) & (y < self.height)
+        cos_t = z / dist
+        area = 4.0 * dr.sqrt(half_w2 * half_h2)
+        importance = dr.rcp(area * cos_t * cos_t * cos_t * dist * dist)
+        wc = -v / dist
+        return x, y, wc, dist, dr.select(valid, importance, 0.0), valid

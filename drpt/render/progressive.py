@@ -82,7 +82,8 @@ class Progressive:
         for b in range(bands):
             _s0, k, r0, rows = self.plan[b]
             img, _sq, nbad = self.renderer._pass(self.spp * bands + b, k, r0, rows)
-            self.acc[r0:r0 + rows] += img
+            lo = 0 if self.renderer.light_tracing else r0  # light paths land anywhere
+            self.acc[lo:lo + img.shape[0]] += img
             self.nonfinite += nbad
         self.spp += 1
         self.seconds += time.perf_counter() - t0

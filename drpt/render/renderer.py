@@ -66,10 +66,13 @@ from ..options import RenderOptions
 from ..scene.model import Camera, Scene
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
+from .film import SplatFilm
 from .filter_sampling import sample_position
 from .integrators.path import PathIntegrator
+from .integrators.ptracer import ParticleTracer
 from .integrators.wavefront import WavefrontIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
+from .lights.rays import EmitterRays
 from .scene import DeviceScene
 
 
@@ -154,6 +157,7 @@ class Renderer:
         self.opt = options
         t0 = time.perf_counter()
         self.scene = DeviceScene(scene, options)
+        self.scene_model = scene
         self.camera_model: Camera = scene.camera
         self.camera = RayCamera(scene.camera, options.width, options.height)
         self.warnings: list[str] = self.scene.warnings
@@ -162,6 +166,9 @@ class Renderer:
 
     def _make_integrator(self):
         options = self.opt
+        if options.integrator == "ptracer":
+            return ParticleTracer(self.scene, EmitterRays(self.scene, self.scene_model), self.camera,
+                                  options.path)
         if options.integrator == "whitted":
             depth = options.path.max_depth
             return WhittedIntegrator(self.scene, WhittedOptions(max_depth=depth if depth > 0 else 16))
@@ -209,6 +216,8 @@ class Renderer:
         """:meth:`_pass`'s sums, float64 with ``wide``, else float32."""
         W = self.opt.width
         pixels = rows * W
+        if isinstance(self.integrator, ParticleTracer):
+            return self._trace_light_pass(pass_index, k * pixels)
         sequential = hasattr(self.integrator, "sample_sequence")
         # Lanes per pixel: with path regeneration m = ceil(min_lanes / pixels)
         # (at most k), each running about k / m samples, else one lane per
@@ -255,6 +264,25 @@ class Renderer:
         img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)
         sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, 3)
         return img, sq, int(nbad[0])
+
+    def _trace_light_pass(self, pass_index: int, n: int) -> tuple[np.ndarray, np.ndarray, int]:
+        """``n`` light paths (:class:`~drpt.render.integrators.ptracer.ParticleTracer`)
+        splatted into a film of the whole image: its sums and sums of squares ``(H, W,
+        3)`` and the non-finite contributions dropped. Their random numbers come from
+        the same ``(seed, pass, lane)`` streams as a camera pass's."""
+        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
+                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+        film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+        bad = self.integrator.trace(rng, film, dr.full(Bool, True, n))
+        with llvm_tuning.blocks_for(n):
+            dr.eval(film.sum, film.sq, bad)
+        img, sq = film.arrays()
+        return img.astype(np.float64), sq.astype(np.float64), int(dr.sum(bad)[0])
+
+    @property
+    def light_tracing(self) -> bool:
+        """Whether passes splat light paths over the whole image (``ptracer``)."""
+        return isinstance(self.integrator, ParticleTracer)
 
     def _camera_ray(self, x: UInt32, y: UInt32) -> Callable:
         """``camera_ray(rng) -> (o, d, weight)`` for pixel column ``x`` and row
@@ -305,8 +333,9 @@ class Renderer:
         for i in chunks.passes_of(index):
             _s0, k, r0, rows = plan[i]
             img, sq, nbad = self._pass(i, k, r0, rows)
-            acc[r0:r0 + rows] += img
-            acc2[r0:r0 + rows] += sq
+            lo = 0 if self.light_tracing else r0  # light paths land anywhere on the image
+            acc[lo:lo + img.shape[0]] += img
+            acc2[lo:lo + img.shape[0]] += sq
             nonfinite += nbad
             if on_pass is not None:
                 on_pass((_s0 - chunks.spp_before(index)) * H * W + (r0 + rows) * W * k)
@@ -335,14 +364,24 @@ class Renderer:
                         on_pass(before + done, W * H * spp)
 
                 merged.push(self.render_chunk(c, progress))
-        return finish(merged, time.perf_counter() - t0, self.build_seconds)
+        return finish(merged, time.perf_counter() - t0, self.build_seconds, self.light_tracing)
 
 
-def finish(merged: ChunkMerge, seconds: float, build_seconds: float) -> RenderResult:
-    """The image and variance of a finished merge."""
+def finish(merged: ChunkMerge, seconds: float, build_seconds: float,
+           light_tracing: bool = False) -> RenderResult:
+    """The image and variance of a finished merge. With ``light_tracing`` the sums are
+    splats of ``W H spp`` light paths (:mod:`~drpt.render.integrators.ptracer`): a
+    pixel's value is its sum over ``spp``, and the variance of that mean is estimated
+    from the sum of squared splats, each path a sample ``W H`` times its splat."""
     spp = merged.spp
     H, W, _ = merged.sum.shape
     mean = merged.sum / spp
+    if light_tracing:
+        paths = W * H * spp
+        second = merged.sumsq * (W * H) / spp  # mean over paths of (W H splat)^2
+        var = np.maximum(second - mean * mean, 0.0) / max(paths - 1, 1)
+        return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, paths,
+                            merged.nonfinite)
     if mean.max() > np.finfo(np.float32).max:
         y, x, _ = np.unravel_index(np.argmax(mean), mean.shape)
         raise DrptError(f"pixel ({x}, {y}) averages {mean.max():.3g}, beyond the float32 "

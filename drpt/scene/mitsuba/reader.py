@@ -291,12 +291,12 @@ class Reader:
     # ------------------------------------------------------------ integrator
     def integrator(self, node: Node) -> None:
         s = self.settings
-        if node.plugin not in ("path", "direct"):
-            self.unsupported(node, f"integrator '{node.plugin}' (drpt has path and direct)",
+        if node.plugin not in ("path", "direct", "ptracer"):
+            self.unsupported(node, f"integrator '{node.plugin}' (drpt has path, direct and ptracer)",
                              fallback="path")
             return
-        s.integrator = "path"
-        if node.plugin == "path":
+        s.integrator = "ptracer" if node.plugin == "ptracer" else "path"
+        if node.plugin in ("path", "ptracer"):
             s.max_depth = node.int("max_depth", -1)
             s.rr_depth = node.int("rr_depth", 5)
             if s.max_depth is not None and s.max_depth < -1:
