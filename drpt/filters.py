@@ -3,8 +3,9 @@
 This module is the host side (Python and numpy, no Dr.Jit): the filter
 vocabulary, :func:`parse_filter` for ``--filter``, the filter functions
 themselves (:meth:`PixelFilter.eval`, for tests and documentation) and the
-Mitsuba ``rfilter`` the exporter writes. The renderer samples them in
-:mod:`drpt.render.filter_sampling`.
+Mitsuba ``rfilter`` the exporter writes. The renderer splats samples
+through them (:mod:`drpt.render.film`), or with ``--filter-sampling``
+samples them (:mod:`drpt.render.filter_sampling`).
 
 The filters (1-D; the 2-D filter is the product ``w(dx) w(dy)``, separable,
 as in Mitsuba; ``x`` is the offset from the pixel center in pixels)
@@ -46,15 +47,20 @@ of ``spp`` i.i.d. terms per pixel area; their ratio has a bias of order
 ``1 / spp``, Mitsuba's, which vanishes in the limit). Near the border the
 filter is therefore *truncated* to the image and renormalized.
 
-drpt samples ``I(c)`` directly, by *filter importance sampling*: each
-sample of pixel ``c`` is placed at ``c + x`` with ``x`` drawn from the
-density ``w(x) / integral_T w`` on ``T = (A - c) intersected with the
-support``, the truncated filter; the pixel is the plain mean of its samples.
-The expectation is exactly ``I(c)``, with no ``1 / spp`` bias, so drpt and
-Mitsuba agree in expectation (in Mitsuba's limit) everywhere, border pixels
-included. Plain filter importance sampling over the whole plane (no
-truncation) would *not* agree at the border: it would average in what
-lies outside the frame, while Mitsuba normalizes over the inside.
+drpt does the same by default (:mod:`drpt.render.film`: the samples of a
+pass are splatted with Dr.Jit's ``scatter_reduce`` into ``sum w L``, ``sum
+w`` and, for the variance, ``sum w^2 L^2`` and ``sum w^2``; the pixel is the
+ratio), so its filtered pixels are Mitsuba's, estimator included.
+
+``--filter-sampling`` (``RenderOptions.filter_sampling``) samples ``I(c)``
+directly instead, by *filter importance sampling*: each sample of pixel
+``c`` is placed at ``c + x`` with ``x`` drawn from the density ``w(x) /
+integral_T w`` on ``T = (A - c) intersected with the support``, the
+truncated filter; the pixel is the plain mean of its samples. The
+expectation is exactly ``I(c)``, with no ``1 / spp`` bias. Plain filter
+importance sampling over the whole plane (no truncation) would *not* agree
+at the border: it would average in what lies outside the frame, while
+Mitsuba normalizes over the inside.
 
 Noise: with splatting a sample feeds several pixels, so each pixel averages
 more samples, but neighbours share samples and their noise is correlated.
@@ -63,13 +69,13 @@ across the filter's footprint, a splatted pixel's variance is about ``v / spp * 
 ``J = (integral w^2) / (integral w)^2`` over the 2-D filter, a filter-
 importance-sampled pixel's ``v / spp``: ``J`` is 4/9 for the tent of radius
 1 and ``1 / (4 pi s^2)``, 0.32, for the Gaussian of stddev 0.5 (truncation
-changes it by < 1%). So at equal spp drpt's tent pixels are 2.25x, its
-Gaussian pixels 3.1x as noisy (in variance) as Mitsuba's, but independent of
-each other: averages over regions much larger than the filter (a
-downsampled image, a block of the block z-test) have the same variance in
-both. drpt's per-pixel variance estimate stays the plain sample variance of
-the pixel's own independent samples, the correct variance of its mean; a
-splatted image's neighbouring pixels would need their covariances too.
+changes it by < 1%). So at equal spp filter-importance-sampled tent pixels
+are 2.25x, Gaussian pixels 3.1x as noisy (in variance) as splatted ones,
+but independent of each other: averages over regions much larger than the
+filter have the same variance in both. A splatted pixel's variance estimate
+is that of a weighted mean (:func:`drpt.render.renderer.finish`); a
+filter-importance-sampled pixel's is the plain sample variance of its own
+samples.
 """
 
 from __future__ import annotations

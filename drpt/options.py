@@ -75,6 +75,7 @@ class RenderOptions:
     wavefront_tail: int = 0  # wavefront: finish in one fused loop once at most this many paths live
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
     filter: str = "box"  # pixel reconstruction filter, drpt.filters.parse_filter's spelling
+    filter_sampling: bool = False  # tent/gaussian: draw samples from the filter instead of splatting
     path: PathOptions = field(default_factory=PathOptions)
     max_lanes: int | None = None  # samples traced at once (None: drpt.backend.policy().max_lanes)
     chunk_spp: int | None = None  # samples per pixel of a chunk (None: one pass step), drpt.render.chunks
@@ -350,8 +351,12 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                             default=d["filter"],
                             help="pixel reconstruction filter, Mitsuba's: box (the pixel's "
                                  "square), tent[:radius=R] (R default 1) or gaussian[:stddev=S] "
-                                 "(S default 0.5; Mitsuba's default filter), by filter "
-                                 f"importance sampling (default {d['filter']})")
+                                 "(S default 0.5; Mitsuba's default filter); tent and gaussian "
+                                 "splat each sample into the pixels they cover, as Mitsuba's film "
+                                 f"does (default {d['filter']})")
+        parser.add_argument("--filter-sampling", dest="filter_sampling", action="store_true",
+                            help="tent and gaussian filters: draw each pixel's samples from its "
+                                 "filter (filter importance sampling) instead of splatting")
     if want("max_lanes"):
         parser.add_argument("--max-lanes", type=int, default=None,
                             help="samples traced at once; bounds memory (default: the "
@@ -562,6 +567,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          wavefront_tail=get("wavefront_tail", base.wavefront_tail),
                          env_sampling=get("env_sampling", base.env_sampling),
                          filter=get("filter", base.filter),
+                         filter_sampling=bool(get("filter_sampling", base.filter_sampling)),
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),
                                           rr_depth=rr_depth, rr_prob=rr_prob),
                          max_lanes=max_lanes, chunk_spp=get("chunk_spp"),

@@ -126,9 +126,11 @@ def test_legacy_06_file_compares_with_unread_parameters_dropped(tmp_path):
     assert sorted(e["dropped"]) == ["path.strict_normals", "roughconductor.int_ior"]
     assert (report["width"], report["height"], report["drpt"]["spp"]) == (40, 30, 256)
     assert report["max_depth"] == 4 and report["rr_depth"] == 3 and report["filter"] == "gaussian"
-    # measured 0.3%: Mitsuba's RGB variants read <spectrum name="radiance" value="10"/> as 10 * D65
-    # in sRGB, (12.05, 9.48, 9.09); read as gray 10 the red channel would be 20% off
-    assert _mean_rel(x, ref) < 0.02, (x.mean((0, 1)), ref.mean((0, 1)))
+    # Mitsuba's RGB variants read <spectrum name="radiance" value="10"/> as 10 * D65 in sRGB,
+    # (12.05, 9.48, 9.09); read as gray 10 the red channel would be 20% off. The image mean's
+    # standard error is about 1.5% here (the sphere emitter's heavy tails: 6 seeds of drpt's
+    # splatted 256-spp render spread by 3% relative), so the bound is 3 of them
+    assert _mean_rel(x, ref) < 0.05, (x.mean((0, 1)), ref.mean((0, 1)))
     assert ref.mean((0, 1))[0] > 1.2 * ref.mean((0, 1))[2]
 
 

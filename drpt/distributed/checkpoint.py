@@ -77,6 +77,7 @@ class Checkpoint:
     nonfinite: int
     sum: np.ndarray
     sumsq: np.ndarray
+    weight: np.ndarray | None = None  # a splatting film's sum(w), sum(w^2) ((H, W, 2))
 
 
 def save(output: Path, cp: Checkpoint) -> None:
@@ -84,11 +85,14 @@ def save(output: Path, cp: Checkpoint) -> None:
     and is what :func:`load` trusts, so a process killed between the two
     renames leaves a consistent checkpoint; the .json is for people."""
     npz, meta = paths(output)
-    d = {k: v for k, v in asdict(cp).items() if k not in ("sum", "sumsq")}
+    d = {k: v for k, v in asdict(cp).items() if k not in ("sum", "sumsq", "weight")}
     d["version"] = VERSION
     text = json.dumps(d, indent=1, sort_keys=True)
     tmp = npz.with_name(npz.name + ".tmp.npz")
-    np.savez(tmp, sum=cp.sum, sumsq=cp.sumsq, meta=np.array(text))
+    arrays = {"sum": cp.sum, "sumsq": cp.sumsq}
+    if cp.weight is not None:
+        arrays["weight"] = cp.weight
+    np.savez(tmp, **arrays, meta=np.array(text))
     os.replace(tmp, npz)
     tmp = meta.with_name(meta.name + ".tmp")
     tmp.write_text(text)
@@ -113,6 +117,7 @@ def load(output: Path, scene_hash: str, options: dict, chunks: int) -> Checkpoin
     try:
         with np.load(npz) as z:
             s, s2 = z["sum"], z["sumsq"]
+            wts = z["weight"] if "weight" in z.files else None
             d = json.loads(str(z["meta"]))
     except (OSError, ValueError, KeyError) as e:
         raise DrptError(f"--resume: {npz}: unreadable checkpoint ({e})") from None
@@ -127,5 +132,7 @@ def load(output: Path, scene_hash: str, options: dict, chunks: int) -> Checkpoin
                         "differ): give the flags of the interrupted render")
     if d["chunks"] != chunks or s.shape != s2.shape or not 0 <= d["next"] <= chunks:
         raise DrptError(f"--resume: {meta} does not match this render's chunks")
+    if wts is not None and wts.shape != s.shape[:2] + (2,):
+        raise DrptError(f"--resume: {meta} does not match this render's chunks")
     return Checkpoint(d["scene_hash"], d["options"], d["chunks"], d["next"], d["spp"],
-                      d["nonfinite"], s, s2)
+                      d["nonfinite"], s, s2, wts)

@@ -120,14 +120,15 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     okey = checkpoint.options_key(opts)
     if resume:
         cp = checkpoint.load(output, key, okey, chunks.count)
-        merged = ChunkMerge(chunks, cp.next, cp.sum, cp.sumsq, cp.nonfinite)
+        merged = ChunkMerge(chunks, cp.next, cp.sum, cp.sumsq, cp.nonfinite, cp.weight)
     else:
         merged = ChunkMerge(chunks)
     job = Job(None, resumed_from=merged.next)
 
     def save() -> None:
         checkpoint.save(output, checkpoint.Checkpoint(key, okey, chunks.count, merged.next, merged.spp,
-                                                      merged.nonfinite, merged.sum, merged.sumsq))
+                                                      merged.nonfinite, merged.sum, merged.sumsq,
+                                                      merged.weight))
 
     def report(messages) -> None:
         for w in messages:

@@ -100,6 +100,8 @@ class ChunkResult:
     seconds: float = 0.0  # time the chunk took where it ran
     worker: str = ""  # where it ran (a Dask worker's address; "" in process)
     warnings: list[str] = field(default_factory=list)  # the scene's, from the first chunk a worker ran
+    #: a splatting film's filter-weight sums, sum(w) and sum(w^2) per pixel ((H, W, 2)); None otherwise
+    weight: np.ndarray | None = None
 
 
 class ChunkMerge:
@@ -107,10 +109,12 @@ class ChunkMerge:
     order, keeps those that arrive early, and adds each when its turn comes.
 
     ``next`` is the first chunk not merged yet; a merge can start from a
-    checkpoint's sums (``next``, ``sum``, ``sumsq``, ``nonfinite``)."""
+    checkpoint's sums (``next``, ``sum``, ``sumsq``, ``nonfinite``, ``weight``).
+    ``weight`` (a splatting film's ``sum(w)``, ``sum(w^2)``) is None until a
+    result with weights arrives."""
 
     def __init__(self, chunks: ChunkPlan, next: int = 0, sum: np.ndarray | None = None,
-                 sumsq: np.ndarray | None = None, nonfinite: int = 0):
+                 sumsq: np.ndarray | None = None, nonfinite: int = 0, weight: np.ndarray | None = None):
         p = chunks.passes
         shape = (p.height, p.width, 3)
         self.chunks = chunks
@@ -118,6 +122,7 @@ class ChunkMerge:
         self.sum = np.zeros(shape, np.float64) if sum is None else np.array(sum, np.float64)
         self.sumsq = np.zeros(shape, np.float64) if sumsq is None else np.array(sumsq, np.float64)
         self.nonfinite = nonfinite
+        self.weight = None if weight is None else np.array(weight, np.float64)
         self.pending: dict[int, ChunkResult] = {}
 
     @property
@@ -139,6 +144,10 @@ class ChunkMerge:
             r = self.pending.pop(self.next)
             self.sum += r.sum
             self.sumsq += r.sumsq
+            if r.weight is not None:
+                if self.weight is None:
+                    self.weight = np.zeros(self.sum.shape[:2] + (2,), np.float64)
+                self.weight += r.weight
             self.nonfinite += r.nonfinite
             merged.append(self.next)
             self.next += 1

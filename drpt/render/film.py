@@ -1,24 +1,31 @@
-"""A film that samples are splatted into: light tracing's image.
+"""A film that samples are splatted into: light tracing's image, and camera
+samples under a tent or Gaussian pixel filter.
 
-A camera path belongs to one pixel, and the renderer sums each pixel's own
-samples (:mod:`drpt.render.renderer`). A light path lands wherever its
-vertices project, so :class:`SplatFilm` adds each contribution into the
-pixels around its image position ``(x, y)`` (continuous, from the image's
-top-left corner) with Dr.Jit's ``scatter_reduce``, as Mitsuba's
-``ImageBlock.put`` does for its particle tracer:
+:class:`SplatFilm` adds each contribution into the pixels around its image
+position ``(x, y)`` (continuous, from the image's top-left corner) with
+Dr.Jit's ``scatter_reduce``, as Mitsuba's ``ImageBlock.put`` does:
 
 * the box filter adds it to the pixel that contains ``(x, y)``;
-* a tent or Gaussian filter (:mod:`drpt.filters`) adds ``value * w_i / sum(w)``
-  to every pixel ``i`` whose center lies within the filter's radius, with
-  ``w_i`` the product of the filter's values along both axes at the offset
-  from the pixel's center; the sum runs over the whole window, pixels outside
-  the image included (their share is dropped), so the weights of one
-  contribution sum to 1 inside the image.
+* a tent or Gaussian filter (:mod:`drpt.filters`) adds ``value * w_i`` to
+  every pixel ``i`` whose center lies within the filter's radius, with ``w_i``
+  the product of the filter's values along both axes at the offset from the
+  pixel's center.
 
-It keeps per pixel the sum of the contributions and the sum of their squares
-(float32, on the device); :meth:`arrays` returns them as ``(H, W, 3)`` numpy
-arrays. The film's arrays are written by scatters inside the tracing kernel,
-so one film takes one pass's contributions.
+Light tracing (``weights=False``, Mitsuba's particle tracer) divides the
+weights of one contribution by their sum over the whole window, pixels
+outside the image included (whose share is dropped), and keeps per pixel the
+sum of the contributions and of their squares. Camera samples
+(``weights=True``, Mitsuba's ``hdrfilm``) keep per pixel ``sum(w L)``,
+``sum(w^2 L^2)``, ``sum(w)`` and ``sum(w^2)``: the pixel is ``sum(w L) /
+sum(w)`` (Mitsuba's film divides by the accumulated weights) and the other
+two estimate its variance (:func:`drpt.render.renderer.finish`). Sums of
+passes, chunks and resumed renders add.
+
+The sums are float32, on the device, over the rows ``[y0, y0 + rows)`` of
+the image (a pass of camera samples reaches only the rows around its band);
+:meth:`arrays` returns them as numpy arrays. The film's arrays are written by
+scatters inside the tracing kernel, so one film takes one pass's
+contributions.
 """
 
 from __future__ import annotations
@@ -32,12 +39,17 @@ from ..filters import PixelFilter
 
 
 class SplatFilm:
-    def __init__(self, width: int, height: int, flt: PixelFilter):
+    def __init__(self, width: int, height: int, flt: PixelFilter, weights: bool = False,
+                 y0: int = 0, rows: int | None = None):
         self.width, self.height = width, height
         self.filter = flt
-        n = width * height
+        self.weights = weights
+        self.y0 = y0
+        self.rows = height - y0 if rows is None else rows
+        n = width * self.rows
         self.sum = [dr.zeros(Float, n) for _ in range(3)]
         self.sq = [dr.zeros(Float, n) for _ in range(3)]
+        self.w = [dr.zeros(Float, n) for _ in range(2)] if weights else []
 
     def _weight(self, d: Float) -> Float:
         f = self.filter
@@ -46,19 +58,23 @@ class SplatFilm:
         s = f.param
         return dr.maximum(0.0, dr.exp(-d * d / (2.0 * s * s)) - f.cutoff)
 
-    def _add(self, index: UInt32, value: Array3f, active: Bool) -> None:
+    def _add(self, index: UInt32, value: Array3f, active: Bool, w: Float | None = None) -> None:
         for c in range(3):
-            v = value[c]
+            v = value[c] if w is None else value[c] * w
             dr.scatter_reduce(dr.ReduceOp.Add, self.sum[c], v, index, active)
             dr.scatter_reduce(dr.ReduceOp.Add, self.sq[c], v * v, index, active)
+        if self.weights:
+            w = Float(1.0) if w is None else w
+            dr.scatter_reduce(dr.ReduceOp.Add, self.w[0], w, index, active)
+            dr.scatter_reduce(dr.ReduceOp.Add, self.w[1], w * w, index, active)
 
     def put(self, x: Float, y: Float, value: Array3f, active: Bool) -> None:
         """Add ``value`` at image position ``(x, y)`` (lanes where ``active``)."""
-        W, H = self.width, self.height
+        W, y0, y1 = self.width, self.y0, self.y0 + self.rows
         if self.filter.is_box:
             ix, iy = Int32(dr.floor(x)), Int32(dr.floor(y))
-            ok = active & (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H)
-            self._add(UInt32(iy * W + ix), value, ok)
+            ok = active & (ix >= 0) & (ix < W) & (iy >= y0) & (iy < y1)
+            self._add(UInt32((iy - y0) * W + ix), value, ok)
             return
         r = self.filter.radius
         reach = int(math.ceil(r))
@@ -71,21 +87,28 @@ class SplatFilm:
             sx = sx + w
         for w in wy[1:]:
             sy = sy + w
-        norm = dr.select((sx > 0.0) & (sy > 0.0), dr.rcp(sx * sy), 0.0)
+        if self.weights:
+            norm = Float(1.0)
+        else:
+            norm = dr.select((sx > 0.0) & (sy > 0.0), dr.rcp(sx * sy), 0.0)
         for j, oy in enumerate(offsets):
             iy = Int32(by) + oy
-            row_ok = active & (iy >= 0) & (iy < H)
+            row_ok = active & (iy >= y0) & (iy < y1)
             for i, ox in enumerate(offsets):
                 ix = Int32(bx) + ox
                 w = wx[i] * wy[j] * norm
                 ok = row_ok & (ix >= 0) & (ix < W) & (w > 0.0)
-                self._add(UInt32(iy * W + ix), value * w, ok)
+                self._add(UInt32((iy - y0) * W + ix), value, ok, w)
 
     def arrays(self):
-        """``(sum, sum of squares)``, each ``(H, W, 3)`` float32 numpy."""
+        """``(sum, sum of squares, weights)``: ``(rows, W, 3)`` float64 numpy arrays,
+        and with ``weights`` ``(rows, W, 2)`` (``sum(w)``, ``sum(w^2)``), else None."""
         import numpy as np
 
-        dr.eval(self.sum, self.sq)
-        s = np.stack([c.numpy() for c in self.sum], axis=-1).reshape(self.height, self.width, 3)
-        q = np.stack([c.numpy() for c in self.sq], axis=-1).reshape(self.height, self.width, 3)
-        return s, q
+        dr.eval(self.sum, self.sq, self.w)
+
+        def stack(cs):
+            return np.stack([c.numpy() for c in cs], axis=-1).reshape(self.rows, self.width, len(cs)
+                                                                      ).astype(np.float64)
+
+        return stack(self.sum), stack(self.sq), stack(self.w) if self.weights else None

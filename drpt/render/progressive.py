@@ -67,6 +67,7 @@ class Progressive:
         self.camera = camera
         self.plan = plan_passes(W, H, 1, lanes)  # the bands of one sample step
         self.acc = np.zeros((H, W, 3), np.float64)
+        self.weight: np.ndarray | None = None  # a splatting film's sum(w) per pixel
         self.spp = 0
         self.seconds = 0.0
         self.nonfinite = 0
@@ -81,14 +82,22 @@ class Progressive:
         bands = self.plan.bands
         for b in range(bands):
             _s0, k, r0, rows = self.plan[b]
-            img, _sq, nbad = self.renderer._pass(self.spp * bands + b, k, r0, rows)
-            lo = 0 if self.renderer.light_tracing else r0  # light paths land anywhere
-            self.acc[lo:lo + img.shape[0]] += img
-            self.nonfinite += nbad
+            p = self.renderer._pass(self.spp * bands + b, k, r0, rows)
+            hi = p.lo + p.sum.shape[0]
+            self.acc[p.lo:hi] += p.sum
+            if p.weight is not None:
+                if self.weight is None:
+                    self.weight = np.zeros(self.acc.shape[:2] + (1,), np.float64)
+                self.weight[p.lo:hi] += p.weight[..., :1]
+            self.nonfinite += p.nonfinite
         self.spp += 1
         self.seconds += time.perf_counter() - t0
         return self.frame()
 
     def frame(self) -> Frame:
-        image = (self.acc / max(self.spp, 1)).astype(np.float32)
+        if self.weight is not None:  # a splatting film: weighted sums over the weights
+            image = np.where(self.weight > 0, self.acc / np.maximum(self.weight, 1e-30), 0.0)
+            image = image.astype(np.float32)
+        else:
+            image = (self.acc / max(self.spp, 1)).astype(np.float32)
         return Frame(image, self.spp, self.seconds, self.options.width, self.options.height)

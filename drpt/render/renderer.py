@@ -25,13 +25,16 @@ float64 sums (:meth:`Renderer._pass`), so such radiance averages correctly
 and other renders pay nothing for it. A pixel mean beyond float32 (which no
 image file holds) is an error.
 
-Where a pixel's sample lies is the pixel filter's business
-(``RenderOptions.filter``, :mod:`drpt.filters`): the box filter (the default)
-jitters it uniformly over the pixel square; ``tent`` and
-``gaussian`` draw it from the filter truncated to the image (filter
-importance sampling, :mod:`drpt.render.filter_sampling`), so each pixel
-still sums its own samples, independent of its neighbours', and its
-variance estimate below stays that of its own samples.
+Where a pixel's sample lies and which pixels it counts in is the pixel
+filter's business (``RenderOptions.filter``, :mod:`drpt.filters`): the box
+filter (the default) jitters it uniformly over the pixel square and the
+pixel sums its own samples; ``tent`` and ``gaussian`` jitter it the same
+way and splat it into every pixel the filter covers with the filter's
+weight, as Mitsuba's film does (:meth:`Renderer._trace_splat_pass`,
+:mod:`drpt.render.film`: one sample per lane); with ``filter_sampling`` they
+draw it from the filter truncated to the image instead (filter importance
+sampling, :mod:`drpt.render.filter_sampling`), so each pixel sums its own
+samples. Light tracing (``ptracer``) splats every pass over the whole image.
 
 Pass parameters that change between passes (row offset, seed, ``k``) are
 opaque JIT values: the megakernel is compiled once per render.
@@ -51,6 +54,7 @@ integrator queries; the renderer adds the camera and the passes.
 from __future__ import annotations
 
 import copy
+import math
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -89,6 +93,22 @@ class RenderResult:
     @property
     def samples_per_second(self) -> float:
         return self.samples / max(self.seconds, 1e-9)
+
+
+@dataclass
+class PassSums:
+    """What one pass adds to the image: sums over the image rows ``lo ..
+    lo + len(sum)`` of its samples (``sum``) and of their squares (``sumsq``),
+    ``(rows, W, 3)`` float64, the non-finite samples it dropped and, for a
+    splatting film (:attr:`Renderer.splatting`), the filter weights' sums
+    ``(rows, W, 2)``: ``sum(w)`` and ``sum(w^2)`` (``sum`` is then ``sum(w L)``
+    and ``sumsq`` ``sum(w^2 L^2)``)."""
+
+    lo: int
+    sum: np.ndarray
+    sumsq: np.ndarray
+    nonfinite: int
+    weight: np.ndarray | None = None
 
 
 def _mix_seed(seed: int, index: int) -> int:
@@ -196,28 +216,31 @@ class Renderer:
         lanes = self.opt.max_lanes
         return policy().max_lanes if lanes is None else lanes
 
-    def _pass(self, pass_index: int, k: int, r0: int, rows: int
-              ) -> tuple[np.ndarray, np.ndarray, int]:
-        """Sums of the ``k`` samples of each pixel of rows ``r0..r0+rows`` and of
-        their squares, and the number of non-finite samples dropped.
+    def _pass(self, pass_index: int, k: int, r0: int, rows: int) -> PassSums:
+        """The :class:`PassSums` of the ``k`` samples of each pixel of rows
+        ``r0..r0+rows``. Without splatting they cover the pass's own rows (``lo =
+        r0``); a splatting pass (:attr:`splatting`) also reaches the rows its filter
+        covers, a light-tracing pass the whole image (``lo = 0``).
 
         The sums are float32; where one overflowed, the pass is traced again
         with float64 sums (a second kernel, compiled only then): float64
         sums in every pass took 1.06x the median CPU time of float32 sums
         (Cornell box, 256x256, 64 spp, LLVM, 15 renders each, interleaved,
         on 2 shared cores)."""
+        if self.light_tracing:
+            return PassSums(0, *self._trace_light_pass(pass_index, k * rows * self.opt.width))
+        if self.splatting:
+            return self._trace_splat_pass(pass_index, k, r0, rows)
         img, sq, nbad = self._trace_pass(pass_index, k, r0, rows, wide=False)
         if not (np.isfinite(img).all() and np.isfinite(sq).all()):
             img, sq, nbad = self._trace_pass(pass_index, k, r0, rows, wide=True)
-        return img, sq, nbad
+        return PassSums(r0, img, sq, nbad)
 
     def _trace_pass(self, pass_index: int, k: int, r0: int, rows: int, wide: bool
                     ) -> tuple[np.ndarray, np.ndarray, int]:
         """:meth:`_pass`'s sums, float64 with ``wide``, else float32."""
         W = self.opt.width
         pixels = rows * W
-        if isinstance(self.integrator, ParticleTracer):
-            return self._trace_light_pass(pass_index, k * pixels)
         sequential = hasattr(self.integrator, "sample_sequence")
         # Lanes per pixel: with path regeneration m = ceil(min_lanes / pixels)
         # (at most k), each running about k / m samples, else one lane per
@@ -276,13 +299,51 @@ class Renderer:
         bad = self.integrator.trace(rng, film, dr.full(Bool, True, n))
         with llvm_tuning.blocks_for(n):
             dr.eval(film.sum, film.sq, bad)
-        img, sq = film.arrays()
-        return img.astype(np.float64), sq.astype(np.float64), int(dr.sum(bad)[0])
+        img, sq, _ = film.arrays()
+        return img, sq, int(dr.sum(bad)[0])
+
+    def _trace_splat_pass(self, pass_index: int, k: int, r0: int, rows: int) -> PassSums:
+        """:meth:`_pass` for a tent or Gaussian filter: each of the ``k`` samples of a
+        pixel of rows ``r0..r0+rows`` lies uniformly in its pixel, and its radiance
+        is splatted into the pixels its filter covers with the filter's weights
+        (:class:`~drpt.render.film.SplatFilm`), as Mitsuba's film does. One sample
+        per lane."""
+        W, H = self.opt.width, self.opt.height
+        n = rows * W * k
+        lane = dr.arange(UInt32, n)
+        pixel = lane // dr.opaque(UInt32, k)
+        x = pixel % W
+        y = pixel // W + dr.opaque(UInt32, r0)
+        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
+                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+        px = Float(x) + rng.next_float32()
+        py = Float(y) + rng.next_float32()
+        lens = Array2f(rng.next_float32(), rng.next_float32()) if self.camera.thin_lens else None
+        o, d = self.camera.ray(px, py, lens)
+        L = self.integrator.sample(rng, o, d, Bool(True))
+        bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
+        L = dr.select(bad, 0.0, L)
+        with llvm_tuning.blocks_for(n):
+            dr.eval(L, bad, px, py)
+        flt = self.opt.pixel_filter
+        reach = int(math.ceil(flt.radius))
+        y0, y1 = max(0, r0 - reach), min(H, r0 + rows + reach)
+        film = SplatFilm(W, H, flt, weights=True, y0=y0, rows=y1 - y0)
+        film.put(px, py, L, ~bad)
+        img, sq, wts = film.arrays()
+        return PassSums(y0, img, sq, int(dr.sum(UInt32(bad))[0]), wts)
 
     @property
     def light_tracing(self) -> bool:
         """Whether passes splat light paths over the whole image (``ptracer``)."""
         return isinstance(self.integrator, ParticleTracer)
+
+    @property
+    def splatting(self) -> bool:
+        """Whether camera samples are splatted through a tent or Gaussian filter
+        (the default for those filters; ``filter_sampling`` draws each pixel's
+        samples from its filter instead)."""
+        return not self.light_tracing and not self.opt.pixel_filter.is_box and not self.opt.filter_sampling
 
     def _camera_ray(self, x: UInt32, y: UInt32) -> Callable:
         """``camera_ray(rng) -> (o, d, weight)`` for pixel column ``x`` and row
@@ -329,18 +390,21 @@ class Renderer:
         W, H = self.opt.width, self.opt.height
         acc = np.zeros((H, W, 3), np.float64)
         acc2 = np.zeros((H, W, 3), np.float64)
+        weight = np.zeros((H, W, 2), np.float64) if self.splatting else None
         nonfinite = 0
         for i in chunks.passes_of(index):
             _s0, k, r0, rows = plan[i]
-            img, sq, nbad = self._pass(i, k, r0, rows)
-            lo = 0 if self.light_tracing else r0  # light paths land anywhere on the image
-            acc[lo:lo + img.shape[0]] += img
-            acc2[lo:lo + img.shape[0]] += sq
-            nonfinite += nbad
+            p = self._pass(i, k, r0, rows)
+            hi = p.lo + p.sum.shape[0]
+            acc[p.lo:hi] += p.sum
+            acc2[p.lo:hi] += p.sumsq
+            if weight is not None:
+                weight[p.lo:hi] += p.weight
+            nonfinite += p.nonfinite
             if on_pass is not None:
                 on_pass((_s0 - chunks.spp_before(index)) * H * W + (r0 + rows) * W * k)
         return ChunkResult(index, chunks.spp_of(index), acc, acc2, nonfinite,
-                           time.perf_counter() - t0)
+                           time.perf_counter() - t0, weight=weight)
 
     def render(self, on_pass: Callable[[int, int], None] | None = None) -> RenderResult:
         """The image at the options' size and spp: every chunk in order
@@ -369,24 +433,47 @@ class Renderer:
 
 def finish(merged: ChunkMerge, seconds: float, build_seconds: float,
            light_tracing: bool = False) -> RenderResult:
-    """The image and variance of a finished merge. With ``light_tracing`` the sums are
-    splats of ``W H spp`` light paths (:mod:`~drpt.render.integrators.ptracer`): a
-    pixel's value is its sum over ``spp``, and the variance of that mean is estimated
-    from the sum of squared splats, each path a sample ``W H`` times its splat."""
+    """The image and variance of a finished merge.
+
+    * Camera samples of their own pixel: the mean of the pixel's samples, and the
+      variance of that mean from their squares.
+    * Splatted camera samples (``merged.weight`` holds ``sum(w)``, ``sum(w^2)``):
+      ``sum(w L) / sum(w)`` (Mitsuba's film), and the variance of that weighted mean,
+      ``(sum(w^2 L^2) / sum(w^2) - mean^2) sum(w^2) / sum(w)^2``, corrected for the
+      effective sample count ``sum(w)^2 / sum(w^2)``.
+    * ``light_tracing``: splats of ``W H spp`` light paths
+      (:mod:`~drpt.render.integrators.ptracer`): a pixel's value is its sum over
+      ``spp``, and the variance of that mean is estimated from the sum of squared
+      splats, each path counting as a sample of ``W H`` times its splat."""
     spp = merged.spp
     H, W, _ = merged.sum.shape
+    if merged.weight is not None:
+        ws, ws2 = merged.weight[..., :1], merged.weight[..., 1:]
+        ok = ws > 0.0
+        mean = np.where(ok, merged.sum / np.where(ok, ws, 1.0), 0.0)
+        second = np.where(ok, merged.sumsq / np.where(ok, ws2, 1.0), 0.0)
+        n_eff = np.where(ok, ws * ws / np.where(ok, ws2, 1.0), 1.0)
+        var = np.maximum(second - mean * mean, 0.0) / np.maximum(n_eff - 1.0, 1.0)
+        _check_range(mean)
+        return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, W * H * spp,
+                            merged.nonfinite)
     mean = merged.sum / spp
+    _check_range(mean)
     if light_tracing:
         paths = W * H * spp
         second = merged.sumsq * (W * H) / spp  # mean over paths of (W H splat)^2
         var = np.maximum(second - mean * mean, 0.0) / max(paths - 1, 1)
         return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, paths,
                             merged.nonfinite)
-    if mean.max() > np.finfo(np.float32).max:
-        y, x, _ = np.unravel_index(np.argmax(mean), mean.shape)
-        raise DrptError(f"pixel ({x}, {y}) averages {mean.max():.3g}, beyond the float32 "
-                        "maximum (3.4e38) of the image: scale the scene's emission down")
     # Unbiased sample variance of one sample, divided by spp: variance of the mean.
     var = np.maximum(merged.sumsq / spp - mean * mean, 0.0) * spp / max(spp - 1, 1) / spp
     return RenderResult(mean.astype(np.float32), var, seconds,
                         build_seconds, W * H * spp, merged.nonfinite)
+
+
+def _check_range(mean: np.ndarray) -> None:
+    """A pixel mean beyond float32, which no image file holds, is an error."""
+    if mean.max() > np.finfo(np.float32).max:
+        y, x, _ = np.unravel_index(np.argmax(mean), mean.shape)
+        raise DrptError(f"pixel ({x}, {y}) averages {mean.max():.3g}, beyond the float32 "
+                        "maximum (3.4e38) of the image: scale the scene's emission down")
