@@ -34,7 +34,8 @@ def test_box_film_adds_to_the_containing_pixel():
     film = SplatFilm(4, 3, PixelFilter())
     film.put(Float(2.3, 0.0, 3.99, 4.0), Float(1.7, 0.0, 2.5, 0.5),
              Array3f(Float(1.0, 10.0, 100.0, 1000.0), 2.0, 3.0), Bool(True))
-    s, q = film.arrays()
+    s, q, w = film.arrays()
+    assert w is None
     assert s[1, 2].tolist() == [1.0, 2.0, 3.0] and q[1, 2].tolist() == [1.0, 4.0, 9.0]
     assert s[0, 0, 0] == 10.0 and s[2, 3, 0] == 100.0
     assert s.sum(axis=(0, 1))[0] == 111.0  # x = 4.0 lies outside the image: dropped
@@ -47,11 +48,18 @@ def test_filtered_film_weights_match_the_filter_and_sum_to_one(flt):
     film = SplatFilm(W, H, flt)
     x, y = 4.3, 4.8
     film.put(Float(x), Float(y), Array3f(1.0, 1.0, 1.0), Bool(True))
-    s, _ = film.arrays()
+    s, _, _ = film.arrays()
     assert abs(s[..., 0].sum() - 1.0) < 1e-5
     cx, cy = np.arange(W) + 0.5 - x, np.arange(H) + 0.5 - y
     w = flt.eval(cy)[:, None] * flt.eval(cx)[None, :]
     assert np.allclose(s[..., 0], w / w.sum(), atol=1e-6)
+    # a camera film (weights): unnormalized w L, w^2 L^2, w, w^2, over rows 2..7 only
+    film = SplatFilm(W, H, flt, weights=True, y0=2, rows=6)
+    film.put(Float(x), Float(y), Array3f(2.0, 2.0, 2.0), Bool(True))
+    s, q, ws = film.arrays()
+    w = w[2:8]
+    assert np.allclose(s[..., 0], 2 * w, atol=1e-6) and np.allclose(q[..., 0], 4 * w * w, atol=1e-6)
+    assert np.allclose(ws[..., 0], w, atol=1e-6) and np.allclose(ws[..., 1], w * w, atol=1e-6)
 
 
 # ------------------------------------------------------------ the estimator
@@ -165,3 +173,28 @@ def test_light_tracing_refuses_what_it_cannot_render(cornell, tmp_path):
                        capture_output=True, text=True, cwd=REPO)
     assert r.returncode == 2 and "roughdielectric" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "g.exr").exists()
+
+
+# ------------------------------------------------------------ chunks and resumed renders
+@pytest.mark.parametrize("what", ["gaussian splatting", "light tracing"])
+def test_splatted_renders_are_the_same_in_chunks_and_resumed(cornell, tmp_path, what):
+    """A splatting film's sums (and weights) add across chunks and a checkpoint: a render
+    interrupted after 3 of 8 chunks and resumed gives the plain render's image bit for bit
+    (its variance to 1e-12: the film's float64 atomic sums vary in their last bits)."""
+    from drpt.distributed.job import run
+
+    kw = {"filter": "gaussian"} if what == "gaussian splatting" else {"integrator": "ptracer"}
+    opts = RenderOptions(width=16, height=12, spp=8, chunk_spp=1, seed=4, progress=False,
+                         max_lanes=96, **kw)
+    plain = Renderer(cornell, opts).render()
+
+    def interrupt(merged, result, engine):
+        if merged.next >= 3:
+            raise KeyboardInterrupt
+
+    out = tmp_path / "cut.exr"
+    with pytest.raises(KeyboardInterrupt):
+        run(cornell, opts, out, on_chunk=interrupt, checkpoint_seconds=0.0)
+    resumed = run(cornell, opts, out, resume=True).result
+    assert np.array_equal(resumed.image, plain.image)
+    assert np.allclose(resumed.variance, plain.variance, rtol=1e-12, atol=0)
