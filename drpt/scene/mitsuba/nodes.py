@@ -86,12 +86,25 @@ class State:
 
         self.path = path
         config = mp.ParserConfig(VARIANT)
+        # Mitsuba's load_file: a copy of the global file resolver with the scene's folder
+        # first, on which the parser prepends each <path> folder (and, while it reads an
+        # <include>d file, that file's folder); plugins resolve their files on what is left
+        backup = mi.file_resolver()
+        fs = mi.FileResolver(backup)
+        fs.prepend(str(path.parent))
+        mi.set_file_resolver(fs)
         try:
             state = mp.parse_file(config, str(path), **{k: str(v) for k, v in defines.items()})
             mp.transform_upgrade(config, state)
             mp.transform_resolve(config, state)
         except RuntimeError as e:
             raise parser_error(path, e) from None
+        finally:
+            mi.set_file_resolver(backup)
+        #: where a relative file name is looked for, first match wins (Mitsuba's order:
+        #: the <path> folders, last first, then the scene's folder, then Mitsuba's defaults)
+        self.search = [Path(str(p)) for p in fs]
+        self.added = self.search[:len(self.search) - len(backup)]  # <path> folders, scene folder
         self.mi = mi
         self.mp = mp
         self.state = state
@@ -150,16 +163,18 @@ class Node:
         return SceneError(self.file, self.line, message)
 
     def resolve_file(self, name: str) -> Path:
-        """A file name of this node, relative to the XML file that holds it (then
-        to the main file's folder), as an absolute path; a missing one is an error."""
+        """A file name of this node as an absolute path, found as Mitsuba's file resolver
+        finds it (:attr:`State.search`: the ``<path>`` folders, the scene's folder), then
+        next to the XML file that holds the node; a missing one is an error at the node."""
         p = Path(name).expanduser()
         if not p.is_absolute():
-            for base in (self.file.parent, self.state.path.parent):
+            for base in (*self.state.search, self.file.parent):
                 if (base / p).exists():
                     p = base / p
                     break
             else:
-                p = self.file.parent / p
+                folders = list(dict.fromkeys(str(b) for b in (*self.state.added, self.file.parent)))
+                raise self.error(f"{self.label}: {name}: no such file (looked in {', '.join(folders)})")
         if not p.is_file():
             what = "not a regular file" if p.exists() else "no such file"
             raise self.error(f"{self.label}: {name}: {what}")
