@@ -35,7 +35,7 @@ from drpt.scene.model import DirectionalLight, PointLight, Skybox, SpotLight
 XML = Path(__file__).resolve().parent / "data" / "xml"
 #: corpus scenes of BSDFs drpt renders, z-tested against Mitsuba
 RENDER_CORPUS = ("sphere", "meshes", "instances", "spot", "envmap", "textured", "composites", "glossy",
-                 "lens", "bsdfs")
+                 "lens", "bsdfs", "ortho")
 
 
 def load(name: str, **kw):

@@ -32,7 +32,8 @@ Camera
     mirroring. ``fov_axis="y"`` makes ``fov`` the full vertical angle.
     ``orthographic``: Mitsuba's unit view spans camera x in [-1, 1] and
     y in [-H/W, H/W], so ``to_world = look_at @ scale(s, s, 1)`` with
-    ``s = size * W / (2H)`` gives a full vertical extent of ``size``.
+    ``s = size * W / (2H)`` gives a full vertical extent of ``size`` (``scale(width/2,
+    s, 1)`` for a camera with its own ``width``).
     ``near_clip``/``far_clip`` are derived from the scene size (tiny / beyond
     the exported planes). A perspective camera with an ``aperture_radius``
     above 0 becomes ``thinlens`` with the same ``fov``/``fov_axis`` and
@@ -301,7 +302,8 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
         if not float(cam.size) > 0.0:
             raise DrptError(f"cannot export camera: size {cam.size} must be positive")
         s = float(cam.size) * width / (2.0 * height)
-        to_world = to_world @ np.diag([s, s, 1.0, 1.0])
+        sx = s if getattr(cam, "width", None) is None else float(cam.width) / 2.0
+        to_world = to_world @ np.diag([sx, s, 1.0, 1.0])
         sensor = {"type": "orthographic"}
     else:  # pragma: no cover - model has only these two
         raise DrptError(f"cannot export camera of type {type(cam).__name__}")

@@ -102,6 +102,8 @@ class OrthographicCamera:
     direction: Vec3
     up: Vec3
     size: float  # full vertical extent of the view, world units
+    #: full horizontal extent, world units; None: ``size`` times the image's width / height
+    width: float | None = None
 
 
 Camera = PerspectiveCamera | OrthographicCamera

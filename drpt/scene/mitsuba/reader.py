@@ -18,6 +18,7 @@ from ..model import (
     DirectionalLight,
     FilmWindow,
     Material,
+    OrthographicCamera,
     PerspectiveCamera,
     PointLight,
     RenderSettings,
@@ -183,9 +184,9 @@ class Reader:
 
     # ------------------------------------------------------------ sensor
     def sensor(self, node: Node) -> None:
-        if node.plugin not in ("perspective", "thinlens"):
-            self.unsupported(node, f"sensor '{node.plugin}' (drpt has a perspective camera)",
-                             fallback="a perspective camera")
+        if node.plugin not in ("perspective", "thinlens", "orthographic"):
+            self.unsupported(node, f"sensor '{node.plugin}' (drpt has perspective, thinlens and "
+                             "orthographic cameras)", fallback="a perspective camera")
         film = sampler = None
         for c in node.children():
             if c.kind == "film":
@@ -215,6 +216,13 @@ class Reader:
             self.check_unread(sampler)
 
         aspect = width / height
+        if node.plugin == "orthographic":
+            if crop != (0, 0, width, height):
+                self.unsupported(node, "crop window of an orthographic sensor", fallback="the whole film")
+            self.camera = orthographic_from_matrix(node, node.transform("to_world"), aspect,
+                                                   node.float("near_clip", 1e-2))
+            self.check_unread(node)
+            return
         if node.has("fov") and node.has("focal_length"):
             raise node.error(f"{node.label}: give 'fov' or 'focal_length', not both")
         if node.has("fov"):
@@ -552,6 +560,36 @@ def vertical_fov(fov: float, axis: str, aspect: float) -> float:
     else:  # diagonal: the half diagonal is t, the half height t / sqrt(1 + aspect^2)
         ty = t / math.sqrt(1.0 + aspect * aspect)
     return math.degrees(2.0 * math.atan(ty))
+
+
+def orthographic_from_matrix(node: Node, m: np.ndarray, aspect: float,
+                             near_clip: float) -> OrthographicCamera:
+    """drpt's camera for Mitsuba's ``orthographic`` sensor: camera-space ``x`` in [-1, 1]
+    (the image's left at +1) and ``y`` in [-1/aspect, 1/aspect] of the film, mapped by
+    ``to_world`` (a rotation times a scale ``(sx, sy, sz)``: the view is ``2 sx`` wide and
+    ``2 sy / aspect`` high), rays along its ``+z`` starting on the near plane ``z =
+    near_clip`` (Mitsuba's ``orthographic_projection``)."""
+    if not np.all(np.isfinite(m)):
+        raise node.error(f"{node.label}: to_world is not finite")
+    a = m[:3, :3]
+    scale = np.linalg.norm(a, axis=0)
+    if not np.all(scale > 0) or not np.allclose((a / scale).T @ (a / scale), np.eye(3), atol=1e-4):
+        raise node.error(f"{node.label}: the orthographic sensor's to_world must be a rotation "
+                         "times a scale along the camera's axes")
+    if np.linalg.det(a) < 0:
+        raise node.error(f"{node.label}: the camera's to_world mirrors the image (a negative scale); "
+                         "drpt's camera cannot")
+    if not (math.isfinite(near_clip) and near_clip >= 0):
+        raise node.error(f"{node.label}: near_clip must be >= 0, got {near_clip}")
+    center = m[:3, 3] + near_clip * a[:, 2]
+    if max(abs(float(x)) for x in center) > MAX_COORDINATE:
+        raise node.error(f"{node.label}: camera position beyond {MAX_COORDINATE:g}")
+    sx, sy = float(scale[0]), float(scale[1])
+    return OrthographicCamera(center=tuple(float(x) for x in center),
+                              direction=tuple(float(x) for x in a[:, 2] / scale[2]),
+                              up=tuple(float(x) for x in a[:, 1] / scale[1]),
+                              size=2.0 * sy / aspect,
+                              width=None if math.isclose(sx, sy, rel_tol=1e-6) else 2.0 * sx)
 
 
 def camera_from_matrix(node: Node, m: np.ndarray, fov_y: float, **lens) -> PerspectiveCamera:
