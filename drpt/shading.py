@@ -84,10 +84,26 @@ _PBR_KEYS = frozenset({"pr", "pm", "ps", "pc", "pcr", "aniso", "anisor"})
 @dataclass(frozen=True)
 class Texture:
     """A texture-valued parameter: an image file (looked up at the surface's
-    uv) and the value the parameter takes where it cannot be looked up."""
+    uv) and the value the parameter takes where it cannot be looked up.
+
+    The lookup is Mitsuba's ``bitmap``'s: ``filter_type`` ``"bilinear"`` or
+    ``"nearest"``, ``wrap_mode`` ``"repeat"``, ``"mirror"`` or ``"clamp"``, ``raw``
+    (8-bit values taken as stored, without the sRGB decoding) and ``to_uv`` (None,
+    or a row-major 3x3 2D affine matrix applied to Mitsuba's uv, as
+    :class:`Checkerboard`'s)."""
 
     path: Path
     fallback: Any = 0.0
+    filter_type: str = "bilinear"
+    wrap_mode: str = "repeat"
+    raw: bool = False
+    to_uv: tuple | None = None
+
+    @property
+    def is_plain(self) -> bool:
+        """A bilinear, repeating, sRGB-decoded image at the surface's own uv (an MTL map)."""
+        return (self.filter_type, self.wrap_mode, self.raw, self.to_uv) == ("bilinear", "repeat",
+                                                                             False, None)
 
 
 @dataclass(frozen=True)

@@ -180,7 +180,8 @@ class MaterialTable:
         textures: list = []
 
         def tex_id(t: Texture) -> int:
-            key = t if isinstance(t, Checkerboard) else t.path  # an image file, or the procedural texture
+            # an MTL-style image by its file; a procedural texture or an image with options as itself
+            key = t.path if t.is_plain and not isinstance(t, Checkerboard) else t
             if key not in textures:
                 textures.append(key)
             return textures.index(key)

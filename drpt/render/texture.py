@@ -39,16 +39,18 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, TensorXf, Texture2f, UInt32
 
 from ..imageio import read_image
+from ..shading import Checkerboard, Texture
 
 __all__ = ["TextureSet", "load_rgb"]
 
 
-def load_rgb(path: str | PathLike) -> np.ndarray:
-    """``(H, W, 3)`` linear float32 texels of an image file (row 0 = top).
+def load_rgb(path: str | PathLike, raw: bool = False) -> np.ndarray:
+    """``(H, W, 3)`` linear float32 texels of an image file (row 0 = top);
+    ``raw``: 8-bit values as stored (no sRGB decoding, Mitsuba's ``raw``).
 
     Raises :class:`drpt.errors.SceneError` naming the file when it is
     missing, unreadable or malformed."""
-    img = read_image(path, linear=True)
+    img = read_image(path, linear=not raw)
     c = img.shape[2]
     if c == 1:
         img = np.repeat(img, 3, axis=2)
@@ -67,9 +69,13 @@ class TextureSet:
         self.textures: list = []
         self.shapes: list[tuple[int, int]] = []
         for p in self.paths:
-            if not isinstance(p, (str, PathLike)):  # a procedural texture (drpt.shading.Checkerboard)
+            if isinstance(p, Checkerboard):  # a procedural texture
                 self.textures.append(_Checker(p))
                 self.shapes.append((0, 0))
+                continue
+            if isinstance(p, Texture):  # an image with Mitsuba bitmap's options
+                self.textures.append(_Bitmap(p))
+                self.shapes.append(self.textures[-1].shape)
                 continue
             img = load_rgb(p)
             self.shapes.append(img.shape[:2])
@@ -102,7 +108,33 @@ class TextureSet:
 def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool) -> Array3f:
     if isinstance(tex, _Checker):
         return tex.eval(pos, scalar)  # pos = (u, 1 - v): Mitsuba's uv
+    if isinstance(tex, _Bitmap):
+        return tex.eval(pos, active)
     return Array3f(tex.eval(pos, active))
+
+
+_FILTERS = {"bilinear": dr.FilterMode.Linear, "nearest": dr.FilterMode.Nearest}
+_WRAPS = {"repeat": dr.WrapMode.Repeat, "mirror": dr.WrapMode.Mirror, "clamp": dr.WrapMode.Clamp}
+
+
+class _Bitmap:
+    """Mitsuba's ``bitmap`` with its options (:class:`drpt.shading.Texture`): Dr.Jit's
+    texture (the one Mitsuba's uses) with the filter and wrap mode, the texels sRGB-decoded
+    unless ``raw``, looked up at ``to_uv`` times Mitsuba's uv."""
+
+    def __init__(self, spec: Texture):
+        img = load_rgb(spec.path, raw=spec.raw)
+        self.shape = img.shape[:2]
+        self.m = None if spec.to_uv is None else [float(x) for x in spec.to_uv]
+        self.tex = Texture2f(TensorXf(img), filter_mode=_FILTERS[spec.filter_type],
+                             wrap_mode=_WRAPS[spec.wrap_mode])
+
+    def eval(self, uv: Array2f, active: Bool = True) -> Array3f:
+        """The texel value at Mitsuba's uv (``(u, 1 - v)`` of drpt's)."""
+        m = self.m
+        if m is not None:
+            uv = Array2f(uv.x * m[0] + uv.y * m[1] + m[2], uv.x * m[3] + uv.y * m[4] + m[5])
+        return Array3f(self.tex.eval(uv, active))
 
 
 class _Checker:
