@@ -221,7 +221,7 @@ class MaterialTable:
         if textures:
             from .texture import TextureSet
 
-            self.textures = TextureSet(textures)
+            self.textures = TextureSet(textures, scene.triangles)
         # materials made only of Dirac lobes (glass, mirrors): Whitted follows them
         delta = [all(self.lobes[c.leaf.kind].DELTA for c in cs) for cs in comps]
         self._all_delta = all(delta)
@@ -257,7 +257,7 @@ class MaterialTable:
         if tid is not None:
             ids = dr.gather(UInt32, tid, si.material, active)
             textured = active & (ids != NONE)
-            looked = self.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f)
+            looked = self.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f, si=si)
             v = dr.select(textured, looked if cls is Array3f else _luminance(looked), v)
         return v
 
@@ -316,7 +316,7 @@ class MaterialTable:
         if s["tex"] is not None:
             ids = dr.gather(UInt32, s["tex"], si.material, present)
             textured = present & (ids != NONE)
-            t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True))
+            t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True, si=si))
             comp = dr.gather(Bool, s["complement"], si.material, present)
             w = dr.select(textured, w * dr.select(comp, 1.0 - t, t), w)
         row_si = copy.copy(si)

@@ -38,8 +38,9 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, TensorXf, Texture2f, UInt32
 
+from ..errors import DrptError
 from ..imageio import read_image
-from ..shading import Checkerboard, Texture
+from ..shading import Checkerboard, MeshAttribute, Texture
 
 __all__ = ["TextureSet", "load_rgb"]
 
@@ -64,11 +65,15 @@ def load_rgb(path: str | PathLike, raw: bool = False) -> np.ndarray:
 class TextureSet:
     """The scene's textures, indexed by position in ``paths``."""
 
-    def __init__(self, paths):
+    def __init__(self, paths, triangles=None):
         self.paths = list(paths)
         self.textures: list = []
         self.shapes: list[tuple[int, int]] = []
         for p in self.paths:
+            if isinstance(p, MeshAttribute):  # the shapes' own values
+                self.textures.append(_Attribute(p, triangles))
+                self.shapes.append((0, 0))
+                continue
             if isinstance(p, Checkerboard):  # a procedural texture
                 self.textures.append(_Checker(p))
                 self.shapes.append((0, 0))
@@ -85,10 +90,12 @@ class TextureSet:
     def __len__(self) -> int:
         return len(self.textures)
 
-    def lookup(self, tex_id: UInt32, uv: Array2f, active: Bool = True, scalar: bool = False) -> Array3f:
+    def lookup(self, tex_id: UInt32, uv: Array2f, active: Bool = True, scalar: bool = False,
+               si=None) -> Array3f:
         """Bilinear, repeat-wrapped linear RGB of texture ``tex_id`` at OBJ ``uv``
         (a procedural texture: its value there; ``scalar``: the one a float
-        parameter reads, whose luminance the caller takes).
+        parameter reads, whose luminance the caller takes; a mesh attribute: its
+        value at the interaction ``si``'s point of its primitive).
 
         Lanes that are inactive or whose id is out of range give 0."""
         if not self.textures:
@@ -97,15 +104,17 @@ class TextureSet:
         pos = Array2f(uv.x, 1.0 - uv.y)
         if len(self.textures) == 1:
             m = active & (tex_id == 0)
-            return dr.select(m, _eval(self.textures[0], pos, uv, m, scalar), 0.0)
+            return dr.select(m, _eval(self.textures[0], pos, uv, m, scalar, si), 0.0)
         out = Array3f(0.0)
         for k, tex in enumerate(self.textures):
             m = active & (tex_id == k)
-            out = dr.select(m, _eval(tex, pos, uv, m, scalar), out)
+            out = dr.select(m, _eval(tex, pos, uv, m, scalar, si), out)
         return out
 
 
-def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool) -> Array3f:
+def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool, si=None) -> Array3f:
+    if isinstance(tex, _Attribute):
+        return tex.eval(si, active)
     if isinstance(tex, _Checker):
         return tex.eval(pos, scalar)  # pos = (u, 1 - v): Mitsuba's uv
     if isinstance(tex, _Bitmap):
@@ -135,6 +144,46 @@ class _Bitmap:
         if m is not None:
             uv = Array2f(uv.x * m[0] + uv.y * m[1] + m[2], uv.x * m[3] + uv.y * m[4] + m[5])
         return Array3f(self.tex.eval(uv, active))
+
+
+def _vec3(a: np.ndarray) -> Array3f:
+    a = np.ascontiguousarray(a, dtype=np.float32).reshape(-1, 3)
+    return Array3f(a[:, 0].copy(), a[:, 1].copy(), a[:, 2].copy())
+
+
+class _Attribute:
+    """Mitsuba's ``mesh_attribute`` (:class:`drpt.shading.MeshAttribute`): the attribute's
+    corner values of the hit triangle blended with the barycentric coordinates of the hit
+    point, computed from the point as Mitsuba's ``barycentric_coordinates`` does (a face
+    attribute has equal corners), times ``scale``; 1 channel is gray. Other primitives
+    (spheres, planes) read 0."""
+
+    def __init__(self, spec, triangles):
+        attrs = getattr(triangles, "attributes", None) or {}
+        if spec.name not in attrs:
+            raise DrptError(f"mesh_attribute '{spec.name}': no shape of the scene has it")
+        a = np.asarray(attrs[spec.name], np.float64) * float(spec.scale)
+        if a.shape[2] == 1:
+            a = np.repeat(a, 3, axis=2)
+        self.n = len(a)
+        self.v0, self.v1, self.v2 = (_vec3(a[:, k]) for k in range(3))
+        p = np.asarray(triangles.positions, np.float32).astype(np.float64)
+        self.p0, self.e1, self.e2 = _vec3(p[:, 0]), _vec3(p[:, 1] - p[:, 0]), _vec3(p[:, 2] - p[:, 0])
+
+    def eval(self, si, active: Bool) -> Array3f:
+        act = Bool(active) & si.valid & (si.prim < self.n)
+        i = dr.select(act, si.prim, 0)
+        e1 = dr.gather(Array3f, self.e1, i, act)
+        e2 = dr.gather(Array3f, self.e2, i, act)
+        rel = si.p - dr.gather(Array3f, self.p0, i, act)
+        d00, d01, d11 = dr.dot(e1, e1), dr.dot(e1, e2), dr.dot(e2, e2)
+        d20, d21 = dr.dot(rel, e1), dr.dot(rel, e2)
+        inv = dr.rcp(dr.maximum(d00 * d11 - d01 * d01, 1e-30))
+        b1 = (d11 * d20 - d01 * d21) * inv
+        b2 = (d00 * d21 - d01 * d20) * inv
+        v = (dr.gather(Array3f, self.v0, i, act) * (1.0 - b1 - b2)
+             + dr.gather(Array3f, self.v1, i, act) * b1 + dr.gather(Array3f, self.v2, i, act) * b2)
+        return dr.select(act, v, 0.0)
 
 
 class _Checker:

@@ -165,6 +165,9 @@ class Triangles:
     material: np.ndarray  # (F,) int32, index into Scene.materials
     normals: np.ndarray | None = None  # (F, 3, 3) float64
     uvs: np.ndarray | None = None  # (F, 3, 2) float64
+    #: mesh attributes by Mitsuba's name (``vertex_color``, ``face_weight``): ``(F, 3, C)``
+    #: float values at each corner (a face attribute repeats its value), C = 1 or 3
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.positions.shape[0])

@@ -16,7 +16,8 @@ BSDF on each side, is not supported), ``blendbsdf`` (two children,
 
 ``bitmap`` keeps Mitsuba's ``filter_type`` (bilinear, nearest), ``wrap_mode``
 (repeat, mirror, clamp), ``raw`` and ``to_uv``; ``rawconstant`` is its constant
-value; ``checkerboard`` becomes :class:`~drpt.shading.Checkerboard`.
+value; ``checkerboard`` becomes :class:`~drpt.shading.Checkerboard`, ``mesh_attribute``
+:class:`~drpt.shading.MeshAttribute` (the reader loads the attribute with the mesh).
 
 What is refused (an "unsupported" error, or with ``--ignore-unsupported`` a
 warning and a fallback): BSDF plugins outside the vocabulary (``bumpmap``,
@@ -36,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from ... import bsdf_kinds
-from ...shading import BSDFSpec, Checkerboard, Texture, complete
+from ...shading import BSDFSpec, Checkerboard, MeshAttribute, Texture, complete
 from .nodes import Node
 
 
@@ -208,6 +209,15 @@ class Materials:
                 raise node.error(f"{node.label}: a 3-valued rawconstant on a float parameter "
                                  "(Mitsuba's eval_1 refuses it)")
             return v if isinstance(v, tuple) or scalar else (v, v, v)
+        if node.plugin == "mesh_attribute":
+            name = node.str("name")
+            if name is None or not (name.startswith("vertex_") or name.startswith("face_")):
+                raise node.error(f"{node.label}: 'name' must start with 'vertex_' or 'face_', got {name!r}")
+            scale = node.float("scale", 1.0)
+            r.check_unread(node)
+            if fallback is None:
+                fallback = 0.5 if scalar else bsdf_kinds.GRAY
+            return MeshAttribute(fallback=fallback, name=name, scale=scale)
         r.unsupported(node, f"texture plugin '{node.plugin}'", fallback="0.5")
         return 0.5 if scalar else bsdf_kinds.GRAY
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import SceneError
+from ...shading import MeshAttribute
 from ..model import (
     MAX_COORDINATE,
     Background,
@@ -165,6 +166,12 @@ class Reader:
                 uvs = np.concatenate([m.uvs if m.uvs is not None else np.zeros((len(m), 3, 2))
                                       for m, _ in self.meshes])
             tris = Triangles(pos, mat, normals, uvs)
+            names = sorted({k for mesh, _ in self.meshes for k in (mesh.attributes or {})})
+            for name in names:  # meshes without the attribute never read it: zeros
+                c = next(mesh.attributes[name].shape[2] for mesh, _ in self.meshes
+                         if name in (mesh.attributes or {}))
+                tris.attributes[name] = np.concatenate(
+                    [(mesh.attributes or {}).get(name, np.zeros((len(mesh), 3, c))) for mesh, _ in self.meshes])
             bad = ~np.isfinite(pos) | (np.abs(pos) > MAX_COORDINATE)
             if bad.any():
                 raise SceneError(self.path, None, f"{int(bad.any(axis=(1, 2)).sum())} triangles have "
@@ -386,8 +393,11 @@ class Reader:
         k = self._material_index(spec, bsdf_node, emission, node)
         m = parent @ node.transform("to_world")
         _check_matrix(node, m)
+        attrs = sorted({t.name for t in spec.textures() if isinstance(t, MeshAttribute)})
+        if attrs and plugin not in geo.MESH_PLUGINS:
+            raise node.error(f"{node.label} has no mesh attributes (its BSDF reads '{attrs[0]}')")
         if plugin in geo.MESH_PLUGINS:
-            mesh = geo.load_mesh(node, m)
+            mesh = geo.load_mesh(node, m, attrs)
             if len(mesh):
                 self.meshes.append((mesh, k))
             else:
