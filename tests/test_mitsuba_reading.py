@@ -149,3 +149,35 @@ def test_moment_channels_are_mitsubas(tmp_path):
     rgb = np.stack([np.asarray(ch[c].pixels, np.float64) for c in "RGB"], -1)
     per_channel = (rgb ** 2).reshape(n, 3).mean(0)  # a pixel's E[R]^2, ... instead of E[X^2]
     assert np.abs(per_channel / want[3:] - 1).max() > 0.1
+
+
+# ------------------------------------------------------------ named children
+def test_named_children_are_read_as_mitsuba_reads_them(tmp_path):
+    body = """<bsdf type="roughplastic" id="red"><rgb name="diffuse_reflectance" value="0.5,0.1,0.1"/></bsdf>
+<sensor type="perspective" name="sensor"><film type="hdrfilm" name="film"><integer name="width" value="8"/>
+<integer name="height" value="8"/><rfilter type="tent" name="rfilter"/></film>
+<sampler type="independent" name="sampler"><integer name="sample_count" value="3"/></sampler></sensor>
+<shape type="sphere"><ref name="bsdf" id="red"/></shape>
+<shape type="sphere"><float name="radius" value="0.5"/>
+<bsdf type="twosided" name="bsdf"><bsdf type="diffuse" name="bsdf_0"/></bsdf>
+<emitter type="area" name="emitter"><rgb name="radiance" value="2,2,2"/></emitter></shape>"""
+    s, warns = _load(_write(tmp_path / "s.xml", body))
+    assert not warns, warns
+    assert s.settings.rfilter == "tent" and s.settings.spp == 3
+    kinds = {m.name: (m.bsdf.kind, m.emission) for m in s.materials}
+    assert kinds["red"][0] == "roughplastic"
+    (twosided,) = [m for m in s.materials if m.bsdf.kind == "twosided"]
+    assert twosided.bsdf.children[0].kind == "diffuse" and twosided.emission == (2.0, 2.0, 2.0)
+
+
+def test_drpt_reads_its_own_export(tmp_path):
+    from drpt.export.mitsuba import write_xml
+
+    src = load_scene(Path(__file__).resolve().parents[1] / "scenes" / "cornellbox" / "cornellbox.txt")
+    out = tmp_path / "cb.xml"
+    write_xml(src, out, 16, 16, 4)
+    s, warns = _load(out)
+    assert not warns, warns
+    kd = {m.bsdf.children[0].params["kd"] for m in s.materials if m.bsdf.kind == "twosided"}
+    assert len(kd) >= 3 and kd <= {m.kd for m in src.materials}
+    assert sum(max(m.emission) > 0 for m in s.materials) == 1
