@@ -30,6 +30,10 @@ VARIANT = "scalar_rgb"
 #: tests/test_mitsuba_xml.py checks them against the installed Mitsuba)
 D65_RGB = (1.204793930053711, 0.948291003704071, 0.9089160561561584)
 
+#: kinds of nested plugins that are parameters by name (``<texture name="reflectance">``,
+#: ``<ref name="interior" id=..>``); other kinds are children whatever their name
+NAMED_KINDS = frozenset({"texture", "medium", "volume"})
+
 _LOCATION = re.compile(r"^(.*) \(line (\d+), col (\d+)\)$")
 _MESSAGE = re.compile(r"Error while loading (.+?) \(line (\d+), col \d+\): (.*)$", re.S)
 _XML_FAILED = re.compile(r'Parsing of XML file "(.+?)" failed: (.*) \(line (\d+), col \d+\)$', re.S)
@@ -181,8 +185,18 @@ class Node:
         return p.resolve()
 
     # ------------------------------------------------------------ params
+    def _is_child(self, key: str) -> bool:
+        """Whether parameter ``key`` is a nested plugin that Mitsuba's plugins find by its
+        type, whatever its name (``<bsdf name="bsdf">``, ``<ref name="bsdf" id=..>``: a
+        shape's BSDF and emitter, a composite's BSDFs, a film's rfilter, a sensor's film),
+        rather than by its name (textures, media and volumes are named parameters)."""
+        if self._type(key) != "ResolvedReference":
+            return False
+        return key.startswith("_arg_") or self.state.node(self.props[key].index()).kind not in NAMED_KINDS
+
     def names(self) -> list[str]:
-        return [k for k in self.props.keys() if not k.startswith("_arg_")]
+        """The parameters, without the nested plugins :meth:`children` returns."""
+        return [k for k in self.props.keys() if not self._is_child(k)]
 
     def has(self, name: str) -> bool:
         return name in self.props
@@ -285,13 +299,16 @@ class Node:
         self.read.add(name)
         return self.state.node(self.props[name].index())
 
+    def objects(self) -> list[tuple[str, Node]]:
+        """Every nested or referenced plugin as ``(parameter name, node)`` in file order
+        (the name is ``_arg_<i>`` for one given without a name)."""
+        return [(k, self.state.node(self.props[k].index())) for k in self.props.keys()
+                if self._type(k) == "ResolvedReference"]
+
     def children(self) -> list[Node]:
-        """Nested or referenced plugins without a parameter name, in file order."""
-        out = []
-        for k in self.props.keys():
-            if k.startswith("_arg_") and self._type(k) == "ResolvedReference":
-                out.append(self.state.node(self.props[k].index()))
-        return out
+        """Nested or referenced plugins that Mitsuba finds by type (:meth:`_is_child`),
+        named or not, in file order."""
+        return [self.state.node(self.props[k].index()) for k in self.props.keys() if self._is_child(k)]
 
     def unread(self, ignore=()) -> list[str]:
         """Parameters (not nested plugins) drpt did not read, in file order."""

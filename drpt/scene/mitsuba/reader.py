@@ -306,6 +306,22 @@ class Reader:
     # ------------------------------------------------------------ integrator
     def integrator(self, node: Node) -> None:
         s = self.settings
+        if node.plugin == "moment":
+            # Mitsuba's moment: renders its first nested integrator's image and records
+            # the XYZ value and its square of every nested one's samples as AOVs
+            nested = [(k, c) for k, c in node.objects() if c.kind == "integrator"]
+            for _, c in node.objects():
+                if c.kind != "integrator":
+                    raise c.error(f"{c.label} inside {node.label} (it takes integrators)")
+            if not nested:
+                raise node.error(f"{node.label} needs a nested integrator")
+            for _, c in nested[1:]:
+                self.unsupported(c, f"a second integrator inside {node.label} (drpt records the "
+                                 "moments of the first)")
+            self.check_unread(node)
+            s.moment = nested[0][0]
+            self.integrator(nested[0][1])
+            return
         if node.plugin not in ("path", "direct"):
             self.unsupported(node, f"integrator '{node.plugin}' (drpt has path and direct)",
                              fallback="path")
