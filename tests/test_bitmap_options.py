@@ -1,4 +1,4 @@
-"""Mitsuba ``bitmap`` options (drpt.shading.Texture, drpt.render.texture._Bitmap): ``filter_type``
+"""Mitsuba ``bitmap`` options (drpt.shading.Texture, drpt.render.texture.Bitmap): ``filter_type``
 nearest, ``wrap_mode`` mirror and clamp, ``raw`` and ``to_uv`` look up what Mitsuba's ``bitmap``
 evaluates at the same uv (and a ``rawconstant`` is its value); the negative controls (nearest read
 as bilinear, mirror as repeat, raw decoded, to_uv dropped) do not. A scene with every combination

@@ -125,12 +125,14 @@ from drpt.scene.model import (
     OrthographicCamera,
     PerspectiveCamera,
     PointLight,
+    ProjectorLight,
     Scene,
     Skybox,
     SpotLight,
 )
 from drpt.shading import BSDFSpec, interpret_scene
 
+from .mitsuba_bsdf import _value as bsdf_value
 from .mitsuba_bsdf import to_mitsuba as bsdf_to_mitsuba
 
 __all__ = ["to_mitsuba_dict", "write_xml", "look_at_matrix", "PLANE_SCALE"]
@@ -191,7 +193,7 @@ _TAGS = {
     "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf",
     "plastic": "bsdf", "roughplastic": "bsdf", "thindielectric": "bsdf", "roughdielectric": "bsdf",
     "mask": "bsdf", "null": "bsdf",
-    "area": "emitter", "point": "emitter", "directional": "emitter", "spot": "emitter",
+    "area": "emitter", "point": "emitter", "directional": "emitter", "spot": "emitter", "projector": "emitter",
     "envmap": "emitter", "constant": "emitter",
     "sphere": "shape", "rectangle": "shape", "ply": "shape",
     "bitmap": "texture",
@@ -424,13 +426,25 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                                  "direction": _Vector(tuple(_normalize(_f3(light.direction)))),
                                  "irradiance": _RGB(_f3(light.color))}
         elif isinstance(light, SpotLight):
-            m = look_at_matrix(_f3(light.position),
-                               tuple(a + b for a, b in zip(_f3(light.position), _f3(light.direction))),
-                               _any_perpendicular(_f3(light.direction)))
+            if getattr(light, "frame", None) is not None:  # the light's own orientation
+                m = _light_matrix(light.position, light.frame)
+            else:
+                m = look_at_matrix(_f3(light.position),
+                                   tuple(a + b for a, b in zip(_f3(light.position), _f3(light.direction))),
+                                   _any_perpendicular(_f3(light.direction)))
             out[f"light_{i}"] = {"type": "spot", "to_world": _Matrix(m),
                                  "intensity": _RGB(_f3(light.color)),
                                  "cutoff_angle": float(light.cutoff_angle),
                                  "beam_width": float(light.beam_width)}
+            if getattr(light, "texture", None) is not None:
+                out[f"light_{i}"]["texture"] = bsdf_value(light.texture, f"light {i}")
+        elif isinstance(light, ProjectorLight):
+            irr = light.irradiance
+            out[f"light_{i}"] = {"type": "projector", "fov": float(light.fov_x), "fov_axis": "x",
+                                 "to_world": _Matrix(_light_matrix(light.position, light.frame)),
+                                 "scale": float(light.scale),
+                                 "irradiance": _RGB(_f3(irr)) if isinstance(irr, tuple)
+                                 else bsdf_value(irr, f"light {i}")}
         elif isinstance(light, Skybox):
             from .mitsuba_envmap import to_mitsuba as envmap_to_mitsuba
 
@@ -452,6 +466,14 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
     head = {k: v for k, v in out.items() if not _is_shape(v)}
     shapes = {k: v for k, v in out.items() if _is_shape(v)}
     return {**head, **shapes}
+
+
+def _light_matrix(position, frame) -> np.ndarray:
+    """A light's to_world: its frame's columns (local x, y, z in world space) and position."""
+    m = np.eye(4)
+    m[:3, :3] = np.asarray(frame, float).reshape(3, 3)
+    m[:3, 3] = _f3(position)
+    return m
 
 
 def _is_shape(node: Any) -> bool:

@@ -42,7 +42,7 @@ from ..errors import DrptError
 from ..imageio import read_image
 from ..shading import Checkerboard, MeshAttribute, Texture
 
-__all__ = ["TextureSet", "load_rgb"]
+__all__ = ["Bitmap", "TextureSet", "load_rgb"]
 
 
 def load_rgb(path: str | PathLike, raw: bool = False) -> np.ndarray:
@@ -79,7 +79,7 @@ class TextureSet:
                 self.shapes.append((0, 0))
                 continue
             if isinstance(p, Texture):  # an image with Mitsuba bitmap's options
-                self.textures.append(_Bitmap(p))
+                self.textures.append(Bitmap(p))
                 self.shapes.append(self.textures[-1].shape)
                 continue
             img = load_rgb(p)
@@ -117,7 +117,7 @@ def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool, si=None) -
         return tex.eval(si, active)
     if isinstance(tex, _Checker):
         return tex.eval(pos, scalar)  # pos = (u, 1 - v): Mitsuba's uv
-    if isinstance(tex, _Bitmap):
+    if isinstance(tex, Bitmap):
         return tex.eval(pos, active)
     return Array3f(tex.eval(pos, active))
 
@@ -126,7 +126,7 @@ _FILTERS = {"bilinear": dr.FilterMode.Linear, "nearest": dr.FilterMode.Nearest}
 _WRAPS = {"repeat": dr.WrapMode.Repeat, "mirror": dr.WrapMode.Mirror, "clamp": dr.WrapMode.Clamp}
 
 
-class _Bitmap:
+class Bitmap:
     """Mitsuba's ``bitmap`` with its options (:class:`drpt.shading.Texture`): Dr.Jit's
     texture (the one Mitsuba's uses) with the filter and wrap mode, the texels sRGB-decoded
     unless ``raw``, looked up at ``to_uv`` times Mitsuba's uv."""

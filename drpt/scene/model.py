@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -237,6 +237,31 @@ class SpotLight:
     color: Vec3
     cutoff_angle: float = 20.0  # degrees
     beam_width: float = 15.0  # degrees, at most cutoff_angle
+    #: Mitsuba's ``texture`` (a :class:`drpt.shading.Texture`) multiplying the intensity,
+    #: looked up at ``uv = 0.5 + 0.5 (x, y) / (z tan(cutoff_angle))`` of the direction in the
+    #: light's ``frame``; None: none
+    texture: Any = None
+    #: the light's orientation: a row-major 3x3 rotation whose columns are its local x, y, z
+    #: (z = ``direction``) in world space; None: some frame around ``direction``
+    frame: tuple | None = None
+
+
+@dataclass
+class ProjectorLight:
+    """Mitsuba's ``projector``: a perspective projection of ``irradiance`` (an RGB
+    triple or a :class:`drpt.shading.Texture`) from ``position``, looking along the
+    ``frame``'s local ``+z``: a point at local ``(x, y, z)`` (``z > 0``) sees the value
+    at Mitsuba's uv ``(0.5 - 0.5 x / (z t), 0.5 - 0.5 aspect y / (z t))`` (``t =
+    tan(fov_x / 2)``, ``aspect`` the texture's width / height), zero outside [0, 1]^2,
+    and receives ``pi * scale * value * dist / z^3`` on a surface facing the light
+    (the value is the irradiance at ``z = 1`` on the plane facing the projector)."""
+
+    position: Vec3
+    frame: tuple  # row-major 3x3 rotation, columns the local x, y, z in world space
+    fov_x: float  # full horizontal field of view, degrees
+    irradiance: Any = (1.0, 1.0, 1.0)
+    aspect: float = 1.0  # the texture's width / height (1 for a constant)
+    scale: float = 1.0
 
 
 @dataclass
@@ -248,7 +273,7 @@ class Skybox:
     rotation: np.ndarray | None = None
 
 
-Light = PointLight | DirectionalLight | SpotLight | Skybox
+Light = PointLight | DirectionalLight | SpotLight | ProjectorLight | Skybox
 
 
 @dataclass

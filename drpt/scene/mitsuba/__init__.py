@@ -37,7 +37,8 @@ Mitsuba                   drpt
 ``instance``              under its ``to_world``
 ``area``                  the shape's material's ``emission`` (radiance)
 ``point``                 :class:`PointLight` (intensity, inverse square)
-``spot``                  :class:`SpotLight`
+``spot``                  :class:`SpotLight` (with a bitmap ``texture``)
+``projector``             :class:`ProjectorLight` (constant or bitmap irradiance)
 ``directional``           :class:`DirectionalLight` (irradiance)
 ``constant``              ``Background.color`` (radiance of escaping rays)
 ``envmap``                :class:`Skybox` with ``scale`` and ``rotation``
@@ -45,7 +46,11 @@ Mitsuba                   drpt
                           tree (:mod:`.materials`); a shape without one gets
                           Mitsuba's default (diffuse 0.5; black on an emitter)
 ``bitmap``                :class:`drpt.shading.Texture` on a texturable param
+                          (filter_type, wrap_mode, raw, to_uv)
 ``checkerboard``          :class:`drpt.shading.Checkerboard` (procedural)
+``mesh_attribute``        :class:`drpt.shading.MeshAttribute` (vertex/face)
+``rawconstant``           its value
+``orthographic``          :class:`OrthographicCamera`
 ========================  =====================================================
 
 Each distinct (BSDF node, area radiance) pair of shapes becomes one
@@ -55,7 +60,7 @@ Errors and warnings. Anything the parser refuses (malformed XML, an
 undefined ``$var``, an unresolved ``<ref>``, a value of the wrong syntax) and
 anything drpt refuses (a parameter of the wrong type, a missing mesh file,
 a plugin drpt cannot render: media, spectral data, other integrators,
-textures other than ``bitmap`` and ``checkerboard``, ...) raises a one-line
+volume textures, ...) raises a one-line
 :class:`~drpt.errors.SceneError` naming the XML file, the line Mitsuba's
 parser gives (``mitsuba.parser.file_location``) and the plugin. With
 ``ignore_unsupported`` an unsupported plugin is left out (or replaced by the

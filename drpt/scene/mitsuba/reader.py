@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import SceneError
-from ...shading import MeshAttribute
+from ...shading import MeshAttribute, Texture
 from ..model import (
     MAX_COORDINATE,
     Background,
@@ -22,6 +22,7 @@ from ..model import (
     OrthographicCamera,
     PerspectiveCamera,
     PointLight,
+    ProjectorLight,
     RenderSettings,
     Scene,
     Skybox,
@@ -478,16 +479,19 @@ class Reader:
             if not similar:
                 raise node.error(f"{node.label}: to_world must be a rotation and translation")
             color = self._intensity(node, "intensity")
-            if node.is_ref("texture"):
-                self.unsupported(node.ref("texture"), "spot texture", fallback="no texture")
+            texture = self._emitter_texture(node, "texture") if node.is_ref("texture") else None
             cutoff = node.float("cutoff_angle", 20.0)
             beam = node.float("beam_width", cutoff * 0.75)
             if not 0 < beam <= cutoff < 180:
                 raise node.error(f"{node.label}: needs 0 < beam_width <= cutoff_angle < 180, "
                                  f"got {beam:g} and {cutoff:g}")
             axis = m[:3, 2] / np.linalg.norm(m[:3, 2])
+            frame = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
             self.lights.append(SpotLight(tuple(float(x) for x in m[:3, 3]), tuple(float(x) for x in axis),
-                                         color, cutoff, beam))
+                                         color, cutoff, beam, texture=texture,
+                                         frame=tuple(float(x) for x in frame.ravel())))
+        elif p == "projector":
+            self.projector(node, np.eye(4) if m is None else m)
         elif p == "directional":
             if node.has("direction") and m is not None:
                 raise node.error(f"{node.label}: give 'direction' or 'to_world', not both")
@@ -535,6 +539,58 @@ class Reader:
             self.unsupported(node, f"emitter '{p}'")
             return
         self.check_unread(node)
+
+    def _emitter_texture(self, node: Node, name: str):
+        """The bitmap of an emitter's texture parameter (a :class:`drpt.shading.Texture`)."""
+        tex = node.ref(name)
+        spec = self.materials.texture(tex, fallback=(1.0, 1.0, 1.0)) if tex.kind == "texture" else None
+        if type(spec) is not Texture:
+            self.unsupported(tex, f"{tex.label} as '{name}' of {node.label} (drpt reads a bitmap there)",
+                             fallback="1")
+            return None
+        return spec
+
+    def projector(self, node: Node, m: np.ndarray) -> None:
+        """Mitsuba's ``projector`` (:class:`~drpt.scene.model.ProjectorLight`)."""
+        similar, s = geo.is_similarity(m)
+        if not similar or not math.isclose(s, 1.0, rel_tol=1e-5) or np.linalg.det(m[:3, :3]) < 0:
+            raise node.error(f"{node.label}: to_world must be a rotation and translation")
+        aspect = 1.0
+        if node.is_ref("irradiance"):
+            irr = self._emitter_texture(node, "irradiance")
+            if irr is None:
+                irr = (1.0, 1.0, 1.0)
+            else:
+                from ...imageio import read_image
+
+                h, w = read_image(irr.path, linear=False).shape[:2]
+                aspect = w / h
+        else:
+            irr = node.color("irradiance", (1.0, 1.0, 1.0), emission=True)
+            _nonnegative(node, "irradiance", irr)
+        scale = node.float("scale", 1.0)
+        if not (math.isfinite(scale) and scale >= 0):
+            raise node.error(f"{node.label}: scale must be >= 0, got {scale}")
+        if node.has("fov") and node.has("focal_length"):
+            raise node.error(f"{node.label}: give 'fov' or 'focal_length', not both")
+        if node.has("fov"):
+            fov, axis = node.float("fov"), (node.str("fov_axis", "x") or "x").lower()
+        else:
+            f = node.str("focal_length", "50mm") or "50mm"
+            try:
+                value = float(f[:-2] if f.endswith("mm") else f)
+            except ValueError:
+                raise node.error(f"{node.label}: focal_length must be like '50mm', got {f!r}") from None
+            fov, axis = 2.0 * math.degrees(math.atan(math.hypot(36.0, 24.0) / (2.0 * value))), "diagonal"
+        if axis not in FOV_AXES:
+            raise node.error(f"{node.label}: fov_axis must be one of {', '.join(FOV_AXES)}, got {axis!r}")
+        fov_y = vertical_fov(fov, axis, aspect)
+        if not 0.0 < fov_y < 180.0:
+            raise node.error(f"{node.label}: field of view {fov:g} ({axis}) is not in (0, 180) degrees")
+        fov_x = 2.0 * math.degrees(math.atan(math.tan(math.radians(fov_y) / 2.0) * aspect))
+        self.lights.append(ProjectorLight(tuple(float(x) for x in m[:3, 3]),
+                                          tuple(float(x) for x in m[:3, :3].ravel()), fov_x, irr,
+                                          aspect, scale))
 
     def _environment(self, node: Node) -> None:
         seen = getattr(self, "_env_node", None)
