@@ -40,7 +40,7 @@ Returns an ``(H, W, C)`` float32 array, row 0 at the top, ``C`` in
 * ``.pfm`` -- ``PF`` (RGB) or ``Pf`` (gray), either endianness, read by
   Mitsuba's ``Bitmap``, which multiplies the values by the magnitude of
   the header's scale (``1`` in files drpt writes).
-* ``.png``, ``.jpg``, ``.jpeg``, ``.tga`` -- with Pillow. 8-bit (16-bit)
+* ``.png``, ``.jpg``, ``.jpeg``, ``.tga``, ``.bmp`` -- with Pillow. 8-bit (16-bit)
   channels become floats in ``[0, 1]`` by dividing by 255 (65535). With
   ``linear=True`` (the default) color channels are then decoded from sRGB
   to linear with the exact sRGB transfer curve (what Mitsuba's ``bitmap``
@@ -75,7 +75,7 @@ from drpt.errors import DrptError, SceneError
 from drpt.scene.files import check_input
 
 WRITE_EXTENSIONS = (".exr", ".png", ".tga", ".hdr", ".pfm")
-READ_EXTENSIONS = (".exr", ".hdr", ".pfm", ".png", ".jpg", ".jpeg", ".tga")
+READ_EXTENSIONS = (".exr", ".hdr", ".pfm", ".png", ".jpg", ".jpeg", ".tga", ".bmp")
 
 __all__ = [
     "write_image",

@@ -216,6 +216,12 @@ class MaterialTable:
             slot["tex"] = UInt32(np.array(ids, np.int64).astype(np.uint32)) if any(
                 i != NONE for i in ids) else None
 
+        # textured emission (Mitsuba's area radiance bitmap), by material
+        etex = [tex_id(m.emission_texture) if getattr(m, "emission_texture", None) is not None else NONE
+                for m in scene.materials]
+        self._emit_tex = UInt32(np.array(etex, np.int64).astype(np.uint32)) if any(
+            i != NONE for i in etex) else None
+
         # Textures: one set for every textured field and weight.
         self.textures = None
         if textures:
@@ -280,8 +286,17 @@ class MaterialTable:
         if not self.has_emission:
             return Array3f(0.0)
         le = dr.gather(Array3f, self.emission, si.material, si.valid)
+        if self._emit_tex is not None:
+            le = self.textured_emission(si.material, si.uv, le, si.valid)
         front = si.valid & (dr.dot(si.ns, si.wi) > 0.0)
         return dr.select(front, le, 0.0)
+
+    def textured_emission(self, material: UInt32, uv: Array2f, le: Array3f, active: Bool) -> Array3f:
+        """``le`` where the material's emission is constant, its texture at OBJ ``uv`` where
+        it has one (only traced for scenes with a textured emitter)."""
+        ids = dr.gather(UInt32, self._emit_tex, material, active)
+        textured = active & (ids != NONE)
+        return dr.select(textured, self.textures.lookup(ids, uv, textured), le)
 
     def is_specular_only(self) -> bool:
         return all(m.DELTA for m in self.lobes.values())

@@ -142,6 +142,9 @@ class Material:
     maps: dict[str, Path] = field(default_factory=dict)  # other map_* by lower-case key, e.g. "pr", "d"
     given: tuple[str, ...] = ()  # lower-case keys of the statements the file gave, sorted
     bsdf: BSDFSpec | None = None  # an explicit BSDF (Mitsuba XML), used as given
+    #: emitted radiance as a texture (Mitsuba's area ``radiance`` bitmap), looked up at the
+    #: surface's uv; ``emission`` then holds its mean (light selection by power)
+    emission_texture: Any = None
 
     @property
     def is_emissive(self) -> bool:

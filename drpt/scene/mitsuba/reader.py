@@ -53,7 +53,16 @@ FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
 
 
 def _material(name: str, origin: str, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
-    return Material(name, emission=emission, origin=origin, bsdf=spec, **legacy_fields(spec))
+    texture = None
+    if isinstance(emission, Texture):  # a textured area emitter: its mean radiance for the power
+        from ...imageio import read_image
+
+        texture = emission
+        img = read_image(texture.path, linear=not texture.raw)
+        img = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img[..., :3]
+        emission = tuple(float(x) for x in img.reshape(-1, 3).mean(0))
+    return Material(name, emission=emission, origin=origin, bsdf=spec, emission_texture=texture,
+                    **legacy_fields(spec))
 
 
 class Reader:
@@ -368,7 +377,7 @@ class Reader:
                 self.unsupported(node.ref(name), f"{node.ref(name).label} ({name} of {node.label})")
         if spec is None:
             # Mitsuba's default: diffuse 0.5, black on a shape with an area emitter
-            spec = default_bsdf(black=max(emission) > 0)
+            spec = default_bsdf(black=isinstance(emission, Texture) or max(emission) > 0)
         return spec, bsdf_node, emission
 
     def _material_index(self, spec: BSDFSpec, bsdf_node: Node | None, emission, shape: Node) -> int:
@@ -379,7 +388,7 @@ class Reader:
                 origin = bsdf_node.where
             else:
                 name, origin = "default", shape.where
-            if max(emission) > 0:
+            if isinstance(emission, Texture) or max(emission) > 0:
                 name += "+area"
             self.mat_index[key] = len(self.mat_list)
             self.mat_list.append(_material(name, origin, spec, emission))
@@ -428,7 +437,7 @@ class Reader:
             local = geo.sphere_local(center, radius, m)
             similar, scale = geo.is_similarity(local)
             mirrored = np.linalg.det(local[:3, :3]) < 0
-            textured = bool(spec.textures())
+            textured = bool(spec.textures()) or isinstance(emission, Texture)
             if similar and not (flip ^ mirrored) and not textured:
                 self.spheres.append((local[:3, 3].copy(), scale, k))
             else:
@@ -452,11 +461,12 @@ class Reader:
         self.check_unread(node)
 
     # ------------------------------------------------------------ emitters
-    def area(self, node: Node) -> tuple:
+    def area(self, node: Node):
+        """An area emitter's radiance: an RGB triple, or a bitmap :class:`Texture`."""
         if node.is_ref("radiance"):
-            self.unsupported(node.ref("radiance"), "textured area emitter radiance",
-                             fallback="radiance 1")
-            return (1.0, 1.0, 1.0)
+            tex = self._emitter_texture(node, "radiance")
+            self.check_unread(node)
+            return tex if tex is not None else (1.0, 1.0, 1.0)
         le = node.color("radiance", (1.0, 1.0, 1.0), emission=True)
         _nonnegative(node, "radiance", le)
         self.check_unread(node)
