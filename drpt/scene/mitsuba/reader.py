@@ -148,7 +148,7 @@ class Reader:
         if self.unread_params:
             self.warn(f"{self.path}: ignored parameters their plugins do not read (Mitsuba 3 would "
                       f"refuse them; --strict makes this an error): {'; '.join(self.unread_params)}")
-        for w in self.warnings:
+        for w in [*self.state.notes, *self.warnings]:
             warnings.warn(w, stacklevel=3)
 
     def _scene(self) -> Scene:
