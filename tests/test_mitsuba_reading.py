@@ -181,3 +181,54 @@ def test_drpt_reads_its_own_export(tmp_path):
     kd = {m.bsdf.children[0].params["kd"] for m in s.materials if m.bsdf.kind == "twosided"}
     assert len(kd) >= 3 and kd <= {m.kd for m in src.materials}
     assert sum(max(m.emission) > 0 for m in s.materials) == 1
+
+
+# ------------------------------------------------------------ spectra given by wavelength
+SPECTRA = """<sensor type="perspective"><film type="hdrfilm"><integer name="width" value="8"/>
+<integer name="height" value="8"/></film></sensor>
+<shape type="sphere" id="a"><bsdf type="diffuse" id="dif">
+<spectrum name="reflectance" value="400:0.1, 500:0.5, 600:0.3, 700:0.2"/></bsdf>
+<emitter type="area"><spectrum name="radiance" value="400:0, 500:8, 600:15.6, 700:18.4"/></emitter></shape>
+<shape type="sphere" id="b"><bsdf type="roughconductor" id="cond">
+<spectrum name="eta" filename="eta.spd"/><spectrum name="k" value="400:3, 550:2.5, 700:4"/>
+<spectrum name="specular_reflectance" value="400:0.1, 500:0.5, 600:3"/></bsdf></shape>
+<emitter type="point"><spectrum name="intensity" value="380:1, 780:2"/></emitter>"""
+
+
+@pytest.mark.mitsuba
+def test_wavelength_spectra_are_mitsubas_rgb(tmp_path):
+    """Reflectance (D65-weighted, clamped to [0, 1]), emission (not weighted, clamped at 0)
+    and unbounded parameters (conductors' eta and k: weighted, not clamped above 1), from
+    values and from an .spd file, equal what Mitsuba's scalar_rgb variant loads from the
+    same file (its plugins' parameters, mi.traverse)."""
+    import mitsuba as mi
+    import numpy as np
+
+    (tmp_path / "eta.spd").write_text("# eta\n400 1.2\n500 0.9\n600 0.4\n700 0.3\n")
+    p = _write(tmp_path / "s.xml", SPECTRA)
+    s, warns = _load(p)
+    assert len(warns) == 1 and "specular_reflectance" in warns[0] and "s.xml:7" in warns[0], warns
+    mi.set_variant("scalar_rgb")
+    params = mi.traverse(mi.load_file(str(p)))
+
+    def mitsuba(key):
+        return np.array(params[key], np.float64).ravel()
+
+    mat = {m.name: m for m in s.materials}
+    assert np.allclose(mat["dif+area"].bsdf.params["kd"], mitsuba("a.bsdf.reflectance.value"), atol=1e-6)
+    assert np.allclose(mat["dif+area"].emission, mitsuba("a.emitter.radiance.value"), atol=1e-5)
+    cond = mat["cond"].bsdf.params
+    for name in ("eta", "k", "specular_reflectance"):
+        assert np.allclose(cond[name], mitsuba(f"b.bsdf.{name}.value"), atol=1e-6), name
+    assert max(cond["k"]) > 1  # unbounded
+    (light,) = s.lights
+    key = [k for k in params.keys() if k.endswith("intensity.value")][0]
+    assert np.allclose(light.color, mitsuba(key), atol=1e-5)
+
+
+def test_a_missing_spd_file_is_a_located_error(tmp_path):
+    p = _write(tmp_path / "s.xml", f'{SENSOR}\n<bsdf type="diffuse">\n'
+               '<spectrum name="reflectance" filename="gone.spd"/></bsdf>')
+    with pytest.raises(SceneError) as e:
+        _load(p)
+    assert f"{p}:4:" in str(e.value) and "gone.spd" in str(e.value)

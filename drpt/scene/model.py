@@ -308,10 +308,11 @@ class RenderSettings:
     moment: str | None = None
     #: the ``-D`` values the file was read with (``compare`` gives Mitsuba the same)
     defines: dict = field(default_factory=dict)
-    #: parameters of the file their plugins do not read (older exporters' files), as
-    #: ``(node index in mitsuba.parser's state, plugin, name)``: ``compare`` drops them
-    #: before Mitsuba loads the file (Mitsuba 3 refuses them)
-    ignored: tuple = ()
+    #: what of the file drpt did not read as written, one located line each: parameters
+    #: their plugins do not read (older exporters' files; Mitsuba 3 refuses them) and,
+    #: with ``--ignore-unsupported``, the plugins left out or replaced. ``compare`` stops
+    #: on such a file, or with ``--ignore-unsupported`` says it is not like for like
+    not_read: tuple = ()
 
 
 # ---------------------------------------------------------------------- scene

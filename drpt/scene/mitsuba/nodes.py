@@ -34,6 +34,10 @@ D65_RGB = (1.204793930053711, 0.948291003704071, 0.9089160561561584)
 #: ``<ref name="interior" id=..>``); other kinds are children whatever their name
 NAMED_KINDS = frozenset({"texture", "medium", "volume"})
 
+#: parameters Mitsuba reads with ``get_unbounded_texture`` (a spectrum given by wavelengths
+#: is not clamped to [0, 1] there): conductors' ``eta`` and ``k``, roughnesses
+UNBOUNDED = frozenset({"eta", "k", "alpha", "alpha_u", "alpha_v", "sigma_a", "theta", "delta"})
+
 _LOCATION = re.compile(r"^(.*) \(line (\d+), col (\d+)\)$")
 _MESSAGE = re.compile(r"Error while loading (.+?) \(line (\d+), col \d+\): (.*)$", re.S)
 _XML_FAILED = re.compile(r'Parsing of XML file "(.+?)" failed: (.*) \(line (\d+), col \d+\)$', re.S)
@@ -114,6 +118,7 @@ class State:
         self.state = state
         self.files = [Path(str(f)) for f in state.files]
         self.nodes: dict[int, Node] = {}
+        self.notes: list[str] = []  # warnings found while reading values (clamped spectra)
         self.version = str(state.versions[0]) if len(state.versions) else ""
 
     def node(self, index: int) -> Node:
@@ -267,14 +272,14 @@ class Node:
         return self.has(name) and self._type(name) == "ResolvedReference"
 
     def color(self, name: str, default=None, *, emission: bool = False) -> tuple[float, float, float] | None:
-        """An RGB triple from ``<rgb>``, a uniform ``<spectrum>`` or a ``<float>``.
+        """An RGB triple from ``<rgb>``, a ``<spectrum>`` or a ``<float>``.
 
-        A spectrum given by wavelengths is refused (drpt renders in RGB; so
-        does Mitsuba's ``*_rgb`` variants' parser only for uniform values).
-        With ``emission`` (an emitter's radiance, intensity or irradiance), a
-        uniform ``<spectrum value="v">`` is what Mitsuba's RGB variants make of
-        it: ``v`` times the D65 illuminant in linear sRGB, :data:`D65_RGB`
-        (``<rgb>`` and ``<float>`` stay gray)."""
+        A spectrum given by wavelengths (or an ``.spd`` file) becomes the color
+        Mitsuba's RGB variants make of it (:meth:`_spectrum_rgb`). With
+        ``emission`` (an emitter's radiance, intensity or irradiance), a uniform
+        ``<spectrum value="v">`` is what Mitsuba's RGB variants make of it: ``v``
+        times the D65 illuminant in linear sRGB, :data:`D65_RGB` (``<rgb>`` and
+        ``<float>`` stay gray)."""
         if not self.has(name):
             return default
         t = self._type(name)
@@ -291,9 +296,35 @@ class Node:
                 if emission:
                     return tuple(v * c for c in D65_RGB)
                 return (v, v, v)
-            raise self.error(f"{self.label}: parameter '{name}' is a spectrum given by wavelengths: "
-                             "unsupported (drpt renders in RGB; give <rgb> or a uniform value)")
+            return self._spectrum_rgb(name, s, emission)
         raise self._wrong(name, "a color (<rgb>, <spectrum> or <float>)")
+
+    def _spectrum_rgb(self, name: str, s, emission: bool) -> tuple[float, float, float]:
+        """A spectrum given by wavelengths (``value="400:0.1, 500:0.5"`` or an ``.spd``
+        file), as Mitsuba's RGB variants read it (``Properties::get_texture_impl``): its
+        linear sRGB color integrated against the CIE 1931 curves
+        (``mi.spectrum_list_to_srgb``), times the D65 illuminant unless it is an emitter's;
+        clamped to [0, 1] unless it is an emitter's or an unbounded parameter's
+        (:data:`UNBOUNDED`), which are clamped at 0. A clamp is noted as a warning."""
+        mi = self.state.mi
+        bounded = not (emission or name in UNBOUNDED)
+        wl, values = [float(x) for x in s.wavelengths], [float(x) for x in s.values]
+        logger = mi.logger()
+        level = logger.log_level()
+        logger.set_log_level(mi.LogLevel.Error)  # drpt reports the clamp itself, once, located
+        try:
+            raw = mi.spectrum_list_to_srgb(wl, values, bounded=False, d65=not emission)
+            rgb = mi.spectrum_list_to_srgb(wl, values, bounded=bounded, d65=not emission)
+        except RuntimeError as e:
+            raise self.error(f"{self.label}: parameter '{name}': {_one_line(str(e))}") from None
+        finally:
+            logger.set_log_level(level)
+        out = (float(rgb[0]), float(rgb[1]), float(rgb[2]))
+        if out != (float(raw[0]), float(raw[1]), float(raw[2])) or min(out) == 0.0 < max(values):
+            self.state.notes.append(f"{self.where}: {self.label}: the spectrum of '{name}' is out of the "
+                                    f"sRGB gamut: clamped to {tuple(round(c, 6) for c in out)}, as Mitsuba's "
+                                    "RGB variants clamp it")
+        return out
 
     def ref(self, name: str) -> Node:
         self.read.add(name)

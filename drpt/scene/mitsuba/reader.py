@@ -77,7 +77,7 @@ class Reader:
         self.state = State(self.path, dict(defines or {}))
         self.materials = Materials(self)
         self.unread_params: list[str] = []
-        self.ignored: list[tuple[int, str, str]] = []
+        self.not_read: list[str] = []  # what drpt left out or replaced, one line each
         self.defines = {k: str(v) for k, v in (defines or {}).items()}
         self.warnings: list[str] = []
         # outputs
@@ -99,8 +99,9 @@ class Reader:
         warn and go on (the caller uses ``fallback``, or leaves the node out)."""
         if not self.ignore_unsupported:
             raise node.error(f"unsupported {what} (--ignore-unsupported renders without it)")
-        self.warn(f"{node.where}: unsupported {what}: "
-                  + (f"using {fallback}" if fallback else "left out"))
+        message = f"{node.where}: unsupported {what}: " + (f"using {fallback}" if fallback else "left out")
+        self.warn(message)
+        self.not_read.append(message)
 
     def drpt_ignores(self, node: Node, name: str, why: str) -> None:
         """A parameter the plugin reads that drpt does not honor."""
@@ -119,7 +120,8 @@ class Reader:
             raise node.error(f"{node.label} does not read parameter{'s' if len(names) > 1 else ''} "
                              f"{listed} (without --strict drpt ignores them)")
         self.unread_params.append(f"{listed} of {node.label} at {node.where}")
-        self.ignored.extend((node.index, node.plugin, n) for n in names)
+        self.not_read.append(f"{node.where}: parameter{'s' if len(names) > 1 else ''} {listed} of "
+                             f"{node.label}: not read")
 
     # ------------------------------------------------------------ the scene
     def read(self) -> Scene:
@@ -151,16 +153,16 @@ class Reader:
             self.integrator(integrators[0])
         self.check_unread(root)
         self.settings.defines = dict(self.defines)
-        self.settings.ignored = tuple(self.ignored)
+        self.settings.not_read = tuple(self.not_read)
         scene = self._scene()
         self._report()
         return scene
 
     def _report(self) -> None:
         if self.unread_params:
-            self.warn(f"{self.path}: ignored parameters their plugins do not read (Mitsuba 3 would "
-                      f"refuse them; --strict makes this an error): {'; '.join(self.unread_params)}")
-        for w in self.warnings:
+            self.warn(f"{self.path}: ignored parameters their plugins do not read (Mitsuba 3 refuses "
+                      f"them; --strict makes this an error): {'; '.join(self.unread_params)}")
+        for w in [*self.state.notes, *self.warnings]:
             warnings.warn(w, stacklevel=3)
 
     def _scene(self) -> Scene:
