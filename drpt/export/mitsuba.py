@@ -109,7 +109,7 @@ from __future__ import annotations
 import math
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -174,6 +174,8 @@ class _MeshData:
     uvs: np.ndarray | None  # (F, 3, 2), already in Mitsuba's convention
     bsdf: dict
     emitter: dict | None
+    #: mesh attributes (Mitsuba's ``vertex_*`` / ``face_*``): ``(F, 3, C)`` corner values
+    attributes: dict = field(default_factory=dict)
 
     def arrays(self):
         f = self.positions.shape[0]
@@ -196,7 +198,7 @@ _TAGS = {
     "area": "emitter", "point": "emitter", "directional": "emitter", "spot": "emitter", "projector": "emitter",
     "envmap": "emitter", "constant": "emitter",
     "sphere": "shape", "rectangle": "shape", "ply": "shape",
-    "bitmap": "texture",
+    "bitmap": "texture", "mesh_attribute": "texture", "checkerboard": "texture",
 }
 
 
@@ -349,7 +351,9 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                 warnings.warn(n, stacklevel=3)
     bsdfs = [_bsdf(spec) for spec in specs]
     emitters = [
-        {"type": "area", "radiance": _RGB(_f3(m.emission))} if m.is_emissive else None
+        ({"type": "area", "radiance": bsdf_value(m.emission_texture, m.origin)}
+         if getattr(m, "emission_texture", None) is not None else
+         {"type": "area", "radiance": _RGB(_f3(m.emission))}) if m.is_emissive else None
         for m in scene.materials
     ]
     nmat = len(scene.materials)
@@ -376,6 +380,7 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                 uvs=uvs,
                 bsdf=bsdfs[mi_],
                 emitter=emitters[mi_],
+                attributes={k: a[sel] for k, a in getattr(tri, "attributes", {}).items()},
             )
 
     # -- spheres
@@ -570,6 +575,9 @@ def _build_mesh(md: _MeshData, mi):
     if uv is not None:
         params["vertex_texcoords"] = mi.Float(uv.ravel())
     params.update()
+    for name, a in md.attributes.items():  # per corner: unwelded vertices; a face's first corner
+        v = a.reshape(-1, a.shape[2]) if name.startswith("vertex_") else a[:, 0, :]
+        mesh.add_attribute(name, a.shape[2], mi.Float(np.ascontiguousarray(v, np.float32).ravel()))
     return mesh
 
 
@@ -601,7 +609,7 @@ def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: in
             if isinstance(node, _MeshData):
                 mesh_dir.mkdir(parents=True, exist_ok=True)
                 ply = mesh_dir / f"{node.name}.ply"
-                _write_ply(ply, *node.arrays())
+                _write_ply(ply, *node.arrays(), attributes=node.attributes)
                 lines += _xml_mesh(node, f"{mesh_dir.name}/{ply.name}", key, 1)
             else:
                 lines += _xml_plugin(node, None, key, 1)
@@ -674,8 +682,13 @@ def _xml_mesh(md: _MeshData, rel_path: str, ident: str, depth: int) -> list[str]
 
 
 def _write_ply(path: Path, pos: np.ndarray, faces: np.ndarray,
-               nrm: np.ndarray | None, uv: np.ndarray | None) -> None:
-    """Binary little-endian PLY: float32 vertex props, uchar/uint32 face list."""
+               nrm: np.ndarray | None, uv: np.ndarray | None, attributes=None) -> None:
+    """Binary little-endian PLY: float32 vertex props, uchar/uint32 face list; mesh
+    attributes as ``<name>_<channel>`` vertex or face properties (``vertex_color`` ->
+    vertex ``color_0..2``, Mitsuba's PLY loader's naming)."""
+    attributes = attributes or {}
+    vattr = {k[len("vertex_"):]: a for k, a in attributes.items() if k.startswith("vertex_")}
+    fattr = {k[len("face_"):]: a for k, a in attributes.items() if k.startswith("face_")}
     nv, nf = pos.shape[0], faces.shape[0]
     props = ["x", "y", "z"]
     cols = [pos]
@@ -685,14 +698,25 @@ def _write_ply(path: Path, pos: np.ndarray, faces: np.ndarray,
     if uv is not None:
         props += ["u", "v"]
         cols.append(uv)
+    for base, a in vattr.items():
+        props += [f"{base}_{c}" for c in range(a.shape[2])]
+        cols.append(a.reshape(-1, a.shape[2]))
     vert = np.ascontiguousarray(np.concatenate(cols, axis=1), dtype="<f4")
     header = ["ply", "format binary_little_endian 1.0", "comment written by drpt",
               f"element vertex {nv}"]
     header += [f"property float {p}" for p in props]
-    header += [f"element face {nf}", "property list uchar uint vertex_indices", "end_header"]
-    face_rec = np.zeros(nf, dtype=[("n", "u1"), ("idx", "<u4", (3,))])
+    header += [f"element face {nf}", "property list uchar uint vertex_indices"]
+    fields = [("n", "u1"), ("idx", "<u4", (3,))]
+    for base, a in fattr.items():
+        header += [f"property float {base}_{c}" for c in range(a.shape[2])]
+        fields += [(f"{base}_{c}", "<f4") for c in range(a.shape[2])]
+    header.append("end_header")
+    face_rec = np.zeros(nf, dtype=fields)
     face_rec["n"] = 3
     face_rec["idx"] = faces
+    for base, a in fattr.items():
+        for c in range(a.shape[2]):
+            face_rec[f"{base}_{c}"] = a[:, 0, c]
     with open(path, "wb") as f:
         f.write(("\n".join(header) + "\n").encode("ascii"))
         f.write(vert.tobytes())

@@ -37,7 +37,7 @@ import numpy as np
 
 from ..bsdf_kinds import COMPOSITES, PARAMS
 from ..errors import DrptError
-from ..shading import BSDFSpec, Checkerboard, Texture
+from ..shading import BSDFSpec, Checkerboard, MeshAttribute, Texture
 from .mitsuba_dielectrics import KINDS as DIELECTRICS
 from .mitsuba_dielectrics import adjust as adjust_dielectric
 
@@ -58,6 +58,8 @@ def _value(v: Any, origin: str) -> Any:
         m[:2, :2], m[:2, 3] = a[:2, :2], a[:2, 2]
         return {"type": "checkerboard", "color0": _value(tuple(v.color0), origin),
                 "color1": _value(tuple(v.color1), origin), "to_uv": _to_uv(m)}
+    if isinstance(v, MeshAttribute):
+        return {"type": "mesh_attribute", "name": v.name, "scale": float(v.scale)}
     if isinstance(v, Texture):
         if not Path(v.path).is_file():
             raise DrptError(f"{origin or 'material'}: texture {v.path} not found")
