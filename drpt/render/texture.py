@@ -7,6 +7,13 @@ is dropped, a gray image is repeated to three channels) and uploaded as a
 and repeat wrapping (``WrapMode.Repeat``), on which ``eval`` interpolates
 *after* the sRGB decoding, as Mitsuba's ``bitmap`` does.
 
+A Mitsuba ``bitmap`` with other options (:class:`drpt.shading.Texture`'s
+``filter_type``, ``wrap_mode``, ``raw``, ``to_uv``) is a :class:`Bitmap`: the
+same Dr.Jit texture with that filter and wrap mode, looked up at ``to_uv``
+times Mitsuba's uv. A ``mesh_attribute`` (:class:`drpt.shading.MeshAttribute`)
+reads the hit triangle's corner values instead (``lookup``'s ``si``), and a
+``checkerboard`` is procedural; a scene without them traces none of this.
+
 Texture coordinates
 -------------------
 drpt keeps OBJ uvs: ``v = 0`` is the *bottom* row of the image. A Dr.Jit
@@ -166,6 +173,7 @@ class _Attribute:
         if a.shape[2] == 1:
             a = np.repeat(a, 3, axis=2)
         self.n = len(a)
+        self.face = spec.name.startswith("face_")
         self.v0, self.v1, self.v2 = (_vec3(a[:, k]) for k in range(3))
         p = np.asarray(triangles.positions, np.float32).astype(np.float64)
         self.p0, self.e1, self.e2 = _vec3(p[:, 0]), _vec3(p[:, 1] - p[:, 0]), _vec3(p[:, 2] - p[:, 0])
@@ -173,6 +181,8 @@ class _Attribute:
     def eval(self, si, active: Bool) -> Array3f:
         act = Bool(active) & si.valid & (si.prim < self.n)
         i = dr.select(act, si.prim, 0)
+        if self.face:  # equal corners: no blending
+            return dr.select(act, dr.gather(Array3f, self.v0, i, act), 0.0)
         e1 = dr.gather(Array3f, self.e1, i, act)
         e2 = dr.gather(Array3f, self.e2, i, act)
         rel = si.p - dr.gather(Array3f, self.p0, i, act)
