@@ -232,3 +232,25 @@ def test_a_missing_spd_file_is_a_located_error(tmp_path):
     with pytest.raises(SceneError) as e:
         _load(p)
     assert f"{p}:4:" in str(e.value) and "gone.spd" in str(e.value)
+
+
+# ------------------------------------------------------------ messages
+@pytest.mark.parametrize("ref, message", [
+    ('<ref id="nope"/>', '<ref id="nope"/>: no object has id "nope"'),
+    ('<ref name="bsdf" id="nope"/>', '<ref name="bsdf" id="nope"/>: no object has id "nope"'),
+])
+def test_a_ref_to_a_missing_id_names_the_ref(tmp_path, ref, message):
+    p = _write(tmp_path / "s.xml", f'{SENSOR}\n<shape type="sphere">{ref}</shape>')
+    with pytest.raises(SceneError) as e:
+        _load(p)
+    assert str(e.value) == f"{p}:3: {message}"
+    assert "_arg_" not in str(e.value)
+
+
+def test_unread_parameters_are_listed_once_and_children_are_not(tmp_path):
+    body = (f'{SENSOR}\n<shape type="sphere"><bsdf type="roughconductor" name="bsdf">'
+            '<float name="int_ior" value="1.5"/></bsdf></shape>')
+    s, warns = _load(_write(tmp_path / "s.xml", body))
+    assert len(warns) == 1 and "'int_ior' of bsdf 'roughconductor' at" in warns[0], warns
+    assert "'bsdf'" not in warns[0] and "Mitsuba 3 refuses them" in warns[0]
+    assert s.settings.not_read and "int_ior" in s.settings.not_read[0]
