@@ -57,8 +57,16 @@ def mitsuba():
     return mi
 
 
+_UNRESOLVED = re.compile(r'unresolved reference to "(.*?)" in property "(.*?)"\. Make sure the object '
+                         r'with id=".*?" exists\.')
+
+
 def _one_line(text: str) -> str:
-    return " ".join(_TAG.sub("", text).split())
+    text = " ".join(_TAG.sub("", text).split())
+    # Mitsuba names an unnamed <ref> by its internal key (property "_arg_0")
+    return _UNRESOLVED.sub(lambda m: (f'<ref id="{m.group(1)}"' if m.group(2).startswith("_arg_")
+                                      else f'<ref name="{m.group(2)}" id="{m.group(1)}"')
+                           + f'/>: no object has id "{m.group(1)}"', text)
 
 
 def parser_error(path: Path, error: Exception) -> SceneError:
