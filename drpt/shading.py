@@ -129,7 +129,7 @@ class MeshAttribute(Texture):
     interpolated with the hit's barycentric coordinates; ``face_*``: the face's value; 1 or
     3 channels, :attr:`drpt.scene.model.Triangles.attributes`) times ``scale``. A
     1-channel attribute on a color parameter is gray; a float parameter reads a
-    3-channel one's luminance."""
+    3-channel one's luminance (Mitsuba 3.9's ``eval_1`` gives 0 there)."""
 
     path: Path | None = None
     name: str = ""
