@@ -84,10 +84,26 @@ _PBR_KEYS = frozenset({"pr", "pm", "ps", "pc", "pcr", "aniso", "anisor"})
 @dataclass(frozen=True)
 class Texture:
     """A texture-valued parameter: an image file (looked up at the surface's
-    uv) and the value the parameter takes where it cannot be looked up."""
+    uv) and the value the parameter takes where it cannot be looked up.
+
+    The lookup is Mitsuba's ``bitmap``'s: ``filter_type`` ``"bilinear"`` or
+    ``"nearest"``, ``wrap_mode`` ``"repeat"``, ``"mirror"`` or ``"clamp"``, ``raw``
+    (8-bit values taken as stored, without the sRGB decoding) and ``to_uv`` (None,
+    or a row-major 3x3 2D affine matrix applied to Mitsuba's uv, as
+    :class:`Checkerboard`'s)."""
 
     path: Path
     fallback: Any = 0.0
+    filter_type: str = "bilinear"
+    wrap_mode: str = "repeat"
+    raw: bool = False
+    to_uv: tuple | None = None
+
+    @property
+    def is_plain(self) -> bool:
+        """A bilinear, repeating, sRGB-decoded image at the surface's own uv (an MTL map)."""
+        options = (self.filter_type, self.wrap_mode, self.raw, self.to_uv)
+        return type(self) is Texture and options == ("bilinear", "repeat", False, None)
 
 
 @dataclass(frozen=True)
@@ -105,6 +121,19 @@ class Checkerboard(Texture):
     color0: tuple = (0.4, 0.4, 0.4)
     color1: tuple = (0.2, 0.2, 0.2)
     to_uv: tuple = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class MeshAttribute(Texture):
+    """Mitsuba's ``mesh_attribute`` texture: the shape's attribute ``name`` (``vertex_*``:
+    interpolated with the hit's barycentric coordinates; ``face_*``: the face's value; 1 or
+    3 channels, :attr:`drpt.scene.model.Triangles.attributes`) times ``scale``. A
+    1-channel attribute on a color parameter is gray; a float parameter reads a
+    3-channel one's luminance (Mitsuba 3.9's ``eval_1`` gives 0 there)."""
+
+    path: Path | None = None
+    name: str = ""
+    scale: float = 1.0
 
 
 @dataclass
@@ -327,14 +356,14 @@ def interpret(m: Material, mode: str = "auto") -> BSDFSpec:
 def interpret_scene(scene: Scene, mode: str = "auto") -> list[BSDFSpec]:
     """:func:`interpret` for every material of ``scene``, then the scene's
     texture rule: without texture coordinates anywhere in the scene every
-    texture parameter takes its fallback value, with a note naming the
+    texture parameter but a mesh attribute takes its fallback value, with a note naming the
     material and the texture."""
     specs = [interpret(m, mode) for m in scene.materials]
     if scene.triangles.uvs is None:
         for m, spec in zip(scene.materials, specs):
             for node in spec.walk():
                 for name, v in list(node.params.items()):
-                    if isinstance(v, Texture):
+                    if isinstance(v, Texture) and not isinstance(v, MeshAttribute):  # (no uv needed)
                         node.params[name] = v.fallback
                         spec.dropped.append(v.path or "checkerboard")
                         spec.notes.append(untextured_note(m, v.path or "checkerboard"))

@@ -32,7 +32,8 @@ Camera
     mirroring. ``fov_axis="y"`` makes ``fov`` the full vertical angle.
     ``orthographic``: Mitsuba's unit view spans camera x in [-1, 1] and
     y in [-H/W, H/W], so ``to_world = look_at @ scale(s, s, 1)`` with
-    ``s = size * W / (2H)`` gives a full vertical extent of ``size``.
+    ``s = size * W / (2H)`` gives a full vertical extent of ``size`` (``scale(width/2,
+    s, 1)`` for a camera with its own ``width``).
     ``near_clip``/``far_clip`` are derived from the scene size (tiny / beyond
     the exported planes). A perspective camera with an ``aperture_radius``
     above 0 becomes ``thinlens`` with the same ``fov``/``fov_axis`` and
@@ -108,7 +109,7 @@ from __future__ import annotations
 import math
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -124,12 +125,14 @@ from drpt.scene.model import (
     OrthographicCamera,
     PerspectiveCamera,
     PointLight,
+    ProjectorLight,
     Scene,
     Skybox,
     SpotLight,
 )
 from drpt.shading import BSDFSpec, interpret_scene
 
+from .mitsuba_bsdf import _value as bsdf_value
 from .mitsuba_bsdf import to_mitsuba as bsdf_to_mitsuba
 
 __all__ = ["to_mitsuba_dict", "write_xml", "look_at_matrix", "PLANE_SCALE"]
@@ -171,6 +174,8 @@ class _MeshData:
     uvs: np.ndarray | None  # (F, 3, 2), already in Mitsuba's convention
     bsdf: dict
     emitter: dict | None
+    #: mesh attributes (Mitsuba's ``vertex_*`` / ``face_*``): ``(F, 3, C)`` corner values
+    attributes: dict = field(default_factory=dict)
 
     def arrays(self):
         f = self.positions.shape[0]
@@ -190,10 +195,10 @@ _TAGS = {
     "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf",
     "plastic": "bsdf", "roughplastic": "bsdf", "thindielectric": "bsdf", "roughdielectric": "bsdf",
     "mask": "bsdf", "null": "bsdf",
-    "area": "emitter", "point": "emitter", "directional": "emitter", "spot": "emitter",
+    "area": "emitter", "point": "emitter", "directional": "emitter", "spot": "emitter", "projector": "emitter",
     "envmap": "emitter", "constant": "emitter",
     "sphere": "shape", "rectangle": "shape", "ply": "shape",
-    "bitmap": "texture",
+    "bitmap": "texture", "mesh_attribute": "texture", "checkerboard": "texture",
 }
 
 
@@ -301,7 +306,8 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
         if not float(cam.size) > 0.0:
             raise DrptError(f"cannot export camera: size {cam.size} must be positive")
         s = float(cam.size) * width / (2.0 * height)
-        to_world = to_world @ np.diag([s, s, 1.0, 1.0])
+        sx = s if getattr(cam, "width", None) is None else float(cam.width) / 2.0
+        to_world = to_world @ np.diag([sx, s, 1.0, 1.0])
         sensor = {"type": "orthographic"}
     else:  # pragma: no cover - model has only these two
         raise DrptError(f"cannot export camera of type {type(cam).__name__}")
@@ -345,7 +351,9 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                 warnings.warn(n, stacklevel=3)
     bsdfs = [_bsdf(spec) for spec in specs]
     emitters = [
-        {"type": "area", "radiance": _RGB(_f3(m.emission))} if m.is_emissive else None
+        ({"type": "area", "radiance": bsdf_value(m.emission_texture, m.origin)}
+         if getattr(m, "emission_texture", None) is not None else
+         {"type": "area", "radiance": _RGB(_f3(m.emission))}) if m.is_emissive else None
         for m in scene.materials
     ]
     nmat = len(scene.materials)
@@ -372,6 +380,7 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                 uvs=uvs,
                 bsdf=bsdfs[mi_],
                 emitter=emitters[mi_],
+                attributes={k: a[sel] for k, a in getattr(tri, "attributes", {}).items()},
             )
 
     # -- spheres
@@ -422,13 +431,25 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                                  "direction": _Vector(tuple(_normalize(_f3(light.direction)))),
                                  "irradiance": _RGB(_f3(light.color))}
         elif isinstance(light, SpotLight):
-            m = look_at_matrix(_f3(light.position),
-                               tuple(a + b for a, b in zip(_f3(light.position), _f3(light.direction))),
-                               _any_perpendicular(_f3(light.direction)))
+            if getattr(light, "frame", None) is not None:  # the light's own orientation
+                m = _light_matrix(light.position, light.frame)
+            else:
+                m = look_at_matrix(_f3(light.position),
+                                   tuple(a + b for a, b in zip(_f3(light.position), _f3(light.direction))),
+                                   _any_perpendicular(_f3(light.direction)))
             out[f"light_{i}"] = {"type": "spot", "to_world": _Matrix(m),
                                  "intensity": _RGB(_f3(light.color)),
                                  "cutoff_angle": float(light.cutoff_angle),
                                  "beam_width": float(light.beam_width)}
+            if getattr(light, "texture", None) is not None:
+                out[f"light_{i}"]["texture"] = bsdf_value(light.texture, f"light {i}")
+        elif isinstance(light, ProjectorLight):
+            irr = light.irradiance
+            out[f"light_{i}"] = {"type": "projector", "fov": float(light.fov_x), "fov_axis": "x",
+                                 "to_world": _Matrix(_light_matrix(light.position, light.frame)),
+                                 "scale": float(light.scale),
+                                 "irradiance": _RGB(_f3(irr)) if isinstance(irr, tuple)
+                                 else bsdf_value(irr, f"light {i}")}
         elif isinstance(light, Skybox):
             from .mitsuba_envmap import to_mitsuba as envmap_to_mitsuba
 
@@ -450,6 +471,14 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
     head = {k: v for k, v in out.items() if not _is_shape(v)}
     shapes = {k: v for k, v in out.items() if _is_shape(v)}
     return {**head, **shapes}
+
+
+def _light_matrix(position, frame) -> np.ndarray:
+    """A light's to_world: its frame's columns (local x, y, z in world space) and position."""
+    m = np.eye(4)
+    m[:3, :3] = np.asarray(frame, float).reshape(3, 3)
+    m[:3, 3] = _f3(position)
+    return m
 
 
 def _is_shape(node: Any) -> bool:
@@ -546,6 +575,9 @@ def _build_mesh(md: _MeshData, mi):
     if uv is not None:
         params["vertex_texcoords"] = mi.Float(uv.ravel())
     params.update()
+    for name, a in md.attributes.items():  # per corner: unwelded vertices; a face's first corner
+        v = a.reshape(-1, a.shape[2]) if name.startswith("vertex_") else a[:, 0, :]
+        mesh.add_attribute(name, a.shape[2], mi.Float(np.ascontiguousarray(v, np.float32).ravel()))
     return mesh
 
 
@@ -577,7 +609,7 @@ def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: in
             if isinstance(node, _MeshData):
                 mesh_dir.mkdir(parents=True, exist_ok=True)
                 ply = mesh_dir / f"{node.name}.ply"
-                _write_ply(ply, *node.arrays())
+                _write_ply(ply, *node.arrays(), attributes=node.attributes)
                 lines += _xml_mesh(node, f"{mesh_dir.name}/{ply.name}", key, 1)
             else:
                 lines += _xml_plugin(node, None, key, 1)
@@ -650,8 +682,13 @@ def _xml_mesh(md: _MeshData, rel_path: str, ident: str, depth: int) -> list[str]
 
 
 def _write_ply(path: Path, pos: np.ndarray, faces: np.ndarray,
-               nrm: np.ndarray | None, uv: np.ndarray | None) -> None:
-    """Binary little-endian PLY: float32 vertex props, uchar/uint32 face list."""
+               nrm: np.ndarray | None, uv: np.ndarray | None, attributes=None) -> None:
+    """Binary little-endian PLY: float32 vertex props, uchar/uint32 face list; mesh
+    attributes as ``<name>_<channel>`` vertex or face properties (``vertex_color`` ->
+    vertex ``color_0..2``, Mitsuba's PLY loader's naming)."""
+    attributes = attributes or {}
+    vattr = {k[len("vertex_"):]: a for k, a in attributes.items() if k.startswith("vertex_")}
+    fattr = {k[len("face_"):]: a for k, a in attributes.items() if k.startswith("face_")}
     nv, nf = pos.shape[0], faces.shape[0]
     props = ["x", "y", "z"]
     cols = [pos]
@@ -661,14 +698,25 @@ def _write_ply(path: Path, pos: np.ndarray, faces: np.ndarray,
     if uv is not None:
         props += ["u", "v"]
         cols.append(uv)
+    for base, a in vattr.items():
+        props += [f"{base}_{c}" for c in range(a.shape[2])]
+        cols.append(a.reshape(-1, a.shape[2]))
     vert = np.ascontiguousarray(np.concatenate(cols, axis=1), dtype="<f4")
     header = ["ply", "format binary_little_endian 1.0", "comment written by drpt",
               f"element vertex {nv}"]
     header += [f"property float {p}" for p in props]
-    header += [f"element face {nf}", "property list uchar uint vertex_indices", "end_header"]
-    face_rec = np.zeros(nf, dtype=[("n", "u1"), ("idx", "<u4", (3,))])
+    header += [f"element face {nf}", "property list uchar uint vertex_indices"]
+    fields = [("n", "u1"), ("idx", "<u4", (3,))]
+    for base, a in fattr.items():
+        header += [f"property float {base}_{c}" for c in range(a.shape[2])]
+        fields += [(f"{base}_{c}", "<f4") for c in range(a.shape[2])]
+    header.append("end_header")
+    face_rec = np.zeros(nf, dtype=fields)
     face_rec["n"] = 3
     face_rec["idx"] = faces
+    for base, a in fattr.items():
+        for c in range(a.shape[2]):
+            face_rec[f"{base}_{c}"] = a[:, 0, c]
     with open(path, "wb") as f:
         f.write(("\n".join(header) + "\n").encode("ascii"))
         f.write(vert.tobytes())

@@ -37,7 +37,7 @@ import numpy as np
 
 from ..bsdf_kinds import COMPOSITES, PARAMS
 from ..errors import DrptError
-from ..shading import BSDFSpec, Checkerboard, Texture
+from ..shading import BSDFSpec, Checkerboard, MeshAttribute, Texture
 from .mitsuba_dielectrics import KINDS as DIELECTRICS
 from .mitsuba_dielectrics import adjust as adjust_dielectric
 
@@ -58,11 +58,21 @@ def _value(v: Any, origin: str) -> Any:
         m[:2, :2], m[:2, 3] = a[:2, :2], a[:2, 2]
         return {"type": "checkerboard", "color0": _value(tuple(v.color0), origin),
                 "color1": _value(tuple(v.color1), origin), "to_uv": _to_uv(m)}
+    if isinstance(v, MeshAttribute):
+        return {"type": "mesh_attribute", "name": v.name, "scale": float(v.scale)}
     if isinstance(v, Texture):
         if not Path(v.path).is_file():
             raise DrptError(f"{origin or 'material'}: texture {v.path} not found")
-        return {"type": "bitmap", "filename": str(Path(v.path).resolve()),
-                "filter_type": "bilinear", "wrap_mode": "repeat"}
+        out = {"type": "bitmap", "filename": str(Path(v.path).resolve()),
+               "filter_type": v.filter_type, "wrap_mode": v.wrap_mode}
+        if v.raw:
+            out["raw"] = True
+        if v.to_uv is not None:
+            a = np.asarray(v.to_uv, float).reshape(3, 3)
+            m = np.eye(4)
+            m[:2, :2], m[:2, 3] = a[:2, :2], a[:2, 2]
+            out["to_uv"] = _to_uv(m)
+        return out
     if isinstance(v, (tuple, list)):
         return {"type": "rgb", "value": [float(x) for x in v]}
     if isinstance(v, bool) or isinstance(v, str):

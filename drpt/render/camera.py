@@ -9,7 +9,8 @@ corner (pixel ``(i, j)`` covers ``[i, i+1) x [j, j+1)``). With
   ``sx = (2x/W - 1) * tan(fov/2) * W/H`` and ``sy = (1 - 2y/H) * tan(fov/2)``;
   ``fov`` is the full *vertical* field of view;
 * orthographic: origin ``center + sx*r + sy*u`` with ``sx = (2x/W - 1) *
-  size/2 * W/H``, ``sy = (1 - 2y/H) * size/2``, direction ``f``;
+  size/2 * W/H`` (or ``* width/2`` where the camera gives its ``width``),
+  ``sy = (1 - 2y/H) * size/2``, direction ``f``;
 * thin lens (a perspective camera with ``aperture_radius = A > 0`` and
   ``focus_distance = F``), Mitsuba's ``thinlens``: the pinhole ray's point
   on the focal plane, ``P = center + F * (f + sx*r + sy*u)`` (its distance
@@ -85,6 +86,8 @@ class RayCamera:
         self.window = window
         if window is None:
             half_w = half_h * width / height
+            if getattr(cam, "width", None) is not None:  # an orthographic view of its own aspect
+                half_w = cam.width / 2.0
         else:
             # the fov is the whole film's; image position x of W maps to film position
             # u = u0 + (u1 - u0) x / W, sx = 2 u - 1 (and sy = 1 - 2 v)

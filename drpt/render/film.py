@@ -44,7 +44,7 @@ from ..filters import PixelFilter
 
 class SplatFilm:
     def __init__(self, width: int, height: int, flt: PixelFilter, weights: bool = False,
-                 y0: int = 0, rows: int | None = None):
+                 y0: int = 0, rows: int | None = None, moment: bool = False):
         self.width, self.height = width, height
         self.filter = flt
         self.weights = weights
@@ -54,6 +54,8 @@ class SplatFilm:
         self.sum = [dr.zeros(Float64, n) for _ in range(3)]
         self.sq = [dr.zeros(Float64, n) for _ in range(3)]
         self.w = [dr.zeros(Float64, n) for _ in range(2)] if weights else []
+        # with moment (camera samples): sum(w L_a L_b) for r^2, g^2, b^2, rg, rb, gb, after sq
+        self.moment = [dr.zeros(Float64, n) for _ in range(6)] if moment and weights else []
 
     def _weight(self, d: Float) -> Float:
         f = self.filter
@@ -71,6 +73,11 @@ class SplatFilm:
             w = Float64(1.0) if w is None else Float64(w)
             dr.scatter_reduce(dr.ReduceOp.Add, self.w[0], w, index, active)
             dr.scatter_reduce(dr.ReduceOp.Add, self.w[1], w * w, index, active)
+            if self.moment:
+                v = [Float64(value[c]) for c in range(3)]
+                products = (v[0] * v[0], v[1] * v[1], v[2] * v[2], v[0] * v[1], v[0] * v[2], v[1] * v[2])
+                for target, prod in zip(self.moment, products):
+                    dr.scatter_reduce(dr.ReduceOp.Add, target, w * prod, index, active)
 
     def put(self, x: Float, y: Float, value: Array3f, active: Bool) -> None:
         """Add ``value`` at image position ``(x, y)`` (lanes where ``active``)."""
@@ -105,14 +112,15 @@ class SplatFilm:
                 self._add(UInt32((iy - y0) * W + ix), value, ok, w)
 
     def arrays(self):
-        """``(sum, sum of squares, weights)``: ``(rows, W, 3)`` float64 numpy arrays,
-        and with ``weights`` ``(rows, W, 2)`` (``sum(w)``, ``sum(w^2)``), else None."""
+        """``(sum, sum of squares, weights)``: ``(rows, W, 3)`` float64 numpy arrays
+        (with ``moment``, the squares are followed by the 6 ``sum(w L_a L_b)``), and
+        with ``weights`` ``(rows, W, 2)`` (``sum(w)``, ``sum(w^2)``), else None."""
         import numpy as np
 
-        dr.eval(self.sum, self.sq, self.w)
+        dr.eval(self.sum, self.sq, self.w, self.moment)
 
         def stack(cs):
             return np.stack([c.numpy() for c in cs], axis=-1).reshape(self.rows, self.width, len(cs)
                                                                       ).astype(np.float64)
 
-        return stack(self.sum), stack(self.sq), stack(self.w) if self.weights else None
+        return stack(self.sum), stack(self.sq + self.moment), stack(self.w) if self.weights else None

@@ -180,7 +180,8 @@ class MaterialTable:
         textures: list = []
 
         def tex_id(t: Texture) -> int:
-            key = t if isinstance(t, Checkerboard) else t.path  # an image file, or the procedural texture
+            # an MTL-style image by its file; a procedural texture or an image with options as itself
+            key = t.path if t.is_plain and not isinstance(t, Checkerboard) else t
             if key not in textures:
                 textures.append(key)
             return textures.index(key)
@@ -215,12 +216,18 @@ class MaterialTable:
             slot["tex"] = UInt32(np.array(ids, np.int64).astype(np.uint32)) if any(
                 i != NONE for i in ids) else None
 
+        # textured emission (Mitsuba's area radiance bitmap), by material
+        etex = [tex_id(m.emission_texture) if getattr(m, "emission_texture", None) is not None else NONE
+                for m in scene.materials]
+        self._emit_tex = UInt32(np.array(etex, np.int64).astype(np.uint32)) if any(
+            i != NONE for i in etex) else None
+
         # Textures: one set for every textured field and weight.
         self.textures = None
         if textures:
             from .texture import TextureSet
 
-            self.textures = TextureSet(textures)
+            self.textures = TextureSet(textures, scene.triangles)
         # materials made only of Dirac lobes (glass, mirrors): Whitted follows them
         delta = [all(self.lobes[c.leaf.kind].DELTA for c in cs) for cs in comps]
         self._all_delta = all(delta)
@@ -256,7 +263,7 @@ class MaterialTable:
         if tid is not None:
             ids = dr.gather(UInt32, tid, si.material, active)
             textured = active & (ids != NONE)
-            looked = self.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f)
+            looked = self.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f, si=si)
             v = dr.select(textured, looked if cls is Array3f else _luminance(looked), v)
         return v
 
@@ -279,8 +286,17 @@ class MaterialTable:
         if not self.has_emission:
             return Array3f(0.0)
         le = dr.gather(Array3f, self.emission, si.material, si.valid)
+        if self._emit_tex is not None:
+            le = self.textured_emission(si.material, si.uv, le, si.valid)
         front = si.valid & (dr.dot(si.ns, si.wi) > 0.0)
         return dr.select(front, le, 0.0)
+
+    def textured_emission(self, material: UInt32, uv: Array2f, le: Array3f, active: Bool) -> Array3f:
+        """``le`` where the material's emission is constant, its texture at OBJ ``uv`` where
+        it has one (only traced for scenes with a textured emitter)."""
+        ids = dr.gather(UInt32, self._emit_tex, material, active)
+        textured = active & (ids != NONE)
+        return dr.select(textured, self.textures.lookup(ids, uv, textured), le)
 
     def is_specular_only(self) -> bool:
         return all(m.DELTA for m in self.lobes.values())
@@ -315,7 +331,7 @@ class MaterialTable:
         if s["tex"] is not None:
             ids = dr.gather(UInt32, s["tex"], si.material, present)
             textured = present & (ids != NONE)
-            t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True))
+            t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True, si=si))
             comp = dr.gather(Bool, s["complement"], si.material, present)
             w = dr.select(textured, w * dr.select(comp, 1.0 - t, t), w)
         row_si = copy.copy(si)

@@ -7,6 +7,13 @@ is dropped, a gray image is repeated to three channels) and uploaded as a
 and repeat wrapping (``WrapMode.Repeat``), on which ``eval`` interpolates
 *after* the sRGB decoding, as Mitsuba's ``bitmap`` does.
 
+A Mitsuba ``bitmap`` with other options (:class:`drpt.shading.Texture`'s
+``filter_type``, ``wrap_mode``, ``raw``, ``to_uv``) is a :class:`Bitmap`: the
+same Dr.Jit texture with that filter and wrap mode, looked up at ``to_uv``
+times Mitsuba's uv. A ``mesh_attribute`` (:class:`drpt.shading.MeshAttribute`)
+reads the hit triangle's corner values instead (``lookup``'s ``si``), and a
+``checkerboard`` is procedural; a scene without them traces none of this.
+
 Texture coordinates
 -------------------
 drpt keeps OBJ uvs: ``v = 0`` is the *bottom* row of the image. A Dr.Jit
@@ -38,17 +45,20 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, TensorXf, Texture2f, UInt32
 
+from ..errors import DrptError
 from ..imageio import read_image
+from ..shading import Checkerboard, MeshAttribute, Texture
 
-__all__ = ["TextureSet", "load_rgb"]
+__all__ = ["Bitmap", "TextureSet", "load_rgb"]
 
 
-def load_rgb(path: str | PathLike) -> np.ndarray:
-    """``(H, W, 3)`` linear float32 texels of an image file (row 0 = top).
+def load_rgb(path: str | PathLike, raw: bool = False) -> np.ndarray:
+    """``(H, W, 3)`` linear float32 texels of an image file (row 0 = top);
+    ``raw``: 8-bit values as stored (no sRGB decoding, Mitsuba's ``raw``).
 
     Raises :class:`drpt.errors.SceneError` naming the file when it is
     missing, unreadable or malformed."""
-    img = read_image(path, linear=True)
+    img = read_image(path, linear=not raw)
     c = img.shape[2]
     if c == 1:
         img = np.repeat(img, 3, axis=2)
@@ -62,14 +72,22 @@ def load_rgb(path: str | PathLike) -> np.ndarray:
 class TextureSet:
     """The scene's textures, indexed by position in ``paths``."""
 
-    def __init__(self, paths):
+    def __init__(self, paths, triangles=None):
         self.paths = list(paths)
         self.textures: list = []
         self.shapes: list[tuple[int, int]] = []
         for p in self.paths:
-            if not isinstance(p, (str, PathLike)):  # a procedural texture (drpt.shading.Checkerboard)
+            if isinstance(p, MeshAttribute):  # the shapes' own values
+                self.textures.append(_Attribute(p, triangles))
+                self.shapes.append((0, 0))
+                continue
+            if isinstance(p, Checkerboard):  # a procedural texture
                 self.textures.append(_Checker(p))
                 self.shapes.append((0, 0))
+                continue
+            if isinstance(p, Texture):  # an image with Mitsuba bitmap's options
+                self.textures.append(Bitmap(p))
+                self.shapes.append(self.textures[-1].shape)
                 continue
             img = load_rgb(p)
             self.shapes.append(img.shape[:2])
@@ -79,10 +97,12 @@ class TextureSet:
     def __len__(self) -> int:
         return len(self.textures)
 
-    def lookup(self, tex_id: UInt32, uv: Array2f, active: Bool = True, scalar: bool = False) -> Array3f:
+    def lookup(self, tex_id: UInt32, uv: Array2f, active: Bool = True, scalar: bool = False,
+               si=None) -> Array3f:
         """Bilinear, repeat-wrapped linear RGB of texture ``tex_id`` at OBJ ``uv``
         (a procedural texture: its value there; ``scalar``: the one a float
-        parameter reads, whose luminance the caller takes).
+        parameter reads, whose luminance the caller takes; a mesh attribute: its
+        value at the interaction ``si``'s point of its primitive).
 
         Lanes that are inactive or whose id is out of range give 0."""
         if not self.textures:
@@ -91,18 +111,89 @@ class TextureSet:
         pos = Array2f(uv.x, 1.0 - uv.y)
         if len(self.textures) == 1:
             m = active & (tex_id == 0)
-            return dr.select(m, _eval(self.textures[0], pos, uv, m, scalar), 0.0)
+            return dr.select(m, _eval(self.textures[0], pos, uv, m, scalar, si), 0.0)
         out = Array3f(0.0)
         for k, tex in enumerate(self.textures):
             m = active & (tex_id == k)
-            out = dr.select(m, _eval(tex, pos, uv, m, scalar), out)
+            out = dr.select(m, _eval(tex, pos, uv, m, scalar, si), out)
         return out
 
 
-def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool) -> Array3f:
+def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool, si=None) -> Array3f:
+    if isinstance(tex, _Attribute):
+        return tex.eval(si, active)
     if isinstance(tex, _Checker):
         return tex.eval(pos, scalar)  # pos = (u, 1 - v): Mitsuba's uv
+    if isinstance(tex, Bitmap):
+        return tex.eval(pos, active)
     return Array3f(tex.eval(pos, active))
+
+
+_FILTERS = {"bilinear": dr.FilterMode.Linear, "nearest": dr.FilterMode.Nearest}
+_WRAPS = {"repeat": dr.WrapMode.Repeat, "mirror": dr.WrapMode.Mirror, "clamp": dr.WrapMode.Clamp}
+
+
+class Bitmap:
+    """Mitsuba's ``bitmap`` with its options (:class:`drpt.shading.Texture`): Dr.Jit's
+    texture (the one Mitsuba's uses) with the filter and wrap mode, the texels sRGB-decoded
+    unless ``raw``, looked up at ``to_uv`` times Mitsuba's uv."""
+
+    def __init__(self, spec: Texture):
+        img = load_rgb(spec.path, raw=spec.raw)
+        self.shape = img.shape[:2]
+        self.m = None if spec.to_uv is None else [float(x) for x in spec.to_uv]
+        self.tex = Texture2f(TensorXf(img), filter_mode=_FILTERS[spec.filter_type],
+                             wrap_mode=_WRAPS[spec.wrap_mode])
+
+    def eval(self, uv: Array2f, active: Bool = True) -> Array3f:
+        """The texel value at Mitsuba's uv (``(u, 1 - v)`` of drpt's)."""
+        m = self.m
+        if m is not None:
+            uv = Array2f(uv.x * m[0] + uv.y * m[1] + m[2], uv.x * m[3] + uv.y * m[4] + m[5])
+        return Array3f(self.tex.eval(uv, active))
+
+
+def _vec3(a: np.ndarray) -> Array3f:
+    a = np.ascontiguousarray(a, dtype=np.float32).reshape(-1, 3)
+    return Array3f(a[:, 0].copy(), a[:, 1].copy(), a[:, 2].copy())
+
+
+class _Attribute:
+    """Mitsuba's ``mesh_attribute`` (:class:`drpt.shading.MeshAttribute`): the attribute's
+    corner values of the hit triangle blended with the barycentric coordinates of the hit
+    point, computed from the point as Mitsuba's ``barycentric_coordinates`` does (a face
+    attribute has equal corners), times ``scale``; 1 channel is gray. Other primitives
+    (spheres, planes) read 0."""
+
+    def __init__(self, spec, triangles):
+        attrs = getattr(triangles, "attributes", None) or {}
+        if spec.name not in attrs:
+            raise DrptError(f"mesh_attribute '{spec.name}': no shape of the scene has it")
+        a = np.asarray(attrs[spec.name], np.float64) * float(spec.scale)
+        if a.shape[2] == 1:
+            a = np.repeat(a, 3, axis=2)
+        self.n = len(a)
+        self.face = spec.name.startswith("face_")
+        self.v0, self.v1, self.v2 = (_vec3(a[:, k]) for k in range(3))
+        p = np.asarray(triangles.positions, np.float32).astype(np.float64)
+        self.p0, self.e1, self.e2 = _vec3(p[:, 0]), _vec3(p[:, 1] - p[:, 0]), _vec3(p[:, 2] - p[:, 0])
+
+    def eval(self, si, active: Bool) -> Array3f:
+        act = Bool(active) & si.valid & (si.prim < self.n)
+        i = dr.select(act, si.prim, 0)
+        if self.face:  # equal corners: no blending
+            return dr.select(act, dr.gather(Array3f, self.v0, i, act), 0.0)
+        e1 = dr.gather(Array3f, self.e1, i, act)
+        e2 = dr.gather(Array3f, self.e2, i, act)
+        rel = si.p - dr.gather(Array3f, self.p0, i, act)
+        d00, d01, d11 = dr.dot(e1, e1), dr.dot(e1, e2), dr.dot(e2, e2)
+        d20, d21 = dr.dot(rel, e1), dr.dot(rel, e2)
+        inv = dr.rcp(dr.maximum(d00 * d11 - d01 * d01, 1e-30))
+        b1 = (d11 * d20 - d01 * d21) * inv
+        b2 = (d00 * d21 - d01 * d20) * inv
+        v = (dr.gather(Array3f, self.v0, i, act) * (1.0 - b1 - b2)
+             + dr.gather(Array3f, self.v1, i, act) * b1 + dr.gather(Array3f, self.v2, i, act) * b2)
+        return dr.select(act, v, 0.0)
 
 
 class _Checker:

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -102,6 +102,8 @@ class OrthographicCamera:
     direction: Vec3
     up: Vec3
     size: float  # full vertical extent of the view, world units
+    #: full horizontal extent, world units; None: ``size`` times the image's width / height
+    width: float | None = None
 
 
 Camera = PerspectiveCamera | OrthographicCamera
@@ -140,6 +142,9 @@ class Material:
     maps: dict[str, Path] = field(default_factory=dict)  # other map_* by lower-case key, e.g. "pr", "d"
     given: tuple[str, ...] = ()  # lower-case keys of the statements the file gave, sorted
     bsdf: BSDFSpec | None = None  # an explicit BSDF (Mitsuba XML), used as given
+    #: emitted radiance as a texture (Mitsuba's area ``radiance`` bitmap), looked up at the
+    #: surface's uv; ``emission`` then holds its mean (light selection by power)
+    emission_texture: Any = None
 
     @property
     def is_emissive(self) -> bool:
@@ -163,6 +168,9 @@ class Triangles:
     material: np.ndarray  # (F,) int32, index into Scene.materials
     normals: np.ndarray | None = None  # (F, 3, 3) float64
     uvs: np.ndarray | None = None  # (F, 3, 2) float64
+    #: mesh attributes by Mitsuba's name (``vertex_color``, ``face_weight``): ``(F, 3, C)``
+    #: float values at each corner (a face attribute repeats its value), C = 1 or 3
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.positions.shape[0])
@@ -232,6 +240,31 @@ class SpotLight:
     color: Vec3
     cutoff_angle: float = 20.0  # degrees
     beam_width: float = 15.0  # degrees, at most cutoff_angle
+    #: Mitsuba's ``texture`` (a :class:`drpt.shading.Texture`) multiplying the intensity,
+    #: looked up at ``uv = 0.5 + 0.5 (x, y) / (z tan(cutoff_angle))`` of the direction in the
+    #: light's ``frame``; None: none
+    texture: Any = None
+    #: the light's orientation: a row-major 3x3 rotation whose columns are its local x, y, z
+    #: (z = ``direction``) in world space; None: some frame around ``direction``
+    frame: tuple | None = None
+
+
+@dataclass
+class ProjectorLight:
+    """Mitsuba's ``projector``: a perspective projection of ``irradiance`` (an RGB
+    triple or a :class:`drpt.shading.Texture`) from ``position``, looking along the
+    ``frame``'s local ``+z``: a point at local ``(x, y, z)`` (``z > 0``) sees the value
+    at Mitsuba's uv ``(0.5 - 0.5 x / (z t), 0.5 - 0.5 aspect y / (z t))`` (``t =
+    tan(fov_x / 2)``, ``aspect`` the texture's width / height), zero outside [0, 1]^2,
+    and receives ``pi * scale * value * dist / z^3`` on a surface facing the light
+    (the value is the irradiance at ``z = 1`` on the plane facing the projector)."""
+
+    position: Vec3
+    frame: tuple  # row-major 3x3 rotation, columns the local x, y, z in world space
+    fov_x: float  # full horizontal field of view, degrees
+    irradiance: Any = (1.0, 1.0, 1.0)
+    aspect: float = 1.0  # the texture's width / height (1 for a constant)
+    scale: float = 1.0
 
 
 @dataclass
@@ -243,7 +276,7 @@ class Skybox:
     rotation: np.ndarray | None = None
 
 
-Light = PointLight | DirectionalLight | SpotLight | Skybox
+Light = PointLight | DirectionalLight | SpotLight | ProjectorLight | Skybox
 
 
 @dataclass
@@ -270,12 +303,16 @@ class RenderSettings:
     #: Mitsuba's ``(fov, fov_axis)`` as the file gives them: an image size of another
     #: aspect than the film's keeps the fov along that axis, as Mitsuba does
     fov: tuple | None = None
+    #: Mitsuba's ``moment`` integrator around the one rendered: the nested integrator's
+    #: name in the file (``_arg_0`` when unnamed), which names the EXR's moment channels
+    moment: str | None = None
     #: the ``-D`` values the file was read with (``compare`` gives Mitsuba the same)
     defines: dict = field(default_factory=dict)
-    #: parameters of the file their plugins do not read (older exporters' files), as
-    #: ``(node index in mitsuba.parser's state, plugin, name)``: ``compare`` drops them
-    #: before Mitsuba loads the file (Mitsuba 3 refuses them)
-    ignored: tuple = ()
+    #: what of the file drpt did not read as written, one located line each: parameters
+    #: their plugins do not read (older exporters' files; Mitsuba 3 refuses them) and,
+    #: with ``--ignore-unsupported``, the plugins left out or replaced. ``compare`` stops
+    #: on such a file, or with ``--ignore-unsupported`` says it is not like for like
+    not_read: tuple = ()
 
 
 # ---------------------------------------------------------------------- scene

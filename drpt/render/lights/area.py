@@ -8,6 +8,11 @@ scenes with many small emitters are not noisier than one large emitter of the
 same power. The solid-angle density seen from a shading point at distance
 ``r`` is ``pdf_A * r^2 / |cos theta_light|``.
 
+A textured emitter (Mitsuba's ``area`` with a bitmap ``radiance``) is chosen by
+its texture's mean luminance and gives the texture's radiance at the sampled
+point's uv (Mitsuba samples such an emitter by the texture instead: the
+same expectation, other noise).
+
 Emissive spheres and planes are not sampled here; they are found by BSDF
 sampling only (their MIS weight is then 1, so the estimate stays unbiased).
 """
@@ -38,10 +43,13 @@ class LightSample:
 
 
 class AreaLights:
-    def __init__(self, scene: Scene, surfaces: SurfaceData):
+    def __init__(self, scene: Scene, surfaces: SurfaceData, materials=None):
         tris = scene.triangles
         emission = np.array([m.emission for m in scene.materials], float).reshape(-1, 3)
         self.surfaces = surfaces
+        # textured emitters (Mitsuba's area radiance bitmap): the radiance at the sampled
+        # point's uv (their power, for the choice of a triangle, is the texture's mean)
+        self.materials = materials if getattr(materials, "_emit_tex", None) is not None else None
         self.count = 0
         if not len(tris) or not len(emission):
             return
@@ -85,6 +93,14 @@ class AreaLights:
             len2 = dr.squared_norm(sn)
             n_front = dr.select(len2 > 1e-20, sn * dr.rsqrt(len2), ng)
         le = dr.gather(Array3f, self.le, k, active)
+        if self.materials is not None:
+            uv = Array2f(0.0, 0.0)
+            if s.has_uv:
+                uv = (dr.gather(Array2f, s.uv0, face, active) * (1.0 - b.x - b.y)
+                      + dr.gather(Array2f, s.uv1, face, active) * b.x
+                      + dr.gather(Array2f, s.uv2, face, active) * b.y)
+            material = dr.gather(UInt32, s.material, face, active)
+            le = self.materials.textured_emission(material, uv, le, active)
         pdf = dr.gather(Float, self.pdf_area_table, face, active)
         return LightSample(p, n_front, ng, le, pdf, active, err)
 

@@ -14,7 +14,18 @@ multiplied by the falloff of the angle ``theta`` between its axis and the
 direction toward the shading point: 1 for ``theta <= beam_width``,
 ``(cutoff - theta) / (cutoff - beam_width)`` up to ``cutoff_angle``, 0
 beyond (Mitsuba's ``falloff_curve``, with the cone tested on ``cos theta >
-cos cutoff`` as there).
+cos cutoff`` as there). A spot's ``texture`` multiplies its intensity by the
+image at ``uv = 0.5 + 0.5 (x, y) / (z tan(cutoff))`` of the direction toward
+the shading point in the light's frame (Mitsuba's ``direction_to_uv``).
+
+A projector (Mitsuba's ``projector``, :class:`~drpt.scene.model.ProjectorLight`)
+maps a shading point at local ``(x, y, z)`` to the uv of its perspective
+projection and gives ``pi * scale * value(uv) * dist / z^3`` (Mitsuba's
+``sample_direction``: ``value * pi * scale / (z^2 cos)``, ``cos = z / dist``),
+zero behind it and outside the image.
+
+Textures are looked up as Mitsuba's ``bitmap`` (:class:`drpt.render.texture.Bitmap`);
+a scene without textured spots or projectors traces none of this.
 """
 
 from __future__ import annotations
@@ -23,9 +34,10 @@ import math
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array3f, Float
+from drjit.auto import Array2f, Array3f, Float
 
-from ...scene.model import DirectionalLight, PointLight, Scene, SpotLight
+from ...scene.model import DirectionalLight, PointLight, ProjectorLight, Scene, SpotLight
+from ..texture import Bitmap
 
 
 class DeltaSample:
@@ -40,7 +52,12 @@ class DeltaLights:
         self.points = [l for l in scene.lights if isinstance(l, PointLight)]
         self.directionals = [l for l in scene.lights if isinstance(l, DirectionalLight)]
         self.spots = [l for l in scene.lights if isinstance(l, SpotLight)]
-        self.count = len(self.points) + len(self.directionals) + len(self.spots)
+        self.projectors = [l for l in scene.lights if isinstance(l, ProjectorLight)]
+        self.count = len(self.points) + len(self.directionals) + len(self.spots) + len(self.projectors)
+        # the images of textured spots and projectors, by light
+        self._bitmaps = {id(l): Bitmap(l.texture) for l in self.spots if l.texture is not None}
+        self._bitmaps.update({id(l): Bitmap(l.irradiance) for l in self.projectors
+                              if not isinstance(l.irradiance, tuple)})
 
     def samples(self, p: Array3f):
         """One :class:`DeltaSample` per light, for shading points ``p``."""
@@ -65,9 +82,35 @@ class DeltaLights:
             falloff = dr.select(cos_t >= math.cos(beam), 1.0, ramp)
             falloff = dr.select(cos_t > math.cos(cutoff), falloff, 0.0)
             E = Array3f(*map(float, light.color)) * falloff / dr.maximum(d2, 1e-30)
+            if light.texture is not None:
+                x, y, z = _local(light.frame, -to)
+                k = 0.5 / math.tan(cutoff)
+                lit = falloff > 0.0
+                uv = Array2f(0.5 + k * x / z, 0.5 + k * y / z)
+                E = E * dr.select(lit, self._bitmaps[id(light)].eval(uv, lit), 0.0)
             yield DeltaSample(to / d, d, dr.select(d > 0.0, E, 0.0))
+        for light in self.projectors:
+            to = Array3f(*map(float, light.position)) - p
+            d = dr.norm(to)
+            x, y, z = _local(light.frame, -to)
+            t = math.tan(math.radians(light.fov_x) / 2.0)
+            uv = Array2f(0.5 - (0.5 / t) * x / z, 0.5 - (0.5 * light.aspect / t) * y / z)
+            ok = (z > 0.0) & (uv.x >= 0.0) & (uv.x <= 1.0) & (uv.y >= 0.0) & (uv.y <= 1.0)
+            if isinstance(light.irradiance, tuple):
+                value = Array3f(*map(float, light.irradiance))
+            else:
+                value = self._bitmaps[id(light)].eval(uv, ok)
+            E = value * (math.pi * float(light.scale)) * d / (z * z * z)
+            yield DeltaSample(to / d, d, dr.select(ok & (d > 0.0), E, 0.0))
         for light in self.directionals:
             w = -np.asarray(light.direction, float)
             w /= np.linalg.norm(w)
             yield DeltaSample(Array3f(*map(float, w)), Float(dr.inf),
                               Array3f(*map(float, light.color)))
+
+
+def _local(frame, v: Array3f):
+    """``(x, y, z)`` of world vector ``v`` in a light's frame (a row-major rotation whose
+    columns are the local axes): the columns' dot products."""
+    f = [float(a) for a in frame]
+    return tuple(v.x * f[k] + v.y * f[3 + k] + v.z * f[6 + k] for k in range(3))

@@ -26,6 +26,8 @@ Mitsuba                   drpt
 ``independent`` (etc.)    ``settings.spp`` = ``sample_count`` (default 4);
                           other samplers take their count too, with a note
 ``path``                  ``settings``: max_depth, rr_depth, hide_emitters
+``moment``                its nested integrator; ``settings.moment`` names the
+                          moment AOVs an EXR output gets
 ``direct``                ``path`` with max_depth 2 (the same expectation)
 ``obj`` ``ply``           triangles, loaded by Mitsuba's own mesh loaders
 ``serialized``            (:mod:`.geometry`): ``to_world``, ``face_normals``,
@@ -37,7 +39,8 @@ Mitsuba                   drpt
 ``instance``              under its ``to_world``
 ``area``                  the shape's material's ``emission`` (radiance)
 ``point``                 :class:`PointLight` (intensity, inverse square)
-``spot``                  :class:`SpotLight`
+``spot``                  :class:`SpotLight` (with a bitmap ``texture``)
+``projector``             :class:`ProjectorLight` (constant or bitmap irradiance)
 ``directional``           :class:`DirectionalLight` (irradiance)
 ``constant``              ``Background.color`` (radiance of escaping rays)
 ``envmap``                :class:`Skybox` with ``scale`` and ``rotation``
@@ -45,8 +48,18 @@ Mitsuba                   drpt
                           tree (:mod:`.materials`); a shape without one gets
                           Mitsuba's default (diffuse 0.5; black on an emitter)
 ``bitmap``                :class:`drpt.shading.Texture` on a texturable param
+                          (filter_type, wrap_mode, raw, to_uv)
 ``checkerboard``          :class:`drpt.shading.Checkerboard` (procedural)
+``mesh_attribute``        :class:`drpt.shading.MeshAttribute` (vertex/face)
+``rawconstant``           its value
+``orthographic``          :class:`OrthographicCamera`
 ========================  =====================================================
+
+Files are found as Mitsuba's file resolver finds them (``<path>`` folders,
+the scene's folder; :meth:`.nodes.Node.resolve_file`); nested plugins are
+found by kind whatever their ``name`` (:meth:`.nodes.Node.children`); a
+spectrum given by wavelength is the color Mitsuba's RGB variants make of it
+(:meth:`.nodes.Node.color`).
 
 Each distinct (BSDF node, area radiance) pair of shapes becomes one
 :class:`~drpt.scene.model.Material`, named after the BSDF's ``id``.
@@ -54,8 +67,8 @@ Each distinct (BSDF node, area radiance) pair of shapes becomes one
 Errors and warnings. Anything the parser refuses (malformed XML, an
 undefined ``$var``, an unresolved ``<ref>``, a value of the wrong syntax) and
 anything drpt refuses (a parameter of the wrong type, a missing mesh file,
-a plugin drpt cannot render: media, spectral data, other integrators,
-textures other than ``bitmap`` and ``checkerboard``, ...) raises a one-line
+a plugin drpt cannot render: media, other integrators,
+volume textures, ...) raises a one-line
 :class:`~drpt.errors.SceneError` naming the XML file, the line Mitsuba's
 parser gives (``mitsuba.parser.file_location``) and the plugin. With
 ``ignore_unsupported`` an unsupported plugin is left out (or replaced by the

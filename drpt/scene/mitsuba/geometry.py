@@ -52,6 +52,7 @@ class Mesh:
     positions: np.ndarray  # (F, 3, 3)
     normals: np.ndarray | None  # (F, 3, 3) unit, or None (geometric normals)
     uvs: np.ndarray | None  # (F, 3, 2), drpt convention
+    attributes: dict | None = None  # name -> (F, 3, C) corner values (mesh_attribute)
 
     def __len__(self) -> int:
         return int(self.positions.shape[0])
@@ -88,9 +89,10 @@ def _indexed(p: np.ndarray, faces: np.ndarray, n: np.ndarray | None, uv: np.ndar
     return Mesh(p[f], normals, uvs)
 
 
-def load_mesh(node: Node, to_world: np.ndarray) -> Mesh:
+def load_mesh(node: Node, to_world: np.ndarray, attributes=()) -> Mesh:
     """A mesh plugin through Mitsuba's loader, in world space (``to_world`` is the
-    node's own, times an instance's)."""
+    node's own, times an instance's), with the named mesh attributes (Mitsuba's
+    ``vertex_*`` / ``face_*`` buffers, per corner)."""
     mi = node.state.mi
     d = {"type": node.plugin, "to_world": mi.ScalarTransform4f(to_world.tolist())}
     if node.plugin in ("obj", "ply", "serialized"):
@@ -126,7 +128,25 @@ def load_mesh(node: Node, to_world: np.ndarray) -> Mesh:
     if mesh.has_vertex_texcoords():
         uv = np.array(mesh.vertex_texcoords_buffer(), dtype=np.float64).reshape(-1, 2)
     # the buffers are as loaded; Mitsuba flips when it intersects (has_flipped_normals)
-    return _indexed(p, faces, n, uv, bool(mesh.has_flipped_normals()))
+    flipped = bool(mesh.has_flipped_normals())
+    out = _indexed(p, faces, n, uv, flipped)
+    if attributes:
+        out.attributes = {}
+        f = faces[:, ::-1] if flipped else faces
+        for name in attributes:
+            if not mesh.has_attribute(name):
+                raise node.error(f"{node.label} has no mesh attribute '{name}' (a mesh_attribute "
+                                 "texture of its BSDF reads it)")
+            buf = np.array(mesh.attribute_buffer(name), dtype=np.float64)
+            if name.startswith("vertex_"):
+                a = buf.reshape(len(p), -1)[f]
+            else:
+                a = np.repeat(buf.reshape(len(faces), -1)[:, None, :], 3, axis=1)
+            if a.shape[2] not in (1, 3):
+                raise node.error(f"{node.label}: mesh attribute '{name}' has {a.shape[2]} channels "
+                                 "(drpt reads 1 or 3)")
+            out.attributes[name] = a
+    return out
 
 
 # ------------------------------------------------------------ analytic shapes

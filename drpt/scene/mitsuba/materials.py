@@ -14,15 +14,16 @@ Composites: ``twosided`` (one child; Mitsuba's two-child form, a different
 BSDF on each side, is not supported), ``blendbsdf`` (two children,
 ``weight``), ``mask`` (one child, ``opacity``).
 
+``bitmap`` keeps Mitsuba's ``filter_type`` (bilinear, nearest), ``wrap_mode``
+(repeat, mirror, clamp), ``raw`` and ``to_uv``; ``rawconstant`` is its constant
+value; ``checkerboard`` becomes :class:`~drpt.shading.Checkerboard`, ``mesh_attribute``
+:class:`~drpt.shading.MeshAttribute` (the reader loads the attribute with the mesh).
+
 What is refused (an "unsupported" error, or with ``--ignore-unsupported`` a
 warning and a fallback): BSDF plugins outside the vocabulary (``bumpmap``,
 ``normalmap``, ``measured``, ``hair``, polarizers, ...; fallback: Mitsuba's
-default ``diffuse``, reflectance 0.5), texture plugins other than
-``bitmap`` (``checkerboard``, ``mesh_attribute``, volumes...; fallback: the
-texture's mean color where known, else 0.5), and ``bitmap`` settings drpt's
-texture lookup does not have (``raw``, a ``to_uv`` other than identity,
-``filter_type`` other than ``bilinear``, ``wrap_mode`` other than
-``repeat``; fallback: the setting is ignored). Parameters the plugin does
+default ``diffuse``, reflectance 0.5) and other texture plugins (volumes...;
+fallback: 0.5). Parameters the plugin does
 not read (``int_ior`` on ``roughconductor``) are left unread, for the
 reader's one warning listing them (:meth:`~drpt.scene.mitsuba.reader.Reader.check_unread`).
 A tree drpt's material layer refuses (:func:`drpt.shading.complete`:
@@ -36,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from ... import bsdf_kinds
-from ...shading import BSDFSpec, Checkerboard, Texture, complete
+from ...shading import BSDFSpec, Checkerboard, MeshAttribute, Texture, complete
 from .nodes import Node
 
 
@@ -50,8 +51,8 @@ def default_bsdf(black: bool = False) -> BSDFSpec:
 #: Mitsuba parameter name -> drpt parameter name, per kind (all others keep their names).
 RENAMED = {"diffuse": {"reflectance": "kd"}}
 
-#: bitmap parameters drpt's texture supports only at these values.
-_BITMAP_FIXED = {"filter_type": "bilinear", "wrap_mode": "repeat", "raw": False}
+#: bitmap string parameters and their values (Mitsuba's)
+_BITMAP_OPTIONS = {"filter_type": ("bilinear", "nearest"), "wrap_mode": ("repeat", "mirror", "clamp")}
 _BITMAP_SILENT = ("format", "accel")  # storage/acceleration choices: no effect on the image
 _SPECTRAL_OR_TEXTURE = frozenset({"eta", "k"})
 
@@ -163,22 +164,25 @@ class Materials:
                               fallback="0.5")
                 return 0.5 if scalar else bsdf_kinds.GRAY
             path = node.resolve_file(filename)
-            for key, value in _BITMAP_FIXED.items():
-                got = node.get(key)
-                if got is not None and got != value:
-                    r.unsupported(node, f"bitmap {key}={got!r} (drpt looks textures up with "
-                                  f"{key}={value!r})", fallback=f"{key}={value!r}")
+            opts = {}
+            for key, choices in _BITMAP_OPTIONS.items():
+                got = node.str(key)
+                if got is not None:
+                    if got not in choices:
+                        raise node.error(f"{node.label}: {key} must be one of {', '.join(choices)}, "
+                                         f"got {got!r}")
+                    opts[key] = got
+            opts["raw"] = bool(node.bool("raw", False))
             if node.has("to_uv"):
                 m = node.transform("to_uv")
                 if not np.allclose(m, np.eye(4)):
-                    r.unsupported(node, "bitmap to_uv other than identity",
-                                  fallback="the identity")
+                    opts["to_uv"] = _uv_matrix(m)
             for key in _BITMAP_SILENT:
                 node.get(key)
             r.check_unread(node)
             if fallback is None:
                 fallback = 0.5 if scalar else bsdf_kinds.GRAY
-            return Texture(path, fallback)
+            return Texture(path, fallback, **opts)
         if node.plugin == "checkerboard":
             for name in ("color0", "color1"):
                 if node.is_ref(name):
@@ -190,12 +194,39 @@ class Materials:
             r.check_unread(node)
             if fallback is None:
                 fallback = 0.5 if scalar else bsdf_kinds.GRAY
-            # Mitsuba's Transform4f -> Transform3f: the 2x2 block and the translation (x, y)
-            uv = np.array([[m[0, 0], m[0, 1], m[0, 3]], [m[1, 0], m[1, 1], m[1, 3]], [0.0, 0.0, 1.0]])
-            return Checkerboard(fallback=fallback, color0=c0, color1=c1,
-                                to_uv=tuple(float(x) for x in uv.ravel()))
+            return Checkerboard(fallback=fallback, color0=c0, color1=c1, to_uv=_uv_matrix(m))
+        if node.plugin == "rawconstant":
+            # a constant taken as given (no spectral upsampling): a vector or a float
+            t = node._type("value") if node.has("value") else None
+            if t == "Vector":
+                v = node.vector("value")
+            elif t is None:
+                raise node.error(f"{node.label} needs a 'value'")
+            else:
+                v = node.float("value")
+            r.check_unread(node)
+            if scalar and isinstance(v, tuple):
+                raise node.error(f"{node.label}: a 3-valued rawconstant on a float parameter "
+                                 "(Mitsuba's eval_1 refuses it)")
+            return v if isinstance(v, tuple) or scalar else (v, v, v)
+        if node.plugin == "mesh_attribute":
+            name = node.str("name")
+            if name is None or not (name.startswith("vertex_") or name.startswith("face_")):
+                raise node.error(f"{node.label}: 'name' must start with 'vertex_' or 'face_', got {name!r}")
+            scale = node.float("scale", 1.0)
+            r.check_unread(node)
+            if fallback is None:
+                fallback = 0.5 if scalar else bsdf_kinds.GRAY
+            return MeshAttribute(fallback=fallback, name=name, scale=scale)
         r.unsupported(node, f"texture plugin '{node.plugin}'", fallback="0.5")
         return 0.5 if scalar else bsdf_kinds.GRAY
+
+
+def _uv_matrix(m: np.ndarray) -> tuple:
+    """Mitsuba's ``Transform4f -> Transform3f`` of a ``to_uv``: the 2x2 block and the
+    translation (x, y), as a row-major 3x3 tuple."""
+    uv = np.array([[m[0, 0], m[0, 1], m[0, 3]], [m[1, 0], m[1, 1], m[1, 3]], [0.0, 0.0, 1.0]])
+    return tuple(float(x) for x in uv.ravel())
 
 
 def legacy_fields(spec: BSDFSpec) -> dict:
@@ -208,6 +239,6 @@ def legacy_fields(spec: BSDFSpec) -> dict:
     kd = spec.params.get("kd", bsdf_kinds.GRAY)
     if isinstance(kd, tuple):
         return {"kd": kd}
-    if isinstance(kd, Texture) and not isinstance(kd, Checkerboard):
+    if isinstance(kd, Texture) and not isinstance(kd, Checkerboard) and kd.is_plain:
         return {"map_kd": kd.path}
     return {}

@@ -12,14 +12,17 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import SceneError
+from ...shading import MeshAttribute, Texture
 from ..model import (
     MAX_COORDINATE,
     Background,
     DirectionalLight,
     FilmWindow,
     Material,
+    OrthographicCamera,
     PerspectiveCamera,
     PointLight,
+    ProjectorLight,
     RenderSettings,
     Scene,
     Skybox,
@@ -50,7 +53,16 @@ FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
 
 
 def _material(name: str, origin: str, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
-    return Material(name, emission=emission, origin=origin, bsdf=spec, **legacy_fields(spec))
+    texture = None
+    if isinstance(emission, Texture):  # a textured area emitter: its mean radiance for the power
+        from ...imageio import read_image
+
+        texture = emission
+        img = read_image(texture.path, linear=not texture.raw)
+        img = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img[..., :3]
+        emission = tuple(float(x) for x in img.reshape(-1, 3).mean(0))
+    return Material(name, emission=emission, origin=origin, bsdf=spec, emission_texture=texture,
+                    **legacy_fields(spec))
 
 
 class Reader:
@@ -65,7 +77,7 @@ class Reader:
         self.state = State(self.path, dict(defines or {}))
         self.materials = Materials(self)
         self.unread_params: list[str] = []
-        self.ignored: list[tuple[int, str, str]] = []
+        self.not_read: list[str] = []  # what drpt left out or replaced, one line each
         self.defines = {k: str(v) for k, v in (defines or {}).items()}
         self.warnings: list[str] = []
         # outputs
@@ -87,8 +99,9 @@ class Reader:
         warn and go on (the caller uses ``fallback``, or leaves the node out)."""
         if not self.ignore_unsupported:
             raise node.error(f"unsupported {what} (--ignore-unsupported renders without it)")
-        self.warn(f"{node.where}: unsupported {what}: "
-                  + (f"using {fallback}" if fallback else "left out"))
+        message = f"{node.where}: unsupported {what}: " + (f"using {fallback}" if fallback else "left out")
+        self.warn(message)
+        self.not_read.append(message)
 
     def drpt_ignores(self, node: Node, name: str, why: str) -> None:
         """A parameter the plugin reads that drpt does not honor."""
@@ -107,7 +120,8 @@ class Reader:
             raise node.error(f"{node.label} does not read parameter{'s' if len(names) > 1 else ''} "
                              f"{listed} (without --strict drpt ignores them)")
         self.unread_params.append(f"{listed} of {node.label} at {node.where}")
-        self.ignored.extend((node.index, node.plugin, n) for n in names)
+        self.not_read.append(f"{node.where}: parameter{'s' if len(names) > 1 else ''} {listed} of "
+                             f"{node.label}: not read")
 
     # ------------------------------------------------------------ the scene
     def read(self) -> Scene:
@@ -139,16 +153,16 @@ class Reader:
             self.integrator(integrators[0])
         self.check_unread(root)
         self.settings.defines = dict(self.defines)
-        self.settings.ignored = tuple(self.ignored)
+        self.settings.not_read = tuple(self.not_read)
         scene = self._scene()
         self._report()
         return scene
 
     def _report(self) -> None:
         if self.unread_params:
-            self.warn(f"{self.path}: ignored parameters their plugins do not read (Mitsuba 3 would "
-                      f"refuse them; --strict makes this an error): {'; '.join(self.unread_params)}")
-        for w in self.warnings:
+            self.warn(f"{self.path}: ignored parameters their plugins do not read (Mitsuba 3 refuses "
+                      f"them; --strict makes this an error): {'; '.join(self.unread_params)}")
+        for w in [*self.state.notes, *self.warnings]:
             warnings.warn(w, stacklevel=3)
 
     def _scene(self) -> Scene:
@@ -164,6 +178,12 @@ class Reader:
                 uvs = np.concatenate([m.uvs if m.uvs is not None else np.zeros((len(m), 3, 2))
                                       for m, _ in self.meshes])
             tris = Triangles(pos, mat, normals, uvs)
+            names = sorted({k for mesh, _ in self.meshes for k in (mesh.attributes or {})})
+            for name in names:  # meshes without the attribute never read it: zeros
+                c = next(mesh.attributes[name].shape[2] for mesh, _ in self.meshes
+                         if name in (mesh.attributes or {}))
+                tris.attributes[name] = np.concatenate(
+                    [(mesh.attributes or {}).get(name, np.zeros((len(mesh), 3, c))) for mesh, _ in self.meshes])
             bad = ~np.isfinite(pos) | (np.abs(pos) > MAX_COORDINATE)
             if bad.any():
                 raise SceneError(self.path, None, f"{int(bad.any(axis=(1, 2)).sum())} triangles have "
@@ -183,9 +203,9 @@ class Reader:
 
     # ------------------------------------------------------------ sensor
     def sensor(self, node: Node) -> None:
-        if node.plugin not in ("perspective", "thinlens"):
-            self.unsupported(node, f"sensor '{node.plugin}' (drpt has a perspective camera)",
-                             fallback="a perspective camera")
+        if node.plugin not in ("perspective", "thinlens", "orthographic"):
+            self.unsupported(node, f"sensor '{node.plugin}' (drpt has perspective, thinlens and "
+                             "orthographic cameras)", fallback="a perspective camera")
         film = sampler = None
         for c in node.children():
             if c.kind == "film":
@@ -215,6 +235,13 @@ class Reader:
             self.check_unread(sampler)
 
         aspect = width / height
+        if node.plugin == "orthographic":
+            if crop != (0, 0, width, height):
+                self.unsupported(node, "crop window of an orthographic sensor", fallback="the whole film")
+            self.camera = orthographic_from_matrix(node, node.transform("to_world"), aspect,
+                                                   node.float("near_clip", 1e-2))
+            self.check_unread(node)
+            return
         if node.has("fov") and node.has("focal_length"):
             raise node.error(f"{node.label}: give 'fov' or 'focal_length', not both")
         if node.has("fov"):
@@ -291,6 +318,22 @@ class Reader:
     # ------------------------------------------------------------ integrator
     def integrator(self, node: Node) -> None:
         s = self.settings
+        if node.plugin == "moment":
+            # Mitsuba's moment: renders its first nested integrator's image and records
+            # the XYZ value and its square of every nested one's samples as AOVs
+            nested = [(k, c) for k, c in node.objects() if c.kind == "integrator"]
+            for _, c in node.objects():
+                if c.kind != "integrator":
+                    raise c.error(f"{c.label} inside {node.label} (it takes integrators)")
+            if not nested:
+                raise node.error(f"{node.label} needs a nested integrator")
+            for _, c in nested[1:]:
+                self.unsupported(c, f"a second integrator inside {node.label} (drpt records the "
+                                 "moments of the first)")
+            self.check_unread(node)
+            s.moment = nested[0][0]
+            self.integrator(nested[0][1])
+            return
         if node.plugin not in ("path", "direct", "ptracer"):
             self.unsupported(node, f"integrator '{node.plugin}' (drpt has path, direct and ptracer)",
                              fallback="path")
@@ -336,7 +379,7 @@ class Reader:
                 self.unsupported(node.ref(name), f"{node.ref(name).label} ({name} of {node.label})")
         if spec is None:
             # Mitsuba's default: diffuse 0.5, black on a shape with an area emitter
-            spec = default_bsdf(black=max(emission) > 0)
+            spec = default_bsdf(black=isinstance(emission, Texture) or max(emission) > 0)
         return spec, bsdf_node, emission
 
     def _material_index(self, spec: BSDFSpec, bsdf_node: Node | None, emission, shape: Node) -> int:
@@ -347,7 +390,7 @@ class Reader:
                 origin = bsdf_node.where
             else:
                 name, origin = "default", shape.where
-            if max(emission) > 0:
+            if isinstance(emission, Texture) or max(emission) > 0:
                 name += "+area"
             self.mat_index[key] = len(self.mat_list)
             self.mat_list.append(_material(name, origin, spec, emission))
@@ -378,8 +421,11 @@ class Reader:
         k = self._material_index(spec, bsdf_node, emission, node)
         m = parent @ node.transform("to_world")
         _check_matrix(node, m)
+        attrs = sorted({t.name for t in spec.textures() if isinstance(t, MeshAttribute)})
+        if attrs and plugin not in geo.MESH_PLUGINS:
+            raise node.error(f"{node.label} has no mesh attributes (its BSDF reads '{attrs[0]}')")
         if plugin in geo.MESH_PLUGINS:
-            mesh = geo.load_mesh(node, m)
+            mesh = geo.load_mesh(node, m, attrs)
             if len(mesh):
                 self.meshes.append((mesh, k))
             else:
@@ -393,7 +439,7 @@ class Reader:
             local = geo.sphere_local(center, radius, m)
             similar, scale = geo.is_similarity(local)
             mirrored = np.linalg.det(local[:3, :3]) < 0
-            textured = bool(spec.textures())
+            textured = bool(spec.textures()) or isinstance(emission, Texture)
             if similar and not (flip ^ mirrored) and not textured:
                 self.spheres.append((local[:3, 3].copy(), scale, k))
             else:
@@ -417,11 +463,12 @@ class Reader:
         self.check_unread(node)
 
     # ------------------------------------------------------------ emitters
-    def area(self, node: Node) -> tuple:
+    def area(self, node: Node):
+        """An area emitter's radiance: an RGB triple, or a bitmap :class:`Texture`."""
         if node.is_ref("radiance"):
-            self.unsupported(node.ref("radiance"), "textured area emitter radiance",
-                             fallback="radiance 1")
-            return (1.0, 1.0, 1.0)
+            tex = self._emitter_texture(node, "radiance")
+            self.check_unread(node)
+            return tex if tex is not None else (1.0, 1.0, 1.0)
         le = node.color("radiance", (1.0, 1.0, 1.0), emission=True)
         _nonnegative(node, "radiance", le)
         self.check_unread(node)
@@ -444,16 +491,19 @@ class Reader:
             if not similar:
                 raise node.error(f"{node.label}: to_world must be a rotation and translation")
             color = self._intensity(node, "intensity")
-            if node.is_ref("texture"):
-                self.unsupported(node.ref("texture"), "spot texture", fallback="no texture")
+            texture = self._emitter_texture(node, "texture") if node.is_ref("texture") else None
             cutoff = node.float("cutoff_angle", 20.0)
             beam = node.float("beam_width", cutoff * 0.75)
             if not 0 < beam <= cutoff < 180:
                 raise node.error(f"{node.label}: needs 0 < beam_width <= cutoff_angle < 180, "
                                  f"got {beam:g} and {cutoff:g}")
             axis = m[:3, 2] / np.linalg.norm(m[:3, 2])
+            frame = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
             self.lights.append(SpotLight(tuple(float(x) for x in m[:3, 3]), tuple(float(x) for x in axis),
-                                         color, cutoff, beam))
+                                         color, cutoff, beam, texture=texture,
+                                         frame=tuple(float(x) for x in frame.ravel())))
+        elif p == "projector":
+            self.projector(node, np.eye(4) if m is None else m)
         elif p == "directional":
             if node.has("direction") and m is not None:
                 raise node.error(f"{node.label}: give 'direction' or 'to_world', not both")
@@ -501,6 +551,58 @@ class Reader:
             self.unsupported(node, f"emitter '{p}'")
             return
         self.check_unread(node)
+
+    def _emitter_texture(self, node: Node, name: str):
+        """The bitmap of an emitter's texture parameter (a :class:`drpt.shading.Texture`)."""
+        tex = node.ref(name)
+        spec = self.materials.texture(tex, fallback=(1.0, 1.0, 1.0)) if tex.kind == "texture" else None
+        if type(spec) is not Texture:
+            self.unsupported(tex, f"{tex.label} as '{name}' of {node.label} (drpt reads a bitmap there)",
+                             fallback="1")
+            return None
+        return spec
+
+    def projector(self, node: Node, m: np.ndarray) -> None:
+        """Mitsuba's ``projector`` (:class:`~drpt.scene.model.ProjectorLight`)."""
+        similar, s = geo.is_similarity(m)
+        if not similar or not math.isclose(s, 1.0, rel_tol=1e-5) or np.linalg.det(m[:3, :3]) < 0:
+            raise node.error(f"{node.label}: to_world must be a rotation and translation")
+        aspect = 1.0
+        if node.is_ref("irradiance"):
+            irr = self._emitter_texture(node, "irradiance")
+            if irr is None:
+                irr = (1.0, 1.0, 1.0)
+            else:
+                from ...imageio import read_image
+
+                h, w = read_image(irr.path, linear=False).shape[:2]
+                aspect = w / h
+        else:
+            irr = node.color("irradiance", (1.0, 1.0, 1.0), emission=True)
+            _nonnegative(node, "irradiance", irr)
+        scale = node.float("scale", 1.0)
+        if not (math.isfinite(scale) and scale >= 0):
+            raise node.error(f"{node.label}: scale must be >= 0, got {scale}")
+        if node.has("fov") and node.has("focal_length"):
+            raise node.error(f"{node.label}: give 'fov' or 'focal_length', not both")
+        if node.has("fov"):
+            fov, axis = node.float("fov"), (node.str("fov_axis", "x") or "x").lower()
+        else:
+            f = node.str("focal_length", "50mm") or "50mm"
+            try:
+                value = float(f[:-2] if f.endswith("mm") else f)
+            except ValueError:
+                raise node.error(f"{node.label}: focal_length must be like '50mm', got {f!r}") from None
+            fov, axis = 2.0 * math.degrees(math.atan(math.hypot(36.0, 24.0) / (2.0 * value))), "diagonal"
+        if axis not in FOV_AXES:
+            raise node.error(f"{node.label}: fov_axis must be one of {', '.join(FOV_AXES)}, got {axis!r}")
+        fov_y = vertical_fov(fov, axis, aspect)
+        if not 0.0 < fov_y < 180.0:
+            raise node.error(f"{node.label}: field of view {fov:g} ({axis}) is not in (0, 180) degrees")
+        fov_x = 2.0 * math.degrees(math.atan(math.tan(math.radians(fov_y) / 2.0) * aspect))
+        self.lights.append(ProjectorLight(tuple(float(x) for x in m[:3, 3]),
+                                          tuple(float(x) for x in m[:3, :3].ravel()), fov_x, irr,
+                                          aspect, scale))
 
     def _environment(self, node: Node) -> None:
         seen = getattr(self, "_env_node", None)
@@ -552,6 +654,36 @@ def vertical_fov(fov: float, axis: str, aspect: float) -> float:
     else:  # diagonal: the half diagonal is t, the half height t / sqrt(1 + aspect^2)
         ty = t / math.sqrt(1.0 + aspect * aspect)
     return math.degrees(2.0 * math.atan(ty))
+
+
+def orthographic_from_matrix(node: Node, m: np.ndarray, aspect: float,
+                             near_clip: float) -> OrthographicCamera:
+    """drpt's camera for Mitsuba's ``orthographic`` sensor: camera-space ``x`` in [-1, 1]
+    (the image's left at +1) and ``y`` in [-1/aspect, 1/aspect] of the film, mapped by
+    ``to_world`` (a rotation times a scale ``(sx, sy, sz)``: the view is ``2 sx`` wide and
+    ``2 sy / aspect`` high), rays along its ``+z`` starting on the near plane ``z =
+    near_clip`` (Mitsuba's ``orthographic_projection``)."""
+    if not np.all(np.isfinite(m)):
+        raise node.error(f"{node.label}: to_world is not finite")
+    a = m[:3, :3]
+    scale = np.linalg.norm(a, axis=0)
+    if not np.all(scale > 0) or not np.allclose((a / scale).T @ (a / scale), np.eye(3), atol=1e-4):
+        raise node.error(f"{node.label}: the orthographic sensor's to_world must be a rotation "
+                         "times a scale along the camera's axes")
+    if np.linalg.det(a) < 0:
+        raise node.error(f"{node.label}: the camera's to_world mirrors the image (a negative scale); "
+                         "drpt's camera cannot")
+    if not (math.isfinite(near_clip) and near_clip >= 0):
+        raise node.error(f"{node.label}: near_clip must be >= 0, got {near_clip}")
+    center = m[:3, 3] + near_clip * a[:, 2]
+    if max(abs(float(x)) for x in center) > MAX_COORDINATE:
+        raise node.error(f"{node.label}: camera position beyond {MAX_COORDINATE:g}")
+    sx, sy = float(scale[0]), float(scale[1])
+    return OrthographicCamera(center=tuple(float(x) for x in center),
+                              direction=tuple(float(x) for x in a[:, 2] / scale[2]),
+                              up=tuple(float(x) for x in a[:, 1] / scale[1]),
+                              size=2.0 * sy / aspect,
+                              width=None if math.isclose(sx, sy, rel_tol=1e-6) else 2.0 * sx)
 
 
 def camera_from_matrix(node: Node, m: np.ndarray, fov_y: float, **lens) -> PerspectiveCamera:
