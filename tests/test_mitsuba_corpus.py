@@ -8,9 +8,9 @@ Every ``test_*.xml`` / ``scene_*.xml`` outside ``participating_media/`` and
 (:data:`EXCLUDED`) is in :data:`SCENES` (rendered at the spp given, about a thousand: the z-test
 uses drpt's spp with the reference's per-sample variance, so fewer samples make it weaker,
 not flakier; at 512 spp a water IOR for BK7 passes) or in :data:`NOT_YET` (a strict xfail
-whose reason names what drpt lacks); one scene per line in both. :data:`DEFINES` gives a
-scene's ``-D`` values where the file's default integrator is one drpt does not have but
-another of the same expectation is.
+whose reason names what drpt lacks); one scene per line in both. The ptracer scene is
+rendered by drpt's light tracer, as authored (its reference is Mitsuba's ``path``, as the
+file's comment says).
 
 The negative controls render perturbed copies (a 10% brighter light, a wrong IOR) written to
 ``tmp_path`` against the original's reference: the test must fail them.
@@ -45,6 +45,7 @@ SCENES = {
     "mesh_attributes/test_mesh_attributes_3_face_direct.xml": 1024,
     "mesh_attributes/test_mesh_attributes_3_vertex_direct.xml": 1024,
     "orthographic_sensor/test_orthographic_path.xml": 1024,
+    "projector/test_projector_constant_direct.xml": 1024,
     "projector/test_projector_textured_direct.xml": 1024,
     "spot_light/test_spot_direct.xml": 1024,
     "texture_interp/test_texture_interp_direct.xml": 1024,
@@ -60,19 +61,10 @@ NOT_YET = {
     "bsdf_spheres/test_textured_roughconductor_path.xml": "anisotropic roughconductor (textured alpha_u/alpha_v): "
                                                           "drpt's tangent frame is not Mitsuba's",
     "bsdf_spheres/test_texturedprincipledthin_path.xml": "principledthin BSDF",
-    "projector/test_projector_constant_direct.xml": "pixel filter noise: drpt's Gaussian filter importance "
-                                                   "sampling (sample weights, pixels at the projection's sharp "
-                                                   "edges) is noisier than Mitsuba's splatting, and this "
-                                                   "reference's variance is ~0 (negative) where the image is "
-                                                   "flat; the projector equals Mitsuba's sample_direction "
-                                                   "(tests/test_projector_spot.py)",
 }
 
-#: corpus scene -> -D values (the reference of the ptracer scene is rendered by Mitsuba's
-#: particle tracer; drpt renders the same expectation with its path tracer)
-DEFINES = {
-    "various_emitters/test_various_emitters_ptracer.xml": {"integrator": "path"},
-}
+#: corpus scene -> -D values, for a scene that cannot be rendered as authored (none)
+DEFINES: dict[str, dict[str, str]] = {}
 
 #: scenes out of drpt's scope: media folders, and sdfgrid shapes
 EXCLUDED_FOLDERS = ("participating_media", "volprim_rf_basic")

@@ -12,7 +12,15 @@ with the ray's *weight*: emitted power over the density of the ray,
   cosine-distributed about the front (shading) normal: ``Le * pi / pdf_A``;
 * point light of intensity ``I``: a uniform direction, ``I * 4 pi``;
 * spot light: a direction uniform in the cutoff cone,
-  ``I * falloff * 2 pi (1 - cos cutoff)``;
+  ``I * falloff * texture(uv) * 2 pi (1 - cos cutoff)`` (a textured spot's
+  image at the direction's uv in the light's frame, as
+  :class:`~drpt.render.lights.delta.DeltaLights` looks it up);
+* projector: a direction through a uniform point ``uv`` of its image, whose
+  intensity is ``pi scale value(uv) / cos^3 theta`` and whose density is
+  ``cos^3 theta / A`` (``A`` the image's area on the plane at distance 1):
+  ``pi scale A value(uv)``;
+* textured emissive triangles: the texture's radiance at the point (the
+  triangle chosen by the texture's mean, as for next-event estimation);
 * directional light of irradiance ``E`` and the sky: rays enter the scene's
   bounding sphere (center ``c``, radius ``R``) from a disk of radius ``R``
   perpendicular to their direction: ``E * pi R^2`` and ``Le(w) * pi R^2 /
@@ -53,6 +61,15 @@ def square_to_uniform_cone(u: Array2f, cos_cutoff: float) -> Array3f:
     r = dr.safe_sqrt(1.0 - z * z)
     s, c = dr.sincos(2.0 * dr.pi * u.x)
     return Array3f(r * c, r * s, z)
+
+
+def _to_world(frame, v: Array3f) -> Array3f:
+    """A light's local vector ``v`` in world space (``frame``: a row-major rotation
+    whose columns are the local axes)."""
+    f = [float(a) for a in frame]
+    return Array3f(f[0] * v.x + f[1] * v.y + f[2] * v.z,
+                   f[3] * v.x + f[4] * v.y + f[5] * v.z,
+                   f[6] * v.x + f[7] * v.y + f[8] * v.z)
 
 
 class LightRay:
@@ -101,6 +118,7 @@ class EmitterRays:
             self.sources.append(("area", None))
         self.sources += [("point", light) for light in dl.points if isinstance(light, PointLight)]
         self.sources += [("spot", light) for light in dl.spots]
+        self.sources += [("projector", light) for light in getattr(dl, "projectors", [])]
         self.sources += [("directional", light) for light in dl.directionals]
         if device_scene.has_environment:
             self.sources.append(("sky", None))
@@ -153,18 +171,38 @@ class EmitterRays:
             color = Array3f(*map(float, light.color))
             if kind == "point":
                 return o, square_to_uniform_sphere(u_dir), color * (4.0 * math.pi)
-            axis = np.asarray(light.direction, float)
-            axis = axis / np.linalg.norm(axis)
             cutoff = math.radians(light.cutoff_angle)
             beam = math.radians(light.beam_width)
             local = square_to_uniform_cone(u_dir, math.cos(cutoff))
-            d = Frame(Array3f(*map(float, axis))).to_world(local)
+            if getattr(light, "frame", None) is not None:
+                d = _to_world(light.frame, local)
+            else:
+                axis = np.asarray(light.direction, float)
+                d = Frame(Array3f(*map(float, axis / np.linalg.norm(axis)))).to_world(local)
             theta = dr.safe_acos(local.z)
             falloff = Float(1.0)
             if cutoff > beam:
                 falloff = dr.select(local.z >= math.cos(beam), 1.0, (cutoff - theta) / (cutoff - beam))
             falloff = dr.select(theta <= cutoff, dr.maximum(falloff, 0.0), 0.0)
-            return o, d, color * falloff * (2.0 * math.pi * (1.0 - math.cos(cutoff)))
+            w = color * falloff * (2.0 * math.pi * (1.0 - math.cos(cutoff)))
+            if getattr(light, "texture", None) is not None:
+                k = 0.5 / math.tan(cutoff)
+                uv = Array2f(0.5 + k * local.x / local.z, 0.5 + k * local.y / local.z)
+                w = w * self.scene.delta_lights._bitmaps[id(light)].eval(uv, active & (falloff > 0.0))
+            return o, d, w
+        if kind == "projector":
+            o = Array3f(*map(float, light.position))
+            t = math.tan(math.radians(light.fov_x) / 2.0)
+            # the uv of Mitsuba's projector (drpt/render/lights/delta.py) inverted at z = 1
+            x = (0.5 - u_dir.x) * (2.0 * t)
+            y = (0.5 - u_dir.y) * (2.0 * t / light.aspect)
+            d = _to_world(light.frame, dr.normalize(Array3f(x, y, 1.0)))
+            plane = 4.0 * t * t / light.aspect
+            if isinstance(light.irradiance, tuple):
+                value = Array3f(*map(float, light.irradiance))
+            else:
+                value = self.scene.delta_lights._bitmaps[id(light)].eval(Array2f(u_dir), active)
+            return o, d, value * (math.pi * float(light.scale) * plane)
         area = math.pi * self.radius * self.radius
         if kind == "directional":
             w = np.asarray(light.direction, float)
