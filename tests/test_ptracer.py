@@ -129,21 +129,26 @@ def test_light_tracing_variance_estimate_is_calibrated(cornell):
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-def test_light_tracing_of_an_xml_scene_agrees_with_mitsubas_path():
-    """tests/data/xml/ptracer.xml: an area light, point, spot and directional lights and an
-    environment map; drpt's ptracer (the file's integrator) against Mitsuba's path."""
+@pytest.mark.parametrize("name", ["ptracer", "projector_spot", "area_textured"])
+def test_light_tracing_of_an_xml_scene_agrees_with_mitsubas_path(name):
+    """drpt's light tracer against Mitsuba's camera integrator on the same file:
+    tests/data/xml/ptracer.xml (an area light, point, spot and directional lights and an
+    environment map; the file's integrator is ptracer, Mitsuba renders it with path),
+    projector_spot.xml (a textured projector and a textured spot; Mitsuba's direct) and
+    area_textured.xml (an area light with a bitmap radiance; Mitsuba's path)."""
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
     from drpt.options import apply_scene_settings
 
-    path = XML / "ptracer.xml"
+    path = XML / f"{name}.xml"
     scene = load_scene(path, defines={"spp": "512"})
-    assert scene.settings.integrator == "ptracer"
-    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=3), scene), spp=512)
+    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=3), scene), spp=512,
+                   integrator="ptracer")
     r = Renderer(scene, opts).render()
     mi.set_variant(mitsuba_variant())
-    ms = mi.load_file(str(path), spp="64", integrator="path")
+    defines = {"integrator": "path"} if name == "ptracer" else {}
+    ms = mi.load_file(str(path), spp="64", **defines)
     runs = np.stack([np.asarray(mi.render(ms, seed=100 + 7919 * k), np.float64)[..., :3] for k in range(8)])
     ref = runs.mean(0)
     var = runs.var(0, ddof=1) / 8 + (1e-5 * ref) ** 2
