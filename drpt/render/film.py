@@ -19,7 +19,11 @@ sum of the contributions and of their squares. Camera samples
 ``sum(w^2 L^2)``, ``sum(w)`` and ``sum(w^2)``: the pixel is ``sum(w L) /
 sum(w)`` (Mitsuba's film divides by the accumulated weights) and the other
 two estimate its variance (:func:`drpt.render.renderer.finish`). Sums of
-passes, chunks and resumed renders add.
+passes, chunks and resumed renders add. The renderer computes the camera
+samples' sums with :func:`gather_splats` (the same sums, gathered by each
+receiving pixel from its neighbours' samples: no atomics, a fixed order),
+and uses the scattering :class:`SplatFilm` for light paths, which land
+anywhere.
 
 The sums are float64, on the device, over the rows ``[y0, y0 + rows)`` of
 the image (a pass of camera samples reaches only the rows around its band);
@@ -27,9 +31,9 @@ the image (a pass of camera samples reaches only the rows around its band);
 scatters inside the tracing kernel, so one film takes one pass's
 contributions. The scatters are atomic additions from several threads, whose
 order varies from run to run: float64 keeps that to the last bits of the
-sums, so the float32 image of a render is the same in one process, in
-chunks, on workers and resumed (the variance, float64, to about 1e-12
-relative).
+sums, so the float32 image of a light-traced render is the same in one
+process, in chunks, on workers and resumed (the variance, float64, to about
+1e-12 relative).
 """
 
 from __future__ import annotations
@@ -124,3 +128,65 @@ class SplatFilm:
                                                                       ).astype(np.float64)
 
         return stack(self.sum), stack(self.sq + self.moment), stack(self.w) if self.weights else None
+
+
+@dr.syntax
+def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: int,
+                  px: Float, py: Float, L: Array3f, ok: Bool, moment: bool = False):
+    """What :class:`SplatFilm` with ``weights`` sums for camera samples, computed per
+    *receiving* pixel: no atomics, the same sums in the same order every run.
+
+    The samples are a pass's, pixel-major: lanes ``p k .. p k + k - 1`` are the ``k``
+    samples of pixel ``p`` of rows ``r0 .. r0 + rows`` (positions ``px``, ``py`` inside
+    that pixel, radiance ``L``, ``ok`` where it counts). A receiving pixel's sums run over
+    the samples of the source pixels within ``R = ceil(r + 1/2) - 1`` pixels of it (the
+    only ones whose samples its filter of radius ``r`` reaches), in a fixed order.
+    Returns ``(y0, sum, sumsq, weight)`` as :meth:`SplatFilm.arrays` (rows from ``y0``)."""
+    import numpy as np
+
+    W = width
+    R = int(math.ceil(flt.radius + 0.5)) - 1
+    y0, y1 = max(0, r0 - R), min(height, r0 + rows + R)
+    n = (y1 - y0) * W
+    out = dr.arange(UInt32, n)
+    ox = Int32(out % W)
+    oy = Int32(out // W) + y0
+    cx, cy = Float(ox) + 0.5, Float(oy) + 0.5
+    side = 2 * R + 1
+    kk = dr.opaque(UInt32, k)
+    total = dr.opaque(UInt32, side * side * k)
+    film = SplatFilm(width, height, flt)  # for its filter function
+
+    zero = dr.zeros(Float64, n)
+    s0, s1, s2 = Float64(zero), Float64(zero), Float64(zero)
+    q0, q1, q2 = Float64(zero), Float64(zero), Float64(zero)
+    w0, w1 = Float64(zero), Float64(zero)
+    m = [Float64(zero) for _ in range(6)] if moment else []
+    it = dr.zeros(UInt32, n)
+    while it < total:
+        off = it // kk
+        j = it - off * kk
+        sx = ox + Int32(off % side) - R
+        sy = oy + Int32(off // side) - R
+        valid = (sx >= 0) & (sx < W) & (sy >= r0) & (sy < r0 + rows)
+        lane = UInt32((sy - r0) * W + sx) * kk + j
+        valid &= dr.gather(Bool, ok, lane, valid)
+        x = dr.gather(Float, px, lane, valid)
+        y = dr.gather(Float, py, lane, valid)
+        v = dr.gather(Array3f, L, lane, valid)
+        w = Float64(dr.select(valid, film._weight(cx - x) * film._weight(cy - y), 0.0))
+        a, b, c = Float64(v.x) * w, Float64(v.y) * w, Float64(v.z) * w
+        s0, s1, s2 = s0 + a, s1 + b, s2 + c
+        q0, q1, q2 = q0 + a * a, q1 + b * b, q2 + c * c
+        w0, w1 = w0 + w, w1 + w * w
+        if moment:
+            r_, g_, b_ = Float64(v.x), Float64(v.y), Float64(v.z)
+            m = [m[0] + w * r_ * r_, m[1] + w * g_ * g_, m[2] + w * b_ * b_,
+                 m[3] + w * r_ * g_, m[4] + w * r_ * b_, m[5] + w * g_ * b_]
+        it += 1
+    dr.eval(s0, s1, s2, q0, q1, q2, w0, w1, m)
+
+    def stack(cs):
+        return np.stack([c.numpy() for c in cs], axis=-1).reshape(y1 - y0, W, len(cs))
+
+    return y0, stack([s0, s1, s2]), stack([q0, q1, q2, *m]), stack([w0, w1])

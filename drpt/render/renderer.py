@@ -54,7 +54,6 @@ integrator queries; the renderer adds the camera and the passes.
 from __future__ import annotations
 
 import copy
-import math
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -70,7 +69,7 @@ from ..options import RenderOptions
 from ..scene.model import Camera, Scene
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
-from .film import SplatFilm
+from .film import SplatFilm, gather_splats
 from .filter_sampling import sample_position
 from .integrators.path import PathIntegrator
 from .integrators.ptracer import ParticleTracer
@@ -335,12 +334,8 @@ class Renderer:
         L = dr.select(bad, 0.0, L)
         with llvm_tuning.blocks_for(n):
             dr.eval(L, bad, px, py)
-        flt = self.opt.pixel_filter
-        reach = int(math.ceil(flt.radius))
-        y0, y1 = max(0, r0 - reach), min(H, r0 + rows + reach)
-        film = SplatFilm(W, H, flt, weights=True, y0=y0, rows=y1 - y0, moment=self.opt.moment)
-        film.put(px, py, L, ~bad)
-        img, sq, wts = film.arrays()
+        y0, img, sq, wts = gather_splats(self.opt.pixel_filter, W, H, r0, rows, k, px, py, L, ~bad,
+                                         self.opt.moment)
         return PassSums(y0, img, sq, int(dr.sum(UInt32(bad))[0]), wts)
 
     @property
