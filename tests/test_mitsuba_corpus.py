@@ -58,8 +58,8 @@ NOT_YET = {
     "bsdf_spheres/test_normalmap_identity_roughconductor_path.xml": "normalmap BSDF",
     "bsdf_spheres/test_normalmap_path.xml": "normalmap BSDF",
     "bsdf_spheres/test_normalmap_roughconductor_path.xml": "normalmap BSDF",
-    "bsdf_spheres/test_textured_roughconductor_path.xml": "anisotropic roughconductor (textured alpha_u/alpha_v): "
-                                                          "drpt's tangent frame is not Mitsuba's",
+    "bsdf_spheres/test_textured_roughconductor_path.xml": "roughconductor with textured alpha_u/alpha_v (wrong "
+                                                          "even when the two are equal; a textured alpha agrees)",
     "bsdf_spheres/test_texturedprincipledthin_path.xml": "principledthin BSDF",
 }
 
