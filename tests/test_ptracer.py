@@ -238,3 +238,23 @@ def test_splatted_renders_are_the_same_in_chunks_and_resumed(cornell, tmp_path, 
         assert np.array_equal(resumed.variance, plain.variance)
     else:
         assert np.allclose(resumed.variance, plain.variance, rtol=1e-12, atol=0)
+
+
+def test_light_tracing_without_emitters_is_black_and_refuses_emissive_spheres(tmp_path):
+    from drpt.options import apply_scene_settings
+
+    body = """<scene version="3.0.0"><integrator type="ptracer"/>
+        <sensor type="perspective"><transform name="to_world"><lookat origin="0,0,4" target="0,0,0"
+        up="0,1,0"/></transform><film type="hdrfilm"><integer name="width" value="8"/>
+        <integer name="height" value="8"/><rfilter type="box"/></film></sensor>
+        <shape type="sphere">SHAPE</shape></scene>"""
+    dark = tmp_path / "dark.xml"
+    dark.write_text(body.replace("SHAPE", '<bsdf type="diffuse"/>'))
+    scene = load_scene(dark)
+    r = Renderer(scene, replace(apply_scene_settings(RenderOptions(progress=False), scene), spp=4)).render()
+    assert r.nonfinite == 0 and not r.image.any()
+    lit = tmp_path / "lit.xml"
+    lit.write_text(body.replace("SHAPE", '<emitter type="area"><rgb name="radiance" value="1"/></emitter>'))
+    scene = load_scene(lit)
+    with pytest.raises(DrptError, match="emissive spheres"):
+        Renderer(scene, replace(apply_scene_settings(RenderOptions(progress=False), scene), spp=4))

@@ -103,6 +103,11 @@ class EmitterRays:
         from ...scene.model import PointLight
 
         self.scene = device_scene
+        emissive = {i for i, m in enumerate(scene.materials) if max(m.emission) > 0.0}
+        for kind, prims in (("spheres", scene.spheres), ("planes", scene.planes)):
+            if len(prims) and emissive & set(int(m) for m in prims.material):
+                raise DrptError(f"light tracing (ptracer) does not start paths on emissive {kind}: "
+                                "use the path integrator, or triangles (Mitsuba: a mesh) as the emitter")
         lo, hi = scene.bounds()
         if not np.all(np.isfinite(lo)):
             lo = hi = np.zeros(3)
@@ -143,8 +148,11 @@ class EmitterRays:
 
     # ------------------------------------------------------------ rays
     def sample_ray(self, u_sel: Float, u_pos: Array2f, u_dir: Array2f, active: Bool) -> LightRay:
-        k, u_reuse = self._select(u_sel)
         n = dr.width(active)
+        if self.count == 0:  # a scene without emitters: no light path
+            return LightRay(dr.zeros(Array3f, n), dr.full(Array3f, [0.0, 0.0, 1.0], n),
+                            dr.zeros(Array3f, n), dr.zeros(Bool, n))
+        k, u_reuse = self._select(u_sel)
         o = dr.zeros(Array3f, n)
         d = dr.full(Array3f, [0.0, 0.0, 1.0], n)
         weight = dr.zeros(Array3f, n)
