@@ -123,9 +123,13 @@ def cmd_render(args: argparse.Namespace) -> int:
         warn(f"{result.nonfinite} samples were NaN/Inf and were set to 0")
     write_image(output, result.image, gamma=args.gamma, extra=moment_channels(scene, result))
     checkpoint.remove(output)
-    print(f"{output}: {opts.width}x{opts.height}, {opts.spp} spp, {result.seconds:.2f} s "
+    stop = ""
+    if opts.target_error is not None or opts.time_limit is not None:
+        reason = f"{job.stopped} reached" if job.stopped else f"all {opts.spp} spp"
+        stop = f", estimated relMSE {result.estimated_rel_mse:.3g} ({reason})"
+    print(f"{output}: {opts.width}x{opts.height}, {result.spp} spp, {result.seconds:.2f} s "
           f"(+{result.build_seconds:.2f} s build), "
-          f"{result.samples_per_second / 1e6:.2f} Msamples/s")
+          f"{result.samples_per_second / 1e6:.2f} Msamples/s{stop}")
     if opts.progress and (args.workers is not None or args.cluster is not None):
         print_workers(job)
     return 0

@@ -11,6 +11,9 @@ computed in float64.
 ``smape``          ``mean(2 |x - ref| / (|x| + |ref|))``, a ``0/0`` term is 0
 ``outside_ci``     fraction of values with ``|x - ref| > z sqrt(var_x + var_ref)``
 ``error_map``      per pixel ``mean_c |x - ref| / (|ref| + eps)``, ``(H, W)``
+``estimated_rel_mse``  ``mean(var_x / (x**2 + eps))``: ``rel_mse``'s expectation
+                   for an unbiased ``x`` with per-pixel variance ``var_x``,
+                   estimated without a reference (``x`` stands in for ``ref``)
 =================  ==========================================================
 
 ``eps`` keeps black reference pixels from dominating the relative errors
@@ -21,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["rel_mse", "mae", "smape", "outside_ci", "error_map", "summary"]
+__all__ = ["rel_mse", "mae", "smape", "outside_ci", "error_map", "estimated_rel_mse", "summary"]
 
 
 def _pair(x, ref) -> tuple[np.ndarray, np.ndarray]:
@@ -41,6 +44,14 @@ def rel_mse(x, ref, eps: float = 1e-2) -> float:
     """
     x, ref = _pair(x, ref)
     return float(np.mean((x - ref) ** 2 / (ref * ref + eps)))
+
+
+def estimated_rel_mse(x, var_x, eps: float = 1e-2) -> float:
+    """The relMSE an unbiased render ``x`` with per-pixel variances ``var_x`` (of
+    its means) has against the true image, ``mean(var_x / (ref**2 + eps))``, with
+    ``x`` in place of the unknown ``ref``. Renders stop on it (``--target-error``)."""
+    x = np.asarray(x, np.float64)
+    return float(np.mean(np.asarray(var_x, np.float64) / (x * x + eps)))
 
 
 def mae(x, ref) -> float:

@@ -26,6 +26,7 @@ parser is built or options are checked, after the CLI chose the backend.
 from __future__ import annotations
 
 import argparse
+import math
 from dataclasses import dataclass, field
 
 from .errors import DrptError, note, warn
@@ -76,6 +77,10 @@ class RenderOptions:
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
     filter: str = "box"  # pixel reconstruction filter, drpt.filters.parse_filter's spelling
     filter_sampling: bool = False  # tent/gaussian: draw samples from the filter instead of splatting
+    #: stop once the estimated relMSE (drpt.metrics.estimated_rel_mse) is at most this, or
+    #: once time_limit seconds have passed, at the end of a chunk; spp is then the most
+    target_error: float | None = None
+    time_limit: float | None = None
     path: PathOptions = field(default_factory=PathOptions)
     max_lanes: int | None = None  # samples traced at once (None: drpt.backend.policy().max_lanes)
     chunk_spp: int | None = None  # samples per pixel of a chunk (None: one pass step), drpt.render.chunks
@@ -106,6 +111,10 @@ class RenderOptions:
             raise DrptError(f"--max-lanes must be between 1 and {MAX_LANES}, got {self.max_lanes}")
         if self.chunk_spp is not None and not 0 < self.chunk_spp <= MAX_SPP:
             raise DrptError(f"--chunk-spp must be between 1 and {MAX_SPP}, got {self.chunk_spp}")
+        if self.target_error is not None and not (math.isfinite(self.target_error) and self.target_error > 0):
+            raise DrptError(f"--target-error must be a positive number, got {self.target_error}")
+        if self.time_limit is not None and not (math.isfinite(self.time_limit) and self.time_limit > 0):
+            raise DrptError(f"--time-limit must be a positive number of seconds, got {self.time_limit}")
         if not 0 <= self.seed <= MAX_SEED:
             raise DrptError(f"--seed must be between 0 and 2^64 - 1, got {self.seed}")
         p = self.path
@@ -429,8 +438,8 @@ def apply_scene_settings(opts: RenderOptions, scene,
     path: dict = {}
     if "size" not in given and st.width is not None and st.height is not None:
         fields["width"], fields["height"] = st.width, st.height
-    if "spp" not in given and st.spp is not None:
-        fields["spp"] = st.spp
+    if "spp" not in given and st.spp is not None and opts.target_error is None and opts.time_limit is None:
+        fields["spp"] = st.spp  # (a --target-error or --time-limit render keeps its own most)
     if "integrator" not in given and st.integrator is not None:
         fields["integrator"] = st.integrator
     if "max_depth" not in given and st.max_depth is not None:
@@ -475,6 +484,17 @@ def add_distributed_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--checkpoint-seconds", dest="checkpoint_seconds", type=float, default=30.0,
                         metavar="T", help="write a checkpoint at most every T seconds while "
                                           "rendering (default 30; 0: after every chunk)")
+    parser.add_argument("--target-error", dest="target_error", type=float, default=None, metavar="E",
+                        help="stop at the end of the first chunk whose estimated relMSE (from the "
+                             "pixels' variances) is at most E; --spp is then the most "
+                             f"(default {TARGET_SPP} when not given)")
+    parser.add_argument("--time-limit", dest="time_limit", type=float, default=None, metavar="S",
+                        help="stop at the end of the first chunk after S seconds of rendering; "
+                             f"--spp is then the most (default {TARGET_SPP} when not given)")
+
+
+#: the most samples per pixel of a --target-error or --time-limit render without --spp
+TARGET_SPP = 65536
 
 
 # ------------------------------------------------------------------ options
@@ -576,7 +596,10 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),
                                           rr_depth=rr_depth, rr_prob=rr_prob),
                          max_lanes=max_lanes, chunk_spp=get("chunk_spp"),
+                         target_error=get("target_error"), time_limit=get("time_limit"),
                          progress=not get("quiet", False))
+    if (opts.target_error is not None or opts.time_limit is not None) and "spp" not in given_flags(args):
+        opts = replace(opts, spp=TARGET_SPP)
     return replace(opts, **overrides).validate()
 
 

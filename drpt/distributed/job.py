@@ -93,6 +93,7 @@ class Job:
     workers: dict[str, WorkerStats] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     resumed_from: int = 0  # chunks merged by the checkpoint it resumed
+    stopped: str | None = None  # "target error" or "time limit" when one ended it early
 
 
 def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str | None = None,
@@ -111,9 +112,10 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     workers)."""
     from tqdm import tqdm
 
-    from ..render.renderer import finish
+    from ..render.renderer import finish, stop_estimate, stops
 
     W, H, spp = opts.width, opts.height, opts.spp
+    light_tracing = opts.integrator == "ptracer"
     max_lanes = policy().max_lanes if opts.max_lanes is None else opts.max_lanes
     chunks = plan_chunks(W, H, spp, max_lanes, opts.chunk_spp)
     key = checkpoint.scene_hash(scene)
@@ -162,11 +164,19 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
                 if r.index not in seen:
                     seen.add(r.index)
                     bar.update(W * H * r.spp)
-                merged.push(r)
+                grew = merged.push(r)
                 if on_chunk is not None:
                     on_chunk(merged, r, engine)
                 if asked:
                     raise KeyboardInterrupt
+                if grew:
+                    estimate = stop_estimate(merged, opts, time.perf_counter() - t0, light_tracing)
+                    if estimate is not None:
+                        bar.set_postfix_str(f"relMSE ~{estimate:.3g}")
+                    if stops(estimate, merged, opts, time.perf_counter() - t0):
+                        job.stopped = "target error" if opts.target_error is not None and \
+                            estimate is not None and estimate <= opts.target_error else "time limit"
+                        break
                 now = time.perf_counter()
                 # a checkpoint holds the merged prefix of chunks: none is written
                 # before it grows (Dask's first result need not be chunk 0)
@@ -182,7 +192,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         raise
     if isinstance(engine, LocalEngine):
         build = engine.renderer.build_seconds
-    job.result = finish(merged, time.perf_counter() - t0, build, opts.integrator == "ptracer")
+    job.result = finish(merged, time.perf_counter() - t0, build, light_tracing)
     return job
 
 

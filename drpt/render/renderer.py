@@ -96,6 +96,19 @@ class RenderResult:
     def samples_per_second(self) -> float:
         return self.samples / max(self.seconds, 1e-9)
 
+    @property
+    def estimated_rel_mse(self) -> float:
+        """The relMSE this image is expected to have (:func:`drpt.metrics.estimated_rel_mse`)."""
+        from ..metrics import estimated_rel_mse
+
+        return estimated_rel_mse(self.image, self.variance)
+
+    @property
+    def spp(self) -> int:
+        """Samples per pixel rendered (fewer than asked when a target error or time
+        limit stopped the render)."""
+        return self.samples // max(self.image.shape[0] * self.image.shape[1], 1)
+
 
 @dataclass
 class PassSums:
@@ -436,6 +449,11 @@ class Renderer:
                         on_pass(before + done, W * H * spp)
 
                 merged.push(self.render_chunk(c, progress))
+                estimate = stop_estimate(merged, self.opt, time.perf_counter() - t0, self.light_tracing)
+                if estimate is not None:
+                    bar.set_postfix_str(f"relMSE ~{estimate:.3g}")
+                    if stops(estimate, merged, self.opt, time.perf_counter() - t0):
+                        break
         return finish(merged, time.perf_counter() - t0, self.build_seconds, self.light_tracing)
 
 
@@ -485,6 +503,30 @@ def finish(merged: ChunkMerge, seconds: float, build_seconds: float,
         moment2 = xyz_second_moment(merged.sumsq / spp)
     return RenderResult(mean.astype(np.float32), var, seconds,
                         build_seconds, W * H * spp, merged.nonfinite, moment2)
+
+
+def stop_estimate(merged: ChunkMerge, opts: RenderOptions, seconds: float,
+                  light_tracing: bool) -> float | None:
+    """With a target error or a time limit: the estimated relMSE of the merged image
+    so far (None before 2 samples per pixel, or without either option)."""
+    if opts.target_error is None and opts.time_limit is None:
+        return None
+    if merged.spp < 2 or merged.done:
+        return None
+    r = finish(merged, seconds, 0.0, light_tracing)
+    return r.estimated_rel_mse
+
+
+def stops(estimate: float | None, merged: ChunkMerge, opts: RenderOptions, seconds: float) -> bool:
+    """Whether a render stops after the merged chunks: its estimate (of
+    :func:`stop_estimate`) at most the target error, or the time limit passed. Only
+    the merged prefix of chunks decides, so a render stopped by its estimate is the
+    same for a seed whatever ran it (in process, on workers, resumed)."""
+    if merged.done or merged.spp < 2:
+        return False
+    if opts.target_error is not None and estimate is not None and estimate <= opts.target_error:
+        return True
+    return opts.time_limit is not None and seconds >= opts.time_limit
 
 
 def _check_range(mean: np.ndarray) -> None:
