@@ -12,9 +12,9 @@ gaussian rfilter), ``bsdfs`` (every BSDF plugin of the vocabulary, with textures
 composites) and ``legacy06`` (a 0.6 file: camelCase names, serialized meshes, parameters the
 plugins do not read). All but ``legacy06`` (which Mitsuba 3 itself refuses) are rendered here
 by drpt and by Mitsuba *from the same file* (block z-test, tests/render_check.py, and the z of
-the image mean); ``aniso`` (an anisotropic roughconductor on a sphere and a rectangle) is a
-known disagreement on the sphere (strict xfail: drpt's tangent frame on analytic spheres is
-not Mitsuba's dp/du).
+the image mean), and so is ``aniso`` (an anisotropic roughconductor on a sphere and a
+rectangle: shading frames follow Mitsuba's dp/du; tests/test_perturbed_frames.py has the
+meshes, the rotated sphere and the negative control).
 """
 
 from __future__ import annotations
@@ -537,8 +537,6 @@ def _mean_z(r, ref, var):
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-@pytest.mark.xfail(strict=True, reason="anisotropic BSDFs on analytic spheres: drpt's shading "
-                   "tangent is not Mitsuba's dp/du (the rectangle in the same scene agrees)")
 def test_anisotropic_roughconductor_on_a_sphere_renders_like_mitsuba():
     from render_check import assert_agree
 
@@ -605,7 +603,7 @@ def _mitsuba_mean_var(path: Path, spp: int, seed: int, **defines):
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("name", ["composites", "spot", "envmap", "instances"])
+@pytest.mark.parametrize("name", ["composites", "spot", "envmap", "instances", "aniso_mesh"])
 def test_export_of_an_imported_scene_renders_the_same_in_mitsuba(tmp_path, name):
     """Round trip: ``drpt export`` of an imported XML scene, rendered by Mitsuba, agrees with
     Mitsuba's render of the original file (block z-test and the mean's z)."""

@@ -383,6 +383,12 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
             raise DrptError(f"cannot export sphere {i}: radius {r} must be positive")
         shape = {"type": "sphere", "center": _Point(_f3(sph.center[i])), "radius": r,
                  "bsdf": bsdfs[sph.material[i]]}
+        if sph.rotation is not None:  # the sphere's orientation: its uv and dp/du
+            m = np.eye(4)
+            m[:3, :3] = sph.rotation[i] * r
+            m[:3, 3] = sph.center[i]
+            del shape["center"], shape["radius"]
+            shape["to_world"] = _Matrix(m)
         if emitters[sph.material[i]] is not None:
             shape["emitter"] = emitters[sph.material[i]]
         out[f"sphere_{i}"] = shape

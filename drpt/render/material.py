@@ -47,6 +47,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
+from .. import bsdf_kinds
 from ..scene.model import Scene
 from ..shading import BSDFSpec, Checkerboard, Texture, interpret_scene
 from .bsdf import BSDFSample, lobe
@@ -96,6 +97,38 @@ def _flatten(spec: BSDFSpec, two_sided: bool = False, c: _Component | None = Non
     return [_Component(spec, two_sided, c.weight, c.weight_texture, c.complement)]
 
 
+def _anisotropic(leaf: BSDFSpec) -> bool:
+    """Whether ``leaf``'s response depends on the tangent's direction (host side):
+    distinct or textured ``alpha_u``/``alpha_v``, principled's ``anisotropic``."""
+    p = leaf.params
+    if leaf.kind in ("roughconductor", "roughdielectric"):
+        au, av = p.get("alpha_u"), p.get("alpha_v")
+        if au is None and av is None:
+            return False
+        return isinstance(au, Texture) or isinstance(av, Texture) or au != av
+    if leaf.kind == "principled":
+        return bsdf_kinds.given(p.get("anisotropic"))
+    return False
+
+
+def tangent_frame(n: Array3f, dp_du: Array3f) -> Frame:
+    """Mitsuba's shading frame (``SurfaceInteraction::initialize_sh_frame``): ``s`` is
+    ``dp/du`` made orthogonal to ``n``, ``t = n x s``; where ``dp/du`` is 0 (or along
+    ``n``), :class:`Frame`'s basis of ``n`` alone."""
+    base = Frame(n)
+    s = dr.fma(n, -dr.dot(n, dp_du), dp_du)
+    len2 = dr.squared_norm(s)
+    ok = len2 > 1e-30
+    s = dr.select(ok, s * dr.rsqrt(dr.select(ok, len2, 1.0)), base.s)
+    return Frame.from_axes(s, dr.cross(n, s), n)
+
+
+def _z_flipped(frame: Frame, flip) -> Frame:
+    """``frame`` seen from behind where ``flip``: ``(s, t, -n)``, Mitsuba's ``twosided``
+    (it negates the local ``z`` and keeps the tangents)."""
+    return Frame.from_axes(frame.s, frame.t, dr.select(flip, -frame.n, frame.n))
+
+
 def _luminance(c: Array3f) -> Float:
     return 0.212671 * c.x + 0.715160 * c.y + 0.072169 * c.z
 
@@ -127,6 +160,9 @@ class MaterialTable:
         # rows: every component of every material, material by material
         self.rows: list[_Component] = [c for cs in comps for c in cs]
         self.kinds = sorted({c.leaf.kind for c in self.rows})
+        # interactions carry dp/du (frames follow it, as Mitsuba's) only where some BSDF
+        # depends on the tangent's direction; a scene without one traces no tangent code
+        self.tangents = 1 if any(_anisotropic(c.leaf) for c in self.rows) else 0
         self.lobes = {k: lobe(k) for k in self.kinds}
         self._rows_of = {k: [i for i, c in enumerate(self.rows) if c.leaf.kind == k] for k in self.kinds}
         kind_idx = np.array([self.kinds.index(c.leaf.kind) for c in self.rows], np.uint32)
@@ -336,11 +372,20 @@ class MaterialTable:
             kind_of = dr.gather(UInt32, self.kind, row_si.material, present)
         flip = dr.dot(si.ns, si.wi) < 0.0
         flipped, plain = None, None
+        tangent = None
         for kind in kinds:
             i = self.kinds.index(kind)
             mask = present if kind_of is None else present & (kind_of == i)
             two = self._two[kind]
-            if two is True:
+            if si.dp_du is not None:  # frames follow dp/du; twosided mirrors z
+                tangent = tangent or tangent_frame(si.ns, si.dp_du)
+                if two is True:
+                    frame = _z_flipped(tangent, flip)
+                elif two is False:
+                    frame = tangent
+                else:
+                    frame = _z_flipped(tangent, dr.gather(Bool, two, row_si.material, mask) & flip)
+            elif two is True:
                 flipped = flipped or Frame(dr.select(flip, -si.ns, si.ns))
                 frame = flipped
             elif two is False:
