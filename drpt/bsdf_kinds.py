@@ -16,8 +16,10 @@ the fields they are read from (MTL ``Kd``, ``Ks``, ``Ns``; the seed's
 Composite kinds (:data:`COMPOSITES`) hold other specs as children:
 ``twosided`` (one child, shown from both sides; reflective children only,
 as in Mitsuba), ``blendbsdf`` (two children mixed as ``(1 - weight) a +
-weight b``) and ``mask`` (one child, seen with probability ``opacity``,
-else the ray passes straight through).
+weight b``), ``mask`` (one child, seen with probability ``opacity``,
+else the ray passes straight through), and ``normalmap`` / ``bumpmap``
+(one child, seen in a shading frame perturbed by a texture: Mitsuba's
+plugins of those names, :mod:`drpt.render.perturb`).
 
 Values are floats, RGB triples, :class:`drpt.shading.Texture` (where a
 kind's :data:`TEXTURABLE` allows it), or for string/bool parameters a
@@ -93,7 +95,15 @@ COMPOSITES: dict[str, tuple[int, dict[str, Any]]] = {
     "twosided": (1, {}),
     "blendbsdf": (2, {"weight": 0.5}),
     "mask": (1, {"opacity": 0.5}),
+    # the child seen in a perturbed shading frame: a tangent-space normal map (a texture,
+    # required), or a height map's gradient (``texture``, required) times ``scale``
+    "normalmap": (1, {"normalmap": None, "flip_invalid_normals": True, "use_shadowing_function": True}),
+    "bumpmap": (1, {"texture": None, "scale": 1.0, "flip_invalid_normals": True,
+                    "use_shadowing_function": True}),
 }
+
+#: Composites that perturb the shading frame of their child, and their texture parameter.
+PERTURBING: dict[str, str] = {"normalmap": "normalmap", "bumpmap": "texture"}
 
 #: Kinds that always transmit light: ``twosided`` refuses them, as Mitsuba's does. ``principled``
 #: is not listed: it transmits (and Mitsuba's ``twosided`` refuses it) exactly when its

@@ -88,6 +88,7 @@ class Texture:
 
     path: Path
     fallback: Any = 0.0
+    raw: bool = False  # the texels as stored (Mitsuba's ``raw``): no sRGB decoding
 
 
 @dataclass(frozen=True)
@@ -156,8 +157,11 @@ def complete(spec: BSDFSpec) -> BSDFSpec:
             raise ValueError(f"BSDF '{kind}' needs {n} nested BSDF(s), found {len(spec.children)}")
     elif spec.children:
         raise ValueError(f"BSDF '{kind}' takes no nested BSDF")
-    allowed = bsdf_kinds.TEXTURABLE.get(kind, frozenset()) | ({"weight", "opacity"} if kind in
-                                                                bsdf_kinds.COMPOSITES else set())
+    allowed = bsdf_kinds.TEXTURABLE.get(kind, frozenset()) | ({"weight", "opacity", "normalmap", "texture"}
+                                                                if kind in bsdf_kinds.COMPOSITES else set())
+    tex = bsdf_kinds.PERTURBING.get(kind)
+    if tex is not None and not isinstance(params[tex], Texture):
+        raise ValueError(f"BSDF '{kind}' needs a texture '{tex}'")
     for name, v in params.items():
         if isinstance(v, Texture) and name not in allowed:
             raise ValueError(f"BSDF '{kind}': parameter '{name}' cannot be a texture")

@@ -189,7 +189,7 @@ _TAGS = {
     "twosided": "bsdf", "diffuse": "bsdf", "drpt_phong": "bsdf", "principled": "bsdf",
     "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf",
     "plastic": "bsdf", "roughplastic": "bsdf", "thindielectric": "bsdf", "roughdielectric": "bsdf",
-    "mask": "bsdf", "null": "bsdf",
+    "mask": "bsdf", "null": "bsdf", "normalmap": "bsdf", "bumpmap": "bsdf",
     "area": "emitter", "point": "emitter", "directional": "emitter", "spot": "emitter",
     "envmap": "emitter", "constant": "emitter",
     "sphere": "shape", "rectangle": "shape", "ply": "shape",

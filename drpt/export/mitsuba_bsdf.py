@@ -5,7 +5,8 @@ One node, one plugin (plain ``mi.load_dict`` dicts: RGB values as
 ``filter_type="bilinear"`` and ``wrap_mode="repeat"``, as drpt looks them up):
 
 * ``twosided``, ``blendbsdf`` (``weight``; ``bsdf_0`` gets ``1 - weight``),
-  ``mask`` (``opacity``) -> the composites of the same name;
+  ``mask`` (``opacity``), ``normalmap``, ``bumpmap`` -> the composites of the
+  same name (a ``raw`` texture as a ``bitmap`` with ``raw``);
 * kinds named after a Mitsuba plugin -> that plugin with the same
   parameters, leaving out the ones not given (``None``) and the ones the
   plugin would not read next to another (``alpha`` beside ``alpha_u``/
@@ -35,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from ..bsdf_kinds import COMPOSITES, PARAMS
+from ..bsdf_kinds import COMPOSITES, PARAMS, PERTURBING
 from ..errors import DrptError
 from ..shading import BSDFSpec, Checkerboard, Texture
 from .mitsuba_dielectrics import KINDS as DIELECTRICS
@@ -61,8 +62,11 @@ def _value(v: Any, origin: str) -> Any:
     if isinstance(v, Texture):
         if not Path(v.path).is_file():
             raise DrptError(f"{origin or 'material'}: texture {v.path} not found")
-        return {"type": "bitmap", "filename": str(Path(v.path).resolve()),
-                "filter_type": "bilinear", "wrap_mode": "repeat"}
+        out = {"type": "bitmap", "filename": str(Path(v.path).resolve()),
+               "filter_type": "bilinear", "wrap_mode": "repeat"}
+        if v.raw:
+            out["raw"] = True
+        return out
     if isinstance(v, (tuple, list)):
         return {"type": "rgb", "value": [float(x) for x in v]}
     if isinstance(v, bool) or isinstance(v, str):
@@ -123,6 +127,18 @@ def to_mitsuba(spec: BSDFSpec) -> dict:
     kids = [to_mitsuba(c) for c in spec.children]
     if spec.kind == "twosided":
         return {"type": "twosided", **{f"bsdf_{i}": k for i, k in enumerate(kids)}}
+    if spec.kind in ("normalmap", "bumpmap"):
+        p = spec.params
+        if not isinstance(p[PERTURBING[spec.kind]], Texture):
+            return kids[0]  # its texture dropped (no uvs): nothing perturbs the child
+        out = {"type": spec.kind, "bsdf": kids[0],
+               "flip_invalid_normals": bool(p["flip_invalid_normals"]),
+               "use_shadowing_function": bool(p["use_shadowing_function"])}
+        if spec.kind == "normalmap":
+            out["normalmap"] = _value(p["normalmap"], spec.origin)
+        else:
+            out["texture"], out["scale"] = _value(p["texture"], spec.origin), float(p["scale"])
+        return out
     if spec.kind == "blendbsdf":
         return {"type": "blendbsdf", "weight": _value(spec.params["weight"], spec.origin),
                 "bsdf_0": kids[0], "bsdf_1": kids[1]}

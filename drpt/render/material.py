@@ -50,7 +50,9 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 from .. import bsdf_kinds
 from ..scene.model import Scene
 from ..shading import BSDFSpec, Checkerboard, Texture, interpret_scene
+from . import perturb
 from .bsdf import BSDFSample, lobe
+from .perturb import PerturbedFrame
 from .surface import Interaction, _vec
 from .warp import Frame
 
@@ -64,15 +66,30 @@ class _Component:
     weight: float = 1.0
     weight_texture: Texture | None = None  # weight *= tex (or 1 - tex when complement)
     complement: bool = False
+    perturb: BSDFSpec | None = None  # the normalmap / bumpmap around the leaf
+    two_inner: bool = False  # a twosided between the perturbation and the leaf
 
 
 def _flatten(spec: BSDFSpec, two_sided: bool = False, c: _Component | None = None) -> list[_Component]:
-    """The components of ``spec`` (a complete tree), in depth-first order."""
+    """The components of ``spec`` (a complete tree), in depth-first order. ``two_sided``
+    (and a component's ``two_sided``) is a ``twosided`` around the component's
+    perturbation, if any (``two_inner``: one inside it)."""
     c = c or _Component(spec, False)
     if spec.kind == "twosided":
         if len(spec.children) == 2:
             raise ValueError("twosided with a different BSDF on each side is not supported")
+        if c.perturb is not None:
+            cc = copy.copy(c)
+            cc.two_inner = True
+            return _flatten(spec.children[0], two_sided, cc)
         return _flatten(spec.children[0], True, c)
+    if spec.kind in bsdf_kinds.PERTURBING:
+        if c.perturb is not None:
+            raise ValueError(f"{spec.kind} inside {c.perturb.kind} is not supported")
+        cc = copy.copy(c)
+        if isinstance(spec.params.get(bsdf_kinds.PERTURBING[spec.kind]), Texture):
+            cc.perturb = spec  # (a texture dropped for want of uvs perturbs nothing)
+        return _flatten(spec.children[0], two_sided, cc)
     if spec.kind in ("blendbsdf", "mask"):
         w = spec.params["weight" if spec.kind == "blendbsdf" else "opacity"]
         if spec.kind == "mask":
@@ -94,7 +111,7 @@ def _flatten(spec: BSDFSpec, two_sided: bool = False, c: _Component | None = Non
                     continue
             out += _flatten(child, two_sided, cc)
         return out
-    return [_Component(spec, two_sided, c.weight, c.weight_texture, c.complement)]
+    return [_Component(spec, two_sided, c.weight, c.weight_texture, c.complement, c.perturb, c.two_inner)]
 
 
 def _anisotropic(leaf: BSDFSpec) -> bool:
@@ -162,7 +179,9 @@ class MaterialTable:
         self.kinds = sorted({c.leaf.kind for c in self.rows})
         # interactions carry dp/du (frames follow it, as Mitsuba's) only where some BSDF
         # depends on the tangent's direction; a scene without one traces no tangent code
-        self.tangents = 1 if any(_anisotropic(c.leaf) for c in self.rows) else 0
+        perturbs = {c.perturb.kind for c in self.rows if c.perturb is not None}
+        self.tangents = 2 if "bumpmap" in perturbs else 1 if (
+            perturbs or any(_anisotropic(c.leaf) for c in self.rows)) else 0
         self.lobes = {k: lobe(k) for k in self.kinds}
         self._rows_of = {k: [i for i, c in enumerate(self.rows) if c.leaf.kind == k] for k in self.kinds}
         kind_idx = np.array([self.kinds.index(c.leaf.kind) for c in self.rows], np.uint32)
@@ -216,7 +235,8 @@ class MaterialTable:
         textures: list = []
 
         def tex_id(t: Texture) -> int:
-            key = t if isinstance(t, Checkerboard) else t.path  # an image file, or the procedural texture
+            # an image file, or the procedural texture or raw image
+            key = t if (isinstance(t, Checkerboard) or t.raw) else t.path
             if key not in textures:
                 textures.append(key)
             return textures.index(key)
@@ -251,6 +271,11 @@ class MaterialTable:
             slot["tex"] = UInt32(np.array(ids, np.int64).astype(np.uint32)) if any(
                 i != NONE for i in ids) else None
 
+        # Perturbed frames (normalmap, bumpmap): per row, only in scenes that have them
+        self._pkinds = sorted({c.leaf.kind for c in self.rows if c.perturb is not None})
+        if self._pkinds:
+            self._setup_perturb(tex_id)
+
         # Textures: one set for every textured field and weight.
         self.textures = None
         if textures:
@@ -264,6 +289,69 @@ class MaterialTable:
         self._any_delta = any(delta)
 
     _only: tuple[str, ...] | None = None  # a restricted view's kinds (see restricted)
+
+    def _setup_perturb(self, tex_id) -> None:
+        rows = self.rows
+        pert = [c.perturb for c in rows]
+        kinds = {p.kind for p in pert if p is not None}
+        self._has_normal, self._has_bump = "normalmap" in kinds, "bumpmap" in kinds
+        code = np.array([0 if p is None else 1 if p.kind == "normalmap" else 2 for p in pert], np.uint32)
+        self._p_code = UInt32(code)
+        ids = [NONE if p is None else tex_id(p.params[bsdf_kinds.PERTURBING[p.kind]]) for p in pert]
+        self._p_tex = UInt32(np.array(ids, np.int64).astype(np.uint32))
+        if self._has_bump:
+            self._p_scale = Float(np.array([float(p.params["scale"]) if p is not None and p.kind == "bumpmap"
+                                            else 0.0 for p in pert], np.float32))
+
+        def flag(name: str, values):
+            got = {v for v, p in zip(values, pert) if p is not None}
+            if len(got) == 1:
+                return got.pop()
+            return Bool(np.array(values, bool))
+
+        self._p_flip = flag("flip", [p is not None and bool(p.params["flip_invalid_normals"]) for p in pert])
+        self._p_shadow = flag("shadow", [p is not None and bool(p.params["use_shadowing_function"])
+                                         for p in pert])
+        self._p_inner = flag("inner", [c.two_inner for c in rows])
+
+    def _perturbed(self, si: Interaction, row_si: Interaction, mask: Bool, outer: Frame,
+                   sh_frame: Frame) -> PerturbedFrame:
+        """The frame the lanes' perturbed components see (:mod:`drpt.render.perturb`);
+        ``outer``: the interaction's frame as the component sees it (mirrored inside
+        ``twosided`` from behind), ``sh_frame``: the interaction's own."""
+        row = row_si.material
+        code = dr.gather(UInt32, self._p_code, row, mask)
+        tid = dr.gather(UInt32, self._p_tex, row, mask)
+        wi_l = outer.to_local(si.wi)
+
+        def rowflag(v):
+            return v if isinstance(v, bool) else dr.gather(Bool, v, row, mask)
+
+        flip = rowflag(self._p_flip)
+        n, s = Array3f(0.0, 0.0, 1.0), Array3f(1.0, 0.0, 0.0)
+        if self._has_normal:
+            m = mask & (code == 1)
+            nn = perturb.normalmap_normal(self.textures.lookup(tid, si.uv, m))
+            if flip is not False:
+                nn = dr.select(flip, perturb.flip_invalid(nn, wi_l), nn)
+            len2 = dr.squared_norm(nn)
+            nn = dr.select(len2 > 1e-30, nn * dr.rsqrt(dr.select(len2 > 1e-30, len2, 1.0)),
+                           Array3f(0.0, 0.0, 1.0))
+            n = dr.select(m, nn, n)
+            s = dr.select(m, perturb.normalmap_tangent(nn), s)
+        if self._has_bump:
+            m = mask & (code == 2)
+            grad = self.textures.gradient(tid, si.uv, m) * dr.gather(Float, self._p_scale, row, m)
+            nb = perturb.bump_normal(grad, si.ns, si.ng, si.dp_du, si.dp_dv, sh_frame)
+            if flip is not False:
+                nb = dr.select(flip, perturb.flip_invalid(nb, wi_l), nb)
+            n = dr.select(m, nb, n)
+            s = dr.select(m, perturb.bump_tangent(nb, si.dp_du), s)
+        inner = rowflag(self._p_inner)
+        mirror = None
+        if inner is not False:
+            mirror = inner & (dr.dot(wi_l, n) < 0.0)
+        return PerturbedFrame(outer, n, s, mirror, rowflag(self._p_shadow))
 
     def restricted(self, kinds) -> MaterialTable:
         """A view of this table that traces only the lobes of ``kinds`` (same
@@ -385,6 +473,8 @@ class MaterialTable:
                     frame = tangent
                 else:
                     frame = _z_flipped(tangent, dr.gather(Bool, two, row_si.material, mask) & flip)
+                if kind in self._pkinds:
+                    frame = self._perturbed(si, row_si, mask, frame, tangent)
             elif two is True:
                 flipped = flipped or Frame(dr.select(flip, -si.ns, si.ns))
                 frame = flipped
@@ -408,6 +498,9 @@ class MaterialTable:
                 p = bsdf.params(self, rsi, mask)
                 wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
                 fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
+                if isinstance(frame, PerturbedFrame):
+                    fac = frame.factor(wo)
+                    fj, pj = fj * fac, dr.select(fac > 0.0, pj, 0.0)
                 if w is None:
                     f = dr.select(mask, fj, f)
                     pdf = dr.select(mask, pj, pdf)
@@ -442,8 +535,13 @@ class MaterialTable:
         for _, bsdf, mask, frame, rsi in self._cases(si, None, row_si, present):
             p = bsdf.params(self, rsi, mask)
             bs = bsdf.sample(p, frame.to_local(si.wi), u1, u2)
+            wo_j = frame.to_world(bs.wo)
+            if isinstance(frame, PerturbedFrame):
+                fac = frame.factor(wo_j)
+                ok = fac > 0.0
+                bs.weight, bs.pdf, bs.valid = bs.weight * fac, dr.select(ok, bs.pdf, 0.0), bs.valid & ok
             out = dr.select(mask, bs, out)
-            wo = dr.select(mask, frame.to_world(bs.wo), wo)
+            wo = dr.select(mask, wo_j, wo)
         out.valid &= present
         if self.K > 1 and not self.is_specular_only():
             # a smooth sample weighs the whole mixture: f_mix / pdf_mix

@@ -43,12 +43,13 @@ from ..imageio import read_image
 __all__ = ["TextureSet", "load_rgb"]
 
 
-def load_rgb(path: str | PathLike) -> np.ndarray:
-    """``(H, W, 3)`` linear float32 texels of an image file (row 0 = top).
+def load_rgb(path: str | PathLike, raw: bool = False) -> np.ndarray:
+    """``(H, W, 3)`` linear float32 texels of an image file (row 0 = top);
+    ``raw``: 8/16-bit values as stored, without sRGB decoding (Mitsuba's ``raw``).
 
     Raises :class:`drpt.errors.SceneError` naming the file when it is
     missing, unreadable or malformed."""
-    img = read_image(path, linear=True)
+    img = read_image(path, linear=not raw)
     c = img.shape[2]
     if c == 1:
         img = np.repeat(img, 3, axis=2)
@@ -67,11 +68,14 @@ class TextureSet:
         self.textures: list = []
         self.shapes: list[tuple[int, int]] = []
         for p in self.paths:
-            if not isinstance(p, (str, PathLike)):  # a procedural texture (drpt.shading.Checkerboard)
+            raw = getattr(p, "raw", False)  # a drpt.shading.Texture read raw (no sRGB decoding)
+            if raw:
+                p = p.path
+            elif not isinstance(p, (str, PathLike)):  # a procedural texture (drpt.shading.Checkerboard)
                 self.textures.append(_Checker(p))
                 self.shapes.append((0, 0))
                 continue
-            img = load_rgb(p)
+            img = load_rgb(p, raw=raw)
             self.shapes.append(img.shape[:2])
             self.textures.append(Texture2f(TensorXf(img), filter_mode=dr.FilterMode.Linear,
                                            wrap_mode=dr.WrapMode.Repeat))
@@ -97,6 +101,33 @@ class TextureSet:
             m = active & (tex_id == k)
             out = dr.select(m, _eval(tex, pos, uv, m, scalar), out)
         return out
+
+
+    def gradient(self, tex_id: UInt32, uv: Array2f, active: Bool = True) -> Array2f:
+        """The derivatives of texture ``tex_id``'s luminance along Mitsuba's ``u`` and
+        ``v`` (``(u, 1 - v)`` of drpt's ``uv``) at ``uv``: Mitsuba's ``bitmap.eval_1_grad``,
+        the bilinear interpolant's differences of the four texels around ``uv`` times the
+        resolution. 0 for procedural textures and inactive lanes."""
+        active = Bool(active)
+        pos = Array2f(uv.x, 1.0 - uv.y)
+        out = Array2f(0.0)
+        for k, (tex, (h, w)) in enumerate(zip(self.textures, self.shapes)):
+            if isinstance(tex, _Checker):
+                continue
+            m = active & (tex_id == k) if len(self.textures) > 1 else active & (tex_id == 0)
+            f00, f10, f01, f11 = (_lum(Array3f(*c)) for c in tex.eval_fetch(pos, m))
+            px = dr.fma(pos.x, w, -0.5)
+            py = dr.fma(pos.y, h, -0.5)
+            w1x, w1y = px - dr.floor(px), py - dr.floor(py)
+            w0x, w0y = 1.0 - w1x, 1.0 - w1y
+            du = dr.fma(w0y, f10 - f00, w1y * (f11 - f01)) * w
+            dv = dr.fma(w0x, f01 - f00, w1x * (f11 - f10)) * h
+            out = dr.select(m, Array2f(du, dv), out)
+        return out
+
+
+def _lum(c: Array3f):
+    return 0.212671 * c.x + 0.715160 * c.y + 0.072169 * c.z
 
 
 def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool) -> Array3f:

@@ -14,13 +14,18 @@ Composites: ``twosided`` (one child; Mitsuba's two-child form, a different
 BSDF on each side, is not supported), ``blendbsdf`` (two children,
 ``weight``), ``mask`` (one child, ``opacity``).
 
+Perturbed frames: ``normalmap`` (the texture ``normalmap``) and ``bumpmap``
+(its one nested texture, whatever its name; ``scale``), each around one BSDF,
+with ``flip_invalid_normals`` and ``use_shadowing_function``. A ``bitmap``
+with ``raw`` keeps its stored values (no sRGB decoding), as Mitsuba's.
+
 What is refused (an "unsupported" error, or with ``--ignore-unsupported`` a
-warning and a fallback): BSDF plugins outside the vocabulary (``bumpmap``,
-``normalmap``, ``measured``, ``hair``, polarizers, ...; fallback: Mitsuba's
+warning and a fallback): BSDF plugins outside the vocabulary (``measured``,
+``hair``, polarizers, ``principledthin``, ...; fallback: Mitsuba's
 default ``diffuse``, reflectance 0.5), texture plugins other than
 ``bitmap`` (``checkerboard``, ``mesh_attribute``, volumes...; fallback: the
 texture's mean color where known, else 0.5), and ``bitmap`` settings drpt's
-texture lookup does not have (``raw``, a ``to_uv`` other than identity,
+texture lookup does not have (a ``to_uv`` other than identity,
 ``filter_type`` other than ``bilinear``, ``wrap_mode`` other than
 ``repeat``; fallback: the setting is ignored). Parameters the plugin does
 not read (``int_ior`` on ``roughconductor``) are left unread, for the
@@ -51,7 +56,7 @@ def default_bsdf(black: bool = False) -> BSDFSpec:
 RENAMED = {"diffuse": {"reflectance": "kd"}}
 
 #: bitmap parameters drpt's texture supports only at these values.
-_BITMAP_FIXED = {"filter_type": "bilinear", "wrap_mode": "repeat", "raw": False}
+_BITMAP_FIXED = {"filter_type": "bilinear", "wrap_mode": "repeat"}
 _BITMAP_SILENT = ("format", "accel")  # storage/acceleration choices: no effect on the image
 _SPECTRAL_OR_TEXTURE = frozenset({"eta", "k"})
 
@@ -83,7 +88,9 @@ class Materials:
         r = self.reader
         kind = node.plugin
         origin = node.where
-        if kind in bsdf_kinds.COMPOSITES:
+        if kind in bsdf_kinds.PERTURBING:
+            spec = self._perturbing(node)
+        elif kind in bsdf_kinds.COMPOSITES:
             want, params_def = bsdf_kinds.COMPOSITES[kind]
             kids = [c for c in node.children() if c.kind == "bsdf"]
             for c in node.children():
@@ -121,6 +128,36 @@ class Materials:
                             [f"{node.where}: unsupported BSDF '{kind}' replaced by diffuse 0.5"], origin)
         r.check_unread(node)
         return spec
+
+    def _perturbing(self, node: Node) -> BSDFSpec:
+        """``normalmap`` (its texture is the parameter ``normalmap``) or ``bumpmap`` (its
+        texture is the one nested texture, whatever its name), around one BSDF."""
+        kind = node.plugin
+        refs = [(k, node.ref(k)) for k in list(node.props.keys()) if node.is_ref(k)]
+        kids = [n for _, n in refs if n.kind == "bsdf"]
+        if len(kids) != 1:
+            raise node.error(f"{node.label} needs 1 nested BSDF, got {len(kids)}")
+        if kind == "normalmap":
+            texs = [n for k, n in refs if k == "normalmap"]
+            if not texs or texs[0].kind != "texture":
+                raise node.error(f"{node.label} needs a texture 'normalmap'")
+            fallback: Any = (0.5, 0.5, 1.0)  # the unperturbed normal
+        else:
+            texs = [n for _, n in refs if n.kind == "texture"]
+            if len(texs) != 1:
+                raise node.error(f"{node.label} needs 1 nested texture, got {len(texs)}")
+            fallback = 0.0  # a flat height
+        for _, n in refs:
+            if n.kind not in ("bsdf", "texture"):
+                self.reader.unsupported(n, f"{n.label} inside {node.label}")
+        params: dict[str, Any] = {bsdf_kinds.PERTURBING[kind]: self.texture(
+            texs[0], scalar=kind == "bumpmap", fallback=fallback)}
+        for name in ("flip_invalid_normals", "use_shadowing_function"):
+            if node.has(name):
+                params[name] = node.bool(name)
+        if kind == "bumpmap" and node.has("scale"):
+            params["scale"] = node.float("scale")
+        return BSDFSpec(kind, params, [self.spec(kids[0])], [], node.where)
 
     # ------------------------------------------------------------ values
     def _value(self, node: Node, kind: str, name: str, default: Any, texturable: bool) -> Any:
@@ -175,10 +212,11 @@ class Materials:
                                   fallback="the identity")
             for key in _BITMAP_SILENT:
                 node.get(key)
+            raw = bool(node.bool("raw", False))
             r.check_unread(node)
             if fallback is None:
                 fallback = 0.5 if scalar else bsdf_kinds.GRAY
-            return Texture(path, fallback)
+            return Texture(path, fallback, raw=raw)
         if node.plugin == "checkerboard":
             for name in ("color0", "color1"):
                 if node.is_ref(name):
