@@ -160,8 +160,10 @@ def complete(spec: BSDFSpec) -> BSDFSpec:
     allowed = bsdf_kinds.TEXTURABLE.get(kind, frozenset()) | ({"weight", "opacity", "normalmap", "texture"}
                                                                 if kind in bsdf_kinds.COMPOSITES else set())
     tex = bsdf_kinds.PERTURBING.get(kind)
-    if tex is not None and not isinstance(params[tex], Texture):
-        raise ValueError(f"BSDF '{kind}' needs a texture '{tex}'")
+    if tex is not None and not (isinstance(params[tex], Texture) or (
+            kind == "normalmap" and isinstance(params[tex], tuple) and len(params[tex]) == 3)):
+        raise ValueError(f"BSDF '{kind}' needs a texture '{tex}'"
+                         + (" (or an RGB value)" if kind == "normalmap" else ""))
     for name, v in params.items():
         if isinstance(v, Texture) and name not in allowed:
             raise ValueError(f"BSDF '{kind}': parameter '{name}' cannot be a texture")

@@ -12,8 +12,8 @@ whose reason names what drpt lacks); one scene per line in both. :data:`DEFINES`
 scene's ``-D`` values where the file's default integrator is one drpt does not have but
 another of the same expectation is.
 
-The negative controls render perturbed copies (a 10% brighter light, a wrong IOR) written to
-``tmp_path`` against the original's reference: the test must fail them.
+The negative controls render perturbed copies (a 10% brighter light, a wrong IOR, a bump map
+of scale 0) written to ``tmp_path`` against the original's reference: the test must fail them.
 """
 
 from __future__ import annotations
@@ -29,13 +29,18 @@ from corpusutil import CORPUS, check_scene, corpus_scene, reference_files, rende
 #: corpus scene -> spp drpt renders it with (all pass Mitsuba's z-test)
 SCENES = {
     "bsdf_spheres/test_arealight_path.xml": 1024,
+    "bsdf_spheres/test_bumpmap_path.xml": 1024,
     "bsdf_spheres/test_constant_path.xml": 1024,
     "bsdf_spheres/test_envmap_path.xml": 1024,
+    "bsdf_spheres/test_normalmap_identity_roughconductor_path.xml": 1024,
+    "bsdf_spheres/test_normalmap_path.xml": 1024,
+    "bsdf_spheres/test_normalmap_roughconductor_path.xml": 1024,
     "bsdf_spheres/test_pointlight_path.xml": 1024,
     "bsdf_spheres/test_roughdielectric_path.xml": 1024,
     "bsdf_spheres/test_roughplastic_linear_path.xml": 1024,
     "bsdf_spheres/test_roughplastic_nonlinear_path.xml": 1024,
     "bsdf_spheres/test_textured_diffuse_path.xml": 1024,
+    "bsdf_spheres/test_textured_roughconductor_path.xml": 1024,
     "bsdf_spheres/test_texturedprincipled1_path.xml": 1024,
     "bsdf_spheres/test_texturedprincipled2_path.xml": 1024,
     "floating_sphere/test_directional_direct.xml": 1024,
@@ -45,12 +50,6 @@ SCENES = {
 
 #: corpus scene -> what drpt lacks to render it (strict xfail)
 NOT_YET = {
-    "bsdf_spheres/test_bumpmap_path.xml": "bumpmap BSDF",
-    "bsdf_spheres/test_normalmap_identity_roughconductor_path.xml": "normalmap BSDF",
-    "bsdf_spheres/test_normalmap_path.xml": "normalmap BSDF",
-    "bsdf_spheres/test_normalmap_roughconductor_path.xml": "normalmap BSDF",
-    "bsdf_spheres/test_textured_roughconductor_path.xml": "anisotropic roughconductor (textured alpha_u/alpha_v): "
-                                                          "drpt's tangent frame is not Mitsuba's",
     "bsdf_spheres/test_texturedprincipledthin_path.xml": "principledthin BSDF",
     "mesh_attributes/test_mesh_attributes_1_face_direct.xml": "mesh_attribute texture",
     "mesh_attributes/test_mesh_attributes_3_face_direct.xml": "mesh_attribute texture",
@@ -130,7 +129,10 @@ def _perturbed(tmp_path: Path, rel: str, old: str, new: str) -> Path:
     # a dielectric sphere with water's IOR instead of BK7's (1.33 for 1.5168)
     ("bsdf_spheres/test_roughdielectric_path.xml", 2048,
      '<string name="int_ior" value="bk7"/>', '<float name="int_ior" value="1.33"/>'),
-], ids=["brighter light", "wrong ior"])
+    # the bump map flattened (scale 0: the sphere without its bumps)
+    ("bsdf_spheres/test_bumpmap_path.xml", 1024,
+     '<float name="scale" value="0.02"/>', '<float name="scale" value="0"/>'),
+], ids=["brighter light", "wrong ior", "flat bump map"])
 def test_negative_controls_fail_the_z_test(tmp_path, rel, spp, old, new):
     """The perturbed copy fails; the copy itself (``<path>`` and ``<include>`` made absolute,
     nothing else changed) passes, so the failure is the perturbation's."""

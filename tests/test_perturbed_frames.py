@@ -27,6 +27,7 @@ import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from chi2util import mitsuba, spherical_chi2
+from drpt.export.mitsuba import _to_dict
 from drpt.export.mitsuba_bsdf import to_mitsuba
 from drpt.render.material import MaterialTable
 from drpt.render.surface import Interaction, triangle_tangents
@@ -105,6 +106,7 @@ CASES = {
     "anisotropic": lambda: aniso(),
     "twosided anisotropic": lambda: BSDFSpec("twosided", {}, [aniso()]),
     "normalmap": lambda: BSDFSpec("normalmap", {"normalmap": NORMALS}, [aniso()]),
+    "normalmap constant": lambda: BSDFSpec("normalmap", {"normalmap": (0.7, 0.4, 0.9)}, [aniso()]),
     "normalmap no shadowing": lambda: BSDFSpec("normalmap", {"normalmap": NORMALS,
                                                              "use_shadowing_function": False}, [diffuse()]),
     "twosided normalmap": lambda: BSDFSpec("twosided", {}, [BSDFSpec("normalmap", {"normalmap": NORMALS},
@@ -129,7 +131,7 @@ def test_eval_pdf_equal_mitsuba(name):
     mi = mitsuba()
     spec = complete(CASES[name]())
     table = MaterialTable(_scene(spec))
-    ref = mi.load_dict(to_mitsuba(spec))
+    ref = mi.load_dict(_to_dict(to_mitsuba(spec), mi))
     n = 4000
     g = Geometry(n, seed=len(name))
     rng = np.random.default_rng(7)

@@ -52,6 +52,13 @@ def _to_uv(m):
     return _Matrix(m)
 
 
+def _Vec(v):
+    """A 3-vector as the exporter writes vectors (its wrapper: ``<vector>`` in XML)."""
+    from .mitsuba import _Vector
+
+    return _Vector(tuple(float(x) for x in v))
+
+
 def _value(v: Any, origin: str) -> Any:
     if isinstance(v, Checkerboard):
         a = np.asarray(v.to_uv, float).reshape(3, 3)
@@ -129,13 +136,17 @@ def to_mitsuba(spec: BSDFSpec) -> dict:
         return {"type": "twosided", **{f"bsdf_{i}": k for i, k in enumerate(kids)}}
     if spec.kind in ("normalmap", "bumpmap"):
         p = spec.params
-        if not isinstance(p[PERTURBING[spec.kind]], Texture):
+        v = p[PERTURBING[spec.kind]]
+        if not (isinstance(v, Texture) or (spec.kind == "normalmap" and isinstance(v, tuple))):
             return kids[0]  # its texture dropped (no uvs): nothing perturbs the child
+        if isinstance(v, tuple):  # one normal everywhere: as stored, like drpt reads it
+            p = {**p, "normalmap": None}
+            const = {"type": "rawconstant", "value": _Vec(v)}
         out = {"type": spec.kind, "bsdf": kids[0],
                "flip_invalid_normals": bool(p["flip_invalid_normals"]),
                "use_shadowing_function": bool(p["use_shadowing_function"])}
         if spec.kind == "normalmap":
-            out["normalmap"] = _value(p["normalmap"], spec.origin)
+            out["normalmap"] = const if isinstance(v, tuple) else _value(v, spec.origin)
         else:
             out["texture"], out["scale"] = _value(p["texture"], spec.origin), float(p["scale"])
         return out

@@ -87,8 +87,9 @@ def _flatten(spec: BSDFSpec, two_sided: bool = False, c: _Component | None = Non
         if c.perturb is not None:
             raise ValueError(f"{spec.kind} inside {c.perturb.kind} is not supported")
         cc = copy.copy(c)
-        if isinstance(spec.params.get(bsdf_kinds.PERTURBING[spec.kind]), Texture):
-            cc.perturb = spec  # (a texture dropped for want of uvs perturbs nothing)
+        v = spec.params.get(bsdf_kinds.PERTURBING[spec.kind])
+        if isinstance(v, Texture) or (spec.kind == "normalmap" and isinstance(v, tuple)):
+            cc.perturb = spec  # (a bump texture dropped for want of uvs perturbs nothing)
         return _flatten(spec.children[0], two_sided, cc)
     if spec.kind in ("blendbsdf", "mask"):
         w = spec.params["weight" if spec.kind == "blendbsdf" else "opacity"]
@@ -297,8 +298,12 @@ class MaterialTable:
         self._has_normal, self._has_bump = "normalmap" in kinds, "bumpmap" in kinds
         code = np.array([0 if p is None else 1 if p.kind == "normalmap" else 2 for p in pert], np.uint32)
         self._p_code = UInt32(code)
-        ids = [NONE if p is None else tex_id(p.params[bsdf_kinds.PERTURBING[p.kind]]) for p in pert]
+        values = [None if p is None else p.params[bsdf_kinds.PERTURBING[p.kind]] for p in pert]
+        ids = [tex_id(v) if isinstance(v, Texture) else NONE for v in values]
         self._p_tex = UInt32(np.array(ids, np.int64).astype(np.uint32))
+        # a normal map's constant value (a texture's: its lookup replaces it)
+        consts = [(0.5, 0.5, 1.0) if not isinstance(v, tuple) else v for v in values]
+        self._p_const = _vec(np.array(consts, float)) if any(isinstance(v, tuple) for v in values) else None
         if self._has_bump:
             self._p_scale = Float(np.array([float(p.params["scale"]) if p is not None and p.kind == "bumpmap"
                                             else 0.0 for p in pert], np.float32))
@@ -331,7 +336,13 @@ class MaterialTable:
         n, s = Array3f(0.0, 0.0, 1.0), Array3f(1.0, 0.0, 0.0)
         if self._has_normal:
             m = mask & (code == 1)
-            nn = perturb.normalmap_normal(self.textures.lookup(tid, si.uv, m))
+            if self._p_const is None:
+                rgb = self.textures.lookup(tid, si.uv, m)
+            else:
+                rgb = dr.gather(Array3f, self._p_const, row, m)
+                if self.textures is not None:
+                    rgb = dr.select(tid != NONE, self.textures.lookup(tid, si.uv, m & (tid != NONE)), rgb)
+            nn = perturb.normalmap_normal(rgb)
             if flip is not False:
                 nn = dr.select(flip, perturb.flip_invalid(nn, wi_l), nn)
             len2 = dr.squared_norm(nn)

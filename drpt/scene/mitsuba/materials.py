@@ -14,7 +14,8 @@ Composites: ``twosided`` (one child; Mitsuba's two-child form, a different
 BSDF on each side, is not supported), ``blendbsdf`` (two children,
 ``weight``), ``mask`` (one child, ``opacity``).
 
-Perturbed frames: ``normalmap`` (the texture ``normalmap``) and ``bumpmap``
+Perturbed frames: ``normalmap`` (the texture ``normalmap``, or a ``rawconstant`` one:
+one normal everywhere) and ``bumpmap``
 (its one nested texture, whatever its name; ``scale``), each around one BSDF,
 with ``flip_invalid_normals`` and ``use_shadowing_function``. A ``bitmap``
 with ``raw`` keeps its stored values (no sRGB decoding), as Mitsuba's.
@@ -150,8 +151,16 @@ class Materials:
         for _, n in refs:
             if n.kind not in ("bsdf", "texture"):
                 self.reader.unsupported(n, f"{n.label} inside {node.label}")
-        params: dict[str, Any] = {bsdf_kinds.PERTURBING[kind]: self.texture(
-            texs[0], scalar=kind == "bumpmap", fallback=fallback)}
+        tex = texs[0]
+        if kind == "normalmap" and tex.plugin == "rawconstant":  # one normal everywhere
+            value: Any = tex.vector("value") if tex.has("value") and tex._type("value") == "Vector" \
+                else tex.color("value")
+            if value is None:
+                raise tex.error(f"{tex.label} needs a 'value'")
+            self.reader.check_unread(tex)
+        else:
+            value = self.texture(tex, scalar=kind == "bumpmap", fallback=fallback)
+        params: dict[str, Any] = {bsdf_kinds.PERTURBING[kind]: value}
         for name in ("flip_invalid_normals", "use_shadowing_function"):
             if node.has(name):
                 params[name] = node.bool(name)
