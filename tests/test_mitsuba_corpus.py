@@ -43,6 +43,7 @@ SCENES = {
     "bsdf_spheres/test_textured_roughconductor_path.xml": 1024,
     "bsdf_spheres/test_texturedprincipled1_path.xml": 1024,
     "bsdf_spheres/test_texturedprincipled2_path.xml": 1024,
+    "bsdf_spheres/test_texturedprincipledthin_path.xml": 1024,
     "floating_sphere/test_directional_direct.xml": 1024,
     "infinite_mirrors/scene_path.xml": 1024,
     "instancing/test_instancing_path.xml": 1024,
@@ -50,7 +51,6 @@ SCENES = {
 
 #: corpus scene -> what drpt lacks to render it (strict xfail)
 NOT_YET = {
-    "bsdf_spheres/test_texturedprincipledthin_path.xml": "principledthin BSDF",
     "mesh_attributes/test_mesh_attributes_1_face_direct.xml": "mesh_attribute texture",
     "mesh_attributes/test_mesh_attributes_3_face_direct.xml": "mesh_attribute texture",
     "mesh_attributes/test_mesh_attributes_3_vertex_direct.xml": "mesh_attribute texture",

@@ -124,7 +124,7 @@ def _anisotropic(leaf: BSDFSpec) -> bool:
         if au is None and av is None:
             return False
         return isinstance(au, Texture) or isinstance(av, Texture) or au != av
-    if leaf.kind == "principled":
+    if leaf.kind in ("principled", "principledthin"):
         return bsdf_kinds.given(p.get("anisotropic"))
     return False
 

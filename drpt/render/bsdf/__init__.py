@@ -105,6 +105,7 @@ REGISTRY: dict[str, str] = {
     "conductor": "conductor",
     "roughconductor": "roughconductor",
     "principled": "principled",
+    "principledthin": "principledthin",
     "thindielectric": "thindielectric",
     "roughdielectric": "roughdielectric",
     "plastic": "plastic",

@@ -22,7 +22,7 @@ with ``raw`` keeps its stored values (no sRGB decoding), as Mitsuba's.
 
 What is refused (an "unsupported" error, or with ``--ignore-unsupported`` a
 warning and a fallback): BSDF plugins outside the vocabulary (``measured``,
-``hair``, polarizers, ``principledthin``, ...; fallback: Mitsuba's
+``hair``, polarizers, ...; fallback: Mitsuba's
 default ``diffuse``, reflectance 0.5), texture plugins other than
 ``bitmap`` (``checkerboard``, ``mesh_attribute``, volumes...; fallback: the
 texture's mean color where known, else 0.5), and ``bitmap`` settings drpt's
