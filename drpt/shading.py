@@ -168,6 +168,10 @@ def complete(spec: BSDFSpec) -> BSDFSpec:
         if isinstance(v, Texture) and name not in allowed:
             raise ValueError(f"BSDF '{kind}': parameter '{name}' cannot be a texture")
     children = [complete(c) for c in spec.children]
+    if tex is not None:
+        inner = [n.kind for c in children for n in c.walk() if n.kind in bsdf_kinds.PERTURBING]
+        if inner:
+            raise ValueError(f"{inner[0]} inside {kind} is not supported")
     if kind == "twosided":
         for c in children:
             trans = [leaf.kind for leaf in c.leaves() if bsdf_kinds.transmits(leaf.kind, leaf.params)]

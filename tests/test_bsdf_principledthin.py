@@ -157,6 +157,11 @@ def test_derive_refuses_bad_parameters():
         pt.derive({"eta": 0.0})
     with pytest.raises(ValueError, match="sampling_rate"):
         pt.derive({"diffuse_reflectance_sampling_rate": -1.0})
+    with pytest.raises(ValueError, match=r"diff_trans = 2.5 is outside \[0, 2\]"):
+        pt.derive({"diff_trans": 2.5})
+    with pytest.raises(ValueError, match=r"sheen = -0.1 is outside \[0, 1\]"):
+        pt.derive({"sheen": -0.1})
+    assert pt.derive({"diff_trans": 2.0, "eta": 1.2}) == {"thin_eta": 1.2}
 
 
 # ------------------------------------------------------------------ renders against Mitsuba

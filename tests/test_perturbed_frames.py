@@ -115,6 +115,7 @@ CASES = {
                                            [BSDFSpec("twosided", {}, [aniso()])]),
     "bumpmap": lambda: BSDFSpec("bumpmap", {"texture": BUMPS, "scale": 0.3}, [diffuse()]),
 
+    "bumpmap anisotropic": lambda: BSDFSpec("bumpmap", {"texture": BUMPS, "scale": 0.3}, [aniso()]),
     "bumpmap no flip": lambda: BSDFSpec("bumpmap", {"texture": BUMPS, "scale": 0.3,
                                                     "flip_invalid_normals": False},
                                         [BSDFSpec("roughplastic", {"alpha": 0.3})]),
@@ -297,6 +298,11 @@ def test_negative_controls_fail(what, monkeypatch):
      r"t.xml:3: bsdf 'bumpmap' needs 1 nested texture, got 0"),
     ('<bsdf type="bumpmap"><texture type="bitmap"><string name="filename" value="bumps.png"/></texture>'
      '</bsdf>', r"t.xml:3: bsdf 'bumpmap' needs 1 nested BSDF, got 0"),
+    ('<bsdf type="bumpmap"><float name="scale" value="nan"/><bsdf type="diffuse"/><texture type="bitmap">'
+     '<string name="filename" value="bumps.png"/></texture></bsdf>', r"t.xml:3: bsdf 'bumpmap': scale must be finite"),
+    ('<bsdf type="normalmap"><texture name="normalmap" type="bitmap"><string name="filename" value="bumps.png"/>'
+     '</texture><bsdf type="bumpmap"><bsdf type="diffuse"/><texture type="bitmap"><string name="filename" '
+     'value="bumps.png"/></texture></bsdf></bsdf>', r"bumpmap inside normalmap is not supported"),
 ])
 def test_bad_perturbations_are_located_errors(tmp_path, body, message):
     from drpt.errors import SceneError
@@ -320,3 +326,17 @@ def test_perturbations_are_read_with_their_parameters():
     assert tex.raw and tex.path.name == "bumps.png" and sphere.children[0].kind == "diffuse"
     (nm, _) = [m.bsdf for m in load_scene(XML / "normalmap.xml").materials if m.bsdf.kind != "diffuse"]
     assert nm.kind == "normalmap" and nm.params["normalmap"].raw and nm.children[0].kind == "roughconductor"
+
+
+def test_only_scenes_that_need_tangents_carry_them():
+    """dp/du (and dp/dv) reach the kernels only for anisotropic BSDFs and perturbed frames;
+    perturbation data only for normal and bump maps."""
+    iso = BSDFSpec("roughconductor", {"alpha": 0.2})
+    cases = [(diffuse(), 0), (iso, 0), (BSDFSpec("roughconductor", {"alpha_u": 0.2, "alpha_v": 0.2}), 0),
+             (aniso(), 1), (BSDFSpec("principled", {"anisotropic": 0.5}), 1),
+             (BSDFSpec("principledthin", {"anisotropic": 0.5}), 1), (CASES["normalmap"](), 1),
+             (CASES["twosided bumpmap"](), 2)]
+    for spec, want in cases:
+        table = MaterialTable(_scene(complete(spec)))
+        assert table.tangents == want, spec
+        assert bool(table._pkinds) == (spec.kind in ("normalmap", "bumpmap") or spec.kind == "twosided")

@@ -8,7 +8,8 @@ Both sides: with ``s = sign(wi.z)``, ``wi' = s wi``, ``wo' = s wo`` (then
 is the reflected one mirrored through the sheet). ``wi.z = 0`` gives 0.
 
 Parameters: ``c = base_color``, ``r = roughness``, ``aniso = anisotropic``,
-``st = spec_trans``, ``dt = diff_trans / 2`` (``diff_trans`` runs 0..2),
+``st = spec_trans``, ``dt = diff_trans / 2`` (``diff_trans`` runs 0..2; the others
+0..1: :func:`derive` refuses numbers outside, textures are clipped),
 ``sheen``, ``sheen_tint``, ``flatness``, ``spec_tint``, ``eta`` (a number:
 the sheet's IOR, default 1.5) and the sampling rates ``srr``, ``srt``,
 ``sdt``, ``sdr`` (``specular_reflectance``, ``specular_transmittance``,
@@ -60,8 +61,18 @@ COLOR = "base_color"
 FLAGS = ("anisotropic", "spec_trans", "sheen", "sheen_tint", "flatness", "spec_tint", "diff_trans")
 
 
+def _upper(name: str) -> float:
+    return 2.0 if name == "diff_trans" else 1.0
+
+
 def derive(params: dict) -> dict:
-    """Host side: checks, and ``eta`` as the field ``thin_eta``."""
+    """Host side: checks (a number outside its range -- [0, 2] for ``diff_trans``, [0, 1]
+    for the others -- is refused; a texture's values are clipped to it), and ``eta`` as the
+    field ``thin_eta``."""
+    for name in FLOATS:
+        v = params.get(name, 0.0)
+        if isinstance(v, numbers.Real) and not (0.0 <= v <= _upper(name)):
+            raise ValueError(f"principledthin: {name} = {v!r} is outside [0, {_upper(name):g}]")
     eta = params.get("eta", 1.5)
     if not (isinstance(eta, numbers.Real) and math.isfinite(eta) and eta > 0.0):
         raise ValueError(f"principledthin: eta = {eta!r} must be a number > 0")
@@ -103,10 +114,11 @@ def params(table, si, active) -> ThinParams:
     flags = flags_of(table.specs_of("principledthin"))
     n = dr.width(si.material)
     vals = {"base_color": table.value("base_color", si, active),
-            "roughness": table.value("roughness", si, active),
+            "roughness": dr.clip(table.value("roughness", si, active), 0.0, 1.0),
             "eta": table.value("thin_eta", si, active)}
     for name in FLOATS[1:]:
-        vals[name] = table.value(name, si, active) if name in flags else dr.zeros(Float, n)
+        vals[name] = dr.clip(table.value(name, si, active), 0.0, _upper(name)) if name in flags \
+            else dr.zeros(Float, n)
     for short, name in zip(("srr", "srt", "sdt", "sdr"), RATES):
         vals[short] = table.value(name, si, active)
     return ThinParams(**vals, flags=flags)

@@ -37,6 +37,7 @@ A tree drpt's material layer refuses (:func:`drpt.shading.complete`:
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -166,6 +167,8 @@ class Materials:
                 params[name] = node.bool(name)
         if kind == "bumpmap" and node.has("scale"):
             params["scale"] = node.float("scale")
+            if not math.isfinite(params["scale"]):
+                raise node.error(f"{node.label}: scale must be finite, got {params['scale']}")
         return BSDFSpec(kind, params, [self.spec(kids[0])], [], node.where)
 
     # ------------------------------------------------------------ values
