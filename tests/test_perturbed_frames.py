@@ -115,6 +115,10 @@ CASES = {
                                            [BSDFSpec("twosided", {}, [aniso()])]),
     "bumpmap": lambda: BSDFSpec("bumpmap", {"texture": BUMPS, "scale": 0.3}, [diffuse()]),
 
+    "blend of a normalmap and a plain BSDF": lambda: BSDFSpec(
+        "blendbsdf", {"weight": 0.35}, [BSDFSpec("normalmap", {"normalmap": NORMALS}, [aniso()]), aniso(0.2)]),
+    "mask around a bump map": lambda: BSDFSpec(
+        "mask", {"opacity": 0.7}, [BSDFSpec("bumpmap", {"texture": BUMPS, "scale": 0.3}, [diffuse()])]),
     "bumpmap anisotropic": lambda: BSDFSpec("bumpmap", {"texture": BUMPS, "scale": 0.3}, [aniso()]),
     "bumpmap no flip": lambda: BSDFSpec("bumpmap", {"texture": BUMPS, "scale": 0.3,
                                                     "flip_invalid_normals": False},
@@ -151,7 +155,7 @@ def test_eval_pdf_equal_mitsuba(name):
 
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("name", ["anisotropic", "normalmap", "bumpmap", "twosided bumpmap",
-                                  "normalmap twosided"])
+                                  "normalmap twosided", "blend of a normalmap and a plain BSDF"])
 def test_sampling_matches_pdf(name):
     """Mitsuba's chi-square test of the table's sampling at one interaction (a perturbed
     frame) against its pdf; samples the perturbation rejects have weight 0."""
@@ -303,6 +307,8 @@ def test_negative_controls_fail(what, monkeypatch):
     ('<bsdf type="normalmap"><texture name="normalmap" type="bitmap"><string name="filename" value="bumps.png"/>'
      '</texture><bsdf type="bumpmap"><bsdf type="diffuse"/><texture type="bitmap"><string name="filename" '
      'value="bumps.png"/></texture></bsdf></bsdf>', r"bumpmap inside normalmap is not supported"),
+    ('<bsdf type="bumpmap"><bsdf type="diffuse"/><texture type="checkerboard"/></bsdf>',
+     r"t.xml:3: unsupported texture 'checkerboard' as a bump map \(only bitmap has a gradient\)"),
 ])
 def test_bad_perturbations_are_located_errors(tmp_path, body, message):
     from drpt.errors import SceneError

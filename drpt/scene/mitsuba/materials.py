@@ -159,6 +159,10 @@ class Materials:
             if value is None:
                 raise tex.error(f"{tex.label} needs a 'value'")
             self.reader.check_unread(tex)
+        elif kind == "bumpmap" and tex.plugin != "bitmap":  # Mitsuba's has no gradient for it
+            self.reader.unsupported(tex, f"{tex.label} as a bump map (only bitmap has a gradient)",
+                                    fallback="no bump")
+            return self.spec(kids[0])
         else:
             value = self.texture(tex, scalar=kind == "bumpmap", fallback=fallback)
         params: dict[str, Any] = {bsdf_kinds.PERTURBING[kind]: value}
