@@ -59,7 +59,7 @@ NOT_YET = {
     "projector/test_projector_textured_direct.xml": "projector emitter",
     "spot_light/test_spot_direct.xml": "spot light texture",
     "texture_interp/test_texture_interp_direct.xml": "bitmap to_uv, filter_type and wrap_mode",
-    "various_emitters/test_various_emitters_ptracer.xml": "textured area lights (bitmap radiance)",
+    "various_emitters/test_various_emitters_ptracer.xml": "textured area lights, projector, spot texture",
 }
 
 #: corpus scene -> -D values (the reference of the ptracer scene is rendered by Mitsuba's

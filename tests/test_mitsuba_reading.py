@@ -297,7 +297,7 @@ def test_files_written_by_other_tools_render_like_mitsuba(monkeypatch, name, con
     path = STYLES / f"{name}.xml"
     if control is not None:
         monkeypatch.setattr(Node, *control)
-    s, warns = _load(path)
+    s, warns = _load(path, ignore_unsupported=control is not None)  # (a dropped child is unsupported)
     assert control is not None or not warns, warns
     r, ref, var = _render_both(s, path, 256)
     assert r.image.shape == (24, 32, 3) and ref.mean() > 0.05 and ref.std() > 0.03  # not just the sky
@@ -307,3 +307,22 @@ def test_files_written_by_other_tools_render_like_mitsuba(monkeypatch, name, con
         assert z < 4.5 and zmean < 4.0, (z, zmean)
     else:
         assert z > 4.5 or zmean > 4.0, (z, zmean)
+
+
+def test_a_parameter_mitsuba_reads_and_drpt_does_not_is_unsupported(tmp_path, monkeypatch):
+    """The unread-parameter warning names only parameters Mitsuba's plugin refuses too (drpt
+    asks Mitsuba, loading the plugin with the node's parameters); one Mitsuba reads is an
+    unsupported parameter instead. Simulated with the sampler's seed, which drpt reads
+    without using it."""
+    from drpt.scene.mitsuba import reader
+
+    monkeypatch.setitem(reader._SILENT, "sampler", ())
+    body = SENSOR.replace("</film>", '</film><sampler type="independent"><integer name="seed" value="3"/>'
+                          "</sampler>")
+    p = _write(tmp_path / "s.xml", body)
+    with pytest.raises(SceneError) as e:
+        _load(p)
+    assert "unsupported parameter 'seed' of sampler 'independent' (Mitsuba reads it, drpt does not)" in str(e.value)
+    s, warns = _load(p, ignore_unsupported=True)
+    assert len(warns) == 1 and "seed" in warns[0] and "do not read" not in warns[0], warns
+    assert "seed" in s.settings.not_read[0]

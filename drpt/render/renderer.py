@@ -256,7 +256,7 @@ class Renderer:
             cross = [type(acc)(acc.x * acc.y, acc.x * acc.z, acc.y * acc.z)] if self.opt.moment else []
             nbad = dr.sum(UInt32(bad))
         sums = [dr.block_sum(c, m) for c in (acc.x, acc.y, acc.z)]
-        # squares, then with --moment (Mitsuba's moment integrator) the products rg, rb, gb
+        # squares, then with RenderOptions.moment (a Mitsuba moment integrator) the products rg, rb, gb
         sqsums = [dr.block_sum(c, m) for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
         dr.eval(sums, sqsums, nbad)
         img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)

@@ -57,6 +57,7 @@ def mitsuba():
     return mi
 
 
+_UNREFERENCED = re.compile(r'^\s*- \S+ "([^"]+)"', re.M)
 _UNRESOLVED = re.compile(r'unresolved reference to "(.*?)" in property "(.*?)"\. Make sure the object '
                          r'with id=".*?" exists\.')
 
@@ -121,6 +122,7 @@ class State:
         #: the <path> folders, last first, then the scene's folder, then Mitsuba's defaults)
         self.search = [Path(str(p)) for p in fs]
         self.added = self.search[:len(self.search) - len(backup)]  # <path> folders, scene folder
+        self.resolver = fs
         self.mi = mi
         self.mp = mp
         self.state = state
@@ -348,6 +350,33 @@ class Node:
         """Nested or referenced plugins that Mitsuba finds by type (:meth:`_is_child`),
         named or not, in file order."""
         return [self.state.node(self.props[k].index()) for k in self.props.keys() if self._is_child(k)]
+
+    def mitsuba_unread(self) -> set[str] | None:
+        """The parameters Mitsuba's plugin itself leaves unread (it refuses them), found by
+        loading the plugin with this node's parameters (not its nested plugins) in
+        Mitsuba; ``None`` when that load fails for another reason (a required nested
+        plugin, a file) and the question stays open."""
+        mi = self.state.mi
+        d = {"type": self.plugin}
+        for k in self.props.keys():
+            if self._type(k) != "ResolvedReference":
+                d[k] = self.props[k]
+        backup = mi.file_resolver()
+        mi.set_file_resolver(self.state.resolver)
+        logger = mi.logger()
+        level = logger.log_level()
+        logger.set_log_level(mi.LogLevel.Error)
+        try:
+            mi.load_dict(d, parallel=False)
+        except Exception as e:  # noqa: BLE001 - any failure leaves the question open
+            text = str(e)
+            if "unreferenced propert" not in text:
+                return None
+            return set(_UNREFERENCED.findall(text))
+        finally:
+            mi.set_file_resolver(backup)
+            logger.set_log_level(level)
+        return set()
 
     def unread(self, ignore=()) -> list[str]:
         """Parameters (not nested plugins) drpt did not read, in file order."""

@@ -103,6 +103,15 @@ class Reader:
         names = node.unread()
         if not names:
             return
+        # the warning names only what Mitsuba's plugin refuses too; a parameter that Mitsuba
+        # reads and drpt does not is an unsupported one (it would change Mitsuba's image)
+        refused = node.mitsuba_unread()
+        if refused is not None:
+            for name in [n for n in names if n not in refused]:
+                self.drpt_ignores(node, name, "Mitsuba reads it, drpt does not")
+            names = [n for n in names if n in refused]
+            if not names:
+                return
         listed = ", ".join(f"'{n}'" for n in names)
         if self.strict:
             raise node.error(f"{node.label} does not read parameter{'s' if len(names) > 1 else ''} "
