@@ -603,7 +603,7 @@ def _mitsuba_mean_var(path: Path, spp: int, seed: int, **defines):
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("name", ["composites", "spot", "envmap", "instances", "aniso_mesh", "normalmap",
+@pytest.mark.parametrize("name", ["composites", "spot", "envmap", "instances", "aniso_mesh", "normalmap", "thin",
                                   "bumpmap"])
 def test_export_of_an_imported_scene_renders_the_same_in_mitsuba(tmp_path, name):
     """Round trip: ``drpt export`` of an imported XML scene, rendered by Mitsuba, agrees with

@@ -187,13 +187,13 @@ _TAGS = {
     "independent": "sampler",
     "path": "integrator",
     "twosided": "bsdf", "diffuse": "bsdf", "drpt_phong": "bsdf", "principled": "bsdf",
-    "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf",
+    "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf", "principledthin": "bsdf",
     "plastic": "bsdf", "roughplastic": "bsdf", "thindielectric": "bsdf", "roughdielectric": "bsdf",
     "mask": "bsdf", "null": "bsdf", "normalmap": "bsdf", "bumpmap": "bsdf",
     "area": "emitter", "point": "emitter", "directional": "emitter", "spot": "emitter",
     "envmap": "emitter", "constant": "emitter",
     "sphere": "shape", "rectangle": "shape", "ply": "shape",
-    "bitmap": "texture",
+    "bitmap": "texture", "checkerboard": "texture", "rawconstant": "texture",
 }
 
 
