@@ -346,3 +346,30 @@ def test_only_scenes_that_need_tangents_carry_them():
         table = MaterialTable(_scene(complete(spec)))
         assert table.tangents == want, spec
         assert bool(table._pkinds) == (spec.kind in ("normalmap", "bumpmap") or spec.kind == "twosided")
+
+
+@pytest.mark.parametrize("name", ["normalmap", "bumpmap anisotropic", "twosided bumpmap", "normalmap twosided"])
+def test_degenerate_frames_stay_finite(name):
+    """dp/du and dp/dv of 0 (drpt's infinite planes, degenerate uvs), along the normal, and
+    grazing or tangent directions: eval, pdf and sample stay finite and non-negative."""
+    table = MaterialTable(_scene(complete(CASES[name]())))
+    n = 3000
+    g = Geometry(n, seed=11)
+    g.dp_du[:, :1000] = 0.0
+    g.dp_dv[:, :1500] = 0.0
+    g.dp_du[:, 2000:2500] = g.ns[:, 2000:2500]
+    rng = np.random.default_rng(12)
+    wi = _unit(rng.normal(size=(3, n)))
+    wi[2, ::3] = 1e-7
+    wi = _unit(wi)
+    wo = _unit(rng.normal(size=(3, n)))
+    wo[2, ::5] = 0.0
+    si = g.drpt(wi)
+    f, pdf = table.eval_pdf(si, _v3(g.world(wo)))
+    u = rng.random((3, n)).astype(np.float32)
+    d, bs = table.sample(si, Float(u[0]), Array2f(Float(u[1]), Float(u[2])))
+    for a in (f, pdf, bs.weight, bs.pdf, d):
+        a = np.array(a)
+        assert np.all(np.isfinite(a)), name
+    for a in (f, pdf, bs.weight, bs.pdf):
+        assert np.all(np.array(a) >= 0), name
