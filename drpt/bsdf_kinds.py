@@ -6,7 +6,7 @@ these names, and :mod:`drpt.render.material` uploads them.
 
 Kinds named after a Mitsuba 3 plugin (``conductor``, ``roughconductor``,
 ``dielectric``, ``thindielectric``, ``roughdielectric``, ``plastic``,
-``roughplastic``, ``principled``) take that plugin's parameter names and
+``roughplastic``, ``principled``, ``principledthin``) take that plugin's parameter names and
 defaults, so a parameter means the same in drpt and in Mitsuba; each one's
 lobe module (:mod:`drpt.render.bsdf`) states the math. drpt's own kinds
 (``diffuse``, ``phong``, ``cook_torrance``, ``mirror``) keep the names of
@@ -16,8 +16,10 @@ the fields they are read from (MTL ``Kd``, ``Ks``, ``Ns``; the seed's
 Composite kinds (:data:`COMPOSITES`) hold other specs as children:
 ``twosided`` (one child, shown from both sides; reflective children only,
 as in Mitsuba), ``blendbsdf`` (two children mixed as ``(1 - weight) a +
-weight b``) and ``mask`` (one child, seen with probability ``opacity``,
-else the ray passes straight through).
+weight b``), ``mask`` (one child, seen with probability ``opacity``,
+else the ray passes straight through), and ``normalmap`` / ``bumpmap``
+(one child, seen in a shading frame perturbed by a texture: Mitsuba's
+plugins of those names, :mod:`drpt.render.perturb`).
 
 Values are floats, RGB triples, :class:`drpt.shading.Texture` (where a
 kind's :data:`TEXTURABLE` allows it), or for string/bool parameters a
@@ -67,6 +69,12 @@ PARAMS: dict[str, dict[str, Any]] = {
                    "sheen_tint": 0.0, "clearcoat": 0.0, "clearcoat_gloss": 0.0,
                    "spec_trans": 0.0, "flatness": 0.0, "diffuse_reflectance_sampling_rate": 1.0,
                    "main_specular_sampling_rate": 1.0, "clearcoat_sampling_rate": 1.0},
+    "principledthin": {"base_color": GRAY, "roughness": 0.5, "anisotropic": 0.0, "spec_trans": 0.0,
+                       "sheen": 0.0, "sheen_tint": 0.0, "flatness": 0.0, "spec_tint": 0.0, "eta": 1.5,
+                       "diff_trans": 0.0, "specular_reflectance_sampling_rate": 1.0,
+                       "specular_transmittance_sampling_rate": 1.0,
+                       "diffuse_transmittance_sampling_rate": 1.0,
+                       "diffuse_reflectance_sampling_rate": 1.0},
 }
 
 #: Parameters of each kind that may be a texture (as Mitsuba allows).
@@ -86,6 +94,9 @@ TEXTURABLE: dict[str, frozenset[str]] = {
     # (Mitsuba reads principled's ``specular`` and ``eta`` as plain floats)
     "principled": frozenset({"base_color", "roughness", "metallic", "spec_tint", "anisotropic", "sheen",
                              "sheen_tint", "clearcoat", "clearcoat_gloss", "spec_trans", "flatness"}),
+    # (drpt reads principledthin's ``eta`` as a plain float)
+    "principledthin": frozenset({"base_color", "roughness", "anisotropic", "spec_trans", "sheen",
+                                 "sheen_tint", "flatness", "spec_tint", "diff_trans"}),
 }
 
 #: Kinds holding other specs: name -> (number of children, their parameters and defaults).
@@ -93,7 +104,15 @@ COMPOSITES: dict[str, tuple[int, dict[str, Any]]] = {
     "twosided": (1, {}),
     "blendbsdf": (2, {"weight": 0.5}),
     "mask": (1, {"opacity": 0.5}),
+    # the child seen in a perturbed shading frame: a tangent-space normal map (a texture,
+    # required), or a height map's gradient (``texture``, required) times ``scale``
+    "normalmap": (1, {"normalmap": None, "flip_invalid_normals": True, "use_shadowing_function": True}),
+    "bumpmap": (1, {"texture": None, "scale": 1.0, "flip_invalid_normals": True,
+                    "use_shadowing_function": True}),
 }
+
+#: Composites that perturb the shading frame of their child, and their texture parameter.
+PERTURBING: dict[str, str] = {"normalmap": "normalmap", "bumpmap": "texture"}
 
 #: Kinds that always transmit light: ``twosided`` refuses them, as Mitsuba's does. ``principled``
 #: is not listed: it transmits (and Mitsuba's ``twosided`` refuses it) exactly when its
@@ -101,7 +120,7 @@ COMPOSITES: dict[str, tuple[int, dict[str, Any]]] = {
 #: (Mitsuba's ``get_flag``: :func:`given`). :func:`transmits` is the whole rule, which
 #: :func:`drpt.shading.complete` applies. Without transmission principled is still one-sided
 #: (black from behind: its lobe sees the unflipped frame) unless wrapped in ``twosided``.
-TRANSMISSIVE = frozenset({"dielectric", "thindielectric", "roughdielectric", "null"})
+TRANSMISSIVE = frozenset({"dielectric", "thindielectric", "roughdielectric", "null", "principledthin"})
 
 LEAF_KINDS = tuple(PARAMS)
 ALL_KINDS = LEAF_KINDS + tuple(COMPOSITES)

@@ -185,12 +185,21 @@ def complete(spec: BSDFSpec) -> BSDFSpec:
             raise ValueError(f"BSDF '{kind}' needs {n} nested BSDF(s), found {len(spec.children)}")
     elif spec.children:
         raise ValueError(f"BSDF '{kind}' takes no nested BSDF")
-    allowed = bsdf_kinds.TEXTURABLE.get(kind, frozenset()) | ({"weight", "opacity"} if kind in
-                                                                bsdf_kinds.COMPOSITES else set())
+    allowed = bsdf_kinds.TEXTURABLE.get(kind, frozenset()) | ({"weight", "opacity", "normalmap", "texture"}
+                                                                if kind in bsdf_kinds.COMPOSITES else set())
+    tex = bsdf_kinds.PERTURBING.get(kind)
+    if tex is not None and not (isinstance(params[tex], Texture) or (
+            kind == "normalmap" and isinstance(params[tex], tuple) and len(params[tex]) == 3)):
+        raise ValueError(f"BSDF '{kind}' needs a texture '{tex}'"
+                         + (" (or an RGB value)" if kind == "normalmap" else ""))
     for name, v in params.items():
         if isinstance(v, Texture) and name not in allowed:
             raise ValueError(f"BSDF '{kind}': parameter '{name}' cannot be a texture")
     children = [complete(c) for c in spec.children]
+    if tex is not None:
+        inner = [n.kind for c in children for n in c.walk() if n.kind in bsdf_kinds.PERTURBING]
+        if inner:
+            raise ValueError(f"{inner[0]} inside {kind} is not supported")
     if kind == "twosided":
         for c in children:
             trans = [leaf.kind for leaf in c.leaves() if bsdf_kinds.transmits(leaf.kind, leaf.params)]

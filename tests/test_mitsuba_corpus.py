@@ -12,8 +12,8 @@ whose reason names what drpt lacks); one scene per line in both. The ptracer sce
 rendered by drpt's light tracer, as authored (its reference is Mitsuba's ``path``, as the
 file's comment says).
 
-The negative controls render perturbed copies (a 10% brighter light, a wrong IOR) written to
-``tmp_path`` against the original's reference: the test must fail them.
+The negative controls render perturbed copies (a 10% brighter light, a wrong IOR, a bump map
+of scale 0) written to ``tmp_path`` against the original's reference: the test must fail them.
 """
 
 from __future__ import annotations
@@ -29,15 +29,21 @@ from corpusutil import CORPUS, check_scene, corpus_scene, reference_files, rende
 #: corpus scene -> spp drpt renders it with (all pass Mitsuba's z-test)
 SCENES = {
     "bsdf_spheres/test_arealight_path.xml": 1024,
+    "bsdf_spheres/test_bumpmap_path.xml": 1024,
     "bsdf_spheres/test_constant_path.xml": 1024,
     "bsdf_spheres/test_envmap_path.xml": 1024,
+    "bsdf_spheres/test_normalmap_identity_roughconductor_path.xml": 1024,
+    "bsdf_spheres/test_normalmap_path.xml": 1024,
+    "bsdf_spheres/test_normalmap_roughconductor_path.xml": 1024,
     "bsdf_spheres/test_pointlight_path.xml": 1024,
     "bsdf_spheres/test_roughdielectric_path.xml": 1024,
     "bsdf_spheres/test_roughplastic_linear_path.xml": 1024,
     "bsdf_spheres/test_roughplastic_nonlinear_path.xml": 1024,
     "bsdf_spheres/test_textured_diffuse_path.xml": 1024,
+    "bsdf_spheres/test_textured_roughconductor_path.xml": 1024,
     "bsdf_spheres/test_texturedprincipled1_path.xml": 1024,
     "bsdf_spheres/test_texturedprincipled2_path.xml": 1024,
+    "bsdf_spheres/test_texturedprincipledthin_path.xml": 1024,
     "floating_sphere/test_directional_direct.xml": 1024,
     "infinite_mirrors/scene_path.xml": 1024,
     "instancing/test_instancing_path.xml": 1024,
@@ -53,15 +59,7 @@ SCENES = {
 }
 
 #: corpus scene -> what drpt lacks to render it (strict xfail)
-NOT_YET = {
-    "bsdf_spheres/test_bumpmap_path.xml": "bumpmap BSDF",
-    "bsdf_spheres/test_normalmap_identity_roughconductor_path.xml": "normalmap BSDF",
-    "bsdf_spheres/test_normalmap_path.xml": "normalmap BSDF",
-    "bsdf_spheres/test_normalmap_roughconductor_path.xml": "normalmap BSDF",
-    "bsdf_spheres/test_textured_roughconductor_path.xml": "roughconductor with textured alpha_u/alpha_v (wrong "
-                                                          "even when the two are equal; a textured alpha agrees)",
-    "bsdf_spheres/test_texturedprincipledthin_path.xml": "principledthin BSDF",
-}
+NOT_YET: dict[str, str] = {}
 
 #: corpus scene -> -D values, for a scene that cannot be rendered as authored (none)
 DEFINES: dict[str, dict[str, str]] = {}
@@ -136,7 +134,10 @@ def _perturbed(tmp_path: Path, rel: str, old: str, new: str) -> Path:
     ("texture_interp/test_texture_interp_direct.xml", 1024,
      '<string name="wrap_mode" value="mirror"/>\n                <string name="filter_type" value="nearest"/>',
      '<string name="wrap_mode" value="mirror"/>\n                <string name="filter_type" value="bilinear"/>'),
-], ids=["brighter light", "wrong ior", "projector image flipped", "nearest read bilinear"])
+    # the bump map flattened (scale 0: the sphere without its bumps)
+    ("bsdf_spheres/test_bumpmap_path.xml", 1024,
+     '<float name="scale" value="0.02"/>', '<float name="scale" value="0"/>'),
+], ids=["brighter light", "wrong ior", "projector image flipped", "nearest read bilinear", "flat bump map"])
 def test_negative_controls_fail_the_z_test(tmp_path, rel, spp, old, new):
     """The perturbed copy fails; the copy itself (``<path>`` and ``<include>`` made absolute,
     nothing else changed) passes, so the failure is the perturbation's."""

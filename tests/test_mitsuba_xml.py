@@ -12,9 +12,9 @@ gaussian rfilter), ``bsdfs`` (every BSDF plugin of the vocabulary, with textures
 composites) and ``legacy06`` (a 0.6 file: camelCase names, serialized meshes, parameters the
 plugins do not read). All but ``legacy06`` (which Mitsuba 3 itself refuses) are rendered here
 by drpt and by Mitsuba *from the same file* (block z-test, tests/render_check.py, and the z of
-the image mean); ``aniso`` (an anisotropic roughconductor on a sphere and a rectangle) is a
-known disagreement on the sphere (strict xfail: drpt's tangent frame on analytic spheres is
-not Mitsuba's dp/du).
+the image mean), and so is ``aniso`` (an anisotropic roughconductor on a sphere and a
+rectangle: shading frames follow Mitsuba's dp/du; tests/test_perturbed_frames.py has the
+meshes, the rotated sphere, normal and bump maps and their negative controls).
 """
 
 from __future__ import annotations
@@ -228,8 +228,8 @@ def test_fov_axes(axis, fov, aspect, expect_y):
 def test_unsupported_plugins_stop_or_are_left_out(tmp_path):
     p = _xml(tmp_path, '<shape type="sphere"><bsdf type="diffuse"/></shape>\n'
                        '<medium type="homogeneous" id="fog"/>\n'
-                       '<shape type="sphere"><bsdf type="bumpmap"><bsdf type="diffuse"/>'
-                       '<texture type="bitmap"><string name="filename" value="x.png"/></texture></bsdf></shape>')
+                       '<shape type="sphere"><bsdf type="hair"><float name="eumelanin" value="1"/>'
+                       '</bsdf></shape>')
     with pytest.raises(SceneError, match=r"t.xml:4: unsupported medium 'homogeneous' \(id 'fog'\)"):
         load_scene(p)
     with warnings.catch_warnings(record=True) as caught:
@@ -237,7 +237,7 @@ def test_unsupported_plugins_stop_or_are_left_out(tmp_path):
         s = load_scene(p, ignore_unsupported=True)
     msgs = [str(w.message) for w in caught]
     assert any("t.xml:4: unsupported medium 'homogeneous'" in m and "left out" in m for m in msgs)
-    assert any("t.xml:5: unsupported BSDF plugin 'bumpmap'" in m for m in msgs)
+    assert any("t.xml:5: unsupported BSDF plugin 'hair'" in m for m in msgs)
     assert len(s.spheres) == 2 and s.materials[1].bsdf.kind == "diffuse"
 
 
@@ -537,8 +537,6 @@ def _mean_z(r, ref, var):
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-@pytest.mark.xfail(strict=True, reason="anisotropic BSDFs on analytic spheres: drpt's shading "
-                   "tangent is not Mitsuba's dp/du (the rectangle in the same scene agrees)")
 def test_anisotropic_roughconductor_on_a_sphere_renders_like_mitsuba():
     from render_check import assert_agree
 
@@ -605,7 +603,8 @@ def _mitsuba_mean_var(path: Path, spp: int, seed: int, **defines):
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("name", ["composites", "spot", "envmap", "instances"])
+@pytest.mark.parametrize("name", ["composites", "spot", "envmap", "instances", "aniso_mesh", "normalmap", "thin",
+                                  "bumpmap"])
 def test_export_of_an_imported_scene_renders_the_same_in_mitsuba(tmp_path, name):
     """Round trip: ``drpt export`` of an imported XML scene, rendered by Mitsuba, agrees with
     Mitsuba's render of the original file (block z-test and the mean's z)."""

@@ -192,13 +192,13 @@ _TAGS = {
     "independent": "sampler",
     "path": "integrator",
     "twosided": "bsdf", "diffuse": "bsdf", "drpt_phong": "bsdf", "principled": "bsdf",
-    "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf",
+    "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf", "principledthin": "bsdf",
     "plastic": "bsdf", "roughplastic": "bsdf", "thindielectric": "bsdf", "roughdielectric": "bsdf",
-    "mask": "bsdf", "null": "bsdf",
+    "mask": "bsdf", "null": "bsdf", "normalmap": "bsdf", "bumpmap": "bsdf",
     "area": "emitter", "point": "emitter", "directional": "emitter", "spot": "emitter", "projector": "emitter",
     "envmap": "emitter", "constant": "emitter",
     "sphere": "shape", "rectangle": "shape", "ply": "shape",
-    "bitmap": "texture", "mesh_attribute": "texture", "checkerboard": "texture",
+    "bitmap": "texture", "mesh_attribute": "texture", "checkerboard": "texture", "rawconstant": "texture",
 }
 
 
@@ -392,6 +392,12 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
             raise DrptError(f"cannot export sphere {i}: radius {r} must be positive")
         shape = {"type": "sphere", "center": _Point(_f3(sph.center[i])), "radius": r,
                  "bsdf": bsdfs[sph.material[i]]}
+        if sph.rotation is not None:  # the sphere's orientation: its uv and dp/du
+            m = np.eye(4)
+            m[:3, :3] = sph.rotation[i] * r
+            m[:3, 3] = sph.center[i]
+            del shape["center"], shape["radius"]
+            shape["to_world"] = _Matrix(m)
         if emitters[sph.material[i]] is not None:
             shape["emitter"] = emitters[sph.material[i]]
         out[f"sphere_{i}"] = shape

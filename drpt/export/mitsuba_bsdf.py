@@ -5,7 +5,8 @@ One node, one plugin (plain ``mi.load_dict`` dicts: RGB values as
 ``filter_type="bilinear"`` and ``wrap_mode="repeat"``, as drpt looks them up):
 
 * ``twosided``, ``blendbsdf`` (``weight``; ``bsdf_0`` gets ``1 - weight``),
-  ``mask`` (``opacity``) -> the composites of the same name;
+  ``mask`` (``opacity``), ``normalmap``, ``bumpmap`` -> the composites of the
+  same name (a ``raw`` texture as a ``bitmap`` with ``raw``);
 * kinds named after a Mitsuba plugin -> that plugin with the same
   parameters, leaving out the ones not given (``None``) and the ones the
   plugin would not read next to another (``alpha`` beside ``alpha_u``/
@@ -35,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from ..bsdf_kinds import COMPOSITES, PARAMS
+from ..bsdf_kinds import COMPOSITES, PARAMS, PERTURBING
 from ..errors import DrptError
 from ..shading import BSDFSpec, Checkerboard, MeshAttribute, Texture
 from .mitsuba_dielectrics import KINDS as DIELECTRICS
@@ -49,6 +50,13 @@ def _to_uv(m):
     from .mitsuba import _Matrix
 
     return _Matrix(m)
+
+
+def _Vec(v):
+    """A 3-vector as the exporter writes vectors (its wrapper: ``<vector>`` in XML)."""
+    from .mitsuba import _Vector
+
+    return _Vector(tuple(float(x) for x in v))
 
 
 def _value(v: Any, origin: str) -> Any:
@@ -133,6 +141,22 @@ def to_mitsuba(spec: BSDFSpec) -> dict:
     kids = [to_mitsuba(c) for c in spec.children]
     if spec.kind == "twosided":
         return {"type": "twosided", **{f"bsdf_{i}": k for i, k in enumerate(kids)}}
+    if spec.kind in ("normalmap", "bumpmap"):
+        p = spec.params
+        v = p[PERTURBING[spec.kind]]
+        if not (isinstance(v, Texture) or (spec.kind == "normalmap" and isinstance(v, tuple))):
+            return kids[0]  # its texture dropped (no uvs): nothing perturbs the child
+        if isinstance(v, tuple):  # one normal everywhere: as stored, like drpt reads it
+            p = {**p, "normalmap": None}
+            const = {"type": "rawconstant", "value": _Vec(v)}
+        out = {"type": spec.kind, "bsdf": kids[0],
+               "flip_invalid_normals": bool(p["flip_invalid_normals"]),
+               "use_shadowing_function": bool(p["use_shadowing_function"])}
+        if spec.kind == "normalmap":
+            out["normalmap"] = const if isinstance(v, tuple) else _value(v, spec.origin)
+        else:
+            out["texture"], out["scale"] = _value(p["texture"], spec.origin), float(p["scale"])
+        return out
     if spec.kind == "blendbsdf":
         return {"type": "blendbsdf", "weight": _value(spec.params["weight"], spec.origin),
                 "bsdf_0": kids[0], "bsdf_1": kids[1]}

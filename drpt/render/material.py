@@ -47,9 +47,12 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
+from .. import bsdf_kinds
 from ..scene.model import Scene
 from ..shading import BSDFSpec, Checkerboard, Texture, interpret_scene
+from . import perturb
 from .bsdf import BSDFSample, lobe
+from .perturb import PerturbedFrame
 from .surface import Interaction, _vec
 from .warp import Frame
 
@@ -63,15 +66,31 @@ class _Component:
     weight: float = 1.0
     weight_texture: Texture | None = None  # weight *= tex (or 1 - tex when complement)
     complement: bool = False
+    perturb: BSDFSpec | None = None  # the normalmap / bumpmap around the leaf
+    two_inner: bool = False  # a twosided between the perturbation and the leaf
 
 
 def _flatten(spec: BSDFSpec, two_sided: bool = False, c: _Component | None = None) -> list[_Component]:
-    """The components of ``spec`` (a complete tree), in depth-first order."""
+    """The components of ``spec`` (a complete tree), in depth-first order. ``two_sided``
+    (and a component's ``two_sided``) is a ``twosided`` around the component's
+    perturbation, if any (``two_inner``: one inside it)."""
     c = c or _Component(spec, False)
     if spec.kind == "twosided":
         if len(spec.children) == 2:
             raise ValueError("twosided with a different BSDF on each side is not supported")
+        if c.perturb is not None:
+            cc = copy.copy(c)
+            cc.two_inner = True
+            return _flatten(spec.children[0], two_sided, cc)
         return _flatten(spec.children[0], True, c)
+    if spec.kind in bsdf_kinds.PERTURBING:
+        if c.perturb is not None:
+            raise ValueError(f"{spec.kind} inside {c.perturb.kind} is not supported")
+        cc = copy.copy(c)
+        v = spec.params.get(bsdf_kinds.PERTURBING[spec.kind])
+        if isinstance(v, Texture) or (spec.kind == "normalmap" and isinstance(v, tuple)):
+            cc.perturb = spec  # (a bump texture dropped for want of uvs perturbs nothing)
+        return _flatten(spec.children[0], two_sided, cc)
     if spec.kind in ("blendbsdf", "mask"):
         w = spec.params["weight" if spec.kind == "blendbsdf" else "opacity"]
         if spec.kind == "mask":
@@ -93,7 +112,39 @@ def _flatten(spec: BSDFSpec, two_sided: bool = False, c: _Component | None = Non
                     continue
             out += _flatten(child, two_sided, cc)
         return out
-    return [_Component(spec, two_sided, c.weight, c.weight_texture, c.complement)]
+    return [_Component(spec, two_sided, c.weight, c.weight_texture, c.complement, c.perturb, c.two_inner)]
+
+
+def _anisotropic(leaf: BSDFSpec) -> bool:
+    """Whether ``leaf``'s response depends on the tangent's direction (host side):
+    distinct or textured ``alpha_u``/``alpha_v``, principled's ``anisotropic``."""
+    p = leaf.params
+    if leaf.kind in ("roughconductor", "roughdielectric"):
+        au, av = p.get("alpha_u"), p.get("alpha_v")
+        if au is None and av is None:
+            return False
+        return isinstance(au, Texture) or isinstance(av, Texture) or au != av
+    if leaf.kind in ("principled", "principledthin"):
+        return bsdf_kinds.given(p.get("anisotropic"))
+    return False
+
+
+def tangent_frame(n: Array3f, dp_du: Array3f) -> Frame:
+    """Mitsuba's shading frame (``SurfaceInteraction::initialize_sh_frame``): ``s`` is
+    ``dp/du`` made orthogonal to ``n``, ``t = n x s``; where ``dp/du`` is 0 (or along
+    ``n``), :class:`Frame`'s basis of ``n`` alone."""
+    base = Frame(n)
+    s = dr.fma(n, -dr.dot(n, dp_du), dp_du)
+    len2 = dr.squared_norm(s)
+    ok = len2 > 1e-30
+    s = dr.select(ok, s * dr.rsqrt(dr.select(ok, len2, 1.0)), base.s)
+    return Frame.from_axes(s, dr.cross(n, s), n)
+
+
+def _z_flipped(frame: Frame, flip) -> Frame:
+    """``frame`` seen from behind where ``flip``: ``(s, t, -n)``, Mitsuba's ``twosided``
+    (it negates the local ``z`` and keeps the tangents)."""
+    return Frame.from_axes(frame.s, frame.t, dr.select(flip, -frame.n, frame.n))
 
 
 def _luminance(c: Array3f) -> Float:
@@ -127,6 +178,11 @@ class MaterialTable:
         # rows: every component of every material, material by material
         self.rows: list[_Component] = [c for cs in comps for c in cs]
         self.kinds = sorted({c.leaf.kind for c in self.rows})
+        # interactions carry dp/du (frames follow it, as Mitsuba's) only where some BSDF
+        # depends on the tangent's direction; a scene without one traces no tangent code
+        perturbs = {c.perturb.kind for c in self.rows if c.perturb is not None}
+        self.tangents = 2 if "bumpmap" in perturbs else 1 if (
+            perturbs or any(_anisotropic(c.leaf) for c in self.rows)) else 0
         self.lobes = {k: lobe(k) for k in self.kinds}
         self._rows_of = {k: [i for i, c in enumerate(self.rows) if c.leaf.kind == k] for k in self.kinds}
         kind_idx = np.array([self.kinds.index(c.leaf.kind) for c in self.rows], np.uint32)
@@ -222,6 +278,11 @@ class MaterialTable:
         self._emit_tex = UInt32(np.array(etex, np.int64).astype(np.uint32)) if any(
             i != NONE for i in etex) else None
 
+        # Perturbed frames (normalmap, bumpmap): per row, only in scenes that have them
+        self._pkinds = sorted({c.leaf.kind for c in self.rows if c.perturb is not None})
+        if self._pkinds:
+            self._setup_perturb(tex_id)
+
         # Textures: one set for every textured field and weight.
         self.textures = None
         if textures:
@@ -235,6 +296,79 @@ class MaterialTable:
         self._any_delta = any(delta)
 
     _only: tuple[str, ...] | None = None  # a restricted view's kinds (see restricted)
+
+    def _setup_perturb(self, tex_id) -> None:
+        rows = self.rows
+        pert = [c.perturb for c in rows]
+        kinds = {p.kind for p in pert if p is not None}
+        self._has_normal, self._has_bump = "normalmap" in kinds, "bumpmap" in kinds
+        code = np.array([0 if p is None else 1 if p.kind == "normalmap" else 2 for p in pert], np.uint32)
+        self._p_code = UInt32(code)
+        values = [None if p is None else p.params[bsdf_kinds.PERTURBING[p.kind]] for p in pert]
+        ids = [tex_id(v) if isinstance(v, Texture) else NONE for v in values]
+        self._p_tex = UInt32(np.array(ids, np.int64).astype(np.uint32))
+        # a normal map's constant value (a texture's: its lookup replaces it)
+        consts = [(0.5, 0.5, 1.0) if not isinstance(v, tuple) else v for v in values]
+        self._p_const = _vec(np.array(consts, float)) if any(isinstance(v, tuple) for v in values) else None
+        if self._has_bump:
+            self._p_scale = Float(np.array([float(p.params["scale"]) if p is not None and p.kind == "bumpmap"
+                                            else 0.0 for p in pert], np.float32))
+
+        def flag(name: str, values):
+            got = {v for v, p in zip(values, pert) if p is not None}
+            if len(got) == 1:
+                return got.pop()
+            return Bool(np.array(values, bool))
+
+        self._p_flip = flag("flip", [p is not None and bool(p.params["flip_invalid_normals"]) for p in pert])
+        self._p_shadow = flag("shadow", [p is not None and bool(p.params["use_shadowing_function"])
+                                         for p in pert])
+        self._p_inner = flag("inner", [c.two_inner for c in rows])
+
+    def _perturbed(self, si: Interaction, row_si: Interaction, mask: Bool, outer: Frame,
+                   sh_frame: Frame) -> PerturbedFrame:
+        """The frame the lanes' perturbed components see (:mod:`drpt.render.perturb`);
+        ``outer``: the interaction's frame as the component sees it (mirrored inside
+        ``twosided`` from behind), ``sh_frame``: the interaction's own."""
+        row = row_si.material
+        code = dr.gather(UInt32, self._p_code, row, mask)
+        tid = dr.gather(UInt32, self._p_tex, row, mask)
+        wi_l = outer.to_local(si.wi)
+
+        def rowflag(v):
+            return v if isinstance(v, bool) else dr.gather(Bool, v, row, mask)
+
+        flip = rowflag(self._p_flip)
+        n, s = Array3f(0.0, 0.0, 1.0), Array3f(1.0, 0.0, 0.0)
+        if self._has_normal:
+            m = mask & (code == 1)
+            if self._p_const is None:
+                rgb = self.textures.lookup(tid, si.uv, m)
+            else:
+                rgb = dr.gather(Array3f, self._p_const, row, m)
+                if self.textures is not None:
+                    rgb = dr.select(tid != NONE, self.textures.lookup(tid, si.uv, m & (tid != NONE)), rgb)
+            nn = perturb.normalmap_normal(rgb)
+            if flip is not False:
+                nn = dr.select(flip, perturb.flip_invalid(nn, wi_l), nn)
+            len2 = dr.squared_norm(nn)
+            nn = dr.select(len2 > 1e-30, nn * dr.rsqrt(dr.select(len2 > 1e-30, len2, 1.0)),
+                           Array3f(0.0, 0.0, 1.0))
+            n = dr.select(m, nn, n)
+            s = dr.select(m, perturb.normalmap_tangent(nn), s)
+        if self._has_bump:
+            m = mask & (code == 2)
+            grad = self.textures.gradient(tid, si.uv, m) * dr.gather(Float, self._p_scale, row, m)
+            nb = perturb.bump_normal(grad, si.ns, si.ng, si.dp_du, si.dp_dv, sh_frame)
+            if flip is not False:
+                nb = dr.select(flip, perturb.flip_invalid(nb, wi_l), nb)
+            n = dr.select(m, nb, n)
+            s = dr.select(m, perturb.bump_tangent(nb, si.dp_du), s)
+        inner = rowflag(self._p_inner)
+        mirror = None
+        if inner is not False:
+            mirror = inner & (dr.dot(wi_l, n) < 0.0)
+        return PerturbedFrame(outer, n, s, mirror, rowflag(self._p_shadow))
 
     def restricted(self, kinds) -> MaterialTable:
         """A view of this table that traces only the lobes of ``kinds`` (same
@@ -352,11 +486,22 @@ class MaterialTable:
             kind_of = dr.gather(UInt32, self.kind, row_si.material, present)
         flip = dr.dot(si.ns, si.wi) < 0.0
         flipped, plain = None, None
+        tangent = None
         for kind in kinds:
             i = self.kinds.index(kind)
             mask = present if kind_of is None else present & (kind_of == i)
             two = self._two[kind]
-            if two is True:
+            if si.dp_du is not None:  # frames follow dp/du; twosided mirrors z
+                tangent = tangent or tangent_frame(si.ns, si.dp_du)
+                if two is True:
+                    frame = _z_flipped(tangent, flip)
+                elif two is False:
+                    frame = tangent
+                else:
+                    frame = _z_flipped(tangent, dr.gather(Bool, two, row_si.material, mask) & flip)
+                if kind in self._pkinds:
+                    frame = self._perturbed(si, row_si, mask, frame, tangent)
+            elif two is True:
                 flipped = flipped or Frame(dr.select(flip, -si.ns, si.ns))
                 frame = flipped
             elif two is False:
@@ -379,6 +524,9 @@ class MaterialTable:
                 p = bsdf.params(self, rsi, mask)
                 wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
                 fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
+                if isinstance(frame, PerturbedFrame):
+                    fac = frame.factor(wo)
+                    fj, pj = fj * fac, dr.select(fac > 0.0, pj, 0.0)
                 if w is None:
                     f = dr.select(mask, fj, f)
                     pdf = dr.select(mask, pj, pdf)
@@ -413,8 +561,13 @@ class MaterialTable:
         for _, bsdf, mask, frame, rsi in self._cases(si, None, row_si, present):
             p = bsdf.params(self, rsi, mask)
             bs = bsdf.sample(p, frame.to_local(si.wi), u1, u2)
+            wo_j = frame.to_world(bs.wo)
+            if isinstance(frame, PerturbedFrame):
+                fac = frame.factor(wo_j)
+                ok = fac > 0.0
+                bs.weight, bs.pdf, bs.valid = bs.weight * fac, dr.select(ok, bs.pdf, 0.0), bs.valid & ok
             out = dr.select(mask, bs, out)
-            wo = dr.select(mask, frame.to_world(bs.wo), wo)
+            wo = dr.select(mask, wo_j, wo)
         out.valid &= present
         if self.K > 1 and not self.is_specular_only():
             # a smooth sample weighs the whole mixture: f_mix / pdf_mix

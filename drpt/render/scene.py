@@ -132,7 +132,8 @@ class DeviceScene:
             self.materials, self.surfaces = NoMaterials(), NoSurfaces()
         else:
             self.materials = MaterialTable(scene, options.bsdf)
-            self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None)
+            self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None,
+                                        tangents=self.materials.tangents)
         self.area_lights = AreaLights(scene, self.surfaces, self.materials)
         self.delta_lights = DeltaLights(scene)
         self.warnings: list[str] = list(self.materials.notes)

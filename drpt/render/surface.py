@@ -34,7 +34,8 @@ class Interaction:
     surface along ``ng`` (:mod:`drpt.render.spawn`; zero on a miss).
     """
 
-    def __init__(self, valid, t, p, ng, ns, prim, material, wi, uv=None, p_error=None):
+    def __init__(self, valid, t, p, ng, ns, prim, material, wi, uv=None, p_error=None,
+                 dp_du=None, dp_dv=None):
         self.valid: Bool = valid
         self.t: Float = t
         self.p: Array3f = p
@@ -45,13 +46,58 @@ class Interaction:
         self.wi: Array3f = wi
         self.uv: Array2f = uv if uv is not None else Array2f(0.0, 0.0)  # OBJ convention
         self.p_error: Float = p_error if p_error is not None else Float(0.0)
+        # Mitsuba's dp/du and dp/dv (world; its uv convention ``(u, 1 - v)``), only in
+        # scenes whose materials need a tangent frame (None otherwise; zero: no tangent)
+        self.dp_du: Array3f | None = dp_du
+        self.dp_dv: Array3f | None = dp_dv
 
     def is_triangle(self, n_triangles: int) -> Bool:
         return self.valid & (self.prim < n_triangles)
 
 
+def triangle_tangents(positions: np.ndarray, uvs: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Mitsuba's ``dp/du`` and ``dp/dv`` of each triangle (``Mesh::compute_surface_interaction``),
+    ``(F, 3)`` each: from the uvs (Mitsuba's convention ``(u, 1 - v)`` of drpt's) where
+    their determinant is not 0, Mitsuba's ``coordinate_system`` of the face normal where
+    it is, and the edges ``p1 - p0``, ``p2 - p0`` (the barycentric parameterisation)
+    without uvs."""
+    p = np.asarray(positions, np.float32).astype(np.float64)
+    dp0, dp1 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    if uvs is None:
+        return dp0, dp1
+    uv = np.asarray(uvs, np.float32).astype(np.float64).copy()
+    uv[..., 1] = 1.0 - uv[..., 1]
+    duv0, duv1 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    det = duv0[:, 0] * duv1[:, 1] - duv0[:, 1] * duv1[:, 0]
+    ok = det != 0.0
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
+    dp_du = (duv1[:, 1:2] * dp0 - duv0[:, 1:2] * dp1) * inv
+    dp_dv = (duv0[:, 0:1] * dp1 - duv1[:, 0:1] * dp0) * inv
+    if not ok.all():
+        n = np.cross(dp0[~ok], dp1[~ok])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        s, t = coordinate_system(n)
+        dp_du[~ok], dp_dv[~ok] = s, t
+    return dp_du, dp_dv
+
+
+def coordinate_system(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mitsuba's (and :class:`drpt.render.warp.Frame`'s) orthonormal basis of unit
+    normals ``n`` ``(N, 3)`` (Duff et al. 2017), on the host."""
+    sign = np.where(n[:, 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + n[:, 2])
+    b = n[:, 0] * n[:, 1] * a
+    s = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], -1)
+    t = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], -1)
+    return s, t
+
+
 class SurfaceData:
-    def __init__(self, scene: Scene, with_uv: bool = False):
+    """``tangents``: 0, or 1 to give interactions Mitsuba's ``dp/du`` (anisotropic
+    BSDFs and normal maps orient their frame by it), 2 to give ``dp/dv`` too (bump maps)."""
+
+    def __init__(self, scene: Scene, with_uv: bool = False, tangents: int = 0):
+        self.tangents = tangents
         tris, sph, pl = scene.triangles, scene.spheres, scene.planes
         self.n_tri, self.n_sph, self.n_pl = len(tris), len(sph), len(pl)
         if self.n_tri:
@@ -70,9 +116,18 @@ class SurfaceData:
                     for k in range(3))
             if self.has_normals:
                 self.n0, self.n1, self.n2 = (_vec(tris.normals[:, k]) for k in range(3))
+            if tangents:
+                dp_du, dp_dv = triangle_tangents(tris.positions, tris.uvs)
+                self.dp_du = _vec(dp_du)
+                if tangents > 1:
+                    self.dp_dv = _vec(dp_dv)
         if self.n_sph:
             self.sph_c = _vec(sph.center)
             self.sph_r = Float(sph.radius.astype(np.float32))
+            self.sph_rot = None
+            if tangents and sph.rotation is not None:
+                rot = np.asarray(sph.rotation, np.float64)
+                self.sph_rot = tuple(_vec(rot[:, :, k]) for k in range(3))  # columns: local axes
         if self.n_pl:
             self.pl_n = _vec(pl.normal)
             self.pl_o = Float(np.asarray(pl.offset, np.float32))
@@ -89,6 +144,8 @@ class SurfaceData:
         ns = Array3f(0.0, 0.0, 1.0)
         err = Float(0.0)
         uv = None
+        dp_du = Array3f(0.0) if self.tangents else None
+        dp_dv = Array3f(0.0) if self.tangents > 1 else None
         if self.n_tri:
             is_tri = valid & (prim < self.n_tri)
             i = dr.select(is_tri, prim, 0)
@@ -110,6 +167,10 @@ class SurfaceData:
                 ns = dr.select(is_tri, sn, ns)
             else:
                 ns = dr.select(is_tri, n, ns)
+            if self.tangents:
+                dp_du = dr.select(is_tri, dr.gather(Array3f, self.dp_du, i, is_tri), dp_du)
+                if self.tangents > 1:
+                    dp_dv = dr.select(is_tri, dr.gather(Array3f, self.dp_dv, i, is_tri), dp_dv)
             if self.has_uv:
                 uv = (dr.gather(Array2f, self.uv0, i, is_tri) * (1.0 - u - v)
                       + dr.gather(Array2f, self.uv1, i, is_tri) * u
@@ -124,6 +185,15 @@ class SurfaceData:
             ng = dr.select(is_sph, n, ng)
             ns = dr.select(is_sph, n, ns)
             err = dr.select(is_sph, sphere_error(p, r, n), err)
+            if self.tangents:
+                # Mitsuba's sphere: dp/du = to_world (-y, x, 0) 2 pi of the local point (x, y, z)
+                if self.sph_rot is None:
+                    du = Array3f(-n.y, n.x, 0.0)
+                else:
+                    a0, a1, a2 = (dr.gather(Array3f, col, j, is_sph) for col in self.sph_rot)
+                    lx, ly = dr.dot(a0, n), dr.dot(a1, n)
+                    du = a1 * lx - a0 * ly
+                dp_du = dr.select(is_sph, du * (r * 2.0 * dr.pi), dp_du)
         if self.n_pl:
             first = self.n_tri + self.n_sph
             is_pl = valid & (prim >= first)
@@ -135,4 +205,4 @@ class SurfaceData:
             ns = dr.select(is_pl, n, ns)
             err = dr.select(is_pl, plane_error(p, n, off), err)
         material = dr.gather(UInt32, self.material, prim, valid)
-        return Interaction(valid, t, p, ng, ns, prim, material, -d, uv, err)
+        return Interaction(valid, t, p, ng, ns, prim, material, -d, uv, err, dp_du, dp_dv)

@@ -119,6 +119,39 @@ class TextureSet:
         return out
 
 
+    def gradient(self, tex_id: UInt32, uv: Array2f, active: Bool = True) -> Array2f:
+        """The derivatives of texture ``tex_id``'s luminance along Mitsuba's ``u`` and
+        ``v`` (``(u, 1 - v)`` of drpt's ``uv``) at ``uv``: Mitsuba's ``bitmap.eval_1_grad``,
+        the bilinear interpolant's differences of the four texels around ``uv`` times the
+        resolution. 0 for procedural textures and inactive lanes."""
+        active = Bool(active)
+        pos = Array2f(uv.x, 1.0 - uv.y)
+        out = Array2f(0.0)
+        for k, (tex, (h, w)) in enumerate(zip(self.textures, self.shapes)):
+            image = getattr(tex, "tex", tex)  # an image texture, possibly wrapped with options
+            if not hasattr(image, "eval_fetch") or image.filter_mode() != dr.FilterMode.Linear:
+                continue  # procedural, or nearest (whose gradient is 0 almost everywhere)
+            m = active & (tex_id == k)
+            a = getattr(tex, "m", None) or (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)  # a to_uv, row-major
+            p = Array2f(pos.x * a[0] + pos.y * a[1] + a[2], pos.x * a[3] + pos.y * a[4] + a[5])
+            f00, f10, f01, f11 = (_lum(Array3f(*c)) for c in image.eval_fetch(p, m))
+            px = dr.fma(p.x, w, -0.5)
+            py = dr.fma(p.y, h, -0.5)
+            w1x, w1y = px - dr.floor(px), py - dr.floor(py)
+            w0x, w0y = 1.0 - w1x, 1.0 - w1y
+            gx = dr.fma(w0y, f10 - f00, w1y * (f11 - f01))
+            gy = dr.fma(w0x, f01 - f00, w1x * (f11 - f10))
+            # Mitsuba's transposed multiply by to_uv, then times the resolution
+            du = (a[0] * gx + a[3] * gy) * w
+            dv = (a[1] * gx + a[4] * gy) * h
+            out = dr.select(m, Array2f(du, dv), out)
+        return out
+
+
+def _lum(c: Array3f):
+    return 0.212671 * c.x + 0.715160 * c.y + 0.072169 * c.z
+
+
 def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool, si=None) -> Array3f:
     if isinstance(tex, _Attribute):
         return tex.eval(si, active)

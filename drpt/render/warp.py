@@ -53,6 +53,13 @@ class Frame:
         self.t = Array3f(b, sign + n.y * n.y * a, -n.y)
         self.n = n
 
+    @classmethod
+    def from_axes(cls, s: Array3f, t: Array3f, n: Array3f) -> Frame:
+        """The frame of given axes (orthonormal; ``(s, t, -n)`` is a mirrored frame)."""
+        f = cls.__new__(cls)
+        f.s, f.t, f.n = s, t, n
+        return f
+
     def to_local(self, v: Array3f) -> Array3f:
         return Array3f(dr.dot(v, self.s), dr.dot(v, self.t), dr.dot(v, self.n))
 

@@ -185,6 +185,10 @@ class Spheres:
     center: np.ndarray  # (S, 3) float64
     radius: np.ndarray  # (S,) float64
     material: np.ndarray  # (S,) int32
+    #: (S, 3, 3) float64: each sphere's orientation (a rotation; Mitsuba's ``to_world``
+    #: without its scale and translation), which orients its parameterisation
+    #: (uv, dp/du) and nothing else; ``None``: the identity for every sphere
+    rotation: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.radius.shape[0])

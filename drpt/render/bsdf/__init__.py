@@ -1,7 +1,9 @@
 """BSDF lobes, one module each: ``diffuse``, ``phong``, ``cook_torrance``
 (with ``microfacet`` for GGX), ``dielectric``, ``mirror``, ``null``,
 ``plastic``, ``roughplastic`` (its coating tables precomputed by
-``roughplastic_tables``).
+``roughplastic_tables``), ``conductor``, ``roughconductor``, ``thindielectric``,
+``roughdielectric``, ``principled``, ``principledthin``. (``normalmap`` and
+``bumpmap`` are no lobes: they perturb the frame a lobe sees, :mod:`drpt.render.perturb`.)
 
 :data:`REGISTRY` maps each leaf kind of :mod:`drpt.bsdf_kinds` to its
 module; :class:`drpt.render.material.MaterialTable` finds a kind's lobe
@@ -105,6 +107,7 @@ REGISTRY: dict[str, str] = {
     "conductor": "conductor",
     "roughconductor": "roughconductor",
     "principled": "principled",
+    "principledthin": "principledthin",
     "thindielectric": "thindielectric",
     "roughdielectric": "roughdielectric",
     "plastic": "plastic",

@@ -127,7 +127,9 @@ def gather_state(s: WaveState, idx: UInt32) -> WaveState:
 def gather_interaction(si: Interaction, idx: UInt32) -> Interaction:
     return Interaction(_take(si.valid, idx), _take(si.t, idx), _take(si.p, idx), _take(si.ng, idx),
                        _take(si.ns, idx), _take(si.prim, idx), _take(si.material, idx),
-                       _take(si.wi, idx), _take(si.uv, idx), _take(si.p_error, idx))
+                       _take(si.wi, idx), _take(si.uv, idx), _take(si.p_error, idx),
+                       None if si.dp_du is None else _take(si.dp_du, idx),
+                       None if si.dp_dv is None else _take(si.dp_dv, idx))
 
 
 def _spread(x: UInt32) -> UInt32:

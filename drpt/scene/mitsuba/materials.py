@@ -15,13 +15,19 @@ BSDF on each side, is not supported), ``blendbsdf`` (two children,
 ``weight``), ``mask`` (one child, ``opacity``).
 
 ``bitmap`` keeps Mitsuba's ``filter_type`` (bilinear, nearest), ``wrap_mode``
-(repeat, mirror, clamp), ``raw`` and ``to_uv``; ``rawconstant`` is its constant
-value; ``checkerboard`` becomes :class:`~drpt.shading.Checkerboard`, ``mesh_attribute``
+(repeat, mirror, clamp), ``raw`` (its stored values, no sRGB decoding) and
+``to_uv``; ``rawconstant`` is its constant value; ``checkerboard`` becomes
+:class:`~drpt.shading.Checkerboard`, ``mesh_attribute``
 :class:`~drpt.shading.MeshAttribute` (the reader loads the attribute with the mesh).
 
+Perturbed frames: ``normalmap`` (the texture ``normalmap``, or a ``rawconstant`` one:
+one normal everywhere) and ``bumpmap``
+(its one nested texture, whatever its name; ``scale``), each around one BSDF,
+with ``flip_invalid_normals`` and ``use_shadowing_function``.
+
 What is refused (an "unsupported" error, or with ``--ignore-unsupported`` a
-warning and a fallback): BSDF plugins outside the vocabulary (``bumpmap``,
-``normalmap``, ``measured``, ``hair``, polarizers, ...; fallback: Mitsuba's
+warning and a fallback): BSDF plugins outside the vocabulary (``measured``,
+``hair``, polarizers, ...; fallback: Mitsuba's
 default ``diffuse``, reflectance 0.5) and other texture plugins (volumes...;
 fallback: 0.5). Parameters the plugin does
 not read (``int_ior`` on ``roughconductor``) are left unread, for the
@@ -32,6 +38,7 @@ A tree drpt's material layer refuses (:func:`drpt.shading.complete`:
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -84,7 +91,9 @@ class Materials:
         r = self.reader
         kind = node.plugin
         origin = node.where
-        if kind in bsdf_kinds.COMPOSITES:
+        if kind in bsdf_kinds.PERTURBING:
+            spec = self._perturbing(node)
+        elif kind in bsdf_kinds.COMPOSITES:
             want, params_def = bsdf_kinds.COMPOSITES[kind]
             kids = [c for c in node.children() if c.kind == "bsdf"]
             for c in node.children():
@@ -122,6 +131,50 @@ class Materials:
                             [f"{node.where}: unsupported BSDF '{kind}' replaced by diffuse 0.5"], origin)
         r.check_unread(node)
         return spec
+
+    def _perturbing(self, node: Node) -> BSDFSpec:
+        """``normalmap`` (its texture is the parameter ``normalmap``) or ``bumpmap`` (its
+        texture is the one nested texture, whatever its name), around one BSDF."""
+        kind = node.plugin
+        refs = [(k, node.ref(k)) for k in list(node.props.keys()) if node.is_ref(k)]
+        kids = [n for _, n in refs if n.kind == "bsdf"]
+        if len(kids) != 1:
+            raise node.error(f"{node.label} needs 1 nested BSDF, got {len(kids)}")
+        if kind == "normalmap":
+            texs = [n for k, n in refs if k == "normalmap"]
+            if not texs or texs[0].kind != "texture":
+                raise node.error(f"{node.label} needs a texture 'normalmap'")
+            fallback: Any = (0.5, 0.5, 1.0)  # the unperturbed normal
+        else:
+            texs = [n for _, n in refs if n.kind == "texture"]
+            if len(texs) != 1:
+                raise node.error(f"{node.label} needs 1 nested texture, got {len(texs)}")
+            fallback = 0.0  # a flat height
+        for _, n in refs:
+            if n.kind not in ("bsdf", "texture"):
+                self.reader.unsupported(n, f"{n.label} inside {node.label}")
+        tex = texs[0]
+        if kind == "normalmap" and tex.plugin == "rawconstant":  # one normal everywhere
+            value: Any = tex.vector("value") if tex.has("value") and tex._type("value") == "Vector" \
+                else tex.color("value")
+            if value is None:
+                raise tex.error(f"{tex.label} needs a 'value'")
+            self.reader.check_unread(tex)
+        elif kind == "bumpmap" and tex.plugin != "bitmap":  # Mitsuba's has no gradient for it
+            self.reader.unsupported(tex, f"{tex.label} as a bump map (only bitmap has a gradient)",
+                                    fallback="no bump")
+            return self.spec(kids[0])
+        else:
+            value = self.texture(tex, scalar=kind == "bumpmap", fallback=fallback)
+        params: dict[str, Any] = {bsdf_kinds.PERTURBING[kind]: value}
+        for name in ("flip_invalid_normals", "use_shadowing_function"):
+            if node.has(name):
+                params[name] = node.bool(name)
+        if kind == "bumpmap" and node.has("scale"):
+            params["scale"] = node.float("scale")
+            if not math.isfinite(params["scale"]):
+                raise node.error(f"{node.label}: scale must be finite, got {params['scale']}")
+        return BSDFSpec(kind, params, [self.spec(kids[0])], [], node.where)
 
     # ------------------------------------------------------------ values
     def _value(self, node: Node, kind: str, name: str, default: Any, texturable: bool) -> Any:

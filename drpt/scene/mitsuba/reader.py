@@ -84,7 +84,7 @@ class Reader:
         self.mat_list: list[Material] = []
         self.mat_index: dict[tuple, int] = {}
         self.meshes: list[tuple[geo.Mesh, int]] = []
-        self.spheres: list[tuple[np.ndarray, float, int]] = []
+        self.spheres: list[tuple[np.ndarray, float, int, np.ndarray]] = []  # center, radius, material, rotation
         self.lights: list = []
         self.background = (0.0, 0.0, 0.0)
         self.camera = None
@@ -200,9 +200,11 @@ class Reader:
         else:
             tris = Triangles.empty()
         if self.spheres:
-            spheres = Spheres(np.array([c for c, _, _ in self.spheres], float),
-                              np.array([r for _, r, _ in self.spheres], float),
-                              np.array([k for _, _, k in self.spheres], np.int32))
+            rot = np.array([q for *_, q in self.spheres], float)
+            spheres = Spheres(np.array([c for c, *_ in self.spheres], float),
+                              np.array([r for _, r, *_ in self.spheres], float),
+                              np.array([k for _, _, k, _ in self.spheres], np.int32),
+                              None if np.allclose(rot, np.eye(3)) else rot)
         else:
             spheres = Spheres.empty()
         scene = Scene(path=self.path, camera=self.camera, materials=self.mat_list, triangles=tris,
@@ -450,7 +452,7 @@ class Reader:
             mirrored = np.linalg.det(local[:3, :3]) < 0
             textured = bool(spec.textures()) or isinstance(emission, Texture)
             if similar and not (flip ^ mirrored) and not textured:
-                self.spheres.append((local[:3, 3].copy(), scale, k))
+                self.spheres.append((local[:3, 3].copy(), scale, k, local[:3, :3] / scale))
             else:
                 why = ("flip_normals" if (flip ^ mirrored) else "a to_world that is not a similarity"
                        if not similar else "a texture (drpt's analytic spheres have no uvs)")

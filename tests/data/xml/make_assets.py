@@ -7,7 +7,12 @@
 * ``shapes.serialized``: a version 4 Mitsuba serialized file with two meshes (index 0: a
   triangle, index 1: a unit quad in z = 0 facing +z), single precision, zlib-compressed;
 * ``checker.png``: an 8x8 sRGB texture, 2x2 tiles of red and white;
-* ``sky.exr``: a 16x8 lat-long map, bright toward +x (u = 1/4), dim elsewhere.
+* ``sky.exr``: a 16x8 lat-long map, bright toward +x (u = 1/4), dim elsewhere;
+* ``uvsphere.obj``: a unit sphere of 24 x 12 quads (as triangles) with normals and
+  lat-long uvs (``u`` around z, a seam at ``u = 0``);
+* ``bumps.png``: a 16x16 8-bit gray height map (bumps), for ``bumpmap`` (read ``raw``);
+* ``normals.png``: a 16x16 8-bit tangent-space normal map (tilts of up to ~35 degrees
+  in four directions), for ``normalmap`` (read ``raw``).
 """
 
 from __future__ import annotations
@@ -67,6 +72,24 @@ def write_serialized(path: Path) -> None:
     path.write_bytes(out)
 
 
+def write_uvsphere(path: Path, slices: int = 24, stacks: int = 12) -> None:
+    lines = ["# a unit uv sphere"]
+    for i in range(stacks + 1):
+        th = np.pi * i / stacks
+        for j in range(slices + 1):
+            ph = 2 * np.pi * j / slices
+            x, y, z = np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)
+            lines += [f"v {x:.6f} {y:.6f} {z:.6f}", f"vn {x:.6f} {y:.6f} {z:.6f}",
+                      f"vt {j / slices:.6f} {1 - i / stacks:.6f}"]
+    for i in range(stacks):
+        for j in range(slices):
+            a, b = i * (slices + 1) + j + 1, (i + 1) * (slices + 1) + j + 1
+            quad = [a, b, b + 1, a + 1]
+            for tri in ((0, 1, 2), (0, 2, 3)):
+                lines.append("f " + " ".join(f"{quad[k]}/{quad[k]}/{quad[k]}" for k in tri))
+    path.write_text("\n".join(lines) + "\n")
+
+
 def main() -> None:
     from drpt.imageio import write_image
 
@@ -84,6 +107,15 @@ def main() -> None:
     bright = np.clip(d[..., 0], 0, None) ** 4
     sky = 0.2 + 4.0 * bright[..., None] * np.array([1.0, 0.9, 0.7])
     write_image(HERE / "sky.exr", sky.astype(np.float32))
+    write_uvsphere(HERE / "uvsphere.obj")
+    x = (np.arange(16) + 0.5) / 16
+    height = 0.5 + 0.45 * np.sin(2 * np.pi * 2 * x)[None, :] * np.cos(2 * np.pi * 2 * x)[:, None]
+    write_image(HERE / "bumps.png", np.repeat(height[..., None], 3, 2).astype(np.float32), gamma=1.0)
+    tx = 0.6 * np.sign(np.sin(2 * np.pi * 2 * x))[None, :] + 0 * x[:, None]
+    ty = 0.4 * np.sign(np.cos(2 * np.pi * 2 * x))[:, None] + 0 * x[None, :]
+    n = np.stack([tx, ty, np.ones_like(tx)], -1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    write_image(HERE / "normals.png", (0.5 * n + 0.5).astype(np.float32), gamma=1.0)
 
 
 if __name__ == "__main__":
