@@ -343,11 +343,11 @@ class MaterialTable:
         if self._has_normal:
             m = mask & (code == 1)
             if self._p_const is None:
-                rgb = self.textures.lookup(tid, si.uv, m)
+                rgb = self.textures.lookup(tid, si.uv, m, si=si)
             else:
                 rgb = dr.gather(Array3f, self._p_const, row, m)
                 if self.textures is not None:
-                    rgb = dr.select(tid != NONE, self.textures.lookup(tid, si.uv, m & (tid != NONE)), rgb)
+                    rgb = dr.select(tid != NONE, self.textures.lookup(tid, si.uv, m & (tid != NONE), si=si), rgb)
             nn = perturb.normalmap_normal(rgb)
             if flip is not False:
                 nn = dr.select(flip, perturb.flip_invalid(nn, wi_l), nn)
