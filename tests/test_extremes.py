@@ -170,7 +170,7 @@ def test_a_pixel_mean_beyond_float32_is_an_error(tmp_path, monkeypatch):
 
     def huge(self, pass_index, k, r0, rows):
         s = np.full((rows, self.opt.width, 3), 1e39 * k)
-        return s, s * 1e39, 0
+        return renderer.PassSums(r0, s, s * 1e39, 0)
 
     monkeypatch.setattr(renderer.Renderer, "_pass", huge)
     with pytest.raises(DrptError, match="beyond the float32 maximum"):
