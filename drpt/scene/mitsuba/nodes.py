@@ -85,6 +85,9 @@ class State:
         import mitsuba.parser as mp
 
         self.path = path
+        from .precheck import check_xml
+
+        check_xml(path, defines)  # what would crash or block Mitsuba's parser
         config = mp.ParserConfig(VARIANT)
         try:
             state = mp.parse_file(config, str(path), **{k: str(v) for k, v in defines.items()})
@@ -163,7 +166,10 @@ class Node:
         if not p.is_file():
             what = "not a regular file" if p.exists() else "no such file"
             raise self.error(f"{self.label}: {name}: {what}")
-        return p.resolve()
+        from ..files import named
+
+        # an image read at render time names this node's line in its errors
+        return named(p.resolve(), (self.file, self.line) if self.line is not None else None)
 
     # ------------------------------------------------------------ params
     def names(self) -> list[str]:
@@ -195,7 +201,10 @@ class Node:
             return default
         if self._type(name) not in ("Float", "Integer"):
             raise self._wrong(name, "a float")
-        return float(self.get(name))
+        v = float(self.get(name))
+        if v != v:
+            raise self.error(f"{self.label}: parameter '{name}' is NaN")
+        return v
 
     def int(self, name: str, default: int | None = None) -> int | None:
         if not self.has(name):
@@ -224,7 +233,7 @@ class Node:
         if self._type(name) != "Vector":
             raise self._wrong(name, "a point or vector")
         v = self.get(name)
-        return (float(v[0]), float(v[1]), float(v[2]))
+        return _finite(self, name, (float(v[0]), float(v[1]), float(v[2])))
 
     def transform(self, name: str = "to_world") -> np.ndarray:
         """A 4x4 float64 matrix (identity when not given)."""
@@ -251,17 +260,17 @@ class Node:
         t = self._type(name)
         if t in ("Float", "Integer"):
             v = float(self.get(name))
-            return (v, v, v)
+            return _finite(self, name, (v, v, v))
         if t == "Color":
             c = self.get(name)
-            return (float(c[0]), float(c[1]), float(c[2]))
+            return _finite(self, name, (float(c[0]), float(c[1]), float(c[2])))
         if t == "Spectrum":
             s = self.get(name)
             if s.is_uniform():
                 v = float(s.values[0])
                 if emission:
-                    return tuple(v * c for c in D65_RGB)
-                return (v, v, v)
+                    return _finite(self, name, tuple(v * c for c in D65_RGB))
+                return _finite(self, name, (v, v, v))
             raise self.error(f"{self.label}: parameter '{name}' is a spectrum given by wavelengths: "
                              "unsupported (drpt renders in RGB; give <rgb> or a uniform value)")
         raise self._wrong(name, "a color (<rgb>, <spectrum> or <float>)")
@@ -281,3 +290,10 @@ class Node:
     def unread(self, ignore=()) -> list[str]:
         """Parameters (not nested plugins) drpt did not read, in file order."""
         return [k for k in self.names() if k not in self.read and k not in ignore]
+
+
+def _finite(node: Node, name: str, v: tuple) -> tuple:
+    """``v``, or a located error when a component is NaN or infinite."""
+    if not all(abs(x) < float("inf") for x in v):
+        raise node.error(f"{node.label}: parameter '{name}' must be finite, got {v}")
+    return v

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import SceneError
+from ...options import MAX_DEPTH, MAX_SIZE, MAX_SPP
 from ..model import (
     MAX_COORDINATE,
     Background,
@@ -209,8 +210,9 @@ class Reader:
                 self.warn(f"{sampler.where}: sampler '{sampler.plugin}': drpt draws independent "
                           "samples (the same expectation, other noise)")
             spp = sampler.int("sample_count", 4)
-            if spp is None or spp <= 0:
-                raise sampler.error(f"{sampler.label}: sample_count must be positive, got {spp}")
+            if spp is None or not 0 < spp <= MAX_SPP:
+                raise sampler.error(f"{sampler.label}: sample_count must be between 1 and {MAX_SPP}, "
+                                    f"got {spp}")
             self.settings.spp = spp
             self.check_unread(sampler)
 
@@ -226,6 +228,8 @@ class Reader:
                 value = float(f[:-2] if f.endswith("mm") else f)
             except ValueError:
                 raise node.error(f"{node.label}: focal_length must be like '50mm', got {f!r}") from None
+            if not (value > 0 and math.isfinite(value)):
+                raise node.error(f"{node.label}: focal_length must be positive, got {f!r}")
             fov = 2.0 * math.degrees(math.atan(math.hypot(36.0, 24.0) / (2.0 * value)))
             axis = "diagonal"
         if axis not in FOV_AXES:
@@ -262,8 +266,9 @@ class Reader:
             self.unsupported(node, f"film '{node.plugin}'", fallback="an hdrfilm")
         width = node.int("width", 768)
         height = node.int("height", 576)
-        if width is None or height is None or width <= 0 or height <= 0:
-            raise node.error(f"{node.label}: width and height must be positive, got {width} x {height}")
+        if width is None or height is None or not (0 < width <= MAX_SIZE and 0 < height <= MAX_SIZE):
+            raise node.error(f"{node.label}: width and height must be between 1 and {MAX_SIZE}, "
+                             f"got {width} x {height}")
         cx, cy = node.int("crop_offset_x", 0), node.int("crop_offset_y", 0)
         cw, ch = node.int("crop_width", width), node.int("crop_height", height)
         if cx < 0 or cy < 0 or cw <= 0 or ch <= 0 or cx + cw > width or cy + ch > height:
@@ -299,10 +304,12 @@ class Reader:
         if node.plugin == "path":
             s.max_depth = node.int("max_depth", -1)
             s.rr_depth = node.int("rr_depth", 5)
-            if s.max_depth is not None and s.max_depth < -1:
-                raise node.error(f"{node.label}: max_depth must be -1 or >= 0, got {s.max_depth}")
-            if s.rr_depth is not None and s.rr_depth <= 0:
-                raise node.error(f"{node.label}: rr_depth must be positive, got {s.rr_depth}")
+            if s.max_depth is not None and not -1 <= s.max_depth <= MAX_DEPTH:
+                raise node.error(f"{node.label}: max_depth must be -1 or between 0 and {MAX_DEPTH}, "
+                                 f"got {s.max_depth}")
+            if s.rr_depth is not None and not 0 < s.rr_depth <= MAX_DEPTH:
+                raise node.error(f"{node.label}: rr_depth must be between 1 and {MAX_DEPTH}, "
+                                 f"got {s.rr_depth}")
         else:
             # Mitsuba's direct: emitters seen by the camera plus direct lighting, the same
             # expectation as path with max_depth 2 (its sample counts only change the noise)
@@ -394,6 +401,9 @@ class Reader:
             similar, scale = geo.is_similarity(local)
             mirrored = np.linalg.det(local[:3, :3]) < 0
             textured = bool(spec.textures())
+            if not np.abs(local[:3, 3]).max() + abs(scale) <= MAX_COORDINATE:
+                raise node.error(f"{node.label}: extends beyond {MAX_COORDINATE:g} (center "
+                                 f"{tuple(float(x) for x in local[:3, 3])}, radius {scale:g})")
             if similar and not (flip ^ mirrored) and not textured:
                 self.spheres.append((local[:3, 3].copy(), scale, k))
             else:
@@ -436,11 +446,15 @@ class Reader:
             if node.has("position") and m is not None:
                 raise node.error(f"{node.label}: give 'position' or 'to_world', not both")
             pos = node.vector("position") or (tuple(m[:3, 3]) if m is not None else (0.0, 0.0, 0.0))
+            if not max(abs(x) for x in pos) <= MAX_COORDINATE:
+                raise node.error(f"{node.label}: position {pos} is beyond {MAX_COORDINATE:g} or not finite")
             color = self._intensity(node, "intensity")
             self.lights.append(PointLight(tuple(float(x) for x in pos), color))
         elif p == "spot":
             m = np.eye(4) if m is None else m
             similar, _ = geo.is_similarity(m)
+            if not np.isfinite(m).all() or not np.abs(m[:3, 3]).max() <= MAX_COORDINATE:
+                raise node.error(f"{node.label}: position beyond {MAX_COORDINATE:g} or not finite")
             if not similar:
                 raise node.error(f"{node.label}: to_world must be a rotation and translation")
             color = self._intensity(node, "intensity")
@@ -460,8 +474,8 @@ class Reader:
             d = node.vector("direction")
             if d is None:
                 d = tuple(m[:3, 2]) if m is not None else (0.0, 0.0, 1.0)
-            if not np.linalg.norm(d) > 0:
-                raise node.error(f"{node.label}: direction has zero length")
+            if not np.linalg.norm(d) > 0 or not np.isfinite(d).all():
+                raise node.error(f"{node.label}: direction has zero length or is not finite")
             e = node.color("irradiance", (1.0, 1.0, 1.0), emission=True) if not node.is_ref("irradiance") else None
             if e is None:
                 self.unsupported(node.ref("irradiance"), "textured irradiance", fallback="1")
