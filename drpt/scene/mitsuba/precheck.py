@@ -54,14 +54,16 @@ def _regular(path: Path) -> bool:
 
 # ------------------------------------------------------------------ XML
 def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int = 0,
-              _level: int = 0) -> None:
-    """Raise a SceneError where ``path`` (or a file it includes) nests too deep
-    or includes something that is not a regular file."""
+              _stack: tuple = ()) -> None:
+    """Raise a SceneError where ``path`` (or a file it includes) nests too deep,
+    includes something that is not a regular file or itself, or gives one
+    plugin a parameter twice."""
     defines = dict(defines or {})
     data = Path(path).read_bytes()
     p = xml.parsers.expat.ParserCreate()
     depth = _depth
     includes: list[tuple[str, int, int]] = []
+    names: list[set] = [set()]
 
     def start(name, attrs):
         nonlocal depth
@@ -69,6 +71,13 @@ def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int 
         if depth > MAX_DEPTH:
             raise SceneError(path, p.CurrentLineNumber,
                              f"<{name}> is nested more than {MAX_DEPTH} elements deep")
+        param = attrs.get("name")
+        if param is not None and name not in ("default", "include", "scene"):
+            if param in names[-1]:
+                raise SceneError(path, p.CurrentLineNumber, f"parameter '{param}' is given twice "
+                                 "in one element (Mitsuba refuses it)")
+            names[-1].add(param)
+        names.append(set())
         if name == "default" and "name" in attrs and "value" in attrs:
             defines.setdefault(attrs["name"], attrs["value"])
         if name == "include" and "filename" in attrs:
@@ -77,6 +86,7 @@ def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int 
     def end(name):
         nonlocal depth
         depth -= 1
+        names.pop()
 
     p.StartElementHandler = start
     p.EndElementHandler = end
@@ -96,8 +106,11 @@ def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int 
             continue  # Mitsuba reports a missing file
         if not _regular(target):
             raise SceneError(path, line, f"<include> {name}: not a regular file")
-        if _level < MAX_INCLUDES:
-            check_xml(target, defines, _depth=at - 1, _level=_level + 1)
+        stack = _stack + (os.path.realpath(path),)
+        if os.path.realpath(target) in stack:
+            raise SceneError(path, line, f"<include> {name}: the file includes itself")
+        if len(stack) < MAX_INCLUDES:
+            check_xml(target, defines, _depth=at - 1, _stack=stack)
 
 
 # ------------------------------------------------------------------ meshes
