@@ -142,8 +142,19 @@ def probe(address: str, timeout: float) -> None:
             out += chunk
         return out
 
+    def connect():
+        """A connection, tried again until the deadline (as Dask's client does:
+        a scheduler that is starting refuses connections for a moment)."""
+        while True:
+            try:
+                return socket.create_connection((host, int(port)), timeout=max(end - time.monotonic(), 0.001))
+            except (ConnectionRefusedError, ConnectionResetError):
+                if time.monotonic() + 0.1 >= end:
+                    raise
+                time.sleep(0.1)
+
     try:
-        with socket.create_connection((host, int(port)), timeout=max(timeout, 0.001)) as sock:
+        with connect() as sock:
             (nbytes,) = struct.unpack("<Q", recv(sock, 8))
             if not 16 <= nbytes <= 1 << 20:
                 raise fail("the server does not speak Dask's protocol (not a Dask scheduler?)")
