@@ -284,12 +284,14 @@ def test_checkpoint_hash_ignores_the_folder(tmp_path):
     from drpt.distributed.checkpoint import scene_hash
 
     hashes = set()
-    for name in ("a", "b"):
+    for name in ("a", "moved/elsewhere"):  # paths of other lengths (pickled strings count them)
         shutil.copytree(fz.SCENES / "showcase", tmp_path / name)
         hashes.add(scene_hash(load_scene(tmp_path / name / "showcase_day.txt")))
-    assert len(hashes) == 1
-    (tmp_path / "b" / "grille.png").write_bytes(b"changed")
-    assert scene_hash(load_scene(tmp_path / "b" / "showcase_day.txt")) not in hashes
+        shutil.copytree(fz.SCENES / "cornellbox", tmp_path / name / "box")
+        hashes.add(scene_hash(load_scene(tmp_path / name / "box" / "cornellbox.txt")))
+    assert len(hashes) == 2
+    (tmp_path / "a" / "grille.png").write_bytes(b"changed")
+    assert scene_hash(load_scene(tmp_path / "a" / "showcase_day.txt")) not in hashes
 
 
 # ------------------------------------------------------------------ cluster addresses

@@ -46,18 +46,24 @@ def scene_hash(scene) -> str:
             return "<scene>/" + p.relative_to(folder).as_posix()
         return str(p)
 
+    prefixes = []
+    if folder is not None:  # the folder inside strings too (materials' origins: FILE:LINE)
+        prefixes = sorted({str(folder) + os.sep, str(Path(scene.path).parent) + os.sep} - {"." + os.sep},
+                          key=len, reverse=True)
+
     class _Pickler(pickle.Pickler):
-        def reducer_override(self, obj):
+        def persistent_id(self, obj):
             if isinstance(obj, PurePath):
-                return str, (rel(obj),)
-            return NotImplemented
+                return "path", rel(obj)
+            if isinstance(obj, str) and any(p in obj for p in prefixes):
+                for p in prefixes:
+                    obj = obj.replace(p, "<scene>/")
+                return "str", obj
+            return None
 
     buf = io.BytesIO()
     _Pickler(buf, protocol=4).dump(scene)
     data = buf.getvalue()
-    if folder is not None:  # the folder inside strings (materials' origins: FILE:LINE)
-        for prefix in {str(folder) + os.sep, str(Path(scene.path).parent) + os.sep} - {"." + os.sep}:
-            data = data.replace(prefix.encode(), b"<scene>/")
     h = hashlib.sha256(data)
     from ..scene.model import Skybox
 
