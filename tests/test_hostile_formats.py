@@ -285,3 +285,43 @@ def test_ctrl_c_in_a_terminal_stops_workers_quietly(tmp_path):
     assert p.returncode == 130, err
     assert lines and all(ln.startswith("drpt: ") for ln in lines), err
     assert "continue with --resume" in err
+
+
+# ------------------------------------------------------------------ XML: what Mitsuba reports without a line
+@pytest.mark.parametrize("extra,match", [
+    ('<shape type="sphere"><transform name="to_world"><translate value="1 2"/></transform></shape>',
+     "must have 1 or 3 numbers"),
+    ('<shape type="sphere"><transform name="to_world"><scale value="2" x="1"/></transform></shape>',
+     "gives 'value' and x/y/z"),
+    ('<shape type="rectangle"><transform name="to_world"><scale value="1e13"/></transform></shape>',
+     "2 triangles have coordinates beyond 1e\\+12"),
+    ('<shape type="disk"><transform name="to_world"><translate x="2e12"/></transform></shape>',
+     "triangles have coordinates beyond 1e\\+12"),
+])
+def test_errors_mitsuba_gives_without_a_line_are_located(tmp_path, extra, match):
+    p = xml(tmp_path, extra=extra)
+    err = refused(p, match)
+    assert err.line == line_of(p, extra[:20]) or err.line == line_of(p, extra[-30:])
+
+
+def test_bytes_that_are_not_utf8_are_located(tmp_path):
+    p = xml(tmp_path)
+    data = p.read_bytes().replace(b'id="white"', b'id="wh\x8aite"').replace(b'<ref id="white"/>', b"")
+    p.write_bytes(data)
+    err = refused(p, "byte 0x8a is not UTF-8")
+    assert err.line == 9
+
+
+def test_a_byte_offset_becomes_a_line(tmp_path):
+    """A file that ends inside an attribute: Mitsuba's parser gives the byte offset."""
+    p = xml(tmp_path)
+    text = p.read_text()
+    p.write_text(text[:text.index('value="4"') + 8])
+    err = refused(p, "malformed XML")
+    assert err.line == len(p.read_text().splitlines()) and "offset" not in err.message, str(err)
+
+
+def test_a_scene_without_a_sensor_names_the_scene_element(tmp_path):
+    p = tmp_path / "s.xml"
+    p.write_text('<scene version="3.0.0">\n<shape type="sphere"/>\n</scene>\n')
+    assert refused(p, "no <sensor>").line == 1

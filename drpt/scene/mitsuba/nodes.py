@@ -65,7 +65,9 @@ def parser_error(path: Path, error: Exception) -> SceneError:
     if m:
         return SceneError(_locate(path, m.group(1)), int(m.group(3)),
                           f"malformed XML: {_one_line(m.group(2))}")
-    return SceneError(path, None, _one_line(text))
+    from .precheck import located_offset
+
+    return located_offset(_TAG.sub("", text)) or SceneError(path, None, _one_line(text))
 
 
 def _locate(main: Path, name: str) -> Path:
@@ -95,6 +97,10 @@ class State:
             mp.transform_resolve(config, state)
         except RuntimeError as e:
             raise parser_error(path, e) from None
+        except UnicodeDecodeError:  # its message quotes bytes that are not UTF-8
+            from .precheck import not_utf8
+
+            raise not_utf8(path, defines) from None
         self.mi = mi
         self.mp = mp
         self.state = state

@@ -71,6 +71,8 @@ def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int 
         if depth > MAX_DEPTH:
             raise SceneError(path, p.CurrentLineNumber,
                              f"<{name}> is nested more than {MAX_DEPTH} elements deep")
+        if name in _XYZ_TAGS and "value" in attrs:
+            _check_xyz(path, p.CurrentLineNumber, name, attrs, defines)
         param = attrs.get("name")
         if param is not None and name not in ("default", "include", "scene"):
             if param in names[-1]:
@@ -111,6 +113,64 @@ def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int 
             raise SceneError(path, line, f"<include> {name}: the file includes itself")
         if len(stack) < MAX_INCLUDES:
             check_xml(target, defines, _depth=at - 1, _stack=stack)
+
+
+#: tags whose ``value`` Mitsuba's parser splits into x, y, z (one value or three)
+_XYZ_TAGS = ("translate", "rotate", "scale", "point", "vector")
+
+
+def _check_xyz(path: Path, line: int, tag: str, attrs: dict, defines: dict) -> None:
+    """What Mitsuba's parser refuses in a ``value`` of x, y, z without saying where."""
+    value = attrs["value"]
+    for k, v in defines.items():
+        value = value.replace(f"${k}", v)
+    if "$" in value:
+        return  # an undefined $name: Mitsuba says where
+    if any(k in attrs for k in "xyz"):
+        raise SceneError(path, line, f"<{tag}> gives 'value' and x/y/z: give one or the other")
+    tokens = [t for t in re.split(r"[, ]", value) if t]
+    if len(tokens) not in (1, 3):
+        raise SceneError(path, line, f"<{tag}> value {attrs['value']!r} must have 1 or 3 numbers, "
+                         f"has {len(tokens)}")
+
+
+_OFFSET = re.compile(r'Parsing of XML file "(.+?)" failed: (.*) \(byte offset (\d+)\)$', re.S)
+
+
+def located_offset(text: str) -> SceneError | None:
+    """Mitsuba's parser error that gives a byte offset (where its location
+    lookup fails), at the line of that offset."""
+    m = _OFFSET.search(text)
+    if m is None:
+        return None
+    path, offset = Path(m.group(1)), int(m.group(3))
+    try:
+        data = path.read_bytes() if _regular(path) else b""
+    except OSError:
+        data = b""
+    line = data[:offset].count(b"\n") + 1
+    return SceneError(path, line, "malformed XML: " + " ".join(m.group(2).split()))
+
+
+def not_utf8(path: Path, defines: dict[str, str] | None = None) -> SceneError:
+    """The error for a file Mitsuba's parser fails on with a message Python
+    cannot decode (it quotes the file's bytes): at the first line of the scene
+    or a file it includes that is not UTF-8 text."""
+    todo, seen = [Path(path)], set()
+    while todo:
+        f = todo.pop(0)
+        if f in seen or not _regular(f) or len(seen) > MAX_INCLUDES:
+            continue
+        seen.add(f)
+        data = f.read_bytes()
+        try:
+            data.decode("utf-8")
+        except UnicodeDecodeError as e:
+            return SceneError(f, data[:e.start].count(b"\n") + 1,
+                              f"malformed XML: byte {data[e.start]:#04x} is not UTF-8 text")
+        for m in re.finditer(rb'<include[^>]*filename="([^"$]*)"', data):
+            todo.append(f.parent / m.group(1).decode())
+    return SceneError(path, None, "malformed XML: Mitsuba's parser failed on bytes that are not UTF-8 text")
 
 
 # ------------------------------------------------------------------ meshes

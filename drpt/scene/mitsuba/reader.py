@@ -131,7 +131,8 @@ class Reader:
             else:
                 self.unsupported(child, f"{child.label}")
         if not sensors:
-            raise SceneError(self.path, None, "the scene has no <sensor> (camera)")
+            raise root.error("the scene has no <sensor> (camera)") if root.line else \
+                SceneError(self.path, 1, "the scene has no <sensor> (camera)")
         if len(sensors) > 1:
             self.warn(f"{sensors[1].where}: {len(sensors)} sensors: drpt renders the first "
                       f"({sensors[0].where}), as Mitsuba's render() does by default")
@@ -383,6 +384,7 @@ class Reader:
             return
         spec, bsdf_node, emission = self._shape_parts(node)
         k = self._material_index(spec, bsdf_node, emission, node)
+        first = len(self.meshes)
         m = parent @ node.transform("to_world")
         _check_matrix(node, m)
         if plugin in geo.MESH_PLUGINS:
@@ -424,6 +426,8 @@ class Reader:
             flip = bool(node.bool("flip_normals", False))
             local = m @ geo.cylinder_frame(p0, p1, radius)
             self.meshes.append((geo.tessellate_cylinder(local, flip), k))
+        for mesh, _ in self.meshes[first:]:
+            _check_coordinates(node, mesh)
         self.check_unread(node)
 
     # ------------------------------------------------------------ emitters
@@ -535,6 +539,14 @@ class Reader:
 def _nonnegative(node: Node, name: str, c) -> None:
     if not all(math.isfinite(x) and x >= 0 for x in c):
         raise node.error(f"{node.label}: {name} must be finite and >= 0, got {tuple(c)}")
+
+
+def _check_coordinates(node: Node, mesh) -> None:
+    """A mesh in world space within drpt's coordinate limit (float32 rendering)."""
+    bad = ~np.isfinite(mesh.positions) | (np.abs(mesh.positions) > MAX_COORDINATE)
+    if bad.any():
+        raise node.error(f"{node.label}: {int(bad.any(axis=(1, 2)).sum())} triangles have coordinates "
+                         f"beyond {MAX_COORDINATE:g} or not finite")
 
 
 def _check_matrix(node: Node, m: np.ndarray) -> None:
