@@ -50,8 +50,15 @@ def rng_for(case_id: str) -> random.Random:
     return random.Random(case_id)
 
 
+#: scenes of tests/data/xml whose XML is mutated (each loaded itself)
+XML_SCENES = ("meshes.xml", "bsdfs.xml", "textured.xml", "spot.xml", "lens.xml", "envmap.xml", "checker.xml",
+              "crop.xml", "instances.xml", "composites.xml")
+
+
 def xml_cases(seeds: int = 3) -> list[tuple[str, str, int]]:
     cases = [(XML_ENTRY, m, s) for m in XML_MUTATIONS for s in range(seeds)]
+    cases += [(name, m, s) for name in XML_SCENES[1:] for m in ("value", "swap_attr", "delete_element")
+              for s in range(seeds)]
     cases += [("wedge.ply", m, s) for m in PLY_MUTATIONS for s in range(seeds)]
     cases += [("shapes.serialized", m, s) for m in SERIALIZED_MUTATIONS for s in range(seeds)]
     cases += [("quad.obj", m, s) for m in OBJ_MUTATIONS for s in range(2)]
@@ -79,7 +86,7 @@ def build_xml(target: str, mutation: str, seed: int, root: Path) -> Path:
     else:
         data = mutate_obj(data.decode(), mutation, rng).encode()
     p.write_bytes(data)
-    return root / XML_ENTRY
+    return p if target.endswith(".xml") else root / XML_ENTRY
 
 
 _ATTR = re.compile(r'(value|filename|name|type|x|y|z|angle)="([^"]*)"')
@@ -89,7 +96,7 @@ _ELEMENT = re.compile(r"^[ \t]*<(?!/|!|\?)[^\n]*/>[ \t]*\n", re.M)
 def mutate_xml(text: str, how: str, rng: random.Random) -> str:
     attrs = list(_ATTR.finditer(text))
     if how == "value":
-        m = rng.choice([a for a in attrs if a.group(1) in ("value", "x", "y", "z", "angle")])
+        m = rng.choice([a for a in attrs if a.group(1) in ("value", "x", "y", "z", "angle")] or attrs)
         return text[:m.start(2)] + rng.choice(VALUES) + text[m.end(2):]
     if how == "swap_attr":
         m = rng.choice(attrs)

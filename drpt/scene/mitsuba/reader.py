@@ -542,11 +542,16 @@ def _nonnegative(node: Node, name: str, c) -> None:
 
 
 def _check_coordinates(node: Node, mesh) -> None:
-    """A mesh in world space within drpt's coordinate limit (float32 rendering)."""
+    """A mesh in world space within drpt's coordinate limit (float32 rendering),
+    with finite normals and uvs (a degenerate transform makes them NaN)."""
     bad = ~np.isfinite(mesh.positions) | (np.abs(mesh.positions) > MAX_COORDINATE)
     if bad.any():
         raise node.error(f"{node.label}: {int(bad.any(axis=(1, 2)).sum())} triangles have coordinates "
                          f"beyond {MAX_COORDINATE:g} or not finite")
+    for name in ("normals", "uvs"):
+        a = getattr(mesh, name)
+        if a is not None and not np.isfinite(a).all():
+            raise node.error(f"{node.label}: its {name} are not finite (a degenerate to_world or radius?)")
 
 
 def _check_matrix(node: Node, m: np.ndarray) -> None:
