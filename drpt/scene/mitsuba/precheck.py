@@ -137,12 +137,23 @@ def _check_xyz(path: Path, line: int, tag: str, attrs: dict, defines: dict) -> N
 _OFFSET = re.compile(r'Parsing of XML file "(.+?)" failed: (.*) \(byte offset (\d+)\)$', re.S)
 
 
+_ROOT = re.compile(r'Error while loading XML file "(.+?)": (.*)$', re.S)
+
+
 def located_offset(text: str) -> SceneError | None:
     """Mitsuba's parser error that gives a byte offset (where its location
-    lookup fails), at the line of that offset."""
+    lookup fails), at the line of that offset; one about the root element
+    (its version), at that element's line."""
     m = _OFFSET.search(text)
     if m is None:
-        return None
+        m = _ROOT.search(text)
+        if m is None:
+            return None
+        path = Path(m.group(1))
+        data = path.read_bytes() if _regular(path) else b""
+        root = re.search(rb"<[A-Za-z_]", data)
+        line = data[:root.start()].count(b"\n") + 1 if root else 1
+        return SceneError(path, line, " ".join(m.group(2).split()))
     path, offset = Path(m.group(1)), int(m.group(3))
     try:
         data = path.read_bytes() if _regular(path) else b""

@@ -223,6 +223,8 @@ class Reader:
         if node.has("fov"):
             fov = node.float("fov")
             axis = (node.str("fov_axis", "x") or "x").lower()
+            if not 0.0 < fov < 180.0:
+                raise node.error(f"{node.label}: fov must be in (0, 180) degrees, got {fov:g}")
         else:
             f = node.str("focal_length", "50mm") or "50mm"
             try:
@@ -252,7 +254,7 @@ class Reader:
             radius = node.float("aperture_radius", 0.0)
             # Mitsuba's focus distance defaults to the far clip plane (1e4)
             focus = node.float("focus_distance", node.float("far_clip", 1e4))
-            if not (radius >= 0 and math.isfinite(radius)) or not focus > 0:
+            if not (radius >= 0 and math.isfinite(radius)) or not (focus > 0 and math.isfinite(focus)):
                 raise node.error(f"{node.label}: needs aperture_radius >= 0 and focus_distance > 0")
             if radius:
                 lens = {"aperture_radius": radius, "focus_distance": focus}
