@@ -106,6 +106,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.checkpoint_seconds) and args.checkpoint_seconds >= 0):
         raise DrptError(f"--checkpoint-seconds must be >= 0, got {args.checkpoint_seconds}")
 
+    from .memory import check as check_memory
+
+    check_memory(opts.width, opts.height)
     ensure()
     if args.gui:
         scene, opts = _gui(scene, opts, args)
