@@ -10,6 +10,7 @@ Checkpoints and the cluster's fake servers are fuzzed in tests/test_fuzz.py.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import signal
@@ -69,6 +70,21 @@ def refused(path: Path, match: str) -> SceneError:
     err = e.value
     assert err.line is not None and len(str(err).splitlines()) == 1, str(err)
     return err
+
+
+@contextlib.contextmanager
+def time_limit(seconds: int):
+    """Raise TimeoutError in the main thread after ``seconds``."""
+    def expire(signum, frame):
+        raise TimeoutError(f"still running after {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, expire)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
 
 
 def ply_shape(name: str) -> str:
@@ -142,11 +158,8 @@ def test_serialized_face_beyond_its_vertices(tmp_path):
 def test_include_of_a_fifo_or_itself(tmp_path):
     os.mkfifo(tmp_path / "fifo.xml")
     p = xml(tmp_path, extra='<include filename="fifo.xml"/>')
-    signal.alarm(10)  # a blocking open would hang the test
-    try:
+    with time_limit(10):  # a blocking open would hang the test
         err = refused(p, "fifo.xml: not a regular file")
-    finally:
-        signal.alarm(0)
     assert err.line == line_of(p, "fifo.xml")
     p = xml(tmp_path, extra='<include filename="scene.xml"/>')
     refused(p, "includes itself")
@@ -325,3 +338,12 @@ def test_a_scene_without_a_sensor_names_the_scene_element(tmp_path):
     p = tmp_path / "s.xml"
     p.write_text('<scene version="3.0.0">\n<shape type="sphere"/>\n</scene>\n')
     assert refused(p, "no <sensor>").line == 1
+
+
+def test_include_of_a_fifo_found_in_a_path_folder(tmp_path):
+    (tmp_path / "lib").mkdir()
+    os.mkfifo(tmp_path / "lib" / "fifo.xml")
+    p = xml(tmp_path, extra='<path value="lib"/>\n<include filename="fifo.xml"/>')
+    with time_limit(10):  # a blocking open would hang the test
+        err = refused(p, "fifo.xml: not a regular file")
+    assert err.line == line_of(p, "fifo.xml")

@@ -7,8 +7,8 @@ bounds (both crash the process), and an ``<include>`` of a FIFO blocks
 forever. :func:`check_xml` and :func:`check_mesh` look first and raise a
 one-line :class:`~drpt.errors.SceneError` at the file and line instead.
 
-* XML (:func:`check_xml`, the scene and each file it includes, found
-  relative to the including file): elements nested at most
+* XML (:func:`check_xml`, the scene and each file it includes, found in the
+  ``<path>`` folders, the including file's folder or the scene's): elements nested at most
   :data:`MAX_DEPTH` deep; every ``<include>`` that exists is a regular file.
   Malformed XML is left to Mitsuba's parser, which reports it.
 * PLY (:func:`check_ply`): an ASCII header (``ply``, ``format``, ``element``,
@@ -54,7 +54,7 @@ def _regular(path: Path) -> bool:
 
 # ------------------------------------------------------------------ XML
 def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int = 0,
-              _stack: tuple = ()) -> None:
+              _stack: tuple = (), _root: Path | None = None) -> None:
     """Raise a SceneError where ``path`` (or a file it includes) nests too deep,
     includes something that is not a regular file or itself, or gives one
     plugin a parameter twice."""
@@ -64,6 +64,7 @@ def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int 
     depth = _depth
     includes: list[tuple[str, int, int]] = []
     names: list[set] = [set()]
+    folders: list[str] = []  # <path> folders, last first (Mitsuba's file resolver)
 
     def start(name, attrs):
         nonlocal depth
@@ -84,6 +85,8 @@ def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int 
             defines.setdefault(attrs["name"], attrs["value"])
         if name == "include" and "filename" in attrs:
             includes.append((attrs["filename"], p.CurrentLineNumber, depth))
+        if name == "path" and "value" in attrs:
+            folders.insert(0, attrs["value"])
 
     def end(name):
         nonlocal depth
@@ -103,7 +106,9 @@ def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int 
             continue
         target = Path(name).expanduser()
         if not target.is_absolute():
-            target = Path(path).parent / target
+            here = Path(path).parent
+            bases = [here / f for f in folders] + [here, Path(_root or path).parent]
+            target = next((b / target for b in bases if os.path.lexists(b / target)), here / target)
         if not os.path.lexists(target):
             continue  # Mitsuba reports a missing file
         if not _regular(target):
@@ -112,7 +117,7 @@ def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int 
         if os.path.realpath(target) in stack:
             raise SceneError(path, line, f"<include> {name}: the file includes itself")
         if len(stack) < MAX_INCLUDES:
-            check_xml(target, defines, _depth=at - 1, _stack=stack)
+            check_xml(target, defines, _depth=at - 1, _stack=stack, _root=_root or path)
 
 
 #: tags whose ``value`` Mitsuba's parser splits into x, y, z (one value or three)
