@@ -376,6 +376,10 @@ class Node:
         for k in self.props.keys():
             if self._type(k) != "ResolvedReference":
                 d[k] = self.props[k]
+        from .precheck import bare_load_crashes
+
+        if bare_load_crashes(self.plugin, d):
+            return None
         backup = mi.file_resolver()
         mi.set_file_resolver(self.state.resolver)
         logger = mi.logger()

@@ -189,6 +189,14 @@ def not_utf8(path: Path, defines: dict[str, str] | None = None) -> SceneError:
     return SceneError(path, None, "malformed XML: Mitsuba's parser failed on bytes that are not UTF-8 text")
 
 
+# ------------------------------------------------------------------ plugins
+def bare_load_crashes(plugin: str, params) -> bool:
+    """Whether Mitsuba 3.9 crashes (a segmentation fault, not an exception)
+    instantiating ``plugin`` with only ``params``, without its nested plugins:
+    ``blendbsdf`` without its two BSDFs, ``bitmap`` without a ``filename``."""
+    return plugin == "blendbsdf" or (plugin == "bitmap" and "filename" not in params)
+
+
 # ------------------------------------------------------------------ meshes
 def check_mesh(plugin: str, path: Path, where, shape_index: int = 0) -> None:
     """Check the mesh file ``path`` of a ``ply`` or ``serialized`` shape;
