@@ -358,3 +358,33 @@ def test_unread_parameters_of_a_blendbsdf_do_not_crash_mitsuba(tmp_path):
         warnings.simplefilter("always")
         load_scene(xml(tmp_path, extra=blend))
     assert any("'2.5'" in str(x.message) for x in w)
+
+
+# ------------------------------------------------------------------ checkpoints
+def test_a_moved_scene_folder_resumes_to_the_same_image(tmp_path):
+    """The checkpoint's scene hash counts paths inside the scene's folder
+    relative to it: a render interrupted in one folder resumes in a copy of it
+    at a path of another length, to the uninterrupted image."""
+    import contextlib
+    import shutil
+    from dataclasses import replace
+
+    from drpt.distributed.job import run
+    from drpt.options import RenderOptions
+
+    opts = replace(RenderOptions(width=16, height=16, spp=4, chunk_spp=1, progress=False), max_lanes=1 << 20)
+    first = tmp_path / "a"
+    shutil.copytree(CORNELL.parent, first)
+
+    def stop(merge, result, engine):
+        if merge.next >= 2:
+            raise KeyboardInterrupt
+
+    with contextlib.suppress(KeyboardInterrupt):
+        run(load_scene(first / "cornellbox.txt"), opts, first / "cut.exr", on_chunk=stop)
+    moved = tmp_path / "moved" / "elsewhere"
+    shutil.copytree(first, moved)
+    job = run(load_scene(moved / "cornellbox.txt"), opts, moved / "cut.exr", resume=True)
+    assert job.resumed_from == 2
+    whole = run(load_scene(first / "cornellbox.txt"), opts, first / "whole.exr").result.image
+    assert np.array_equal(job.result.image, whole)
