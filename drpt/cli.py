@@ -22,12 +22,17 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import warnings
 from pathlib import Path
 
 from .errors import DrptError, showwarning, warn
 from .options import check_view_args
+
+#: the most local worker processes --workers starts per core (each is a Python
+#: process with its own copy of the scene and its own compiled kernels)
+WORKERS_PER_CORE = 4
 
 
 def _add_render_args(p: argparse.ArgumentParser) -> None:
@@ -108,11 +113,20 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.cluster is not None:
         raise DrptError("give --workers N (a local cluster) or --cluster ADDRESS, not both")
-    if args.workers is not None and args.workers < 1:
-        raise DrptError(f"--workers must be at least 1, got {args.workers}")
+    most = WORKERS_PER_CORE * max(2, os.cpu_count() or 1)
+    if args.workers is not None and not 1 <= args.workers <= most:
+        raise DrptError(f"--workers must be between 1 and {most} ({WORKERS_PER_CORE} local worker "
+                        f"processes per core), got {args.workers}")
+    if args.cluster is not None:
+        from .distributed.engine import check_address
+
+        check_address(args.cluster)
     if not (math.isfinite(args.checkpoint_seconds) and args.checkpoint_seconds >= 0):
         raise DrptError(f"--checkpoint-seconds must be >= 0, got {args.checkpoint_seconds}")
 
+    from .memory import check as check_memory
+
+    check_memory(opts.width, opts.height)
     ensure()
     if args.gui:
         scene, opts = _gui(scene, opts, args)

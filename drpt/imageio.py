@@ -137,16 +137,27 @@ def write_image(path: str | PathLike, rgb: np.ndarray, gamma: float = 2.2,
         raise ValueError(f"gamma must be positive, got {gamma}")
 
     try:
-        if ext == ".exr":
-            _write_exr(path, img, extra or {})
-        elif ext in (".hdr", ".pfm"):
-            _write_bitmap(path, img)
-        else:
-            _write_ldr(path, img, gamma, "PNG" if ext == ".png" else "TGA")
+        # encoded in a private folder, then written by Python, which reports a
+        # failed write (a full disk; Mitsuba's and OpenEXR's writers may not)
+        import tempfile
+
+        with tempfile.TemporaryDirectory(prefix="drpt-image-") as tmp:
+            encoded = Path(tmp) / ("image" + ext)
+            if ext == ".exr":
+                _write_exr(encoded, img, extra or {})
+            elif ext in (".hdr", ".pfm"):
+                _write_bitmap(encoded, img)
+            else:
+                _write_ldr(encoded, img, gamma, "PNG" if ext == ".png" else "TGA")
+            data = encoded.read_bytes()
+        if not data:
+            raise OSError(0, "the encoder wrote nothing")
+        with open(path, "wb") as f:
+            f.write(data)
     except OSError as e:
         raise DrptError(f"{path}: cannot write image: {e.strerror or e}") from e
     except RuntimeError as e:  # OpenEXR reports I/O failures this way
-        raise DrptError(f"{path}: cannot write image: {e}") from e
+        raise DrptError(f"{path}: cannot write image: {_mitsuba_message(e)}") from e
 
 
 def _write_exr(path: Path, img: np.ndarray, extra: dict[str, np.ndarray]) -> None:
@@ -173,10 +184,7 @@ def _write_bitmap(path: Path, img: np.ndarray) -> None:
     """``.hdr`` (negative values clamped to 0 first) or ``.pfm``, by Mitsuba."""
     if path.suffix.lower() == ".hdr":
         img = np.maximum(img, 0.0)
-    try:
-        _bitmap_class()(np.ascontiguousarray(img, dtype=np.float32)).write(str(path))
-    except RuntimeError as e:
-        raise DrptError(f"{path}: cannot write image: {_mitsuba_message(e)}") from e
+    _bitmap_class()(np.ascontiguousarray(img, dtype=np.float32)).write(str(path))
 
 
 def _bitmap_class():

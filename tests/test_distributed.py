@@ -298,7 +298,7 @@ def test_resume_refuses_a_checkpoint_of_other_options(tmp_path, capsys):
     assert rc == 2 and "no checkpoint" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("flags,message", [(["--workers", "0"], "--workers must be at least 1"),
+@pytest.mark.parametrize("flags,message", [(["--workers", "0"], "--workers must be between 1 and"),
                                            (["--workers", "2", "--cluster", "tcp://127.0.0.1:9"], "not both"),
                                            (["--chunk-spp", "0"], "--chunk-spp must be between"),
                                            (["--checkpoint-seconds", "-1"], "--checkpoint-seconds must be")])

@@ -35,6 +35,7 @@ import warnings
 import numpy as np
 import pytest
 
+import fuzzformats as ff
 import fuzzutil as fz
 from drpt.imageio import read_image
 from drpt.scene import load_scene
@@ -184,3 +185,143 @@ def test_extreme_numbers_accepted_or_reported(case, tmp_path):
         _read(case, entry)
     except Exception as e:
         fz.check_error(e, tmp_path, image=False)
+
+
+# ------------------------------------------------------------------ Mitsuba XML, PLY, serialized, OBJ
+# (tests/fuzzformats.py): the meshes scene of tests/data/xml with one file
+# mutated, loaded in-process: accepted with finite data, or one located error.
+@pytest.mark.parametrize("target,mutation,seed", [
+    pytest.param(*c, id=ff.xml_id(*c)) for c in ff.xml_cases()])
+def test_xml_and_meshes_accept_or_report(target, mutation, seed, tmp_path):
+    entry = ff.build_xml(target, mutation, seed, tmp_path)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with time_limit(CASE_SECONDS):
+                scene = load_scene(entry)
+    except Exception as e:  # the contract is checked on any exception
+        fz.check_error(e, tmp_path, image=False)
+        return
+    fz.assert_finite(scene)
+
+
+# ------------------------------------------------------------------ checkpoints
+@pytest.fixture(scope="module")
+def checkpoint_render(tmp_path_factory):
+    """A real checkpoint (2 of 4 chunks of a 16x16 Cornell box render) and what
+    :func:`checkpoint.load` checks it against."""
+    from dataclasses import replace
+
+    from drpt.distributed import checkpoint
+    from drpt.distributed.job import run
+    from drpt.options import RenderOptions
+    from drpt.render.chunks import plan_chunks
+
+    root = tmp_path_factory.mktemp("fuzz_checkpoint")
+    scene = load_scene(fz.SCENES / "cornellbox" / "cornellbox.txt")
+    opts = replace(RenderOptions(width=16, height=16, spp=4, chunk_spp=1, progress=False), max_lanes=1 << 20)
+    out = root / "cut.exr"
+
+    def stop(merge, result, engine):
+        if merge.next >= 2:
+            raise KeyboardInterrupt
+
+    with contextlib.suppress(KeyboardInterrupt):
+        run(scene, opts, out, on_chunk=stop)
+    npz, _ = checkpoint.paths(out)
+    chunks = plan_chunks(16, 16, 4, opts.max_lanes, 1)
+    args = (checkpoint.scene_hash(scene), checkpoint.options_key(opts), chunks)
+    assert checkpoint.load(out, *args).next == 2  # the intact one is accepted
+    return npz.read_bytes(), args
+
+
+@pytest.mark.parametrize("mutation,seed", [
+    pytest.param(m, s, id=f"checkpoint/{m}-s{s}") for m in ff.CHECKPOINT_MUTATIONS for s in range(3)])
+def test_damaged_checkpoints_are_refused(mutation, seed, tmp_path, checkpoint_render):
+    """A damaged checkpoint is refused with one line naming it, or (a mutation
+    that changed nothing the render uses) accepted with consistent sums."""
+    from drpt.distributed import checkpoint
+
+    raw, args = checkpoint_render
+    out = tmp_path / "cut.exr"
+    npz, _ = checkpoint.paths(out)
+    npz.write_bytes(raw)
+    ff.mutate_checkpoint(npz, mutation, ff.rng_for(f"checkpoint/{mutation}-s{seed}"))
+    try:
+        with time_limit(CASE_SECONDS):
+            cp = checkpoint.load(out, *args)
+    except Exception as e:  # the contract is checked on any exception
+        fz.check_error(e, tmp_path, image=True)
+        return
+    chunks = args[2]
+    assert cp.sum.dtype == np.float64 and cp.sum.shape == (16, 16, 3) and np.isfinite(cp.sum).all()
+    assert cp.spp == chunks.spp_before(cp.next)
+
+
+def test_special_files_as_checkpoints(tmp_path, checkpoint_render):
+    """A FIFO or a folder where the checkpoint goes: refused at once, never read."""
+    import os
+
+    from drpt.distributed import checkpoint
+    from drpt.errors import DrptError
+
+    _, args = checkpoint_render
+    for kind in ("fifo", "dir"):
+        out = tmp_path / f"{kind}.exr"
+        npz, _ = checkpoint.paths(out)
+        os.mkfifo(npz) if kind == "fifo" else npz.mkdir()
+        with time_limit(CASE_SECONDS), pytest.raises(DrptError, match="not a regular file"):
+            checkpoint.load(out, *args)
+        with pytest.raises(DrptError, match="not a regular file"):
+            checkpoint.check_paths(out)
+        checkpoint.remove(out)  # leaves what it did not write
+        assert os.path.lexists(npz)
+
+
+def test_checkpoint_hash_ignores_the_folder(tmp_path):
+    import shutil
+
+    from drpt.distributed.checkpoint import scene_hash
+
+    hashes = set()
+    for name in ("a", "moved/elsewhere"):  # paths of other lengths (pickled strings count them)
+        shutil.copytree(fz.SCENES / "showcase", tmp_path / name)
+        hashes.add(scene_hash(load_scene(tmp_path / name / "showcase_day.txt")))
+        shutil.copytree(fz.SCENES / "cornellbox", tmp_path / name / "box")
+        hashes.add(scene_hash(load_scene(tmp_path / name / "box" / "cornellbox.txt")))
+    assert len(hashes) == 2
+    (tmp_path / "a" / "grille.png").write_bytes(b"changed")
+    assert scene_hash(load_scene(tmp_path / "a" / "showcase_day.txt")) not in hashes
+
+
+# ------------------------------------------------------------------ cluster addresses
+@pytest.mark.parametrize("seed", range(24), ids=lambda s: f"cluster/address-s{s}")
+def test_cluster_addresses_are_checked(seed):
+    from drpt.distributed.engine import check_address
+    from drpt.errors import DrptError
+
+    a = ff.address(ff.rng_for(f"cluster/address-s{seed}"))
+    try:
+        check_address(a)
+    except DrptError as e:
+        assert len(str(e).splitlines()) == 1 and str(e).startswith("--cluster "), str(e)
+        return
+    assert a.startswith(("tcp://", "localhost", "127.", "[")) and a.rpartition(":")[2].isdigit(), a
+
+
+@pytest.mark.parametrize("kind,seed", [pytest.param(k, s, id=f"cluster/server-{k}-s{s}")
+                                       for k in ff.SERVER_KINDS for s in range(2)])
+def test_fake_schedulers_are_one_error_within_the_deadline(kind, seed):
+    """A server on 127.0.0.1 that is not a Dask scheduler: one error line, in
+    about the connect timeout (0.5 s here), never an allocation of its frame length."""
+    import time
+
+    from drpt.distributed.engine import probe
+    from drpt.errors import DrptError
+
+    with ff.FakeServer(kind, ff.rng_for(f"cluster/server-{kind}-s{seed}")) as server:
+        t = time.monotonic()
+        with time_limit(CASE_SECONDS), pytest.raises(DrptError) as e:
+            probe(f"tcp://127.0.0.1:{server.port}", 0.5)
+        assert time.monotonic() - t < 2.0
+    assert len(str(e.value).splitlines()) == 1

@@ -15,18 +15,20 @@ uninterrupted render has after the same chunks.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 import pickle
+import stat
 from dataclasses import asdict, dataclass
-from pathlib import Path
+from pathlib import Path, PurePath
 
 import numpy as np
 
 from ..errors import DrptError
 
 SUFFIX = ".drpt-checkpoint"
-VERSION = 1
+VERSION = 2  # 2: the description holds the sums' digest
 
 
 def scene_hash(scene) -> str:
@@ -34,8 +36,35 @@ def scene_hash(scene) -> str:
     lights, camera; pickled) and the bytes of the images it names (textures,
     sky), which the renderer reads when it builds the device scene. The model
     holds no sets: their pickled order changes from one process to the next
-    (string hashing is randomized), so the hash would too."""
-    h = hashlib.sha256(pickle.dumps(scene, protocol=4))
+    (string hashing is randomized), so the hash would too. Paths inside the
+    scene's folder count relative to it, so a moved folder keeps its hash."""
+    folder = _scene_folder(scene)
+
+    def rel(p) -> str:
+        p = Path(os.path.abspath(p))
+        if folder is not None and p.is_relative_to(folder):
+            return "<scene>/" + p.relative_to(folder).as_posix()
+        return str(p)
+
+    prefixes = []
+    if folder is not None:  # the folder inside strings too (materials' origins: FILE:LINE)
+        prefixes = sorted({str(folder) + os.sep, str(Path(scene.path).parent) + os.sep} - {"." + os.sep},
+                          key=len, reverse=True)
+
+    class _Pickler(pickle.Pickler):
+        def persistent_id(self, obj):
+            if isinstance(obj, PurePath):
+                return "path", rel(obj)
+            if isinstance(obj, str) and any(p in obj for p in prefixes):
+                for p in prefixes:
+                    obj = obj.replace(p, "<scene>/")
+                return "str", obj
+            return None
+
+    buf = io.BytesIO()
+    _Pickler(buf, protocol=4).dump(scene)
+    data = buf.getvalue()
+    h = hashlib.sha256(data)
     from ..scene.model import Skybox
 
     images = {str(m.map_kd) for m in scene.materials if m.map_kd is not None}
@@ -43,12 +72,21 @@ def scene_hash(scene) -> str:
     images |= {str(t.path) for m in scene.materials if m.bsdf is not None for t in m.bsdf.textures()}
     images = sorted(images | {str(light.path) for light in scene.lights if isinstance(light, Skybox)})
     for name in images:
-        h.update(name.encode())
+        h.update(rel(name).encode())
         try:
+            if not stat.S_ISREG(os.stat(name).st_mode):  # a FIFO would block
+                raise OSError(name)
             h.update(Path(name).read_bytes())
         except OSError:
             h.update(b"<unreadable>")
     return h.hexdigest()
+
+
+def _scene_folder(scene) -> Path | None:
+    path = getattr(scene, "path", None)
+    if path is None:
+        return None
+    return Path(os.path.abspath(path)).parent
 
 
 def options_key(opts) -> dict:
@@ -80,13 +118,33 @@ class Checkpoint:
     weight: np.ndarray | None = None  # a splatting film's sum(w), sum(w^2) ((H, W, 2))
 
 
+def _digest(a: np.ndarray, b: np.ndarray, c: np.ndarray | None = None) -> str:
+    data = b"".join(np.ascontiguousarray(x).tobytes() for x in (a, b, c) if x is not None)
+    return hashlib.sha256(data).hexdigest()
+
+
+def check_paths(output: Path) -> None:
+    """Refuse, before rendering, checkpoint paths drpt could not write or
+    remove (a folder, a FIFO or a device where its files go)."""
+    for p in paths(output):
+        try:
+            mode = os.stat(p).st_mode
+        except OSError:
+            continue
+        if not stat.S_ISREG(mode):
+            raise DrptError(f"{p}: not a regular file; drpt keeps {output.name}'s checkpoint there "
+                            "(move it away)")
+
+
 def save(output: Path, cp: Checkpoint) -> None:
-    """Write the checkpoint. The .npz holds the description too (``meta``)
-    and is what :func:`load` trusts, so a process killed between the two
-    renames leaves a consistent checkpoint; the .json is for people."""
+    """Write the checkpoint. The .npz holds the description too (``meta``,
+    with a digest of the sums) and is what :func:`load` trusts, so a process
+    killed between the two renames leaves a consistent checkpoint; the .json
+    is for people."""
     npz, meta = paths(output)
     d = {k: v for k, v in asdict(cp).items() if k not in ("sum", "sumsq", "weight")}
     d["version"] = VERSION
+    d["digest"] = _digest(cp.sum, cp.sumsq, cp.weight)
     text = json.dumps(d, indent=1, sort_keys=True)
     tmp = npz.with_name(npz.name + ".tmp.npz")
     arrays = {"sum": cp.sum, "sumsq": cp.sumsq}
@@ -100,39 +158,98 @@ def save(output: Path, cp: Checkpoint) -> None:
 
 
 def remove(output: Path) -> None:
+    """Remove the checkpoint's files (regular files only: never a folder or
+    device someone put in their place)."""
+    def unlink(p: Path) -> None:
+        try:
+            if stat.S_ISREG(os.lstat(p).st_mode) or p.is_symlink():
+                p.unlink()
+        except OSError:
+            pass
+
     for p in paths(output):
-        p.unlink(missing_ok=True)
+        unlink(p)
     # a .tmp file left by a process killed while writing
     for p in paths(output):
         for tmp in p.parent.glob(p.name + ".tmp*"):
-            tmp.unlink(missing_ok=True)
+            unlink(tmp)
 
 
-def load(output: Path, scene_hash: str, options: dict, chunks: int) -> Checkpoint:
-    """The checkpoint of ``output``, checked against this render: a missing,
-    unreadable or foreign one (other scene, options or chunks) is a DrptError."""
+# the description's fields and their types (bool is not an int here)
+_FIELDS = {"version": int, "scene_hash": str, "options": dict, "chunks": int, "next": int,
+           "spp": int, "nonfinite": int, "digest": str}
+
+
+def load(output: Path, scene_hash: str, options: dict, chunks) -> Checkpoint:
+    """The checkpoint of ``output``, checked against this render (``chunks``:
+    its :class:`~drpt.render.chunks.ChunkPlan`): a missing, unreadable,
+    damaged or foreign one (other scene, options or chunks) is a DrptError
+    naming the file. Nothing in it is trusted unchecked: the description's
+    fields and types, the sums' dtype (float64), shape (the image's), values
+    (finite, not negative, ``sum^2 <= spp sumsq`` per pixel) and digest, and
+    the chunks merged against the samples per pixel they hold."""
     npz, meta = paths(output)
-    if not npz.exists():
-        raise DrptError(f"--resume: no checkpoint for {output} ({npz.name} beside it)")
     try:
-        with np.load(npz) as z:
+        mode = os.stat(npz).st_mode
+    except OSError:
+        raise DrptError(f"--resume: no checkpoint for {output} ({npz.name} beside it)") from None
+    if not stat.S_ISREG(mode):
+        raise DrptError(f"{npz}: --resume: the checkpoint is not a regular file")
+
+    def refuse(why: str) -> DrptError:
+        return DrptError(f"{npz}: --resume: {why}")
+
+    try:
+        with np.load(npz, allow_pickle=False) as z:
             s, s2 = z["sum"], z["sumsq"]
             wts = z["weight"] if "weight" in z.files else None
             d = json.loads(str(z["meta"]))
-    except (OSError, ValueError, KeyError) as e:
-        raise DrptError(f"--resume: {npz}: unreadable checkpoint ({e})") from None
+    except Exception as e:  # noqa: BLE001 - whatever a damaged file raises (zip, npy, json)
+        raise refuse(f"unreadable checkpoint ({' '.join(f'{type(e).__name__}: {e}'.split())})") from None
+    if not isinstance(d, dict):
+        raise refuse("damaged checkpoint (its description is not an object)")
     if d.get("version") != VERSION:
-        raise DrptError(f"--resume: {meta}: checkpoint version {d.get('version')}, not {VERSION}")
+        raise refuse(f"checkpoint version {d.get('version')!r}, not {VERSION}")
+    for k, t in _FIELDS.items():
+        if not isinstance(d.get(k), t) or isinstance(d.get(k), bool):
+            raise refuse(f"damaged checkpoint ('{k}' is {d.get(k)!r}, not {t.__name__})")
     if d["scene_hash"] != scene_hash:
-        raise DrptError(f"--resume: {meta} is a checkpoint of another scene (its content changed)")
+        raise refuse(f"a checkpoint of another scene (its content changed): {meta.name}")
     if d["options"] != json.loads(json.dumps(options)):
         diff = sorted(k for k in set(d["options"]) | set(options)
                       if d["options"].get(k) != json.loads(json.dumps(options)).get(k))
-        raise DrptError(f"--resume: {meta} was rendered with other options ({', '.join(diff)} "
-                        "differ): give the flags of the interrupted render")
-    if d["chunks"] != chunks or s.shape != s2.shape or not 0 <= d["next"] <= chunks:
-        raise DrptError(f"--resume: {meta} does not match this render's chunks")
-    if wts is not None and wts.shape != s.shape[:2] + (2,):
-        raise DrptError(f"--resume: {meta} does not match this render's chunks")
+        raise refuse(f"rendered with other options ({', '.join(diff)} differ): give the flags of "
+                     "the interrupted render")
+    p = chunks.passes
+    shape = (p.height, p.width, 3)
+    if d["chunks"] != chunks.count or not 0 <= d["next"] <= chunks.count:
+        raise refuse("does not match this render's chunks")
+    # sumsq: the squares, then with a moment render the channel products (6) or, splatted,
+    # the weighted r^2 .. gb (9); a splatting film's weights: sum(w), sum(w^2)
+    sq_shapes = [shape[:2] + (c,) for c in ((6, 9) if options.get("moment") else (3,))]
+    splatted = options.get("integrator") != "ptracer" and not options.get("filter_sampling") and \
+        str(options.get("filter", "box")).split(":")[0] != "box"
+    if splatted != (wts is not None):
+        raise refuse("damaged checkpoint (filter weights " + ("missing)" if splatted else "where none belong)"))
+    arrays = [("sum", s, [shape]), ("sumsq", s2, sq_shapes)]
+    if wts is not None:
+        arrays.append(("weight", wts, [shape[:2] + (2,)]))
+    for name, a, shapes in arrays:
+        if a.dtype != np.float64 or a.shape not in shapes:
+            raise refuse(f"damaged checkpoint ('{name}' is {a.dtype} {a.shape}, not float64 {shapes[0]})")
+        if not np.isfinite(a).all() or (a < 0).any():
+            raise refuse(f"damaged checkpoint ('{name}' holds negative or non-finite values)")
+    if _digest(s, s2, wts) != d["digest"]:
+        raise refuse("damaged checkpoint (its sums do not match their digest)")
+    spp = chunks.spp_before(d["next"])
+    if d["spp"] != spp or not 0 <= d["nonfinite"] <= p.width * p.height * spp:
+        raise refuse(f"damaged checkpoint ({d['next']} chunks merged hold {spp} spp, it says "
+                     f"{d['spp']}; {d['nonfinite']} samples dropped)")
+    # a pixel's own samples: sum^2 <= spp sumsq (splats of other pixels' samples may exceed it)
+    if not splatted and options.get("integrator") != "ptracer" and \
+            (s * s > spp * s2[..., :3] * (1 + 1e-9) + 1e-300).any():
+        raise refuse("damaged checkpoint (its sums of squares are too small for its sums)")
+    if wts is not None and (wts[..., 1] > wts[..., 0] ** 2 * (1 + 1e-9) + 1e-300).any():
+        raise refuse("damaged checkpoint (its filter weights are inconsistent)")
     return Checkpoint(d["scene_hash"], d["options"], d["chunks"], d["next"], d["spp"],
                       d["nonfinite"], s, s2, wts)

@@ -89,6 +89,86 @@ def _lost(e: BaseException) -> bool:
                           concurrent.futures.CancelledError))
 
 
+def check_address(address: str) -> str:
+    """``address`` if drpt can join a scheduler there (``tcp://host:port`` or
+    ``host:port``), else a DrptError: other protocols (``tls://`` needs
+    certificates drpt does not pass, ``ucx://`` a package it does not
+    install), spaces or control characters."""
+    shown = repr(address)
+    if not address or any(c.isspace() or not c.isprintable() for c in address):
+        raise DrptError(f"--cluster {shown}: an address has no spaces or control characters "
+                        "(tcp://host:8786)")
+    scheme, sep, rest = address.rpartition("://")
+    if sep and scheme != "tcp":
+        raise DrptError(f"--cluster {shown}: drpt joins schedulers over tcp:// only, "
+                        f"not {scheme}://")
+    host, colon, port = rest.rpartition(":")
+    import re
+
+    if (not colon or not re.fullmatch(r"[A-Za-z0-9.-]+|\[[0-9A-Fa-f:.]+\]", host)
+            or not re.fullmatch(r"[0-9]{1,5}", port) or not 0 < int(port) < 65536):
+        raise DrptError(f"--cluster {shown}: give the scheduler as tcp://HOST:PORT")
+    return address
+
+
+def probe(address: str, timeout: float) -> None:
+    """Connect to ``address`` and read the handshake a Dask scheduler sends
+    first, all within ``timeout`` seconds: a server that never answers, or
+    answers in another protocol (HTTP, garbage), is a DrptError here, before
+    Dask's client reads a frame length from it (and allocates that much) or
+    waits on it without a deadline."""
+    import socket
+    import struct
+    import time
+
+    rest = address.rpartition("://")[2]
+    host, _, port = rest.rpartition(":")
+    host = host.strip("[]")
+    end = time.monotonic() + timeout
+
+    def fail(why: str) -> DrptError:
+        return DrptError(f"--cluster {address}: {why}")
+
+    def recv(sock, n: int) -> bytes:
+        out = b""
+        while len(out) < n:
+            left = end - time.monotonic()
+            if left <= 0:
+                raise TimeoutError
+            sock.settimeout(left)
+            chunk = sock.recv(n - len(out))
+            if not chunk:
+                raise fail("the server closed the connection (not a Dask scheduler?)")
+            out += chunk
+        return out
+
+    def connect():
+        """A connection, tried again until the deadline (as Dask's client does:
+        a scheduler that is starting refuses connections for a moment)."""
+        while True:
+            try:
+                return socket.create_connection((host, int(port)), timeout=max(end - time.monotonic(), 0.001))
+            except (ConnectionRefusedError, ConnectionResetError):
+                if time.monotonic() + 0.1 >= end:
+                    raise
+                time.sleep(0.1)
+
+    try:
+        with connect() as sock:
+            (nbytes,) = struct.unpack("<Q", recv(sock, 8))
+            if not 16 <= nbytes <= 1 << 20:
+                raise fail("the server does not speak Dask's protocol (not a Dask scheduler?)")
+            frames = recv(sock, nbytes)
+            (count,) = struct.unpack_from("<Q", frames)
+            if not 1 <= count <= 64 or 8 * (count + 1) > nbytes:
+                raise fail("the server does not speak Dask's protocol (not a Dask scheduler?)")
+    except (TimeoutError, socket.timeout):
+        raise fail(f"no Dask scheduler answered within {timeout:g} s") from None
+    except OSError as e:
+        raise fail(f"no Dask scheduler answered within {timeout:g} s "
+                   f"({_one_line(e)})") from None
+
+
 def _one_line(e: BaseException) -> str:
     text = " ".join(f"{type(e).__name__}: {e}".split())
     if "deserializ" in text:
@@ -118,6 +198,8 @@ class DaskEngine:
 
         if opts.max_lanes is None:  # the coordinator's, not each worker's, default
             opts = replace(opts, max_lanes=policy().max_lanes)
+        if address is not None:
+            check_address(address)
         self.scene, self.opts, self.backend = scene, opts, name()
         self.key = scene_hash + json.dumps(repr(opts))
         self.workers, self.address = workers, address
@@ -125,6 +207,9 @@ class DaskEngine:
         self.client = self.cluster = None
 
     def __enter__(self) -> DaskEngine:
+        import signal
+        import threading
+
         from distributed import Client, LocalCluster
 
         # drpt reports lost workers, failed chunks and a lost scheduler itself, in one line
@@ -135,15 +220,26 @@ class DaskEngine:
             logging.getLogger(n).setLevel(logging.CRITICAL)
         try:
             if self.address is not None:
+                probe(self.address, self.connect_timeout)
                 try:
                     self.client = Client(self.address, timeout=self.connect_timeout)
                 except (OSError, TimeoutError, ValueError) as e:
                     raise DrptError(f"--cluster {self.address}: no Dask scheduler answered within "
                                     f"{self.connect_timeout:g} s ({_one_line(e)})") from None
             else:
-                self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
-                                            processes=True, dashboard_address=None,
-                                            silence_logs=logging.ERROR)
+                # the worker processes start with Ctrl-C ignored (an ignored signal stays
+                # ignored in a child, and Python then installs no KeyboardInterrupt handler):
+                # a terminal's Ctrl-C reaches the whole process group, and only this
+                # process stops the render, with its checkpoint
+                main = threading.current_thread() is threading.main_thread()
+                old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+                try:
+                    self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
+                                                processes=True, dashboard_address=None,
+                                                silence_logs=logging.ERROR)
+                finally:
+                    if main:
+                        signal.signal(signal.SIGINT, old)
                 self.client = Client(self.cluster)
                 # one core per worker process (Dr.Jit would start a thread per core in each)
                 self.client.run(_share_cores, max(1, (os.cpu_count() or 1) // self.workers))

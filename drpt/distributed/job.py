@@ -120,8 +120,9 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     chunks = plan_chunks(W, H, spp, max_lanes, opts.chunk_spp)
     key = checkpoint.scene_hash(scene)
     okey = checkpoint.options_key(opts)
+    checkpoint.check_paths(output)
     if resume:
-        cp = checkpoint.load(output, key, okey, chunks.count)
+        cp = checkpoint.load(output, key, okey, chunks)
         merged = ChunkMerge(chunks, cp.next, cp.sum, cp.sumsq, cp.nonfinite, cp.weight)
     else:
         merged = ChunkMerge(chunks)
@@ -181,12 +182,21 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
                 # a checkpoint holds the merged prefix of chunks: none is written
                 # before it grows (Dask's first result need not be chunk 0)
                 if not merged.done and merged.next > saved and now - last >= checkpoint_seconds:
-                    save()
+                    try:
+                        save()
+                    except OSError as e:  # a full disk: the render goes on without one
+                        npz, _ = checkpoint.paths(output)
+                        if on_warning is not None:
+                            on_warning(f"{npz}: cannot write the checkpoint: {e.strerror or e}")
                     saved, last = merged.next, now
     except BaseException:
         if merged.next > job.resumed_from or resume:
-            save()
             npz, _ = checkpoint.paths(output)
+            try:
+                save()
+            except OSError as e:
+                note(f"no checkpoint written: {npz}: {e.strerror or e}")
+                raise
             note(f"checkpoint {npz.name} kept: {merged.next} of {chunks.count} chunks "
                  f"({merged.spp} of {spp} spp); continue with --resume")
         raise

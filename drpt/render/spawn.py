@@ -84,10 +84,13 @@ def triangle_point(p0: Array3f, e1: Array3f, e2: Array3f, u: Float, v: Float
     point (its rounding, and the watertight test's for a ray starting there)."""
     p = p0 + (e1 * u + e2 * v)
     c = dr.cross(e1, e2)
-    rcp_len = dr.rsqrt(dr.squared_norm(c))
-    ng = c * rcp_len
+    # |c|^2 ~ |e|^4 overflows float32 past edges of 4e9: normalize c by its largest component
+    m = dr.maximum(dr.maximum(dr.abs(c.x), dr.abs(c.y)), dr.abs(c.z))
+    c = c * dr.rcp(m)
+    r = dr.rsqrt(dr.squared_norm(c))
+    ng = c * r
     edges = dr.squared_norm(e1) + dr.squared_norm(e2)
-    shape = edges * dr.sqrt(edges) * rcp_len  # |e|^3 / |e1 x e2|: a length, large for slivers
+    shape = edges * (dr.sqrt(edges) * r / m)  # |e|^3 / |e1 x e2|: a length, large for slivers
     return p, ng, dr.dot(dr.abs(ng), dr.abs(p)) * POINT_GAMMA + shape * SHAPE_GAMMA
 
 

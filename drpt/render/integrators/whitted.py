@@ -57,7 +57,7 @@ class WhittedIntegrator:
         scene, direct = self.scene, self.direct
         max_depth = self.opt.max_depth if self.opt.max_depth > 0 else 16
 
-        L = Array3f(0.0)
+        L = dr.zeros(Array3f, dr.width(d))  # as wide as the rays, though nothing adds to it (an empty scene)
         beta = Array3f(1.0)
         depth = UInt32(0)
         active = Bool(active)

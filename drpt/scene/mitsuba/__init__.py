@@ -94,7 +94,12 @@ def load_mitsuba_xml(path: str | Path, defines: dict[str, str] | None = None, *,
     """Read the Mitsuba XML scene at ``path`` (``$name`` from ``defines``)."""
     from .reader import Reader
 
-    return Reader(path, defines, ignore_unsupported=ignore_unsupported, strict=strict).read()
+    try:
+        return Reader(path, defines, ignore_unsupported=ignore_unsupported, strict=strict).read()
+    except UnicodeDecodeError:  # a name or value of bytes that are not UTF-8, which Mitsuba kept
+        from .precheck import not_utf8
+
+        raise not_utf8(Path(path).expanduser().resolve(), defines) from None
 
 
 def parse_defines(items) -> dict[str, str]:

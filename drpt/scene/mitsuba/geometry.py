@@ -33,10 +33,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from .nodes import Node
+from .precheck import check_indices, check_mesh
 
 SPHERE_STACKS = 64
 SPHERE_SLICES = 128
@@ -100,6 +102,7 @@ def load_mesh(node: Node, to_world: np.ndarray, attributes=()) -> Mesh:
         if filename is None:
             raise node.error(f"{node.label}: needs a 'filename'")
         d["filename"] = str(node.resolve_file(filename))
+        check_mesh(node.plugin, Path(d["filename"]), node, node.int("shape_index", 0) or 0)
     for name, get in (("face_normals", node.bool), ("flip_tex_coords", node.bool),
                       ("shape_index", node.int)):
         if node.plugin == "serialized" and name == "flip_tex_coords":
@@ -119,8 +122,12 @@ def load_mesh(node: Node, to_world: np.ndarray, attributes=()) -> Mesh:
         from .nodes import _one_line
 
         raise node.error(f"{node.label}: {_one_line(str(e))}") from None
+    except UnicodeDecodeError:  # Mitsuba's message quotes the file's bytes
+        raise node.error(f"{node.label}: Mitsuba cannot read {d.get('filename', 'the mesh')} "
+                         "(not a valid mesh file)") from None
     p = np.array(mesh.vertex_positions_buffer(), dtype=np.float64).reshape(-1, 3)
     faces = np.array(mesh.faces_buffer(), dtype=np.int64).reshape(-1, 3)
+    check_indices(faces, len(p), node)
     n = None
     if mesh.has_vertex_normals() and not mesh.has_face_normals():
         n = np.array(mesh.vertex_normals_buffer(), dtype=np.float64).reshape(-1, 3)

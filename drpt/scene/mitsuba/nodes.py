@@ -82,7 +82,9 @@ def parser_error(path: Path, error: Exception) -> SceneError:
     if m:
         return SceneError(_locate(path, m.group(1)), int(m.group(3)),
                           f"malformed XML: {_one_line(m.group(2))}")
-    return SceneError(path, None, _one_line(text))
+    from .precheck import located_offset
+
+    return located_offset(_TAG.sub("", text)) or SceneError(path, None, _one_line(text))
 
 
 def _locate(main: Path, name: str) -> Path:
@@ -102,6 +104,9 @@ class State:
         import mitsuba.parser as mp
 
         self.path = path
+        from .precheck import check_xml
+
+        check_xml(path, defines)  # what would crash or block Mitsuba's parser
         config = mp.ParserConfig(VARIANT)
         # Mitsuba's load_file: a copy of the global file resolver with the scene's folder
         # first, on which the parser prepends each <path> folder (and, while it reads an
@@ -116,6 +121,10 @@ class State:
             mp.transform_resolve(config, state)
         except RuntimeError as e:
             raise parser_error(path, e) from None
+        except UnicodeDecodeError:  # its message quotes bytes that are not UTF-8
+            from .precheck import not_utf8
+
+            raise not_utf8(path, defines) from None
         finally:
             mi.set_file_resolver(backup)
         #: where a relative file name is looked for, first match wins (Mitsuba's order:
@@ -197,7 +206,10 @@ class Node:
         if not p.is_file():
             what = "not a regular file" if p.exists() else "no such file"
             raise self.error(f"{self.label}: {name}: {what}")
-        return p.resolve()
+        from ..files import named
+
+        # an image read at render time names this node's line in its errors
+        return named(p.resolve(), (self.file, self.line) if self.line is not None else None)
 
     # ------------------------------------------------------------ params
     def _is_child(self, key: str) -> bool:
@@ -239,7 +251,10 @@ class Node:
             return default
         if self._type(name) not in ("Float", "Integer"):
             raise self._wrong(name, "a float")
-        return float(self.get(name))
+        v = float(self.get(name))
+        if v != v:
+            raise self.error(f"{self.label}: parameter '{name}' is NaN")
+        return v
 
     def int(self, name: str, default: int | None = None) -> int | None:
         if not self.has(name):
@@ -268,7 +283,7 @@ class Node:
         if self._type(name) != "Vector":
             raise self._wrong(name, "a point or vector")
         v = self.get(name)
-        return (float(v[0]), float(v[1]), float(v[2]))
+        return _finite(self, name, (float(v[0]), float(v[1]), float(v[2])))
 
     def transform(self, name: str = "to_world") -> np.ndarray:
         """A 4x4 float64 matrix (identity when not given)."""
@@ -295,18 +310,18 @@ class Node:
         t = self._type(name)
         if t in ("Float", "Integer"):
             v = float(self.get(name))
-            return (v, v, v)
+            return _finite(self, name, (v, v, v))
         if t == "Color":
             c = self.get(name)
-            return (float(c[0]), float(c[1]), float(c[2]))
+            return _finite(self, name, (float(c[0]), float(c[1]), float(c[2])))
         if t == "Spectrum":
             s = self.get(name)
             if s.is_uniform():
                 v = float(s.values[0])
                 if emission:
-                    return tuple(v * c for c in D65_RGB)
-                return (v, v, v)
-            return self._spectrum_rgb(name, s, emission)
+                    return _finite(self, name, tuple(v * c for c in D65_RGB))
+                return _finite(self, name, (v, v, v))
+            return _finite(self, name, self._spectrum_rgb(name, s, emission))
         raise self._wrong(name, "a color (<rgb>, <spectrum> or <float>)")
 
     def _spectrum_rgb(self, name: str, s, emission: bool) -> tuple[float, float, float]:
@@ -361,6 +376,10 @@ class Node:
         for k in self.props.keys():
             if self._type(k) != "ResolvedReference":
                 d[k] = self.props[k]
+        from .precheck import bare_load_crashes
+
+        if bare_load_crashes(self.plugin, d):
+            return None
         backup = mi.file_resolver()
         mi.set_file_resolver(self.state.resolver)
         logger = mi.logger()
@@ -381,3 +400,10 @@ class Node:
     def unread(self, ignore=()) -> list[str]:
         """Parameters (not nested plugins) drpt did not read, in file order."""
         return [k for k in self.names() if k not in self.read and k not in ignore]
+
+
+def _finite(node: Node, name: str, v: tuple) -> tuple:
+    """``v``, or a located error when a component is NaN or infinite."""
+    if not all(abs(x) < float("inf") for x in v):
+        raise node.error(f"{node.label}: parameter '{name}' must be finite, got {v}")
+    return v

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import SceneError
+from ...options import MAX_DEPTH, MAX_SIZE, MAX_SPP
 from ...shading import MeshAttribute, Texture
 from ..model import (
     MAX_COORDINATE,
@@ -153,7 +154,8 @@ class Reader:
             else:
                 self.unsupported(child, f"{child.label}")
         if not sensors:
-            raise SceneError(self.path, None, "the scene has no <sensor> (camera)")
+            raise root.error("the scene has no <sensor> (camera)") if root.line else \
+                SceneError(self.path, 1, "the scene has no <sensor> (camera)")
         if len(sensors) > 1:
             self.warn(f"{sensors[1].where}: {len(sensors)} sensors: drpt renders the first "
                       f"({sensors[0].where}), as Mitsuba's render() does by default")
@@ -240,8 +242,9 @@ class Reader:
                 self.warn(f"{sampler.where}: sampler '{sampler.plugin}': drpt draws independent "
                           "samples (the same expectation, other noise)")
             spp = sampler.int("sample_count", 4)
-            if spp is None or spp <= 0:
-                raise sampler.error(f"{sampler.label}: sample_count must be positive, got {spp}")
+            if spp is None or not 0 < spp <= MAX_SPP:
+                raise sampler.error(f"{sampler.label}: sample_count must be between 1 and {MAX_SPP}, "
+                                    f"got {spp}")
             self.settings.spp = spp
             self.check_unread(sampler)
 
@@ -258,12 +261,16 @@ class Reader:
         if node.has("fov"):
             fov = node.float("fov")
             axis = (node.str("fov_axis", "x") or "x").lower()
+            if not 0.0 < fov < 180.0:
+                raise node.error(f"{node.label}: fov must be in (0, 180) degrees, got {fov:g}")
         else:
             f = node.str("focal_length", "50mm") or "50mm"
             try:
                 value = float(f[:-2] if f.endswith("mm") else f)
             except ValueError:
                 raise node.error(f"{node.label}: focal_length must be like '50mm', got {f!r}") from None
+            if not (value > 0 and math.isfinite(value)):
+                raise node.error(f"{node.label}: focal_length must be positive, got {f!r}")
             fov = 2.0 * math.degrees(math.atan(math.hypot(36.0, 24.0) / (2.0 * value)))
             axis = "diagonal"
         if axis not in FOV_AXES:
@@ -285,7 +292,7 @@ class Reader:
             radius = node.float("aperture_radius", 0.0)
             # Mitsuba's focus distance defaults to the far clip plane (1e4)
             focus = node.float("focus_distance", node.float("far_clip", 1e4))
-            if not (radius >= 0 and math.isfinite(radius)) or not focus > 0:
+            if not (radius >= 0 and math.isfinite(radius)) or not (focus > 0 and math.isfinite(focus)):
                 raise node.error(f"{node.label}: needs aperture_radius >= 0 and focus_distance > 0")
             if radius:
                 lens = {"aperture_radius": radius, "focus_distance": focus}
@@ -300,8 +307,9 @@ class Reader:
             self.unsupported(node, f"film '{node.plugin}'", fallback="an hdrfilm")
         width = node.int("width", 768)
         height = node.int("height", 576)
-        if width is None or height is None or width <= 0 or height <= 0:
-            raise node.error(f"{node.label}: width and height must be positive, got {width} x {height}")
+        if width is None or height is None or not (0 < width <= MAX_SIZE and 0 < height <= MAX_SIZE):
+            raise node.error(f"{node.label}: width and height must be between 1 and {MAX_SIZE}, "
+                             f"got {width} x {height}")
         cx, cy = node.int("crop_offset_x", 0), node.int("crop_offset_y", 0)
         cw, ch = node.int("crop_width", width), node.int("crop_height", height)
         if cx < 0 or cy < 0 or cw <= 0 or ch <= 0 or cx + cw > width or cy + ch > height:
@@ -353,10 +361,12 @@ class Reader:
         if node.plugin in ("path", "ptracer"):
             s.max_depth = node.int("max_depth", -1)
             s.rr_depth = node.int("rr_depth", 5)
-            if s.max_depth is not None and s.max_depth < -1:
-                raise node.error(f"{node.label}: max_depth must be -1 or >= 0, got {s.max_depth}")
-            if s.rr_depth is not None and s.rr_depth <= 0:
-                raise node.error(f"{node.label}: rr_depth must be positive, got {s.rr_depth}")
+            if s.max_depth is not None and not -1 <= s.max_depth <= MAX_DEPTH:
+                raise node.error(f"{node.label}: max_depth must be -1 or between 0 and {MAX_DEPTH}, "
+                                 f"got {s.max_depth}")
+            if s.rr_depth is not None and not 0 < s.rr_depth <= MAX_DEPTH:
+                raise node.error(f"{node.label}: rr_depth must be between 1 and {MAX_DEPTH}, "
+                                 f"got {s.rr_depth}")
         else:
             # Mitsuba's direct: emitters seen by the camera plus direct lighting, the same
             # expectation as path with max_depth 2 (its sample counts only change the noise)
@@ -430,6 +440,7 @@ class Reader:
             return
         spec, bsdf_node, emission = self._shape_parts(node)
         k = self._material_index(spec, bsdf_node, emission, node)
+        first = len(self.meshes)
         m = parent @ node.transform("to_world")
         _check_matrix(node, m)
         attrs = sorted({t.name for t in spec.textures() if isinstance(t, MeshAttribute)})
@@ -450,7 +461,8 @@ class Reader:
             local = geo.sphere_local(center, radius, m)
             similar, scale = geo.is_similarity(local)
             mirrored = np.linalg.det(local[:3, :3]) < 0
-            textured = bool(spec.textures()) or isinstance(emission, Texture)
+from ...options import MAX_DEPTH, MAX_SIZE, MAX_SPP
+from ...shading import MeshAttribute, Texture
             if similar and not (flip ^ mirrored) and not textured:
                 self.spheres.append((local[:3, 3].copy(), scale, k, local[:3, :3] / scale))
             else:
@@ -471,6 +483,8 @@ class Reader:
             flip = bool(node.bool("flip_normals", False))
             local = m @ geo.cylinder_frame(p0, p1, radius)
             self.meshes.append((geo.tessellate_cylinder(local, flip), k))
+        for mesh, _ in self.meshes[first:]:
+            _check_coordinates(node, mesh)
         self.check_unread(node)
 
     # ------------------------------------------------------------ emitters
@@ -494,11 +508,15 @@ class Reader:
             if node.has("position") and m is not None:
                 raise node.error(f"{node.label}: give 'position' or 'to_world', not both")
             pos = node.vector("position") or (tuple(m[:3, 3]) if m is not None else (0.0, 0.0, 0.0))
+            if not max(abs(x) for x in pos) <= MAX_COORDINATE:
+                raise node.error(f"{node.label}: position {pos} is beyond {MAX_COORDINATE:g} or not finite")
             color = self._intensity(node, "intensity")
             self.lights.append(PointLight(tuple(float(x) for x in pos), color))
         elif p == "spot":
             m = np.eye(4) if m is None else m
             similar, _ = geo.is_similarity(m)
+            if not np.isfinite(m).all() or not np.abs(m[:3, 3]).max() <= MAX_COORDINATE:
+                raise node.error(f"{node.label}: position beyond {MAX_COORDINATE:g} or not finite")
             if not similar:
                 raise node.error(f"{node.label}: to_world must be a rotation and translation")
             color = self._intensity(node, "intensity")
@@ -521,8 +539,8 @@ class Reader:
             d = node.vector("direction")
             if d is None:
                 d = tuple(m[:3, 2]) if m is not None else (0.0, 0.0, 1.0)
-            if not np.linalg.norm(d) > 0:
-                raise node.error(f"{node.label}: direction has zero length")
+            if not np.linalg.norm(d) > 0 or not np.isfinite(d).all():
+                raise node.error(f"{node.label}: direction has zero length or is not finite")
             e = node.color("irradiance", (1.0, 1.0, 1.0), emission=True) if not node.is_ref("irradiance") else None
             if e is None:
                 self.unsupported(node.ref("irradiance"), "textured irradiance", fallback="1")
@@ -634,6 +652,19 @@ class Reader:
 def _nonnegative(node: Node, name: str, c) -> None:
     if not all(math.isfinite(x) and x >= 0 for x in c):
         raise node.error(f"{node.label}: {name} must be finite and >= 0, got {tuple(c)}")
+
+
+def _check_coordinates(node: Node, mesh) -> None:
+    """A mesh in world space within drpt's coordinate limit (float32 rendering),
+    with finite normals and uvs (a degenerate transform makes them NaN)."""
+    bad = ~np.isfinite(mesh.positions) | (np.abs(mesh.positions) > MAX_COORDINATE)
+    if bad.any():
+        raise node.error(f"{node.label}: {int(bad.any(axis=(1, 2)).sum())} triangles have coordinates "
+                         f"beyond {MAX_COORDINATE:g} or not finite")
+    for name in ("normals", "uvs"):
+        a = getattr(mesh, name)
+        if a is not None and not np.isfinite(a).all():
+            raise node.error(f"{node.label}: its {name} are not finite (a degenerate to_world or radius?)")
 
 
 def _check_matrix(node: Node, m: np.ndarray) -> None:
