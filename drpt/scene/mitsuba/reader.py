@@ -461,8 +461,10 @@ class Reader:
             local = geo.sphere_local(center, radius, m)
             similar, scale = geo.is_similarity(local)
             mirrored = np.linalg.det(local[:3, :3]) < 0
-from ...options import MAX_DEPTH, MAX_SIZE, MAX_SPP
-from ...shading import MeshAttribute, Texture
+            textured = bool(spec.textures()) or isinstance(emission, Texture)
+            if not np.abs(local[:3, 3]).max() + abs(scale) <= MAX_COORDINATE:
+                raise node.error(f"{node.label}: extends beyond {MAX_COORDINATE:g} (center "
+                                 f"{tuple(float(x) for x in local[:3, 3])}, radius {scale:g})")
             if similar and not (flip ^ mirrored) and not textured:
                 self.spheres.append((local[:3, 3].copy(), scale, k, local[:3, :3] / scale))
             else:
