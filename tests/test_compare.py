@@ -177,3 +177,73 @@ def test_control_gives_the_level_an_unbiased_renderer_reaches(tmp_path, capsys):
 
     assert scaled(0.9) > 1.3 * m["outside_ci_control"]
     assert scaled(1.2) < m["outside_ci_control"]
+
+
+# ------------------------------------------------------------------ the verdict
+XML = Path(__file__).resolve().parent / "data" / "xml"
+
+
+def _gaussian_copy(tmp_path, name):
+    """tests/data/xml/NAME.xml with the sensor's rfilter removed: Mitsuba's default, the
+    Gaussian, as in a file that names no filter."""
+    import shutil
+
+    d = tmp_path / "xml"
+    shutil.copytree(XML, d)
+    sensor = d / "common_sensor.xml"
+    sensor.write_text(sensor.read_text().replace('<rfilter type="box"/>', ""))
+    return d / f"{name}.xml"
+
+
+def test_block_test_passes_noise_and_fails_a_bias():
+    """The block test on synthetic pixels: independent noise of the stated variance passes
+    (at the Sidak level 0.01 it fails ~1% of images), a 5% bias fails, a noiseless image
+    equal up to float rounding passes (the relative floor)."""
+    from drpt.tools.compare import block_test
+
+    rng = np.random.default_rng(3)
+    ref = np.full((64, 64, 3), 0.5)
+    var = np.full_like(ref, 0.01 ** 2)
+    fails = 0
+    for _ in range(50):
+        x = ref + rng.normal(0, 0.01, ref.shape)
+        fails += not block_test(x, var, ref, np.zeros((8, 8, 3)), 8)["passed"]
+    assert fails <= 3
+    biased = 1.05 * ref + rng.normal(0, 0.01, ref.shape)
+    assert not block_test(biased, var, ref, np.zeros((8, 8, 3)), 8)["passed"]
+    assert block_test(ref * (1 + 1e-6), np.zeros_like(ref), ref, np.zeros((8, 8, 3)), 8)["passed"]
+
+
+@pytest.mark.slow
+@pytest.mark.mitsuba
+def test_verdict_agrees_on_a_gaussian_filtered_scene_and_catches_a_bias(tmp_path, capsys,
+                                                                         monkeypatch):
+    """A file that names no filter (Mitsuba's Gaussian): 11.9% of drpt's pixel values lie
+    outside the 99.7% interval (Mitsuba's own control: 1.1%) though the images agree,
+    because a pixel whose filter reaches across an edge rarely samples the other side
+    and then reports too small a variance. The verdict's 8x8 block test agrees
+    (measured max |z| 3.04, threshold 3.63). Negative control: drpt 10% too bright
+    differs (the second render fails the same blocks)."""
+    from drpt.render.renderer import Renderer
+
+    scene = _gaussian_copy(tmp_path, "meshes")
+    args = [scene, "--spp", "64", "--ref-spp", "1024", "--cache", tmp_path / "cache", "-q"]
+    assert run(*args, "--out", tmp_path / "good") == 0
+    good = json.loads((tmp_path / "good" / "metrics.json").read_text())
+    assert good["filter"].startswith("gaussian")
+    assert good["metrics"]["outside_ci"] > 0.05  # the per-pixel statistic cries wolf
+    assert good["metrics"]["verdict"] == "agrees", good["metrics"]
+    assert "verdict           agrees" in capsys.readouterr().out
+
+    real = Renderer.render
+
+    def bright(self, *a, **k):
+        r = real(self, *a, **k)
+        r.image, r.variance = 1.1 * r.image, 1.21 * r.variance
+        return r
+
+    monkeypatch.setattr(Renderer, "render", bright)
+    assert run(*args, "--out", tmp_path / "bad") == 0
+    bad = json.loads((tmp_path / "bad" / "metrics.json").read_text())
+    assert bad["metrics"]["verdict"] == "differs", bad["metrics"]
+    assert bad["metrics"]["block_confirmed"] is True
