@@ -14,7 +14,7 @@ The render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
 Every row renders the scene with drpt at ``--spp`` and changes one knob from
 the default (``auto`` accelerator, ``--bsdf`` materials, unbounded depth,
 Russian roulette from depth 5 with the adaptive probability
-``min(throughput, 0.95)``):
+``min(max(throughput) * eta^2, 0.95)``, Mitsuba's):
 
 ``depth``  ``max_depth`` 2 (direct light only), 3, 5, 8 (``--depths``);
 ``rr``     Russian roulette from depth 1, 3, 10 (``--rr-depths``, adaptive
