@@ -36,8 +36,8 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", nargs="?", help="scene file (the seed's text format, or Mitsuba XML: .xml)")
     p.add_argument("--input", "-input", dest="input", help="scene file (seed flag)")
     p.add_argument("--output", "-output", "-o", dest="output",
-                   help="image to write: .exr (linear float32), .png or .tga (gamma); "
-                        "default <scene>.png")
+                   help="image to write, its type from the extension: .exr, .hdr or .pfm "
+                        "(linear float), .png or .tga (8-bit, gamma); default <scene>.png")
     add_render_flags(p, seed_flags=True)
     from .options import add_distributed_flags
 
@@ -183,11 +183,60 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 class _Parser(argparse.ArgumentParser):
     """argparse with drpt's error format: one line, exit status 2 (argparse's
-    own prints the whole usage first)."""
+    own prints the whole usage first), naming the command whose ``--help`` to read;
+    an unknown flag gets the closest known one ("did you mean"). No flag is
+    abbreviated: neither ``--sp`` for ``--spp`` (``allow_abbrev=False``) nor, as
+    argparse otherwise allows, ``-Monte`` for ``-MonteCarlo``."""
 
     def error(self, message: str):
-        print(f"drpt: error: {self.prog}: {message} (see {self.prog} --help)", file=sys.stderr)
+        import difflib
+        import re
+
+        bad = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if bad:
+            close = difflib.get_close_matches(bad.group(1), re.findall(r"'([^']*)'", bad.group(2)),
+                                              n=1, cutoff=0.6)
+            if close:
+                message += f"; did you mean {close[0]}?"
+        command = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""
+        print(f"drpt: error: {command}{message} (see {self.prog} --help)", file=sys.stderr)
         sys.exit(2)
+
+    def _get_option_tuples(self, option_string):
+        # single-dash flags: only a one-letter flag with its value attached (-Dname=value,
+        # -oout.png), never a prefix of a longer flag (argparse's default)
+        found = super()._get_option_tuples(option_string)
+        if option_string[:2] != "--":
+            found = [t for t in found if t[1] == option_string[:2]]
+        return found
+
+    def parse_args(self, args=None, namespace=None):
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            target = self
+            for action in self._actions:
+                if isinstance(action, argparse._SubParsersAction):
+                    target = action.choices.get(getattr(ns, "command", None), self)
+            target.error(_unrecognized(target, extras))
+        return ns
+
+
+def _unrecognized(parser: argparse.ArgumentParser, extras: list[str]) -> str:
+    """``unrecognized arguments: ...``, with the closest flag of ``parser`` for each
+    unknown flag among them."""
+    import difflib
+
+    known = [o for a in parser._actions for o in a.option_strings]
+    hints = []
+    for arg in extras:
+        if arg.startswith("-") and len(arg) > 1:
+            name = arg.split("=", 1)[0]
+            close = ([o for o in known if o.startswith(name)]
+                     or difflib.get_close_matches(name, known, n=1, cutoff=0.6))
+            if close:
+                hints.append(f"{arg}: did you mean {close[0]}?")
+    noun = "argument" if len(extras) == 1 else "arguments"
+    return f"unrecognized {noun}: {' '.join(extras)}" + (f" ({'; '.join(hints)})" if hints else "")
 
 
 def build_parser() -> argparse.ArgumentParser:
