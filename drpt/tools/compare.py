@@ -42,7 +42,8 @@ Scene form
 
 Image form
     Two images (any format :func:`drpt.imageio.read_image` reads; alpha is
-    dropped, a gray image is compared against each channel of an RGB one).
+    dropped, a gray image is compared against each channel of an RGB one; 8-bit
+    images are decoded by ``x ** --gamma``, the curve ``render`` writes them with).
     ``B`` is the reference. Without variances there is no confidence
     interval: ``outside_ci`` is ``null`` in the JSON.
 
@@ -101,6 +102,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         "it by the same tests: what an unbiased renderer reads on this scene at "
                         "this spp (the verdict is 'undecided' when Mitsuba itself fails)")
     p.add_argument("--out", default=None, help="output folder (default compare_<name>/)")
+    p.add_argument("--gamma", type=float, default=2.2,
+                   help="compare A B: the power curve 8-bit images (.png, .tga, .jpg) are "
+                        "decoded with, as render --gamma writes them (default 2.2)")
     p.set_defaults(func=main)
     return p
 
@@ -119,7 +123,9 @@ def main(args: argparse.Namespace) -> int:
                                 f"compare A B takes two images of type "
                                 f"{', '.join(IMAGE_EXTENSIONS)}")
         out = Path(args.out) if args.out else Path(f"compare_{inputs[0].stem}_vs_{inputs[1].stem}")
-        report = compare_images(inputs[0], inputs[1], out)
+        if not (np.isfinite(args.gamma) and args.gamma > 0):
+            raise DrptError(f"--gamma must be a positive finite number, got {args.gamma}")
+        report = compare_images(inputs[0], inputs[1], out, gamma=args.gamma)
     else:
         scene = inputs[0]
         if scene.suffix.lower() in IMAGE_EXTENSIONS:
@@ -237,13 +243,20 @@ def format_table(report: dict) -> str:
 
 
 # ------------------------------------------------------------ image form
-def compare_images(a: Path, b: Path, out: Path) -> dict:
-    """Compare image ``a`` with reference ``b``; write metrics.json and the PNG."""
+def compare_images(a: Path, b: Path, out: Path, gamma: float = 2.2) -> dict:
+    """Compare image ``a`` with reference ``b``; write metrics.json and the PNG.
+    8-bit images are decoded by ``x ** gamma``, the curve ``render`` writes them with;
+    an 8-bit image against a float one compares both clamped to [0, 1], what the 8-bit
+    one can hold."""
     from .. import metrics
-    from ..imageio import read_image
+    from ..imageio import _LDR, read_image
 
-    x = _rgb(read_image(a), a)
-    ref = _rgb(read_image(b), b)
+    x = _rgb(read_image(a, gamma=gamma), a)
+    ref = _rgb(read_image(b, gamma=gamma), b)
+    # an 8-bit image holds [0, 1]: the other one is compared as it would be written
+    clamped = (a.suffix.lower() in _LDR) != (b.suffix.lower() in _LDR)
+    if clamped:
+        x, ref = np.clip(x, 0.0, 1.0), np.clip(ref, 0.0, 1.0)
     if x.shape[:2] != ref.shape[:2]:
         raise DrptError(f"image sizes differ: {a} is {x.shape[1]}x{x.shape[0]}, "
                         f"{b} is {ref.shape[1]}x{ref.shape[0]}")
@@ -261,6 +274,8 @@ def compare_images(a: Path, b: Path, out: Path) -> dict:
         "width": int(x.shape[1]),
         "height": int(x.shape[0]),
         "metrics": summary,
+        "gamma": float(gamma),
+        "clamped": bool(clamped),
         "outside_ci_note": "null: two images carry no variance, so there is no confidence "
                            "interval",
     }
