@@ -105,7 +105,10 @@ def cmd_render(args: argparse.Namespace) -> int:
         warn(f"{result.nonfinite} samples were NaN/Inf and were set to 0")
     write_image(output, result.image, gamma=args.gamma)
     checkpoint.remove(output)
-    print(f"{output}: {opts.width}x{opts.height}, {opts.spp} spp, {result.seconds:.2f} s "
+    spp = f"{opts.spp} spp"
+    if job.resumed_spp:
+        spp += f" ({job.resumed_spp} from the checkpoint, {opts.spp - job.resumed_spp} now)"
+    print(f"{output}: {opts.width}x{opts.height}, {spp}, {result.seconds:.2f} s "
           f"(+{result.build_seconds:.2f} s build), "
           f"{result.samples_per_second / 1e6:.2f} Msamples/s")
     if opts.progress and (args.workers is not None or args.cluster is not None):

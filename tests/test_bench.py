@@ -117,3 +117,25 @@ def test_bad_options(tmp_path, argv):
     args = _parse([str(CORNELL), *argv, "--out", str(tmp_path / "o")])
     with pytest.raises(DrptError):
         args.func(args)
+
+
+def test_chart_uses_a_log_axis():
+    """A build ratio of ~400 next to ratios near 1 flattened every other bar on a linear
+    axis: the chart's axis is logarithmic, and every bar keeps a visible height."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from drpt.tools.bench import RATIOS, chart
+
+    rows = [dict({k: v for (k, _), v in zip(RATIOS, (400.0, 1.1, 1.6, 1.4, 2.0))},
+                 scene="cornellbox", accel="inline")]
+    fig = chart(rows, mitsuba=True)
+    try:
+        ax = fig.axes[0]
+        assert ax.get_yscale() == "log"
+        lo, hi = ax.get_ylim()
+        heights = [p.get_height() for p in ax.patches]
+        # on the log axis the smallest bar spans a fair part of the axis
+        assert min(np.log(h / lo) for h in heights) / np.log(hi / lo) > 0.05
+    finally:
+        plt.close(fig)

@@ -56,3 +56,67 @@ def test_xml_flags_on_a_text_scene_say_they_do_nothing(tmp_path, capsys):
     assert "drpt: note: " in err and "-D and --strict apply to Mitsuba XML scenes only" in err, err
     assert main(["render", CORNELL, "--size", "4", "4", "--spp", "1", "-o", str(out), "-q"]) == 0
     assert "note" not in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ distributed renders
+def test_resumed_render_counts_only_the_samples_it_traced(tmp_path, capsys):
+    """After --resume the summary's samples/s counted the checkpoint's samples as rendered
+    now (3x too high when two thirds came from it)."""
+    from drpt.cli import main as drpt_main
+    from drpt.distributed.job import run
+    from drpt.options import RenderOptions
+    from drpt.scene import load_scene
+
+    out = tmp_path / "x.exr"
+    from drpt.backend import policy
+
+    opts = RenderOptions(width=8, height=8, spp=6, chunk_spp=1, progress=False,
+                         max_lanes=policy().max_lanes)  # what the command line gives
+
+    def stop(merged, result, engine):
+        if merged.next >= 4:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run(load_scene(CORNELL), opts, out, checkpoint_seconds=0, on_chunk=stop)
+    capsys.readouterr()
+    job = run(load_scene(CORNELL), opts, out, resume=True)
+    assert job.resumed_spp == 4
+    assert job.result.samples == 8 * 8 * 2
+    with pytest.raises(KeyboardInterrupt):
+        run(load_scene(CORNELL), opts, out, checkpoint_seconds=0, on_chunk=stop)
+    capsys.readouterr()
+    flags = ["render", CORNELL, "--size", "8", "8", "--spp", "6", "--chunk-spp", "1", "-o", str(out), "-q"]
+    assert drpt_main([*flags, "--resume"]) == 0
+    assert "6 spp (4 from the checkpoint, 2 now)" in capsys.readouterr().out
+    assert drpt_main(flags) == 0
+    assert "from the checkpoint" not in capsys.readouterr().out
+
+
+def test_workers_left_idle_and_replaced_workers_are_explained(tmp_path, capsys, monkeypatch):
+    import drpt.distributed.engine as engine
+    from drpt.distributed.job import Job, WorkerStats, print_workers, run
+    from drpt.errors import DrptError
+    from drpt.options import RenderOptions
+    from drpt.scene import load_scene
+
+    class NoCluster:
+        def __init__(self, *a, **k):
+            raise DrptError("no cluster in this test")
+
+    monkeypatch.setattr(engine, "DaskEngine", NoCluster)
+    opts = RenderOptions(width=8, height=8, spp=4, progress=False)  # one chunk
+    with pytest.raises(DrptError):
+        run(load_scene(CORNELL), opts, tmp_path / "x.exr", workers=2)
+    err = capsys.readouterr().err
+    assert "the render is 1 chunk for 2 workers: 1 will have nothing to do" in err
+    assert "--chunk-spp" in err
+
+    job = Job(None, workers={f"w{i}": WorkerStats(1, 64, 0.1) for i in range(3)},
+              requested_workers=2)
+    print_workers(job)
+    err = capsys.readouterr().err
+    assert "3 workers for --workers 2: 1 replaced one that stopped" in err
+    job.requested_workers = 3
+    print_workers(job)
+    assert "replaced" not in capsys.readouterr().err

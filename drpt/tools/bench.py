@@ -372,6 +372,18 @@ def format_table(rows: list[dict], mitsuba: bool) -> str:
 
 
 def write_chart(rows: list[dict], path: Path, mitsuba: bool) -> None:
+    """bench.png: :func:`chart` saved."""
+    import matplotlib.pyplot as plt
+
+    fig = chart(rows, mitsuba)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def chart(rows: list[dict], mitsuba: bool):
+    """The bar chart of ``rows`` (ratios to Mitsuba, or drpt's rates without it) on a
+    log axis: the build ratio runs to hundreds where the others sit near 1, and on a
+    linear axis it flattened every other bar."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -392,11 +404,11 @@ def write_chart(rows: list[dict], path: Path, mitsuba: bool) -> None:
         ax.set_ylabel("drpt / Mitsuba 3 (> 1: drpt faster)")
     else:
         ax.set_ylabel("Mrays/s, Msamples/s")
+    ax.set_yscale("log")
     ax.set_title("drpt bench")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    return fig
 
 
 # --------------------------------------------------------------------------- command
