@@ -172,6 +172,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     opts = options_from_args(args)
     if not args.output.strip():
         raise DrptError("the output is empty: give the .xml file to write")
+    out = Path(args.output)
+    if str(out.parent) != "" and not out.parent.is_dir():  # render's rule: no folder is made
+        raise DrptError(f"{out}: folder {out.parent} does not exist")
     scene = load_scene(args.scene)
     opts = apply_scene_settings(opts, scene, args)
     if len(scene.triangles) + len(scene.spheres) + len(scene.planes) == 0:

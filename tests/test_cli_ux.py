@@ -120,3 +120,27 @@ def test_workers_left_idle_and_replaced_workers_are_explained(tmp_path, capsys, 
     job.requested_workers = 3
     print_workers(job)
     assert "replaced" not in capsys.readouterr().err
+
+
+def test_an_ignored_plugin_is_reported_once(tmp_path, capsys):
+    sensor = SCENES.parent / "tests" / "data" / "xml" / "common_sensor.xml"
+    scene = tmp_path / "s.xml"
+    scene.write_text(f'<scene version="3.0.0"><include filename="{sensor}"/>'
+                     '<shape type="sphere"><bsdf type="nosuchbsdf"/></shape>'
+                     '<emitter type="constant"/></scene>')
+    assert main(["render", str(scene), "--ignore-unsupported", "--spp", "1", "-q",
+                 "-o", str(tmp_path / "x.exr")]) == 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "nosuchbsdf" in ln]
+    assert len(lines) == 1 and lines[0].startswith("drpt: warning: "), lines
+
+
+def test_export_and_render_refuse_a_missing_output_folder_alike(tmp_path, capsys):
+    """export made a missing folder where render refuses one: one rule, refuse."""
+    for args in (["render", CORNELL, "--size", "4", "4", "--spp", "1", "-o",
+                  str(tmp_path / "no" / "x.exr")],
+                 ["export", CORNELL, str(tmp_path / "no" / "x.xml")]):
+        assert main(args) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.endswith(f"folder {tmp_path / 'no'} does not exist"), err
+    assert not (tmp_path / "no").exists()
+    assert main(["export", CORNELL, str(tmp_path / "x.xml")]) == 0
