@@ -26,7 +26,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from .errors import DrptError, showwarning, warn
+from .errors import DrptError, note, showwarning, warn
 from .options import check_view_args
 
 
@@ -47,6 +47,9 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("-gui", "--gui", dest="gui", action="store_true",
                    help="seed flag: move the camera in the viewer (as drpt view) first; "
                         "its \"render\" button (or closing the page) starts the render")
+    p.add_argument("--gui-timeout", dest="gui_timeout", type=float, default=None, metavar="T",
+                   help="with -gui: start the render with the scene's camera when no page is "
+                        "open T seconds after the viewer starts (default: wait for a page)")
     from .options import add_view_flags
 
     add_view_flags(p)
@@ -85,6 +88,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     _check_output(output)
     if args.gui:
         check_view_args(args)
+    if args.gui_timeout is not None:
+        if not args.gui:
+            raise DrptError("--gui-timeout applies to -gui")
+        if not (math.isfinite(args.gui_timeout) and args.gui_timeout >= 0):
+            raise DrptError(f"--gui-timeout must be >= 0 seconds, got {args.gui_timeout}")
     scene = load_scene(scene_path)
     opts = apply_scene_settings(opts, scene, args)
 
@@ -131,13 +139,33 @@ def _viewer(scene, opts, args, *, output: Path | None, final: bool):
 def _gui(scene, opts, args):
     """``render -gui``: the viewer until "render"; the scene with its camera
     and the options with its integrator, depth and accelerator."""
+    import threading
     from dataclasses import replace
 
     viewer = _viewer(scene, opts, args, output=None, final=True)
+    timeout = getattr(args, "gui_timeout", None)
+    print("drpt render -gui: open that address in a browser and move the camera; the page's "
+          "\"render\" button, or closing the page, starts the render with it (Ctrl-C stops). "
+          + ("Without a browser it waits: --gui-timeout T renders the scene's camera after T s."
+             if timeout is None else
+             f"With no page open after {timeout:g} s it renders the scene's camera."), flush=True)
+    timer = None
+    if timeout is not None:
+        def no_page() -> None:
+            if not viewer.server.get_clients():
+                note(f"no page opened the viewer within --gui-timeout {timeout:g} s: rendering "
+                     "the scene's camera")
+                viewer.request_render()
+
+        timer = threading.Timer(timeout, no_page)
+        timer.daemon = True
+        timer.start()
     try:
         camera = viewer.wait()
         settings = viewer.settings()
     finally:
+        if timer is not None:
+            timer.cancel()
         viewer.close()
     return replace(scene, camera=camera), replace(settings, progress=opts.progress)
 

@@ -144,3 +144,21 @@ def test_export_and_render_refuse_a_missing_output_folder_alike(tmp_path, capsys
         assert err.endswith(f"folder {tmp_path / 'no'} does not exist"), err
     assert not (tmp_path / "no").exists()
     assert main(["export", CORNELL, str(tmp_path / "x.xml")]) == 0
+
+
+@pytest.mark.slow
+def test_gui_says_what_starts_the_render_and_can_time_out(tmp_path, capsys):
+    """-gui printed only its address: nothing said that "render" or closing the page
+    starts the render, and with no browser it waited for ever."""
+    pytest.importorskip("viser")
+    out = tmp_path / "x.exr"
+    assert main(["render", CORNELL, "--size", "8", "8", "--spp", "1", "-o", str(out), "-q",
+                 "-gui", "--port", "0", "--gui-timeout", "0.5"]) == 0
+    text = capsys.readouterr()
+    assert "drpt view: http://" in text.out
+    assert '"render" button, or closing the page, starts the render' in text.out
+    assert "With no page open after 0.5 s it renders the scene's camera" in text.out
+    assert "no page opened the viewer within --gui-timeout 0.5 s" in text.err
+    assert out.is_file()
+    assert main(["render", CORNELL, "--gui-timeout", "1", "-o", str(out)]) == 2
+    assert "--gui-timeout applies to -gui" in capsys.readouterr().err
