@@ -116,8 +116,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     spp = f"{opts.spp} spp"
     if job.resumed_spp:
         spp += f" ({job.resumed_spp} from the checkpoint, {opts.spp - job.resumed_spp} now)"
-    print(f"{output}: {opts.width}x{opts.height}, {spp}, {result.seconds:.2f} s "
-          f"(+{result.build_seconds:.2f} s build), "
+    extra = f"+{result.build_seconds:.2f} s build"
+    if args.workers is not None or args.cluster is not None:
+        extra += f", +{job.startup_seconds:.2f} s to start the cluster"
+    print(f"{output}: {opts.width}x{opts.height}, {spp}, {result.seconds:.2f} s ({extra}), "
           f"{result.samples_per_second / 1e6:.2f} Msamples/s")
     if opts.progress and (args.workers is not None or args.cluster is not None):
         print_workers(job)
@@ -274,7 +276,8 @@ def _unrecognized(parser: argparse.ArgumentParser, extras: list[str]) -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="drpt", description=__doc__.split("\n")[0], allow_abbrev=False)
+    parser = _Parser(prog="drpt", description=__doc__.split("\n")[0].replace("``", ""),
+                     allow_abbrev=False)
     sub = parser.add_subparsers(dest="command", required=True)
     render = sub.add_parser("render", help="render a scene to an image", allow_abbrev=False)
     _add_render_args(render)

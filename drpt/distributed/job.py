@@ -95,6 +95,7 @@ class Job:
     resumed_from: int = 0  # chunks merged by the checkpoint it resumed
     resumed_spp: int = 0  # samples per pixel those chunks hold
     requested_workers: int | None = None  # --workers N
+    startup_seconds: float = 0.0  # starting the engine (a local Dask cluster), before the render
 
 
 def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str | None = None,
@@ -153,6 +154,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         engine = DaskEngine(scene, key, opts, workers=workers, address=cluster,
                             connect_timeout=connect_timeout)
     t0 = last = time.perf_counter()
+    entered = t0
     saved = merged.next  # the merged prefix the last checkpoint holds
     seen = set()
     build = 0.0
@@ -160,6 +162,9 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         with _stop_requests() as asked, engine, tqdm(total=W * H * spp, initial=W * H * merged.spp, unit="spl",
                           unit_scale=True, disable=not opts.progress, desc="render",
                           leave=False) as bar:
+            # the time to start a local cluster (seconds) is not the render's
+            t0 = last = time.perf_counter()
+            job.startup_seconds = t0 - entered
             for r in engine.results(range(merged.next, chunks.count)):
                 stats = job.workers.setdefault(r.worker, WorkerStats())
                 stats.chunks += 1
