@@ -139,3 +139,30 @@ def test_chart_uses_a_log_axis():
         assert min(np.log(h / lo) for h in heights) / np.log(hi / lo) > 0.05
     finally:
         plt.close(fig)
+
+
+def test_other_scenes_are_read_as_every_command_reads_them(tmp_path, monkeypatch):
+    """bench read any scene but newscene as Phong; render, compare and profile read `auto`.
+    The bundled scenes keep the readings of the published numbers."""
+    import shutil
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def spy(scene, options, rays, repeat):
+        seen[scene.path.name] = options.bsdf
+        raise Stop
+
+    monkeypatch.setattr(bench, "bench_drpt", spy)
+    for f in ("cornellbox.txt", "cornellbox.obj", "cornellbox.mtl"):
+        shutil.copy(SCENES / "cornellbox" / f, tmp_path / f)
+    (tmp_path / "cornellbox.txt").rename(tmp_path / "box.txt")
+    for scene in (tmp_path / "box.txt", SCENES / "cornellbox" / "cornellbox.txt",
+                  SCENES / "newscene" / "newscene.txt"):
+        args = _parse([str(scene), "--no-mitsuba", "--accel", "bvh", "--rays", "64",
+                       "--out", str(tmp_path / "b")])
+        with pytest.raises(Stop):
+            bench.main(args)
+    assert seen == {"box.txt": "auto", "cornellbox.txt": "phong", "newscene.txt": "cook-torrance"}
