@@ -66,6 +66,24 @@ def _check_output(output: Path) -> None:
         raise DrptError(f"{output}: folder {output.parent} does not exist")
 
 
+def moment_channels(scene, result) -> dict:
+    """The AOVs of Mitsuba's ``moment`` integrator for a render with
+    ``RenderOptions.moment``: ``<name>.X/Y/Z`` (the pixel in CIE XYZ) and
+    ``m2_<name>.X/Y/Z`` (the mean of its samples' squares), ``<name>`` the nested
+    integrator's name in the file; empty for other renders."""
+    if result.moment2 is None:
+        return {}
+    import numpy as np
+
+    from .render.renderer import SRGB_TO_XYZ
+
+    name = getattr(getattr(scene, "settings", None), "moment", None) or "_arg_0"
+    xyz = result.image.astype(np.float64) @ SRGB_TO_XYZ.T
+    out = {f"{name}.{c}": xyz[..., i] for i, c in enumerate("XYZ")}
+    out.update({f"m2_{name}.{c}": result.moment2[..., i] for i, c in enumerate("XYZ")})
+    return out
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from .backend import ensure
     from .distributed import checkpoint
@@ -111,7 +129,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     result = job.result
     if result.nonfinite:
         warn(f"{result.nonfinite} samples were NaN/Inf and were set to 0")
-    write_image(output, result.image, gamma=args.gamma)
+    write_image(output, result.image, gamma=args.gamma, extra=moment_channels(scene, result))
     checkpoint.remove(output)
     spp = f"{opts.spp} spp"
     if job.resumed_spp:

@@ -112,10 +112,13 @@ def _ext(path: Path) -> str:
 
 
 # ------------------------------------------------------------------ writing
-def write_image(path: str | PathLike, rgb: np.ndarray, gamma: float = 2.2) -> None:
+def write_image(path: str | PathLike, rgb: np.ndarray, gamma: float = 2.2,
+                extra: dict[str, np.ndarray] | None = None) -> None:
     """Write a linear ``(H, W, 3)`` image; the format follows the extension.
 
-    ``gamma`` only affects the 8-bit formats (``.png``, ``.tga``).
+    ``gamma`` only affects the 8-bit formats (``.png``, ``.tga``). ``extra``:
+    more ``(H, W)`` float channels by name, written to ``.exr`` only (other
+    formats have no room for them).
     Raises :class:`DrptError` for an unsupported extension or an unwritable
     path, and :class:`ValueError` for a wrongly shaped array or NaN/Inf values.
     """
@@ -138,7 +141,7 @@ def write_image(path: str | PathLike, rgb: np.ndarray, gamma: float = 2.2) -> No
 
     try:
         if ext == ".exr":
-            _write_exr(path, img)
+            _write_exr(path, img, extra or {})
         elif ext in (".hdr", ".pfm"):
             _write_bitmap(path, img)
         else:
@@ -149,10 +152,12 @@ def write_image(path: str | PathLike, rgb: np.ndarray, gamma: float = 2.2) -> No
         raise DrptError(f"{path}: cannot write image: {e}") from e
 
 
-def _write_exr(path: Path, img: np.ndarray) -> None:
+def _write_exr(path: Path, img: np.ndarray, extra: dict[str, np.ndarray]) -> None:
     import OpenEXR
 
     channels = {c: np.ascontiguousarray(img[..., i]) for i, c in enumerate("RGB")}
+    for name, values in extra.items():
+        channels[name] = np.ascontiguousarray(np.asarray(values, np.float32).reshape(img.shape[:2]))
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     if not path.parent.is_dir():
         raise OSError(2, f"no such directory: {path.parent}")

@@ -79,6 +79,9 @@ class RenderOptions:
     max_lanes: int | None = None  # samples traced at once (None: drpt.backend.policy().max_lanes)
     chunk_spp: int | None = None  # samples per pixel of a chunk (None: one pass step), drpt.render.chunks
     progress: bool = True
+    #: also sum each sample's color products (Mitsuba's ``moment`` integrator: the result's
+    #: ``moment2``, the per-sample second moment of the pixel in CIE XYZ)
+    moment: bool = False
 
     def validate(self) -> RenderOptions:
         """Raise :class:`~drpt.errors.DrptError` on a value the renderer cannot
@@ -433,6 +436,8 @@ def apply_scene_settings(opts: RenderOptions, scene,
         path["rr_depth"] = st.rr_depth
     if st.hide_emitters is not None:
         path["hide_emitters"] = st.hide_emitters
+    if getattr(st, "moment", None) is not None:
+        fields["moment"] = True
     if st.rfilter is not None and "filter" not in given:
         fields["filter"] = filter_spelling(st.rfilter, st.rfilter_params)
     if path.get("max_depth") == 0:

@@ -4,8 +4,9 @@ Checked here: compare on corpus files agrees at the file's own settings; the ref
 is the file's, not drpt's reading of it (drpt given a modified copy while Mitsuba gets
 the original is caught); flags that differ from the file edit Mitsuba's film and
 integrator alike; the reference is cached and a change of the file renders a new one;
-the 0.6 file (which Mitsuba 3 refuses as it is) compares, with its unread parameters
-dropped, and its uniform emitter spectrum read as Mitsuba's RGB variants read it (D65).
+a file drpt does not read as written (the 0.6 file, whose unread parameters Mitsuba 3
+refuses; a plugin drpt lacks) stops compare, or with --ignore-unsupported is compared and
+marked not like for like.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ def test_compare_xml_agrees_with_mitsuba_on_the_file(tmp_path, name):
     report, x, ref = _compare(tmp_path, XML / f"{name}.xml", "--spp", "256", "--ref-spp", "1024")
     r = report["reference"]
     assert r["renderer"].endswith("on the XML file")
-    assert r["xml"]["file"] == str(XML / f"{name}.xml") and r["xml"]["dropped"] == []
+    assert r["xml"]["file"] == str(XML / f"{name}.xml") and report["like_for_like"]
     assert r["xml"]["rfilter"] is None and r["xml"]["integrator"] is None  # the file's own
     assert (report["width"], report["height"]) == (32, 24) == (x.shape[1], x.shape[0])  # the film's
     assert report["filter"] == "box"  # the file's rfilter
@@ -111,7 +112,19 @@ def test_reference_is_cached_and_a_changed_file_renders_a_new_one(tmp_path):
     assert not c["reference"]["cached"] and c["reference"]["key"] != a["reference"]["key"]
 
 
-def test_legacy_06_file_compares_with_unread_parameters_dropped(tmp_path):
+def _compare_rc(tmp_path, scene, *flags, out="out"):
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "drpt", "compare", str(scene), "--out", str(tmp_path / out),
+                        "--cache", str(tmp_path / "cache"), "-q", *flags],
+                       capture_output=True, text=True, timeout=300)
+    return r.returncode, r.stderr
+
+
+def test_compare_stops_where_drpt_does_not_read_the_file_as_written(tmp_path):
+    """The 0.6 file has parameters its plugins do not read: the reference of the file as
+    written is not the scene drpt renders (and Mitsuba 3 refuses it), so compare stops."""
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
@@ -119,17 +132,31 @@ def test_legacy_06_file_compares_with_unread_parameters_dropped(tmp_path):
     mi.set_variant(mitsuba_variant())
     with pytest.raises(Exception, match="int_ior|strict_normals|unreferenced|unused"):
         mi.load_file(str(XML / "legacy06.xml"), optimize=False)  # Mitsuba 3 refuses the file itself
-    # box filter: drpt's sphere emitter is found by BSDF sampling only (no light sampling),
-    # its heavy-tailed pixels make the per-pixel interval meaningless; judge the image mean
-    report, x, ref = _compare(tmp_path, XML / "legacy06.xml", "--spp", "256", "--ref-spp", "2048")
-    e = report["reference"]["xml"]
-    assert sorted(e["dropped"]) == ["path.strict_normals", "roughconductor.int_ior"]
-    assert (report["width"], report["height"], report["drpt"]["spp"]) == (40, 30, 256)
-    assert report["max_depth"] == 4 and report["rr_depth"] == 3 and report["filter"] == "gaussian"
-    # measured 0.3%: Mitsuba's RGB variants read <spectrum name="radiance" value="10"/> as 10 * D65
-    # in sRGB, (12.05, 9.48, 9.09); read as gray 10 the red channel would be 20% off
-    assert _mean_rel(x, ref) < 0.02, (x.mean((0, 1)), ref.mean((0, 1)))
-    assert ref.mean((0, 1))[0] > 1.2 * ref.mean((0, 1))[2]
+    rc, err = _compare_rc(tmp_path, XML / "legacy06.xml", "--spp", "4", "--ref-spp", "16")
+    errors = [line for line in err.splitlines() if line.startswith("drpt: error:")]
+    assert rc == 2 and len(errors) == 1 and err.strip().splitlines()[-1] == errors[0], err
+    assert "drpt does not read all of the file" in err and "strict_normals" in err
+    assert "--ignore-unsupported compares anyway" in err
+    assert not (tmp_path / "out" / "metrics.json").exists()
+    rc, err = _compare_rc(tmp_path, XML / "legacy06.xml", "--spp", "4", "--ref-spp", "16",
+                          "--ignore-unsupported")
+    assert rc == 2 and "Mitsuba refuses the file" in err, err  # as written, with no parameter dropped
+
+
+def test_ignore_unsupported_compares_marked_not_like_for_like(tmp_path):
+    """A plugin drpt lacks (the hair BSDF) with --ignore-unsupported: drpt renders its fallback,
+    Mitsuba the file as written, and the report says the two are not the same scene."""
+    src = (XML / "spot.xml").read_text()
+    shutil.copy(XML / "common_sensor.xml", tmp_path / "common_sensor.xml")
+    p = tmp_path / "hair.xml"
+    p.write_text(src.replace('<bsdf type="diffuse"><rgb name="reflectance" value="0.7"/></bsdf>',
+                             '<bsdf type="hair"/>', 1))
+    rc, err = _compare_rc(tmp_path, p, "--spp", "4", "--ref-spp", "16")
+    assert rc == 2 and "unsupported BSDF plugin 'hair'" in err, err
+    report, _, _ = _compare(tmp_path, p, "--spp", "4", "--ref-spp", "16", "--ignore-unsupported")
+    assert report["like_for_like"] is False and "hair" in report["not_read"][0]
+    good, _, _ = _compare(tmp_path, XML / "spot.xml", "--spp", "4", "--ref-spp", "16", out="good")
+    assert good["like_for_like"] is True and good["not_read"] == []
 
 
 def test_d65_constant_is_mitsubas():

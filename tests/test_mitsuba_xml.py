@@ -252,8 +252,8 @@ def test_unsupported_plugins_stop_or_are_left_out(tmp_path):
      '<string name="filename" value="a.png"/></texture></bsdf></shape>',
      r"t.xml:3: bsdf 'conductor': parameter 'material' cannot be a texture"),
     ('<emitter type="area"/>', r"t.xml:3: emitter 'area' must be attached to a shape"),
-    ('<shape type="sphere"><emitter type="area"><spectrum name="radiance" value="400:1, 700:2"/>'
-     '</emitter></shape>', r"spectrum given by wavelengths: unsupported"),
+    ('<shape type="sphere"><emitter type="area"><spectrum name="radiance" value="400:1, 700:x"/>'
+     '</emitter></shape>', r"t.xml:3: Could not parse wavelength:value pair \"700:x\""),
     ('<integrator type="volpath"/>', r"t.xml:3: unsupported integrator 'volpath'"),
     ('<shape type="sphere"><bsdf type="twosided"/></shape>',
      r"t.xml:3: bsdf 'twosided' needs 1 nested BSDF, got 0"),

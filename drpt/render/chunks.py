@@ -138,6 +138,8 @@ class ChunkMerge:
         while self.next in self.pending:
             r = self.pending.pop(self.next)
             self.sum += r.sum
+            if r.sumsq.shape != self.sumsq.shape and not self.sumsq.any():
+                self.sumsq = np.zeros_like(r.sumsq)  # with the channel products of a moment render
             self.sumsq += r.sumsq
             self.nonfinite += r.nonfinite
             merged.append(self.next)

@@ -82,6 +82,9 @@ class RenderResult:
     build_seconds: float
     samples: int
     nonfinite: int  # samples discarded because they were NaN/Inf (should be 0)
+    #: with ``RenderOptions.moment``: (H, W, 3) float64, each pixel's mean of its samples'
+    #: squared CIE XYZ values (Mitsuba's ``moment`` integrator's ``m2_`` channels)
+    moment2: np.ndarray | None = None
 
     @property
     def samples_per_second(self) -> float:
@@ -231,12 +234,14 @@ class Renderer:
         if sequential:
             j = lane % mm
             count = kk // mm + dr.select(j < kk % mm, 1, 0)
-            acc, acc2, bad = self.integrator.sample_sequence(rng, camera_ray, count, wide=wide)
+            extra = {"moment": True} if self.opt.moment else {}
+            acc, acc2, bad, *cross = self.integrator.sample_sequence(rng, camera_ray, count, wide=wide,
+                                                                     **extra)
             # evaluate the path loop once (the reductions below would each
             # re-run it: measured 4.1x slower), in blocks that keep every
             # thread busy to the end (drpt.llvm_tuning.blocks_for)
             with llvm_tuning.blocks_for(n):
-                dr.eval(acc, acc2, bad)
+                dr.eval(acc, acc2, bad, cross)
             nbad = dr.sum(bad)
         else:
             o, d, weight = camera_ray(rng)
@@ -248,12 +253,14 @@ class Renderer:
             bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
             acc = (Array3f64 if wide else Array3f)(dr.select(bad, 0.0, L))
             acc2 = acc * acc
+            cross = [type(acc)(acc.x * acc.y, acc.x * acc.z, acc.y * acc.z)] if self.opt.moment else []
             nbad = dr.sum(UInt32(bad))
         sums = [dr.block_sum(c, m) for c in (acc.x, acc.y, acc.z)]
-        sqsums = [dr.block_sum(c, m) for c in (acc2.x, acc2.y, acc2.z)]
+        # squares, then with RenderOptions.moment (a Mitsuba moment integrator) the products rg, rb, gb
+        sqsums = [dr.block_sum(c, m) for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
         dr.eval(sums, sqsums, nbad)
         img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)
-        sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, 3)
+        sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, len(sqsums))
         return img, sq, int(nbad[0])
 
     def _camera_ray(self, x: UInt32, y: UInt32) -> Callable:
@@ -300,7 +307,7 @@ class Renderer:
         plan = chunks.passes
         W, H = self.opt.width, self.opt.height
         acc = np.zeros((H, W, 3), np.float64)
-        acc2 = np.zeros((H, W, 3), np.float64)
+        acc2 = np.zeros((H, W, 6 if self.opt.moment else 3), np.float64)
         nonfinite = 0
         for i in chunks.passes_of(index):
             _s0, k, r0, rows = plan[i]
@@ -348,6 +355,26 @@ def finish(merged: ChunkMerge, seconds: float, build_seconds: float) -> RenderRe
         raise DrptError(f"pixel ({x}, {y}) averages {mean.max():.3g}, beyond the float32 "
                         "maximum (3.4e38) of the image: scale the scene's emission down")
     # Unbiased sample variance of one sample, divided by spp: variance of the mean.
-    var = np.maximum(merged.sumsq / spp - mean * mean, 0.0) * spp / max(spp - 1, 1) / spp
+    var = np.maximum(merged.sumsq[..., :3] / spp - mean * mean, 0.0) * spp / max(spp - 1, 1) / spp
+    moment2 = None
+    if merged.sumsq.shape[-1] == 6:
+        moment2 = xyz_second_moment(merged.sumsq / spp)
     return RenderResult(mean.astype(np.float32), var, seconds,
-                        build_seconds, W * H * spp, merged.nonfinite)
+                        build_seconds, W * H * spp, merged.nonfinite, moment2)
+
+
+#: linear sRGB -> CIE XYZ, Mitsuba's ``srgb_to_xyz``
+SRGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423],
+                        [0.212671, 0.715160, 0.072169],
+                        [0.019334, 0.119193, 0.950227]])
+
+
+def xyz_second_moment(m: np.ndarray) -> np.ndarray:
+    """Per pixel, the mean of ``X^2, Y^2, Z^2`` over the samples, from the means ``m`` of
+    ``r^2, g^2, b^2, rg, rb, gb`` (``X = a . rgb`` gives ``X^2 = a^T (rgb rgb^T) a``)."""
+    rr, gg, bb, rg, rb, gb = (m[..., i] for i in range(6))
+    a = SRGB_TO_XYZ
+    out = [a[i, 0] ** 2 * rr + a[i, 1] ** 2 * gg + a[i, 2] ** 2 * bb
+           + 2 * (a[i, 0] * a[i, 1] * rg + a[i, 0] * a[i, 2] * rb + a[i, 1] * a[i, 2] * gb)
+           for i in range(3)]
+    return np.stack(out, -1)

@@ -270,12 +270,16 @@ class RenderSettings:
     #: Mitsuba's ``(fov, fov_axis)`` as the file gives them: an image size of another
     #: aspect than the film's keeps the fov along that axis, as Mitsuba does
     fov: tuple | None = None
+    #: Mitsuba's ``moment`` integrator around the one rendered: the nested integrator's
+    #: name in the file (``_arg_0`` when unnamed), which names the EXR's moment channels
+    moment: str | None = None
     #: the ``-D`` values the file was read with (``compare`` gives Mitsuba the same)
     defines: dict = field(default_factory=dict)
-    #: parameters of the file their plugins do not read (older exporters' files), as
-    #: ``(node index in mitsuba.parser's state, plugin, name)``: ``compare`` drops them
-    #: before Mitsuba loads the file (Mitsuba 3 refuses them)
-    ignored: tuple = ()
+    #: what of the file drpt did not read as written, one located line each: parameters
+    #: their plugins do not read (older exporters' files; Mitsuba 3 refuses them) and,
+    #: with ``--ignore-unsupported``, the plugins left out or replaced. ``compare`` stops
+    #: on such a file, or with ``--ignore-unsupported`` says it is not like for like
+    not_read: tuple = ()
 
 
 # ---------------------------------------------------------------------- scene

@@ -231,6 +231,9 @@ def format_table(report: dict) -> str:
                      f"{100 * m['outside_ci']:.2f}% of pixel values (Mitsuba itself at {spp} spp: "
                      f"{100 * m['outside_ci_control']:.2f}%; ~{100 * EXPECTED_OUTSIDE:.2f}% for "
                      "Gaussian errors)"))
+    if report["mode"] == "scene" and not report.get("like_for_like", True):
+        rows.append(("NOT like for like", f"drpt left out {len(report['not_read'])} thing(s) Mitsuba "
+                                          "renders (metrics.json: not_read)"))
     if report["mode"] == "scene":
         d, r = report["drpt"], report["reference"]
         rows.append(("drpt time", f"{d['seconds']:.2f} s  ({d['spp']} spp, "
@@ -378,6 +381,12 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
 
         if args is not None:
             options = apply_scene_settings(options, scene, args)
+        not_read = list(getattr(scene.settings, "not_read", ()))
+        if not_read and not getattr(args, "ignore_unsupported", False):
+            raise DrptError(f"{scene_path}: drpt does not read all of the file ({not_read[0]}"
+                            + (f"; and {len(not_read) - 1} more" if len(not_read) > 1 else "")
+                            + "): Mitsuba's reference of the file as written would not be the scene "
+                            "drpt renders (--ignore-unsupported compares anyway, marked not like for like)")
         source = MitsubaXML.for_scene(scene, options)
     width, height, spp, seed = options.width, options.height, options.spp, options.seed
     bsdf, max_depth, rr_depth = options.bsdf, options.path.max_depth, options.path.rr_depth
@@ -431,9 +440,14 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
                     "block_tests": test["tests"], "block_threshold": test["threshold"],
                     "block_max_abs_z": test["max_abs_z"], "block_worst": test["worst_block"],
                     "block_confirmed": confirmed})
+    not_read = list(getattr(getattr(scene, "settings", None), "not_read", ()))
     report = {
         "mode": "scene",
         "scene": str(scene_path),
+        # drpt rendered the file as written (False: it left out what not_read lists, while
+        # Mitsuba's reference renders all of it)
+        "like_for_like": not not_read,
+        "not_read": not_read,
         "width": int(width),
         "height": int(height),
         "bsdf": bsdf,

@@ -6,14 +6,10 @@ not depend on drpt's reader. The file goes through Mitsuba's own pipeline, as
 ``mi.load_file(path, optimize=False, **defines)`` does it (``mitsuba.parser``:
 ``parse_file`` with the ``-D`` values, with the file's folder first on the file
 resolver; ``transform_all`` without the mesh and equivalence merging, which
-fail on some files; ``instantiate``), with three edits of the parsed scene
-graph between ``transform_all`` and ``instantiate``:
+fail on some files; ``instantiate``), with two edits of the parsed scene
+graph between ``transform_all`` and ``instantiate``, both only where the
+command line asks for other settings than the file's:
 
-* the parameters drpt's reader found that their plugins do not read
-  (``Scene.settings.ignored``: files of older exporters, ``strict_normals`` on
-  ``path``, ``int_ior`` on ``roughconductor``) are deleted, since Mitsuba 3
-  refuses such files; any other unread parameter still makes Mitsuba refuse
-  the file (a reader that missed one is an error, not a silent drop);
 * the film's ``width``/``height`` become the image size drpt renders when it
   differs from the file's (``--size``); a film with a crop window keeps its
   size and window, and an image size other than the window's is refused
@@ -26,8 +22,8 @@ graph between ``transform_all`` and ``instantiate``:
 The sample count is the reference's (``mi.render(spp=...)``), not the file's.
 The cache key (:meth:`MitsubaXML.key`) hashes the bytes of the file and of
 every file it includes, the size, mtime and path of every file a ``filename``
-parameter names (meshes, textures, environment maps), the defines, the
-dropped parameters, the edits, this module's source and the render settings.
+parameter names (meshes, textures, environment maps), the defines, the edits,
+this module's source and the render settings.
 """
 
 from __future__ import annotations
@@ -45,19 +41,16 @@ class MitsubaXML:
     Args:
         path: the XML file.
         defines: ``-D`` values (``Scene.settings.defines``).
-        ignored: ``(node index, plugin, name)`` of parameters to delete
-            (``Scene.settings.ignored``).
         size: the image size to render, ``(width, height)``; None: the file's.
         rfilter: a :class:`~drpt.filters.PixelFilter` replacing the film's, or None.
         integrator: ``{"max_depth", "rr_depth", "hide_emitters"}`` of a ``path``
             integrator replacing the file's, or None.
     """
 
-    def __init__(self, path, defines: dict | None = None, ignored=(), *, size=None,
+    def __init__(self, path, defines: dict | None = None, *, size=None,
                  rfilter=None, integrator: dict | None = None):
         self.path = Path(path).resolve()
         self.defines = {str(k): str(v) for k, v in (defines or {}).items()}
-        self.ignored = tuple((int(i), str(p), str(n)) for i, p, n in ignored)
         self.size = None if size is None else (int(size[0]), int(size[1]))
         self.rfilter = rfilter
         self.integrator = None if integrator is None else dict(integrator)
@@ -80,13 +73,12 @@ class MitsubaXML:
         if (options.path.max_depth, options.path.rr_depth) != depths:
             integrator = {"max_depth": int(options.path.max_depth), "rr_depth": int(options.path.rr_depth),
                           "hide_emitters": bool(options.path.hide_emitters)}
-        return cls(scene.path, st.defines, st.ignored, size=size, rfilter=rfilter, integrator=integrator)
+        return cls(scene.path, st.defines, size=size, rfilter=rfilter, integrator=integrator)
 
     # ------------------------------------------------------------ identity
     def edits(self) -> dict:
         """The edits of the file, JSON-ready (reports, the cache key)."""
         return {"file": str(self.path), "defines": self.defines,
-                "dropped": [f"{p}.{n}" for _, p, n in self.ignored],
                 "size": None if self.size is None else list(self.size),
                 "rfilter": None if self.rfilter is None else str(self.rfilter),
                 "integrator": self.integrator}
@@ -97,7 +89,7 @@ class MitsubaXML:
 
         from .reference import CACHE_VERSION
 
-        state, _ = self._parse()
+        state, _, resolver = self._parse()
         h = hashlib.sha256()
 
         def add(tag: str, data: bytes) -> None:
@@ -113,15 +105,15 @@ class MitsubaXML:
             props = node.props
             for name in props.keys():
                 if "filename" in name and str(props.type(name)).endswith("String"):
-                    deps.append(_stat(self._resolve(str(props[name]))))
+                    deps.append(_stat(self._resolve(str(props[name]), resolver)))
         add("deps", json.dumps(deps).encode())
         add("source", Path(__file__).read_bytes())
         return h.hexdigest()
 
     # ------------------------------------------------------------ loading
-    def _resolve(self, name: str) -> Path:
+    def _resolve(self, name: str, resolver) -> Path:
         p = Path(name)
-        return p if p.is_absolute() else self.path.parent / p
+        return p if p.is_absolute() else Path(str(resolver.resolve(name)))
 
     def _parse(self):
         import mitsuba as mi
@@ -141,7 +133,9 @@ class MitsubaXML:
             raise DrptError(f"{self.path}: Mitsuba cannot parse the file: {_short(e)}") from None
         finally:
             mi.set_file_resolver(resolver)
-        return state, config
+        # the resolver as the parser left it: the file's folder and its <path> folders,
+        # where the plugins find their files when they are instantiated
+        return state, config, local
 
     def load(self):
         """``(mi.Scene, integrator or None)``: the file with the edits, loaded by Mitsuba
@@ -149,21 +143,12 @@ class MitsubaXML:
         import mitsuba as mi
         import mitsuba.parser as mp
 
-        state, config = self._parse()
+        state, config, local = self._parse()
         nodes = state.nodes
-        for index, plugin, name in self.ignored:
-            if not (0 <= index < len(nodes)) or nodes[index].props.plugin_name() != plugin:
-                raise DrptError(f"{self.path}: parameter {plugin}.{name} to drop is not where drpt's "
-                                "reader saw it (the file changed?)")
-            props = nodes[index].props
-            if name in props:
-                del props[name]
         sensors = [n for n in nodes if n.type == mi.ObjectType.Sensor]
         if sensors and (self.size is not None or self.rfilter is not None):
             self._edit_film(mi, mp, state, _child(mi, nodes, sensors[0], mi.ObjectType.Film))
         resolver = mi.file_resolver()
-        local = mi.FileResolver(resolver)
-        local.prepend(str(self.path.parent))
         mi.set_file_resolver(local)
         try:
             scene = mp.instantiate(config, state)

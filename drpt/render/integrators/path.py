@@ -58,6 +58,15 @@ class PathState:
     active: Bool
 
 
+def bank(sums: tuple, L):
+    """``sums`` (of samples, of their squares and, when there are three, of the products
+    of their channels ``(rg, rb, gb)``) with the sample ``L`` added."""
+    out = (sums[0] + L, sums[1] + L * L)
+    if len(sums) > 2:
+        out += (sums[2] + type(L)(L.x * L.y, L.x * L.z, L.y * L.z),)
+    return out
+
+
 class PathIntegrator:
     def __init__(self, scene: DeviceScene, options: PathOptions):
         self.scene = scene
@@ -74,8 +83,8 @@ class PathIntegrator:
         return state.L
 
     @dr.syntax
-    def sample_sequence(self, rng: PCG32, camera_ray: Callable, count: UInt32, wide: bool = False
-                        ) -> tuple[Array3f | Array3f64, Array3f | Array3f64, UInt32]:
+    def sample_sequence(self, rng: PCG32, camera_ray: Callable, count: UInt32, wide: bool = False,
+                        moment: bool = False) -> tuple:
         """``count`` paths per lane, one after another (path regeneration).
 
         A lane starts a path at ``camera_ray(rng) -> (o, d)`` or ``(o, d,
@@ -92,27 +101,28 @@ class PathIntegrator:
         float64: samples are float32 and finite, but a sum of many (or a
         square) of radiance near the float32 maximum is not (the renderer
         traces a pass whose float32 sums overflowed again with ``wide``).
+        With ``moment`` a fourth value follows: the sum of the products of
+        each sample's channels ``(rg, rb, gb)`` (for second moments in other
+        color spaces; without it the kernel has no such sum).
         """
         scene = self.scene
         left = UInt32(count)
         o, d, *weight = camera_ray(rng)
         state = self._start(o, d, left > 0, *weight)
         Sum = Array3f64 if wide else Array3f
-        acc, acc2 = Sum(0.0), Sum(0.0)
+        sums = (Sum(0.0), Sum(0.0)) + ((Sum(0.0),) if moment else ())
         dropped = UInt32(0)
         while left > 0:
             state = self._bounce(scene, state, rng)
             if ~state.active & (left > 0):  # the path ended: bank it, start the next
                 L = state.L
                 finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
-                Lf = Sum(dr.select(finite, L, 0.0))
-                acc += Lf
-                acc2 += Lf * Lf
+                sums = bank(sums, Sum(dr.select(finite, L, 0.0)))
                 dropped += dr.select(finite, 0, 1)
                 left -= 1
                 o, d, *weight = camera_ray(rng)
                 state = self._start(o, d, left > 0, *weight)
-        return acc, acc2, dropped
+        return (*sums[:2], dropped, *sums[2:])
 
     def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> PathState:
         """A new path along the ray ``(o, d)``: no radiance, throughput

@@ -26,6 +26,8 @@ Mitsuba                   drpt
 ``independent`` (etc.)    ``settings.spp`` = ``sample_count`` (default 4);
                           other samplers take their count too, with a note
 ``path``                  ``settings``: max_depth, rr_depth, hide_emitters
+``moment``                its nested integrator; ``settings.moment`` names the
+                          moment AOVs an EXR output gets
 ``direct``                ``path`` with max_depth 2 (the same expectation)
 ``obj`` ``ply``           triangles, loaded by Mitsuba's own mesh loaders
 ``serialized``            (:mod:`.geometry`): ``to_world``, ``face_normals``,
@@ -48,13 +50,19 @@ Mitsuba                   drpt
 ``checkerboard``          :class:`drpt.shading.Checkerboard` (procedural)
 ========================  =====================================================
 
+Files are found as Mitsuba's file resolver finds them (``<path>`` folders,
+the scene's folder; :meth:`.nodes.Node.resolve_file`); nested plugins are
+found by kind whatever their ``name`` (:meth:`.nodes.Node.children`); a
+spectrum given by wavelength is the color Mitsuba's RGB variants make of it
+(:meth:`.nodes.Node.color`).
+
 Each distinct (BSDF node, area radiance) pair of shapes becomes one
 :class:`~drpt.scene.model.Material`, named after the BSDF's ``id``.
 
 Errors and warnings. Anything the parser refuses (malformed XML, an
 undefined ``$var``, an unresolved ``<ref>``, a value of the wrong syntax) and
 anything drpt refuses (a parameter of the wrong type, a missing mesh file,
-a plugin drpt cannot render: media, spectral data, other integrators,
+a plugin drpt cannot render: media, other integrators,
 textures other than ``bitmap`` and ``checkerboard``, ...) raises a one-line
 :class:`~drpt.errors.SceneError` naming the XML file, the line Mitsuba's
 parser gives (``mitsuba.parser.file_location``) and the plugin. With

@@ -30,6 +30,14 @@ VARIANT = "scalar_rgb"
 #: tests/test_mitsuba_xml.py checks them against the installed Mitsuba)
 D65_RGB = (1.204793930053711, 0.948291003704071, 0.9089160561561584)
 
+#: kinds of nested plugins that are parameters by name (``<texture name="reflectance">``,
+#: ``<ref name="interior" id=..>``); other kinds are children whatever their name
+NAMED_KINDS = frozenset({"texture", "medium", "volume"})
+
+#: parameters Mitsuba reads with ``get_unbounded_texture`` (a spectrum given by wavelengths
+#: is not clamped to [0, 1] there): conductors' ``eta`` and ``k``, roughnesses
+UNBOUNDED = frozenset({"eta", "k", "alpha", "alpha_u", "alpha_v", "sigma_a", "theta", "delta"})
+
 _LOCATION = re.compile(r"^(.*) \(line (\d+), col (\d+)\)$")
 _MESSAGE = re.compile(r"Error while loading (.+?) \(line (\d+), col \d+\): (.*)$", re.S)
 _XML_FAILED = re.compile(r'Parsing of XML file "(.+?)" failed: (.*) \(line (\d+), col \d+\)$', re.S)
@@ -49,8 +57,17 @@ def mitsuba():
     return mi
 
 
+_UNREFERENCED = re.compile(r'^\s*- \S+ "([^"]+)"', re.M)
+_UNRESOLVED = re.compile(r'unresolved reference to "(.*?)" in property "(.*?)"\. Make sure the object '
+                         r'with id=".*?" exists\.')
+
+
 def _one_line(text: str) -> str:
-    return " ".join(_TAG.sub("", text).split())
+    text = " ".join(_TAG.sub("", text).split())
+    # Mitsuba names an unnamed <ref> by its internal key (property "_arg_0")
+    return _UNRESOLVED.sub(lambda m: (f'<ref id="{m.group(1)}"' if m.group(2).startswith("_arg_")
+                                      else f'<ref name="{m.group(2)}" id="{m.group(1)}"')
+                           + f'/>: no object has id "{m.group(1)}"', text)
 
 
 def parser_error(path: Path, error: Exception) -> SceneError:
@@ -86,17 +103,32 @@ class State:
 
         self.path = path
         config = mp.ParserConfig(VARIANT)
+        # Mitsuba's load_file: a copy of the global file resolver with the scene's folder
+        # first, on which the parser prepends each <path> folder (and, while it reads an
+        # <include>d file, that file's folder); plugins resolve their files on what is left
+        backup = mi.file_resolver()
+        fs = mi.FileResolver(backup)
+        fs.prepend(str(path.parent))
+        mi.set_file_resolver(fs)
         try:
             state = mp.parse_file(config, str(path), **{k: str(v) for k, v in defines.items()})
             mp.transform_upgrade(config, state)
             mp.transform_resolve(config, state)
         except RuntimeError as e:
             raise parser_error(path, e) from None
+        finally:
+            mi.set_file_resolver(backup)
+        #: where a relative file name is looked for, first match wins (Mitsuba's order:
+        #: the <path> folders, last first, then the scene's folder, then Mitsuba's defaults)
+        self.search = [Path(str(p)) for p in fs]
+        self.added = self.search[:len(self.search) - len(backup)]  # <path> folders, scene folder
+        self.resolver = fs
         self.mi = mi
         self.mp = mp
         self.state = state
         self.files = [Path(str(f)) for f in state.files]
         self.nodes: dict[int, Node] = {}
+        self.notes: list[str] = []  # warnings found while reading values (clamped spectra)
         self.version = str(state.versions[0]) if len(state.versions) else ""
 
     def node(self, index: int) -> Node:
@@ -150,24 +182,36 @@ class Node:
         return SceneError(self.file, self.line, message)
 
     def resolve_file(self, name: str) -> Path:
-        """A file name of this node, relative to the XML file that holds it (then
-        to the main file's folder), as an absolute path; a missing one is an error."""
+        """A file name of this node as an absolute path, found as Mitsuba's file resolver
+        finds it (:attr:`State.search`: the ``<path>`` folders, the scene's folder), then
+        next to the XML file that holds the node; a missing one is an error at the node."""
         p = Path(name).expanduser()
         if not p.is_absolute():
-            for base in (self.file.parent, self.state.path.parent):
+            for base in (*self.state.search, self.file.parent):
                 if (base / p).exists():
                     p = base / p
                     break
             else:
-                p = self.file.parent / p
+                folders = list(dict.fromkeys(str(b) for b in (*self.state.added, self.file.parent)))
+                raise self.error(f"{self.label}: {name}: no such file (looked in {', '.join(folders)})")
         if not p.is_file():
             what = "not a regular file" if p.exists() else "no such file"
             raise self.error(f"{self.label}: {name}: {what}")
         return p.resolve()
 
     # ------------------------------------------------------------ params
+    def _is_child(self, key: str) -> bool:
+        """Whether parameter ``key`` is a nested plugin that Mitsuba's plugins find by its
+        type, whatever its name (``<bsdf name="bsdf">``, ``<ref name="bsdf" id=..>``: a
+        shape's BSDF and emitter, a composite's BSDFs, a film's rfilter, a sensor's film),
+        rather than by its name (textures, media and volumes are named parameters)."""
+        if self._type(key) != "ResolvedReference":
+            return False
+        return key.startswith("_arg_") or self.state.node(self.props[key].index()).kind not in NAMED_KINDS
+
     def names(self) -> list[str]:
-        return [k for k in self.props.keys() if not k.startswith("_arg_")]
+        """The parameters, without the nested plugins :meth:`children` returns."""
+        return [k for k in self.props.keys() if not self._is_child(k)]
 
     def has(self, name: str) -> bool:
         return name in self.props
@@ -238,14 +282,14 @@ class Node:
         return self.has(name) and self._type(name) == "ResolvedReference"
 
     def color(self, name: str, default=None, *, emission: bool = False) -> tuple[float, float, float] | None:
-        """An RGB triple from ``<rgb>``, a uniform ``<spectrum>`` or a ``<float>``.
+        """An RGB triple from ``<rgb>``, a ``<spectrum>`` or a ``<float>``.
 
-        A spectrum given by wavelengths is refused (drpt renders in RGB; so
-        does Mitsuba's ``*_rgb`` variants' parser only for uniform values).
-        With ``emission`` (an emitter's radiance, intensity or irradiance), a
-        uniform ``<spectrum value="v">`` is what Mitsuba's RGB variants make of
-        it: ``v`` times the D65 illuminant in linear sRGB, :data:`D65_RGB`
-        (``<rgb>`` and ``<float>`` stay gray)."""
+        A spectrum given by wavelengths (or an ``.spd`` file) becomes the color
+        Mitsuba's RGB variants make of it (:meth:`_spectrum_rgb`). With
+        ``emission`` (an emitter's radiance, intensity or irradiance), a uniform
+        ``<spectrum value="v">`` is what Mitsuba's RGB variants make of it: ``v``
+        times the D65 illuminant in linear sRGB, :data:`D65_RGB` (``<rgb>`` and
+        ``<float>`` stay gray)."""
         if not self.has(name):
             return default
         t = self._type(name)
@@ -262,21 +306,77 @@ class Node:
                 if emission:
                     return tuple(v * c for c in D65_RGB)
                 return (v, v, v)
-            raise self.error(f"{self.label}: parameter '{name}' is a spectrum given by wavelengths: "
-                             "unsupported (drpt renders in RGB; give <rgb> or a uniform value)")
+            return self._spectrum_rgb(name, s, emission)
         raise self._wrong(name, "a color (<rgb>, <spectrum> or <float>)")
+
+    def _spectrum_rgb(self, name: str, s, emission: bool) -> tuple[float, float, float]:
+        """A spectrum given by wavelengths (``value="400:0.1, 500:0.5"`` or an ``.spd``
+        file), as Mitsuba's RGB variants read it (``Properties::get_texture_impl``): its
+        linear sRGB color integrated against the CIE 1931 curves
+        (``mi.spectrum_list_to_srgb``), times the D65 illuminant unless it is an emitter's;
+        clamped to [0, 1] unless it is an emitter's or an unbounded parameter's
+        (:data:`UNBOUNDED`), which are clamped at 0. A clamp is noted as a warning."""
+        mi = self.state.mi
+        bounded = not (emission or name in UNBOUNDED)
+        wl, values = [float(x) for x in s.wavelengths], [float(x) for x in s.values]
+        logger = mi.logger()
+        level = logger.log_level()
+        logger.set_log_level(mi.LogLevel.Error)  # drpt reports the clamp itself, once, located
+        try:
+            raw = mi.spectrum_list_to_srgb(wl, values, bounded=False, d65=not emission)
+            rgb = mi.spectrum_list_to_srgb(wl, values, bounded=bounded, d65=not emission)
+        except RuntimeError as e:
+            raise self.error(f"{self.label}: parameter '{name}': {_one_line(str(e))}") from None
+        finally:
+            logger.set_log_level(level)
+        out = (float(rgb[0]), float(rgb[1]), float(rgb[2]))
+        if out != (float(raw[0]), float(raw[1]), float(raw[2])) or min(out) == 0.0 < max(values):
+            self.state.notes.append(f"{self.where}: {self.label}: the spectrum of '{name}' is out of the "
+                                    f"sRGB gamut: clamped to {tuple(round(c, 6) for c in out)}, as Mitsuba's "
+                                    "RGB variants clamp it")
+        return out
 
     def ref(self, name: str) -> Node:
         self.read.add(name)
         return self.state.node(self.props[name].index())
 
+    def objects(self) -> list[tuple[str, Node]]:
+        """Every nested or referenced plugin as ``(parameter name, node)`` in file order
+        (the name is ``_arg_<i>`` for one given without a name)."""
+        return [(k, self.state.node(self.props[k].index())) for k in self.props.keys()
+                if self._type(k) == "ResolvedReference"]
+
     def children(self) -> list[Node]:
-        """Nested or referenced plugins without a parameter name, in file order."""
-        out = []
+        """Nested or referenced plugins that Mitsuba finds by type (:meth:`_is_child`),
+        named or not, in file order."""
+        return [self.state.node(self.props[k].index()) for k in self.props.keys() if self._is_child(k)]
+
+    def mitsuba_unread(self) -> set[str] | None:
+        """The parameters Mitsuba's plugin itself leaves unread (it refuses them), found by
+        loading the plugin with this node's parameters (not its nested plugins) in
+        Mitsuba; ``None`` when that load fails for another reason (a required nested
+        plugin, a file) and the question stays open."""
+        mi = self.state.mi
+        d = {"type": self.plugin}
         for k in self.props.keys():
-            if k.startswith("_arg_") and self._type(k) == "ResolvedReference":
-                out.append(self.state.node(self.props[k].index()))
-        return out
+            if self._type(k) != "ResolvedReference":
+                d[k] = self.props[k]
+        backup = mi.file_resolver()
+        mi.set_file_resolver(self.state.resolver)
+        logger = mi.logger()
+        level = logger.log_level()
+        logger.set_log_level(mi.LogLevel.Error)
+        try:
+            mi.load_dict(d, parallel=False)
+        except Exception as e:  # noqa: BLE001 - any failure leaves the question open
+            text = str(e)
+            if "unreferenced propert" not in text:
+                return None
+            return set(_UNREFERENCED.findall(text))
+        finally:
+            mi.set_file_resolver(backup)
+            logger.set_log_level(level)
+        return set()
 
     def unread(self, ignore=()) -> list[str]:
         """Parameters (not nested plugins) drpt did not read, in file order."""

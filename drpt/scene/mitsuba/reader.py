@@ -65,7 +65,7 @@ class Reader:
         self.state = State(self.path, dict(defines or {}))
         self.materials = Materials(self)
         self.unread_params: list[str] = []
-        self.ignored: list[tuple[int, str, str]] = []
+        self.not_read: list[str] = []  # what drpt left out or replaced, one line each
         self.defines = {k: str(v) for k, v in (defines or {}).items()}
         self.warnings: list[str] = []
         # outputs
@@ -87,8 +87,9 @@ class Reader:
         warn and go on (the caller uses ``fallback``, or leaves the node out)."""
         if not self.ignore_unsupported:
             raise node.error(f"unsupported {what} (--ignore-unsupported renders without it)")
-        self.warn(f"{node.where}: unsupported {what}: "
-                  + (f"using {fallback}" if fallback else "left out"))
+        message = f"{node.where}: unsupported {what}: " + (f"using {fallback}" if fallback else "left out")
+        self.warn(message)
+        self.not_read.append(message)
 
     def drpt_ignores(self, node: Node, name: str, why: str) -> None:
         """A parameter the plugin reads that drpt does not honor."""
@@ -102,12 +103,22 @@ class Reader:
         names = node.unread()
         if not names:
             return
+        # the warning names only what Mitsuba's plugin refuses too; a parameter that Mitsuba
+        # reads and drpt does not is an unsupported one (it would change Mitsuba's image)
+        refused = node.mitsuba_unread()
+        if refused is not None:
+            for name in [n for n in names if n not in refused]:
+                self.drpt_ignores(node, name, "Mitsuba reads it, drpt does not")
+            names = [n for n in names if n in refused]
+            if not names:
+                return
         listed = ", ".join(f"'{n}'" for n in names)
         if self.strict:
             raise node.error(f"{node.label} does not read parameter{'s' if len(names) > 1 else ''} "
                              f"{listed} (without --strict drpt ignores them)")
         self.unread_params.append(f"{listed} of {node.label} at {node.where}")
-        self.ignored.extend((node.index, node.plugin, n) for n in names)
+        self.not_read.append(f"{node.where}: parameter{'s' if len(names) > 1 else ''} {listed} of "
+                             f"{node.label}: not read")
 
     # ------------------------------------------------------------ the scene
     def read(self) -> Scene:
@@ -139,16 +150,16 @@ class Reader:
             self.integrator(integrators[0])
         self.check_unread(root)
         self.settings.defines = dict(self.defines)
-        self.settings.ignored = tuple(self.ignored)
+        self.settings.not_read = tuple(self.not_read)
         scene = self._scene()
         self._report()
         return scene
 
     def _report(self) -> None:
         if self.unread_params:
-            self.warn(f"{self.path}: ignored parameters their plugins do not read (Mitsuba 3 would "
-                      f"refuse them; --strict makes this an error): {'; '.join(self.unread_params)}")
-        for w in self.warnings:
+            self.warn(f"{self.path}: ignored parameters their plugins do not read (Mitsuba 3 refuses "
+                      f"them; --strict makes this an error): {'; '.join(self.unread_params)}")
+        for w in [*self.state.notes, *self.warnings]:
             warnings.warn(w, stacklevel=3)
 
     def _scene(self) -> Scene:
@@ -291,6 +302,22 @@ class Reader:
     # ------------------------------------------------------------ integrator
     def integrator(self, node: Node) -> None:
         s = self.settings
+        if node.plugin == "moment":
+            # Mitsuba's moment: renders its first nested integrator's image and records
+            # the XYZ value and its square of every nested one's samples as AOVs
+            nested = [(k, c) for k, c in node.objects() if c.kind == "integrator"]
+            for _, c in node.objects():
+                if c.kind != "integrator":
+                    raise c.error(f"{c.label} inside {node.label} (it takes integrators)")
+            if not nested:
+                raise node.error(f"{node.label} needs a nested integrator")
+            for _, c in nested[1:]:
+                self.unsupported(c, f"a second integrator inside {node.label} (drpt records the "
+                                 "moments of the first)")
+            self.check_unread(node)
+            s.moment = nested[0][0]
+            self.integrator(nested[0][1])
+            return
         if node.plugin not in ("path", "direct"):
             self.unsupported(node, f"integrator '{node.plugin}' (drpt has path and direct)",
                              fallback="path")
