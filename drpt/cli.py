@@ -205,6 +205,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     opts = apply_scene_settings(opts, scene, args)
     ensure()
     viewer = _viewer(scene, opts, args, output=output, final=False)
+    print(f"drpt view: open that address in a browser; its \"render\" button writes {output}; "
+          "Ctrl-C stops the viewer", flush=True)
     try:
         viewer.wait()
     finally:
