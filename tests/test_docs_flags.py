@@ -198,3 +198,15 @@ def test_wavefront_is_the_megakernel_s_image_exactly_as_far_as_the_docs_say():
     np.testing.assert_allclose(b, a, rtol=1e-5, atol=1e-7)
     a, b = image(edge + 1, "megakernel"), image(edge + 1, "wavefront")
     assert not np.allclose(b, a, rtol=1e-3, atol=1e-5)
+
+
+# flags of other programs the docs quote: dask worker's, git's, benchmarks/ scripts'
+OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks"}
+
+
+def test_every_flag_the_docs_name_exists(parsers):
+    _, subs = parsers
+    known = {o for p in subs.values() for a in p._actions for o in a.option_strings}
+    for doc in [*sorted((ROOT / "docs").glob("*.md")), ROOT / "README.md"]:
+        for flag in set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", doc.read_text())):
+            assert flag in known | OTHER_PROGRAMS, f"{doc.name} names {flag}, which no command has"
