@@ -77,7 +77,6 @@ from drpt.errors import DrptError, SceneError
 from drpt.scene.files import check_input
 
 WRITE_EXTENSIONS = (".exr", ".png", ".tga", ".hdr", ".pfm")
-_LDR = (".png", ".jpg", ".jpeg", ".tga")
 READ_EXTENSIONS = (".exr", ".hdr", ".pfm", ".png", ".jpg", ".jpeg", ".tga")
 
 __all__ = [
@@ -201,6 +200,10 @@ def _mitsuba_message(e: Exception) -> str:
 
 
 # ------------------------------------------------------------------ reading
+# the 8/16-bit formats Pillow reads (the others hold floats)
+_LDR = tuple(e for e in READ_EXTENSIONS if e not in (".exr", ".hdr", ".pfm"))
+
+
 def read_image(path: str | PathLike, linear: bool = True, gamma: float | None = None) -> np.ndarray:
     """Read an image as an ``(H, W, C)`` float32 array (see module docs).
 
