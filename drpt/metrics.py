@@ -154,6 +154,22 @@ def block_variance_independent(var, b: int) -> np.ndarray:
     return block_sums(var, b) / (n * n)
 
 
+def filter_j(pixel_filter) -> float:
+    """``J = integral w^2 / (integral w)^2`` of a 2-D pixel filter ``w(x) w(y)`` (a
+    :class:`drpt.filters.PixelFilter`): 1 for the box, 4/9 for the unit tent, ~0.32 for
+    the Gaussian of stddev 0.5. A splatted pixel's variance is about ``J`` times a
+    box-filtered one's, while the mean of a block much larger than the filter is about
+    as noisy as the box's: so such a block's variance is ``sum(var) / (J n^2)``, where
+    the pixels' independent sum would be ``J`` times too small."""
+    if pixel_filter.is_box:
+        return 1.0
+    r = pixel_filter.radius
+    x = np.linspace(-r, r, 8001)
+    w = pixel_filter.eval(x)
+    j1 = float(np.trapezoid(w * w, x) / np.trapezoid(w, x) ** 2)
+    return j1 * j1
+
+
 def sidak_z(tests: int, alpha: float = 0.01) -> float:
     """The two-sided ``|z|`` threshold that ``tests`` independent standard-normal tests all
     stay below with probability ``1 - alpha`` (Sidak's correction, as Mitsuba's render

@@ -299,8 +299,10 @@ def block_size(pixel_filter) -> int:
     return next((b for b in BLOCK_SIZES if b >= want), BLOCK_SIZES[-1])
 
 
-def block_test(x, var_x, ref, ref_block_var, b: int, alpha: float = ALPHA) -> dict:
-    """drpt's ``x`` (independent pixels with variances ``var_x``) against ``ref``
+def block_test(x, var_x, ref, ref_block_var, b: int, alpha: float = ALPHA,
+               splat_j: float = 1.0) -> dict:
+    """drpt's ``x`` (pixels with variances ``var_x``: independent, or splatted by a
+    filter of :func:`drpt.metrics.filter_j` ``splat_j``) against ``ref``
     (``ref_block_var``: the variance of each ``b x b`` block mean) by the z of every
     block mean and channel; it passes when every ``|z|`` stays below the Sidak
     threshold of level ``alpha``. The standard deviation has a floor of
@@ -308,7 +310,8 @@ def block_test(x, var_x, ref, ref_block_var, b: int, alpha: float = ALPHA) -> di
     seen directly) that differ by float rounding pass."""
     from .. import metrics
 
-    var = metrics.block_variance_independent(var_x, b) + np.asarray(ref_block_var, np.float64)
+    var = (metrics.block_variance_independent(var_x, b) / splat_j
+           + np.asarray(ref_block_var, np.float64))
     floor = REL_FLOOR * np.abs(metrics.block_means(ref, b))
     z = metrics.block_z(x, ref, var + floor * floor, 0.0, b)
     threshold = metrics.sidak_z(z.size, alpha)
@@ -410,7 +413,12 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
     ref_block_var = (reference.block_variance or {}).get(b)
     if ref_block_var is None:
         ref_block_var = metrics.block_variance_independent(ref_var, b)
-    test = block_test(result.image, result.variance, ref, ref_block_var, b)
+    # drpt's pixels are independent with filter importance sampling; were they splatted
+    # (a film that spreads each sample over its neighbours), a block's variance would be
+    # its pixels' sum over J (metrics.filter_j)
+    splats = not options.pixel_filter.is_box and not getattr(options, "filter_sampling", True)
+    splat_j = metrics.filter_j(options.pixel_filter) if splats else 1.0
+    test = block_test(result.image, result.variance, ref, ref_block_var, b, splat_j=splat_j)
     confirmed = None
     if not test["passed"]:
         from dataclasses import replace
@@ -419,7 +427,7 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
 
         other = seed + 1 if seed < MAX_SEED else seed - 1
         again = Renderer(scene, replace(options, seed=other, progress=False)).render()
-        second = block_test(again.image, again.variance, ref, ref_block_var, b)
+        second = block_test(again.image, again.variance, ref, ref_block_var, b, splat_j=splat_j)
         confirmed = confirm(test["_z"], test["failing"], second["_z"])
     control_info = control_test = None
     if control:
