@@ -304,3 +304,11 @@ def test_block_variance_of_a_splatted_image():
     assert 1.0 <= independent / metrics.filter_j(f) / empirical < 1.4
     assert metrics.filter_j(PixelFilter()) == 1.0
     assert metrics.filter_j(PixelFilter("tent", 1.0)) == pytest.approx(4 / 9, rel=1e-4)
+
+
+def test_one_sample_per_pixel_is_refused(tmp_path):
+    """At 1 spp drpt's pixels have no variance estimate (0): the verdict 'agreed' on the
+    reference's variance alone."""
+    with pytest.raises(DrptError, match="--spp must be at least 2"):
+        run(CORNELL, "--spp", "1", "--size", "8", "8", "--out", tmp_path / "o",
+            "--cache", tmp_path / "c", "-q")

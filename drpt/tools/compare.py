@@ -393,6 +393,8 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
         source = MitsubaXML.for_scene(scene, options)
     width, height, spp, seed = options.width, options.height, options.spp, options.seed
     bsdf, max_depth, rr_depth = options.bsdf, options.path.max_depth, options.path.rr_depth
+    if spp < 2:  # (one sample per pixel has no variance: the tests would see only the reference's)
+        raise DrptError(f"--spp must be at least 2 (for a variance), got {spp}")
     check_reference_args(ref_spp, ref_batches, max_depth, rr_depth, announce=False)
     _prepare_out(out)
     reference = get_reference(
