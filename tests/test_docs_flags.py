@@ -200,8 +200,9 @@ def test_wavefront_is_the_megakernel_s_image_exactly_as_far_as_the_docs_say():
     assert not np.allclose(b, a, rtol=1e-3, atol=1e-5)
 
 
-# flags of other programs the docs quote: dask worker's, git's, benchmarks/ scripts'
-OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks"}
+# flags of other programs the docs quote (dask worker's, git's, benchmarks/ scripts'), and
+# cli.md's example of a mistyped one
+OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "--sizee", "--sp"}
 
 
 def test_every_flag_the_docs_name_exists(parsers):
