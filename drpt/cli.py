@@ -27,7 +27,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from .errors import DrptError, showwarning, warn
+from .errors import DrptError, note, showwarning, warn
 from .options import check_view_args
 
 #: the most local worker processes --workers starts per core (each is a Python
@@ -41,8 +41,8 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", nargs="?", help="scene file (the seed's text format, or Mitsuba XML: .xml)")
     p.add_argument("--input", "-input", dest="input", help="scene file (seed flag)")
     p.add_argument("--output", "-output", "-o", dest="output",
-                   help="image to write: .exr (linear float32), .png or .tga (gamma); "
-                        "default <scene>.png")
+                   help="image to write, its type from the extension: .exr, .hdr or .pfm "
+                        "(linear float), .png or .tga (8-bit, gamma); default <scene>.png")
     add_render_flags(p, seed_flags=True)
     from .options import add_distributed_flags
 
@@ -52,6 +52,9 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("-gui", "--gui", dest="gui", action="store_true",
                    help="seed flag: move the camera in the viewer (as drpt view) first; "
                         "its \"render\" button (or closing the page) starts the render")
+    p.add_argument("--gui-timeout", dest="gui_timeout", type=float, default=None, metavar="T",
+                   help="with -gui: start the render with the scene's camera when no page is "
+                        "open T seconds after the viewer starts (default: wait for a page)")
     from .options import add_view_flags
 
     add_view_flags(p)
@@ -108,6 +111,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     _check_output(output)
     if args.gui:
         check_view_args(args)
+    if args.gui_timeout is not None:
+        if not args.gui:
+            raise DrptError("--gui-timeout applies to -gui")
+        if not (math.isfinite(args.gui_timeout) and args.gui_timeout >= 0):
+            raise DrptError(f"--gui-timeout must be >= 0 seconds, got {args.gui_timeout}")
     scene = load_scene(scene_path)
     opts = apply_scene_settings(opts, scene, args)
 
@@ -137,12 +145,18 @@ def cmd_render(args: argparse.Namespace) -> int:
         warn(f"{result.nonfinite} samples were NaN/Inf and were set to 0")
     write_image(output, result.image, gamma=args.gamma, extra=moment_channels(scene, result))
     checkpoint.remove(output)
+    total = result.spp + job.resumed_spp  # samples per pixel in the image (fewer than --spp
+    spp = f"{total} spp"                  # when a target error or time limit stopped it)
+    if job.resumed_spp:
+        spp += f" ({job.resumed_spp} from the checkpoint, {total - job.resumed_spp} now)"
+    extra = f"+{result.build_seconds:.2f} s build"
+    if args.workers is not None or args.cluster is not None:
+        extra += f", +{job.startup_seconds:.2f} s to start the cluster"
     stop = ""
     if opts.target_error is not None or opts.time_limit is not None:
         reason = f"{job.stopped} reached" if job.stopped else f"all {opts.spp} spp"
         stop = f", estimated relMSE {result.estimated_rel_mse:.3g} ({reason})"
-    print(f"{output}: {opts.width}x{opts.height}, {result.spp} spp, {result.seconds:.2f} s "
-          f"(+{result.build_seconds:.2f} s build), "
+    print(f"{output}: {opts.width}x{opts.height}, {spp}, {result.seconds:.2f} s ({extra}), "
           f"{result.samples_per_second / 1e6:.2f} Msamples/s{stop}")
     if opts.progress and (args.workers is not None or args.cluster is not None):
         print_workers(job)
@@ -164,13 +178,33 @@ def _viewer(scene, opts, args, *, output: Path | None, final: bool):
 def _gui(scene, opts, args):
     """``render -gui``: the viewer until "render"; the scene with its camera
     and the options with its integrator, depth and accelerator."""
+    import threading
     from dataclasses import replace
 
     viewer = _viewer(scene, opts, args, output=None, final=True)
+    timeout = getattr(args, "gui_timeout", None)
+    print("drpt render -gui: open that address in a browser and move the camera; the page's "
+          "\"render\" button, or closing the page, starts the render with it (Ctrl-C stops). "
+          + ("Without a browser it waits: --gui-timeout T renders the scene's camera after T s."
+             if timeout is None else
+             f"With no page open after {timeout:g} s it renders the scene's camera."), flush=True)
+    timer = None
+    if timeout is not None:
+        def no_page() -> None:
+            if not viewer.server.get_clients():
+                note(f"no page opened the viewer within --gui-timeout {timeout:g} s: rendering "
+                     "the scene's camera")
+                viewer.request_render()
+
+        timer = threading.Timer(timeout, no_page)
+        timer.daemon = True
+        timer.start()
     try:
         camera = viewer.wait()
         settings = viewer.settings()
     finally:
+        if timer is not None:
+            timer.cancel()
         viewer.close()
     return replace(scene, camera=camera), replace(settings, progress=opts.progress)
 
@@ -190,6 +224,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     opts = apply_scene_settings(opts, scene, args)
     ensure()
     viewer = _viewer(scene, opts, args, output=output, final=False)
+    print(f"drpt view: open that address in a browser; its \"render\" button writes {output}; "
+          "Ctrl-C stops the viewer", flush=True)
     try:
         viewer.wait()
     finally:
@@ -205,6 +241,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     opts = options_from_args(args)
     if not args.output.strip():
         raise DrptError("the output is empty: give the .xml file to write")
+    out = Path(args.output)
+    if str(out.parent) != "" and not out.parent.is_dir():  # render's rule: no folder is made
+        raise DrptError(f"{out}: folder {out.parent} does not exist")
     scene = load_scene(args.scene)
     opts = apply_scene_settings(opts, scene, args)
     if len(scene.triangles) + len(scene.spheres) + len(scene.planes) == 0:
@@ -219,15 +258,65 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 class _Parser(argparse.ArgumentParser):
     """argparse with drpt's error format: one line, exit status 2 (argparse's
-    own prints the whole usage first)."""
+    own prints the whole usage first), naming the command whose ``--help`` to read;
+    an unknown flag gets the closest known one ("did you mean"). No flag is
+    abbreviated: neither ``--sp`` for ``--spp`` (``allow_abbrev=False``) nor, as
+    argparse otherwise allows, ``-Monte`` for ``-MonteCarlo``."""
 
     def error(self, message: str):
-        print(f"drpt: error: {self.prog}: {message} (see {self.prog} --help)", file=sys.stderr)
+        import difflib
+        import re
+
+        bad = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if bad:
+            close = difflib.get_close_matches(bad.group(1), re.findall(r"'([^']*)'", bad.group(2)),
+                                              n=1, cutoff=0.6)
+            if close:
+                message += f"; did you mean {close[0]}?"
+        command = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""
+        print(f"drpt: error: {command}{message} (see {self.prog} --help)", file=sys.stderr)
         sys.exit(2)
+
+    def _get_option_tuples(self, option_string):
+        # single-dash flags: only a one-letter flag with its value attached (-Dname=value,
+        # -oout.png), never a prefix of a longer flag (argparse's default)
+        found = super()._get_option_tuples(option_string)
+        if option_string[:2] != "--":
+            found = [t for t in found if t[1] == option_string[:2]]
+        return found
+
+    def parse_args(self, args=None, namespace=None):
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            target = self
+            for action in self._actions:
+                if isinstance(action, argparse._SubParsersAction):
+                    target = action.choices.get(getattr(ns, "command", None), self)
+            target.error(_unrecognized(target, extras))
+        return ns
+
+
+def _unrecognized(parser: argparse.ArgumentParser, extras: list[str]) -> str:
+    """``unrecognized arguments: ...``, with the closest flag of ``parser`` for each
+    unknown flag among them."""
+    import difflib
+
+    known = [o for a in parser._actions for o in a.option_strings]
+    hints = []
+    for arg in extras:
+        if arg.startswith("-") and len(arg) > 1:
+            name = arg.split("=", 1)[0]
+            close = ([o for o in known if o.startswith(name)]
+                     or difflib.get_close_matches(name, known, n=1, cutoff=0.6))
+            if close:
+                hints.append(f"{arg}: did you mean {close[0]}?")
+    noun = "argument" if len(extras) == 1 else "arguments"
+    return f"unrecognized {noun}: {' '.join(extras)}" + (f" ({'; '.join(hints)})" if hints else "")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="drpt", description=__doc__.split("\n")[0], allow_abbrev=False)
+    parser = _Parser(prog="drpt", description=__doc__.split("\n")[0].replace("``", ""),
+                     allow_abbrev=False)
     sub = parser.add_subparsers(dest="command", required=True)
     render = sub.add_parser("render", help="render a scene to an image", allow_abbrev=False)
     _add_render_args(render)

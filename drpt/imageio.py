@@ -45,7 +45,9 @@ Returns an ``(H, W, C)`` float32 array, row 0 at the top, ``C`` in
   ``linear=True`` (the default) color channels are then decoded from sRGB
   to linear with the exact sRGB transfer curve (what Mitsuba's ``bitmap``
   texture does for 8-bit images when ``raw`` is false); alpha is never
-  decoded. ``linear=False`` returns the encoded values. Palette images are
+  decoded. ``gamma=G`` decodes them with the power curve ``x ** G`` instead,
+  the inverse of what :func:`write_image` writes (``compare A.png B.exr``).
+  ``linear=False`` returns the encoded values. Palette images are
   expanded; gray+alpha becomes RGBA.
 
 A missing, unreadable, truncated, malformed or empty (0 pixel) file, or one that is not a
@@ -206,11 +208,17 @@ def _mitsuba_message(e: Exception) -> str:
 
 
 # ------------------------------------------------------------------ reading
-def read_image(path: str | PathLike, linear: bool = True) -> np.ndarray:
+# the 8/16-bit formats Pillow reads (the others hold floats)
+_LDR = tuple(e for e in READ_EXTENSIONS if e not in (".exr", ".hdr", ".pfm"))
+
+
+def read_image(path: str | PathLike, linear: bool = True, gamma: float | None = None) -> np.ndarray:
     """Read an image as an ``(H, W, C)`` float32 array (see module docs).
 
     ``linear`` only matters for 8/16-bit formats: decode their sRGB-encoded
-    color channels to linear values. Raises :class:`SceneError` when the
+    color channels to linear values (textures: Mitsuba's convention), or with
+    ``gamma``, by the plain power curve ``x ** gamma`` that :func:`write_image`
+    encodes them with (renders). Raises :class:`SceneError` when the
     file is missing, not a regular file, unreadable, malformed or of an
     unsupported type: at the file itself, or, for a
     :class:`~drpt.scene.files.NamedPath` (a texture or sky named by a scene
@@ -220,7 +228,11 @@ def read_image(path: str | PathLike, linear: bool = True) -> np.ndarray:
     named_at = getattr(path, "named_at", None)
     path = Path(path)
     try:
-        return _read_image(path, linear)
+        img = _read_image(path, linear and gamma is None)
+        if gamma is not None and linear and _ext(path) in _LDR:
+            nc = 3 if img.shape[2] >= 3 else 1
+            img[..., :nc] = np.clip(img[..., :nc], 0.0, 1.0) ** gamma
+        return img
     except SceneError as e:
         if named_at is None:
             raise

@@ -130,3 +130,74 @@ def summary(x, ref, var_x=None, var_ref=None, z: float = 3.0) -> dict:
         "mean_rel_error": float(emap.mean()),
         "max_rel_error": float(emap.max()) if emap.size else 0.0,
     }
+
+
+# ------------------------------------------------------------------ block z-test
+BLOCK_SIZES = (2, 4, 8, 16)  # block sizes whose variances the reference caches keep
+
+
+def block_sums(img, b: int) -> np.ndarray:
+    """Sums of ``img`` (``(H, W, C)``) over ``b x b`` blocks, ``(ceil(H/b), ceil(W/b), C)``;
+    the blocks at the right and bottom edges hold what remains of the image."""
+    img = np.asarray(img, dtype=np.float64)
+    h, w = img.shape[:2]
+    ph, pw = -h % b, -w % b
+    if ph or pw:
+        img = np.pad(img, ((0, ph), (0, pw)) + ((0, 0),) * (img.ndim - 2))
+    hb, wb = img.shape[0] // b, img.shape[1] // b
+    return img.reshape(hb, b, wb, b, *img.shape[2:]).sum(axis=(1, 3))
+
+
+def block_counts(shape, b: int) -> np.ndarray:
+    """Pixels in each ``b x b`` block of an image of ``shape`` (``(H, W, ...)``), ``(hb, wb, 1)``."""
+    return block_sums(np.ones(tuple(shape[:2]) + (1,)), b)
+
+
+def block_means(img, b: int) -> np.ndarray:
+    """Means of ``img`` over ``b x b`` blocks (:func:`block_sums` / pixels per block)."""
+    return block_sums(img, b) / block_counts(np.shape(img), b)
+
+
+def block_variance_independent(var, b: int) -> np.ndarray:
+    """Variance of each block's mean when the pixels are independent (drpt's are: each
+    averages its own samples, whatever the filter): ``sum(var) / n^2``."""
+    n = block_counts(np.shape(var), b)
+    return block_sums(var, b) / (n * n)
+
+
+def filter_j(pixel_filter) -> float:
+    """``J = integral w^2 / (integral w)^2`` of a 2-D pixel filter ``w(x) w(y)`` (a
+    :class:`drpt.filters.PixelFilter`): 1 for the box, 4/9 for the unit tent, ~0.32 for
+    the Gaussian of stddev 0.5. A splatted pixel's variance is about ``J`` times a
+    box-filtered one's, while the mean of a block much larger than the filter is about
+    as noisy as the box's: so such a block's variance is ``sum(var) / (J n^2)``, where
+    the pixels' independent sum would be ``J`` times too small."""
+    if pixel_filter.is_box:
+        return 1.0
+    r = pixel_filter.radius
+    x = np.linspace(-r, r, 8001)
+    w = pixel_filter.eval(x)
+    j1 = float(np.trapezoid(w * w, x) / np.trapezoid(w, x) ** 2)
+    return j1 * j1
+
+
+def sidak_z(tests: int, alpha: float = 0.01) -> float:
+    """The two-sided ``|z|`` threshold that ``tests`` independent standard-normal tests all
+    stay below with probability ``1 - alpha`` (Sidak's correction, as Mitsuba's render
+    tests use)."""
+    from statistics import NormalDist
+
+    per_test = 1.0 - (1.0 - alpha) ** (1.0 / max(tests, 1))
+    return float(NormalDist().inv_cdf(1.0 - per_test / 2.0))
+
+
+def block_z(x, ref, var_x_block, var_ref_block, b: int) -> np.ndarray:
+    """Per block and channel, ``(mean_x - mean_ref) / sqrt(var_x + var_ref)`` of the
+    ``b x b`` block means (variances of the block means given). A block with zero
+    combined variance has ``z = 0`` where the means agree, else ``inf``."""
+    d = block_means(x, b) - block_means(ref, b)
+    v = np.asarray(var_x_block, np.float64) + np.asarray(var_ref_block, np.float64)
+    sd = np.sqrt(np.maximum(v, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(sd > 0, d / np.where(sd > 0, sd, 1.0), np.where(d == 0, 0.0, np.inf))
+    return z

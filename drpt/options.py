@@ -285,7 +285,8 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
     if want("rr_prob"):
         parser.add_argument("--rr-prob", type=float, default=None,
                             help="fixed path continuation probability for Russian roulette "
-                                 "(default: adaptive, min(throughput, 0.95))")
+                                 "(default: adaptive, min(max(throughput) * eta^2, 0.95), "
+                                 "Mitsuba's rule)")
         if seed_flags:
             parser.add_argument("-RR_cutdown", dest="rr_cutdown", type=float, default=None,
                                 help="seed flag: fixed continuation probability p at every "
@@ -345,7 +346,7 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                  "them in one fused loop (default 0: every bounce as wavefront stages)")
     if want("bsdf"):
         default = d["bsdf"]
-        shown = default or "auto; phong with -input"
+        shown = default or ("auto; phong with -input" if seed_flags else "auto")
         parser.add_argument("--bsdf", choices=BSDF_MODES, default=default,
                             help="how MTL materials are read: auto (each material's own statements "
                                  "decide its model, see docs/scene-format.md), or one model for every "

@@ -117,3 +117,52 @@ def test_bad_options(tmp_path, argv):
     args = _parse([str(CORNELL), *argv, "--out", str(tmp_path / "o")])
     with pytest.raises(DrptError):
         args.func(args)
+
+
+def test_chart_uses_a_log_axis():
+    """A build ratio of ~400 next to ratios near 1 flattened every other bar on a linear
+    axis: the chart's axis is logarithmic, and every bar keeps a visible height."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from drpt.tools.bench import RATIOS, chart
+
+    rows = [dict({k: v for (k, _), v in zip(RATIOS, (400.0, 1.1, 1.6, 1.4, 2.0))},
+                 scene="cornellbox", accel="inline")]
+    fig = chart(rows, mitsuba=True)
+    try:
+        ax = fig.axes[0]
+        assert ax.get_yscale() == "log"
+        lo, hi = ax.get_ylim()
+        heights = [p.get_height() for p in ax.patches]
+        # on the log axis the smallest bar spans a fair part of the axis
+        assert min(np.log(h / lo) for h in heights) / np.log(hi / lo) > 0.05
+    finally:
+        plt.close(fig)
+
+
+def test_other_scenes_are_read_as_every_command_reads_them(tmp_path, monkeypatch):
+    """bench read any scene but newscene as Phong; render, compare and profile read `auto`.
+    The bundled scenes keep the readings of the published numbers."""
+    import shutil
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def spy(scene, options, rays, repeat):
+        seen[scene.path.name] = options.bsdf
+        raise Stop
+
+    monkeypatch.setattr(bench, "bench_drpt", spy)
+    for f in ("cornellbox.txt", "cornellbox.obj", "cornellbox.mtl"):
+        shutil.copy(SCENES / "cornellbox" / f, tmp_path / f)
+    (tmp_path / "cornellbox.txt").rename(tmp_path / "box.txt")
+    for scene in (tmp_path / "box.txt", SCENES / "cornellbox" / "cornellbox.txt",
+                  SCENES / "newscene" / "newscene.txt"):
+        args = _parse([str(scene), "--no-mitsuba", "--accel", "bvh", "--rays", "64",
+                       "--out", str(tmp_path / "b")])
+        with pytest.raises(Stop):
+            bench.main(args)
+    assert seen == {"box.txt": "auto", "cornellbox.txt": "phong", "newscene.txt": "cook-torrance"}

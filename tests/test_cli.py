@@ -303,4 +303,5 @@ def test_flag_parsing_errors_are_one_line(capsys, args, needle):
         main(args)
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("drpt: error: drpt") and needle in err[0], err
+    assert len(err) == 1 and err[0].startswith("drpt: error: ") and needle in err[0], err
+    assert not err[0].startswith("drpt: error: drpt"), err  # no doubled prefix

@@ -459,7 +459,9 @@ def test_knobs_cli_smoke(tmp_path, capsys):
     from drpt.tools import knobs
 
     out = tmp_path / "kn"
-    assert _run(knobs, CORNELL, "--size", "16", "16", "--spp", "8", "--ref-spp", "64",
+    # (32 spp, a 256-spp reference: the bias's standard error, its channels taken as
+    # correlated, is ~6% here, so direct light only, -30%, is beyond 3 of them)
+    assert _run(knobs, CORNELL, "--size", "16", "16", "--spp", "32", "--ref-spp", "256",
                 "--knobs", "depth", "accel", "--depths", "2", "--repeats", "1",
                 "--cache", tmp_path / "cache", "--out", out, "-q") == 0
     text = capsys.readouterr().out
@@ -491,4 +493,28 @@ def test_knobs_configs_and_bias():
         "cook-torrance", "phong"]
     ref = np.ones((4, 4, 3))
     d, se = image_bias(0.9 * ref, np.full_like(ref, 0.01), ref, np.zeros_like(ref))
-    assert d == pytest.approx(-0.1) and se == pytest.approx(np.sqrt(48 * 0.01) / 48)
+    # the channels taken as perfectly correlated: each channel's s.e. over 16 pixels
+    assert d == pytest.approx(-0.1) and se == pytest.approx(np.sqrt(16 * 0.01) / 16)
+
+
+def test_knobs_bias_is_not_fooled_by_correlated_channels():
+    """A gray scene's channels carry the same noise. Summing their variances as if
+    independent made the standard error sqrt(3) too small: `knobs --size 32 32 --spp 16`
+    read an unbiased setting (RR off) +4.62% +- 1.11% "biased". Unbiased images must be
+    flagged at about the 3-sigma rate (0.27%; threshold 3 of 300), a 3% bias always
+    (negative control; its z is ~6)."""
+    from drpt.tools.knobs import image_bias
+
+    rng = np.random.default_rng(11)
+    ref = np.full((16, 16, 3), 0.5)
+    sd = 0.04
+    var = np.full_like(ref, sd * sd)
+    flagged = 0
+    for _ in range(300):
+        x = ref + rng.normal(0, sd, ref.shape[:2])[..., None]  # one noise for R, G and B
+        d, se = image_bias(x, var, ref, np.zeros_like(ref))
+        flagged += abs(d) > 3 * se
+    assert flagged <= 3
+    x = 1.03 * ref + rng.normal(0, sd, ref.shape[:2])[..., None]
+    d, se = image_bias(x, var, ref, np.zeros_like(ref))
+    assert abs(d) > 3 * se

@@ -5,6 +5,8 @@ The scene: a floor, a back wall and a ceiling light (OBJ + MTL), one sphere
 of the material under test, a diffuse sphere beside it, max depth 6.
 """
 
+import contextlib
+
 import pytest
 
 from drpt.scene import load_scene
@@ -100,7 +102,8 @@ CASES = [
 def test_material_matches_mitsuba(tmp_path, mtl, mode, module):
     pytest.importorskip(f"drpt.render.bsdf.{module}")
     scene = make(tmp_path, mtl)
-    r, ref, ref_var = render_both(scene, 48, 32, 128, max_depth=6, bsdf=mode)
+    with _expected_notes(mtl):
+        r, ref, ref_var = render_both(scene, 48, 32, 128, max_depth=6, bsdf=mode)
     assert r.image.mean() > 0.02
     assert_agree(r, ref, ref_var)
 
@@ -145,8 +148,17 @@ def test_mtl_dissolve_is_a_mask_that_matches_mitsuba(tmp_path):
     i = next(k for k, m in enumerate(scene.materials) if m.name == "phong")
     given = tuple(sorted({*scene.materials[i].given, "d"}))
     scene.materials[i] = replace(scene.materials[i], dissolve=0.3, given=given)
-    r, ref, ref_var = render_both(scene, 48, 32, 128, max_depth=6, bsdf="auto")
+    with _expected_notes("phong"):
+        r, ref, ref_var = render_both(scene, 48, 32, 128, max_depth=6, bsdf="auto")
     assert_agree(r, ref, ref_var)
+
+
+def _expected_notes(mtl):
+    """The exporter's warning for a material that needs one: "phong" (Kd 0.3 0.4 0.6, Ks
+    0.5) reflects 1.1 and is scaled to 1, in drpt and in the export alike."""
+    if mtl == "phong":
+        return pytest.warns(UserWarning, match=r"material 'phong': Kd \+ Ks = 1.1 > 1")
+    return contextlib.nullcontext()
 
 
 def test_composite_negative_control(tmp_path, monkeypatch):

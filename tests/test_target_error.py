@@ -73,8 +73,9 @@ def test_resumed_target_error_render_stops_where_the_whole_one_does(scene, tmp_p
     out = tmp_path / "cut.exr"
     with pytest.raises(KeyboardInterrupt):
         run(scene, opts, out, on_chunk=interrupt, checkpoint_seconds=0.0)
-    resumed = run(scene, opts, out, resume=True).result
-    assert resumed.spp == whole.spp and np.array_equal(resumed.image, whole.image)
+    job = run(scene, opts, out, resume=True)
+    assert job.resumed_spp > 0 and job.result.spp + job.resumed_spp == whole.spp
+    assert np.array_equal(job.result.image, whole.image)
 
 
 @pytest.mark.slow

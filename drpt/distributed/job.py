@@ -94,6 +94,9 @@ class Job:
     warnings: list[str] = field(default_factory=list)
     resumed_from: int = 0  # chunks merged by the checkpoint it resumed
     stopped: str | None = None  # "target error" or "time limit" when one ended it early
+    resumed_spp: int = 0  # samples per pixel those chunks hold
+    requested_workers: int | None = None  # --workers N
+    startup_seconds: float = 0.0  # starting the engine (a local Dask cluster), before the render
 
 
 def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str | None = None,
@@ -126,7 +129,13 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         merged = ChunkMerge(chunks, cp.next, cp.sum, cp.sumsq, cp.nonfinite, cp.weight)
     else:
         merged = ChunkMerge(chunks)
-    job = Job(None, resumed_from=merged.next)
+    job = Job(None, resumed_from=merged.next, resumed_spp=merged.spp, requested_workers=workers)
+    left = chunks.count - merged.next
+    if workers is not None and 0 < left < workers:
+        hint = ("" if opts.chunk_spp is not None and opts.chunk_spp == 1
+                else "; a smaller --chunk-spp cuts it into more")
+        note(f"the render is {left} chunk{'s' if left > 1 else ''} for {workers} workers: "
+             f"{workers - left} will have nothing to do{hint}")
 
     def save() -> None:
         checkpoint.save(output, checkpoint.Checkpoint(key, okey, chunks.count, merged.next, merged.spp,
@@ -149,6 +158,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         engine = DaskEngine(scene, key, opts, workers=workers, address=cluster,
                             connect_timeout=connect_timeout)
     t0 = last = time.perf_counter()
+    entered = t0
     saved = merged.next  # the merged prefix the last checkpoint holds
     seen = set()
     build = 0.0
@@ -156,6 +166,9 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         with _stop_requests() as asked, engine, tqdm(total=W * H * spp, initial=W * H * merged.spp, unit="spl",
                           unit_scale=True, disable=not opts.progress, desc="render",
                           leave=False) as bar:
+            # the time to start a local cluster (seconds) is not the render's
+            t0 = last = time.perf_counter()
+            job.startup_seconds = t0 - entered
             for r in engine.results(range(merged.next, chunks.count)):
                 stats = job.workers.setdefault(r.worker, WorkerStats())
                 stats.chunks += 1
@@ -203,11 +216,20 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     if isinstance(engine, LocalEngine):
         build = engine.renderer.build_seconds
     job.result = finish(merged, time.perf_counter() - t0, build, light_tracing)
+    # the samples traced now: a resumed render's checkpoint was rendered before
+    job.result.samples = W * H * (merged.spp - job.resumed_spp)
     return job
 
 
-def print_workers(job: Job, file=sys.stderr) -> None:
-    """Per-worker figures: chunks, samples and seconds each."""
+def print_workers(job: Job, file=None) -> None:
+    """Per-worker figures: chunks, samples and seconds each; more workers than
+    ``--workers`` asked for are explained (Dask replaces a worker that stopped)."""
+    file = sys.stderr if file is None else file
+    n, asked = len(job.workers), job.requested_workers
+    if asked is not None and n > asked:
+        print(f"  {n} workers for --workers {asked}: {n - asked} replaced "
+              f"{'one' if n - asked == 1 else 'ones'} that stopped (their chunks were traced "
+              "again; the image is the same)", file=file)
     for name, s in sorted(job.workers.items()):
         print(f"  {name}: {s.chunks} chunks, {s.samples / 1e6:.3g} Msamples, {s.seconds:.2f} s",
               file=file)

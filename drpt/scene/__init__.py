@@ -51,8 +51,9 @@ def xml_flags(**flags):
 def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupported: bool | None = None,
                strict: bool | None = None) -> Scene:
     """Load a scene file: drpt's text format, or Mitsuba XML for a ``.xml`` file
-    (``defines``, ``ignore_unsupported`` and ``strict`` apply to XML only; ``None``
-    takes :func:`xml_flags`' value, else none / False)."""
+    (``defines``, ``ignore_unsupported`` and ``strict`` apply to XML only, a note
+    says so when given for another file; ``None`` takes :func:`xml_flags`' value,
+    else none / False)."""
     if Path(path).suffix.lower() == ".xml":
         from .mitsuba import load_mitsuba_xml
 
@@ -62,6 +63,15 @@ def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupporte
             ignore_unsupported=bool(ctx.get("ignore_unsupported", False) if ignore_unsupported is None
                                     else ignore_unsupported),
             strict=bool(ctx.get("strict", False) if strict is None else strict))
+    ctx = _XML_FLAGS.get() or {}
+    given = [name for name, on in (("-D", defines or ctx.get("defines")),
+                                   ("--ignore-unsupported", ignore_unsupported or ctx.get("ignore_unsupported")),
+                                   ("--strict", strict or ctx.get("strict"))) if on]
+    if given:
+        from ..errors import note
+
+        verb = "applies" if len(given) == 1 else "apply"
+        note(f"{' and '.join(given)} {verb} to Mitsuba XML scenes only: ignored", file=path)
     return _load_drpt_scene(path)
 
 

@@ -441,8 +441,10 @@ def format_table(report: dict) -> str:
                  "err ratio = drpt / Mitsuba at equal spp")
     for name in ("drpt", "mitsuba"):
         s = report["slopes"][name]
-        lines.append(f"{name} log-log slope (spp >= {s['from_spp']}): {_fmt(s['slope'], '.3f')} "
-                     f"+- {_fmt(s['stderr'], '.3f')} (1/N: -1)")
+        se = _fmt(s["stderr"], ".3f", none="")
+        se = f" +- {se}" if se else " (two levels: no standard error; raise --max-spp)"
+        lines.append(f"{name} log-log slope (spp >= {s['from_spp']}): {_fmt(s['slope'], '.3f')}"
+                     f"{se} (1/N: -1)")
     eq = report["equal_time"]
     lines.append(f"equal-time error ratio drpt/Mitsuba: {_fmt(eq['ratio_geomean'], '.3f')} "
                  "(geometric mean over the common time range)")

@@ -77,7 +77,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     size.add_argument("--scale", type=int, default=2,
                       help="render each scene at this multiple of its reference's size "
                            "(default 2)")
-    add_render_flags(p, omit=("size", "bsdf", "max_depth"), spp=64)
+    # (no -D, --ignore-unsupported, --strict: the bundled scenes are text files)
+    add_render_flags(p, omit=("size", "bsdf", "max_depth", "scene"), spp=64)
     p.add_argument("--scenes", default=None,
                    help="comma-separated subset of the scene names (default: all)")
     p.add_argument("--out", default="gallery", help="output folder (default gallery/)")

@@ -14,7 +14,7 @@ The render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
 Every row renders the scene with drpt at ``--spp`` and changes one knob from
 the default (``auto`` accelerator, ``--bsdf`` materials, unbounded depth,
 Russian roulette from depth 5 with the adaptive probability
-``min(throughput, 0.95)``):
+``min(max(throughput) * eta^2, 0.95)``, Mitsuba's):
 
 ``depth``  ``max_depth`` 2 (direct light only), 3, 5, 8 (``--depths``);
 ``rr``     Russian roulette from depth 1, 3, 10 (``--rr-depths``, adaptive
@@ -38,8 +38,9 @@ work-normalised error ``relMSE x seconds`` relative to the default row
 (``efficiency``: above 1 means a better trade than the default at equal
 time, as long as the row is unbiased), and the bias: the relative
 difference of the image means, ``(mean(x) - mean(ref)) / mean(ref)``, with
-its standard error ``sqrt(sum var_x + sum var_ref) / n / mean(ref)``
-(per-pixel variances of drpt and of the reference's batches), from the mean
+its standard error ``mean_c sqrt(sum_p (var_x + var_ref)) / n_pixels / mean(ref)``
+(per-pixel variances of drpt and of the reference's batches, the channels taken
+as perfectly correlated, which they nearly are: :func:`image_bias`), from the mean
 of all ``--repeats`` renders (independent seeds, ``repeats x spp`` samples
 per pixel), so more repeats resolve smaller biases. Rows whose
 difference is more than 3 standard errors are marked biased. Truncating
@@ -155,15 +156,26 @@ def configs(bsdf: str, knobs=KNOBS, depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
 
 
 def image_bias(x, var_x, ref, var_ref) -> tuple[float, float]:
-    """Relative difference of the image means and its standard error."""
+    """Relative difference of the image means (over pixels and channels) and its
+    standard error.
+
+    The variances are per pixel and channel; the channels of one sample are
+    correlated (a path that finds the light brightens R, G and B at once), and the
+    renderers report no covariance. So the standard error is the bound for perfectly
+    correlated channels, ``mean_c sqrt(sum_p var_pc) / n_pixels / mean(ref)``, exact
+    for gray scenes and at most sqrt(3) too large: summing the channels' variances as
+    if independent (``sqrt(sum var) / n``) made it up to sqrt(3) too small, and
+    unbiased settings read "biased"."""
     x, ref = np.asarray(x, np.float64), np.asarray(ref, np.float64)
     m = float(ref.mean())
     if m <= 0:
         return float("nan"), float("nan")
-    n = x.size
     diff = float(x.mean() - m) / m
-    se = float(np.sqrt(np.sum(var_x, dtype=np.float64) + np.sum(var_ref, dtype=np.float64))
-               / n / m)
+    var = np.asarray(var_x, np.float64) + np.asarray(var_ref, np.float64)
+    var = np.broadcast_to(var, x.shape)
+    channels = var.reshape(-1, var.shape[-1]) if var.ndim == 3 else var.reshape(-1, 1)
+    pixels = channels.shape[0]
+    se = float(np.mean(np.sqrt(channels.sum(axis=0))) / pixels / m)
     return diff, se
 
 

@@ -650,10 +650,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p = subparsers.add_parser("profile", help="profile a render: megakernel vs wavefront, per stage",
                               description=__doc__.split("\n")[0], allow_abbrev=False)
     p.add_argument("scene", help="scene file")
-    add_render_flags(p, omit=("mode",), size=(128, 128), spp=16, accel="auto", integrator="path",
-                     bsdf="phong")
+    add_render_flags(p, omit=("mode",), size=(128, 128), spp=16, accel="auto", integrator="path")
     p.add_argument("--mode", choices=("both", *MODES), default="both",
                    help="the execution modes to profile (default both, with the verdict)")
+    p.add_argument("--wavefront-tail", dest="wavefront_tail", type=int, default=0, metavar="N",
+                   help="the wavefront's fused tail, as render's (default 0); the A/B also "
+                        f"times the other setting ({TAIL_AB} when this is 0)")
     p.add_argument("--repeat", type=int, default=1,
                    help="timed renders per mode after the warm-up; the fastest is reported")
     p.add_argument("--out", default=None,

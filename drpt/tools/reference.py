@@ -176,13 +176,15 @@ def render_committed(name: str, seed: int = 12345) -> Path:
 # ------------------------------------------------------------ the batched render
 def render_batches(scene, width: int, height: int, batch_spp: int, batches: int, seed: int,
                    seed_step: int = 7919, max_depth: int = -1, rr_depth: int = 5,
-                   bsdf: str = "phong", progress: bool = True, rfilter: str = "box", source=None):
+                   bsdf: str = "phong", progress: bool = True, rfilter: str = "box", source=None,
+                   blocks: bool = False):
     """Mitsuba's ``path`` integrator on the exported ``scene``, ``batches`` times
     at ``batch_spp`` samples per pixel, batch ``k`` with seed ``seed + seed_step * k``.
 
     Returns the mean image, the per-pixel variance of the mean
     (``var(ddof=1) / batches``; zero for one batch), both float32, the
-    render seconds and the ``load_dict`` seconds. ``rfilter`` is the film's
+    render seconds and the ``load_dict`` seconds (with ``blocks``, a fifth item:
+    :func:`_batch_block_variances`). ``rfilter`` is the film's
     pixel filter (``--filter``'s spelling). Mitsuba's variant must be set
     (:func:`drpt.backend.set_mitsuba_variant`).
 
@@ -208,7 +210,24 @@ def render_batches(scene, width: int, height: int, batch_spp: int, batches: int,
     runs = np.stack(runs)
     mean = runs.mean(0)
     var = runs.var(0, ddof=1) / batches if batches > 1 else np.zeros_like(mean)
+    if blocks:
+        return (mean.astype(np.float32), var.astype(np.float32), seconds, load_seconds,
+                _batch_block_variances(runs))
     return mean.astype(np.float32), var.astype(np.float32), seconds, load_seconds
+
+
+def _batch_block_variances(runs: np.ndarray) -> dict:
+    """``{b: variance of each b x b block's mean}`` (:data:`drpt.metrics.BLOCK_SIZES`)
+    from the spread of independent renders ``runs`` (``(B, H, W, 3)``) of which the
+    mean is taken: it holds the correlation a splatting filter gives neighbouring
+    pixels, which a sum of per-pixel variances misses."""
+    from ..metrics import BLOCK_SIZES, block_means
+
+    out = {}
+    for b in BLOCK_SIZES:
+        m = np.stack([block_means(r, b) for r in runs])
+        out[b] = (m.var(0, ddof=1) / len(runs)).astype(np.float32)
+    return out
 
 
 def _load(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter, source):
@@ -339,22 +358,30 @@ def reference_key(scene, settings: dict) -> str:
 
 
 def _load_cached(path: Path):
+    """``(mean, variance, meta, block variances)`` of a cache entry, or None (an entry
+    from before the block variances counts as missing: it is rendered again)."""
+    from ..metrics import BLOCK_SIZES
+
     try:
         with np.load(path, allow_pickle=False) as z:
+            if any(f"block_var_{b}" not in z.files for b in BLOCK_SIZES):
+                return None
             mean, var = z["mean"].astype(np.float32), z["variance"].astype(np.float32)
             meta = json.loads(str(z["meta"]))
-        return mean, var, meta
+            blocks = {b: z[f"block_var_{b}"].astype(np.float32) for b in BLOCK_SIZES}
+        return mean, var, meta, blocks
     except Exception as e:  # a broken cache entry is re-rendered, not fatal
         warn(f"ignoring unreadable cached reference: {e}", file=path)
         return None
 
 
-def _save_cached(path: Path, mean, var, meta: dict) -> None:
+def _save_cached(path: Path, mean, var, meta: dict, blocks: dict) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=path.stem, suffix=".tmp.npz", dir=path.parent)
         os.close(fd)
-        np.savez(tmp, mean=mean, variance=var, meta=np.array(json.dumps(meta)))
+        np.savez(tmp, mean=mean, variance=var, meta=np.array(json.dumps(meta)),
+                 **{f"block_var_{b}": v for b, v in blocks.items()})
         os.replace(tmp, path)
     except OSError as e:
         warn(f"cannot cache the reference in {path.parent}: {e.strerror or e}")
@@ -372,6 +399,7 @@ class Reference:
     cache_file: Path | None  # <cache_dir>/<stem>_<key[:24]>.npz, None without a cache
     settings: dict  # width, height, batch_spp, batches, max_depth, rr_depth, bsdf, ref_seed
     xml: dict | None = None  # rendered from the user's XML file: its edits (MitsubaXML.edits)
+    block_variance: dict | None = None  # {b: variance of each b x b block's mean}, from the batches
 
     def info(self) -> dict:
         """What a report says about the reference (JSON-ready)."""
@@ -418,24 +446,24 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
     cache_file = None if cache_dir is None else Path(cache_dir) / f"{stem}_{key[:24]}.npz"
     cached = _load_cached(cache_file) if cache_file is not None and cache_file.is_file() else None
     if cached is not None:
-        ref, ref_var, meta = cached
+        ref, ref_var, meta, blocks = cached
         if ref.shape != (height, width, 3):
             cached = None
     if cached is None:
-        ref, ref_var, secs, load_secs = render_batches(
+        ref, ref_var, secs, load_secs, blocks = render_batches(
             scene, width, height, per, int(ref_batches), settings["ref_seed"],
             max_depth=max_depth, rr_depth=rr_depth, bsdf=bsdf, progress=progress,
-            rfilter=settings.get("rfilter", "box"), source=source)
+            rfilter=settings.get("rfilter", "box"), source=source, blocks=True)
         if ref.shape != (height, width, 3):
             raise DrptError(f"the Mitsuba reference is {ref.shape[1]}x{ref.shape[0]}, drpt renders "
                             f"{width}x{height}")
         meta = {"seconds": secs, "load_seconds": load_secs, "key": key, "settings": settings}
         if cache_file is not None:
-            _save_cached(cache_file, ref, ref_var, meta)
+            _save_cached(cache_file, ref, ref_var, meta, blocks)
     if not np.all(np.isfinite(ref)):
         raise DrptError("the Mitsuba reference has NaN/Inf pixels")
     return Reference(ref, ref_var, meta, cached is not None, key, cache_file, settings,
-                     None if source is None else source.edits())
+                     None if source is None else source.edits(), blocks)
 
 
 def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
@@ -445,7 +473,8 @@ def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
     pixel (render ``k`` with seed ``seed + k``): the per-pixel mean and the variance of
     that mean estimated the way drpt estimates its own, ``var(samples, ddof=1) / spp``.
 
-    Returns (mean, variance of the mean, seconds), float32 images. Mitsuba reports no
+    Returns (mean, variance of the mean, seconds, ``{b: variance of each b x b block's
+    mean}``), float32 images. Mitsuba reports no
     per-sample variance for one render (its ``moment`` integrator records moments of XYZ,
     not of RGB), hence the single-sample renders. ``rfilter`` is the film's pixel filter
     (with a splatting one, neighbouring pixels of a render are correlated; each pixel's
@@ -456,8 +485,12 @@ def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
     if spp < 2:
         raise DrptError(f"a per-pixel variance needs at least 2 samples per pixel, got {spp}")
     ms, integrator = _load(scene, width, height, 1, max_depth, rr_depth, seed, bsdf, rfilter, source)
+    from ..metrics import BLOCK_SIZES, block_means
+
     s1 = np.zeros((height, width, 3))
     s2 = np.zeros((height, width, 3))
+    b1 = {b: 0.0 for b in BLOCK_SIZES}
+    b2 = {b: 0.0 for b in BLOCK_SIZES}
     t0 = time.perf_counter()
     for k in range(spp):
         x = _rgb(mi.render(ms, spp=1, seed=seed + k, integrator=integrator))
@@ -466,6 +499,10 @@ def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
                             f"{width}x{height}")
         s1 += x
         s2 += x * x
+        for b in BLOCK_SIZES:
+            m = block_means(x, b)
+            b1[b] = b1[b] + m
+            b2[b] = b2[b] + m * m
         if progress:
             print(f"\rcontrol: sample {k + 1}/{spp}", end="", file=sys.stderr, flush=True)
     if progress:
@@ -473,7 +510,9 @@ def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
     seconds = time.perf_counter() - t0
     mean = s1 / spp
     var = np.maximum(s2 / spp - mean * mean, 0.0) * (spp / (spp - 1)) / spp
-    return mean.astype(np.float32), var.astype(np.float32), seconds
+    blocks = {b: (np.maximum(b2[b] / spp - (b1[b] / spp) ** 2, 0.0) / (spp - 1)).astype(np.float32)
+              for b in BLOCK_SIZES}
+    return mean.astype(np.float32), var.astype(np.float32), seconds, blocks
 
 
 def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str = "phong",
@@ -487,7 +526,9 @@ def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str =
     ``compare --control`` measures it against the reference with the statistic it
     applies to drpt: the fraction an unbiased renderer reaches on this scene at this
     spp (0.27% only when the pixel errors are Gaussian; scenes with heavy-tailed
-    samples read far higher at low spp). Returns (mean, variance, info dict)."""
+    samples read far higher at low spp). Returns (mean, variance, info dict; its
+    ``"block_variance"``: ``{b: variance of each b x b block's mean}``, from the
+    single-sample renders, so that a splatting filter's correlations are in it)."""
     _mitsuba()
     settings = {"control": True, "width": int(width), "height": int(height), "batch_spp": 1,
                 "spp": int(spp), "max_depth": int(max_depth), "rr_depth": int(rr_depth),
@@ -498,18 +539,19 @@ def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str =
     if cached is not None and cached[0].shape != (height, width, 3):
         cached = None
     if cached is None:
-        mean, var, secs = render_single_samples(
+        mean, var, secs, blocks = render_single_samples(
             scene, width, height, spp, settings["ref_seed"], max_depth=max_depth,
             rr_depth=rr_depth, bsdf=bsdf, progress=progress, rfilter=settings["rfilter"],
             source=source)
         meta = {"seconds": secs, "key": key, "settings": settings}
         if cache_file is not None:
-            _save_cached(cache_file, mean, var, meta)
+            _save_cached(cache_file, mean, var, meta, blocks)
     else:
-        mean, var, meta = cached
+        mean, var, meta, blocks = cached
     info = {"spp": int(spp), "seed": settings["ref_seed"], "seconds": float(meta["seconds"]),
             "cached": cached is not None,
-            "cache_file": None if cache_file is None else str(cache_file)}
+            "cache_file": None if cache_file is None else str(cache_file),
+            "block_variance": blocks}
     return mean, var, info
 
 

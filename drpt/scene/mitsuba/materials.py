@@ -127,8 +127,8 @@ class Materials:
                 r.unsupported(c, f"{c.label} inside {node.label}")
         else:
             r.unsupported(node, f"BSDF plugin '{kind}'", fallback="Mitsuba's default diffuse BSDF")
-            return BSDFSpec("diffuse", {"kd": bsdf_kinds.GRAY}, [],
-                            [f"{node.where}: unsupported BSDF '{kind}' replaced by diffuse 0.5"], origin)
+            # (one warning: r.unsupported's; a note on the spec would print it again)
+            return BSDFSpec("diffuse", {"kd": bsdf_kinds.GRAY}, [], [], origin)
         r.check_unread(node)
         return spec
 
