@@ -161,13 +161,15 @@ def test_light_tracing_variance_estimate_is_calibrated(cornell):
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("name", ["ptracer", "projector_spot", "area_textured"])
+@pytest.mark.parametrize("name", ["ptracer", "projector_spot", "area_textured", "sphere_light"])
 def test_light_tracing_of_an_xml_scene_agrees_with_mitsubas_path(name):
     """drpt's light tracer against Mitsuba's camera integrator on the same file:
     tests/data/xml/ptracer.xml (an area light, point, spot and directional lights and an
     environment map; the file's integrator is ptracer, Mitsuba renders it with path),
-    projector_spot.xml (a textured projector and a textured spot; Mitsuba's direct) and
-    area_textured.xml (an area light with a bitmap radiance; Mitsuba's path)."""
+    projector_spot.xml (a textured projector and a textured spot; Mitsuba's direct),
+    area_textured.xml (an area light with a bitmap radiance; Mitsuba's path) and
+    sphere_light.xml (analytic sphere lights, where light paths start and which the camera
+    sees, and a rectangle light; Mitsuba's path)."""
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
