@@ -1,14 +1,15 @@
 """Rays leaving the emitters, for light tracing (:mod:`drpt.render.integrators.ptracer`).
 
 :class:`EmitterRays` treats the scene's emitters as a list of *sources*: the
-emissive triangles together (a point chosen by power, as
-:class:`~drpt.render.lights.area.AreaLights` samples them), each point and
+emissive triangles and spheres together (a primitive chosen by the light sampler
+and a point uniformly on it, :meth:`~drpt.render.lights.area.AreaLights.sample`
+without a reference point), each point and
 spot light, each directional light, and the sky or constant background. A
 light path picks one source uniformly (Mitsuba picks one emitter uniformly
 too; its weight is the number of sources) and draws its first ray from it,
 with the ray's *weight*: emitted power over the density of the ray,
 
-* emissive triangle: a point ``y`` with area density ``pdf_A``, a direction
+* emissive triangle or sphere: a point ``y`` with area density ``pdf_A``, a direction
   cosine-distributed about the front (shading) normal: ``Le * pi / pdf_A``;
 * point light of intensity ``I``: a uniform direction, ``I * 4 pi``;
 * spot light: a direction uniform in the cutoff cone,
