@@ -11,7 +11,9 @@
 * renders of a small bright sphere light and of Veach's MIS scene against Mitsuba on the
   same XML (block z-test), and Veach's scene's error at equal spp no worse than 2x
   Mitsuba's (it was 30x when analytic spheres were found by BSDF sampling only: the
-  negative control).
+  negative control); the sphere light's render with a cone density 1.3x too high, and
+  with uniform selection reporting power's densities, fails the z-test (|z| > 6; both
+  read over 20).
 """
 
 from pathlib import Path
@@ -234,3 +236,25 @@ def test_veach_mis_error_is_mitsubas(monkeypatch, control):
     else:
         assert np.abs(z).max() < 4.5, np.abs(z).max()
         assert ratio < 2.0, ratio
+
+
+@pytest.mark.slow
+@pytest.mark.mitsuba
+@pytest.mark.parametrize("what", ["cone pdf 1.3x", "uniform selection with power's pdf"])
+def test_sphere_light_negative_controls_fail(monkeypatch, what):
+    """The render test of sphere_light.xml catches a wrong density: each perturbed
+    sampler must FAIL (max |block z| or |image mean z| over 6)."""
+    if what == "cone pdf 1.3x":
+        real_pdf = area_mod.cone_pdf
+        monkeypatch.setattr(area_mod, "cone_pdf", lambda omc: real_pdf(omc) * 1.3)
+    else:
+        real_init = AreaLights.__init__
+
+        def init(self, scene, surfaces, materials=None, sampler="power"):
+            real_init(self, scene, surfaces, materials, sampler="uniform")
+            power = AreaLights.__new__(AreaLights)
+            real_init(power, scene, surfaces, materials, sampler="power")
+            self.pdf_area_table, self.sph_prob = power.pdf_area_table, power.sph_prob
+        monkeypatch.setattr(AreaLights, "__init__", init)
+    _, _, _, z, zm = _agree_with_mitsuba("sphere_light", 256)
+    assert np.abs(z).max() > 6 or np.abs(zm).max() > 6, (np.abs(z).max(), zm)
