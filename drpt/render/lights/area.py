@@ -20,7 +20,7 @@ direction is uniform in the cone of the visible cap (Mitsuba's
 ``sphere.sample_direction``): solid-angle density ``P(k) / (2 pi (1 - cos
 theta_max))``, ``sin theta_max = radius / distance to the center``; from
 inside, and without ``ref`` (light tracing), the point is uniform on the
-sphere, ``pdf_A = P(k) / (4 pi radius^2)``. :meth:`AreaLights.pdf_direction`
+sphere, ``pdf_A = P(k) / (4 pi radius^2)``. :meth:`AreaLights.pdf_sphere`
 is the same density for a point a ray hit (MIS). A scene without emissive
 spheres traces no sphere code.
 
@@ -153,7 +153,6 @@ class AreaLights:
             p, n_front, ng, err, pdf, le = self._triangle_point(face, u, le, active)
             return LightSample(p, n_front, ng, le, pdf, active, err)
         is_sph = face >= self.n_tri
-        solid = None
         if self.has_triangles:
             tri = active & ~is_sph
             p, n_front, ng, err, pdf, le = self._triangle_point(dr.select(is_sph, 0, face), u, le, tri)
