@@ -133,8 +133,7 @@ class DeviceScene:
         else:
             self.materials = MaterialTable(scene, options.bsdf)
             self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None)
-        self.area_lights = AreaLights(scene, self.surfaces, self.materials,
-                                      sampler=getattr(options, "light_sampler", "power"))
+        self.area_lights = AreaLights(scene, self.surfaces, self.materials, sampler=options.light_sampler)
         self.delta_lights = DeltaLights(scene)
         self.warnings: list[str] = list(self.materials.notes)
         if self.is_empty:
