@@ -35,6 +35,7 @@ BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
 INTEGRATORS = ("path", "whitted", "ptracer")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
+LIGHT_SAMPLERS = ("power", "uniform")  # drpt.render.lights.area
 BVH_KINDS = ("bvh", "bvh2", "bvh4")
 GRID_MAX_RESOLUTION = 256
 
@@ -75,6 +76,9 @@ class RenderOptions:
     mode: str = "megakernel"  # path tracing as one fused kernel, or "wavefront" (a kernel per stage)
     wavefront_tail: int = 0  # wavefront: finish in one fused loop once at most this many paths live
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
+    #: how next-event estimation picks an area light: "power" (each emissive primitive by its
+    #: power) or "uniform" (Mitsuba's: each emitter alike, then a point by area)
+    light_sampler: str = "power"
     filter: str = "box"  # pixel reconstruction filter, drpt.filters.parse_filter's spelling
     filter_sampling: bool = False  # tent/gaussian: draw samples from the filter instead of splatting
     #: stop once the estimated relMSE (drpt.metrics.estimated_rel_mse) is at most this, or
@@ -130,7 +134,8 @@ class RenderOptions:
                                      ("--bsdf", self.bsdf, BSDF_MODES),
                                      ("--integrator", self.integrator, INTEGRATORS),
                                      ("--mode", self.mode, MODES),
-                                     ("--env-sampling", self.env_sampling, ENV_SAMPLING)):
+                                     ("--env-sampling", self.env_sampling, ENV_SAMPLING),
+                                     ("--light-sampler", self.light_sampler, LIGHT_SAMPLERS)):
             if value not in allowed:
                 raise DrptError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
         from .filters import parse_filter
@@ -359,6 +364,12 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
         parser.add_argument("--env-sampling", choices=ENV_SAMPLING, default=d["env_sampling"],
                             help="how sky directions are sampled: by luminance (default) or "
                                  "uniformly over the sphere (for comparison)")
+        parser.add_argument("--light-sampler", dest="light_sampler", choices=LIGHT_SAMPLERS,
+                            default=RenderOptions.light_sampler,
+                            help="how next-event estimation picks an area light (emissive "
+                                 "triangles and spheres): power (each primitive by its emitted "
+                                 "power) or uniform (Mitsuba's: every emitter alike, then a point "
+                                 f"by area) (default {RenderOptions.light_sampler})")
     if want("filter"):
         parser.add_argument("--filter", dest="filter", metavar="box|tent|gaussian", action=_Given,
                             default=d["filter"],
@@ -592,6 +603,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          integrator=integrator, mode=get("mode", base.mode),
                          wavefront_tail=get("wavefront_tail", base.wavefront_tail),
                          env_sampling=get("env_sampling", base.env_sampling),
+                         light_sampler=get("light_sampler", base.light_sampler),
                          filter=get("filter", base.filter),
                          filter_sampling=bool(get("filter_sampling", base.filter_sampling)),
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),

@@ -489,7 +489,9 @@ def test_render_xml_with_its_own_settings_and_flags(tmp_path):
 
 
 # ------------------------------------------------------------ renders against Mitsuba
-def _render_both(scene, path: Path, spp: int, defines: dict | None = None, seed: int = 3):
+def _render_both(scene, path: Path, spp: int, defines: dict | None = None, seed: int = 3, **options):
+    """drpt's render of ``scene`` (the file's settings, ``spp``, RenderOptions ``options``) and
+    Mitsuba's of ``path`` as the mean of 8 batches: ``(result, mean, variance of the mean)``."""
     from dataclasses import replace
 
     import mitsuba as mi
@@ -498,7 +500,7 @@ def _render_both(scene, path: Path, spp: int, defines: dict | None = None, seed:
     from drpt.options import RenderOptions, apply_scene_settings
     from drpt.render.renderer import Renderer
 
-    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=seed), scene), spp=spp)
+    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=seed), scene), spp=spp, **options)
     r = Renderer(scene, opts).render()
     mi.set_variant(mitsuba_variant())
     batches = 8

@@ -161,13 +161,15 @@ def test_light_tracing_variance_estimate_is_calibrated(cornell):
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("name", ["ptracer", "projector_spot", "area_textured"])
+@pytest.mark.parametrize("name", ["ptracer", "projector_spot", "area_textured", "sphere_light"])
 def test_light_tracing_of_an_xml_scene_agrees_with_mitsubas_path(name):
     """drpt's light tracer against Mitsuba's camera integrator on the same file:
     tests/data/xml/ptracer.xml (an area light, point, spot and directional lights and an
     environment map; the file's integrator is ptracer, Mitsuba renders it with path),
-    projector_spot.xml (a textured projector and a textured spot; Mitsuba's direct) and
-    area_textured.xml (an area light with a bitmap radiance; Mitsuba's path)."""
+    projector_spot.xml (a textured projector and a textured spot; Mitsuba's direct),
+    area_textured.xml (an area light with a bitmap radiance; Mitsuba's path) and
+    sphere_light.xml (analytic sphere lights, where light paths start and which the camera
+    sees, and a rectangle light; Mitsuba's path)."""
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
@@ -240,21 +242,28 @@ def test_splatted_renders_are_the_same_in_chunks_and_resumed(cornell, tmp_path, 
         assert np.allclose(resumed.variance, plain.variance, rtol=1e-12, atol=0)
 
 
-def test_light_tracing_without_emitters_is_black_and_refuses_emissive_spheres(tmp_path):
+def test_light_tracing_without_emitters_is_black_and_refuses_emissive_planes(tmp_path):
     from drpt.options import apply_scene_settings
 
     body = """<scene version="3.0.0"><integrator type="ptracer"/>
         <sensor type="perspective"><transform name="to_world"><lookat origin="0,0,4" target="0,0,0"
         up="0,1,0"/></transform><film type="hdrfilm"><integer name="width" value="8"/>
         <integer name="height" value="8"/><rfilter type="box"/></film></sensor>
-        <shape type="sphere">SHAPE</shape></scene>"""
+        <shape type="sphere"><bsdf type="diffuse"/></shape></scene>"""
     dark = tmp_path / "dark.xml"
-    dark.write_text(body.replace("SHAPE", '<bsdf type="diffuse"/>'))
+    dark.write_text(body)
     scene = load_scene(dark)
     r = Renderer(scene, replace(apply_scene_settings(RenderOptions(progress=False), scene), spp=4)).render()
     assert r.nonfinite == 0 and not r.image.any()
-    lit = tmp_path / "lit.xml"
-    lit.write_text(body.replace("SHAPE", '<emitter type="area"><rgb name="radiance" value="1"/></emitter>'))
-    scene = load_scene(lit)
-    with pytest.raises(DrptError, match="emissive spheres"):
-        Renderer(scene, replace(apply_scene_settings(RenderOptions(progress=False), scene), spp=4))
+    lit = tmp_path / "plane.txt"
+    lit.write_text("""PerspectiveCamera { center 0 0 5 direction 0 0 -1 up 0 1 0 angle 40 }
+Materials { numMaterials 1
+  Material { diffuseColor 0 0 0 Ke 1 1 1 }
+}
+Group { numObjects 1
+  MaterialIndex 0
+  Plane { normal 0 0 1 offset -1 }
+}
+""")
+    with pytest.raises(DrptError, match="emissive planes"):
+        _render(load_scene(lit), "ptracer", 4)

@@ -83,3 +83,22 @@ def test_sphere_only_scene_traces_no_triangle_test(monkeypatch, tmp_path):
     for accel in ("auto", "bvh"):  # auto: inline here
         render(tmp_path / "s.txt", accel=accel)
         assert_traced(render, CORNELL, accel=accel)
+
+
+def test_scene_without_emissive_spheres_traces_no_sphere_light_sampling(monkeypatch, tmp_path):
+    from drpt.render.lights import area
+
+    monkeypatch.setattr(area.AreaLights, "_sphere_point", trap)
+    monkeypatch.setattr(area.AreaLights, "pdf_sphere", trap)
+    render(CORNELL)  # a triangle light and no sphere
+    (tmp_path / "s.txt").write_text(
+        "PerspectiveCamera { center 0 0 3 direction 0 0 -1 up 0 1 0 angle 40 }\n"
+        "Materials { numMaterials 2 Material { Kd 0.5 0.5 0.5 } Material { Kd 0 0 0 Ke 5 5 5 } }\n"
+        "Group { numObjects 4 MaterialIndex 0 Sphere { center 0 0 0 radius 1 }\n"
+        "Triangle { vertex0 -3 -1 -3 vertex1 3 -1 -3 vertex2 0 -1 3 }\n"
+        "MaterialIndex 1 Triangle { vertex0 -1 3 -1 vertex1 0 3 1 vertex2 1 3 -1 }\n"
+        "MaterialIndex 0 Sphere { center 2 0 0 radius 0.3 } }\n")
+    render(tmp_path / "s.txt")  # spheres, none emissive
+    (tmp_path / "s.txt").write_text((tmp_path / "s.txt").read_text().replace(
+        "MaterialIndex 0 Sphere { center 2", "MaterialIndex 1 Sphere { center 2"))
+    assert_traced(render, tmp_path / "s.txt")

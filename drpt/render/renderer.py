@@ -219,7 +219,7 @@ class Renderer:
         other per-render ``options`` (size, spp, seed, integrator, path
         depths, lanes) and ``camera`` (default: this renderer's). The options
         that shape the device scene (accelerator, material mode, sky
-        sampling) stay this renderer's. Renders equal those of a new
+        sampling, light sampler) stay this renderer's. Renders equal those of a new
         :class:`Renderer` of the scene with these options and camera."""
         new = copy.copy(self)
         new.opt = options.validate()

@@ -134,7 +134,7 @@ class DeviceScene:
             self.materials = MaterialTable(scene, options.bsdf)
             self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None,
                                         tangents=self.materials.tangents)
-        self.area_lights = AreaLights(scene, self.surfaces, self.materials)
+        self.area_lights = AreaLights(scene, self.surfaces, self.materials, sampler=options.light_sampler)
         self.delta_lights = DeltaLights(scene)
         self.warnings: list[str] = list(self.materials.notes)
         if self.is_empty:
@@ -210,10 +210,12 @@ class DeviceScene:
     # ------------------------------------------------------------ emitters
     def sample_area_emitter(self, si: Interaction, u_select: Float, u: Array2f,
                             active: Bool) -> EmitterSample:
-        """A point on an emissive triangle (chosen by power) seen from ``si``,
-        with the solid-angle density ``pdf_area * r^2 / |cos theta_light|``.
+        """A point on an emissive triangle or sphere (chosen by the light sampler) seen
+        from ``si``, with its solid-angle density: ``pdf_area * r^2 / |cos theta_light|``
+        on a triangle, the cone's density on a sphere seen from outside.
         Only the front of an emitter (its shading normal's side) emits."""
-        ls = self.area_lights.sample(u_select, u, active)
+        lights = self.area_lights
+        ls = lights.sample(u_select, u, active, ref=si.p if lights.has_spheres else None)
         to_light = ls.p - si.p
         dist2 = dr.squared_norm(to_light)
         wo = to_light * dr.rsqrt(dist2)
@@ -221,15 +223,22 @@ class DeviceScene:
         cos_light = dr.abs(dr.dot(ls.ng, wo))
         valid = active & front & (cos_light > 0.0) & (ls.pdf_area > 0.0)
         pdf = ls.pdf_area * dist2 / cos_light
+        if ls.solid_angle is not None:
+            pdf = dr.select(ls.solid_angle, ls.pdf_area, pdf)
         p_end = spawn_origin(ls.p, ls.ng, ls.p_error, -wo)
         return EmitterSample(wo, p_end, ls.le, pdf, valid)
 
     def pdf_area_emitter(self, si: Interaction, d: Array3f, active: Bool) -> Float:
         """The density :meth:`sample_area_emitter` has for the point ``si`` a
-        ray of direction ``d`` hit (0 where ``si`` is not a sampled emitter)."""
+        ray of unit direction ``d`` hit (0 where ``si`` is not a sampled emitter)."""
         pdf_a = self.area_lights.pdf_area(si.prim, active)
         sees_light = active & (pdf_a > 0.0)
-        return dr.select(sees_light, pdf_a * dr.square(si.t) / dr.abs(dr.dot(si.ng, d)), 0.0)
+        pdf = dr.select(sees_light, pdf_a * dr.square(si.t) / dr.abs(dr.dot(si.ng, d)), 0.0)
+        if self.area_lights.has_spheres:
+            ref = si.p - d * si.t  # where the ray came from
+            is_sph, pdf_s = self.area_lights.pdf_sphere(si.prim, si.p, ref, d, si.t, active & si.valid)
+            pdf = dr.select(is_sph, pdf_s, pdf)
+        return pdf
 
     def delta_emitters(self, p: Array3f):
         """One ``DeltaSample`` per point and directional light, seen from ``p``."""

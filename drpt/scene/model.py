@@ -171,9 +171,18 @@ class Triangles:
     #: mesh attributes by Mitsuba's name (``vertex_color``, ``face_weight``): ``(F, 3, C)``
     #: float values at each corner (a face attribute repeats its value), C = 1 or 3
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the emitter (shape) each face belongs to, for ``--light-sampler uniform``: faces with
+    #: one id and an emissive material form one emitter (a Mitsuba XML shape); ``None``: the
+    #: faces of one material form one emitter (drpt's own format, as the exporter writes
+    #: one mesh per material)
+    shape: np.ndarray | None = None  # (F,) int
 
     def __len__(self) -> int:
         return int(self.positions.shape[0])
+
+    def emitter_ids(self) -> np.ndarray:
+        """Each face's emitter id (:attr:`shape`, else its material)."""
+        return np.asarray(self.material if self.shape is None else self.shape, np.int64)
 
     @staticmethod
     def empty() -> "Triangles":

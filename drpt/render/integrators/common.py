@@ -3,7 +3,8 @@
 :class:`DirectLight` estimates light arriving at a surface point straight
 from the emitters, each estimator with its own shadow ray:
 
-* ``area``: one point on an emissive triangle (chosen by power), weighted
+* ``area``: one point on an emissive triangle or sphere (chosen by the light
+  sampler; on a sphere by the cone it subtends), weighted
   by the power heuristic against BSDF sampling when ``mis`` is set;
 * ``delta``: every point and directional light;
 * ``env``: one direction from the environment map (by luminance), MIS

@@ -1,7 +1,7 @@
 """Unidirectional path tracing with next-event estimation and MIS.
 
 At every vertex the path gathers light two ways: a point sampled on an
-emissive triangle and a direction sampled on the environment map
+emissive triangle or sphere and a direction sampled on the environment map
 (next-event estimation, with shadow rays), and the emitter or sky the next
 BSDF-sampled ray happens to hit. Both estimates are weighted by the
 power heuristic, so glossy and diffuse surfaces, small and large lights are

@@ -1,12 +1,12 @@
-"""Emitters, one module per family: ``area`` (emissive triangles), ``delta``
+"""Emitters, one module per family: ``area`` (emissive triangles and spheres), ``delta``
 (point and directional lights), ``envmap`` (the environment map).
 
 The three families are sampled differently, so each has its own interface,
 stated here as a :class:`~typing.Protocol` (what
 :class:`drpt.render.scene.DeviceScene` asks of it):
 
-* :class:`AreaEmitter`: one point on an emissive triangle, chosen by power,
-  with its area density, and that density for a triangle a ray hit (MIS);
+* :class:`AreaEmitter`: one point on an emissive triangle or sphere (chosen by
+  the light sampler) with its density, and that density for a point a ray hit (MIS);
 * :class:`DeltaEmitter`: every light, as seen from a shading point (BSDF
   sampling never hits them: no MIS);
 * :class:`EnvironmentEmitter`: a direction toward the sky with its radiance
@@ -22,17 +22,18 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 
 class AreaEmitter(Protocol):
-    """Emissive triangles (:class:`drpt.render.lights.area.AreaLights`)."""
+    """Emissive triangles and spheres (:class:`drpt.render.lights.area.AreaLights`)."""
 
     count: int  # emitters that can be sampled; 0 traces no light sampling
 
-    def sample(self, u_select: Float, u: Array2f, active: Bool):
+    def sample(self, u_select: Float, u: Array2f, active: Bool, ref: Array3f | None = None):
         """A point on an emitter: a ``LightSample`` (``p``, front normal ``n``,
-        geometric normal ``ng``, radiance ``le``, ``pdf_area``, ``valid``)."""
+        geometric normal ``ng``, radiance ``le``, ``pdf_area``, ``valid``; with
+        ``ref``, a sphere's lanes in ``solid_angle`` have a solid-angle density)."""
         ...
 
     def pdf_area(self, prim: UInt32, active: Bool) -> Float:
-        """Area density with which :meth:`sample` picks a point on ``prim``."""
+        """Area density with which :meth:`sample` picks a point on triangle ``prim``."""
         ...
 
 

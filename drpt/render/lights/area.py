@@ -1,84 +1,176 @@
-"""Emissive triangles as area lights, for next-event estimation.
+"""Emissive triangles and spheres as area lights, for next-event estimation.
 
-One triangle is chosen with probability proportional to its power
-(``area * luminance(emission)``), then a point uniformly on it, so the area
-density of a point ``y`` on emissive triangle ``k`` is
-``pdf_A(y) = P(k) / area_k = luminance_k / sum_j(area_j * luminance_j)``:
-scenes with many small emitters are not noisier than one large emitter of the
-same power. The solid-angle density seen from a shading point at distance
-``r`` is ``pdf_A * r^2 / |cos theta_light|``.
+An emissive *primitive* (triangle or analytic sphere) is chosen from one
+discrete distribution ``P(k)``, then a point on it:
 
-A textured emitter (Mitsuba's ``area`` with a bitmap ``radiance``) is chosen by
-its texture's mean luminance and gives the texture's radiance at the sampled
-point's uv (Mitsuba samples such an emitter by the texture instead: the
-same expectation, other noise).
+* ``power`` (the default light sampler): ``P(k)`` proportional to the
+  primitive's power ``area_k * luminance_k``, so scenes with many small
+  emitters are not noisier than one large emitter of the same power;
+* ``uniform`` (Mitsuba's): every *emitter* equally likely, then a primitive
+  of it by area: ``P(k) = area_k / (N * area_e(k))`` with ``N`` emitters.
+  An emitter is a shape: a Mitsuba XML shape, the faces of one material in
+  drpt's own format (:meth:`drpt.scene.model.Triangles.emitter_ids`), each
+  sphere.
 
-Emissive spheres and planes are not sampled here; they are found by BSDF
-sampling only (their MIS weight is then 1, so the estimate stays unbiased).
+On a triangle the point is uniform, so its area density is
+``pdf_A(y) = P(k) / area_k`` and the solid-angle density seen from a shading
+point at distance ``r`` is ``pdf_A * r^2 / |cos theta_light|``. On a sphere,
+seen from a point outside it (:meth:`AreaLights.sample` with ``ref``), the
+direction is uniform in the cone of the visible cap (Mitsuba's
+``sphere.sample_direction``): solid-angle density ``P(k) / (2 pi (1 - cos
+theta_max))``, ``sin theta_max = radius / distance to the center``; from
+inside, and without ``ref`` (light tracing), the point is uniform on the
+sphere, ``pdf_A = P(k) / (4 pi radius^2)``. :meth:`AreaLights.pdf_sphere`
+is the same density for a point a ray hit (MIS). A scene without emissive
+spheres traces no sphere code.
+
+A textured emitter (Mitsuba's ``area`` with a bitmap ``radiance``) is weighed
+by its texture's mean luminance and gives the texture's radiance at the
+sampled point's uv (Mitsuba samples such an emitter by the texture instead:
+the same expectation, other noise).
+
+Emissive planes are not sampled here; they are found by BSDF sampling only
+(their MIS weight is then 1, so the estimate stays unbiased).
 """
 
 from __future__ import annotations
+
+import math
 
 import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ...scene.model import Scene
-from ..spawn import triangle_point
+from ..spawn import sphere_error, triangle_point
 from ..surface import SurfaceData
-from ..warp import square_to_uniform_triangle
+from ..warp import Frame, square_to_uniform_triangle
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+LIGHT_SAMPLERS = ("power", "uniform")  # drpt.options.LIGHT_SAMPLERS
+
+
+def selection_weights(area: np.ndarray, lum: np.ndarray, emitter: np.ndarray,
+                      sampler: str) -> np.ndarray:
+    """Each primitive's weight in the light selection, ``P(k)`` up to a factor (zero
+    for those that emit nothing): its power ``area * lum``, or ``uniform``: each
+    emitter (``emitter`` ids) alike, then its primitives by area."""
+    power = area * lum
+    ok = (power > 0) & np.isfinite(power)
+    w = np.zeros(len(area))
+    if sampler == "power" or not ok.any():
+        w[ok] = power[ok]
+        return w
+    ids, inverse = np.unique(emitter[ok], return_inverse=True)
+    emitter_area = np.bincount(inverse, weights=area[ok], minlength=len(ids))
+    w[ok] = area[ok] / emitter_area[inverse] / len(ids)
+    return w
 
 
 class LightSample:
-    def __init__(self, p, n, ng, le, pdf_area, valid, p_error):
+    def __init__(self, p, n, ng, le, pdf_area, valid, p_error, solid_angle=None):
         self.p: Array3f = p  # point on the light
         self.n: Array3f = n  # its front (emitting) unit normal: the shading normal
         self.ng: Array3f = ng  # its unit geometric normal (for the area Jacobian)
-        self.p_error: Float = p_error  # bound on p's distance from the triangle along ng
+        self.p_error: Float = p_error  # bound on p's distance from the primitive along ng
         self.le: Array3f = le  # radiance emitted toward the front
         self.pdf_area: Float = pdf_area
         self.valid: Bool = valid
+        #: lanes whose ``pdf_area`` is a solid-angle density from the reference point
+        #: (a sphere's cone); None: no such lane (no emissive sphere, or no reference)
+        self.solid_angle: Bool | None = solid_angle
 
 
 class AreaLights:
-    def __init__(self, scene: Scene, surfaces: SurfaceData, materials=None):
-        tris = scene.triangles
+    def __init__(self, scene: Scene, surfaces: SurfaceData, materials=None, sampler: str = "power"):
+        tris, sph = scene.triangles, scene.spheres
         emission = np.array([m.emission for m in scene.materials], float).reshape(-1, 3)
         self.surfaces = surfaces
+        self.sampler = sampler
         # textured emitters (Mitsuba's area radiance bitmap): the radiance at the sampled
         # point's uv (their power, for the choice of a triangle, is the texture's mean)
         self.materials = materials if getattr(materials, "_emit_tex", None) is not None else None
         self.count = 0
-        if not len(tris) or not len(emission):
+        self.n_tri = len(tris)
+        self.has_spheres = self.has_triangles = False
+        if not (len(tris) + len(sph)) or not len(emission):
             return
-        p = tris.positions
-        area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-        lum = emission[tris.material] @ LUMINANCE
-        power = area * lum
-        ids = np.nonzero((power > 0) & np.isfinite(power))[0]
+        area = np.zeros(0)
+        if len(tris):
+            p = tris.positions
+            area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+        sph_area = 4.0 * np.pi * np.asarray(sph.radius, float) ** 2
+        mats = np.concatenate([tris.material, sph.material]).astype(np.int64)
+        lum = emission[mats] @ LUMINANCE
+        all_area = np.concatenate([area, sph_area])
+        power = all_area * lum
+        emitter = np.concatenate([tris.emitter_ids() if len(tris) else np.zeros(0, np.int64),
+                                  np.arange(len(sph)) + (int(tris.emitter_ids().max()) + 1 if len(tris) else 0)])
+        weight = selection_weights(all_area, lum, emitter, sampler)
+        ids = np.nonzero((weight > 0) & np.isfinite(weight))[0]
         if ids.size == 0:
             return
-        total = power[ids].sum()
-        cdf = np.cumsum(power[ids]) / total
+        total = weight[ids].sum()
+        keep = np.zeros(len(all_area), bool)
+        keep[ids] = True
+        prob = np.where(keep, weight / total, 0.0)
+        cdf = np.cumsum(weight[ids]) / total
         cdf[-1] = 1.0
-        pdf_area = np.zeros(len(tris), np.float32)
-        pdf_area[ids] = lum[ids] / total
+        # area density of a point: P(k) / area_k (by power: luminance_k / total power)
+        pdf_area = np.where(keep, prob / np.where(keep, all_area, 1.0), 0.0)
         self.count = int(ids.size)
-        self.total_power = float(total)
+        self.emitters = int(np.unique(emitter[ids]).size)
+        self.total_power = float(power[ids].sum())
+        #: P(k) of each primitive (triangles, then spheres), for tests and tools
+        self.probabilities = prob
         self.ids = UInt32(ids.astype(np.uint32))
         self.cdf = Float(cdf.astype(np.float32))
-        self.pdf_area_table = Float(pdf_area)
-        self.le = Array3f(*(Float(emission[tris.material[ids], c].astype(np.float32)) for c in range(3)))
+        self.pdf_area_table = Float(pdf_area[:self.n_tri].astype(np.float32)) if self.n_tri else None
+        self.le = Array3f(*(Float(emission[mats[ids], c].astype(np.float32)) for c in range(3)))
+        self.has_spheres = bool((ids >= self.n_tri).any())
+        self.has_triangles = bool((ids < self.n_tri).any())
+        if self.has_spheres:
+            # per sphere: its selection probability P(k) (its area density is P(k) / 4 pi r^2)
+            self.sph_prob = Float(prob[self.n_tri:].astype(np.float32))
+        if self.n_tri == 0:
+            # no triangles: the triangle branch is never traced, but keep a table to gather from
+            self.pdf_area_table = Float(np.zeros(1, np.float32))
 
-    def sample(self, u_select: Float, u: Array2f, active: Bool) -> LightSample:
-        """A point on an emissive triangle, with its area density."""
+    def _select(self, u_select: Float, active: Bool):
         cdf = self.cdf
         n = self.count
         k = dr.binary_search(0, n - 1, lambda i: dr.gather(Float, cdf, i) <= u_select)
         k = dr.minimum(k, n - 1)
-        face = dr.gather(UInt32, self.ids, k, active)
+        return k, dr.gather(UInt32, self.ids, k, active)
+
+    def sample(self, u_select: Float, u: Array2f, active: Bool, ref: Array3f | None = None) -> LightSample:
+        """A point on an emissive primitive, with its area density. On a sphere the
+        point is uniform on it, or with ``ref`` (a shading point outside it) in the
+        cone of its cap seen from ``ref``, with the solid-angle density (``solid_angle``)."""
+        k, face = self._select(u_select, active)
+        le = dr.gather(Array3f, self.le, k, active)
+        if not self.has_spheres:
+            p, n_front, ng, err, pdf, le = self._triangle_point(face, u, le, active)
+            return LightSample(p, n_front, ng, le, pdf, active, err)
+        is_sph = face >= self.n_tri
+        if self.has_triangles:
+            tri = active & ~is_sph
+            p, n_front, ng, err, pdf, le = self._triangle_point(dr.select(is_sph, 0, face), u, le, tri)
+        else:
+            p, n_front, ng, err, pdf = (Array3f(0.0), Array3f(0.0, 0.0, 1.0), Array3f(0.0, 0.0, 1.0),
+                                        Float(0.0), Float(0.0))
+        sa = active & is_sph
+        sp, sn, serr, spdf, solid = self._sphere_point(face - self.n_tri, u, sa, ref)
+        p = dr.select(is_sph, sp, p)
+        n_front = dr.select(is_sph, sn, n_front)
+        ng = dr.select(is_sph, sn, ng)
+        err = dr.select(is_sph, serr, err)
+        pdf = dr.select(is_sph, spdf, pdf)
+        if solid is not None:
+            solid = is_sph & solid
+        return LightSample(p, n_front, ng, le, pdf, active, err, solid)
+
+    def _triangle_point(self, face: UInt32, u: Array2f, le: Array3f, active: Bool):
         s = self.surfaces
         p0 = dr.gather(Array3f, s.p0, face, active)
         e1 = dr.gather(Array3f, s.e1, face, active)
@@ -92,7 +184,6 @@ class AreaLights:
                   + dr.gather(Array3f, s.n2, face, active) * b.y)
             len2 = dr.squared_norm(sn)
             n_front = dr.select(len2 > 1e-20, sn * dr.rsqrt(len2), ng)
-        le = dr.gather(Array3f, self.le, k, active)
         if self.materials is not None:
             uv = Array2f(0.0, 0.0)
             if s.has_uv:
@@ -102,9 +193,76 @@ class AreaLights:
             material = dr.gather(UInt32, s.material, face, active)
             le = self.materials.textured_emission(material, uv, le, active)
         pdf = dr.gather(Float, self.pdf_area_table, face, active)
-        return LightSample(p, n_front, ng, le, pdf, active, err)
+        return p, n_front, ng, err, pdf, le
+
+    def _sphere_point(self, j: UInt32, u: Array2f, active: Bool, ref: Array3f | None):
+        """A point on sphere ``j``: ``(p, outward normal, p_error, density, solid_angle)``."""
+        s = self.surfaces
+        j = dr.select(active, j, 0)
+        c = dr.gather(Array3f, s.sph_c, j, active)
+        r = dr.gather(Float, s.sph_r, j, active)
+        prob = dr.gather(Float, self.sph_prob, j, active)
+        # uniform on the sphere
+        z = 1.0 - 2.0 * u.y
+        sxy = dr.safe_sqrt(1.0 - z * z)
+        sin_p, cos_p = dr.sincos(2.0 * dr.pi * u.x)
+        n = Array3f(sxy * cos_p, sxy * sin_p, z)
+        pdf = prob / (4.0 * dr.pi * r * r)
+        solid = None
+        if ref is not None:
+            outside, omc, sin2_max, axis = cone_of(c, r, ref)
+            # a direction uniform in the cone (1 - cos theta = u omc, exact), then the
+            # point of the sphere it meets first, by its angle alpha at the center
+            v = u.x * omc
+            sin2_t = v * (2.0 - v)
+            cos_t = 1.0 - v
+            inv_sin_max = dr.rsqrt(dr.maximum(sin2_max, 1e-30))
+            cos_a = (sin2_t * inv_sin_max
+                     + cos_t * dr.safe_sqrt(1.0 - sin2_t * dr.square(inv_sin_max)))
+            sin_a = dr.safe_sqrt(1.0 - cos_a * cos_a)
+            sp, cp = dr.sincos(2.0 * dr.pi * u.y)
+            nc = Frame(axis).to_world(Array3f(cp * sin_a, sp * sin_a, cos_a))
+            n = dr.select(outside, nc, n)
+            pdf = dr.select(outside, prob * cone_pdf(omc), pdf)
+            solid = outside
+        p = c + n * r
+        return p, n, sphere_error(p, r, n), pdf, solid
 
     def pdf_area(self, prim: UInt32, active: Bool) -> Float:
-        """Area density with which :meth:`sample` picks a point on ``prim``."""
+        """Area density with which :meth:`sample` picks a point on triangle ``prim``."""
         is_tri = active & (prim < self.surfaces.n_tri)
         return dr.gather(Float, self.pdf_area_table, prim, is_tri)
+
+    def pdf_sphere(self, prim: UInt32, p: Array3f, ref: Array3f, d: Array3f, dist: Float,
+                   active: Bool) -> tuple[Bool, Float]:
+        """The solid-angle density with which :meth:`sample` (with ``ref``) gives the
+        direction ``d`` toward point ``p`` of sphere ``prim`` at ``dist``: ``(is_sphere, pdf)``."""
+        s = self.surfaces
+        is_sph = active & (prim >= self.n_tri) & (prim < self.n_tri + s.n_sph)
+        j = dr.select(is_sph, prim - self.n_tri, 0)
+        c = dr.gather(Array3f, s.sph_c, j, is_sph)
+        r = dr.gather(Float, s.sph_r, j, is_sph)
+        prob = dr.gather(Float, self.sph_prob, j, is_sph)
+        outside, omc, _, _ = cone_of(c, r, ref)
+        n = dr.normalize(p - c)
+        area = prob / (4.0 * dr.pi * r * r) * dr.square(dist) / dr.abs(dr.dot(n, d))
+        pdf = dr.select(outside, prob * cone_pdf(omc), area)
+        return is_sph, dr.select(is_sph & (prob > 0.0), pdf, 0.0)
+
+
+def cone_of(c: Array3f, r: Float, ref: Array3f):
+    """The cone of sphere ``(c, r)`` seen from ``ref``: ``(outside, 1 - cos theta_max,
+    sin^2 theta_max, unit axis from the center toward ref)``. ``1 - cos`` is computed as
+    ``sin^2 / (1 + cos)``, exact for tiny or distant spheres."""
+    dc = ref - c
+    dc2 = dr.squared_norm(dc)
+    outside = dc2 > r * r
+    sin2_max = dr.minimum(r * r / dr.maximum(dc2, 1e-30), 1.0)
+    cos_max = dr.safe_sqrt(1.0 - sin2_max)
+    omc = sin2_max / (1.0 + cos_max)
+    return outside, omc, sin2_max, dc * dr.rsqrt(dr.maximum(dc2, 1e-30))
+
+
+def cone_pdf(one_minus_cos: Float) -> Float:
+    """Density of a direction uniform in a cone of ``1 - cos theta_max``."""
+    return dr.select(one_minus_cos > 0.0, 1.0 / (2.0 * math.pi * dr.maximum(one_minus_cos, 1e-30)), 0.0)

@@ -1,14 +1,15 @@
 """Rays leaving the emitters, for light tracing (:mod:`drpt.render.integrators.ptracer`).
 
 :class:`EmitterRays` treats the scene's emitters as a list of *sources*: the
-emissive triangles together (a point chosen by power, as
-:class:`~drpt.render.lights.area.AreaLights` samples them), each point and
+emissive triangles and spheres together (a primitive chosen by the light sampler
+and a point uniformly on it, :meth:`~drpt.render.lights.area.AreaLights.sample`
+without a reference point), each point and
 spot light, each directional light, and the sky or constant background. A
 light path picks one source uniformly (Mitsuba picks one emitter uniformly
 too; its weight is the number of sources) and draws its first ray from it,
 with the ray's *weight*: emitted power over the density of the ray,
 
-* emissive triangle: a point ``y`` with area density ``pdf_A``, a direction
+* emissive triangle or sphere: a point ``y`` with area density ``pdf_A``, a direction
   cosine-distributed about the front (shading) normal: ``Le * pi / pdf_A``;
 * point light of intensity ``I``: a uniform direction, ``I * 4 pi``;
 * spot light: a direction uniform in the cutoff cone,
@@ -104,10 +105,9 @@ class EmitterRays:
 
         self.scene = device_scene
         emissive = {i for i, m in enumerate(scene.materials) if max(m.emission) > 0.0}
-        for kind, prims in (("spheres", scene.spheres), ("planes", scene.planes)):
-            if len(prims) and emissive & set(int(m) for m in prims.material):
-                raise DrptError(f"light tracing (ptracer) does not start paths on emissive {kind}: "
-                                "use the path integrator, or triangles (Mitsuba: a mesh) as the emitter")
+        if len(scene.planes) and emissive & set(int(m) for m in scene.planes.material):
+            raise DrptError("light tracing (ptracer) does not start paths on emissive planes (infinite: "
+                            "no finite power): use the path integrator, or a finite emitter")
         lo, hi = scene.bounds()
         if not np.all(np.isfinite(lo)):
             lo = hi = np.zeros(3)

@@ -188,7 +188,8 @@ class Reader:
             if any(m.uvs is not None for m, _ in self.meshes):
                 uvs = np.concatenate([m.uvs if m.uvs is not None else np.zeros((len(m), 3, 2))
                                       for m, _ in self.meshes])
-            tris = Triangles(pos, mat, normals, uvs)
+            shape = np.concatenate([np.full(len(m), i, np.int64) for i, (m, _) in enumerate(self.meshes)])
+            tris = Triangles(pos, mat, normals, uvs, shape=shape)
             names = sorted({k for mesh, _ in self.meshes for k in (mesh.attributes or {})})
             for name in names:  # meshes without the attribute never read it: zeros
                 c = next(mesh.attributes[name].shape[2] for mesh, _ in self.meshes

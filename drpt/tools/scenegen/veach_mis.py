@@ -15,9 +15,9 @@ mode reads ``alpha = Pr^2``), alpha 0.005, 0.02, 0.05, 0.1 from the farthest
 
 Lights: spheres at ``x = -3.75, -1.25, 1.25, 3.75`` (y 0.2, z -0.5), radii
 0.0333, 0.1, 0.3, 0.9, radiance ``900 (0.0333 / r)^2`` = 900, 100, 11.1,
-1.23 (white), tessellated (16 x 8 segments, radial normals) so that drpt's
-next-event estimation samples them (drpt samples triangle lights; its
-analytic spheres are found only by BSDF sampling).
+1.23 (white), tessellated (16 x 8 segments, radial normals), each its own
+material. ``tests/data/xml/veach_mis.xml`` is the same scene as Mitsuba XML with
+analytic spheres, roughness up to 0.2 and a large ceiling light.
 
 Plates are 8 x 1 quads (single-sided geometry; the conductor is two-sided)
 whose normal bisects the directions to the camera and to the middle of the

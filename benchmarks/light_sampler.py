@@ -1,0 +1,125 @@
+"""Light selection by power against Mitsuba's uniform selection, at equal spp and equal time.
+
+    PYTHONPATH=. .venv/bin/python benchmarks/light_sampler.py [SPP] [REPEATS]
+
+For each scene with area lights (the bundled ones, the generated Veach MIS scene, the XML
+test scenes with several emitters, and the Mitsuba corpus scenes with area lights that drpt
+reads, when ``../shared/corpus`` is present) drpt renders ``REPEATS`` images (seeds 0..)
+at ``SPP`` (default 64) with ``--light-sampler power`` and ``uniform``, and measures
+each against a reference: the corpus scene's shipped Mitsuba reference, Mitsuba at 8192
+spp for the other XML scenes, and drpt at 8192 spp (power, another seed) for drpt's own
+format. It prints, per scene, the emitters, the mean relMSE
+(``mean((x - ref)^2 / (ref^2 + 0.01))``) of each sampler, the mean render seconds
+(compilation excluded: a discarded first render), and the ratios ``uniform / power`` of
+the relMSE at equal spp and at equal time (relMSE times seconds); below 1: uniform is
+better. Both samplers trace the same kernel (only the tables differ), so the time ratio
+is 1 up to the timing noise of short renders. For XML scenes Mitsuba's relMSE at the same
+spp (its seeds 0..) and drpt's (power) over it follow.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from drpt.options import RenderOptions, apply_scene_settings
+from drpt.render.renderer import Renderer
+from drpt.scene import load_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+CORPUS = ROOT.parent / "shared" / "corpus" / "mitsuba-data" / "tests" / "scenes"
+REF_SPP = 8192
+
+
+def scenes() -> list[tuple[str, Path, str]]:
+    """``(name, path, reference kind)``: ``drpt``, ``mitsuba`` or ``corpus``."""
+    from drpt.tools.scenegen import veach_mis
+
+    tmp = Path(tempfile.mkdtemp())
+    out = [("cornellbox", ROOT / "scenes/cornellbox/cornellbox.txt", "drpt"),
+           ("newscene", ROOT / "scenes/newscene/newscene.txt", "drpt"),
+           ("veach_mis (scenegen, tessellated)",
+            next(p for p in veach_mis.main(tmp) if p.suffix == ".txt"), "drpt")]
+    xml = ROOT / "tests/data/xml"
+    out += [(f"{n}.xml", xml / f"{n}.xml", "mitsuba") for n in ("veach_mis", "sphere_light", "ptracer")]
+    for rel in ("bsdf_spheres/test_arealight_path.xml", "various_emitters/test_various_emitters_ptracer.xml"):
+        if (CORPUS / rel).is_file():
+            out.append((rel, CORPUS / rel, "corpus"))
+    return out
+
+
+def options(scene, spp, seed, sampler, size):
+    opts = apply_scene_settings(RenderOptions(progress=False, seed=seed, light_sampler=sampler), scene)
+    if scene.settings is None:
+        opts = replace(opts, width=size, height=size)
+    return replace(opts, spp=spp)
+
+
+def reference(name, path, kind, scene, size):
+    from drpt.imageio import read_image
+
+    if kind == "corpus":
+        stem = path.stem.rsplit("_", 1)[0]
+        return np.asarray(read_image(path.parent / "refs" / f"{stem}_ref_rgb.exr"), np.float64)[..., :3]
+    if kind == "mitsuba":
+        import mitsuba as mi
+
+        from drpt.backend import mitsuba_variant
+
+        mi.set_variant(mitsuba_variant())
+        ms = mi.load_file(str(path), optimize=False)
+        return np.mean([np.asarray(mi.render(ms, spp=REF_SPP // 8, seed=1000 + k), np.float64)[..., :3]
+                        for k in range(8)], 0)
+    return Renderer(scene, options(scene, REF_SPP, 10**6, "power", size)).render().image.astype(np.float64)
+
+
+def mitsuba_error(path, kind, spp, repeats, ref):
+    """Mitsuba's mean relMSE at ``spp`` on an XML scene (``None`` for drpt's own format)."""
+    if kind == "drpt":
+        return None
+    import mitsuba as mi
+
+    from drpt.backend import mitsuba_variant
+
+    mi.set_variant(mitsuba_variant())
+    defines = {"spp": str(spp)} if kind == "corpus" else {}
+    ms = mi.load_file(str(path), optimize=False, **defines)
+    errs = [np.mean((np.asarray(mi.render(ms, spp=spp, seed=k), np.float64)[..., :3] - ref) ** 2
+                    / (ref ** 2 + 1e-2)) for k in range(repeats)]
+    return float(np.mean(errs))
+
+
+def main(spp=64, repeats=4, size=64):
+    print("| scene | emitters | relMSE power | relMSE uniform | uniform / power, equal spp | "
+          "s power | s uniform | uniform / power, equal time | Mitsuba relMSE | power / Mitsuba |\n"
+          "|---|---|---|---|---|---|---|---|---|---|")
+    for name, path, kind in scenes():
+        defines = {"spp": str(spp)} if kind == "corpus" else None
+        scene = load_scene(path, defines=defines) if defines else load_scene(path)
+        ref = reference(name, path, kind, scene, size)
+        row = {}
+        for sampler in ("power", "uniform"):
+            r = Renderer(scene, options(scene, 1, 99, sampler, size))
+            r.render()  # compile
+            errs, secs = [], []
+            for seed in range(repeats):
+                r2 = r.derive(options(scene, spp, seed, sampler, size))
+                t0 = time.perf_counter()
+                img = r2.render().image.astype(np.float64)
+                secs.append(time.perf_counter() - t0)
+                errs.append(float(np.mean((img - ref) ** 2 / (ref ** 2 + 1e-2))))
+            row[sampler] = (float(np.mean(errs)), float(np.mean(secs)), r.scene.area_lights)
+        (ep, sp, lights), (eu, su, _) = row["power"], row["uniform"]
+        em = mitsuba_error(path, kind, spp, repeats, ref)
+        mcols = "| | |" if em is None else f"| {em:.4g} | {ep / em:.2f} |"
+        print(f"| {name} | {getattr(lights, 'emitters', 0)} | {ep:.4g} | {eu:.4g} | {eu / ep:.2f} | "
+              f"{sp:.2f} | {su:.2f} | {eu * su / (ep * sp):.2f} {mcols}", flush=True)
+
+
+if __name__ == "__main__":
+    main(*(int(a) for a in sys.argv[1:3]))
