@@ -83,6 +83,10 @@ class RenderOptions:
     #: also sum each sample's color products (Mitsuba's ``moment`` integrator: the result's
     #: ``moment2``, the per-sample second moment of the pixel in CIE XYZ)
     moment: bool = False
+    #: AOVs traced beside the image, ``(name, type)`` pairs (:mod:`drpt.aovs`, ``--aovs``)
+    aovs: tuple = ()
+    #: also trace the denoiser's albedo and normal guides (``--denoise``, :mod:`drpt.denoise`)
+    denoise: bool = False
 
     def validate(self) -> RenderOptions:
         """Raise :class:`~drpt.errors.DrptError` on a value the renderer cannot
@@ -442,6 +446,8 @@ def apply_scene_settings(opts: RenderOptions, scene,
         path["hide_emitters"] = st.hide_emitters
     if getattr(st, "moment", None) is not None:
         fields["moment"] = True
+    if getattr(st, "aovs", ()):
+        fields["aovs"] = tuple(st.aovs)  # Mitsuba's aov integrator (--aovs replaces them)
     if st.rfilter is not None and "filter" not in given:
         fields["filter"] = filter_spelling(st.rfilter, st.rfilter_params)
     if path.get("max_depth") == 0:

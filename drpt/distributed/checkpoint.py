@@ -78,6 +78,7 @@ class Checkpoint:
     sum: np.ndarray
     sumsq: np.ndarray
     weight: np.ndarray | None = None  # a splatting film's sum(w), sum(w^2) ((H, W, 2))
+    aov: np.ndarray | None = None  # the AOVs' sums and their weights' ((H, W, C + 1))
 
 
 def save(output: Path, cp: Checkpoint) -> None:
@@ -85,13 +86,15 @@ def save(output: Path, cp: Checkpoint) -> None:
     and is what :func:`load` trusts, so a process killed between the two
     renames leaves a consistent checkpoint; the .json is for people."""
     npz, meta = paths(output)
-    d = {k: v for k, v in asdict(cp).items() if k not in ("sum", "sumsq", "weight")}
+    d = {k: v for k, v in asdict(cp).items() if k not in ("sum", "sumsq", "weight", "aov")}
     d["version"] = VERSION
     text = json.dumps(d, indent=1, sort_keys=True)
     tmp = npz.with_name(npz.name + ".tmp.npz")
     arrays = {"sum": cp.sum, "sumsq": cp.sumsq}
     if cp.weight is not None:
         arrays["weight"] = cp.weight
+    if cp.aov is not None:
+        arrays["aov"] = cp.aov
     np.savez(tmp, **arrays, meta=np.array(text))
     os.replace(tmp, npz)
     tmp = meta.with_name(meta.name + ".tmp")
@@ -118,6 +121,7 @@ def load(output: Path, scene_hash: str, options: dict, chunks: int) -> Checkpoin
         with np.load(npz) as z:
             s, s2 = z["sum"], z["sumsq"]
             wts = z["weight"] if "weight" in z.files else None
+            aov = z["aov"] if "aov" in z.files else None
             d = json.loads(str(z["meta"]))
     except (OSError, ValueError, KeyError) as e:
         raise DrptError(f"--resume: {npz}: unreadable checkpoint ({e})") from None
@@ -134,5 +138,7 @@ def load(output: Path, scene_hash: str, options: dict, chunks: int) -> Checkpoin
         raise DrptError(f"--resume: {meta} does not match this render's chunks")
     if wts is not None and wts.shape != s.shape[:2] + (2,):
         raise DrptError(f"--resume: {meta} does not match this render's chunks")
+    if aov is not None and aov.shape[:2] != s.shape[:2]:
+        raise DrptError(f"--resume: {meta} does not match this render's chunks")
     return Checkpoint(d["scene_hash"], d["options"], d["chunks"], d["next"], d["spp"],
-                      d["nonfinite"], s, s2, wts)
+                      d["nonfinite"], s, s2, wts, aov)

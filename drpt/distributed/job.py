@@ -120,7 +120,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     okey = checkpoint.options_key(opts)
     if resume:
         cp = checkpoint.load(output, key, okey, chunks.count)
-        merged = ChunkMerge(chunks, cp.next, cp.sum, cp.sumsq, cp.nonfinite, cp.weight)
+        merged = ChunkMerge(chunks, cp.next, cp.sum, cp.sumsq, cp.nonfinite, cp.weight, cp.aov)
     else:
         merged = ChunkMerge(chunks)
     job = Job(None, resumed_from=merged.next)
@@ -128,7 +128,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     def save() -> None:
         checkpoint.save(output, checkpoint.Checkpoint(key, okey, chunks.count, merged.next, merged.spp,
                                                       merged.nonfinite, merged.sum, merged.sumsq,
-                                                      merged.weight))
+                                                      merged.weight, merged.aov))
 
     def report(messages) -> None:
         for w in messages:

@@ -306,6 +306,10 @@ class RenderSettings:
     #: Mitsuba's ``moment`` integrator around the one rendered: the nested integrator's
     #: name in the file (``_arg_0`` when unnamed), which names the EXR's moment channels
     moment: str | None = None
+    #: Mitsuba's ``aov`` integrator: its AOVs, ``(name, type)`` pairs (:mod:`drpt.aovs`), and
+    #: the nested integrator's name (its image is also written as ``<name>.R/G/B``)
+    aovs: tuple = ()
+    aov_image: str | None = None
     #: the ``-D`` values the file was read with (``compare`` gives Mitsuba the same)
     defines: dict = field(default_factory=dict)
     #: what of the file drpt did not read as written, one located line each: parameters

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import SceneError
+from ...errors import DrptError, SceneError
 from ...shading import MeshAttribute, Texture
 from ..model import (
     MAX_COORDINATE,
@@ -342,6 +342,27 @@ class Reader:
             self.check_unread(node)
             s.moment = nested[0][0]
             self.integrator(nested[0][1])
+            return
+        if node.plugin == "aov":
+            # Mitsuba's aov: its first nested integrator renders the image; the AOVs named
+            # by ``aovs`` (name:type pairs) become EXR layers (drpt.aovs)
+            from ...aovs import parse_aovs
+
+            nested = [(k, c) for k, c in node.objects() if c.kind == "integrator"]
+            for _, c in node.objects():
+                if c.kind != "integrator":
+                    raise c.error(f"{c.label} inside {node.label} (it takes integrators)")
+            for _, c in nested[1:]:
+                self.unsupported(c, f"a second integrator inside {node.label} (drpt renders "
+                                 "the first)")
+            try:
+                s.aovs = parse_aovs(node.str("aovs", "") or "", f"{node.label}: aovs")
+            except DrptError as e:
+                raise node.error(str(e)) from None
+            self.check_unread(node)
+            if nested:
+                s.aov_image = nested[0][0]
+                self.integrator(nested[0][1])
             return
         if node.plugin not in ("path", "direct", "ptracer"):
             self.unsupported(node, f"integrator '{node.plugin}' (drpt has path, direct and ptracer)",

@@ -1,0 +1,98 @@
+"""The AOV kernel: first-hit quantities of camera rays (:mod:`drpt.aovs` names them).
+
+:func:`aov_values` traces rays ``(o, d)`` to their first hit and returns the AOVs'
+channels as a list of ``Float`` (0 on a miss, as Mitsuba's ``aov`` integrator zeroes a
+missed interaction). The denoiser's guides (``guide_albedo``, ``guide_normal``) follow
+delta lobes (mirror, glass: one sampled lobe per bounce, at most :data:`MAX_DELTA`
+bounces) to the first other surface first. The renderer traces this kernel once per pass
+beside the beauty kernel, only for renders that ask for AOVs or denoising.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
+
+from ..aovs import GUIDES
+
+#: the most delta bounces a guide ray follows before it takes the surface it is on
+MAX_DELTA = 8
+
+
+@dr.syntax
+def _past_delta(scene, rng: PCG32, o: Array3f, d: Array3f) -> tuple[Array3f, Array3f]:
+    """The ray, per lane, whose first hit is the first non-delta surface (or a miss)
+    along the path that follows delta lobes from ``(o, d)``."""
+    active = dr.full(Bool, True, dr.width(o))
+    depth = dr.zeros(UInt32, dr.width(o))
+    o, d = Array3f(o), Array3f(d)
+    while active:
+        si = scene.intersect(o, d, active)
+        u1 = rng.next_float32()
+        u2 = Array2f(rng.next_float32(), rng.next_float32())
+        follow = active & si.valid & scene.is_delta(si) & (depth < MAX_DELTA)
+        wo, bs = scene.sample_bsdf(si, u1, u2)
+        follow &= bs.valid
+        o[follow] = scene.spawn(si, wo)
+        d[follow] = wo
+        depth += 1
+        active = Bool(follow)
+    return o, d
+
+
+def aov_values(scene, rng: PCG32, o: Array3f, d: Array3f, kinds) -> list[Float]:
+    """The channels of the AOV ``kinds`` (in order) for rays ``(o, d)``."""
+    si = scene.intersect(o, d, Bool(True))
+    hit = si.valid
+    out: list[Float] = []
+
+    def vec(v, n=3):
+        out.extend(dr.select(hit, v[i], 0.0) for i in range(n))
+
+    gsi = None
+    if any(k in GUIDES for k in kinds) and _has_delta(scene):
+        go, gd = _past_delta(scene, rng, o, d)
+        gsi = scene.intersect(go, gd, Bool(True))
+    for kind in kinds:
+        if kind == "albedo":
+            vec(scene.albedo(si, hit))
+        elif kind == "depth":
+            out.append(dr.select(hit, si.t, 0.0))
+        elif kind == "position":
+            vec(si.p)
+        elif kind == "uv":
+            vec(_uv(scene, si), 2)
+        elif kind == "geo_normal":
+            vec(si.ng)
+        elif kind == "sh_normal":
+            vec(si.ns)
+        elif kind in GUIDES:
+            g = si if gsi is None else gsi
+            v = scene.albedo(g, g.valid) if kind == "guide_albedo" else g.ns
+            out.extend(dr.select(g.valid, v[i], 0.0) for i in range(3))
+        else:
+            raise ValueError(f"unknown AOV kind {kind!r}")
+    return out
+
+
+def _uv(scene, si) -> Array2f:
+    """Mitsuba's ``si.uv``: ``(u, 1 - v)`` of a triangle's OBJ-convention uv; on a sphere
+    ``(phi / 2 pi, theta / pi)`` of the direction from its center (world axes: the frame of
+    a sphere given by center and radius)."""
+    surf = scene.surfaces
+    uv = Array2f(si.uv.x, 1.0 - si.uv.y) if getattr(surf, "has_uv", False) else Array2f(0.0)
+    n_tri, n_sph = getattr(surf, "n_tri", 0), getattr(surf, "n_sph", 0)
+    if n_sph:
+        is_sph = si.valid & (si.prim >= n_tri) & (si.prim < n_tri + n_sph)
+        c = dr.gather(Array3f, surf.sph_c, dr.select(is_sph, si.prim - n_tri, 0), is_sph)
+        v = dr.normalize(si.p - c)
+        phi = dr.atan2(v.y, v.x)
+        phi = dr.select(phi < 0.0, phi + 2.0 * dr.pi, phi)
+        theta = dr.acos(dr.clip(v.z, -1.0, 1.0))
+        uv = dr.select(is_sph, Array2f(phi * (0.5 / dr.pi), theta / dr.pi), uv)
+    return uv
+
+
+def _has_delta(scene) -> bool:
+    """Whether some material has a delta lobe (else guides are the first hit's)."""
+    return bool(getattr(scene.materials, "_any_delta", False))
