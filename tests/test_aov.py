@@ -123,6 +123,20 @@ def test_aov_kernel_is_traced_only_when_asked_for(monkeypatch):
         Renderer(load_scene(CORNELL), replace(opts, denoise=True)).render()
 
 
+@pytest.mark.parametrize("flags", [{}, {"filter": "gaussian"}, {"integrator": "ptracer"}],
+                         ids=["box", "gaussian", "ptracer"])
+def test_aovs_leave_the_image_bit_for_bit(flags):
+    """The AOV kernel draws from random streams of its own: the image and its variance
+    are those of a render without AOVs."""
+    scene = load_scene(CORNELL)
+    opts = RenderOptions(width=12, height=10, spp=3, progress=False, **flags)
+    plain = Renderer(scene, opts).render()
+    with_aovs = Renderer(scene, replace(opts, aovs=parse_aovs("depth,uv,albedo"), denoise=True)).render()
+    assert np.array_equal(plain.image, with_aovs.image)
+    assert np.array_equal(plain.variance, with_aovs.variance)
+    assert with_aovs.aov.shape == (10, 12, 1 + 2 + 3 + 6) and np.isfinite(with_aovs.aov).all()
+
+
 def test_chunked_and_resumed_aovs_equal_the_plain_render(tmp_path):
     from drpt.distributed import job
 
