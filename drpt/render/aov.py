@@ -23,9 +23,10 @@ MAX_DELTA = 8
 def _past_delta(scene, rng: PCG32, o: Array3f, d: Array3f) -> tuple[Array3f, Array3f]:
     """The ray, per lane, whose first hit is the first non-delta surface (or a miss)
     along the path that follows delta lobes from ``(o, d)``."""
-    active = dr.full(Bool, True, dr.width(o))
-    depth = dr.zeros(UInt32, dr.width(o))
-    o, d = Array3f(o), Array3f(d)
+    n = max(dr.width(o), dr.width(d))  # a pinhole's origin may be one value for all lanes
+    active = dr.full(Bool, True, n)
+    depth = dr.zeros(UInt32, n)
+    o, d = o + dr.zeros(Array3f, n), d + dr.zeros(Array3f, n)  # loop state starts full width
     while active:
         si = scene.intersect(o, d, active)
         u1 = rng.next_float32()
