@@ -14,11 +14,17 @@ type           channels   value at the camera ray's first hit (0 on a miss)
 ``uv``         ``U V``    Mitsuba's texture coordinates (``(u, 1 - v)`` of OBJ uvs)
 ``geo_normal`` ``X Y Z``  the geometric normal (triangle winding, sphere outward)
 ``sh_normal``  ``X Y Z``  the shading normal (interpolated vertex normals)
+``prim_index`` ``I``      the face's index in its shape (0 on analytic shapes)
+``shape_index`` ``I``     the shape's place in Mitsuba's ``scene.shapes()``, from 1 (as
+                          Mitsuba's scalar variants number them; its JIT variants write
+                          pointer bits): the shapes that are not meshes in file order,
+                          then the meshes in file order (Mitsuba's own order of several
+                          meshes varies from load to load); Mitsuba XML scenes only
 ============== ========== =====================================================
 
 On the command line (``--aovs``) a bare type names itself (``depth`` is ``depth:depth``)
-and ``normal`` is ``sh_normal``. Mitsuba's ``dp_du``, ``dp_dv``, ``duv_dx``, ``duv_dy``,
-``prim_index`` and ``shape_index`` are not supported.
+and ``normal`` is ``sh_normal``. Mitsuba's ``dp_du``, ``dp_dv``, ``duv_dx`` and ``duv_dy``
+are not supported.
 
 Two more kinds feed the denoiser (:mod:`drpt.denoise`) and are not written:
 ``guide_albedo`` and ``guide_normal``, the albedo and shading normal of the first
@@ -40,9 +46,13 @@ CHANNELS: dict[str, tuple[str, ...]] = {
     "uv": ("U", "V"),
     "geo_normal": ("X", "Y", "Z"),
     "sh_normal": ("X", "Y", "Z"),
+    "prim_index": ("I",),
+    "shape_index": ("I",),
 }
+#: the kinds read from the scene's shape data (Mitsuba XML only)
+INDEX_KINDS = ("prim_index", "shape_index")
 #: Mitsuba's types drpt does not compute
-UNSUPPORTED = ("dp_du", "dp_dv", "duv_dx", "duv_dy", "prim_index", "shape_index")
+UNSUPPORTED = ("dp_du", "dp_dv", "duv_dx", "duv_dy")
 ALIASES = {"normal": "sh_normal"}
 #: the denoiser's auxiliary images (first non-delta hit), never written as layers
 GUIDES: dict[str, tuple[str, ...]] = {"guide_albedo": ("R", "G", "B"), "guide_normal": ("X", "Y", "Z")}

@@ -41,8 +41,10 @@ def _past_delta(scene, rng: PCG32, o: Array3f, d: Array3f) -> tuple[Array3f, Arr
     return o, d
 
 
-def aov_values(scene, rng: PCG32, o: Array3f, d: Array3f, kinds) -> list[Float]:
-    """The channels of the AOV ``kinds`` (in order) for rays ``(o, d)``."""
+def aov_values(scene, rng: PCG32, o: Array3f, d: Array3f, kinds, ids=None) -> list[Float]:
+    """The channels of the AOV ``kinds`` (in order) for rays ``(o, d)``. ``ids``: for
+    ``shape_index`` and ``prim_index``, ``(shape, prim)`` per global primitive id
+    (:func:`index_arrays`)."""
     si = scene.intersect(o, d, Bool(True))
     hit = si.valid
     out: list[Float] = []
@@ -67,6 +69,9 @@ def aov_values(scene, rng: PCG32, o: Array3f, d: Array3f, kinds) -> list[Float]:
             vec(si.ng)
         elif kind == "sh_normal":
             vec(si.ns)
+        elif kind in ("shape_index", "prim_index"):
+            table = ids[0] if kind == "shape_index" else ids[1]
+            out.append(dr.select(hit, Float(dr.gather(UInt32, table, si.prim, hit)), 0.0))
         elif kind in GUIDES:
             g = si if gsi is None else gsi
             v = scene.albedo(g, g.valid) if kind == "guide_albedo" else g.ns
@@ -74,6 +79,25 @@ def aov_values(scene, rng: PCG32, o: Array3f, d: Array3f, kinds) -> list[Float]:
         else:
             raise ValueError(f"unknown AOV kind {kind!r}")
     return out
+
+
+def index_arrays(model) -> tuple[UInt32, UInt32]:
+    """``(shape, prim)`` per global primitive id (triangles, spheres, planes) of a scene
+    model read from Mitsuba XML (:attr:`drpt.scene.model.Triangles.shape_index`); a
+    :class:`~drpt.errors.DrptError` for other scenes."""
+    import numpy as np
+
+    from ..errors import DrptError
+
+    tri, sph, pl = model.triangles, model.spheres, model.planes
+    if (len(tri) and tri.shape_index is None) or (len(sph) and sph.shape_index is None) or len(pl):
+        raise DrptError("the prim_index and shape_index AOVs need a Mitsuba XML scene (drpt's "
+                        "text format has no shapes)")
+    shape = np.concatenate([tri.shape_index if len(tri) else np.zeros(0, np.int32),
+                            sph.shape_index if len(sph) else np.zeros(0, np.int32), [0]])
+    prim = np.concatenate([tri.prim_index if len(tri) else np.zeros(0, np.int32),
+                           np.zeros(len(sph) + 1, np.int32)])
+    return UInt32(shape.astype(np.uint32)), UInt32(prim.astype(np.uint32))
 
 
 def _uv(scene, si) -> Array2f:

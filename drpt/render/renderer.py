@@ -195,7 +195,20 @@ class Renderer:
         self.camera = RayCamera(scene.camera, options.width, options.height)
         self.warnings: list[str] = self.scene.warnings
         self.integrator = self._make_integrator()
+        self._aov_ids = None
+        if self.aov_kinds:
+            self._aov_index_arrays()  # a scene without shape data is an error before rendering
         self.build_seconds = time.perf_counter() - t0
+
+    def _aov_index_arrays(self):
+        """The ``(shape, prim)`` tables of the index AOVs (None when none is asked for)."""
+        from ..aovs import INDEX_KINDS
+
+        if self._aov_ids is None and any(k in INDEX_KINDS for k in self.aov_kinds):
+            from .aov import index_arrays
+
+            self._aov_ids = index_arrays(self.scene_model)
+        return self._aov_ids
 
     def _make_integrator(self):
         options = self.opt
@@ -291,7 +304,7 @@ class Renderer:
             weight = None
         else:
             o, d, weight = self._camera_ray(x, y)(rng)
-        values = aov_values(self.scene, rng, o, d, self.aov_kinds)
+        values = aov_values(self.scene, rng, o, d, self.aov_kinds, self._aov_index_arrays())
         if weight is not None:
             values = [v * weight for v in values]
         with llvm_tuning.blocks_for(n):

@@ -171,6 +171,11 @@ class Triangles:
     #: mesh attributes by Mitsuba's name (``vertex_color``, ``face_weight``): ``(F, 3, C)``
     #: float values at each corner (a face attribute repeats its value), C = 1 or 3
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
+    #: Mitsuba XML: each face's shape (1-based, in the order of Mitsuba's ``scene.shapes()``)
+    #: and its index in that shape (0 on Mitsuba's analytic shapes drpt tessellates), for
+    #: the ``shape_index`` and ``prim_index`` AOVs; None for other scenes
+    shape_index: np.ndarray | None = None  # (F,) int32
+    prim_index: np.ndarray | None = None  # (F,) int32
 
     def __len__(self) -> int:
         return int(self.positions.shape[0])
@@ -185,6 +190,7 @@ class Spheres:
     center: np.ndarray  # (S, 3) float64
     radius: np.ndarray  # (S,) float64
     material: np.ndarray  # (S,) int32
+    shape_index: np.ndarray | None = None  # (S,) int32, Mitsuba XML (as Triangles.shape_index)
 
     def __len__(self) -> int:
         return int(self.radius.shape[0])

@@ -85,6 +85,13 @@ class Reader:
         self.mat_index: dict[tuple, int] = {}
         self.meshes: list[tuple[geo.Mesh, int]] = []
         self.spheres: list[tuple[np.ndarray, float, int]] = []
+        # the top-level shape of each entry of meshes / spheres (1-based, file order) and
+        # whether a mesh is a Mitsuba mesh (else an analytic shape: prim_index 0);
+        # shape_meshes: whether each top-level shape is a Mitsuba mesh (for _shape_ranks)
+        self.shape_count = 0
+        self.shape_meshes: list[bool] = []
+        self.mesh_shapes: list[tuple[int, bool]] = []
+        self.sphere_shapes: list[int] = []
         self.lights: list = []
         self.background = (0.0, 0.0, 0.0)
         self.camera = None
@@ -145,6 +152,8 @@ class Reader:
                 integrators.append(child)
             elif kind == "shape":
                 if child.plugin != "shapegroup":
+                    self.shape_count += 1  # an instance is one of Mitsuba's shapes
+                    self.shape_meshes.append(child.plugin in geo.MESH_PLUGINS)
                     self.shape(child, np.eye(4))
             elif kind == "emitter":
                 self.emitter(child)
@@ -174,7 +183,18 @@ class Reader:
         for w in [*self.state.notes, *self.warnings]:
             warnings.warn(w, stacklevel=3)
 
+    def _shape_ranks(self) -> np.ndarray:
+        """File ordinal -> the shape's 1-based place in Mitsuba's ``scene.shapes()``: the
+        shapes that are not meshes (spheres, disks, cylinders, instances) in file order, then
+        the meshes in file order. (Mitsuba loads meshes in parallel: their order among
+        themselves varies from load to load, and matches drpt's only for one mesh.)"""
+        order = sorted(range(len(self.shape_meshes)), key=lambda i: (self.shape_meshes[i], i))
+        rank = np.zeros(len(self.shape_meshes) + 1, np.int32)
+        rank[np.array(order, np.int64) + 1] = np.arange(1, len(order) + 1)
+        return rank
+
     def _scene(self) -> Scene:
+        rank = self._shape_ranks()
         if self.meshes:
             pos = np.concatenate([m.positions for m, _ in self.meshes])
             mat = np.concatenate([np.full(len(m), k, np.int32) for m, k in self.meshes])
@@ -187,6 +207,11 @@ class Reader:
                 uvs = np.concatenate([m.uvs if m.uvs is not None else np.zeros((len(m), 3, 2))
                                       for m, _ in self.meshes])
             tris = Triangles(pos, mat, normals, uvs)
+            tris.shape_index = np.concatenate([np.full(len(m), rank[i], np.int32)
+                                               for (m, _), (i, _) in zip(self.meshes, self.mesh_shapes)])
+            tris.prim_index = np.concatenate([np.arange(len(m), dtype=np.int32) if real
+                                              else np.zeros(len(m), np.int32)
+                                              for (m, _), (_, real) in zip(self.meshes, self.mesh_shapes)])
             names = sorted({k for mesh, _ in self.meshes for k in (mesh.attributes or {})})
             for name in names:  # meshes without the attribute never read it: zeros
                 c = next(mesh.attributes[name].shape[2] for mesh, _ in self.meshes
@@ -202,7 +227,8 @@ class Reader:
         if self.spheres:
             spheres = Spheres(np.array([c for c, _, _ in self.spheres], float),
                               np.array([r for _, r, _ in self.spheres], float),
-                              np.array([k for _, _, k in self.spheres], np.int32))
+                              np.array([k for _, _, k in self.spheres], np.int32),
+                              rank[np.array(self.sphere_shapes, np.int64)])
         else:
             spheres = Spheres.empty()
         scene = Scene(path=self.path, camera=self.camera, materials=self.mat_list, triangles=tris,
@@ -458,6 +484,7 @@ class Reader:
             mesh = geo.load_mesh(node, m, attrs)
             if len(mesh):
                 self.meshes.append((mesh, k))
+                self.mesh_shapes.append((self.shape_count, True))
             else:
                 self.warn(f"{node.where}: {node.label} has no faces")
         elif plugin == "sphere":
@@ -472,15 +499,18 @@ class Reader:
             textured = bool(spec.textures()) or isinstance(emission, Texture)
             if similar and not (flip ^ mirrored) and not textured:
                 self.spheres.append((local[:3, 3].copy(), scale, k))
+                self.sphere_shapes.append(self.shape_count)
             else:
                 why = ("flip_normals" if (flip ^ mirrored) else "a to_world that is not a similarity"
                        if not similar else "a texture (drpt's analytic spheres have no uvs)")
                 self.warn(f"{node.where}: {node.label} with {why} is tessellated "
                           f"({geo.SPHERE_STACKS}x{geo.SPHERE_SLICES} quads)")
                 self.meshes.append((geo.tessellate_sphere(local, flip ^ mirrored), k))
+                self.mesh_shapes.append((self.shape_count, False))
         elif plugin == "disk":
             flip = bool(node.bool("flip_normals", False))
             self.meshes.append((geo.tessellate_disk(m, flip), k))
+            self.mesh_shapes.append((self.shape_count, False))
         elif plugin == "cylinder":
             p0 = node.vector("p0", (0.0, 0.0, 0.0))
             p1 = node.vector("p1", (0.0, 0.0, 1.0))
@@ -490,6 +520,7 @@ class Reader:
             flip = bool(node.bool("flip_normals", False))
             local = m @ geo.cylinder_frame(p0, p1, radius)
             self.meshes.append((geo.tessellate_cylinder(local, flip), k))
+            self.mesh_shapes.append((self.shape_count, False))
         self.check_unread(node)
 
     # ------------------------------------------------------------ emitters
