@@ -63,6 +63,16 @@ def test_denoised_image_is_closer_to_the_converged_one():
 
 
 # ------------------------------------------------------------------ tools
+def test_knobs_default_has_denoise_only_with_pyoidn(monkeypatch):
+    from drpt.tools.knobs import configs, default_knobs, markdown_table
+
+    monkeypatch.setitem(sys.modules, "pyoidn", None)
+    assert "denoise" not in default_knobs()
+    assert [c.knob for c in configs("phong", knobs=["denoise"])] == ["default", "denoise"]
+    row = {"knob": "denoise", "setting": "s", "seconds": 1.0, "samples_per_second": 1.0,
+           "excess_rel_mse": 1e-3, "efficiency": 1.0, "mean_bias": 0.01,
+           "mean_bias_se": float("nan"), "biased": False, "bias_spp": 8}
+    assert "+1.00% (no s.e.)" in markdown_table([row])  # one repeat: no spread to measure
 def _run(module, *argv) -> int:
     import argparse
 

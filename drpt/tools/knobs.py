@@ -341,7 +341,8 @@ def markdown_table(rows: list[dict]) -> str:
               "efficiency vs default", f"mean bias (± s.e., {rows[0]['bias_spp']} spp)"]
     cells = []
     for r in rows:
-        bias = f"{100 * r['mean_bias']:+.2f}% ± {100 * r['mean_bias_se']:.2f}%"
+        bias = f"{100 * r['mean_bias']:+.2f}%"
+        bias += f" ± {100 * r['mean_bias_se']:.2f}%" if np.isfinite(r["mean_bias_se"]) else " (no s.e.)"
         bias += " **biased**" if r["biased"] else ""
         eff = r["efficiency"]
         cells.append([r["knob"], r["setting"], f"{r['seconds']:.2f}",
