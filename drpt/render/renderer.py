@@ -307,6 +307,7 @@ class Renderer:
         values = aov_values(self.scene, rng, o, d, self.aov_kinds, self._aov_index_arrays())
         if weight is not None:
             values = [v * weight for v in values]
+        values = [dr.select(dr.isfinite(v), v, 0.0) for v in values]  # as the image drops NaN/Inf
         with llvm_tuning.blocks_for(n):
             dr.eval(values)
         if splat:
