@@ -9,12 +9,15 @@ type           channels   value at the camera ray's first hit (0 on a miss)
 ``albedo``     ``R G B``  the material's diffuse reflectance (its diffuse color, else
                           ``pi f(wi, n)``, 0 for delta lobes: Mitsuba's
                           ``eval_diffuse_reflectance``)
-``depth``      ``T``      the ray distance ``t``
+``depth``      ``T``      the ray distance ``t`` (from a Mitsuba perspective sensor's
+                          ``near_clip`` plane, where Mitsuba's rays start)
 ``position``   ``X Y Z``  the world-space hit point
 ``uv``         ``U V``    Mitsuba's texture coordinates (``(u, 1 - v)`` of OBJ uvs)
 ``geo_normal`` ``X Y Z``  the geometric normal (triangle winding, sphere outward)
 ``sh_normal``  ``X Y Z``  the shading normal (interpolated vertex normals)
-``prim_index`` ``I``      the face's index in its shape (0 on analytic shapes)
+``prim_index`` ``I``      the face's index in its shape (0 on analytic shapes; Mitsuba
+                          numbers the faces of meshes it merges, those sharing a BSDF,
+                          on from one mesh to the next)
 ``shape_index`` ``I``     the shape's place in Mitsuba's ``scene.shapes()``, from 1 (as
                           Mitsuba's scalar variants number them; its JIT variants write
                           pointer bits): the shapes that are not meshes in file order,

@@ -19,7 +19,8 @@ from drpt.scene import load_scene
 CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
 
 #: every supported AOV type; a sphere (analytic), a rectangle and a cube (meshes with
-#: uvs), diffuse and rough-conductor BSDFs, a constant sky
+#: uvs), diffuse and rough-conductor BSDFs, a constant sky; Mitsuba's depth is measured
+#: from the near clip plane, where its camera rays start
 AOVS = "dd.y:depth,nn:sh_normal,gn:geo_normal,pos:position,alb:albedo,uv:uv,pi:prim_index"
 SCENE = """<scene version="3.0.0">
   <default name="filter" value="box"/>
@@ -28,7 +29,7 @@ SCENE = """<scene version="3.0.0">
     <integrator type="path" name="img"><integer name="max_depth" value="3"/></integrator>
   </integrator>
   <sensor type="perspective">
-    <float name="fov" value="40"/>
+    <float name="fov" value="40"/><float name="near_clip" value="1"/>
     <transform name="to_world"><lookat origin="0,1,4" target="0,0,0" up="0,1,0"/></transform>
     <sampler type="independent"><integer name="sample_count" value="64"/></sampler>
     <film type="hdrfilm"><integer name="width" value="48"/><integer name="height" value="32"/>

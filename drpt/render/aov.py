@@ -41,10 +41,12 @@ def _past_delta(scene, rng: PCG32, o: Array3f, d: Array3f) -> tuple[Array3f, Arr
     return o, d
 
 
-def aov_values(scene, rng: PCG32, o: Array3f, d: Array3f, kinds, ids=None) -> list[Float]:
+def aov_values(scene, rng: PCG32, o: Array3f, d: Array3f, kinds, ids=None,
+               near=None) -> list[Float]:
     """The channels of the AOV ``kinds`` (in order) for rays ``(o, d)``. ``ids``: for
     ``shape_index`` and ``prim_index``, ``(shape, prim)`` per global primitive id
-    (:func:`index_arrays`)."""
+    (:func:`index_arrays`). ``near``: ``(near_clip, unit forward)`` of a perspective camera
+    whose rays Mitsuba starts on its near plane: ``depth`` is measured from there."""
     si = scene.intersect(o, d, Bool(True))
     hit = si.valid
     out: list[Float] = []
@@ -60,7 +62,10 @@ def aov_values(scene, rng: PCG32, o: Array3f, d: Array3f, kinds, ids=None) -> li
         if kind == "albedo":
             vec(scene.albedo(si, hit))
         elif kind == "depth":
-            out.append(dr.select(hit, si.t, 0.0))
+            t = si.t
+            if near is not None:
+                t = t - near[0] / dr.dot(d, Array3f(*near[1]))
+            out.append(dr.select(hit, t, 0.0))
         elif kind == "position":
             vec(si.p)
         elif kind == "uv":

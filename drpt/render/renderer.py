@@ -304,7 +304,12 @@ class Renderer:
             weight = None
         else:
             o, d, weight = self._camera_ray(x, y)(rng)
-        values = aov_values(self.scene, rng, o, d, self.aov_kinds, self._aov_index_arrays())
+        cam = self.camera_model
+        near = None
+        if getattr(cam, "near_clip", 0.0) > 0.0 and hasattr(cam, "fov"):
+            fwd = np.asarray(cam.direction, np.float64)
+            near = (float(cam.near_clip), tuple(float(c) for c in fwd / np.linalg.norm(fwd)))
+        values = aov_values(self.scene, rng, o, d, self.aov_kinds, self._aov_index_arrays(), near)
         if weight is not None:
             values = [v * weight for v in values]
         values = [dr.select(dr.isfinite(v), v, 0.0) for v in values]  # as the image drops NaN/Inf

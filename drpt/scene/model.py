@@ -94,6 +94,10 @@ class PerspectiveCamera:
     #: an off-center window of the film (Mitsuba's crop window, principal point offset); None:
     #: the whole film, centered, of the image's aspect
     window: FilmWindow | None = None
+    #: Mitsuba XML's ``near_clip``: Mitsuba's camera rays start on that plane, so its ``depth``
+    #: AOV is the distance from there; drpt's rays start at ``center`` (only the depth AOV
+    #: reads it)
+    near_clip: float = 0.0
 
 
 @dataclass

@@ -315,6 +315,10 @@ class Reader:
                 lens = {"aperture_radius": radius, "focus_distance": focus}
         m = node.transform("to_world")
         self.camera = camera_from_matrix(node, m, fov_y, **lens)
+        near = node.float("near_clip", 1e-2)
+        if not (math.isfinite(near) and near >= 0):
+            raise node.error(f"{node.label}: near_clip must be >= 0, got {near}")
+        self.camera.near_clip = near
         if window is not None:
             self.camera.window = window
         self.check_unread(node)
