@@ -109,15 +109,22 @@ def test_aovs_equal_mitsubas_aov_integrator(tmp_path, rfilter):
 
 def test_shape_index_is_mitsubas(tmp_path):
     """``shape_index`` numbers the shapes as Mitsuba's scalar variants do (its
-    ``scene.shapes()``: a sphere, a sphere, then the cube, though the cube comes second in
-    the file), 0 where the ray misses; ``prim_index`` is the face within its shape. Same
-    criterion as above (measured: 0.3%, 0.2%); the one-row shift fails it (3.4%, 1.9%)."""
+    ``scene.shapes()``: the shapes that are not meshes first, so the cube, second in the
+    file, is number 4 after two spheres and a disk), 0 where the ray misses; ``prim_index``
+    is the face within its shape. Same criterion as above (measured: 0.3%, 0.2%).
+    Negative controls: the one-row shift fails it (3.4%, 1.9%), and so does numbering the
+    shapes in file order (the cube 2: 17%)."""
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("scalar_rgb")
-    p = tmp_path / "shapes.xml"
-    p.write_text(SCENE.format(aovs="s:shape_index,p:prim_index").replace(
+    text = SCENE.format(aovs="s:shape_index,p:prim_index").replace(
         '<shape type="rectangle">', '<shape type="sphere"><point name="center" value="0.9,0.6,-1"/>'
-        '<float name="radius" value="0.4"/></shape>\n  <shape type="disk">'))
+        '<float name="radius" value="0.4"/></shape>\n  <shape type="disk">')
+    i = text.index('  <shape type="cube">')
+    cube = text[i:text.index("</shape>", i) + len("</shape>\n")]
+    text = text.replace(cube, "")
+    first = text.index("</shape>\n") + len("</shape>\n")
+    p = tmp_path / "shapes.xml"
+    p.write_text(text[:first] + cube + text[first:])  # sphere, cube, sphere, disk
     ref = np.array(mi.render(mi.load_file(str(p), filter="box"), spp=64))[..., 3:]
     s = load_scene(p)
     ours = Renderer(s, apply_scene_settings(RenderOptions(progress=False), s)).render().aov
@@ -126,6 +133,8 @@ def test_shape_index_is_mitsubas(tmp_path):
     err = np.abs(ours - ref).mean(axis=(0, 1)) / scale
     assert err.max() < 0.01, err
     assert (np.abs(ours[1:] - ref[:-1]).mean(axis=(0, 1)) / scale).min() > 0.01
+    file_order = np.array([0, 1, 3, 4, 2], float)[np.round(ours[..., 0]).astype(int)]
+    assert np.abs(file_order - ref[..., 0]).mean() / scale[0] > 0.01
 
 
 MASKS = """<scene version="3.0.0">
