@@ -86,6 +86,20 @@ def parse_aovs(text: str, where: str = "--aovs") -> tuple[tuple[str, str], ...]:
     return tuple(out)
 
 
+def check_aovs(aovs) -> None:
+    """Raise :class:`~drpt.errors.DrptError` unless ``aovs`` is a sequence of ``(name,
+    type)`` pairs of supported types with distinct names (``RenderOptions.aovs``)."""
+    names = set()
+    for item in aovs:
+        if not (isinstance(item, (tuple, list)) and len(item) == 2 and item[1] in CHANNELS
+                and isinstance(item[0], str) and item[0]):
+            raise DrptError(f"AOVs must be (name, type) pairs with a type of "
+                            f"{', '.join(CHANNELS)}, got {item!r} (parse_aovs reads a list)")
+        if item[0] in names:
+            raise DrptError(f"AOV name {item[0]!r} is given twice")
+        names.add(item[0])
+
+
 def traced(aovs, denoise: bool = False) -> list[tuple[str, str]]:
     """The ``(name, kind)`` pairs a render traces: the AOVs, then the denoiser's guides."""
     out = [(n, k) for n, k in aovs]

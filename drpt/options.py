@@ -131,6 +131,9 @@ class RenderOptions:
         from .filters import parse_filter
 
         parse_filter(self.filter)  # raises DrptError on a bad --filter
+        from .aovs import check_aovs
+
+        check_aovs(self.aovs)
         if not 0 <= self.wavefront_tail <= MAX_LANES:
             raise DrptError(f"--wavefront-tail must be between 0 and {MAX_LANES}, got {self.wavefront_tail}")
         if self.mode == "wavefront" and self.integrator != "path":

@@ -72,6 +72,14 @@ def test_bad_aov_lists_are_one_error(text, message):
         parse_aovs(text)
 
 
+def test_options_check_their_aovs():
+    with pytest.raises(DrptError, match="must be \\(name, type\\) pairs"):
+        RenderOptions(aovs="depth").validate()
+    with pytest.raises(DrptError, match="given twice"):
+        RenderOptions(aovs=(("a", "depth"), ("a", "uv"))).validate()
+    RenderOptions(aovs=parse_aovs("depth,uv")).validate()
+
+
 def test_the_aov_integrator_is_read(tmp_path):
     s = load_scene(_scene_file(tmp_path))
     assert s.settings.aovs == parse_aovs(AOVS) and s.settings.aov_image == "img"
