@@ -145,6 +145,23 @@ def test_shape_index_is_mitsubas(tmp_path):
     assert np.abs(file_order - ref[..., 0]).mean() / scale[0] > 0.01
 
 
+def test_uv_of_a_mesh_without_texture_coordinates_is_barycentric(tmp_path):
+    """Mitsuba's uv on a mesh without texture coordinates is the hit's barycentric
+    coordinates ``(b1, b2)``: drpt's equals it to 0.03 mean |difference| (measured: 0.018,
+    the pixels' own 16-spp noise); zeros (a mesh without uvs read as (0, 0)) miss by 0.29."""
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    (tmp_path / "quad.obj").write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3\nf 1 3 4\n")
+    p = tmp_path / "quad.xml"
+    p.write_text(MASKS.replace('value="a:albedo"', 'value="u:uv"').split("  <shape")[0]
+                 + '  <shape type="obj"><string name="filename" value="quad.obj"/></shape>\n</scene>')
+    ref = np.array(mi.render(mi.load_file(str(p)), spp=16))[..., 3:]
+    s = load_scene(p)
+    ours = Renderer(s, replace(apply_scene_settings(RenderOptions(progress=False), s), spp=16)).render().aov
+    assert np.abs(ours - ref).mean() < 0.03
+    assert np.abs(ref).mean() > 0.2  # the negative control: zeros
+
+
 ALL = "d:depth,n:sh_normal,g:geo_normal,p:position,a:albedo,u:uv,i:prim_index"
 
 

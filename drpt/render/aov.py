@@ -47,7 +47,8 @@ def aov_values(scene, rng: PCG32, o: Array3f, d: Array3f, kinds, ids=None,
     ``shape_index`` and ``prim_index``, ``(shape, prim)`` per global primitive id
     (:func:`index_arrays`). ``near``: ``(near_clip, unit forward)`` of a perspective camera
     whose rays Mitsuba starts on its near plane: ``depth`` is measured from there."""
-    si = scene.intersect(o, d, Bool(True))
+    prelim = scene.intersect_preliminary(o, d, Bool(True))
+    si = scene.interaction(o, d, prelim)
     hit = si.valid
     out: list[Float] = []
 
@@ -69,7 +70,7 @@ def aov_values(scene, rng: PCG32, o: Array3f, d: Array3f, kinds, ids=None,
         elif kind == "position":
             vec(si.p)
         elif kind == "uv":
-            vec(_uv(scene, si), 2)
+            vec(_uv(scene, si, prelim), 2)
         elif kind == "geo_normal":
             vec(si.ng)
         elif kind == "sh_normal":
@@ -105,13 +106,20 @@ def index_arrays(model) -> tuple[UInt32, UInt32]:
     return UInt32(shape.astype(np.uint32)), UInt32(prim.astype(np.uint32))
 
 
-def _uv(scene, si) -> Array2f:
-    """Mitsuba's ``si.uv``: ``(u, 1 - v)`` of a triangle's OBJ-convention uv; on a sphere
-    ``(phi / 2 pi, theta / pi)`` of the direction from its center (world axes: the frame of
-    a sphere given by center and radius)."""
+def _uv(scene, si, prelim) -> Array2f:
+    """Mitsuba's ``si.uv``: ``(u, 1 - v)`` of a triangle's OBJ-convention uv, or where no
+    triangle of the scene has uvs the hit's barycentric coordinates ``(b1, b2)`` (Mitsuba's
+    for a mesh without texture coordinates); on a sphere ``(phi / 2 pi, theta / pi)`` of
+    the direction from its center (world axes: the frame of a sphere given by center and
+    radius)."""
     surf = scene.surfaces
-    uv = Array2f(si.uv.x, 1.0 - si.uv.y) if getattr(surf, "has_uv", False) else Array2f(0.0)
     n_tri, n_sph = getattr(surf, "n_tri", 0), getattr(surf, "n_sph", 0)
+    if getattr(surf, "has_uv", False):
+        uv = Array2f(si.uv.x, 1.0 - si.uv.y)
+    elif n_tri:
+        uv = dr.select(si.valid & (si.prim < n_tri), Array2f(prelim.u, prelim.v), Array2f(0.0))
+    else:
+        uv = Array2f(0.0)
     if n_sph:
         is_sph = si.valid & (si.prim >= n_tri) & (si.prim < n_tri + n_sph)
         c = dr.gather(Array3f, surf.sph_c, dr.select(is_sph, si.prim - n_tri, 0), is_sph)
