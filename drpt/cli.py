@@ -58,6 +58,13 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     from .options import add_view_flags
 
     add_view_flags(p)
+    p.add_argument("--aovs", default=None, metavar="LIST",
+                   help="AOVs written as extra layers of an .exr output, comma-separated TYPE "
+                        "or NAME:TYPE, TYPE one of albedo, depth, position, uv, geo_normal, "
+                        "sh_normal (normal) (Mitsuba's aov integrator; replaces a scene's own)")
+    p.add_argument("--denoise", action="store_true",
+                   help="also write the image denoised by Intel Open Image Denoise (pyoidn), "
+                        "guided by the albedo and normal AOVs, as OUT.denoised.EXT")
 
 
 def _check_output(output: Path) -> None:
@@ -89,6 +96,20 @@ def moment_channels(scene, result) -> dict:
     return out
 
 
+def aov_channels(scene, opts, result) -> dict:
+    """The AOV layers of a render with ``RenderOptions.aovs`` (:mod:`drpt.aovs`), and for
+    a Mitsuba ``aov`` integrator its nested integrator's image as ``<name>.R/G/B``."""
+    if result.aov is None:
+        return {}
+    from .aovs import split
+
+    layers, _ = split(opts.aovs, opts.denoise, result.aov)
+    name = getattr(getattr(scene, "settings", None), "aov_image", None)
+    if name and opts.aovs:
+        layers = {**{f"{name}.{c}": result.image[..., i] for i, c in enumerate("RGB")}, **layers}
+    return layers
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from .backend import ensure
     from .distributed import checkpoint
@@ -118,6 +139,7 @@ def cmd_render(args: argparse.Namespace) -> int:
             raise DrptError(f"--gui-timeout must be >= 0 seconds, got {args.gui_timeout}")
     scene = load_scene(scene_path)
     opts = apply_scene_settings(opts, scene, args)
+    opts = _aov_options(opts, args, output)
 
     if args.workers is not None and args.cluster is not None:
         raise DrptError("give --workers N (a local cluster) or --cluster ADDRESS, not both")
@@ -143,7 +165,12 @@ def cmd_render(args: argparse.Namespace) -> int:
     result = job.result
     if result.nonfinite:
         warn(f"{result.nonfinite} samples were NaN/Inf and were set to 0")
-    write_image(output, result.image, gamma=args.gamma, extra=moment_channels(scene, result))
+    write_image(output, result.image, gamma=args.gamma,
+                extra={**moment_channels(scene, result), **aov_channels(scene, opts, result)})
+    if opts.denoise:
+        from .denoise import denoise_result, denoised_path
+
+        write_image(denoised_path(output), denoise_result(result), gamma=args.gamma)
     checkpoint.remove(output)
     total = result.spp + job.resumed_spp  # samples per pixel in the image (fewer than --spp
     spp = f"{total} spp"                  # when a target error or time limit stopped it)
@@ -161,6 +188,29 @@ def cmd_render(args: argparse.Namespace) -> int:
     if opts.progress and (args.workers is not None or args.cluster is not None):
         print_workers(job)
     return 0
+
+
+def _aov_options(opts, args, output: Path):
+    """``opts`` with ``--aovs`` and ``--denoise``: the flag's AOVs replace the scene's; AOVs
+    need an .exr output (a scene's own are not traced for other formats); --denoise needs
+    pyoidn (checked before rendering)."""
+    from dataclasses import replace
+
+    from .aovs import parse_aovs
+
+    exr = output.suffix.lower() == ".exr"
+    if args.aovs is not None:
+        if not exr:
+            raise DrptError(f"--aovs: {output} holds no extra layers: write an .exr")
+        opts = replace(opts, aovs=parse_aovs(args.aovs))
+    elif opts.aovs and not exr:
+        opts = replace(opts, aovs=())
+    if args.denoise:
+        from .denoise import require
+
+        require()
+        opts = replace(opts, denoise=True)
+    return opts
 
 
 def _viewer(scene, opts, args, *, output: Path | None, final: bool):

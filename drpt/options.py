@@ -92,6 +92,10 @@ class RenderOptions:
     #: also sum each sample's color products (Mitsuba's ``moment`` integrator: the result's
     #: ``moment2``, the per-sample second moment of the pixel in CIE XYZ)
     moment: bool = False
+    #: AOVs traced beside the image, ``(name, type)`` pairs (:mod:`drpt.aovs`, ``--aovs``)
+    aovs: tuple = ()
+    #: also trace the denoiser's albedo and normal guides (``--denoise``, :mod:`drpt.denoise`)
+    denoise: bool = False
 
     def validate(self) -> RenderOptions:
         """Raise :class:`~drpt.errors.DrptError` on a value the renderer cannot
@@ -141,6 +145,9 @@ class RenderOptions:
         from .filters import parse_filter
 
         parse_filter(self.filter)  # raises DrptError on a bad --filter
+        from .aovs import check_aovs
+
+        check_aovs(self.aovs)
         if not 0 <= self.wavefront_tail <= MAX_LANES:
             raise DrptError(f"--wavefront-tail must be between 0 and {MAX_LANES}, got {self.wavefront_tail}")
         if self.mode == "wavefront" and self.integrator != "path":
@@ -463,6 +470,8 @@ def apply_scene_settings(opts: RenderOptions, scene,
         path["hide_emitters"] = st.hide_emitters
     if getattr(st, "moment", None) is not None:
         fields["moment"] = True
+    if getattr(st, "aovs", ()):
+        fields["aovs"] = tuple(st.aovs)  # Mitsuba's aov integrator (--aovs replaces them)
     if st.rfilter is not None and "filter" not in given:
         fields["filter"] = filter_spelling(st.rfilter, st.rfilter_params)
     if path.get("max_depth") == 0:

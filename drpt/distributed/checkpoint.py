@@ -116,10 +116,11 @@ class Checkpoint:
     sum: np.ndarray
     sumsq: np.ndarray
     weight: np.ndarray | None = None  # a splatting film's sum(w), sum(w^2) ((H, W, 2))
+    aov: np.ndarray | None = None  # the AOVs' sums and their weights' ((H, W, C + 1))
 
 
-def _digest(a: np.ndarray, b: np.ndarray, c: np.ndarray | None = None) -> str:
-    data = b"".join(np.ascontiguousarray(x).tobytes() for x in (a, b, c) if x is not None)
+def _digest(*arrays: np.ndarray | None) -> str:
+    data = b"".join(np.ascontiguousarray(x).tobytes() for x in arrays if x is not None)
     return hashlib.sha256(data).hexdigest()
 
 
@@ -142,14 +143,16 @@ def save(output: Path, cp: Checkpoint) -> None:
     killed between the two renames leaves a consistent checkpoint; the .json
     is for people."""
     npz, meta = paths(output)
-    d = {k: v for k, v in asdict(cp).items() if k not in ("sum", "sumsq", "weight")}
+    d = {k: v for k, v in asdict(cp).items() if k not in ("sum", "sumsq", "weight", "aov")}
     d["version"] = VERSION
-    d["digest"] = _digest(cp.sum, cp.sumsq, cp.weight)
+    d["digest"] = _digest(cp.sum, cp.sumsq, cp.weight, cp.aov)
     text = json.dumps(d, indent=1, sort_keys=True)
     tmp = npz.with_name(npz.name + ".tmp.npz")
     arrays = {"sum": cp.sum, "sumsq": cp.sumsq}
     if cp.weight is not None:
         arrays["weight"] = cp.weight
+    if cp.aov is not None:
+        arrays["aov"] = cp.aov
     np.savez(tmp, **arrays, meta=np.array(text))
     os.replace(tmp, npz)
     tmp = meta.with_name(meta.name + ".tmp")
@@ -203,6 +206,7 @@ def load(output: Path, scene_hash: str, options: dict, chunks) -> Checkpoint:
         with np.load(npz, allow_pickle=False) as z:
             s, s2 = z["sum"], z["sumsq"]
             wts = z["weight"] if "weight" in z.files else None
+            aov = z["aov"] if "aov" in z.files else None
             d = json.loads(str(z["meta"]))
     except Exception as e:  # noqa: BLE001 - whatever a damaged file raises (zip, npy, json)
         raise refuse(f"unreadable checkpoint ({' '.join(f'{type(e).__name__}: {e}'.split())})") from None
@@ -239,7 +243,11 @@ def load(output: Path, scene_hash: str, options: dict, chunks) -> Checkpoint:
             raise refuse(f"damaged checkpoint ('{name}' is {a.dtype} {a.shape}, not float64 {shapes[0]})")
         if not np.isfinite(a).all() or (a < 0).any():
             raise refuse(f"damaged checkpoint ('{name}' holds negative or non-finite values)")
-    if _digest(s, s2, wts) != d["digest"]:
+    if aov is not None and (aov.dtype != np.float64 or aov.ndim != 3 or aov.shape[:2] != shape[:2]
+                            or not np.isfinite(aov).all()):
+        raise refuse(f"damaged checkpoint ('aov' is {aov.dtype} {aov.shape}, not float64 finite "
+                     f"{shape[:2]} x channels)")
+    if _digest(s, s2, wts, aov) != d["digest"]:
         raise refuse("damaged checkpoint (its sums do not match their digest)")
     spp = chunks.spp_before(d["next"])
     if d["spp"] != spp or not 0 <= d["nonfinite"] <= p.width * p.height * spp:
@@ -252,4 +260,4 @@ def load(output: Path, scene_hash: str, options: dict, chunks) -> Checkpoint:
     if wts is not None and (wts[..., 1] > wts[..., 0] ** 2 * (1 + 1e-9) + 1e-300).any():
         raise refuse("damaged checkpoint (its filter weights are inconsistent)")
     return Checkpoint(d["scene_hash"], d["options"], d["chunks"], d["next"], d["spp"],
-                      d["nonfinite"], s, s2, wts)
+                      d["nonfinite"], s, s2, wts, aov)

@@ -126,7 +126,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     checkpoint.check_paths(output)
     if resume:
         cp = checkpoint.load(output, key, okey, chunks)
-        merged = ChunkMerge(chunks, cp.next, cp.sum, cp.sumsq, cp.nonfinite, cp.weight)
+        merged = ChunkMerge(chunks, cp.next, cp.sum, cp.sumsq, cp.nonfinite, cp.weight, cp.aov)
     else:
         merged = ChunkMerge(chunks)
     job = Job(None, resumed_from=merged.next, resumed_spp=merged.spp, requested_workers=workers)
@@ -140,7 +140,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     def save() -> None:
         checkpoint.save(output, checkpoint.Checkpoint(key, okey, chunks.count, merged.next, merged.spp,
                                                       merged.nonfinite, merged.sum, merged.sumsq,
-                                                      merged.weight))
+                                                      merged.weight, merged.aov))
 
     def report(messages) -> None:
         for w in messages:

@@ -102,6 +102,8 @@ class ChunkResult:
     warnings: list[str] = field(default_factory=list)  # the scene's, from the first chunk a worker ran
     #: a splatting film's filter-weight sums, sum(w) and sum(w^2) per pixel ((H, W, 2)); None otherwise
     weight: np.ndarray | None = None
+    #: with AOVs: their channels' weighted sums, then the weights' sum ((H, W, C + 1)); None otherwise
+    aov: np.ndarray | None = None
 
 
 class ChunkMerge:
@@ -111,10 +113,11 @@ class ChunkMerge:
     ``next`` is the first chunk not merged yet; a merge can start from a
     checkpoint's sums (``next``, ``sum``, ``sumsq``, ``nonfinite``, ``weight``).
     ``weight`` (a splatting film's ``sum(w)``, ``sum(w^2)``) is None until a
-    result with weights arrives."""
+    result with weights arrives; ``aov`` (the AOVs' sums) until one with AOVs arrives."""
 
     def __init__(self, chunks: ChunkPlan, next: int = 0, sum: np.ndarray | None = None,
-                 sumsq: np.ndarray | None = None, nonfinite: int = 0, weight: np.ndarray | None = None):
+                 sumsq: np.ndarray | None = None, nonfinite: int = 0, weight: np.ndarray | None = None,
+                 aov: np.ndarray | None = None):
         p = chunks.passes
         shape = (p.height, p.width, 3)
         self.chunks = chunks
@@ -123,6 +126,7 @@ class ChunkMerge:
         self.sumsq = np.zeros(shape, np.float64) if sumsq is None else np.array(sumsq, np.float64)
         self.nonfinite = nonfinite
         self.weight = None if weight is None else np.array(weight, np.float64)
+        self.aov = None if aov is None else np.array(aov, np.float64)
         self.pending: dict[int, ChunkResult] = {}
 
     @property
@@ -150,6 +154,10 @@ class ChunkMerge:
                 if self.weight is None:
                     self.weight = np.zeros(self.sum.shape[:2] + (2,), np.float64)
                 self.weight += r.weight
+            if r.aov is not None:
+                if self.aov is None:
+                    self.aov = np.zeros_like(r.aov)
+                self.aov += r.aov
             self.nonfinite += r.nonfinite
             merged.append(self.next)
             self.next += 1

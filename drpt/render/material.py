@@ -453,6 +453,34 @@ class MaterialTable:
                 out = dr.select(mask & active, self.value(name, row_si, mask & active), out)
         return out
 
+    def albedo(self, si: Interaction, active: Bool) -> Array3f:
+        """The diffuse reflectance (the ``albedo`` AOV, Mitsuba's
+        ``eval_diffuse_reflectance``): per component, its kind's ``COLOR`` field (diffuse,
+        plastic, Phong, ...), else ``pi f(wi, n)`` toward the normal on the viewer's side,
+        0 for delta lobes; components weighted as the material blends them. A ``mask``'s
+        pass-through is left out of the blend (Mitsuba's is its nested BSDF's)."""
+        out = Array3f(0.0)
+        up = Array3f(0.0, 0.0, 1.0)
+        w_null = Float(0.0)
+        for j in range(self.K):
+            row_si, w, present = self._slot(si, j)
+            for kind, bsdf, mask, frame, rsi in self._cases(si, j, row_si, present):
+                m = mask & active
+                name = getattr(bsdf, "COLOR", None)
+                if name is not None:
+                    a = self.value(name, rsi, m)
+                elif kind == "null" and w is not None:
+                    w_null = dr.select(m, w_null + w, w_null)
+                    continue
+                elif bsdf.DELTA:
+                    continue
+                else:
+                    a = bsdf.eval(bsdf.params(self, rsi, m), frame.to_local(si.wi), up) * dr.pi
+                out = dr.select(m, a if w is None else dr.fma(a, w, out), out)
+        if "null" in self.kinds and self.K > 1:
+            out = dr.select(w_null < 1.0, out / dr.maximum(1.0 - w_null, 1e-6), out)
+        return out
+
     # ------------------------------------------------------------------ dispatch
     def _slot(self, si: Interaction, j: int):
         """(row-indexed interaction, weight or None, lanes with a component) of slot ``j``."""

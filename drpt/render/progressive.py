@@ -62,7 +62,8 @@ class Progressive:
         :attr:`done` turns true)."""
         W, H = options.width, options.height
         lanes = frame_lanes(W, H, self.base.max_lanes if options.max_lanes is None else options.max_lanes)
-        self.options = replace(options, max_lanes=lanes, progress=False, moment=False)  # no AOVs in a view
+        self.options = replace(options, max_lanes=lanes, progress=False, moment=False,
+                               aovs=(), denoise=False)  # no AOVs in a view
         self.renderer = self.base.derive(self.options, camera)
         self.camera = camera
         self.plan = plan_passes(W, H, 1, lanes)  # the bands of one sample step

@@ -91,6 +91,9 @@ class RenderResult:
     #: with ``RenderOptions.moment``: (H, W, 3) float64, each pixel's mean of its samples'
     #: squared CIE XYZ values (Mitsuba's ``moment`` integrator's ``m2_`` channels)
     moment2: np.ndarray | None = None
+    #: with AOVs or denoising (``RenderOptions.aovs``, ``denoise``): (H, W, C) float32, each
+    #: pixel's mean of the traced AOVs' channels (:func:`drpt.aovs.traced` gives their order)
+    aov: np.ndarray | None = None
 
     @property
     def samples_per_second(self) -> float:
@@ -124,6 +127,14 @@ class PassSums:
     sumsq: np.ndarray
     nonfinite: int
     weight: np.ndarray | None = None
+    #: with AOVs: the rows ``aov_lo ..`` of the AOV channels' weighted sums, then the
+    #: weights' sum, ``(rows, W, C + 1)`` (:meth:`Renderer._trace_aov_pass`)
+    aov: np.ndarray | None = None
+    aov_lo: int = 0
+
+
+#: mixed into the seed of the AOV kernel's random streams (its own, beside the beauty's)
+AOV_STREAM = 0xA0F5EED
 
 
 def _mix_seed(seed: int, index: int) -> int:
@@ -197,7 +208,20 @@ class Renderer:
         self.camera = RayCamera(scene.camera, options.width, options.height)
         self.warnings: list[str] = self.scene.warnings
         self.integrator = self._make_integrator()
+        self._aov_ids = None
+        if self.aov_kinds:
+            self._aov_index_arrays()  # a scene without shape data is an error before rendering
         self.build_seconds = time.perf_counter() - t0
+
+    def _aov_index_arrays(self):
+        """The ``(shape, prim)`` tables of the index AOVs (None when none is asked for)."""
+        from ..aovs import INDEX_KINDS
+
+        if self._aov_ids is None and any(k in INDEX_KINDS for k in self.aov_kinds):
+            from .aov import index_arrays
+
+            self._aov_ids = index_arrays(self.scene_model)
+        return self._aov_ids
 
     def _make_integrator(self):
         options = self.opt
@@ -246,13 +270,79 @@ class Renderer:
         (Cornell box, 256x256, 64 spp, LLVM, 15 renders each, interleaved,
         on 2 shared cores)."""
         if self.light_tracing:
-            return PassSums(0, *self._trace_light_pass(pass_index, k * rows * self.opt.width))
-        if self.splatting:
-            return self._trace_splat_pass(pass_index, k, r0, rows)
-        img, sq, nbad = self._trace_pass(pass_index, k, r0, rows, wide=False)
-        if not (np.isfinite(img).all() and np.isfinite(sq).all()):
-            img, sq, nbad = self._trace_pass(pass_index, k, r0, rows, wide=True)
-        return PassSums(r0, img, sq, nbad)
+            sums = PassSums(0, *self._trace_light_pass(pass_index, k * rows * self.opt.width))
+        elif self.splatting:
+            sums = self._trace_splat_pass(pass_index, k, r0, rows)
+        else:
+            img, sq, nbad = self._trace_pass(pass_index, k, r0, rows, wide=False)
+            if not (np.isfinite(img).all() and np.isfinite(sq).all()):
+                img, sq, nbad = self._trace_pass(pass_index, k, r0, rows, wide=True)
+            sums = PassSums(r0, img, sq, nbad)
+        if self.aov_kinds:
+            sums.aov_lo, sums.aov = self._trace_aov_pass(pass_index, k, r0, rows)
+        return sums
+
+    @property
+    def aov_kinds(self) -> list[str]:
+        """The AOV kinds this render traces (:func:`drpt.aovs.traced`; empty: no AOV kernel)."""
+        from ..aovs import traced
+
+        return [k for _, k in traced(self.opt.aovs, self.opt.denoise)]
+
+    def _trace_aov_pass(self, pass_index: int, k: int, r0: int, rows: int) -> tuple[int, np.ndarray]:
+        """The AOV kernel (:mod:`drpt.render.aov`) for the ``k`` samples of each pixel of
+        rows ``r0..r0+rows``: camera rays through each pixel as the beauty's samples lie
+        (uniform in the pixel, or drawn from the filter with ``filter_sampling``), from
+        random streams of their own. With a tent or Gaussian filter the values are splatted
+        as the beauty's (:func:`~drpt.render.film.gather_splats`), also for light tracing,
+        whose image is splatted. Returns the first row and the ``(rows, W, C + 1)`` sums:
+        the channels' weighted sums, then the weights' sum."""
+        from .aov import aov_values
+
+        W, H = self.opt.width, self.opt.height
+        n = rows * W * k
+        lane = dr.arange(UInt32, n)
+        pixel = lane // dr.opaque(UInt32, k)
+        x = pixel % W
+        y = pixel // W + dr.opaque(UInt32, r0)
+        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed ^ AOV_STREAM, pass_index)),
+                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+        flt = self.opt.pixel_filter
+        splat = not flt.is_box and (self.light_tracing or not self.opt.filter_sampling)
+        if splat:
+            px = Float(x) + rng.next_float32()
+            py = Float(y) + rng.next_float32()
+            lens = Array2f(rng.next_float32(), rng.next_float32()) if self.camera.thin_lens else None
+            o, d = self.camera.ray(px, py, lens)
+            weight = None
+        else:
+            o, d, weight = self._camera_ray(x, y)(rng)
+        cam = self.camera_model
+        near = None
+        if getattr(cam, "near_clip", 0.0) > 0.0 and hasattr(cam, "fov"):
+            fwd = np.asarray(cam.direction, np.float64)
+            near = (float(cam.near_clip), tuple(float(c) for c in fwd / np.linalg.norm(fwd)))
+        values = aov_values(self.scene, rng, o, d, self.aov_kinds, self._aov_index_arrays(), near)
+        if weight is not None:
+            values = [v * weight for v in values]
+        values = [dr.select(dr.isfinite(v), v, 0.0) for v in values]  # as the image drops NaN/Inf
+        with llvm_tuning.blocks_for(n):
+            dr.eval(values)
+        if splat:
+            ok = dr.full(Bool, True, n)
+            blocks = []
+            y0 = r0
+            for c in range(0, len(values), 3):
+                group = values[c:c + 3] + [Float(0.0)] * (3 - len(values[c:c + 3]))
+                y0, s, _sq, wts = gather_splats(flt, W, H, r0, rows, k, px, py, Array3f(*group), ok)
+                blocks.append(s[..., :min(3, len(values) - c)])
+            return y0, np.concatenate(blocks + [wts[..., :1]], axis=-1)
+        sums = [dr.block_sum(v, k) for v in values]
+        wsum = None if weight is None else dr.block_sum(Float(weight), k)
+        dr.eval(sums, wsum)
+        cols = [c.numpy() for c in sums]
+        cols.append(np.full(rows * W, float(k)) if wsum is None else wsum.numpy())
+        return r0, np.stack(cols, axis=-1).astype(np.float64).reshape(rows, W, len(cols))
 
     def _trace_pass(self, pass_index: int, k: int, r0: int, rows: int, wide: bool
                     ) -> tuple[np.ndarray, np.ndarray, int]:
@@ -412,6 +502,11 @@ class Renderer:
         channels = (9 if self.splatting else 6) if self.opt.moment else 3
         acc2 = np.zeros((H, W, channels), np.float64)
         weight = np.zeros((H, W, 2), np.float64) if self.splatting else None
+        aov = None
+        if self.aov_kinds:
+            from ..aovs import channel_count
+
+            aov = np.zeros((H, W, channel_count(self.aov_kinds) + 1), np.float64)
         nonfinite = 0
         for i in chunks.passes_of(index):
             _s0, k, r0, rows = plan[i]
@@ -421,11 +516,13 @@ class Renderer:
             acc2[p.lo:hi] += p.sumsq
             if weight is not None:
                 weight[p.lo:hi] += p.weight
+            if aov is not None:
+                aov[p.aov_lo:p.aov_lo + p.aov.shape[0]] += p.aov
             nonfinite += p.nonfinite
             if on_pass is not None:
                 on_pass((_s0 - chunks.spp_before(index)) * H * W + (r0 + rows) * W * k)
         return ChunkResult(index, chunks.spp_of(index), acc, acc2, nonfinite,
-                           time.perf_counter() - t0, weight=weight)
+                           time.perf_counter() - t0, weight=weight, aov=aov)
 
     def render(self, on_pass: Callable[[int, int], None] | None = None) -> RenderResult:
         """The image at the options' size and spp: every chunk in order
@@ -459,6 +556,19 @@ class Renderer:
 
 def finish(merged: ChunkMerge, seconds: float, build_seconds: float,
            light_tracing: bool = False) -> RenderResult:
+    """The image and variance of a finished merge (:func:`_finish_image`), with the
+    AOVs' means where the merge has AOV sums (each pixel's weighted sums over its
+    weights' sum)."""
+    result = _finish_image(merged, seconds, build_seconds, light_tracing)
+    if merged.aov is not None:
+        ws = merged.aov[..., -1:]
+        ok = ws > 0.0
+        result.aov = np.where(ok, merged.aov[..., :-1] / np.where(ok, ws, 1.0), 0.0).astype(np.float32)
+    return result
+
+
+def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
+                  light_tracing: bool = False) -> RenderResult:
     """The image and variance of a finished merge.
 
     * Camera samples of their own pixel: the mean of the pixel's samples, and the

@@ -116,6 +116,8 @@ class NoMaterials:
     def diffuse_color(self, si: Interaction, active: Bool) -> Array3f:
         return dr.zeros(Array3f, dr.width(si.valid))
 
+    albedo = diffuse_color
+
 
 class DeviceScene:
     def __init__(self, scene: Scene, options: RenderOptions):
@@ -132,7 +134,8 @@ class DeviceScene:
             self.materials, self.surfaces = NoMaterials(), NoSurfaces()
         else:
             self.materials = MaterialTable(scene, options.bsdf)
-            self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None,
+            uv_aov = any(k == "uv" for _, k in getattr(options, "aovs", ()))
+            self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None or uv_aov,
                                         tangents=self.materials.tangents)
         self.area_lights = AreaLights(scene, self.surfaces, self.materials, sampler=options.light_sampler)
         self.delta_lights = DeltaLights(scene)
@@ -206,6 +209,10 @@ class DeviceScene:
     def diffuse_color(self, si: Interaction, active: Bool) -> Array3f:
         """The diffuse color (Kd or its texture)."""
         return self.materials.diffuse_color(si, active)
+
+    def albedo(self, si: Interaction, active: Bool) -> Array3f:
+        """The diffuse reflectance, Mitsuba's ``eval_diffuse_reflectance`` (the albedo AOV)."""
+        return self.materials.albedo(si, active)
 
     # ------------------------------------------------------------ emitters
     def sample_area_emitter(self, si: Interaction, u_select: Float, u: Array2f,

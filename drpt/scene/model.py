@@ -94,6 +94,10 @@ class PerspectiveCamera:
     #: an off-center window of the film (Mitsuba's crop window, principal point offset); None:
     #: the whole film, centered, of the image's aspect
     window: FilmWindow | None = None
+    #: Mitsuba XML's ``near_clip``: Mitsuba's camera rays start on that plane, so its ``depth``
+    #: AOV is the distance from there; drpt's rays start at ``center`` (only the depth AOV
+    #: reads it)
+    near_clip: float = 0.0
 
 
 @dataclass
@@ -176,6 +180,11 @@ class Triangles:
     #: faces of one material form one emitter (drpt's own format, as the exporter writes
     #: one mesh per material)
     shape: np.ndarray | None = None  # (F,) int
+    #: Mitsuba XML: each face's shape (1-based, in the order of Mitsuba's ``scene.shapes()``)
+    #: and its index in that shape (0 on Mitsuba's analytic shapes drpt tessellates), for
+    #: the ``shape_index`` and ``prim_index`` AOVs; None for other scenes
+    shape_index: np.ndarray | None = None  # (F,) int32
+    prim_index: np.ndarray | None = None  # (F,) int32
 
     def __len__(self) -> int:
         return int(self.positions.shape[0])
@@ -198,6 +207,7 @@ class Spheres:
     #: without its scale and translation), which orients its parameterisation
     #: (uv, dp/du) and nothing else; ``None``: the identity for every sphere
     rotation: np.ndarray | None = None
+    shape_index: np.ndarray | None = None  # (S,) int32, Mitsuba XML (as Triangles.shape_index)
 
     def __len__(self) -> int:
         return int(self.radius.shape[0])
@@ -319,6 +329,10 @@ class RenderSettings:
     #: Mitsuba's ``moment`` integrator around the one rendered: the nested integrator's
     #: name in the file (``_arg_0`` when unnamed), which names the EXR's moment channels
     moment: str | None = None
+    #: Mitsuba's ``aov`` integrator: its AOVs, ``(name, type)`` pairs (:mod:`drpt.aovs`), and
+    #: the nested integrator's name (its image is also written as ``<name>.R/G/B``)
+    aovs: tuple = ()
+    aov_image: str | None = None
     #: the ``-D`` values the file was read with (``compare`` gives Mitsuba the same)
     defines: dict = field(default_factory=dict)
     #: what of the file drpt did not read as written, one located line each: parameters

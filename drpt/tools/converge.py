@@ -51,6 +51,16 @@ Ratios
     crossing after its last level above ``e``, interpolated log-log), drpt /
     Mitsuba, where both reach it. Below 1: drpt gets there sooner.
 
+Denoising (``--denoise``, needs ``pyoidn``)
+    drpt also renders each level with the denoiser's albedo and normal guides and
+    denoises it with Intel Open Image Denoise (as ``render --denoise``): rows
+    ``drpt+oidn``, whose seconds are the render's (guides included) plus the
+    denoiser's. The denoised error splits into a *variance* part, from a second
+    independent render of the level denoised too (``mean((D1 - D2)^2 / (ref^2 +
+    0.01)) / 2``), and a *bias* part, the excess relMSE minus the variance part:
+    the error the denoiser leaves that more samples take away slowly (noisy at
+    low spp). The raw drpt rows stay the unbiased renders without guides.
+
 Output in ``--out`` (default ``converge_<scene stem>/``): ``converge.csv``
 (one row per renderer and level), ``converge.json`` (settings, reference,
 levels, fitted slopes, ratios) and ``converge.png`` (excess relMSE against
@@ -104,15 +114,25 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    metavar="E", help="excess relMSE levels for the time-to-error ratio "
                                      "(default 0.1 0.03 0.01)")
     p.add_argument("--out", default=None, help="output folder (default converge_<name>/)")
+    p.add_argument("--denoise", action="store_true",
+                   help="also measure drpt's image denoised by Intel Open Image Denoise "
+                        "(pyoidn): its error, bias and variance at each spp")
     add_reference_args(p, ref_spp=4096)
     p.set_defaults(func=main)
     return p
 
 
 def main(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
     from ..options import options_from_args
 
     options = options_from_args(args)
+    if args.denoise:
+        from ..denoise import require
+
+        require()
+        options = replace(options, denoise=True)
     scene = Path(args.scene)
     out = Path(args.out) if args.out else Path(f"converge_{scene.stem}")
     report = converge_study(scene, out, options, max_spp=args.max_spp, ref_spp=args.ref_spp,
@@ -326,7 +346,13 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
     import mitsuba as mi
 
     floor = noise_floor(ref, ref_var)
-    renderer, drpt_render = make_drpt(scene, replace(options, spp=1, progress=False))
+    denoising = options.denoise
+    renderer, drpt_render = make_drpt(scene, replace(options, spp=1, progress=False, denoise=False))
+    if denoising:
+        from ..denoise import denoise_result
+
+        _, dn_render = make_drpt(scene, replace(options, spp=1, progress=False))
+        dn_render(1, seed + 999_998)  # warm-up
     for message in renderer.warnings:
         warn(message)
     mits_render, mits_load = make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf,
@@ -356,6 +382,9 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
         _log(progress, f"converge: {spp:>5} spp  drpt {d['seconds']:7.3f} s "
                        f"{d['excess_rel_mse']:.3e}   mitsuba {mm['seconds']:7.3f} s "
                        f"{mm['excess_rel_mse']:.3e}")
+        if denoising:
+            rows.append(_denoised_row(dn_render, denoise_result, spp, seed + 300_000 + i,
+                                      seed + 400_000 + i, ref, floor))
 
     report = analyse(rows, levels)
     report.update({
@@ -379,6 +408,25 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
     _write_json(out / "converge.json", report)
     plot(out / "converge.png", report)
     return report
+
+
+def _denoised_row(render, denoise_result, spp: int, seed_a: int, seed_b: int, ref, floor: float) -> dict:
+    """The ``drpt+oidn`` row of a level: two independent renders with guides, both
+    denoised; the first's error, split into variance (from the pair) and bias."""
+    from .. import metrics
+
+    r = render(spp, seed_a)
+    t0 = time.perf_counter()
+    d1 = denoise_result(r)
+    seconds = r.seconds + time.perf_counter() - t0
+    d2 = denoise_result(render(spp, seed_b))
+    w = np.asarray(ref, np.float64) ** 2 + EPS
+    var = float(np.mean((d1.astype(np.float64) - d2) ** 2 / w)) / 2.0
+    m = metrics.summary(d1, ref)
+    excess = m["rel_mse"] - floor
+    return {"renderer": "drpt+oidn", "spp": int(spp), "seconds": float(seconds),
+            "rel_mse": m["rel_mse"], "floor": floor, "excess_rel_mse": excess, "mae": m["mae"],
+            "smape": m["smape"], "variance_rel_mse": var, "bias_rel_mse": excess - var}
 
 
 def analyse(rows: list[dict], levels) -> dict:
@@ -409,7 +457,8 @@ def analyse(rows: list[dict], levels) -> dict:
 
 
 # ------------------------------------------------------------ output
-FIELDS = ["renderer", "spp", "seconds", "rel_mse", "floor", "excess_rel_mse", "mae", "smape"]
+FIELDS = ["renderer", "spp", "seconds", "rel_mse", "floor", "excess_rel_mse", "mae", "smape",
+          "variance_rel_mse", "bias_rel_mse"]
 
 
 def write_csv(path: Path, rows: list[dict], fields=FIELDS) -> None:
@@ -437,6 +486,15 @@ def format_table(report: dict) -> str:
         lines.append(f"{a['spp']:>6}  {a['seconds']:>8.3f}  {_fmt(a['excess_rel_mse'], '.3e'):>9}  "
                      f"{b['seconds']:>9.3f}  {_fmt(b['excess_rel_mse'], '.3e'):>9}  "
                      f"{_fmt(ratio, '.3f'):>9}")
+    dn = {r["spp"]: r for r in rows if r["renderer"] == "drpt+oidn"}
+    if dn:
+        lines[0] += f"  {'oidn s':>8}  {'oidn err':>9}  {'bias part':>9}  {'var part':>9}"
+        for k, a in enumerate(d, start=1):
+            r = dn.get(a["spp"])
+            if r is not None:
+                lines[k] += (f"  {r['seconds']:>8.3f}  {_fmt(r['excess_rel_mse'], '.3e'):>9}  "
+                             f"{_fmt(r['bias_rel_mse'], '.2e'):>9}  "
+                             f"{_fmt(r['variance_rel_mse'], '.2e'):>9}")
     lines.append(f"error = relMSE - reference noise floor ({report['noise_floor']:.2e}); "
                  "err ratio = drpt / Mitsuba at equal spp")
     for name in ("drpt", "mitsuba"):
@@ -463,7 +521,8 @@ def plot(path: Path, report: dict) -> None:
 
     rows = report["rows"]
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True)
-    styles = {"drpt": dict(color="C0", marker="o"), "mitsuba": dict(color="C1", marker="s")}
+    styles = {"drpt": dict(color="C0", marker="o"), "mitsuba": dict(color="C1", marker="s"),
+              "drpt+oidn": dict(color="C2", marker="^")}
     for name, st in styles.items():
         rs = [r for r in rows if r["renderer"] == name and r["excess_rel_mse"] > 0]
         if not rs:
@@ -471,7 +530,7 @@ def plot(path: Path, report: dict) -> None:
         n = np.array([r["spp"] for r in rs], float)
         t = np.array([r["seconds"] for r in rs])
         e = np.array([r["excess_rel_mse"] for r in rs])
-        label = "Mitsuba 3" if name == "mitsuba" else "drpt"
+        label = {"mitsuba": "Mitsuba 3", "drpt+oidn": "drpt denoised (OIDN)"}.get(name, "drpt")
         axes[0].plot(n, e, label=label, **st)
         axes[1].plot(t, e, label=label, **st)
         if name == "drpt":

@@ -25,7 +25,13 @@ Russian roulette from depth 5 with the adaptive probability
            (``auto``: inline for tiny scenes, else Embree where installed, else
            the BVH; same image up to float order);
 ``bsdf``   the other material mode (Phong <-> Cook-Torrance). That changes the
-           scene, so that row is compared with its own reference.
+           scene, so that row is compared with its own reference;
+``denoise`` the default row's settings, its image denoised by Intel Open Image
+           Denoise (``render --denoise``; needs ``pyoidn``, and is in the default
+           ``--knobs`` only where it is installed): the seconds include the
+           albedo/normal guide kernel and the denoiser, the error and bias are the
+           denoised image's, its noise part (``mean(var / w)``) is the variance of
+           the denoised images across the ``--repeats`` (none with one repeat).
 
 Columns: render seconds (the fastest of ``--repeats`` timed renders, taken
 round robin over the rows so that load from other processes spreads over
@@ -73,7 +79,7 @@ from .reference import (
     get_reference,
 )
 
-KNOBS = ("depth", "rr", "accel", "bsdf")
+KNOBS = ("depth", "rr", "accel", "bsdf", "denoise")
 RR_OFF_DEPTH = 64
 
 __all__ = ["add_parser", "main", "Config", "configs", "knobs_study", "image_bias"]
@@ -88,6 +94,14 @@ class Config:
     max_depth: int = -1
     rr_depth: int = 5
     rr_prob: float | None = None
+    denoise: bool = False
+
+
+def default_knobs() -> list[str]:
+    """Every knob; ``denoise`` only where pyoidn is installed."""
+    from ..denoise import available
+
+    return [k for k in KNOBS if k != "denoise" or available()]
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -102,8 +116,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("scene", help="scene file")
     add_render_flags(p, omit=("max_depth", "rr_depth", "rr_prob", "accel"), size=(64, 64),
                      spp=64)
-    p.add_argument("--knobs", nargs="+", choices=KNOBS, default=list(KNOBS),
-                   help="which knobs to vary (default all)")
+    p.add_argument("--knobs", nargs="+", choices=KNOBS, default=None,
+                   help="which knobs to vary (default all; denoise where pyoidn is installed)")
     p.add_argument("--depths", type=int, nargs="+", default=[2, 3, 5, 8], metavar="D",
                    help="max depths to try (default 2 3 5 8; unbounded is the default row)")
     p.add_argument("--rr-depths", type=int, nargs="+", default=[1, 3, 10], metavar="K",
@@ -126,7 +140,9 @@ def main(args: argparse.Namespace) -> int:
     scene = Path(args.scene)
     out = Path(args.out) if args.out else Path(f"knobs_{scene.stem}")
     report = knobs_study(scene, out, options, ref_spp=args.ref_spp,
-                         ref_batches=args.ref_batches, knobs=args.knobs, depths=args.depths,
+                         ref_batches=args.ref_batches,
+                         knobs=args.knobs if args.knobs is not None else default_knobs(),
+                         depths=args.depths,
                          rr_depths=args.rr_depths, rr_probs=args.rr_probs,
                          repeats=args.repeats, cache_dir=cache_dir_from_args(args))
     print(report["markdown_table"])
@@ -134,7 +150,7 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def configs(bsdf: str, knobs=KNOBS, depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
+def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
             rr_probs=(0.5, 0.8)) -> list[Config]:
     """The default row, then one row per knob setting."""
     rows = [Config("default", "auto accel, unbounded depth, RR from depth 5 (adaptive)", bsdf)]
@@ -152,6 +168,8 @@ def configs(bsdf: str, knobs=KNOBS, depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
     if "bsdf" in knobs:
         other = "cook-torrance" if bsdf == "phong" else "phong"
         rows.append(Config("material", f"{other} (own reference)", other))
+    if "denoise" in knobs:
+        rows.append(Config("denoise", "OIDN on the default row's image", bsdf, denoise=True))
     return rows
 
 
@@ -180,7 +198,7 @@ def image_bias(x, var_x, ref, var_ref) -> tuple[float, float]:
 
 
 def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
-                ref_batches: int = 8, knobs=KNOBS, depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
+                ref_batches: int = 8, knobs=None, depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
                 rr_probs=(0.5, 0.8), repeats: int = 3, cache_dir: Path | None = None) -> dict:
     """Run the study (see the module docs) from drpt's ``options`` (a
     :class:`~drpt.options.RenderOptions`: size, spp, seed and material mode of
@@ -211,6 +229,11 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
     if any(not (0.0 < p <= 1.0) for p in rr_probs):
         raise DrptError(f"--rr-probs must be in (0, 1], got {list(rr_probs)}")
     check_reference_args(ref_spp, ref_batches, -1, 5, announce=False)
+    knobs = default_knobs() if knobs is None else knobs
+    if "denoise" in knobs:
+        from ..denoise import require
+
+        require()
     scene = load_scene(scene_path)
     _prepare_out(out)
 
@@ -231,8 +254,9 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
     for c in cfgs:
         reference(c.bsdf)
         opts = replace(options, spp=1, seed=seed + 999_999, accel=c.accel, bsdf=c.bsdf,
-                       progress=False, path=PathOptions(max_depth=c.max_depth,
-                                                        rr_depth=c.rr_depth, rr_prob=c.rr_prob))
+                       progress=False, denoise=c.denoise,
+                       path=PathOptions(max_depth=c.max_depth, rr_depth=c.rr_depth,
+                                        rr_prob=c.rr_prob))
         renderer = Renderer(scene, opts)
         renderer.render()  # warm-up: compiles this row's kernel
         renderer.opt.spp = spp
@@ -242,7 +266,7 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
     for k in range(repeats):
         for i, renderer in enumerate(renderers):
             renderer.opt.seed = seed + 1 + i + 1000 * k
-            results[i].append(renderer.render())
+            results[i].append(_render(renderer))
             if progress:
                 print(f"\rknobs: repeat {k + 1}/{repeats}, row {i + 1}/{len(cfgs)}", end="",
                       file=sys.stderr, flush=True)
@@ -257,11 +281,17 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
         x, w = first.image, ref["image"].astype(np.float64) ** 2 + 1e-2
         rel = metrics.rel_mse(x, ref["image"])
         excess = rel - ref["floor"]
-        pred = float(np.mean(first.variance / w))
         # The bias uses every repeat (independent seeds): the mean image of R
         # renders, with variance of the mean var / R.
         mean_img = np.mean([r.image for r in rs], axis=0)
-        mean_var = np.mean([r.variance for r in rs], axis=0) / len(rs)
+        if c.denoise:  # the denoised images' variance: their spread across the repeats
+            var = (np.var([r.image for r in rs], axis=0, ddof=1, dtype=np.float64)
+                   if len(rs) > 1 else np.full(x.shape, np.nan))
+            pred = float(np.mean(var / w))
+            mean_var = var / len(rs)
+        else:
+            pred = float(np.mean(first.variance / w))
+            mean_var = np.mean([r.variance for r in rs], axis=0) / len(rs)
         bias, bias_se = image_bias(mean_img, mean_var, ref["image"], ref["variance"])
         rows.append({
             "knob": c.knob, "setting": c.setting, "bsdf": c.bsdf, "accel": c.accel,
@@ -303,12 +333,28 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
     return report
 
 
+def _render(renderer):
+    """``renderer.render()``; with ``denoise`` the result's image is the denoised one and
+    its seconds include the denoiser's."""
+    import time
+
+    r = renderer.render()
+    if renderer.opt.denoise:
+        from ..denoise import denoise_result
+
+        t0 = time.perf_counter()
+        r.image = denoise_result(r)
+        r.seconds += time.perf_counter() - t0
+    return r
+
+
 def markdown_table(rows: list[dict]) -> str:
     header = ["knob", "setting", "seconds", "Msamples/s", "excess relMSE",
               "efficiency vs default", f"mean bias (± s.e., {rows[0]['bias_spp']} spp)"]
     cells = []
     for r in rows:
-        bias = f"{100 * r['mean_bias']:+.2f}% ± {100 * r['mean_bias_se']:.2f}%"
+        bias = f"{100 * r['mean_bias']:+.2f}%"
+        bias += f" ± {100 * r['mean_bias_se']:.2f}%" if np.isfinite(r["mean_bias_se"]) else " (no s.e.)"
         bias += " **biased**" if r["biased"] else ""
         eff = r["efficiency"]
         cells.append([r["knob"], r["setting"], f"{r['seconds']:.2f}",

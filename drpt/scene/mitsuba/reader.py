@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import SceneError
+from ...errors import DrptError, SceneError
 from ...options import MAX_DEPTH, MAX_SIZE, MAX_SPP
 from ...shading import MeshAttribute, Texture
 from ..model import (
@@ -86,6 +86,13 @@ class Reader:
         self.mat_index: dict[tuple, int] = {}
         self.meshes: list[tuple[geo.Mesh, int]] = []
         self.spheres: list[tuple[np.ndarray, float, int, np.ndarray]] = []  # center, radius, material, rotation
+        # the top-level shape of each entry of meshes / spheres (1-based, file order) and
+        # whether a mesh is a Mitsuba mesh (else an analytic shape: prim_index 0);
+        # shape_meshes: whether each top-level shape is a Mitsuba mesh (for _shape_ranks)
+        self.shape_count = 0
+        self.shape_meshes: list[bool] = []
+        self.mesh_shapes: list[tuple[int, bool]] = []
+        self.sphere_shapes: list[int] = []
         self.lights: list = []
         self.background = (0.0, 0.0, 0.0)
         self.camera = None
@@ -146,6 +153,8 @@ class Reader:
                 integrators.append(child)
             elif kind == "shape":
                 if child.plugin != "shapegroup":
+                    self.shape_count += 1  # an instance is one of Mitsuba's shapes
+                    self.shape_meshes.append(child.plugin in geo.MESH_PLUGINS)
                     self.shape(child, np.eye(4))
             elif kind == "emitter":
                 self.emitter(child)
@@ -176,7 +185,18 @@ class Reader:
         for w in [*self.state.notes, *self.warnings]:
             warnings.warn(w, stacklevel=3)
 
+    def _shape_ranks(self) -> np.ndarray:
+        """File ordinal -> the shape's 1-based place in Mitsuba's ``scene.shapes()``: the
+        shapes that are not meshes (spheres, disks, cylinders, instances) in file order, then
+        the meshes in file order. (Mitsuba loads meshes in parallel: their order among
+        themselves varies from load to load, and matches drpt's only for one mesh.)"""
+        order = sorted(range(len(self.shape_meshes)), key=lambda i: (self.shape_meshes[i], i))
+        rank = np.zeros(len(self.shape_meshes) + 1, np.int32)
+        rank[np.array(order, np.int64) + 1] = np.arange(1, len(order) + 1)
+        return rank
+
     def _scene(self) -> Scene:
+        rank = self._shape_ranks()
         if self.meshes:
             pos = np.concatenate([m.positions for m, _ in self.meshes])
             mat = np.concatenate([np.full(len(m), k, np.int32) for m, k in self.meshes])
@@ -190,6 +210,11 @@ class Reader:
                                       for m, _ in self.meshes])
             shape = np.concatenate([np.full(len(m), i, np.int64) for i, (m, _) in enumerate(self.meshes)])
             tris = Triangles(pos, mat, normals, uvs, shape=shape)
+            tris.shape_index = np.concatenate([np.full(len(m), rank[i], np.int32)
+                                               for (m, _), (i, _) in zip(self.meshes, self.mesh_shapes)])
+            tris.prim_index = np.concatenate([np.arange(len(m), dtype=np.int32) if real
+                                              else np.zeros(len(m), np.int32)
+                                              for (m, _), (_, real) in zip(self.meshes, self.mesh_shapes)])
             names = sorted({k for mesh, _ in self.meshes for k in (mesh.attributes or {})})
             for name in names:  # meshes without the attribute never read it: zeros
                 c = next(mesh.attributes[name].shape[2] for mesh, _ in self.meshes
@@ -207,7 +232,8 @@ class Reader:
             spheres = Spheres(np.array([c for c, *_ in self.spheres], float),
                               np.array([r for _, r, *_ in self.spheres], float),
                               np.array([k for _, _, k, _ in self.spheres], np.int32),
-                              None if np.allclose(rot, np.eye(3)) else rot)
+                              rotation=None if np.allclose(rot, np.eye(3)) else rot,
+                              shape_index=rank[np.array(self.sphere_shapes, np.int64)])
         else:
             spheres = Spheres.empty()
         scene = Scene(path=self.path, camera=self.camera, materials=self.mat_list, triangles=tris,
@@ -299,6 +325,10 @@ class Reader:
                 lens = {"aperture_radius": radius, "focus_distance": focus}
         m = node.transform("to_world")
         self.camera = camera_from_matrix(node, m, fov_y, **lens)
+        near = node.float("near_clip", 1e-2)
+        if not (math.isfinite(near) and near >= 0):
+            raise node.error(f"{node.label}: near_clip must be >= 0, got {near}")
+        self.camera.near_clip = near
         if window is not None:
             self.camera.window = window
         self.check_unread(node)
@@ -353,6 +383,27 @@ class Reader:
             self.check_unread(node)
             s.moment = nested[0][0]
             self.integrator(nested[0][1])
+            return
+        if node.plugin == "aov":
+            # Mitsuba's aov: its first nested integrator renders the image; the AOVs named
+            # by ``aovs`` (name:type pairs) become EXR layers (drpt.aovs)
+            from ...aovs import parse_aovs
+
+            nested = [(k, c) for k, c in node.objects() if c.kind == "integrator"]
+            for _, c in node.objects():
+                if c.kind != "integrator":
+                    raise c.error(f"{c.label} inside {node.label} (it takes integrators)")
+            for _, c in nested[1:]:
+                self.unsupported(c, f"a second integrator inside {node.label} (drpt renders "
+                                 "the first)")
+            try:
+                s.aovs = parse_aovs(node.str("aovs", "") or "", f"{node.label}: aovs")
+            except DrptError as e:
+                raise node.error(str(e)) from None
+            self.check_unread(node)
+            if nested:
+                s.aov_image = nested[0][0]
+                self.integrator(nested[0][1])
             return
         if node.plugin not in ("path", "direct", "ptracer"):
             self.unsupported(node, f"integrator '{node.plugin}' (drpt has path, direct and ptracer)",
@@ -451,6 +502,7 @@ class Reader:
             mesh = geo.load_mesh(node, m, attrs)
             if len(mesh):
                 self.meshes.append((mesh, k))
+                self.mesh_shapes.append((self.shape_count, True))
             else:
                 self.warn(f"{node.where}: {node.label} has no faces")
         elif plugin == "sphere":
@@ -468,15 +520,18 @@ class Reader:
                                  f"{tuple(float(x) for x in local[:3, 3])}, radius {scale:g})")
             if similar and not (flip ^ mirrored) and not textured:
                 self.spheres.append((local[:3, 3].copy(), scale, k, local[:3, :3] / scale))
+                self.sphere_shapes.append(self.shape_count)
             else:
                 why = ("flip_normals" if (flip ^ mirrored) else "a to_world that is not a similarity"
                        if not similar else "a texture (drpt's analytic spheres have no uvs)")
                 self.warn(f"{node.where}: {node.label} with {why} is tessellated "
                           f"({geo.SPHERE_STACKS}x{geo.SPHERE_SLICES} quads)")
                 self.meshes.append((geo.tessellate_sphere(local, flip ^ mirrored), k))
+                self.mesh_shapes.append((self.shape_count, False))
         elif plugin == "disk":
             flip = bool(node.bool("flip_normals", False))
             self.meshes.append((geo.tessellate_disk(m, flip), k))
+            self.mesh_shapes.append((self.shape_count, False))
         elif plugin == "cylinder":
             p0 = node.vector("p0", (0.0, 0.0, 0.0))
             p1 = node.vector("p1", (0.0, 0.0, 1.0))
@@ -486,6 +541,7 @@ class Reader:
             flip = bool(node.bool("flip_normals", False))
             local = m @ geo.cylinder_frame(p0, p1, radius)
             self.meshes.append((geo.tessellate_cylinder(local, flip), k))
+            self.mesh_shapes.append((self.shape_count, False))
         for mesh, _ in self.meshes[first:]:
             _check_coordinates(node, mesh)
         self.check_unread(node)
