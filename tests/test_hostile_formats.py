@@ -388,3 +388,13 @@ def test_a_moved_scene_folder_resumes_to_the_same_image(tmp_path):
     assert job.resumed_from == 2
     whole = run(load_scene(first / "cornellbox.txt"), opts, first / "whole.exr").result.image
     assert np.array_equal(job.result.image, whole)
+
+
+def test_an_output_folder_is_refused_before_rendering(tmp_path, capsys):
+    from drpt.cli import main
+
+    out = tmp_path / "dir.exr"
+    out.mkdir()
+    assert main(["render", str(CORNELL), "--size", "8", "8", "--spp", "1", "-q", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"drpt: error: {out}: is a folder; give an image file to write"]
