@@ -16,6 +16,16 @@ FILE:LINE: ...`` line (``FILE: ...`` for an image) and no image written;
 the other stderr lines may only be drpt's one-line warnings and notes.
 Never a traceback, never a hang.
 
+Beyond drpt's own format (tests/fuzzformats.py): the Mitsuba XML test scenes
+of tests/data/xml with their XML (values and structure), PLY, serialized
+and OBJ meshes mutated, each loaded in-process under the same contract
+(``xml/FILE-MUTATION-sSEED``); a real checkpoint damaged in ten ways and read
+back, refused with one line naming it or accepted consistent
+(``checkpoint/MUTATION-sSEED``); generated ``--cluster`` addresses
+(``cluster/address-sSEED``) and fake servers on 127.0.0.1 that speak garbage,
+HTTP, nothing, hang up or announce a huge frame, each one error within
+0.5 s plus a margin (``cluster/server-KIND-sSEED``).
+
 The test id is ``FOLDER/FILE-MUTATION-sSEED`` (``extremes/NAME`` for the
 hand-written scenes); ``pytest tests/test_fuzz.py -k
 'cornellbox.txt-truncate-s1'`` reruns one case. Cases that fail today
