@@ -398,3 +398,26 @@ def test_an_output_folder_is_refused_before_rendering(tmp_path, capsys):
     assert main(["render", str(CORNELL), "--size", "8", "8", "--spp", "1", "-q", "-o", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"drpt: error: {out}: is a folder; give an image file to write"]
+
+
+@pytest.mark.slow
+def test_a_scheduler_without_workers_is_one_line(tmp_path, capsys):
+    pytest.importorskip("distributed")
+    import socket
+
+    from drpt.cli import main
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    dask = Path(sys.executable).with_name("dask")
+    scheduler = subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        rc = main(["render", str(CORNELL), "--size", "8", "8", "--spp", "1", "-q", "-o", str(tmp_path / "x.exr"),
+                   "--cluster", f"tcp://127.0.0.1:{port}"])
+    finally:
+        scheduler.kill()
+        scheduler.wait()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "no Dask worker took the scene" in err[0], err
