@@ -421,3 +421,16 @@ def test_a_scheduler_without_workers_is_one_line(tmp_path, capsys):
         scheduler.wait()
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "no Dask worker took the scene" in err[0], err
+
+
+def test_max_depth_zero_and_too_many_samples_name_their_line(tmp_path, capsys):
+    from drpt.cli import main
+
+    p = xml(tmp_path, integrator='<integer name="max_depth" value="0"/>')
+    assert main(["render", str(p), "-q", "-o", str(tmp_path / "x.exr")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"drpt: error: {p}:{line_of(p, 'max_depth')}: max_depth 0 renders nothing "
+                   "(Mitsuba gives a black image)"]
+    p = xml(tmp_path, film='<integer name="width" value="65536"/><integer name="height" value="65536"/>',
+            spp="4294967295")
+    refused(p, "more than drpt's 2\\^60")
