@@ -76,6 +76,8 @@ def _check_output(output: Path) -> None:
                         f"(use one of {', '.join(sorted(WRITE_EXTENSIONS))})")
     if not output.parent.exists() and str(output.parent) != "":
         raise DrptError(f"{output}: folder {output.parent} does not exist")
+    if output.is_dir():
+        raise DrptError(f"{output}: is a folder; give an image file to write")
 
 
 def moment_channels(scene, result) -> dict:
