@@ -487,15 +487,27 @@ class Renderer:
         o = self.opt
         return plan_chunks(o.width, o.height, o.spp, self.max_lanes, o.chunk_spp)
 
-    def render_chunk(self, index: int, on_pass: Callable[[int], None] | None = None) -> ChunkResult:
+    def render_chunk(self, index: int, on_pass: Callable[[int], None] | None = None,
+                     into: ChunkMerge | None = None) -> ChunkResult:
         """Sums of chunk ``index``'s samples and of their squares, per pixel
         (float64): a pure function of the scene, the options and ``index``.
         ``on_pass(samples)``, if given, is called after each pass with the
-        samples of the chunk traced so far."""
+        samples of the chunk traced so far.
+
+        ``into``, a merge whose next chunk is ``index``: where each pass of the
+        chunk adds to its own rows only, once (one sample step per chunk; no
+        splatting film, light tracing or AOVs), the passes' sums are added straight
+        into the merge's sums, the very float64 additions that adding the chunk's
+        sums would make (each pixel's chunk sum is one pass's), without the chunk's
+        own full-image arrays; the result is then :attr:`ChunkResult.direct`. Until
+        it is pushed, ``into.dirty`` is set."""
         t0 = time.perf_counter()
         chunks = self.chunks
         plan = chunks.passes
         W, H = self.opt.width, self.opt.height
+        if (into is not None and into.next == index and chunks.steps == 1 and not self.splatting
+                and not self.light_tracing and not self.aov_kinds):
+            return self._render_chunk_into(index, on_pass, into, t0)
         acc = np.zeros((H, W, 3), np.float64)
         # squares; with moment (Mitsuba's moment integrator) also the channel products
         # (rg, rb, gb) or, splatted, the weighted r^2 .. gb (SplatFilm)
@@ -524,6 +536,27 @@ class Renderer:
         return ChunkResult(index, chunks.spp_of(index), acc, acc2, nonfinite,
                            time.perf_counter() - t0, weight=weight, aov=aov)
 
+    def _render_chunk_into(self, index: int, on_pass, into: ChunkMerge, t0: float) -> ChunkResult:
+        chunks = self.chunks
+        plan = chunks.passes
+        W, H = self.opt.width, self.opt.height
+        channels = 6 if self.opt.moment else 3
+        if into.sumsq.shape[-1] != channels and not into.sumsq.any():
+            into.sumsq = np.zeros((H, W, channels), np.float64)
+        nonfinite = 0
+        for i in chunks.passes_of(index):
+            _s0, k, r0, rows = plan[i]
+            p = self._pass(i, k, r0, rows)
+            hi = p.lo + p.sum.shape[0]
+            into.dirty = True
+            into.sum[p.lo:hi] += p.sum
+            into.sumsq[p.lo:hi] += p.sumsq
+            nonfinite += p.nonfinite
+            if on_pass is not None:
+                on_pass((_s0 - chunks.spp_before(index)) * H * W + (r0 + rows) * W * k)
+        return ChunkResult(index, chunks.spp_of(index), None, None, nonfinite, time.perf_counter() - t0,
+                           direct=True)
+
     def render(self, on_pass: Callable[[int, int], None] | None = None) -> RenderResult:
         """The image at the options' size and spp: every chunk in order
         (:meth:`render_chunk`), merged as a distributed render merges them
@@ -545,7 +578,7 @@ class Renderer:
                     if on_pass is not None:
                         on_pass(before + done, W * H * spp)
 
-                merged.push(self.render_chunk(c, progress))
+                merged.push(self.render_chunk(c, progress, into=merged))
                 estimate = stop_estimate(merged, self.opt, time.perf_counter() - t0, self.light_tracing)
                 if estimate is not None:
                     bar.set_postfix_str(f"relMSE ~{estimate:.3g}")
