@@ -584,15 +584,18 @@ class Renderer:
                     bar.set_postfix_str(f"relMSE ~{estimate:.3g}")
                     if stops(estimate, merged, self.opt, time.perf_counter() - t0):
                         break
-        return finish(merged, time.perf_counter() - t0, self.build_seconds, self.light_tracing)
+        return finish(merged, time.perf_counter() - t0, self.build_seconds, self.light_tracing, consume=True)
 
 
 def finish(merged: ChunkMerge, seconds: float, build_seconds: float,
-           light_tracing: bool = False) -> RenderResult:
+           light_tracing: bool = False, consume: bool = False) -> RenderResult:
     """The image and variance of a finished merge (:func:`_finish_image`), with the
     AOVs' means where the merge has AOV sums (each pixel's weighted sums over its
-    weights' sum)."""
-    result = _finish_image(merged, seconds, build_seconds, light_tracing)
+    weights' sum). With ``consume`` (the render's last word on the merge) a camera
+    render's mean and variance are computed in the merge's own sums, which are then
+    no longer sums: no image-sized temporaries beyond the float32 image and one
+    channel."""
+    result = _finish_image(merged, seconds, build_seconds, light_tracing, consume)
     if merged.aov is not None:
         ws = merged.aov[..., -1:]
         ok = ws > 0.0
@@ -601,7 +604,7 @@ def finish(merged: ChunkMerge, seconds: float, build_seconds: float,
 
 
 def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
-                  light_tracing: bool = False) -> RenderResult:
+                  light_tracing: bool = False, consume: bool = False) -> RenderResult:
     """The image and variance of a finished merge.
 
     * Camera samples of their own pixel: the mean of the pixel's samples, and the
@@ -631,7 +634,11 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
             moment2 = xyz_second_moment(np.where(ok, merged.sumsq[..., 3:] / np.where(ok, ws, 1.0), 0.0))
         return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, W * H * spp,
                             merged.nonfinite, moment2)
-    mean = merged.sum / spp
+    if consume and not light_tracing:
+        mean = merged.sum
+        mean /= spp  # the same division as merged.sum / spp, in the merge's array
+    else:
+        mean = merged.sum / spp
     _check_range(mean)
     if light_tracing:
         paths = W * H * spp
@@ -639,11 +646,19 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
         var = np.maximum(second - mean * mean, 0.0) / max(paths - 1, 1)
         return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, paths,
                             merged.nonfinite)
-    # Unbiased sample variance of one sample, divided by spp: variance of the mean.
-    var = np.maximum(merged.sumsq[..., :3] / spp - mean * mean, 0.0) * spp / max(spp - 1, 1) / spp
+    # Unbiased sample variance of one sample, divided by spp: variance of the mean,
+    # max(sumsq / spp - mean^2, 0) * spp / max(spp - 1, 1) / spp, in that order, in place
     moment2 = None
     if merged.sumsq.shape[-1] == 6:
         moment2 = xyz_second_moment(merged.sumsq / spp)
+    var = merged.sumsq if consume and merged.sumsq.shape[-1] == 3 else merged.sumsq[..., :3].copy()
+    var /= spp
+    for c in range(3):  # one channel's temporary at a time
+        var[..., c] -= np.square(mean[..., c])
+    np.maximum(var, 0.0, out=var)
+    var *= spp
+    var /= max(spp - 1, 1)
+    var /= spp
     return RenderResult(mean.astype(np.float32), var, seconds,
                         build_seconds, W * H * spp, merged.nonfinite, moment2)
 
