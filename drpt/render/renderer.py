@@ -76,6 +76,7 @@ from .integrators.ptracer import ParticleTracer
 from .integrators.wavefront import WavefrontIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lights.rays import EmitterRays
+from .sampler import LDSampler, next_2d, uses_ld
 from .scene import DeviceScene
 
 
@@ -208,6 +209,9 @@ class Renderer:
         self.camera = RayCamera(scene.camera, options.width, options.height)
         self.warnings: list[str] = self.scene.warnings
         self.integrator = self._make_integrator()
+        if uses_ld(options.sampler) and not self.ld_sampling:
+            what = "light tracing" if self.light_tracing else "the wavefront mode"
+            self.warnings.append(f"--sampler {options.sampler}: {what} draws independent samples")
         self._aov_ids = None
         if self.aov_kinds:
             self._aov_index_arrays()  # a scene without shape data is an error before rendering
@@ -364,8 +368,8 @@ class Renderer:
         pixel = lane // mm
         x = pixel % W
         y = pixel // W + dr.opaque(UInt32, r0)
-        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
-                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+        # with path regeneration lane j of a pixel's m traces its samples j, j + m, ...
+        rng = self._sampler(pass_index, n, x, y, lane % mm, mm if sequential else 1)
 
         camera_ray = self._camera_ray(x, y)
         if sequential:
@@ -400,6 +404,27 @@ class Renderer:
         sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, len(sqsums))
         return img, sq, int(nbad[0])
 
+    @property
+    def ld_sampling(self) -> bool:
+        """Whether camera passes draw from the low-discrepancy sampler
+        (:mod:`drpt.render.sampler`): ``--sampler`` other than ``independent``,
+        for the megakernel's path and Whitted integrators (light tracing and the
+        wavefront mode draw independent samples)."""
+        return (uses_ld(self.opt.sampler) and not self.light_tracing
+                and not isinstance(self.integrator, WavefrontIntegrator))
+
+    def _sampler(self, pass_index: int, n: int, x: UInt32, y: UInt32, j: UInt32, step):
+        """The random numbers of a camera pass's ``n`` lanes: the lane's PCG32 stream
+        of ``(seed, pass, lane)``, or with :attr:`ld_sampling` an
+        :class:`~drpt.render.sampler.LDSampler` of pixel ``(x, y)`` whose first sample
+        is the pass's first sample plus ``j``, its next ``step`` further on."""
+        if not self.ld_sampling:
+            return PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
+                         initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+        s0 = self.chunks.passes[pass_index][0]
+        pixel = y * dr.opaque(UInt32, self.opt.width) + x
+        return LDSampler.for_pixels(self.opt.seed, pixel, j + dr.opaque(UInt32, s0), step)
+
     def _trace_light_pass(self, pass_index: int, n: int) -> tuple[np.ndarray, np.ndarray, int]:
         """``n`` light paths (:class:`~drpt.render.integrators.ptracer.ParticleTracer`)
         splatted into a film of the whole image: its sums and sums of squares ``(H, W,
@@ -426,11 +451,11 @@ class Renderer:
         pixel = lane // dr.opaque(UInt32, k)
         x = pixel % W
         y = pixel // W + dr.opaque(UInt32, r0)
-        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
-                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
-        px = Float(x) + rng.next_float32()
-        py = Float(y) + rng.next_float32()
-        lens = Array2f(rng.next_float32(), rng.next_float32()) if self.camera.thin_lens else None
+        rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1)
+        u = next_2d(rng)
+        px = Float(x) + u.x
+        py = Float(y) + u.y
+        lens = next_2d(rng) if self.camera.thin_lens else None
         o, d = self.camera.ray(px, py, lens)
         L = self.integrator.sample(rng, o, d, Bool(True))
         bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
@@ -465,17 +490,16 @@ class Renderer:
         camera = self.camera
 
         def camera_ray(rng):
+            u = next_2d(rng)
             if flt.is_box:
-                px = Float(x) + rng.next_float32()
-                py = Float(y) + rng.next_float32()
+                px = Float(x) + u.x
+                py = Float(y) + u.y
                 weight = None
             else:
-                u1 = rng.next_float32()
-                u2 = rng.next_float32()
-                px, py, weight = sample_position(flt, Float(x), Float(y), u1, u2, W, H)
+                px, py, weight = sample_position(flt, Float(x), Float(y), u.x, u.y, W, H)
             lens = None
             if camera.thin_lens:
-                lens = Array2f(rng.next_float32(), rng.next_float32())
+                lens = next_2d(rng)
             o, d = camera.ray(px, py, lens)
             return o, d, weight
 

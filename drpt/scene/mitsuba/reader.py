@@ -40,7 +40,9 @@ from .nodes import Node, State
 _SILENT = {
     "film": ("pixel_format", "component_format", "file_format", "banner", "compensate",
              "sample_border"),
-    "sampler": ("seed",),
+    # (stratified, multijitter and orthogonal draw from drpt's ldsampler: their jitter and
+    # strength shape only the noise)
+    "sampler": ("jitter", "strength", "scramble_seed"),
     "integrator": ("samples_per_pass", "block_size", "emitter_samples", "bsdf_samples",
                    "shading_samples"),
     "sensor": ("near_clip", "far_clip", "shutter_open", "shutter_close"),
@@ -265,9 +267,14 @@ class Reader:
         if sampler is not None:
             if sampler.plugin not in SAMPLERS:
                 self.unsupported(sampler, f"sampler '{sampler.plugin}'", fallback="independent samples")
-            elif sampler.plugin != "independent":
-                self.warn(f"{sampler.where}: sampler '{sampler.plugin}': drpt draws independent "
-                          "samples (the same expectation, other noise)")
+            else:
+                self.settings.sampler = sampler.plugin
+            if sampler.has("seed"):
+                seed = sampler.int("seed", 0)
+                if seed is None or not 0 <= seed < 1 << 64:
+                    raise sampler.error(f"{sampler.label}: seed must be between 0 and 2^64 - 1, "
+                                        f"got {seed}")
+                self.settings.seed = seed
             spp = sampler.int("sample_count", 4)
             if spp is None or not 0 < spp <= MAX_SPP:
                 raise sampler.error(f"{sampler.label}: sample_count must be between 1 and {MAX_SPP}, "
