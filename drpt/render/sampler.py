@@ -112,15 +112,15 @@ class LDSampler:
         self.step = UInt32(1) if step is None else UInt32(step)
         self.dim = dr.zeros(UInt32, dr.width(self.index))
 
-    @staticmethod
-    def for_pixels(seed: int, pixel: UInt32, index: UInt32, step: UInt32 | int = 1) -> LDSampler:
+    @classmethod
+    def for_pixels(cls, seed: int, pixel: UInt32, index: UInt32, step: UInt32 | int = 1) -> LDSampler:
         """A sampler of pixels ``pixel`` (their ids in the image), at sample
         ``index``; ``seed`` is the render's."""
         from .renderer import _mix_seed
 
         s = _mix_seed(seed, LD_STREAM) & 0xFFFFFFFF
         key = mix32(UInt32(pixel) ^ dr.opaque(UInt32, s))
-        return LDSampler(key, index, UInt32(step))
+        return cls(key, index, UInt32(step))
 
     def _seed(self) -> UInt32:
         """The hash of ``(key, dim)`` that scrambles the current dimension."""

@@ -1,0 +1,202 @@
+"""The low-discrepancy sampler (drpt.render.sampler): its values, its stratification, and
+renders with it.
+
+* Sobol's second dimension from the superset-sum formula equals the one from its
+  generator matrix (``v_1 = 2^31``, ``v_{k+1} = v_k ^ (v_k >> 1)``).
+* Uniform: 1-D (64 bins) and 2-D (16x16 cells) histograms of the values of a dimension
+  over 16384 pixels (one sample each, so independent scrambles) pass a chi-square test at
+  p > 1e-4 (a fixed seed; the false-failure rate of a correct sampler is 1e-4 per
+  histogram). Negative control: values bent by ``u^1.15`` fail it.
+* Stratified: for 64 samples of a pixel, each of the 64 cells of every elementary grid
+  (``2^a x 2^b``, ``a + b = 6``) of a 2-D draw holds one sample; for 1-D draws each of the
+  64 intervals; also for samples 64..127 and for dimensions of a later bounce. Negative
+  control: PCG32's values are not.
+* Renders are unbiased: drpt with ``--sampler ldsampler`` against Mitsuba by the 8x8 block
+  z-test (``|z| < 4.5``, image mean ``|z| < 4``, as the corpus tests); drpt's per-pixel
+  variance comes from the samples' squares, which for correlated (stratified) samples
+  overestimates the variance of the mean, so the test is conservative. Negative control:
+  a sampler whose 2-D draws reuse their first dimension as their second (every pair on the
+  diagonal) fails it.
+* Deterministic for a seed; a chunked render equals the plain one bit for bit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import drjit as dr
+import numpy as np
+import pytest
+from drjit.auto import PCG32, Array2f, UInt32, UInt64
+from scipy.stats import chi2
+
+from drpt.render.sampler import LDSampler, sobol1_reversed
+
+
+def _sobol1_matrix(i: int) -> int:
+    r, v = 0, 1 << 31
+    while i:
+        if i & 1:
+            r ^= v
+        i >>= 1
+        v ^= v >> 1
+    return r
+
+
+def test_sobol_second_dimension_matches_its_generator_matrix():
+    idx = np.random.default_rng(1).integers(0, 1 << 32, 500, dtype=np.uint64).astype(np.uint32)
+    idx[:4] = (0, 1, 2, 0xFFFFFFFF)
+    got = dr.brev(sobol1_reversed(UInt32(idx))).numpy()
+    assert (got == np.array([_sobol1_matrix(int(i)) for i in idx], np.uint32)).all()
+
+
+def _draws(seed: int, pixels: int, spp: int, start: int = 0, skip: int = 0):
+    """One 1-D draw and one 2-D draw (after ``skip`` dimensions) of ``spp`` samples from
+    ``start`` of each of ``pixels`` pixels: numpy ``(pixels, spp)`` arrays ``u, x, y``."""
+    lane = dr.arange(UInt32, pixels * spp)
+    s = LDSampler.for_pixels(seed, lane // spp, lane % spp + start)
+    for _ in range(skip):
+        s.next_float32()
+    u = s.next_float32()
+    p = s.next_2d()
+    return (u.numpy().reshape(pixels, spp), p.x.numpy().reshape(pixels, spp),
+            p.y.numpy().reshape(pixels, spp))
+
+
+def _chi2_p(counts: np.ndarray) -> float:
+    expected = counts.sum() / counts.size
+    stat = ((counts - expected) ** 2 / expected).sum()
+    return float(chi2.sf(stat, counts.size - 1))
+
+
+def _uniform_p(u, x, y, bend=1.0):
+    u, x, y = u ** bend, x ** bend, y ** bend
+    p1 = _chi2_p(np.histogram(u, 64, (0, 1))[0])
+    p2 = _chi2_p(np.histogram2d(x, y, 16, ((0, 1), (0, 1)))[0])
+    return p1, p2
+
+
+@pytest.mark.parametrize("skip", [0, 37])
+def test_values_are_uniform(skip):
+    u, x, y = _draws(5, 16384, 4, skip=skip)
+    # one sample per pixel: pixels' scrambles are independent, so the values are too
+    p1, p2 = _uniform_p(u[:, 1], x[:, 1], y[:, 1])
+    assert p1 > 1e-4 and p2 > 1e-4, (p1, p2)
+    bent = _uniform_p(u[:, 1], x[:, 1], y[:, 1], bend=1.15)
+    assert max(bent) < 1e-4, bent  # negative control
+
+
+def _stratified(x, y, spp: int) -> bool:
+    m = spp.bit_length() - 1
+    for a in range(m + 1):
+        nx, ny = 1 << a, 1 << (m - a)
+        cell = np.floor(x * nx).astype(np.int64) * ny + np.floor(y * ny).astype(np.int64)
+        if any(len(set(row)) != spp for row in cell):
+            return False
+    return True
+
+
+@pytest.mark.parametrize("start,skip", [(0, 0), (64, 0), (0, 20), (128, 41)])
+def test_a_pixels_samples_are_stratified(start, skip):
+    spp = 64
+    u, x, y = _draws(11, 50, spp, start, skip)
+    assert all(len(set(np.floor(row * spp).astype(int))) == spp for row in u)
+    assert _stratified(x, y, spp)
+    # negative control: independent samples are not
+    rng = PCG32(50 * spp, initstate=UInt64(1))
+    xi, yi = rng.next_float32().numpy(), rng.next_float32().numpy()
+    assert not _stratified(xi.reshape(50, spp), yi.reshape(50, spp), spp)
+
+
+def test_deterministic_for_a_seed_and_decorrelated_across_seeds():
+    a, b, c = _draws(3, 64, 16), _draws(3, 64, 16), _draws(4, 64, 16)
+    assert all((p == q).all() for p, q in zip(a, b))
+    assert all((p != q).mean() > 0.9 for p, q in zip(a, c))
+    # pixels and dimensions decorrelated
+    u, x, _ = _draws(3, 2048, 1)
+    assert abs(np.corrcoef(u[:-1, 0], u[1:, 0])[0, 1]) < 0.1
+    assert abs(np.corrcoef(u[:, 0], x[:, 0])[0, 1]) < 0.1
+
+
+class _DiagonalSampler(LDSampler):
+    """Negative control: a 2-D draw's second value reuses its first dimension."""
+
+    def next_2d(self):
+        p = super().next_2d()
+        return Array2f(p.x, p.x)
+
+
+@pytest.mark.slow
+@pytest.mark.mitsuba
+@pytest.mark.parametrize("name,control", [("meshes", False), ("lens", False), ("glossy", False),
+                                          ("meshes", True)])
+def test_ldsampler_renders_like_mitsuba(name, control, monkeypatch):
+    from render_check import block_z
+    from test_mitsuba_xml import XML, _mean_z, _render_both, load
+
+    if control:
+        from drpt.render import renderer
+
+        monkeypatch.setattr(renderer, "LDSampler", _DiagonalSampler)
+    scene, _ = load(name)
+    r, ref, var = _render_both(scene, XML / f"{name}.xml", 256, sampler="ldsampler")
+    z = np.abs(block_z(r.image.astype(np.float64), r.variance, ref, var)).max()
+    zmean = np.abs(_mean_z(r, ref, var)).max()
+    if control:
+        assert z > 4.5 or zmean > 4.0, (z, zmean)
+    else:
+        assert z < 4.5 and zmean < 4.0, (z, zmean)
+
+
+@pytest.mark.slow
+def test_chunked_render_is_the_plain_render(tmp_path):
+    from drpt.options import RenderOptions
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    scene = load_scene("scenes/cornellbox/cornellbox.txt")
+    o = RenderOptions(width=16, height=16, spp=12, seed=7, progress=False, sampler="ldsampler",
+                      max_lanes=16 * 16 * 4)
+    plain = Renderer(scene, o).render()
+    chunked = Renderer(scene, replace(o, chunk_spp=4)).render()
+    again = Renderer(scene, o).render()
+    other = Renderer(scene, replace(o, seed=8)).render()
+    assert (plain.image == chunked.image).all() and (plain.image == again.image).all()
+    assert (plain.image != other.image).any()
+
+
+#: Mitsuba corpus scenes rendered with --sampler ldsampler (their files ask for independent)
+CORPUS_LD = ("bsdf_spheres/test_arealight_path.xml", "bsdf_spheres/test_textured_roughconductor_path.xml",
+             "bsdf_spheres/test_envmap_path.xml", "spot_light/test_spot_direct.xml")
+
+
+def _corpus_ld(rel: str, spp: int, sampler: str = "ldsampler"):
+    from corpusutil import _read, corpus_scene, reference_files, z_test
+    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    path = corpus_scene(rel)
+    ref, var = reference_files(path)
+    scene = load_scene(path, defines={"spp": str(spp)})
+    opts = replace(apply_scene_settings(RenderOptions(progress=False), scene), spp=spp, sampler=sampler)
+    return z_test(Renderer(scene, opts).render().image, spp, _read(ref), _read(var))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("rel", CORPUS_LD)
+def test_corpus_scenes_pass_with_the_ldsampler(rel):
+    """Mitsuba's render-test z-test (:mod:`corpusutil`) of corpus scenes rendered with the
+    low-discrepancy sampler at 256 spp (skips without ../shared)."""
+    t = _corpus_ld(rel, 256)
+    assert t.passed, str(t)
+
+
+@pytest.mark.slow
+def test_corpus_z_test_catches_a_sampler_that_reuses_a_dimension(monkeypatch):
+    """Negative control of the corpus test: the diagonal sampler fails it."""
+    from drpt.render import renderer
+
+    monkeypatch.setattr(renderer, "LDSampler", _DiagonalSampler)
+    t = _corpus_ld(CORPUS_LD[0], 256)
+    assert not t.passed, str(t)
