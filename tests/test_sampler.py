@@ -149,20 +149,32 @@ def test_ldsampler_renders_like_mitsuba(name, control, monkeypatch):
 
 
 @pytest.mark.slow
-def test_chunked_render_is_the_plain_render(tmp_path):
+@pytest.mark.parametrize("kw", [{}, {"filter": "gaussian"}, {"integrator": "whitted"},
+                                {"filter": "tent", "filter_sampling": True}],
+                         ids=["path", "gaussian-splatting", "whitted", "filter-sampling"])
+def test_chunked_and_resumed_renders_are_the_plain_render(tmp_path, kw):
+    """A render in chunks of one sample per pixel, interrupted after 3 chunks and resumed from
+    its checkpoint, gives the plain render's image bit for bit; another seed another image."""
+    from drpt.distributed.job import run
     from drpt.options import RenderOptions
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
     scene = load_scene("scenes/cornellbox/cornellbox.txt")
-    o = RenderOptions(width=16, height=16, spp=12, seed=7, progress=False, sampler="ldsampler",
-                      max_lanes=16 * 16 * 4)
+    o = RenderOptions(width=16, height=12, spp=12, seed=7, progress=False, sampler="ldsampler",
+                      max_lanes=16 * 12 * 4, chunk_spp=1, **kw)
     plain = Renderer(scene, o).render()
-    chunked = Renderer(scene, replace(o, chunk_spp=4)).render()
-    again = Renderer(scene, o).render()
     other = Renderer(scene, replace(o, seed=8)).render()
-    assert (plain.image == chunked.image).all() and (plain.image == again.image).all()
     assert (plain.image != other.image).any()
+
+    def interrupt(merged, result, engine):
+        if merged.next >= 3:
+            raise KeyboardInterrupt
+
+    out = tmp_path / "cut.exr"
+    with pytest.raises(KeyboardInterrupt):
+        run(scene, o, out, on_chunk=interrupt, checkpoint_seconds=0.0)
+    assert np.array_equal(run(scene, o, out, resume=True).result.image, plain.image)
 
 
 #: Mitsuba corpus scenes rendered with --sampler ldsampler (their files ask for independent)
@@ -200,3 +212,59 @@ def test_corpus_z_test_catches_a_sampler_that_reuses_a_dimension(monkeypatch):
     monkeypatch.setattr(renderer, "LDSampler", _DiagonalSampler)
     t = _corpus_ld(CORPUS_LD[0], 256)
     assert not t.passed, str(t)
+
+
+XML_SCENE = """<scene version="3.0.0">
+    <sensor type="perspective"><float name="fov" value="40"/>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/>
+            <rfilter type="box"/></film>
+        SAMPLER</sensor>
+    <shape type="sphere"><bsdf type="diffuse"/></shape>
+    <emitter type="constant"/>
+</scene>"""
+
+
+@pytest.mark.parametrize("plugin", ["ldsampler", "stratified", "multijitter", "orthogonal", "independent"])
+def test_the_xml_sampler_and_its_seed_are_read(tmp_path, plugin):
+    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.scene import load_scene
+
+    p = tmp_path / "s.xml"
+    p.write_text(XML_SCENE.replace("SAMPLER", f'<sampler type="{plugin}"><integer name="sample_count" '
+                                   'value="16"/><integer name="seed" value="5"/>'
+                                   '<boolean name="jitter" value="true"/></sampler>'
+                                   if plugin != "independent" else
+                                   '<sampler type="independent"><integer name="seed" value="5"/></sampler>'))
+    opts = apply_scene_settings(RenderOptions(progress=False), load_scene(p))
+    assert (opts.sampler, opts.seed) == (plugin, 5)
+
+
+def test_the_command_line_sampler_and_seed_win_over_the_files(tmp_path):
+    import argparse
+
+    from drpt.options import add_render_flags, apply_scene_settings, options_from_args
+    from drpt.scene import load_scene
+
+    p = tmp_path / "s.xml"
+    p.write_text(XML_SCENE.replace("SAMPLER", '<sampler type="ldsampler"><integer name="seed" value="5"/></sampler>'))
+    parser = argparse.ArgumentParser()
+    add_render_flags(parser)
+    scene = load_scene(p)
+    args = parser.parse_args(["--sampler", "independent", "--seed", "2"])
+    assert (lambda o: (o.sampler, o.seed))(apply_scene_settings(options_from_args(args), scene, args)) == \
+        ("independent", 2)
+    args = parser.parse_args([])
+    assert (lambda o: (o.sampler, o.seed))(apply_scene_settings(options_from_args(args), scene, args)) == \
+        ("ldsampler", 5)
+
+
+@pytest.mark.parametrize("kw,what", [({"integrator": "ptracer"}, "light tracing"),
+                                     ({"mode": "wavefront"}, "wavefront")])
+def test_light_tracing_and_wavefront_say_they_draw_independent_samples(kw, what):
+    from drpt.options import RenderOptions
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    scene = load_scene("scenes/cornellbox/cornellbox.txt")
+    r = Renderer(scene, RenderOptions(width=8, height=8, spp=1, progress=False, sampler="ldsampler", **kw))
+    assert not r.ld_sampling and any(what in w and "independent" in w for w in r.warnings), r.warnings
