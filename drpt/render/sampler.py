@@ -118,8 +118,8 @@ class LDSampler:
         ``index``; ``seed`` is the render's."""
         from .renderer import _mix_seed
 
-        s = _mix_seed(seed, LD_STREAM) & 0xFFFFFFFF
-        key = mix32(UInt32(pixel) ^ dr.opaque(UInt32, s))
+        s = _mix_seed(seed, LD_STREAM)  # 64 bits: both halves go into the key
+        key = mix32(mix32(UInt32(pixel) ^ dr.opaque(UInt32, s & 0xFFFFFFFF)) + dr.opaque(UInt32, s >> 32))
         return cls(key, index, UInt32(step))
 
     def _seed(self) -> UInt32:
