@@ -1,9 +1,10 @@
 """Per-pixel variance at equal spp and equal-time efficiency of the samplers.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/sampler_variance.py SCENE [SIZE SPP SEEDS]
+    PYTHONPATH=. .venv/bin/python benchmarks/sampler_variance.py SCENE [SIZE SPP SEEDS [FILTER]]
 
 Renders ``SCENE`` at ``SIZE`` x ``SIZE`` with ``SPP`` samples per pixel and ``SEEDS`` seeds
-with each ``--sampler`` (independent, ldsampler), interleaved in one process, and prints per
+(and the ``--filter`` ``FILTER``, default the scene's) with each ``--sampler``
+(independent, ldsampler), interleaved in one process, and prints per
 sampler the mean over pixels of the variance of a pixel's value across seeds (a
 low-discrepancy sampler's samples are not independent, so the variance comes from
 independent renders, not from one render's samples), its ratio to the independent
@@ -33,6 +34,8 @@ def main(argv: list[str]) -> int:
     base = RenderOptions(width=size, height=size, spp=spp, progress=False)
     base = apply_scene_settings(base, scene)
     base = replace(base, width=size, height=size, spp=spp).validate()
+    if len(argv) > 4:
+        base = replace(base, filter=argv[4]).validate()
     renderers = {s: Renderer(scene, replace(base, sampler=s)) for s in SAMPLERS}
     for r in renderers.values():  # compile
         r.derive(replace(r.opt, seed=999)).render()
