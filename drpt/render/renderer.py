@@ -421,7 +421,9 @@ class Renderer:
         if not self.ld_sampling:
             return PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
                          initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
-        s0 = self.chunks.passes[pass_index][0]
+        plan = self.chunks.passes
+        s0 = pass_index // plan.bands * plan.k  # plan[pass_index]'s first sample (also past spp:
+        # a live view's frames go on)
         pixel = y * dr.opaque(UInt32, self.opt.width) + x
         return LDSampler.for_pixels(self.opt.seed, pixel, j + dr.opaque(UInt32, s0), step)
 
