@@ -161,3 +161,13 @@ def next_path(rng) -> None:
     the lane's next sample index; a PCG32 stream just goes on."""
     if isinstance(rng, LDSampler):
         rng.advance()
+
+
+def light_sample(scene, rng, u_sel: Float, u_light: Array2f, active) -> tuple[Float, Array2f]:
+    """The area light's selection and point samples for next-event estimation: with an
+    :class:`LDSampler` both from the stratified pair ``u_light`` (the selection from its
+    first value, which is then rescaled: :meth:`~drpt.render.lights.area.AreaLights.reuse`),
+    else ``(u_sel, u_light)`` as drawn."""
+    if isinstance(rng, LDSampler):
+        return scene.area_lights.reuse(u_light, active)
+    return u_sel, u_light

@@ -39,7 +39,7 @@ import drjit as dr
 from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32
 
 from ...options import PathOptions
-from ..sampler import next_2d, next_path
+from ..sampler import light_sample, next_2d, next_path
 from ..scene import DeviceScene
 from .common import DirectLight, power_heuristic
 
@@ -155,6 +155,7 @@ class PathIntegrator:
         u_sel = rng.next_float32()
         u_light = next_2d(rng)
         if nee:
+            u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
             L = L + s.beta * self.direct.area(si, u_sel, u_light, active, mis=True)
         if scene.has_delta_lights and scene.has_smooth_bsdfs:
             L = L + s.beta * self.direct.delta(si, active)

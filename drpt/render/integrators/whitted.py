@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import drjit as dr
 from drjit.auto import PCG32, Array3f, Bool, UInt32
 
-from ..sampler import next_2d
+from ..sampler import light_sample, next_2d
 from ..scene import DeviceScene
 from .common import DirectLight
 
@@ -79,6 +79,7 @@ class WhittedIntegrator:
             u_sel = rng.next_float32()
             u_light = next_2d(rng)
             if scene.has_area_lights:
+                u_sel, u_light = light_sample(scene, rng, u_sel, u_light, shade)
                 L += beta * direct.area(si, u_sel, u_light, shade, mis=False)
             if scene.has_delta_lights:
                 L += beta * direct.delta(si, shade)
