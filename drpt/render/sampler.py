@@ -14,15 +14,18 @@ random shuffle of the sample indices and its own random Owen scrambling of
 the values, both hashed from ``(seed, pixel, dimension)`` (Burley, "Practical
 Hash-based Owen Scrambling", JCGT 2020), so different dimensions, pixels and
 seeds are decorrelated and every draw is uniform in its own right; the
-shuffle is a nested uniform scramble of the index's bits, so any
-``2^m`` consecutive sample indices of a pixel (from a multiple of ``2^m``)
-keep the stratification. Mitsuba's ``ldsampler`` and pbrt-v4's
+shuffle is a nested uniform scramble of the index's bits (each bit flipped by
+a hash of the bits above it), which maps every aligned block of ``2^m``
+indices onto an aligned block, so any ``2^m`` consecutive sample indices of
+a pixel (from a multiple of ``2^m``) keep the stratification. Mitsuba's ``ldsampler`` and pbrt-v4's
 ``PaddedSobolSampler`` are built the same way.
 
 A path draws its dimensions in a fixed order (camera: pixel position, then the
 lens; each bounce: light selection, light point, environment direction, BSDF
 lobe, BSDF direction, Russian roulette), so each decision of each bounce has a
-dimension of its own. A sampler has PCG32's ``next_float32()`` plus
+dimension of its own. Next-event estimation picks its light from the light
+point's pair (:func:`light_sample`), so the points stay stratified over all
+the emitters' surfaces. A sampler has PCG32's ``next_float32()`` plus
 ``next_2d()``; :func:`next_2d` draws a pair from either (for PCG32 two
 ``next_float32()`` calls, so the independent sampler's kernels are unchanged).
 """
@@ -73,8 +76,8 @@ def owen_reversed(x: UInt32, seed: UInt32) -> UInt32:
 
 def shuffle(index: UInt32, seed: UInt32) -> UInt32:
     """A random permutation of the sample indices (nested uniform scramble of
-    the index bits): it maps each aligned block of ``2^m`` indices onto indices
-    with ``2^m`` distinct low ``m`` bits."""
+    the index bits): it maps each aligned block of ``2^m`` indices onto an
+    aligned block of ``2^m``."""
     return dr.brev(laine_karras(dr.brev(index), seed))
 
 
