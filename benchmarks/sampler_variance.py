@@ -8,7 +8,8 @@ Renders ``SCENE`` at ``SIZE`` x ``SIZE`` with ``SPP`` samples per pixel and ``SE
 sampler the mean over pixels of the variance of a pixel's value across seeds (a
 low-discrepancy sampler's samples are not independent, so the variance comes from
 independent renders, not from one render's samples), its ratio to the independent
-sampler's (and the same of the median over pixels, which a few fireflies do not sway), the
+sampler's (and the same of the median over the pixels that vary, which a few fireflies do not
+sway), the
 median render time, and the efficiency ratio ``1 / (variance x time)``
 relative to the independent sampler's (above 1: less noise in the same time).
 """
@@ -49,13 +50,14 @@ def main(argv: list[str]) -> int:
             times[s].append(time.perf_counter() - t0)
     pixel_var = {s: np.var(np.stack(images[s]), axis=0, ddof=1) for s in SAMPLERS}
     var = {s: float(pixel_var[s].mean()) for s in SAMPLERS}
-    med = {s: float(np.median(pixel_var[s])) for s in SAMPLERS}
+    seen = pixel_var[SAMPLERS[0]] > 0  # the median over pixels that vary
+    med = {s: float(np.median(pixel_var[s][seen])) if seen.any() else 0.0 for s in SAMPLERS}
     t = {s: float(np.median(times[s])) for s in SAMPLERS}
     ref = SAMPLERS[0]
     print(f"{scene_file} {size}x{size} {spp} spp, {seeds} seeds, filter {base.filter}")
     for s in SAMPLERS:
         print(f"  {s:12s} variance {var[s]:.4g} ({var[s] / var[ref]:.3f}x, median pixel "
-              f"{med[s] / med[ref]:.3f}x)  time {t[s]:.3f} s "
+              f"{med[s] / max(med[ref], 1e-300):.3g}x)  time {t[s]:.3f} s "
               f"({t[s] / t[ref]:.3f}x)  efficiency {var[ref] * t[ref] / (var[s] * t[s]):.2f}x")
     return 0
 
