@@ -297,3 +297,20 @@ def test_light_sample_reuse_keeps_the_selection_and_rescales_uniformly():
         if mine.sum() >= 32 * 20:
             assert _chi2_p(np.histogram(x[mine], 32, (0, 1))[0]) > 1e-4
             assert _chi2_p(np.histogram(ux[mine], 32, (0, 1))[0]) < 1e-4  # negative control
+
+
+@pytest.mark.mitsuba
+def test_sample_counts_round_as_mitsubas_samplers_do():
+    """drpt's reader takes the sample count Mitsuba's sampler plugins round ``sample_count``
+    to (ldsampler: square powers of two; stratified: squares; multijitter: r x ceil(n / r);
+    orthogonal: squares of primes), asked of Mitsuba's own plugins."""
+    import mitsuba as mi
+
+    from drpt.backend import mitsuba_variant
+    from drpt.scene.mitsuba.reader import mitsuba_sample_count
+
+    mi.set_variant(mitsuba_variant())
+    for plugin in ("independent", "ldsampler", "stratified", "multijitter", "orthogonal"):
+        for n in (1, 2, 5, 10, 16, 17, 50, 64, 100):
+            expected = mi.load_dict({"type": plugin, "sample_count": n}).sample_count()
+            assert mitsuba_sample_count(plugin, n) == expected, (plugin, n)

@@ -55,6 +55,34 @@ SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler
 FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
 
 
+def mitsuba_sample_count(plugin: str, spp: int) -> int:
+    """The samples per pixel Mitsuba's sampler ``plugin`` takes for ``sample_count`` ``spp``
+    (its ``set_sample_count``): ``ldsampler`` a square power of two (at least 4),
+    ``stratified`` a square, ``multijitter`` ``r (ceil(spp / r))`` with ``r = floor(sqrt(spp))``,
+    ``orthogonal`` the square of a prime; ``independent`` (and any other) ``spp``."""
+    if plugin == "ldsampler":
+        res = 2
+        while res * res < spp:
+            res = 1 << res.bit_length()  # Mitsuba's round_to_power_of_two(res + 1)
+        return res * res
+    if plugin == "stratified":
+        res = math.isqrt(spp)
+        return spp if res * res == spp else (res + 1) ** 2
+    if plugin == "multijitter":
+        r1 = math.isqrt(spp)
+        return r1 * -(-spp // r1)
+    if plugin == "orthogonal":
+        res = max(2, math.isqrt(spp - 1) + 1)  # the smallest res with res^2 >= spp
+
+        def prime(x: int) -> bool:
+            return all(x % d for d in range(2, math.isqrt(x) + 1))
+
+        while not prime(res):
+            res += 1
+        return res * res
+    return spp
+
+
 def _material(name: str, origin: str, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
     texture = None
     if isinstance(emission, Texture):  # a textured area emitter: its mean radiance for the power
@@ -279,7 +307,14 @@ class Reader:
             if spp is None or not 0 < spp <= MAX_SPP:
                 raise sampler.error(f"{sampler.label}: sample_count must be between 1 and {MAX_SPP}, "
                                     f"got {spp}")
-            self.settings.spp = spp
+            rounded = mitsuba_sample_count(sampler.plugin, spp)
+            if rounded != spp:
+                if rounded > MAX_SPP:
+                    raise sampler.error(f"{sampler.label}: sample_count {spp} rounds up to {rounded} "
+                                        f"(as Mitsuba rounds it), beyond {MAX_SPP}")
+                self.warn(f"{sampler.where}: sampler '{sampler.plugin}': sample_count {spp} rounded up "
+                          f"to {rounded}, as Mitsuba does")
+            self.settings.spp = rounded
             self.check_unread(sampler)
 
         aspect = width / height
