@@ -23,7 +23,8 @@ Mitsuba                   drpt
                           (box, tent, gaussian; default gaussian) as
                           ``settings.rfilter``/``rfilter_params``, which
                           become ``--filter`` unless it is given
-``independent`` (etc.)    ``settings.spp`` = ``sample_count`` (default 4),
+``independent`` (etc.)    ``settings.spp`` = ``sample_count`` (default 4,
+                          rounded up as Mitsuba's plugin rounds it),
                           ``settings.sampler`` (its name: ``--sampler``)
                           and ``settings.seed`` = ``seed``
 ``path``                  ``settings``: max_depth, rr_depth, hide_emitters
