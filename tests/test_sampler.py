@@ -314,3 +314,22 @@ def test_sample_counts_round_as_mitsubas_samplers_do():
         for n in (1, 2, 5, 10, 16, 17, 50, 64, 100):
             expected = mi.load_dict({"type": plugin, "sample_count": n}).sample_count()
             assert mitsuba_sample_count(plugin, n) == expected, (plugin, n)
+
+
+def test_the_image_does_not_depend_on_the_pass_layout():
+    """A pixel's samples are its sequence's indices 0..spp-1 whatever the passes, lanes per
+    pixel and path regeneration: renders with other max_lanes agree to float rounding
+    (1e-6, the sums' order). Negative control: independent samples do not (their streams
+    are the pass's and the lane's)."""
+    from drpt.options import RenderOptions
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    scene = load_scene("scenes/cornellbox/cornellbox.txt")
+    o = RenderOptions(width=16, height=16, spp=16, seed=5, progress=False, sampler="ldsampler")
+    ref = Renderer(scene, o).render().image
+    for lanes in (64, 256, 16 * 16 * 3):  # bands of rows, 1 and 3 samples per pixel a pass
+        assert np.abs(Renderer(scene, replace(o, max_lanes=lanes)).render().image - ref).max() < 1e-6
+    ind = replace(o, sampler="independent")
+    assert np.abs(Renderer(scene, replace(ind, max_lanes=256)).render().image
+                  - Renderer(scene, ind).render().image).max() > 1e-3
