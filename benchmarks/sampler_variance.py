@@ -4,7 +4,7 @@
 
 Renders ``SCENE`` at ``SIZE`` x ``SIZE`` with ``SPP`` samples per pixel and ``SEEDS`` seeds
 (and the ``--filter`` ``FILTER``, default the scene's) with each ``--sampler``
-(independent, ldsampler), interleaved in one process, and prints per
+(independent, ldsampler; ``DRPT_BSDF`` sets ``--bsdf``), interleaved in one process, and prints per
 sampler the mean over pixels of the variance of a pixel's value across seeds (a
 low-discrepancy sampler's samples are not independent, so the variance comes from
 independent renders, not from one render's samples), its ratio to the independent
@@ -14,6 +14,7 @@ median render time, and the efficiency ratio ``1 / (variance x time)``
 relative to the independent sampler's (above 1: less noise in the same time).
 """
 
+import os
 import sys
 import time
 from dataclasses import replace
@@ -33,7 +34,8 @@ def main(argv: list[str]) -> int:
     spp = int(argv[2]) if len(argv) > 2 else 16
     seeds = int(argv[3]) if len(argv) > 3 else 8
     scene = load_scene(scene_file)
-    base = RenderOptions(width=size, height=size, spp=spp, progress=False)
+    base = RenderOptions(width=size, height=size, spp=spp, progress=False,
+                         bsdf=os.environ.get("DRPT_BSDF", "auto"))
     base = apply_scene_settings(base, scene)
     base = replace(base, width=size, height=size, spp=spp).validate()
     if len(argv) > 4:
