@@ -4,13 +4,13 @@
 
 Renders ``SCENE`` at ``SIZE`` x ``SIZE`` with ``SPP`` samples per pixel and ``SEEDS`` seeds
 (and the ``--filter`` ``FILTER``, default the scene's) with each ``--sampler``
-(independent, ldsampler; ``DRPT_BSDF`` sets ``--bsdf``), interleaved in one process, and prints per
+(independent, ldsampler, zsobol; ``DRPT_BSDF`` sets ``--bsdf``), interleaved in one process, and prints per
 sampler the mean over pixels of the variance of a pixel's value across seeds (a
 low-discrepancy sampler's samples are not independent, so the variance comes from
 independent renders, not from one render's samples), its ratio to the independent
 sampler's (and the same of the median over the pixels that vary, which a few fireflies do not
-sway), the
-median render time, and the efficiency ratio ``1 / (variance x time)``
+sway) and of the means of 4x4 pixel blocks (where an error spread as blue noise averages
+out), the median render time, and the efficiency ratio ``1 / (variance x time)``
 relative to the independent sampler's (above 1: less noise in the same time).
 """
 
@@ -25,7 +25,7 @@ from drpt.options import RenderOptions, apply_scene_settings
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
-SAMPLERS = ("independent", "ldsampler")
+SAMPLERS = ("independent", "ldsampler", "zsobol")
 
 
 def main(argv: list[str]) -> int:
@@ -52,6 +52,12 @@ def main(argv: list[str]) -> int:
             times[s].append(time.perf_counter() - t0)
     pixel_var = {s: np.var(np.stack(images[s]), axis=0, ddof=1) for s in SAMPLERS}
     var = {s: float(pixel_var[s].mean()) for s in SAMPLERS}
+    def blocks(im):  # 4x4 pixel blocks' means: how the error averages out over neighbours
+        h, w = im.shape[0] // 4 * 4, im.shape[1] // 4 * 4
+        return im[:h, :w].reshape(h // 4, 4, w // 4, 4, -1).mean((1, 3))
+
+    block_var = {s: float(np.var(np.stack([blocks(im) for im in images[s]]), axis=0, ddof=1).mean())
+                 for s in SAMPLERS}
     seen = pixel_var[SAMPLERS[0]] > 0  # the median over pixels that vary
     med = {s: float(np.median(pixel_var[s][seen])) if seen.any() else 0.0 for s in SAMPLERS}
     t = {s: float(np.median(times[s])) for s in SAMPLERS}
@@ -59,7 +65,8 @@ def main(argv: list[str]) -> int:
     print(f"{scene_file} {size}x{size} {spp} spp, {seeds} seeds, filter {base.filter}")
     for s in SAMPLERS:
         print(f"  {s:12s} variance {var[s]:.4g} ({var[s] / var[ref]:.3f}x, median pixel "
-              f"{med[s] / max(med[ref], 1e-300):.3g}x)  time {t[s]:.3f} s "
+              f"{med[s] / max(med[ref], 1e-300):.3g}x, 4x4 blocks {block_var[s] / block_var[ref]:.3f}x)"
+              f"  time {t[s]:.3f} s "
               f"({t[s] / t[ref]:.3f}x)  efficiency {var[ref] * t[ref] / (var[s] * t[s]):.2f}x")
     return 0
 

@@ -38,7 +38,7 @@ ENV_SAMPLING = ("luminance", "uniform")
 LIGHT_SAMPLERS = ("power", "uniform")  # drpt.render.lights.area
 #: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy sampler, and
 #: Mitsuba's other sampler plugins, which draw from the low-discrepancy one
-SAMPLERS = ("independent", "ldsampler", "stratified", "multijitter", "orthogonal")
+SAMPLERS = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "orthogonal")
 BVH_KINDS = ("bvh", "bvh2", "bvh4")
 GRID_MAX_RESOLUTION = 256
 
@@ -316,7 +316,9 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
         parser.add_argument("--sampler", choices=SAMPLERS, default=None, action=_Given,
                             help="sample generator: independent (a random stream per sample) or "
                                  "ldsampler (a padded Owen-scrambled Sobol (0,2)-sequence per "
-                                 "pixel: less noise per sample); stratified, multijitter and "
+                                 "pixel: less noise per sample), zsobol (one such sequence over the "
+                                 "image in Morton order: its error as blue noise); stratified, "
+                                 "multijitter and "
                                  "orthogonal (Mitsuba's names) draw from ldsampler's sequence "
                                  f"(default {RenderOptions.sampler}, or the scene file's)")
     if want("accel"):

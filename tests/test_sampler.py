@@ -9,8 +9,9 @@ renders with it.
   histogram). Negative control: values bent by ``u^1.15`` fail it.
 * Stratified: for 64 samples of a pixel, each of the 64 cells of every elementary grid
   (``2^a x 2^b``, ``a + b = 6``) of a 2-D draw holds one sample; for 1-D draws each of the
-  64 intervals; also for samples 64..127 and for dimensions of a later bounce. Negative
-  control: PCG32's values are not.
+  64 intervals; also for samples 64..127 (``zsobol``: for a pixel's whole block of 128, as
+  pbrt's ZSobolSampler stratifies the spp rounded up to a power of two) and for dimensions
+  of a later bounce. Negative control: PCG32's values are not.
 * Renders are unbiased: drpt with ``--sampler ldsampler`` against Mitsuba by the 8x8 block
   z-test (``|z| < 4.5``, image mean ``|z| < 4``, as the corpus tests); drpt's per-pixel
   variance comes from the samples' squares, which for correlated (stratified) samples
@@ -30,7 +31,7 @@ import pytest
 from drjit.auto import PCG32, Array2f, UInt32, UInt64
 from scipy.stats import chi2
 
-from drpt.render.sampler import LDSampler, sobol1_reversed
+from drpt.render.sampler import LDSampler, ZSobolSampler, sobol1_reversed
 
 
 def _sobol1_matrix(i: int) -> int:
@@ -50,11 +51,17 @@ def test_sobol_second_dimension_matches_its_generator_matrix():
     assert (got == np.array([_sobol1_matrix(int(i)) for i in idx], np.uint32)).all()
 
 
-def _draws(seed: int, pixels: int, spp: int, start: int = 0, skip: int = 0):
+def _draws(seed: int, pixels: int, spp: int, start: int = 0, skip: int = 0, kind: str = "ldsampler"):
     """One 1-D draw and one 2-D draw (after ``skip`` dimensions) of ``spp`` samples from
-    ``start`` of each of ``pixels`` pixels: numpy ``(pixels, spp)`` arrays ``u, x, y``."""
+    ``start`` of each of ``pixels`` pixels (of a 64-pixel-wide image for ``zsobol``):
+    numpy ``(pixels, spp)`` arrays ``u, x, y``."""
     lane = dr.arange(UInt32, pixels * spp)
-    s = LDSampler.for_pixels(seed, lane // spp, lane % spp + start)
+    pixel, index = lane // spp, lane % spp + start
+    if kind == "zsobol":
+        cls = ZSobolSampler.for_image(64, -(-pixels // 64), start + spp)
+        s = cls.for_pixels_xy(seed, pixel % 64, pixel // 64, index)
+    else:
+        s = LDSampler.for_pixels(seed, pixel, index)
     for _ in range(skip):
         s.next_float32()
     u = s.next_float32()
@@ -76,9 +83,10 @@ def _uniform_p(u, x, y, bend=1.0):
     return p1, p2
 
 
+@pytest.mark.parametrize("kind", ["ldsampler", "zsobol"])
 @pytest.mark.parametrize("skip", [0, 37])
-def test_values_are_uniform(skip):
-    u, x, y = _draws(5, 16384, 4, skip=skip)
+def test_values_are_uniform(skip, kind):
+    u, x, y = _draws(5, 16384, 4, skip=skip, kind=kind)
     # one sample per pixel: pixels' scrambles are independent, so the values are too
     p1, p2 = _uniform_p(u[:, 1], x[:, 1], y[:, 1])
     assert p1 > 1e-4 and p2 > 1e-4, (p1, p2)
@@ -96,10 +104,13 @@ def _stratified(x, y, spp: int) -> bool:
     return True
 
 
+@pytest.mark.parametrize("kind", ["ldsampler", "zsobol"])
 @pytest.mark.parametrize("start,skip", [(0, 0), (64, 0), (0, 20), (128, 41)])
-def test_a_pixels_samples_are_stratified(start, skip):
+def test_a_pixels_samples_are_stratified(start, skip, kind):
     spp = 64
-    u, x, y = _draws(11, 50, spp, start, skip)
+    if kind == "zsobol":  # its pixel's whole block of 2^m samples (64, or 128: odd m)
+        start, spp = 0, 64 if start == 0 else 128
+    u, x, y = _draws(11, 50, spp, start, skip, kind)
     assert all(len(set(np.floor(row * spp).astype(int))) == spp for row in u)
     assert _stratified(x, y, spp)
     # negative control: independent samples are not
@@ -128,9 +139,10 @@ class _DiagonalSampler(LDSampler):
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("name,control", [("meshes", False), ("lens", False), ("glossy", False),
-                                          ("meshes", True)])
-def test_ldsampler_renders_like_mitsuba(name, control, monkeypatch):
+@pytest.mark.parametrize("name,control,kind", [("meshes", False, "ldsampler"), ("lens", False, "ldsampler"),
+                                               ("glossy", False, "ldsampler"), ("meshes", True, "ldsampler"),
+                                               ("glossy", False, "zsobol"), ("lens", False, "zsobol")])
+def test_ldsampler_renders_like_mitsuba(name, control, kind, monkeypatch):
     from render_check import block_z
     from test_mitsuba_xml import XML, _mean_z, _render_both, load
 
@@ -139,7 +151,7 @@ def test_ldsampler_renders_like_mitsuba(name, control, monkeypatch):
 
         monkeypatch.setattr(renderer, "LDSampler", _DiagonalSampler)
     scene, _ = load(name)
-    r, ref, var = _render_both(scene, XML / f"{name}.xml", 256, sampler="ldsampler")
+    r, ref, var = _render_both(scene, XML / f"{name}.xml", 256, sampler=kind)
     z = np.abs(block_z(r.image.astype(np.float64), r.variance, ref, var)).max()
     zmean = np.abs(_mean_z(r, ref, var)).max()
     if control:
@@ -150,8 +162,8 @@ def test_ldsampler_renders_like_mitsuba(name, control, monkeypatch):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("kw", [{}, {"filter": "gaussian"}, {"integrator": "whitted"},
-                                {"filter": "tent", "filter_sampling": True}],
-                         ids=["path", "gaussian-splatting", "whitted", "filter-sampling"])
+                                {"filter": "tent", "filter_sampling": True}, {"sampler": "zsobol"}],
+                         ids=["path", "gaussian-splatting", "whitted", "filter-sampling", "zsobol"])
 def test_chunked_and_resumed_renders_are_the_plain_render(tmp_path, kw):
     """A render in chunks of one sample per pixel, interrupted after 3 chunks and resumed from
     its checkpoint, gives the plain render's image bit for bit; another seed another image."""
@@ -161,8 +173,8 @@ def test_chunked_and_resumed_renders_are_the_plain_render(tmp_path, kw):
     from drpt.scene import load_scene
 
     scene = load_scene("scenes/cornellbox/cornellbox.txt")
-    o = RenderOptions(width=16, height=12, spp=12, seed=7, progress=False, sampler="ldsampler",
-                      max_lanes=16 * 12 * 4, chunk_spp=1, **kw)
+    o = RenderOptions(width=16, height=12, spp=12, seed=7, progress=False,
+                      max_lanes=16 * 12 * 4, chunk_spp=1, **{"sampler": "ldsampler", **kw})
     plain = Renderer(scene, o).render()
     other = Renderer(scene, replace(o, seed=8)).render()
     assert (plain.image != other.image).any()
@@ -326,10 +338,23 @@ def test_the_image_does_not_depend_on_the_pass_layout():
     from drpt.scene import load_scene
 
     scene = load_scene("scenes/cornellbox/cornellbox.txt")
-    o = RenderOptions(width=16, height=16, spp=16, seed=5, progress=False, sampler="ldsampler")
-    ref = Renderer(scene, o).render().image
-    for lanes in (64, 256, 16 * 16 * 3):  # bands of rows, 1 and 3 samples per pixel a pass
-        assert np.abs(Renderer(scene, replace(o, max_lanes=lanes)).render().image - ref).max() < 1e-6
+    for kind in ("ldsampler", "zsobol"):
+        o = RenderOptions(width=16, height=16, spp=16, seed=5, progress=False, sampler=kind)
+        ref = Renderer(scene, o).render().image
+        for lanes in (64, 256, 16 * 16 * 3):  # bands of rows, 1 and 3 samples per pixel a pass
+            assert np.abs(Renderer(scene, replace(o, max_lanes=lanes)).render().image - ref).max() < 1e-6
     ind = replace(o, sampler="independent")
     assert np.abs(Renderer(scene, replace(ind, max_lanes=256)).render().image
                   - Renderer(scene, ind).render().image).max() > 1e-3
+
+
+def test_zsobol_beyond_32_index_bits_draws_from_the_ldsampler_with_a_warning():
+    from drpt.options import RenderOptions
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    scene = load_scene("scenes/cornellbox/cornellbox.txt")
+    big = Renderer(scene, RenderOptions(width=4096, height=2048, spp=512, progress=False, sampler="zsobol"))
+    assert big._zsobol is None and any("32 bits" in w for w in big.warnings), big.warnings
+    fits = Renderer(scene, RenderOptions(width=4096, height=2048, spp=256, progress=False, sampler="zsobol"))
+    assert fits._zsobol is not None and not any("32 bits" in w for w in fits.warnings)

@@ -76,7 +76,7 @@ from .integrators.ptracer import ParticleTracer
 from .integrators.wavefront import WavefrontIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lights.rays import EmitterRays
-from .sampler import LDSampler, next_2d, uses_ld
+from .sampler import LDSampler, ZSobolSampler, next_2d, uses_ld
 from .scene import DeviceScene
 
 
@@ -212,6 +212,9 @@ class Renderer:
         if uses_ld(options.sampler) and not self.ld_sampling:
             what = "light tracing" if self.light_tracing else "the wavefront mode"
             self.warnings.append(f"--sampler {options.sampler}: {what} draws independent samples")
+        elif options.sampler == "zsobol" and self._zsobol is None:
+            self.warnings.append("--sampler zsobol: the image's Morton codes and the sample index "
+                                 "need more than 32 bits: ldsampler's sequences instead")
         self._aov_ids = None
         if self.aov_kinds:
             self._aov_index_arrays()  # a scene without shape data is an error before rendering
@@ -424,8 +427,20 @@ class Renderer:
         plan = self.chunks.passes
         s0 = pass_index // plan.bands * plan.k  # plan[pass_index]'s first sample (also past spp:
         # a live view's frames go on)
+        index = j + dr.opaque(UInt32, s0)
+        zsobol = self._zsobol
+        if zsobol is not None:
+            return zsobol.for_pixels_xy(self.opt.seed, x, y, index, step)
         pixel = y * dr.opaque(UInt32, self.opt.width) + x
-        return LDSampler.for_pixels(self.opt.seed, pixel, j + dr.opaque(UInt32, s0), step)
+        return LDSampler.for_pixels(self.opt.seed, pixel, index, step)
+
+    @property
+    def _zsobol(self):
+        """With ``--sampler zsobol``: the :class:`~drpt.render.sampler.ZSobolSampler` class of
+        this image size and spp (None otherwise, or where its index does not fit 32 bits:
+        then ``ldsampler``'s sequences, with a warning)."""
+        o = self.opt
+        return ZSobolSampler.for_image(o.width, o.height, o.spp) if o.sampler == "zsobol" else None
 
     def _trace_light_pass(self, pass_index: int, n: int) -> tuple[np.ndarray, np.ndarray, int]:
         """``n`` light paths (:class:`~drpt.render.integrators.ptracer.ParticleTracer`)

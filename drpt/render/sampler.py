@@ -41,7 +41,7 @@ from ..options import SAMPLERS  # noqa: F401  (the --sampler names)
 LD_STREAM = 0x5A3B1E
 
 
-def uses_ld(name: str) -> bool:
+def uses_ld(name: str) -> bool:  # (zsobol too: ZSobolSampler is an LDSampler)
     """Whether the ``--sampler`` ``name`` draws from :class:`LDSampler`."""
     return name != "independent"
 
@@ -174,3 +174,92 @@ def light_sample(scene, rng, u_sel: Float, u_light: Array2f, active) -> tuple[Fl
     if isinstance(rng, LDSampler):
         return scene.area_lights.reuse(u_light, active)
     return u_sel, u_light
+
+
+def _morton2(x: UInt32, y: UInt32) -> UInt32:
+    """The Morton (Z-order) code of ``(x, y)`` (16 bits each): x in the even bits."""
+    def spread(v):
+        v = (v | (v << 8)) & 0x00FF00FF
+        v = (v | (v << 4)) & 0x0F0F0F0F
+        v = (v | (v << 2)) & 0x33333333
+        return (v | (v << 1)) & 0x55555555
+    return spread(UInt32(x)) | (spread(UInt32(y)) << 1)
+
+
+#: the 24 permutations of (0, 1, 2, 3), each packed in 8 bits (2 bits per image)
+_PERMS = [sum(p[i] << (2 * i) for i in range(4)) for p in __import__("itertools").permutations(range(4))]
+
+
+class ZSobolSampler(LDSampler):
+    """pbrt-v4's ``ZSobolSampler`` (Ahmed and Wonka, "Screen-Space Blue-Noise Diffusion of
+    Monte Carlo Sampling Error via Hierarchical Ordering of Pixels", 2020): one Owen-scrambled
+    Sobol (0,2)-sequence over the whole image, whose index is the pixel's Morton code
+    followed by the sample's index, with each base-4 digit of it permuted by a hash of the
+    digits above it and the dimension. A pixel's samples are an aligned block of the
+    sequence (stratified as :class:`LDSampler`'s), and neighbouring pixels' blocks are
+    stratified together, so the error is spread as blue noise. ``key`` holds the pixel's
+    Morton code shifted past the sample bits; :meth:`for_image` makes the class of an image
+    size and spp (its digit counts are class attributes)."""
+
+    log2spp = 0
+    digits = 0
+
+    @classmethod
+    def for_image(cls, width: int, height: int, spp: int) -> type:
+        """The class for an image of ``width x height`` pixels and ``spp`` samples per
+        pixel (None where the index does not fit 32 bits)."""
+        log2spp = max(0, (spp - 1).bit_length())
+        log2res = max(0, (max(width, height) - 1).bit_length())
+        if 2 * log2res + log2spp > 32:
+            return None
+        return type(f"ZSobol_{log2res}_{log2spp}", (cls,),
+                    {"log2spp": log2spp, "digits": log2res + (log2spp + 1) // 2})
+
+    @classmethod
+    def for_pixels_xy(cls, seed: int, x: UInt32, y: UInt32, index: UInt32, step: UInt32 | int = 1):
+        """A sampler of pixels ``(x, y)`` at sample ``index`` (``step``: as
+        :meth:`LDSampler.for_pixels`); ``seed`` is the render's."""
+        from .renderer import _mix_seed
+
+        s = _mix_seed(seed, LD_STREAM) & 0xFFFFFFFF
+        out = cls(_morton2(x, y) << cls.log2spp, index, UInt32(step))
+        out.seed = dr.opaque(UInt32, s) + dr.zeros(UInt32, dr.width(out.index))
+        return out
+
+    DRJIT_STRUCT = {"key": UInt32, "index": UInt32, "step": UInt32, "dim": UInt32, "seed": UInt32}
+
+    def __init__(self, key=None, index=None, step=None):
+        super().__init__(key, index, step)
+        self.seed = UInt32(0)
+
+    def _sample_index(self) -> UInt32:
+        """The sequence index of the current sample and dimension (pbrt's GetSampleIndex)."""
+        m = self.key | self.index
+        odd = self.log2spp & 1
+        dimhash = self.dim * 0x55555555
+        out = dr.zeros(UInt32, dr.width(m))
+        table = UInt32(_PERMS)
+        for i in range(self.digits - 1, odd - 1, -1):
+            shift = 2 * i - odd
+            digit = (m >> shift) & 3
+            higher = m >> (shift + 2) if shift + 2 < 32 else UInt32(0)
+            p = (mix32(higher ^ dimhash) >> 24) % 24
+            perm = dr.gather(UInt32, table, p)
+            out |= ((perm >> (2 * digit)) & 3) << shift
+        if odd:
+            out |= (m & 1) ^ (mix32((m >> 1) ^ dimhash) & 1)
+        return out
+
+    def next_float32(self) -> Float:
+        i = self._sample_index()
+        h = mix32(self.seed ^ (self.dim * 0x9E3779B9))
+        self.dim += 1
+        return to_float(owen_reversed(i, h))
+
+    def next_2d(self) -> Array2f:
+        i = self._sample_index()
+        h = mix32(self.seed ^ (self.dim * 0x9E3779B9))
+        self.dim += 2
+        x = owen_reversed(i, mix32(h ^ 0x68E31DA4))
+        y = owen_reversed(sobol1_reversed(i), mix32(h ^ 0xB5297A4D))
+        return Array2f(to_float(x), to_float(y))
