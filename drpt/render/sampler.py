@@ -18,7 +18,10 @@ shuffle is a nested uniform scramble of the index's bits (each bit flipped by
 a hash of the bits above it), which maps every aligned block of ``2^m``
 indices onto an aligned block, so any ``2^m`` consecutive sample indices of
 a pixel (from a multiple of ``2^m``) keep the stratification. Mitsuba's ``ldsampler`` and pbrt-v4's
-``PaddedSobolSampler`` are built the same way.
+``PaddedSobolSampler`` are built the same way. ``zsobol``
+(:class:`ZSobolSampler`, pbrt-v4's ``ZSobolSampler``) draws from one such
+sequence over the whole image in Morton order instead, which spreads the
+remaining error as blue noise.
 
 A path draws its dimensions in a fixed order (camera: pixel position, then the
 lens; each bounce: light selection, light point, environment direction, BSDF
