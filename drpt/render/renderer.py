@@ -210,8 +210,7 @@ class Renderer:
         self.warnings: list[str] = self.scene.warnings
         self.integrator = self._make_integrator()
         if uses_ld(options.sampler) and not self.ld_sampling:
-            what = "light tracing" if self.light_tracing else "the wavefront mode"
-            self.warnings.append(f"--sampler {options.sampler}: {what} draws independent samples")
+            self.warnings.append(f"--sampler {options.sampler}: light tracing draws independent samples")
         elif options.sampler == "zsobol" and self._zsobol is None:
             self.warnings.append("--sampler zsobol: the image's Morton codes and the sample index "
                                  "need more than 32 bits: ldsampler's sequences instead")
@@ -409,12 +408,10 @@ class Renderer:
 
     @property
     def ld_sampling(self) -> bool:
-        """Whether camera passes draw from the low-discrepancy sampler
+        """Whether camera passes draw from a low-discrepancy sampler
         (:mod:`drpt.render.sampler`): ``--sampler`` other than ``independent``,
-        for the megakernel's path and Whitted integrators (light tracing and the
-        wavefront mode draw independent samples)."""
-        return (uses_ld(self.opt.sampler) and not self.light_tracing
-                and not isinstance(self.integrator, WavefrontIntegrator))
+        but for light tracing (which draws independent samples)."""
+        return uses_ld(self.opt.sampler) and not self.light_tracing
 
     def _sampler(self, pass_index: int, n: int, x: UInt32, y: UInt32, j: UInt32, step):
         """The random numbers of a camera pass's ``n`` lanes: the lane's PCG32 stream

@@ -266,3 +266,31 @@ class ZSobolSampler(LDSampler):
         x = owen_reversed(i, mix32(h ^ 0x68E31DA4))
         y = owen_reversed(sobol1_reversed(i), mix32(h ^ 0xB5297A4D))
         return Array2f(to_float(x), to_float(y))
+
+
+def pack(rng) -> tuple:
+    """A sampler's state as two UInt64 arrays (the wavefront integrator's buffers): a PCG32's
+    ``(state, inc)``; an :class:`LDSampler`'s ``key | index << 32`` and ``dim | step << 32``
+    (a :class:`ZSobolSampler`'s ``seed`` in place of ``step``, which one path per lane does
+    not use)."""
+    from drjit.auto import UInt64
+
+    if not isinstance(rng, LDSampler):
+        return rng.state, rng.inc
+    other = rng.seed if isinstance(rng, ZSobolSampler) else rng.step
+    return (UInt64(rng.key) | (UInt64(rng.index) << 32), UInt64(rng.dim) | (UInt64(other) << 32))
+
+
+def unpack(kind: type, a, b):
+    """The sampler of class ``kind`` whose state :func:`pack` gave as ``(a, b)``."""
+    if not issubclass(kind, LDSampler):
+        rng = kind()
+        rng.state, rng.inc = a, b
+        return rng
+    rng = kind(UInt32(a), UInt32(a >> 32), UInt32(1))
+    rng.dim = UInt32(b)
+    if issubclass(kind, ZSobolSampler):
+        rng.seed = UInt32(b >> 32)
+    else:
+        rng.step = UInt32(b >> 32)
+    return rng
