@@ -162,8 +162,9 @@ def test_ldsampler_renders_like_mitsuba(name, control, kind, monkeypatch):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("kw", [{}, {"filter": "gaussian"}, {"integrator": "whitted"},
-                                {"filter": "tent", "filter_sampling": True}, {"sampler": "zsobol"}],
-                         ids=["path", "gaussian-splatting", "whitted", "filter-sampling", "zsobol"])
+                                {"filter": "tent", "filter_sampling": True}, {"sampler": "zsobol"},
+                                {"integrator": "ptracer"}],
+                         ids=["path", "gaussian-splatting", "whitted", "filter-sampling", "zsobol", "ptracer"])
 def test_chunked_and_resumed_renders_are_the_plain_render(tmp_path, kw):
     """A render in chunks of one sample per pixel, interrupted after 3 chunks and resumed from
     its checkpoint, gives the plain render's image bit for bit; another seed another image."""
@@ -191,7 +192,8 @@ def test_chunked_and_resumed_renders_are_the_plain_render(tmp_path, kw):
 
 #: Mitsuba corpus scenes rendered with --sampler ldsampler (their files ask for independent)
 CORPUS_LD = ("bsdf_spheres/test_arealight_path.xml", "bsdf_spheres/test_textured_roughconductor_path.xml",
-             "bsdf_spheres/test_envmap_path.xml", "spot_light/test_spot_direct.xml")
+             "bsdf_spheres/test_envmap_path.xml", "spot_light/test_spot_direct.xml",
+             "various_emitters/test_various_emitters_ptracer.xml")
 
 
 def _corpus_ld(rel: str, spp: int, sampler: str = "ldsampler"):
@@ -270,15 +272,17 @@ def test_the_command_line_sampler_and_seed_win_over_the_files(tmp_path):
         ("ldsampler", 5)
 
 
-def test_light_tracing_says_it_draws_independent_samples():
+def test_light_tracing_beyond_2_32_paths_says_it_draws_independent_samples():
     from drpt.options import RenderOptions
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
     scene = load_scene("scenes/cornellbox/cornellbox.txt")
-    r = Renderer(scene, RenderOptions(width=8, height=8, spp=1, progress=False, sampler="ldsampler",
-                                      integrator="ptracer"))
-    assert not r.ld_sampling and any("light tracing" in w and "independent" in w for w in r.warnings)
+    o = RenderOptions(width=65536, height=65536, spp=2, progress=False, sampler="ldsampler", integrator="ptracer")
+    r = Renderer(scene, o)
+    assert not r.ld_sampling and any("2^32 paths" in w and "independent" in w for w in r.warnings)
+    r = Renderer(scene, replace(o, spp=1))
+    assert r.ld_sampling and not r.warnings
 
 
 @pytest.mark.slow

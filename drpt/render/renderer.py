@@ -210,8 +210,12 @@ class Renderer:
         self.warnings: list[str] = self.scene.warnings
         self.integrator = self._make_integrator()
         if uses_ld(options.sampler) and not self.ld_sampling:
-            self.warnings.append(f"--sampler {options.sampler}: light tracing draws independent samples")
-        elif options.sampler == "zsobol" and self._zsobol is None:
+            self.warnings.append(f"--sampler {options.sampler}: light tracing beyond 2^32 paths "
+                                 "(width x height x spp) draws independent samples")
+        elif options.sampler == "zsobol" and self.light_tracing:
+            self.warnings.append("--sampler zsobol: light tracing draws from one ldsampler sequence "
+                                 "of all its paths")
+        elif options.sampler == "zsobol" and self._zsobol is None and not self.light_tracing:
             self.warnings.append("--sampler zsobol: the image's Morton codes and the sample index "
                                  "need more than 32 bits: ldsampler's sequences instead")
         self._aov_ids = None
@@ -408,10 +412,11 @@ class Renderer:
 
     @property
     def ld_sampling(self) -> bool:
-        """Whether camera passes draw from a low-discrepancy sampler
-        (:mod:`drpt.render.sampler`): ``--sampler`` other than ``independent``,
-        but for light tracing (which draws independent samples)."""
-        return uses_ld(self.opt.sampler) and not self.light_tracing
+        """Whether passes draw from a low-discrepancy sampler
+        (:mod:`drpt.render.sampler`): ``--sampler`` other than ``independent``
+        (light tracing: one sequence of all its paths, while they are at most 2^32)."""
+        o = self.opt
+        return uses_ld(o.sampler) and (not self.light_tracing or o.width * o.height * o.spp <= 1 << 32)
 
     def _sampler(self, pass_index: int, n: int, x: UInt32, y: UInt32, j: UInt32, step):
         """The random numbers of a camera pass's ``n`` lanes: the lane's PCG32 stream
@@ -444,8 +449,17 @@ class Renderer:
         splatted into a film of the whole image: its sums and sums of squares ``(H, W,
         3)`` and the non-finite contributions dropped. Their random numbers come from
         the same ``(seed, pass, lane)`` streams as a camera pass's."""
-        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
-                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+        if self.ld_sampling:
+            # one sequence of all the render's light paths: pass (s0, k, r0, ..)'s lane j is
+            # path s0 W H + r0 W k + j (W H spp < 2^32: ld_sampling)
+            plan = self.chunks.passes
+            step, band = divmod(pass_index, plan.bands)
+            first = step * plan.k * self.opt.width * self.opt.height + band * plan.rows * self.opt.width * plan.k
+            rng = LDSampler.for_pixels(self.opt.seed, UInt32(0),
+                                       dr.arange(UInt32, n) + dr.opaque(UInt32, first))
+        else:
+            rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
+                        initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
         film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
         bad = self.integrator.trace(rng, film, dr.full(Bool, True, n))
         with llvm_tuning.blocks_for(n):
