@@ -381,3 +381,16 @@ def test_zsobol_beyond_32_index_bits_draws_from_the_ldsampler_with_a_warning():
     assert big._zsobol is None and any("32 bits" in w for w in big.warnings), big.warnings
     fits = Renderer(scene, RenderOptions(width=4096, height=2048, spp=256, progress=False, sampler="zsobol"))
     assert fits._zsobol is not None and not any("32 bits" in w for w in fits.warnings)
+
+
+@pytest.mark.parametrize("w,h,spp,lanes", [(7, 5, 11, 40), (7, 5, 11, 1000), (16, 12, 9, 64), (5, 3, 4, 10)])
+def test_passes_first_samples_number_every_sample_once(w, h, spp, lanes):
+    """PassPlan.first_sample (light tracing's path index in its one sequence): the passes'
+    ranges ``first .. first + k rows W`` cover 0 .. W H spp - 1 once each."""
+    from drpt.render.renderer import plan_passes
+
+    plan = plan_passes(w, h, spp, lanes)
+    seen = []
+    for i, (_s0, k, _r0, rows) in enumerate(plan):
+        seen += range(plan.first_sample(i), plan.first_sample(i) + k * rows * w)
+    assert sorted(seen) == list(range(w * h * spp))

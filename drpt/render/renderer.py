@@ -180,6 +180,14 @@ class PassPlan:
         s0, r0 = step * self.k, band * self.rows
         return s0, min(self.k, self.spp - s0), r0, min(self.rows, self.height - r0)
 
+    def first_sample(self, i: int) -> int:
+        """The index of pass ``i``'s first sample among the render's ``W H spp``, in pass
+        order (``(s0 H + r0 k) W``; also past the last pass: a live view's frames go on)."""
+        step, band = divmod(i, self.bands)
+        s0 = step * self.k
+        k = max(1, min(self.k, self.spp - s0))
+        return (s0 * self.height + band * self.rows * k) * self.width
+
     def __iter__(self) -> Iterator[tuple[int, int, int, int]]:
         for i in range(self.count):
             yield self[i]
@@ -450,11 +458,9 @@ class Renderer:
         3)`` and the non-finite contributions dropped. Their random numbers come from
         the same ``(seed, pass, lane)`` streams as a camera pass's."""
         if self.ld_sampling:
-            # one sequence of all the render's light paths: pass (s0, k, r0, ..)'s lane j is
-            # path s0 W H + r0 W k + j (W H spp < 2^32: ld_sampling)
-            plan = self.chunks.passes
-            step, band = divmod(pass_index, plan.bands)
-            first = step * plan.k * self.opt.width * self.opt.height + band * plan.rows * self.opt.width * plan.k
+                # one sequence of all the render's light paths: lane j of a pass is path
+            # first_sample + j (W H spp <= 2^32: ld_sampling)
+            first = self.chunks.passes.first_sample(pass_index)
             rng = LDSampler.for_pixels(self.opt.seed, UInt32(0),
                                        dr.arange(UInt32, n) + dr.opaque(UInt32, first))
         else:
