@@ -460,7 +460,7 @@ class Renderer:
         if self.ld_sampling:
                 # one sequence of all the render's light paths: lane j of a pass is path
             # first_sample + j (W H spp <= 2^32: ld_sampling)
-            first = self.chunks.passes.first_sample(pass_index)
+            first = self.chunks.passes.first_sample(pass_index) & 0xFFFFFFFF  # (a live view: wraps)
             rng = LDSampler.for_pixels(self.opt.seed, UInt32(0),
                                        dr.arange(UInt32, n) + dr.opaque(UInt32, first))
         else:
