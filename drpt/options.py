@@ -36,6 +36,9 @@ INTEGRATORS = ("path", "whitted", "ptracer")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
 LIGHT_SAMPLERS = ("power", "uniform")  # drpt.render.lights.area
+#: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy sampler, and
+#: Mitsuba's other sampler plugins, which draw from the low-discrepancy one
+SAMPLERS = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "orthogonal")
 BVH_KINDS = ("bvh", "bvh2", "bvh4")
 GRID_MAX_RESOLUTION = 256
 
@@ -79,6 +82,9 @@ class RenderOptions:
     #: how next-event estimation picks an area light: "power" (each emissive primitive by its
     #: power) or "uniform" (Mitsuba's: each emitter alike, then a point by area)
     light_sampler: str = "power"
+    #: what the camera passes' random numbers are drawn from (:mod:`drpt.render.sampler`):
+    #: "independent" (a PCG32 stream per lane) or a low-discrepancy sampler's name
+    sampler: str = "independent"
     filter: str = "box"  # pixel reconstruction filter, drpt.filters.parse_filter's spelling
     filter_sampling: bool = False  # tent/gaussian: draw samples from the filter instead of splatting
     #: stop once the estimated relMSE (drpt.metrics.estimated_rel_mse) is at most this, or
@@ -139,7 +145,8 @@ class RenderOptions:
                                      ("--integrator", self.integrator, INTEGRATORS),
                                      ("--mode", self.mode, MODES),
                                      ("--env-sampling", self.env_sampling, ENV_SAMPLING),
-                                     ("--light-sampler", self.light_sampler, LIGHT_SAMPLERS)):
+                                     ("--light-sampler", self.light_sampler, LIGHT_SAMPLERS),
+                                     ("--sampler", self.sampler, SAMPLERS)):
             if value not in allowed:
                 raise DrptError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
         from .filters import parse_filter
@@ -304,8 +311,16 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                 help="seed flag: fixed continuation probability p at every "
                                      "bounce")
     if want("seed"):
-        parser.add_argument("--seed", type=int, default=d["seed"],
+        parser.add_argument("--seed", type=int, default=d["seed"], action=_Given,
                             help=f"random seed (default {d['seed']})")
+        parser.add_argument("--sampler", choices=SAMPLERS, default=None, action=_Given,
+                            help="sample generator: independent (a random stream per sample) or "
+                                 "ldsampler (a padded Owen-scrambled Sobol (0,2)-sequence per "
+                                 "pixel: less noise per sample), zsobol (one such sequence over the "
+                                 "image in Morton order: its error as blue noise); stratified, "
+                                 "multijitter and "
+                                 "orthogonal (Mitsuba's names) draw from ldsampler's sequence "
+                                 f"(default {RenderOptions.sampler}, or the scene file's)")
     if want("accel"):
         parser.add_argument("--accel", choices=_AccelChoices(KINDS), default=d["accel"],
                             metavar="{" + ",".join(KINDS) + "}",
@@ -472,6 +487,10 @@ def apply_scene_settings(opts: RenderOptions, scene,
         fields["moment"] = True
     if getattr(st, "aovs", ()):
         fields["aovs"] = tuple(st.aovs)  # Mitsuba's aov integrator (--aovs replaces them)
+    if getattr(st, "sampler", None) is not None and "sampler" not in given:
+        fields["sampler"] = st.sampler
+    if getattr(st, "seed", None) is not None and "seed" not in given:
+        fields["seed"] = st.seed
     if st.rfilter is not None and "filter" not in given:
         fields["filter"] = filter_spelling(st.rfilter, st.rfilter_params)
     if path.get("max_depth") == 0:
@@ -614,6 +633,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          wavefront_tail=get("wavefront_tail", base.wavefront_tail),
                          env_sampling=get("env_sampling", base.env_sampling),
                          light_sampler=get("light_sampler", base.light_sampler),
+                         sampler=get("sampler") or base.sampler,
                          filter=get("filter", base.filter),
                          filter_sampling=bool(get("filter_sampling", base.filter_sampling)),
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),

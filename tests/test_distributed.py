@@ -141,6 +141,14 @@ def test_workers_give_the_plain_image_bit_for_bit(tmp_path):
 
 
 @pytest.mark.slow
+def test_workers_give_the_plain_image_with_the_ldsampler(tmp_path):
+    pytest.importorskip("distributed")
+    plain = _render(tmp_path, "plain", "--sampler", "ldsampler")
+    assert np.array_equal(plain, _render(tmp_path, "w2", "--workers", "2", "--sampler", "ldsampler"))
+    assert not np.array_equal(plain, _render(tmp_path, "indep"))
+
+
+@pytest.mark.slow
 def test_killed_worker_leaves_the_image_unchanged(tmp_path):
     pytest.importorskip("distributed")
     from drpt.distributed.job import run

@@ -87,14 +87,16 @@ def _moved(cam, dx):
 
 
 @pytest.mark.slow
-def test_progressive_equals_render():
+@pytest.mark.parametrize("sampler", ["independent", "ldsampler"])
+def test_progressive_equals_render(sampler):
     """n frames of 1 spp are bit-identical to a render at n spp with the same
-    seed and max_lanes = frame_lanes(...), for a moved camera too."""
+    seed and max_lanes = frame_lanes(...), for a moved camera too, with either sampler;
+    frames go on past spp."""
     from drpt.render.progressive import Progressive, frame_lanes
     from drpt.render.renderer import Renderer
 
     scene = _scene()
-    opt = RenderOptions(width=12, height=8, spp=3, seed=7, progress=False)
+    opt = RenderOptions(width=12, height=8, spp=3, seed=7, progress=False, sampler=sampler)
     base = Renderer(scene, opt)
     cam = _moved(scene.camera, 5.0)
     prog = Progressive(base, cam, opt)
@@ -111,6 +113,7 @@ def test_progressive_equals_render():
         frame = prog.step()
     ref = Renderer(replace(scene, camera=cam), small).render().image
     np.testing.assert_array_equal(frame.image, ref)
+    assert prog.step().spp == 4
 
 
 @pytest.mark.slow

@@ -76,6 +76,7 @@ from .integrators.ptracer import ParticleTracer
 from .integrators.wavefront import WavefrontIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lights.rays import EmitterRays
+from .sampler import LDSampler, ZSobolSampler, next_2d, uses_ld
 from .scene import DeviceScene
 
 
@@ -179,6 +180,14 @@ class PassPlan:
         s0, r0 = step * self.k, band * self.rows
         return s0, min(self.k, self.spp - s0), r0, min(self.rows, self.height - r0)
 
+    def first_sample(self, i: int) -> int:
+        """The index of pass ``i``'s first sample among the render's ``W H spp``, in pass
+        order (``(s0 H + r0 k) W``; also past the last pass: a live view's frames go on)."""
+        step, band = divmod(i, self.bands)
+        s0 = step * self.k
+        k = max(1, min(self.k, self.spp - s0))
+        return (s0 * self.height + band * self.rows * k) * self.width
+
     def __iter__(self) -> Iterator[tuple[int, int, int, int]]:
         for i in range(self.count):
             yield self[i]
@@ -208,6 +217,15 @@ class Renderer:
         self.camera = RayCamera(scene.camera, options.width, options.height)
         self.warnings: list[str] = self.scene.warnings
         self.integrator = self._make_integrator()
+        if uses_ld(options.sampler) and not self.ld_sampling:
+            self.warnings.append(f"--sampler {options.sampler}: light tracing beyond 2^32 paths "
+                                 "(width x height x spp) draws independent samples")
+        elif options.sampler == "zsobol" and self.light_tracing:
+            self.warnings.append("--sampler zsobol: light tracing draws from one ldsampler sequence "
+                                 "of all its paths")
+        elif options.sampler == "zsobol" and self._zsobol is None and not self.light_tracing:
+            self.warnings.append("--sampler zsobol: the image's Morton codes and the sample index "
+                                 "need more than 32 bits: ldsampler's sequences instead")
         self._aov_ids = None
         if self.aov_kinds:
             self._aov_index_arrays()  # a scene without shape data is an error before rendering
@@ -364,8 +382,8 @@ class Renderer:
         pixel = lane // mm
         x = pixel % W
         y = pixel // W + dr.opaque(UInt32, r0)
-        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
-                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+        # with path regeneration lane j of a pixel's m traces its samples j, j + m, ...
+        rng = self._sampler(pass_index, n, x, y, lane % mm, mm if sequential else 1)
 
         camera_ray = self._camera_ray(x, y)
         if sequential:
@@ -400,13 +418,54 @@ class Renderer:
         sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, len(sqsums))
         return img, sq, int(nbad[0])
 
+    @property
+    def ld_sampling(self) -> bool:
+        """Whether passes draw from a low-discrepancy sampler
+        (:mod:`drpt.render.sampler`): ``--sampler`` other than ``independent``
+        (light tracing: one sequence of all its paths, while they are at most 2^32)."""
+        o = self.opt
+        return uses_ld(o.sampler) and (not self.light_tracing or o.width * o.height * o.spp <= 1 << 32)
+
+    def _sampler(self, pass_index: int, n: int, x: UInt32, y: UInt32, j: UInt32, step):
+        """The random numbers of a camera pass's ``n`` lanes: the lane's PCG32 stream
+        of ``(seed, pass, lane)``, or with :attr:`ld_sampling` an
+        :class:`~drpt.render.sampler.LDSampler` of pixel ``(x, y)`` whose first sample
+        is the pass's first sample plus ``j``, its next ``step`` further on."""
+        if not self.ld_sampling:
+            return PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
+                         initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+        plan = self.chunks.passes
+        s0 = pass_index // plan.bands * plan.k  # plan[pass_index]'s first sample (also past spp:
+        # a live view's frames go on)
+        index = j + dr.opaque(UInt32, s0)
+        zsobol = self._zsobol
+        if zsobol is not None:
+            return zsobol.for_pixels_xy(self.opt.seed, x, y, index, step)
+        pixel = y * dr.opaque(UInt32, self.opt.width) + x
+        return LDSampler.for_pixels(self.opt.seed, pixel, index, step)
+
+    @property
+    def _zsobol(self):
+        """With ``--sampler zsobol``: the :class:`~drpt.render.sampler.ZSobolSampler` class of
+        this image size and spp (None otherwise, or where its index does not fit 32 bits:
+        then ``ldsampler``'s sequences, with a warning)."""
+        o = self.opt
+        return ZSobolSampler.for_image(o.width, o.height, o.spp) if o.sampler == "zsobol" else None
+
     def _trace_light_pass(self, pass_index: int, n: int) -> tuple[np.ndarray, np.ndarray, int]:
         """``n`` light paths (:class:`~drpt.render.integrators.ptracer.ParticleTracer`)
         splatted into a film of the whole image: its sums and sums of squares ``(H, W,
         3)`` and the non-finite contributions dropped. Their random numbers come from
         the same ``(seed, pass, lane)`` streams as a camera pass's."""
-        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
-                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+        if self.ld_sampling:
+                # one sequence of all the render's light paths: lane j of a pass is path
+            # first_sample + j (W H spp <= 2^32: ld_sampling)
+            first = self.chunks.passes.first_sample(pass_index) & 0xFFFFFFFF  # (a live view: wraps)
+            rng = LDSampler.for_pixels(self.opt.seed, UInt32(0),
+                                       dr.arange(UInt32, n) + dr.opaque(UInt32, first))
+        else:
+            rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
+                        initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
         film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
         bad = self.integrator.trace(rng, film, dr.full(Bool, True, n))
         with llvm_tuning.blocks_for(n):
@@ -426,11 +485,11 @@ class Renderer:
         pixel = lane // dr.opaque(UInt32, k)
         x = pixel % W
         y = pixel // W + dr.opaque(UInt32, r0)
-        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
-                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
-        px = Float(x) + rng.next_float32()
-        py = Float(y) + rng.next_float32()
-        lens = Array2f(rng.next_float32(), rng.next_float32()) if self.camera.thin_lens else None
+        rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1)
+        u = next_2d(rng)
+        px = Float(x) + u.x
+        py = Float(y) + u.y
+        lens = next_2d(rng) if self.camera.thin_lens else None
         o, d = self.camera.ray(px, py, lens)
         L = self.integrator.sample(rng, o, d, Bool(True))
         bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
@@ -465,17 +524,16 @@ class Renderer:
         camera = self.camera
 
         def camera_ray(rng):
+            u = next_2d(rng)
             if flt.is_box:
-                px = Float(x) + rng.next_float32()
-                py = Float(y) + rng.next_float32()
+                px = Float(x) + u.x
+                py = Float(y) + u.y
                 weight = None
             else:
-                u1 = rng.next_float32()
-                u2 = rng.next_float32()
-                px, py, weight = sample_position(flt, Float(x), Float(y), u1, u2, W, H)
+                px, py, weight = sample_position(flt, Float(x), Float(y), u.x, u.y, W, H)
             lens = None
             if camera.thin_lens:
-                lens = Array2f(rng.next_float32(), rng.next_float32())
+                lens = next_2d(rng)
             o, d = camera.ray(px, py, lens)
             return o, d, weight
 

@@ -321,6 +321,8 @@ class RenderSettings:
     max_depth: int | None = None
     rr_depth: int | None = None
     hide_emitters: bool | None = None
+    sampler: str | None = None  # the sampler plugin's name (drpt.render.sampler)
+    seed: int | None = None  # the sampler's seed
     rfilter: str | None = None  # reconstruction filter name: "box", "tent", "gaussian"
     rfilter_params: dict = field(default_factory=dict)  # Mitsuba's names: radius, stddev
     #: Mitsuba's ``(fov, fov_axis)`` as the file gives them: an image size of another

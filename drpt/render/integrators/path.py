@@ -36,9 +36,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import drjit as dr
-from drjit.auto import PCG32, Array2f, Array3f, Array3f64, Bool, Float, UInt32
+from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32
 
 from ...options import PathOptions
+from ..sampler import light_sample, next_2d, next_path
 from ..scene import DeviceScene
 from .common import DirectLight, power_heuristic
 
@@ -120,6 +121,7 @@ class PathIntegrator:
                 sums = bank(sums, Sum(dr.select(finite, L, 0.0)))
                 dropped += dr.select(finite, 0, 1)
                 left -= 1
+                next_path(rng)
                 o, d, *weight = camera_ray(rng)
                 state = self._start(o, d, left > 0, *weight)
         return (*sums[:2], dropped, *sums[2:])
@@ -151,12 +153,13 @@ class PathIntegrator:
 
         # ---- next-event estimation
         u_sel = rng.next_float32()
-        u_light = Array2f(rng.next_float32(), rng.next_float32())
+        u_light = next_2d(rng)
         if nee:
+            u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
             L = L + s.beta * self.direct.area(si, u_sel, u_light, active, mis=True)
         if scene.has_delta_lights and scene.has_smooth_bsdfs:
             L = L + s.beta * self.direct.delta(si, active)
-        u_env = Array2f(rng.next_float32(), rng.next_float32())
+        u_env = next_2d(rng)
         if scene.has_environment and scene.has_smooth_bsdfs:
             L = L + s.beta * self.direct.env_light(si, u_env, active, mis=True)
 
@@ -205,7 +208,7 @@ def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32):
     IORs, the depth, and the lanes whose path goes on. Shared by the megakernel
     and the wavefront integrator."""
     u_lobe = rng.next_float32()
-    u_bsdf = Array2f(rng.next_float32(), rng.next_float32())
+    u_bsdf = next_2d(rng)
     wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
     beta = s.beta * bs.weight
     eta = s.eta * bs.eta

@@ -43,13 +43,14 @@ so they are fine).
 from __future__ import annotations
 
 import drjit as dr
-from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import PCG32, Array3f, Bool, Float, UInt32
 
 from ...errors import DrptError
 from ...options import PathOptions
 from ..camera import RayCamera
 from ..film import SplatFilm
 from ..lights.rays import EmitterRays
+from ..sampler import next_2d
 from ..scene import DeviceScene
 from ..spawn import origin as spawn_origin
 from .common import SHADOW_SHRINK
@@ -103,7 +104,7 @@ class ParticleTracer:
         """Paths of one segment: an emitter point (or sky direction) seen by the camera."""
         scene, cam = self.scene, self.camera
         u_sel = rng.next_float32()
-        u_pos = Array2f(rng.next_float32(), rng.next_float32())
+        u_pos = next_2d(rng)
         vp = self.rays.sample_visible(u_sel, u_pos, Array3f(cam.center), active)
         x, y, wc, dist, importance, visible = cam.connect(vp.p)
         cos_l = dr.dot(vp.n, wc)
@@ -127,8 +128,8 @@ class ParticleTracer:
         if max_depth != 0 and not opt.hide_emitters and self.rays.count > 0:
             self._visible_emitters(rng, film, Bool(active))
         u_sel = rng.next_float32()
-        u_pos = Array2f(rng.next_float32(), rng.next_float32())
-        u_dir = Array2f(rng.next_float32(), rng.next_float32())
+        u_pos = next_2d(rng)
+        u_dir = next_2d(rng)
         ray = self.rays.sample_ray(u_sel, u_pos, u_dir, Bool(active))
         o, d, beta = Array3f(ray.o), Array3f(ray.d), Array3f(ray.weight)
         eta = dr.full(Float, 1.0, dr.width(active))
@@ -146,7 +147,7 @@ class ParticleTracer:
             self._connect(si, beta, film, live)
 
             u_lobe = rng.next_float32()
-            u_bsdf = Array2f(rng.next_float32(), rng.next_float32())
+            u_bsdf = next_2d(rng)
             wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
             corr, sides = self._correction(si, wo)
             beta = beta * bs.weight * (corr * dr.square(bs.eta))

@@ -5,7 +5,8 @@
 per lane; emission with MIS, next-event estimation of area, delta and
 environment lights with MIS, BSDF sampling, Russian roulette, the same nine
 random numbers per vertex drawn in the same order from the lane's PCG32
-stream), but instead of one fused kernel with the bounce loop inside it, the
+stream or low-discrepancy sampler, :mod:`drpt.render.sampler`, whose state the
+buffers carry as two UInt64 arrays), but instead of one fused kernel with the bounce loop inside it, the
 bounce loop runs in Python and every stage is its own evaluated kernel over
 structure-of-arrays buffers (one Dr.Jit array per field of
 :class:`WaveState`, ``n`` = the paths still alive):
@@ -51,7 +52,8 @@ The renderer runs this integrator with one path per lane (it has no
 ``sample_sequence``), so for a seed its image is in general not the
 megakernel's (whose lanes regenerate paths on other streams); where the
 megakernel also runs one path per lane (a pass with at most ``min_lanes``
-samples), the images are the same.
+samples), or with a low-discrepancy sampler (whose numbers depend on the
+pixel, the sample and the dimension only), the images are the same.
 
 Same estimator: every sample is the megakernel's ``sample`` function of the
 same random numbers, so images agree statistically with the megakernel's
@@ -75,9 +77,10 @@ import time
 from dataclasses import dataclass, field, fields
 
 import drjit as dr
-from drjit.auto import PCG32, Array2f, Array3f, Array3u, Bool, Float, UInt32, UInt64
+from drjit.auto import PCG32, Array3f, Array3u, Bool, Float, UInt32, UInt64
 
 from ...options import PathOptions
+from ..sampler import light_sample, next_2d, pack, unpack
 from ..scene import DeviceScene
 from ..surface import Interaction
 from .common import DirectLight, ShadowQuery
@@ -283,7 +286,9 @@ class WavefrontIntegrator:
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:
         """Radiance arriving at ``o`` from ``-d``, one path per lane (as
         :meth:`PathIntegrator.sample`, the same random numbers per path)."""
-        n = max(dr.width(o), dr.width(d), dr.width(active), dr.width(rng.state))
+        self._rng_kind = type(rng)
+        rng_a, rng_b = pack(rng)
+        n = max(dr.width(o), dr.width(d), dr.width(active), dr.width(rng_a))
         timer = _Timer(self.stats)
         L = dr.zeros(Array3f, n)
         s = WaveState(lane=dr.arange(UInt32, n), o=Array3f(o) + dr.zeros(Array3f, n),
@@ -291,8 +296,8 @@ class WavefrontIntegrator:
                       beta=dr.full(Array3f, 1.0, n), eta=dr.full(Float, 1.0, n),
                       depth=dr.zeros(UInt32, n), prev_pdf=dr.full(Float, 1.0, n),
                       prev_delta=dr.full(Bool, True, n),
-                      rng_state=UInt64(rng.state) + dr.zeros(UInt64, n),
-                      rng_inc=UInt64(rng.inc) + dr.zeros(UInt64, n))
+                      rng_state=UInt64(rng_a) + dr.zeros(UInt64, n),
+                      rng_inc=UInt64(rng_b) + dr.zeros(UInt64, n))
         alive = Bool(active) | dr.zeros(Bool, n)
         timer.done("compact + sort", s, alive, L)
         live = []
@@ -315,8 +320,7 @@ class WavefrontIntegrator:
         """The last few paths in one fused loop of the megakernel's bounce (the
         same random numbers in the same order), their radiance added at their lanes."""
         m = dr.width(s.lane)
-        rng = PCG32()
-        rng.state, rng.inc = UInt64(s.rng_state), UInt64(s.rng_inc)
+        rng = unpack(self._rng_kind, UInt64(s.rng_state), UInt64(s.rng_inc))
         state = PathState(o=s.o, d=s.d, L=dr.zeros(Array3f, m), beta=s.beta, eta=s.eta, depth=s.depth,
                           prev_pdf=s.prev_pdf, prev_delta=s.prev_delta, active=dr.full(Bool, True, m))
         dr.scatter_add(L, _fused_loop(self._fused, self.scene, state, rng), s.lane)
@@ -426,17 +430,17 @@ class WavefrontIntegrator:
         """Next-event estimation (as shadow queries), BSDF sampling and Russian
         roulette of one queue's paths (as PathIntegrator._bounce)."""
         scene, opt = queue.scene, self.opt
-        rng = PCG32()
-        rng.state, rng.inc = UInt64(s.rng_state), UInt64(s.rng_inc)
+        rng = unpack(self._rng_kind, UInt64(s.rng_state), UInt64(s.rng_inc))
         active = dr.full(Bool, True, dr.width(s.lane))
         found: list[ShadowQuery] = []
         u_sel = rng.next_float32()
-        u_light = Array2f(rng.next_float32(), rng.next_float32())
+        u_light = next_2d(rng)
         if scene.has_area_lights and scene.has_smooth_bsdfs:
+            u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
             found.append(queue.direct.area_query(si, u_sel, u_light, active, mis=True))
         if scene.has_delta_lights and scene.has_smooth_bsdfs:
             found += queue.direct.delta_queries(si, active)
-        u_env = Array2f(rng.next_float32(), rng.next_float32())
+        u_env = next_2d(rng)
         if scene.has_environment and scene.has_smooth_bsdfs:
             found.append(queue.direct.env_query(si, u_env, active, mis=True))
         for q in found:  # the path's throughput, as the megakernel's L + beta * estimate
@@ -446,7 +450,7 @@ class WavefrontIntegrator:
         wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, rng)
         out = WaveState(lane=s.lane, o=scene.spawn(si, wo), d=Array3f(wo), beta=beta, eta=eta,
                         depth=depth, prev_pdf=Float(bs.pdf), prev_delta=Bool(bs.delta),
-                        rng_state=rng.state, rng_inc=rng.inc)
+                        **dict(zip(("rng_state", "rng_inc"), pack(rng))))
         return out, found, live
 
     def _shadow(self, queries: list[ShadowQuery], lanes: UInt32, L: Array3f, timer: _Timer) -> None:

@@ -34,8 +34,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import drjit as dr
-from drjit.auto import PCG32, Array2f, Array3f, Bool, UInt32
+from drjit.auto import PCG32, Array3f, Bool, UInt32
 
+from ..sampler import light_sample, next_2d
 from ..scene import DeviceScene
 from .common import DirectLight
 
@@ -76,18 +77,19 @@ class WhittedIntegrator:
                 L += dr.select(shade, beta * Array3f(*scene.ambient) * scene.diffuse_color(si, shade),
                                0.0)
             u_sel = rng.next_float32()
-            u_light = Array2f(rng.next_float32(), rng.next_float32())
+            u_light = next_2d(rng)
             if scene.has_area_lights:
+                u_sel, u_light = light_sample(scene, rng, u_sel, u_light, shade)
                 L += beta * direct.area(si, u_sel, u_light, shade, mis=False)
             if scene.has_delta_lights:
                 L += beta * direct.delta(si, shade)
-            u_env = Array2f(rng.next_float32(), rng.next_float32())
+            u_env = next_2d(rng)
             if scene.has_environment:
                 L += beta * direct.env_light(si, u_env, shade, mis=False)
 
             # Follow mirrors and glass; stop everywhere else.
             u_lobe = rng.next_float32()
-            u_dir = Array2f(rng.next_float32(), rng.next_float32())
+            u_dir = next_2d(rng)
             wo, bs = scene.sample_bsdf(si, u_lobe, u_dir)
             beta *= bs.weight
             o = scene.spawn(si, wo)

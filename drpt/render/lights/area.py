@@ -143,6 +143,18 @@ class AreaLights:
         k = dr.minimum(k, n - 1)
         return k, dr.gather(UInt32, self.ids, k, active)
 
+    def reuse(self, u: Array2f, active: Bool) -> tuple[Float, Array2f]:
+        """The light selection drawn from ``u.x`` and ``u`` with ``u.x`` rescaled to the
+        selected primitive's interval of the CDF, to pass to :meth:`sample` (Mitsuba's
+        sample reuse): the primitive and the point on it then come from one 2-D sample,
+        so a stratified 2-D sample stays stratified over the lights' surfaces (the
+        low-discrepancy sampler's NEE, :mod:`drpt.render.sampler`)."""
+        k, _ = self._select(u.x, active)
+        hi = dr.gather(Float, self.cdf, k, active)
+        lo = dr.select(k > 0, dr.gather(Float, self.cdf, dr.maximum(k, 1) - 1, active & (k > 0)), 0.0)
+        x = (u.x - lo) / dr.maximum(hi - lo, 1e-30)
+        return u.x, Array2f(dr.clip(x, 0.0, 0.99999994), u.y)
+
     def sample(self, u_select: Float, u: Array2f, active: Bool, ref: Array3f | None = None) -> LightSample:
         """A point on an emissive primitive, with its area density. On a sphere the
         point is uniform on it, or with ``ref`` (a shading point outside it) in the

@@ -23,8 +23,10 @@ Mitsuba                   drpt
                           (box, tent, gaussian; default gaussian) as
                           ``settings.rfilter``/``rfilter_params``, which
                           become ``--filter`` unless it is given
-``independent`` (etc.)    ``settings.spp`` = ``sample_count`` (default 4);
-                          other samplers take their count too, with a note
+``independent`` (etc.)    ``settings.spp`` = ``sample_count`` (default 4,
+                          rounded up as Mitsuba's plugin rounds it),
+                          ``settings.sampler`` (its name: ``--sampler``)
+                          and ``settings.seed`` = ``seed``
 ``path``                  ``settings``: max_depth, rr_depth, hide_emitters
 ``moment``                its nested integrator; ``settings.moment`` names the
                           moment AOVs an EXR output gets
@@ -76,7 +78,7 @@ stated fallback) with a warning each. Parameters that a plugin does not
 read (files from older exporters: ``strict_normals`` on ``path``,
 ``int_ior`` on ``roughconductor``) are listed in one warning; with
 ``strict`` the first is an error. Parameters drpt reads but that change
-nothing in its image (film pixel formats, sampler seeds, clip planes) are
+nothing in its image (film pixel formats, a sampler's jitter, clip planes) are
 read silently.
 """
 

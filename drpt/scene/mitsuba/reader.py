@@ -40,7 +40,9 @@ from .nodes import Node, State
 _SILENT = {
     "film": ("pixel_format", "component_format", "file_format", "banner", "compensate",
              "sample_border"),
-    "sampler": ("seed",),
+    # (stratified, multijitter and orthogonal draw from drpt's ldsampler: their jitter and
+    # strength shape only the noise)
+    "sampler": ("jitter", "strength", "scramble_seed"),
     "integrator": ("samples_per_pass", "block_size", "emitter_samples", "bsdf_samples",
                    "shading_samples"),
     "sensor": ("near_clip", "far_clip", "shutter_open", "shutter_close"),
@@ -51,6 +53,34 @@ _SILENT = {
 RFILTERS = {"box": (), "tent": ("radius",), "gaussian": ("stddev",)}
 SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
 FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
+
+
+def mitsuba_sample_count(plugin: str, spp: int) -> int:
+    """The samples per pixel Mitsuba's sampler ``plugin`` takes for ``sample_count`` ``spp``
+    (its ``set_sample_count``): ``ldsampler`` a square power of two (at least 4),
+    ``stratified`` a square, ``multijitter`` ``r (ceil(spp / r))`` with ``r = floor(sqrt(spp))``,
+    ``orthogonal`` the square of a prime; ``independent`` (and any other) ``spp``."""
+    if plugin == "ldsampler":
+        res = 2
+        while res * res < spp:
+            res = 1 << res.bit_length()  # Mitsuba's round_to_power_of_two(res + 1)
+        return res * res
+    if plugin == "stratified":
+        res = math.isqrt(spp)
+        return spp if res * res == spp else (res + 1) ** 2
+    if plugin == "multijitter":
+        r1 = math.isqrt(spp)
+        return r1 * -(-spp // r1)
+    if plugin == "orthogonal":
+        res = max(2, math.isqrt(spp - 1) + 1)  # the smallest res with res^2 >= spp
+
+        def prime(x: int) -> bool:
+            return all(x % d for d in range(2, math.isqrt(x) + 1))
+
+        while not prime(res):
+            res += 1
+        return res * res
+    return spp
 
 
 def _material(name: str, origin: str, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
@@ -265,16 +295,28 @@ class Reader:
         if sampler is not None:
             if sampler.plugin not in SAMPLERS:
                 self.unsupported(sampler, f"sampler '{sampler.plugin}'", fallback="independent samples")
-            elif sampler.plugin != "independent":
-                self.warn(f"{sampler.where}: sampler '{sampler.plugin}': drpt draws independent "
-                          "samples (the same expectation, other noise)")
+            else:
+                self.settings.sampler = sampler.plugin
+            if sampler.has("seed"):
+                seed = sampler.int("seed", 0)
+                if seed is None or not 0 <= seed < 1 << 64:
+                    raise sampler.error(f"{sampler.label}: seed must be between 0 and 2^64 - 1, "
+                                        f"got {seed}")
+                self.settings.seed = seed
             spp = sampler.int("sample_count", 4)
             if spp is None or not 0 < spp <= MAX_SPP:
                 raise sampler.error(f"{sampler.label}: sample_count must be between 1 and {MAX_SPP}, "
                                     f"got {spp}")
-            self.settings.spp = spp
-            if crop[2] * crop[3] * spp > MAX_SAMPLES:
-                raise sampler.error(f"{sampler.label}: {crop[2]} x {crop[3]} pixels x {spp} samples is "
+            rounded = mitsuba_sample_count(sampler.plugin, spp)
+            if rounded != spp:
+                if rounded > MAX_SPP:
+                    raise sampler.error(f"{sampler.label}: sample_count {spp} rounds up to {rounded} "
+                                        f"(as Mitsuba rounds it), beyond {MAX_SPP}")
+                self.warn(f"{sampler.where}: sampler '{sampler.plugin}': sample_count {spp} rounded up "
+                          f"to {rounded}, as Mitsuba does")
+            self.settings.spp = rounded
+            if crop[2] * crop[3] * rounded > MAX_SAMPLES:
+                raise sampler.error(f"{sampler.label}: {crop[2]} x {crop[3]} pixels x {rounded} samples is "
                                     f"more than drpt's 2^60")
             self.check_unread(sampler)
 
