@@ -71,7 +71,6 @@ def test_a_local_render_s_peak_memory_per_pixel(tmp_path):
     the child process), the difference per pixel: at most BYTES_PER_PIXEL_LOCAL (measured
     66-74 B; the sums are 48). A render that kept each chunk's full-image sums apart, as
     before passes were added straight into the merge, measured 178 B and fails it."""
-    import resource
     import subprocess
     import sys
 
@@ -79,9 +78,13 @@ def test_a_local_render_s_peak_memory_per_pixel(tmp_path):
 
     peaks = []
     for size in (1024, 2048):
-        before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-        subprocess.run([sys.executable, "-m", "drpt", "render", str(CORNELL), "--size", str(size), str(size),
-                        "--spp", "1", "-q", "-o", str(tmp_path / f"{size}.exr")], check=True, cwd=REPO)
-        peaks.append(max(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, before) * 1024)
+        # a wrapper process whose only child is the render: its children's peak is the render's
+        code = ("import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True); "
+                "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)")
+        out = subprocess.run([sys.executable, "-c", code, sys.executable, "-m", "drpt", "render", str(CORNELL),
+                              "--size", str(size), str(size), "--spp", "1", "-q",
+                              "-o", str(tmp_path / f"{size}.exr")], check=True, cwd=REPO,
+                             capture_output=True, text=True).stdout
+        peaks.append(int(out.split()[-1]) * 1024)
     per_pixel = (peaks[1] - peaks[0]) / (2048 * 2048 - 1024 * 1024)
     assert 40 < per_pixel <= memory.BYTES_PER_PIXEL_LOCAL, per_pixel
