@@ -149,6 +149,16 @@ class Material:
     #: emitted radiance as a texture (Mitsuba's area ``radiance`` bitmap), looked up at the
     #: surface's uv; ``emission`` then holds its mean (light selection by power)
     emission_texture: Any = None
+    #: the participating media on either side of the surfaces of this material (Mitsuba's
+    #: shape ``interior``/``exterior``): indices into :attr:`Scene.media`, ``None`` for
+    #: vacuum. Shapes with a medium on either side are *medium transitions*: a ray crossing
+    #: one enters the interior when it goes against the geometric normal, else the exterior
+    interior: int | None = None
+    exterior: int | None = None
+
+    @property
+    def is_medium_transition(self) -> bool:
+        return self.interior is not None or self.exterior is not None
 
     @property
     def is_emissive(self) -> bool:
@@ -342,6 +352,27 @@ class RenderSettings:
     not_read: tuple = ()
 
 
+# ---------------------------------------------------------------------- media
+@dataclass
+class Medium:
+    """A homogeneous participating medium (Mitsuba's ``homogeneous``): extinction
+    ``sigma_t * scale`` (per unit length, RGB), single-scattering ``albedo`` (RGB, in
+    [0, 1]) and a phase function: ``"isotropic"``, or ``"hg"`` (Henyey-Greenstein) with
+    mean cosine ``g`` in (-1, 1) (positive: forward scattering)."""
+
+    name: str
+    sigma_t: Vec3 = (1.0, 1.0, 1.0)
+    albedo: Vec3 = (0.75, 0.75, 0.75)
+    scale: float = 1.0
+    phase: str = "isotropic"
+    g: float = 0.0
+    origin: str = ""
+
+    @property
+    def extinction(self) -> Vec3:
+        return tuple(float(s) * self.scale for s in self.sigma_t)
+
+
 # ---------------------------------------------------------------------- scene
 @dataclass
 class Scene:
@@ -354,6 +385,7 @@ class Scene:
     lights: list[Light] = field(default_factory=list)
     background: Background = field(default_factory=Background)
     settings: RenderSettings | None = None  # render settings the file gives (Mitsuba XML)
+    media: list[Medium] = field(default_factory=list)  # participating media (Material.interior/exterior)
 
     @property
     def emissive_materials(self) -> list[int]:

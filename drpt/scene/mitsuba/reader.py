@@ -20,6 +20,7 @@ from ..model import (
     DirectionalLight,
     FilmWindow,
     Material,
+    Medium,
     OrthographicCamera,
     PerspectiveCamera,
     PointLight,
@@ -94,6 +95,8 @@ class Reader:
         self.mesh_shapes: list[tuple[int, bool]] = []
         self.sphere_shapes: list[int] = []
         self.lights: list = []
+        self.media: list[Medium] = []
+        self.medium_index: dict[int, int] = {}  # medium node -> index into media
         self.background = (0.0, 0.0, 0.0)
         self.camera = None
         self.settings = RenderSettings()
@@ -158,7 +161,7 @@ class Reader:
                     self.shape(child, np.eye(4))
             elif kind == "emitter":
                 self.emitter(child)
-            elif kind in ("bsdf", "texture"):
+            elif kind in ("bsdf", "texture", "medium"):
                 pass  # definitions, read where a shape refers to them
             else:
                 self.unsupported(child, f"{child.label}")
@@ -238,7 +241,8 @@ class Reader:
             spheres = Spheres.empty()
         scene = Scene(path=self.path, camera=self.camera, materials=self.mat_list, triangles=tris,
                       spheres=spheres, lights=self.lights,
-                      background=Background(color=self.background), settings=self.settings)
+                      background=Background(color=self.background), settings=self.settings,
+                      media=self.media)
         return scene
 
     # ------------------------------------------------------------ sensor
@@ -254,6 +258,9 @@ class Reader:
                 sampler = c
             else:
                 self.unsupported(c, f"{c.label} inside {node.label}")
+        if node.is_ref("medium"):
+            self.unsupported(node.ref("medium"), f"{node.ref('medium').label} around the sensor (drpt's "
+                             "camera sits in vacuum)")
         width, height = 768, 576  # Mitsuba's hdrfilm defaults
         crop = (0, 0, width, height)
         self.settings.rfilter, self.settings.rfilter_params = "gaussian", {"stddev": 0.5}
@@ -405,12 +412,12 @@ class Reader:
                 s.aov_image = nested[0][0]
                 self.integrator(nested[0][1])
             return
-        if node.plugin not in ("path", "direct", "ptracer"):
-            self.unsupported(node, f"integrator '{node.plugin}' (drpt has path, direct and ptracer)",
-                             fallback="path")
+        if node.plugin not in ("path", "direct", "ptracer", "volpath"):
+            self.unsupported(node, f"integrator '{node.plugin}' (drpt has path, volpath, direct and "
+                             "ptracer)", fallback="path")
             return
-        s.integrator = "ptracer" if node.plugin == "ptracer" else "path"
-        if node.plugin in ("path", "ptracer"):
+        s.integrator = node.plugin if node.plugin in ("ptracer", "volpath") else "path"
+        if node.plugin in ("path", "ptracer", "volpath"):
             s.max_depth = node.int("max_depth", -1)
             s.rr_depth = node.int("rr_depth", 5)
             if s.max_depth is not None and not -1 <= s.max_depth <= MAX_DEPTH:
@@ -447,16 +454,68 @@ class Reader:
                 emission = self.area(c)
             else:
                 self.unsupported(c, f"{c.label} inside {node.label}")
-        for name in ("interior", "exterior"):
-            if node.is_ref(name):
-                self.unsupported(node.ref(name), f"{node.ref(name).label} ({name} of {node.label})")
+        media = tuple(self.medium(node.ref(name), f"{name} of {node.label}") if node.is_ref(name) else None
+                      for name in ("interior", "exterior"))
         if spec is None:
             # Mitsuba's default: diffuse 0.5, black on a shape with an area emitter
             spec = default_bsdf(black=isinstance(emission, Texture) or max(emission) > 0)
-        return spec, bsdf_node, emission
+        return spec, bsdf_node, (emission, media)
 
-    def _material_index(self, spec: BSDFSpec, bsdf_node: Node | None, emission, shape: Node) -> int:
-        key = (bsdf_node.index if bsdf_node is not None else None, emission)
+    def medium(self, node: Node, where: str) -> int | None:
+        """The index in :attr:`media` of the medium ``node`` (read once), or ``None`` where
+        drpt cannot render it and ``--ignore-unsupported`` leaves it out."""
+        if node.index in self.medium_index:
+            return self.medium_index[node.index]
+        if node.kind != "medium":
+            raise node.error(f"{node.label} as the {where} (it takes a medium)")
+        if node.plugin != "homogeneous":
+            self.unsupported(node, f"{node.label} ({where}; drpt has homogeneous media)")
+            self.medium_index[node.index] = None
+            return None
+        values = {}
+        for name, default in (("sigma_t", (1.0, 1.0, 1.0)), ("albedo", (0.75, 0.75, 0.75))):
+            if node.is_ref(name):
+                self.unsupported(node.ref(name), f"{node.ref(name).label} as '{name}' of {node.label} "
+                                 "(drpt's homogeneous medium takes a color)", fallback=str(default))
+                values[name] = default
+            else:
+                values[name] = node.color(name, default)
+        sigma_t, albedo = values["sigma_t"], values["albedo"]
+        scale = node.float("scale", 1.0)
+        if not all(math.isfinite(x) and x >= 0 for x in sigma_t):
+            raise node.error(f"{node.label}: sigma_t must be finite and >= 0, got {tuple(sigma_t)}")
+        if not all(0.0 <= x <= 1.0 for x in albedo):
+            raise node.error(f"{node.label}: albedo must be in [0, 1], got {tuple(albedo)}")
+        if not (math.isfinite(scale) and scale >= 0):
+            raise node.error(f"{node.label}: scale must be finite and >= 0, got {scale}")
+        if not all(math.isfinite(x * scale) and x * scale <= 1e30 for x in sigma_t):
+            raise node.error(f"{node.label}: sigma_t * scale must be at most 1e30")
+        if not node.bool("sample_emitters", True):
+            self.drpt_ignores(node, "sample_emitters", "drpt always samples emitters in media")
+        phase, g = "isotropic", 0.0
+        for c in node.children():
+            if c.kind != "phasefunction":
+                self.unsupported(c, f"{c.label} inside {node.label}")
+            elif c.plugin == "isotropic":
+                self.check_unread(c)
+            elif c.plugin == "hg":
+                g = c.float("g", 0.8)
+                if not -1.0 < g < 1.0:
+                    raise c.error(f"{c.label}: g must be in (-1, 1), got {g}")
+                phase = "hg"
+                self.check_unread(c)
+            else:
+                self.unsupported(c, f"phase function '{c.plugin}' (drpt has isotropic and hg)",
+                                 fallback="isotropic")
+        self.check_unread(node)
+        self.medium_index[node.index] = len(self.media)
+        self.media.append(Medium(node.id or f"{node.plugin}@{node.line}", tuple(sigma_t), tuple(albedo),
+                                 scale, phase, g, node.where))
+        return self.medium_index[node.index]
+
+    def _material_index(self, spec: BSDFSpec, bsdf_node: Node | None, parts, shape: Node) -> int:
+        emission, (interior, exterior) = parts
+        key = (bsdf_node.index if bsdf_node is not None else None, emission, interior, exterior)
         if key not in self.mat_index:
             if bsdf_node is not None:
                 name = bsdf_node.id or f"{bsdf_node.plugin}@{bsdf_node.line}"
@@ -466,7 +525,9 @@ class Reader:
             if isinstance(emission, Texture) or max(emission) > 0:
                 name += "+area"
             self.mat_index[key] = len(self.mat_list)
-            self.mat_list.append(_material(name, origin, spec, emission))
+            mat = _material(name, origin, spec, emission)
+            mat.interior, mat.exterior = interior, exterior
+            self.mat_list.append(mat)
         return self.mat_index[key]
 
     def shape(self, node: Node, parent: np.ndarray) -> None:
@@ -490,8 +551,9 @@ class Reader:
         if plugin not in geo.MESH_PLUGINS + geo.ANALYTIC_PLUGINS:
             self.unsupported(node, f"shape '{plugin}'")
             return
-        spec, bsdf_node, emission = self._shape_parts(node)
-        k = self._material_index(spec, bsdf_node, emission, node)
+        spec, bsdf_node, parts = self._shape_parts(node)
+        emission = parts[0]
+        k = self._material_index(spec, bsdf_node, parts, node)
         first = len(self.meshes)
         m = parent @ node.transform("to_world")
         _check_matrix(node, m)
