@@ -230,6 +230,9 @@ class Renderer:
 
     def _make_integrator(self):
         options = self.opt
+        media = getattr(self.scene_model, "media", None)
+        if media and options.integrator != "volpath" and MEDIA_IGNORED not in self.warnings:
+            self.warnings.append(MEDIA_IGNORED)
         if options.integrator == "ptracer":
             if options.moment:
                 raise DrptError("the moment integrator cannot wrap ptracer (light tracing has no "
@@ -239,13 +242,10 @@ class Renderer:
         if options.integrator == "whitted":
             depth = options.path.max_depth
             return WhittedIntegrator(self.scene, WhittedOptions(max_depth=depth if depth > 0 else 16))
-        media = getattr(self.scene_model, "media", None)
         if options.integrator == "volpath" and media:
             from .integrators.volpath import VolPathIntegrator
 
             return VolPathIntegrator(self.scene, options.path, self.scene_model)
-        if media and MEDIA_IGNORED not in self.warnings:
-            self.warnings.append(MEDIA_IGNORED)
         if options.mode == "wavefront":
             return WavefrontIntegrator(self.scene, options.path, tail=options.wavefront_tail)
         # (volpath in a scene without media: the path integrator, the same expectation)
