@@ -336,3 +336,26 @@ def test_bad_media_are_located_one_line_errors(tmp_path, medium, message):
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"drpt: error: {path}:2: "), lines
     assert re.search(message, lines[0]), lines
+
+
+def test_export_of_a_scene_with_media_is_refused(tmp_path):
+    from drpt.errors import DrptError
+    from drpt.export.mitsuba import _describe
+
+    r = _renderer(tmp_path)
+    with pytest.raises(DrptError, match="participating media"):
+        _describe(r.scene_model, 8, 8, 4, -1, 5, 0)
+
+
+def test_compare_edits_keep_volpath(tmp_path):
+    """``compare --max-depth`` on a volpath file: Mitsuba's integrator stays volpath (its path
+    would ignore the media)."""
+    from dataclasses import replace as dc_replace
+
+    from drpt.tools.xmlref import MitsubaXML
+
+    r = _renderer(tmp_path)
+    opts = dc_replace(r.opt, path=dc_replace(r.opt.path, max_depth=8))
+    assert MitsubaXML.for_scene(r.scene_model, opts).integrator["type"] == "volpath"
+    opts = dc_replace(opts, integrator="path")
+    assert "type" not in MitsubaXML.for_scene(r.scene_model, opts).integrator
