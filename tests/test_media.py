@@ -2,9 +2,9 @@
 
 * Mitsuba's own render tests of ``participating_media/`` rendered as authored and z-tested
   against the shipped references (:func:`corpusutil.check_scene`, as
-  ``test_mitsuba_corpus.py`` tests the other folders): :data:`MEDIA_SCENES` pass,
-  :data:`MEDIA_NOT_YET` are strict xfails naming what drpt lacks. Negative control: a wrong
-  albedo fails.
+  ``test_mitsuba_corpus.py`` tests the other folders): :data:`MEDIA_SCENES` pass (all
+  nine), :data:`MEDIA_NOT_YET` would be strict xfails naming what drpt lacks. Negative
+  controls: a wrong albedo, a heterogeneous medium's halved density, fail.
 * Henyey-Greenstein sampling: a chi-square test of sampled directions (cosine x azimuth
   bins) against the density's integral over each bin (p > 1e-3 passes; negative control:
   the same samples against the opposite sign of ``g`` fail), and the density integrates to 1.
@@ -41,15 +41,12 @@ MEDIA_SCENES = {
     "participating_media/test_homo_obj_inside_medium_volpath.xml": 512,
     "participating_media/test_homo_roughdielectric_spot_volpath.xml": 512,
     "participating_media/test_surf_area_light_volpath.xml": 512,
+    "participating_media/test_hetero_sigmat_albedo_volpath.xml": 512,
+    "participating_media/test_hetero_sigmat_volpath.xml": 512,
 }
 
-#: participating_media scene -> what drpt lacks to render it (strict xfail)
-MEDIA_NOT_YET = {
-    "participating_media/test_hetero_sigmat_albedo_volpath.xml":
-        "heterogeneous medium (gridvolume sigma_t and albedo): drpt has homogeneous media",
-    "participating_media/test_hetero_sigmat_volpath.xml":
-        "heterogeneous medium (gridvolume sigma_t): drpt has homogeneous media",
-}
+#: participating_media scene -> what drpt lacks to render it (strict xfail; none)
+MEDIA_NOT_YET: dict[str, str] = {}
 
 
 def _cases():
@@ -69,17 +66,24 @@ def test_media_corpus_scene_passes_mitsubas_z_test(rel, spp):
 
 
 @pytest.mark.slow
-def test_wrong_albedo_fails_the_z_test(tmp_path):
-    """Negative control: the null-bounded medium with red albedo 0.9 for 0.99 fails against
-    the reference; the unchanged copy passes (the failure is the albedo's)."""
+@pytest.mark.parametrize("rel, old, new", [
+    ("participating_media/test_homo_null_envmap_volpath.xml", '<rgb name="albedo" value="0.99, 0.5, 0.5"/>',
+     '<rgb name="albedo" value="0.9, 0.5, 0.5"/>'),
+    ("participating_media/test_hetero_sigmat_volpath.xml", '<float name="scale" value="5"/>',
+     '<float name="scale" value="2.5"/>'),
+], ids=["albedo 0.9 for 0.99", "grid density halved"])
+def test_wrong_medium_fails_the_z_test(tmp_path, rel, old, new):
+    """Negative controls: a homogeneous medium's red albedo 0.9 for 0.99, a heterogeneous
+    one's density halved, fail against the reference; the unchanged copies pass (the
+    failure is the perturbation's). (The z-test at 512 spp does not see a 20% lower
+    density, scale 4 for 5, in the heterogeneous scene: a weak test there.)"""
     from corpusutil import _read
     from test_mitsuba_corpus import _perturbed
 
-    rel, spp = "participating_media/test_homo_null_envmap_volpath.xml", 512
-    old = '<rgb name="albedo" value="0.99, 0.5, 0.5"/>'
+    spp = 512
     ref, var = (_read(p) for p in reference_files(corpus_scene(rel)))
     results = {}
-    for name, value in (("copy", old), ("perturbed", '<rgb name="albedo" value="0.9, 0.5, 0.5"/>')):
+    for name, value in (("copy", old), ("perturbed", new)):
         path = _perturbed(tmp_path / name, rel, old, value)
         # (its include's own includes are found through the original folder, as a <path>)
         folder = corpus_scene(rel).parent
@@ -359,3 +363,17 @@ def test_compare_edits_keep_volpath(tmp_path):
     assert MitsubaXML.for_scene(r.scene_model, opts).integrator["type"] == "volpath"
     opts = dc_replace(opts, integrator="path")
     assert "type" not in MitsubaXML.for_scene(r.scene_model, opts).integrator
+
+
+def test_a_bad_grid_volume_is_a_located_error(tmp_path):
+    from drpt.errors import SceneError
+    from drpt.scene import load_scene
+
+    (tmp_path / "bad.vol").write_bytes(b"VOL\x03" + b"\x01\x00\x00\x00" + b"\x00" * 20)
+    path = tmp_path / "m.xml"
+    path.write_text('<scene version="3.0.0">\n<medium id="m" type="heterogeneous">\n'
+                    '<volume name="sigma_t" type="gridvolume"><string name="filename" value="bad.vol"/></volume>\n'
+                    '</medium>\n<shape type="sphere"><bsdf type="null"/><ref name="interior" id="m"/></shape>\n'
+                    '<sensor type="perspective"/>\n</scene>\n')
+    with pytest.raises(SceneError, match=r"m.xml:3: volume 'gridvolume'.*bad.vol"):
+        load_scene(path)

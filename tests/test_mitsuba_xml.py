@@ -226,17 +226,17 @@ def test_fov_axes(axis, fov, aspect, expect_y):
 
 
 def test_unsupported_plugins_stop_or_are_left_out(tmp_path):
-    p = _xml(tmp_path, '<medium type="heterogeneous" id="fog"/>\n'
+    p = _xml(tmp_path, '<medium type="homogeneous" id="fog"><phase type="rayleigh"/></medium>\n'
                        '<shape type="sphere"><bsdf type="diffuse"/><ref name="interior" id="fog"/></shape>\n'
                        '<shape type="sphere"><bsdf type="hair"><float name="eumelanin" value="1"/>'
                        '</bsdf></shape>')
-    with pytest.raises(SceneError, match=r"t.xml:3: unsupported medium 'heterogeneous' \(id 'fog'\)"):
+    with pytest.raises(SceneError, match=r"t.xml:3: unsupported phase function 'rayleigh'"):
         load_scene(p)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         s = load_scene(p, ignore_unsupported=True)
     msgs = [str(w.message) for w in caught]
-    assert any("t.xml:3: unsupported medium 'heterogeneous'" in m and "left out" in m for m in msgs)
+    assert any("t.xml:3: unsupported phase function 'rayleigh'" in m and "using isotropic" in m for m in msgs)
     assert any("t.xml:5: unsupported BSDF plugin 'hair'" in m for m in msgs)
     assert len(s.spheres) == 2 and s.materials[1].bsdf.kind == "diffuse"
 

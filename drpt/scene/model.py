@@ -354,11 +354,30 @@ class RenderSettings:
 
 # ---------------------------------------------------------------------- media
 @dataclass
+class GridVolume:
+    """A voxel grid (Mitsuba's ``gridvolume``): ``data`` ``(Z, Y, X, C)`` float32 values
+    (C 1 or 3), looked up at ``to_local @ (p, 1)`` in the unit cube (voxel centers at
+    ``(i + 0.5) / res``), ``filter`` ``"trilinear"`` or ``"nearest"``, ``wrap`` ``"clamp"``,
+    ``"repeat"`` or ``"mirror"`` outside it."""
+
+    data: np.ndarray
+    to_local: np.ndarray  # (4, 4) world -> unit cube
+    filter: str = "trilinear"
+    wrap: str = "clamp"
+
+    @property
+    def max(self) -> float:
+        return float(self.data.max()) if self.data.size else 0.0
+
+
+@dataclass
 class Medium:
-    """A homogeneous participating medium (Mitsuba's ``homogeneous``): extinction
-    ``sigma_t * scale`` (per unit length, RGB), single-scattering ``albedo`` (RGB, in
-    [0, 1]) and a phase function: ``"isotropic"``, or ``"hg"`` (Henyey-Greenstein) with
-    mean cosine ``g`` in (-1, 1) (positive: forward scattering)."""
+    """A participating medium: extinction ``sigma_t * scale`` (per unit length, RGB),
+    single-scattering ``albedo`` (RGB, in [0, 1]) and a phase function: ``"isotropic"``, or
+    ``"hg"`` (Henyey-Greenstein) with mean cosine ``g`` in (-1, 1) (positive: forward
+    scattering). Homogeneous (Mitsuba's ``homogeneous``) unless ``sigma_t_grid`` is set
+    (Mitsuba's ``heterogeneous`` with a one-channel ``gridvolume`` extinction, which is zero
+    outside the grid's box); ``albedo_grid`` replaces the constant albedo there."""
 
     name: str
     sigma_t: Vec3 = (1.0, 1.0, 1.0)
@@ -367,6 +386,12 @@ class Medium:
     phase: str = "isotropic"
     g: float = 0.0
     origin: str = ""
+    sigma_t_grid: GridVolume | None = None
+    albedo_grid: GridVolume | None = None
+
+    @property
+    def is_homogeneous(self) -> bool:
+        return self.sigma_t_grid is None
 
     @property
     def extinction(self) -> Vec3:

@@ -1,4 +1,4 @@
-"""Volumetric path tracing through homogeneous participating media (Mitsuba's ``volpath``).
+"""Volumetric path tracing through participating media (Mitsuba's ``volpath``).
 
 A medium fills the inside or the outside of the shapes whose material names it
 (:attr:`drpt.scene.model.Material.interior` / ``exterior``): the medium a ray travels in
@@ -17,6 +17,14 @@ channel's weight is at most 3 times its albedo and channels with ``sigma_t = 0``
 special case. (Mitsuba keeps one channel per path and divides by its density alone: the same
 expectation, more variance for chromatic media.) At a scattering event the phase function
 (isotropic or Henyey-Greenstein) is sampled exactly (weight 1).
+
+A heterogeneous medium (:class:`Heterogeneous`: a one-channel extinction grid) is sampled by
+delta tracking as Mitsuba's: a tentative collision at a distance sampled with the majorant
+(``scale`` times the grid's maximum) from where the ray enters the grid's box is real with
+probability ``sigma_t(x) / majorant`` (the throughput times the albedo there), else a null
+collision and the ray goes on unchanged (a loop iteration that is not a scattering event).
+Shadow rays use ratio tracking: ``1 - sigma_t(x) / majorant`` at each tentative collision, one
+random number each. Scenes without heterogeneous media trace none of this.
 
 Next-event estimation runs at surfaces and at scattering events alike (the BSDF or the
 phase function evaluated toward the emitter sample, power-heuristic MIS against sampling
@@ -89,7 +97,8 @@ def hg_sample(g: Float, u: Array2f, d: Array3f) -> Array3f:
 
 
 class MediumTable:
-    """The scene's homogeneous media and, per material, the media on either side of its
+    """The scene's media (homogeneous ones in arrays, heterogeneous ones as
+    :class:`Heterogeneous` objects) and, per material, the media on either side of its
     surfaces and how a shadow ray passes it (on the device). Medium ids are 1-based
     (``0``: vacuum)."""
 
@@ -99,7 +108,11 @@ class MediumTable:
 
         media = scene.media
         self.count = len(media)
-        self.sigma_t = _vec([m.extinction for m in media])
+        # (a heterogeneous medium is vacuum to the homogeneous code: its own in self.hetero)
+        self.sigma_t = _vec([m.extinction if m.is_homogeneous else (0.0, 0.0, 0.0) for m in media])
+        self.hetero = [Heterogeneous(i + 1, m) for i, m in enumerate(media) if not m.is_homogeneous]
+        self.hetero = [h for h in self.hetero if h.majorant > 0.0]
+        self.has_hetero = bool(self.hetero)
         self.albedo = _vec([m.albedo for m in media])
         self.g = Float(np.array([m.g if m.phase == "hg" else 0.0 for m in media], np.float32))
         mats = scene.materials or []
@@ -178,6 +191,73 @@ class MediumTable:
         return dr.select(on, value, 0.0)
 
 
+def _affine(m, p: Array3f, translate: bool = True) -> Array3f:
+    """The 4x4 host matrix ``m`` (nested lists) applied to the point (or, without
+    ``translate``, the vector) ``p``."""
+    return Array3f(*(m[r][0] * p.x + m[r][1] * p.y + m[r][2] * p.z + (m[r][3] if translate else 0.0)
+                     for r in range(3)))
+
+
+def _texture(grid):
+    from drjit.auto import TensorXf, Texture3f
+
+    mode = dr.FilterMode.Linear if grid.filter == "trilinear" else dr.FilterMode.Nearest
+    wrap = {"clamp": dr.WrapMode.Clamp, "repeat": dr.WrapMode.Repeat, "mirror": dr.WrapMode.Mirror}[grid.wrap]
+    return Texture3f(TensorXf(np.ascontiguousarray(grid.data, np.float32)), use_accel=False,
+                     filter_mode=mode, wrap_mode=wrap)
+
+
+class Heterogeneous:
+    """One heterogeneous medium (Mitsuba's ``heterogeneous`` with a ``gridvolume``
+    extinction): its extinction is the grid's value times ``scale`` inside the world-space
+    box of the grid's unit cube (Mitsuba's ``Volume::bbox``, wrap mode outside the cube but
+    inside the box) and zero elsewhere; the majorant is ``scale`` times the grid's maximum."""
+
+    def __init__(self, medium_id: int, m):
+        grid = m.sigma_t_grid
+        self.id = medium_id
+        self.scale = float(m.scale)
+        self.majorant = self.scale * grid.max
+        self.to_local = np.asarray(grid.to_local, np.float64).tolist()
+        corners = np.array([[x, y, z, 1.0] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) @ \
+            np.linalg.inv(grid.to_local).T
+        self.lo, self.hi = corners[:, :3].min(0).tolist(), corners[:, :3].max(0).tolist()
+        self.sigma_tex = _texture(grid)
+        self.albedo_const = tuple(float(a) for a in m.albedo)
+        self.albedo_grid = m.albedo_grid
+        if self.albedo_grid is not None:
+            self.albedo_tex = _texture(self.albedo_grid)
+            self.albedo_to_local = np.asarray(self.albedo_grid.to_local, np.float64).tolist()
+
+    def box(self, o: Array3f, d: Array3f) -> tuple[Float, Float, Bool]:
+        """``(mint, maxt, hit)`` of the ray ``(o, d)`` through the medium's box."""
+        mint, maxt = Float(-dr.inf), Float(dr.inf)
+        for k in range(3):
+            ok, dk = o[k], d[k]
+            inside = (ok >= self.lo[k]) & (ok <= self.hi[k])
+            a, b = (self.lo[k] - ok) / dk, (self.hi[k] - ok) / dk
+            zero = dk == 0.0
+            mint = dr.maximum(mint, dr.select(zero, dr.select(inside, -dr.inf, dr.inf), dr.minimum(a, b)))
+            maxt = dr.minimum(maxt, dr.select(zero, dr.select(inside, dr.inf, -dr.inf), dr.maximum(a, b)))
+        return mint, maxt, mint <= maxt
+
+    def sigma_t(self, p: Array3f, active: Bool) -> Float:
+        return self.sigma_tex.eval(_affine(self.to_local, p), active)[0] * self.scale
+
+    def albedo(self, p: Array3f, active: Bool) -> Array3f:
+        if self.albedo_grid is None:
+            return Array3f(*self.albedo_const)
+        v = self.albedo_tex.eval(_affine(self.albedo_to_local, p), active)
+        return Array3f(v[0], v[0], v[0]) if len(v) == 1 else Array3f(v[0], v[1], v[2])
+
+    def collide(self, o: Array3f, d: Array3f, end: Float, u: Float, active: Bool) -> tuple[Bool, Float]:
+        """Lanes whose tentative collision (distance sampled with the majorant from where the
+        ray enters the box) comes before ``end``, and its distance."""
+        mint, maxt, hit = self.box(o, d)
+        t = dr.maximum(mint, 0.0) - dr.log(1.0 - u) / self.majorant
+        return active & hit & (t < dr.minimum(maxt, end)), t
+
+
 def _transmittance(sigma_t: Array3f, dist: Float) -> Array3f:
     """``exp(-sigma_t dist)`` per channel, 1 where ``sigma_t`` is 0 (also for an infinite ``dist``)."""
     return dr.select(sigma_t > 0.0, dr.exp(-sigma_t * dist), 1.0)
@@ -201,7 +281,7 @@ class VolPathState:
 
 
 class VolPathIntegrator(PathIntegrator):
-    """Mitsuba's ``volpath`` for homogeneous media (see the module's docs). Its
+    """Mitsuba's ``volpath`` (see the module's docs). Its
     ``sample`` and ``sample_sequence`` are :class:`PathIntegrator`'s."""
 
     def __init__(self, scene: DeviceScene, options: PathOptions, model: Scene):
@@ -217,10 +297,13 @@ class VolPathIntegrator(PathIntegrator):
                             ref_p=Array3f(o), medium=dr.zeros(UInt32, w), active=Bool(active))
 
     @dr.syntax
-    def shadow(self, o: Array3f, d: Array3f, tmax: Float, medium: UInt32, active: Bool) -> Array3f:
+    def shadow(self, o: Array3f, d: Array3f, tmax: Float, medium: UInt32, active: Bool,
+               rng: PCG32 | None = None) -> Array3f:
         """The transmittance of the segment from ``o`` along unit ``d`` up to ``tmax``
         (``inf``: to the sky), starting in ``medium``: media, null boundaries and
-        thindielectric sheets pass light, other surfaces block it."""
+        thindielectric sheets pass light, other surfaces block it. Homogeneous media
+        attenuate exactly; heterogeneous ones by ratio tracking (``rng``: one number per
+        step, only in scenes with such media)."""
         scene, media = self.scene, self.media
         tr = dr.full(Array3f, 1.0, dr.width(active))
         live = Bool(active)
@@ -228,18 +311,30 @@ class VolPathIntegrator(PathIntegrator):
         crossings = UInt32(0)
         while live:
             si = scene.intersect(o, d, live)
-            blocked = live & si.valid & (si.t < tmax)
-            seg = dr.select(blocked, si.t, tmax)
+            ahead = live & si.valid & (si.t < tmax)
+            seg = dr.select(ahead, si.t, tmax)
+            step = Bool(False)
+            p_step = Array3f(o)
+            if media.has_hetero:
+                u = rng.next_float32()
+                for h in media.hetero:
+                    hit, t = h.collide(o, d, seg, u, live & (medium == h.id))
+                    p = o + d * t
+                    tr = dr.select(hit, tr * dr.maximum(1.0 - h.sigma_t(p, hit) / h.majorant, 0.0), tr)
+                    p_step = dr.select(hit, p, p_step)
+                    tmax = dr.select(hit, tmax - t, tmax)
+                    step = step | hit
+            blocked = ahead & ~step
             sigma_t, _, _ = media.coefficients(medium, live)
-            tr = dr.select(live, tr * _transmittance(sigma_t, seg), tr)
+            tr = dr.select(live & ~step, tr * _transmittance(sigma_t, seg), tr)
             tr = dr.select(blocked, tr * media.null_transmission(si, d, blocked), tr)
             medium = media.after(si, d, medium, blocked)
             o2 = scene.spawn(si, d)
             tmax = dr.select(blocked, tmax - dr.dot(o2 - o, d), tmax)
-            o = dr.select(blocked, o2, o)
-            crossings += 1
+            o = dr.select(blocked, o2, dr.select(step, p_step, o))
+            crossings = dr.select(blocked, crossings + 1, crossings)
             tr = dr.select(blocked & (crossings >= MAX_SHADOW_CROSSINGS), 0.0, tr)
-            live = blocked & (dr.max(tr) > 0.0) & (crossings < MAX_SHADOW_CROSSINGS)
+            live = (blocked | step) & (dr.max(tr) > 0.0) & (crossings < MAX_SHADOW_CROSSINGS)
         return tr
 
     def _bounce(self, scene: DeviceScene, s: VolPathState, rng: PCG32) -> VolPathState:
@@ -270,10 +365,21 @@ class VolPathIntegrator(PathIntegrator):
         ratio = dr.select(mean_pdf > 0.0, tr / mean_pdf, 0.0)
         beta = dr.select(in_medium, beta * ratio, beta)
         beta = dr.select(scatter, beta * sigma_t * albedo, beta)
-        depth = dr.select(scatter, s.depth + 1, s.depth)
         p_med = s.o + s.d * t
+        het_null = Bool(False)
+        if media.has_hetero:  # delta tracking against the majorant (Mitsuba's null collisions)
+            u_null = rng.next_float32()
+            for h in media.hetero:
+                cand, t_h = h.collide(s.o, s.d, t_surf, u_t, in_medium & (s.medium == h.id))
+                p_h = s.o + s.d * t_h
+                real = cand & (u_null * h.majorant < h.sigma_t(p_h, cand))
+                beta = dr.select(real, beta * h.albedo(p_h, real), beta)
+                p_med = dr.select(cand, p_h, p_med)
+                scatter = scatter | real
+                het_null = het_null | (cand & ~real)
+        depth = dr.select(scatter, s.depth + 1, s.depth)
         scatter_live = scatter & (depth < opt.max_depth) if opt.max_depth >= 0 else Bool(scatter)
-        surf = active & ~scatter
+        surf = active & ~scatter & ~het_null
 
         # ---- the emitter or sky the ray reaches
         L = s.L
@@ -323,7 +429,7 @@ class VolPathIntegrator(PathIntegrator):
             o, med = start(ls.wo)
             to = ls.p - o
             dl = dr.norm(to)
-            tr_l = self.shadow(o, to / dr.maximum(dl, 1e-30), dl * SHADOW_SHRINK, med, ok)
+            tr_l = self.shadow(o, to / dr.maximum(dl, 1e-30), dl * SHADOW_SHRINK, med, ok, rng)
             wl = power_heuristic(ls.pdf, pdf_b) / ls.pdf
             L = L + dr.select(ok, beta * f * ls.le * tr_l * wl, 0.0)
         if scene.has_delta_lights:
@@ -331,14 +437,14 @@ class VolPathIntegrator(PathIntegrator):
                 f, _ = scatter_eval(dlt.wo)
                 ok = nee_ok & (dr.max(f) > 0.0) & (dr.max(dlt.irradiance) > 0.0)
                 o, med = start(dlt.wo)
-                tr_l = self.shadow(o, dlt.wo, dlt.dist * SHADOW_SHRINK, med, ok)
+                tr_l = self.shadow(o, dlt.wo, dlt.dist * SHADOW_SHRINK, med, ok, rng)
                 L = L + dr.select(ok, beta * f * dlt.irradiance * tr_l, 0.0)
         if scene.has_environment:
             wo_e, rad_e, pdf_e = scene.sample_environment(u_env, nee_ok)
             f, pdf_b = scatter_eval(wo_e)
             ok = nee_ok & (pdf_e > 0.0) & (dr.max(f) > 0.0)
             o, med = start(wo_e)
-            tr_l = self.shadow(o, wo_e, Float(dr.inf), med, ok)
+            tr_l = self.shadow(o, wo_e, Float(dr.inf), med, ok, rng)
             we = power_heuristic(pdf_e, pdf_b) / dr.maximum(pdf_e, 1e-30)
             L = L + dr.select(ok, beta * f * rad_e * tr_l * we, 0.0)
 
@@ -360,10 +466,13 @@ class VolPathIntegrator(PathIntegrator):
         depth = dr.select(real, depth + 1, depth)
         new_d = dr.select(scatter_live, wo_ph, Array3f(wo))
         new_o = dr.select(scatter_live, p_med, scene.spawn(si, wo))
+        if media.has_hetero:  # a null collision: on along the same ray
+            new_d = dr.select(het_null, s.d, new_d)
+            new_o = dr.select(het_null, p_med, new_o)
         medium = media.after(si, wo, s.medium, on_surface)
         ref_p = dr.select(scatter_live, p_med, dr.select(real, si.p, s.ref_p))
         prev_pdf = dr.select(scatter_live, wo_ph_pdf, dr.select(real, Float(bs.pdf), s.prev_pdf))
         prev_delta = dr.select(scatter_live, False, dr.select(real, Bool(bs.delta), s.prev_delta))
-        live = scatter_live | (on_surface & bs.valid)
+        live = scatter_live | (on_surface & bs.valid) | het_null
         return VolPathState(o=new_o, d=new_d, L=L, beta=beta, eta=eta, depth=depth, prev_pdf=prev_pdf,
                             prev_delta=prev_delta, ref_p=ref_p, medium=medium, active=live)

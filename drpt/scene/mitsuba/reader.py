@@ -19,6 +19,7 @@ from ..model import (
     Background,
     DirectionalLight,
     FilmWindow,
+    GridVolume,
     Material,
     Medium,
     OrthographicCamera,
@@ -468,19 +469,35 @@ class Reader:
             return self.medium_index[node.index]
         if node.kind != "medium":
             raise node.error(f"{node.label} as the {where} (it takes a medium)")
-        if node.plugin != "homogeneous":
-            self.unsupported(node, f"{node.label} ({where}; drpt has homogeneous media)")
+        if node.plugin not in ("homogeneous", "heterogeneous"):
+            self.unsupported(node, f"{node.label} ({where}; drpt has homogeneous and heterogeneous media)")
             self.medium_index[node.index] = None
             return None
-        values = {}
+        values, grids = {}, {}
         for name, default in (("sigma_t", (1.0, 1.0, 1.0)), ("albedo", (0.75, 0.75, 0.75))):
-            if node.is_ref(name):
-                self.unsupported(node.ref(name), f"{node.ref(name).label} as '{name}' of {node.label} "
-                                 "(drpt's homogeneous medium takes a color)", fallback=str(default))
-                values[name] = default
-            else:
+            values[name] = default
+            if not node.is_ref(name):
                 values[name] = node.color(name, default)
+                continue
+            vol = node.ref(name)
+            if vol.kind == "volume" and vol.plugin == "constvolume":
+                values[name] = vol.color("value", (1.0, 1.0, 1.0))
+                self.check_unread(vol)
+            elif vol.kind == "volume" and vol.plugin == "gridvolume" and node.plugin == "heterogeneous":
+                grid = self.grid_volume(vol)
+                if name == "sigma_t" and grid.data.shape[3] != 1:
+                    self.unsupported(vol, f"{vol.label} with {grid.data.shape[3]} channels as 'sigma_t' "
+                                     "(drpt's heterogeneous extinction has one)", fallback="1")
+                    continue
+                grids[name] = grid
+            else:
+                self.unsupported(vol, f"{vol.label} as '{name}' of {node.label}", fallback=str(default))
         sigma_t, albedo = values["sigma_t"], values["albedo"]
+        if "albedo" in grids and not (grids["albedo"].data.min() >= 0.0 and grids["albedo"].data.max() <= 1.0):
+            raise node.error(f"{node.label}: the albedo grid's values must be in [0, 1]")
+        if "sigma_t" in grids and not (np.isfinite(grids["sigma_t"].data).all()
+                                       and grids["sigma_t"].data.min() >= 0.0):
+            raise node.error(f"{node.label}: the sigma_t grid's values must be finite and >= 0")
         scale = node.float("scale", 1.0)
         if not all(math.isfinite(x) and x >= 0 for x in sigma_t):
             raise node.error(f"{node.label}: sigma_t must be finite and >= 0, got {tuple(sigma_t)}")
@@ -509,9 +526,57 @@ class Reader:
                                  fallback="isotropic")
         self.check_unread(node)
         self.medium_index[node.index] = len(self.media)
-        self.media.append(Medium(node.id or f"{node.plugin}@{node.line}", tuple(sigma_t), tuple(albedo),
-                                 scale, phase, g, node.where))
+        medium = Medium(node.id or f"{node.plugin}@{node.line}", tuple(sigma_t), tuple(albedo),
+                        scale, phase, g, node.where)
+        if "sigma_t" in grids:  # (a constant extinction: a homogeneous medium, any albedo grid aside)
+            medium.sigma_t_grid, medium.albedo_grid = grids["sigma_t"], grids.get("albedo")
+            if not math.isfinite(medium.sigma_t_grid.max * scale) or medium.sigma_t_grid.max * scale > 1e30:
+                raise node.error(f"{node.label}: the grid's sigma_t * scale must be at most 1e30")
+        elif "albedo" in grids:
+            self.unsupported(node, f"{node.label} with an albedo grid and a constant sigma_t",
+                             fallback="the constant albedo")
+        self.media.append(medium)
         return self.medium_index[node.index]
+
+    def grid_volume(self, node: Node) -> GridVolume:
+        """Mitsuba's ``gridvolume`` from a ``.vol`` file (binary, version 3, float32)."""
+        path = node.resolve_file(node.str("filename") or "")
+        try:
+            raw = Path(path).read_bytes()
+        except OSError as e:
+            raise node.error(f"{node.label}: {path}: {e.strerror}") from None
+        if len(raw) < 48 or raw[:3] != b"VOL" or raw[3] != 3:
+            raise node.error(f"{node.label}: {path} is not a version 3 .vol file")
+        enc, nx, ny, nz, nc = np.frombuffer(raw[4:24], "<i4")
+        if enc != 1:
+            raise node.error(f"{node.label}: {path}: only float32 grids (encoding 1) are read, got {enc}")
+        if min(nx, ny, nz) < 1 or nc not in (1, 3) or len(raw) != 48 + 4 * int(nx) * ny * nz * nc:
+            raise node.error(f"{node.label}: {path}: bad size ({nx} x {ny} x {nz}, {nc} channels, "
+                             f"{len(raw)} bytes)")
+        bbox = np.frombuffer(raw[24:48], "<f4").astype(np.float64)
+        data = np.frombuffer(raw[48:], "<f4").reshape(int(nz), int(ny), int(nx), int(nc)).copy()
+        if not np.isfinite(data).all():
+            raise node.error(f"{node.label}: {path}: values are not finite")
+        to_world = node.transform("to_world")
+        _check_matrix(node, to_world)
+        to_local = np.linalg.inv(to_world)
+        if node.bool("use_grid_bbox", False):
+            lo, hi = bbox[:3], bbox[3:]
+            if not np.all(hi > lo):
+                raise node.error(f"{node.label}: {path}: its bounding box is empty")
+            m = np.diag([*(1.0 / (hi - lo)), 1.0])
+            m[:3, 3] = -lo / (hi - lo)
+            to_local = m @ to_local
+        filt = node.str("filter_type", "trilinear")
+        wrap = node.str("wrap_mode", "clamp")
+        if filt not in ("trilinear", "nearest"):
+            raise node.error(f"{node.label}: filter_type must be trilinear or nearest, got {filt!r}")
+        if wrap not in ("clamp", "repeat", "mirror"):
+            raise node.error(f"{node.label}: wrap_mode must be clamp, repeat or mirror, got {wrap!r}")
+        node.get("accel")
+        node.bool("raw", False)  # (RGB variants read the values as given either way)
+        self.check_unread(node)
+        return GridVolume(data, to_local, filt, wrap)
 
     def _material_index(self, spec: BSDFSpec, bsdf_node: Node | None, parts, shape: Node) -> int:
         emission, (interior, exterior) = parts
