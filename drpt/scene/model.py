@@ -411,6 +411,7 @@ class Scene:
     background: Background = field(default_factory=Background)
     settings: RenderSettings | None = None  # render settings the file gives (Mitsuba XML)
     media: list[Medium] = field(default_factory=list)  # participating media (Material.interior/exterior)
+    camera_medium: int | None = None  # the medium camera rays start in (index into media; None: vacuum)
 
     @property
     def emissive_materials(self) -> list[int]:

@@ -4,8 +4,9 @@ A medium fills the inside or the outside of the shapes whose material names it
 (:attr:`drpt.scene.model.Material.interior` / ``exterior``): the medium a ray travels in
 follows the boundaries it crosses, as in Mitsuba (after a surface of a *medium transition*
 the ray is in the interior where it leaves against the surface's geometric normal, else in
-the exterior; a camera ray starts in vacuum). A ``null`` BSDF is a pure boundary, and a
-``thindielectric`` sheet's transmission passes straight through as Mitsuba's null component.
+the exterior; a camera ray starts in the sensor's medium, if it has one, else in vacuum).
+A ``null`` BSDF is a pure boundary, and a ``thindielectric`` sheet's transmission passes
+straight through as Mitsuba's null component.
 
 Each segment in a medium samples a free-flight distance: a color channel is picked
 uniformly (one random number per event), ``t = -log(1 - u) / sigma_t[c]``; the sample is
@@ -26,12 +27,17 @@ collision and the ray goes on unchanged (a loop iteration that is not a scatteri
 Shadow rays use ratio tracking: ``1 - sigma_t(x) / majorant`` at each tentative collision, one
 random number each. Scenes without heterogeneous media trace none of this.
 
-Next-event estimation runs at surfaces and at scattering events alike (the BSDF or the
-phase function evaluated toward the emitter sample, power-heuristic MIS against sampling
-them): the shadow ray's transmittance is computed analytically (``exp(-sigma_t d)`` per
+Next-event estimation (area emitters, point-like lights, the environment map, or a
+constant background by uniform directions) runs at surfaces and at scattering events alike
+(the BSDF or the phase function evaluated toward the emitter sample, power-heuristic MIS
+against sampling them): the shadow ray's transmittance is computed analytically (``exp(-sigma_t d)`` per
 segment of homogeneous medium), through ``null`` boundaries (factor 1) and ``thindielectric``
 sheets (their transmission ``1 - 2R / (1 + R)``), changing medium at each transition; any
-other surface blocks it. An emitter a BSDF or phase sample hits afterwards is weighted
+other surface blocks it. (As in Mitsuba, the sky is ``2 max(R, |p - c|)`` away for this
+estimate, ``(c, R)`` the bounding sphere of the scene's shapes: in a medium that extends
+beyond the shapes, such as the sensor's, the sky is seen through that much of it, while a
+sampled ray that leaves every shape in such a medium scatters before it reaches the sky.)
+An emitter a BSDF or phase sample hits afterwards is weighted
 against the density next-event estimation has for it from the last real scattering vertex
 (null crossings do not count), as Mitsuba does.
 
@@ -287,6 +293,16 @@ class VolPathIntegrator(PathIntegrator):
     def __init__(self, scene: DeviceScene, options: PathOptions, model: Scene):
         super().__init__(scene, options)
         self.media = MediumTable(model)
+        cm = getattr(model, "camera_medium", None)
+        self.camera_medium = 0 if cm is None else cm + 1
+        # Mitsuba's sky, for next-event estimation, is 2 max(R, |p - c|) away from the point p,
+        # (c, R) the bounding sphere of the scene's shapes (what a medium attenuates on the way)
+        lo, hi = model.bounds()
+        if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
+            self.sky_center = tuple(float(x) for x in (lo + hi) / 2)
+            self.sky_radius = float(np.linalg.norm(hi - lo) / 2)
+        else:
+            self.sky_center, self.sky_radius = (0.0, 0.0, 0.0), 0.0
 
     def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> VolPathState:
         w = dr.width(active)
@@ -294,7 +310,8 @@ class VolPathIntegrator(PathIntegrator):
         return VolPathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=beta, eta=dr.full(Float, 1.0, w),
                             depth=dr.zeros(UInt32, w), prev_pdf=dr.full(Float, 1.0, w),
                             prev_delta=dr.full(Bool, not self.opt.hide_emitters, w),
-                            ref_p=Array3f(o), medium=dr.zeros(UInt32, w), active=Bool(active))
+                            ref_p=Array3f(o), medium=dr.full(UInt32, self.camera_medium, w),
+                            active=Bool(active))
 
     @dr.syntax
     def shadow(self, o: Array3f, d: Array3f, tmax: Float, medium: UInt32, active: Bool,
@@ -396,8 +413,9 @@ class VolPathIntegrator(PathIntegrator):
                 w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
             L = L + dr.select(hit_emitter, beta * le * w, 0.0)
         escaped = surf & ~si.valid & ~hide
-        if scene.has_background:
-            L = L + dr.select(escaped, beta * Array3f(*scene.background), 0.0)
+        if scene.has_background:  # sampled by next-event estimation too (below): MIS
+            w_bg = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, Float(1.0 / (4.0 * dr.pi))))
+            L = L + dr.select(escaped, beta * Array3f(*scene.background) * w_bg, 0.0)
         if scene.has_environment:
             le_env, pdf_env = scene.eval_pdf_environment(s.d, escaped)
             w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env))
@@ -439,12 +457,20 @@ class VolPathIntegrator(PathIntegrator):
                 o, med = start(dlt.wo)
                 tr_l = self.shadow(o, dlt.wo, dlt.dist * SHADOW_SHRINK, med, ok, rng)
                 L = L + dr.select(ok, beta * f * dlt.irradiance * tr_l, 0.0)
-        if scene.has_environment:
-            wo_e, rad_e, pdf_e = scene.sample_environment(u_env, nee_ok)
+        if scene.has_environment or scene.has_background:
+            if scene.has_environment:
+                wo_e, rad_e, pdf_e = scene.sample_environment(u_env, nee_ok)
+            else:  # a constant background (Mitsuba's constant emitter): uniform directions
+                z = 1.0 - 2.0 * u_env.x
+                r = dr.safe_sqrt(1.0 - z * z)
+                sp, cp = dr.sincos(2.0 * dr.pi * u_env.y)
+                wo_e, rad_e = Array3f(r * cp, r * sp, z), Array3f(*scene.background)
+                pdf_e = Float(1.0 / (4.0 * dr.pi))
             f, pdf_b = scatter_eval(wo_e)
             ok = nee_ok & (pdf_e > 0.0) & (dr.max(f) > 0.0)
             o, med = start(wo_e)
-            tr_l = self.shadow(o, wo_e, Float(dr.inf), med, ok, rng)
+            sky = 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
+            tr_l = self.shadow(o, wo_e, sky * SHADOW_SHRINK, med, ok, rng)
             we = power_heuristic(pdf_e, pdf_b) / dr.maximum(pdf_e, 1e-30)
             L = L + dr.select(ok, beta * f * rad_e * tr_l * we, 0.0)
 

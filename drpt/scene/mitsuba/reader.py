@@ -98,6 +98,7 @@ class Reader:
         self.lights: list = []
         self.media: list[Medium] = []
         self.medium_index: dict[int, int] = {}  # medium node -> index into media
+        self.camera_medium: int | None = None
         self.background = (0.0, 0.0, 0.0)
         self.camera = None
         self.settings = RenderSettings()
@@ -243,7 +244,7 @@ class Reader:
         scene = Scene(path=self.path, camera=self.camera, materials=self.mat_list, triangles=tris,
                       spheres=spheres, lights=self.lights,
                       background=Background(color=self.background), settings=self.settings,
-                      media=self.media)
+                      media=self.media, camera_medium=self.camera_medium)
         return scene
 
     # ------------------------------------------------------------ sensor
@@ -259,9 +260,8 @@ class Reader:
                 sampler = c
             else:
                 self.unsupported(c, f"{c.label} inside {node.label}")
-        if node.is_ref("medium"):
-            self.unsupported(node.ref("medium"), f"{node.ref('medium').label} around the sensor (drpt's "
-                             "camera sits in vacuum)")
+        if node.is_ref("medium"):  # the medium camera rays start in
+            self.camera_medium = self.medium(node.ref("medium"), f"medium of {node.label}")
         width, height = 768, 576  # Mitsuba's hdrfilm defaults
         crop = (0, 0, width, height)
         self.settings.rfilter, self.settings.rfilter_params = "gaussian", {"stddev": 0.5}
