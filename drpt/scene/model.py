@@ -373,11 +373,13 @@ class GridVolume:
 @dataclass
 class Medium:
     """A participating medium: extinction ``sigma_t * scale`` (per unit length, RGB),
-    single-scattering ``albedo`` (RGB, in [0, 1]) and a phase function: ``"isotropic"``, or
+    single-scattering ``albedo`` (RGB, in [0, 1]) and a phase function: ``"isotropic"``,
     ``"hg"`` (Henyey-Greenstein) with mean cosine ``g`` in (-1, 1) (positive: forward
-    scattering). Homogeneous (Mitsuba's ``homogeneous``) unless ``sigma_t_grid`` is set
-    (Mitsuba's ``heterogeneous`` with a one-channel ``gridvolume`` extinction, which is zero
-    outside the grid's box); ``albedo_grid`` replaces the constant albedo there."""
+    scattering), or ``"blend"`` (Mitsuba's ``blendphase``): ``(1 - blend)`` times HG(``g``)
+    plus ``blend`` times HG(``g2``) (an isotropic lobe has g 0). Homogeneous (Mitsuba's
+    ``homogeneous``) unless ``sigma_t_grid`` is set (Mitsuba's ``heterogeneous`` with a
+    one-channel ``gridvolume`` extinction, which is zero outside the grid's box);
+    ``albedo_grid`` replaces the constant albedo there."""
 
     name: str
     sigma_t: Vec3 = (1.0, 1.0, 1.0)
@@ -388,6 +390,8 @@ class Medium:
     origin: str = ""
     sigma_t_grid: GridVolume | None = None
     albedo_grid: GridVolume | None = None
+    g2: float = 0.0
+    blend: float = 0.0
 
     @property
     def is_homogeneous(self) -> bool:

@@ -120,7 +120,11 @@ class MediumTable:
         self.hetero = [h for h in self.hetero if h.majorant > 0.0]
         self.has_hetero = bool(self.hetero)
         self.albedo = _vec([m.albedo for m in media])
-        self.g = Float(np.array([m.g if m.phase == "hg" else 0.0 for m in media], np.float32))
+        self.g = Float(np.array([m.g if m.phase in ("hg", "blend") else 0.0 for m in media], np.float32))
+        self.has_blend = any(m.phase == "blend" for m in media)
+        if self.has_blend:  # Mitsuba's blendphase: a second HG lobe and its weight
+            self.g2 = Float(np.array([m.g2 if m.phase == "blend" else 0.0 for m in media], np.float32))
+            self.blend = Float(np.array([m.blend if m.phase == "blend" else 0.0 for m in media], np.float32))
         mats = scene.materials or []
         interior = [0 if m.interior is None else m.interior + 1 for m in mats]
         exterior = [0 if m.exterior is None else m.exterior + 1 for m in mats]
@@ -166,6 +170,12 @@ class MediumTable:
         al = dr.gather(Array3f, self.albedo, i, inside)
         g = dr.gather(Float, self.g, i, inside)
         return dr.select(inside, st, 0.0), al, g
+
+    def blend_lobe(self, medium: UInt32, active: Bool) -> tuple[Float, Float]:
+        """``(g2, weight)`` of the lanes' blended phase functions (weight 0: one lobe)."""
+        inside = active & (medium > 0)
+        i = dr.select(inside, medium - 1, 0)
+        return dr.gather(Float, self.g2, i, inside), dr.select(inside, dr.gather(Float, self.blend, i, inside), 0.0)
 
     def after(self, si, d: Array3f, medium: UInt32, active: Bool) -> UInt32:
         """The medium a ray leaving the surface ``si`` along ``d`` is in."""
@@ -431,9 +441,19 @@ class VolPathIntegrator(PathIntegrator):
         u_light = Array2f(rng.next_float32(), rng.next_float32())
         u_env = Array2f(rng.next_float32(), rng.next_float32())
 
+        if media.has_blend:
+            g2, wb = media.blend_lobe(s.medium, in_medium)
+
+            def phase_pdf(wo):
+                c = dr.dot(wo, s.d)
+                return (1.0 - wb) * hg_pdf(g, c) + wb * hg_pdf(g2, c)
+        else:
+            def phase_pdf(wo):
+                return hg_pdf(g, dr.dot(wo, s.d))
+
         def scatter_eval(wo):
             f_s, pdf_s = scene.eval_bsdf(si, wo)
-            ph = hg_pdf(g, dr.dot(wo, s.d))
+            ph = phase_pdf(wo)
             return dr.select(scatter, Array3f(ph), f_s), dr.select(scatter, ph, pdf_s)
 
         def start(wo):
@@ -478,8 +498,9 @@ class VolPathIntegrator(PathIntegrator):
         u_lobe = rng.next_float32()
         u2 = Array2f(rng.next_float32(), rng.next_float32())
         wo, bs = scene.sample_bsdf(si, u_lobe, u2)
-        wo_ph = hg_sample(g, Array2f(u2.x, u2.y), s.d)
-        wo_ph_pdf = hg_pdf(g, dr.dot(wo_ph, s.d))
+        g_lobe = dr.select(u_lobe < wb, g2, g) if media.has_blend else g  # (Mitsuba's lobe choice)
+        wo_ph = hg_sample(g_lobe, Array2f(u2.x, u2.y), s.d)
+        wo_ph_pdf = phase_pdf(wo_ph)
         if media.has_null:
             kind = media.null_kind_of(si, on_surface)
             passed = dr.dot(wo, si.ng) * dr.dot(s.d, si.ng) > 0.0

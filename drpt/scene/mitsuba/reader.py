@@ -509,25 +509,32 @@ class Reader:
             raise node.error(f"{node.label}: sigma_t * scale must be at most 1e30")
         if not node.bool("sample_emitters", True):
             self.drpt_ignores(node, "sample_emitters", "drpt always samples emitters in media")
-        phase, g = "isotropic", 0.0
+        phase, g, g2, blend = "isotropic", 0.0, 0.0, 0.0
         for c in node.children():
             if c.kind != "phasefunction":
                 self.unsupported(c, f"{c.label} inside {node.label}")
-            elif c.plugin == "isotropic":
-                self.check_unread(c)
-            elif c.plugin == "hg":
-                g = c.float("g", 0.8)
-                if not -1.0 < g < 1.0:
-                    raise c.error(f"{c.label}: g must be in (-1, 1), got {g}")
-                phase = "hg"
+            elif c.plugin == "blendphase":
+                kids = [k for k in c.children() if k.kind == "phasefunction"]
+                if len(kids) != 2:
+                    raise c.error(f"{c.label} needs 2 nested phase functions, got {len(kids)}")
+                if c.is_ref("weight"):
+                    self.unsupported(c.ref("weight"), f"{c.ref('weight').label} as the weight of {c.label}",
+                                     fallback="0.5")
+                    blend = 0.5
+                else:
+                    blend = c.float("weight", 0.5)
+                if not 0.0 <= blend <= 1.0:
+                    raise c.error(f"{c.label}: weight must be in [0, 1], got {blend}")
+                g, g2 = self._phase_lobe(kids[0]), self._phase_lobe(kids[1])
+                phase = "blend"
                 self.check_unread(c)
             else:
-                self.unsupported(c, f"phase function '{c.plugin}' (drpt has isotropic and hg)",
-                                 fallback="isotropic")
+                g = self._phase_lobe(c)
+                phase = "hg" if c.plugin == "hg" else "isotropic"
         self.check_unread(node)
         self.medium_index[node.index] = len(self.media)
         medium = Medium(node.id or f"{node.plugin}@{node.line}", tuple(sigma_t), tuple(albedo),
-                        scale, phase, g, node.where)
+                        scale, phase, g, node.where, g2=g2, blend=blend)
         if "sigma_t" in grids:  # (a constant extinction: a homogeneous medium, any albedo grid aside)
             medium.sigma_t_grid, medium.albedo_grid = grids["sigma_t"], grids.get("albedo")
             if not math.isfinite(medium.sigma_t_grid.max * scale) or medium.sigma_t_grid.max * scale > 1e30:
@@ -537,6 +544,21 @@ class Reader:
                              fallback="the constant albedo")
         self.media.append(medium)
         return self.medium_index[node.index]
+
+    def _phase_lobe(self, c: Node) -> float:
+        """The ``g`` of an ``isotropic`` (0) or ``hg`` phase function."""
+        if c.plugin == "hg":
+            g = c.float("g", 0.8)
+            if not -1.0 < g < 1.0:
+                raise c.error(f"{c.label}: g must be in (-1, 1), got {g}")
+            self.check_unread(c)
+            return g
+        if c.plugin != "isotropic":
+            self.unsupported(c, f"phase function '{c.plugin}' (drpt has isotropic, hg and blendphase "
+                             "of those)", fallback="isotropic")
+        else:
+            self.check_unread(c)
+        return 0.0
 
     def grid_volume(self, node: Node) -> GridVolume:
         """Mitsuba's ``gridvolume`` from a ``.vol`` file (binary, version 3, float32)."""
