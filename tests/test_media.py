@@ -478,3 +478,27 @@ def test_blendphase_renders_like_mitsuba(tmp_path):
         worst[w] = float(np.abs(block_z(np.asarray(res.image, np.float64), res.variance, ref, ref_var)).max())
     assert worst["0.7"] < 5.0, worst
     assert worst["0.3"] > 6.0, worst
+
+
+def test_a_too_dense_grid_is_refused(tmp_path):
+    """Delta tracking takes about majorant x box-diagonal steps across a heterogeneous
+    medium: beyond 1e5 the reader refuses it (a located error, not a hang)."""
+    import struct
+
+    from drpt.errors import SceneError
+    from drpt.scene import load_scene
+
+    (tmp_path / "g.vol").write_bytes(b"VOL\x03" + struct.pack("<5i", 1, 2, 2, 2, 1)
+                                     + struct.pack("<6f", 0, 0, 0, 1, 1, 1) + struct.pack("<8f", *[1.0] * 8))
+    for scale, ok in (("1000", True), ("1e6", False)):
+        path = tmp_path / f"m{ok}.xml"
+        path.write_text('<scene version="3.0.0">\n<medium id="m" type="heterogeneous">\n'
+                        f'<float name="scale" value="{scale}"/><volume name="sigma_t" type="gridvolume">'
+                        '<string name="filename" value="g.vol"/></volume>\n'
+                        '</medium>\n<shape type="sphere"><bsdf type="null"/><ref name="interior" id="m"/></shape>\n'
+                        '<sensor type="perspective"/>\n</scene>\n')
+        if ok:
+            assert load_scene(path).media[0].sigma_t_grid is not None
+        else:
+            with pytest.raises(SceneError, match=r"mFalse.xml:2: .*diagonal is 1.73e\+06"):
+                load_scene(path)

@@ -51,6 +51,9 @@ _SILENT = {
 }
 
 RFILTERS = {"box": (), "tent": ("radius",), "gaussian": ("stddev",)}
+#: a heterogeneous medium's majorant times its box's diagonal at most (the tentative
+#: collisions a ray takes across it: beyond, rendering would all but hang)
+MAX_MAJORANT_DEPTH = 1e5
 SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
 FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
 
@@ -537,8 +540,14 @@ class Reader:
                         scale, phase, g, node.where, g2=g2, blend=blend)
         if "sigma_t" in grids:  # (a constant extinction: a homogeneous medium, any albedo grid aside)
             medium.sigma_t_grid, medium.albedo_grid = grids["sigma_t"], grids.get("albedo")
-            if not math.isfinite(medium.sigma_t_grid.max * scale) or medium.sigma_t_grid.max * scale > 1e30:
-                raise node.error(f"{node.label}: the grid's sigma_t * scale must be at most 1e30")
+            majorant = medium.sigma_t_grid.max * scale
+            corners = np.array([[x, y, z, 1.0] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) @ \
+                np.linalg.inv(medium.sigma_t_grid.to_local).T
+            depth = majorant * float(np.linalg.norm(corners[:, :3].max(0) - corners[:, :3].min(0)))
+            if not depth <= MAX_MAJORANT_DEPTH:
+                raise node.error(f"{node.label}: the grid's maximum sigma_t * scale times its box's "
+                                 f"diagonal is {depth:.3g}; drpt's delta tracking takes about that many "
+                                 f"steps across it and refuses more than {MAX_MAJORANT_DEPTH:g}")
         elif "albedo" in grids:
             self.unsupported(node, f"{node.label} with an albedo grid and a constant sigma_t",
                              fallback="the constant albedo")
