@@ -502,3 +502,76 @@ def test_a_too_dense_grid_is_refused(tmp_path):
         else:
             with pytest.raises(SceneError, match=r"mFalse.xml:2: .*diagonal is 1.73e\+06"):
                 load_scene(path)
+
+
+# ------------------------------------------------------------ drpt's own format
+OWN = """PerspectiveCamera {
+    center 0 0 5
+    direction 0 0 -1
+    up 0 1 0
+    angle 30
+}
+Background { color 1 1 1 }
+Media {
+    numMedia 1
+    Medium { sigmaT 0.75 0.5 0.25  albedo 0.9 0.8 0.7  scale 2  g 0.6 }
+}
+Materials {
+    numMaterials 1
+    Material { passThrough interior 0 }
+}
+Group {
+    numObjects 1
+    MaterialIndex 0
+    Sphere { center 0 0 0 radius 1 }
+}
+"""
+
+
+@pytest.mark.slow
+def test_own_format_media_render_like_mitsuba(tmp_path):
+    """A ``Media`` block and a ``passThrough`` material with ``interior 0`` (drpt's format)
+    render like the same scene in Mitsuba XML rendered by Mitsuba's volpath (8 runs, 8x8
+    blocks, max |z| < 5); negative control: albedo 0.7 for 0.9 (max |z| > 6)."""
+    import mitsuba as mi
+
+    from drpt.backend import mitsuba_variant
+    from drpt.options import PathOptions, RenderOptions
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+    from render_check import block_z
+
+    xml = tmp_path / "fog.xml"
+    xml.write_text(FURNACE.replace('value="8"', 'value="32"'))  # (a square film: fov 30 either way)
+    mi.set_variant(mitsuba_variant())
+    ms = mi.load_file(str(xml), albedo="0.9, 0.8, 0.7", sigma="0.75, 0.5, 0.25", scale="2", g="0.6")
+    runs = np.stack([np.asarray(mi.render(ms, spp=64, seed=31 + k), np.float64)[..., :3] for k in range(8)])
+    ref, ref_var = runs.mean(0), runs.var(0, ddof=1) / 8
+    worst = {}
+    for name, text in (("same", OWN), ("albedo", OWN.replace("albedo 0.9 0.8 0.7", "albedo 0.7 0.8 0.7"))):
+        path = tmp_path / f"{name}.txt"
+        path.write_text(text)
+        sc = load_scene(path)
+        assert sc.media[0].phase == "hg" and sc.materials[0].interior == 0
+        res = Renderer(sc, RenderOptions(width=32, height=32, spp=512, seed=6, integrator="volpath", progress=False,
+                                         filter="box", path=PathOptions(max_depth=-1))).render()
+        worst[name] = float(np.abs(block_z(np.asarray(res.image, np.float64), res.variance, ref, ref_var)).max())
+    assert worst["same"] < 5.0, worst
+    assert worst["albedo"] > 6.0, worst
+
+
+@pytest.mark.parametrize("change, message", [
+    (("interior 0", "interior 1"), r"own.txt:14: medium 1 is out of range \(the Media block defines 1\)"),
+    (("passThrough interior 0", "passThrough diffuseColor 1 0 0"), r"own.txt:14: passThrough takes no other"),
+    (("g 0.6", "g 1"), r"own.txt:10: Medium g must be in \(-1, 1\)"),
+    (("albedo 0.9 0.8 0.7", "albedo 1.5 0.8 0.7"), r"own.txt:10: Medium albedo must be in \[0, 1\]"),
+    (("numMedia 1", "numMedia 2"), r"own.txt:8: Media declares numMedia 2 but contains 1 media"),
+])
+def test_own_format_media_errors(tmp_path, change, message):
+    from drpt.errors import SceneError
+    from drpt.scene import load_scene
+
+    path = tmp_path / "own.txt"
+    path.write_text(OWN.replace(*change))
+    with pytest.raises(SceneError, match=message):
+        load_scene(path)
