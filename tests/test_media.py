@@ -575,3 +575,18 @@ def test_own_format_media_errors(tmp_path, change, message):
     path.write_text(OWN.replace(*change))
     with pytest.raises(SceneError, match=message):
         load_scene(path)
+
+
+def test_rr_prob_keeps_the_furnace(tmp_path):
+    """``--rr-prob`` (a fixed continuation probability) in volpath: the albedo-1 furnace still
+    averages the background (within 4 standard errors)."""
+    from dataclasses import replace as dc_replace
+
+    from drpt.render.renderer import Renderer
+
+    r = _renderer(tmp_path, sigma="3, 3, 3", rr=1)
+    res = Renderer(r.scene_model, dc_replace(r.opt, path=dc_replace(r.opt.path, rr_prob=0.5), spp=64)).render()
+    img = np.asarray(res.image)
+    se = math.sqrt(float(np.sum(res.variance))) / img.size
+    assert np.isfinite(img).all() and abs(float(img.mean()) - 1.0) < 4.0 * se, (img.mean(), se)
+    assert img.std() > 0.01  # roulette did play

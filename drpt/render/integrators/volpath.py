@@ -44,8 +44,8 @@ against the density next-event estimation has for it from the last real scatteri
 Depth as in Mitsuba's volpath: ``depth`` counts real scattering events (surface or
 medium, not null crossings); a path ends when ``depth`` reaches ``max_depth`` (-1:
 unbounded), and Russian roulette plays once ``depth > rr_depth`` with survival probability
-``min(max(throughput) * eta^2, 0.95)``. A scattering event at ``depth = max_depth`` ends
-the path without next-event estimation. Null crossings are bounded by
+``min(max(throughput) * eta^2, 0.95)`` (or ``--rr-prob``). A scattering event at
+``depth = max_depth`` ends the path without next-event estimation. Null crossings are bounded by
 :data:`MAX_SHADOW_CROSSINGS` on shadow rays; the loop's own crossings each advance the ray.
 
 Only scenes with media use this module (:meth:`drpt.render.renderer.Renderer._make_integrator`):
@@ -368,7 +368,10 @@ class VolPathIntegrator(PathIntegrator):
         opt, media = self.opt, self.media
         # ---- Russian roulette and the depth limit (at the top, as Mitsuba's volpath)
         u_rr = rng.next_float32()
-        q = dr.minimum(dr.max(s.beta) * dr.square(s.eta), 0.95)
+        if opt.rr_prob is not None:  # (--rr-prob: a fixed continuation probability)
+            q = Float(opt.rr_prob)
+        else:
+            q = dr.minimum(dr.max(s.beta) * dr.square(s.eta), 0.95)
         perform_rr = s.depth > opt.rr_depth
         active = s.active & (dr.max(s.beta) > 0.0) & ((u_rr < q) | ~perform_rr)
         beta = dr.select(perform_rr, s.beta / q, s.beta)
