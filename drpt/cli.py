@@ -76,6 +76,8 @@ def _check_output(output: Path) -> None:
                         f"(use one of {', '.join(sorted(WRITE_EXTENSIONS))})")
     if not output.parent.exists() and str(output.parent) != "":
         raise DrptError(f"{output}: folder {output.parent} does not exist")
+    if output.is_dir():
+        raise DrptError(f"{output}: is a folder; give an image file to write")
 
 
 def moment_channels(scene, result) -> dict:
@@ -154,9 +156,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.checkpoint_seconds) and args.checkpoint_seconds >= 0):
         raise DrptError(f"--checkpoint-seconds must be >= 0, got {args.checkpoint_seconds}")
 
+    from .memory import bytes_per_pixel
     from .memory import check as check_memory
 
-    check_memory(opts.width, opts.height)
+    local = args.workers is None and args.cluster is None
+    check_memory(opts.width, opts.height, per_pixel=bytes_per_pixel(opts, local))
     ensure()
     if args.gui:
         scene, opts = _gui(scene, opts, args)

@@ -475,7 +475,8 @@ def apply_scene_settings(opts: RenderOptions, scene,
     if st.rfilter is not None and "filter" not in given:
         fields["filter"] = filter_spelling(st.rfilter, st.rfilter_params)
     if path.get("max_depth") == 0:
-        raise DrptError(f"{scene.path}: max_depth 0 renders nothing (Mitsuba gives a black image)")
+        where = getattr(st, "origin", {}).get("max_depth", scene.path)
+        raise DrptError(f"{where}: max_depth 0 renders nothing (Mitsuba gives a black image)")
     opts = replace(opts, path=replace(opts.path, **path), **fields)
     fov = getattr(st, "fov", None)
     if (fov is not None and st.width and st.height and (opts.width, opts.height) != (st.width, st.height)

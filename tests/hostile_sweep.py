@@ -307,6 +307,17 @@ def cluster_cases(root: Path):
         port, stop = serve(kind)
         yield case(f"server_{kind}", ["--cluster", f"tcp://127.0.0.1:{port}"], timeout=20)
         stop.set()
+    # a scheduler that has no workers
+    port = socket.socket()
+    port.bind(("127.0.0.1", 0))
+    free = port.getsockname()[1]
+    port.close()
+    sched = subprocess.Popen([Path(PY).with_name("dask"), "scheduler", "--host", "127.0.0.1", "--port", str(free),
+                              "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    time.sleep(4)
+    yield case("no_workers", ["--cluster", f"tcp://127.0.0.1:{free}"], timeout=60)
+    sched.kill()
+    sched.wait()
     # Ctrl-C in a terminal: SIGINT to the process group during a --workers render
     out = root / "int.exr"
     p = subprocess.Popen([PY, "-m", "drpt", "render", scene, "--size", "64", "64", "--spp", "100000",

@@ -518,3 +518,16 @@ def test_knobs_bias_is_not_fooled_by_correlated_channels():
     x = 1.03 * ref + rng.normal(0, sd, ref.shape[:2])[..., None]
     d, se = image_bias(x, var, ref, np.zeros_like(ref))
     assert abs(d) > 3 * se
+
+
+def test_knobs_rows_for_light_sampler_filter_and_integrator():
+    """The knobs of the noise issue: the light sampler, the filter's splatting (only with a
+    tent or Gaussian filter) and light tracing, each one row changing one option."""
+    from drpt.tools.knobs import configs
+
+    rows = configs("auto", ("light", "filter", "integrator"))
+    assert [(r.knob, r.light_sampler, r.filter_sampling, r.integrator) for r in rows] == [
+        ("default", "power", False, "path"), ("light sampler", "uniform", False, "path"),
+        ("integrator", "power", False, "ptracer")]
+    rows = configs("auto", ("filter",), filtered=True)
+    assert [r.knob for r in rows] == ["default", "filter"] and rows[1].filter_sampling

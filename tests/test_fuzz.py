@@ -16,6 +16,16 @@ FILE:LINE: ...`` line (``FILE: ...`` for an image) and no image written;
 the other stderr lines may only be drpt's one-line warnings and notes.
 Never a traceback, never a hang.
 
+Beyond drpt's own format (tests/fuzzformats.py): the Mitsuba XML test scenes
+of tests/data/xml with their XML (values and structure), PLY, serialized
+and OBJ meshes mutated, each loaded in-process under the same contract
+(``xml/FILE-MUTATION-sSEED``); a real checkpoint damaged in ten ways and read
+back, refused with one line naming it or accepted consistent
+(``checkpoint/MUTATION-sSEED``); generated ``--cluster`` addresses
+(``cluster/address-sSEED``) and fake servers on 127.0.0.1 that speak garbage,
+HTTP, nothing, hang up or announce a huge frame, each one error within
+0.5 s plus a margin (``cluster/server-KIND-sSEED``).
+
 The test id is ``FOLDER/FILE-MUTATION-sSEED`` (``extremes/NAME`` for the
 hand-written scenes); ``pytest tests/test_fuzz.py -k
 'cornellbox.txt-truncate-s1'`` reruns one case. Cases that fail today
@@ -325,3 +335,32 @@ def test_fake_schedulers_are_one_error_within_the_deadline(kind, seed):
             probe(f"tcp://127.0.0.1:{server.port}", 0.5)
         assert time.monotonic() - t < 2.0
     assert len(str(e.value).splitlines()) == 1
+
+
+@pytest.mark.parametrize("seed,lanes", [(0, None), (3, None), (5, 1 << 20), (7, 64)])
+def test_intact_checkpoints_are_accepted(tmp_path, seed, lanes):
+    """A checkpoint drpt wrote passes every check :func:`checkpoint.load` makes
+    (sums of squares summed in float32 sit on the bound ``sum^2 <= spp sumsq``
+    within rounding where every sample is equal, e.g. pixels that see the light)."""
+    from dataclasses import replace
+
+    from drpt.backend import policy
+    from drpt.distributed import checkpoint
+    from drpt.distributed.job import run
+    from drpt.options import RenderOptions
+    from drpt.render.chunks import plan_chunks
+
+    scene = load_scene(fz.SCENES / "cornellbox" / "cornellbox.txt")
+    opts = replace(RenderOptions(width=16, height=16, spp=4, chunk_spp=1, seed=seed, progress=False),
+                   max_lanes=lanes)
+    out = tmp_path / "cut.exr"
+
+    def stop(merge, result, engine):
+        if merge.next >= 2:
+            raise KeyboardInterrupt
+
+    with contextlib.suppress(KeyboardInterrupt):
+        run(scene, opts, out, on_chunk=stop)
+    chunks = plan_chunks(16, 16, 4, lanes or policy().max_lanes, 1)
+    cp = checkpoint.load(out, checkpoint.scene_hash(scene), checkpoint.options_key(opts), chunks)
+    assert cp.next == 2

@@ -388,3 +388,49 @@ def test_a_moved_scene_folder_resumes_to_the_same_image(tmp_path):
     assert job.resumed_from == 2
     whole = run(load_scene(first / "cornellbox.txt"), opts, first / "whole.exr").result.image
     assert np.array_equal(job.result.image, whole)
+
+
+def test_an_output_folder_is_refused_before_rendering(tmp_path, capsys):
+    from drpt.cli import main
+
+    out = tmp_path / "dir.exr"
+    out.mkdir()
+    assert main(["render", str(CORNELL), "--size", "8", "8", "--spp", "1", "-q", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"drpt: error: {out}: is a folder; give an image file to write"]
+
+
+@pytest.mark.slow
+def test_a_scheduler_without_workers_is_one_line(tmp_path, capsys):
+    pytest.importorskip("distributed")
+    import socket
+
+    from drpt.cli import main
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    dask = Path(sys.executable).with_name("dask")
+    scheduler = subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        rc = main(["render", str(CORNELL), "--size", "8", "8", "--spp", "1", "-q", "-o", str(tmp_path / "x.exr"),
+                   "--cluster", f"tcp://127.0.0.1:{port}"])
+    finally:
+        scheduler.kill()
+        scheduler.wait()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "no Dask worker took the scene" in err[0], err
+
+
+def test_max_depth_zero_and_too_many_samples_name_their_line(tmp_path, capsys):
+    from drpt.cli import main
+
+    p = xml(tmp_path, integrator='<integer name="max_depth" value="0"/>')
+    assert main(["render", str(p), "-q", "-o", str(tmp_path / "x.exr")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"drpt: error: {p}:{line_of(p, 'max_depth')}: max_depth 0 renders nothing "
+                   "(Mitsuba gives a black image)"]
+    p = xml(tmp_path, film='<integer name="width" value="65536"/><integer name="height" value="65536"/>',
+            spp="4294967295")
+    refused(p, "more than drpt's 2\\^60")

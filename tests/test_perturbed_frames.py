@@ -302,8 +302,11 @@ def test_negative_controls_fail(what, monkeypatch):
      r"t.xml:3: bsdf 'bumpmap' needs 1 nested texture, got 0"),
     ('<bsdf type="bumpmap"><texture type="bitmap"><string name="filename" value="bumps.png"/></texture>'
      '</bsdf>', r"t.xml:3: bsdf 'bumpmap' needs 1 nested BSDF, got 0"),
-    ('<bsdf type="bumpmap"><float name="scale" value="nan"/><bsdf type="diffuse"/><texture type="bitmap">'
+    ('<bsdf type="bumpmap"><float name="scale" value="inf"/><bsdf type="diffuse"/><texture type="bitmap">'
      '<string name="filename" value="bumps.png"/></texture></bsdf>', r"t.xml:3: bsdf 'bumpmap': scale must be finite"),
+    ('<bsdf type="bumpmap"><float name="scale" value="nan"/><bsdf type="diffuse"/><texture type="bitmap">'
+     '<string name="filename" value="bumps.png"/></texture></bsdf>',
+     r"t.xml:3: bsdf 'bumpmap': parameter 'scale' is NaN"),
     ('<bsdf type="normalmap"><texture name="normalmap" type="bitmap"><string name="filename" value="bumps.png"/>'
      '</texture><bsdf type="bumpmap"><bsdf type="diffuse"/><texture type="bitmap"><string name="filename" '
      'value="bumps.png"/></texture></bsdf></bsdf>', r"bumpmap inside normalmap is not supported"),

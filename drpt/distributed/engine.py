@@ -243,10 +243,15 @@ class DaskEngine:
                 self.client = Client(self.cluster)
                 # one core per worker process (Dr.Jit would start a thread per core in each)
                 self.client.run(_share_cores, max(1, (os.cpu_count() or 1) // self.workers))
+            try:
+                self.scene_future = self.client.scatter(self.scene, broadcast=True)
+            except (TimeoutError, OSError) as e:  # Dask's scatter waits a while for a worker
+                where = f"--cluster {self.address}" if self.address is not None else "--workers"
+                raise DrptError(f"{where}: no Dask worker took the scene ({_one_line(e)}); start "
+                                "workers with: dask worker ADDRESS") from None
         except BaseException:
             self.__exit__()
             raise
-        self.scene_future = self.client.scatter(self.scene, broadcast=True)
         return self
 
     def __exit__(self, *exc) -> None:

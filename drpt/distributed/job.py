@@ -45,9 +45,11 @@ class LocalEngine:
     def __exit__(self, *exc) -> None:
         pass
 
-    def results(self, todo: Iterable[int]) -> Iterator[ChunkResult]:
+    def results(self, todo: Iterable[int], into=None) -> Iterator[ChunkResult]:
+        """The chunks' results in order; with ``into`` (the job's merge) the chunks that
+        can are added straight into it (:meth:`Renderer.render_chunk`)."""
         for i in todo:
-            r = self.renderer.render_chunk(i)
+            r = self.renderer.render_chunk(i, into=into)
             r.worker = "this process"
             if not self.sent_warnings:
                 r.warnings, self.sent_warnings = list(self.renderer.warnings), True
@@ -169,7 +171,10 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
             # the time to start a local cluster (seconds) is not the render's
             t0 = last = time.perf_counter()
             job.startup_seconds = t0 - entered
-            for r in engine.results(range(merged.next, chunks.count)):
+            # in this process, chunks are added straight into the merge where they can
+            # (no full-image copy per chunk: drpt.render.renderer.Renderer.render_chunk)
+            direct = {"into": merged} if isinstance(engine, LocalEngine) else {}
+            for r in engine.results(range(merged.next, chunks.count), **direct):
                 stats = job.workers.setdefault(r.worker, WorkerStats())
                 stats.chunks += 1
                 stats.samples += W * H * r.spp
@@ -203,6 +208,14 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
                             on_warning(f"{npz}: cannot write the checkpoint: {e.strerror or e}")
                     saved, last = merged.next, now
     except BaseException:
+        if merged.dirty:
+            # stopped inside a chunk that was being added straight into the sums: they are
+            # no merged prefix of chunks, so the checkpoint written last (if any) stays
+            npz, _ = checkpoint.paths(output)
+            kept = (f"checkpoint {npz.name} kept from before ({saved} of {chunks.count} chunks)"
+                    if npz.is_file() else "no checkpoint written")
+            note(f"stopped inside a chunk: {kept}")
+            raise
         if merged.next > job.resumed_from or resume:
             npz, _ = checkpoint.paths(output)
             try:
@@ -215,7 +228,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         raise
     if isinstance(engine, LocalEngine):
         build = engine.renderer.build_seconds
-    job.result = finish(merged, time.perf_counter() - t0, build, light_tracing)
+    job.result = finish(merged, time.perf_counter() - t0, build, light_tracing, consume=True)
     # the samples traced now: a resumed render's checkpoint was rendered before
     job.result.samples = W * H * (merged.spp - job.resumed_spp)
     return job

@@ -102,6 +102,10 @@ class ChunkResult:
     warnings: list[str] = field(default_factory=list)  # the scene's, from the first chunk a worker ran
     #: a splatting film's filter-weight sums, sum(w) and sum(w^2) per pixel ((H, W, 2)); None otherwise
     weight: np.ndarray | None = None
+    #: the chunk's sums were added straight into the merge it was traced for
+    #: (:meth:`~drpt.render.renderer.Renderer.render_chunk` with ``into``): ``sum`` and
+    #: ``sumsq`` are None and pushing it only counts it
+    direct: bool = False
     #: with AOVs: their channels' weighted sums, then the weights' sum ((H, W, C + 1)); None otherwise
     aov: np.ndarray | None = None
 
@@ -128,6 +132,9 @@ class ChunkMerge:
         self.weight = None if weight is None else np.array(weight, np.float64)
         self.aov = None if aov is None else np.array(aov, np.float64)
         self.pending: dict[int, ChunkResult] = {}
+        #: a direct chunk (:attr:`ChunkResult.direct`) is being added into the sums: until it
+        #: is pushed they are no merged prefix of chunks (no checkpoint may be written)
+        self.dirty = False
 
     @property
     def done(self) -> bool:
@@ -146,6 +153,12 @@ class ChunkMerge:
         merged = []
         while self.next in self.pending:
             r = self.pending.pop(self.next)
+            if r.direct:  # its sums are in ours already
+                self.nonfinite += r.nonfinite
+                self.dirty = False
+                merged.append(self.next)
+                self.next += 1
+                continue
             self.sum += r.sum
             if r.sumsq.shape != self.sumsq.shape and not self.sumsq.any():
                 self.sumsq = np.zeros_like(r.sumsq)  # with the channel products of a moment render

@@ -500,15 +500,27 @@ class Renderer:
         o = self.opt
         return plan_chunks(o.width, o.height, o.spp, self.max_lanes, o.chunk_spp)
 
-    def render_chunk(self, index: int, on_pass: Callable[[int], None] | None = None) -> ChunkResult:
+    def render_chunk(self, index: int, on_pass: Callable[[int], None] | None = None,
+                     into: ChunkMerge | None = None) -> ChunkResult:
         """Sums of chunk ``index``'s samples and of their squares, per pixel
         (float64): a pure function of the scene, the options and ``index``.
         ``on_pass(samples)``, if given, is called after each pass with the
-        samples of the chunk traced so far."""
+        samples of the chunk traced so far.
+
+        ``into``, a merge whose next chunk is ``index``: where each pass of the
+        chunk adds to its own rows only, once (one sample step per chunk; no
+        splatting film, light tracing or AOVs), the passes' sums are added straight
+        into the merge's sums, the very float64 additions that adding the chunk's
+        sums would make (each pixel's chunk sum is one pass's), without the chunk's
+        own full-image arrays; the result is then :attr:`ChunkResult.direct`. Until
+        it is pushed, ``into.dirty`` is set."""
         t0 = time.perf_counter()
         chunks = self.chunks
         plan = chunks.passes
         W, H = self.opt.width, self.opt.height
+        if (into is not None and into.next == index and chunks.steps == 1 and not self.splatting
+                and not self.light_tracing and not self.aov_kinds):
+            return self._render_chunk_into(index, on_pass, into, t0)
         acc = np.zeros((H, W, 3), np.float64)
         # squares; with moment (Mitsuba's moment integrator) also the channel products
         # (rg, rb, gb) or, splatted, the weighted r^2 .. gb (SplatFilm)
@@ -537,6 +549,27 @@ class Renderer:
         return ChunkResult(index, chunks.spp_of(index), acc, acc2, nonfinite,
                            time.perf_counter() - t0, weight=weight, aov=aov)
 
+    def _render_chunk_into(self, index: int, on_pass, into: ChunkMerge, t0: float) -> ChunkResult:
+        chunks = self.chunks
+        plan = chunks.passes
+        W, H = self.opt.width, self.opt.height
+        channels = 6 if self.opt.moment else 3
+        if into.sumsq.shape[-1] != channels and not into.sumsq.any():
+            into.sumsq = np.zeros((H, W, channels), np.float64)
+        nonfinite = 0
+        for i in chunks.passes_of(index):
+            _s0, k, r0, rows = plan[i]
+            p = self._pass(i, k, r0, rows)
+            hi = p.lo + p.sum.shape[0]
+            into.dirty = True
+            into.sum[p.lo:hi] += p.sum
+            into.sumsq[p.lo:hi] += p.sumsq
+            nonfinite += p.nonfinite
+            if on_pass is not None:
+                on_pass((_s0 - chunks.spp_before(index)) * H * W + (r0 + rows) * W * k)
+        return ChunkResult(index, chunks.spp_of(index), None, None, nonfinite, time.perf_counter() - t0,
+                           direct=True)
+
     def render(self, on_pass: Callable[[int, int], None] | None = None) -> RenderResult:
         """The image at the options' size and spp: every chunk in order
         (:meth:`render_chunk`), merged as a distributed render merges them
@@ -558,21 +591,24 @@ class Renderer:
                     if on_pass is not None:
                         on_pass(before + done, W * H * spp)
 
-                merged.push(self.render_chunk(c, progress))
+                merged.push(self.render_chunk(c, progress, into=merged))
                 estimate = stop_estimate(merged, self.opt, time.perf_counter() - t0, self.light_tracing)
                 if estimate is not None:
                     bar.set_postfix_str(f"relMSE ~{estimate:.3g}")
                     if stops(estimate, merged, self.opt, time.perf_counter() - t0):
                         break
-        return finish(merged, time.perf_counter() - t0, self.build_seconds, self.light_tracing)
+        return finish(merged, time.perf_counter() - t0, self.build_seconds, self.light_tracing, consume=True)
 
 
 def finish(merged: ChunkMerge, seconds: float, build_seconds: float,
-           light_tracing: bool = False) -> RenderResult:
+           light_tracing: bool = False, consume: bool = False) -> RenderResult:
     """The image and variance of a finished merge (:func:`_finish_image`), with the
     AOVs' means where the merge has AOV sums (each pixel's weighted sums over its
-    weights' sum)."""
-    result = _finish_image(merged, seconds, build_seconds, light_tracing)
+    weights' sum). With ``consume`` (the render's last word on the merge) a camera
+    render's mean and variance are computed in the merge's own sums, which are then
+    no longer sums: no image-sized temporaries beyond the float32 image and one
+    channel."""
+    result = _finish_image(merged, seconds, build_seconds, light_tracing, consume)
     if merged.aov is not None:
         ws = merged.aov[..., -1:]
         ok = ws > 0.0
@@ -581,7 +617,7 @@ def finish(merged: ChunkMerge, seconds: float, build_seconds: float,
 
 
 def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
-                  light_tracing: bool = False) -> RenderResult:
+                  light_tracing: bool = False, consume: bool = False) -> RenderResult:
     """The image and variance of a finished merge.
 
     * Camera samples of their own pixel: the mean of the pixel's samples, and the
@@ -611,7 +647,11 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
             moment2 = xyz_second_moment(np.where(ok, merged.sumsq[..., 3:] / np.where(ok, ws, 1.0), 0.0))
         return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, W * H * spp,
                             merged.nonfinite, moment2)
-    mean = merged.sum / spp
+    if consume and not light_tracing:
+        mean = merged.sum
+        mean /= spp  # the same division as merged.sum / spp, in the merge's array
+    else:
+        mean = merged.sum / spp
     _check_range(mean)
     if light_tracing:
         paths = W * H * spp
@@ -619,11 +659,19 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
         var = np.maximum(second - mean * mean, 0.0) / max(paths - 1, 1)
         return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, paths,
                             merged.nonfinite)
-    # Unbiased sample variance of one sample, divided by spp: variance of the mean.
-    var = np.maximum(merged.sumsq[..., :3] / spp - mean * mean, 0.0) * spp / max(spp - 1, 1) / spp
+    # Unbiased sample variance of one sample, divided by spp: variance of the mean,
+    # max(sumsq / spp - mean^2, 0) * spp / max(spp - 1, 1) / spp, in that order, in place
     moment2 = None
     if merged.sumsq.shape[-1] == 6:
         moment2 = xyz_second_moment(merged.sumsq / spp)
+    var = merged.sumsq if consume and merged.sumsq.shape[-1] == 3 else merged.sumsq[..., :3].copy()
+    var /= spp
+    for c in range(3):  # one channel's temporary at a time
+        var[..., c] -= np.square(mean[..., c])
+    np.maximum(var, 0.0, out=var)
+    var *= spp
+    var /= max(spp - 1, 1)
+    var /= spp
     return RenderResult(mean.astype(np.float32), var, seconds,
                         build_seconds, W * H * spp, merged.nonfinite, moment2)
 

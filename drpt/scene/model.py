@@ -345,6 +345,8 @@ class RenderSettings:
     aov_image: str | None = None
     #: the ``-D`` values the file was read with (``compare`` gives Mitsuba the same)
     defines: dict = field(default_factory=dict)
+    #: ``FILE:LINE`` of the element that gave a setting, by setting name (for errors)
+    origin: dict = field(default_factory=dict)
     #: what of the file drpt did not read as written, one located line each: parameters
     #: their plugins do not read (older exporters' files; Mitsuba 3 refuses them) and,
     #: with ``--ignore-unsupported``, the plugins left out or replaced. ``compare`` stops

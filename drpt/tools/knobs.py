@@ -3,7 +3,7 @@
 ::
 
     python -m drpt knobs SCENE [render flags] [--ref-spp M] [--ref-batches B]
-                               [--knobs depth rr accel bsdf]
+                               [--knobs depth rr accel bsdf light filter integrator denoise]
                                [--depths D ...] [--rr-depths K ...] [--rr-probs P ...]
                                [--repeats R] [--cache DIR | --no-cache] [--out DIR]
 
@@ -26,6 +26,11 @@ Russian roulette from depth 5 with the adaptive probability
            the BVH; same image up to float order);
 ``bsdf``   the other material mode (Phong <-> Cook-Torrance). That changes the
            scene, so that row is compared with its own reference;
+``light``  ``--light-sampler uniform`` instead of ``power``;
+``filter`` ``--filter-sampling`` instead of the splatting film (only with a tent or
+           Gaussian filter);
+``integrator`` light tracing (``ptracer``); a scene it cannot render lists the row as
+           not rendered (``skipped``);
 ``denoise`` the default row's settings, its image denoised by Intel Open Image
            Denoise (``render --denoise``; needs ``pyoidn``, and is in the default
            ``--knobs`` only where it is installed): the seconds include the
@@ -79,7 +84,7 @@ from .reference import (
     get_reference,
 )
 
-KNOBS = ("depth", "rr", "accel", "bsdf", "denoise")
+KNOBS = ("depth", "rr", "accel", "bsdf", "light", "filter", "integrator", "denoise")
 RR_OFF_DEPTH = 64
 
 __all__ = ["add_parser", "main", "Config", "configs", "knobs_study", "image_bias"]
@@ -95,6 +100,9 @@ class Config:
     rr_depth: int = 5
     rr_prob: float | None = None
     denoise: bool = False
+    integrator: str = "path"
+    light_sampler: str = "power"
+    filter_sampling: bool = False
 
 
 def default_knobs() -> list[str]:
@@ -151,8 +159,9 @@ def main(args: argparse.Namespace) -> int:
 
 
 def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
-            rr_probs=(0.5, 0.8)) -> list[Config]:
-    """The default row, then one row per knob setting."""
+            rr_probs=(0.5, 0.8), filtered: bool = False) -> list[Config]:
+    """The default row, then one row per knob setting (``filter`` only for a tent or
+    Gaussian filter, ``filtered``)."""
     rows = [Config("default", "auto accel, unbounded depth, RR from depth 5 (adaptive)", bsdf)]
     if "depth" in knobs:
         rows += [Config("max depth", str(d), bsdf, max_depth=d) for d in depths]
@@ -168,6 +177,14 @@ def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10
     if "bsdf" in knobs:
         other = "cook-torrance" if bsdf == "phong" else "phong"
         rows.append(Config("material", f"{other} (own reference)", other))
+    if "light" in knobs:
+        rows.append(Config("light sampler", "uniform (Mitsuba's: every emitter alike)", bsdf,
+                           light_sampler="uniform"))
+    if "filter" in knobs and filtered:
+        rows.append(Config("filter", "filter importance sampling instead of splatting", bsdf,
+                           filter_sampling=True))
+    if "integrator" in knobs:
+        rows.append(Config("integrator", "ptracer (light tracing)", bsdf, integrator="ptracer"))
     if "denoise" in knobs:
         rows.append(Config("denoise", "OIDN on the default row's image", bsdf, denoise=True))
     return rows
@@ -249,15 +266,25 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
                           "floor": noise_floor(r.image, r.variance), "info": r.info()}
         return refs[mode]
 
-    cfgs = configs(bsdf, knobs, depths, rr_depths, rr_probs)
+    cfgs = configs(bsdf, knobs, depths, rr_depths, rr_probs,
+                   filtered=not options.pixel_filter.is_box)
     renderers = []
-    for c in cfgs:
-        reference(c.bsdf)
+    skipped = []
+    for c in list(cfgs):
         opts = replace(options, spp=1, seed=seed + 999_999, accel=c.accel, bsdf=c.bsdf,
-                       progress=False, denoise=c.denoise,
+                       progress=False, denoise=c.denoise, integrator=c.integrator,
+                       light_sampler=c.light_sampler, filter_sampling=c.filter_sampling,
                        path=PathOptions(max_depth=c.max_depth, rr_depth=c.rr_depth,
                                         rr_prob=c.rr_prob))
-        renderer = Renderer(scene, opts)
+        try:
+            renderer = Renderer(scene, opts)
+        except DrptError as e:  # a setting this scene cannot take (light tracing a rough glass)
+            if c.knob == "default":
+                raise
+            skipped.append(f"{c.knob} {c.setting}: {e}")
+            cfgs.remove(c)
+            continue
+        reference(c.bsdf)
         renderer.render()  # warm-up: compiles this row's kernel
         renderer.opt.spp = spp
         renderers.append(renderer)
@@ -309,11 +336,13 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
         r["efficiency"] = base / work if work > 0 else float("nan")
 
     table = markdown_table(rows)
+    if skipped:
+        table += "\n\nNot rendered (the scene cannot take them):\n" + "\n".join(f"* {s}" for s in skipped)
     report = {
         "scene": str(scene_path), "width": int(width), "height": int(height), "spp": int(spp),
         "bsdf": bsdf, "repeats": int(repeats), "seed": int(seed), "rows": rows,
         "references": {m: dict(r["info"], noise_floor=r["floor"]) for m, r in refs.items()},
-        "markdown_table": table,
+        "markdown_table": table, "skipped": skipped,
     }
     fields = ["knob", "setting", "bsdf", "accel", "max_depth", "rr_depth", "rr_prob", "spp",
               "seconds", "build_seconds", "samples_per_second", "rel_mse", "excess_rel_mse",

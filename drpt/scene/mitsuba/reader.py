@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import DrptError, SceneError
-from ...options import MAX_DEPTH, MAX_SIZE, MAX_SPP
+from ...options import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP
 from ...shading import MeshAttribute, Texture
 from ..model import (
     MAX_COORDINATE,
@@ -284,6 +284,9 @@ class Reader:
                 raise sampler.error(f"{sampler.label}: sample_count must be between 1 and {MAX_SPP}, "
                                     f"got {spp}")
             self.settings.spp = spp
+            if crop[2] * crop[3] * spp > MAX_SAMPLES:
+                raise sampler.error(f"{sampler.label}: {crop[2]} x {crop[3]} pixels x {spp} samples is "
+                                    f"more than drpt's 2^60")
             self.check_unread(sampler)
 
         aspect = width / height
@@ -423,6 +426,7 @@ class Reader:
         s.integrator = node.plugin if node.plugin in ("ptracer", "volpath") else "path"
         if node.plugin in ("path", "ptracer", "volpath"):
             s.max_depth = node.int("max_depth", -1)
+            s.origin["max_depth"] = node.where
             s.rr_depth = node.int("rr_depth", 5)
             if s.max_depth is not None and not -1 <= s.max_depth <= MAX_DEPTH:
                 raise node.error(f"{node.label}: max_depth must be -1 or between 0 and {MAX_DEPTH}, "
