@@ -3,9 +3,10 @@ and rendered by drpt *as authored* and z-tested against the shipped references a
 ``test_renders.py`` tests its own renders (:mod:`corpusutil`: XYZ, per pixel and channel,
 Sidak-corrected level, 99.75% of the pixel channels must pass).
 
-Every ``test_*.xml`` / ``scene_*.xml`` outside ``participating_media/`` and
-``volprim_rf_basic/`` (media, out of drpt's scope) and the scenes with ``sdfgrid`` shapes
-(:data:`EXCLUDED`) is in :data:`SCENES` (rendered at the spp given, about a thousand: the z-test
+Every ``test_*.xml`` / ``scene_*.xml`` outside ``participating_media/`` (tested by
+``test_media.py``, whose lists the coverage test counts) and ``volprim_rf_basic/`` (volumetric
+primitives, out of drpt's scope) and the scenes with ``sdfgrid`` shapes (:data:`EXCLUDED`)
+is in :data:`SCENES` (rendered at the spp given, about a thousand: the z-test
 uses drpt's spp with the reference's per-sample variance, so fewer samples make it weaker,
 not flakier; at 512 spp a water IOR for BK7 passes) or in :data:`NOT_YET` (a strict xfail
 whose reason names what drpt lacks); one scene per line in both. The ptracer scene is
@@ -64,8 +65,9 @@ NOT_YET: dict[str, str] = {}
 #: corpus scene -> -D values, for a scene that cannot be rendered as authored (none)
 DEFINES: dict[str, dict[str, str]] = {}
 
-#: scenes out of drpt's scope: media folders, and sdfgrid shapes
-EXCLUDED_FOLDERS = ("participating_media", "volprim_rf_basic")
+#: scenes out of drpt's scope: volumetric primitives, and sdfgrid shapes (participating_media/
+#: is test_media.py's: MEDIA_SCENES and MEDIA_NOT_YET)
+EXCLUDED_FOLDERS = ("volprim_rf_basic",)
 EXCLUDED = {
     "various_shapes/test_various_shapes_path.xml": "sdfgrid shape (and ../../serialized meshes that are "
                                                    "not in the stored corpus)",
@@ -94,6 +96,11 @@ def test_the_lists_cover_the_corpus():
     found = {str(p.relative_to(CORPUS)) for p in CORPUS.rglob("*.xml")
              if re.match(r"(test|scene)_", p.name) and p.parent.name != "refs"
              and p.relative_to(CORPUS).parts[0] not in EXCLUDED_FOLDERS}
+    from test_media import MEDIA_NOT_YET, MEDIA_SCENES
+
+    media = set(MEDIA_SCENES) | set(MEDIA_NOT_YET)
+    found = {rel for rel in found if rel not in media}
+    assert media <= {str(p.relative_to(CORPUS)) for p in CORPUS.rglob("participating_media/test_*.xml")}
     listed = set(SCENES) | set(NOT_YET) | set(EXCLUDED)
     assert found == listed, (sorted(found - listed), sorted(listed - found))
     assert not set(SCENES) & set(NOT_YET)

@@ -226,17 +226,17 @@ def test_fov_axes(axis, fov, aspect, expect_y):
 
 
 def test_unsupported_plugins_stop_or_are_left_out(tmp_path):
-    p = _xml(tmp_path, '<shape type="sphere"><bsdf type="diffuse"/></shape>\n'
-                       '<medium type="homogeneous" id="fog"/>\n'
+    p = _xml(tmp_path, '<medium type="homogeneous" id="fog"><phase type="rayleigh"/></medium>\n'
+                       '<shape type="sphere"><bsdf type="diffuse"/><ref name="interior" id="fog"/></shape>\n'
                        '<shape type="sphere"><bsdf type="hair"><float name="eumelanin" value="1"/>'
                        '</bsdf></shape>')
-    with pytest.raises(SceneError, match=r"t.xml:4: unsupported medium 'homogeneous' \(id 'fog'\)"):
+    with pytest.raises(SceneError, match=r"t.xml:3: unsupported phase function 'rayleigh'"):
         load_scene(p)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         s = load_scene(p, ignore_unsupported=True)
     msgs = [str(w.message) for w in caught]
-    assert any("t.xml:4: unsupported medium 'homogeneous'" in m and "left out" in m for m in msgs)
+    assert any("t.xml:3: unsupported phase function 'rayleigh'" in m and "using isotropic" in m for m in msgs)
     assert any("t.xml:5: unsupported BSDF plugin 'hair'" in m for m in msgs)
     assert len(s.spheres) == 2 and s.materials[1].bsdf.kind == "diffuse"
 
@@ -254,7 +254,7 @@ def test_unsupported_plugins_stop_or_are_left_out(tmp_path):
     ('<emitter type="area"/>', r"t.xml:3: emitter 'area' must be attached to a shape"),
     ('<shape type="sphere"><emitter type="area"><spectrum name="radiance" value="400:1, 700:x"/>'
      '</emitter></shape>', r"t.xml:3: Could not parse wavelength:value pair \"700:x\""),
-    ('<integrator type="volpath"/>', r"t.xml:3: unsupported integrator 'volpath'"),
+    ('<integrator type="bdpt"/>', r"t.xml:3: unsupported integrator 'bdpt'"),
     ('<shape type="sphere"><bsdf type="twosided"/></shape>',
      r"t.xml:3: bsdf 'twosided' needs 1 nested BSDF, got 0"),
     ('<shape type="sphere"><bsdf type="twosided"><bsdf type="dielectric"/></bsdf></shape>',

@@ -267,6 +267,9 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
               rr_depth: int, seed: int, bsdf: str = "auto", rfilter: str = "box",
               hide_emitters: bool = False) -> dict:
     pixel_filter = parse_filter(rfilter)
+    if getattr(scene, "media", None):
+        raise DrptError(f"cannot export: the scene has participating media ({len(scene.media)}); "
+                        "drpt's Mitsuba export writes none")
     if int(width) <= 0 or int(height) <= 0:
         raise DrptError(f"image size must be positive, got {width}x{height}")
     if int(spp) <= 0:

@@ -207,6 +207,11 @@ def plan_passes(width: int, height: int, spp: int, max_lanes: int) -> PassPlan:
     return PassPlan(width, height, spp, k, rows)
 
 
+#: the warning of a scene with participating media rendered by another integrator than volpath
+MEDIA_IGNORED = ("the scene's participating media are ignored by this integrator (as by Mitsuba's path): "
+                 "--integrator volpath renders them")
+
+
 class Renderer:
     def __init__(self, scene: Scene, options: RenderOptions):
         self.opt = options
@@ -243,6 +248,9 @@ class Renderer:
 
     def _make_integrator(self):
         options = self.opt
+        media = getattr(self.scene_model, "media", None)
+        if media and options.integrator != "volpath" and MEDIA_IGNORED not in self.warnings:
+            self.warnings.append(MEDIA_IGNORED)
         if options.integrator == "ptracer":
             if options.moment:
                 raise DrptError("the moment integrator cannot wrap ptracer (light tracing has no "
@@ -252,8 +260,13 @@ class Renderer:
         if options.integrator == "whitted":
             depth = options.path.max_depth
             return WhittedIntegrator(self.scene, WhittedOptions(max_depth=depth if depth > 0 else 16))
+        if options.integrator == "volpath" and media:
+            from .integrators.volpath import VolPathIntegrator
+
+            return VolPathIntegrator(self.scene, options.path, self.scene_model)
         if options.mode == "wavefront":
             return WavefrontIntegrator(self.scene, options.path, tail=options.wavefront_tail)
+        # (volpath in a scene without media: the path integrator, the same expectation)
         return PathIntegrator(self.scene, options.path)
 
     def derive(self, options: RenderOptions, camera: Camera | None = None) -> Renderer:

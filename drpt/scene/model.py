@@ -149,6 +149,16 @@ class Material:
     #: emitted radiance as a texture (Mitsuba's area ``radiance`` bitmap), looked up at the
     #: surface's uv; ``emission`` then holds its mean (light selection by power)
     emission_texture: Any = None
+    #: the participating media on either side of the surfaces of this material (Mitsuba's
+    #: shape ``interior``/``exterior``): indices into :attr:`Scene.media`, ``None`` for
+    #: vacuum. Shapes with a medium on either side are *medium transitions*: a ray crossing
+    #: one enters the interior when it goes against the geometric normal, else the exterior
+    interior: int | None = None
+    exterior: int | None = None
+
+    @property
+    def is_medium_transition(self) -> bool:
+        return self.interior is not None or self.exterior is not None
 
     @property
     def is_emissive(self) -> bool:
@@ -346,6 +356,56 @@ class RenderSettings:
     not_read: tuple = ()
 
 
+# ---------------------------------------------------------------------- media
+@dataclass
+class GridVolume:
+    """A voxel grid (Mitsuba's ``gridvolume``): ``data`` ``(Z, Y, X, C)`` float32 values
+    (C 1 or 3), looked up at ``to_local @ (p, 1)`` in the unit cube (voxel centers at
+    ``(i + 0.5) / res``), ``filter`` ``"trilinear"`` or ``"nearest"``, ``wrap`` ``"clamp"``,
+    ``"repeat"`` or ``"mirror"`` outside it."""
+
+    data: np.ndarray
+    to_local: np.ndarray  # (4, 4) world -> unit cube
+    filter: str = "trilinear"
+    wrap: str = "clamp"
+
+    @property
+    def max(self) -> float:
+        return float(self.data.max()) if self.data.size else 0.0
+
+
+@dataclass
+class Medium:
+    """A participating medium: extinction ``sigma_t * scale`` (per unit length, RGB),
+    single-scattering ``albedo`` (RGB, in [0, 1]) and a phase function: ``"isotropic"``,
+    ``"hg"`` (Henyey-Greenstein) with mean cosine ``g`` in (-1, 1) (positive: forward
+    scattering), or ``"blend"`` (Mitsuba's ``blendphase``): ``(1 - blend)`` times HG(``g``)
+    plus ``blend`` times HG(``g2``) (an isotropic lobe has g 0). Homogeneous (Mitsuba's
+    ``homogeneous``) unless ``sigma_t_grid`` is set (Mitsuba's ``heterogeneous`` with a
+    one-channel ``gridvolume`` extinction, which is zero outside the grid's box);
+    ``albedo_grid`` replaces the constant albedo there."""
+
+    name: str
+    sigma_t: Vec3 = (1.0, 1.0, 1.0)
+    albedo: Vec3 = (0.75, 0.75, 0.75)
+    scale: float = 1.0
+    phase: str = "isotropic"
+    g: float = 0.0
+    origin: str = ""
+    sigma_t_grid: GridVolume | None = None
+    albedo_grid: GridVolume | None = None
+    g2: float = 0.0
+    blend: float = 0.0
+
+    @property
+    def is_homogeneous(self) -> bool:
+        return self.sigma_t_grid is None
+
+    @property
+    def extinction(self) -> Vec3:
+        return tuple(float(s) * self.scale for s in self.sigma_t)
+
+
 # ---------------------------------------------------------------------- scene
 @dataclass
 class Scene:
@@ -358,6 +418,8 @@ class Scene:
     lights: list[Light] = field(default_factory=list)
     background: Background = field(default_factory=Background)
     settings: RenderSettings | None = None  # render settings the file gives (Mitsuba XML)
+    media: list[Medium] = field(default_factory=list)  # participating media (Material.interior/exterior)
+    camera_medium: int | None = None  # the medium camera rays start in (index into media; None: vacuum)
 
     @property
     def emissive_materials(self) -> list[int]:

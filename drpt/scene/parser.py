@@ -123,10 +123,12 @@ from .model import (
     Background,
     DirectionalLight,
     Material,
+    Medium,
     OrthographicCamera,
     PerspectiveCamera,
     Planes,
     PointLight,
+    RenderSettings,
     Scene,
     Skybox,
     Spheres,
@@ -140,11 +142,11 @@ __all__ = ["load_scene", "DEFAULT_MATERIAL_NAME"]
 
 DEFAULT_MATERIAL_NAME = "default"
 
-_TOP_BLOCKS = ("PerspectiveCamera", "OrthographicCamera", "Background", "Lights", "Materials", "Group")
+_TOP_BLOCKS = ("PerspectiveCamera", "OrthographicCamera", "Background", "Lights", "Materials", "Media", "Group")
 _OBJECTS = ("Group", "Sphere", "Plane", "Triangle", "TriangleMesh", "Transform")
 _LIGHTS = ("DirectionalLight", "PointLight", "Skybox")
 _OPS = ("Translate", "Scale", "UniformScale", "XRotate", "YRotate", "ZRotate", "Rotate", "Matrix")
-_KNOWN = set(_TOP_BLOCKS + _OBJECTS + _LIGHTS + _OPS + ("MaterialIndex", "Material", "PhongMaterial"))
+_KNOWN = set(_TOP_BLOCKS + _OBJECTS + _LIGHTS + _OPS + ("MaterialIndex", "Material", "PhongMaterial", "Medium"))
 _MTL_KEYS = {"kd", "ks", "ke", "le", "ns", "ni", "d", "tr", "tf", "kt", "illum", "roughness", "mentalness",
              "metalness", "pr", "pm", "ps", "pc", "pcr", "aniso", "anisor", "map_kd"}
 
@@ -215,6 +217,8 @@ class _Parser:
         self.background = Background()
         self.lights: list = []
         self.block_materials: list[Material] = []
+        self.media: list[Medium] = []
+        self.medium_refs: list[tuple[int, int]] = []  # (line, medium index) of Material interior/exterior
         self.seen: dict[str, int] = {}
         self.skyboxes: list[tuple[Path, int]] = []
         self.mtl_cache: MtlCache = {}
@@ -330,6 +334,8 @@ class _Parser:
                 self.parse_lights(tok)
             elif kind == "Materials":
                 self.parse_materials(tok)
+            elif kind == "Media":
+                self.parse_media(tok)
             else:
                 self.parse_group(tok, tf.identity(), None)
         if self.camera is None and not self.seen:
@@ -340,6 +346,11 @@ class _Parser:
             self.camera = PerspectiveCamera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0), 45.0)
         if self.camera is None:
             raise self.error(ts.last_line, "no camera: add a PerspectiveCamera or OrthographicCamera block")
+        for line, k in self.medium_refs:
+            if k >= len(self.media):
+                have = (f"the Media block defines {len(self.media)}" if "Media" in self.seen
+                        else "there is no Media block")
+                raise self.error(line, f"medium {k} is out of range ({have})")
         materials, index = self.resolve_materials()
         for sky, line in self.skyboxes:
             check_input(sky, ref=(self.path, line), what="skybox file")
@@ -352,6 +363,9 @@ class _Parser:
             planes=self.build_planes(index),
             lights=self.lights,
             background=self.background,
+            media=self.media,
+            # a scene with media renders with volpath unless --integrator says otherwise
+            settings=RenderSettings(integrator="volpath") if self.media else None,
         )
 
     # --------------------------------------------------------------- camera
@@ -495,6 +509,37 @@ class _Parser:
             self.block_materials.append(self.parse_material(tok, len(self.block_materials)))
         self.check_count("numMaterials", "Materials", opened, n, len(self.block_materials), "materials")
 
+    def parse_media(self, opened: Token) -> None:
+        """``Media { numMedia N Medium { [sigmaT v3] [albedo v3] [scale s] [g g] }* }``:
+        homogeneous media (:class:`~drpt.scene.model.Medium`), Mitsuba's defaults."""
+        ts = self.ts
+        ts.expect("{", "after 'Media'")
+        n = self.count("numMedia", "Media", opened)
+        while True:
+            tok = ts.next(f"a Medium or '}}' to close Media (opened at line {opened.line})")
+            if tok.text == "}":
+                break
+            if tok.text != "Medium":
+                raise self.unknown(tok, "block in Media", ("Medium",))
+            got = self.fields("Medium", tok, {"sigmaT": self.vec("sigmaT"), "albedo": self.vec("albedo"),
+                                              "scale": self.num("scale"), "g": self.num("g")})
+            sigma_t, _ = got.get("sigmaT", ((1.0, 1.0, 1.0), 0))
+            albedo, _ = got.get("albedo", ((0.75, 0.75, 0.75), 0))
+            scale, _ = got.get("scale", (1.0, 0))
+            g, _ = got.get("g", (0.0, 0))
+            lines = {key: got[key][1] if key in got else tok.line for key in ("sigmaT", "albedo", "g")}
+            if not all(0.0 <= x <= 3.4e38 for x in sigma_t) or not 0.0 <= scale <= 3.4e38 or \
+                    not max(sigma_t) * scale <= 1e30:
+                raise self.error(lines["sigmaT"], "Medium sigmaT and scale must be >= 0 (sigmaT * scale at "
+                                 "most 1e30)")
+            if not all(0.0 <= x <= 1.0 for x in albedo):
+                raise self.error(lines["albedo"], f"Medium albedo must be in [0, 1], got {albedo}")
+            if not -1.0 < g < 1.0:
+                raise self.error(lines["g"], f"Medium g must be in (-1, 1), got {g:g}")
+            self.media.append(Medium(f"medium_{len(self.media)}", tuple(sigma_t), tuple(albedo), float(scale),
+                                     "hg" if g else "isotropic", float(g), f"{self.path}:{tok.line}"))
+        self.check_count("numMedia", "Media", opened, n, len(self.media), "media")
+
     def parse_material(self, opened: Token, i: int) -> Material:
         mat = Material(name=f"material_{i}", origin=f"{self.path}:{opened.line}")
         ts = self.ts
@@ -523,8 +568,27 @@ class _Parser:
             "transparentColor": self.vec("transparentColor"),
             "indexOfRefraction": self.material_number("indexOfRefraction"),
             "texture": texture,
+            "interior": lambda tok: self.ts.integer("interior"),
+            "exterior": lambda tok: self.ts.integer("exterior"),
+            "passThrough": lambda tok: True,
         }
         got = self.fields(opened.text, opened, readers, extra=mtl_style)
+        media = {}
+        for key in ("interior", "exterior"):
+            if key in got:
+                k, line = got.pop(key)
+                if k < 0:
+                    raise self.error(line, f"{key} must be a medium index >= 0, got {k}")
+                self.medium_refs.append((line, k))
+                media[key] = k
+        if "passThrough" in got:  # a pure boundary (Mitsuba's null BSDF)
+            _, line = got.pop("passThrough")
+            if got or mat.given:
+                raise self.error(line, "passThrough takes no other appearance fields (the surface is invisible)")
+            from ..shading import BSDFSpec
+
+            return replace(mat, bsdf=BSDFSpec("null", {}, [], [], mat.origin), **media)
+        mat = replace(mat, **media)
         for key in ("diffuseColor", "specularColor", "reflectiveColor", "transparentColor"):
             if key in got:
                 got[key] = (reflectance(got[key][0], self.path, got[key][1], key), got[key][1])

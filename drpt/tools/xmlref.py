@@ -73,6 +73,8 @@ class MitsubaXML:
         if (options.path.max_depth, options.path.rr_depth) != depths:
             integrator = {"max_depth": int(options.path.max_depth), "rr_depth": int(options.path.rr_depth),
                           "hide_emitters": bool(options.path.hide_emitters)}
+            if options.integrator == "volpath":  # (Mitsuba's path would ignore the media)
+                integrator["type"] = "volpath"
         return cls(scene.path, st.defines, size=size, rfilter=rfilter, integrator=integrator)
 
     # ------------------------------------------------------------ identity

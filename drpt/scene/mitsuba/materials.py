@@ -110,6 +110,8 @@ class Materials:
                 if node.has(name):
                     params[name] = self._value(node, kind, name, float(params_def[name]), texturable=True)
             spec = BSDFSpec(kind, params, [self.spec(k) for k in kids], [], origin)
+        elif kind == "null":  # a pure boundary (of a medium): the ray passes straight through
+            spec = BSDFSpec("null", {}, [], [], origin)
         elif kind in bsdf_kinds.PARAMS and kind not in ("phong", "cook_torrance", "mirror", "null"):
             renamed = RENAMED.get(kind, {})
             to_mitsuba = {d: m for m, d in renamed.items()}

@@ -19,7 +19,9 @@ from ..model import (
     Background,
     DirectionalLight,
     FilmWindow,
+    GridVolume,
     Material,
+    Medium,
     OrthographicCamera,
     PerspectiveCamera,
     PointLight,
@@ -51,6 +53,9 @@ _SILENT = {
 }
 
 RFILTERS = {"box": (), "tent": ("radius",), "gaussian": ("stddev",)}
+#: a heterogeneous medium's majorant times its box's diagonal at most (the tentative
+#: collisions a ray takes across it: beyond, rendering would all but hang)
+MAX_MAJORANT_DEPTH = 1e5
 SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
 FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
 
@@ -124,6 +129,9 @@ class Reader:
         self.mesh_shapes: list[tuple[int, bool]] = []
         self.sphere_shapes: list[int] = []
         self.lights: list = []
+        self.media: list[Medium] = []
+        self.medium_index: dict[int, int] = {}  # medium node -> index into media
+        self.camera_medium: int | None = None
         self.background = (0.0, 0.0, 0.0)
         self.camera = None
         self.settings = RenderSettings()
@@ -188,7 +196,7 @@ class Reader:
                     self.shape(child, np.eye(4))
             elif kind == "emitter":
                 self.emitter(child)
-            elif kind in ("bsdf", "texture"):
+            elif kind in ("bsdf", "texture", "medium"):
                 pass  # definitions, read where a shape refers to them
             else:
                 self.unsupported(child, f"{child.label}")
@@ -268,7 +276,8 @@ class Reader:
             spheres = Spheres.empty()
         scene = Scene(path=self.path, camera=self.camera, materials=self.mat_list, triangles=tris,
                       spheres=spheres, lights=self.lights,
-                      background=Background(color=self.background), settings=self.settings)
+                      background=Background(color=self.background), settings=self.settings,
+                      media=self.media, camera_medium=self.camera_medium)
         return scene
 
     # ------------------------------------------------------------ sensor
@@ -284,6 +293,8 @@ class Reader:
                 sampler = c
             else:
                 self.unsupported(c, f"{c.label} inside {node.label}")
+        if node.is_ref("medium"):  # the medium camera rays start in
+            self.camera_medium = self.medium(node.ref("medium"), f"medium of {node.label}")
         width, height = 768, 576  # Mitsuba's hdrfilm defaults
         crop = (0, 0, width, height)
         self.settings.rfilter, self.settings.rfilter_params = "gaussian", {"stddev": 0.5}
@@ -450,12 +461,12 @@ class Reader:
                 s.aov_image = nested[0][0]
                 self.integrator(nested[0][1])
             return
-        if node.plugin not in ("path", "direct", "ptracer"):
-            self.unsupported(node, f"integrator '{node.plugin}' (drpt has path, direct and ptracer)",
-                             fallback="path")
+        if node.plugin not in ("path", "direct", "ptracer", "volpath"):
+            self.unsupported(node, f"integrator '{node.plugin}' (drpt has path, volpath, direct and "
+                             "ptracer)", fallback="path")
             return
-        s.integrator = "ptracer" if node.plugin == "ptracer" else "path"
-        if node.plugin in ("path", "ptracer"):
+        s.integrator = node.plugin if node.plugin in ("ptracer", "volpath") else "path"
+        if node.plugin in ("path", "ptracer", "volpath"):
             s.max_depth = node.int("max_depth", -1)
             s.origin["max_depth"] = node.where
             s.rr_depth = node.int("rr_depth", 5)
@@ -493,16 +504,160 @@ class Reader:
                 emission = self.area(c)
             else:
                 self.unsupported(c, f"{c.label} inside {node.label}")
-        for name in ("interior", "exterior"):
-            if node.is_ref(name):
-                self.unsupported(node.ref(name), f"{node.ref(name).label} ({name} of {node.label})")
+        media = tuple(self.medium(node.ref(name), f"{name} of {node.label}") if node.is_ref(name) else None
+                      for name in ("interior", "exterior"))
         if spec is None:
             # Mitsuba's default: diffuse 0.5, black on a shape with an area emitter
             spec = default_bsdf(black=isinstance(emission, Texture) or max(emission) > 0)
-        return spec, bsdf_node, emission
+        return spec, bsdf_node, (emission, media)
 
-    def _material_index(self, spec: BSDFSpec, bsdf_node: Node | None, emission, shape: Node) -> int:
-        key = (bsdf_node.index if bsdf_node is not None else None, emission)
+    def medium(self, node: Node, where: str) -> int | None:
+        """The index in :attr:`media` of the medium ``node`` (read once), or ``None`` where
+        drpt cannot render it and ``--ignore-unsupported`` leaves it out."""
+        if node.index in self.medium_index:
+            return self.medium_index[node.index]
+        if node.kind != "medium":
+            raise node.error(f"{node.label} as the {where} (it takes a medium)")
+        if node.plugin not in ("homogeneous", "heterogeneous"):
+            self.unsupported(node, f"{node.label} ({where}; drpt has homogeneous and heterogeneous media)")
+            self.medium_index[node.index] = None
+            return None
+        values, grids = {}, {}
+        for name, default in (("sigma_t", (1.0, 1.0, 1.0)), ("albedo", (0.75, 0.75, 0.75))):
+            values[name] = default
+            if not node.is_ref(name):
+                values[name] = node.color(name, default)
+                continue
+            vol = node.ref(name)
+            if vol.kind == "volume" and vol.plugin == "constvolume":
+                values[name] = vol.color("value", (1.0, 1.0, 1.0))
+                self.check_unread(vol)
+            elif vol.kind == "volume" and vol.plugin == "gridvolume" and node.plugin == "heterogeneous":
+                grid = self.grid_volume(vol)
+                if name == "sigma_t" and grid.data.shape[3] != 1:
+                    self.unsupported(vol, f"{vol.label} with {grid.data.shape[3]} channels as 'sigma_t' "
+                                     "(drpt's heterogeneous extinction has one)", fallback="1")
+                    continue
+                grids[name] = grid
+            else:
+                self.unsupported(vol, f"{vol.label} as '{name}' of {node.label}", fallback=str(default))
+        sigma_t, albedo = values["sigma_t"], values["albedo"]
+        if "albedo" in grids and not (grids["albedo"].data.min() >= 0.0 and grids["albedo"].data.max() <= 1.0):
+            raise node.error(f"{node.label}: the albedo grid's values must be in [0, 1]")
+        if "sigma_t" in grids and not (np.isfinite(grids["sigma_t"].data).all()
+                                       and grids["sigma_t"].data.min() >= 0.0):
+            raise node.error(f"{node.label}: the sigma_t grid's values must be finite and >= 0")
+        scale = node.float("scale", 1.0)
+        if not all(math.isfinite(x) and x >= 0 for x in sigma_t):
+            raise node.error(f"{node.label}: sigma_t must be finite and >= 0, got {tuple(sigma_t)}")
+        if not all(0.0 <= x <= 1.0 for x in albedo):
+            raise node.error(f"{node.label}: albedo must be in [0, 1], got {tuple(albedo)}")
+        if not (math.isfinite(scale) and scale >= 0):
+            raise node.error(f"{node.label}: scale must be finite and >= 0, got {scale}")
+        if not all(math.isfinite(x * scale) and x * scale <= 1e30 for x in sigma_t):
+            raise node.error(f"{node.label}: sigma_t * scale must be at most 1e30")
+        if not node.bool("sample_emitters", True):
+            self.drpt_ignores(node, "sample_emitters", "drpt always samples emitters in media")
+        phase, g, g2, blend = "isotropic", 0.0, 0.0, 0.0
+        for c in node.children():
+            if c.kind != "phasefunction":
+                self.unsupported(c, f"{c.label} inside {node.label}")
+            elif c.plugin == "blendphase":
+                kids = [k for k in c.children() if k.kind == "phasefunction"]
+                if len(kids) != 2:
+                    raise c.error(f"{c.label} needs 2 nested phase functions, got {len(kids)}")
+                if c.is_ref("weight"):
+                    self.unsupported(c.ref("weight"), f"{c.ref('weight').label} as the weight of {c.label}",
+                                     fallback="0.5")
+                    blend = 0.5
+                else:
+                    blend = c.float("weight", 0.5)
+                if not 0.0 <= blend <= 1.0:
+                    raise c.error(f"{c.label}: weight must be in [0, 1], got {blend}")
+                g, g2 = self._phase_lobe(kids[0]), self._phase_lobe(kids[1])
+                phase = "blend"
+                self.check_unread(c)
+            else:
+                g = self._phase_lobe(c)
+                phase = "hg" if c.plugin == "hg" else "isotropic"
+        self.check_unread(node)
+        self.medium_index[node.index] = len(self.media)
+        medium = Medium(node.id or f"{node.plugin}@{node.line}", tuple(sigma_t), tuple(albedo),
+                        scale, phase, g, node.where, g2=g2, blend=blend)
+        if "sigma_t" in grids:  # (a constant extinction: a homogeneous medium, any albedo grid aside)
+            medium.sigma_t_grid, medium.albedo_grid = grids["sigma_t"], grids.get("albedo")
+            majorant = medium.sigma_t_grid.max * scale
+            corners = np.array([[x, y, z, 1.0] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) @ \
+                np.linalg.inv(medium.sigma_t_grid.to_local).T
+            depth = majorant * float(np.linalg.norm(corners[:, :3].max(0) - corners[:, :3].min(0)))
+            if not depth <= MAX_MAJORANT_DEPTH:
+                raise node.error(f"{node.label}: the grid's maximum sigma_t * scale times its box's "
+                                 f"diagonal is {depth:.3g}; drpt's delta tracking takes about that many "
+                                 f"steps across it and refuses more than {MAX_MAJORANT_DEPTH:g}")
+        elif "albedo" in grids:
+            self.unsupported(node, f"{node.label} with an albedo grid and a constant sigma_t",
+                             fallback="the constant albedo")
+        self.media.append(medium)
+        return self.medium_index[node.index]
+
+    def _phase_lobe(self, c: Node) -> float:
+        """The ``g`` of an ``isotropic`` (0) or ``hg`` phase function."""
+        if c.plugin == "hg":
+            g = c.float("g", 0.8)
+            if not -1.0 < g < 1.0:
+                raise c.error(f"{c.label}: g must be in (-1, 1), got {g}")
+            self.check_unread(c)
+            return g
+        if c.plugin != "isotropic":
+            self.unsupported(c, f"phase function '{c.plugin}' (drpt has isotropic, hg and blendphase "
+                             "of those)", fallback="isotropic")
+        else:
+            self.check_unread(c)
+        return 0.0
+
+    def grid_volume(self, node: Node) -> GridVolume:
+        """Mitsuba's ``gridvolume`` from a ``.vol`` file (binary, version 3, float32)."""
+        path = node.resolve_file(node.str("filename") or "")
+        try:
+            raw = Path(path).read_bytes()
+        except OSError as e:
+            raise node.error(f"{node.label}: {path}: {e.strerror}") from None
+        if len(raw) < 48 or raw[:3] != b"VOL" or raw[3] != 3:
+            raise node.error(f"{node.label}: {path} is not a version 3 .vol file")
+        enc, nx, ny, nz, nc = np.frombuffer(raw[4:24], "<i4")
+        if enc != 1:
+            raise node.error(f"{node.label}: {path}: only float32 grids (encoding 1) are read, got {enc}")
+        if min(nx, ny, nz) < 1 or nc not in (1, 3) or len(raw) != 48 + 4 * int(nx) * ny * nz * nc:
+            raise node.error(f"{node.label}: {path}: bad size ({nx} x {ny} x {nz}, {nc} channels, "
+                             f"{len(raw)} bytes)")
+        bbox = np.frombuffer(raw[24:48], "<f4").astype(np.float64)
+        data = np.frombuffer(raw[48:], "<f4").reshape(int(nz), int(ny), int(nx), int(nc)).copy()
+        if not np.isfinite(data).all():
+            raise node.error(f"{node.label}: {path}: values are not finite")
+        to_world = node.transform("to_world")
+        _check_matrix(node, to_world)
+        to_local = np.linalg.inv(to_world)
+        if node.bool("use_grid_bbox", False):
+            lo, hi = bbox[:3], bbox[3:]
+            if not np.all(hi > lo):
+                raise node.error(f"{node.label}: {path}: its bounding box is empty")
+            m = np.diag([*(1.0 / (hi - lo)), 1.0])
+            m[:3, 3] = -lo / (hi - lo)
+            to_local = m @ to_local
+        filt = node.str("filter_type", "trilinear")
+        wrap = node.str("wrap_mode", "clamp")
+        if filt not in ("trilinear", "nearest"):
+            raise node.error(f"{node.label}: filter_type must be trilinear or nearest, got {filt!r}")
+        if wrap not in ("clamp", "repeat", "mirror"):
+            raise node.error(f"{node.label}: wrap_mode must be clamp, repeat or mirror, got {wrap!r}")
+        node.get("accel")
+        node.bool("raw", False)  # (RGB variants read the values as given either way)
+        self.check_unread(node)
+        return GridVolume(data, to_local, filt, wrap)
+
+    def _material_index(self, spec: BSDFSpec, bsdf_node: Node | None, parts, shape: Node) -> int:
+        emission, (interior, exterior) = parts
+        key = (bsdf_node.index if bsdf_node is not None else None, emission, interior, exterior)
         if key not in self.mat_index:
             if bsdf_node is not None:
                 name = bsdf_node.id or f"{bsdf_node.plugin}@{bsdf_node.line}"
@@ -512,7 +667,9 @@ class Reader:
             if isinstance(emission, Texture) or max(emission) > 0:
                 name += "+area"
             self.mat_index[key] = len(self.mat_list)
-            self.mat_list.append(_material(name, origin, spec, emission))
+            mat = _material(name, origin, spec, emission)
+            mat.interior, mat.exterior = interior, exterior
+            self.mat_list.append(mat)
         return self.mat_index[key]
 
     def shape(self, node: Node, parent: np.ndarray) -> None:
@@ -536,8 +693,9 @@ class Reader:
         if plugin not in geo.MESH_PLUGINS + geo.ANALYTIC_PLUGINS:
             self.unsupported(node, f"shape '{plugin}'")
             return
-        spec, bsdf_node, emission = self._shape_parts(node)
-        k = self._material_index(spec, bsdf_node, emission, node)
+        spec, bsdf_node, parts = self._shape_parts(node)
+        emission = parts[0]
+        k = self._material_index(spec, bsdf_node, parts, node)
         first = len(self.meshes)
         m = parent @ node.transform("to_world")
         _check_matrix(node, m)

@@ -1,0 +1,528 @@
+"""Volumetric path tracing through participating media (Mitsuba's ``volpath``).
+
+A medium fills the inside or the outside of the shapes whose material names it
+(:attr:`drpt.scene.model.Material.interior` / ``exterior``): the medium a ray travels in
+follows the boundaries it crosses, as in Mitsuba (after a surface of a *medium transition*
+the ray is in the interior where it leaves against the surface's geometric normal, else in
+the exterior; a camera ray starts in the sensor's medium, if it has one, else in vacuum).
+A ``null`` BSDF is a pure boundary, and a ``thindielectric`` sheet's transmission passes
+straight through as Mitsuba's null component.
+
+Each segment in a medium samples a free-flight distance: a color channel is picked
+uniformly (one random number per event), ``t = -log(1 - u) / sigma_t[c]``; the sample is
+a scattering event if ``t`` comes before the surface the ray hits. The weight divides by
+the *mean* density over the three channels (one-sample MIS with the balance heuristic,
+"spectral MIS"): ``tr * sigma_s / mean(tr * sigma_t)`` at a scattering event,
+``tr / mean(tr)`` when the ray reaches the surface, ``tr = exp(-sigma_t t)``, so each
+channel's weight is at most 3 times its albedo and channels with ``sigma_t = 0`` need no
+special case. (Mitsuba keeps one channel per path and divides by its density alone: the same
+expectation, more variance for chromatic media.) At a scattering event the phase function
+(isotropic or Henyey-Greenstein) is sampled exactly (weight 1).
+
+A heterogeneous medium (:class:`Heterogeneous`: a one-channel extinction grid) is sampled by
+delta tracking as Mitsuba's: a tentative collision at a distance sampled with the majorant
+(``scale`` times the grid's maximum) from where the ray enters the grid's box is real with
+probability ``sigma_t(x) / majorant`` (the throughput times the albedo there), else a null
+collision and the ray goes on unchanged (a loop iteration that is not a scattering event).
+Shadow rays use ratio tracking: ``1 - sigma_t(x) / majorant`` at each tentative collision, one
+random number each. Scenes without heterogeneous media trace none of this.
+
+Next-event estimation (area emitters, point-like lights, the environment map, or a
+constant background by uniform directions) runs at surfaces and at scattering events alike
+(the BSDF or the phase function evaluated toward the emitter sample, power-heuristic MIS
+against sampling them): the shadow ray's transmittance is computed analytically (``exp(-sigma_t d)`` per
+segment of homogeneous medium), through ``null`` boundaries (factor 1) and ``thindielectric``
+sheets (their transmission ``1 - 2R / (1 + R)``), changing medium at each transition; any
+other surface blocks it. (As in Mitsuba, the sky is ``2 max(R, |p - c|)`` away for this
+estimate, ``(c, R)`` the bounding sphere of the scene's shapes: in a medium that extends
+beyond the shapes, such as the sensor's, the sky is seen through that much of it, while a
+sampled ray that leaves every shape in such a medium scatters before it reaches the sky.)
+An emitter a BSDF or phase sample hits afterwards is weighted
+against the density next-event estimation has for it from the last real scattering vertex
+(null crossings do not count), as Mitsuba does.
+
+Depth as in Mitsuba's volpath: ``depth`` counts real scattering events (surface or
+medium, not null crossings); a path ends when ``depth`` reaches ``max_depth`` (-1:
+unbounded), and Russian roulette plays once ``depth > rr_depth`` with survival probability
+``min(max(throughput) * eta^2, 0.95)`` (or ``--rr-prob``). A scattering event at
+``depth = max_depth`` ends the path without next-event estimation. Null crossings are bounded by
+:data:`MAX_SHADOW_CROSSINGS` on shadow rays; the loop's own crossings each advance the ray.
+
+Only scenes with media use this module (:meth:`drpt.render.renderer.Renderer._make_integrator`):
+a scene without them renders with :class:`~drpt.render.integrators.path.PathIntegrator`,
+whose kernel does not change.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import drjit as dr
+import numpy as np
+from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
+
+from ...errors import DrptError
+from ...options import PathOptions
+from ...scene.model import Scene
+from ..scene import DeviceScene
+from ..warp import Frame
+from .common import SHADOW_SHRINK, power_heuristic
+from .path import PathIntegrator
+
+#: at most this many boundaries (null or thindielectric) a shadow ray passes; beyond, it is blocked
+MAX_SHADOW_CROSSINGS = 64
+
+NULL_NONE, NULL_BOUNDARY, NULL_THIN = 0, 1, 2
+
+
+def _vec(a) -> Array3f:
+    a = np.ascontiguousarray(np.asarray(a, np.float32).reshape(-1, 3))
+    return Array3f(Float(a[:, 0]), Float(a[:, 1]), Float(a[:, 2]))
+
+
+def hg_pdf(g: Float, cos_fwd: Float) -> Float:
+    """Henyey-Greenstein density (per steradian) of scattering by angle ``acos(cos_fwd)``
+    from the propagation direction (``g > 0``: forward); ``g = 0`` is isotropic."""
+    denom = dr.maximum(1.0 + g * g - 2.0 * g * cos_fwd, 1e-12)
+    return (1.0 - g * g) / (4.0 * dr.pi * denom * dr.sqrt(denom))
+
+
+def hg_sample(g: Float, u: Array2f, d: Array3f) -> Array3f:
+    """A direction distributed by :func:`hg_pdf` about the unit propagation direction ``d``
+    (exact inversion; isotropic where ``|g| < 1e-3``)."""
+    iso = dr.abs(g) < 1e-3
+    gg = dr.select(iso, 1.0, g)
+    sq = (1.0 - gg * gg) / (1.0 - gg + 2.0 * gg * u.x)
+    cos = dr.select(iso, 1.0 - 2.0 * u.x, (1.0 + gg * gg - sq * sq) / (2.0 * gg))
+    cos = dr.clip(cos, -1.0, 1.0)
+    sin = dr.safe_sqrt(1.0 - cos * cos)
+    phi = 2.0 * dr.pi * u.y
+    sp, cp = dr.sincos(phi)
+    return dr.normalize(Frame(d).to_world(Array3f(sin * cp, sin * sp, cos)))
+
+
+class MediumTable:
+    """The scene's media (homogeneous ones in arrays, heterogeneous ones as
+    :class:`Heterogeneous` objects) and, per material, the media on either side of its
+    surfaces and how a shadow ray passes it (on the device). Medium ids are 1-based
+    (``0``: vacuum)."""
+
+    def __init__(self, scene: Scene):
+        from ...bsdf_kinds import PARAMS
+        from ...iors import relative_ior
+
+        media = scene.media
+        self.count = len(media)
+        # (a heterogeneous medium is vacuum to the homogeneous code: its own in self.hetero)
+        self.sigma_t = _vec([m.extinction if m.is_homogeneous else (0.0, 0.0, 0.0) for m in media])
+        self.hetero = [Heterogeneous(i + 1, m) for i, m in enumerate(media) if not m.is_homogeneous]
+        self.hetero = [h for h in self.hetero if h.majorant > 0.0]
+        self.has_hetero = bool(self.hetero)
+        self.albedo = _vec([m.albedo for m in media])
+        self.g = Float(np.array([m.g if m.phase in ("hg", "blend") else 0.0 for m in media], np.float32))
+        self.has_blend = any(m.phase == "blend" for m in media)
+        if self.has_blend:  # Mitsuba's blendphase: a second HG lobe and its weight
+            self.g2 = Float(np.array([m.g2 if m.phase == "blend" else 0.0 for m in media], np.float32))
+            self.blend = Float(np.array([m.blend if m.phase == "blend" else 0.0 for m in media], np.float32))
+        mats = scene.materials or []
+        interior = [0 if m.interior is None else m.interior + 1 for m in mats]
+        exterior = [0 if m.exterior is None else m.exterior + 1 for m in mats]
+        transition = [m.is_medium_transition for m in mats]
+        kind, eta, trans = [], [], []
+        for m in mats:
+            spec = m.bsdf
+            k = spec.kind if spec is not None else ""
+            if k == "null":
+                kind.append(NULL_BOUNDARY)
+                eta.append(1.0)
+                trans.append((1.0, 1.0, 1.0))
+            elif k == "thindielectric":
+                p = {**PARAMS["thindielectric"], **spec.params}
+                t = p.get("specular_transmittance", (1.0, 1.0, 1.0))
+                if isinstance(t, (int, float)):
+                    t = (float(t),) * 3
+                if not (isinstance(t, tuple) and len(t) == 3):
+                    raise DrptError(f"{m.origin}: volpath: a thindielectric with a textured "
+                                    "specular_transmittance is not supported")
+                kind.append(NULL_THIN)
+                eta.append(relative_ior(p["int_ior"], p["ext_ior"]))
+                trans.append(tuple(float(x) for x in t))
+            else:
+                kind.append(NULL_NONE)
+                eta.append(1.0)
+                trans.append((0.0, 0.0, 0.0))
+        if not mats:
+            interior, exterior, transition, kind, eta, trans = [0], [0], [False], [0], [1.0], [(0.0,) * 3]
+        self.interior = UInt32(np.array(interior, np.uint32))
+        self.exterior = UInt32(np.array(exterior, np.uint32))
+        self.transition = Bool(np.array(transition, bool))
+        self.null_kind = UInt32(np.array(kind, np.uint32))
+        self.thin_eta = Float(np.array(eta, np.float32))
+        self.null_trans = _vec(trans)
+        self.has_null = any(k != NULL_NONE for k in kind)
+
+    def coefficients(self, medium: UInt32, active: Bool) -> tuple[Array3f, Array3f, Float]:
+        """``(sigma_t, albedo, g)`` of the lanes' media (zeros in vacuum)."""
+        inside = active & (medium > 0)
+        i = dr.select(inside, medium - 1, 0)
+        st = dr.gather(Array3f, self.sigma_t, i, inside)
+        al = dr.gather(Array3f, self.albedo, i, inside)
+        g = dr.gather(Float, self.g, i, inside)
+        return dr.select(inside, st, 0.0), al, g
+
+    def blend_lobe(self, medium: UInt32, active: Bool) -> tuple[Float, Float]:
+        """``(g2, weight)`` of the lanes' blended phase functions (weight 0: one lobe)."""
+        inside = active & (medium > 0)
+        i = dr.select(inside, medium - 1, 0)
+        return dr.gather(Float, self.g2, i, inside), dr.select(inside, dr.gather(Float, self.blend, i, inside), 0.0)
+
+    def after(self, si, d: Array3f, medium: UInt32, active: Bool) -> UInt32:
+        """The medium a ray leaving the surface ``si`` along ``d`` is in."""
+        on = active & si.valid
+        mat = dr.select(on, si.material, 0)
+        trans = dr.gather(Bool, self.transition, mat, on) & on
+        out = dr.dot(d, si.ng) > 0.0
+        target = dr.select(out, dr.gather(UInt32, self.exterior, mat, trans),
+                           dr.gather(UInt32, self.interior, mat, trans))
+        return dr.select(trans, target, medium)
+
+    def null_kind_of(self, si, active: Bool) -> UInt32:
+        on = active & si.valid
+        return dr.select(on, dr.gather(UInt32, self.null_kind, dr.select(on, si.material, 0), on), NULL_NONE)
+
+    def null_transmission(self, si, d: Array3f, active: Bool) -> Array3f:
+        """What a shadow ray along ``d`` keeps crossing ``si``: 1 through a ``null``
+        boundary, ``(1 - R') * specular_transmittance`` through a thindielectric sheet
+        (Mitsuba's ``eval_null_transmission``), 0 through anything else."""
+        from ..bsdf.thindielectric import reflectance
+
+        on = active & si.valid
+        mat = dr.select(on, si.material, 0)
+        kind = dr.gather(UInt32, self.null_kind, mat, on)
+        eta = dr.gather(Float, self.thin_eta, mat, on)
+        t = dr.gather(Array3f, self.null_trans, mat, on)
+        r = reflectance(dr.dot(si.ns, d), eta)
+        value = dr.select(kind == NULL_THIN, t * (1.0 - r), t)
+        return dr.select(on, value, 0.0)
+
+
+def _affine(m, p: Array3f, translate: bool = True) -> Array3f:
+    """The 4x4 host matrix ``m`` (nested lists) applied to the point (or, without
+    ``translate``, the vector) ``p``."""
+    return Array3f(*(m[r][0] * p.x + m[r][1] * p.y + m[r][2] * p.z + (m[r][3] if translate else 0.0)
+                     for r in range(3)))
+
+
+def _texture(grid):
+    from drjit.auto import TensorXf, Texture3f
+
+    mode = dr.FilterMode.Linear if grid.filter == "trilinear" else dr.FilterMode.Nearest
+    wrap = {"clamp": dr.WrapMode.Clamp, "repeat": dr.WrapMode.Repeat, "mirror": dr.WrapMode.Mirror}[grid.wrap]
+    return Texture3f(TensorXf(np.ascontiguousarray(grid.data, np.float32)), use_accel=False,
+                     filter_mode=mode, wrap_mode=wrap)
+
+
+class Heterogeneous:
+    """One heterogeneous medium (Mitsuba's ``heterogeneous`` with a ``gridvolume``
+    extinction): its extinction is the grid's value times ``scale`` inside the world-space
+    box of the grid's unit cube (Mitsuba's ``Volume::bbox``, wrap mode outside the cube but
+    inside the box) and zero elsewhere; the majorant is ``scale`` times the grid's maximum."""
+
+    def __init__(self, medium_id: int, m):
+        grid = m.sigma_t_grid
+        self.id = medium_id
+        self.scale = float(m.scale)
+        self.majorant = self.scale * grid.max
+        self.to_local = np.asarray(grid.to_local, np.float64).tolist()
+        corners = np.array([[x, y, z, 1.0] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) @ \
+            np.linalg.inv(grid.to_local).T
+        self.lo, self.hi = corners[:, :3].min(0).tolist(), corners[:, :3].max(0).tolist()
+        self.sigma_tex = _texture(grid)
+        self.albedo_const = tuple(float(a) for a in m.albedo)
+        self.albedo_grid = m.albedo_grid
+        if self.albedo_grid is not None:
+            self.albedo_tex = _texture(self.albedo_grid)
+            self.albedo_to_local = np.asarray(self.albedo_grid.to_local, np.float64).tolist()
+
+    def box(self, o: Array3f, d: Array3f) -> tuple[Float, Float, Bool]:
+        """``(mint, maxt, hit)`` of the ray ``(o, d)`` through the medium's box."""
+        mint, maxt = Float(-dr.inf), Float(dr.inf)
+        for k in range(3):
+            ok, dk = o[k], d[k]
+            inside = (ok >= self.lo[k]) & (ok <= self.hi[k])
+            a, b = (self.lo[k] - ok) / dk, (self.hi[k] - ok) / dk
+            zero = dk == 0.0
+            mint = dr.maximum(mint, dr.select(zero, dr.select(inside, -dr.inf, dr.inf), dr.minimum(a, b)))
+            maxt = dr.minimum(maxt, dr.select(zero, dr.select(inside, dr.inf, -dr.inf), dr.maximum(a, b)))
+        return mint, maxt, mint <= maxt
+
+    def sigma_t(self, p: Array3f, active: Bool) -> Float:
+        return self.sigma_tex.eval(_affine(self.to_local, p), active)[0] * self.scale
+
+    def albedo(self, p: Array3f, active: Bool) -> Array3f:
+        if self.albedo_grid is None:
+            return Array3f(*self.albedo_const)
+        v = self.albedo_tex.eval(_affine(self.albedo_to_local, p), active)
+        return Array3f(v[0], v[0], v[0]) if len(v) == 1 else Array3f(v[0], v[1], v[2])
+
+    def collide(self, o: Array3f, d: Array3f, end: Float, u: Float, active: Bool) -> tuple[Bool, Float]:
+        """Lanes whose tentative collision (distance sampled with the majorant from where the
+        ray enters the box) comes before ``end``, and its distance."""
+        mint, maxt, hit = self.box(o, d)
+        t = dr.maximum(mint, 0.0) - dr.log(1.0 - u) / self.majorant
+        return active & hit & (t < dr.minimum(maxt, end)), t
+
+
+def _transmittance(sigma_t: Array3f, dist: Float) -> Array3f:
+    """``exp(-sigma_t dist)`` per channel, 1 where ``sigma_t`` is 0 (also for an infinite ``dist``)."""
+    return dr.select(sigma_t > 0.0, dr.exp(-sigma_t * dist), 1.0)
+
+
+@dataclass
+class VolPathState:
+    """One path per lane (a Dr.Jit loop state)."""
+
+    o: Array3f
+    d: Array3f
+    L: Array3f
+    beta: Array3f
+    eta: Float
+    depth: UInt32  # real scattering events (surface or medium)
+    prev_pdf: Float  # density of d at the last real scattering event (MIS)
+    prev_delta: Bool  # Mitsuba's specular_chain: the emitter d hits counts in full
+    ref_p: Array3f  # the last real scattering event (the MIS density of the emitter d hits)
+    medium: UInt32  # 1-based medium id of the ray, 0 in vacuum
+    active: Bool
+
+
+class VolPathIntegrator(PathIntegrator):
+    """Mitsuba's ``volpath`` (see the module's docs). Its
+    ``sample`` and ``sample_sequence`` are :class:`PathIntegrator`'s."""
+
+    def __init__(self, scene: DeviceScene, options: PathOptions, model: Scene):
+        super().__init__(scene, options)
+        self.media = MediumTable(model)
+        cm = getattr(model, "camera_medium", None)
+        self.camera_medium = 0 if cm is None else cm + 1
+        # Mitsuba's sky, for next-event estimation, is 2 max(R, |p - c|) away from the point p,
+        # (c, R) the bounding sphere of the scene's shapes (what a medium attenuates on the way)
+        lo, hi = model.bounds()
+        if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
+            self.sky_center = tuple(float(x) for x in (lo + hi) / 2)
+            self.sky_radius = float(np.linalg.norm(hi - lo) / 2)
+        else:
+            self.sky_center, self.sky_radius = (0.0, 0.0, 0.0), 0.0
+
+    def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> VolPathState:
+        w = dr.width(active)
+        beta = dr.full(Array3f, 1.0, w) if weight is None else Array3f(weight, weight, weight)
+        return VolPathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=beta, eta=dr.full(Float, 1.0, w),
+                            depth=dr.zeros(UInt32, w), prev_pdf=dr.full(Float, 1.0, w),
+                            prev_delta=dr.full(Bool, not self.opt.hide_emitters, w),
+                            ref_p=Array3f(o), medium=dr.full(UInt32, self.camera_medium, w),
+                            active=Bool(active))
+
+    @dr.syntax
+    def shadow(self, o: Array3f, d: Array3f, tmax: Float, medium: UInt32, active: Bool,
+               rng: PCG32 | None = None) -> Array3f:
+        """The transmittance of the segment from ``o`` along unit ``d`` up to ``tmax``
+        (``inf``: to the sky), starting in ``medium``: media, null boundaries and
+        thindielectric sheets pass light, other surfaces block it. Homogeneous media
+        attenuate exactly; heterogeneous ones by ratio tracking (``rng``: one number per
+        step, only in scenes with such media)."""
+        scene, media = self.scene, self.media
+        tr = dr.full(Array3f, 1.0, dr.width(active))
+        live = Bool(active)
+        o, d, tmax, medium = Array3f(o), Array3f(d), Float(tmax), UInt32(medium)
+        crossings = UInt32(0)
+        while live:
+            si = scene.intersect(o, d, live)
+            ahead = live & si.valid & (si.t < tmax)
+            seg = dr.select(ahead, si.t, tmax)
+            step = Bool(False)
+            p_step = Array3f(o)
+            if media.has_hetero:
+                u = rng.next_float32()
+                for h in media.hetero:
+                    hit, t = h.collide(o, d, seg, u, live & (medium == h.id))
+                    p = o + d * t
+                    tr = dr.select(hit, tr * dr.maximum(1.0 - h.sigma_t(p, hit) / h.majorant, 0.0), tr)
+                    p_step = dr.select(hit, p, p_step)
+                    tmax = dr.select(hit, tmax - t, tmax)
+                    step = step | hit
+            blocked = ahead & ~step
+            sigma_t, _, _ = media.coefficients(medium, live)
+            tr = dr.select(live & ~step, tr * _transmittance(sigma_t, seg), tr)
+            tr = dr.select(blocked, tr * media.null_transmission(si, d, blocked), tr)
+            medium = media.after(si, d, medium, blocked)
+            o2 = scene.spawn(si, d)
+            tmax = dr.select(blocked, tmax - dr.dot(o2 - o, d), tmax)
+            o = dr.select(blocked, o2, dr.select(step, p_step, o))
+            crossings = dr.select(blocked, crossings + 1, crossings)
+            tr = dr.select(blocked & (crossings >= MAX_SHADOW_CROSSINGS), 0.0, tr)
+            live = (blocked | step) & (dr.max(tr) > 0.0) & (crossings < MAX_SHADOW_CROSSINGS)
+        return tr
+
+    def _bounce(self, scene: DeviceScene, s: VolPathState, rng: PCG32) -> VolPathState:
+        opt, media = self.opt, self.media
+        # ---- Russian roulette and the depth limit (at the top, as Mitsuba's volpath)
+        u_rr = rng.next_float32()
+        if opt.rr_prob is not None:  # (--rr-prob: a fixed continuation probability)
+            q = Float(opt.rr_prob)
+        else:
+            q = dr.minimum(dr.max(s.beta) * dr.square(s.eta), 0.95)
+        perform_rr = s.depth > opt.rr_depth
+        active = s.active & (dr.max(s.beta) > 0.0) & ((u_rr < q) | ~perform_rr)
+        beta = dr.select(perform_rr, s.beta / q, s.beta)
+        if opt.max_depth >= 0:
+            active = active & (s.depth < opt.max_depth)
+        si = scene.intersect(s.o, s.d, active)
+
+        # ---- free-flight sampling in the ray's medium (spectral MIS over the channels)
+        u_ch, u_t = rng.next_float32(), rng.next_float32()
+        in_medium = active & (s.medium > 0)
+        sigma_t, albedo, g = media.coefficients(s.medium, in_medium)
+        ch = dr.minimum(UInt32(u_ch * 3.0), 2)
+        m = dr.select(ch == 0, sigma_t.x, dr.select(ch == 1, sigma_t.y, sigma_t.z))
+        t = -dr.log(1.0 - u_t) / m  # inf where m = 0
+        t_surf = dr.select(si.valid, si.t, dr.inf)
+        scatter = in_medium & (t < t_surf)
+        dist = dr.select(scatter, t, t_surf)
+        tr = _transmittance(sigma_t, dist)
+        pdf = dr.select(scatter, tr * sigma_t, tr)
+        mean_pdf = (pdf.x + pdf.y + pdf.z) * (1.0 / 3.0)
+        ratio = dr.select(mean_pdf > 0.0, tr / mean_pdf, 0.0)
+        beta = dr.select(in_medium, beta * ratio, beta)
+        beta = dr.select(scatter, beta * sigma_t * albedo, beta)
+        p_med = s.o + s.d * t
+        het_null = Bool(False)
+        if media.has_hetero:  # delta tracking against the majorant (Mitsuba's null collisions)
+            u_null = rng.next_float32()
+            for h in media.hetero:
+                cand, t_h = h.collide(s.o, s.d, t_surf, u_t, in_medium & (s.medium == h.id))
+                p_h = s.o + s.d * t_h
+                real = cand & (u_null * h.majorant < h.sigma_t(p_h, cand))
+                beta = dr.select(real, beta * h.albedo(p_h, real), beta)
+                p_med = dr.select(cand, p_h, p_med)
+                scatter = scatter | real
+                het_null = het_null | (cand & ~real)
+        depth = dr.select(scatter, s.depth + 1, s.depth)
+        scatter_live = scatter & (depth < opt.max_depth) if opt.max_depth >= 0 else Bool(scatter)
+        surf = active & ~scatter & ~het_null
+
+        # ---- the emitter or sky the ray reaches
+        L = s.L
+        nee_area = scene.has_area_lights
+        hide = (depth == 0) if opt.hide_emitters else Bool(False)
+        hit_emitter = surf & si.valid & ~hide
+        if getattr(scene.materials, "has_emission", True):
+            le = scene.emitted(si)
+            w = Float(1.0)
+            if nee_area:
+                si_ref = copy.copy(si)
+                si_ref.t = dr.norm(si.p - s.ref_p)
+                pdf_l = scene.pdf_area_emitter(si_ref, s.d, hit_emitter)
+                w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
+            L = L + dr.select(hit_emitter, beta * le * w, 0.0)
+        escaped = surf & ~si.valid & ~hide
+        if scene.has_background:  # sampled by next-event estimation too (below): MIS
+            w_bg = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, Float(1.0 / (4.0 * dr.pi))))
+            L = L + dr.select(escaped, beta * Array3f(*scene.background) * w_bg, 0.0)
+        if scene.has_environment:
+            le_env, pdf_env = scene.eval_pdf_environment(s.d, escaped)
+            w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env))
+            L = L + dr.select(escaped, beta * le_env * w_env, 0.0)
+
+        # ---- next-event estimation at the scattering vertex (surface or medium)
+        on_surface = surf & si.valid
+        nee_ok = on_surface & (depth + 1 < opt.max_depth) if opt.max_depth >= 0 else Bool(on_surface)
+        nee_ok = nee_ok | scatter_live  # (no in-place operators: they would change on_surface)
+        vertex = copy.copy(si)
+        vertex.p = dr.select(scatter, p_med, si.p)
+        u_sel = rng.next_float32()
+        u_light = Array2f(rng.next_float32(), rng.next_float32())
+        u_env = Array2f(rng.next_float32(), rng.next_float32())
+
+        if media.has_blend:
+            g2, wb = media.blend_lobe(s.medium, in_medium)
+
+            def phase_pdf(wo):
+                c = dr.dot(wo, s.d)
+                return (1.0 - wb) * hg_pdf(g, c) + wb * hg_pdf(g2, c)
+        else:
+            def phase_pdf(wo):
+                return hg_pdf(g, dr.dot(wo, s.d))
+
+        def scatter_eval(wo):
+            f_s, pdf_s = scene.eval_bsdf(si, wo)
+            ph = phase_pdf(wo)
+            return dr.select(scatter, Array3f(ph), f_s), dr.select(scatter, ph, pdf_s)
+
+        def start(wo):
+            o = dr.select(scatter, p_med, scene.spawn(si, wo))
+            return o, dr.select(scatter, s.medium, media.after(si, wo, s.medium, on_surface))
+
+        if nee_area:
+            ls = scene.sample_area_emitter(vertex, u_sel, u_light, nee_ok)
+            f, pdf_b = scatter_eval(ls.wo)
+            ok = nee_ok & ls.valid & (dr.max(f) > 0.0)
+            o, med = start(ls.wo)
+            to = ls.p - o
+            dl = dr.norm(to)
+            tr_l = self.shadow(o, to / dr.maximum(dl, 1e-30), dl * SHADOW_SHRINK, med, ok, rng)
+            wl = power_heuristic(ls.pdf, pdf_b) / ls.pdf
+            L = L + dr.select(ok, beta * f * ls.le * tr_l * wl, 0.0)
+        if scene.has_delta_lights:
+            for dlt in scene.delta_emitters(vertex.p):
+                f, _ = scatter_eval(dlt.wo)
+                ok = nee_ok & (dr.max(f) > 0.0) & (dr.max(dlt.irradiance) > 0.0)
+                o, med = start(dlt.wo)
+                tr_l = self.shadow(o, dlt.wo, dlt.dist * SHADOW_SHRINK, med, ok, rng)
+                L = L + dr.select(ok, beta * f * dlt.irradiance * tr_l, 0.0)
+        if scene.has_environment or scene.has_background:
+            if scene.has_environment:
+                wo_e, rad_e, pdf_e = scene.sample_environment(u_env, nee_ok)
+            else:  # a constant background (Mitsuba's constant emitter): uniform directions
+                z = 1.0 - 2.0 * u_env.x
+                r = dr.safe_sqrt(1.0 - z * z)
+                sp, cp = dr.sincos(2.0 * dr.pi * u_env.y)
+                wo_e, rad_e = Array3f(r * cp, r * sp, z), Array3f(*scene.background)
+                pdf_e = Float(1.0 / (4.0 * dr.pi))
+            f, pdf_b = scatter_eval(wo_e)
+            ok = nee_ok & (pdf_e > 0.0) & (dr.max(f) > 0.0)
+            o, med = start(wo_e)
+            sky = 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
+            tr_l = self.shadow(o, wo_e, sky * SHADOW_SHRINK, med, ok, rng)
+            we = power_heuristic(pdf_e, pdf_b) / dr.maximum(pdf_e, 1e-30)
+            L = L + dr.select(ok, beta * f * rad_e * tr_l * we, 0.0)
+
+        # ---- continue: sample the BSDF or the phase function
+        u_lobe = rng.next_float32()
+        u2 = Array2f(rng.next_float32(), rng.next_float32())
+        wo, bs = scene.sample_bsdf(si, u_lobe, u2)
+        g_lobe = dr.select(u_lobe < wb, g2, g) if media.has_blend else g  # (Mitsuba's lobe choice)
+        wo_ph = hg_sample(g_lobe, Array2f(u2.x, u2.y), s.d)
+        wo_ph_pdf = phase_pdf(wo_ph)
+        if media.has_null:
+            kind = media.null_kind_of(si, on_surface)
+            passed = dr.dot(wo, si.ng) * dr.dot(s.d, si.ng) > 0.0
+            null = on_surface & (kind != NULL_NONE) & passed
+        else:
+            null = Bool(False)
+        real = on_surface & ~null
+        beta = dr.select(on_surface, beta * bs.weight, beta)
+        eta = dr.select(on_surface, s.eta * bs.eta, s.eta)
+        depth = dr.select(real, depth + 1, depth)
+        new_d = dr.select(scatter_live, wo_ph, Array3f(wo))
+        new_o = dr.select(scatter_live, p_med, scene.spawn(si, wo))
+        if media.has_hetero:  # a null collision: on along the same ray
+            new_d = dr.select(het_null, s.d, new_d)
+            new_o = dr.select(het_null, p_med, new_o)
+        medium = media.after(si, wo, s.medium, on_surface)
+        ref_p = dr.select(scatter_live, p_med, dr.select(real, si.p, s.ref_p))
+        prev_pdf = dr.select(scatter_live, wo_ph_pdf, dr.select(real, Float(bs.pdf), s.prev_pdf))
+        prev_delta = dr.select(scatter_live, False, dr.select(real, Bool(bs.delta), s.prev_delta))
+        live = scatter_live | (on_surface & bs.valid) | het_null
+        return VolPathState(o=new_o, d=new_d, L=L, beta=beta, eta=eta, depth=depth, prev_pdf=prev_pdf,
+                            prev_delta=prev_delta, ref_p=ref_p, medium=medium, active=live)
