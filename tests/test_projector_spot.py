@@ -170,3 +170,20 @@ def test_export_round_trip(tmp_path):
     for x, y in zip(a, b):
         assert x.max() > 0
         np.testing.assert_allclose(x, y, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("value, message", [("0mm", "focal_length must be positive"),
+                                            ("abc", "focal_length must be like '50mm'")])
+def test_projector_focal_length_errors_are_located(tmp_path, value, message):
+    """A projector reads its field of view as the sensor does (drpt/scene/mitsuba/reader.py's
+    field_of_view): a zero focal length was a ZeroDivisionError."""
+    from drpt.errors import SceneError
+    from drpt.scene import load_scene
+
+    p = tmp_path / "p.xml"
+    p.write_text('<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm">'
+                 '<integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>\n'
+                 '<shape type="rectangle"/>\n'
+                 f'<emitter type="projector"><string name="focal_length" value="{value}"/></emitter></scene>')
+    with pytest.raises(SceneError, match=f"p.xml:3: emitter 'projector': {message}"):
+        load_scene(p)

@@ -331,11 +331,7 @@ class Renderer:
         from .aov import aov_values
 
         W, H = self.opt.width, self.opt.height
-        n = rows * W * k
-        lane = dr.arange(UInt32, n)
-        pixel = lane // dr.opaque(UInt32, k)
-        x = pixel % W
-        y = pixel // W + dr.opaque(UInt32, r0)
+        n, lane, x, y = self._pass_lanes(k, r0, rows)
         rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed ^ AOV_STREAM, pass_index)),
                     initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
         flt = self.opt.pixel_filter
@@ -486,6 +482,16 @@ class Renderer:
         img, sq, _ = film.arrays()
         return img, sq, int(dr.sum(bad)[0])
 
+    def _pass_lanes(self, k: int, r0: int, rows: int) -> tuple[int, UInt32, UInt32, UInt32]:
+        """``(n, lane, x, y)``: one lane per sample of a pass of ``k`` samples per pixel
+        of rows ``r0..r0+rows``, pixel-major (a pixel's ``k`` lanes are adjacent), and
+        each lane's pixel column and row."""
+        W = self.opt.width
+        n = rows * W * k
+        lane = dr.arange(UInt32, n)
+        pixel = lane // dr.opaque(UInt32, k)
+        return n, lane, pixel % W, pixel // W + dr.opaque(UInt32, r0)
+
     def _trace_splat_pass(self, pass_index: int, k: int, r0: int, rows: int) -> PassSums:
         """:meth:`_pass` for a tent or Gaussian filter: each of the ``k`` samples of a
         pixel of rows ``r0..r0+rows`` lies uniformly in its pixel, and its radiance
@@ -493,11 +499,7 @@ class Renderer:
         (:class:`~drpt.render.film.SplatFilm`), as Mitsuba's film does. One sample
         per lane."""
         W, H = self.opt.width, self.opt.height
-        n = rows * W * k
-        lane = dr.arange(UInt32, n)
-        pixel = lane // dr.opaque(UInt32, k)
-        x = pixel % W
-        y = pixel // W + dr.opaque(UInt32, r0)
+        n, lane, x, y = self._pass_lanes(k, r0, rows)
         rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1)
         u = next_2d(rng)
         px = Float(x) + u.x

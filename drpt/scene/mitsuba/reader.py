@@ -339,25 +339,7 @@ class Reader:
                                                    node.float("near_clip", 1e-2))
             self.check_unread(node)
             return
-        if node.has("fov") and node.has("focal_length"):
-            raise node.error(f"{node.label}: give 'fov' or 'focal_length', not both")
-        if node.has("fov"):
-            fov = node.float("fov")
-            axis = (node.str("fov_axis", "x") or "x").lower()
-            if not 0.0 < fov < 180.0:
-                raise node.error(f"{node.label}: fov must be in (0, 180) degrees, got {fov:g}")
-        else:
-            f = node.str("focal_length", "50mm") or "50mm"
-            try:
-                value = float(f[:-2] if f.endswith("mm") else f)
-            except ValueError:
-                raise node.error(f"{node.label}: focal_length must be like '50mm', got {f!r}") from None
-            if not (value > 0 and math.isfinite(value)):
-                raise node.error(f"{node.label}: focal_length must be positive, got {f!r}")
-            fov = 2.0 * math.degrees(math.atan(math.hypot(36.0, 24.0) / (2.0 * value)))
-            axis = "diagonal"
-        if axis not in FOV_AXES:
-            raise node.error(f"{node.label}: fov_axis must be one of {', '.join(FOV_AXES)}, got {axis!r}")
+        fov, axis = field_of_view(node)
         fov_y = vertical_fov(fov, axis, aspect)
         self.settings.fov = (fov, axis)
         if not 0.0 < fov_y < 180.0 or not math.isfinite(fov_y):
@@ -875,19 +857,7 @@ class Reader:
         scale = node.float("scale", 1.0)
         if not (math.isfinite(scale) and scale >= 0):
             raise node.error(f"{node.label}: scale must be >= 0, got {scale}")
-        if node.has("fov") and node.has("focal_length"):
-            raise node.error(f"{node.label}: give 'fov' or 'focal_length', not both")
-        if node.has("fov"):
-            fov, axis = node.float("fov"), (node.str("fov_axis", "x") or "x").lower()
-        else:
-            f = node.str("focal_length", "50mm") or "50mm"
-            try:
-                value = float(f[:-2] if f.endswith("mm") else f)
-            except ValueError:
-                raise node.error(f"{node.label}: focal_length must be like '50mm', got {f!r}") from None
-            fov, axis = 2.0 * math.degrees(math.atan(math.hypot(36.0, 24.0) / (2.0 * value))), "diagonal"
-        if axis not in FOV_AXES:
-            raise node.error(f"{node.label}: fov_axis must be one of {', '.join(FOV_AXES)}, got {axis!r}")
+        fov, axis = field_of_view(node)
         fov_y = vertical_fov(fov, axis, aspect)
         if not 0.0 < fov_y < 180.0:
             raise node.error(f"{node.label}: field of view {fov:g} ({axis}) is not in (0, 180) degrees")
@@ -1012,3 +982,29 @@ def camera_from_matrix(node: Node, m: np.ndarray, fov_y: float, **lens) -> Persp
         raise node.error(f"{node.label}: camera position beyond {MAX_COORDINATE:g}")
     return PerspectiveCamera(center=center, direction=tuple(float(x) for x in a[:, 2]),
                              up=tuple(float(x) for x in a[:, 1]), fov=float(fov_y), **lens)
+
+
+def field_of_view(node: Node) -> tuple[float, str]:
+    """``(fov, axis)`` of a perspective sensor or a projector: its ``fov`` and
+    ``fov_axis``, or Mitsuba's conversion of ``focal_length`` (a 35 mm film's
+    diagonal); a bad value is a located error."""
+    if node.has("fov") and node.has("focal_length"):
+        raise node.error(f"{node.label}: give 'fov' or 'focal_length', not both")
+    if node.has("fov"):
+        fov = node.float("fov")
+        axis = (node.str("fov_axis", "x") or "x").lower()
+        if not 0.0 < fov < 180.0:
+            raise node.error(f"{node.label}: fov must be in (0, 180) degrees, got {fov:g}")
+    else:
+        f = node.str("focal_length", "50mm") or "50mm"
+        try:
+            value = float(f[:-2] if f.endswith("mm") else f)
+        except ValueError:
+            raise node.error(f"{node.label}: focal_length must be like '50mm', got {f!r}") from None
+        if not (value > 0 and math.isfinite(value)):
+            raise node.error(f"{node.label}: focal_length must be positive, got {f!r}")
+        fov = 2.0 * math.degrees(math.atan(math.hypot(36.0, 24.0) / (2.0 * value)))
+        axis = "diagonal"
+    if axis not in FOV_AXES:
+        raise node.error(f"{node.label}: fov_axis must be one of {', '.join(FOV_AXES)}, got {axis!r}")
+    return fov, axis
