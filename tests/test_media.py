@@ -381,13 +381,14 @@ def test_bad_media_are_located_one_line_errors(tmp_path, medium, message):
     assert re.search(message, lines[0]), lines
 
 
-def test_export_of_a_scene_with_media_is_refused(tmp_path):
-    from drpt.errors import DrptError
+def test_export_of_a_scene_with_media_writes_volpath(tmp_path):
+    """The exporter writes homogeneous media and Mitsuba's volpath (more in test_export.py)."""
     from drpt.export.mitsuba import _describe
 
     r = _renderer(tmp_path)
-    with pytest.raises(DrptError, match="participating media"):
-        _describe(r.scene_model, 8, 8, 4, -1, 5, 0)
+    d = _describe(r.scene_model, 8, 8, 4, -1, 5, 0)
+    assert d["integrator"]["type"] == "volpath"
+    assert any(isinstance(v, dict) and v.get("interior", {}).get("type") == "homogeneous" for v in d.values())
 
 
 def test_compare_edits_keep_volpath(tmp_path):
