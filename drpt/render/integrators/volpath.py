@@ -30,7 +30,10 @@ random number each. Scenes without heterogeneous media trace none of this.
 Next-event estimation (area emitters, point-like lights, the environment map, or a
 constant background by uniform directions) runs at surfaces and at scattering events alike
 (the BSDF or the phase function evaluated toward the emitter sample, power-heuristic MIS
-against sampling them): the shadow ray's transmittance is computed analytically (``exp(-sigma_t d)`` per
+against sampling them; in a scene with area emitters and a sky, one of the two is picked, with
+probability :data:`P_AREA` for the area emitters, so that each vertex traces one shadow ray
+besides those of point-like lights, as Mitsuba's emitter selection): the shadow ray's
+transmittance is computed analytically (``exp(-sigma_t d)`` per
 segment of homogeneous medium), through ``null`` boundaries (factor 1) and ``thindielectric``
 sheets (their transmission ``1 - 2R / (1 + R)``), changing medium at each transition; any
 other surface blocks it. (As in Mitsuba, the sky is ``2 max(R, |p - c|)`` away for this
@@ -74,6 +77,10 @@ from .path import PathIntegrator
 MAX_SHADOW_CROSSINGS = 64
 
 NULL_NONE, NULL_BOUNDARY, NULL_THIN = 0, 1, 2
+
+#: where a scene has area emitters and a sky, the probability that next-event estimation
+#: samples the area emitters (else the sky): one shadow ray per vertex, as Mitsuba's
+P_AREA = 0.5
 
 
 def _vec(a) -> Array3f:
@@ -414,6 +421,10 @@ class VolPathIntegrator(PathIntegrator):
         # ---- the emitter or sky the ray reaches
         L = s.L
         nee_area = scene.has_area_lights
+        sky_nee = scene.has_environment or scene.has_background
+        # with area emitters and a sky, next-event estimation picks one of the two (one shadow ray)
+        pick = nee_area and sky_nee
+        p_area = P_AREA if pick else 1.0
         hide = (depth == 0) if opt.hide_emitters else Bool(False)
         hit_emitter = surf & si.valid & ~hide
         if getattr(scene.materials, "has_emission", True):
@@ -422,16 +433,18 @@ class VolPathIntegrator(PathIntegrator):
             if nee_area:
                 si_ref = copy.copy(si)
                 si_ref.t = dr.norm(si.p - s.ref_p)
-                pdf_l = scene.pdf_area_emitter(si_ref, s.d, hit_emitter)
+                pdf_l = scene.pdf_area_emitter(si_ref, s.d, hit_emitter) * p_area
                 w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
             L = L + dr.select(hit_emitter, beta * le * w, 0.0)
         escaped = surf & ~si.valid & ~hide
         if scene.has_background:  # sampled by next-event estimation too (below): MIS
-            w_bg = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, Float(1.0 / (4.0 * dr.pi))))
+            w_bg = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, Float((1.0 - p_area) / (4.0 * dr.pi)
+                                                                                  if pick else 1.0 / (4.0 * dr.pi))))
             L = L + dr.select(escaped, beta * Array3f(*scene.background) * w_bg, 0.0)
         if scene.has_environment:
             le_env, pdf_env = scene.eval_pdf_environment(s.d, escaped)
-            w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env))
+            w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env * (1.0 - p_area) if pick
+                                                                 else pdf_env))
             L = L + dr.select(escaped, beta * le_env * w_env, 0.0)
 
         # ---- next-event estimation at the scattering vertex (surface or medium)
@@ -463,16 +476,22 @@ class VolPathIntegrator(PathIntegrator):
             o = dr.select(scatter, p_med, scene.spawn(si, wo))
             return o, dr.select(scatter, s.medium, media.after(si, wo, s.medium, on_surface))
 
+        if pick:  # (u_sel picks area emitters below p_area, and is reused for them)
+            use_area = u_sel < p_area
+            u_sel = dr.minimum(u_sel / p_area, 0.99999994)
         if nee_area:
             ls = scene.sample_area_emitter(vertex, u_sel, u_light, nee_ok)
             f, pdf_b = scatter_eval(ls.wo)
-            ok = nee_ok & ls.valid & (dr.max(f) > 0.0)
-            o, med = start(ls.wo)
-            to = ls.p - o
+            ok_a = nee_ok & ls.valid & (dr.max(f) > 0.0)
+            o_a, med_a = start(ls.wo)
+            to = ls.p - o_a
             dl = dr.norm(to)
-            tr_l = self.shadow(o, to / dr.maximum(dl, 1e-30), dl * SHADOW_SHRINK, med, ok, rng)
-            wl = power_heuristic(ls.pdf, pdf_b) / ls.pdf
-            L = L + dr.select(ok, beta * f * ls.le * tr_l * wl, 0.0)
+            d_a, tmax_a = to / dr.maximum(dl, 1e-30), dl * SHADOW_SHRINK
+            wl = power_heuristic(ls.pdf * p_area, pdf_b) / (ls.pdf * p_area)
+            c_a = beta * f * ls.le * wl
+            if not pick:
+                tr_l = self.shadow(o_a, d_a, tmax_a, med_a, ok_a, rng)
+                L = L + dr.select(ok_a, c_a * tr_l, 0.0)
         if scene.has_delta_lights:
             for dlt in scene.delta_emitters(vertex.p):
                 f, _ = scatter_eval(dlt.wo)
@@ -493,9 +512,18 @@ class VolPathIntegrator(PathIntegrator):
             ok = nee_ok & (pdf_e > 0.0) & (dr.max(f) > 0.0)
             o, med = start(wo_e)
             sky = 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
-            tr_l = self.shadow(o, wo_e, sky * SHADOW_SHRINK, med, ok, rng)
-            we = power_heuristic(pdf_e, pdf_b) / dr.maximum(pdf_e, 1e-30)
-            L = L + dr.select(ok, beta * f * rad_e * tr_l * we, 0.0)
+            pdf_es = pdf_e * (1.0 - p_area) if pick else pdf_e
+            we = power_heuristic(pdf_es, pdf_b) / dr.maximum(pdf_es, 1e-30)
+            c_e = beta * f * rad_e * we
+            if pick:  # one shadow ray, toward the picked one
+                ok = dr.select(use_area, ok_a, ok)
+                tr_l = self.shadow(dr.select(use_area, o_a, o), dr.select(use_area, d_a, wo_e),
+                                   dr.select(use_area, tmax_a, sky * SHADOW_SHRINK),
+                                   dr.select(use_area, med_a, med), ok, rng)
+                L = L + dr.select(ok, dr.select(use_area, c_a, c_e) * tr_l, 0.0)
+            else:
+                tr_l = self.shadow(o, wo_e, sky * SHADOW_SHRINK, med, ok, rng)
+                L = L + dr.select(ok, c_e * tr_l, 0.0)
 
         # ---- continue: sample the BSDF or the phase function
         u_lobe = rng.next_float32()
