@@ -476,22 +476,51 @@ class VolPathIntegrator(PathIntegrator):
             o = dr.select(scatter, p_med, scene.spawn(si, wo))
             return o, dr.select(scatter, s.medium, media.after(si, wo, s.medium, on_surface))
 
-        if pick:  # (u_sel picks area emitters below p_area, and is reused for them)
+        def sky_sample():
+            if scene.has_environment:
+                return scene.sample_environment(u_env, nee_ok)
+            # a constant background (Mitsuba's constant emitter): uniform directions
+            z = 1.0 - 2.0 * u_env.x
+            r = dr.safe_sqrt(1.0 - z * z)
+            sp, cp = dr.sincos(2.0 * dr.pi * u_env.y)
+            return Array3f(r * cp, r * sp, z), Array3f(*scene.background), Float(1.0 / (4.0 * dr.pi))
+
+        def sky_distance():
+            return 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
+
+        if pick:  # one shadow ray, to an area emitter (probability p_area) or to the sky
             use_area = u_sel < p_area
-            u_sel = dr.minimum(u_sel / p_area, 0.99999994)
-        if nee_area:
+            ls = scene.sample_area_emitter(vertex, dr.minimum(u_sel / p_area, 0.99999994), u_light, nee_ok)
+            wo_e, rad_e, pdf_e = sky_sample()
+            wo_n = dr.select(use_area, ls.wo, wo_e)
+            f, pdf_b = scatter_eval(wo_n)
+            o, med = start(wo_n)
+            to = ls.p - o
+            dl = dr.norm(to)
+            ok = nee_ok & (dr.max(f) > 0.0) & dr.select(use_area, ls.valid, pdf_e > 0.0)
+            pdf_n = dr.select(use_area, ls.pdf * p_area, pdf_e * (1.0 - p_area))
+            w = power_heuristic(pdf_n, pdf_b) / dr.maximum(pdf_n, 1e-30)
+            tr_l = self.shadow(o, dr.select(use_area, to / dr.maximum(dl, 1e-30), wo_e),
+                               dr.select(use_area, dl, sky_distance()) * SHADOW_SHRINK, med, ok, rng)
+            L = L + dr.select(ok, beta * f * dr.select(use_area, ls.le, rad_e) * w * tr_l, 0.0)
+        elif nee_area:
             ls = scene.sample_area_emitter(vertex, u_sel, u_light, nee_ok)
             f, pdf_b = scatter_eval(ls.wo)
-            ok_a = nee_ok & ls.valid & (dr.max(f) > 0.0)
-            o_a, med_a = start(ls.wo)
-            to = ls.p - o_a
+            ok = nee_ok & ls.valid & (dr.max(f) > 0.0)
+            o, med = start(ls.wo)
+            to = ls.p - o
             dl = dr.norm(to)
-            d_a, tmax_a = to / dr.maximum(dl, 1e-30), dl * SHADOW_SHRINK
-            wl = power_heuristic(ls.pdf * p_area, pdf_b) / (ls.pdf * p_area)
-            c_a = beta * f * ls.le * wl
-            if not pick:
-                tr_l = self.shadow(o_a, d_a, tmax_a, med_a, ok_a, rng)
-                L = L + dr.select(ok_a, c_a * tr_l, 0.0)
+            tr_l = self.shadow(o, to / dr.maximum(dl, 1e-30), dl * SHADOW_SHRINK, med, ok, rng)
+            wl = power_heuristic(ls.pdf, pdf_b) / ls.pdf
+            L = L + dr.select(ok, beta * f * ls.le * tr_l * wl, 0.0)
+        elif sky_nee:
+            wo_e, rad_e, pdf_e = sky_sample()
+            f, pdf_b = scatter_eval(wo_e)
+            ok = nee_ok & (pdf_e > 0.0) & (dr.max(f) > 0.0)
+            o, med = start(wo_e)
+            tr_l = self.shadow(o, wo_e, sky_distance() * SHADOW_SHRINK, med, ok, rng)
+            we = power_heuristic(pdf_e, pdf_b) / dr.maximum(pdf_e, 1e-30)
+            L = L + dr.select(ok, beta * f * rad_e * tr_l * we, 0.0)
         if scene.has_delta_lights:
             for dlt in scene.delta_emitters(vertex.p):
                 f, _ = scatter_eval(dlt.wo)
@@ -499,31 +528,6 @@ class VolPathIntegrator(PathIntegrator):
                 o, med = start(dlt.wo)
                 tr_l = self.shadow(o, dlt.wo, dlt.dist * SHADOW_SHRINK, med, ok, rng)
                 L = L + dr.select(ok, beta * f * dlt.irradiance * tr_l, 0.0)
-        if scene.has_environment or scene.has_background:
-            if scene.has_environment:
-                wo_e, rad_e, pdf_e = scene.sample_environment(u_env, nee_ok)
-            else:  # a constant background (Mitsuba's constant emitter): uniform directions
-                z = 1.0 - 2.0 * u_env.x
-                r = dr.safe_sqrt(1.0 - z * z)
-                sp, cp = dr.sincos(2.0 * dr.pi * u_env.y)
-                wo_e, rad_e = Array3f(r * cp, r * sp, z), Array3f(*scene.background)
-                pdf_e = Float(1.0 / (4.0 * dr.pi))
-            f, pdf_b = scatter_eval(wo_e)
-            ok = nee_ok & (pdf_e > 0.0) & (dr.max(f) > 0.0)
-            o, med = start(wo_e)
-            sky = 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
-            pdf_es = pdf_e * (1.0 - p_area) if pick else pdf_e
-            we = power_heuristic(pdf_es, pdf_b) / dr.maximum(pdf_es, 1e-30)
-            c_e = beta * f * rad_e * we
-            if pick:  # one shadow ray, toward the picked one
-                ok = dr.select(use_area, ok_a, ok)
-                tr_l = self.shadow(dr.select(use_area, o_a, o), dr.select(use_area, d_a, wo_e),
-                                   dr.select(use_area, tmax_a, sky * SHADOW_SHRINK),
-                                   dr.select(use_area, med_a, med), ok, rng)
-                L = L + dr.select(ok, dr.select(use_area, c_a, c_e) * tr_l, 0.0)
-            else:
-                tr_l = self.shadow(o, wo_e, sky * SHADOW_SHRINK, med, ok, rng)
-                L = L + dr.select(ok, c_e * tr_l, 0.0)
 
         # ---- continue: sample the BSDF or the phase function
         u_lobe = rng.next_float32()
