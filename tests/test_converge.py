@@ -199,7 +199,8 @@ def test_error_falls_as_one_over_n(name, reference_scene):
 
     r = Renderer(reference_scene(scene_file),
                  RenderOptions(width=w, height=h, spp=1, bsdf=mode, progress=False,
-                               path=PathOptions(max_depth=depth)))
+                               path=PathOptions(max_depth=depth),
+                               integrator="volpath" if reference_scene(scene_file).media else "path"))
     results = {}
     for i, spp in enumerate(LEVELS):
         r.opt.spp, r.opt.seed = spp, 4242 + i

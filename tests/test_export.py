@@ -432,3 +432,34 @@ def test_xml_matches_dict_with_several_emitters(tmp_path):
     # The default (optimized) load draws other samples but converges to the same image.
     c = render(mi.load_file(str(xml)))
     assert abs(c.mean() - a.mean()) < 0.05 * a.mean()
+
+
+# ------------------------------------------------------------ media
+def test_media_export_as_homogeneous_media_with_volpath(tmp_path):
+    """The bundled Cornell box with media: the XML and the dict both give Mitsuba's volpath,
+    the sphere's and the fog box's interior media (sigma_t above 1 as a color in [0, 1]
+    times the scale) and render alike sample for sample; a heterogeneous medium is refused."""
+    from dataclasses import replace as dc_replace
+
+    from drpt.errors import DrptError
+    from drpt.scene import load_scene
+    from drpt.scene.model import GridVolume
+
+    root = Path(__file__).resolve().parents[1]
+    scene = load_scene(root / "scenes" / "cornellbox_media" / "cornellbox_media.txt")
+    xml = write_xml(scene, tmp_path / "m.xml", 16, 16, 4, seed=3)
+    text = xml.read_text()
+    assert '<integrator type="volpath"' in text and text.count('<medium type="homogeneous" name="interior">') == 2
+    loaded = mi.load_file(str(xml))
+    media = [s.interior_medium() for s in loaded.shapes() if s.interior_medium() is not None]
+    assert len(media) == 2
+    sigma = sorted(np.array(mi.traverse(m)["sigma_t.value.value"]).ravel().tolist() for m in media)
+    scales = sorted(float(mi.traverse(m)["scale"]) for m in media)
+    assert np.allclose(scales, [0.4, 2.8]) and np.allclose(sigma[0], [1.2 / 2.8, 2.0 / 2.8, 1.0])
+    a = render(loaded)
+    b = render(to_mitsuba_dict(scene, 16, 16, 4, seed=3))
+    assert np.allclose(a, b, atol=1e-5)
+    grid = GridVolume(data=np.ones((2, 2, 2, 1), np.float32), to_local=np.eye(4))
+    hetero = dc_replace(scene, media=[dc_replace(scene.media[0], sigma_t_grid=grid), scene.media[1]])
+    with pytest.raises(DrptError, match="heterogeneous medium"):
+        write_xml(hetero, tmp_path / "h.xml", 16, 16, 4)

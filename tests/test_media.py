@@ -66,6 +66,40 @@ def test_media_corpus_scene_passes_mitsubas_z_test(rel, spp):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("rel, spp", [pytest.param(rel, spp, id=rel) for rel, spp in MEDIA_SCENES.items()])
+def test_media_corpus_scene_with_volpathmis_passes(rel, spp):
+    """Mitsuba's render tests map every ``volpath`` scene to ``volpathmis`` too (``-D
+    integrator=volpathmis``, the same reference): drpt reads it and renders it with its
+    ``volpath`` (spectral MIS free-flight sampling, exact shadow transmittance)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        z = check_scene(rel, spp, integrator="volpathmis")
+    assert z.passed, f"{rel} (volpathmis): {z}"
+
+
+def test_volpathmis_is_read_as_volpath(tmp_path):
+    """``volpathmis`` with its parameters reads as drpt's volpath, with no warning."""
+    from drpt.scene import load_scene
+
+    xml = """<scene version="3.0.0">
+    <integrator type="volpathmis"><integer name="max_depth" value="7"/><integer name="rr_depth" value="3"/>
+    <boolean name="hide_emitters" value="true"/></integrator>
+    <medium type="homogeneous" id="m"><rgb name="sigma_t" value="1, 2, 3"/></medium>
+    <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="4"/>
+    <integer name="height" value="4"/></film></sensor>
+    <shape type="sphere"><bsdf type="null"/><ref name="interior" id="m"/></shape>
+    <emitter type="constant"/>
+    </scene>"""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        path = tmp_path / "mis.xml"
+        path.write_text(xml)
+        sc = load_scene(path)
+    s = sc.settings
+    assert (s.integrator, s.max_depth, s.rr_depth, s.hide_emitters) == ("volpath", 7, 3, True)
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("rel, old, new", [
     ("participating_media/test_homo_null_envmap_volpath.xml", '<rgb name="albedo" value="0.99, 0.5, 0.5"/>',
      '<rgb name="albedo" value="0.9, 0.5, 0.5"/>'),
@@ -347,13 +381,14 @@ def test_bad_media_are_located_one_line_errors(tmp_path, medium, message):
     assert re.search(message, lines[0]), lines
 
 
-def test_export_of_a_scene_with_media_is_refused(tmp_path):
-    from drpt.errors import DrptError
+def test_export_of_a_scene_with_media_writes_volpath(tmp_path):
+    """The exporter writes homogeneous media and Mitsuba's volpath (more in test_export.py)."""
     from drpt.export.mitsuba import _describe
 
     r = _renderer(tmp_path)
-    with pytest.raises(DrptError, match="participating media"):
-        _describe(r.scene_model, 8, 8, 4, -1, 5, 0)
+    d = _describe(r.scene_model, 8, 8, 4, -1, 5, 0)
+    assert d["integrator"]["type"] == "volpath"
+    assert any(isinstance(v, dict) and v.get("interior", {}).get("type") == "homogeneous" for v in d.values())
 
 
 def test_compare_edits_keep_volpath(tmp_path):

@@ -176,6 +176,9 @@ class _MeshData:
     emitter: dict | None
     #: mesh attributes (Mitsuba's ``vertex_*`` / ``face_*``): ``(F, 3, C)`` corner values
     attributes: dict = field(default_factory=dict)
+    #: the media inside and outside the mesh (Mitsuba ``homogeneous`` dicts; None: vacuum)
+    interior: dict | None = None
+    exterior: dict | None = None
 
     def arrays(self):
         f = self.positions.shape[0]
@@ -190,7 +193,8 @@ _TAGS = {
     "perspective": "sensor", "orthographic": "sensor", "thinlens": "sensor",
     "hdrfilm": "film", "box": "rfilter", "tent": "rfilter", "gaussian": "rfilter",
     "independent": "sampler",
-    "path": "integrator",
+    "path": "integrator", "volpath": "integrator",
+    "homogeneous": "medium", "hg": "phase", "isotropic": "phase", "blendphase": "phase",
     "twosided": "bsdf", "diffuse": "bsdf", "drpt_phong": "bsdf", "principled": "bsdf",
     "dielectric": "bsdf", "conductor": "bsdf", "roughconductor": "bsdf", "blendbsdf": "bsdf", "principledthin": "bsdf",
     "plastic": "bsdf", "roughplastic": "bsdf", "thindielectric": "bsdf", "roughdielectric": "bsdf",
@@ -267,9 +271,7 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
               rr_depth: int, seed: int, bsdf: str = "auto", rfilter: str = "box",
               hide_emitters: bool = False) -> dict:
     pixel_filter = parse_filter(rfilter)
-    if getattr(scene, "media", None):
-        raise DrptError(f"cannot export: the scene has participating media ({len(scene.media)}); "
-                        "drpt's Mitsuba export writes none")
+    media = [_medium(m) for m in (getattr(scene, "media", None) or [])]
     if int(width) <= 0 or int(height) <= 0:
         raise DrptError(f"image size must be positive, got {width}x{height}")
     if int(spp) <= 0:
@@ -283,7 +285,7 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
 
     out: dict[str, Any] = {"type": "scene"}
     out["integrator"] = {
-        "type": "path",
+        "type": "volpath" if media else "path",
         "max_depth": int(max_depth),
         "rr_depth": int(rr_depth),
         "hide_emitters": bool(hide_emitters),
@@ -342,6 +344,8 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
         "rfilter": pixel_filter.to_mitsuba(),  # sample_border: Mitsuba's default, false
     }
     sensor["sampler"] = {"type": "independent", "sample_count": int(spp), "seed": int(seed)}
+    if media and getattr(scene, "camera_medium", None) is not None:
+        sensor["medium"] = media[scene.camera_medium]
     out["sensor"] = sensor
 
     # -- materials
@@ -360,6 +364,14 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
         for m in scene.materials
     ]
     nmat = len(scene.materials)
+
+    def with_media(shape: dict, m: Material) -> dict:
+        """``shape`` with the material's interior and exterior media (a medium transition)."""
+        for side in ("interior", "exterior"):
+            k = getattr(m, side, None)
+            if k is not None:
+                shape[side] = media[k]
+        return shape
 
     def check_mat(idx: np.ndarray, what: str) -> None:
         if idx.size and (idx.min() < 0 or idx.max() >= nmat):
@@ -384,6 +396,8 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                 bsdf=bsdfs[mi_],
                 emitter=emitters[mi_],
                 attributes={k: a[sel] for k, a in getattr(tri, "attributes", {}).items()},
+                interior=with_media({}, scene.materials[mi_]).get("interior"),
+                exterior=with_media({}, scene.materials[mi_]).get("exterior"),
             )
 
     # -- spheres
@@ -403,7 +417,7 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
             shape["to_world"] = _Matrix(m)
         if emitters[sph.material[i]] is not None:
             shape["emitter"] = emitters[sph.material[i]]
-        out[f"sphere_{i}"] = shape
+        out[f"sphere_{i}"] = with_media(shape, scene.materials[sph.material[i]])
 
     # -- planes
     pl = scene.planes
@@ -416,7 +430,7 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                  "bsdf": bsdfs[pl.material[i]]}
         if emitters[pl.material[i]] is not None:
             shape["emitter"] = emitters[pl.material[i]]
-        out[f"plane_{i}"] = shape
+        out[f"plane_{i}"] = with_media(shape, scene.materials[pl.material[i]])
 
     # -- lights
     has_sky = any(isinstance(light, Skybox) for light in scene.lights)
@@ -480,6 +494,27 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
     head = {k: v for k, v in out.items() if not _is_shape(v)}
     shapes = {k: v for k, v in out.items() if _is_shape(v)}
     return {**head, **shapes}
+
+
+def _medium(m) -> dict:
+    """Mitsuba's ``homogeneous`` medium for a drpt :class:`~drpt.scene.model.Medium`
+    (a heterogeneous one is refused)."""
+    if not m.is_homogeneous:
+        raise DrptError(f"{m.origin or m.name}: cannot export a heterogeneous medium "
+                        "(drpt's Mitsuba export writes homogeneous ones)")
+    if m.phase == "blend":
+        lobes = [{"type": "hg", "g": float(g)} if g != 0.0 else {"type": "isotropic"} for g in (m.g, m.g2)]
+        phase = {"type": "blendphase", "weight": float(m.blend), "phase_0": lobes[0], "phase_1": lobes[1]}
+    elif m.phase == "hg" and m.g != 0.0:
+        phase = {"type": "hg", "g": float(m.g)}
+    else:
+        phase = {"type": "isotropic"}
+    # (sigma_t as a color in [0, 1] times the scale: Mitsuba reads an RGB value of a
+    # dict as a reflectance, which must not exceed 1)
+    st = _f3(m.sigma_t)
+    peak = max(max(st), 0.0) or 1.0
+    return {"type": "homogeneous", "sigma_t": _RGB(tuple(x / peak for x in st)),
+            "albedo": _RGB(_f3(m.albedo)), "scale": float(m.scale) * peak, "phase": phase}
 
 
 def _light_matrix(position, frame) -> np.ndarray:
@@ -573,6 +608,9 @@ def _build_mesh(md: _MeshData, mi):
     props["bsdf"] = mi.load_dict(_to_dict(md.bsdf, mi))
     if md.emitter is not None:
         props["emitter"] = mi.load_dict(_to_dict(md.emitter, mi))
+    for side in ("interior", "exterior"):
+        if getattr(md, side) is not None:
+            props[side] = mi.load_dict(_to_dict(getattr(md, side), mi))
     mesh = mi.Mesh(md.name, pos.shape[0], faces.shape[0], props,
                    has_vertex_normals=nrm is not None,
                    has_vertex_texcoords=uv is not None)
@@ -657,7 +695,7 @@ def _xml_value(k: str, v: Any, depth: int) -> list[str]:
         # Nested plugins that are property values (textures) carry a name;
         # children such as bsdf/emitter/film/sampler/rfilter need none.
         tag = _TAGS[v["type"]]
-        named = tag == "texture" or k not in ("bsdf", "emitter", "film", "sampler", "rfilter")
+        named = tag == "texture" or k not in ("bsdf", "emitter", "film", "sampler", "rfilter", "phase")
         return _xml_plugin(v, k if named else None, None, depth)
     if isinstance(v, bool):
         return [f'{pad}<boolean name={n} value="{str(v).lower()}"/>']
@@ -687,6 +725,9 @@ def _xml_mesh(md: _MeshData, rel_path: str, ident: str, depth: int) -> list[str]
     node["bsdf"] = md.bsdf
     if md.emitter is not None:
         node["emitter"] = md.emitter
+    for side in ("interior", "exterior"):
+        if getattr(md, side) is not None:
+            node[side] = getattr(md, side)
     return _xml_plugin(node, None, ident, depth)
 
 

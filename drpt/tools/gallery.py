@@ -134,7 +134,9 @@ def render_gallery(out: Path, options, names=None, size=None, scale: int = 2) ->
         scene = load_scene(refs.scene_path(scene_file))
         load_s = time.perf_counter() - t0
         renderer = Renderer(scene, replace(options, width=W, height=H, bsdf=mode,
-                                           path=replace(options.path, max_depth=depth)))
+                                           path=replace(options.path, max_depth=depth),
+                                           # (a scene with media: volpath, as its reference)
+                                           integrator="volpath" if scene.media else options.integrator))
         for message in renderer.warnings:
             warn(f"{name}: {message}")
         r = renderer.render()

@@ -69,13 +69,15 @@ REFERENCES = {
     "showcase_day": ("scenes/showcase/showcase_day.txt", 128, 72, 4096, -1, "cook-torrance"),
     "showcase_dusk": ("scenes/showcase/showcase_dusk.txt", 128, 72, 16384, -1, "cook-torrance"),
     "diningroom": ("scenes/diningroom/diningroom.txt", 96, 96, 4096, -1, "cook-torrance"),
+    # participating media (the export's integrator is Mitsuba's volpath)
+    "cornellbox_media": ("scenes/cornellbox_media/cornellbox_media.txt", 64, 64, 16384, -1, "auto"),
 }
 
 # References rendered as this many independent batches (default 1): their spread gives
 # the per-pixel variance of the reference (variance_path). Scenes lit through glass and
 # by a small sun have heavy-tailed samples; a test at low spp cannot estimate their
 # variance from its own samples, the reference's 4096 can.
-BATCHES = {"showcase_day": 16, "showcase_dusk": 16, "diningroom": 16}
+BATCHES = {"showcase_day": 16, "showcase_dusk": 16, "diningroom": 16, "cornellbox_media": 16}
 
 # Scenes generated on demand (git-ignored): scene file -> (drpt.tools.scenegen module,
 # triangle count of its default output). The count is read back from the OBJ's first line.

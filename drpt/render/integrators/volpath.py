@@ -30,7 +30,10 @@ random number each. Scenes without heterogeneous media trace none of this.
 Next-event estimation (area emitters, point-like lights, the environment map, or a
 constant background by uniform directions) runs at surfaces and at scattering events alike
 (the BSDF or the phase function evaluated toward the emitter sample, power-heuristic MIS
-against sampling them): the shadow ray's transmittance is computed analytically (``exp(-sigma_t d)`` per
+against sampling them; in a scene with area emitters and a sky, one of the two is picked, with
+probability :data:`P_AREA` for the area emitters, so that each vertex traces one shadow ray
+besides those of point-like lights, as Mitsuba's emitter selection): the shadow ray's
+transmittance is computed analytically (``exp(-sigma_t d)`` per
 segment of homogeneous medium), through ``null`` boundaries (factor 1) and ``thindielectric``
 sheets (their transmission ``1 - 2R / (1 + R)``), changing medium at each transition; any
 other surface blocks it. (As in Mitsuba, the sky is ``2 max(R, |p - c|)`` away for this
@@ -74,6 +77,10 @@ from .path import PathIntegrator
 MAX_SHADOW_CROSSINGS = 64
 
 NULL_NONE, NULL_BOUNDARY, NULL_THIN = 0, 1, 2
+
+#: where a scene has area emitters and a sky, the probability that next-event estimation
+#: samples the area emitters (else the sky): one shadow ray per vertex, as Mitsuba's
+P_AREA = 0.5
 
 
 def _vec(a) -> Array3f:
@@ -414,6 +421,10 @@ class VolPathIntegrator(PathIntegrator):
         # ---- the emitter or sky the ray reaches
         L = s.L
         nee_area = scene.has_area_lights
+        sky_nee = scene.has_environment or scene.has_background
+        # with area emitters and a sky, next-event estimation picks one of the two (one shadow ray)
+        pick = nee_area and sky_nee
+        p_area = P_AREA if pick else 1.0
         hide = (depth == 0) if opt.hide_emitters else Bool(False)
         hit_emitter = surf & si.valid & ~hide
         if getattr(scene.materials, "has_emission", True):
@@ -422,16 +433,18 @@ class VolPathIntegrator(PathIntegrator):
             if nee_area:
                 si_ref = copy.copy(si)
                 si_ref.t = dr.norm(si.p - s.ref_p)
-                pdf_l = scene.pdf_area_emitter(si_ref, s.d, hit_emitter)
+                pdf_l = scene.pdf_area_emitter(si_ref, s.d, hit_emitter) * p_area
                 w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
             L = L + dr.select(hit_emitter, beta * le * w, 0.0)
         escaped = surf & ~si.valid & ~hide
         if scene.has_background:  # sampled by next-event estimation too (below): MIS
-            w_bg = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, Float(1.0 / (4.0 * dr.pi))))
+            w_bg = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, Float((1.0 - p_area) / (4.0 * dr.pi)
+                                                                                  if pick else 1.0 / (4.0 * dr.pi))))
             L = L + dr.select(escaped, beta * Array3f(*scene.background) * w_bg, 0.0)
         if scene.has_environment:
             le_env, pdf_env = scene.eval_pdf_environment(s.d, escaped)
-            w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env))
+            w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env * (1.0 - p_area) if pick
+                                                                 else pdf_env))
             L = L + dr.select(escaped, beta * le_env * w_env, 0.0)
 
         # ---- next-event estimation at the scattering vertex (surface or medium)
@@ -463,7 +476,34 @@ class VolPathIntegrator(PathIntegrator):
             o = dr.select(scatter, p_med, scene.spawn(si, wo))
             return o, dr.select(scatter, s.medium, media.after(si, wo, s.medium, on_surface))
 
-        if nee_area:
+        def sky_sample():
+            if scene.has_environment:
+                return scene.sample_environment(u_env, nee_ok)
+            # a constant background (Mitsuba's constant emitter): uniform directions
+            z = 1.0 - 2.0 * u_env.x
+            r = dr.safe_sqrt(1.0 - z * z)
+            sp, cp = dr.sincos(2.0 * dr.pi * u_env.y)
+            return Array3f(r * cp, r * sp, z), Array3f(*scene.background), Float(1.0 / (4.0 * dr.pi))
+
+        def sky_distance():
+            return 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
+
+        if pick:  # one shadow ray, to an area emitter (probability p_area) or to the sky
+            use_area = u_sel < p_area
+            ls = scene.sample_area_emitter(vertex, dr.minimum(u_sel / p_area, 0.99999994), u_light, nee_ok)
+            wo_e, rad_e, pdf_e = sky_sample()
+            wo_n = dr.select(use_area, ls.wo, wo_e)
+            f, pdf_b = scatter_eval(wo_n)
+            o, med = start(wo_n)
+            to = ls.p - o
+            dl = dr.norm(to)
+            ok = nee_ok & (dr.max(f) > 0.0) & dr.select(use_area, ls.valid, pdf_e > 0.0)
+            pdf_n = dr.select(use_area, ls.pdf * p_area, pdf_e * (1.0 - p_area))
+            w = power_heuristic(pdf_n, pdf_b) / dr.maximum(pdf_n, 1e-30)
+            tr_l = self.shadow(o, dr.select(use_area, to / dr.maximum(dl, 1e-30), wo_e),
+                               dr.select(use_area, dl, sky_distance()) * SHADOW_SHRINK, med, ok, rng)
+            L = L + dr.select(ok, beta * f * dr.select(use_area, ls.le, rad_e) * w * tr_l, 0.0)
+        elif nee_area:
             ls = scene.sample_area_emitter(vertex, u_sel, u_light, nee_ok)
             f, pdf_b = scatter_eval(ls.wo)
             ok = nee_ok & ls.valid & (dr.max(f) > 0.0)
@@ -473,6 +513,14 @@ class VolPathIntegrator(PathIntegrator):
             tr_l = self.shadow(o, to / dr.maximum(dl, 1e-30), dl * SHADOW_SHRINK, med, ok, rng)
             wl = power_heuristic(ls.pdf, pdf_b) / ls.pdf
             L = L + dr.select(ok, beta * f * ls.le * tr_l * wl, 0.0)
+        elif sky_nee:
+            wo_e, rad_e, pdf_e = sky_sample()
+            f, pdf_b = scatter_eval(wo_e)
+            ok = nee_ok & (pdf_e > 0.0) & (dr.max(f) > 0.0)
+            o, med = start(wo_e)
+            tr_l = self.shadow(o, wo_e, sky_distance() * SHADOW_SHRINK, med, ok, rng)
+            we = power_heuristic(pdf_e, pdf_b) / dr.maximum(pdf_e, 1e-30)
+            L = L + dr.select(ok, beta * f * rad_e * tr_l * we, 0.0)
         if scene.has_delta_lights:
             for dlt in scene.delta_emitters(vertex.p):
                 f, _ = scatter_eval(dlt.wo)
@@ -480,22 +528,6 @@ class VolPathIntegrator(PathIntegrator):
                 o, med = start(dlt.wo)
                 tr_l = self.shadow(o, dlt.wo, dlt.dist * SHADOW_SHRINK, med, ok, rng)
                 L = L + dr.select(ok, beta * f * dlt.irradiance * tr_l, 0.0)
-        if scene.has_environment or scene.has_background:
-            if scene.has_environment:
-                wo_e, rad_e, pdf_e = scene.sample_environment(u_env, nee_ok)
-            else:  # a constant background (Mitsuba's constant emitter): uniform directions
-                z = 1.0 - 2.0 * u_env.x
-                r = dr.safe_sqrt(1.0 - z * z)
-                sp, cp = dr.sincos(2.0 * dr.pi * u_env.y)
-                wo_e, rad_e = Array3f(r * cp, r * sp, z), Array3f(*scene.background)
-                pdf_e = Float(1.0 / (4.0 * dr.pi))
-            f, pdf_b = scatter_eval(wo_e)
-            ok = nee_ok & (pdf_e > 0.0) & (dr.max(f) > 0.0)
-            o, med = start(wo_e)
-            sky = 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
-            tr_l = self.shadow(o, wo_e, sky * SHADOW_SHRINK, med, ok, rng)
-            we = power_heuristic(pdf_e, pdf_b) / dr.maximum(pdf_e, 1e-30)
-            L = L + dr.select(ok, beta * f * rad_e * tr_l * we, 0.0)
 
         # ---- continue: sample the BSDF or the phase function
         u_lobe = rng.next_float32()

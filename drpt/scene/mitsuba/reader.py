@@ -443,12 +443,15 @@ class Reader:
                 s.aov_image = nested[0][0]
                 self.integrator(nested[0][1])
             return
-        if node.plugin not in ("path", "direct", "ptracer", "volpath"):
-            self.unsupported(node, f"integrator '{node.plugin}' (drpt has path, volpath, direct and "
-                             "ptracer)", fallback="path")
+        if node.plugin not in ("path", "direct", "ptracer", "volpath", "volpathmis"):
+            self.unsupported(node, f"integrator '{node.plugin}' (drpt has path, volpath, volpathmis, "
+                             "direct and ptracer)", fallback="path")
             return
-        s.integrator = node.plugin if node.plugin in ("ptracer", "volpath") else "path"
-        if node.plugin in ("path", "ptracer", "volpath"):
+        # Mitsuba's volpathmis: drpt's volpath, whose free-flight sampling already is spectral MIS
+        # over the channels and whose shadow rays get the transmittance exactly (the same
+        # expectation as volpathmis's tracked, spectrally weighted estimate)
+        s.integrator = {"ptracer": "ptracer", "volpath": "volpath", "volpathmis": "volpath"}.get(node.plugin, "path")
+        if node.plugin in ("path", "ptracer", "volpath", "volpathmis"):
             s.max_depth = node.int("max_depth", -1)
             s.origin["max_depth"] = node.where
             s.rr_depth = node.int("rr_depth", 5)
