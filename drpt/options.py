@@ -540,7 +540,7 @@ def add_distributed_flags(parser: argparse.ArgumentParser) -> None:
                         help="stop at the end of the first chunk after S seconds of rendering; "
                              f"--spp is then the most (default {TARGET_SPP} when not given)")
     parser.add_argument("--adaptive", action="store_true",
-                        help="adaptive sampling: a pilot of spp/4 samples per pixel estimates each "
+                        help="adaptive sampling: two pilots of spp/8 samples per pixel estimate each "
                              "pixel's error, the rest of the budget (--spp on average) goes to the "
                              "pixels in proportion to it; the image stays unbiased")
 

@@ -1,30 +1,29 @@
 """Adaptive sampling (``--adaptive``): samples per pixel allocated from each pixel's
 estimated error, with an unbiased image.
 
-A render of ``spp`` samples per pixel on average runs in three phases, each a
-kernel of path-regeneration lanes (:meth:`~drpt.render.integrators.path.PathIntegrator.sample_sequence`)
-whose per-lane sample counts come from a per-pixel count array:
+A render of ``spp`` samples per pixel on average runs two kernels of path-regeneration
+lanes (:meth:`~drpt.render.integrators.path.PathIntegrator.sample_sequence`) whose
+per-lane sample counts come from per-pixel count arrays:
 
-1. **Pilot A**: ``a = max(2, spp // 8)`` samples in every pixel. From them, each
-   pixel's relative per-sample variance ``sum_c var_c / (mean_c^2 + 0.01)`` (the
-   quantity relMSE sums), averaged over the 5x5 pixels around it (a pilot of a few
-   samples is too noisy alone).
-2. **Pilot B**: ``a`` more samples in every pixel, independent of A.
-3. **Allocation**: the rest of the budget, ``(spp - 2a) W H`` samples, over the
-   pixels in proportion to ``0.8 s / mean(s) + 0.2``, ``s`` the square root of the
-   smoothed relative variance (Neyman allocation, mixed with a uniform share as a
-   guard against a pilot that missed a pixel's rare paths), at least 1 sample each.
+1. **Two pilots**, A and B, of ``a = max(2, spp // 8)`` independent samples in every
+   pixel. From each, every pixel's relative per-sample variance ``sum_c var_c /
+   (mean_c^2 + 0.01)`` (the quantity relMSE sums), averaged over the ``SMOOTH x
+   SMOOTH`` pixels around it (a pilot of a few samples is too noisy alone).
+2. **Allocation**: the rest of the budget, ``(spp - 2a) W H`` samples, in two halves:
+   half over the pixels as pilot A's estimate says and half as pilot B's, each in
+   proportion to ``(1 - UNIFORM_SHARE) s / mean(s) + UNIFORM_SHARE``, ``s`` the square
+   root of the smoothed relative variance (Neyman allocation, mixed with a uniform share
+   as a guard against a pilot that missed a pixel's rare paths), at least 1 sample each.
 
-The image is ``w mean_A + (1 - w) mean_BN`` with the fixed weight ``w = a / spp``,
-``mean_BN`` each pixel's mean of its pilot-B and allocated samples. Only pilot A
-decided the allocation, and B and the allocated samples are independent of A, so
-given A, ``mean_BN`` is the mean of a fixed number of independent samples: its
-expectation is the pixel's value whatever A was, and ``mean_A``'s too, so the image
-is unbiased. (Averaging A in with the others, its samples deciding how many
-samples dilute them, is biased: a pilot that drew a bright outlier gives its pixel
-more samples, which dilute it; ``tests/test_adaptive.py`` shows the z-test catches
-it.) With uniform variance the allocation is near uniform and the weights give each
-sample ``1 / spp``, as a uniform render does.
+The image is the mean of two estimators (cross-fitting): pilot B's samples with those
+pilot A chose, and pilot A's with those pilot B chose. Pilot A decided only how many
+samples its half drew; they and pilot B are independent of A, so given A the first
+estimator is the mean of a fixed number of independent samples, whose expectation is
+the pixel's value whatever A was: both estimators, and their mean, are unbiased. No
+sample is thrown away, and with the weights fixed at 1/2 each sample counts about
+``1 / spp`` where the two pilots agree. (Averaging every sample of a pixel together is
+biased: a pilot that drew a bright outlier gives its pixel more samples, which dilute
+it; ``tests/test_adaptive.py`` shows the z-test catches it.)
 
 Adaptive renders draw independent samples (PCG32 streams of their own), trace the
 path integrator's megakernel (``path``, ``volpath``) with a box filter (or
@@ -47,9 +46,9 @@ from ..errors import DrptError
 #: mixed into the seed of the adaptive phases' random streams
 ADAPTIVE_STREAM = 0xADA5EED
 #: the share of the allocated samples given out uniformly (the rest: Neyman allocation)
-UNIFORM_SHARE = 0.2
+UNIFORM_SHARE = 0.1
 #: the side of the square of pixels whose pilot variances are averaged
-SMOOTH = 5
+SMOOTH = 3
 #: the fewest samples per pixel of an adaptive render (two pilots of 2, and 4 to allocate)
 MIN_SPP = 8
 
@@ -109,8 +108,8 @@ def allocate(mean: np.ndarray, var: np.ndarray, budget: int) -> np.ndarray:
 
 def render_adaptive(renderer, reuse_pilot: bool = False):
     """The :class:`~drpt.render.renderer.RenderResult` of an adaptive render (module
-    docstring). ``reuse_pilot`` (a negative control for tests only) averages every
-    sample, pilot A's included, into each pixel: biased."""
+    docstring). ``reuse_pilot`` (a negative control for tests only) averages all of a
+    pixel's samples, each pilot's included, into it: biased."""
     from .renderer import RenderResult, _check_range
 
     opts = renderer.opt
@@ -121,31 +120,33 @@ def render_adaptive(renderer, reuse_pilot: bool = False):
     t0 = time.perf_counter()
     W, H, spp = opts.width, opts.height, opts.spp
     a = pilot_spp(spp)
-    pixels = W * H
-    uniform = np.full(pixels, a, np.int64)
-    sA, qA, badA = trace_counts(renderer, 0, uniform)
-    sB, qB, badB = trace_counts(renderer, 1, uniform)
-    meanA = sA / a
-    varA = np.maximum(qA / a - meanA * meanA, 0.0) * a / (a - 1)
-    n = allocate(meanA.reshape(H, W, 3), varA.reshape(H, W, 3), (spp - 2 * a) * pixels).reshape(-1)
-    sN, qN, badN = trace_counts(renderer, 2, n)
-    cnt = (a + n)[:, None].astype(np.float64)
+    P = W * H
+    # the two pilots, in one kernel: slots 0..P-1 are pilot A's pixels, P..2P-1 pilot B's
+    s, q, bad = trace_counts(renderer, 0, np.full(2 * P, a, np.int64), P)
+    mean_p = s / a
+    var_p = np.maximum(q / a - mean_p * mean_p, 0.0) * a / (a - 1)  # per sample
+    half = (spp - 2 * a) * P / 2
+    nA = allocate(mean_p[:P].reshape(H, W, 3), var_p[:P].reshape(H, W, 3), half).reshape(-1)
+    nB = allocate(mean_p[P:].reshape(H, W, 3), var_p[P:].reshape(H, W, 3), half).reshape(-1)
+    # the allocated samples: slots 0..P-1 join pilot B (pilot A chose their counts), P..2P-1 pilot A
+    sN, qN, badN = trace_counts(renderer, 1, np.concatenate([nA, nB]), P)
+    s_all, q_all = s + sN[np.r_[P:2 * P, 0:P]], q + qN[np.r_[P:2 * P, 0:P]]
+    # estimator 1 (pilot B + the samples A chose) in slots P.., estimator 2 in slots ..P
+    cnt = (a + np.concatenate([nB, nA]))[:, None].astype(np.float64)
     if reuse_pilot:
-        cnt = cnt + a
-        mean = (sA + sB + sN) / cnt
-        var1 = np.maximum((qA + qB + qN) / cnt - mean * mean, 0.0) * cnt / (cnt - 1)
-        var = var1 / cnt
+        n = cnt[:P] + cnt[P:]
+        mean = (s_all[:P] + s_all[P:]) / n
+        var = np.maximum((q_all[:P] + q_all[P:]) / n - mean * mean, 0.0) / (n - 1)
     else:
-        w = a / spp
-        meanBN = (sB + sN) / cnt
-        varBN = np.maximum((qB + qN) / cnt - meanBN * meanBN, 0.0) * cnt / (cnt - 1)
-        mean = w * meanA + (1.0 - w) * meanBN
-        var = w * w * varA / a + (1.0 - w) ** 2 * varBN / cnt
+        means = s_all / cnt
+        vars_ = np.maximum(q_all / cnt - means * means, 0.0) / (cnt - 1)  # of each estimator
+        mean = 0.5 * (means[:P] + means[P:])
+        var = 0.25 * (vars_[:P] + vars_[P:])
     mean = mean.reshape(H, W, 3)
     _check_range(mean)
-    samples = int(2 * a * pixels + n.sum())
+    samples = int(2 * a * P + nA.sum() + nB.sum())
     return RenderResult(mean.astype(np.float32), var.reshape(H, W, 3), time.perf_counter() - t0,
-                        renderer.build_seconds, samples, badA + badB + badN)
+                        renderer.build_seconds, samples, bad + badN)
 
 
 def _mix(seed: int, index: int) -> int:
@@ -154,26 +155,29 @@ def _mix(seed: int, index: int) -> int:
     return _mix_seed(seed ^ ADAPTIVE_STREAM, index)
 
 
-def trace_counts(renderer, phase: int, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-    """``counts[p]`` samples in each pixel ``p`` (row-major): per pixel, the sums of the
-    samples and of their squares ``(W H, 3)`` float64 and the non-finite samples
-    dropped. A pixel's samples run on ``ceil(counts / L)`` lanes, ``L`` chosen so that
-    the lanes number about the backend's ``min_lanes`` (and at least one per pixel);
-    lanes go to the kernel in batches of at most ``max_lanes``."""
+def trace_counts(renderer, phase: int, counts: np.ndarray, pixels: int
+                 ) -> tuple[np.ndarray, np.ndarray, int]:
+    """``counts[i]`` samples in each slot ``i``, slot ``i`` a sample set of pixel ``i %
+    pixels`` (row-major): per slot, the sums of the samples and of their squares
+    ``(len(counts), 3)`` float64, and the non-finite samples dropped. A slot's samples run
+    on ``ceil(counts / L)`` lanes, ``L`` chosen so that the lanes number about the
+    backend's ``min_lanes`` (and at least one per slot); lanes go to the kernel in batches
+    of at most ``max_lanes``."""
     W = renderer.opt.width
-    pixels = counts.size
+    slots = counts.size
     total = int(counts.sum())
-    target = max(policy().min_lanes, pixels)
+    target = max(policy().min_lanes, slots)
     per_lane = max(1, -(-total // target))
     lanes = -(-counts // per_lane)  # lanes per pixel (a pixel of 0 samples has none)
-    pixel = np.repeat(np.arange(pixels, dtype=np.int64), lanes)
-    first = np.cumsum(lanes) - lanes  # each pixel's first lane
-    j = np.arange(pixel.size) - first[pixel]
-    m = lanes[pixel]
-    c = counts[pixel]
+    slot = np.repeat(np.arange(slots, dtype=np.int64), lanes)
+    first = np.cumsum(lanes) - lanes  # each slot's first lane
+    j = np.arange(slot.size) - first[slot]
+    m = lanes[slot]
+    c = counts[slot]
     lane_count = c // m + (j < c % m)
-    acc = np.zeros((pixels, 3))
-    acc2 = np.zeros((pixels, 3))
+    pixel = slot % pixels
+    acc = np.zeros((slots, 3))
+    acc2 = np.zeros((slots, 3))
     bad = 0
     step = max(1, renderer.max_lanes)
     for b, lo in enumerate(range(0, pixel.size, step)):
@@ -183,8 +187,8 @@ def trace_counts(renderer, phase: int, counts: np.ndarray) -> tuple[np.ndarray, 
         if not (np.isfinite(s).all() and np.isfinite(q).all()):
             s, q, nb = _trace_lanes(renderer, index, pixel[lo:hi], lane_count[lo:hi], W, wide=True)
         for ch in range(3):
-            acc[:, ch] += np.bincount(pixel[lo:hi], weights=s[:, ch], minlength=pixels)
-            acc2[:, ch] += np.bincount(pixel[lo:hi], weights=q[:, ch], minlength=pixels)
+            acc[:, ch] += np.bincount(slot[lo:hi], weights=s[:, ch], minlength=slots)
+            acc2[:, ch] += np.bincount(slot[lo:hi], weights=q[:, ch], minlength=slots)
         bad += nb
     return acc, acc2, bad
 
