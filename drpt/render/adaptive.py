@@ -12,8 +12,9 @@ per-lane sample counts come from per-pixel count arrays:
 2. **Allocation**: the rest of the budget, ``(spp - 2a) W H`` samples, in two halves:
    half over the pixels as pilot A's estimate says and half as pilot B's, each in
    proportion to ``(1 - UNIFORM_SHARE) s / mean(s) + UNIFORM_SHARE``, ``s`` the square
-   root of the smoothed relative variance (Neyman allocation, mixed with a uniform share
-   as a guard against a pilot that missed a pixel's rare paths), at least 1 sample each.
+   root of the smoothed relative variance over the smoothed cost per sample (the pilot's
+   bounces per sample: Neyman allocation for equal time, mixed with a uniform share as a
+   guard against a pilot that missed a pixel's rare paths), at least 1 sample each.
 
 The image is the mean of two estimators (cross-fitting): pilot B's samples with those
 pilot A chose, and pilot A's with those pilot B chose. Pilot A decided only how many
@@ -49,6 +50,8 @@ ADAPTIVE_STREAM = 0xADA5EED
 UNIFORM_SHARE = 0.1
 #: the side of the square of pixels whose pilot variances are averaged
 SMOOTH = 3
+#: allocate by relative variance over cost (bounces per sample), not variance alone
+COST_AWARE = True
 #: the fewest samples per pixel of an adaptive render (two pilots of 2, and 4 to allocate)
 MIN_SPP = 8
 
@@ -93,11 +96,16 @@ def _smooth(a: np.ndarray, side: int) -> np.ndarray:
     return total / ((y1 - y0) * (x1 - x0))
 
 
-def allocate(mean: np.ndarray, var: np.ndarray, budget: int) -> np.ndarray:
+def allocate(mean: np.ndarray, var: np.ndarray, budget: float, cost: np.ndarray | None = None
+             ) -> np.ndarray:
     """Samples per pixel ``(H, W)`` int64 summing to about ``budget``, at least 1 each,
-    from a pilot's per-pixel means and per-sample variances ``(H, W, 3)``."""
+    from a pilot's per-pixel means and per-sample variances ``(H, W, 3)`` and, if given,
+    each pixel's cost per sample ``(H, W)`` (bounces): the error per unit of time falls
+    most with samples in proportion to ``sqrt(relative variance / cost)``."""
     H, W, _ = mean.shape
     rel = (var / (np.square(mean) + 0.01)).sum(-1)
+    if cost is not None and COST_AWARE:
+        rel = rel / np.maximum(_smooth(cost, SMOOTH), 1.0)
     s = np.sqrt(np.maximum(_smooth(rel, SMOOTH), 0.0))  # (cumulative sums round below 0)
     ms = s.mean()
     share = s / ms if ms > 0 else np.ones_like(s)
@@ -122,14 +130,17 @@ def render_adaptive(renderer, reuse_pilot: bool = False):
     a = pilot_spp(spp)
     P = W * H
     # the two pilots, in one kernel: slots 0..P-1 are pilot A's pixels, P..2P-1 pilot B's
-    s, q, bad = trace_counts(renderer, 0, np.full(2 * P, a, np.int64), P)
+    s, q, bad, work = trace_counts(renderer, 0, np.full(2 * P, a, np.int64), P)
+    cost = work / a  # bounces per sample
     mean_p = s / a
     var_p = np.maximum(q / a - mean_p * mean_p, 0.0) * a / (a - 1)  # per sample
     half = (spp - 2 * a) * P / 2
-    nA = allocate(mean_p[:P].reshape(H, W, 3), var_p[:P].reshape(H, W, 3), half).reshape(-1)
-    nB = allocate(mean_p[P:].reshape(H, W, 3), var_p[P:].reshape(H, W, 3), half).reshape(-1)
+    nA = allocate(mean_p[:P].reshape(H, W, 3), var_p[:P].reshape(H, W, 3), half,
+                  cost[:P].reshape(H, W)).reshape(-1)
+    nB = allocate(mean_p[P:].reshape(H, W, 3), var_p[P:].reshape(H, W, 3), half,
+                  cost[P:].reshape(H, W)).reshape(-1)
     # the allocated samples: slots 0..P-1 join pilot B (pilot A chose their counts), P..2P-1 pilot A
-    sN, qN, badN = trace_counts(renderer, 1, np.concatenate([nA, nB]), P)
+    sN, qN, badN, _ = trace_counts(renderer, 1, np.concatenate([nA, nB]), P)
     s_all, q_all = s + sN[np.r_[P:2 * P, 0:P]], q + qN[np.r_[P:2 * P, 0:P]]
     # estimator 1 (pilot B + the samples A chose) in slots P.., estimator 2 in slots ..P
     cnt = (a + np.concatenate([nB, nA]))[:, None].astype(np.float64)
@@ -156,10 +167,11 @@ def _mix(seed: int, index: int) -> int:
 
 
 def trace_counts(renderer, phase: int, counts: np.ndarray, pixels: int
-                 ) -> tuple[np.ndarray, np.ndarray, int]:
+                 ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
     """``counts[i]`` samples in each slot ``i``, slot ``i`` a sample set of pixel ``i %
     pixels`` (row-major): per slot, the sums of the samples and of their squares
-    ``(len(counts), 3)`` float64, and the non-finite samples dropped. A slot's samples run
+    ``(len(counts), 3)`` float64, the non-finite samples dropped, and per slot the
+    bounces its samples traced (their cost). A slot's samples run
     on ``ceil(counts / L)`` lanes, ``L`` chosen so that the lanes number about the
     backend's ``min_lanes`` (and at least one per slot); lanes go to the kernel in batches
     of at most ``max_lanes``."""
@@ -178,19 +190,21 @@ def trace_counts(renderer, phase: int, counts: np.ndarray, pixels: int
     pixel = slot % pixels
     acc = np.zeros((slots, 3))
     acc2 = np.zeros((slots, 3))
+    work = np.zeros(slots)
     bad = 0
     step = max(1, renderer.max_lanes)
     for b, lo in enumerate(range(0, pixel.size, step)):
         hi = min(pixel.size, lo + step)
         index = phase * (1 << 20) + b
-        s, q, nb = _trace_lanes(renderer, index, pixel[lo:hi], lane_count[lo:hi], W, wide=False)
+        s, q, nb, st = _trace_lanes(renderer, index, pixel[lo:hi], lane_count[lo:hi], W, wide=False)
         if not (np.isfinite(s).all() and np.isfinite(q).all()):
-            s, q, nb = _trace_lanes(renderer, index, pixel[lo:hi], lane_count[lo:hi], W, wide=True)
+            s, q, nb, st = _trace_lanes(renderer, index, pixel[lo:hi], lane_count[lo:hi], W, wide=True)
+        work += np.bincount(slot[lo:hi], weights=st, minlength=slots)
         for ch in range(3):
             acc[:, ch] += np.bincount(slot[lo:hi], weights=s[:, ch], minlength=slots)
             acc2[:, ch] += np.bincount(slot[lo:hi], weights=q[:, ch], minlength=slots)
         bad += nb
-    return acc, acc2, bad
+    return acc, acc2, bad, work
 
 
 def _trace_lanes(renderer, index: int, pixel: np.ndarray, count: np.ndarray, W: int, wide: bool):
@@ -201,10 +215,10 @@ def _trace_lanes(renderer, index: int, pixel: np.ndarray, count: np.ndarray, W: 
     rng = PCG32(n, initstate=dr.opaque(UInt64, _mix(renderer.opt.seed, index)),
                 initseq=dr.opaque(UInt64, index * renderer.max_lanes))
     camera_ray = renderer._camera_ray(x, y)
-    acc, acc2, nbad = renderer.integrator.sample_sequence(rng, camera_ray, UInt32(count.astype(np.uint32)),
-                                                          wide=wide)
+    acc, acc2, nbad, steps = renderer.integrator.sample_sequence(
+        rng, camera_ray, UInt32(count.astype(np.uint32)), wide=wide, bounces=True)
     with llvm_tuning.blocks_for(n):
-        dr.eval(acc, acc2, nbad)
+        dr.eval(acc, acc2, nbad, steps)
     s = np.stack([np.asarray(c, np.float64) for c in (acc.x, acc.y, acc.z)], -1)
     q = np.stack([np.asarray(c, np.float64) for c in (acc2.x, acc2.y, acc2.z)], -1)
-    return s, q, int(dr.sum(nbad)[0])
+    return s, q, int(dr.sum(nbad)[0]), np.asarray(steps, np.float64)
