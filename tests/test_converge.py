@@ -494,6 +494,13 @@ def test_knobs_cli_smoke(tmp_path, capsys):
     assert (out / "knobs.md").read_text().startswith("# Quality knobs")
 
 
+def test_knobs_has_an_adaptive_row():
+    from drpt.tools.knobs import configs
+
+    rows = configs("phong", knobs=("adaptive",))
+    assert [(r.knob, r.adaptive) for r in rows] == [("default", False), ("sampling", True)]
+
+
 def test_knobs_configs_and_bias():
     from drpt.tools.knobs import configs, image_bias
 
