@@ -87,7 +87,7 @@ def test_adaptive_result_counts_its_samples(cornell):
     r = Renderer(scene, RenderOptions(width=8, height=8, spp=16, seed=3, progress=False,
                                       adaptive=True)).render()
     assert np.isfinite(r.image).all() and np.isfinite(r.variance).all()
-    assert abs(r.samples - 8 * 8 * 16) <= 8 * 8
+    assert abs(r.samples - 8 * 8 * 16) <= 0.25 * 8 * 8 * 16  # (a budget of work, not of samples)
     assert r.image.mean() > 0
 
 

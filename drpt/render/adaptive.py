@@ -9,12 +9,15 @@ per-lane sample counts come from per-pixel count arrays:
    pixel. From each, every pixel's relative per-sample variance ``sum_c var_c /
    (mean_c^2 + 0.01)`` (the quantity relMSE sums), averaged over the ``SMOOTH x
    SMOOTH`` pixels around it (a pilot of a few samples is too noisy alone).
-2. **Allocation**: the rest of the budget, ``(spp - 2a) W H`` samples, in two halves:
+2. **Allocation**: the rest of the budget, the work of ``(spp - 2a) W H`` samples, in two halves:
    half over the pixels as pilot A's estimate says and half as pilot B's, each in
    proportion to ``(1 - UNIFORM_SHARE) s / mean(s) + UNIFORM_SHARE``, ``s`` the square
-   root of the smoothed relative variance over the smoothed cost per sample (the pilot's
-   bounces per sample: Neyman allocation for equal time, mixed with a uniform share as a
-   guard against a pilot that missed a pixel's rare paths), at least 1 sample each.
+   root of the smoothed relative variance over the smoothed cost per sample (from the
+   pilot's bounces per sample: Neyman allocation for equal time, mixed with a uniform
+   share as a guard against a pilot that missed a pixel's rare paths), at least 1 sample
+   each, as many as cost what ``spp - 2a`` samples per pixel spread uniformly would: the
+   render takes about a uniform render's time, and its sample count differs from ``W H
+   spp`` where cheap and expensive pixels differ in error.
 
 The image is the mean of two estimators (cross-fitting): pilot B's samples with those
 pilot A chose, and pilot A's with those pilot B chose. Pilot A decided only how many
@@ -52,6 +55,8 @@ UNIFORM_SHARE = 0.1
 SMOOTH = 3
 #: allocate by relative variance over cost (bounces per sample), not variance alone
 COST_AWARE = True
+#: lanes per kernel, in units of the backend's min_lanes
+LANES_PER_MIN = 1
 #: the fewest samples per pixel of an adaptive render (two pilots of 2, and 4 to allocate)
 MIN_SPP = 8
 
@@ -98,19 +103,25 @@ def _smooth(a: np.ndarray, side: int) -> np.ndarray:
 
 def allocate(mean: np.ndarray, var: np.ndarray, budget: float, cost: np.ndarray | None = None
              ) -> np.ndarray:
-    """Samples per pixel ``(H, W)`` int64 summing to about ``budget``, at least 1 each,
-    from a pilot's per-pixel means and per-sample variances ``(H, W, 3)`` and, if given,
-    each pixel's cost per sample ``(H, W)`` (bounces): the error per unit of time falls
-    most with samples in proportion to ``sqrt(relative variance / cost)``."""
+    """Samples per pixel ``(H, W)`` int64, at least 1 each, from a pilot's per-pixel means
+    and per-sample variances ``(H, W, 3)``: in proportion to ``sqrt(relative variance)``
+    (mixed with a uniform share), ``budget`` in all. With each pixel's cost per sample
+    ``(H, W)`` (bounces), in proportion to ``sqrt(relative variance / cost)`` (the error
+    at equal time falls most so), as many as cost the work of ``budget`` samples spread
+    uniformly: an adaptive render takes about a uniform render's time."""
     H, W, _ = mean.shape
     rel = (var / (np.square(mean) + 0.01)).sum(-1)
-    if cost is not None and COST_AWARE:
-        rel = rel / np.maximum(_smooth(cost, SMOOTH), 1.0)
     s = np.sqrt(np.maximum(_smooth(rel, SMOOTH), 0.0))  # (cumulative sums round below 0)
+    c = np.maximum(_smooth(cost, SMOOTH), 1.0) if cost is not None and COST_AWARE else None
+    if c is not None:
+        s = s / np.sqrt(c)
     ms = s.mean()
     share = s / ms if ms > 0 else np.ones_like(s)
     share = (1.0 - UNIFORM_SHARE) * share + UNIFORM_SHARE
-    per = budget / (H * W) * share
+    if c is None:
+        per = budget / (H * W) * share
+    else:
+        per = budget * c.mean() / (share * c).sum() * share
     return np.maximum(np.floor(per + 0.5).astype(np.int64), 1)
 
 
@@ -131,7 +142,9 @@ def render_adaptive(renderer, reuse_pilot: bool = False):
     P = W * H
     # the two pilots, in one kernel: slots 0..P-1 are pilot A's pixels, P..2P-1 pilot B's
     s, q, bad, work = trace_counts(renderer, 0, np.full(2 * P, a, np.int64), P)
-    cost = work / a  # bounces per sample
+    # cost per sample: bounces per sample, each but the last also traced a shadow ray and
+    # shaded (a path that escapes ends with a cheap miss): about 2 bounces - 1
+    cost = 2.0 * work / a - 1.0
     mean_p = s / a
     var_p = np.maximum(q / a - mean_p * mean_p, 0.0) * a / (a - 1)  # per sample
     half = (spp - 2 * a) * P / 2
@@ -178,7 +191,7 @@ def trace_counts(renderer, phase: int, counts: np.ndarray, pixels: int
     W = renderer.opt.width
     slots = counts.size
     total = int(counts.sum())
-    target = max(policy().min_lanes, slots)
+    target = max(LANES_PER_MIN * policy().min_lanes, slots)
     per_lane = max(1, -(-total // target))
     lanes = -(-counts // per_lane)  # lanes per pixel (a pixel of 0 samples has none)
     slot = np.repeat(np.arange(slots, dtype=np.int64), lanes)
