@@ -164,8 +164,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     ensure()
     if args.gui:
         scene, opts = _gui(scene, opts, args)
-    job = run(scene, opts, output, workers=args.workers, cluster=args.cluster,
-              resume=args.resume, checkpoint_seconds=args.checkpoint_seconds, on_warning=warn)
+    if opts.adaptive:
+        job = _adaptive_job(scene, opts, args)
+    else:
+        job = run(scene, opts, output, workers=args.workers, cluster=args.cluster,
+                  resume=args.resume, checkpoint_seconds=args.checkpoint_seconds, on_warning=warn)
     result = job.result
     if result.nonfinite:
         warn(f"{result.nonfinite} samples were NaN/Inf and were set to 0")
@@ -192,6 +195,20 @@ def cmd_render(args: argparse.Namespace) -> int:
     if opts.progress and (args.workers is not None or args.cluster is not None):
         print_workers(job)
     return 0
+
+
+def _adaptive_job(scene, opts, args):
+    """An ``--adaptive`` render (:mod:`drpt.render.adaptive`), in this process."""
+    from .distributed.job import Job
+    from .render.renderer import Renderer
+
+    if args.workers is not None or args.cluster is not None or args.resume:
+        raise DrptError("--adaptive renders in one process: --workers, --cluster and --resume "
+                        "do not apply")
+    renderer = Renderer(scene, opts)
+    for w in renderer.warnings:
+        warn(w)
+    return Job(renderer.render())
 
 
 def _aov_options(opts, args, output: Path):

@@ -102,6 +102,9 @@ class RenderOptions:
     aovs: tuple = ()
     #: also trace the denoiser's albedo and normal guides (``--denoise``, :mod:`drpt.denoise`)
     denoise: bool = False
+    #: allocate samples per pixel from a pilot's estimated error (``--adaptive``,
+    #: :mod:`drpt.render.adaptive`); ``spp`` is then the average
+    adaptive: bool = False
 
     def validate(self) -> RenderOptions:
         """Raise :class:`~drpt.errors.DrptError` on a value the renderer cannot
@@ -183,6 +186,10 @@ class RenderOptions:
                                 f"be at most {most} with the 4-wide BVH (its leaves hold at most "
                                 f"{LEAF_MAX_COUNT}), got {self.bvh_min_leaf}; --accel bvh2 "
                                 "takes any")
+        if self.adaptive:
+            from .render.adaptive import check
+
+            check(self)
         return self
 
     @property
@@ -532,6 +539,10 @@ def add_distributed_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--time-limit", dest="time_limit", type=float, default=None, metavar="S",
                         help="stop at the end of the first chunk after S seconds of rendering; "
                              f"--spp is then the most (default {TARGET_SPP} when not given)")
+    parser.add_argument("--adaptive", action="store_true",
+                        help="adaptive sampling: two pilots of spp/8 samples per pixel estimate each "
+                             "pixel's error, the rest of the budget (--spp on average) goes to the "
+                             "pixels in proportion to it; the image stays unbiased")
 
 
 #: the most samples per pixel of a --target-error or --time-limit render without --spp
@@ -640,6 +651,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                                           rr_depth=rr_depth, rr_prob=rr_prob),
                          max_lanes=max_lanes, chunk_spp=get("chunk_spp"),
                          target_error=get("target_error"), time_limit=get("time_limit"),
+                         adaptive=bool(get("adaptive", False)),
                          progress=not get("quiet", False))
     if (opts.target_error is not None or opts.time_limit is not None) and "spp" not in given_flags(args):
         opts = replace(opts, spp=TARGET_SPP)

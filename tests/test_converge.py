@@ -133,6 +133,20 @@ def test_equal_time_ratio_of_two_power_laws():
     assert res["overlap"] is None and math.isnan(res["geomean"]) and res["at_a_times"] == []
 
 
+def test_adaptive_ratio_against_uniform_drpt():
+    from drpt.tools.converge import adaptive_ratio
+
+    # adaptive: half the error per sample, 1.25x the seconds -> 0.625x at equal time
+    rows = [{"renderer": "drpt", "spp": n, "seconds": 0.01 * n, "excess_rel_mse": 1.0 / n}
+            for n in (8, 16, 32, 64)]
+    rows += [{"renderer": "drpt+adaptive", "spp": n, "seconds": 0.0125 * n, "excess_rel_mse": 0.5 / n}
+             for n in (8, 16, 32, 64)]
+    r = adaptive_ratio(rows)
+    assert r["equal_spp_ratio"] == pytest.approx(0.5)
+    assert r["equal_time_ratio"] == pytest.approx(0.625)
+    assert adaptive_ratio(rows[:4])["equal_time_ratio"] is None  # no adaptive rows
+
+
 def test_time_to_error_interpolates_the_crossing_it_stays_below():
     t = np.array([1.0, 2.0, 4.0, 8.0])
     e = 0.1 / t  # 0.1, 0.05, 0.025, 0.0125
@@ -479,6 +493,13 @@ def test_knobs_cli_smoke(tmp_path, capsys):
     data = json.loads((out / "knobs.json").read_text())
     assert set(data["references"]) == {"auto"}
     assert (out / "knobs.md").read_text().startswith("# Quality knobs")
+
+
+def test_knobs_has_an_adaptive_row():
+    from drpt.tools.knobs import configs
+
+    rows = configs("phong", knobs=("adaptive",))
+    assert [(r.knob, r.adaptive) for r in rows] == [("default", False), ("sampling", True)]
 
 
 def test_knobs_configs_and_bias():

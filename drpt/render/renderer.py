@@ -637,6 +637,10 @@ class Renderer:
         if given, is called after each pass with the samples traced so far."""
         from tqdm import tqdm
 
+        if self.opt.adaptive:
+            from .adaptive import render_adaptive
+
+            return render_adaptive(self)
         W, H, spp = self.opt.width, self.opt.height, self.opt.spp
         chunks = self.chunks
         merged = ChunkMerge(chunks)

@@ -117,6 +117,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--denoise", action="store_true",
                    help="also measure drpt's image denoised by Intel Open Image Denoise "
                         "(pyoidn): its error, bias and variance at each spp")
+    p.add_argument("--adaptive", action="store_true",
+                   help="also render each level of at least 8 spp with adaptive sampling "
+                        "(render --adaptive): rows drpt+adaptive, its equal-time error ratio "
+                        "against uniform drpt")
     add_reference_args(p, ref_spp=4096)
     p.set_defaults(func=main)
     return p
@@ -127,7 +131,7 @@ def main(args: argparse.Namespace) -> int:
 
     from ..options import options_from_args
 
-    options = options_from_args(args)
+    options = options_from_args(args, adaptive=False)  # (--adaptive adds rows of its own)
     if args.denoise:
         from ..denoise import require
 
@@ -137,7 +141,7 @@ def main(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(f"converge_{scene.stem}")
     report = converge_study(scene, out, options, max_spp=args.max_spp, ref_spp=args.ref_spp,
                             ref_batches=args.ref_batches, levels=args.levels,
-                            cache_dir=cache_dir_from_args(args))
+                            cache_dir=cache_dir_from_args(args), adaptive=args.adaptive)
     print(format_table(report))
     print(f"{out}: converge.csv, converge.json, converge.png")
     return 0
@@ -312,7 +316,7 @@ def _log(progress: bool, msg: str) -> None:
 
 def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
                    ref_spp: int = 4096, ref_batches: int = 8, levels=DEFAULT_LEVELS,
-                   cache_dir: Path | None = None) -> dict:
+                   cache_dir: Path | None = None, adaptive: bool = False) -> dict:
     """Run the study (see the module docs) with drpt's ``options`` (a
     :class:`~drpt.options.RenderOptions`; the levels set its spp and seed);
     write the outputs; return the report."""
@@ -355,6 +359,10 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
         dn_render(1, seed + 999_998)  # warm-up
     for message in renderer.warnings:
         warn(message)
+    if adaptive:
+        _, ad_render = make_drpt(scene, replace(options, spp=8, progress=False, denoise=False,
+                                                adaptive=True))
+        ad_render(8, seed + 999_997)  # warm-up
     mits_render, mits_load = make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf,
                                           options.filter)
     # Warm-up: compiles both renderers' kernels (reused at every spp), discarded.
@@ -382,11 +390,20 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
         _log(progress, f"converge: {spp:>5} spp  drpt {d['seconds']:7.3f} s "
                        f"{d['excess_rel_mse']:.3e}   mitsuba {mm['seconds']:7.3f} s "
                        f"{mm['excess_rel_mse']:.3e}")
+        if adaptive and spp >= 8:
+            ra = ad_render(spp, seed + 500_000 + i)
+            m = metrics.summary(ra.image, ref)
+            rows.append({"renderer": "drpt+adaptive", "spp": int(spp), "seconds": float(ra.seconds),
+                         "rel_mse": m["rel_mse"], "floor": floor,
+                         "excess_rel_mse": m["rel_mse"] - floor, "mae": m["mae"],
+                         "smape": m["smape"]})
         if denoising:
             rows.append(_denoised_row(dn_render, denoise_result, spp, seed + 300_000 + i,
                                       seed + 400_000 + i, ref, floor))
 
     report = analyse(rows, levels)
+    if adaptive:
+        report["adaptive"] = adaptive_ratio(rows)
     report.update({
         "scene": str(scene_path), "width": int(width), "height": int(height), "bsdf": bsdf,
         "max_depth": int(max_depth), "rr_depth": int(rr_depth), "seed": int(seed),
@@ -456,6 +473,26 @@ def analyse(rows: list[dict], levels) -> dict:
     }
 
 
+def adaptive_ratio(rows: list[dict]) -> dict:
+    """Adaptive against uniform drpt: the equal-time error ratio (geometric mean over the
+    common time range) and the error ratio at equal spp (geometric mean over the levels)."""
+    def curve(name):
+        rs = [r for r in rows if r["renderer"] == name and r["excess_rel_mse"] > 0]
+        return {r["spp"]: r for r in rs}
+
+    u, a = curve("drpt"), curve("drpt+adaptive")
+    common = sorted(set(u) & set(a))
+    if len(common) < 2:
+        return {"equal_time_ratio": None, "equal_spp_ratio": None}
+    t_u = np.array([u[n]["seconds"] for n in common])
+    e_u = np.array([u[n]["excess_rel_mse"] for n in common])
+    t_a = np.array([a[n]["seconds"] for n in common])
+    e_a = np.array([a[n]["excess_rel_mse"] for n in common])
+    eq = equal_time_ratios(t_a, e_a, t_u, e_u)
+    return {"equal_time_ratio": eq["geomean"],
+            "equal_spp_ratio": float(np.exp(np.mean(np.log(e_a / e_u))))}
+
+
 # ------------------------------------------------------------ output
 FIELDS = ["renderer", "spp", "seconds", "rel_mse", "floor", "excess_rel_mse", "mae", "smape",
           "variance_rel_mse", "bias_rel_mse"]
@@ -503,6 +540,14 @@ def format_table(report: dict) -> str:
         se = f" +- {se}" if se else " (two levels: no standard error; raise --max-spp)"
         lines.append(f"{name} log-log slope (spp >= {s['from_spp']}): {_fmt(s['slope'], '.3f')}"
                      f"{se} (1/N: -1)")
+    ad = report.get("adaptive")
+    if ad is not None:
+        for r in (r for r in rows if r["renderer"] == "drpt+adaptive"):
+            lines.append(f"adaptive {r['spp']:>6} spp: {r['seconds']:.3f} s, error "
+                         f"{_fmt(r['excess_rel_mse'], '.3e')}")
+        lines.append(f"adaptive / uniform drpt: equal-time error ratio "
+                     f"{_fmt(ad['equal_time_ratio'], '.3f')}, at equal spp "
+                     f"{_fmt(ad['equal_spp_ratio'], '.3f')}")
     eq = report["equal_time"]
     lines.append(f"equal-time error ratio drpt/Mitsuba: {_fmt(eq['ratio_geomean'], '.3f')} "
                  "(geometric mean over the common time range)")
@@ -522,7 +567,7 @@ def plot(path: Path, report: dict) -> None:
     rows = report["rows"]
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True)
     styles = {"drpt": dict(color="C0", marker="o"), "mitsuba": dict(color="C1", marker="s"),
-              "drpt+oidn": dict(color="C2", marker="^")}
+              "drpt+oidn": dict(color="C2", marker="^"), "drpt+adaptive": dict(color="C3", marker="v")}
     for name, st in styles.items():
         rs = [r for r in rows if r["renderer"] == name and r["excess_rel_mse"] > 0]
         if not rs:
@@ -530,7 +575,8 @@ def plot(path: Path, report: dict) -> None:
         n = np.array([r["spp"] for r in rs], float)
         t = np.array([r["seconds"] for r in rs])
         e = np.array([r["excess_rel_mse"] for r in rs])
-        label = {"mitsuba": "Mitsuba 3", "drpt+oidn": "drpt denoised (OIDN)"}.get(name, "drpt")
+        label = {"mitsuba": "Mitsuba 3", "drpt+oidn": "drpt denoised (OIDN)",
+                 "drpt+adaptive": "drpt adaptive"}.get(name, "drpt")
         axes[0].plot(n, e, label=label, **st)
         axes[1].plot(t, e, label=label, **st)
         if name == "drpt":

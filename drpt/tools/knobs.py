@@ -3,7 +3,7 @@
 ::
 
     python -m drpt knobs SCENE [render flags] [--ref-spp M] [--ref-batches B]
-                               [--knobs depth rr accel bsdf light filter integrator denoise]
+                               [--knobs depth rr accel bsdf light filter integrator adaptive denoise]
                                [--depths D ...] [--rr-depths K ...] [--rr-probs P ...]
                                [--repeats R] [--cache DIR | --no-cache] [--out DIR]
 
@@ -31,6 +31,9 @@ Russian roulette from depth 5 with the adaptive probability
            Gaussian filter);
 ``integrator`` light tracing (``ptracer``); a scene it cannot render lists the row as
            not rendered (``skipped``);
+``adaptive`` adaptive sampling (``render --adaptive``: the same budget of samples,
+           allocated per pixel from two pilots' error estimates; needs ``--spp`` of at
+           least 8, else the row is ``skipped``);
 ``denoise`` the default row's settings, its image denoised by Intel Open Image
            Denoise (``render --denoise``; needs ``pyoidn``, and is in the default
            ``--knobs`` only where it is installed): the seconds include the
@@ -84,7 +87,7 @@ from .reference import (
     get_reference,
 )
 
-KNOBS = ("depth", "rr", "accel", "bsdf", "light", "filter", "integrator", "denoise")
+KNOBS = ("depth", "rr", "accel", "bsdf", "light", "filter", "integrator", "adaptive", "denoise")
 RR_OFF_DEPTH = 64
 
 __all__ = ["add_parser", "main", "Config", "configs", "knobs_study", "image_bias"]
@@ -103,6 +106,7 @@ class Config:
     integrator: str = "path"
     light_sampler: str = "power"
     filter_sampling: bool = False
+    adaptive: bool = False
 
 
 def default_knobs() -> list[str]:
@@ -185,6 +189,8 @@ def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10
                            filter_sampling=True))
     if "integrator" in knobs:
         rows.append(Config("integrator", "ptracer (light tracing)", bsdf, integrator="ptracer"))
+    if "adaptive" in knobs:
+        rows.append(Config("sampling", "adaptive (--adaptive)", bsdf, adaptive=True))
     if "denoise" in knobs:
         rows.append(Config("denoise", "OIDN on the default row's image", bsdf, denoise=True))
     return rows
@@ -271,12 +277,21 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
     renderers = []
     skipped = []
     for c in list(cfgs):
-        opts = replace(options, spp=1, seed=seed + 999_999, accel=c.accel, bsdf=c.bsdf,
+        if c.adaptive and spp < 8:
+            skipped.append(f"{c.knob} {c.setting}: --adaptive needs --spp of at least 8")
+            cfgs.remove(c)
+            continue
+        opts = replace(options, spp=8 if c.adaptive else 1, seed=seed + 999_999, accel=c.accel,
+                       bsdf=c.bsdf, adaptive=c.adaptive,
                        progress=False, denoise=c.denoise, integrator=c.integrator,
                        light_sampler=c.light_sampler, filter_sampling=c.filter_sampling,
                        path=PathOptions(max_depth=c.max_depth, rr_depth=c.rr_depth,
                                         rr_prob=c.rr_prob))
         try:
+            if c.adaptive:
+                from ..render.adaptive import check
+
+                check(opts)  # (a splatting filter, light tracing, ...: one line, the row skipped)
             renderer = Renderer(scene, opts)
         except DrptError as e:  # a setting this scene cannot take (light tracing a rough glass)
             if c.knob == "default":

@@ -85,7 +85,7 @@ class PathIntegrator:
 
     @dr.syntax
     def sample_sequence(self, rng: PCG32, camera_ray: Callable, count: UInt32, wide: bool = False,
-                        moment: bool = False) -> tuple:
+                        moment: bool = False, bounces: bool = False) -> tuple:
         """``count`` paths per lane, one after another (path regeneration).
 
         A lane starts a path at ``camera_ray(rng) -> (o, d)`` or ``(o, d,
@@ -104,7 +104,9 @@ class PathIntegrator:
         traces a pass whose float32 sums overflowed again with ``wide``).
         With ``moment`` a fourth value follows: the sum of the products of
         each sample's channels ``(rg, rb, gb)`` (for second moments in other
-        color spaces; without it the kernel has no such sum).
+        color spaces; without it the kernel has no such sum). With ``bounces`` the last
+        value is the number of bounces the lane traced, its work (adaptive sampling's cost
+        estimate, :mod:`drpt.render.adaptive`; without it the kernel has no such counter).
         """
         scene = self.scene
         left = UInt32(count)
@@ -113,8 +115,11 @@ class PathIntegrator:
         Sum = Array3f64 if wide else Array3f
         sums = (Sum(0.0), Sum(0.0)) + ((Sum(0.0),) if moment else ())
         dropped = UInt32(0)
+        steps = (UInt32(0),) if bounces else ()
         while left > 0:
             state = self._bounce(scene, state, rng)
+            if bounces:
+                steps = (steps[0] + 1,)
             if ~state.active & (left > 0):  # the path ended: bank it, start the next
                 L = state.L
                 finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
@@ -124,7 +129,7 @@ class PathIntegrator:
                 next_path(rng)
                 o, d, *weight = camera_ray(rng)
                 state = self._start(o, d, left > 0, *weight)
-        return (*sums[:2], dropped, *sums[2:])
+        return (*sums[:2], dropped, *sums[2:], *steps)
 
     def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> PathState:
         """A new path along the ray ``(o, d)``: no radiance, throughput
