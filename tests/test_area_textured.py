@@ -28,7 +28,7 @@ def test_renders_like_mitsuba():
 
     from drpt.options import RenderOptions, apply_scene_settings
     from drpt.render.renderer import Renderer
-    from render_check import assert_agree, block_z
+    from drpt.testing import assert_agree, block_z
     from test_mitsuba_xml import XML, _render_both
 
     path = XML / "area_textured.xml"

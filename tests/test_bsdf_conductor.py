@@ -27,12 +27,12 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float, UInt32
 
-from chi2util import mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 from drpt import conductors
 from drpt.bsdf_kinds import defaults
 from drpt.render.bsdf import REGISTRY, lobe
 from drpt.render.bsdf import conductor as cd
 from drpt.render.bsdf import roughconductor as rc
+from drpt.testing import mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 
 
 def _sphere(n, seed):

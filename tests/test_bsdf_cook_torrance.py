@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float, UInt32
 
-from chi2util import export_bsdf, mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 from drpt.render.bsdf import cook_torrance as ct
 from drpt.render.bsdf import microfacet as mf
+from drpt.testing import export_bsdf, mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 
 BASE = (0.8, 0.6, 0.4)
 HARD = ((0.9, 0.75, 0.3), 0.9, 0.9)  # the seed's hard case: base, metalness, alpha

@@ -39,7 +39,6 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from chi2util import export_bsdf, mitsuba, spherical_chi2
 from dielectricutil import FakeTable, Spec
 from drpt import bsdf_kinds
 from drpt.export.mitsuba_dielectrics import adjust
@@ -48,6 +47,7 @@ from drpt.render.bsdf import REGISTRY, lobe
 from drpt.render.bsdf import dielectric as de
 from drpt.render.bsdf import roughdielectric as rd
 from drpt.render.bsdf import thindielectric as td
+from drpt.testing import export_bsdf, mitsuba, spherical_chi2
 
 
 def _f(a):
@@ -763,7 +763,7 @@ def _render_specs():
 
 
 def _render_case(tmp_path, name):
-    from render_check import assert_agree, render_both
+    from drpt.testing import assert_agree, render_both
     from test_materials_render import _with_bsdf, make
 
     scene = _with_bsdf(make(tmp_path, "phong"), "phong", _render_specs()[name])

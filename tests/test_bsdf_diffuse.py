@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
-from chi2util import run_chi2
 from drpt.render.bsdf import diffuse
 from drpt.render.bsdf.diffuse import DiffuseParams
+from drpt.testing import run_chi2
 
 KD = DiffuseParams(Array3f(0.7, 0.5, 0.2))
 

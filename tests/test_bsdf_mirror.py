@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
-from chi2util import export_bsdf, mitsuba
 from drpt.render.bsdf import mirror
+from drpt.testing import export_bsdf, mitsuba
 
 R = (0.9, 0.6, 0.25)
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
-from chi2util import export_bsdf, mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 from drpt.export import mitsuba_phong
 from drpt.render.bsdf import phong
+from drpt.testing import export_bsdf, mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 
 KD = (0.25, 0.3, 0.15)
 KS = (0.5, 0.45, 0.6)  # max(kd + ks) = 0.75

@@ -44,12 +44,12 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-from chi2util import mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 from drpt.bsdf_kinds import PARAMS
 from drpt.render.bsdf import REGISTRY, lobe
 from drpt.render.bsdf import plastic as pl
 from drpt.render.bsdf import roughplastic as rp
 from drpt.render.bsdf import roughplastic_tables as rt
+from drpt.testing import mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 
 COLOR = (0.8, 0.35, 0.1)
 TINT = (0.9, 0.8, 1.0)
@@ -848,7 +848,7 @@ def test_render_matches_mitsuba(tmp_path, spec):
     """A sphere of the material in the test box (tests/test_materials_render.py),
     rendered by drpt and by Mitsuba through the exporter: block z-scores < 4.5."""
     from drpt.shading import BSDFSpec
-    from render_check import assert_agree, render_both
+    from drpt.testing import assert_agree, render_both
     from test_materials_render import _with_bsdf, make
 
     scene = _with_bsdf(make(tmp_path, "phong"), "phong", BSDFSpec(spec["kind"], dict(spec["params"])))

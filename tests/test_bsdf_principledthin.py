@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
-from chi2util import mitsuba, spherical_chi2, to_drpt
 from drpt.bsdf_kinds import defaults
 from drpt.export.mitsuba_bsdf import to_mitsuba
 from drpt.render.bsdf import principledthin as pt
 from drpt.shading import BSDFSpec, complete
+from drpt.testing import mitsuba, spherical_chi2, to_drpt
 
 RED = (0.8, 0.3, 0.2)
 CASES = {
@@ -176,7 +176,7 @@ def test_thin_sheets_render_like_mitsuba(control):
     from dataclasses import replace
 
     import test_mitsuba_xml as tx
-    from render_check import block_z
+    from drpt.testing import block_z
 
     scene, _ = tx.load("thin")
     if control:

@@ -65,7 +65,7 @@ def test_values_equal_mitsubas_eval_and_eval_1(tmp_path, to_uv):
 
 @pytest.mark.slow
 def test_checkerboard_scene_renders_like_mitsuba():
-    from render_check import assert_agree, block_z
+    from drpt.testing import assert_agree, block_z
     from test_mitsuba_xml import _render_both
 
     scene = load_scene(XML / "checker.xml")

@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
-from chi2util import mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 from drpt.export.mitsuba import look_at_matrix
 from drpt.export.mitsuba_envmap import to_mitsuba
 from drpt.imageio import write_image
 from drpt.render.camera import RayCamera
 from drpt.render.lights.envmap import LUMINANCE, EnvironmentLight, check_radius
 from drpt.scene import model
+from drpt.testing import mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 
 Z_MAX = 5.0
 

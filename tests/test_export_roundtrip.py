@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from render_check import block_z
+from drpt.testing import block_z
 
 SCENES = sorted((Path(__file__).resolve().parents[1] / "scenes").glob("*/*.txt"))
 SIZE, SPP = 32, 128

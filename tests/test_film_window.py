@@ -118,7 +118,7 @@ def test_export_of_a_cropped_camera_is_mitsubas_film(tmp_path):
 @pytest.mark.slow
 @pytest.mark.mitsuba
 def test_cropped_scene_renders_like_mitsuba():
-    from render_check import assert_agree, block_z
+    from drpt.testing import assert_agree, block_z
     from test_mitsuba_xml import _render_both
 
     scene = load_scene(XML / "crop.xml")

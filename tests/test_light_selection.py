@@ -161,7 +161,7 @@ CONES = {"near": ((0.3, -0.2, 0.1), 1.0, (0.0, 0.0, 1.6)),
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("where", list(CONES))
 def test_sphere_direction_density_chi2(where):
-    from chi2util import run_chi2
+    from drpt.testing import run_chi2
 
     sample, pdf = _cone_functions(*CONES[where])
     ok, msg = run_chi2(sample, pdf, sample_count=200_000, ires=32)  # the cone's edge crosses bins
@@ -171,7 +171,7 @@ def test_sphere_direction_density_chi2(where):
 @pytest.mark.mitsuba
 def test_wrong_cone_density_fails_chi2():
     """Negative control: a cone density 5% too high fails the same test."""
-    from chi2util import run_chi2
+    from drpt.testing import run_chi2
 
     sample, pdf = _cone_functions(*CONES["near"], scale=1.05)
     ok, _ = run_chi2(sample, pdf, sample_count=200_000, ires=32)
@@ -190,7 +190,7 @@ def test_cone_pdf_is_exact_for_tiny_and_distant_spheres():
 # ------------------------------------------------------------ renders against Mitsuba
 def _agree_with_mitsuba(name, spp, **opts):
     from drpt.scene import load_scene
-    from render_check import block_z
+    from drpt.testing import block_z
     from test_mitsuba_xml import _mean_z, _render_both
 
     path = XML / f"{name}.xml"

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from drpt.scene import load_scene
-from render_check import assert_agree, render_both
+from drpt.testing import assert_agree, render_both
 
 SCENE = """
 PerspectiveCamera {{ center 0 1.5 5  direction 0 -0.3 -1  up 0 1 0  angle 40 }}

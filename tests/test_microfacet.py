@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
-from chi2util import mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 from drpt.render.bsdf import microfacet as mf
+from drpt.testing import mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 
 # (beckmann, alpha_u, alpha_v or None for isotropic)
 CASES = [(True, 0.1, None), (False, 0.1, None), (True, 0.5, None), (False, 0.5, None),

@@ -29,8 +29,8 @@ from drpt.imageio import read_image
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
+from drpt.testing import block_z
 from drpt.tools.reference import REFERENCES, reference_path
-from render_check import block_z
 
 
 def speckles(x, ref):

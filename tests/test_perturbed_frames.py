@@ -26,13 +26,13 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-from chi2util import mitsuba, spherical_chi2
 from drpt.export.mitsuba import _to_dict
 from drpt.export.mitsuba_bsdf import to_mitsuba
 from drpt.render.material import MaterialTable
 from drpt.render.surface import Interaction, triangle_tangents
 from drpt.scene.model import Background, Material, PerspectiveCamera, Planes, Scene, Spheres, Triangles
 from drpt.shading import BSDFSpec, Texture, complete
+from drpt.testing import mitsuba, spherical_chi2
 
 XML = Path(__file__).resolve().parent / "data" / "xml"
 NORMALS = Texture(XML / "normals.png", (0.5, 0.5, 1.0), raw=True)
@@ -252,7 +252,7 @@ def _render(name: str, spp: int = 256, change=None):
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("name", ["aniso_mesh", "normalmap", "bumpmap"])
 def test_renders_like_mitsuba(name):
-    from render_check import assert_agree
+    from drpt.testing import assert_agree
     from test_mitsuba_xml import _mean_z
 
     r, ref, var = _render(name)
@@ -277,7 +277,7 @@ def _drop_perturbation(scene):
 def test_negative_controls_fail(what, monkeypatch):
     import drpt.render.material as material
     import drpt.render.perturb as perturb
-    from render_check import block_z
+    from drpt.testing import block_z
     from test_mitsuba_xml import _mean_z
 
     if what == "tangent from the normal alone":
@@ -410,7 +410,7 @@ def test_wavefront_renders_perturbed_frames_like_mitsuba():
     from drpt.backend import mitsuba_variant
     from drpt.options import RenderOptions, apply_scene_settings
     from drpt.render.renderer import Renderer
-    from render_check import assert_agree
+    from drpt.testing import assert_agree
 
     scene, _ = tx.load("bumpmap")
     opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=3), scene), spp=256, mode="wavefront")

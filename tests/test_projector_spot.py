@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from drjit.auto import Array3f
 
-from chi2util import mitsuba
 from drpt.scene import load_scene
+from drpt.testing import mitsuba
 
 LOOKAT = '<lookat origin="0.3, -0.2, 2" target="0, 0.1, 0" up="0.2, 1, 0"/>'
 
@@ -121,7 +121,7 @@ def test_projector_analytic_radiance(tmp_path):
 def test_scene_renders_like_mitsuba():
     """tests/data/xml/projector_spot.xml: a textured projector and a textured spot on a floor
     and a sphere, direct lighting, drpt vs Mitsuba on the same file (8x8 block z-test)."""
-    from render_check import assert_agree
+    from drpt.testing import assert_agree
     from test_mitsuba_xml import XML, _render_both
 
     path = XML / "projector_spot.xml"

@@ -102,7 +102,7 @@ def _render(scene, integrator, spp, seed=1, **kw):
 
 
 def _agree(a, b, zmax=4.5):
-    from render_check import block_z
+    from drpt.testing import block_z
 
     z = block_z(a.image, a.variance, b.image, b.variance)
     n = a.image.shape[0] * a.image.shape[1]

@@ -26,8 +26,8 @@ from drpt.imageio import read_image
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
+from drpt.testing import assert_agree, block_z, render_both
 from drpt.tools.reference import REFERENCES, reference_path
-from render_check import assert_agree, block_z, render_both
 
 CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
 

@@ -58,7 +58,7 @@ from drpt.scene.model import (
     Spheres,
     Triangles,
 )
-from render_check import block_z
+from drpt.testing import block_z
 
 CAM = None  # SurfaceData ignores the camera
 EPS = 2.0**-24

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Float, UInt32
 
-from chi2util import mitsuba
 from drpt.errors import SceneError
 from drpt.imageio import srgb_to_linear, write_image
 from drpt.render.texture import TextureSet
+from drpt.testing import mitsuba
 
 H, W = 4, 5
 
@@ -273,7 +273,7 @@ def test_textured_render_matches_mitsuba(tmp_path):
     from drpt.options import PathOptions, RenderOptions
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
-    from render_check import assert_agree, render_both
+    from drpt.testing import assert_agree, render_both
 
     rng = np.random.default_rng(12)
     floor = rng.integers(20, 256, size=(4, 6, 3), dtype=np.uint8)

@@ -242,7 +242,7 @@ def dof(mi, tmp_path_factory):
 def _z(scene, runs):
     from drpt.options import PathOptions, RenderOptions
     from drpt.render.renderer import Renderer
-    from render_check import block_z_correlated
+    from drpt.testing import block_z_correlated
 
     r = Renderer(scene, RenderOptions(width=48, height=48, spp=EDGE_SPP, seed=1, progress=False,
                                       path=PathOptions(max_depth=2))).render()

@@ -6,8 +6,8 @@ import pytest
 from drjit.auto import Array2f, Array3f, Float
 from scipy import stats
 
-from chi2util import run_chi2
 from drpt.render import warp
+from drpt.testing import run_chi2
 
 
 @pytest.mark.mitsuba

@@ -34,7 +34,7 @@ from drpt.render.integrators import wavefront as wf
 from drpt.render.integrators.path import PathIntegrator
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-from render_check import block_z
+from drpt.testing import block_z
 
 ZMAX = 4.5
 BLOCK = 16  # 16 x 16 pixels at 256 spp: 65536 samples per block mean

@@ -11,7 +11,7 @@ import pytest
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-from render_check import assert_agree, render_both
+from drpt.testing import assert_agree, render_both
 
 SCENE = """
 PerspectiveCamera {{ center 0 1.2 6  direction 0 -0.2 -1  up 0 1 0  angle 35 }}
