@@ -23,22 +23,22 @@ import numpy as np
 import pytest
 from drjit.auto import Array3f, Float
 
-from conftest import REPO, SCENES
 from drpt import bsdf_kinds
 from drpt.render import bsdf as bsdf_pkg
 from drpt.testing import bsdf_chi2, furnace
 
-DOC = REPO / "docs" / "architecture.md"
 NAME = "drpt.render.bsdf.oren_nayar"
 WIS = [(0.0, 0.0, 1.0), (0.7, 0.0, 0.714), (0.98, 0.0, 0.199)]
 
 
-def _section() -> str:
-    return DOC.read_text().split("## Adding a BSDF", 1)[1].split("\n## ", 1)[0]
+@pytest.fixture(scope="module")
+def section(repo) -> str:
+    """The text of docs/architecture.md's "Adding a BSDF"."""
+    return (repo / "docs" / "architecture.md").read_text().split("## Adding a BSDF", 1)[1].split("\n## ", 1)[0]
 
 
-def _blocks() -> list[str]:
-    return re.findall(r"```python\n(.*?)```", _section(), re.S)
+def _blocks(section: str) -> list[str]:
+    return re.findall(r"```python\n(.*?)```", section, re.S)
 
 
 def _load(tmp_path, source: str):
@@ -51,19 +51,19 @@ def _load(tmp_path, source: str):
 
 
 @pytest.fixture
-def oren_nayar(tmp_path, monkeypatch):
+def oren_nayar(tmp_path, monkeypatch, section):
     """The doc's module, registered the way the doc says (the registry line and the
     ``PARAMS`` entry; ``LEAF_KINDS``/``ALL_KINDS`` are derived from ``PARAMS`` at import)."""
-    module_src, registry_src = _blocks()[:2]
+    module_src, registry_src = _blocks(section)[:2]
     assert module_src.startswith("# drpt/render/bsdf/oren_nayar.py")
     mod = _load(tmp_path, module_src)
     monkeypatch.setitem(sys.modules, NAME, mod)
     for kind, module in re.findall(r'"(\w+)": "(\w+)",', registry_src):
         monkeypatch.setitem(bsdf_pkg.REGISTRY, kind, module)
-    entry = re.search(r'`("oren_nayar": \{.*?\})` to `PARAMS`', _section(), re.S).group(1)
+    entry = re.search(r'`("oren_nayar": \{.*?\})` to `PARAMS`', section, re.S).group(1)
     kind, params = eval("{" + entry + "}", {"GRAY": bsdf_kinds.GRAY}).popitem()
     monkeypatch.setitem(bsdf_kinds.PARAMS, kind, params)
-    tex = re.search(r'`"oren_nayar": (frozenset\(.*?\))` to\s+`TEXTURABLE`', _section(), re.S).group(1)
+    tex = re.search(r'`"oren_nayar": (frozenset\(.*?\))` to\s+`TEXTURABLE`', section, re.S).group(1)
     monkeypatch.setitem(bsdf_kinds.TEXTURABLE, kind, eval(tex))
     monkeypatch.setattr(bsdf_kinds, "LEAF_KINDS", tuple(bsdf_kinds.PARAMS))
     monkeypatch.setattr(bsdf_kinds, "ALL_KINDS", bsdf_kinds.LEAF_KINDS + tuple(bsdf_kinds.COMPOSITES))
@@ -83,9 +83,9 @@ def test_furnace(oren_nayar, sigma):
     assert np.all(r.albedo > 0.5)
 
 
-def test_furnace_catches_a_lobe_without_its_a_loss(tmp_path):
-    src = _blocks()[0].replace("a = 1.0 - s / (2.0 * (s + 0.33))", "a = 1.0")
-    assert src != _blocks()[0]
+def test_furnace_catches_a_lobe_without_its_a_loss(tmp_path, section):
+    src = _blocks(section)[0].replace("a = 1.0 - s / (2.0 * (s + 0.33))", "a = 1.0")
+    assert src != _blocks(section)[0]
     mod = _load(tmp_path, src)
     assert not furnace(_sampler(mod, (1.0, 1.0, 1.0), 1.0), WIS, n=100_000).passed
 
@@ -98,13 +98,13 @@ def test_sampling_matches_pdf(oren_nayar, sigma):
     assert ok, msg
 
 
-def _render(kind_of):
+def _render(kind_of, cornell):
     from drpt.options import RenderOptions
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
     from drpt.shading import BSDFSpec
 
-    scene = load_scene(SCENES / "cornellbox" / "cornellbox.txt")
+    scene = load_scene(cornell)
     mats = []
     for m in scene.materials:
         kd = tuple(float(c) for c in m.kd)
@@ -113,12 +113,12 @@ def _render(kind_of):
     return Renderer(scene, RenderOptions(width=16, height=16, spp=8, seed=3, progress=False)).render()
 
 
-def test_a_scene_renders_it_like_diffuse_at_sigma_zero(oren_nayar):
-    on = _render(lambda kd, S: S("oren_nayar", {"kd": kd, "sigma": 0.0}))
-    di = _render(lambda kd, S: S("diffuse", {"kd": kd}))
+def test_a_scene_renders_it_like_diffuse_at_sigma_zero(oren_nayar, cornell):
+    on = _render(lambda kd, S: S("oren_nayar", {"kd": kd, "sigma": 0.0}), cornell)
+    di = _render(lambda kd, S: S("diffuse", {"kd": kd}), cornell)
     assert on.nonfinite == 0 and np.all(np.isfinite(on.image)) and on.image.mean() > 0.01
     assert np.allclose(on.image, di.image, rtol=1e-4, atol=1e-5)
-    rough = _render(lambda kd, S: S("oren_nayar", {"kd": kd, "sigma": 0.5}))
+    rough = _render(lambda kd, S: S("oren_nayar", {"kd": kd, "sigma": 0.5}), cornell)
     assert np.all(np.isfinite(rough.image)) and not np.allclose(rough.image, di.image, rtol=1e-3)
 
 

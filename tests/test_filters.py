@@ -75,16 +75,15 @@ def test_filter_flag_and_options(capsys):
 
 
 @pytest.mark.slow
-def test_filter_on_the_command_line(tmp_path):
+def test_filter_on_the_command_line(tmp_path, cornell):
     """render and export take --filter; export writes the matching rfilter;
     a bad value is one line, exit status 2, nothing written."""
     import subprocess
     import sys
 
-    from conftest import SCENES
     from drpt.cli import main
 
-    scene = str(SCENES / "cornellbox" / "cornellbox.txt")
+    scene = str(cornell)
     out = tmp_path / "g.exr"
     assert main(["render", scene, "--size", "8", "6", "--spp", "2", "--filter", "gaussian",
                  "-o", str(out), "--quiet"]) == 0 and out.is_file()
