@@ -2,7 +2,7 @@
 
 ``SHARED`` is the ``shared/`` folder beside the repository checkout (the seed
 renderer's files); tests that read it skip cleanly when it is absent. Tests take
-the repository's paths as fixtures (``repo``, ``scenes``, ``cornell``); the
+the repository's paths as fixtures (``repo``, ``scenes_dir``, ``cornell``); the
 constants ``REPO``, ``SCENES`` and ``SHARED`` stay for the helper modules.
 The statistical checks are in :mod:`drpt.testing`.
 """
@@ -26,7 +26,7 @@ def repo() -> Path:
 
 
 @pytest.fixture(scope="session")
-def scenes() -> Path:
+def scenes_dir() -> Path:
     """The bundled scenes, ``scenes/``."""
     return SCENES
 

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from drjit.auto import PCG32, Bool, Float, UInt32
 
-from conftest import SCENES
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
@@ -14,8 +13,8 @@ from drpt.scene import load_scene
 W = H = 32
 
 
-def _renderer(name, bsdf):
-    return Renderer(load_scene(SCENES / name), RenderOptions(width=W, height=H, bsdf=bsdf,
+def _renderer(scene_path, bsdf):
+    return Renderer(load_scene(scene_path), RenderOptions(width=W, height=H, bsdf=bsdf,
                                                              progress=False))
 
 
@@ -25,11 +24,11 @@ def _camera_ray(r, pixel):
     return lambda rng: r.camera.ray(x + rng.next_float32(), y + rng.next_float32())
 
 
-def test_first_regenerated_path_is_the_single_path():
+def test_first_regenerated_path_is_the_single_path(scenes_dir):
     """With one path per lane and the same random stream, sample_sequence's
     sum is exactly sample()'s radiance, and its square sum the square: the
     regeneration loop adds nothing and loses nothing."""
-    r = _renderer("cornellbox/cornellbox.txt", "phong")
+    r = _renderer(scenes_dir / "cornellbox/cornellbox.txt", "phong")
     n = W * H
     camera_ray = _camera_ray(r, dr.arange(UInt32, n))
     rng = PCG32(n, initstate=7)
@@ -45,12 +44,12 @@ def test_first_regenerated_path_is_the_single_path():
 
 
 @pytest.mark.slow
-def test_sequence_mean_matches_independent_paths():
+def test_sequence_mean_matches_independent_paths(scenes_dir):
     """k paths one after another in a lane estimate the same image as k lanes
     with one path each (newscene, Cook-Torrance): per color channel, the image
     sums agree within 5 standard errors (~1.8% here: a 3% loss in the
     sequence's sums fails it)."""
-    r = _renderer("newscene/newscene.txt", "cook-torrance")
+    r = _renderer(scenes_dir / "newscene/newscene.txt", "cook-torrance")
     n, k = W * H, 256
     acc, acc2, _ = r.integrator.sample_sequence(
         PCG32(n, initstate=1), _camera_ray(r, dr.arange(UInt32, n)), dr.full(UInt32, k, n))

@@ -38,7 +38,6 @@ import numpy as np
 import pytest
 from drjit.auto import Array3f, Bool, Float, UInt32
 
-from conftest import SCENES
 from drpt.accel.protocol import INVALID, Hit
 from drpt.geometry import intersect_plane, intersect_sphere, intersect_triangle_watertight
 from drpt.options import RenderOptions
@@ -252,10 +251,6 @@ def test_offset_bound_follows_the_primitive_not_the_scene():
 
 
 # ------------------------------------------------------------------- renders
-def _box():
-    return load_scene(SCENES / "cornellbox" / "cornellbox.txt")
-
-
 def _render(scene, size=24, spp=16, seed=3):
     return Renderer(scene, RenderOptions(width=size, height=size, spp=spp, seed=seed, progress=False)).render()
 
@@ -309,8 +304,8 @@ def _dark_pixels(r, ref, z=-4.0):
 
 
 @pytest.mark.slow
-def test_far_sphere_changes_nothing():
-    box = _box()
+def test_far_sphere_changes_nothing(cornell):
+    box = load_scene(cornell)
     ref = _render(box).image
     for x in (1e5, 1e6, 1e8):
         img = _render(_with_far_sphere(box, x)).image
@@ -318,8 +313,8 @@ def test_far_sphere_changes_nothing():
 
 
 @pytest.mark.slow
-def test_far_sphere_negative_control_scene_size_offset(monkeypatch):
-    box = _box()
+def test_far_sphere_negative_control_scene_size_offset(monkeypatch, cornell):
+    box = load_scene(cornell)
     ref = _render(box).image.mean()
     far = _with_far_sphere(box, 1e6)
     _scene_size_offset(monkeypatch, far)
@@ -328,11 +323,11 @@ def test_far_sphere_negative_control_scene_size_offset(monkeypatch):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("scale", [1e-4, 1e4])
-def test_scaled_box_renders_the_same(scale):
+def test_scaled_box_renders_the_same(scale, cornell):
     # Radiance does not depend on scale. Same seed, so the tolerances are
     # tighter than independent noise: mean within 2%, block z < 4.5 (8x8
-    # blocks, as tests/render_check.py), no pixel darker by a z of 4.
-    box = _box()
+    # blocks, as drpt.testing.block_z), no pixel darker by a z of 4.
+    box = load_scene(cornell)
     ref = _render(box, 32, 32)
     r = _render(_moved(box, scale), 32, 32)
     assert abs(r.image.mean() / ref.image.mean() - 1) < 0.02
@@ -340,10 +335,10 @@ def test_scaled_box_renders_the_same(scale):
     assert _dark_pixels(r, ref) == 0
 
 
-def _low_light_box():
+def _low_light_box(cornell):
     """The Cornell box with its light 0.5 below the ceiling instead of 0.001,
     so that at 1e6 (float32 spacing 0.0625) light and ceiling stay apart."""
-    box = _box()
+    box = load_scene(cornell)
     emissive = np.array([m.is_emissive for m in box.materials])[box.triangles.material]
     p = box.triangles.positions.copy()
     p[emissive, :, 1] -= 0.5
@@ -352,13 +347,13 @@ def _low_light_box():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("shift", [1e5, 1e6])
-def test_translated_box_renders_as_at_the_origin(shift):
+def test_translated_box_renders_as_at_the_origin(shift, cornell):
     # At 1e6 float32 coordinates are 0.0625 apart and the offsets are a few
     # of those (~0.2, 4% of the box), so contact shadows and corners change
     # within that band: the mean stays within 3% of the same float32 geometry
     # rendered at the origin (same seed; 1.3% measured), and no pixel is
     # darker by a z of 4.
-    box = _low_light_box()
+    box = _low_light_box(cornell)
     ref = _render(_moved(box, shift=shift, quantize=True), 32, 32)
     r = _render(_moved(box, shift=shift), 32, 32)
     assert r.nonfinite == 0
@@ -367,8 +362,8 @@ def test_translated_box_renders_as_at_the_origin(shift):
 
 
 @pytest.mark.slow
-def test_translated_box_negative_control_scene_size_offset(monkeypatch):
-    box = _low_light_box()
+def test_translated_box_negative_control_scene_size_offset(monkeypatch, cornell):
+    box = _low_light_box(cornell)
     ref = _render(_moved(box, shift=1e6, quantize=True), 32, 32)
     moved = _moved(box, shift=1e6)
     _scene_size_offset(monkeypatch, moved)

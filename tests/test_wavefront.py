@@ -27,7 +27,6 @@ import numpy as np
 import pytest
 from drjit.auto import PCG32, Bool, Float, UInt32
 
-from conftest import SCENES
 from drpt.errors import DrptError
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.integrators import wavefront as wf
@@ -41,12 +40,12 @@ BLOCK = 16  # 16 x 16 pixels at 256 spp: 65536 samples per block mean
 
 
 @pytest.fixture(scope="module")
-def scenes(tmp_path_factory):
+def scenes(tmp_path_factory, cornell):
     from drpt.tools.scenegen import envsun, materials_cornell
 
     out = tmp_path_factory.mktemp("wavefront_scenes")
     materials_cornell.main(out)
-    loaded = {"cornell": load_scene(SCENES / "cornellbox/cornellbox.txt"),
+    loaded = {"cornell": load_scene(cornell),
               "materials": load_scene(out / "materials_cornell.txt"),
               # a sky, a sun, a point light: three estimator slots per path (area-free)
               "envsun": load_scene(envsun.main(out / "env", point=True))}
@@ -278,10 +277,10 @@ def test_mode_options():
         replace(_opts(), mode="wavefront", wavefront_tail=-1).validate()
 
 
-def test_cli_render_wavefront(tmp_path):
+def test_cli_render_wavefront(tmp_path, cornell):
     from drpt.cli import main
 
     out = tmp_path / "wf.exr"
-    assert main(["render", str(SCENES / "cornellbox/cornellbox.txt"), "--size", "8", "8", "--spp", "2",
+    assert main(["render", str(cornell), "--size", "8", "8", "--spp", "2",
                  "--mode", "wavefront", "--wavefront-tail", "16", "-q", "-o", str(out)]) == 0
     assert out.is_file()
