@@ -8,11 +8,9 @@ import math
 
 import pytest
 
-from conftest import SCENES
 from drpt.errors import DrptError
 from drpt.tools import bench
 
-CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
 NUMBERS = ["build_s", "accel_mib", "primary_mrays", "incoherent_mrays", "shadow_mrays",
            "render_s", "msamples_s", "mi_load_s", "mi_primary_mrays", "mi_incoherent_mrays",
            "mi_shadow_mrays", "mi_render_s", "mi_msamples_s"]
@@ -25,9 +23,9 @@ def _parse(argv):
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory):
+def run(tmp_path_factory, cornell):
     out = tmp_path_factory.mktemp("bench")
-    args = _parse([str(CORNELL), "--size", "16", "16", "--spp", "2", "--rays", "4096",
+    args = _parse([str(cornell), "--size", "16", "16", "--spp", "2", "--rays", "4096",
                    "--accel", "bvh,grid", "--out", str(out)])
     assert args.func is bench.main
     rc = args.func(args)
@@ -67,8 +65,8 @@ def test_csv_rows_positive_and_ratios_finite(run):
             assert math.isfinite(v) and v > 0, (k, r[k])
 
 
-def test_no_mitsuba(tmp_path):
-    args = _parse([str(CORNELL), "--size", "8", "8", "--spp", "1", "--rays", "1024",
+def test_no_mitsuba(tmp_path, cornell):
+    args = _parse([str(cornell), "--size", "8", "8", "--spp", "1", "--rays", "1024",
                    "--accel", "bvh", "--repeat", "1", "--no-mitsuba", "--out", str(tmp_path)])
     assert args.func(args) == 0
     with open(tmp_path / "bench.csv", newline="") as f:
@@ -77,7 +75,7 @@ def test_no_mitsuba(tmp_path):
     assert (tmp_path / "bench.png").exists()
 
 
-def test_bvh_variants_as_accelerators(tmp_path, monkeypatch):
+def test_bvh_variants_as_accelerators(tmp_path, monkeypatch, cornell):
     import drpt.render.renderer as renderer
 
     seen = []
@@ -89,7 +87,7 @@ def test_bvh_variants_as_accelerators(tmp_path, monkeypatch):
         real(self, scene, options)
 
     monkeypatch.setattr(renderer.Renderer, "__init__", spy)
-    args = _parse([str(CORNELL), "--size", "8", "8", "--spp", "1", "--rays", "1024",
+    args = _parse([str(cornell), "--size", "8", "8", "--spp", "1", "--rays", "1024",
                    "--accel", "bvh-median,bvh-threshold,bvh-sah,bvh", "--sah-threshold", "3",
                    "--min-leaf", "2", "--repeat", "1", "--no-mitsuba", "--out", str(tmp_path)])
     assert args.func(args) == 0
@@ -113,8 +111,8 @@ def test_missing_scene(tmp_path):
                                   ["--rays", "-1"], ["--max-depth", "0"],
                                   ["--accel", "bvh-octree"], ["--sah-threshold", "-1"],
                                   ["--min-leaf", "0"]])
-def test_bad_options(tmp_path, argv):
-    args = _parse([str(CORNELL), *argv, "--out", str(tmp_path / "o")])
+def test_bad_options(tmp_path, argv, cornell):
+    args = _parse([str(cornell), *argv, "--out", str(tmp_path / "o")])
     with pytest.raises(DrptError):
         args.func(args)
 
@@ -141,7 +139,7 @@ def test_chart_uses_a_log_axis():
         plt.close(fig)
 
 
-def test_other_scenes_are_read_as_every_command_reads_them(tmp_path, monkeypatch):
+def test_other_scenes_are_read_as_every_command_reads_them(tmp_path, monkeypatch, scenes_dir):
     """bench read any scene but newscene as Phong; render, compare and profile read `auto`.
     The bundled scenes keep the readings of the published numbers."""
     import shutil
@@ -157,10 +155,10 @@ def test_other_scenes_are_read_as_every_command_reads_them(tmp_path, monkeypatch
 
     monkeypatch.setattr(bench, "bench_drpt", spy)
     for f in ("cornellbox.txt", "cornellbox.obj", "cornellbox.mtl"):
-        shutil.copy(SCENES / "cornellbox" / f, tmp_path / f)
+        shutil.copy(scenes_dir / "cornellbox" / f, tmp_path / f)
     (tmp_path / "cornellbox.txt").rename(tmp_path / "box.txt")
-    for scene in (tmp_path / "box.txt", SCENES / "cornellbox" / "cornellbox.txt",
-                  SCENES / "newscene" / "newscene.txt"):
+    for scene in (tmp_path / "box.txt", scenes_dir / "cornellbox" / "cornellbox.txt",
+                  scenes_dir / "newscene" / "newscene.txt"):
         args = _parse([str(scene), "--no-mitsuba", "--accel", "bvh", "--rays", "64",
                        "--out", str(tmp_path / "b")])
         with pytest.raises(Stop):

@@ -7,11 +7,8 @@ import json
 
 import pytest
 
-from conftest import SCENES
 from drpt.errors import DrptError
 from drpt.tools import profile
-
-CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
 
 
 def _parse(argv):
@@ -21,10 +18,10 @@ def _parse(argv):
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory):
+def run(tmp_path_factory, cornell):
     out = tmp_path_factory.mktemp("profile") / "cb.png"
     # the BVH: its traversal loops are what the stage checks below look at
-    args = _parse([str(CORNELL), "--size", "16", "16", "--spp", "2", "--accel", "bvh",
+    args = _parse([str(cornell), "--size", "16", "16", "--spp", "2", "--accel", "bvh",
                    "--out", str(out)])
     assert args.func is profile.main
     rc = args.func(args)
@@ -126,10 +123,10 @@ def test_verdict_names_the_winner_with_numbers(run):
 
 
 @pytest.mark.slow
-def test_inline_accelerator_profile(tmp_path):
+def test_inline_accelerator_profile(tmp_path, cornell):
     """The Cornell box's default (inline) accelerator, one mode only."""
     out = tmp_path / "cb.png"
-    assert profile.main(_parse([str(CORNELL), "--size", "8", "8", "--spp", "1", "--mode", "wavefront",
+    assert profile.main(_parse([str(cornell), "--size", "8", "8", "--spp", "1", "--mode", "wavefront",
                                 "--out", str(out)])) == 0
     data = json.loads(out.with_suffix(".json").read_text())
     assert set(data["modes"]) == {"wavefront"}
@@ -155,10 +152,10 @@ def test_missing_scene_is_an_error(tmp_path):
         profile.main(args)
 
 
-def test_bad_options_are_errors(tmp_path):
+def test_bad_options_are_errors(tmp_path, cornell):
     with pytest.raises(DrptError):
-        profile.main(_parse([str(CORNELL), "--spp", "0"]))
+        profile.main(_parse([str(cornell), "--spp", "0"]))
     with pytest.raises(DrptError):
-        profile.main(_parse([str(CORNELL), "--out", str(tmp_path / "p.jpg")]))
+        profile.main(_parse([str(cornell), "--out", str(tmp_path / "p.jpg")]))
     with pytest.raises(DrptError, match="integrator"):
-        profile.main(_parse([str(CORNELL), "--integrator", "whitted", "--out", str(tmp_path / "p.png")]))
+        profile.main(_parse([str(cornell), "--integrator", "whitted", "--out", str(tmp_path / "p.png")]))
