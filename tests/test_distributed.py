@@ -16,18 +16,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO, SCENES
-
-SCENE = SCENES / "cornellbox" / "cornellbox.txt"
 FLAGS = ["--size", "16", "16", "-q"]
 
 
-def _render(tmp_path, name, *flags, spp=16, chunk=1):
+def _render(scene, tmp_path, name, *flags, spp=16, chunk=1):
     from drpt.cli import main
     from drpt.imageio import read_image
 
     out = tmp_path / f"{name}.exr"
-    assert main(["render", str(SCENE), *FLAGS, "--spp", str(spp), "--chunk-spp", str(chunk),
+    assert main(["render", str(scene), *FLAGS, "--spp", str(spp), "--chunk-spp", str(chunk),
                  "-o", str(out), *flags]) == 0
     return read_image(out)
 
@@ -103,16 +100,16 @@ def test_merge_waits_for_the_next_chunk():
 
 
 @pytest.mark.slow
-def test_a_chunk_is_pure():
+def test_a_chunk_is_pure(cornell):
     from drpt.options import RenderOptions
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
-    scene = load_scene(SCENE)
+    scene = load_scene(cornell)
     opts = RenderOptions(width=8, height=8, spp=8, chunk_spp=2, progress=False)
     a = Renderer(scene, opts)
     first, again = a.render_chunk(2), a.render_chunk(2)
-    other = Renderer(load_scene(SCENE), opts).render_chunk(2)
+    other = Renderer(load_scene(cornell), opts).render_chunk(2)
     for r in (again, other):
         assert np.array_equal(first.sum, r.sum) and np.array_equal(first.sumsq, r.sumsq)
     assert first.spp == 2 and first.sum.dtype == np.float64
@@ -120,43 +117,43 @@ def test_a_chunk_is_pure():
 
 
 @pytest.mark.slow
-def test_plain_render_does_not_import_dask(tmp_path):
+def test_plain_render_does_not_import_dask(tmp_path, repo, cornell):
     code = ("import sys; from drpt.cli import main; "
-            f"rc = main(['render', {str(SCENE)!r}, '--size', '8', '8', '--spp', '2', '-q', "
+            f"rc = main(['render', {str(cornell)!r}, '--size', '8', '8', '--spp', '2', '-q', "
             f"'-o', {str(tmp_path / 'a.exr')!r}]); "
             "print(rc, sorted(m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed')))")
-    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-c", code], cwd=repo, capture_output=True, text=True,
                          timeout=120)
     assert out.stdout.split("\n")[-2] == "0 []", out.stderr
 
 
 # ------------------------------------------------------------------ on Dask
 @pytest.mark.slow
-def test_workers_give_the_plain_image_bit_for_bit(tmp_path):
+def test_workers_give_the_plain_image_bit_for_bit(tmp_path, cornell):
     pytest.importorskip("distributed")
-    plain = _render(tmp_path, "plain")
-    assert np.array_equal(plain, _render(tmp_path, "w1", "--workers", "1"))
-    assert np.array_equal(plain, _render(tmp_path, "w2", "--workers", "2"))
+    plain = _render(cornell, tmp_path, "plain")
+    assert np.array_equal(plain, _render(cornell, tmp_path, "w1", "--workers", "1"))
+    assert np.array_equal(plain, _render(cornell, tmp_path, "w2", "--workers", "2"))
     assert not list(tmp_path.glob("*.drpt-checkpoint*"))
 
 
 @pytest.mark.slow
-def test_workers_give_the_plain_image_with_the_ldsampler(tmp_path):
+def test_workers_give_the_plain_image_with_the_ldsampler(tmp_path, cornell):
     pytest.importorskip("distributed")
-    plain = _render(tmp_path, "plain", "--sampler", "ldsampler")
-    assert np.array_equal(plain, _render(tmp_path, "w2", "--workers", "2", "--sampler", "ldsampler"))
-    assert not np.array_equal(plain, _render(tmp_path, "indep"))
+    plain = _render(cornell, tmp_path, "plain", "--sampler", "ldsampler")
+    assert np.array_equal(plain, _render(cornell, tmp_path, "w2", "--workers", "2", "--sampler", "ldsampler"))
+    assert not np.array_equal(plain, _render(cornell, tmp_path, "indep"))
 
 
 @pytest.mark.slow
-def test_killed_worker_leaves_the_image_unchanged(tmp_path):
+def test_killed_worker_leaves_the_image_unchanged(tmp_path, cornell):
     pytest.importorskip("distributed")
     from drpt.distributed.job import run
     from drpt.options import RenderOptions
     from drpt.scene import load_scene
 
     opts = RenderOptions(width=16, height=16, spp=24, chunk_spp=1, progress=False)
-    scene = load_scene(SCENE)
+    scene = load_scene(cornell)
     plain = run(scene, opts, tmp_path / "plain.exr").result.image
     killed = []
 
@@ -182,7 +179,7 @@ def _free_port() -> int:
 
 
 @pytest.mark.slow
-def test_lost_scheduler_is_one_error_and_keeps_the_samples(tmp_path):
+def test_lost_scheduler_is_one_error_and_keeps_the_samples(tmp_path, repo, cornell):
     pytest.importorskip("distributed")
     from drpt.distributed.job import run
     from drpt.errors import DrptError
@@ -191,14 +188,14 @@ def test_lost_scheduler_is_one_error_and_keeps_the_samples(tmp_path):
 
     address = f"tcp://127.0.0.1:{_free_port()}"
     dask = Path(sys.executable).with_name("dask")
-    env = {**os.environ, "PYTHONPATH": str(REPO)}  # the scheduler unpickles the tasks too
+    env = {**os.environ, "PYTHONPATH": str(repo)}  # the scheduler unpickles the tasks too
     scheduler = subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":")[-1],
                                   "--no-dashboard"], env=env, stderr=subprocess.DEVNULL)
     worker = subprocess.Popen([dask, "worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard"], env=env,
                               stderr=subprocess.DEVNULL)
     try:
         opts = RenderOptions(width=16, height=16, spp=64, chunk_spp=1, progress=False)
-        scene = load_scene(SCENE)
+        scene = load_scene(cornell)
         out = tmp_path / "lost.exr"
 
         def stop_scheduler(merged, result, engine):
@@ -222,7 +219,7 @@ def _always_fails(*args):
 
 
 @pytest.mark.slow
-def test_a_chunk_that_keeps_failing_is_one_error(tmp_path, monkeypatch, capsys):
+def test_a_chunk_that_keeps_failing_is_one_error(tmp_path, monkeypatch, capsys, cornell):
     pytest.importorskip("distributed")
     import cloudpickle
 
@@ -231,7 +228,7 @@ def test_a_chunk_that_keeps_failing_is_one_error(tmp_path, monkeypatch, capsys):
 
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
     monkeypatch.setattr(engine, "TASK", _always_fails)
-    rc = main(["render", str(SCENE), *FLAGS, "--spp", "4", "--chunk-spp", "1", "--workers", "1",
+    rc = main(["render", str(cornell), *FLAGS, "--spp", "4", "--chunk-spp", "1", "--workers", "1",
                "-o", str(tmp_path / "x.exr")])
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("drpt")]
     assert rc == 2
@@ -239,12 +236,12 @@ def test_a_chunk_that_keeps_failing_is_one_error(tmp_path, monkeypatch, capsys):
 
 
 @pytest.mark.slow
-def test_bad_cluster_address_is_one_error_quickly(tmp_path, capsys):
+def test_bad_cluster_address_is_one_error_quickly(tmp_path, capsys, cornell):
     pytest.importorskip("distributed")
     from drpt.cli import main
 
     t0 = time.perf_counter()
-    rc = main(["render", str(SCENE), *FLAGS, "--cluster", "tcp://127.0.0.1:9",
+    rc = main(["render", str(cornell), *FLAGS, "--cluster", "tcp://127.0.0.1:9",
                "-o", str(tmp_path / "x.exr")])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and err[0].startswith("drpt: error: --cluster tcp://127.0.0.1:9")
@@ -255,13 +252,13 @@ def test_bad_cluster_address_is_one_error_quickly(tmp_path, capsys):
 SPP, CHUNK = 256, 4  # 64 chunks: the render is still running when the signal comes
 
 
-def _interrupt(out, *flags, sig=signal.SIGINT):
+def _interrupt(scene, repo, out, *flags, sig=signal.SIGINT):
     """Start a render in a subprocess, signal it once it wrote a checkpoint."""
     meta = Path(str(out) + ".drpt-checkpoint.json")
-    cmd = [sys.executable, "-m", "drpt", "render", str(SCENE), *FLAGS, "--spp", str(SPP),
+    cmd = [sys.executable, "-m", "drpt", "render", str(scene), *FLAGS, "--spp", str(SPP),
            "--chunk-spp", str(CHUNK),
            "--checkpoint-seconds", "0", "-o", str(out), *flags]
-    p = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(cmd, cwd=repo, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     t0 = time.monotonic()
     while not meta.exists() and p.poll() is None and time.monotonic() - t0 < 120:
         time.sleep(0.02)
@@ -282,27 +279,27 @@ def _interrupt(out, *flags, sig=signal.SIGINT):
                                            (signal.SIGTERM, ("--workers", "2"), ()),
                                            (signal.SIGKILL, (), ())],
                          ids=["ctrl-c-plain-then-workers", "sigterm-workers-then-plain", "sigkill-plain"])
-def test_resume_after_an_interrupt_gives_the_uninterrupted_image(tmp_path, sig, first, then):
+def test_resume_after_an_interrupt_gives_the_uninterrupted_image(tmp_path, sig, first, then, repo, cornell):
     if "--workers" in first + then:
         pytest.importorskip("distributed")
-    whole = _render(tmp_path, "whole", spp=SPP, chunk=CHUNK)
+    whole = _render(cornell, tmp_path, "whole", spp=SPP, chunk=CHUNK)
     out = tmp_path / "cut.exr"
-    _interrupt(out, *first, sig=sig)
-    assert np.array_equal(whole, _render(tmp_path, "cut", "--resume", *then, spp=SPP, chunk=CHUNK))
+    _interrupt(cornell, repo, out, *first, sig=sig)
+    assert np.array_equal(whole, _render(cornell, tmp_path, "cut", "--resume", *then, spp=SPP, chunk=CHUNK))
     assert not list(tmp_path.glob("*.drpt-checkpoint*"))
 
 
 @pytest.mark.slow
-def test_resume_refuses_a_checkpoint_of_other_options(tmp_path, capsys):
+def test_resume_refuses_a_checkpoint_of_other_options(tmp_path, capsys, repo, cornell):
     from drpt.cli import main
 
     out = tmp_path / "cut.exr"
-    _interrupt(out)
-    rc = main(["render", str(SCENE), *FLAGS, "--spp", str(SPP), "--chunk-spp", str(CHUNK), "--seed", "7",
+    _interrupt(cornell, repo, out)
+    rc = main(["render", str(cornell), *FLAGS, "--spp", str(SPP), "--chunk-spp", str(CHUNK), "--seed", "7",
                "--resume", "-o", str(out)])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "other options (seed differ)" in err[0]
-    rc = main(["render", str(SCENE), *FLAGS, "--spp", "8", "--resume", "-o", str(tmp_path / "none.exr")])
+    rc = main(["render", str(cornell), *FLAGS, "--spp", "8", "--resume", "-o", str(tmp_path / "none.exr")])
     assert rc == 2 and "no checkpoint" in capsys.readouterr().err
 
 
@@ -310,23 +307,23 @@ def test_resume_refuses_a_checkpoint_of_other_options(tmp_path, capsys):
                                            (["--workers", "2", "--cluster", "tcp://127.0.0.1:9"], "not both"),
                                            (["--chunk-spp", "0"], "--chunk-spp must be between"),
                                            (["--checkpoint-seconds", "-1"], "--checkpoint-seconds must be")])
-def test_distributed_flag_errors_are_one_line(tmp_path, capsys, flags, message):
+def test_distributed_flag_errors_are_one_line(tmp_path, capsys, flags, message, cornell):
     from drpt.cli import main
 
-    rc = main(["render", str(SCENE), *FLAGS, "--spp", "1", "-o", str(tmp_path / "x.exr"), *flags])
+    rc = main(["render", str(cornell), *FLAGS, "--spp", "1", "-o", str(tmp_path / "x.exr"), *flags])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and message in err[0]
     assert not (tmp_path / "x.exr").exists()
 
 
-def test_scene_hash_is_the_same_in_every_process():
+def test_scene_hash_is_the_same_in_every_process(cornell):
     """String hashing is randomized per process: a set in the scene model would
     pickle in another order in the worker that resumes a render."""
     import subprocess
     import sys
 
     code = ("from drpt.scene import load_scene; from drpt.distributed.checkpoint import scene_hash; "
-            f"print(scene_hash(load_scene({str(SCENE)!r})))")
+            f"print(scene_hash(load_scene({str(cornell)!r})))")
     env = dict(os.environ)
     hashes = set()
     for seed in ("1", "2", "3", "4", "5", "6", "7"):  # a 2-element set: both orders among 7 runs w.p. 98%
