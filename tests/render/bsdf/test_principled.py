@@ -432,7 +432,7 @@ def test_derived_eta_matches_mitsubas_clamps():
 
 # ------------------------------------------------------------- chi-square
 # ROT maps the normal to +y so the horizon is the grid lines phi = 0, pi and
-# the lobes lie on the equator (as in test_bsdf_cook_torrance).
+# the lobes lie on the equator (as in test_cook_torrance).
 ROT = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
 ANGLES = (0.0, 45.0, 80.0, 89.0)
 CHI2_CASES = {

@@ -1,5 +1,5 @@
 """Mitsuba 3's dielectric family beyond the smooth ``dielectric`` (which
-tests/test_bsdf_dielectric.py covers): ``thindielectric``
+tests/render/bsdf/test_dielectric.py covers): ``thindielectric``
 (drpt/render/bsdf/thindielectric.py), ``roughdielectric``
 (drpt/render/bsdf/roughdielectric.py) and the named IORs (drpt/iors.py).
 
@@ -737,7 +737,7 @@ def test_rough_index_matched_equals_exported_mitsuba_dielectric():
     np.testing.assert_array_equal(wo, -wi)
     np.testing.assert_allclose(wo[:2], mwo[:2], atol=1e-7)
     # Mitsuba's cos_t = sqrt(1 - eta_ti^2 (1 - cos^2)) loses digits near grazing (see
-    # test_bsdf_dielectric.py): compare z^2, as there
+    # test_dielectric.py): compare z^2, as there
     np.testing.assert_allclose(wo[2] ** 2, mwo[2] ** 2, atol=4e-7)
     np.testing.assert_allclose(_np3(bs.weight, n), _np3(mw, n), rtol=1e-6)
     np.testing.assert_array_equal(_np1(bs.eta, n), np.array(mbs.eta))
