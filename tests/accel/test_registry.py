@@ -25,7 +25,7 @@ def test_every_kind_is_an_accelerator():
     sc = make_scene(soup(rng, 10), (rng.random((2, 3)) * 10, np.ones(2)), ([[0, 0, 1]], [0.0]))
     for kind in KINDS:
         if kind == "embree" and embree_lib.reason() is not None:
-            continue  # tests/test_embree.py covers the error
+            continue  # tests/accel/test_embree.py covers the error
         a = build_accel(sc, kind)
         assert isinstance(a, Accelerator), kind
         assert a.stats["prims"] in (0, 12, 13) and a.build_seconds >= 0 and a.nbytes >= 0
