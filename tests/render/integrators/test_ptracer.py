@@ -25,7 +25,7 @@ from drpt.render.film import SplatFilm
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[3]
 XML = REPO / "tests" / "data" / "xml"
 
 

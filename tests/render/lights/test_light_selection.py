@@ -29,7 +29,7 @@ from drpt.render.lights.area import AreaLights
 from drpt.render.surface import SurfaceData
 from drpt.scene.model import Material, PerspectiveCamera, Scene, Spheres, Triangles
 
-XML = Path(__file__).parent / "data" / "xml"
+XML = Path(__file__).resolve().parents[2] / "data" / "xml"  # tests/data/xml
 CAM = PerspectiveCamera((0, 0, 5), (0, 0, -1), (0, 1, 0), 40)
 
 
