@@ -13,7 +13,7 @@ composites) and ``legacy06`` (a 0.6 file: camelCase names, serialized meshes, pa
 plugins do not read). All but ``legacy06`` (which Mitsuba 3 itself refuses) are rendered here
 by drpt and by Mitsuba *from the same file* (block z-test, tests/render_check.py, and the z of
 the image mean), and so is ``aniso`` (an anisotropic roughconductor on a sphere and a
-rectangle: shading frames follow Mitsuba's dp/du; tests/test_perturbed_frames.py has the
+rectangle: shading frames follow Mitsuba's dp/du; tests/render/test_perturbed_frames.py has the
 meshes, the rotated sphere, normal and bump maps and their negative controls).
 """
 
@@ -297,7 +297,7 @@ def test_crop_window_and_thin_lens_reach_the_camera(tmp_path):
     assert not caught
     assert (s.settings.width, s.settings.height) == (10, 576)  # the crop of Mitsuba's default film
     w = s.camera.window
-    assert (w.film_width, w.film_height, w.crop_size) == (768, 576, (10, 576))  # tests/test_film_window.py
+    assert (w.film_width, w.film_height, w.crop_size) == (768, 576, (10, 576))  # tests/render/test_film_window.py
     # Mitsuba's focus distance defaults to the far clip plane
     assert (s.camera.aperture_radius, s.camera.focus_distance) == (0.1, 1e4)
     assert s.settings.rfilter == "gaussian"  # the film's default filter

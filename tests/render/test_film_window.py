@@ -15,7 +15,7 @@ import pytest
 
 from drpt.scene import load_scene
 
-XML = Path(__file__).resolve().parent / "data" / "xml"
+XML = Path(__file__).resolve().parents[1] / "data" / "xml"  # tests/data/xml
 
 
 def _camera_xml(path: Path, plugin: str, crop, ppo, W=48, H=30) -> Path:
@@ -142,7 +142,7 @@ def test_kernel_op_count_unchanged_without_a_window():
     from drpt.options import RenderOptions
     from drpt.render.renderer import Renderer
 
-    cornell = Path(__file__).resolve().parents[1] / "scenes" / "cornellbox" / "cornellbox.txt"
+    cornell = Path(__file__).resolve().parents[2] / "scenes" / "cornellbox" / "cornellbox.txt"
     s = load_scene(cornell)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:

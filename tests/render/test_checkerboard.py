@@ -17,7 +17,7 @@ from drpt.scene import load_scene
 from drpt.shading import Checkerboard
 
 pytestmark = pytest.mark.mitsuba
-XML = Path(__file__).resolve().parent / "data" / "xml"
+XML = Path(__file__).resolve().parents[1] / "data" / "xml"  # tests/data/xml
 TO_UV = '<transform name="to_uv"><scale x="4" y="3"/><rotate z="1" angle="20"/><translate x="0.3"/></transform>'
 
 

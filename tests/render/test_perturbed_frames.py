@@ -34,7 +34,7 @@ from drpt.scene.model import Background, Material, PerspectiveCamera, Planes, Sc
 from drpt.shading import BSDFSpec, Texture, complete
 from drpt.testing import mitsuba, spherical_chi2
 
-XML = Path(__file__).resolve().parent / "data" / "xml"
+XML = Path(__file__).resolve().parents[1] / "data" / "xml"  # tests/data/xml
 NORMALS = Texture(XML / "normals.png", (0.5, 0.5, 1.0), raw=True)
 BUMPS = Texture(XML / "bumps.png", 0.0, raw=True)
 
