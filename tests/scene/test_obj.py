@@ -12,7 +12,7 @@ import pytest
 from drpt.errors import SceneError
 from drpt.scene.obj import load_obj
 
-SEED = Path(__file__).resolve().parents[2] / "shared" / "seed"
+SEED = Path(__file__).resolve().parents[3] / "shared" / "seed"
 
 QUAD_V = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
 

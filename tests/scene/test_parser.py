@@ -21,7 +21,7 @@ from drpt.scene import (
 )
 from drpt.scene.tokens import tokenize
 
-SEED = Path(__file__).resolve().parents[2] / "shared" / "seed"
+SEED = Path(__file__).resolve().parents[3] / "shared" / "seed"
 
 CAM = "PerspectiveCamera { center 0 0 5 direction 0 0 -1 up 0 1 0 angle 45 }\n"
 TRI = "Triangle { vertex0 1 0 0 vertex1 0 1 0 vertex2 0 0 1 }"

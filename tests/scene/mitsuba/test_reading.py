@@ -18,7 +18,7 @@ from drpt.scene.mitsuba.nodes import Node
 
 _IS_CHILD = Node._is_child
 
-XML = Path(__file__).resolve().parent / "data" / "xml"
+XML = Path(__file__).resolve().parents[2] / "data" / "xml"  # tests/data/xml
 SENSOR = '<sensor type="perspective"><film type="hdrfilm"><integer name="width" value="8"/>' \
          '<integer name="height" value="8"/></film></sensor>'
 
@@ -177,7 +177,7 @@ def test_named_children_are_read_as_mitsuba_reads_them(tmp_path):
 def test_drpt_reads_its_own_export(tmp_path):
     from drpt.export.mitsuba import write_xml
 
-    src = load_scene(Path(__file__).resolve().parents[1] / "scenes" / "cornellbox" / "cornellbox.txt")
+    src = load_scene(Path(__file__).resolve().parents[3] / "scenes" / "cornellbox" / "cornellbox.txt")
     out = tmp_path / "cb.xml"
     write_xml(src, out, 16, 16, 4)
     s, warns = _load(out)
