@@ -14,7 +14,7 @@ from drpt.errors import DrptError
 from drpt.imageio import read_image, write_image
 from drpt.tools.compare import add_parser, main
 
-CORNELL = Path(__file__).resolve().parents[1] / "scenes" / "cornellbox" / "cornellbox.txt"
+CORNELL = Path(__file__).resolve().parents[2] / "scenes" / "cornellbox" / "cornellbox.txt"
 
 
 def run(*argv: str) -> int:
@@ -180,7 +180,7 @@ def test_control_gives_the_level_an_unbiased_renderer_reaches(tmp_path, capsys):
 
 
 # ------------------------------------------------------------------ the verdict
-XML = Path(__file__).resolve().parent / "data" / "xml"
+XML = Path(__file__).resolve().parents[1] / "data" / "xml"  # tests/data/xml
 
 
 def _gaussian_copy(tmp_path, name):

@@ -20,7 +20,7 @@ import pytest
 
 from drpt.testing import block_z
 
-SCENES = sorted((Path(__file__).resolve().parents[1] / "scenes").glob("*/*.txt"))
+SCENES = sorted((Path(__file__).resolve().parents[2] / "scenes").glob("*/*.txt"))
 SIZE, SPP = 32, 128
 
 

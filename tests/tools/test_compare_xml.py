@@ -21,7 +21,7 @@ import pytest
 
 pytestmark = pytest.mark.mitsuba
 
-XML = Path(__file__).resolve().parent / "data" / "xml"
+XML = Path(__file__).resolve().parents[1] / "data" / "xml"  # tests/data/xml
 
 
 def _compare(tmp_path, scene, *flags, out="out"):
