@@ -19,7 +19,7 @@ out-of-gamut negative components clamped to 0 -- hence the zeros, e.g. in
 
 for every ``name`` in Mitsuba's ``data/ior`` directory, and wrote them here
 as the shortest decimal strings that round-trip to the same float32.
-``tests/test_bsdf_conductor.py`` re-measures them against the installed
+``tests/render/bsdf/test_conductor.py`` re-measures them against the installed
 Mitsuba.
 
 ``material = "none"`` (the default): ``eta = 0, k = 1``, for which the

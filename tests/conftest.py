@@ -1,7 +1,10 @@
 """Shared test fixtures and helpers.
 
 ``SHARED`` is the ``shared/`` folder beside the repository checkout (the seed
-renderer's files); tests that read it skip cleanly when it is absent.
+renderer's files); tests that read it skip cleanly when it is absent. Tests take
+the repository's paths as fixtures (``repo``, ``scenes_dir``, ``cornell``); the
+constants ``REPO``, ``SCENES`` and ``SHARED`` stay for the helper modules.
+The statistical checks are in :mod:`drpt.testing`.
 """
 
 from __future__ import annotations
@@ -14,6 +17,24 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 SEED = SHARED / "seed"
 SCENES = REPO / "scenes"
+
+
+@pytest.fixture(scope="session")
+def repo() -> Path:
+    """The repository checkout's root."""
+    return REPO
+
+
+@pytest.fixture(scope="session")
+def scenes_dir() -> Path:
+    """The bundled scenes, ``scenes/``."""
+    return SCENES
+
+
+@pytest.fixture(scope="session")
+def cornell() -> Path:
+    """The bundled Cornell box, ``scenes/cornellbox/cornellbox.txt``."""
+    return SCENES / "cornellbox" / "cornellbox.txt"
 
 
 @pytest.fixture(params=[True, False], ids=["symbolic", "evaluated"])

@@ -19,22 +19,16 @@ sample count).
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from conftest import SHARED
+from drpt.testing import SRGB_TO_XYZ, ZTest, to_xyz, z_test  # noqa: F401
 
 CORPUS = SHARED / "corpus" / "mitsuba-data" / "tests" / "scenes"
-
-#: linear sRGB -> CIE XYZ (D65), the matrix of Mitsuba's ``srgb_to_xyz``; the test applies it
-#: to the images and (as Mitsuba's ``Bitmap.convert`` does) to the variance images alike
-SRGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423],
-                        [0.212671, 0.715160, 0.072169],
-                        [0.019334, 0.119193, 0.950227]])
 
 
 def corpus_scene(rel: str) -> Path:
@@ -59,39 +53,6 @@ def _read(path: Path) -> np.ndarray:
     if img.ndim == 2:
         img = img[..., None]
     return img[..., :3]
-
-
-def to_xyz(rgb: np.ndarray) -> np.ndarray:
-    return rgb @ SRGB_TO_XYZ.T
-
-
-@dataclass
-class ZTest:
-    passed: bool
-    fraction: float  # of pixel channels with p > alpha
-    alpha: float
-    min_p: float
-    spp: int
-
-    def __str__(self) -> str:
-        return (f"{'pass' if self.passed else 'FAIL'}: {self.fraction:.4%} of pixel channels "
-                f"p > {self.alpha:.2e} (need 99.75%), min p {self.min_p:.2e}, {self.spp} spp")
-
-
-def z_test(image_rgb: np.ndarray, spp: int, ref_rgb: np.ndarray, ref_var_rgb: np.ndarray,
-           significance: float = 0.01) -> ZTest:
-    """Mitsuba's render-test z-test of a drpt image (linear RGB, ``(H, W, 3)``) rendered at
-    ``spp`` against a reference and its per-sample variance (both linear RGB)."""
-    img = to_xyz(np.asarray(image_rgb, np.float64)[..., :3])
-    ref = to_xyz(ref_rgb)
-    var = np.maximum(to_xyz(ref_var_rgb), 1e-4)
-    z = np.abs(img - ref) * np.sqrt(spp / var)
-    p = np.array([math.erfc(v / math.sqrt(2.0)) for v in z.ravel()]).reshape(z.shape)
-    pixels = img.shape[0] * img.shape[1]
-    alpha = 1.0 - (1.0 - significance) ** (1.0 / pixels)
-    ok = p > alpha
-    frac = float(np.count_nonzero(ok)) / (3 * pixels)
-    return ZTest(frac >= 0.9975, frac, alpha, float(p.min()), spp)
 
 
 def render_as_authored(scene_path: Path, spp: int, seed: int = 0, **defines):

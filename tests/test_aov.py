@@ -9,14 +9,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from conftest import SCENES
 from drpt.aovs import parse_aovs, split
 from drpt.errors import DrptError, SceneError
 from drpt.options import RenderOptions, apply_scene_settings
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-
-CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
 
 #: every supported AOV type; a sphere (analytic), a rectangle and a cube (meshes with
 #: uvs), diffuse and rough-conductor BSDFs, a constant sky; Mitsuba's depth is measured
@@ -224,7 +221,7 @@ def test_albedo_of_masks_and_blends_is_mitsubas(tmp_path):
 
 
 # ------------------------------------------------------------------ the kernel
-def test_aov_kernel_is_traced_only_when_asked_for(monkeypatch):
+def test_aov_kernel_is_traced_only_when_asked_for(monkeypatch, cornell):
     from drpt.render import aov
 
     def trap(*args, **kwargs):
@@ -232,21 +229,21 @@ def test_aov_kernel_is_traced_only_when_asked_for(monkeypatch):
 
     monkeypatch.setattr(aov, "aov_values", trap)
     opts = RenderOptions(width=4, height=4, spp=1, progress=False)
-    r = Renderer(load_scene(CORNELL), opts).render()  # no AOVs: no AOV kernel
+    r = Renderer(load_scene(cornell), opts).render()  # no AOVs: no AOV kernel
     assert r.aov is None
     with pytest.raises(RuntimeError, match="traced"):
-        Renderer(load_scene(CORNELL), replace(opts, aovs=parse_aovs("depth"))).render()
+        Renderer(load_scene(cornell), replace(opts, aovs=parse_aovs("depth"))).render()
     with pytest.raises(RuntimeError, match="traced"):
-        Renderer(load_scene(CORNELL), replace(opts, denoise=True)).render()
+        Renderer(load_scene(cornell), replace(opts, denoise=True)).render()
 
 
 @pytest.mark.parametrize("flags", [{}, {"filter": "gaussian"}, {"integrator": "ptracer"}],
                          ids=["box", "gaussian", "ptracer"])
-def test_aovs_leave_the_image_bit_for_bit(flags):
+def test_aovs_leave_the_image_bit_for_bit(flags, cornell):
     """The AOV kernel draws from random streams of its own: the image and its variance
     are those of a render without AOVs (light tracing's variance to float64 rounding: its
     film adds splats atomically, in varying order, :mod:`drpt.render.film`)."""
-    scene = load_scene(CORNELL)
+    scene = load_scene(cornell)
     opts = RenderOptions(width=12, height=10, spp=3, progress=False, **flags)
     plain = Renderer(scene, opts).render()
     with_aovs = Renderer(scene, replace(opts, aovs=parse_aovs("depth,uv,albedo"), denoise=True)).render()
@@ -258,10 +255,10 @@ def test_aovs_leave_the_image_bit_for_bit(flags):
     assert with_aovs.aov.shape == (10, 12, 1 + 2 + 3 + 6) and np.isfinite(with_aovs.aov).all()
 
 
-def test_chunked_and_resumed_aovs_equal_the_plain_render(tmp_path):
+def test_chunked_and_resumed_aovs_equal_the_plain_render(tmp_path, cornell):
     from drpt.distributed import job
 
-    scene = load_scene(CORNELL)
+    scene = load_scene(cornell)
     opts = RenderOptions(width=16, height=12, spp=8, progress=False, aovs=parse_aovs("depth,albedo"),
                          denoise=True, max_lanes=16 * 12 * 2)
     plain = Renderer(scene, opts).render()
@@ -312,13 +309,13 @@ def test_guides_follow_mirrors_to_the_first_other_surface(tmp_path):
 
 
 # ------------------------------------------------------------------ command line
-def test_render_writes_aov_layers(tmp_path):
+def test_render_writes_aov_layers(tmp_path, cornell):
     import OpenEXR
 
     from drpt.cli import main
 
     out = tmp_path / "x.exr"
-    assert main(["render", str(CORNELL), "--size", "8", "8", "--spp", "2", "-q",
+    assert main(["render", str(cornell), "--size", "8", "8", "--spp", "2", "-q",
                  "--aovs", "depth,nn:normal", "-o", str(out)]) == 0
     with OpenEXR.File(str(out)) as f:
         names = set(f.channels())
@@ -329,10 +326,10 @@ def test_render_writes_aov_layers(tmp_path):
     (["--aovs", "depth", "-o", "x.png"], "holds no extra layers: write an .exr"),
     (["--aovs", "depth,dp_du", "-o", "x.exr"], "'dp_du' is not supported"),
     (["--aovs", "shape_index", "-o", "x.exr"], "need a Mitsuba XML scene")])
-def test_aov_flag_errors_are_one_line(tmp_path, capsys, flags, message):
+def test_aov_flag_errors_are_one_line(tmp_path, capsys, flags, message, cornell):
     from drpt.cli import main
 
     flags = [str(tmp_path / f) if f.startswith("x.") else f for f in flags]
-    assert main(["render", str(CORNELL), "--size", "8", "8", "--spp", "1", "-q", *flags]) == 2
+    assert main(["render", str(cornell), "--size", "8", "8", "--spp", "1", "-q", *flags]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Float, UInt32
 
-from chi2util import mitsuba
 from drpt.render.texture import TextureSet
 from drpt.shading import Texture
+from drpt.testing import mitsuba
 
 TO_UV = (2.0, 0.3, -0.5, -0.2, 2.0, -0.5, 0.0, 0.0, 1.0)
 
@@ -111,7 +111,7 @@ def test_scene_renders_like_mitsuba():
     from drpt.options import RenderOptions, apply_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
-    from render_check import assert_agree, block_z
+    from drpt.testing import assert_agree, block_z
     from test_mitsuba_xml import _render_both
 
     path = Path(__file__).resolve().parent / "data" / "xml" / "bitmap_options.xml"

@@ -2,15 +2,16 @@
 
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import SCENES
 from drpt.cli import main
 from drpt.imageio import read_image
 
-CORNELL = str(SCENES / "cornellbox" / "cornellbox.txt")
+# a module constant, not the cornell fixture: the parametrize tables below name it
+CORNELL = str(Path(__file__).resolve().parents[1] / "scenes" / "cornellbox" / "cornellbox.txt")
 
 
 def run(args):
@@ -264,10 +265,10 @@ def test_backend_flag_names_the_loaded_backend_in_process(tmp_path):
                  "-o", str(tmp_path / "a.png"), "--quiet"]) == 0
 
 
-def test_scene_warnings_print_on_one_line_each(tmp_path):
+def test_scene_warnings_print_on_one_line_each(tmp_path, cornell):
     import shutil
 
-    for f in (SCENES / "cornellbox").iterdir():
+    for f in cornell.parent.iterdir():
         shutil.copy(f, tmp_path / f.name)
     obj = tmp_path / "cornellbox.obj"
     obj.write_text(obj.read_text() + "zz 1 2 3\n")

@@ -6,10 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from conftest import SCENES
 from drpt.cli import main
-
-CORNELL = str(SCENES / "cornellbox" / "cornellbox.txt")
 
 
 def _error(capsys, args):
@@ -21,45 +18,45 @@ def _error(capsys, args):
     return err[0]
 
 
-def test_unknown_flag_names_the_command_s_help_and_the_flag_meant(capsys):
-    err = _error(capsys, ["render", CORNELL, "--sizee", "64", "64"])
+def test_unknown_flag_names_the_command_s_help_and_the_flag_meant(capsys, cornell):
+    err = _error(capsys, ["render", str(cornell), "--sizee", "64", "64"])
     assert err.startswith("drpt: error: render: unrecognized arguments: --sizee 64 64"), err
     assert "did you mean --size?" in err and err.endswith("(see drpt render --help)"), err
-    err = _error(capsys, ["compare", CORNELL, "--controll"])
+    err = _error(capsys, ["compare", str(cornell), "--controll"])
     assert "did you mean --control?" in err and "(see drpt compare --help)" in err, err
-    err = _error(capsys, ["rendr", CORNELL])
+    err = _error(capsys, ["rendr", str(cornell)])
     assert "did you mean render?" in err and err.endswith("(see drpt --help)"), err
 
 
 @pytest.mark.parametrize("flag, meant", [("--sp", "--spp"), ("-Monte", "-MonteCarlo"),
                                          ("-cook", "-cook_torrance")])
-def test_no_flag_is_abbreviated(capsys, flag, meant):
+def test_no_flag_is_abbreviated(capsys, flag, meant, cornell):
     """``--sp`` was refused while ``-Monte`` was taken for ``-MonteCarlo``: one rule, none."""
-    args = ["render", "-input", CORNELL, "--size", "4", "4", flag]
+    args = ["render", "-input", str(cornell), "--size", "4", "4", flag]
     if flag == "--sp":
         args.append("2")
     err = _error(capsys, args)
     assert "unrecognized argument" in err and f"did you mean {meant}?" in err, err
 
 
-def test_attached_values_of_one_letter_flags_still_work(tmp_path):
+def test_attached_values_of_one_letter_flags_still_work(tmp_path, cornell):
     out = tmp_path / "x.exr"
-    assert main(["render", CORNELL, "--size", "4", "4", "--spp", "1", f"-o{out}", "-q"]) == 0
+    assert main(["render", str(cornell), "--size", "4", "4", "--spp", "1", f"-o{out}", "-q"]) == 0
     assert out.is_file()
 
 
-def test_xml_flags_on_a_text_scene_say_they_do_nothing(tmp_path, capsys):
+def test_xml_flags_on_a_text_scene_say_they_do_nothing(tmp_path, capsys, cornell):
     out = tmp_path / "x.exr"
-    assert main(["render", CORNELL, "--size", "4", "4", "--spp", "1", "-o", str(out), "-q",
+    assert main(["render", str(cornell), "--size", "4", "4", "--spp", "1", "-o", str(out), "-q",
                  "-D", "spp=4", "--strict"]) == 0
     err = capsys.readouterr().err
     assert "drpt: note: " in err and "-D and --strict apply to Mitsuba XML scenes only" in err, err
-    assert main(["render", CORNELL, "--size", "4", "4", "--spp", "1", "-o", str(out), "-q"]) == 0
+    assert main(["render", str(cornell), "--size", "4", "4", "--spp", "1", "-o", str(out), "-q"]) == 0
     assert "note" not in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------ distributed renders
-def test_resumed_render_counts_only_the_samples_it_traced(tmp_path, capsys):
+def test_resumed_render_counts_only_the_samples_it_traced(tmp_path, capsys, cornell):
     """After --resume the summary's samples/s counted the checkpoint's samples as rendered
     now (3x too high when two thirds came from it)."""
     from drpt.cli import main as drpt_main
@@ -78,22 +75,22 @@ def test_resumed_render_counts_only_the_samples_it_traced(tmp_path, capsys):
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        run(load_scene(CORNELL), opts, out, checkpoint_seconds=0, on_chunk=stop)
+        run(load_scene(str(cornell)), opts, out, checkpoint_seconds=0, on_chunk=stop)
     capsys.readouterr()
-    job = run(load_scene(CORNELL), opts, out, resume=True)
+    job = run(load_scene(str(cornell)), opts, out, resume=True)
     assert job.resumed_spp == 4
     assert job.result.samples == 8 * 8 * 2
     with pytest.raises(KeyboardInterrupt):
-        run(load_scene(CORNELL), opts, out, checkpoint_seconds=0, on_chunk=stop)
+        run(load_scene(str(cornell)), opts, out, checkpoint_seconds=0, on_chunk=stop)
     capsys.readouterr()
-    flags = ["render", CORNELL, "--size", "8", "8", "--spp", "6", "--chunk-spp", "1", "-o", str(out), "-q"]
+    flags = ["render", str(cornell), "--size", "8", "8", "--spp", "6", "--chunk-spp", "1", "-o", str(out), "-q"]
     assert drpt_main([*flags, "--resume"]) == 0
     assert "6 spp (4 from the checkpoint, 2 now)" in capsys.readouterr().out
     assert drpt_main(flags) == 0
     assert "from the checkpoint" not in capsys.readouterr().out
 
 
-def test_workers_left_idle_and_replaced_workers_are_explained(tmp_path, capsys, monkeypatch):
+def test_workers_left_idle_and_replaced_workers_are_explained(tmp_path, capsys, monkeypatch, cornell):
     import drpt.distributed.engine as engine
     from drpt.distributed.job import Job, WorkerStats, print_workers, run
     from drpt.errors import DrptError
@@ -107,7 +104,7 @@ def test_workers_left_idle_and_replaced_workers_are_explained(tmp_path, capsys, 
     monkeypatch.setattr(engine, "DaskEngine", NoCluster)
     opts = RenderOptions(width=8, height=8, spp=4, progress=False)  # one chunk
     with pytest.raises(DrptError):
-        run(load_scene(CORNELL), opts, tmp_path / "x.exr", workers=2)
+        run(load_scene(str(cornell)), opts, tmp_path / "x.exr", workers=2)
     err = capsys.readouterr().err
     assert "the render is 1 chunk for 2 workers: 1 will have nothing to do" in err
     assert "--chunk-spp" in err
@@ -122,8 +119,8 @@ def test_workers_left_idle_and_replaced_workers_are_explained(tmp_path, capsys, 
     assert "replaced" not in capsys.readouterr().err
 
 
-def test_an_ignored_plugin_is_reported_once(tmp_path, capsys):
-    sensor = SCENES.parent / "tests" / "data" / "xml" / "common_sensor.xml"
+def test_an_ignored_plugin_is_reported_once(tmp_path, capsys, scenes_dir):
+    sensor = scenes_dir.parent / "tests" / "data" / "xml" / "common_sensor.xml"
     scene = tmp_path / "s.xml"
     scene.write_text(f'<scene version="3.0.0"><include filename="{sensor}"/>'
                      '<shape type="sphere"><bsdf type="nosuchbsdf"/></shape>'
@@ -134,25 +131,25 @@ def test_an_ignored_plugin_is_reported_once(tmp_path, capsys):
     assert len(lines) == 1 and lines[0].startswith("drpt: warning: "), lines
 
 
-def test_export_and_render_refuse_a_missing_output_folder_alike(tmp_path, capsys):
+def test_export_and_render_refuse_a_missing_output_folder_alike(tmp_path, capsys, cornell):
     """export made a missing folder where render refuses one: one rule, refuse."""
-    for args in (["render", CORNELL, "--size", "4", "4", "--spp", "1", "-o",
+    for args in (["render", str(cornell), "--size", "4", "4", "--spp", "1", "-o",
                   str(tmp_path / "no" / "x.exr")],
-                 ["export", CORNELL, str(tmp_path / "no" / "x.xml")]):
+                 ["export", str(cornell), str(tmp_path / "no" / "x.xml")]):
         assert main(args) == 2
         err = capsys.readouterr().err.strip()
         assert err.endswith(f"folder {tmp_path / 'no'} does not exist"), err
     assert not (tmp_path / "no").exists()
-    assert main(["export", CORNELL, str(tmp_path / "x.xml")]) == 0
+    assert main(["export", str(cornell), str(tmp_path / "x.xml")]) == 0
 
 
 @pytest.mark.slow
-def test_gui_says_what_starts_the_render_and_can_time_out(tmp_path, capsys):
+def test_gui_says_what_starts_the_render_and_can_time_out(tmp_path, capsys, cornell):
     """-gui printed only its address: nothing said that "render" or closing the page
     starts the render, and with no browser it waited for ever."""
     pytest.importorskip("viser")
     out = tmp_path / "x.exr"
-    assert main(["render", CORNELL, "--size", "8", "8", "--spp", "1", "-o", str(out), "-q",
+    assert main(["render", str(cornell), "--size", "8", "8", "--spp", "1", "-o", str(out), "-q",
                  "-gui", "--port", "0", "--gui-timeout", "0.5"]) == 0
     text = capsys.readouterr()
     assert "drpt view: http://" in text.out
@@ -160,5 +157,5 @@ def test_gui_says_what_starts_the_render_and_can_time_out(tmp_path, capsys):
     assert "With no page open after 0.5 s it renders the scene's camera" in text.out
     assert "no page opened the viewer within --gui-timeout 0.5 s" in text.err
     assert out.is_file()
-    assert main(["render", CORNELL, "--gui-timeout", "1", "-o", str(out)]) == 2
+    assert main(["render", str(cornell), "--gui-timeout", "1", "-o", str(out)]) == 2
     assert "--gui-timeout applies to -gui" in capsys.readouterr().err

@@ -69,7 +69,6 @@ import math
 import numpy as np
 import pytest
 
-from conftest import REPO
 from drpt.tools import converge
 from drpt.tools.converge import (
     equal_time_ratios,
@@ -82,7 +81,6 @@ from drpt.tools.converge import (
 )
 from drpt.tools.reference import REFERENCES, reference_path, variance_path
 
-CORNELL = REPO / "scenes" / "cornellbox" / "cornellbox.txt"
 LEVELS = (4, 8, 16, 32, 64)
 SLOPE_TOL = 0.25
 BIAS_FRACTION = 0.25
@@ -437,10 +435,10 @@ def _run(module, *argv: str) -> int:
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-def test_converge_cli_smoke(tmp_path, capsys):
+def test_converge_cli_smoke(tmp_path, capsys, cornell):
     pytest.importorskip("mitsuba")
     out = tmp_path / "cv"
-    assert _run(converge, CORNELL, "--size", "16", "16", "--max-spp", "8", "--ref-spp", "64",
+    assert _run(converge, cornell, "--size", "16", "16", "--max-spp", "8", "--ref-spp", "64",
                 "--cache", tmp_path / "cache", "--out", out, "-q") == 0
     text = capsys.readouterr().out
     assert "equal-time error ratio" in text and "time to error" in text
@@ -456,27 +454,27 @@ def test_converge_cli_smoke(tmp_path, capsys):
     assert len(list((tmp_path / "cache").glob("*.npz"))) == 1
 
 
-def test_converge_rejects_bad_arguments(tmp_path):
+def test_converge_rejects_bad_arguments(tmp_path, cornell):
     from drpt.errors import DrptError
 
     with pytest.raises(DrptError, match="--ref-spp"):
-        _run(converge, CORNELL, "--max-spp", "64", "--ref-spp", "64", "--out", tmp_path / "o")
+        _run(converge, cornell, "--max-spp", "64", "--ref-spp", "64", "--out", tmp_path / "o")
     with pytest.raises(DrptError, match="--max-spp"):
-        _run(converge, CORNELL, "--max-spp", "0", "--out", tmp_path / "o")
+        _run(converge, cornell, "--max-spp", "0", "--out", tmp_path / "o")
     with pytest.raises(DrptError, match="--levels"):
-        _run(converge, CORNELL, "--levels", "0", "--out", tmp_path / "o")
+        _run(converge, cornell, "--levels", "0", "--out", tmp_path / "o")
 
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-def test_knobs_cli_smoke(tmp_path, capsys):
+def test_knobs_cli_smoke(tmp_path, capsys, cornell):
     pytest.importorskip("mitsuba")
     from drpt.tools import knobs
 
     out = tmp_path / "kn"
     # (32 spp, a 256-spp reference: the bias's standard error, its channels taken as
     # correlated, is ~6% here, so direct light only, -30%, is beyond 3 of them)
-    assert _run(knobs, CORNELL, "--size", "16", "16", "--spp", "32", "--ref-spp", "256",
+    assert _run(knobs, cornell, "--size", "16", "16", "--spp", "32", "--ref-spp", "256",
                 "--knobs", "depth", "accel", "--depths", "2", "--repeats", "1",
                 "--cache", tmp_path / "cache", "--out", out, "-q") == 0
     text = capsys.readouterr().out

@@ -9,21 +9,18 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import SCENES
 from drpt.metrics import rel_mse
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
-CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
 
-
-def test_render_denoise_keeps_the_raw_image_and_writes_the_denoised_one(tmp_path):
+def test_render_denoise_keeps_the_raw_image_and_writes_the_denoised_one(tmp_path, cornell):
     pytest.importorskip("pyoidn")
     from drpt.cli import main
     from drpt.imageio import read_image
 
-    flags = ["render", str(CORNELL), "--size", "16", "16", "--spp", "4", "-q"]
+    flags = ["render", str(cornell), "--size", "16", "16", "--spp", "4", "-q"]
     assert main([*flags, "-o", str(tmp_path / "plain.exr")]) == 0
     assert main([*flags, "--denoise", "-o", str(tmp_path / "x.exr")]) == 0
     # the guides come from random streams of their own: the raw image is the plain render's
@@ -33,26 +30,26 @@ def test_render_denoise_keeps_the_raw_image_and_writes_the_denoised_one(tmp_path
     assert not np.array_equal(denoised, read_image(tmp_path / "x.exr"))
 
 
-def test_denoise_without_pyoidn_is_one_error_before_rendering(tmp_path, capsys, monkeypatch):
+def test_denoise_without_pyoidn_is_one_error_before_rendering(tmp_path, capsys, monkeypatch, cornell):
     from drpt.cli import main
 
     monkeypatch.setitem(sys.modules, "pyoidn", None)  # import pyoidn raises ImportError
     out = tmp_path / "x.exr"
-    assert main(["render", str(CORNELL), "--size", "8", "8", "--spp", "1", "-q", "--denoise",
+    assert main(["render", str(cornell), "--size", "8", "8", "--spp", "1", "-q", "--denoise",
                  "-o", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--denoise needs" in err[0] and "pip install pyoidn" in err[0]
     assert not out.exists()
 
 
-def test_denoised_image_is_closer_to_the_converged_one():
+def test_denoised_image_is_closer_to_the_converged_one(cornell):
     """Cornell box 64x64: against a 256-spp render, the denoised 16-spp image's relMSE is
     below 0.6 x the raw 16-spp image's (measured: 0.24x for this seed, 0.24x-0.43x over
     seeds 1-3). Negative control: the denoised image one pixel row off fails it (37x)."""
     pytest.importorskip("pyoidn")
     from drpt.denoise import denoise_result
 
-    scene = load_scene(CORNELL)
+    scene = load_scene(cornell)
     ref = Renderer(scene, RenderOptions(width=64, height=64, spp=256, seed=9, progress=False)).render()
     r = Renderer(scene, RenderOptions(width=64, height=64, spp=16, seed=1, denoise=True,
                                       progress=False)).render()
@@ -83,7 +80,7 @@ def _run(module, *argv) -> int:
 
 
 @pytest.mark.mitsuba
-def test_converge_reports_the_denoised_error(tmp_path, capsys):
+def test_converge_reports_the_denoised_error(tmp_path, capsys, cornell):
     pytest.importorskip("pyoidn")
     pytest.importorskip("mitsuba")
     import csv
@@ -91,7 +88,7 @@ def test_converge_reports_the_denoised_error(tmp_path, capsys):
     from drpt.tools import converge
 
     out = tmp_path / "cv"
-    assert _run(converge, CORNELL, "--size", "16", "16", "--max-spp", "4", "--ref-spp", "64",
+    assert _run(converge, cornell, "--size", "16", "16", "--max-spp", "4", "--ref-spp", "64",
                 "--denoise", "--cache", tmp_path / "cache", "--out", out, "-q") == 0
     assert "oidn err" in capsys.readouterr().out
     with open(out / "converge.csv", newline="") as fh:
@@ -104,7 +101,7 @@ def test_converge_reports_the_denoised_error(tmp_path, capsys):
 
 
 @pytest.mark.mitsuba
-def test_knobs_has_a_denoise_row(tmp_path, capsys):
+def test_knobs_has_a_denoise_row(tmp_path, capsys, cornell):
     pytest.importorskip("pyoidn")
     pytest.importorskip("mitsuba")
     import json
@@ -112,7 +109,7 @@ def test_knobs_has_a_denoise_row(tmp_path, capsys):
     from drpt.tools import knobs
 
     out = tmp_path / "kn"
-    assert _run(knobs, CORNELL, "--size", "16", "16", "--spp", "8", "--ref-spp", "64",
+    assert _run(knobs, cornell, "--size", "16", "16", "--spp", "8", "--ref-spp", "64",
                 "--knobs", "denoise", "--repeats", "2", "--cache", tmp_path / "cache",
                 "--out", out, "-q") == 0
     rows = json.loads((out / "knobs.json").read_text())["rows"]

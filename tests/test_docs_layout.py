@@ -6,9 +6,8 @@ from __future__ import annotations
 
 import re
 
-from conftest import REPO
+DOC = "docs/architecture.md"
 
-DOC = REPO / "docs" / "architecture.md"
 
 
 def _table(text: str) -> dict[str, set[str]]:
@@ -22,12 +21,12 @@ def _table(text: str) -> dict[str, set[str]]:
     return rows
 
 
-def _tree() -> dict[str, set[str]]:
+def _tree(repo) -> dict[str, set[str]]:
     out: dict[str, set[str]] = {}
-    for p in (REPO / "drpt").rglob("*.py"):
+    for p in (repo / "drpt").rglob("*.py"):
         if p.name in ("__init__.py", "__main__.py"):
             continue
-        out.setdefault(str(p.parent.relative_to(REPO)), set()).add(p.name)
+        out.setdefault(str(p.parent.relative_to(repo)), set()).add(p.name)
     return out
 
 
@@ -44,13 +43,13 @@ def _problems(table: dict[str, set[str]], tree: dict[str, set[str]]) -> list[str
     return out
 
 
-def test_layout_table_matches_the_tree():
-    assert _problems(_table(DOC.read_text()), _tree()) == []
+def test_layout_table_matches_the_tree(repo):
+    assert _problems(_table((repo / DOC).read_text()), _tree(repo)) == []
 
 
-def test_the_check_catches_a_missing_and_an_invented_module():
-    table = _table(DOC.read_text())
-    tree = _tree()
+def test_the_check_catches_a_missing_and_an_invented_module(repo):
+    table = _table((repo / DOC).read_text())
+    tree = _tree(repo)
     table["drpt/render"] = table["drpt/render"] - {"film.py"}
     table["drpt/tools"] = table["drpt/tools"] | {"nonexistent.py"}
     problems = _problems(table, tree)

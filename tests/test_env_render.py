@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from drpt.scene import load_scene
+from drpt.testing import assert_agree, render_both
 from drpt.tools.scenegen import envsun
-from render_check import assert_agree, render_both
 
 # envsun's "glossy" material (Kd + Ks = 1.1) is scaled to reflect 1, in drpt and in the
 # export alike: the exporter says so, and the tests that use it expect that warning

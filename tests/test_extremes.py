@@ -8,13 +8,11 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from conftest import SCENES
 from drpt.cli import main
 from drpt.errors import DrptError
 from drpt.imageio import read_image, write_image
 from drpt.options import RenderOptions
 
-CORNELL = str(SCENES / "cornellbox" / "cornellbox.txt")
 CAMERA = "PerspectiveCamera { center 0 0 0 direction 0 0 -1 up 0 1 0 angle 30 }\n"
 EMPTY_WARNING = "the scene has no primitives"
 
@@ -101,8 +99,8 @@ def test_compare_of_an_empty_scene(tmp_path, capsys):
     (["--gamma", "nan"], "--gamma"),
     (["--output", ""], "--output is empty"),
 ])
-def test_render_flag_limits(tmp_path, capsys, flags, needle):
-    args = ["render", CORNELL, "--size", "4", "4", "--spp", "1", "-q", "-o", str(tmp_path / "x.png")]
+def test_render_flag_limits(tmp_path, capsys, flags, needle, cornell):
+    args = ["render", str(cornell), "--size", "4", "4", "--spp", "1", "-q", "-o", str(tmp_path / "x.png")]
     assert main(args + flags) == 2
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1 and err.startswith("drpt: error:")
@@ -121,9 +119,9 @@ def test_flag_limits_allow_their_bounds():
     (["--spp", "0"], "--spp"), (["--spp", str(2 ** 32)], "--spp"),
     (["--size", "0", "4"], "size must be positive"),
 ])
-def test_export_validates_as_render(tmp_path, capsys, flags, needle):
+def test_export_validates_as_render(tmp_path, capsys, flags, needle, cornell):
     xml = tmp_path / "x.xml"
-    assert main(["export", CORNELL, str(xml), *flags]) == 2
+    assert main(["export", str(cornell), str(xml), *flags]) == 2
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1
     assert not xml.exists()

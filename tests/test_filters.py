@@ -75,16 +75,15 @@ def test_filter_flag_and_options(capsys):
 
 
 @pytest.mark.slow
-def test_filter_on_the_command_line(tmp_path):
+def test_filter_on_the_command_line(tmp_path, cornell):
     """render and export take --filter; export writes the matching rfilter;
     a bad value is one line, exit status 2, nothing written."""
     import subprocess
     import sys
 
-    from conftest import SCENES
     from drpt.cli import main
 
-    scene = str(SCENES / "cornellbox" / "cornellbox.txt")
+    scene = str(cornell)
     out = tmp_path / "g.exr"
     assert main(["render", scene, "--size", "8", "6", "--spp", "2", "--filter", "gaussian",
                  "-o", str(out), "--quiet"]) == 0 and out.is_file()
@@ -264,7 +263,7 @@ def edge(tmp_path_factory):
 @pytest.fixture(scope="module")
 def mitsuba(edge):
     """``get(rfilter)``: Mitsuba's batches of the edge scene (cached)."""
-    from render_check import mitsuba_runs
+    from drpt.testing import mitsuba_runs
 
     runs = {}
 
@@ -285,7 +284,7 @@ def _drpt(scene, flt, spp=SPP, seed=1, filter_sampling=False):
 
 
 def _max_z(r, runs, block=4):
-    from render_check import block_z_correlated
+    from drpt.testing import block_z_correlated
 
     assert np.all(np.isfinite(r.image)) and r.nonfinite == 0
     z, f = block_z_correlated(r.image, r.variance, runs, block=block)
@@ -353,7 +352,7 @@ def test_noise_per_pixel_filter_importance_sampling_vs_splatting(tmp_path):
     noisy image (drpt: its estimated variance; Mitsuba: across 8 runs)."""
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
-    from render_check import mitsuba_runs
+    from drpt.testing import mitsuba_runs
 
     (tmp_path / "wall.txt").write_text(LIT_WALL)
     scene = load_scene(tmp_path / "wall.txt")

@@ -44,7 +44,7 @@ import numpy as np
 import pytest
 
 from drpt.scene import load_scene
-from render_check import BATCHES, block_z, mitsuba_runs, render_both
+from drpt.testing import BATCHES, block_z, mitsuba_runs, render_both
 
 pytestmark = [pytest.mark.slow, pytest.mark.mitsuba]
 

@@ -10,7 +10,7 @@ import contextlib
 import pytest
 
 from drpt.scene import load_scene
-from render_check import assert_agree, render_both
+from drpt.testing import assert_agree, render_both
 
 pytestmark = pytest.mark.mitsuba
 
@@ -166,7 +166,7 @@ def test_composite_negative_control(tmp_path, monkeypatch):
     import numpy as np
 
     from drpt.export import mitsuba as ex
-    from render_check import block_z
+    from drpt.testing import block_z
 
     real = ex.bsdf_to_mitsuba
 

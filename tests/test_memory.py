@@ -66,15 +66,13 @@ def test_render_kinds_have_their_bytes_per_pixel():
 
 
 @pytest.mark.slow
-def test_a_local_render_s_peak_memory_per_pixel(tmp_path):
+def test_a_local_render_s_peak_memory_per_pixel(tmp_path, repo):
     """Peak resident memory of a 1 spp render at 1024x1024 and 2048x2048 (``ru_maxrss`` of
     the child process), the difference per pixel: at most BYTES_PER_PIXEL_LOCAL (measured
     66-74 B; the sums are 48). A render that kept each chunk's full-image sums apart, as
     before passes were added straight into the merge, measured 178 B and fails it."""
     import subprocess
     import sys
-
-    from conftest import REPO
 
     peaks = []
     for size in (1024, 2048):
@@ -83,7 +81,7 @@ def test_a_local_render_s_peak_memory_per_pixel(tmp_path):
                 "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)")
         out = subprocess.run([sys.executable, "-c", code, sys.executable, "-m", "drpt", "render", str(CORNELL),
                               "--size", str(size), str(size), "--spp", "1", "-q",
-                              "-o", str(tmp_path / f"{size}.exr")], check=True, cwd=REPO,
+                              "-o", str(tmp_path / f"{size}.exr")], check=True, cwd=repo,
                              capture_output=True, text=True).stdout
         peaks.append(int(out.split()[-1]) * 1024)
     per_pixel = (peaks[1] - peaks[0]) / (2048 * 2048 - 1024 * 1024)

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from drjit.auto import Bool, Float, UInt32
 
-from chi2util import mitsuba
 from drpt.scene import load_scene
+from drpt.testing import mitsuba
 
 
 def _write_ply(path: Path, n=5, seed=0):
@@ -128,7 +128,7 @@ def test_lookups_equal_mitsubas_eval(tmp_path, name):
 def test_renders_like_mitsuba(tmp_path, name):
     """The mesh lit by a directional light, direct integrator, 128 spp, 4x4 block z-test
     (|z| < 4.5 over 64 blocks x 3 channels)."""
-    from render_check import assert_agree
+    from drpt.testing import assert_agree
     from test_mitsuba_xml import _render_both
 
     ply = _write_ply(tmp_path / "grid.ply")

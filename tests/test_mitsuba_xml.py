@@ -13,7 +13,7 @@ composites) and ``legacy06`` (a 0.6 file: camelCase names, serialized meshes, pa
 plugins do not read). All but ``legacy06`` (which Mitsuba 3 itself refuses) are rendered here
 by drpt and by Mitsuba *from the same file* (block z-test, tests/render_check.py, and the z of
 the image mean), and so is ``aniso`` (an anisotropic roughconductor on a sphere and a
-rectangle: shading frames follow Mitsuba's dp/du; tests/test_perturbed_frames.py has the
+rectangle: shading frames follow Mitsuba's dp/du; tests/render/test_perturbed_frames.py has the
 meshes, the rotated sphere, normal and bump maps and their negative controls).
 """
 
@@ -297,7 +297,7 @@ def test_crop_window_and_thin_lens_reach_the_camera(tmp_path):
     assert not caught
     assert (s.settings.width, s.settings.height) == (10, 576)  # the crop of Mitsuba's default film
     w = s.camera.window
-    assert (w.film_width, w.film_height, w.crop_size) == (768, 576, (10, 576))  # tests/test_film_window.py
+    assert (w.film_width, w.film_height, w.crop_size) == (768, 576, (10, 576))  # tests/render/test_film_window.py
     # Mitsuba's focus distance defaults to the far clip plane
     assert (s.camera.aperture_radius, s.camera.focus_distance) == (0.1, 1e4)
     assert s.settings.rfilter == "gaussian"  # the film's default filter
@@ -519,7 +519,7 @@ def _render_both(scene, path: Path, spp: int, defines: dict | None = None, seed:
 def test_corpus_renders_like_mitsuba(name):
     """drpt and Mitsuba render the very same XML file alike (8x8 block z-test): the file's own
     size, integrator, depths and filter (box), no extra flags."""
-    from render_check import assert_agree
+    from drpt.testing import assert_agree
 
     scene, _ = load(name)
     r, ref, var = _render_both(scene, XML / f"{name}.xml", 256)
@@ -540,7 +540,7 @@ def _mean_z(r, ref, var):
 @pytest.mark.slow
 @pytest.mark.mitsuba
 def test_anisotropic_roughconductor_on_a_sphere_renders_like_mitsuba():
-    from render_check import assert_agree
+    from drpt.testing import assert_agree
 
     scene, _ = load("aniso")
     r, ref, var = _render_both(scene, XML / "aniso.xml", 256)
@@ -555,7 +555,7 @@ def test_negative_controls_fail_the_z_test(what):
     """The render check catches a wrong reading of the file: each perturbed scene must FAIL."""
     from dataclasses import replace
 
-    from render_check import block_z
+    from drpt.testing import block_z
 
     if what == "envmap rotation":
         scene, _ = load("envmap")
@@ -611,7 +611,7 @@ def test_export_of_an_imported_scene_renders_the_same_in_mitsuba(tmp_path, name)
     """Round trip: ``drpt export`` of an imported XML scene, rendered by Mitsuba, agrees with
     Mitsuba's render of the original file (block z-test and the mean's z)."""
     from drpt.cli import main
-    from render_check import block_z
+    from drpt.testing import block_z
 
     out = tmp_path / f"{name}.xml"
     assert main(["export", str(XML / f"{name}.xml"), str(out)]) == 0

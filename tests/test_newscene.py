@@ -24,13 +24,12 @@ import numpy as np
 import pytest
 from scipy.ndimage import median_filter
 
-from conftest import REPO
 from drpt.imageio import read_image
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
+from drpt.testing import block_z
 from drpt.tools.reference import REFERENCES, reference_path
-from render_check import block_z
 
 
 def speckles(x, ref):
@@ -48,7 +47,7 @@ def rel_mse(x, ref):
 @pytest.mark.slow
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("name", ["newscene", "newscene_hard"])
-def test_newscene_converges_to_mitsuba_without_speckles(name):
+def test_newscene_converges_to_mitsuba_without_speckles(name, repo):
     mi = pytest.importorskip("mitsuba")
     from drpt.backend import mitsuba_variant
     mi.set_variant(mitsuba_variant())
@@ -56,7 +55,7 @@ def test_newscene_converges_to_mitsuba_without_speckles(name):
 
     scene_file, W, H, ref_spp, depth, mode = REFERENCES[name]
     ref = read_image(reference_path(name))
-    scene = load_scene(REPO / scene_file)
+    scene = load_scene(repo / scene_file)
     spp = 64
     r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, seed=3, bsdf=mode,
                                       progress=False)).render()

@@ -20,16 +20,13 @@ Two statistics, both with fixed seeds:
 import numpy as np
 import pytest
 
-from conftest import SCENES
 from drpt.cli import main
 from drpt.imageio import read_image
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
+from drpt.testing import assert_agree, block_z, render_both
 from drpt.tools.reference import REFERENCES, reference_path
-from render_check import assert_agree, block_z, render_both
-
-CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
 
 
 def rel_mse(x, ref):
@@ -43,10 +40,10 @@ def reference():
 
 
 @pytest.mark.slow
-def test_seed_flags_render_matches_mitsuba_reference(tmp_path, reference, capsys):
+def test_seed_flags_render_matches_mitsuba_reference(tmp_path, reference, capsys, cornell):
     ref, _ = reference
     out = tmp_path / "cornell.exr"
-    code = main(["render", "-input", str(CORNELL), "-size", "128", "128", "-output", str(out),
+    code = main(["render", "-input", str(cornell), "-size", "128", "128", "-output", str(out),
                  "-spp", "256", "-MonteCarlo", "-SpatialTree", "--quiet"])
     assert code == 0
     img = read_image(out)
@@ -57,10 +54,10 @@ def test_seed_flags_render_matches_mitsuba_reference(tmp_path, reference, capsys
     assert "Msamples/s" in capsys.readouterr().out
 
 
-def test_no_bias_against_mitsuba_reference(reference):
+def test_no_bias_against_mitsuba_reference(reference, cornell):
     ref, ref_spp = reference
     spp = 64
-    r = Renderer(load_scene(CORNELL), RenderOptions(width=128, height=128, spp=spp, seed=7,
+    r = Renderer(load_scene(cornell), RenderOptions(width=128, height=128, spp=spp, seed=7,
                                                     progress=False)).render()
     z = block_z(r.image, r.variance, ref, r.variance * spp / ref_spp, block=16)
     assert np.abs(z).max() < 4.5, np.abs(z).max()
@@ -72,10 +69,10 @@ def test_no_bias_against_mitsuba_reference(reference):
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-def test_live_mitsuba_export_agrees_at_fixed_depth():
+def test_live_mitsuba_export_agrees_at_fixed_depth(cornell):
     # Non-square, truncated depth (exercises the depth convention), Mitsuba
     # rendered now from the in-memory export.
-    scene = load_scene(CORNELL)
+    scene = load_scene(cornell)
     for depth in (2, 3):
         r, ref, ref_var = render_both(scene, 64, 48, 256, max_depth=depth, seed=3)
         assert_agree(r, ref, ref_var, block=16)

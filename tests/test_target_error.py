@@ -16,10 +16,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from conftest import REPO, SCENES
-
-SCENE = SCENES / "cornellbox" / "cornellbox.txt"
-
 
 def _opts(**kw):
     from drpt.options import RenderOptions
@@ -28,10 +24,10 @@ def _opts(**kw):
 
 
 @pytest.fixture(scope="module")
-def scene():
+def scene(cornell):
     from drpt.scene import load_scene
 
-    return load_scene(SCENE)
+    return load_scene(cornell)
 
 
 def test_target_error_stops_early_at_the_plain_render_of_that_spp(scene, tmp_path):
@@ -99,9 +95,9 @@ def test_the_estimate_is_calibrated(scene):
 
 @pytest.mark.parametrize("flag, value", [("--target-error", "0"), ("--target-error", "nan"),
                                          ("--time-limit", "-1"), ("--time-limit", "inf")])
-def test_bad_values_are_one_line_errors(tmp_path, flag, value):
+def test_bad_values_are_one_line_errors(tmp_path, flag, value, repo, cornell):
     out = tmp_path / "x.exr"
-    r = subprocess.run([sys.executable, "-m", "drpt", "render", str(SCENE), "--size", "8", "8", flag, value,
-                        "-o", str(out), "-q"], capture_output=True, text=True, cwd=REPO)
+    r = subprocess.run([sys.executable, "-m", "drpt", "render", str(cornell), "--size", "8", "8", flag, value,
+                        "-o", str(out), "-q"], capture_output=True, text=True, cwd=repo)
     assert r.returncode == 2 and flag in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert not out.exists()

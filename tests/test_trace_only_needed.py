@@ -5,13 +5,9 @@ raises, renders a scene without the feature (must work), then one with it
 
 import pytest
 
-from conftest import SCENES
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-
-CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
-NEWSCENE = SCENES / "newscene" / "newscene.txt"
 
 
 class Traced(Exception):
@@ -40,24 +36,24 @@ def render(path, bsdf="phong", accel="auto"):
                                              progress=False)).render()
 
 
-def test_diffuse_scene_traces_no_ggx_or_phong(monkeypatch):
+def test_diffuse_scene_traces_no_ggx_or_phong(monkeypatch, cornell, scenes_dir):
     from drpt.render.bsdf import cook_torrance, microfacet, phong
 
     for mod, name in [(cook_torrance, "eval"), (cook_torrance, "sample"), (microfacet, "D"),
                       (phong, "eval"), (phong, "sample")]:
         monkeypatch.setattr(mod, name, trap)
-    render(CORNELL)  # Cornell box: diffuse only
-    assert_traced(render, NEWSCENE, bsdf="cook-torrance")
+    render(cornell)  # Cornell box: diffuse only
+    assert_traced(render, (scenes_dir / "newscene" / "newscene.txt"), bsdf="cook-torrance")
 
 
-def test_untextured_scene_traces_no_texture_lookup(monkeypatch, tmp_path):
+def test_untextured_scene_traces_no_texture_lookup(monkeypatch, tmp_path, cornell):
     import numpy as np
 
     from drpt.imageio import write_image
     from drpt.render import texture
 
     monkeypatch.setattr(texture.TextureSet, "lookup", trap)
-    render(CORNELL)
+    render(cornell)
     write_image(tmp_path / "t.png", np.full((4, 4, 3), 0.5, np.float32))
     (tmp_path / "q.mtl").write_text("newmtl t\nKd 1 1 1\nmap_Kd t.png\nnewmtl l\nKe 5 5 5\n")
     (tmp_path / "q.obj").write_text("mtllib q.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n"
@@ -70,7 +66,7 @@ def test_untextured_scene_traces_no_texture_lookup(monkeypatch, tmp_path):
     assert_traced(render, tmp_path / "s.txt")
 
 
-def test_sphere_only_scene_traces_no_triangle_test(monkeypatch, tmp_path):
+def test_sphere_only_scene_traces_no_triangle_test(monkeypatch, tmp_path, cornell):
     from drpt.accel import bvh4, inline, primitives
 
     monkeypatch.setattr(primitives, "test_triangle", trap)
@@ -82,15 +78,15 @@ def test_sphere_only_scene_traces_no_triangle_test(monkeypatch, tmp_path):
         "Group { numObjects 1 Sphere { center 0 0 0 radius 1 } }\n")
     for accel in ("auto", "bvh"):  # auto: inline here
         render(tmp_path / "s.txt", accel=accel)
-        assert_traced(render, CORNELL, accel=accel)
+        assert_traced(render, cornell, accel=accel)
 
 
-def test_scene_without_emissive_spheres_traces_no_sphere_light_sampling(monkeypatch, tmp_path):
+def test_scene_without_emissive_spheres_traces_no_sphere_light_sampling(monkeypatch, tmp_path, cornell):
     from drpt.render.lights import area
 
     monkeypatch.setattr(area.AreaLights, "_sphere_point", trap)
     monkeypatch.setattr(area.AreaLights, "pdf_sphere", trap)
-    render(CORNELL)  # a triangle light and no sphere
+    render(cornell)  # a triangle light and no sphere
     (tmp_path / "s.txt").write_text(
         "PerspectiveCamera { center 0 0 3 direction 0 0 -1 up 0 1 0 angle 40 }\n"
         "Materials { numMaterials 2 Material { Kd 0.5 0.5 0.5 } Material { Kd 0 0 0 Ke 5 5 5 } }\n"

@@ -15,11 +15,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from conftest import SCENES
 from drpt.options import RenderOptions
 from drpt.scene.model import OrthographicCamera, PerspectiveCamera
-
-CORNELL = SCENES / "cornellbox" / "cornellbox.txt"
 
 CAMERAS = [
     PerspectiveCamera((0.0, 1.0, 3.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0), 40.0),
@@ -76,10 +73,10 @@ def test_camera_block_parses(tmp_path):
     assert got == cam
 
 
-def _scene():
+def _scene(path):
     from drpt.scene import load_scene
 
-    return load_scene(CORNELL)
+    return load_scene(path)
 
 
 def _moved(cam, dx):
@@ -88,14 +85,14 @@ def _moved(cam, dx):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sampler", ["independent", "ldsampler"])
-def test_progressive_equals_render(sampler):
+def test_progressive_equals_render(sampler, cornell):
     """n frames of 1 spp are bit-identical to a render at n spp with the same
     seed and max_lanes = frame_lanes(...), for a moved camera too, with either sampler;
     frames go on past spp."""
     from drpt.render.progressive import Progressive, frame_lanes
     from drpt.render.renderer import Renderer
 
-    scene = _scene()
+    scene = _scene(cornell)
     opt = RenderOptions(width=12, height=8, spp=3, seed=7, progress=False, sampler=sampler)
     base = Renderer(scene, opt)
     cam = _moved(scene.camera, 5.0)
@@ -117,13 +114,13 @@ def test_progressive_equals_render(sampler):
 
 
 @pytest.mark.slow
-def test_camera_move_compiles_nothing():
+def test_camera_move_compiles_nothing(cornell):
     import drjit as dr
 
     from drpt.render.progressive import Progressive
     from drpt.render.renderer import Renderer
 
-    scene = _scene()
+    scene = _scene(cornell)
     opt = RenderOptions(width=16, height=16, spp=100, progress=False)
     prog = Progressive(Renderer(scene, opt), scene.camera, opt)
     prog.step()
@@ -199,7 +196,7 @@ def _full(shape):
 
 
 @pytest.mark.slow
-def test_server_follows_the_camera():
+def test_server_follows_the_camera(cornell):
     """Start the server on a free port, move the camera from a client: the
     frames change with it and the still frame matches a render of the new
     camera (PNG frames: the same 8-bit image)."""
@@ -208,7 +205,7 @@ def test_server_follows_the_camera():
     from drpt.render.renderer import Renderer
     from drpt.view.server import Viewer, display_image
 
-    scene = _scene()
+    scene = _scene(cornell)
     opt = RenderOptions(width=24, height=16, spp=4, seed=3, progress=False)
     viewer = Viewer(scene, opt, port=0, frame_format="png")
     try:
@@ -241,7 +238,7 @@ def pose_round(cam):
 
 
 @pytest.mark.slow
-def test_gui_flag_renders_the_viewers_camera(tmp_path, monkeypatch):
+def test_gui_flag_renders_the_viewers_camera(tmp_path, monkeypatch, cornell):
     """``render -gui``: the page's "render" button ends the viewer and the
     image is the render of the camera the client left it at."""
     pytest.importorskip("viser")
@@ -260,7 +257,7 @@ def test_gui_flag_renders_the_viewers_camera(tmp_path, monkeypatch):
     monkeypatch.setattr(server.Viewer, "__init__", record)
     out = tmp_path / "gui.exr"
     rc = []
-    args = ["render", "-input", str(CORNELL), "-size", "16", "16", "-spp", "2", "-output", str(out),
+    args = ["render", "-input", str(cornell), "-size", "16", "16", "-spp", "2", "-output", str(out),
             "-gui", "--port", "0", "--quiet", "-MonteCarlo"]
     thread = threading.Thread(target=lambda: rc.append(main(args)), daemon=True)
     thread.start()
@@ -268,7 +265,7 @@ def test_gui_flag_renders_the_viewers_camera(tmp_path, monkeypatch):
     while not viewers and time.monotonic() < end:
         time.sleep(0.05)
     viewer = viewers[0]
-    scene = _scene()
+    scene = _scene(cornell)
     moved = _moved(scene.camera, -1.0)
     client = Client(viewer.server.get_port())
     client.send_camera(moved, 16, 16)
@@ -282,7 +279,7 @@ def test_gui_flag_renders_the_viewers_camera(tmp_path, monkeypatch):
 
 
 @pytest.mark.slow
-def test_page_in_headless_chromium(tmp_path):
+def test_page_in_headless_chromium(tmp_path, cornell):
     """The page loads in headless Chromium and draws the scene (a canvas
     that is not one flat colour)."""
     pytest.importorskip("viser")
@@ -293,7 +290,7 @@ def test_page_in_headless_chromium(tmp_path):
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
         pytest.skip("no chromium")
-    scene = _scene()
+    scene = _scene(cornell)
     viewer = Viewer(scene, RenderOptions(width=32, height=32, spp=2, progress=False), port=0)
     shot = tmp_path / "page.png"
     stds = []
@@ -340,7 +337,7 @@ def test_view_flags(capsys):
 
 
 @pytest.mark.slow
-def test_view_command(tmp_path):
+def test_view_command(tmp_path, cornell):
     """``python -m drpt view`` prints its URL; the page's "render" writes
     ``--output``, "save camera" writes ``--camera-out``; Ctrl-C ends it."""
     pytest.importorskip("viser")
@@ -350,7 +347,7 @@ def test_view_command(tmp_path):
     from drpt.scene import load_scene
 
     out, cam_out = tmp_path / "v.png", tmp_path / "cam.txt"
-    proc = subprocess.Popen([sys.executable, "-m", "drpt", "view", str(CORNELL), "--size", "8", "8", "--spp", "1",
+    proc = subprocess.Popen([sys.executable, "-m", "drpt", "view", str(cornell), "--size", "8", "8", "--spp", "1",
                              "--port", "0", "-o", str(out), "--camera-out", str(cam_out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -377,7 +374,7 @@ def test_view_command(tmp_path):
             for m in inner["messages"]:
                 if m["type"] == "GuiButtonMessage":
                     buttons[m["props"]["label"]] = m["uuid"]
-        scene = load_scene(CORNELL)
+        scene = load_scene(cornell)
         moved = _moved(scene.camera, 0.5)
         client.send_camera(moved, 8, 8)
         client.frames(_full((8, 8)), timeout=30)

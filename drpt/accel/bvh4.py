@@ -95,7 +95,7 @@ With the whole stack in one ``dr.alloc_local`` array of 25 entries (100
 bytes per lane), Dr.Jit 1.5's LLVM backend crashes sporadically on the
 reproducer (100k copies of one triangle, 1000 rays along -z, closest hit
 then occlusion, 2 repetitions per process; ``DRPT_STRESS=1 pytest
-tests/test_bvh4.py``): about 1 process in 6-10 dies with SIGSEGV in a packet
+tests/accel/test_bvh4.py``): about 1 process in 6-10 dies with SIGSEGV in a packet
 gather of the JIT kernel on a Dr.Jit worker thread, at a wild address (a node
 index around 2**31 / 6, i.e. a garbage ``cur``). What decides it is the size
 of the local arrays: in two concurrent loops of 24 reproducer processes, the
@@ -126,7 +126,7 @@ Dr.Jit 1.5 hazard (avoided): in a symbolic loop, ``Local.write(value, index,
 mask)`` whose ``index`` variable has size 1 is rendered as one uniform row
 store at the largest index of the active lanes, even when the lanes' values
 differ; a stack pointer created as ``UInt32(0)`` and written before being
-widened loses entries (44 of 64 lanes in ``tests/test_bvh4.py``). Every loop
+widened loses entries (44 of 64 lanes in ``tests/accel/test_bvh4.py``). Every loop
 variable here starts full width (``dr.zeros(T, n)``).
 
 Device data (float32 or uint32, in BVH order, uploaded 64-byte aligned and

@@ -22,7 +22,7 @@ express. ``--accel auto`` therefore picks this accelerator above
 (:func:`drpt.accel.registry.resolve_kind`), and drpt's BVH otherwise (CUDA, no Embree,
 or a BVH rule asked for).
 
-Agreement with drpt's own tests (``tests/test_embree.py``): the same hits up to
+Agreement with drpt's own tests (``tests/accel/test_embree.py``): the same hits up to
 ties between primitives at equal ``t`` and rounding of ``t, u, v`` (Embree's robust
 triangle test is watertight too, but not bit-identical to
 :mod:`drpt.geometry.triangle`); triangles are two-sided, ``u, v`` are the same

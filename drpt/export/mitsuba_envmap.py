@@ -3,7 +3,7 @@
 drpt's environment light (:mod:`drpt.render.lights.envmap`) uses Mitsuba's
 own lat-long mapping, texel placement and bilinear lookup, so the matching
 emitter is ``envmap`` with an *identity* ``to_world`` (verified against
-Mitsuba 3.9.1 in ``tests/test_envmap.py``: direct evaluation of the emitter
+Mitsuba 3.9.1 in ``tests/render/lights/test_envmap.py``: direct evaluation of the emitter
 and renders of a map with one marked texel).
 
 Mitsuba reads the same file formats as :func:`drpt.imageio.read_image`

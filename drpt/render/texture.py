@@ -24,7 +24,7 @@ center at ``((j + 0.5) / W, (i + 0.5) / H)``. So :meth:`TextureSet.lookup`
 evaluates at ``pos = (u, 1 - v)``: the same point Mitsuba's ``bitmap``
 samples at ``si.uv = (u, 1 - v)`` (what the exporter writes). Checked
 against Mitsuba, including wrap-around at the borders, by
-``tests/test_texture.py``.
+``tests/render/test_texture.py``.
 
 Dispatch and cost
 -----------------

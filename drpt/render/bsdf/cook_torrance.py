@@ -8,7 +8,7 @@ parameter at its default -- ``specular = 0.5`` (so ``eta = 1.5``),
 ``spec_tint = 0``, ``anisotropic = 0``, ``sheen = 0``, ``clearcoat = 0``,
 ``spec_trans = 0``, ``flatness = 0``, not ``thin``. ``eval`` reproduces
 principled's ``eval`` formula for formula (checked against Mitsuba's own
-``eval`` to 1e-4 relative in ``tests/test_bsdf_cook_torrance.py``), and the
+``eval`` to 1e-4 relative in ``tests/render/bsdf/test_cook_torrance.py``), and the
 lobe-selection probabilities are principled's too, so ``pdf`` equals
 principled's ``pdf`` as well. It is *not* a textbook "F0 = lerp(0.04, kd,
 m) Schlick + Lambert" Cook-Torrance: the differences are spelled out below.

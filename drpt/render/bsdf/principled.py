@@ -6,7 +6,7 @@ specular (anisotropic, metallic, spec-tinted), rough specular transmission
 
 ``eval`` and ``pdf`` reproduce principled's formula for formula, with the
 departures listed at the end (tested against Mitsuba's own plugin in
-``tests/test_bsdf_principled.py``). ``sample`` draws the same lobes with the
+``tests/render/bsdf/test_principled.py``). ``sample`` draws the same lobes with the
 same probabilities (its visible-normal warp is Heitz 2018's, Mitsuba's is
 Heitz 2014's: the same density, other directions for the same ``u``).
 
@@ -147,7 +147,7 @@ compatibility test, or whose pdf is 0, is invalid (weight 0, pdf 0).
 Energy
 ------
 principled does not conserve energy in general, exactly as Mitsuba's
-(``tests/test_bsdf_principled.py`` pins it against Mitsuba's albedo): the
+(``tests/render/bsdf/test_principled.py`` pins it against Mitsuba's albedo): the
 Burley diffuse is not reduced by the specular Fresnel and its
 retro-reflection grows at grazing angles (white, roughness 1: albedo 1.05 at
 normal incidence, 1.57 at 89 degrees), and the sheen and the clearcoat are

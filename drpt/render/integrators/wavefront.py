@@ -59,7 +59,7 @@ Same estimator: every sample is the megakernel's ``sample`` function of the
 same random numbers, so images agree statistically with the megakernel's
 (the renderer's megakernel runs ``sample_sequence``, path regeneration, on
 other random streams) and, for the same lane streams, path by path up to
-float rounding (tests/test_wavefront.py). Determinism: every stage is a
+float rounding (tests/render/integrators/test_wavefront.py). Determinism: every stage is a
 pure function of its inputs; the sorts are stable, and a path's arithmetic
 does not depend on its position in the buffer, so a seed gives the same
 image bit for bit (the coherence sort changes the order, not the values).

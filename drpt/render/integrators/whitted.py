@@ -26,7 +26,7 @@ diffuse bounces, so the two agree only where no path with a diffuse bounce
 *before* the last vertex carries light, e.g. delta lights, convex diffuse
 objects that cannot see other diffuse objects, mirrors, a black
 background, no ambient term, and ``max_depth`` 3 (camera -> mirror ->
-diffuse -> light). ``tests/test_whitted.py`` checks exactly such scenes.
+diffuse -> light). ``tests/render/integrators/test_whitted.py`` checks exactly such scenes.
 """
 
 from __future__ import annotations

@@ -39,7 +39,7 @@ reads the south pole row (a set of measure zero).
 it. This was verified against Mitsuba 3.9.1 by evaluating its ``envmap``
 emitter at 50 000 random directions (agreement to ~2e-6 relative, float32
 ``atan2``/``acos`` rounding) and by rendering maps with one marked texel
-through a ``perspective`` camera (``tests/test_envmap.py``);
+through a ``perspective`` camera (``tests/render/lights/test_envmap.py``);
 the matching Mitsuba emitter is ``envmap`` with ``to_world`` = identity
 (:func:`drpt.export.mitsuba_envmap.to_mitsuba`).
 
