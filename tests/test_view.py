@@ -270,6 +270,11 @@ def test_gui_flag_renders_the_viewers_camera(tmp_path, monkeypatch, cornell):
     client = Client(viewer.server.get_port())
     client.send_camera(moved, 16, 16)
     client.frames(lambda f: _full((16, 16))(f))
+    # the click must not overtake the camera message (a loaded machine delivered it late)
+    end = time.monotonic() + 60
+    want = np.asarray(pose_round(moved).center, float)
+    while time.monotonic() < end and not np.allclose(np.asarray(viewer.camera.center, float), want, atol=1e-5):
+        time.sleep(0.05)
     client.click(viewer.render_button)
     thread.join(timeout=120)
     assert rc == [0]
