@@ -20,37 +20,20 @@ from drpt.imageio import write_image
 from drpt.render.camera import RayCamera
 from drpt.render.lights.envmap import LUMINANCE, EnvironmentLight, check_radius
 from drpt.scene import model
-from drpt.testing import mitsuba, to_drpt, to_mitsuba_float, to_mitsuba_vec3
+from drpt.testing import mitsuba
+from drpt.testing import run_chi2 as chi2_on_sphere
 
 Z_MAX = 5.0
 
 
 # ----------------------------------------------------------------- helpers
 def run_chi2(sample, pdf, ires=16, res=61, sample_count=400_000, seed=0):
-    """chi2util.run_chi2 with a finer pdf quadrature: the envmap pdf is
+    """drpt.testing.run_chi2 with a finer pdf quadrature: the envmap pdf is
     piecewise constant with jumps at cell edges (up to 1e5x for the sun),
     which Mitsuba's default 4x4-point trapezoid rule per histogram bin
     misintegrates (PDF sum 0.9957 for the sun map, chi2 ~1e6); 16x16 points
     integrate it to ~1e-4."""
-    import os
-    import tempfile
-
-    mitsuba()
-    from mitsuba.chi2 import ChiSquareTest, SphericalDomain
-
-    test = ChiSquareTest(
-        domain=SphericalDomain(),
-        sample_func=lambda u: to_mitsuba_vec3(sample(to_drpt(u, Array2f))),
-        pdf_func=lambda w: to_mitsuba_float(pdf(to_drpt(w, Array3f))),
-        sample_count=sample_count, res=res, ires=ires, seed=seed)
-    cwd = os.getcwd()
-    with tempfile.TemporaryDirectory() as tmp:
-        os.chdir(tmp)
-        try:
-            ok = test.run()
-        finally:
-            os.chdir(cwd)
-    return ok, test.messages
+    return chi2_on_sphere(sample, pdf, sample_count=sample_count, res=res, seed=seed, ires=ires)
 
 
 def uniform(n, seed):
