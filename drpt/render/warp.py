@@ -35,6 +35,24 @@ def cosine_hemisphere_pdf(cos_theta: Float) -> Float:
     return dr.maximum(cos_theta, 0.0) * INV_PI
 
 
+def square_to_uniform_sphere(u: Array2f) -> Array3f:
+    """Uniform direction on the unit sphere (``z = 1 - 2 u.y``, azimuth ``2 pi u.x``);
+    density ``1 / (4 pi)``."""
+    z = 1.0 - 2.0 * u.y
+    r = dr.safe_sqrt(1.0 - z * z)
+    s, c = dr.sincos(2.0 * dr.pi * u.x)
+    return Array3f(r * c, r * s, z)
+
+
+def square_to_uniform_cone(u: Array2f, cos_cutoff: float) -> Array3f:
+    """Uniform direction in the cone of half-angle ``acos(cos_cutoff)`` around +z;
+    density ``1 / (2 pi (1 - cos_cutoff))``."""
+    z = 1.0 - u.y * (1.0 - cos_cutoff)
+    r = dr.safe_sqrt(1.0 - z * z)
+    s, c = dr.sincos(2.0 * dr.pi * u.x)
+    return Array3f(r * c, r * s, z)
+
+
 def square_to_uniform_triangle(u: Array2f) -> Array2f:
     """Uniform barycentrics (b1, b2) on a triangle; b0 = 1 - b1 - b2."""
     t = dr.safe_sqrt(1.0 - u.x)

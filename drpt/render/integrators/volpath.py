@@ -69,7 +69,7 @@ from ...errors import DrptError
 from ...options import PathOptions
 from ...scene.model import Scene
 from ..scene import DeviceScene
-from ..warp import Frame
+from ..warp import Frame, square_to_uniform_sphere
 from .common import SHADOW_SHRINK, power_heuristic
 from .path import PathIntegrator
 
@@ -480,10 +480,8 @@ class VolPathIntegrator(PathIntegrator):
             if scene.has_environment:
                 return scene.sample_environment(u_env, nee_ok)
             # a constant background (Mitsuba's constant emitter): uniform directions
-            z = 1.0 - 2.0 * u_env.x
-            r = dr.safe_sqrt(1.0 - z * z)
-            sp, cp = dr.sincos(2.0 * dr.pi * u_env.y)
-            return Array3f(r * cp, r * sp, z), Array3f(*scene.background), Float(1.0 / (4.0 * dr.pi))
+            wo = square_to_uniform_sphere(Array2f(u_env.y, u_env.x))
+            return wo, Array3f(*scene.background), Float(1.0 / (4.0 * dr.pi))
 
         def sky_distance():
             return 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))

@@ -44,7 +44,7 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 from ...scene.model import Scene
 from ..spawn import sphere_error, triangle_point
 from ..surface import SurfaceData
-from ..warp import Frame, square_to_uniform_triangle
+from ..warp import Frame, square_to_uniform_sphere, square_to_uniform_triangle
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 LIGHT_SAMPLERS = ("power", "uniform")  # drpt.options.LIGHT_SAMPLERS
@@ -214,11 +214,7 @@ class AreaLights:
         c = dr.gather(Array3f, s.sph_c, j, active)
         r = dr.gather(Float, s.sph_r, j, active)
         prob = dr.gather(Float, self.sph_prob, j, active)
-        # uniform on the sphere
-        z = 1.0 - 2.0 * u.y
-        sxy = dr.safe_sqrt(1.0 - z * z)
-        sin_p, cos_p = dr.sincos(2.0 * dr.pi * u.x)
-        n = Array3f(sxy * cos_p, sxy * sin_p, z)
+        n = square_to_uniform_sphere(u)
         pdf = prob / (4.0 * dr.pi * r * r)
         solid = None
         if ref is not None:

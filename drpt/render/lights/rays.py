@@ -45,23 +45,15 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ...errors import DrptError
 from ..spawn import origin as spawn_origin
-from ..warp import Frame, square_to_cosine_hemisphere, square_to_uniform_disk_concentric
+from ..warp import (
+    Frame,
+    square_to_cosine_hemisphere,
+    square_to_uniform_cone,
+    square_to_uniform_disk_concentric,
+    square_to_uniform_sphere,
+)
 
 INV_FOUR_PI = 1.0 / (4.0 * math.pi)
-
-
-def square_to_uniform_sphere(u: Array2f) -> Array3f:
-    z = 1.0 - 2.0 * u.y
-    r = dr.safe_sqrt(1.0 - z * z)
-    s, c = dr.sincos(2.0 * dr.pi * u.x)
-    return Array3f(r * c, r * s, z)
-
-
-def square_to_uniform_cone(u: Array2f, cos_cutoff: float) -> Array3f:
-    z = 1.0 - u.y * (1.0 - cos_cutoff)
-    r = dr.safe_sqrt(1.0 - z * z)
-    s, c = dr.sincos(2.0 * dr.pi * u.x)
-    return Array3f(r * c, r * s, z)
 
 
 def _to_world(frame, v: Array3f) -> Array3f:
