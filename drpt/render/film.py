@@ -38,12 +38,21 @@ process, in chunks, on workers and resumed (the variance, float64, to about
 
 from __future__ import annotations
 
+import functools
 import math
 
 import drjit as dr
 from drjit.auto import Array3f, Bool, Float, Float64, Int32, UInt32
 
 from ..filters import PixelFilter
+
+
+def filter_weight(flt: PixelFilter, d: Float) -> Float:
+    """The tent's or Gaussian's ``w(d)`` on the device (:meth:`PixelFilter.eval`'s formula)."""
+    if flt.kind == "tent":
+        return dr.maximum(0.0, 1.0 - dr.abs(d) / flt.param)
+    s = flt.param
+    return dr.maximum(0.0, dr.exp(-d * d / (2.0 * s * s)) - flt.cutoff)
 
 
 class SplatFilm:
@@ -62,11 +71,7 @@ class SplatFilm:
         self.moment = [dr.zeros(Float64, n) for _ in range(6)] if moment and weights else []
 
     def _weight(self, d: Float) -> Float:
-        f = self.filter
-        if f.kind == "tent":
-            return dr.maximum(0.0, 1.0 - dr.abs(d) / f.param)
-        s = f.param
-        return dr.maximum(0.0, dr.exp(-d * d / (2.0 * s * s)) - f.cutoff)
+        return filter_weight(self.filter, d)
 
     def _add(self, index: UInt32, value: Array3f, active: Bool, w: Float | None = None) -> None:
         for c in range(3):
@@ -155,7 +160,8 @@ def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int,
     side = 2 * R + 1
     kk = dr.opaque(UInt32, k)
     total = dr.opaque(UInt32, side * side * k)
-    film = SplatFilm(width, height, flt)  # for its filter function
+    # a plain function, not the filter: the loop would take a dataclass for loop state
+    weight = functools.partial(filter_weight, flt)
 
     zero = dr.zeros(Float64, n)
     s0, s1, s2 = Float64(zero), Float64(zero), Float64(zero)
@@ -174,7 +180,7 @@ def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int,
         x = dr.gather(Float, px, lane, valid)
         y = dr.gather(Float, py, lane, valid)
         v = dr.gather(Array3f, L, lane, valid)
-        w = Float64(dr.select(valid, film._weight(cx - x) * film._weight(cy - y), 0.0))
+        w = Float64(dr.select(valid, weight(cx - x) * weight(cy - y), 0.0))
         a, b, c = Float64(v.x) * w, Float64(v.y) * w, Float64(v.z) * w
         s0, s1, s2 = s0 + a, s1 + b, s2 + c
         q0, q1, q2 = q0 + a * a, q1 + b * b, q2 + c * c
