@@ -55,6 +55,15 @@ def _read(path: Path) -> np.ndarray:
     return img[..., :3]
 
 
+def cases(scenes: dict[str, int], not_yet: dict[str, str], not_yet_spp: int) -> list:
+    """pytest params ``(rel, spp)``: every scene of ``scenes`` at its spp, then every scene of
+    ``not_yet`` as a strict xfail whose reason is what drpt lacks."""
+    out = [pytest.param(rel, spp, id=rel) for rel, spp in scenes.items()]
+    out += [pytest.param(rel, not_yet_spp, id=rel, marks=pytest.mark.xfail(strict=True, reason=why))
+            for rel, why in not_yet.items()]
+    return out
+
+
 def render_as_authored(scene_path: Path, spp: int, seed: int = 0, **defines):
     """drpt's render of the corpus file at ``spp`` (RenderResult), the file's own settings."""
     from drpt.options import RenderOptions, apply_scene_settings

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from corpusutil import CORPUS, check_scene, corpus_scene, reference_files, render_as_authored, z_test
+from corpusutil import CORPUS, cases, check_scene, corpus_scene, reference_files, render_as_authored, z_test
 
 #: participating_media scene -> spp drpt renders it with (all pass Mitsuba's z-test)
 MEDIA_SCENES = {
@@ -49,15 +49,8 @@ MEDIA_SCENES = {
 MEDIA_NOT_YET: dict[str, str] = {}
 
 
-def _cases():
-    out = [pytest.param(rel, spp, id=rel) for rel, spp in MEDIA_SCENES.items()]
-    out += [pytest.param(rel, 64, id=rel, marks=pytest.mark.xfail(strict=True, reason=why))
-            for rel, why in MEDIA_NOT_YET.items()]
-    return out
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("rel, spp", _cases())
+@pytest.mark.parametrize("rel, spp", cases(MEDIA_SCENES, MEDIA_NOT_YET, 64))
 def test_media_corpus_scene_passes_mitsubas_z_test(rel, spp):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

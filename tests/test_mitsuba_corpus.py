@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pytest
 
-from corpusutil import CORPUS, check_scene, corpus_scene, reference_files, render_as_authored, z_test
+from corpusutil import CORPUS, cases, check_scene, corpus_scene, reference_files, render_as_authored, z_test
 
 #: corpus scene -> spp drpt renders it with (all pass Mitsuba's z-test)
 SCENES = {
@@ -74,15 +74,8 @@ EXCLUDED = {
 }
 
 
-def _cases():
-    out = [pytest.param(rel, spp, id=rel) for rel, spp in SCENES.items()]
-    out += [pytest.param(rel, 256, id=rel, marks=pytest.mark.xfail(strict=True, reason=why))
-            for rel, why in NOT_YET.items()]
-    return out
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("rel, spp", _cases())
+@pytest.mark.parametrize("rel, spp", cases(SCENES, NOT_YET, 256))
 def test_corpus_scene_passes_mitsubas_z_test(rel, spp):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
