@@ -1,7 +1,7 @@
 """Sky importance sampling vs uniform sphere sampling at equal spp.
 
 An env-lit glossy scene (:mod:`drpt.tools.scenegen.envsun`, the one in
-tests/test_env_render.py: a gradient sky
+tests/validation/test_env_render.py: a gradient sky
 with a one-texel sun 2e4x brighter than the sky, a glossy Phong sphere, a
 matte sphere, a matte ground) is rendered by drpt with both sky samplers at
 the same spp and compared against a 1024-spp luminance-sampled reference.

@@ -1,10 +1,10 @@
-"""Shared test fixtures and helpers.
+"""Shared test fixtures.
 
-``SHARED`` is the ``shared/`` folder beside the repository checkout (the seed
-renderer's files); tests that read it skip cleanly when it is absent. Tests take
-the repository's paths as fixtures (``repo``, ``scenes_dir``, ``cornell``); the
-constants ``REPO``, ``SCENES`` and ``SHARED`` stay for the helper modules.
-The statistical checks are in :mod:`drpt.testing`.
+Tests take the repository's paths as fixtures (``repo``, ``scenes_dir``, ``cornell``,
+``seed_dir``); module-level code that needs a path imports it from :mod:`support`
+(``tests/support/``, with the other shared helpers). The statistical checks are in
+:mod:`drpt.testing`. ``shared/`` beside the checkout (the seed renderer's files, Mitsuba's
+corpus) may be absent: tests that read it skip cleanly.
 """
 
 from __future__ import annotations
@@ -13,10 +13,7 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
-SEED = SHARED / "seed"
-SCENES = REPO / "scenes"
+from support import REPO, SCENES, SEED
 
 
 @pytest.fixture(scope="session")

@@ -7,7 +7,7 @@
   truncation fails the same check (negative controls);
 * renders with ``--filter tent`` and ``gaussian`` agree with Mitsuba's
   splatting film on an edge-rich scene (block z-test with correlated
-  reference pixels, tests/render_check.py); box-filtered drpt against
+  reference pixels, drpt/testing.py); box-filtered drpt against
   Gaussian Mitsuba, a wrong stddev, and filter sampling without the
   truncation at the image border all fail it;
 * the noise claim of drpt/filters.py: a filtered drpt pixel is as noisy as a
@@ -253,7 +253,7 @@ DEPTH = 2
 @pytest.fixture(scope="module")
 def edge(tmp_path_factory):
     from drpt.scene import load_scene
-    from render_check import edge_scene
+    from support.scenes import edge_scene
 
     p = tmp_path_factory.mktemp("filters") / "edges.txt"
     p.write_text(edge_scene())

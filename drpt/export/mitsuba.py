@@ -19,7 +19,7 @@ plane ``rectangle`` counts as a mesh and becomes float32 triangles) and
 orders the area emitters of meshes nondeterministically: same expectation,
 other random numbers. Every transform is written as an explicit 4x4 matrix.
 
-Equivalences (each one checked by ``tests/test_export.py``)
+Equivalences (each one checked by ``tests/export/test_export.py``)
 -----------------------------------------------------------
 Camera
     drpt maps pixel ``(x, y)`` (continuous, from the top-left, pixel centers

@@ -27,7 +27,7 @@ the pixel's value whatever A was: both estimators, and their mean, are unbiased.
 sample is thrown away, and with the weights fixed at 1/2 each sample counts about
 ``1 / spp`` where the two pilots agree. (Averaging every sample of a pixel together is
 biased: a pilot that drew a bright outlier gives its pixel more samples, which dilute
-it; ``tests/test_adaptive.py`` shows the z-test catches it.)
+it; ``tests/render/test_adaptive.py`` shows the z-test catches it.)
 
 Adaptive renders draw independent samples (PCG32 streams of their own), trace the
 path integrator's megakernel (``path``, ``volpath``) with a box filter (or

@@ -98,7 +98,7 @@ class RayCamera:
         # Opaque, not literals: in Dr.Jit 1.5, ``Float(0.0) * wide_array``
         # resizes the literal 0 operand in place, so a camera basis with a
         # zero component would keep the first pass's width and break the next
-        # pass of another size (tests/test_cli.py covers it).
+        # pass of another size (tests/cli/test_cli.py covers it).
         self.center = dr.opaque(Array3f, tuple(map(float, cam.center)))
         self.f = dr.opaque(Array3f, tuple(map(float, f)))
         self.r = dr.opaque(Array3f, tuple(map(float, r * half_w)))  # scaled by half extents

@@ -8,7 +8,7 @@ pass, or a few bands of rows when the image is larger than the lane
 budget), with :meth:`Renderer._pass` and its per-pass seeding; frames are
 summed in float64. After ``n`` frames the image is therefore bit-identical
 to ``Renderer.render()`` of the same camera with ``spp = n``, the same seed
-and ``max_lanes = frame_lanes(...)`` (``tests/test_view.py`` checks it).
+and ``max_lanes = frame_lanes(...)`` (``tests/view/test_view.py`` checks it).
 
 The camera is a kernel input (:class:`~drpt.render.camera.RayCamera`), so
 after a camera move the next frame runs the kernel already compiled for

@@ -15,7 +15,7 @@ from drpt.accel import build_accel
 from drpt.accel.build import build_bvh
 from drpt.accel.bvh4 import BVH4, stack_entries
 from drpt.accel.bvh4_nodes import EMPTY_REF, LEAF_COUNT_SHIFT, LEAF_FLAG, LEAF_START_MASK, collapse_bvh4
-from test_bvh import brute_hits, make_scene, mixed_scene_and_rays, rays, soup
+from support.accel import brute_hits, make_scene, mixed_scene_and_rays, rays, soup
 
 INF = float("inf")
 TRI = np.float64([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]])

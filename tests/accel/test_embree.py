@@ -12,7 +12,7 @@ from drjit.auto import Array3f, Bool, Float, UInt32
 from drpt.accel import build_accel, embree_lib, resolve_kind
 from drpt.accel.embree import EmbreeAccel
 from drpt.errors import DrptError
-from test_bvh import brute_hits, make_scene, mixed_scene_and_rays, rays, soup
+from support.accel import brute_hits, make_scene, mixed_scene_and_rays, rays, soup
 
 INF = float("inf")
 needs_embree = pytest.mark.skipif(embree_lib.reason() is not None,

@@ -13,7 +13,7 @@ from drjit.auto import Float
 
 from drpt.accel.brute import BruteForce
 from drpt.accel.grid import MAX_RES, UniformGrid, auto_resolution
-from test_bvh import icosphere, make_scene, rays, soup
+from support.accel import icosphere, make_scene, rays, soup
 
 INF = float("inf")
 RESOLUTIONS = [1, 7, None]

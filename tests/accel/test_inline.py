@@ -16,7 +16,7 @@ from drjit.auto import Float
 
 from drpt.accel import InlineList, build_accel, embree_lib, resolve_kind
 from drpt.backend import policy
-from test_bvh import closed_mesh_rays, make_scene, rays, soup
+from support.accel import closed_mesh_rays, make_scene, rays, soup
 
 MAX_PRIMS = policy().inline_max_prims
 

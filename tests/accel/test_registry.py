@@ -12,7 +12,7 @@ from drjit.auto import UInt32
 from drpt import backend
 from drpt.accel import ACCELERATORS, KINDS, Accelerator, build_accel, embree_lib, resolve_kind
 from drpt.accel.device import device_array
-from test_bvh import make_scene, soup
+from support.accel import make_scene, soup
 
 
 def test_kinds_come_from_the_table():

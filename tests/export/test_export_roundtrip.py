@@ -5,7 +5,7 @@ lights and camera the exporter wrote.
 
 The two renders (same size, spp and seed) are not bit-identical (the PLY meshes and the
 material table come back in another order, so the samples differ), so they are compared by
-the 8x8 block z-test of tests/render_check.py (each render's own per-pixel variance): every
+the 8x8 block z-test of drpt/testing.py (each render's own per-pixel variance): every
 block within 4.5 standard errors, and the image mean within 4. Negative control: the
 exported Cornell box with its white walls' reflectance 0.725 -> 0.65 fails it.
 """

@@ -65,8 +65,9 @@ def test_values_equal_mitsubas_eval_and_eval_1(tmp_path, to_uv):
 
 @pytest.mark.slow
 def test_checkerboard_scene_renders_like_mitsuba():
-    from drpt.testing import assert_agree, block_z
     from test_mitsuba_xml import _render_both
+
+    from drpt.testing import assert_agree, block_z
 
     scene = load_scene(XML / "checker.xml")
     r, ref, var = _render_both(scene, XML / "checker.xml", 256)

@@ -118,8 +118,9 @@ def test_export_of_a_cropped_camera_is_mitsubas_film(tmp_path):
 @pytest.mark.slow
 @pytest.mark.mitsuba
 def test_cropped_scene_renders_like_mitsuba():
-    from drpt.testing import assert_agree, block_z
     from test_mitsuba_xml import _render_both
+
+    from drpt.testing import assert_agree, block_z
 
     scene = load_scene(XML / "crop.xml")
     r, ref, var = _render_both(scene, XML / "crop.xml", 256)

@@ -10,7 +10,7 @@ perturbed frames of ``normalmap`` and ``bumpmap`` (drpt/render/perturb.py).
 * XML scenes rendered by drpt and by Mitsuba from the same file (``aniso_mesh``: an OBJ
   sphere with uvs and a rotated analytic sphere, anisotropic; ``normalmap``, ``bumpmap``:
   both on an OBJ sphere and a rectangle, textures read ``raw``), 8x8 block z-test
-  (``max |z| < 4.5``) and the image mean's z (``< 4``), as tests/test_mitsuba_xml.py;
+  (``max |z| < 4.5``) and the image mean's z (``< 4``), as tests/scene/mitsuba/test_mitsuba_xml.py;
   with negative controls that must fail the same test: the tangent frame built from the
   normal alone, the bump map dropped, the normal map read without its [0, 1] -> [-1, 1]
   remap;
@@ -252,8 +252,9 @@ def _render(name: str, spp: int = 256, change=None):
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("name", ["aniso_mesh", "normalmap", "bumpmap"])
 def test_renders_like_mitsuba(name):
-    from drpt.testing import assert_agree
     from test_mitsuba_xml import _mean_z
+
+    from drpt.testing import assert_agree
 
     r, ref, var = _render(name)
     assert r.image.shape == (24, 32, 3) and ref.mean() > 0.05
@@ -275,10 +276,11 @@ def _drop_perturbation(scene):
 @pytest.mark.parametrize("what", ["tangent from the normal alone", "bump map dropped",
                                   "normal map not remapped"])
 def test_negative_controls_fail(what, monkeypatch):
+    from test_mitsuba_xml import _mean_z
+
     import drpt.render.material as material
     import drpt.render.perturb as perturb
     from drpt.testing import block_z
-    from test_mitsuba_xml import _mean_z
 
     if what == "tangent from the normal alone":
         monkeypatch.setattr(material, "_anisotropic", lambda leaf: False)
@@ -381,12 +383,12 @@ def test_degenerate_frames_stay_finite(name):
 @pytest.mark.slow
 def test_corpus_textured_roughconductor_fails_with_the_tangent_from_the_normal(monkeypatch):
     """Negative control on Mitsuba's own scene (``bsdf_spheres/test_textured_roughconductor``,
-    which passes in tests/test_mitsuba_corpus.py): with the frame built from the normal alone
+    which passes in tests/validation/test_mitsuba_corpus.py): with the frame built from the normal alone
     it fails Mitsuba's z-test (85.8% of the pixel channels pass at 1024 spp, 99.75% needed)."""
     import warnings
 
     import drpt.render.material as material
-    from corpusutil import CORPUS, check_scene
+    from support.corpus import CORPUS, check_scene
 
     if not CORPUS.is_dir():
         pytest.skip("../shared/corpus/mitsuba-data is not present")
@@ -405,8 +407,8 @@ def test_wavefront_renders_perturbed_frames_like_mitsuba():
     from dataclasses import replace
 
     import mitsuba as mi
-
     import test_mitsuba_xml as tx
+
     from drpt.backend import mitsuba_variant
     from drpt.options import RenderOptions, apply_scene_settings
     from drpt.render.renderer import Renderer

@@ -143,8 +143,9 @@ class _DiagonalSampler(LDSampler):
                                                ("glossy", False, "ldsampler"), ("meshes", True, "ldsampler"),
                                                ("glossy", False, "zsobol"), ("lens", False, "zsobol")])
 def test_ldsampler_renders_like_mitsuba(name, control, kind, monkeypatch):
-    from render_check import block_z
     from test_mitsuba_xml import XML, _mean_z, _render_both, load
+
+    from drpt.testing import block_z
 
     if control:
         from drpt.render import renderer
@@ -197,10 +198,10 @@ CORPUS_LD = ("bsdf_spheres/test_arealight_path.xml", "bsdf_spheres/test_textured
 
 
 def _corpus_ld(rel: str, spp: int, sampler: str = "ldsampler"):
-    from corpusutil import _read, corpus_scene, reference_files, z_test
     from drpt.options import RenderOptions, apply_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
+    from support.corpus import _read, corpus_scene, reference_files, z_test
 
     path = corpus_scene(rel)
     ref, var = reference_files(path)
@@ -212,7 +213,7 @@ def _corpus_ld(rel: str, spp: int, sampler: str = "ldsampler"):
 @pytest.mark.slow
 @pytest.mark.parametrize("rel", CORPUS_LD)
 def test_corpus_scenes_pass_with_the_ldsampler(rel):
-    """Mitsuba's render-test z-test (:mod:`corpusutil`) of corpus scenes rendered with the
+    """Mitsuba's render-test z-test (:mod:`support.corpus`) of corpus scenes rendered with the
     low-discrepancy sampler at 256 spp (skips without ../shared)."""
     t = _corpus_ld(rel, 256)
     assert t.passed, str(t)

@@ -226,7 +226,8 @@ EDGE_SPP = 256
 def dof(mi, tmp_path_factory):
     """The edge scene with spheres through a thin lens focused at 3, and
     Mitsuba's batches of it (box filter)."""
-    from render_check import edge_scene, mitsuba_runs
+    from drpt.testing import mitsuba_runs
+    from support.scenes import edge_scene
 
     d = tmp_path_factory.mktemp("dof")
 

@@ -27,7 +27,7 @@ VARIANT = "scalar_rgb"
 
 #: A uniform ``<spectrum value="1">`` on an emitter in Mitsuba 3's RGB variants: the
 #: D65 illuminant in linear sRGB (float32 values read from Mitsuba 3.9's point emitter;
-#: tests/test_mitsuba_xml.py checks them against the installed Mitsuba)
+#: tests/scene/mitsuba/test_mitsuba_xml.py checks them against the installed Mitsuba)
 D65_RGB = (1.204793930053711, 0.948291003704071, 0.9089160561561584)
 
 #: kinds of nested plugins that are parameters by name (``<texture name="reflectance">``,

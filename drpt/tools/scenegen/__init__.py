@@ -11,7 +11,7 @@ command line, which ``scenes/make_<name>.py`` runs:
 * :mod:`.diningroom` (``scenes/diningroom/``, 510k triangles, git-ignored):
   generated on demand (:func:`drpt.tools.reference.scene_path`);
 * :mod:`.materials_cornell` and :mod:`.veach_mis`: small test scenes of mixed
-  PBR materials for ``tests/test_materials_mitsuba.py``, not committed: their
+  PBR materials for ``tests/validation/test_materials_mitsuba.py``, not committed: their
   ``main(out)`` and ``scenes/make_<name>.py OUT_DIR`` need the folder
   (:mod:`.meshes` holds the mesh builders and OBJ writer they share).
 """

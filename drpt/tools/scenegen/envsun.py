@@ -1,7 +1,7 @@
 """An env-lit test scene: a gradient sky with a one-texel sun 2e4x brighter
 than the sky (``Skybox``), a glossy sphere (material ``glossy``: Phong, or
 ``ct_metal``: Cook-Torrance metal), a matte sphere and a matte ground; with
-``point`` also a point light. The scene of tests/test_env_render.py, which
+``point`` also a point light. The scene of tests/validation/test_env_render.py, which
 benchmarks/env_sampling.py renders with both sky samplers.
 """
 

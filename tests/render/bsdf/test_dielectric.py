@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from dielectricutil import FakeTable, Spec
 from drpt import bsdf_kinds
 from drpt.render.bsdf import dielectric
 from drpt.testing import mitsuba
+from support.dielectric import FakeTable, Spec
 
 
 def _f(a):

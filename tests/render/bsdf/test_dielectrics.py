@@ -39,7 +39,6 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from dielectricutil import FakeTable, Spec
 from drpt import bsdf_kinds
 from drpt.export.mitsuba_dielectrics import adjust
 from drpt.iors import NAMED, lookup_ior, relative_ior
@@ -48,6 +47,7 @@ from drpt.render.bsdf import dielectric as de
 from drpt.render.bsdf import roughdielectric as rd
 from drpt.render.bsdf import thindielectric as td
 from drpt.testing import export_bsdf, mitsuba, spherical_chi2
+from support.dielectric import FakeTable, Spec
 
 
 def _f(a):
@@ -763,8 +763,9 @@ def _render_specs():
 
 
 def _render_case(tmp_path, name):
-    from drpt.testing import assert_agree, render_both
     from test_materials_render import _with_bsdf, make
+
+    from drpt.testing import assert_agree, render_both
 
     scene = _with_bsdf(make(tmp_path, "phong"), "phong", _render_specs()[name])
     r, ref, ref_var = render_both(scene, 48, 32, 128, max_depth=6, bsdf="auto")

@@ -845,11 +845,12 @@ def test_material_table_renders_plastics_as_mitsuba(tmp_path):
                                         "sample_visible": False}},
 ], ids=["plastic", "roughplastic-ggx", "roughplastic-beckmann-all"])
 def test_render_matches_mitsuba(tmp_path, spec):
-    """A sphere of the material in the test box (tests/test_materials_render.py),
+    """A sphere of the material in the test box (tests/validation/test_materials_render.py),
     rendered by drpt and by Mitsuba through the exporter: block z-scores < 4.5."""
+    from test_materials_render import _with_bsdf, make
+
     from drpt.shading import BSDFSpec
     from drpt.testing import assert_agree, render_both
-    from test_materials_render import _with_bsdf, make
 
     scene = _with_bsdf(make(tmp_path, "phong"), "phong", BSDFSpec(spec["kind"], dict(spec["params"])))
     r, ref, ref_var = render_both(scene, 48, 32, 128, max_depth=6, bsdf="auto")

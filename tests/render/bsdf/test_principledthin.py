@@ -171,11 +171,12 @@ def test_derive_refuses_bad_parameters():
 def test_thin_sheets_render_like_mitsuba(control):
     """``tests/data/xml/thin.xml`` (a leaf lit from behind, a textured anisotropic sheet)
     rendered by drpt and by Mitsuba from the same file: 8x8 block z-test and the image mean's
-    z (as tests/test_mitsuba_xml.py). The negative control, the leaf without its diffuse
+    z (as tests/scene/mitsuba/test_mitsuba_xml.py). The negative control, the leaf without its diffuse
     transmission, must fail it."""
     from dataclasses import replace
 
     import test_mitsuba_xml as tx
+
     from drpt.testing import block_z
 
     scene, _ = tx.load("thin")

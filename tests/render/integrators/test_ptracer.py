@@ -1,6 +1,6 @@
 """Light tracing (drpt/render/integrators/ptracer.py) and its splatting film (drpt/render/film.py).
 
-Statistics: 8x8-block z-tests (tests/render_check.py's ``block_z``) of the light-traced image
+Statistics: 8x8-block z-tests (``drpt.testing.block_z``) of the light-traced image
 against the path-traced one (same scene, drpt's per-pixel variances) or against Mitsuba's ``path``
 on the same XML file (variance from 8 seeds), threshold |z| < 4.5 over every block and channel,
 and the z of the image means < 4. Negative controls: the camera's importance without its

@@ -7,7 +7,7 @@
   diffuse: four shading queues).
 * Same estimator, statistically: renders by the two modes at different
   seeds (the megakernel with path regeneration, 4 paths per lane) agree by
-  the block z-test of tests/render_check.py (16x16 blocks at 256 spp, max |z| < 4.5);
+  the block z-test of drpt/testing.py (16x16 blocks at 256 spp, max |z| < 4.5);
   negative controls: the wavefront image scaled by 0.97 / 1.03 fails
   (Cornell box; 0.93 / 1.07 on the noisier mixed-material scene), and
   so does a wavefront render whose MIS weights are dropped (emitters hit

@@ -26,10 +26,11 @@ def test_reader_keeps_the_texture():
 def test_renders_like_mitsuba():
     from dataclasses import replace
 
+    from test_mitsuba_xml import XML, _render_both
+
     from drpt.options import RenderOptions, apply_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.testing import assert_agree, block_z
-    from test_mitsuba_xml import XML, _render_both
 
     path = XML / "area_textured.xml"
     scene = load_scene(path)
@@ -48,10 +49,10 @@ def test_export_round_trip(tmp_path):
     """The exporter writes the textured radiance back: drpt reads the same textures from the
     exported file, and Mitsuba renders it as it renders the original (image means within 3%)."""
     import mitsuba as mi
+    from test_mitsuba_xml import XML
 
     from drpt.backend import mitsuba_variant
     from drpt.export.mitsuba import write_xml
-    from test_mitsuba_xml import XML
 
     s = load_scene(XML / "area_textured.xml")
     out = write_xml(s, tmp_path / "x.xml", 32, 24, 4, max_depth=3)

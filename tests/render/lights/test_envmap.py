@@ -2,7 +2,7 @@
 
 Statistical checks use z = (estimate - truth) / (standard error of the
 mean) and require |z| < 5 (two-sided false alarm ~6e-7 per check, fixed
-seeds). Sampling is checked with Mitsuba's chi-square test (tests/chi2util).
+seeds). Sampling is checked with Mitsuba's chi-square test (drpt/testing.py).
 """
 
 import math

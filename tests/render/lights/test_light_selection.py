@@ -189,9 +189,10 @@ def test_cone_pdf_is_exact_for_tiny_and_distant_spheres():
 
 # ------------------------------------------------------------ renders against Mitsuba
 def _agree_with_mitsuba(name, spp, **opts):
+    from test_mitsuba_xml import _mean_z, _render_both
+
     from drpt.scene import load_scene
     from drpt.testing import block_z
-    from test_mitsuba_xml import _mean_z, _render_both
 
     path = XML / f"{name}.xml"
     r, ref, var = _render_both(load_scene(path), path, spp, **opts)

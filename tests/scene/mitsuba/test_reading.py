@@ -291,8 +291,9 @@ def test_files_written_by_other_tools_render_like_mitsuba(monkeypatch, name, con
     rendering the same file (8x8 block z-test below 4.5, image mean z below 4, as
     test_mitsuba_xml's corpus). Negative controls: the reader's old ways (named children
     dropped; reflectance spectra integrated without the D65 weighting) fail it."""
-    from drpt.testing import block_z
     from test_mitsuba_xml import _mean_z, _render_both
+
+    from drpt.testing import block_z
 
     path = STYLES / f"{name}.xml"
     if control is not None:

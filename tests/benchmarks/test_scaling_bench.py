@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "scaling.py"
+from support import REPO
+
+_PATH = REPO / "benchmarks" / "scaling.py"
 _spec = importlib.util.spec_from_file_location("scaling_bench", _PATH)
 scaling = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(scaling)

@@ -170,7 +170,7 @@ def test_corpus_aovs_equal_mitsubas(rel):
     channel, mean |difference| below 1.5% of the channel's largest value (measured: at most
     1.07%, the textured albedo; it falls as 1/sqrt(spp): noise). The one-row shift fails
     it (albedo 7.4% and 3.4%; constant channels, such as a plane's normal, cannot)."""
-    from corpusutil import corpus_scene
+    from support.corpus import corpus_scene
 
     path = corpus_scene(rel)
     mi = pytest.importorskip("mitsuba")

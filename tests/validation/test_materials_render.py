@@ -1,5 +1,5 @@
 """Each material kind rendered by drpt and by Mitsuba 3 (through the
-exporter) agrees within noise: block z-scores, see tests/render_check.py.
+exporter) agrees within noise: block z-scores, see drpt/testing.py.
 
 The scene: a floor, a back wall and a ceiling light (OBJ + MTL), one sphere
 of the material under test, a diffuse sphere beside it, max depth 6.

@@ -1,11 +1,11 @@
 """Hostile input beyond drpt's own format: Mitsuba XML and its meshes, the
 cluster's addresses and Ctrl-C, image output on a full device.
 
-One test per class of the hostile-input sweep (``tests/hostile_sweep.py``
+One test per class of the hostile-input sweep (``tests/robustness/hostile_sweep.py``
 runs the same reproducers through the command line): each ends as one
 located error line, or a correct image; never a crash of Mitsuba's parser
 or mesh loaders, a traceback, a hang or a wrong image with exit status 0.
-Checkpoints and the cluster's fake servers are fuzzed in tests/test_fuzz.py.
+Checkpoints and the cluster's fake servers are fuzzed in tests/robustness/test_fuzz.py.
 """
 
 from __future__ import annotations
@@ -26,9 +26,9 @@ import pytest
 
 from drpt.errors import DrptError, SceneError
 from drpt.scene import load_scene
+from support import DATA, REPO
 
-REPO = Path(__file__).resolve().parents[1]
-XML_DIR = REPO / "tests" / "data" / "xml"
+XML_DIR = DATA / "xml"
 
 SCENE = """<scene version="3.0.0">
   <sensor type="perspective">
@@ -145,7 +145,7 @@ def test_garbage_ply_is_one_error(tmp_path, data, match):
 def test_serialized_face_beyond_its_vertices(tmp_path):
     import random
 
-    import fuzzformats as ff
+    from support import fuzzformats as ff
 
     data = ff.mutate_serialized((XML_DIR / "shapes.serialized").read_bytes(), "index_oob", random.Random(1))
     (tmp_path / "m.serialized").write_bytes(data)

@@ -1,7 +1,7 @@
 """Participating media and the ``volpath`` integrator (:mod:`drpt.render.integrators.volpath`).
 
 * Mitsuba's own render tests of ``participating_media/`` rendered as authored and z-tested
-  against the shipped references (:func:`corpusutil.check_scene`, as
+  against the shipped references (:func:`support.corpus.check_scene`, as
   ``test_mitsuba_corpus.py`` tests the other folders): :data:`MEDIA_SCENES` pass (all
   nine), :data:`MEDIA_NOT_YET` would be strict xfails naming what drpt lacks. Negative
   controls: a wrong albedo, a heterogeneous medium's halved density, fail.
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from corpusutil import CORPUS, cases, check_scene, corpus_scene, reference_files, render_as_authored, z_test
+from support.corpus import CORPUS, cases, check_scene, corpus_scene, reference_files, render_as_authored, z_test
 
 #: participating_media scene -> spp drpt renders it with (all pass Mitsuba's z-test)
 MEDIA_SCENES = {
@@ -104,8 +104,9 @@ def test_wrong_medium_fails_the_z_test(tmp_path, rel, old, new):
     one's density halved, fail against the reference; the unchanged copies pass (the
     failure is the perturbation's). (The z-test at 512 spp does not see a 20% lower
     density, scale 4 for 5, in the heterogeneous scene: a weak test there.)"""
-    from corpusutil import _read
     from test_mitsuba_corpus import _perturbed
+
+    from support.corpus import _read
 
     spp = 512
     ref, var = (_read(p) for p in reference_files(corpus_scene(rel)))
@@ -303,7 +304,7 @@ def test_hg_medium_renders_like_mitsuba_and_the_wrong_sign_does_not(tmp_path):
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
-    from render_check import block_z
+    from drpt.testing import block_z
 
     scene = FURNACE.replace('<emitter type="constant"><rgb name="radiance" value="1"/></emitter>',
                             '<emitter type="constant"><rgb name="radiance" value="0.1"/></emitter>\n'
@@ -446,7 +447,7 @@ def test_a_camera_in_fog_renders_like_mitsuba(tmp_path):
     from drpt.options import RenderOptions, apply_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
-    from render_check import block_z
+    from drpt.testing import block_z
 
     path = tmp_path / "fog.xml"
     path.write_text(FOG)
@@ -478,7 +479,7 @@ def test_blendphase_renders_like_mitsuba(tmp_path):
     from drpt.options import RenderOptions, apply_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
-    from render_check import block_z
+    from drpt.testing import block_z
 
     scene = FURNACE.replace('<emitter type="constant"><rgb name="radiance" value="1"/></emitter>',
                             '<emitter type="constant"><rgb name="radiance" value="0.1"/></emitter>\n'
@@ -567,7 +568,7 @@ def test_own_format_media_render_like_mitsuba(tmp_path):
     from drpt.options import PathOptions, RenderOptions
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
-    from render_check import block_z
+    from drpt.testing import block_z
 
     xml = tmp_path / "fog.xml"
     xml.write_text(FURNACE.replace('value="8"', 'value="32"'))  # (a square film: fov 30 either way)

@@ -18,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,9 +26,10 @@ from drpt.options import RenderOptions
 from drpt.render import adaptive
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-from render_check import block_z
+from drpt.testing import block_z
+from support import REPO
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = REPO
 CORNELL = str(ROOT / "scenes" / "cornellbox" / "cornellbox.txt")
 N, SPP, K = 16, 8, 128
 

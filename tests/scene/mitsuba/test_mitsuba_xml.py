@@ -11,7 +11,7 @@ named-IOR dielectric, thindielectric, roughdielectric, principled), ``lens`` (th
 gaussian rfilter), ``bsdfs`` (every BSDF plugin of the vocabulary, with textures and
 composites) and ``legacy06`` (a 0.6 file: camelCase names, serialized meshes, parameters the
 plugins do not read). All but ``legacy06`` (which Mitsuba 3 itself refuses) are rendered here
-by drpt and by Mitsuba *from the same file* (block z-test, tests/render_check.py, and the z of
+by drpt and by Mitsuba *from the same file* (block z-test, drpt/testing.py, and the z of
 the image mean), and so is ``aniso`` (an anisotropic roughconductor on a sphere and a
 rectangle: shading frames follow Mitsuba's dp/du; tests/render/test_perturbed_frames.py has the
 meshes, the rotated sphere, normal and bump maps and their negative controls).
@@ -31,8 +31,9 @@ import pytest
 from drpt.errors import SceneError
 from drpt.scene import load_scene
 from drpt.scene.model import DirectionalLight, PointLight, Skybox, SpotLight
+from support import DATA
 
-XML = Path(__file__).resolve().parent / "data" / "xml"
+XML = DATA / "xml"
 #: corpus scenes of BSDFs drpt renders, z-tested against Mitsuba
 RENDER_CORPUS = ("sphere", "meshes", "instances", "spot", "envmap", "textured", "composites", "glossy",
                  "lens", "bsdfs", "ortho")

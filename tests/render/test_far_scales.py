@@ -19,8 +19,9 @@ import pytest
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
+from support import SCENES
 
-BOX = Path(__file__).resolve().parents[1] / "scenes" / "cornellbox"
+BOX = SCENES / "cornellbox"
 THRESHOLD = 0.01
 
 

@@ -2,7 +2,7 @@
 classified: traceback, hang, signal, silent wrong, error without a location,
 clean error, correct image. Not a test (pytest does not collect it):
 
-    .venv/bin/python tests/hostile_sweep.py [FAMILY ...] [-k SUBSTRING]
+    .venv/bin/python tests/robustness/hostile_sweep.py [FAMILY ...] [-k SUBSTRING]
 
 prints one line per case and the counts per family and outcome.
 """
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PY = sys.executable
 TIMEOUT = 45
 

@@ -25,8 +25,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import SHARED
 from drpt.testing import SRGB_TO_XYZ, ZTest, to_xyz, z_test  # noqa: F401
+
+from . import SHARED
 
 CORPUS = SHARED / "corpus" / "mitsuba-data" / "tests" / "scenes"
 

@@ -2,16 +2,16 @@
 
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from drpt.cli import main
 from drpt.imageio import read_image
+from support import SCENES
 
 # a module constant, not the cornell fixture: the parametrize tables below name it
-CORNELL = str(Path(__file__).resolve().parents[1] / "scenes" / "cornellbox" / "cornellbox.txt")
+CORNELL = str(SCENES / "cornellbox" / "cornellbox.txt")
 
 
 def run(args):
@@ -28,7 +28,7 @@ def test_all_seed_flags_as_written_in_the_report(tmp_path, capsys):
     img = read_image(out, linear=False)
     assert img.shape == (12, 16, 3) and img.max() > 0
     # every seed flag is built: nothing to announce (-gui opens the viewer,
-    # tests/test_view.py drives it)
+    # tests/view/test_view.py drives it)
     assert "drpt:" not in capsys.readouterr().err
 
 

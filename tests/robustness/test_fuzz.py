@@ -1,13 +1,13 @@
 """Fuzzing the readers with seeded mutations of the bundled inputs.
 
-Every case (see tests/fuzzutil.py) mutates one file of a bundled scene or
+Every case (see tests/support/fuzz.py) mutates one file of a bundled scene or
 one image and reads it in-process: :func:`drpt.scene.load_scene` for scene,
 OBJ and MTL files, :func:`drpt.imageio.read_image` for images. The input is
 either accepted or rejected with a :class:`~drpt.errors.DrptError` whose
 message is one line starting ``FILE:LINE:`` (``FILE:`` for images); any other
 exception, or a case running past ``CASE_SECONDS``, fails. An accepted
 scene holds only finite numbers; an accepted image has at least one pixel.
-Hand-written scenes at the ends of float64 (``fuzzutil.EXTREME_SCENES``)
+Hand-written scenes at the ends of float64 (``support.fuzz.EXTREME_SCENES``)
 are held to the same rule, and the valid ones among them must load.
 
 A few cases also run ``python -m drpt render`` at 8x8, 1 spp, which must
@@ -16,7 +16,7 @@ FILE:LINE: ...`` line (``FILE: ...`` for an image) and no image written;
 the other stderr lines may only be drpt's one-line warnings and notes.
 Never a traceback, never a hang.
 
-Beyond drpt's own format (tests/fuzzformats.py): the Mitsuba XML test scenes
+Beyond drpt's own format (tests/support/fuzzformats.py): the Mitsuba XML test scenes
 of tests/data/xml with their XML (values and structure), PLY, serialized
 and OBJ meshes mutated, each loaded in-process under the same contract
 (``xml/FILE-MUTATION-sSEED``); a real checkpoint damaged in ten ways and read
@@ -27,7 +27,7 @@ HTTP, nothing, hang up or announce a huge frame, each one error within
 0.5 s plus a margin (``cluster/server-KIND-sSEED``).
 
 The test id is ``FOLDER/FILE-MUTATION-sSEED`` (``extremes/NAME`` for the
-hand-written scenes); ``pytest tests/test_fuzz.py -k
+hand-written scenes); ``pytest tests/robustness/test_fuzz.py -k
 'cornellbox.txt-truncate-s1'`` reruns one case. Cases that fail today
 because of a known defect are listed in ``KNOWN`` (in-process) and
 ``KNOWN_RENDER`` (command line) and expected to fail, strictly: a fix
@@ -45,10 +45,10 @@ import warnings
 import numpy as np
 import pytest
 
-import fuzzformats as ff
-import fuzzutil as fz
 from drpt.imageio import read_image
 from drpt.scene import load_scene
+from support import fuzz as fz
+from support import fuzzformats as ff
 
 CASE_SECONDS = 5
 
@@ -198,7 +198,7 @@ def test_extreme_numbers_accepted_or_reported(case, tmp_path):
 
 
 # ------------------------------------------------------------------ Mitsuba XML, PLY, serialized, OBJ
-# (tests/fuzzformats.py): the meshes scene of tests/data/xml with one file
+# (tests/support/fuzzformats.py): the meshes scene of tests/data/xml with one file
 # mutated, loaded in-process: accepted with finite data, or one located error.
 @pytest.mark.parametrize("target,mutation,seed", [
     pytest.param(*c, id=ff.xml_id(*c)) for c in ff.xml_cases()])

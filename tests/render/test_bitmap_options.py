@@ -14,6 +14,7 @@ from drjit.auto import Array2f, Float, UInt32
 from drpt.render.texture import TextureSet
 from drpt.shading import Texture
 from drpt.testing import mitsuba
+from support import DATA
 
 TO_UV = (2.0, 0.3, -0.5, -0.2, 2.0, -0.5, 0.0, 0.0, 1.0)
 
@@ -106,15 +107,15 @@ def test_scene_renders_like_mitsuba():
     nearest mirror one raw), drpt vs Mitsuba on the same file: 4x4 block z-test (|z| < 4.5 over
     96 blocks x 3 channels); negative control: the nearest textures read bilinear fail it."""
     from dataclasses import replace
-    from pathlib import Path
+
+    from test_mitsuba_xml import _render_both
 
     from drpt.options import RenderOptions, apply_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
     from drpt.testing import assert_agree, block_z
-    from test_mitsuba_xml import _render_both
 
-    path = Path(__file__).resolve().parent / "data" / "xml" / "bitmap_options.xml"
+    path = DATA / "xml" / "bitmap_options.xml"
     scene = load_scene(path)
     r, ref, var = _render_both(scene, path, 64)
     assert r.image.shape == (32, 48, 3) and ref.mean() > 0.05

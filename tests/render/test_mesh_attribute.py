@@ -128,8 +128,9 @@ def test_lookups_equal_mitsubas_eval(tmp_path, name):
 def test_renders_like_mitsuba(tmp_path, name):
     """The mesh lit by a directional light, direct integrator, 128 spp, 4x4 block z-test
     (|z| < 4.5 over 64 blocks x 3 channels)."""
-    from drpt.testing import assert_agree
     from test_mitsuba_xml import _render_both
+
+    from drpt.testing import assert_agree
 
     ply = _write_ply(tmp_path / "grid.ply")
     p = _scene_xml(tmp_path / "s.xml", ply, BSDFS[name])

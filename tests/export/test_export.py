@@ -35,6 +35,7 @@ mi = pytest.importorskip("mitsuba")
 pytestmark = pytest.mark.mitsuba
 
 from drpt.export.mitsuba import look_at_matrix, to_mitsuba_dict, write_xml  # noqa: E402
+from support import SCENES  # noqa: E402
 
 W, H = 64, 48
 
@@ -445,8 +446,7 @@ def test_media_export_as_homogeneous_media_with_volpath(tmp_path):
     from drpt.scene import load_scene
     from drpt.scene.model import GridVolume
 
-    root = Path(__file__).resolve().parents[1]
-    scene = load_scene(root / "scenes" / "cornellbox_media" / "cornellbox_media.txt")
+    scene = load_scene(SCENES / "cornellbox_media" / "cornellbox_media.txt")
     xml = write_xml(scene, tmp_path / "m.xml", 16, 16, 4, seed=3)
     text = xml.read_text()
     assert '<integrator type="volpath"' in text and text.count('<medium type="homogeneous" name="interior">') == 2

@@ -5,7 +5,7 @@ Two statistics, both with fixed seeds:
 * relMSE = mean over pixels and channels of (x - ref)^2 / (ref^2 + 1e-2),
   the usual relative MSE. It measures noise plus bias; the bound 0.01 is
   the issue's ("well under 0.01"); drpt measures ~7e-4 at 128x128, 256 spp.
-* block z-scores (tests/render_check.py): the image is cut into 16x16-pixel
+* block z-scores (drpt/testing.py): the image is cut into 16x16-pixel
   blocks; for each block and channel z = (mean_drpt - mean_ref) /
   sqrt(var_drpt + var_ref), with drpt's per-pixel variance estimate; for the
   8192-spp reference the same per-sample variance over its own spp (one

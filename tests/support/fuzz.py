@@ -1,11 +1,11 @@
-"""Seeded mutations of drpt's input files, for tests/test_fuzz.py.
+"""Seeded mutations of drpt's input files, for tests/robustness/test_fuzz.py.
 
 A :class:`Case` names one input file of a bundled scene (or a small image),
 one mutation and one seed; :func:`build` copies the scene's folder into a
 fresh directory, applies the mutation there with ``random.Random(seed)`` and
 returns the file to load. The same case always yields the same bytes, so a
 failing case id (``TARGET-MUTATION-sSEED``) reproduces alone with
-``pytest tests/test_fuzz.py -k ID``.
+``pytest tests/robustness/test_fuzz.py -k ID``.
 
 :func:`check_error` is the contract every rejected input must meet: a
 :class:`~drpt.errors.DrptError` whose message is one line beginning with
@@ -27,8 +27,7 @@ import numpy as np
 
 from drpt.errors import DrptError
 
-REPO = Path(__file__).resolve().parents[1]
-SCENES = REPO / "scenes"
+from . import SCENES
 
 # Numbers at and past the ends of float64 and of integer types.
 EXTREMES = ("1e308", "-1e308", "1e-320", "nan", "inf", "-inf", "1e999", "-0", "-0.0",

@@ -1,5 +1,5 @@
 """Environment-lit scenes against Mitsuba 3 (block z-scores, see
-tests/render_check.py): the seed's own cornellbox.txt (Skybox + area light),
+drpt/testing.py): the seed's own cornellbox.txt (Skybox + area light),
 a synthetic sky with a small sun over glossy and diffuse spheres, and the
 same with a point light added."""
 

@@ -15,7 +15,7 @@ decide its BSDF); ``materials_cornell`` and ``veach_mis`` also in the seed's
 ``cook-torrance`` reading (smooth dielectrics, ``cook_torrance``, mirrors),
 which renders on code without the new BSDFs.
 
-Statistic (tests/render_check.py): per block of BLOCK x BLOCK pixels and per
+Statistic (drpt/testing.py): per block of BLOCK x BLOCK pixels and per
 channel, ``z = (mean_drpt - mean_mitsuba) / sqrt(var_drpt + var_mitsuba)``,
 drpt's variance from its per-pixel estimate, Mitsuba's from 8 independent
 batches; ``max |z| < 4.5``. Blocks of 16 x 16 pixels at 256 spp hold 65536

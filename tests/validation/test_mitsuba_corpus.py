@@ -1,6 +1,6 @@
 """Mitsuba 3's own render-test scenes (``../shared/corpus/mitsuba-data/tests/scenes``), read
 and rendered by drpt *as authored* and z-tested against the shipped references as Mitsuba's
-``test_renders.py`` tests its own renders (:mod:`corpusutil`: XYZ, per pixel and channel,
+``test_renders.py`` tests its own renders (:mod:`support.corpus`: XYZ, per pixel and channel,
 Sidak-corrected level, 99.75% of the pixel channels must pass).
 
 Every ``test_*.xml`` / ``scene_*.xml`` outside ``participating_media/`` (tested by
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pytest
 
-from corpusutil import CORPUS, cases, check_scene, corpus_scene, reference_files, render_as_authored, z_test
+from support.corpus import CORPUS, cases, check_scene, corpus_scene, reference_files, render_as_authored, z_test
 
 #: corpus scene -> spp drpt renders it with (all pass Mitsuba's z-test)
 SCENES = {
@@ -141,7 +141,7 @@ def _perturbed(tmp_path: Path, rel: str, old: str, new: str) -> Path:
 def test_negative_controls_fail_the_z_test(tmp_path, rel, spp, old, new):
     """The perturbed copy fails; the copy itself (``<path>`` and ``<include>`` made absolute,
     nothing else changed) passes, so the failure is the perturbation's."""
-    from corpusutil import _read
+    from support.corpus import _read
 
     ref, var = (_read(p) for p in reference_files(corpus_scene(rel)))
     results = {}

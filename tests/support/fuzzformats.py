@@ -1,9 +1,9 @@
 """Seeded hostile inputs for the Mitsuba XML reader, its meshes (PLY,
-serialized), checkpoints and cluster addresses, for tests/test_fuzz.py.
+serialized), checkpoints and cluster addresses, for tests/robustness/test_fuzz.py.
 
 Every case is ``(family, target, mutation, seed)``; its bytes come from
 ``random.Random(case id)`` alone, so a failing id reruns alone with
-``pytest tests/test_fuzz.py -k ID``.
+``pytest tests/robustness/test_fuzz.py -k ID``.
 
 * ``xml/FILE-MUTATION-sSEED``: ``tests/data/xml`` copied, ``FILE`` (the
   meshes scene, its PLY, its serialized meshes, its OBJ) mutated, the scene
@@ -31,7 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-XML_DIR = Path(__file__).resolve().parent / "data" / "xml"
+from . import DATA
+
+XML_DIR = DATA / "xml"
 XML_ENTRY = "meshes.xml"
 
 VALUES = ("nan", "inf", "-inf", "1e308", "-1e308", "1e-320", "0", "-1", "1e30", "4294967296",

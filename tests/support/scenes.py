@@ -1,20 +1,10 @@
-"""Render-comparison helpers for tests: drpt vs Mitsuba 3 on one scene.
+"""Small scenes written for the tests, in drpt's format.
 
-The statistics (``block_z``, ``block_z_correlated``, ``render_both``, ``mitsuba_runs``,
-``assert_agree``) are in :mod:`drpt.testing` and re-exported here; ``edge_scene`` is a test
-scene of its own.
+``edge_scene``: thin stripes and emitters just outside the frame, for the pixel-filter and
+camera tests that compare drpt with Mitsuba (the statistics are in :mod:`drpt.testing`).
 """
 
 from __future__ import annotations
-
-from drpt.testing import (  # noqa: F401
-    BATCHES,
-    assert_agree,
-    block_z,
-    block_z_correlated,
-    mitsuba_runs,
-    render_both,
-)
 
 
 def _quad(x0, y0, x1, y1, z, mat):

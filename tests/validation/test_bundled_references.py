@@ -4,7 +4,7 @@ env-lit car showcase by day and at dusk, the 510k-triangle dining room, and the
 Cornell box with a glass sphere of scattering liquid and a fog layer (drpt's volpath
 against Mitsuba's, the scene exported with its media).
 
-Statistic (as in tests/test_render_mitsuba.py and test_newscene.py): drpt
+Statistic (as in tests/validation/test_render_mitsuba.py and test_newscene.py): drpt
 renders at the reference's size with a fixed seed; the image is cut into
 blocks and for each block and channel
 

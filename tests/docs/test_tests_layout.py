@@ -1,0 +1,70 @@
+"""``tests/`` mirrors the package, as docs/architecture.md's "Tests" section says: every folder
+of ``tests/`` is a package folder or module of ``drpt/`` (``tests/render/bsdf/`` for
+``drpt/render/bsdf/``, ``tests/cli/`` for ``drpt/cli.py``) or one of the folders that section
+lists, every test file in ``tests/`` itself is named for a top-level module
+(``test_imageio.py`` for ``drpt/imageio.py``), and no two test files share a name (pytest
+imports them by name). Negative control: a flat test file of no module, a folder of no module
+and a duplicated name each fail the check."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+DOC = "docs/architecture.md"
+
+
+def _section(repo: Path) -> str:
+    return (repo / DOC).read_text().split("\n## Tests\n", 1)[1].split("\n## ", 1)[0]
+
+
+def _extra_folders(section: str) -> set[str]:
+    """The folders of the section's table: ``| `tests/NAME/` | ... |``."""
+    return set(re.findall(r"^\| `tests/([a-z_]+)/` \|", section, re.M))
+
+
+def _problems(tests: Path, drpt: Path, extra: set[str]) -> list[str]:
+    out = []
+    for d in sorted(p for p in tests.rglob("*") if p.is_dir()):
+        rel = d.relative_to(tests)
+        if rel.parts[0] in extra or "__pycache__" in rel.parts:
+            continue
+        if not ((drpt / rel).is_dir() or (drpt / rel).with_suffix(".py").is_file()):
+            out.append(f"tests/{rel.as_posix()}/ mirrors no drpt/{rel.as_posix()}[.py]")
+    for f in sorted(tests.glob("test_*.py")):
+        if not (drpt / f.name.removeprefix("test_")).is_file():
+            out.append(f"tests/{f.name} names no top-level module drpt/{f.name.removeprefix('test_')}: "
+                       "move it to the folder of what it tests")
+    seen: dict[str, Path] = {}
+    for f in sorted(tests.rglob("test_*.py")):
+        if f.name in seen:
+            out.append(f"{f.relative_to(tests.parent)} and {seen[f.name].relative_to(tests.parent)} share a name")
+        seen.setdefault(f.name, f)
+    return out
+
+
+def test_tests_mirror_the_package(repo):
+    extra = _extra_folders(_section(repo))
+    assert {"validation", "robustness", "docs", "support", "data"} <= extra
+    assert _problems(repo / "tests", repo / "drpt", extra) == []
+
+
+def test_the_check_catches_a_misplaced_test(repo, tmp_path):
+    extra = _extra_folders(_section(repo))
+    drpt = tmp_path / "drpt"
+    (drpt / "render").mkdir(parents=True)
+    (drpt / "imageio.py").write_text("")
+    tests = tmp_path / "tests"
+    for f in ("test_imageio.py", "render/test_camera.py", "support/corpus.py"):
+        (tests / f).parent.mkdir(parents=True, exist_ok=True)
+        (tests / f).write_text("")
+    assert _problems(tests, drpt, extra) == []
+    (tests / "test_everything.py").write_text("")
+    (tests / "misc").mkdir()
+    (tests / "validation").mkdir()
+    (tests / "validation" / "test_camera.py").write_text("")
+    problems = _problems(tests, drpt, extra)
+    assert len(problems) == 3, problems
+    assert any("test_everything.py" in p for p in problems)
+    assert any("tests/misc/" in p for p in problems)
+    assert any("share a name" in p for p in problems)
