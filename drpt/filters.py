@@ -69,8 +69,8 @@ across the filter's footprint, a splatted pixel's variance is about ``v / spp * 
 ``J = (integral w^2) / (integral w)^2`` over the 2-D filter, a filter-
 importance-sampled pixel's ``v / spp``: ``J`` is 4/9 for the tent of radius
 1 and ``1 / (4 pi s^2)``, 0.32, for the Gaussian of stddev 0.5 (truncation
-changes it by < 1%). So at equal spp filter-importance-sampled tent pixels
-are 2.25x, Gaussian pixels 3.1x as noisy (in variance) as splatted ones,
+changes it by < 1%). So at equal spp a filter-importance-sampled pixel's variance is
+``1 / J`` times a splatted one's (9/4 for the tent, about 3.1 for the Gaussian),
 but independent of each other: averages over regions much larger than the
 filter have the same variance in both. A splatted pixel's variance estimate
 is that of a weighted mean (:func:`drpt.render.renderer.finish`); a

@@ -57,7 +57,8 @@ for a texture or sky named by a scene or MTL file
 (:class:`drpt.scene.files.NamedPath`) the error names that file and line
 instead, followed by the image's name.
 
-Mitsuba is imported on the first ``.hdr`` or ``.pfm`` (about 0.3 s); its
+Mitsuba is imported on the first ``.hdr`` or ``.pfm``, not before (the import takes
+a noticeable fraction of a second); its
 ``Bitmap`` needs no variant, so none is set.
 """
 
@@ -190,7 +191,7 @@ def _write_bitmap(path: Path, img: np.ndarray) -> None:
 
 
 def _bitmap_class():
-    """``mitsuba.Bitmap``, imported on first use (about 0.3 s).
+    """``mitsuba.Bitmap``, imported on first use.
 
     ``Bitmap`` belongs to Mitsuba's core library, so no variant is set: the
     global variant stays what the rest of the program chose."""

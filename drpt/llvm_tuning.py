@@ -1,6 +1,7 @@
 """How Dr.Jit's LLVM backend compiles and launches drpt's kernels: drpt's tuning of it.
 
-Two settings of ``libdrjit-core``, both measured on drpt's renders:
+Two settings of ``libdrjit-core``; what each gains, and how it was measured, is in
+docs/performance.md ("Dr.Jit's LLVM settings"):
 
 **The code-generation target.** Dr.Jit compiles every LLVM kernel for the host:
 LLVM's name for the CPU and its feature string (``jit_llvm_target_cpu()``,
@@ -19,17 +20,13 @@ AVX2 CPU, ``0``: keep Dr.Jit's target). Images are bitwise the same.
 thread pool: ``2 * cores`` blocks up to 16384 lanes each, then blocks of
 ``jit_llvm_block_size()`` = 16384 lanes. A path-regeneration pass of a 256x256
 image is 65536 lanes: 4 blocks on 2 cores, and a core that finishes its second
-block first waits for the other (CPU utilization 1.86-1.94 of 2). The
-renderer launches its path kernel inside :func:`blocks_for`, which sets the
-block size to the largest power of two (Dr.Jit's requirement) that gives each
-thread at least :data:`BLOCKS_PER_THREAD` blocks, at most 16384: 16 blocks of
-4096 lanes there (utilization 1.97-1.98). A fixed 4096 would split a pass of
-22500 lanes into 5 blocks and a short sixth (0.93x as fast on the dining room
-at 150x150).
+block first waits for the other. The renderer launches its path kernel inside
+:func:`blocks_for`, which sets the block size to the largest power of two (Dr.Jit's
+requirement) that gives each thread at least :data:`BLOCKS_PER_THREAD` blocks, at most
+16384: 16 blocks of 4096 lanes there. A fixed 4096 would split a pass of 22500 lanes (the
+dining room at 150x150) into 5 blocks and a short sixth, which ran slower.
 
-Measured with ``benchmarks/codegen_ab.py`` (2-core AMD EPYC, Zen 3; numbers in
-``docs/performance.md``): with both, the Cornell box and newscene render
-1.4x faster, the dining room (Embree) 1.1x.
+``benchmarks/codegen_ab.py`` renders with and without each setting in one process.
 
 The target is global to the process (the block size is set only around the
 path kernel's launch): Mitsuba's kernels compiled in the same

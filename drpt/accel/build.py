@@ -6,12 +6,11 @@ Rules (``method``, :data:`METHODS`), each in the module of its name:
 ``"auto"`` (default)
     ``"sah"`` for up to ``AUTO_SAH_MAX`` (100k) primitives, ``"ploc"``
     above (and ``"sah"`` whenever ``min_leaf > 1``, which ``"ploc"`` does
-    not support). Full SAH costs 13-19 us of single-threaded numpy per
-    primitive here (6.7-9.6 s for the 510k-triangle dining room, 11-14x
-    Mitsuba's whole scene load); PLOC ~2 us (1.0-1.2 s) for trees that trace
-    about as fast, the Morton build about as long for trees that trace
-    0.72-0.89x as fast (``bench --accel bvh-sah,bvh-ploc,bvh-morton``); 100k primitives keep the SAH
-    build under ~2 s. ``BVHArrays.stats["method"]`` is the rule that ran.
+    not support). Full SAH is single-threaded numpy and the slowest build;
+    PLOC builds several times faster, trees that trace about as fast, and the
+    Morton build about as fast, trees that trace slower (build times and trace
+    rates: docs/performance.md, "BVH builders"). Up to 100k primitives the SAH
+    build stays short. ``BVHArrays.stats["method"]`` is the rule that ran.
 ``"sah"``, ``"median"``, ``"threshold"``
     Top-down splits (binned SAH, object median, and the seed's rule: SAH in
     nodes of at most ``2 * sah_threshold`` primitives, median above),

@@ -17,7 +17,7 @@ left, every round
 The merge order is greedy on surface area in a neighbourhood, which gives
 trees that trace about as fast as a full binned SAH build's, for a fraction
 of its build time; Morton order only decides who is compared with whom.
-The dining room (510k triangles) takes 68 rounds and ~1 s.
+The dining room (510k triangles) takes 68 rounds.
 
 Ties (identical boxes: a million copies of one triangle) are broken by a
 strict total order on pairs: distance, then index gap, then the parity of the

@@ -1,133 +1,70 @@
 """4-wide BVH, drpt's own accelerator (``--accel auto``'s choice on the CUDA
-backend and where Embree is missing, :mod:`drpt.accel.embree`): traversal in
-Dr.Jit of the binary BVH collapsed to four children per node.
+backend and where Embree is missing, :mod:`drpt.accel.embree`): the binary BVH
+collapsed to four children per node, traversed in Dr.Jit.
 
 :class:`BVH4` has the interface of every accelerator
-(:class:`~drpt.accel.protocol.Accelerator`; same primitive ids and
-:class:`~drpt.accel.protocol.Hit` results, planes tested brute force before
-the traversal by its :class:`~drpt.accel.primitives.SceneGeometry`). It builds
-the binary tree with :func:`~drpt.accel.build.build_bvh` (all its split
-rules) and collapses it (:func:`~drpt.accel.bvh4_nodes.collapse_bvh4`, node
-layout in :mod:`drpt.accel.bvh4_nodes`), which halves the number of loop
-iterations spent in inner nodes and tests four child boxes per iteration
-and their references from seven packet gathers.
+(:class:`~drpt.accel.protocol.Accelerator`): ``intersect(o, d, tmax, active) -> Hit``
+and ``occluded(o, d, tmax, active) -> Bool`` over the global primitive ids, planes
+tested brute force before the traversal by its
+:class:`~drpt.accel.primitives.SceneGeometry`. It builds the binary tree with
+:func:`~drpt.accel.build.build_bvh` (all its split rules) and collapses it
+(:func:`~drpt.accel.bvh4_nodes.collapse_bvh4`, node layout in
+:mod:`drpt.accel.bvh4_nodes`), which halves the number of loop iterations spent in
+inner nodes and tests four child boxes per iteration.
 
 Traversal
 ---------
-Everything happens in one ``dr.while_loop`` (symbolic by default; it also
-runs in evaluated mode, following :py:attr:`drjit.JitFlag.SymbolicLoops`).
-The root box is tested before the loop. Each iteration of a lane does, in
-this order:
+One ``dr.while_loop`` per query (symbolic by default; it also runs in evaluated
+mode, following :py:attr:`drjit.JitFlag.SymbolicLoops`). The root box is tested
+before the loop. Each iteration of a lane does, in this order:
 
-1. *node phase* (when the lane is not inside a leaf): pop a node reference
-   from the lane's stack unless one is current. The stack's newest entry is
-   kept in a register (``top``), the older ones in ``dr.alloc_local``
-   arrays, so a node with one or two hit children beyond the nearest pushes
-   and later pops one entry fewer through memory (same process, ``bench``
-   rays, three rounds: Cornell box 1.00-1.09x / 1.02-1.18x / 1.11-1.13x
-   primary / incoherent / shadow, dining room 1.00-1.04x / 1.00-1.03x /
-   1.02-1.06x, newscene 0.94-1.08x / 1.02-1.05x / 0.98-1.03x).
-   For an inner node, fetch the four child boxes and the four child
-   references with seven 16-byte packet gathers from the node's 128-byte
-   record (:func:`~drpt.accel.bvh4_nodes.node_records`), slab-test all
-   four, sort the hits by entry distance (5-comparator network, misses
-   last), push the farther hits (farthest first) and continue with the
-   nearest. If the entry in hand is a leaf (popped, or the nearest child just
-   found), load its primitive range right away;
-2. *primitive phase* (when inside a leaf): test the leaf's next
-   ``LEAF_STEP`` (2) primitives, one after the other (a lane with fewer left
-   tests them under a mask).
+1. *node phase* (when the lane is not inside a leaf): pop a node reference from
+   the lane's stack unless one is current. For an inner node, fetch the four child
+   boxes and the four child references with seven 16-byte packet gathers from the
+   node's 128-byte record (:func:`~drpt.accel.bvh4_nodes.node_records`), slab-test
+   all four, sort the hits by entry distance (5-comparator network, misses last),
+   push the farther hits (farthest first) and continue with the nearest. If the
+   entry in hand is a leaf (popped, or the nearest child just found), load its
+   primitive range right away;
+2. *primitive phase* (when inside a leaf): test the leaf's next ``LEAF_STEP`` (2)
+   primitives, one after the other (a lane with fewer left tests them under a mask).
 
-Two primitives per leaf iteration against one, and one node record against
-boxes and references in separate arrays (three cache lines per node read
-instead of two), measured in one process with ``benchmarks/accel_ab.py``
-(``bench``'s 262144 rays, median of 12 interleaved rounds): on the dining room
-(510k triangles) 1.03-1.06x primary, 1.03-1.06x incoherent and 1.04-1.05x
-shadow rays over two runs; on small scenes forced onto the BVH within noise,
-except shadow rays on newscene (37 primitives), 0.87-0.89x, where the second
-test after an any-hit is wasted work (one primitive per iteration for any-hit
-queries only measured 0.96x on the dining room's shadow rays, so both kinds
-take two). Three and four primitives per iteration were slower than two
-(incoherent 0.90x and 0.86x of one): lanes in short leaves idle through the
-longer step.
+Why it is built this way (each choice measured against its alternative in one
+process; the figures are in docs/performance.md, "4-wide BVH"):
 
-Children are only pushed when their box starts before the closest hit so
-far; popped entries are not checked again against a closer hit found since
-(which would need their entry distances on a second stack). Keeping those
-distances and skipping such entries was slower, measured in one process on
-``bench``'s 1M rays: dropping them made closest-hit queries 1.02-1.04x faster
-on the Cornell box, 0.96-1.03x on newscene and 1.31-1.33x on the dining room,
-and shadow rays (which end at their first hit, so never skip) 1.07-1.35x.
-
-Each phase is a symbolic ``dr.if_stmt``, which the LLVM backend compiles to a
-real branch taken when any lane of the SIMD packet needs it: a packet whose
-lanes are all inside leaves skips the node phase (the costlier one: seven
-packet gathers, four slab tests, a sort and pushes), and one with no lane in a
-leaf skips the primitive test. Against both phases always executed under
-masks, measured in one process on ``bench``'s 1M rays (``intersect`` /
-``occluded``, best of 3): Cornell box 1.25x / 1.07x / 1.14x (primary /
-incoherent / shadow), newscene 1.33x / 1.09x / 1.05x, dining room 1.08x /
-1.16x / 1.15x.
+* each phase is a symbolic ``dr.if_stmt``, which the LLVM backend compiles to a
+  real branch taken when any lane of the SIMD packet needs it: a packet whose lanes
+  are all inside leaves skips the node phase, one with no lane in a leaf skips the
+  primitive test;
+* two primitives per leaf iteration: fewer iterations than one, while three or
+  four leave lanes in short leaves idle through the longer step;
+* one 128-byte node record read, rather than boxes and references in separate
+  arrays (two cache lines per node instead of three);
+* children are pushed only when their box starts before the closest hit so far;
+  popped entries are not checked again against a closer hit found since (that
+  would need their entry distances on a second stack, which cost more than the
+  nodes it skipped);
+* the stack's newest entry is kept in a register (``top``), the older ones in
+  ``dr.alloc_local`` arrays, so a node with one or two hit children beyond the
+  nearest pushes and later pops one entry fewer through memory;
+* every read and write of a local array with per-lane indices is a masked packet
+  gather or scatter, paid even when its mask is empty; each one is therefore a
+  symbolic if, taken only when some lane of the packet uses that array
+  (:func:`_push`, :func:`_pop`).
 
 Stack size: a lane at a node of depth ``k`` (root = 0) holds at most three
 entries per ancestor level, and a push round adds at most three, so
-``3 * (depth4 + 1)`` entries suffice; :func:`stack_entries` adds one spare.
-The stack is split into ``dr.alloc_local`` arrays of at most ``local_chunk``
-entries (:class:`drpt.backend.Policy`, read at trace time; 16 on both
-backends, see "Local arrays of at most 16 entries" below): the Cornell box
-needs one, 100k identical triangles two (16 + 9), the dining room three or
-four. Every read and write of a local array with
-per-lane indices is a masked packet gather or scatter, paid even when its
-mask is empty; each one is therefore a symbolic if, taken only when some lane
-of the packet uses that array (:func:`_push`, :func:`_pop`). Against
-unconditional reads and writes, measured in one process on ``bench``'s rays
-(best of 3, three rounds; primary / incoherent / shadow): dining room
-1.35-1.43x / 1.19-1.28x / 1.17-1.31x (three arrays; with ``--bvh sah``, four:
-1.48-1.56x / 1.31-1.41x / 1.21-1.42x), and with one array, where only the
-pushes of third and fourth children (which few packets need) are skipped,
-Cornell box 1.19-1.21x / 1.08-1.16x / 1.08-1.14x, newscene 1.12-1.17x /
-1.09-1.10x / 0.96-1.15x. ``BVH4.track_stack``
-records the largest stack pointer of each query (tests).
-
-Local arrays of at most 16 entries
-----------------------------------
-With the whole stack in one ``dr.alloc_local`` array of 25 entries (100
-bytes per lane), Dr.Jit 1.5's LLVM backend crashes sporadically on the
-reproducer (100k copies of one triangle, 1000 rays along -z, closest hit
-then occlusion, 2 repetitions per process; ``DRPT_STRESS=1 pytest
-tests/accel/test_bvh4.py``): about 1 process in 6-10 dies with SIGSEGV in a packet
-gather of the JIT kernel on a Dr.Jit worker thread, at a wild address (a node
-index around 2**31 / 6, i.e. a garbage ``cur``). What decides it is the size
-of the local arrays: in two concurrent loops of 24 reproducer processes, the
-25-entry stack in one array crashed 4 times, split into arrays of at most 16
-entries (64 bytes) never; split, it has not crashed in 396 reproducer
-processes (at 1 crash in 6, the probability of that is ~4e-32) nor in the
-test suite. Hence ``local_chunk = 16`` (:class:`drpt.backend.Policy`).
-Ruled out, with evidence:
-
-* stack overflow: with ``track_stack`` the deepest stack was 29 entries of
-  43 on a lopsided tree (now 25 at most, :mod:`drpt.accel.bvh4_nodes`); the
-  bound above holds;
-* dangling host memory: Dr.Jit maps numpy memory without copying but keeps
-  a reference to the array; uploads copied into Dr.Jit-owned memory crashed
-  just as often;
-* masked packet gathers: masked lanes read a static zero packet (checked in
-  the generated IR); packets past the end: uploads are padded by 64 bytes
-  (:func:`~drpt.accel.device.device_array`);
-* the Dr.Jit 1.5 local-array hazard below.
-
-It matches Dr.Jit issues #532 (``dr.alloc_local`` stacks larger than 128
-bytes per lane crash the LLVM backend, DFS/BVH kernels) and #446 (LLVM-only
-garbage indices in a ``dr.Local`` BVH stack); with ``dr.set_thread_count(0)``
-it did not crash either. The mechanism inside Dr.Jit is not known; the binary
-BVH (``"bvh2"``, 64-entry arrays) never crashed.
-
-Dr.Jit 1.5 hazard (avoided): in a symbolic loop, ``Local.write(value, index,
-mask)`` whose ``index`` variable has size 1 is rendered as one uniform row
-store at the largest index of the active lanes, even when the lanes' values
-differ; a stack pointer created as ``UInt32(0)`` and written before being
-widened loses entries (44 of 64 lanes in ``tests/accel/test_bvh4.py``). Every loop
-variable here starts full width (``dr.zeros(T, n)``).
+``3 * (depth4 + 1)`` entries suffice; :func:`stack_entries` adds one spare. The
+stack is split into ``dr.alloc_local`` arrays of at most ``local_chunk`` entries
+(:class:`drpt.backend.Policy`, read at trace time; 16 on both backends): larger
+per-lane local arrays crash Dr.Jit 1.5's LLVM backend sporadically (SIGSEGV at a
+garbage node index in a worker thread; cf. Dr.Jit issues #532 and #446; the
+evidence is in docs/performance.md), and ``DRPT_STRESS=1 pytest
+tests/accel/test_bvh4.py`` runs the reproducer. ``BVH4.track_stack`` records the
+largest stack pointer of each query (tests). Every loop variable starts full
+width (``dr.zeros(T, n)``): Dr.Jit 1.5 renders ``Local.write`` with a size-1 index
+in a symbolic loop as one uniform store, and a stack pointer created as
+``UInt32(0)`` would lose entries (docs/architecture.md, "Dr.Jit 1.5 pitfalls").
 
 Device data (float32 or uint32, in BVH order, uploaded 64-byte aligned and
 zero padded by :func:`~drpt.accel.device.device_array` so that Dr.Jit emits

@@ -13,11 +13,11 @@ Planes are tested by brute force first (:class:`~drpt.accel.primitives.SceneGeom
 and Embree's ``tfar`` is the nearest plane hit.
 
 Why: on large scenes drpt's own 4-wide BVH (:mod:`drpt.accel.bvh4`, one ray per SIMD
-lane, a packet looping until its slowest lane is done) traces at 0.3-0.5x Embree's rate,
-and on the 510k-triangle dining room its traversal is more than half of a path-traced
-frame; Embree's packet queries fall back to single-ray traversal with SIMD across a
-node's children when a packet diverges, which a lane-per-ray Dr.Jit kernel cannot
-express. ``--accel auto`` therefore picks this accelerator above
+lane, a packet looping until its slowest lane is done) traces incoherent rays at a
+fraction of Embree's rate, and on the 510k-triangle dining room its traversal is more than
+half of a path-traced frame (docs/performance.md, "Embree"); Embree's packet queries
+fall back to single-ray traversal with SIMD across a node's children when a packet
+diverges, which a lane-per-ray Dr.Jit kernel cannot express. ``--accel auto`` therefore picks this accelerator above
 ``inline_max_prims`` primitives on the LLVM backend when Embree 3 loads
 (:func:`drpt.accel.registry.resolve_kind`), and drpt's BVH otherwise (CUDA, no Embree,
 or a BVH rule asked for).

@@ -51,8 +51,8 @@ hit so far lies inside the cell (``t <= t_exit``, with a relative slack of
 steps to the neighbour across the nearest face and loads that cell's
 reference range, in the same iteration. With ``skip_empty`` (class attribute,
 default on) this stepping is a small nested ``dr.while_loop`` that walks over
-empty cells without running the primitive test code (measured 10-80 % faster
-on a sparse 82k-triangle mesh, neutral on the Cornell box). Primitives are
+empty cells without running the primitive test code (faster on sparse meshes,
+neutral on the Cornell box: docs/performance.md, "Uniform grid"). Primitives are
 tested one per outer iteration (as in the BVH), so lanes of a SIMD packet share
 iterations whatever the primitive counts of their cells; an inner per-cell
 primitive loop was not measured. Hits beyond the current cell's exit never

@@ -67,7 +67,7 @@ def build_accel(scene, kind: str = "auto", method: str = "auto", leaf_size: int 
             primitive's test compiled into the kernel with its data as
             constants, :mod:`drpt.accel.inline`), ``"bvh"`` (the 4-wide BVH,
             :mod:`drpt.accel.bvh4`; alias ``"bvh4"``), ``"bvh2"`` (the binary
-            BVH it is collapsed from, :mod:`drpt.accel.bvh`: 2-3x slower to
+            BVH it is collapsed from, :mod:`drpt.accel.bvh`: slower to
             trace, kept for comparison), ``"grid"`` (uniform grid, 3D-DDA) or
             ``"brute"`` (:data:`ACCELERATORS`).
         method: BVH split rule (:mod:`drpt.accel.build`): ``"auto"``

@@ -8,9 +8,8 @@ tracer runs them with *path regeneration*
 pixel gets ``m`` Dr.Jit lanes (from ``drpt.backend.policy().min_lanes``,
 see :meth:`Renderer._pass`), each lane traces its
 share of the ``k`` samples one path after another and sums them, so a SIMD
-packet no longer waits for its longest path at every bounce (measured in one
-process against one sample per lane: Cornell box 1.17x, newscene 1.32x at
-256x256, 64 spp). The Whitted integrator runs one sample per lane. Lanes are
+packet no longer waits for its longest path at every bounce (its gain:
+docs/performance.md, "Execution model"). The Whitted integrator runs one sample per lane. Lanes are
 ordered pixel-major, so a pixel's lanes are adjacent and ``dr.block_sum``
 adds them (a pixel is the mean of its own samples). Each
 lane draws from its own PCG32 stream, selected by ``(seed, pass, lane)``, so
@@ -296,10 +295,8 @@ class Renderer:
         covers, a light-tracing pass the whole image (``lo = 0``).
 
         The sums are float32; where one overflowed, the pass is traced again
-        with float64 sums (a second kernel, compiled only then): float64
-        sums in every pass took 1.06x the median CPU time of float32 sums
-        (Cornell box, 256x256, 64 spp, LLVM, 15 renders each, interleaved,
-        on 2 shared cores)."""
+        with float64 sums (a second kernel, compiled only then), since float64
+        sums in every pass cost time (docs/performance.md, "Execution model")."""
         if self.light_tracing:
             sums = PassSums(0, *self._trace_light_pass(pass_index, k * rows * self.opt.width))
         elif self.splatting:
@@ -402,7 +399,7 @@ class Renderer:
             acc, acc2, bad, *cross = self.integrator.sample_sequence(rng, camera_ray, count, wide=wide,
                                                                      **extra)
             # evaluate the path loop once (the reductions below would each
-            # re-run it: measured 4.1x slower), in blocks that keep every
+            # re-run it), in blocks that keep every
             # thread busy to the end (drpt.llvm_tuning.blocks_for)
             with llvm_tuning.blocks_for(n):
                 dr.eval(acc, acc2, bad, cross)

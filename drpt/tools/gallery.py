@@ -11,7 +11,7 @@ and the material mode and depth it is rendered with (``cornellbox`` and
 ``cornellbox_ct`` are the Cornell box read as Phong and as Cook-Torrance).
 The other render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
 ``--spp`` default 64). The dining room is generated first
-(:mod:`drpt.tools.scenegen.diningroom`, ~6 s) when ``scenes/diningroom/`` is
+(:mod:`drpt.tools.scenegen.diningroom`) when ``scenes/diningroom/`` is
 missing.
 
 Size

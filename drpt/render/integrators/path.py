@@ -94,8 +94,7 @@ class PathIntegrator:
         ends it adds the sample to its sums and starts the next one, until
         ``count`` are done. A SIMD packet of lanes therefore runs until its
         lanes' *total* work is done, instead of each bounce loop waiting for
-        the packet's longest path (Russian roulette makes path lengths vary:
-        on the Cornell box the longest path of 16 averages 1.6x the mean).
+        the packet's longest path (Russian roulette makes path lengths vary).
         Returns the sum of the samples, the sum of their squares (for the
         variance) and how many non-finite samples were dropped (counted, not
         added: there should be none). The sums are float32, or with ``wide``
