@@ -109,6 +109,7 @@ def traced(aovs, denoise: bool = False) -> list[tuple[str, str]]:
 
 
 def channel_count(kinds) -> int:
+    """Channels of the AOV (or denoiser guide) ``kinds`` together."""
     return sum(len(CHANNELS.get(k) or GUIDES[k]) for k in kinds)
 
 

@@ -105,6 +105,7 @@ class PixelFilter:
 
     @property
     def is_box(self) -> bool:
+        """Whether this is the box filter (each sample counts in its own pixel only)."""
         return self.kind == "box"
 
     @property

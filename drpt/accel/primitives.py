@@ -162,6 +162,8 @@ def test_triangle(tri_buf, idx, prep: RayPrep, bt, active):
 
 
 def test_sphere(sph_buf, idx, o, d, bt, active):
+    """Sphere ``idx`` of ``sph_buf`` (center and radius as 4 floats) against the rays:
+    ``(t, hit)`` of the nearest intersection before ``bt``, ``hit`` only where ``active``."""
     s = dr.gather(Array4f, sph_buf, idx, active)
     t, h = intersect_sphere(o, d, Array3f(s.x, s.y, s.z), s.w, bt)
     return t, h & active

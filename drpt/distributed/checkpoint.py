@@ -107,6 +107,9 @@ def paths(output: Path) -> tuple[Path, Path]:
 
 @dataclass
 class Checkpoint:
+    """A render's merged prefix of chunks: what it was rendered from (``scene_hash``,
+    ``options``), how far it got (``next`` of ``chunks``, at ``spp``) and its sums."""
+
     scene_hash: str
     options: dict
     chunks: int  # chunks of the whole render

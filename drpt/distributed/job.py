@@ -82,6 +82,8 @@ def _stop_requests():
 
 @dataclass
 class WorkerStats:
+    """What one worker did: chunks and samples rendered, and their render seconds."""
+
     chunks: int = 0
     samples: int = 0
     seconds: float = 0.0

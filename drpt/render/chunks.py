@@ -45,16 +45,20 @@ class ChunkPlan:
 
     @property
     def sample_steps(self) -> int:
+        """Sample steps of the whole render: ``ceil(spp / k)`` (``k`` samples per pixel each)."""
         return -(-self.passes.spp // self.passes.k)
 
     @property
     def count(self) -> int:
+        """Chunks of the render: ``ceil(sample_steps / steps)`` (the last may be short)."""
         return -(-self.sample_steps // self.steps)
 
     def __len__(self) -> int:
         return self.count
 
     def passes_of(self, c: int) -> range:
+        """The pass indices of chunk ``c`` (every band of rows of its sample steps);
+        ``IndexError`` outside ``0 .. count - 1``."""
         if not 0 <= c < self.count:
             raise IndexError(f"chunk {c} of {self.count}")
         bands = self.passes.bands
@@ -138,6 +142,7 @@ class ChunkMerge:
 
     @property
     def done(self) -> bool:
+        """Whether every chunk of the render is merged."""
         return self.next >= self.chunks.count
 
     @property

@@ -56,6 +56,12 @@ def filter_weight(flt: PixelFilter, d: Float) -> Float:
 
 
 class SplatFilm:
+    """The float64 sums of one pass's splats over the rows ``[y0, y0 + rows)`` of a
+    ``width x height`` image (all rows by default), filtered by ``flt``: light tracing's
+    with ``weights=False``, camera samples' (with the sums of the weights) with
+    ``weights=True``, and, with ``moment`` too, the channels' products for Mitsuba's
+    ``moment`` integrator (the module docstring has the sums and their meaning)."""
+
     def __init__(self, width: int, height: int, flt: PixelFilter, weights: bool = False,
                  y0: int = 0, rows: int | None = None, moment: bool = False):
         self.width, self.height = width, height

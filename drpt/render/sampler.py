@@ -254,12 +254,14 @@ class ZSobolSampler(LDSampler):
         return out
 
     def next_float32(self) -> Float:
+        """The next dimension's value in ``[0, 1)`` for each lane."""
         i = self._sample_index()
         h = mix32(self.seed ^ (self.dim * 0x9E3779B9))
         self.dim += 1
         return to_float(owen_reversed(i, h))
 
     def next_2d(self) -> Array2f:
+        """The next two dimensions, stratified together (a 2-D Sobol point), in ``[0, 1)^2``."""
         i = self._sample_index()
         h = mix32(self.seed ^ (self.dim * 0x9E3779B9))
         self.dim += 2

@@ -32,6 +32,8 @@ def square_to_cosine_hemisphere(u: Array2f) -> Array3f:
 
 
 def cosine_hemisphere_pdf(cos_theta: Float) -> Float:
+    """Solid-angle density of :func:`square_to_cosine_hemisphere` at a direction of
+    ``cos_theta`` (its z): ``max(cos_theta, 0) / pi``, 0 below the horizon."""
     return dr.maximum(cos_theta, 0.0) * INV_PI
 
 
@@ -79,7 +81,9 @@ class Frame:
         return f
 
     def to_local(self, v: Array3f) -> Array3f:
+        """``v`` in this frame's coordinates, ``(v . s, v . t, v . n)``: ``n`` becomes +z."""
         return Array3f(dr.dot(v, self.s), dr.dot(v, self.t), dr.dot(v, self.n))
 
     def to_world(self, v: Array3f) -> Array3f:
+        """The inverse of :meth:`to_local`: ``s v.x + t v.y + n v.z``."""
         return self.s * v.x + self.t * v.y + self.n * v.z

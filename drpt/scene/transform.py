@@ -16,6 +16,13 @@ Geometry helpers:
   by ``M``;
 * spheres: a similarity (uniform scale times rotation, within 1e-6 relative)
   keeps a sphere a sphere; anything else needs :func:`tessellate_sphere`.
+
+Angles are in degrees, rotations right-handed. ``Translate 1 0 0`` then ``RotateZ 90``
+(written in that order) rotates a point first, then moves it:
+
+>>> m = compose(translate(1, 0, 0), rotate_z(90))
+>>> transform_points(m, np.array([1.0, 0.0, 0.0])).round(12).tolist()
+[1.0, 1.0, 0.0]
 """
 
 from __future__ import annotations
@@ -26,16 +33,19 @@ import numpy as np
 
 
 def identity() -> np.ndarray:
+    """The 4x4 identity."""
     return np.eye(4)
 
 
 def translate(x: float, y: float, z: float) -> np.ndarray:
+    """Translation by ``(x, y, z)``."""
     m = np.eye(4)
     m[:3, 3] = (x, y, z)
     return m
 
 
 def scale(x: float, y: float, z: float) -> np.ndarray:
+    """Scale by ``x``, ``y``, ``z`` along the axes (negative factors mirror)."""
     return np.diag([x, y, z, 1.0])
 
 
@@ -60,14 +70,17 @@ def rotate_axis(axis, degrees: float) -> np.ndarray:
 
 
 def rotate_x(degrees: float) -> np.ndarray:
+    """Right-handed rotation by ``degrees`` about the x axis."""
     return rotate_axis((1.0, 0.0, 0.0), degrees)
 
 
 def rotate_y(degrees: float) -> np.ndarray:
+    """Right-handed rotation by ``degrees`` about the y axis."""
     return rotate_axis((0.0, 1.0, 0.0), degrees)
 
 
 def rotate_z(degrees: float) -> np.ndarray:
+    """Right-handed rotation by ``degrees`` about the z axis."""
     return rotate_axis((0.0, 0.0, 1.0), degrees)
 
 
@@ -90,10 +103,12 @@ def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def is_finite(m: np.ndarray) -> bool:
+    """Whether every entry of ``m`` is finite (an overflowing :func:`compose` gives inf)."""
     return bool(np.isfinite(m).all())
 
 
 def is_identity(m: np.ndarray) -> bool:
+    """Whether ``m`` is exactly the identity (no tolerance)."""
     return bool(np.array_equal(m, np.eye(4)))
 
 

@@ -291,6 +291,7 @@ def cache_dir_from_args(args: argparse.Namespace) -> Path | None:
 
 
 def default_cache_dir() -> Path:
+    """``$XDG_CACHE_HOME/drpt/references`` (``~/.cache`` without it)."""
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "drpt" / "references"
 

@@ -9,6 +9,8 @@ every comment (:mod:`tokenize`) of ``drpt/`` and matches :data:`SPEEDUP`. Negati
 planted module with such figures in a module, class and function docstring and in a comment
 is caught, each where it was planted, and the same module with sizes and statistics in their
 place ("4x4 blocks", "a 2x2 matrix", "the 99.7% interval", "1.6 times the mean") is not.
+
+The examples in docstrings (``>>>``) run and show their output (:mod:`doctest`).
 """
 
 from __future__ import annotations
@@ -86,3 +88,30 @@ def test_the_check_passes_sizes_and_statistics():
              .replace("2-3x slower", "a 2x2 matrix"))
     assert speedups(clean, "clean.py") == []
 
+
+
+def _modules_with_examples(repo) -> list[str]:
+    out = []
+    for path in sorted((repo / "drpt").rglob("*.py")):
+        if ">>> " in path.read_text():
+            parts = path.relative_to(repo).with_suffix("").parts
+            out.append(".".join(parts[:-1] if parts[-1] == "__init__" else parts))
+    return out
+
+
+def test_docstring_examples_run(repo):
+    """Every ``>>>`` example in a docstring of ``drpt/`` gives the output it shows
+    (:mod:`doctest`; examples marked ``+SKIP`` are skipped). Negative control: an example
+    whose shown output is wrong fails the same runner."""
+    import doctest
+    import importlib
+
+    names = _modules_with_examples(repo)
+    assert "drpt.scene.transform" in names
+    for name in names:
+        result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
+        assert result.failed == 0, f"{name}: {result.failed} of {result.attempted} examples failed"
+
+    wrong = type(doctest)("planted")
+    wrong.__doc__ = ">>> 1 + 1\n3\n"
+    assert doctest.testmod(wrong, report=False).failed == 1
