@@ -376,10 +376,8 @@ class Renderer:
         sequential = hasattr(self.integrator, "sample_sequence")
         # Lanes per pixel: with path regeneration m = ceil(min_lanes / pixels)
         # (at most k), each running about k / m samples, else one lane per
-        # sample. Fewer, longer lanes balance better (LLVM, Cornell box, 64
-        # spp, render seconds: 256x256 with m = 1, 2, 4, 16: 8.7, 9.2, 9.8,
-        # 10.6; 64x64 at 256 spp with 4k, 8k, 16k, 64k lanes: 2.4, 2.2, 1.9,
-        # 2.2), but too few lanes leave the device idle.
+        # sample. Fewer, longer lanes balance better (docs/performance.md,
+        # "Execution model"), but too few lanes leave the device idle.
         min_lanes = policy().min_lanes
         m = min(k, -(-min_lanes // pixels)) if sequential else k
         n = pixels * m
