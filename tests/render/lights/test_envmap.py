@@ -6,7 +6,6 @@ seeds). Sampling is checked with Mitsuba's chi-square test (drpt/testing.py).
 """
 
 import math
-import time
 import warnings
 
 import drjit as dr
@@ -379,14 +378,11 @@ def test_gray_and_rgba_inputs():
     np.testing.assert_allclose(np.array(a.eval(d)), 0.5, rtol=1e-6)
 
 
-def test_large_map_builds_fast_and_samples():
+def test_large_map_builds_and_samples():
     rng = np.random.default_rng(10)
     img = rng.random((2048, 4096, 3), dtype=np.float32)
     img[300:304, 1000:1004] = 1e5
-    t = time.perf_counter()
     light = EnvironmentLight(img)
-    dt = time.perf_counter() - t
-    assert dt < 4.0, dt  # ~0.3-2 s here (first large allocation dominates)
     d, le, pdf = light.sample(uniform(10_000, 11))
     le, pdf = np.array(le), np.array(pdf)
     assert np.all(np.isfinite(pdf)) and np.all(pdf > 0) and np.all(np.isfinite(le))
