@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from .errors import DrptError, note, warn
 
 BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
-INTEGRATORS = ("path", "whitted", "ptracer", "volpath")
+INTEGRATORS = ("path", "whitted", "ptracer", "volpath", "bdpt")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
 LIGHT_SAMPLERS = ("power", "uniform")  # drpt.render.lights.area
