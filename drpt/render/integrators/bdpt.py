@@ -70,9 +70,12 @@ refused, as are rough dielectric and principled materials (their transmission
 is not symmetric: see :mod:`~drpt.render.integrators.ptracer`).
 
 Image: the renderer runs BDPT as it runs light tracing (a pass splats over the
-whole image, :meth:`~drpt.render.renderer.Renderer._trace_light_pass`); the
-camera subpath's sum is splatted at its own image position, so the pixel is the
-film's sum over ``spp``.
+whole image, :meth:`~drpt.render.renderer.Renderer._trace_light_pass`, one light
+subpath per camera sample: ``W H`` per sample per pixel). The ``t = 1`` splats go
+into one film, each camera sample's sum of the other strategies into a second one
+at its own image position; the pixel is their sum over ``spp``, and the renderer
+estimates the two parts' variances apart (a camera part's is that of a mean of
+``spp`` samples, the splats' that of a light-traced image).
 """
 
 from __future__ import annotations
@@ -153,6 +156,28 @@ def connection_weight(pdf_l: Float, dvcm_l: Float, dvc_l: Float, rev_l: Float,
     return dr.select(dr.isfinite(w), w, 0.0)
 
 
+def nee_weight(pdf_bsdf: Float, pdf_light: Float, emit: Float, cos_c: Float, cos_l: Float,
+               dvcm: Float, dvc: Float, rev: Float) -> Float:
+    """Weight of next-event estimation (``s = 1``) at a camera vertex: ``pdf_bsdf`` the
+    BSDF's density toward the light point (0 for a delta light), ``pdf_light`` the point's
+    density as a solid angle (for a delta light: ``dist^2``, its area density 1), ``emit``
+    the light subpath's density of that point and direction, ``cos_c`` and ``cos_l`` the
+    geometric cosines at the camera vertex and the light, ``rev`` the BSDF's density
+    toward the camera vertex's predecessor seen from the light."""
+    wl = mis(pdf_bsdf / pdf_light)
+    wc = mis(emit * cos_c / (pdf_light * cos_l)) * (dvcm + dvc * mis(rev))
+    w = dr.rcp(1.0 + wl + wc)
+    return dr.select(dr.isfinite(w), w, 0.0)
+
+
+def emission_weight(pdf_nee: Float, emit: Float, dvcm: Float, dvc: Float) -> Float:
+    """Weight of a camera subpath hitting an emitter (``s = 0``) after at least one
+    bounce: ``pdf_nee`` next-event estimation's area density of the point, ``emit`` the
+    light subpath's density of it and of the direction back along the ray."""
+    w = dr.rcp(1.0 + mis(pdf_nee) * dvcm + mis(emit) * dvc)
+    return dr.select(dr.isfinite(w), w, 0.0)
+
+
 def mis_weights_reference(pdf_fwd: list[float], pdf_rev: list[float], delta: list[bool],
                           p_nee: float, light_is_delta: bool, n_light_paths: float = 1.0,
                           ) -> list[float]:
@@ -182,9 +207,7 @@ def mis_weights_reference(pdf_fwd: list[float], pdf_rev: list[float], delta: lis
         if s == k:
             p *= n_light_paths
         # a connection between x_{s-1} and x_s needs both to be non-Dirac
-        if s >= 1 and (delta[s - 1] or delta[s] if s < k else delta[s - 1]):
-            return 0.0
-        if s == 0 and delta[0]:
+        if s >= 1 and (delta[s - 1] or delta[s]):
             return 0.0
         return p
 
@@ -367,11 +390,9 @@ class BDPTIntegrator:
         pdf_a = self.origin_pdf(si.prim, active)
         cos_e = dr.maximum(dr.dot(si.ns, si.wi), 0.0)
         emit = self.pick * pdf_a * cos_e / math.pi
-        wc = mis(pdf_a) * dvcm + mis(emit) * dvc
-        w = dr.select(first, 1.0, dr.rcp(1.0 + wc))
-        if self.opt.hide_emitters:
-            w = dr.select(first, 0.0, w)
-        return dr.select(active & dr.isfinite(w), beta * le * w, 0.0)
+        w = dr.select(first, 0.0 if self.opt.hide_emitters else 1.0,
+                      emission_weight(pdf_a, emit, dvcm, dvc))
+        return dr.select(active, beta * le * w, 0.0)
 
     def _nee_area(self, si: Interaction, dvcm: Float, dvc: Float, rng: PCG32, active: Bool) -> Array3f:
         """``s = 1`` for the area lights: a point drawn as the path tracer draws it."""
@@ -396,9 +417,7 @@ class BDPTIntegrator:
         _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
         emit = self.pick * pdf_a * cos_front / math.pi
         cos_c = dr.abs(dr.dot(si.ng, wo))
-        wl = mis(fwd / pdf_w)
-        wc = mis(emit * cos_c / (pdf_w * cos_l)) * (dvcm + dvc * mis(rev))
-        w = dr.rcp(1.0 + wl + wc)
+        w = nee_weight(fwd, pdf_w, emit, cos_c, cos_l, dvcm, dvc, rev)
         value = f * ls.le * (w / pdf)
         ok &= (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         so = scene.spawn(si, wo)
@@ -417,8 +436,8 @@ class BDPTIntegrator:
             _, rev = scene.eval_bsdf(with_wi(si, ds.wo), si.wi)
             emit = self.pick * self._pdf_dir_delta(light)
             cos_c = dr.abs(dr.dot(si.ng, ds.wo))
-            wc = mis(emit * cos_c / dr.square(ds.dist)) * (dvcm + dvc * mis(rev))
-            value = f * ds.irradiance * dr.rcp(1.0 + wc)
+            w = nee_weight(Float(0.0), dr.square(ds.dist), emit, cos_c, Float(1.0), dvcm, dvc, rev)
+            value = f * ds.irradiance * w
             ok = active & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
             so = scene.spawn(si, ds.wo)
             ok &= ~scene.occluded(so, ds.wo, dr.norm(Array3f(*map(float, light.position)) - so) * SHADOW_SHRINK,

@@ -1,0 +1,289 @@
+"""Bidirectional path tracing (drpt/render/integrators/bdpt.py).
+
+MIS weights: the recursive quantities the integrator carries along its subpaths
+(``hit_update``, ``scatter_update``) and its weight functions (``connection_weight``,
+``nee_weight``, ``emission_weight``) are run on random paths (random distances, cosines
+and BSDF densities, some vertices Dirac, area or point lights) and must give pbrt's
+weights computed from the whole path (``mis_weights_reference``, relative error < 1e-3)
+and sum to 1 over the strategies of each path. Negative control: a wrong reverse density
+in one update makes them disagree.
+
+Images: 4x4-block z-tests (``drpt.testing.block_z``) of bdpt against the path tracer on the
+same scene with the same ``max_depth`` (both with drpt's per-pixel variance estimates),
+threshold |z| < 4.5 over every block and channel, and the z of the image means < 4: the
+bundled Cornell box and a small scene of glass, mirror, Phong and diffuse surfaces lit by
+a point light and an emissive sphere. Negative controls: a missing cosine in the
+connection of light and camera vertices, and a wrong density in the weights of next-event
+estimation, must fail the same test (|z| > 6).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import drjit as dr
+import numpy as np
+import pytest
+from drjit.auto import Bool, Float
+
+from drpt.errors import DrptError
+from drpt.options import PathOptions, RenderOptions
+from drpt.render.integrators import bdpt as B
+from drpt.render.renderer import Renderer
+from drpt.scene import load_scene
+
+REPO = Path(__file__).resolve().parents[3]
+
+
+# ------------------------------------------------------------ MIS weights
+def _random_paths(rng, n, k, delta_light):
+    """``n`` random paths of ``k`` segments: per path the geometry and densities."""
+    P = {
+        "d2": rng.uniform(0.05, 4.0, (n, k)),  # squared length of edge i (x_i -- x_{i+1})
+        "cp": rng.uniform(0.05, 1.0, (n, k + 1)),  # |cos| at x_i of edge i
+        "cm": rng.uniform(0.05, 1.0, (n, k + 1)),  # |cos| at x_i of edge i - 1
+        "a": rng.uniform(0.05, 3.0, (n, k + 1)),  # BSDF density at x_i toward x_{i+1} (from x_{i-1})
+        "b": rng.uniform(0.05, 3.0, (n, k + 1)),  # toward x_{i-1} (from x_{i+1})
+        "e0": rng.uniform(0.05, 1.0, n),  # emission direction density at x_0
+        "pL0": rng.uniform(0.1, 2.0, n),  # light subpath origin density
+        "pnee": rng.uniform(0.1, 2.0, n),  # next-event estimation's density of x_0
+        "cdir": rng.uniform(0.5, 3.0, n),  # camera direction density of the pixel sample
+        "delta": rng.uniform(size=(n, k + 1)) < 0.25,
+    }
+    P["delta"][:, 0] = P["delta"][:, k] = False
+    if delta_light:
+        P["pnee"][:] = 1.0
+    # a Dirac vertex's own densities count as 1
+    P["a"] = np.where(P["delta"], 1.0, P["a"])
+    P["b"] = np.where(P["delta"], 1.0, P["b"])
+    return P
+
+
+def _reference(P, j, k, delta_light, N):
+    fwd = [P["pL0"][j]] + [(P["e0"][j] if i == 1 else P["a"][j, i - 1]) * P["cm"][j, i] / P["d2"][j, i - 1]
+                           for i in range(1, k + 1)]
+    rev = [(P["cdir"][j] if i == k - 1 else P["b"][j, i + 1]) * P["cp"][j, i] / P["d2"][j, i]
+           for i in range(k)] + [1.0]
+    return B.mis_weights_reference(fwd, rev, list(P["delta"][j]), P["pnee"][j], delta_light, N)
+
+
+def _recursive(P, k, delta_light, N, wrong_rev=False):
+    """Each strategy's weight from the integrator's functions, per path (Dr.Jit lanes)."""
+    F = {key: (Float(v.astype(np.float32)) if v.ndim == 1 else [Float(v[:, i].astype(np.float32))
+                                                                   for i in range(v.shape[1])])
+         for key, v in P.items() if key != "delta"}
+    D = [Bool(P["delta"][:, i]) for i in range(k + 1)]
+    emit = F["pL0"] * F["e0"]
+
+    def light_side(s):  # dvcm, dvc at x_{s-1}
+        dvcm = B.mis(F["pnee"] / emit)
+        dvc = Float(0.0) if delta_light else B.mis(F["cp"][0] / emit)
+        for j in range(1, s):
+            dvcm, dvc = B.hit_update(dvcm, dvc, F["d2"][j - 1], F["cm"][j])
+            if j < s - 1:
+                rev = F["b"][j] * (1.5 if wrong_rev and j == 1 else 1.0)
+                dvcm, dvc = B.scatter_update(dvcm, dvc, F["a"][j], rev, F["cp"][j], D[j])
+        return dvcm, dvc
+
+    def camera_side(s):  # dvcm, dvc at x_s
+        dvcm, dvc = B.mis(N / F["cdir"]), Float(0.0)
+        for i in range(k - 1, s - 1, -1):
+            dvcm, dvc = B.hit_update(dvcm, dvc, F["d2"][i], F["cp"][i])
+            if i > s:
+                dvcm, dvc = B.scatter_update(dvcm, dvc, F["b"][i], F["a"][i], F["cm"][i], D[i])
+        return dvcm, dvc
+
+    out = []
+    for s in range(k + 1):
+        if s == 0:
+            dvcm, dvc = camera_side(0)
+            w = Float(0.0) if delta_light else B.emission_weight(F["pnee"], emit, dvcm, dvc)
+            w = w if k > 1 else Float(0.0 if delta_light else 1.0)  # seen by the camera: weight 1
+        elif s == 1:
+            dvcm, dvc = camera_side(1)
+            pdf_light = F["pnee"] * F["d2"][0] / F["cp"][0]
+            fwd = Float(0.0) if delta_light else F["b"][1]
+            w = B.nee_weight(fwd, pdf_light, emit, F["cm"][1], F["cp"][0], dvcm, dvc, F["a"][1])
+            w = dr.select(D[1], 0.0, w) if k > 1 else Float(0.0)
+        else:
+            dvcm_l, dvc_l = light_side(s)
+            pdf_l = (F["cdir"] / N if s == k else F["b"][s]) * F["cp"][s - 1] / F["d2"][s - 1]
+            if s == k:
+                w = B.connection_weight(pdf_l, dvcm_l, dvc_l, F["b"][s - 1], Float(0.0), Float(0.0),
+                                        Float(0.0), Float(0.0))
+            else:
+                dvcm_c, dvc_c = camera_side(s)
+                pdf_c = F["a"][s - 1] * F["cm"][s] / F["d2"][s - 1]
+                w = B.connection_weight(pdf_l, dvcm_l, dvc_l, F["b"][s - 1], pdf_c, dvcm_c, dvc_c,
+                                        F["a"][s])
+            w = dr.select(D[s - 1] | (D[s] if s < k else Bool(False)), 0.0, w)
+        out.append(np.broadcast_to(np.asarray(w.numpy(), np.float64), (len(P["e0"]),)))
+    return np.stack(out, axis=1)
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 5, 7])
+@pytest.mark.parametrize("delta_light", [False, True])
+def test_mis_weights_match_pbrts_and_sum_to_one(k, delta_light):
+    rng = np.random.default_rng(10 * k + delta_light)
+    n, N = 300, 64.0
+    P = _random_paths(rng, n, k, delta_light)
+    got = _recursive(P, k, delta_light, N)
+    ref = np.array([_reference(P, j, k, delta_light, N) for j in range(n)])
+    # paths no strategy samples (a point light seen directly, or through Dirac vertices only)
+    # have no weights
+    possible = ref.sum(1) > 0
+    assert possible.mean() > 0.5 or (delta_light and k == 1)
+    assert np.allclose(ref[possible].sum(1), 1.0, atol=1e-9)
+    assert np.allclose(got[possible].sum(1), 1.0, atol=2e-4), np.abs(got[possible].sum(1) - 1).max()
+    assert np.allclose(got, ref, rtol=1e-3, atol=1e-5), np.abs(got - ref).max()
+
+
+def test_mis_weights_negative_control():
+    """A reverse density 1.5x too large at one light vertex breaks the sum."""
+    k, n = 5, 300
+    P = _random_paths(np.random.default_rng(3), n, k, False)
+    got = _recursive(P, k, False, 64.0, wrong_rev=True)
+    assert np.abs(got.sum(1) - 1.0).max() > 1e-2
+
+
+# ------------------------------------------------------------ images
+POINT_SCENE = """
+PerspectiveCamera { center 0 1 4.5 direction 0 -0.15 -1 up 0 1 0 angle 45 }
+%s
+Materials { numMaterials 6
+  Material { diffuseColor 0.7 0.7 0.7 }
+  Material { diffuseColor 0.2 0.6 0.2 }
+  Material { transparentColor 1 1 1 indexOfRefraction 1.5 }
+  Material { reflectiveColor 0.9 0.9 0.9 }
+  Material { diffuseColor 0.3 0.2 0.5 specularColor 0.5 0.5 0.5 exponent 30 }
+  Material { Ke 12 10 8 }
+}
+Group { numObjects %d
+  MaterialIndex 0
+  Triangle { vertex0 -2 0 -2 vertex1 2 0 2 vertex2 2 0 -2 }
+  Triangle { vertex0 -2 0 -2 vertex1 -2 0 2 vertex2 2 0 2 }
+  Triangle { vertex0 -2 0 -2 vertex1 2 0 -2 vertex2 2 3 -2 }
+  Triangle { vertex0 -2 0 -2 vertex1 2 3 -2 vertex2 -2 3 -2 }
+  MaterialIndex 1
+  Triangle { vertex0 -2 0 -2 vertex1 -2 3 -2 vertex2 -2 3 2 }
+  Triangle { vertex0 -2 0 -2 vertex1 -2 3 2 vertex2 -2 0 2 }
+  MaterialIndex %d
+  Sphere { center 0.3 0.5 0 radius 0.5 }
+  MaterialIndex %d
+  Sphere { center -1.0 0.4 -1.0 radius 0.4 }
+  MaterialIndex 4
+  Sphere { center 1.2 0.35 -0.8 radius 0.35 }
+  %s
+}
+"""
+
+
+def _scene(tmp_path_factory, name):
+    """``point``: diffuse and Phong surfaces under a point light; ``specular``: glass,
+    mirror, Phong and diffuse surfaces lit by a small emissive sphere (caustics that the
+    path tracer finds by chance)."""
+    if name == "point":
+        text = POINT_SCENE % ("Lights { numLights 1 PointLight { position -0.6 2.2 0.8 color 4 4 4 } }",
+                              9, 0, 4, "")
+    else:
+        text = POINT_SCENE % ("", 10, 2, 3, "MaterialIndex 5\n  Sphere { center 0.9 2.0 0.3 radius 0.15 }")
+    path = tmp_path_factory.mktemp("bdpt") / f"{name}.txt"
+    path.write_text(text)
+    return load_scene(path)
+
+
+def _render(scene, integrator, spp, depth, seed=1, size=32):
+    opts = RenderOptions(width=size, height=size, spp=spp, seed=seed, integrator=integrator,
+                         progress=False, path=PathOptions(max_depth=depth))
+    return Renderer(scene, opts)
+
+
+def _agree(a, b):
+    from drpt.testing import block_z
+
+    z = block_z(a.image, a.variance, b.image, b.variance, block=4)
+    n = a.image.shape[0] * a.image.shape[1]
+    zmean = (a.image.mean((0, 1)) - b.image.mean((0, 1))) / np.sqrt(
+        a.variance.mean((0, 1)) / n + b.variance.mean((0, 1)) / n)
+    return float(np.abs(z).max()), float(np.abs(zmean).max())
+
+
+#: (scene, max_depth, bdpt spp, path spp): the path tracer's caustics need many samples
+CASES = {"cornell": (5, 64, 256), "point": (6, 64, 256), "specular": (6, 128, 1024)}
+
+
+@pytest.fixture(scope="module")
+def scenes(tmp_path_factory):
+    return {"cornell": load_scene(REPO / "scenes" / "cornellbox" / "cornellbox.txt"),
+            "point": _scene(tmp_path_factory, "point"),
+            "specular": _scene(tmp_path_factory, "specular")}
+
+
+@pytest.fixture(scope="module")
+def references(scenes):
+    return {}
+
+
+def _reference(scenes, references, name):
+    if name not in references:
+        depth, _, spp = CASES[name]
+        references[name] = _render(scenes[name], "path", spp, depth, seed=7).render()
+    return references[name]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(CASES))
+def test_bdpt_agrees_with_path_tracing(scenes, references, name):
+    depth, spp, _ = CASES[name]
+    r = _render(scenes[name], "bdpt", spp, depth).render()
+    assert r.nonfinite == 0 and np.all(np.isfinite(r.image)) and r.image.mean() > 0.01
+    zb, zm = _agree(r, _reference(scenes, references, name))
+    assert zb < 4.5 and zm < 4.0, (zb, zm)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name,what", [("cornell", "no cosine at the light vertex"),
+                                       ("point", "no cosine at the light vertex"),
+                                       ("cornell", "a wrong density in next-event estimation's weight")])
+def test_negative_controls_fail(scenes, references, monkeypatch, name, what):
+    if what.startswith("no cosine"):
+        correction = B.correction
+
+        def no_cosine(si, w):  # importance leaving a light vertex without |cos(ns, w)|
+            corr, ok = correction(si, w)
+            return corr / dr.maximum(dr.abs(dr.dot(si.ns, w)), 1e-3), ok
+
+        monkeypatch.setattr(B, "correction", no_cosine)
+    else:
+        nee_weight = B.nee_weight
+        monkeypatch.setattr(B, "nee_weight", lambda fwd, pdf, *a: nee_weight(fwd, pdf * 2.0, *a))
+    depth, spp, _ = CASES[name]
+    zb, _ = _agree(_render(scenes[name], "bdpt", spp, depth).render(), _reference(scenes, references, name))
+    assert zb > 6.0, zb
+
+
+def test_bdpt_variance_estimate_is_calibrated(scenes):
+    """Two renders of different seeds differ by their estimated variances: the per-pixel
+    z has a standard deviation near 1 (0.9-1.1 over 3072 pixel channels)."""
+    a = _render(scenes["cornell"], "bdpt", 16, 5, seed=1).render()
+    b = _render(scenes["cornell"], "bdpt", 16, 5, seed=2).render()
+    z = (a.image - b.image) / np.sqrt(a.variance + b.variance + 1e-12)
+    assert 0.9 < z.std() < 1.1, z.std()
+
+
+# ------------------------------------------------------------ what it refuses
+def test_bdpt_refuses_what_it_cannot_render(scenes):
+    cornell = scenes["cornell"]
+    lens = replace(cornell, camera=replace(cornell.camera, aperture_radius=0.1, focus_distance=3.0))
+    with pytest.raises(DrptError, match="pinhole"):
+        _render(lens, "bdpt", 1, 5)
+    with pytest.raises(DrptError, match="at most 16 segments"):
+        _render(cornell, "bdpt", 1, 40)
+    from drpt.scene.model import DirectionalLight
+
+    sun = replace(cornell, lights=[*cornell.lights, DirectionalLight((0.0, -1.0, 0.0), (1.0, 1.0, 1.0))])
+    with pytest.raises(DrptError, match="directional"):
+        _render(sun, "bdpt", 1, 5)
+    r = _render(cornell, "bdpt", 1, -1)
+    assert any("at most 16 segments" in w for w in r.warnings)
