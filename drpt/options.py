@@ -33,6 +33,9 @@ from .errors import DrptError, note, warn
 
 BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
 INTEGRATORS = ("path", "whitted", "ptracer", "volpath", "bdpt")
+#: integrators whose passes splat light paths over the whole image (their sums merge and
+#: finish as light tracing's, drpt.render.renderer.finish)
+LIGHT_TRACED = ("ptracer", "bdpt")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
 LIGHT_SAMPLERS = ("power", "uniform")  # drpt.render.lights.area
@@ -75,7 +78,7 @@ class RenderOptions:
     sah_threshold: int | None = None  # K of bvh_method="threshold" (None: the seed's 2000)
     bvh_min_leaf: int = 1  # minimum primitives per BVH leaf (the seed's -resolution)
     bsdf: str = "auto"  # how MTL materials are read, see drpt.shading
-    integrator: str = "path"  # "path" (MIS path tracing), "whitted" or "ptracer" (light tracing)
+    integrator: str = "path"  # "path" (MIS path tracing), "whitted", "ptracer" (light tracing), "bdpt", "volpath"
     mode: str = "megakernel"  # path tracing as one fused kernel, or "wavefront" (a kernel per stage)
     wavefront_tail: int = 0  # wavefront: finish in one fused loop once at most this many paths live
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)

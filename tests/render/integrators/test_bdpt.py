@@ -287,3 +287,53 @@ def test_bdpt_refuses_what_it_cannot_render(scenes):
         _render(sun, "bdpt", 1, 5)
     r = _render(cornell, "bdpt", 1, -1)
     assert any("at most 16 segments" in w for w in r.warnings)
+
+
+# ------------------------------------------------------------ chunks, workers, resume
+def _cli_render(tmp_path, name, *flags, spp=16):
+    from drpt.cli import main
+    from drpt.imageio import read_image
+
+    out = tmp_path / f"{name}.exr"
+    scene = REPO / "scenes" / "cornellbox" / "cornellbox.txt"
+    assert main(["render", str(scene), "--size", "16", "16", "-q", "--integrator", "bdpt", "--max-depth", "5",
+                 "--spp", str(spp), "-o", str(out), *flags]) == 0
+    return read_image(out)
+
+
+@pytest.mark.slow
+def test_workers_give_the_plain_image(tmp_path):
+    """As light tracing's: the float32 image of a chunk layout is the same in one process
+    and on Dask workers (the splats' float64 sums differ at most in their last bits);
+    another layout draws other random numbers (negative control)."""
+    plain = _cli_render(tmp_path, "plain", "--chunk-spp", "4")
+    assert not np.array_equal(plain, _cli_render(tmp_path, "chunks", "--chunk-spp", "1"))
+    pytest.importorskip("distributed")
+    assert np.array_equal(plain, _cli_render(tmp_path, "w2", "--chunk-spp", "4", "--workers", "2"))
+
+
+@pytest.mark.slow
+def test_resume_after_an_interrupt_gives_the_uninterrupted_image(tmp_path):
+    import json
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    spp, chunk = 128, 2
+    whole = _cli_render(tmp_path, "whole", "--chunk-spp", str(chunk), spp=spp)
+    out = tmp_path / "cut.exr"
+    meta = Path(str(out) + ".drpt-checkpoint.json")
+    cmd = [sys.executable, "-m", "drpt", "render", str(REPO / "scenes" / "cornellbox" / "cornellbox.txt"),
+           "--size", "16", "16", "-q", "--integrator", "bdpt", "--max-depth", "5", "--spp", str(spp),
+           "--chunk-spp", str(chunk), "--checkpoint-seconds", "0", "-o", str(out)]
+    p = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = time.monotonic()
+    while not meta.exists() and p.poll() is None and time.monotonic() - t0 < 120:
+        time.sleep(0.02)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 130, err
+    state = json.loads(meta.read_text())
+    assert 0 < state["next"] < state["chunks"]
+    assert np.array_equal(whole, _cli_render(tmp_path, "cut", "--chunk-spp", str(chunk), "--resume", spp=spp))
