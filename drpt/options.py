@@ -367,7 +367,8 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
     if want("integrator"):
         default = d["integrator"]
         parser.add_argument("--integrator", choices=INTEGRATORS, default=default, action=_Given,
-                            help="path (MIS path tracing, default) or whitted")
+                            help="path (MIS path tracing, default), whitted, ptracer (light "
+                                 "tracing), bdpt (bidirectional) or volpath")
         if seed_flags:
             parser.add_argument("-MonteCarlo", dest="monte_carlo", action="store_true",
                                 help="seed flag: Monte Carlo path tracing (the seed's default "
