@@ -11,8 +11,9 @@ in one update makes them disagree.
 Images: 4x4-block z-tests (``drpt.testing.block_z``) of bdpt against the path tracer on the
 same scene with the same ``max_depth`` (both with drpt's per-pixel variance estimates),
 threshold |z| < 4.5 over every block and channel, and the z of the image means < 4: the
-bundled Cornell box and a small scene of glass, mirror, Phong and diffuse surfaces lit by
-a point light and an emissive sphere. Negative controls: a missing cosine in the
+bundled Cornell box, a small scene of diffuse and Phong surfaces lit by a point light or a
+spot light, and one of glass, mirror, Phong and diffuse surfaces lit by an emissive sphere
+(the path tracer then needs 1024 spp: its caustics are fireflies). Negative controls: a missing cosine in the
 connection of light and camera vertices, and a wrong density in the weights of next-event
 estimation, must fail the same test (|z| > 6).
 """
@@ -193,6 +194,13 @@ def _scene(tmp_path_factory, name):
     return load_scene(path)
 
 
+def _spot_scene(point):
+    """The point-light scene lit by a spot light instead (Mitsuba XML's ``spot``)."""
+    from drpt.scene.model import SpotLight
+
+    return replace(point, lights=[SpotLight((0.5, 2.5, 1.0), (-0.3, -1.0, -0.5), (6.0, 5.0, 4.0), 30.0, 20.0)])
+
+
 def _render(scene, integrator, spp, depth, seed=1, size=32):
     opts = RenderOptions(width=size, height=size, spp=spp, seed=seed, integrator=integrator,
                          progress=False, path=PathOptions(max_depth=depth))
@@ -210,13 +218,14 @@ def _agree(a, b):
 
 
 #: (scene, max_depth, bdpt spp, path spp): the path tracer's caustics need many samples
-CASES = {"cornell": (5, 64, 256), "point": (6, 64, 256), "specular": (6, 128, 1024)}
+CASES = {"cornell": (5, 64, 256), "point": (6, 64, 256), "spot": (6, 64, 256), "specular": (6, 128, 1024)}
 
 
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory):
+    point = _scene(tmp_path_factory, "point")
     return {"cornell": load_scene(REPO / "scenes" / "cornellbox" / "cornellbox.txt"),
-            "point": _scene(tmp_path_factory, "point"),
+            "point": point, "spot": _spot_scene(point),
             "specular": _scene(tmp_path_factory, "specular")}
 
 
