@@ -5,10 +5,11 @@ its pixel) and combines them by every connection strategy ``(s, t)``: ``s``
 vertices from the light subpath, ``t`` from the camera subpath (the camera
 itself is camera vertex 0), a path of ``s + t - 1`` segments:
 
-* ``s = 0``: the camera subpath hits an emissive triangle or sphere;
+* ``s = 0``: the camera subpath hits an emissive triangle or sphere, or escapes to
+  the sky or the background color;
 * ``s = 1``: next-event estimation at a camera vertex (a point sampled on an
   area light as :meth:`~drpt.render.lights.area.AreaLights.sample` draws it for
-  the path tracer, and every point and spot light);
+  the path tracer, every point, spot and directional light, a sky direction);
 * ``s >= 2, t >= 2``: a stored light vertex joined to a camera vertex by a
   shadow ray;
 * ``t = 1``: a light vertex joined to the pinhole camera and splatted at the
@@ -37,10 +38,15 @@ whose BPT part this is): each subpath vertex carries two numbers, ``dvcm`` and
 follows in O(1):
 
 * at an emitter: ``dvcm = m(p_nee / p_emit)``, ``dvc = m(|cos_g| / p_emit)``
-  (``0`` for a point or spot light: the camera cannot hit it), ``m(x) = x^2``,
-  ``p_emit`` the light subpath's density of its origin and direction (source
+  (``0`` for a point, spot or directional light: the camera cannot hit it), ``m(x) =
+  x^2``, ``p_emit`` the light subpath's density of its origin and direction (source
   choice, area density, cosine density), ``p_nee`` next-event estimation's area
-  density of the point (1 for delta lights, which it samples every time);
+  density of the point (1 for delta lights, which it samples every time; 0 for the
+  background color, which it does not sample). An infinite emitter (sky, background,
+  directional light) has a direction's density for ``p_nee`` and a point on a disk
+  of the scene's bounding radius ``R`` for ``p_emit`` (``1 / (pi R^2)``, as
+  :class:`~drpt.render.lights.rays.EmitterRays` starts it), no cosine, and its
+  first segment no distance to convert;
 * at the camera: ``dvcm = m(A cos^3)``, ``dvc = 0`` (``A`` the film's area at
   distance 1: ``1 / (A cos^3)`` is the pixel sample's direction density times
   the ``W H`` light paths per sample per pixel);
@@ -64,10 +70,10 @@ pbrt's way, from a whole path's densities (the tests compare them).
 segments, and at most :data:`MAX_DEPTH`; ``max_depth = -1`` means
 :data:`MAX_DEPTH` (with a warning). Pinhole perspective cameras only (the
 ``t = 1`` strategy needs the camera's importance). Emitters: emissive triangles
-and spheres (textured too), point and spot lights; directional lights,
-projectors, textured spots, the environment and a background color are
-refused, as are rough dielectric and principled materials (their transmission
-is not symmetric: see :mod:`~drpt.render.integrators.ptracer`).
+and spheres (textured too), point, spot and directional lights, the sky and a
+background color; projectors and textured spots are refused, as are rough
+dielectric and principled materials (their transmission is not symmetric: see
+:mod:`~drpt.render.integrators.ptracer`).
 
 Image: the renderer runs BDPT as it runs light tracing (a pass splats over the
 whole image, :meth:`~drpt.render.renderer.Renderer._trace_light_pass`, one light
@@ -90,19 +96,19 @@ from ...errors import DrptError
 from ...options import PathOptions
 from ..camera import RayCamera
 from ..film import SplatFilm
-from ..lights.rays import EmitterRays
+from ..lights.rays import INV_FOUR_PI, EmitterRays
 from ..sampler import next_2d
 from ..scene import DeviceScene
 from ..spawn import origin as spawn_origin
 from ..surface import Interaction
-from ..warp import Frame, square_to_cosine_hemisphere
+from ..warp import Frame, square_to_cosine_hemisphere, square_to_uniform_sphere
 from .common import SHADOW_SHRINK
 from .ptracer import NONSYMMETRIC_LOBES
 
 #: the longest path BDPT traces (segments); its light vertices are stored per lane
 MAX_DEPTH = 16
 
-SUPPORTED_SOURCES = ("area", "point", "spot")
+SUPPORTED_SOURCES = ("area", "point", "spot", "directional", "sky", "background")
 
 
 def mis(x: Float) -> Float:
@@ -280,8 +286,7 @@ class BDPTIntegrator:
                             "materials (their transmission is not symmetric)")
         for kind, light in rays.sources:
             if kind not in SUPPORTED_SOURCES or (kind == "spot" and getattr(light, "texture", None) is not None):
-                name = {"sky": "an environment map", "background": "a background color"}.get(
-                    kind, f"{'textured ' if kind == 'spot' else ''}{kind} lights")
+                name = f"{'textured ' if kind == 'spot' else ''}{kind} lights"
                 raise DrptError(f"bidirectional path tracing (bdpt) does not support {name}: use the "
                                 "path integrator")
         self.warnings: list[str] = []
@@ -299,14 +304,25 @@ class BDPTIntegrator:
         self.camera = camera
         self.opt = options
         self.pick = 1.0 / rays.count if rays.count else 0.0
-        self.deltas = [light for kind, light in rays.sources if kind in ("point", "spot")]
+        # the order of DeltaLights.samples: points, spots (projectors are refused), directionals
+        self.deltas = ([light for kind, light in rays.sources if kind in ("point", "spot")]
+                       + [light for kind, light in rays.sources if kind == "directional"])
+        self.has_sky = any(kind == "sky" for kind, _ in rays.sources)
+        self.has_background = any(kind == "background" for kind, _ in rays.sources)
+        #: a light subpath leaving an infinite emitter starts on a disk of the scene's
+        #: bounding sphere's radius R, perpendicular to its direction: area density 1 / (pi R^2)
+        self.disk_pdf = 1.0 / (math.pi * rays.radius * rays.radius)
 
     # ------------------------------------------------------------ emitter densities
-    def _pdf_dir_delta(self, light) -> float:
-        """Direction density of a point (uniform sphere) or spot light (uniform cone)."""
-        if getattr(light, "cutoff_angle", None) is None:
-            return 1.0 / (4.0 * math.pi)
-        return 1.0 / (2.0 * math.pi * (1.0 - math.cos(math.radians(light.cutoff_angle))))
+    def _delta_emit(self, light) -> float:
+        """The light subpath's density of leaving a delta light: a point light's direction
+        (uniform sphere), a spot's (uniform cone), a directional light's origin (the disk),
+        times the source's choice."""
+        if getattr(light, "cutoff_angle", None) is not None:
+            return self.pick / (2.0 * math.pi * (1.0 - math.cos(math.radians(light.cutoff_angle))))
+        if getattr(light, "position", None) is None:
+            return self.pick * self.disk_pdf
+        return self.pick / (4.0 * math.pi)
 
     def origin_pdf(self, prim: UInt32, active: Bool) -> Float:
         """Area density of an emitter point on primitive ``prim`` as the light sampler draws
@@ -324,7 +340,8 @@ class BDPTIntegrator:
 
     # ------------------------------------------------------------ light subpath start
     def _emit(self, rng: PCG32, active: Bool):
-        """The light subpath's first ray: ``(o, d, beta, dvcm, dvc, valid)``."""
+        """The light subpath's first ray: ``(o, d, beta, dvcm, dvc, infinite, valid)``
+        (``infinite``: it leaves the directional light, the sky or the background)."""
         rays, n = self.rays, dr.width(active)
         u_sel = rng.next_float32()
         u_pos = next_2d(rng)
@@ -335,6 +352,7 @@ class BDPTIntegrator:
         beta = dr.zeros(Array3f, n)
         dvcm = dr.zeros(Float, n)
         dvc = dr.zeros(Float, n)
+        infinite = dr.zeros(Bool, n)
         for i, (kind, light) in enumerate(rays.sources):
             mine = active & (k == i)
             if kind == "area":
@@ -348,19 +366,38 @@ class BDPTIntegrator:
                 bi = ls.le * (local.z * inv)
                 vcm = mis(ls.pdf_area * inv)
                 vc = mis(dr.abs(dr.dot(ls.ng, di)) * inv)
+            elif kind in ("sky", "background"):
+                # next-event estimation samples the sky's direction by the same density (the
+                # background not at all); no cosine at an infinite emitter
+                if kind == "sky":
+                    w_sky, le, pdf = self.scene.sample_environment(u_dir, mine)
+                else:
+                    w_sky = square_to_uniform_sphere(u_dir)
+                    le, pdf = Array3f(*map(float, self.scene.background)), Float(INV_FOUR_PI)
+                di = -w_sky
+                oi = rays._disk_origin(di, u_pos)
+                emit = self.pick * pdf * self.disk_pdf
+                ok = mine & (emit > 0.0)
+                inv = dr.select(ok, dr.rcp(emit), 0.0)
+                bi = le * inv
+                vcm = mis(pdf * inv) if kind == "sky" else Float(0.0)
+                vc = mis(inv)
+                infinite |= mine
             else:
                 oi, di, w = rays._source_ray(kind, light, u_reuse, u_pos, u_dir, mine)
-                emit = self.pick * self._pdf_dir_delta(light)
+                emit = self._delta_emit(light)
                 bi = w * float(rays.count)
                 vcm = Float(mis(1.0 / emit))
                 vc = Float(0.0)
+                if kind == "directional":
+                    infinite |= mine
             o = dr.select(mine, oi, o)
             d = dr.select(mine, di, d)
             beta = dr.select(mine, bi, beta)
             dvcm = dr.select(mine, vcm, dvcm)
             dvc = dr.select(mine, vc, dvc)
         valid = active & (dr.max(beta) > 0.0)
-        return o, d, beta, dvcm, dvc, valid
+        return o, d, beta, dvcm, dvc, infinite, valid
 
     # ------------------------------------------------------------ strategies
     def _splat(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float, film: SplatFilm,
@@ -434,16 +471,44 @@ class BDPTIntegrator:
         for light, ds in zip(self.deltas, scene.delta_emitters(si.p)):
             f, _ = scene.eval_bsdf(si, ds.wo)
             _, rev = scene.eval_bsdf(with_wi(si, ds.wo), si.wi)
-            emit = self.pick * self._pdf_dir_delta(light)
             cos_c = dr.abs(dr.dot(si.ng, ds.wo))
-            w = nee_weight(Float(0.0), dr.square(ds.dist), emit, cos_c, Float(1.0), dvcm, dvc, rev)
+            # the light's area density is 1 (a Dirac): as a solid angle dist^2, or 1 for a
+            # directional light (infinitely far: no distance, no cosine)
+            far = getattr(light, "position", None) is None
+            pdf_light = Float(1.0) if far else dr.square(ds.dist)
+            w = nee_weight(Float(0.0), pdf_light, Float(self._delta_emit(light)), cos_c, Float(1.0),
+                           dvcm, dvc, rev)
             value = f * ds.irradiance * w
             ok = active & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
             so = scene.spawn(si, ds.wo)
-            ok &= ~scene.occluded(so, ds.wo, dr.norm(Array3f(*map(float, light.position)) - so) * SHADOW_SHRINK,
-                                  ok)
+            ok &= ~scene.occluded(so, ds.wo, ds.dist * SHADOW_SHRINK, ok)
             total += dr.select(ok, value, 0.0)
         return total
+
+    def _nee_sky(self, si: Interaction, dvcm: Float, dvc: Float, rng: PCG32, active: Bool) -> Array3f:
+        """``s = 1`` for the sky: a direction drawn by its density (as the path tracer's)."""
+        scene = self.scene
+        wo, radiance, pdf = scene.sample_environment(next_2d(rng), active)
+        f, fwd = scene.eval_bsdf(si, wo)
+        _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
+        emit = self.pick * pdf * self.disk_pdf
+        w = nee_weight(fwd, pdf, emit, dr.abs(dr.dot(si.ng, wo)), Float(1.0), dvcm, dvc, rev)
+        value = f * radiance * (w / dr.maximum(pdf, 1e-30))
+        ok = active & (pdf > 0.0) & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
+        ok &= ~scene.occluded(scene.spawn(si, wo), wo, Float(dr.inf), ok)
+        return dr.select(ok, value, 0.0)
+
+    def _escaped(self, d: Array3f, beta: Array3f, dvcm: Float, dvc: Float, first: Bool,
+                 active: Bool) -> Array3f:
+        """``s = 0`` for the sky or the background the camera subpath's ray ``d`` escapes to
+        (no distance or cosine to convert at an infinite emitter)."""
+        if self.has_sky:
+            le, pdf = self.scene.eval_pdf_environment(d, active)
+        else:
+            le, pdf = Array3f(*map(float, self.scene.background)), Float(0.0)  # no NEE of it
+        emit = self.pick * (pdf if self.has_sky else INV_FOUR_PI) * self.disk_pdf
+        w = dr.select(first, 0.0 if self.opt.hide_emitters else 1.0, emission_weight(pdf, emit, dvcm, dvc))
+        return dr.select(active, beta * le * w, 0.0)
 
     def _connect(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float,
                  lv: Interaction, beta_l: Array3f, dvcm_l: Float, dvc_l: Float, active: Bool) -> Array3f:
@@ -488,7 +553,7 @@ class BDPTIntegrator:
         lverts = None
         if NL > 0 and self.rays.count > 0 and scene.has_smooth_bsdfs:
             lverts = LightVertices(NL, getattr(scene.materials, "tangents", False))
-            o, d, beta, dvcm, dvc, live = self._emit(rng, Bool(active))
+            o, d, beta, dvcm, dvc, infinite, live = self._emit(rng, Bool(active))
             eta = dr.full(Float, 1.0, n)
             depth = dr.full(UInt32, 1, n)
             while live:
@@ -497,7 +562,10 @@ class BDPTIntegrator:
                 finite = dr.isfinite(beta.x) & dr.isfinite(beta.y) & dr.isfinite(beta.z)
                 dropped += dr.select(live & ~finite, 1, 0)
                 live &= finite
-                dvcm, dvc = hit_update(dvcm, dvc, dr.square(si.t), dr.abs(dr.dot(si.ng, d)))
+                # the first segment from an infinite emitter has no length to convert
+                dist2 = dr.select(infinite, 1.0, dr.square(si.t))
+                infinite = dr.zeros(Bool, n)
+                dvcm, dvc = hit_update(dvcm, dvc, dist2, dr.abs(dr.dot(si.ng, d)))
                 connectible = live & ~scene.is_delta(si)
                 if connectible:
                     lverts.write(dr.minimum(stored, NL - 1), si, beta, dvcm, dvc, depth)
@@ -536,6 +604,8 @@ class BDPTIntegrator:
         live = Bool(active) & (D > 0)
         while live:
             si = scene.intersect(o, d, live)
+            if self.has_sky or self.has_background:
+                L += self._escaped(d, beta, dvcm, dvc, k == 1, live & ~si.valid)
             live &= si.valid
             dvcm, dvc = hit_update(dvcm, dvc, dr.square(si.t), dr.abs(dr.dot(si.ng, d)))
             if scene.has_area_lights:
@@ -545,6 +615,8 @@ class BDPTIntegrator:
                 L += beta * self._nee_area(si, dvcm, dvc, rng, connectible)
             if has_deltas:
                 L += beta * self._nee_delta(si, dvcm, dvc, connectible)
+            if self.has_sky and scene.has_smooth_bsdfs:
+                L += beta * self._nee_sky(si, dvcm, dvc, rng, connectible)
             if lverts is not None:
                 i = dr.zeros(UInt32, n)
                 while connectible & (i < stored):

@@ -11,9 +11,10 @@ in one update makes them disagree.
 Images: 4x4-block z-tests (``drpt.testing.block_z``) of bdpt against the path tracer on the
 same scene with the same ``max_depth`` (both with drpt's per-pixel variance estimates),
 threshold |z| < 4.5 over every block and channel, and the z of the image means < 4: the
-bundled Cornell box, a small scene of diffuse and Phong surfaces lit by a point light or a
-spot light, and one of glass, mirror, Phong and diffuse surfaces lit by an emissive sphere
-(the path tracer then needs 1024 spp: its caustics are fireflies). Negative controls: a missing cosine in the
+bundled Cornell box, a small scene of diffuse and Phong surfaces lit by a point light, a
+spot light, or a directional light and a background color, one of glass, mirror, Phong and
+diffuse surfaces lit by an emissive sphere (the path tracer then needs 1024 spp: its
+caustics are fireflies), and envsun's sky with a sun and a point light. Negative controls: a missing cosine in the
 connection of light and camera vertices, and a wrong density in the weights of next-event
 estimation, must fail the same test (|z| > 6).
 """
@@ -38,7 +39,7 @@ REPO = Path(__file__).resolve().parents[3]
 
 
 # ------------------------------------------------------------ MIS weights
-def _random_paths(rng, n, k, delta_light):
+def _random_paths(rng, n, k, delta_light, infinite=False):
     """``n`` random paths of ``k`` segments: per path the geometry and densities."""
     P = {
         "d2": rng.uniform(0.05, 4.0, (n, k)),  # squared length of edge i (x_i -- x_{i+1})
@@ -55,13 +56,16 @@ def _random_paths(rng, n, k, delta_light):
     P["delta"][:, 0] = P["delta"][:, k] = False
     if delta_light:
         P["pnee"][:] = 1.0
+    if infinite:  # x_0 is a direction: no distance, no cosine there
+        P["d2"][:, 0] = 1.0
+        P["cp"][:, 0] = 1.0
     # a Dirac vertex's own densities count as 1
     P["a"] = np.where(P["delta"], 1.0, P["a"])
     P["b"] = np.where(P["delta"], 1.0, P["b"])
     return P
 
 
-def _reference(P, j, k, delta_light, N):
+def _pbrt_weights(P, j, k, delta_light, N):
     fwd = [P["pL0"][j]] + [(P["e0"][j] if i == 1 else P["a"][j, i - 1]) * P["cm"][j, i] / P["d2"][j, i - 1]
                            for i in range(1, k + 1)]
     rev = [(P["cdir"][j] if i == k - 1 else P["b"][j, i + 1]) * P["cp"][j, i] / P["d2"][j, i]
@@ -69,7 +73,7 @@ def _reference(P, j, k, delta_light, N):
     return B.mis_weights_reference(fwd, rev, list(P["delta"][j]), P["pnee"][j], delta_light, N)
 
 
-def _recursive(P, k, delta_light, N, wrong_rev=False):
+def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False):
     """Each strategy's weight from the integrator's functions, per path (Dr.Jit lanes)."""
     F = {key: (Float(v.astype(np.float32)) if v.ndim == 1 else [Float(v[:, i].astype(np.float32))
                                                                    for i in range(v.shape[1])])
@@ -81,7 +85,9 @@ def _recursive(P, k, delta_light, N, wrong_rev=False):
         dvcm = B.mis(F["pnee"] / emit)
         dvc = Float(0.0) if delta_light else B.mis(F["cp"][0] / emit)
         for j in range(1, s):
-            dvcm, dvc = B.hit_update(dvcm, dvc, F["d2"][j - 1], F["cm"][j])
+            # the first segment from an infinite emitter has no length (as the integrator's)
+            dvcm, dvc = B.hit_update(dvcm, dvc, Float(1.0) if infinite and j == 1 else F["d2"][j - 1],
+                                     F["cm"][j])
             if j < s - 1:
                 rev = F["b"][j] * (1.5 if wrong_rev and j == 1 else 1.0)
                 dvcm, dvc = B.scatter_update(dvcm, dvc, F["a"][j], rev, F["cp"][j], D[j])
@@ -90,6 +96,8 @@ def _recursive(P, k, delta_light, N, wrong_rev=False):
     def camera_side(s):  # dvcm, dvc at x_s
         dvcm, dvc = B.mis(N / F["cdir"]), Float(0.0)
         for i in range(k - 1, s - 1, -1):
+            if i == 0 and infinite:
+                break  # an escaped ray: nothing to convert
             dvcm, dvc = B.hit_update(dvcm, dvc, F["d2"][i], F["cp"][i])
             if i > s:
                 dvcm, dvc = B.scatter_update(dvcm, dvc, F["b"][i], F["a"][i], F["cm"][i], D[i])
@@ -124,13 +132,17 @@ def _recursive(P, k, delta_light, N, wrong_rev=False):
 
 
 @pytest.mark.parametrize("k", [1, 2, 3, 5, 7])
-@pytest.mark.parametrize("delta_light", [False, True])
-def test_mis_weights_match_pbrts_and_sum_to_one(k, delta_light):
-    rng = np.random.default_rng(10 * k + delta_light)
+@pytest.mark.parametrize("light", ["area", "point", "sky", "directional"])
+def test_mis_weights_match_pbrts_and_sum_to_one(k, light):
+    """``sky``: an infinite emitter (the reference's densities of ``x_0`` and ``x_1`` are
+    then solid angles and the disk's density times the cosine at ``x_1``, the integrator's
+    skip the first segment's distance); ``directional``: infinite and Dirac."""
+    delta_light, infinite = light in ("point", "directional"), light in ("sky", "directional")
+    rng = np.random.default_rng(10 * k + len(light))
     n, N = 300, 64.0
-    P = _random_paths(rng, n, k, delta_light)
-    got = _recursive(P, k, delta_light, N)
-    ref = np.array([_reference(P, j, k, delta_light, N) for j in range(n)])
+    P = _random_paths(rng, n, k, delta_light, infinite)
+    got = _recursive(P, k, delta_light, N, infinite=infinite)
+    ref = np.array([_pbrt_weights(P, j, k, delta_light, N) for j in range(n)])
     # paths no strategy samples (a point light seen directly, or through Dirac vertices only)
     # have no weights
     possible = ref.sum(1) > 0
@@ -218,15 +230,26 @@ def _agree(a, b):
 
 
 #: (scene, max_depth, bdpt spp, path spp): the path tracer's caustics need many samples
-CASES = {"cornell": (5, 64, 256), "point": (6, 64, 256), "spot": (6, 64, 256), "specular": (6, 128, 1024)}
+CASES = {"cornell": (5, 64, 256), "point": (6, 64, 256), "spot": (6, 64, 256), "specular": (6, 128, 1024),
+         "sky": (5, 64, 256), "directional": (5, 64, 256)}
 
 
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory):
+    import warnings
+
+    from drpt.scene.model import DirectionalLight
+    from drpt.tools.scenegen import envsun
+
     point = _scene(tmp_path_factory, "point")
+    with warnings.catch_warnings():  # envsun's glossy material is scaled to reflect 1 (a note)
+        warnings.simplefilter("ignore")
+        sky = load_scene(envsun.main(tmp_path_factory.mktemp("envsun"), mtl="glossy", point=True))
+    sun = replace(point, lights=[DirectionalLight((0.4, -1.0, -0.6), (1.5, 1.4, 1.2))],
+                  background=replace(point.background, color=(0.3, 0.35, 0.5)))
     return {"cornell": load_scene(REPO / "scenes" / "cornellbox" / "cornellbox.txt"),
             "point": point, "spot": _spot_scene(point),
-            "specular": _scene(tmp_path_factory, "specular")}
+            "specular": _scene(tmp_path_factory, "specular"), "sky": sky, "directional": sun}
 
 
 @pytest.fixture(scope="module")
@@ -289,11 +312,11 @@ def test_bdpt_refuses_what_it_cannot_render(scenes):
         _render(lens, "bdpt", 1, 5)
     with pytest.raises(DrptError, match="at most 16 segments"):
         _render(cornell, "bdpt", 1, 40)
-    from drpt.scene.model import DirectionalLight
+    from drpt.scene.model import ProjectorLight
 
-    sun = replace(cornell, lights=[*cornell.lights, DirectionalLight((0.0, -1.0, 0.0), (1.0, 1.0, 1.0))])
-    with pytest.raises(DrptError, match="directional"):
-        _render(sun, "bdpt", 1, 5)
+    projector = ProjectorLight((2.78, 5.0, 2.8), (1.0, 0, 0, 0, 0, 1.0, 0, -1.0, 0), 40.0)
+    with pytest.raises(DrptError, match="projector"):
+        _render(replace(cornell, lights=[projector]), "bdpt", 1, 5)
     r = _render(cornell, "bdpt", 1, -1)
     assert any("at most 16 segments" in w for w in r.warnings)
 
