@@ -621,7 +621,7 @@ class BDPTIntegrator:
                 i = dr.zeros(UInt32, n)
                 while connectible & (i < stored):
                     lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
-                    L += beta * self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
+                    L += self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
                                               connectible & (depth_l + k < D))
                     i += 1
 
