@@ -108,6 +108,9 @@ class RenderOptions:
     #: allocate samples per pixel from a pilot's estimated error (``--adaptive``,
     #: :mod:`drpt.render.adaptive`); ``spp`` is then the average
     adaptive: bool = False
+    #: bdpt: also sum each connection strategy's contributions (``--bdpt-strategies``,
+    #: :meth:`drpt.render.renderer.Renderer.strategy_images`)
+    bdpt_strategies: bool = False
 
     def validate(self) -> RenderOptions:
         """Raise :class:`~drpt.errors.DrptError` on a value the renderer cannot
@@ -165,6 +168,8 @@ class RenderOptions:
             raise DrptError(f"--wavefront-tail must be between 0 and {MAX_LANES}, got {self.wavefront_tail}")
         if self.mode == "wavefront" and self.integrator != "path":
             raise DrptError(f"--mode wavefront runs the path integrator, not --integrator {self.integrator}")
+        if self.bdpt_strategies and self.integrator != "bdpt":
+            raise DrptError(f"--bdpt-strategies needs --integrator bdpt, not {self.integrator}")
         if self.accel == "grid" and self.grid_resolution is not None and \
                 not 1 <= self.grid_resolution <= GRID_MAX_RESOLUTION:
             raise DrptError(f"-resolution must be between 1 and {GRID_MAX_RESOLUTION} grid cells "

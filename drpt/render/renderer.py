@@ -71,7 +71,7 @@ from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
 from .film import SplatFilm, gather_splats
 from .filter_sampling import sample_position
-from .integrators.bdpt import BDPTIntegrator
+from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
 from .integrators.path import PathIntegrator
 from .integrators.ptracer import ParticleTracer
 from .integrators.wavefront import WavefrontIntegrator
@@ -237,6 +237,9 @@ class Renderer:
         self._aov_ids = None
         if self.aov_kinds:
             self._aov_index_arrays()  # a scene without shape data is an error before rendering
+        #: with ``bdpt_strategies``: the sums of each strategy's contributions, ``(count, H, W,
+        #: 3)`` (:class:`~drpt.render.integrators.bdpt.StrategyFilm`), over the passes traced
+        self.strategy_sums = None
         self.build_seconds = time.perf_counter() - t0
 
     def _aov_index_arrays(self):
@@ -279,6 +282,16 @@ class Renderer:
             return WavefrontIntegrator(self.scene, options.path, tail=options.wavefront_tail)
         # (volpath in a scene without media: the path integrator, the same expectation)
         return PathIntegrator(self.scene, options.path)
+
+    def strategy_images(self, spp: int) -> dict[tuple[int, int], np.ndarray]:
+        """With ``bdpt_strategies``, after a render of ``spp`` samples per pixel: each used
+        strategy's image ``(s, t) -> (H, W, 3)`` float32 (the image is their sum, for paths
+        of at most :data:`~drpt.render.integrators.bdpt.STRATEGY_SEGMENTS` segments)."""
+        if self.strategy_sums is None:
+            return {}
+        segments = min(self.integrator.depth, STRATEGY_SEGMENTS)
+        return {st: (self.strategy_sums[i] / max(spp, 1)).astype(np.float32)
+                for i, st in enumerate(strategies(segments)) if st != (1, 1)}
 
     def derive(self, options: RenderOptions, camera: Camera | None = None) -> Renderer:
         """A renderer of the same device scene (nothing is built again) with
@@ -490,10 +503,17 @@ class Renderer:
             u = next_2d(rng)
             film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
             camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+            strategies = None
+            if self.opt.bdpt_strategies:
+                strategies = StrategyFilm(self.opt.width, self.opt.height,
+                                          min(self.integrator.depth, STRATEGY_SEGMENTS))
             bad = self.integrator.trace(rng, film, camera, Float(x) + u.x, Float(y) + u.y,
-                                        dr.full(Bool, True, n))
+                                        dr.full(Bool, True, n), strategies)
             with llvm_tuning.blocks_for(n):
-                dr.eval(film.sum, film.sq, camera.sum, camera.sq, bad)
+                dr.eval(film.sum, film.sq, camera.sum, camera.sq, bad, strategies.sum if strategies else [])
+            if strategies is not None:
+                sums = strategies.arrays()
+                self.strategy_sums = sums if self.strategy_sums is None else self.strategy_sums + sums
             img, sq, _ = film.arrays()
             cimg, csq, _ = camera.arrays()
             # squares of the light splats, then of the camera samples, then the camera samples'

@@ -75,6 +75,9 @@ background color; projectors and textured spots are refused, as are rough
 dielectric and principled materials (their transmission is not symmetric: see
 :mod:`~drpt.render.integrators.ptracer`).
 
+Debugging: with ``--bdpt-strategies`` (:class:`StrategyFilm`) every contribution is also
+added to its strategy's image, as pbrt-v4 writes them.
+
 Image: the renderer runs BDPT as it runs light tracing (a pass splats over the
 whole image, :meth:`~drpt.render.renderer.Renderer._trace_light_pass`, one light
 subpath per camera sample: ``W H`` per sample per pixel). The ``t = 1`` splats go
@@ -90,7 +93,7 @@ import copy
 import math
 
 import drjit as dr
-from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, Int32, UInt32
 
 from ...errors import DrptError
 from ...options import PathOptions
@@ -107,6 +110,9 @@ from .ptracer import NONSYMMETRIC_LOBES
 
 #: the longest path BDPT traces (segments); its light vertices are stored per lane
 MAX_DEPTH = 16
+
+#: ``--bdpt-strategies`` writes an image per strategy of the paths of at most this many segments
+STRATEGY_SEGMENTS = 5
 
 SUPPORTED_SOURCES = ("area", "point", "spot", "directional", "sky", "background")
 
@@ -220,6 +226,40 @@ def mis_weights_reference(pdf_fwd: list[float], pdf_rev: list[float], delta: lis
     ps = [density(s) for s in range(k + 1)]
     total = sum(p * p for p in ps)
     return [p * p / total if total > 0 else 0.0 for p in ps]
+
+
+def strategies(segments: int) -> list[tuple[int, int]]:
+    """The ``(s, t)`` of paths of ``1 .. segments`` segments, in :class:`StrategyFilm`'s order
+    (by length, then ``s``); ``(1, 1)`` is among them but never used."""
+    return [(s, d + 2 - s) for d in range(segments) for s in range(d + 2)]
+
+
+class StrategyFilm:
+    """``--bdpt-strategies``: each strategy's weighted contributions, summed per pixel (the
+    pixel containing the image position: no pixel filter), one image per ``(s, t)`` of
+    :func:`strategies`. Their sum is the image (for paths of at most ``segments``)."""
+
+    def __init__(self, width: int, height: int, segments: int):
+        self.width, self.height, self.segments = width, height, segments
+        self.count = segments * (segments + 3) // 2
+        self.sum = [dr.zeros(Float, self.count * width * height) for _ in range(3)]
+
+    def put(self, s, t, x: Float, y: Float, value: Array3f, active: Bool) -> None:
+        W, H = self.width, self.height
+        d = UInt32(s) + UInt32(t) - 2
+        ix, iy = Int32(dr.floor(x)), Int32(dr.floor(y))
+        ok = active & (d < self.segments) & (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H)
+        index = ((d * (d + 3)) // 2 + UInt32(s)) * (W * H) + UInt32(iy * W + ix)
+        for c in range(3):
+            dr.scatter_reduce(dr.ReduceOp.Add, self.sum[c], value[c], index, ok)
+
+    def arrays(self):
+        """The sums, ``(count, H, W, 3)`` float64."""
+        import numpy as np
+
+        dr.eval(self.sum)
+        return np.stack([c.numpy() for c in self.sum], -1).reshape(
+            self.count, self.height, self.width, 3).astype(np.float64)
 
 
 class LightVertices:
@@ -401,7 +441,7 @@ class BDPTIntegrator:
 
     # ------------------------------------------------------------ strategies
     def _splat(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float, film: SplatFilm,
-               active: Bool) -> None:
+               active: Bool, depth: UInt32, strategies: StrategyFilm | None) -> None:
         """``t = 1``: light vertex ``si`` joined to the camera, splatted into ``film``."""
         scene, cam = self.scene, self.camera
         x, y, wc, _dist, importance, visible = cam.connect(si.p)
@@ -418,6 +458,8 @@ class BDPTIntegrator:
         dist = dr.norm(to)
         ok &= ~scene.occluded(so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         film.put(x, y, value, ok)
+        if strategies is not None:
+            strategies.put(depth + 1, 1, x, y, value, ok)
 
     def _emission(self, si: Interaction, d: Array3f, beta: Array3f, dvcm: Float, dvc: Float,
                   first: Bool, active: Bool) -> Array3f:
@@ -538,10 +580,11 @@ class BDPTIntegrator:
     # ------------------------------------------------------------ the subpaths
     @dr.syntax
     def trace(self, rng: PCG32, film: SplatFilm, camera_film: SplatFilm, px: Float, py: Float,
-              active: Bool) -> UInt32:
+              active: Bool, strategies: StrategyFilm | None = None) -> UInt32:
         """One light subpath and one camera sample through image position ``(px, py)`` per
         lane: the ``t = 1`` strategies splatted into ``film``, the sum of the others into
-        ``camera_film`` at ``(px, py)``; returns the non-finite contributions dropped (per
+        ``camera_film`` at ``(px, py)``, and with ``strategies`` each contribution also
+        into its strategy's image; returns the non-finite contributions dropped (per
         lane)."""
         scene, opt, cam = self.scene, self.opt, self.camera
         n = dr.width(active)
@@ -570,7 +613,7 @@ class BDPTIntegrator:
                 if connectible:
                     lverts.write(dr.minimum(stored, NL - 1), si, beta, dvcm, dvc, depth)
                     stored += 1
-                self._splat(si, beta, dvcm, dvc, film, connectible)
+                self._splat(si, beta, dvcm, dvc, film, connectible, depth, strategies)
 
                 u_lobe = rng.next_float32()
                 u_bsdf = next_2d(rng)
@@ -602,27 +645,42 @@ class BDPTIntegrator:
         L = dr.zeros(Array3f, n)
         k = dr.full(UInt32, 1, n)
         live = Bool(active) & (D > 0)
+        record = strategies is not None
+
         while live:
             si = scene.intersect(o, d, live)
             if self.has_sky or self.has_background:
-                L += self._escaped(d, beta, dvcm, dvc, k == 1, live & ~si.valid)
+                c = self._escaped(d, beta, dvcm, dvc, k == 1, live & ~si.valid)
+                L += c
+                if record:
+                    strategies.put(0, k + 1, px, py, c, active)
             live &= si.valid
             dvcm, dvc = hit_update(dvcm, dvc, dr.square(si.t), dr.abs(dr.dot(si.ng, d)))
             if scene.has_area_lights:
-                L += self._emission(si, d, beta, dvcm, dvc, k == 1, live)
+                c = self._emission(si, d, beta, dvcm, dvc, k == 1, live)
+                L += c
+                if record:
+                    strategies.put(0, k + 1, px, py, c, active)
             connectible = live & ~scene.is_delta(si) & (k < D)
+            nee = dr.zeros(Array3f, n)
             if scene.has_area_lights and scene.has_smooth_bsdfs:
-                L += beta * self._nee_area(si, dvcm, dvc, rng, connectible)
+                nee += self._nee_area(si, dvcm, dvc, rng, connectible)
             if has_deltas:
-                L += beta * self._nee_delta(si, dvcm, dvc, connectible)
+                nee += self._nee_delta(si, dvcm, dvc, connectible)
             if self.has_sky and scene.has_smooth_bsdfs:
-                L += beta * self._nee_sky(si, dvcm, dvc, rng, connectible)
+                nee += self._nee_sky(si, dvcm, dvc, rng, connectible)
+            L += beta * nee
+            if record:
+                strategies.put(1, k + 1, px, py, beta * nee, active)
             if lverts is not None:
                 i = dr.zeros(UInt32, n)
                 while connectible & (i < stored):
                     lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
-                    L += self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
-                                              connectible & (depth_l + k < D))
+                    c = self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
+                                      connectible & (depth_l + k < D))
+                    L += c
+                    if record:
+                        strategies.put(depth_l + 1, k + 1, px, py, c, active)
                     i += 1
 
             u_lobe = rng.next_float32()

@@ -416,3 +416,31 @@ def test_bdpt_of_an_xml_scene_agrees_with_mitsubas_path(name):
     n = ref.shape[0] * ref.shape[1]
     zm = (r.image.mean((0, 1)) - ref.mean((0, 1))) / np.sqrt(r.variance.mean((0, 1)) / n + var.mean((0, 1)) / n)
     assert np.abs(z).max() < 4.5 and np.abs(zm).max() < 4.0, (np.abs(z).max(), np.abs(zm).max())
+
+
+# ------------------------------------------------------------ --bdpt-strategies
+def test_strategy_images_sum_to_the_image(tmp_path, capsys):
+    """``--bdpt-strategies`` at ``--max-depth 4``: the 13 used strategies of paths of 1..4
+    segments (``(1, 1)`` is not used), each image non-negative, the direct view (``s = 0,
+    t = 2``) and light tracing's direct light (``s = 2, t = 1``) not black, and their sum
+    the image; refused without bdpt and with workers (one line, exit status 2)."""
+    import glob
+
+    from drpt.cli import main
+    from drpt.imageio import read_image
+
+    image = _cli_render(tmp_path, "c", "--max-depth", "4", "--bdpt-strategies", spp=8)
+    files = sorted(glob.glob(str(tmp_path / "c.bdpt_d*_s*_t*.exr")))
+    assert len(files) == 13
+    parts = {Path(f).name.split(".")[1]: read_image(f) for f in files}
+    assert all(p.min() >= 0.0 for p in parts.values())
+    assert parts["bdpt_d0_s0_t2"].max() > 1.0 and parts["bdpt_d1_s2_t1"].mean() > 0.01
+    total = sum(parts.values())
+    assert np.allclose(total, image, rtol=1e-5, atol=1e-6), np.abs(total - image).max()
+    scene = str(REPO / "scenes" / "cornellbox" / "cornellbox.txt")
+    for flags in (["--integrator", "path"], ["--integrator", "bdpt", "--workers", "2"]):
+        capsys.readouterr()
+        rc = main(["render", scene, "--size", "8", "8", "-q", "--bdpt-strategies", *flags,
+                   "-o", str(tmp_path / "x.exr")])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 2 and len(err) == 1 and "--bdpt-strategies" in err[0], err
