@@ -157,13 +157,19 @@ def hit_update(dvcm: Float, dvc: Float, dist2: Float, cos_in: Float) -> tuple[Fl
     return dvcm * mis(dist2 * inv), dvc * mis(inv)
 
 
+def _term(p: Float, rest: Float) -> Float:
+    """``m(p) * rest``, 0 where ``p`` is (a strategy that cannot sample the path, whatever
+    ``rest`` overflowed to)."""
+    return dr.select(p != 0.0, mis(p) * rest, 0.0)
+
+
 def connection_weight(pdf_l: Float, dvcm_l: Float, dvc_l: Float, rev_l: Float,
                       pdf_c: Float, dvcm_c: Float, dvc_c: Float, rev_c: Float) -> Float:
     """Weight of joining a light vertex to a camera vertex: ``pdf_l`` the area density of
     the light vertex sampled from the camera vertex, ``rev_l`` the light vertex's BSDF
     density toward its predecessor seen from the camera vertex (and the other way round)."""
-    wl = mis(pdf_l) * (dvcm_l + dvc_l * mis(rev_l))
-    wc = mis(pdf_c) * (dvcm_c + dvc_c * mis(rev_c))
+    wl = _term(pdf_l, dvcm_l + _term(rev_l, dvc_l))
+    wc = _term(pdf_c, dvcm_c + _term(rev_c, dvc_c))
     w = dr.rcp(1.0 + wl + wc)
     return dr.select(dr.isfinite(w), w, 0.0)
 
@@ -177,7 +183,7 @@ def nee_weight(pdf_bsdf: Float, pdf_light: Float, emit: Float, cos_c: Float, cos
     geometric cosines at the camera vertex and the light, ``rev`` the BSDF's density
     toward the camera vertex's predecessor seen from the light."""
     wl = mis(pdf_bsdf / pdf_light)
-    wc = mis(emit * cos_c / (pdf_light * cos_l)) * (dvcm + dvc * mis(rev))
+    wc = _term(emit * cos_c / (pdf_light * cos_l), dvcm + _term(rev, dvc))
     w = dr.rcp(1.0 + wl + wc)
     return dr.select(dr.isfinite(w), w, 0.0)
 
@@ -186,7 +192,7 @@ def emission_weight(pdf_nee: Float, emit: Float, dvcm: Float, dvc: Float) -> Flo
     """Weight of a camera subpath hitting an emitter (``s = 0``) after at least one
     bounce: ``pdf_nee`` next-event estimation's area density of the point, ``emit`` the
     light subpath's density of it and of the direction back along the ray."""
-    w = dr.rcp(1.0 + mis(pdf_nee) * dvcm + mis(emit) * dvc)
+    w = dr.rcp(1.0 + _term(pdf_nee, dvcm) + _term(emit, dvc))
     return dr.select(dr.isfinite(w), w, 0.0)
 
 
