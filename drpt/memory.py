@@ -45,6 +45,8 @@ def bytes_per_pixel(opts=None, local: bool = False) -> int:
         extra += 2 * 8 * (3 * max(len(aovs), 2) + 1)  # AOV channels and their weight
     if opts.integrator == "bdpt":
         extra += 2 * 8 * 6  # the camera samples' squares and sums beside the splats' squares
+    if getattr(opts, "bdpt_strategies", False):
+        extra += 20 * 3 * (4 + 8 + 8)  # 20 strategy images: the pass's film, its sums, the total
     direct = local and not splat and opts.integrator not in LIGHT_TRACED and not opts.moment and not extra
     return (BYTES_PER_PIXEL_LOCAL if direct else BYTES_PER_PIXEL) + extra
 

@@ -305,6 +305,7 @@ class Renderer:
         new.camera_model = self.camera_model if camera is None else camera
         new.camera = RayCamera(new.camera_model, options.width, options.height)
         new.integrator = new._make_integrator()
+        new.strategy_sums = None
         return new
 
     @property
