@@ -353,6 +353,9 @@ class BDPTIntegrator:
         # the order of DeltaLights.samples: points, spots (projectors are refused), directionals
         self.deltas = ([light for kind, light in rays.sources if kind in ("point", "spot")]
                        + [light for kind, light in rays.sources if kind == "directional"])
+        #: a test hook: ``(s, t)``, the one strategy that counts, with weight 1 (None: all,
+        #: MIS-weighted); the image is then that strategy's unweighted estimate
+        self.only: tuple[int, int] | None = None
         self.has_sky = any(kind == "sky" for kind, _ in rays.sources)
         self.has_background = any(kind == "background" for kind, _ in rays.sources)
         #: a light subpath leaving an infinite emitter starts on a disk of the scene's
@@ -446,6 +449,13 @@ class BDPTIntegrator:
         return o, d, beta, dvcm, dvc, infinite, valid
 
     # ------------------------------------------------------------ strategies
+    def _weight(self, w: Float, s, t) -> Float:
+        """The MIS weight ``w`` of strategy ``(s, t)``, or with :attr:`only` 1 for that
+        strategy and 0 for the others."""
+        if self.only is None:
+            return w
+        return dr.select((UInt32(s) == self.only[0]) & (UInt32(t) == self.only[1]), 1.0, 0.0)
+
     def _splat(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float, film: SplatFilm,
                active: Bool, depth: UInt32, strategies: StrategyFilm | None) -> None:
         """``t = 1``: light vertex ``si`` joined to the camera, splatted into ``film``."""
@@ -456,7 +466,8 @@ class BDPTIntegrator:
         _, rev = scene.eval_bsdf(with_wi(si, wc), si.wi)
         corr, sides = correction(si, wc)
         pdf_cam = importance * dr.abs(dr.dot(si.ng, wc))
-        w = connection_weight(pdf_cam, dvcm, dvc, rev, Float(0.0), Float(0.0), Float(0.0), Float(0.0))
+        w = self._weight(connection_weight(pdf_cam, dvcm, dvc, rev, Float(0.0), Float(0.0), Float(0.0),
+                                           Float(0.0)), depth + 1, 1)
         value = beta * f * (corr * importance * w)
         ok &= sides & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         so = scene.spawn(si, wc)
@@ -468,18 +479,20 @@ class BDPTIntegrator:
             strategies.put(depth + 1, 1, x, y, value, ok)
 
     def _emission(self, si: Interaction, d: Array3f, beta: Array3f, dvcm: Float, dvc: Float,
-                  first: Bool, active: Bool) -> Array3f:
+                  t: UInt32, active: Bool) -> Array3f:
         """``s = 0``: the emitter the camera subpath's ray ``d`` hits at ``si``."""
         scene = self.scene
         le = scene.emitted(si)
         pdf_a = self.origin_pdf(si.prim, active)
         cos_e = dr.maximum(dr.dot(si.ns, si.wi), 0.0)
         emit = self.pick * pdf_a * cos_e / math.pi
-        w = dr.select(first, 0.0 if self.opt.hide_emitters else 1.0,
+        w = dr.select(t == 2, 0.0 if self.opt.hide_emitters else 1.0,
                       emission_weight(pdf_a, emit, dvcm, dvc))
+        w = self._weight(w, 0, t)
         return dr.select(active, beta * le * w, 0.0)
 
-    def _nee_area(self, si: Interaction, dvcm: Float, dvc: Float, rng: PCG32, active: Bool) -> Array3f:
+    def _nee_area(self, si: Interaction, dvcm: Float, dvc: Float, rng: PCG32, active: Bool,
+                  t: UInt32) -> Array3f:
         """``s = 1`` for the area lights: a point drawn as the path tracer draws it."""
         scene = self.scene
         lights = scene.area_lights
@@ -502,7 +515,7 @@ class BDPTIntegrator:
         _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
         emit = self.pick * pdf_a * cos_front / math.pi
         cos_c = dr.abs(dr.dot(si.ng, wo))
-        w = nee_weight(fwd, pdf_w, emit, cos_c, cos_l, dvcm, dvc, rev)
+        w = self._weight(nee_weight(fwd, pdf_w, emit, cos_c, cos_l, dvcm, dvc, rev), 1, t)
         value = f * ls.le * (w / pdf)
         ok &= (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         so = scene.spawn(si, wo)
@@ -512,7 +525,7 @@ class BDPTIntegrator:
         ok &= ~scene.occluded(so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         return dr.select(ok, value, 0.0)
 
-    def _nee_delta(self, si: Interaction, dvcm: Float, dvc: Float, active: Bool) -> Array3f:
+    def _nee_delta(self, si: Interaction, dvcm: Float, dvc: Float, active: Bool, t: UInt32) -> Array3f:
         """``s = 1`` for the point and spot lights: each, every time."""
         scene = self.scene
         total = dr.zeros(Array3f, dr.width(active))
@@ -524,8 +537,8 @@ class BDPTIntegrator:
             # directional light (infinitely far: no distance, no cosine)
             far = getattr(light, "position", None) is None
             pdf_light = Float(1.0) if far else dr.square(ds.dist)
-            w = nee_weight(Float(0.0), pdf_light, Float(self._delta_emit(light)), cos_c, Float(1.0),
-                           dvcm, dvc, rev)
+            w = self._weight(nee_weight(Float(0.0), pdf_light, Float(self._delta_emit(light)), cos_c,
+                                        Float(1.0), dvcm, dvc, rev), 1, t)
             value = f * ds.irradiance * w
             ok = active & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
             so = scene.spawn(si, ds.wo)
@@ -533,20 +546,22 @@ class BDPTIntegrator:
             total += dr.select(ok, value, 0.0)
         return total
 
-    def _nee_sky(self, si: Interaction, dvcm: Float, dvc: Float, rng: PCG32, active: Bool) -> Array3f:
+    def _nee_sky(self, si: Interaction, dvcm: Float, dvc: Float, rng: PCG32, active: Bool,
+                 t: UInt32) -> Array3f:
         """``s = 1`` for the sky: a direction drawn by its density (as the path tracer's)."""
         scene = self.scene
         wo, radiance, pdf = scene.sample_environment(next_2d(rng), active)
         f, fwd = scene.eval_bsdf(si, wo)
         _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
         emit = self.pick * pdf * self.disk_pdf
-        w = nee_weight(fwd, pdf, emit, dr.abs(dr.dot(si.ng, wo)), Float(1.0), dvcm, dvc, rev)
+        w = self._weight(nee_weight(fwd, pdf, emit, dr.abs(dr.dot(si.ng, wo)), Float(1.0), dvcm, dvc, rev),
+                         1, t)
         value = f * radiance * (w / dr.maximum(pdf, 1e-30))
         ok = active & (pdf > 0.0) & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         ok &= ~scene.occluded(scene.spawn(si, wo), wo, Float(dr.inf), ok)
         return dr.select(ok, value, 0.0)
 
-    def _escaped(self, d: Array3f, beta: Array3f, dvcm: Float, dvc: Float, first: Bool,
+    def _escaped(self, d: Array3f, beta: Array3f, dvcm: Float, dvc: Float, t: UInt32,
                  active: Bool) -> Array3f:
         """``s = 0`` for the sky or the background the camera subpath's ray ``d`` escapes to
         (no distance or cosine to convert at an infinite emitter)."""
@@ -555,11 +570,13 @@ class BDPTIntegrator:
         else:
             le, pdf = Array3f(*map(float, self.scene.background)), Float(0.0)  # no NEE of it
         emit = self.pick * (pdf if self.has_sky else INV_FOUR_PI) * self.disk_pdf
-        w = dr.select(first, 0.0 if self.opt.hide_emitters else 1.0, emission_weight(pdf, emit, dvcm, dvc))
+        w = dr.select(t == 2, 0.0 if self.opt.hide_emitters else 1.0, emission_weight(pdf, emit, dvcm, dvc))
+        w = self._weight(w, 0, t)
         return dr.select(active, beta * le * w, 0.0)
 
     def _connect(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float,
-                 lv: Interaction, beta_l: Array3f, dvcm_l: Float, dvc_l: Float, active: Bool) -> Array3f:
+                 lv: Interaction, beta_l: Array3f, dvcm_l: Float, dvc_l: Float, active: Bool,
+                 s: UInt32, t: UInt32) -> Array3f:
         """``s >= 2, t >= 2``: camera vertex ``si`` joined to light vertex ``lv``."""
         scene = self.scene
         to = lv.p - si.p
@@ -573,7 +590,7 @@ class BDPTIntegrator:
         inv_d2 = dr.rcp(dist2)
         pdf_l = fwd_c * dr.abs(dr.dot(lv.ng, w)) * inv_d2
         pdf_c = fwd_l * dr.abs(dr.dot(si.ng, w)) * inv_d2
-        weight = connection_weight(pdf_l, dvcm_l, dvc_l, rev_l, pdf_c, dvcm, dvc, rev_c)
+        weight = self._weight(connection_weight(pdf_l, dvcm_l, dvc_l, rev_l, pdf_c, dvcm, dvc, rev_c), s, t)
         value = beta * f_c * beta_l * f_l * (corr * inv_d2 * weight)
         ok = active & sides & (dist2 > 0.0) & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         so = scene.spawn(si, w)
@@ -656,25 +673,25 @@ class BDPTIntegrator:
         while live:
             si = scene.intersect(o, d, live)
             if self.has_sky or self.has_background:
-                c = self._escaped(d, beta, dvcm, dvc, k == 1, live & ~si.valid)
+                c = self._escaped(d, beta, dvcm, dvc, k + 1, live & ~si.valid)
                 L += c
                 if record:
                     strategies.put(0, k + 1, px, py, c, active)
             live &= si.valid
             dvcm, dvc = hit_update(dvcm, dvc, dr.square(si.t), dr.abs(dr.dot(si.ng, d)))
             if scene.has_area_lights:
-                c = self._emission(si, d, beta, dvcm, dvc, k == 1, live)
+                c = self._emission(si, d, beta, dvcm, dvc, k + 1, live)
                 L += c
                 if record:
                     strategies.put(0, k + 1, px, py, c, active)
             connectible = live & ~scene.is_delta(si) & (k < D)
             nee = dr.zeros(Array3f, n)
             if scene.has_area_lights and scene.has_smooth_bsdfs:
-                nee += self._nee_area(si, dvcm, dvc, rng, connectible)
+                nee += self._nee_area(si, dvcm, dvc, rng, connectible, k + 1)
             if has_deltas:
-                nee += self._nee_delta(si, dvcm, dvc, connectible)
+                nee += self._nee_delta(si, dvcm, dvc, connectible, k + 1)
             if self.has_sky and scene.has_smooth_bsdfs:
-                nee += self._nee_sky(si, dvcm, dvc, rng, connectible)
+                nee += self._nee_sky(si, dvcm, dvc, rng, connectible, k + 1)
             L += beta * nee
             if record:
                 strategies.put(1, k + 1, px, py, beta * nee, active)
@@ -683,7 +700,7 @@ class BDPTIntegrator:
                 while connectible & (i < stored):
                     lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
                     c = self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
-                                      connectible & (depth_l + k < D))
+                                      connectible & (depth_l + k < D), depth_l + 1, k + 1)
                     L += c
                     if record:
                         strategies.put(depth_l + 1, k + 1, px, py, c, active)

@@ -17,6 +17,10 @@ diffuse surfaces lit by an emissive sphere (the path tracer then needs 1024 spp:
 caustics are fireflies), and envsun's sky with a sun and a point light. Negative controls: a missing cosine in the
 connection of light and camera vertices, and a wrong density in the weights of next-event
 estimation, must fail the same test (|z| > 6).
+
+Each strategy alone (weight 1 for it, 0 for the others) against the path tracer's image of
+the paths of that many bounces (Cornell box, 1 and 2 bounces, six strategies), with a
+strategy of the wrong length as the negative control.
 """
 
 from __future__ import annotations
@@ -444,3 +448,47 @@ def test_strategy_images_sum_to_the_image(tmp_path, capsys):
                    "-o", str(tmp_path / "x.exr")])
         err = capsys.readouterr().err.strip().splitlines()
         assert rc == 2 and len(err) == 1 and "--bdpt-strategies" in err[0], err
+
+
+# ------------------------------------------------------------ each strategy alone
+class _Image:
+    def __init__(self, image, variance):
+        self.image, self.variance = image, variance
+
+
+@pytest.fixture(scope="module")
+def bounce_references(scenes):
+    """The Cornell box's paths of exactly 1 and exactly 2 bounces (the path tracer without
+    what the camera sees directly: depth 2, and depth 3 minus depth 2, other seeds)."""
+    cornell = scenes["cornell"]
+
+    def path(depth, seed):
+        r = _render(cornell, "path", 1024, depth, seed=seed)
+        return r.derive(replace(r.opt, path=replace(r.opt.path, hide_emitters=True))).render()
+
+    one, two, one_b = path(2, 11), path(3, 12), path(2, 13)
+    return {1: _Image(one.image, one.variance),
+            2: _Image(two.image - one_b.image, two.variance + one_b.variance)}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("s,t", [(0, 3), (1, 2), (2, 1), (2, 2), (3, 1), (1, 3)])
+def test_each_strategy_alone_is_unbiased(scenes, bounce_references, s, t):
+    """One strategy with weight 1 (``BDPTIntegrator.only``) estimates all the paths of its
+    length that it can sample: in the Cornell box (no Dirac surfaces, an area light) every
+    path of ``s + t - 2`` bounces. Against the path tracer's image of that many bounces."""
+    r = _render(scenes["cornell"], "bdpt", 128, 3)
+    r.integrator.only = (s, t)
+    img = r.render()
+    assert img.image.mean() > 0.005
+    zb, zm = _agree(img, bounce_references[s + t - 2])
+    assert zb < 4.5 and zm < 4.0, (zb, zm)
+
+
+@pytest.mark.slow
+def test_a_strategy_alone_negative_control(scenes, bounce_references):
+    """(2, 2) alone is not the image of paths of 1 bounce."""
+    r = _render(scenes["cornell"], "bdpt", 128, 3)
+    r.integrator.only = (2, 2)
+    zb, _ = _agree(r.render(), bounce_references[1])
+    assert zb > 6.0, zb
