@@ -25,6 +25,7 @@ import math
 import os
 import sys
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 from .errors import DrptError, note, showwarning, warn
@@ -65,6 +66,10 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--denoise", action="store_true",
                    help="also write the image denoised by Intel Open Image Denoise (pyoidn), "
                         "guided by the albedo and normal AOVs, as OUT.denoised.EXT")
+    p.add_argument("--bdpt-strategies", dest="bdpt_strategies", action="store_true",
+                   help="with --integrator bdpt: also write each connection strategy's "
+                        "MIS-weighted image (paths of at most 5 segments) as "
+                        "OUT.bdpt_dD_sS_tT.EXT")
 
 
 def _check_output(output: Path) -> None:
@@ -142,6 +147,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     scene = load_scene(scene_path)
     opts = apply_scene_settings(opts, scene, args)
     opts = _aov_options(opts, args, output)
+    if args.bdpt_strategies:
+        opts = replace(opts, bdpt_strategies=True).validate()
+        if args.workers is not None or args.cluster is not None or args.resume or opts.adaptive:
+            raise DrptError("--bdpt-strategies renders in one process: --workers, --cluster, --resume "
+                            "and --adaptive do not apply")
 
     if args.workers is not None and args.cluster is not None:
         raise DrptError("give --workers N (a local cluster) or --cluster ADDRESS, not both")
@@ -166,6 +176,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         scene, opts = _gui(scene, opts, args)
     if opts.adaptive:
         job = _adaptive_job(scene, opts, args)
+    elif opts.bdpt_strategies:
+        job = _strategies_job(scene, opts, output, args)
     else:
         job = run(scene, opts, output, workers=args.workers, cluster=args.cluster,
                   resume=args.resume, checkpoint_seconds=args.checkpoint_seconds, on_warning=warn)
@@ -209,6 +221,23 @@ def _adaptive_job(scene, opts, args):
     for w in renderer.warnings:
         warn(w)
     return Job(renderer.render())
+
+
+def _strategies_job(scene, opts, output: Path, args):
+    """A ``--bdpt-strategies`` render, in this process: the image, and each strategy's
+    image as ``OUT.bdpt_dD_sS_tT.EXT`` (``D = s + t - 2`` bounces, pbrt-v4's names)."""
+    from .distributed.job import Job
+    from .imageio import write_image
+    from .render.renderer import Renderer
+
+    renderer = Renderer(scene, opts)
+    for w in renderer.warnings:
+        warn(w)
+    result = renderer.render()
+    for (s, t), image in renderer.strategy_images(result.spp).items():
+        name = f"{output.stem}.bdpt_d{s + t - 2}_s{s}_t{t}{output.suffix}"
+        write_image(output.with_name(name), image, gamma=args.gamma)
+    return Job(result)
 
 
 def _aov_options(opts, args, output: Path):

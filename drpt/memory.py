@@ -22,6 +22,7 @@ nothing.
 from __future__ import annotations
 
 from .errors import DrptError
+from .options import LIGHT_TRACED
 
 BYTES_PER_PIXEL = 180
 BYTES_PER_PIXEL_LOCAL = 80
@@ -33,7 +34,7 @@ def bytes_per_pixel(opts=None, local: bool = False) -> int:
     common), ``local``: traced in this process (not on workers)."""
     if opts is None:
         return BYTES_PER_PIXEL
-    splat = not (opts.pixel_filter.is_box or opts.filter_sampling) and opts.integrator != "ptracer"
+    splat = not (opts.pixel_filter.is_box or opts.filter_sampling) and opts.integrator not in LIGHT_TRACED
     extra = 0
     if opts.moment:
         extra += 2 * 8 * (6 if splat else 3)  # the channel products, merged and per chunk
@@ -42,7 +43,11 @@ def bytes_per_pixel(opts=None, local: bool = False) -> int:
     aovs = getattr(opts, "aovs", ()) or ()
     if aovs or getattr(opts, "denoise", False):
         extra += 2 * 8 * (3 * max(len(aovs), 2) + 1)  # AOV channels and their weight
-    direct = local and not splat and opts.integrator != "ptracer" and not opts.moment and not extra
+    if opts.integrator == "bdpt":
+        extra += 2 * 8 * 6  # the camera samples' squares and sums beside the splats' squares
+    if getattr(opts, "bdpt_strategies", False):
+        extra += 20 * 3 * (4 + 8 + 8)  # 20 strategy images: the pass's film, its sums, the total
+    direct = local and not splat and opts.integrator not in LIGHT_TRACED and not opts.moment and not extra
     return (BYTES_PER_PIXEL_LOCAL if direct else BYTES_PER_PIXEL) + extra
 
 

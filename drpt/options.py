@@ -32,7 +32,10 @@ from dataclasses import dataclass, field
 from .errors import DrptError, note, warn
 
 BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
-INTEGRATORS = ("path", "whitted", "ptracer", "volpath")
+INTEGRATORS = ("path", "whitted", "ptracer", "volpath", "bdpt")
+#: integrators whose passes splat light paths over the whole image (their sums merge and
+#: finish as light tracing's, drpt.render.renderer.finish)
+LIGHT_TRACED = ("ptracer", "bdpt")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
 LIGHT_SAMPLERS = ("power", "uniform")  # drpt.render.lights.area
@@ -75,7 +78,7 @@ class RenderOptions:
     sah_threshold: int | None = None  # K of bvh_method="threshold" (None: the seed's 2000)
     bvh_min_leaf: int = 1  # minimum primitives per BVH leaf (the seed's -resolution)
     bsdf: str = "auto"  # how MTL materials are read, see drpt.shading
-    integrator: str = "path"  # "path" (MIS path tracing), "whitted" or "ptracer" (light tracing)
+    integrator: str = "path"  # "path" (MIS path tracing), "whitted", "ptracer" (light tracing), "bdpt", "volpath"
     mode: str = "megakernel"  # path tracing as one fused kernel, or "wavefront" (a kernel per stage)
     wavefront_tail: int = 0  # wavefront: finish in one fused loop once at most this many paths live
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
@@ -105,6 +108,9 @@ class RenderOptions:
     #: allocate samples per pixel from a pilot's estimated error (``--adaptive``,
     #: :mod:`drpt.render.adaptive`); ``spp`` is then the average
     adaptive: bool = False
+    #: bdpt: also sum each connection strategy's contributions (``--bdpt-strategies``,
+    #: :meth:`drpt.render.renderer.Renderer.strategy_images`)
+    bdpt_strategies: bool = False
 
     def validate(self) -> RenderOptions:
         """Raise :class:`~drpt.errors.DrptError` on a value the renderer cannot
@@ -162,6 +168,8 @@ class RenderOptions:
             raise DrptError(f"--wavefront-tail must be between 0 and {MAX_LANES}, got {self.wavefront_tail}")
         if self.mode == "wavefront" and self.integrator != "path":
             raise DrptError(f"--mode wavefront runs the path integrator, not --integrator {self.integrator}")
+        if self.bdpt_strategies and self.integrator != "bdpt":
+            raise DrptError(f"--bdpt-strategies needs --integrator bdpt, not {self.integrator}")
         if self.accel == "grid" and self.grid_resolution is not None and \
                 not 1 <= self.grid_resolution <= GRID_MAX_RESOLUTION:
             raise DrptError(f"-resolution must be between 1 and {GRID_MAX_RESOLUTION} grid cells "
@@ -364,7 +372,8 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
     if want("integrator"):
         default = d["integrator"]
         parser.add_argument("--integrator", choices=INTEGRATORS, default=default, action=_Given,
-                            help="path (MIS path tracing, default) or whitted")
+                            help="path (MIS path tracing, default), whitted, ptracer (light "
+                                 "tracing), bdpt (bidirectional) or volpath")
         if seed_flags:
             parser.add_argument("-MonteCarlo", dest="monte_carlo", action="store_true",
                                 help="seed flag: Monte Carlo path tracing (the seed's default "

@@ -69,7 +69,7 @@ def test_omitted_flags_take_the_dataclass_defaults():
     (RenderOptions(accel="kd"), "--accel must be one of"),
     (RenderOptions(accel="bvh", bvh_method="octree"), "--bvh must be one of"),
     (RenderOptions(bsdf="lambert"), "--bsdf"),
-    (RenderOptions(integrator="bdpt"), "--integrator"),
+    (RenderOptions(integrator="mlt"), "--integrator"),
     (RenderOptions(env_sampling="cosine"), "--env-sampling"),
     (RenderOptions(accel="grid", grid_resolution=999), "between 1 and 256"),
     (RenderOptions(accel="bvh", bvh_method="sah", sah_threshold=5), "applies to --bvh threshold"),

@@ -26,6 +26,7 @@ from pathlib import Path, PurePath
 import numpy as np
 
 from ..errors import DrptError
+from ..options import LIGHT_TRACED
 
 SUFFIX = ".drpt-checkpoint"
 VERSION = 2  # 2: the description holds the sums' digest
@@ -234,7 +235,9 @@ def load(output: Path, scene_hash: str, options: dict, chunks) -> Checkpoint:
     # sumsq: the squares, then with a moment render the channel products (6) or, splatted,
     # the weighted r^2 .. gb (9); a splatting film's weights: sum(w), sum(w^2)
     sq_shapes = [shape[:2] + (c,) for c in ((6, 9) if options.get("moment") else (3,))]
-    splatted = options.get("integrator") != "ptracer" and not options.get("filter_sampling") and \
+    if options.get("integrator") == "bdpt":  # the splats' squares, the camera samples' squares and sums
+        sq_shapes = [shape[:2] + (9,)]
+    splatted = options.get("integrator") not in LIGHT_TRACED and not options.get("filter_sampling") and \
         str(options.get("filter", "box")).split(":")[0] != "box"
     if splatted != (wts is not None):
         raise refuse("damaged checkpoint (filter weights " + ("missing)" if splatted else "where none belong)"))
@@ -259,7 +262,7 @@ def load(output: Path, scene_hash: str, options: dict, chunks) -> Checkpoint:
     # a pixel's own samples: sum^2 <= spp sumsq (splats of other pixels' samples may exceed it;
     # the sums of squares may be float32 sums: a pixel whose samples are all equal, e.g. one
     # that sees the light, sits on the bound within float32 rounding)
-    if not splatted and options.get("integrator") != "ptracer" and \
+    if not splatted and options.get("integrator") not in LIGHT_TRACED and \
             (s * s > spp * s2[..., :3] * (1 + 1e-4) + 1e-300).any():
         raise refuse("damaged checkpoint (its sums of squares are too small for its sums)")
     if wts is not None and (wts[..., 1] > wts[..., 0] ** 2 * (1 + 1e-9) + 1e-300).any():

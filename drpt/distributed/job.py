@@ -24,6 +24,7 @@ from pathlib import Path
 
 from ..backend import policy
 from ..errors import note
+from ..options import LIGHT_TRACED
 from ..render.chunks import ChunkMerge, ChunkResult, plan_chunks
 from . import checkpoint
 
@@ -122,7 +123,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     from ..render.renderer import finish, stop_estimate, stops
 
     W, H, spp = opts.width, opts.height, opts.spp
-    light_tracing = opts.integrator == "ptracer"
+    light_tracing = opts.integrator in LIGHT_TRACED
     max_lanes = policy().max_lanes if opts.max_lanes is None else opts.max_lanes
     chunks = plan_chunks(W, H, spp, max_lanes, opts.chunk_spp)
     key = checkpoint.scene_hash(scene)

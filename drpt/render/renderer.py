@@ -70,6 +70,7 @@ from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
 from .film import SplatFilm, gather_splats
 from .filter_sampling import sample_position
+from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
 from .integrators.path import PathIntegrator
 from .integrators.ptracer import ParticleTracer
 from .integrators.wavefront import WavefrontIntegrator
@@ -221,7 +222,9 @@ class Renderer:
         self.camera = RayCamera(scene.camera, options.width, options.height)
         self.warnings: list[str] = self.scene.warnings
         self.integrator = self._make_integrator()
-        if uses_ld(options.sampler) and not self.ld_sampling:
+        if uses_ld(options.sampler) and isinstance(self.integrator, BDPTIntegrator):
+            self.warnings.append(f"--sampler {options.sampler}: bdpt draws independent samples")
+        elif uses_ld(options.sampler) and not self.ld_sampling:
             self.warnings.append(f"--sampler {options.sampler}: light tracing beyond 2^32 paths "
                                  "(width x height x spp) draws independent samples")
         elif options.sampler == "zsobol" and self.light_tracing:
@@ -233,6 +236,9 @@ class Renderer:
         self._aov_ids = None
         if self.aov_kinds:
             self._aov_index_arrays()  # a scene without shape data is an error before rendering
+        #: with ``bdpt_strategies``: the sums of each strategy's contributions, ``(count, H, W,
+        #: 3)`` (:class:`~drpt.render.integrators.bdpt.StrategyFilm`), over the passes traced
+        self.strategy_sums = None
         self.build_seconds = time.perf_counter() - t0
 
     def _aov_index_arrays(self):
@@ -256,6 +262,14 @@ class Renderer:
                                 "per-pixel samples; Mitsuba's cannot either)")
             return ParticleTracer(self.scene, EmitterRays(self.scene, self.scene_model), self.camera,
                                   options.path)
+        if options.integrator == "bdpt":
+            if options.moment:
+                raise DrptError("the moment integrator cannot wrap bdpt (its light paths have no "
+                                "per-pixel samples)")
+            bdpt = BDPTIntegrator(self.scene, EmitterRays(self.scene, self.scene_model), self.camera,
+                                  options.path)
+            self.warnings += [w for w in bdpt.warnings if w not in self.warnings]
+            return bdpt
         if options.integrator == "whitted":
             depth = options.path.max_depth
             return WhittedIntegrator(self.scene, WhittedOptions(max_depth=depth if depth > 0 else 16))
@@ -267,6 +281,16 @@ class Renderer:
             return WavefrontIntegrator(self.scene, options.path, tail=options.wavefront_tail)
         # (volpath in a scene without media: the path integrator, the same expectation)
         return PathIntegrator(self.scene, options.path)
+
+    def strategy_images(self, spp: int) -> dict[tuple[int, int], np.ndarray]:
+        """With ``bdpt_strategies``, after a render of ``spp`` samples per pixel: each used
+        strategy's image ``(s, t) -> (H, W, 3)`` float32 (the image is their sum, for paths
+        of at most :data:`~drpt.render.integrators.bdpt.STRATEGY_SEGMENTS` segments)."""
+        if self.strategy_sums is None:
+            return {}
+        segments = min(self.integrator.depth, STRATEGY_SEGMENTS)
+        return {st: (self.strategy_sums[i] / max(spp, 1)).astype(np.float32)
+                for i, st in enumerate(strategies(segments)) if st != (1, 1)}
 
     def derive(self, options: RenderOptions, camera: Camera | None = None) -> Renderer:
         """A renderer of the same device scene (nothing is built again) with
@@ -280,6 +304,7 @@ class Renderer:
         new.camera_model = self.camera_model if camera is None else camera
         new.camera = RayCamera(new.camera_model, options.width, options.height)
         new.integrator = new._make_integrator()
+        new.strategy_sums = None
         return new
 
     @property
@@ -298,7 +323,7 @@ class Renderer:
         with float64 sums (a second kernel, compiled only then), since float64
         sums in every pass cost time (docs/performance.md, "Execution model")."""
         if self.light_tracing:
-            sums = PassSums(0, *self._trace_light_pass(pass_index, k * rows * self.opt.width))
+            sums = PassSums(0, *self._trace_light_pass(pass_index, k * rows * self.opt.width, k, r0, rows))
         elif self.splatting:
             sums = self._trace_splat_pass(pass_index, k, r0, rows)
         else:
@@ -428,6 +453,8 @@ class Renderer:
         (:mod:`drpt.render.sampler`): ``--sampler`` other than ``independent``
         (light tracing: one sequence of all its paths, while they are at most 2^32)."""
         o = self.opt
+        if isinstance(self.integrator, BDPTIntegrator):
+            return False  # bdpt draws from PCG32 streams
         return uses_ld(o.sampler) and (not self.light_tracing or o.width * o.height * o.spp <= 1 << 32)
 
     def _sampler(self, pass_index: int, n: int, x: UInt32, y: UInt32, j: UInt32, step):
@@ -456,11 +483,38 @@ class Renderer:
         o = self.opt
         return ZSobolSampler.for_image(o.width, o.height, o.spp) if o.sampler == "zsobol" else None
 
-    def _trace_light_pass(self, pass_index: int, n: int) -> tuple[np.ndarray, np.ndarray, int]:
+    def _trace_light_pass(self, pass_index: int, n: int, k: int = 0, r0: int = 0, rows: int = 0
+                          ) -> tuple[np.ndarray, np.ndarray, int]:
         """``n`` light paths (:class:`~drpt.render.integrators.ptracer.ParticleTracer`)
         splatted into a film of the whole image: its sums and sums of squares ``(H, W,
         3)`` and the non-finite contributions dropped. Their random numbers come from
-        the same ``(seed, pass, lane)`` streams as a camera pass's."""
+        the same ``(seed, pass, lane)`` streams as a camera pass's. Bidirectional path
+        tracing (:class:`~drpt.render.integrators.bdpt.BDPTIntegrator`) also gives each
+        lane a camera sample: the ``k`` samples of each pixel of rows ``r0..r0+rows``,
+        pixel-major, uniform in their pixel."""
+        if isinstance(self.integrator, BDPTIntegrator):
+            rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
+                        initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+            _, _, x, y = self._pass_lanes(k, r0, rows)
+            u = next_2d(rng)
+            film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+            camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+            strategies = None
+            if self.opt.bdpt_strategies:
+                strategies = StrategyFilm(self.opt.width, self.opt.height,
+                                          min(self.integrator.depth, STRATEGY_SEGMENTS))
+            bad = self.integrator.trace(rng, film, camera, Float(x) + u.x, Float(y) + u.y,
+                                        dr.full(Bool, True, n), strategies)
+            with llvm_tuning.blocks_for(n):
+                dr.eval(film.sum, film.sq, camera.sum, camera.sq, bad, strategies.sum if strategies else [])
+            if strategies is not None:
+                sums = strategies.arrays()
+                self.strategy_sums = sums if self.strategy_sums is None else self.strategy_sums + sums
+            img, sq, _ = film.arrays()
+            cimg, csq, _ = camera.arrays()
+            # squares of the light splats, then of the camera samples, then the camera samples'
+            # sums: finish estimates the two parts' variances apart (_finish_image)
+            return img + cimg, np.concatenate([sq, csq, cimg], axis=-1), int(dr.sum(bad)[0])
         if self.ld_sampling:
                 # one sequence of all the render's light paths: lane j of a pass is path
             # first_sample + j (W H spp <= 2^32: ld_sampling)
@@ -512,8 +566,8 @@ class Renderer:
 
     @property
     def light_tracing(self) -> bool:
-        """Whether passes splat light paths over the whole image (``ptracer``)."""
-        return isinstance(self.integrator, ParticleTracer)
+        """Whether passes splat light paths over the whole image (``ptracer``, ``bdpt``)."""
+        return isinstance(self.integrator, (ParticleTracer, BDPTIntegrator))
 
     @property
     def splatting(self) -> bool:
@@ -580,6 +634,8 @@ class Renderer:
         # squares; with moment (Mitsuba's moment integrator) also the channel products
         # (rg, rb, gb) or, splatted, the weighted r^2 .. gb (SplatFilm)
         channels = (9 if self.splatting else 6) if self.opt.moment else 3
+        if isinstance(self.integrator, BDPTIntegrator):
+            channels = 9  # light splats' squares, camera samples' squares and sums
         acc2 = np.zeros((H, W, channels), np.float64)
         weight = np.zeros((H, W, 2), np.float64) if self.splatting else None
         aov = None
@@ -714,6 +770,16 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
     _check_range(mean)
     if light_tracing:
         paths = W * H * spp
+        if merged.sumsq.shape[-1] == 9:
+            # bdpt: the camera samples' part (squares and sums after the splats' squares) is
+            # a mean of spp samples per pixel, the rest a light-traced image
+            cam = merged.sumsq[..., 6:] / spp
+            var_c = np.maximum(merged.sumsq[..., 3:6] / spp - cam * cam, 0.0) / max(spp - 1, 1)
+            light = mean - cam
+            second = merged.sumsq[..., :3] * (W * H) / spp
+            var = var_c + np.maximum(second - light * light, 0.0) / max(paths - 1, 1)
+            return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, paths,
+                                merged.nonfinite)
         second = merged.sumsq * (W * H) / spp  # mean over paths of (W H splat)^2
         var = np.maximum(second - mean * mean, 0.0) / max(paths - 1, 1)
         return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, paths,

@@ -29,8 +29,8 @@ Russian roulette from depth 5 with the adaptive probability
 ``light``  ``--light-sampler uniform`` instead of ``power``;
 ``filter`` ``--filter-sampling`` instead of the splatting film (only with a tent or
            Gaussian filter);
-``integrator`` light tracing (``ptracer``); a scene it cannot render lists the row as
-           not rendered (``skipped``);
+``integrator`` light tracing (``ptracer``) and bidirectional path tracing (``bdpt``); a
+           scene one cannot render lists its row as not rendered (``skipped``);
 ``adaptive`` adaptive sampling (``render --adaptive``: the same budget of samples,
            allocated per pixel from two pilots' error estimates; needs ``--spp`` of at
            least 8, else the row is ``skipped``);
@@ -189,6 +189,7 @@ def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10
                            filter_sampling=True))
     if "integrator" in knobs:
         rows.append(Config("integrator", "ptracer (light tracing)", bsdf, integrator="ptracer"))
+        rows.append(Config("integrator", "bdpt (bidirectional)", bsdf, integrator="bdpt"))
     if "adaptive" in knobs:
         rows.append(Config("sampling", "adaptive (--adaptive)", bsdf, adaptive=True))
     if "denoise" in knobs:

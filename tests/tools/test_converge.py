@@ -542,12 +542,13 @@ def test_knobs_bias_is_not_fooled_by_correlated_channels():
 
 def test_knobs_rows_for_light_sampler_filter_and_integrator():
     """The knobs of the noise issue: the light sampler, the filter's splatting (only with a
-    tent or Gaussian filter) and light tracing, each one row changing one option."""
+    tent or Gaussian filter), light tracing and bidirectional path tracing, each one row
+    changing one option."""
     from drpt.tools.knobs import configs
 
     rows = configs("auto", ("light", "filter", "integrator"))
     assert [(r.knob, r.light_sampler, r.filter_sampling, r.integrator) for r in rows] == [
         ("default", "power", False, "path"), ("light sampler", "uniform", False, "path"),
-        ("integrator", "power", False, "ptracer")]
+        ("integrator", "power", False, "ptracer"), ("integrator", "power", False, "bdpt")]
     rows = configs("auto", ("filter",), filtered=True)
     assert [r.knob for r in rows] == ["default", "filter"] and rows[1].filter_sampling

@@ -1,0 +1,729 @@
+"""Bidirectional path tracing (Veach 1997, ch. 10; pbrt-v4's ``BDPTIntegrator``).
+
+Each lane traces one light subpath and one camera subpath (the camera sample of
+its pixel) and combines them by every connection strategy ``(s, t)``: ``s``
+vertices from the light subpath, ``t`` from the camera subpath (the camera
+itself is camera vertex 0), a path of ``s + t - 1`` segments:
+
+* ``s = 0``: the camera subpath hits an emissive triangle or sphere, or escapes to
+  the sky or the background color;
+* ``s = 1``: next-event estimation at a camera vertex (a point sampled on an
+  area light as :meth:`~drpt.render.lights.area.AreaLights.sample` draws it for
+  the path tracer, every point, spot and directional light, a sky direction);
+* ``s >= 2, t >= 2``: a stored light vertex joined to a camera vertex by a
+  shadow ray;
+* ``t = 1``: a light vertex joined to the pinhole camera and splatted at the
+  pixel it projects to (:class:`~drpt.render.film.SplatFilm`), as light tracing
+  (:mod:`~drpt.render.integrators.ptracer`) does. ``(s, t) = (1, 1)`` is not
+  used (emitters the camera sees come from ``s = 0`` with weight 1), as in pbrt.
+
+The light subpath starts as light tracing's: a source chosen uniformly among
+the scene's emitters (:class:`~drpt.render.lights.rays.EmitterRays`), a point
+and a direction on it; it carries importance (refraction's ``eta^2`` undone,
+Veach's shading-normal correction). Its surface vertices that are not pure
+Dirac (mirror, smooth glass) are stored in per-lane local arrays
+(``dr.alloc_local``, one per field) of ``max_depth - 1`` entries; the camera
+subpath then runs as a Dr.Jit loop, and at each of its non-Dirac vertices an
+inner loop connects it to every stored light vertex. Both subpaths play Russian
+roulette as the path tracer does (after ``rr_depth`` segments, probability
+``min(max(beta) eta^2, 0.95)``); the MIS weights ignore it (they still sum to 1
+over the strategies of a path, so the estimate stays unbiased).
+
+**MIS weights.** The power heuristic over all strategies of a path, ``w_s =
+p_s^2 / sum_i p_i^2``, computed as pbrt computes it (ratios of the forward and
+reverse area densities along the path) but accumulated while the subpaths are
+traced (Georgiev et al. 2012, "Implementing Vertex Connection and Merging",
+whose BPT part this is): each subpath vertex carries two numbers, ``dvcm`` and
+``dvc``, from which the sum over the strategies on its side of a connection
+follows in O(1):
+
+* at an emitter: ``dvcm = m(p_nee / p_emit)``, ``dvc = m(|cos_g| / p_emit)``
+  (``0`` for a point, spot or directional light: the camera cannot hit it), ``m(x) =
+  x^2``, ``p_emit`` the light subpath's density of its origin and direction (source
+  choice, area density, cosine density), ``p_nee`` next-event estimation's area
+  density of the point (1 for delta lights, which it samples every time; 0 for the
+  background color, which it does not sample). An infinite emitter (sky, background,
+  directional light) has a direction's density for ``p_nee`` and a point on a disk
+  of the scene's bounding radius ``R`` for ``p_emit`` (``1 / (pi R^2)``, as
+  :class:`~drpt.render.lights.rays.EmitterRays` starts it), no cosine, and its
+  first segment no distance to convert;
+* at the camera: ``dvcm = m(A cos^3)``, ``dvc = 0`` (``A`` the film's area at
+  distance 1: ``1 / (A cos^3)`` is the pixel sample's direction density times
+  the ``W H`` light paths per sample per pixel);
+* at each hit, from distance ``d`` and incoming geometric cosine ``c``:
+  ``dvcm *= m(d^2 / c)``, ``dvc /= m(c)``;
+* at each BSDF sample of density ``p`` (reverse density ``p_rev``, outgoing
+  geometric cosine ``c_o``): ``dvc = m(c_o / p) (dvc m(p_rev) + dvcm)``, ``dvcm =
+  m(1 / p)``; after a Dirac lobe ``dvc *= m(c_o)``, ``dvcm = 0`` (a strategy
+  that would connect at that vertex does not exist).
+
+A connection of light vertex ``y`` and camera vertex ``z`` then has weight ``1 /
+(1 + w_l + w_c)`` with ``w_l = m(p_z(y)) (dvcm_y + dvc_y m(p_rev,y))``, ``p_z(y)``
+the area density of ``y`` sampled from ``z``, and ``w_c`` likewise. Next-event
+estimation and emitter hits use the same quantities. Spheres' next-event
+estimation samples the cone they subtend; the weights use the uniform area
+density the light subpath starts with for every strategy (as pbrt does): still
+weights that sum to 1. :func:`mis_weights_reference` computes the same weights
+pbrt's way, from a whole path's densities (the tests compare them).
+
+**Limits.** The light subpath is stored, so paths are at most ``max_depth``
+segments, and at most :data:`MAX_DEPTH`; ``max_depth = -1`` means
+:data:`MAX_DEPTH` (with a warning). Pinhole perspective cameras only (the
+``t = 1`` strategy needs the camera's importance). Emitters: emissive triangles
+and spheres (textured too), point, spot and directional lights, the sky and a
+background color; projectors and textured spots are refused, as are rough
+dielectric and principled materials (their transmission is not symmetric: see
+:mod:`~drpt.render.integrators.ptracer`).
+
+Debugging: with ``--bdpt-strategies`` (:class:`StrategyFilm`) every contribution is also
+added to its strategy's image, as pbrt-v4 writes them.
+
+Image: the renderer runs BDPT as it runs light tracing (a pass splats over the
+whole image, :meth:`~drpt.render.renderer.Renderer._trace_light_pass`, one light
+subpath per camera sample: ``W H`` per sample per pixel). The ``t = 1`` splats go
+into one film, each camera sample's sum of the other strategies into a second one
+at its own image position; the pixel is their sum over ``spp``, and the renderer
+estimates the two parts' variances apart (a camera part's is that of a mean of
+``spp`` samples, the splats' that of a light-traced image).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import drjit as dr
+from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, Int32, UInt32
+
+from ...errors import DrptError
+from ...options import PathOptions
+from ..camera import RayCamera
+from ..film import SplatFilm
+from ..lights.rays import INV_FOUR_PI, EmitterRays
+from ..sampler import next_2d
+from ..scene import DeviceScene
+from ..spawn import origin as spawn_origin
+from ..surface import Interaction
+from ..warp import Frame, square_to_cosine_hemisphere, square_to_uniform_sphere
+from .common import SHADOW_SHRINK
+from .ptracer import NONSYMMETRIC_LOBES
+
+#: the longest path BDPT traces (segments); its light vertices are stored per lane
+MAX_DEPTH = 16
+
+#: ``--bdpt-strategies`` writes an image per strategy of the paths of at most this many segments
+STRATEGY_SEGMENTS = 5
+
+SUPPORTED_SOURCES = ("area", "point", "spot", "directional", "sky", "background")
+
+
+def mis(x: Float) -> Float:
+    """The power heuristic's ``x^2``."""
+    return x * x
+
+
+def with_wi(si: Interaction, wi: Array3f) -> Interaction:
+    """``si`` seen from direction ``wi`` (for a BSDF's reverse density)."""
+    out = copy.copy(si)
+    out.wi = wi
+    return out
+
+
+def correction(si: Interaction, w: Array3f) -> tuple[Float, Bool]:
+    """Veach's shading-normal correction for importance leaving ``si`` toward ``w``
+    (``si.wi`` toward the light), and whether both directions lie on the same side of
+    the shading and the geometric normal (as light tracing's)."""
+    wi_g, wi_s = dr.dot(si.ng, si.wi), dr.dot(si.ns, si.wi)
+    w_g, w_s = dr.dot(si.ng, w), dr.dot(si.ns, w)
+    ok = (wi_g * wi_s > 0.0) & (w_g * w_s > 0.0)
+    corr = dr.abs((wi_s * w_g) / (w_s * wi_g))
+    return dr.select(ok, corr, 0.0), ok
+
+
+def scatter_update(dvcm: Float, dvc: Float, pdf: Float, pdf_rev: Float, cos_out: Float,
+                   delta: Bool) -> tuple[Float, Float]:
+    """The MIS quantities after a BSDF sample of density ``pdf`` (reverse ``pdf_rev``,
+    outgoing geometric cosine ``cos_out``); a Dirac lobe (``delta``) cancels its own."""
+    inv = dr.select(pdf > 0.0, dr.rcp(pdf), 0.0)
+    dvc_new = dr.select(delta, dvc * mis(cos_out), mis(cos_out * inv) * (dvc * mis(pdf_rev) + dvcm))
+    dvcm_new = dr.select(delta, 0.0, mis(inv))
+    return dvcm_new, dvc_new
+
+
+def hit_update(dvcm: Float, dvc: Float, dist2: Float, cos_in: Float) -> tuple[Float, Float]:
+    """The MIS quantities at a hit at squared distance ``dist2``, incoming geometric
+    cosine ``cos_in``."""
+    inv = dr.select(cos_in > 0.0, dr.rcp(cos_in), 0.0)
+    return dvcm * mis(dist2 * inv), dvc * mis(inv)
+
+
+def _term(p: Float, rest: Float) -> Float:
+    """``m(p) * rest``, 0 where ``p`` is (a strategy that cannot sample the path, whatever
+    ``rest`` overflowed to)."""
+    return dr.select(p != 0.0, mis(p) * rest, 0.0)
+
+
+def connection_weight(pdf_l: Float, dvcm_l: Float, dvc_l: Float, rev_l: Float,
+                      pdf_c: Float, dvcm_c: Float, dvc_c: Float, rev_c: Float) -> Float:
+    """Weight of joining a light vertex to a camera vertex: ``pdf_l`` the area density of
+    the light vertex sampled from the camera vertex, ``rev_l`` the light vertex's BSDF
+    density toward its predecessor seen from the camera vertex (and the other way round)."""
+    wl = _term(pdf_l, dvcm_l + _term(rev_l, dvc_l))
+    wc = _term(pdf_c, dvcm_c + _term(rev_c, dvc_c))
+    w = dr.rcp(1.0 + wl + wc)
+    return dr.select(dr.isfinite(w), w, 0.0)
+
+
+def nee_weight(pdf_bsdf: Float, pdf_light: Float, emit: Float, cos_c: Float, cos_l: Float,
+               dvcm: Float, dvc: Float, rev: Float) -> Float:
+    """Weight of next-event estimation (``s = 1``) at a camera vertex: ``pdf_bsdf`` the
+    BSDF's density toward the light point (0 for a delta light), ``pdf_light`` the point's
+    density as a solid angle (for a delta light: ``dist^2``, its area density 1), ``emit``
+    the light subpath's density of that point and direction, ``cos_c`` and ``cos_l`` the
+    geometric cosines at the camera vertex and the light, ``rev`` the BSDF's density
+    toward the camera vertex's predecessor seen from the light."""
+    wl = mis(pdf_bsdf / pdf_light)
+    wc = _term(emit * cos_c / (pdf_light * cos_l), dvcm + _term(rev, dvc))
+    w = dr.rcp(1.0 + wl + wc)
+    return dr.select(dr.isfinite(w), w, 0.0)
+
+
+def emission_weight(pdf_nee: Float, emit: Float, dvcm: Float, dvc: Float) -> Float:
+    """Weight of a camera subpath hitting an emitter (``s = 0``) after at least one
+    bounce: ``pdf_nee`` next-event estimation's area density of the point, ``emit`` the
+    light subpath's density of it and of the direction back along the ray."""
+    w = dr.rcp(1.0 + _term(pdf_nee, dvcm) + _term(emit, dvc))
+    return dr.select(dr.isfinite(w), w, 0.0)
+
+
+def mis_weights_reference(pdf_fwd: list[float], pdf_rev: list[float], delta: list[bool],
+                          p_nee: float, light_is_delta: bool, n_light_paths: float = 1.0,
+                          ) -> list[float]:
+    """The power-heuristic weights of every strategy ``s = 0 .. k`` of one path of ``k``
+    segments, computed pbrt's way (plain floats, for the tests).
+
+    Vertices ``x_0`` (on the light) .. ``x_k`` (the camera). ``pdf_fwd[i]``: area
+    density of ``x_i`` sampled from the light side (``x_0``: the light subpath's origin
+    density), ``pdf_rev[i]``: from the camera side (``x_k``'s is unused, ``x_{k-1}``'s
+    includes the pixel density), ``delta[i]``: ``x_i`` scattered by a Dirac lobe;
+    ``p_nee``: next-event estimation's area density of ``x_0``. Strategy ``s`` takes
+    ``x_0 .. x_{s-1}`` from the light; ``s = 1`` samples ``x_0`` by ``p_nee``, ``s = k``
+    (``t = 1``) is counted ``n_light_paths`` times; ``s = k + 1`` (``t = 0``) and ``(1,
+    1)`` do not exist. Returns ``[w_0, .., w_k]``."""
+    k = len(pdf_fwd) - 1
+
+    def density(s):
+        if s == 1 and k == 1:
+            return 0.0  # (1, 1) is not used
+        if s == 0 and light_is_delta:
+            return 0.0
+        p = 1.0
+        for i in range(s):
+            p *= (p_nee if s == 1 else pdf_fwd[0]) if i == 0 else pdf_fwd[i]
+        for i in range(s, k):
+            p *= pdf_rev[i]
+        if s == k:
+            p *= n_light_paths
+        # a connection between x_{s-1} and x_s needs both to be non-Dirac
+        if s >= 1 and (delta[s - 1] or delta[s]):
+            return 0.0
+        return p
+
+    ps = [density(s) for s in range(k + 1)]
+    total = sum(p * p for p in ps)
+    return [p * p / total if total > 0 else 0.0 for p in ps]
+
+
+def strategies(segments: int) -> list[tuple[int, int]]:
+    """The ``(s, t)`` of paths of ``1 .. segments`` segments, in :class:`StrategyFilm`'s order
+    (by length, then ``s``); ``(1, 1)`` is among them but never used."""
+    return [(s, d + 2 - s) for d in range(segments) for s in range(d + 2)]
+
+
+class StrategyFilm:
+    """``--bdpt-strategies``: each strategy's weighted contributions, summed per pixel (the
+    pixel containing the image position: no pixel filter), one image per ``(s, t)`` of
+    :func:`strategies`. Their sum is the image (for paths of at most ``segments``)."""
+
+    def __init__(self, width: int, height: int, segments: int):
+        self.width, self.height, self.segments = width, height, segments
+        self.count = segments * (segments + 3) // 2
+        self.sum = [dr.zeros(Float, self.count * width * height) for _ in range(3)]
+
+    def put(self, s, t, x: Float, y: Float, value: Array3f, active: Bool) -> None:
+        W, H = self.width, self.height
+        d = UInt32(s) + UInt32(t) - 2
+        ix, iy = Int32(dr.floor(x)), Int32(dr.floor(y))
+        ok = active & (d < self.segments) & (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H)
+        index = ((d * (d + 3)) // 2 + UInt32(s)) * (W * H) + UInt32(iy * W + ix)
+        for c in range(3):
+            dr.scatter_reduce(dr.ReduceOp.Add, self.sum[c], value[c], index, ok)
+
+    def arrays(self):
+        """The sums, ``(count, H, W, 3)`` float64."""
+        import numpy as np
+
+        dr.eval(self.sum)
+        return np.stack([c.numpy() for c in self.sum], -1).reshape(
+            self.count, self.height, self.width, 3).astype(np.float64)
+
+
+class LightVertices:
+    """The stored light-subpath vertices of each lane: one ``dr.alloc_local`` array per
+    field, ``size`` entries."""
+
+    def __init__(self, size: int, tangents: bool):
+        self.size = size
+        self.p = dr.alloc_local(Array3f, size)
+        self.ng = dr.alloc_local(Array3f, size)
+        self.ns = dr.alloc_local(Array3f, size)
+        self.wi = dr.alloc_local(Array3f, size)
+        self.uv = dr.alloc_local(Array2f, size)
+        self.err = dr.alloc_local(Float, size)
+        self.prim = dr.alloc_local(UInt32, size)
+        self.material = dr.alloc_local(UInt32, size)
+        self.beta = dr.alloc_local(Array3f, size)
+        self.dvcm = dr.alloc_local(Float, size)
+        self.dvc = dr.alloc_local(Float, size)
+        self.depth = dr.alloc_local(UInt32, size)
+        self.tangents = tangents
+        if tangents:
+            self.dp_du = dr.alloc_local(Array3f, size)
+            self.dp_dv = dr.alloc_local(Array3f, size)
+
+    def write(self, i: UInt32, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float,
+              depth: UInt32) -> None:
+        self.p[i] = si.p
+        self.ng[i] = si.ng
+        self.ns[i] = si.ns
+        self.wi[i] = si.wi
+        self.uv[i] = Array2f(si.uv)
+        self.err[i] = si.p_error
+        self.prim[i] = si.prim
+        self.material[i] = si.material
+        self.beta[i] = beta
+        self.dvcm[i] = dvcm
+        self.dvc[i] = dvc
+        self.depth[i] = depth
+        if self.tangents:
+            self.dp_du[i] = si.dp_du
+            self.dp_dv[i] = si.dp_dv
+
+    def read(self, i: UInt32, valid: Bool):
+        si = Interaction(Bool(valid), Float(0.0), self.p[i], self.ng[i], self.ns[i], self.prim[i],
+                         self.material[i], self.wi[i], self.uv[i], self.err[i],
+                         self.dp_du[i] if self.tangents else None,
+                         self.dp_dv[i] if self.tangents else None)
+        return si, self.beta[i], self.dvcm[i], self.dvc[i], self.depth[i]
+
+
+class BDPTIntegrator:
+    """Bidirectional path tracing over a :class:`~drpt.render.scene.DeviceScene` seen by a
+    pinhole camera."""
+
+    def __init__(self, scene: DeviceScene, rays: EmitterRays, camera: RayCamera, options: PathOptions):
+        if camera.orthographic or camera.thin_lens or camera.window is not None:
+            raise DrptError("bidirectional path tracing (bdpt) needs a pinhole perspective camera "
+                            "without a crop window")
+        kinds = set(getattr(scene.materials, "kinds", ()))
+        bad = sorted(kinds & set(NONSYMMETRIC_LOBES))
+        if bad:
+            raise DrptError(f"bidirectional path tracing (bdpt) does not support {', '.join(bad)} "
+                            "materials (their transmission is not symmetric)")
+        for kind, light in rays.sources:
+            if kind not in SUPPORTED_SOURCES or (kind == "spot" and getattr(light, "texture", None) is not None):
+                name = f"{'textured ' if kind == 'spot' else ''}{kind} lights"
+                raise DrptError(f"bidirectional path tracing (bdpt) does not support {name}: use the "
+                                "path integrator")
+        self.warnings: list[str] = []
+        depth = options.max_depth
+        if depth < 0:
+            depth = MAX_DEPTH
+            self.warnings.append(f"bdpt traces paths of at most {MAX_DEPTH} segments "
+                                 f"(--max-depth -1 taken as {MAX_DEPTH})")
+        elif depth > MAX_DEPTH:
+            raise DrptError(f"bidirectional path tracing (bdpt) traces at most {MAX_DEPTH} segments: "
+                            f"--max-depth {depth} is too deep")
+        self.depth = depth
+        self.scene = scene
+        self.rays = rays
+        self.camera = camera
+        self.opt = options
+        self.pick = 1.0 / rays.count if rays.count else 0.0
+        # the order of DeltaLights.samples: points, spots (projectors are refused), directionals
+        self.deltas = ([light for kind, light in rays.sources if kind in ("point", "spot")]
+                       + [light for kind, light in rays.sources if kind == "directional"])
+        #: a test hook: ``(s, t)``, the one strategy that counts, with weight 1 (None: all,
+        #: MIS-weighted); the image is then that strategy's unweighted estimate
+        self.only: tuple[int, int] | None = None
+        self.has_sky = any(kind == "sky" for kind, _ in rays.sources)
+        self.has_background = any(kind == "background" for kind, _ in rays.sources)
+        #: a light subpath leaving an infinite emitter starts on a disk of the scene's
+        #: bounding sphere's radius R, perpendicular to its direction: area density 1 / (pi R^2)
+        self.disk_pdf = 1.0 / (math.pi * rays.radius * rays.radius)
+
+    # ------------------------------------------------------------ emitter densities
+    def _delta_emit(self, light) -> float:
+        """The light subpath's density of leaving a delta light: a point light's direction
+        (uniform sphere), a spot's (uniform cone), a directional light's origin (the disk),
+        times the source's choice."""
+        if getattr(light, "cutoff_angle", None) is not None:
+            return self.pick / (2.0 * math.pi * (1.0 - math.cos(math.radians(light.cutoff_angle))))
+        if getattr(light, "position", None) is None:
+            return self.pick * self.disk_pdf
+        return self.pick / (4.0 * math.pi)
+
+    def origin_pdf(self, prim: UInt32, active: Bool) -> Float:
+        """Area density of an emitter point on primitive ``prim`` as the light sampler draws
+        it without a reference point (0 on non-emitters)."""
+        lights = self.scene.area_lights
+        pdf = lights.pdf_area(prim, active) if lights.has_triangles else Float(0.0)
+        if lights.has_spheres:
+            s = self.scene.surfaces
+            is_sph = active & (prim >= lights.n_tri) & (prim < lights.n_tri + s.n_sph)
+            j = dr.select(is_sph, prim - lights.n_tri, 0)
+            prob = dr.gather(Float, lights.sph_prob, j, is_sph)
+            r = dr.gather(Float, s.sph_r, j, is_sph)
+            pdf = dr.select(is_sph, prob / (4.0 * dr.pi * r * r), pdf)
+        return pdf
+
+    # ------------------------------------------------------------ light subpath start
+    def _emit(self, rng: PCG32, active: Bool):
+        """The light subpath's first ray: ``(o, d, beta, dvcm, dvc, infinite, valid)``
+        (``infinite``: it leaves the directional light, the sky or the background)."""
+        rays, n = self.rays, dr.width(active)
+        u_sel = rng.next_float32()
+        u_pos = next_2d(rng)
+        u_dir = next_2d(rng)
+        k, u_reuse = rays._select(u_sel)
+        o = dr.zeros(Array3f, n)
+        d = dr.full(Array3f, [0.0, 0.0, 1.0], n)
+        beta = dr.zeros(Array3f, n)
+        dvcm = dr.zeros(Float, n)
+        dvc = dr.zeros(Float, n)
+        infinite = dr.zeros(Bool, n)
+        for i, (kind, light) in enumerate(rays.sources):
+            mine = active & (k == i)
+            if kind == "area":
+                ls = self.scene.area_lights.sample(u_reuse, u_pos, mine)
+                local = square_to_cosine_hemisphere(u_dir)
+                di = Frame(ls.n).to_world(local)
+                oi = spawn_origin(ls.p, ls.ng, ls.p_error, di)
+                emit = self.pick * ls.pdf_area * local.z / math.pi
+                ok = mine & (emit > 0.0)
+                inv = dr.select(ok, dr.rcp(emit), 0.0)
+                bi = ls.le * (local.z * inv)
+                vcm = mis(ls.pdf_area * inv)
+                vc = mis(dr.abs(dr.dot(ls.ng, di)) * inv)
+            elif kind in ("sky", "background"):
+                # next-event estimation samples the sky's direction by the same density (the
+                # background not at all); no cosine at an infinite emitter
+                if kind == "sky":
+                    w_sky, le, pdf = self.scene.sample_environment(u_dir, mine)
+                else:
+                    w_sky = square_to_uniform_sphere(u_dir)
+                    le, pdf = Array3f(*map(float, self.scene.background)), Float(INV_FOUR_PI)
+                di = -w_sky
+                oi = rays._disk_origin(di, u_pos)
+                emit = self.pick * pdf * self.disk_pdf
+                ok = mine & (emit > 0.0)
+                inv = dr.select(ok, dr.rcp(emit), 0.0)
+                bi = le * inv
+                vcm = mis(pdf * inv) if kind == "sky" else Float(0.0)
+                vc = mis(inv)
+                infinite |= mine
+            else:
+                oi, di, w = rays._source_ray(kind, light, u_reuse, u_pos, u_dir, mine)
+                emit = self._delta_emit(light)
+                bi = w * float(rays.count)
+                vcm = Float(mis(1.0 / emit))
+                vc = Float(0.0)
+                if kind == "directional":
+                    infinite |= mine
+            o = dr.select(mine, oi, o)
+            d = dr.select(mine, di, d)
+            beta = dr.select(mine, bi, beta)
+            dvcm = dr.select(mine, vcm, dvcm)
+            dvc = dr.select(mine, vc, dvc)
+        valid = active & (dr.max(beta) > 0.0)
+        return o, d, beta, dvcm, dvc, infinite, valid
+
+    # ------------------------------------------------------------ strategies
+    def _weight(self, w: Float, s, t) -> Float:
+        """The MIS weight ``w`` of strategy ``(s, t)``, or with :attr:`only` 1 for that
+        strategy and 0 for the others."""
+        if self.only is None:
+            return w
+        return dr.select((UInt32(s) == self.only[0]) & (UInt32(t) == self.only[1]), 1.0, 0.0)
+
+    def _splat(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float, film: SplatFilm,
+               active: Bool, depth: UInt32, strategies: StrategyFilm | None) -> None:
+        """``t = 1``: light vertex ``si`` joined to the camera, splatted into ``film``."""
+        scene, cam = self.scene, self.camera
+        x, y, wc, _dist, importance, visible = cam.connect(si.p)
+        ok = active & visible
+        f, _ = scene.eval_bsdf(si, wc)
+        _, rev = scene.eval_bsdf(with_wi(si, wc), si.wi)
+        corr, sides = correction(si, wc)
+        pdf_cam = importance * dr.abs(dr.dot(si.ng, wc))
+        w = self._weight(connection_weight(pdf_cam, dvcm, dvc, rev, Float(0.0), Float(0.0), Float(0.0),
+                                           Float(0.0)), depth + 1, 1)
+        value = beta * f * (corr * importance * w)
+        ok &= sides & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
+        so = scene.spawn(si, wc)
+        to = cam.center - so
+        dist = dr.norm(to)
+        ok &= ~scene.occluded(so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        film.put(x, y, value, ok)
+        if strategies is not None:
+            strategies.put(depth + 1, 1, x, y, value, ok)
+
+    def _emission(self, si: Interaction, d: Array3f, beta: Array3f, dvcm: Float, dvc: Float,
+                  t: UInt32, active: Bool) -> Array3f:
+        """``s = 0``: the emitter the camera subpath's ray ``d`` hits at ``si``."""
+        scene = self.scene
+        le = scene.emitted(si)
+        pdf_a = self.origin_pdf(si.prim, active)
+        cos_e = dr.maximum(dr.dot(si.ns, si.wi), 0.0)
+        emit = self.pick * pdf_a * cos_e / math.pi
+        w = dr.select(t == 2, 0.0 if self.opt.hide_emitters else 1.0,
+                      emission_weight(pdf_a, emit, dvcm, dvc))
+        w = self._weight(w, 0, t)
+        return dr.select(active, beta * le * w, 0.0)
+
+    def _nee_area(self, si: Interaction, dvcm: Float, dvc: Float, rng: PCG32, active: Bool,
+                  t: UInt32) -> Array3f:
+        """``s = 1`` for the area lights: a point drawn as the path tracer draws it."""
+        scene = self.scene
+        lights = scene.area_lights
+        u_sel = rng.next_float32()
+        u = next_2d(rng)
+        ls = lights.sample(u_sel, u, active, ref=si.p if lights.has_spheres else None)
+        _, face = lights._select(u_sel, active)
+        to = ls.p - si.p
+        dist2 = dr.squared_norm(to)
+        wo = to * dr.rsqrt(dist2)
+        cos_front = -dr.dot(ls.n, wo)
+        cos_l = dr.abs(dr.dot(ls.ng, wo))
+        pdf = ls.pdf_area * dist2 / cos_l
+        if ls.solid_angle is not None:
+            pdf = dr.select(ls.solid_angle, ls.pdf_area, pdf)
+        ok = active & (cos_front > 0.0) & (cos_l > 0.0) & (ls.pdf_area > 0.0)
+        pdf_a = self.origin_pdf(face, active)
+        pdf_w = pdf_a * dist2 / cos_l  # the density the weights use (uniform on a sphere)
+        f, fwd = scene.eval_bsdf(si, wo)
+        _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
+        emit = self.pick * pdf_a * cos_front / math.pi
+        cos_c = dr.abs(dr.dot(si.ng, wo))
+        w = self._weight(nee_weight(fwd, pdf_w, emit, cos_c, cos_l, dvcm, dvc, rev), 1, t)
+        value = f * ls.le * (w / pdf)
+        ok &= (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
+        so = scene.spawn(si, wo)
+        end = spawn_origin(ls.p, ls.ng, ls.p_error, -wo)
+        seg = end - so
+        dist = dr.norm(seg)
+        ok &= ~scene.occluded(so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        return dr.select(ok, value, 0.0)
+
+    def _nee_delta(self, si: Interaction, dvcm: Float, dvc: Float, active: Bool, t: UInt32) -> Array3f:
+        """``s = 1`` for the point and spot lights: each, every time."""
+        scene = self.scene
+        total = dr.zeros(Array3f, dr.width(active))
+        for light, ds in zip(self.deltas, scene.delta_emitters(si.p)):
+            f, _ = scene.eval_bsdf(si, ds.wo)
+            _, rev = scene.eval_bsdf(with_wi(si, ds.wo), si.wi)
+            cos_c = dr.abs(dr.dot(si.ng, ds.wo))
+            # the light's area density is 1 (a Dirac): as a solid angle dist^2, or 1 for a
+            # directional light (infinitely far: no distance, no cosine)
+            far = getattr(light, "position", None) is None
+            pdf_light = Float(1.0) if far else dr.square(ds.dist)
+            w = self._weight(nee_weight(Float(0.0), pdf_light, Float(self._delta_emit(light)), cos_c,
+                                        Float(1.0), dvcm, dvc, rev), 1, t)
+            value = f * ds.irradiance * w
+            ok = active & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
+            so = scene.spawn(si, ds.wo)
+            ok &= ~scene.occluded(so, ds.wo, ds.dist * SHADOW_SHRINK, ok)
+            total += dr.select(ok, value, 0.0)
+        return total
+
+    def _nee_sky(self, si: Interaction, dvcm: Float, dvc: Float, rng: PCG32, active: Bool,
+                 t: UInt32) -> Array3f:
+        """``s = 1`` for the sky: a direction drawn by its density (as the path tracer's)."""
+        scene = self.scene
+        wo, radiance, pdf = scene.sample_environment(next_2d(rng), active)
+        f, fwd = scene.eval_bsdf(si, wo)
+        _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
+        emit = self.pick * pdf * self.disk_pdf
+        w = self._weight(nee_weight(fwd, pdf, emit, dr.abs(dr.dot(si.ng, wo)), Float(1.0), dvcm, dvc, rev),
+                         1, t)
+        value = f * radiance * (w / dr.maximum(pdf, 1e-30))
+        ok = active & (pdf > 0.0) & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
+        ok &= ~scene.occluded(scene.spawn(si, wo), wo, Float(dr.inf), ok)
+        return dr.select(ok, value, 0.0)
+
+    def _escaped(self, d: Array3f, beta: Array3f, dvcm: Float, dvc: Float, t: UInt32,
+                 active: Bool) -> Array3f:
+        """``s = 0`` for the sky or the background the camera subpath's ray ``d`` escapes to
+        (no distance or cosine to convert at an infinite emitter)."""
+        if self.has_sky:
+            le, pdf = self.scene.eval_pdf_environment(d, active)
+        else:
+            le, pdf = Array3f(*map(float, self.scene.background)), Float(0.0)  # no NEE of it
+        emit = self.pick * (pdf if self.has_sky else INV_FOUR_PI) * self.disk_pdf
+        w = dr.select(t == 2, 0.0 if self.opt.hide_emitters else 1.0, emission_weight(pdf, emit, dvcm, dvc))
+        w = self._weight(w, 0, t)
+        return dr.select(active, beta * le * w, 0.0)
+
+    def _connect(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float,
+                 lv: Interaction, beta_l: Array3f, dvcm_l: Float, dvc_l: Float, active: Bool,
+                 s: UInt32, t: UInt32) -> Array3f:
+        """``s >= 2, t >= 2``: camera vertex ``si`` joined to light vertex ``lv``."""
+        scene = self.scene
+        to = lv.p - si.p
+        dist2 = dr.squared_norm(to)
+        w = to * dr.rsqrt(dist2)
+        f_c, fwd_c = scene.eval_bsdf(si, w)
+        _, rev_c = scene.eval_bsdf(with_wi(si, w), si.wi)
+        f_l, fwd_l = scene.eval_bsdf(lv, -w)
+        _, rev_l = scene.eval_bsdf(with_wi(lv, -w), lv.wi)
+        corr, sides = correction(lv, -w)
+        inv_d2 = dr.rcp(dist2)
+        pdf_l = fwd_c * dr.abs(dr.dot(lv.ng, w)) * inv_d2
+        pdf_c = fwd_l * dr.abs(dr.dot(si.ng, w)) * inv_d2
+        weight = self._weight(connection_weight(pdf_l, dvcm_l, dvc_l, rev_l, pdf_c, dvcm, dvc, rev_c), s, t)
+        value = beta * f_c * beta_l * f_l * (corr * inv_d2 * weight)
+        ok = active & sides & (dist2 > 0.0) & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
+        so = scene.spawn(si, w)
+        end = spawn_origin(lv.p, lv.ng, lv.p_error, -w)
+        seg = end - so
+        dist = dr.norm(seg)
+        ok &= ~scene.occluded(so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        return dr.select(ok, value, 0.0)
+
+    # ------------------------------------------------------------ the subpaths
+    @dr.syntax
+    def trace(self, rng: PCG32, film: SplatFilm, camera_film: SplatFilm, px: Float, py: Float,
+              active: Bool, strategies: StrategyFilm | None = None) -> UInt32:
+        """One light subpath and one camera sample through image position ``(px, py)`` per
+        lane: the ``t = 1`` strategies splatted into ``film``, the sum of the others into
+        ``camera_film`` at ``(px, py)``, and with ``strategies`` each contribution also
+        into its strategy's image; returns the non-finite contributions dropped (per
+        lane)."""
+        scene, opt, cam = self.scene, self.opt, self.camera
+        n = dr.width(active)
+        D = self.depth
+        NL = D - 1
+        has_deltas = len(self.deltas) > 0 and scene.has_smooth_bsdfs
+        dropped = dr.zeros(UInt32, n)
+        stored = dr.zeros(UInt32, n)
+        lverts = None
+        if NL > 0 and self.rays.count > 0 and scene.has_smooth_bsdfs:
+            lverts = LightVertices(NL, getattr(scene.materials, "tangents", False))
+            o, d, beta, dvcm, dvc, infinite, live = self._emit(rng, Bool(active))
+            eta = dr.full(Float, 1.0, n)
+            depth = dr.full(UInt32, 1, n)
+            while live:
+                si = scene.intersect(o, d, live)
+                live &= si.valid
+                finite = dr.isfinite(beta.x) & dr.isfinite(beta.y) & dr.isfinite(beta.z)
+                dropped += dr.select(live & ~finite, 1, 0)
+                live &= finite
+                # the first segment from an infinite emitter has no length to convert
+                dist2 = dr.select(infinite, 1.0, dr.square(si.t))
+                infinite = dr.zeros(Bool, n)
+                dvcm, dvc = hit_update(dvcm, dvc, dist2, dr.abs(dr.dot(si.ng, d)))
+                connectible = live & ~scene.is_delta(si)
+                if connectible:
+                    lverts.write(dr.minimum(stored, NL - 1), si, beta, dvcm, dvc, depth)
+                    stored += 1
+                self._splat(si, beta, dvcm, dvc, film, connectible, depth, strategies)
+
+                u_lobe = rng.next_float32()
+                u_bsdf = next_2d(rng)
+                wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
+                _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
+                corr, sides = correction(si, wo)
+                dvcm, dvc = scatter_update(dvcm, dvc, bs.pdf, rev, dr.abs(dr.dot(si.ng, wo)), bs.delta)
+                beta = beta * bs.weight * (corr * dr.square(bs.eta))
+                eta = eta * bs.eta
+                live &= bs.valid & sides & (dr.max(beta) > 0.0)
+                depth += 1
+                live &= depth < D
+                u_rr = rng.next_float32()
+                use_rr = depth > opt.rr_depth
+                q = dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
+                live &= ~use_rr | (u_rr < q)
+                beta = dr.select(use_rr, beta / q, beta)
+                o = scene.spawn(si, wo)
+                d = Array3f(wo)
+
+        # ---- the camera subpath
+        o, d = cam.ray(px, py)
+        cos_cam = dr.dot(d, cam.f)
+        area = 4.0 * dr.sqrt(dr.squared_norm(cam.r) * dr.squared_norm(cam.u))
+        dvcm = mis(area * cos_cam * cos_cam * cos_cam)
+        dvc = dr.zeros(Float, n)
+        beta = dr.full(Array3f, 1.0, n)
+        eta = dr.full(Float, 1.0, n)
+        L = dr.zeros(Array3f, n)
+        k = dr.full(UInt32, 1, n)
+        live = Bool(active) & (D > 0)
+        record = strategies is not None
+
+        while live:
+            si = scene.intersect(o, d, live)
+            if self.has_sky or self.has_background:
+                c = self._escaped(d, beta, dvcm, dvc, k + 1, live & ~si.valid)
+                L += c
+                if record:
+                    strategies.put(0, k + 1, px, py, c, active)
+            live &= si.valid
+            dvcm, dvc = hit_update(dvcm, dvc, dr.square(si.t), dr.abs(dr.dot(si.ng, d)))
+            if scene.has_area_lights:
+                c = self._emission(si, d, beta, dvcm, dvc, k + 1, live)
+                L += c
+                if record:
+                    strategies.put(0, k + 1, px, py, c, active)
+            connectible = live & ~scene.is_delta(si) & (k < D)
+            nee = dr.zeros(Array3f, n)
+            if scene.has_area_lights and scene.has_smooth_bsdfs:
+                nee += self._nee_area(si, dvcm, dvc, rng, connectible, k + 1)
+            if has_deltas:
+                nee += self._nee_delta(si, dvcm, dvc, connectible, k + 1)
+            if self.has_sky and scene.has_smooth_bsdfs:
+                nee += self._nee_sky(si, dvcm, dvc, rng, connectible, k + 1)
+            L += beta * nee
+            if record:
+                strategies.put(1, k + 1, px, py, beta * nee, active)
+            if lverts is not None:
+                i = dr.zeros(UInt32, n)
+                while connectible & (i < stored):
+                    lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
+                    c = self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
+                                      connectible & (depth_l + k < D), depth_l + 1, k + 1)
+                    L += c
+                    if record:
+                        strategies.put(depth_l + 1, k + 1, px, py, c, active)
+                    i += 1
+
+            u_lobe = rng.next_float32()
+            u_bsdf = next_2d(rng)
+            wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
+            _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
+            dvcm, dvc = scatter_update(dvcm, dvc, bs.pdf, rev, dr.abs(dr.dot(si.ng, wo)), bs.delta)
+            beta = beta * bs.weight
+            eta = eta * bs.eta
+            live &= bs.valid & (dr.max(beta) > 0.0)
+            k += 1
+            live &= k <= D
+            u_rr = rng.next_float32()
+            use_rr = k > opt.rr_depth
+            q = dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
+            live &= ~use_rr | (u_rr < q)
+            beta = dr.select(use_rr, beta / q, beta)
+            o = scene.spawn(si, wo)
+            d = Array3f(wo)
+        finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
+        dropped += dr.select(active & ~finite, 1, 0)
+        camera_film.put(px, py, L, active & finite)
+        return dropped
