@@ -278,7 +278,7 @@ def _megakernel_counts(renderer) -> dict:
 
     integ, scene = renderer.integrator, renderer.scene
     iters, shadows = [], []
-    seq, bounce, occluded = integ.sample_sequence, integ._bounce, scene.occluded
+    seq, bounce, occluded = integ.sample_sequence, integ.bounce, scene.occluded
     cur = {}
 
     def counting_sequence(rng, camera_ray, count, **kw):
@@ -301,11 +301,11 @@ def _megakernel_counts(renderer) -> dict:
         dr.scatter_add(cur["sh"], UInt32(1), dr.arange(UInt32, cur["n"]), act)
         return occluded(o, d, tmax, active)
 
-    integ.sample_sequence, integ._bounce, scene.occluded = counting_sequence, counting_bounce, counting_occluded
+    integ.sample_sequence, integ.bounce, scene.occluded = counting_sequence, counting_bounce, counting_occluded
     try:
         renderer.render()
     finally:
-        del integ.sample_sequence, integ._bounce, scene.occluded
+        del integ.sample_sequence, integ.bounce, scene.occluded
     w = _simd_width()
     useful = executed = 0
     for c in iters:

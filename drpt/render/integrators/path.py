@@ -22,8 +22,9 @@ Delta lobes (glass, mirrors) have nothing to evaluate: next-event estimation
 contributes nothing there and the emitter their ray hits counts in full
 (``prev_delta``). A scene of only delta materials traces no NEE code.
 
-Two entry points run the same bounce (``_bounce(scene, state, rng) ->
-state``, the loop state a :class:`PathState`): ``sample`` traces one path
+Two entry points run the same bounce (:meth:`PathIntegrator.bounce`,
+``bounce(scene, state, rng) -> state``, the loop state a :class:`PathState`;
+public, so that the wavefront integrator's fused tail runs it too): ``sample`` traces one path
 per lane; ``sample_sequence``, which the renderer uses, traces several per
 lane one after another (path regeneration) and returns their sums. Every
 question about the scene goes to the :class:`~drpt.render.scene.DeviceScene`;
@@ -80,7 +81,7 @@ class PathIntegrator:
         scene = self.scene
         state = self._start(o, d, Bool(active))
         while state.active:
-            state = self._bounce(scene, state, rng)
+            state = self.bounce(scene, state, rng)
         return state.L
 
     @dr.syntax
@@ -117,7 +118,7 @@ class PathIntegrator:
         dropped = UInt32(0)
         steps = (UInt32(0),) if bounces else ()
         while left > 0:
-            state = self._bounce(scene, state, rng)
+            state = self.bounce(scene, state, rng)
             if bounces:
                 steps = (steps[0] + 1,)
             if ~state.active & (left > 0):  # the path ended: bank it, start the next
@@ -142,7 +143,7 @@ class PathIntegrator:
                          prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
                          active=Bool(active))
 
-    def _bounce(self, scene: DeviceScene, s: PathState, rng: PCG32) -> PathState:
+    def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32) -> PathState:
         """One vertex of the path: the emission the ray sees, next-event
         estimation, BSDF sampling and Russian roulette."""
         opt = self.opt

@@ -260,7 +260,7 @@ class _Queue:
 @dr.syntax
 def _fused_loop(integ: PathIntegrator, scene: DeviceScene, state: PathState, rng: PCG32) -> Array3f:
     while state.active:
-        state = integ._bounce(scene, state, rng)
+        state = integ.bounce(scene, state, rng)
     return state.L
 
 
@@ -310,7 +310,7 @@ class WavefrontIntegrator:
             if m <= self.tail:
                 self._finish(s, L, timer)
                 break
-            s, alive = self._bounce(s, L, timer)
+            s, alive = self._stages(s, L, timer)
         if self.stats is not None:
             self.stats.live.append(live)
         return L
@@ -345,7 +345,7 @@ class WavefrontIntegrator:
         timer.done("compact + sort", s, lanes=m)
         return s, m
 
-    def _bounce(self, s: WaveState, L: Array3f, timer: _Timer) -> tuple[WaveState, Bool]:
+    def _stages(self, s: WaveState, L: Array3f, timer: _Timer) -> tuple[WaveState, Bool]:
         scene, opt = self.scene, self.opt
         n = dr.width(s.lane)
 
@@ -428,7 +428,7 @@ class WavefrontIntegrator:
 
     def _shade(self, queue: _Queue, s: WaveState, si: Interaction):
         """Next-event estimation (as shadow queries), BSDF sampling and Russian
-        roulette of one queue's paths (as PathIntegrator._bounce)."""
+        roulette of one queue's paths (as PathIntegrator.bounce)."""
         scene, opt = queue.scene, self.opt
         rng = unpack(self._rng_kind, UInt64(s.rng_state), UInt64(s.rng_inc))
         active = dr.full(Bool, True, dr.width(s.lane))
