@@ -26,7 +26,9 @@ Two entry points run the same bounce (:meth:`PathIntegrator.bounce`,
 ``bounce(scene, state, rng) -> state``, the loop state a :class:`PathState`;
 public, so that the wavefront integrator's fused tail runs it too): ``sample`` traces one path
 per lane; ``sample_sequence``, which the renderer uses, traces several per
-lane one after another (path regeneration) and returns their sums. Every
+lane one after another (path regeneration) and returns their sums. Both tell
+the scene's instrument (:mod:`drpt.render.instrument`), if any, about the
+paths and every bounce. Every
 question about the scene goes to the :class:`~drpt.render.scene.DeviceScene`;
 its feature flags decide at trace time which estimators are compiled.
 """
@@ -80,7 +82,12 @@ class PathIntegrator:
         """Radiance arriving at ``o`` from direction ``-d``, one sample per lane."""
         scene = self.scene
         state = self._start(o, d, Bool(active))
+        inst = scene.instrument
+        if inst is not None:
+            inst.paths(dr.width(state.active))
         while state.active:
+            if inst is not None:
+                inst.bounce(state)
             state = self.bounce(scene, state, rng)
         return state.L
 
@@ -117,7 +124,12 @@ class PathIntegrator:
         sums = (Sum(0.0), Sum(0.0)) + ((Sum(0.0),) if moment else ())
         dropped = UInt32(0)
         steps = (UInt32(0),) if bounces else ()
+        inst = scene.instrument
+        if inst is not None:
+            inst.paths(dr.width(left))
         while left > 0:
+            if inst is not None:
+                inst.bounce(state)
             state = self.bounce(scene, state, rng)
             if bounces:
                 steps = (steps[0] + 1,)
