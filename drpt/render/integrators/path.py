@@ -24,13 +24,14 @@ contributes nothing there and the emitter their ray hits counts in full
 
 Two entry points run the same bounce (:meth:`PathIntegrator.bounce`,
 ``bounce(scene, state, rng) -> state``, the loop state a :class:`PathState`;
-public, so that the wavefront integrator's fused tail runs it too): ``sample`` traces one path
-per lane; ``sample_sequence``, which the renderer uses, traces several per
-lane one after another (path regeneration) and returns their sums. Both tell
-the scene's instrument (:mod:`drpt.render.instrument`), if any, about the
-paths and every bounce. Every
-question about the scene goes to the :class:`~drpt.render.scene.DeviceScene`;
-its feature flags decide at trace time which estimators are compiled.
+public, so that the wavefront integrator's fused tail runs it too):
+``sample`` traces one path per lane; ``sample_sequence``, which the renderer
+uses, traces several per lane one after another (path regeneration) and
+returns their sums. Both tell the scene's instrument
+(:mod:`drpt.render.instrument`), if any, about the paths and every bounce.
+Every question about the scene goes to the
+:class:`~drpt.render.scene.DeviceScene`; its feature flags decide at trace
+time which estimators are compiled.
 """
 
 from __future__ import annotations

@@ -33,9 +33,9 @@ structure-of-arrays buffers (one Dr.Jit array per field of
    components, so a Cornell box of diffuse walls, principled, rough and
    smooth dielectrics runs four queues). Each queue's kernel runs only its
    BSDFs' code (a :meth:`~drpt.render.scene.DeviceScene.restricted` view of
-   the scene, whose feature flags are those of its kinds): light sampling and BSDF evaluation for
-   next-event estimation (queued as shadow queries), BSDF sampling, Russian
-   roulette, and writes the next ray and path state;
+   the scene, whose feature flags are those of its kinds): light sampling
+   and BSDF evaluation for next-event estimation (queued as shadow queries),
+   BSDF sampling, Russian roulette, and writes the next ray and path state;
 5. **shadow rays** (``shadow rays``, ``shadow resolve``): the queues write their shadow queries into
    one buffer set per estimator slot (area, each delta light, environment)
    at their paths' positions; those with a non-zero contribution are
