@@ -433,7 +433,8 @@ class MaterialTable:
         return dr.select(textured, self.textures.lookup(ids, uv, textured), le)
 
     def is_specular_only(self) -> bool:
-        return all(m.DELTA for m in self.lobes.values())
+        """Whether every lobe this table traces (a :meth:`restricted` view: its kinds') is a delta lobe."""
+        return all(self.lobes[k].DELTA for k in (self.kinds if self._only is None else self._only))
 
     def is_delta(self, si: Interaction) -> Bool:
         """Lanes whose material has only Dirac lobes (glass, mirror)."""

@@ -5,7 +5,8 @@ its camera or options change (:meth:`Progressive.reset`). Frame ``i`` traces
 sample step ``i`` of the pass plan of a render whose ``max_lanes`` is
 :func:`frame_lanes` (at most one sample per pixel per pass, so a frame is one
 pass, or a few bands of rows when the image is larger than the lane
-budget), with :meth:`Renderer._pass` and its per-pass seeding; frames are
+budget), with :meth:`Renderer.render_pass` (which goes on past the plan's
+last pass) and its per-pass seeding; frames are
 summed in float64. After ``n`` frames the image is therefore bit-identical
 to ``Renderer.render()`` of the same camera with ``spp = n``, the same seed
 and ``max_lanes = frame_lanes(...)`` (``tests/view/test_view.py`` checks it).
@@ -24,7 +25,7 @@ import numpy as np
 
 from ..options import RenderOptions
 from ..scene.model import Camera
-from .renderer import Renderer, plan_passes
+from .renderer import Renderer
 
 
 def frame_lanes(width: int, height: int, max_lanes: int) -> int:
@@ -66,7 +67,7 @@ class Progressive:
                                aovs=(), denoise=False)  # no AOVs in a view
         self.renderer = self.base.derive(self.options, camera)
         self.camera = camera
-        self.plan = plan_passes(W, H, 1, lanes)  # the bands of one sample step
+        self.plan = self.renderer.plan  # one sample per pixel per step (frame_lanes): bands
         self.acc = np.zeros((H, W, 3), np.float64)
         self.weight: np.ndarray | None = None  # a splatting film's sum(w) per pixel
         self.spp = 0
@@ -82,8 +83,7 @@ class Progressive:
         t0 = time.perf_counter()
         bands = self.plan.bands
         for b in range(bands):
-            _s0, k, r0, rows = self.plan[b]
-            p = self.renderer._pass(self.spp * bands + b, k, r0, rows)
+            p = self.renderer.render_pass(self.spp * bands + b)
             hi = p.lo + p.sum.shape[0]
             self.acc[p.lo:hi] += p.sum
             if p.weight is not None:

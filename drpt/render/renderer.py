@@ -6,7 +6,7 @@ bounded at any image size and sample count: a pass covers a band of rows with
 tracer runs them with *path regeneration*
 (:meth:`~drpt.render.integrators.path.PathIntegrator.sample_sequence`): each
 pixel gets ``m`` Dr.Jit lanes (from ``drpt.backend.policy().min_lanes``,
-see :meth:`Renderer._pass`), each lane traces its
+see :meth:`Renderer.render_pass`), each lane traces its
 share of the ``k`` samples one path after another and sums them, so a SIMD
 packet no longer waits for its longest path at every bounce (its gain:
 docs/performance.md, "Execution model"). The Whitted integrator runs one sample per lane. Lanes are
@@ -20,7 +20,7 @@ planning 10^7 spp at 4096x4096 takes no memory. Sums in the lanes and
 across a pixel's lanes are float32, across passes float64; a pass whose
 float32 sums overflowed (radiance near the float32 maximum: the samples
 themselves are finite) is traced again, with the same random numbers, with
-float64 sums (:meth:`Renderer._pass`), so such radiance averages correctly
+float64 sums (:meth:`Renderer.render_pass`), so such radiance averages correctly
 and other renders pay nothing for it. A pixel mean beyond float32 (which no
 image file holds) is an error.
 
@@ -180,6 +180,15 @@ class PassPlan:
         s0, r0 = step * self.k, band * self.rows
         return s0, min(self.k, self.spp - s0), r0, min(self.rows, self.height - r0)
 
+    def at(self, i: int) -> tuple[int, int, int, int]:
+        """``plan[i]``, also past the last pass, where further sample steps of ``k``
+        samples per pixel follow in the same bands (a live view's frames go on)."""
+        if i < self.count:
+            return self[i]
+        step, band = divmod(i, self.bands)
+        r0 = band * self.rows
+        return step * self.k, self.k, r0, min(self.rows, self.height - r0)
+
     def first_sample(self, i: int) -> int:
         """The index of pass ``i``'s first sample among the render's ``W H spp``, in pass
         order (``(s0 H + r0 k) W``; also past the last pass: a live view's frames go on)."""
@@ -313,15 +322,28 @@ class Renderer:
         lanes = self.opt.max_lanes
         return policy().max_lanes if lanes is None else lanes
 
-    def _pass(self, pass_index: int, k: int, r0: int, rows: int) -> PassSums:
-        """The :class:`PassSums` of the ``k`` samples of each pixel of rows
-        ``r0..r0+rows``. Without splatting they cover the pass's own rows (``lo =
-        r0``); a splatting pass (:attr:`splatting`) also reaches the rows its filter
-        covers, a light-tracing pass the whole image (``lo = 0``).
+    @property
+    def plan(self) -> PassPlan:
+        """The render's passes (:func:`plan_passes` of its size, spp and :attr:`max_lanes`)."""
+        return self.chunks.passes
+
+    def render_pass(self, pass_index: int) -> PassSums:
+        """Pass ``pass_index`` of :attr:`plan`: the :class:`PassSums` of its ``k`` samples
+        of each pixel of its rows, a pure function of the scene, the options and
+        ``pass_index`` (its random numbers are selected by the seed and the index).
+        Past the plan's last pass, sample steps of the plan's ``k`` samples per pixel
+        go on in its bands of rows, so a live view (:mod:`drpt.render.progressive`)
+        renders frame after frame with the render's own passes. :meth:`render` is the
+        passes of the plan in order, summed.
+
+        Without splatting the sums cover the pass's own rows (``lo = r0``); a
+        splatting pass (:attr:`splatting`) also reaches the rows its filter covers,
+        a light-tracing pass the whole image (``lo = 0``).
 
         The sums are float32; where one overflowed, the pass is traced again
         with float64 sums (a second kernel, compiled only then), since float64
         sums in every pass cost time (docs/performance.md, "Execution model")."""
+        _s0, k, r0, rows = self.plan.at(pass_index)
         if self.light_tracing:
             sums = PassSums(0, *self._trace_light_pass(pass_index, k * rows * self.opt.width, k, r0, rows))
         elif self.splatting:
@@ -395,7 +417,7 @@ class Renderer:
 
     def _trace_pass(self, pass_index: int, k: int, r0: int, rows: int, wide: bool
                     ) -> tuple[np.ndarray, np.ndarray, int]:
-        """:meth:`_pass`'s sums, float64 with ``wide``, else float32."""
+        """:meth:`render_pass`'s sums, float64 with ``wide``, else float32."""
         W = self.opt.width
         pixels = rows * W
         sequential = hasattr(self.integrator, "sample_sequence")
@@ -542,7 +564,7 @@ class Renderer:
         return n, lane, pixel % W, pixel // W + dr.opaque(UInt32, r0)
 
     def _trace_splat_pass(self, pass_index: int, k: int, r0: int, rows: int) -> PassSums:
-        """:meth:`_pass` for a tent or Gaussian filter: each of the ``k`` samples of a
+        """:meth:`render_pass` for a tent or Gaussian filter: each of the ``k`` samples of a
         pixel of rows ``r0..r0+rows`` lies uniformly in its pixel, and its radiance
         is splatted into the pixels its filter covers with the filter's weights
         (:class:`~drpt.render.film.SplatFilm`), as Mitsuba's film does. One sample
@@ -646,7 +668,7 @@ class Renderer:
         nonfinite = 0
         for i in chunks.passes_of(index):
             _s0, k, r0, rows = plan[i]
-            p = self._pass(i, k, r0, rows)
+            p = self.render_pass(i)
             hi = p.lo + p.sum.shape[0]
             acc[p.lo:hi] += p.sum
             acc2[p.lo:hi] += p.sumsq
@@ -670,7 +692,7 @@ class Renderer:
         nonfinite = 0
         for i in chunks.passes_of(index):
             _s0, k, r0, rows = plan[i]
-            p = self._pass(i, k, r0, rows)
+            p = self.render_pass(i)
             hi = p.lo + p.sum.shape[0]
             into.dirty = True
             into.sum[p.lo:hi] += p.sum

@@ -33,12 +33,19 @@ material tables are stand-ins that answer every query as a miss
 (:class:`NoSurfaces`, :class:`NoMaterials`: Dr.Jit cannot gather from an
 empty array), and :attr:`DeviceScene.warnings` says so once.
 
-Each query is a method called through ``self``, so
-:mod:`drpt.tools.profile` can time it by replacing the method on an
-instance (:meth:`intersect` then counts as traversal plus interaction).
+A view restricted to some material kinds (:meth:`DeviceScene.restricted`, the
+wavefront's shading queues) shares the device data and recomputes the flags
+(:meth:`DeviceScene._set_flags`, their one definition).
+
+Measurement tools observe queries through :attr:`DeviceScene.instrument`
+(an :class:`~drpt.render.instrument.Instrument`, None by default): while a
+kernel is traced, :meth:`occluded` and the path integrator's bounce call it,
+so what it records lands in that kernel; without one no such code is traced.
 """
 
 from __future__ import annotations
+
+import copy
 
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
@@ -47,6 +54,7 @@ from ..accel.protocol import INVALID
 from ..options import RenderOptions
 from ..scene.model import Scene, Skybox
 from .bsdf import BSDFSample
+from .instrument import Instrument
 from .lights.area import AreaLights
 from .lights.delta import DeltaLights
 from .lights.envmap import EnvironmentLight, RotatedEnvironment, UniformSphereSampling, check_radius
@@ -160,13 +168,33 @@ class DeviceScene:
                 self.warnings.append(msg)
         self.background = tuple(float(c) for c in scene.background.color)
         self.ambient = tuple(float(c) for c in scene.background.ambient)
+        #: an :class:`~drpt.render.instrument.Instrument` that measurement tools attach
+        #: (``drpt profile``); None: queries trace no instrumentation code
+        self.instrument: Instrument | None = None
+        self._set_flags()
 
+    def _set_flags(self) -> None:
+        """The feature flags, from the scene's emitters and the materials it traces
+        (the one place they are computed: :meth:`__init__` and :meth:`restricted`)."""
         self.has_area_lights = self.area_lights.count > 0
         self.has_delta_lights = self.delta_lights.count > 0
         self.has_environment = self.environment is not None and not self.environment.is_black
         self.has_background = max(self.background) > 0.0 and not self.has_environment
         self.has_ambient = max(self.ambient) > 0.0
         self.has_smooth_bsdfs = not self.materials.is_specular_only()
+
+    def restricted(self, kinds) -> DeviceScene:
+        """A view of this scene for lanes whose materials have components of the lobe
+        kinds ``kinds`` only: the same device data (nothing is built or uploaded
+        again), a material table that traces only those lobes
+        (:meth:`MaterialTable.restricted <drpt.render.material.MaterialTable.restricted>`),
+        and the feature flags recomputed for it (a view of delta lobes only traces no
+        next-event estimation). The wavefront integrator's shading queues run on such
+        views."""
+        view = copy.copy(self)
+        view.materials = self.materials.restricted(kinds)
+        view._set_flags()
+        return view
 
     # ------------------------------------------------------------ geometry
     def intersect(self, o: Array3f, d: Array3f, active: Bool) -> Interaction:
@@ -183,6 +211,8 @@ class DeviceScene:
 
     def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool) -> Bool:
         """Lanes whose ray ``(o, d)`` hits anything at ``0 < t < tmax``."""
+        if self.instrument is not None:
+            self.instrument.occluded(o, d, tmax, active)
         return self.accel.occluded(o, d, tmax, active)
 
     def spawn(self, si: Interaction, d: Array3f) -> Array3f:

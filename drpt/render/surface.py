@@ -4,7 +4,8 @@
 scene's original primitive order and in the accel's global id space
 (triangles ``0..F-1``, spheres ``F..F+S-1``, planes ``F+S..F+S+P-1``).
 :meth:`SurfaceData.interaction` turns an accel ``Hit`` into a
-:class:`Interaction`. Only the primitive kinds the scene has are traced.
+:class:`Interaction` (a :class:`TangentInteraction` where materials need
+tangents). Only the primitive kinds the scene has are traced.
 """
 
 from __future__ import annotations
@@ -32,10 +33,25 @@ class Interaction:
     Mitsuba. ``wi`` points from the hit back along the incoming ray.
     ``p_error`` bounds the distance of ``p`` from the primitive's float32
     surface along ``ng`` (:mod:`drpt.render.spawn`; zero on a miss).
+
+    A Dr.Jit struct (``DRJIT_STRUCT``): ``dr.gather(type(si), si, index)``,
+    ``dr.select``, ``dr.eval`` and symbolic loops take it whole. Every field is
+    an array; ``uv`` and ``p_error`` default to zero (a width-1 broadcast, which a
+    gather keeps a broadcast). ``dp_du`` and ``dp_dv`` are None here: only a
+    :class:`TangentInteraction` carries them, so a scene whose materials need no
+    tangent frame has none in its kernels.
     """
 
-    def __init__(self, valid, t, p, ng, ns, prim, material, wi, uv=None, p_error=None,
-                 dp_du=None, dp_dv=None):
+    DRJIT_STRUCT = {"valid": Bool, "t": Float, "p": Array3f, "ng": Array3f, "ns": Array3f,
+                    "prim": UInt32, "material": UInt32, "wi": Array3f, "uv": Array2f, "p_error": Float}
+
+    #: Mitsuba's dp/du and dp/dv: None (no tangent frame), see :class:`TangentInteraction`
+    dp_du: Array3f | None = None
+    dp_dv: Array3f | None = None
+
+    def __init__(self, valid=None, t=None, p=None, ng=None, ns=None, prim=None, material=None, wi=None,
+                 uv=None, p_error=None):
+        # (no arguments: an empty struct for Dr.Jit to fill in, as dr.gather does)
         self.valid: Bool = valid
         self.t: Float = t
         self.p: Array3f = p
@@ -46,13 +62,24 @@ class Interaction:
         self.wi: Array3f = wi
         self.uv: Array2f = uv if uv is not None else Array2f(0.0, 0.0)  # OBJ convention
         self.p_error: Float = p_error if p_error is not None else Float(0.0)
-        # Mitsuba's dp/du and dp/dv (world; its uv convention ``(u, 1 - v)``), only in
-        # scenes whose materials need a tangent frame (None otherwise; zero: no tangent)
-        self.dp_du: Array3f | None = dp_du
-        self.dp_dv: Array3f | None = dp_dv
 
     def is_triangle(self, n_triangles: int) -> Bool:
         return self.valid & (self.prim < n_triangles)
+
+
+class TangentInteraction(Interaction):
+    """An :class:`Interaction` with Mitsuba's ``dp_du`` and ``dp_dv`` (world; its uv
+    convention ``(u, 1 - v)``; zero: no tangent), made in scenes whose materials
+    need a tangent frame (``MaterialTable.tangents``: anisotropic BSDFs, normal and
+    bump maps; ``dp_dv`` stays zero unless a bump map needs it)."""
+
+    DRJIT_STRUCT = {**Interaction.DRJIT_STRUCT, "dp_du": Array3f, "dp_dv": Array3f}
+
+    def __init__(self, valid=None, t=None, p=None, ng=None, ns=None, prim=None, material=None, wi=None,
+                 uv=None, p_error=None, dp_du=None, dp_dv=None):
+        super().__init__(valid, t, p, ng, ns, prim, material, wi, uv, p_error)
+        self.dp_du: Array3f = dp_du if dp_du is not None else Array3f(0.0)
+        self.dp_dv: Array3f = dp_dv if dp_dv is not None else Array3f(0.0)
 
 
 def triangle_tangents(positions: np.ndarray, uvs: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -205,4 +232,6 @@ class SurfaceData:
             ns = dr.select(is_pl, n, ns)
             err = dr.select(is_pl, plane_error(p, n, off), err)
         material = dr.gather(UInt32, self.material, prim, valid)
-        return Interaction(valid, t, p, ng, ns, prim, material, -d, uv, err, dp_du, dp_dv)
+        if self.tangents:
+            return TangentInteraction(valid, t, p, ng, ns, prim, material, -d, uv, err, dp_du, dp_dv)
+        return Interaction(valid, t, p, ng, ns, prim, material, -d, uv, err)

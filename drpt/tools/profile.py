@@ -30,7 +30,8 @@ the coherence sort gives the sort's effect (A/B in one process).
 *Megakernel*: the fused kernel cannot be split; its history is split by
 kernel (the path kernel and the accumulation kernels around it). An
 instrumented render counts, per lane, the loop iterations it ran and the
-shadow rays it traced (a scatter-add in the loop; not timed): rays are
+shadow rays it traced (an :class:`~drpt.render.instrument.Instrument` on the
+scene: a scatter-add in the loop; not timed): rays are
 exact, and the SIMD occupancy is the useful lane-iterations over those the
 packets executed (a packet of ``W`` consecutive lanes runs until its
 longest lane is done; ``W`` = 16 with AVX-512, 8 with AVX2, read from the
@@ -53,6 +54,7 @@ from pathlib import Path
 
 from ..errors import DrptError
 from ..options import RenderOptions
+from ..render.instrument import Instrument
 
 MODES = ("megakernel", "wavefront")
 
@@ -269,43 +271,51 @@ def _timed(renderer, repeat: int) -> tuple[float, list[dict]]:
     return best
 
 
+class _LaneCounts(Instrument):
+    """An instrument (:mod:`drpt.render.instrument`) counting, per lane of each pass,
+    the path vertices it traces and the shadow rays it asks for (scatter-adds that
+    land in the path kernel)."""
+
+    def __init__(self):
+        self.iters: list = []  # per pass: UInt32 per lane
+        self.shadows: list = []
+
+    def paths(self, lanes: int) -> None:
+        import drjit as dr
+        from drjit.auto import UInt32
+
+        self.n = lanes
+        self.iters.append(dr.zeros(UInt32, lanes))
+        self.shadows.append(dr.zeros(UInt32, lanes))
+        dr.eval(self.iters[-1], self.shadows[-1])
+
+    def _count(self, into, active) -> None:
+        import drjit as dr
+        from drjit.auto import Bool, UInt32
+
+        dr.scatter_add(into, UInt32(1), dr.arange(UInt32, self.n), active | dr.zeros(Bool, self.n))
+
+    def bounce(self, state) -> None:
+        self._count(self.iters[-1], state.active)
+
+    def occluded(self, o, d, tmax, active) -> None:
+        self._count(self.shadows[-1], active)
+
+
 def _megakernel_counts(renderer) -> dict:
     """Per-lane loop iterations and shadow rays of one megakernel render,
-    counted by scatter-adds in the loop (instance wrappers; not timed)."""
-    import drjit as dr
+    counted by an instrument on the scene (:class:`_LaneCounts`; not timed)."""
     import numpy as np
-    from drjit.auto import UInt32
 
-    integ, scene = renderer.integrator, renderer.scene
-    iters, shadows = [], []
-    seq, bounce, occluded = integ.sample_sequence, integ._bounce, scene.occluded
-    cur = {}
-
-    def counting_sequence(rng, camera_ray, count, **kw):
-        n = dr.width(count)
-        cur["n"] = n
-        cur["it"], cur["sh"] = dr.zeros(UInt32, n), dr.zeros(UInt32, n)
-        dr.eval(cur["it"], cur["sh"])
-        out = seq(rng, camera_ray, count, **kw)
-        dr.eval(out)
-        iters.append(cur["it"].numpy())
-        shadows.append(cur["sh"].numpy())
-        return out
-
-    def counting_bounce(sc, state, rng):
-        dr.scatter_add(cur["it"], UInt32(1), dr.arange(UInt32, cur["n"]), state.active)
-        return bounce(sc, state, rng)
-
-    def counting_occluded(o, d, tmax, active):
-        act = active | dr.zeros(dr.auto.Bool, cur["n"])
-        dr.scatter_add(cur["sh"], UInt32(1), dr.arange(UInt32, cur["n"]), act)
-        return occluded(o, d, tmax, active)
-
-    integ.sample_sequence, integ._bounce, scene.occluded = counting_sequence, counting_bounce, counting_occluded
+    scene = renderer.scene
+    counts = _LaneCounts()
+    scene.instrument = counts
     try:
         renderer.render()
     finally:
-        del integ.sample_sequence, integ._bounce, scene.occluded
+        scene.instrument = None
+    iters = [c.numpy() for c in counts.iters]
+    shadows = [c.numpy() for c in counts.shadows]
     w = _simd_width()
     useful = executed = 0
     for c in iters:

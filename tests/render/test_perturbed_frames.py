@@ -29,7 +29,7 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 from drpt.export.mitsuba import _to_dict
 from drpt.export.mitsuba_bsdf import to_mitsuba
 from drpt.render.material import MaterialTable
-from drpt.render.surface import Interaction, triangle_tangents
+from drpt.render.surface import TangentInteraction, triangle_tangents
 from drpt.scene.model import Background, Material, PerspectiveCamera, Planes, Scene, Spheres, Triangles
 from drpt.shading import BSDFSpec, Texture, complete
 from drpt.testing import mitsuba, spherical_chi2
@@ -74,12 +74,12 @@ class Geometry:
     def world(self, local):
         return self.s * local[0] + self.t * local[1] + self.ns * local[2]
 
-    def drpt(self, wi_local) -> Interaction:
+    def drpt(self, wi_local) -> TangentInteraction:
         n = self.n
         uv = Array2f(Float(self.uv[0].astype(np.float32)), Float((1.0 - self.uv[1]).astype(np.float32)))
-        return Interaction(dr.full(Bool, True, n), dr.full(Float, 1.0, n), dr.zeros(Array3f, n),
-                           _v3(self.ng), _v3(self.ns), dr.zeros(UInt32, n), dr.zeros(UInt32, n),
-                           _v3(self.world(wi_local)), uv, None, _v3(self.dp_du), _v3(self.dp_dv))
+        return TangentInteraction(dr.full(Bool, True, n), dr.full(Float, 1.0, n), dr.zeros(Array3f, n),
+                                  _v3(self.ng), _v3(self.ns), dr.zeros(UInt32, n), dr.zeros(UInt32, n),
+                                  _v3(self.world(wi_local)), uv, None, _v3(self.dp_du), _v3(self.dp_dv))
 
     def mitsuba(self, mi, wi_local):
         si = dr.zeros(mi.SurfaceInteraction3f, self.n)
@@ -203,9 +203,7 @@ def _chi2(name, wrap_pdf=None):
 
     def si_of(k):
         si = g.drpt(wi)
-        return Interaction(*(dr.gather(type(v), v, dr.zeros(UInt32, k)) if v is not None else None
-                             for v in (si.valid, si.t, si.p, si.ng, si.ns, si.prim, si.material, si.wi,
-                                       si.uv, si.p_error, si.dp_du, si.dp_dv)))
+        return dr.gather(type(si), si, dr.zeros(UInt32, k))
 
     def sample(u):
         u = np.array(u, np.float32)

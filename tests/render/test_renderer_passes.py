@@ -1,5 +1,6 @@
 """Pass planning and path regeneration (drpt/render/renderer.py): every (pixel, sample) exactly once,
-never more than the lane budget at a time."""
+never more than the lane budget at a time; the public per-pass API (``Renderer.render_pass``,
+``PassPlan.at``) sums to the render and goes on past the plan's last pass."""
 
 import numpy as np
 import pytest
@@ -43,3 +44,36 @@ def test_every_pixel_gets_exactly_spp_samples(tmp_path, monkeypatch, spp, max_la
     assert r.samples == 7 * 5 * spp
     assert np.array_equal(r.image, np.full((5, 7, 3), 0.5, np.float32))
     assert np.all(r.variance == 0.0)
+
+
+def test_plan_at_goes_on_past_the_last_pass():
+    plan = plan_passes(10, 7, 3, 30)  # bands of 3 rows, one sample per pixel per pass
+    assert [plan.at(i) for i in range(plan.count)] == list(plan)
+    longer = plan_passes(10, 7, 5, 30)
+    assert [plan.at(i) for i in range(longer.count)] == list(longer)
+    with pytest.raises(IndexError):
+        plan[plan.count]
+
+
+def test_render_passes_sum_to_the_render(cornell):
+    """``render`` is the plan's passes in order, summed (float64) over spp: the same bits.
+    Past the plan, pass ``i`` is the longer render's pass ``i`` (a live view's next frame).
+    Negative control: another pass index gives other sums."""
+    from dataclasses import replace
+
+    from drpt.options import RenderOptions
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    r = Renderer(load_scene(cornell), RenderOptions(width=8, height=6, spp=3, seed=2, max_lanes=16,
+                                                    progress=False))
+    assert r.plan.bands == 3 and r.plan.count == 9
+    acc = np.zeros((6, 8, 3))
+    for i in range(r.plan.count):
+        p = r.render_pass(i)
+        acc[p.lo:p.lo + p.sum.shape[0]] += p.sum
+    assert np.array_equal((acc / 3).astype(np.float32), r.render().image)
+    longer = r.derive(replace(r.opt, spp=4))
+    past = r.render_pass(10)
+    assert past.lo == 2 and np.array_equal(past.sum, longer.render_pass(10).sum)
+    assert not np.array_equal(past.sum, r.render_pass(7).sum)  # same rows, another sample step

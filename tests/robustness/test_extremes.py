@@ -165,11 +165,12 @@ def test_a_pixel_mean_beyond_float32_is_an_error(tmp_path, monkeypatch):
 
     (tmp_path / "s.txt").write_text(CAMERA + "Group { numObjects 0 }\n")
 
-    def huge(self, pass_index, k, r0, rows):
+    def huge(self, pass_index):
+        _s0, k, r0, rows = self.plan.at(pass_index)
         s = np.full((rows, self.opt.width, 3), 1e39 * k)
         return renderer.PassSums(r0, s, s * 1e39, 0)
 
-    monkeypatch.setattr(renderer.Renderer, "_pass", huge)
+    monkeypatch.setattr(renderer.Renderer, "render_pass", huge)
     with pytest.raises(DrptError, match="beyond the float32 maximum"):
         _render(tmp_path / "s.txt", width=2, height=2, spp=2)
 

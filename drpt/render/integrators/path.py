@@ -22,12 +22,16 @@ Delta lobes (glass, mirrors) have nothing to evaluate: next-event estimation
 contributes nothing there and the emitter their ray hits counts in full
 (``prev_delta``). A scene of only delta materials traces no NEE code.
 
-Two entry points run the same bounce (``_bounce(scene, state, rng) ->
-state``, the loop state a :class:`PathState`): ``sample`` traces one path
-per lane; ``sample_sequence``, which the renderer uses, traces several per
-lane one after another (path regeneration) and returns their sums. Every
-question about the scene goes to the :class:`~drpt.render.scene.DeviceScene`;
-its feature flags decide at trace time which estimators are compiled.
+Two entry points run the same bounce (:meth:`PathIntegrator.bounce`,
+``bounce(scene, state, rng) -> state``, the loop state a :class:`PathState`;
+public, so that the wavefront integrator's fused tail runs it too):
+``sample`` traces one path per lane; ``sample_sequence``, which the renderer
+uses, traces several per lane one after another (path regeneration) and
+returns their sums. Both tell the scene's instrument
+(:mod:`drpt.render.instrument`), if any, about the paths and every bounce.
+Every question about the scene goes to the
+:class:`~drpt.render.scene.DeviceScene`; its feature flags decide at trace
+time which estimators are compiled.
 """
 
 from __future__ import annotations
@@ -79,8 +83,13 @@ class PathIntegrator:
         """Radiance arriving at ``o`` from direction ``-d``, one sample per lane."""
         scene = self.scene
         state = self._start(o, d, Bool(active))
+        inst = scene.instrument
+        if inst is not None:
+            inst.paths(dr.width(state.active))
         while state.active:
-            state = self._bounce(scene, state, rng)
+            if inst is not None:
+                inst.bounce(state)
+            state = self.bounce(scene, state, rng)
         return state.L
 
     @dr.syntax
@@ -115,8 +124,13 @@ class PathIntegrator:
         sums = (Sum(0.0), Sum(0.0)) + ((Sum(0.0),) if moment else ())
         dropped = UInt32(0)
         steps = (UInt32(0),) if bounces else ()
+        inst = scene.instrument
+        if inst is not None:
+            inst.paths(dr.width(left))
         while left > 0:
-            state = self._bounce(scene, state, rng)
+            if inst is not None:
+                inst.bounce(state)
+            state = self.bounce(scene, state, rng)
             if bounces:
                 steps = (steps[0] + 1,)
             if ~state.active & (left > 0):  # the path ended: bank it, start the next
@@ -141,7 +155,7 @@ class PathIntegrator:
                          prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
                          active=Bool(active))
 
-    def _bounce(self, scene: DeviceScene, s: PathState, rng: PCG32) -> PathState:
+    def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32) -> PathState:
         """One vertex of the path: the emission the ray sees, next-event
         estimation, BSDF sampling and Russian roulette."""
         opt = self.opt

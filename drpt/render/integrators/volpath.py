@@ -371,7 +371,7 @@ class VolPathIntegrator(PathIntegrator):
             live = (blocked | step) & (dr.max(tr) > 0.0) & (crossings < MAX_SHADOW_CROSSINGS)
         return tr
 
-    def _bounce(self, scene: DeviceScene, s: VolPathState, rng: PCG32) -> VolPathState:
+    def bounce(self, scene: DeviceScene, s: VolPathState, rng: PCG32) -> VolPathState:
         opt, media = self.opt, self.media
         # ---- Russian roulette and the depth limit (at the top, as Mitsuba's volpath)
         u_rr = rng.next_float32()

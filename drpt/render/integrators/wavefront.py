@@ -32,10 +32,10 @@ structure-of-arrays buffers (one Dr.Jit array per field of
    id with ``block_mkperm``; queue = the set of leaf kinds of the material's
    components, so a Cornell box of diffuse walls, principled, rough and
    smooth dielectrics runs four queues). Each queue's kernel runs only its
-   BSDFs' code (a :meth:`~drpt.render.material.MaterialTable.restricted`
-   view of the material table): light sampling and BSDF evaluation for
-   next-event estimation (queued as shadow queries), BSDF sampling, Russian
-   roulette, and writes the next ray and path state;
+   BSDFs' code (a :meth:`~drpt.render.scene.DeviceScene.restricted` view of
+   the scene, whose feature flags are those of its kinds): light sampling
+   and BSDF evaluation for next-event estimation (queued as shadow queries),
+   BSDF sampling, Russian roulette, and writes the next ray and path state;
 5. **shadow rays** (``shadow rays``, ``shadow resolve``): the queues write their shadow queries into
    one buffer set per estimator slot (area, each delta light, environment)
    at their paths' positions; those with a non-zero contribution are
@@ -72,7 +72,6 @@ and the live paths per bounce.
 
 from __future__ import annotations
 
-import copy
 import time
 from dataclasses import dataclass, field, fields
 
@@ -125,14 +124,6 @@ def _take(v, idx: UInt32):
 
 def gather_state(s: WaveState, idx: UInt32) -> WaveState:
     return WaveState(*(_take(getattr(s, f.name), idx) for f in fields(s)))
-
-
-def gather_interaction(si: Interaction, idx: UInt32) -> Interaction:
-    return Interaction(_take(si.valid, idx), _take(si.t, idx), _take(si.p, idx), _take(si.ng, idx),
-                       _take(si.ns, idx), _take(si.prim, idx), _take(si.material, idx),
-                       _take(si.wi, idx), _take(si.uv, idx), _take(si.p_error, idx),
-                       None if si.dp_du is None else _take(si.dp_du, idx),
-                       None if si.dp_dv is None else _take(si.dp_dv, idx))
 
 
 def _spread(x: UInt32) -> UInt32:
@@ -250,17 +241,14 @@ class _Queue:
 
     def __init__(self, scene: DeviceScene, kinds: tuple[str, ...]):
         self.kinds = kinds
-        view = copy.copy(scene)
-        view.materials = scene.materials.restricted(kinds)
-        view.has_smooth_bsdfs = not all(scene.materials.lobes[k].DELTA for k in kinds)
-        self.scene = view
-        self.direct = DirectLight(view)
+        self.scene = scene.restricted(kinds)
+        self.direct = DirectLight(self.scene)
 
 
 @dr.syntax
 def _fused_loop(integ: PathIntegrator, scene: DeviceScene, state: PathState, rng: PCG32) -> Array3f:
     while state.active:
-        state = integ._bounce(scene, state, rng)
+        state = integ.bounce(scene, state, rng)
     return state.L
 
 
@@ -310,7 +298,7 @@ class WavefrontIntegrator:
             if m <= self.tail:
                 self._finish(s, L, timer)
                 break
-            s, alive = self._bounce(s, L, timer)
+            s, alive = self._stages(s, L, timer)
         if self.stats is not None:
             self.stats.live.append(live)
         return L
@@ -345,7 +333,7 @@ class WavefrontIntegrator:
         timer.done("compact + sort", s, lanes=m)
         return s, m
 
-    def _bounce(self, s: WaveState, L: Array3f, timer: _Timer) -> tuple[WaveState, Bool]:
+    def _stages(self, s: WaveState, L: Array3f, timer: _Timer) -> tuple[WaveState, Bool]:
         scene, opt = self.scene, self.opt
         n = dr.width(s.lane)
 
@@ -384,7 +372,7 @@ class WavefrontIntegrator:
             if count == 0:
                 continue
             qs = gather_state(s, idx)
-            qsi = gather_interaction(si, idx)
+            qsi = dr.gather(type(si), si, idx)
             out, found, live = self._shade(queue, qs, qsi)
             for f in fields(nxt):
                 if f.name != "lane":
@@ -428,7 +416,7 @@ class WavefrontIntegrator:
 
     def _shade(self, queue: _Queue, s: WaveState, si: Interaction):
         """Next-event estimation (as shadow queries), BSDF sampling and Russian
-        roulette of one queue's paths (as PathIntegrator._bounce)."""
+        roulette of one queue's paths (as PathIntegrator.bounce)."""
         scene, opt = queue.scene, self.opt
         rng = unpack(self._rng_kind, UInt64(s.rng_state), UInt64(s.rng_inc))
         active = dr.full(Bool, True, dr.width(s.lane))

@@ -1,0 +1,81 @@
+"""DeviceScene.restricted (drpt/render/scene.py): a view for some material kinds, with
+its feature flags recomputed in the one place they are defined.
+
+On the mixed-material Cornell box (principled, rough and smooth dielectrics,
+diffuse): a view of the smooth dielectric alone (a delta lobe) has no smooth BSDF,
+so it traces no next-event estimation, while views of smooth kinds and the whole
+scene have one; the emitter flags are the scene's; the view shares the device data
+and leaves the scene as it was (negative control: the whole scene's flag stays on).
+A view traces only its kinds' lobes (the wavefront's queues: their kernels).
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from drpt.options import RenderOptions
+from drpt.render.scene import DeviceScene
+from drpt.scene import load_scene
+
+FLAGS = ("has_area_lights", "has_delta_lights", "has_environment", "has_background", "has_ambient")
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    from drpt.tools.scenegen import materials_cornell
+
+    out = tmp_path_factory.mktemp("restricted")
+    materials_cornell.main(out)
+    return DeviceScene(load_scene(out / "materials_cornell.txt"), RenderOptions(width=8, height=8, spp=1))
+
+
+def test_flags_of_a_view_follow_its_kinds(scene):
+    kinds = scene.materials.kinds
+    assert "dielectric" in kinds and "diffuse" in kinds, kinds
+    assert scene.has_smooth_bsdfs
+    glass = scene.restricted(("dielectric",))
+    assert not glass.has_smooth_bsdfs  # delta lobes only: no next-event estimation
+    assert glass.materials.is_specular_only()
+    for k in kinds:
+        view = scene.restricted((k,))
+        assert view.has_smooth_bsdfs == (not scene.materials.lobes[k].DELTA), k
+        assert all(getattr(view, f) == getattr(scene, f) for f in FLAGS)
+    assert scene.restricted(("dielectric", "diffuse")).has_smooth_bsdfs
+
+
+def test_a_view_shares_the_device_data_and_leaves_the_scene(scene):
+    view = scene.restricted(("dielectric",))
+    assert view.accel is scene.accel and view.surfaces is scene.surfaces
+    assert view.area_lights is scene.area_lights and view.environment is scene.environment
+    assert view.materials is not scene.materials
+    assert view.materials._data is scene.materials._data  # nothing uploaded again
+    assert scene.has_smooth_bsdfs and not scene.materials.is_specular_only()
+
+
+def test_a_view_traces_only_its_lobes(scene, monkeypatch):
+    import drjit as dr
+    from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
+
+    from drpt.render.surface import Interaction
+
+    table = scene.materials
+    traced = []
+    for kind, mod in table.lobes.items():
+        orig = mod.sample
+
+        def spy(*a, _orig=orig, _kind=kind, **k):
+            traced.append(_kind)
+            return _orig(*a, **k)
+
+        monkeypatch.setattr(mod, "sample", spy)
+    n = 4
+    z = dr.full(Array3f, [0.0, 0.0, 1.0], n)
+    si = Interaction(dr.full(Bool, True, n), dr.full(Float, 1.0, n), dr.zeros(Array3f, n), z, z,
+                     dr.zeros(UInt32, n), dr.zeros(UInt32, n), z)
+    for kinds in (("dielectric",), ("diffuse",)):
+        traced.clear()
+        scene.restricted(kinds).sample_bsdf(si, dr.full(Float, 0.5, n), dr.full(Array2f, 0.5, n))
+        assert traced == list(kinds)
+    traced.clear()
+    scene.sample_bsdf(si, dr.full(Float, 0.5, n), dr.full(Array2f, 0.5, n))
+    assert sorted(traced) == sorted(table.kinds)  # the whole scene traces every kind
