@@ -103,7 +103,7 @@ from ..lights.rays import INV_FOUR_PI, EmitterRays
 from ..sampler import next_2d
 from ..scene import DeviceScene
 from ..spawn import origin as spawn_origin
-from ..surface import Interaction
+from ..surface import Interaction, TangentInteraction
 from ..warp import Frame, square_to_cosine_hemisphere, square_to_uniform_sphere
 from .common import SHADOW_SHRINK
 from .ptracer import NONSYMMETRIC_LOBES
@@ -310,10 +310,10 @@ class LightVertices:
             self.dp_dv[i] = si.dp_dv
 
     def read(self, i: UInt32, valid: Bool):
-        si = Interaction(Bool(valid), Float(0.0), self.p[i], self.ng[i], self.ns[i], self.prim[i],
-                         self.material[i], self.wi[i], self.uv[i], self.err[i],
-                         self.dp_du[i] if self.tangents else None,
-                         self.dp_dv[i] if self.tangents else None)
+        fields = (Bool(valid), Float(0.0), self.p[i], self.ng[i], self.ns[i], self.prim[i],
+                  self.material[i], self.wi[i], self.uv[i], self.err[i])
+        si = (TangentInteraction(*fields, self.dp_du[i], self.dp_dv[i]) if self.tangents
+              else Interaction(*fields))
         return si, self.beta[i], self.dvcm[i], self.dvc[i], self.depth[i]
 
 
