@@ -44,6 +44,7 @@ import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ..accel.protocol import INVALID
+from ..errors import located
 from ..options import RenderOptions
 from ..scene.model import Scene, Skybox
 from .bsdf import BSDFSample
@@ -146,7 +147,8 @@ class DeviceScene:
         skies = [light for light in scene.lights if isinstance(light, Skybox)]
         if skies:
             if len(skies) > 1:
-                self.warnings.append(f"{len(skies)} Skybox lights: using the first")
+                self.warnings.append(located(f"{len(skies)} Skybox lights: using the first",
+                                             getattr(skies[1], "loc", None)))
             sky = skies[0]
             self.environment = EnvironmentLight.from_file(sky.path, scale=getattr(sky, "scale", 1.0))
             self.warnings += self.environment.warnings
