@@ -159,7 +159,7 @@ class DeviceScene:
             lo, hi = scene.bounds()
             msg = check_radius(lo, hi, skies[0].radius)
             if msg:
-                self.warnings.append(msg)
+                self.warnings.append(located(msg, getattr(sky, "loc", None)))
         self.background = tuple(float(c) for c in scene.background.color)
         self.ambient = tuple(float(c) for c in scene.background.ambient)
 
