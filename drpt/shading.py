@@ -99,8 +99,8 @@ class Texture:
     wrap_mode: str = "repeat"
     raw: bool = False
     to_uv: tuple | None = None
-    #: where the file defines it (not part of ==: alike textures share one upload)
-    loc: Loc | None = field(default=None, compare=False)
+    #: where the file defines it (not part of == nor repr: alike textures share one upload)
+    loc: Loc | None = field(default=None, compare=False, repr=False)
 
     @property
     def is_plain(self) -> bool:
