@@ -52,7 +52,7 @@ Returns an ``(H, W, C)`` float32 array, row 0 at the top, ``C`` in
 
 A missing, unreadable, truncated, malformed or empty (0 pixel) file, or one that is not a
 regular file (a directory, FIFO, device or symbolic link loop), raises
-``SceneError(path, None, message)``, a one-line message naming the file;
+``SceneError(Loc(path), message)``, a one-line message naming the file;
 for a texture or sky named by a scene or MTL file
 (:class:`drpt.scene.files.NamedPath`) the error names that file and line
 instead, followed by the image's name.
@@ -74,7 +74,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drpt.errors import DrptError, SceneError
+from drpt.errors import DrptError, Loc, SceneError
 from drpt.scene.files import check_input
 
 WRITE_EXTENSIONS = (".exr", ".png", ".tga", ".hdr", ".pfm")
@@ -237,14 +237,14 @@ def read_image(path: str | PathLike, linear: bool = True, gamma: float | None = 
     except SceneError as e:
         if named_at is None:
             raise
-        raise SceneError(named_at[0], named_at[1], f"{path.name}: {e.message}") from e
+        raise SceneError(named_at, f"{path.name}: {e.message}") from e
 
 
 def _read_image(path: Path, linear: bool) -> np.ndarray:
     ext = _ext(path)
     if ext not in READ_EXTENSIONS:
         raise SceneError(
-            path, None,
+            Loc(path),
             f"cannot read images with extension {ext or '(none)'!r}; "
             f"supported: {', '.join(READ_EXTENSIONS)}",
         )
@@ -260,13 +260,13 @@ def _read_image(path: Path, linear: bool) -> np.ndarray:
     except SceneError:
         raise
     except OSError as e:
-        raise SceneError(path, None, f"cannot read image: {e.strerror or e}") from e
+        raise SceneError(Loc(path), f"cannot read image: {e.strerror or e}") from e
     except Exception as e:  # malformed data: Pillow/OpenEXR/our decoders
-        raise SceneError(path, None, f"cannot read image: {e}") from e
+        raise SceneError(Loc(path), f"cannot read image: {e}") from e
     if img.ndim == 2:
         img = img[..., None]
     if img.size == 0:
-        raise SceneError(path, None, f"empty image ({img.shape[1]}x{img.shape[0]} pixels)")
+        raise SceneError(Loc(path), f"empty image ({img.shape[1]}x{img.shape[0]} pixels)")
     return np.ascontiguousarray(img, dtype=np.float32)
 
 
@@ -304,7 +304,7 @@ def _read_exr(path: Path) -> np.ndarray:
             f = OpenEXR.File(str(path), separate_channels=True)
             ch = f.channels()
     except Exception as e:
-        raise SceneError(path, None, f"cannot read .exr image (truncated or corrupt): {e}") from e
+        raise SceneError(Loc(path), f"cannot read .exr image (truncated or corrupt): {e}") from e
     names = list(ch)
     if all(c in ch for c in "RGB"):
         order = ["R", "G", "B"] + (["A"] if "A" in ch else [])
@@ -361,21 +361,21 @@ def _read_bitmap(path: Path, ext: str) -> np.ndarray:
     with open(path, "rb") as f:
         head = f.read(16)
     if not head.startswith(_MAGIC[ext]):
-        raise SceneError(path, None, f"not {_KIND[ext]}")
+        raise SceneError(Loc(path), f"not {_KIND[ext]}")
     try:
         bmp = _bitmap_class()(str(path))
     except MemoryError as e:  # std::bad_alloc: a corrupt size in the header
-        raise SceneError(path, None, f"cannot read {ext} image: its size does not fit "
+        raise SceneError(Loc(path), f"cannot read {ext} image: its size does not fit "
                          "in memory (corrupt header?)") from e
     except RuntimeError as e:
         img = _read_rgbe_old_rle(path) if ext == ".hdr" else None
         if img is None:
-            raise SceneError(path, None, f"cannot read {ext} image (truncated or corrupt): "
+            raise SceneError(Loc(path), f"cannot read {ext} image (truncated or corrupt): "
                              f"{_mitsuba_message(e)}") from e
         return img
     fmt, formats = bmp.pixel_format(), _bitmap_class().PixelFormat
     if fmt not in (formats.RGB, formats.Y):  # e.g. FORMAT=32-bit_rle_xyze
-        raise SceneError(path, None, f"unsupported {ext} pixel format {fmt.name} "
+        raise SceneError(Loc(path), f"unsupported {ext} pixel format {fmt.name} "
                          "(only RGB or gray; .hdr: only FORMAT=32-bit_rle_rgbe)")
     return np.array(bmp, dtype=np.float32)
 
@@ -403,7 +403,7 @@ def _read_rgbe_old_rle(path: Path) -> np.ndarray | None:
     m = _RES_RE.fullmatch(res)
     if not m:
         line = res.decode("ascii", "replace")
-        raise SceneError(path, None, f"unsupported .hdr resolution line {line!r} "
+        raise SceneError(Loc(path), f"unsupported .hdr resolution line {line!r} "
                          "(only '-Y H +X W', rows from the top)")
     h, w = int(m.group(1)), int(m.group(2))
     px = np.frombuffer(body, np.uint8, count=len(body) // 4 * 4).reshape(-1, 4)

@@ -29,7 +29,7 @@ import argparse
 import math
 from dataclasses import dataclass, field
 
-from .errors import DrptError, note, warn
+from .errors import DrptError, Loc, SceneError, note, warn
 
 BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
 INTEGRATORS = ("path", "whitted", "ptracer", "volpath", "bdpt")
@@ -510,8 +510,8 @@ def apply_scene_settings(opts: RenderOptions, scene,
     if st.rfilter is not None and "filter" not in given:
         fields["filter"] = filter_spelling(st.rfilter, st.rfilter_params)
     if path.get("max_depth") == 0:
-        where = getattr(st, "origin", {}).get("max_depth", scene.path)
-        raise DrptError(f"{where}: max_depth 0 renders nothing (Mitsuba gives a black image)")
+        where = getattr(st, "origin", {}).get("max_depth") or Loc(scene.path)
+        raise SceneError(where, "max_depth 0 renders nothing (Mitsuba gives a black image)")
     opts = replace(opts, path=replace(opts.path, **path), **fields)
     fov = getattr(st, "fov", None)
     if (fov is not None and st.width and st.height and (opts.width, opts.height) != (st.width, st.height)

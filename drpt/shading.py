@@ -72,6 +72,7 @@ from pathlib import Path
 from typing import Any
 
 from . import bsdf_kinds
+from .errors import Loc
 from .scene.model import Material, Scene
 
 MODES = ("auto", "phong", "cook-torrance", "diffuse")
@@ -98,6 +99,8 @@ class Texture:
     wrap_mode: str = "repeat"
     raw: bool = False
     to_uv: tuple | None = None
+    #: where the file defines it (not part of == nor repr: alike textures share one upload)
+    loc: Loc | None = field(default=None, compare=False, repr=False)
 
     @property
     def is_plain(self) -> bool:
@@ -140,14 +143,14 @@ class MeshAttribute(Texture):
 class BSDFSpec:
     """One node of a material's BSDF tree: a kind of :mod:`drpt.bsdf_kinds`,
     its parameters by name (defaults filled in by :func:`complete`) and, for
-    composites, its children. ``notes`` are messages for the user;
-    ``origin`` is where the material was defined (``file:line``)."""
+    composites, its children. ``notes`` are messages for the user about the
+    material at ``loc``, where it was defined."""
 
     kind: str
     params: dict[str, Any] = field(default_factory=dict)
     children: list[BSDFSpec] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
-    origin: str = ""
+    loc: Loc | None = None
     dropped: list[Path] = field(default_factory=list)  # textures replaced by their fallback
 
     def __getitem__(self, name: str) -> Any:
@@ -223,7 +226,7 @@ def _clamp01(v: float, what: str, m: Material, notes: list[str]) -> float:
 def _tex(m: Material, key: str, fallback):
     """The texture of statement ``map_<key>`` (``None`` when absent)."""
     path = m.map_kd if key == "kd" else m.maps.get(key)
-    return None if path is None else Texture(path, fallback)
+    return None if path is None else Texture(path, fallback, loc=getattr(path, "named_at", None))
 
 
 def _color(m: Material) -> Any:
@@ -358,7 +361,7 @@ def interpret(m: Material, mode: str = "auto") -> BSDFSpec:
         spec = _seed(m, mode, notes)
     spec = complete(spec)
     spec.notes = list(spec.notes) + notes
-    spec.origin = spec.origin or m.origin
+    spec.loc = spec.loc or m.loc
     return spec
 
 

@@ -48,7 +48,7 @@ def scene_hash(scene) -> str:
         return str(p)
 
     prefixes = []
-    if folder is not None:  # the folder inside strings too (materials' origins: FILE:LINE)
+    if folder is not None:  # the folder inside strings too (the file of each Loc: materials, lights)
         prefixes = sorted({str(folder) + os.sep, str(Path(scene.path).parent) + os.sep} - {"." + os.sep},
                           key=len, reverse=True)
 

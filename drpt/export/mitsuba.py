@@ -117,7 +117,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from drpt.errors import DrptError
+from drpt.errors import DrptError, SceneWarning
 from drpt.filters import parse_filter
 from drpt.scene.model import (
     DirectionalLight,
@@ -132,6 +132,7 @@ from drpt.scene.model import (
 )
 from drpt.shading import BSDFSpec, interpret_scene
 
+from .mitsuba_bsdf import _error as bsdf_error
 from .mitsuba_bsdf import _value as bsdf_value
 from .mitsuba_bsdf import to_mitsuba as bsdf_to_mitsuba
 
@@ -355,10 +356,10 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
     for i in used:
         if 0 <= i < len(specs):
             for n in specs[i].notes:
-                warnings.warn(n, stacklevel=3)
+                warnings.warn(SceneWarning(specs[i].loc, n), stacklevel=3)
     bsdfs = [_bsdf(spec) for spec in specs]
     emitters = [
-        ({"type": "area", "radiance": bsdf_value(m.emission_texture, m.origin)}
+        ({"type": "area", "radiance": bsdf_value(m.emission_texture, m.loc or f"material '{m.name}'")}
          if getattr(m, "emission_texture", None) is not None else
          {"type": "area", "radiance": _RGB(_f3(m.emission))}) if m.is_emissive else None
         for m in scene.materials
@@ -441,10 +442,10 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                 scale = 1.0 / q
             else:
                 scale = 1.0 / (c + l + q)
-                warnings.warn(
-                    f"point light {i}: attenuation {(c, l, q)} has no Mitsuba equivalent "
+                warnings.warn(SceneWarning(
+                    light.loc, f"point light {i}: attenuation {(c, l, q)} has no Mitsuba equivalent "
                     "(Mitsuba's point light falls off with the inverse square only); "
-                    f"exported as intensity color/{c + l + q:g}, equal at distance 1",
+                    f"exported as intensity color/{c + l + q:g}, equal at distance 1"),
                     stacklevel=3,
                 )
             out[f"light_{i}"] = {"type": "point", "position": _Point(_f3(light.position)),
@@ -465,14 +466,14 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                                  "cutoff_angle": float(light.cutoff_angle),
                                  "beam_width": float(light.beam_width)}
             if getattr(light, "texture", None) is not None:
-                out[f"light_{i}"]["texture"] = bsdf_value(light.texture, f"light {i}")
+                out[f"light_{i}"]["texture"] = bsdf_value(light.texture, light.loc or f"light {i}")
         elif isinstance(light, ProjectorLight):
             irr = light.irradiance
             out[f"light_{i}"] = {"type": "projector", "fov": float(light.fov_x), "fov_axis": "x",
                                  "to_world": _Matrix(_light_matrix(light.position, light.frame)),
                                  "scale": float(light.scale),
                                  "irradiance": _RGB(_f3(irr)) if isinstance(irr, tuple)
-                                 else bsdf_value(irr, f"light {i}")}
+                                 else bsdf_value(irr, light.loc or f"light {i}")}
         elif isinstance(light, Skybox):
             from .mitsuba_envmap import to_mitsuba as envmap_to_mitsuba
 
@@ -500,8 +501,8 @@ def _medium(m) -> dict:
     """Mitsuba's ``homogeneous`` medium for a drpt :class:`~drpt.scene.model.Medium`
     (a heterogeneous one is refused)."""
     if not m.is_homogeneous:
-        raise DrptError(f"{m.origin or m.name}: cannot export a heterogeneous medium "
-                        "(drpt's Mitsuba export writes homogeneous ones)")
+        raise bsdf_error(m.loc or f"medium '{m.name}'", "cannot export a heterogeneous medium "
+                         "(drpt's Mitsuba export writes homogeneous ones)")
     if m.phase == "blend":
         lobes = [{"type": "hg", "g": float(g)} if g != 0.0 else {"type": "isotropic"} for g in (m.g, m.g2)]
         phase = {"type": "blendphase", "weight": float(m.blend), "phase_0": lobes[0], "phase_1": lobes[1]}
@@ -549,7 +550,7 @@ def _bsdf(spec: BSDFSpec) -> dict:
     A missing texture file is an error, also where the texture is dropped."""
     for path in spec.dropped:
         if not Path(path).is_file():
-            raise DrptError(f"{spec.origin or 'material'}: texture {path} not found")
+            raise bsdf_error(spec.loc or "material", f"texture {path} not found")
     return _plain(bsdf_to_mitsuba(spec))
 
 

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from ..bsdf_kinds import COMPOSITES, PARAMS, PERTURBING
-from ..errors import DrptError
+from ..errors import DrptError, Loc, SceneError
 from ..shading import BSDFSpec, Checkerboard, MeshAttribute, Texture
 from .mitsuba_dielectrics import KINDS as DIELECTRICS
 from .mitsuba_dielectrics import adjust as adjust_dielectric
@@ -59,18 +59,24 @@ def _Vec(v):
     return _Vector(tuple(float(x) for x in v))
 
 
-def _value(v: Any, origin: str) -> Any:
+def _error(where: Loc | str, message: str) -> DrptError:
+    """The error about a value of the material or light at ``where`` (its Loc, or a name
+    such as ``"light 2"`` for one built in code)."""
+    return SceneError(where, message) if isinstance(where, Loc) else DrptError(f"{where}: {message}")
+
+
+def _value(v: Any, where: Loc | str) -> Any:
     if isinstance(v, Checkerboard):
         a = np.asarray(v.to_uv, float).reshape(3, 3)
         m = np.eye(4)
         m[:2, :2], m[:2, 3] = a[:2, :2], a[:2, 2]
-        return {"type": "checkerboard", "color0": _value(tuple(v.color0), origin),
-                "color1": _value(tuple(v.color1), origin), "to_uv": _to_uv(m)}
+        return {"type": "checkerboard", "color0": _value(tuple(v.color0), where),
+                "color1": _value(tuple(v.color1), where), "to_uv": _to_uv(m)}
     if isinstance(v, MeshAttribute):
         return {"type": "mesh_attribute", "name": v.name, "scale": float(v.scale)}
     if isinstance(v, Texture):
         if not Path(v.path).is_file():
-            raise DrptError(f"{origin or 'material'}: texture {v.path} not found")
+            raise _error(where, f"texture {v.path} not found")
         out = {"type": "bitmap", "filename": str(Path(v.path).resolve()),
                "filter_type": v.filter_type, "wrap_mode": v.wrap_mode}
         if v.raw:
@@ -87,7 +93,7 @@ def _value(v: Any, origin: str) -> Any:
         return v
     x = float(v)
     if not math.isfinite(x):
-        raise DrptError(f"{origin or 'material'}: parameter value {v!r} is not finite")
+        raise _error(where, f"parameter value {v!r} is not finite")
     return x
 
 
@@ -95,7 +101,7 @@ def _leaf(spec: BSDFSpec) -> dict:
     p, kind = spec.params, spec.kind
 
     def val(v):
-        return _value(v, spec.origin)
+        return _value(v, spec.loc or "material")
 
     if kind == "diffuse":
         return {"type": "diffuse", "reflectance": val(p["kd"])}
@@ -113,7 +119,7 @@ def _leaf(spec: BSDFSpec) -> dict:
     if kind == "null":
         return {"type": "null"}
     if kind not in PARAMS:
-        raise DrptError(f"{spec.origin or 'material'}: BSDF kind '{kind}' has no Mitsuba counterpart")
+        raise _error(spec.loc or "material", f"BSDF kind '{kind}' has no Mitsuba counterpart")
     if kind in DIELECTRICS:  # e.g. an index-matched roughdielectric -> dielectric
         kind, p = adjust_dielectric(kind, p)
     out: dict[str, Any] = {"type": kind}
@@ -153,11 +159,11 @@ def to_mitsuba(spec: BSDFSpec) -> dict:
                "flip_invalid_normals": bool(p["flip_invalid_normals"]),
                "use_shadowing_function": bool(p["use_shadowing_function"])}
         if spec.kind == "normalmap":
-            out["normalmap"] = const if isinstance(v, tuple) else _value(v, spec.origin)
+            out["normalmap"] = const if isinstance(v, tuple) else _value(v, spec.loc or "material")
         else:
-            out["texture"], out["scale"] = _value(p["texture"], spec.origin), float(p["scale"])
+            out["texture"], out["scale"] = _value(p["texture"], spec.loc or "material"), float(p["scale"])
         return out
     if spec.kind == "blendbsdf":
-        return {"type": "blendbsdf", "weight": _value(spec.params["weight"], spec.origin),
+        return {"type": "blendbsdf", "weight": _value(spec.params["weight"], spec.loc or "material"),
                 "bsdf_0": kids[0], "bsdf_1": kids[1]}
-    return {"type": "mask", "opacity": _value(spec.params["opacity"], spec.origin), "bsdf": kids[0]}
+    return {"type": "mask", "opacity": _value(spec.params["opacity"], spec.loc or "material"), "bsdf": kids[0]}

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drpt.errors import DrptError
+from drpt.errors import DrptError, SceneError, SceneWarning
 from drpt.scene.model import Skybox
 
 __all__ = ["to_mitsuba", "TO_WORLD", "mitsuba_compatible_image"]
@@ -77,7 +77,9 @@ def to_mitsuba(skybox: Skybox, scale: float = 1.0, out_dir: str | PathLike | Non
 
     path = Path(skybox.path)
     if not path.is_file():
-        raise DrptError(f"skybox image {path} not found")
+        loc = getattr(skybox, "loc", None)
+        message = f"skybox image {path} not found"
+        raise SceneError(loc, message) if loc is not None else DrptError(message)
     scale = float(scale)
     if not (np.isfinite(scale) and scale >= 0.0):
         raise DrptError(f"skybox {path}: scale must be finite and >= 0, got {scale}")
@@ -88,7 +90,7 @@ def to_mitsuba(skybox: Skybox, scale: float = 1.0, out_dir: str | PathLike | Non
         d.mkdir(parents=True, exist_ok=True)
         filename = (d / f"{path.stem}.mitsuba.exr").resolve()
         write_image(filename, img)
-        warnings.warn(f"skybox {path}: {'; '.join(reasons)}; Mitsuba gets the fixed copy "
-                      f"{filename}", stacklevel=2)
+        warnings.warn(SceneWarning(getattr(skybox, "loc", None), f"skybox {path}: {'; '.join(reasons)}; "
+                                   f"Mitsuba gets the fixed copy {filename}"), stacklevel=2)
     return {"type": "envmap", "filename": str(filename), "scale": scale,
             "to_world": TO_WORLD.copy()}

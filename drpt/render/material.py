@@ -48,6 +48,7 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from .. import bsdf_kinds
+from ..errors import Loc, SceneError, located
 from ..scene.model import Scene
 from ..shading import BSDFSpec, Checkerboard, Texture, interpret_scene
 from . import perturb
@@ -160,15 +161,13 @@ class MaterialTable:
         black = BSDFSpec("diffuse", {"kd": (0.0, 0.0, 0.0)})
         specs = interpret_scene(scene, mode)
         self.specs: list[BSDFSpec] = [s if u else black for s, u in zip(specs, used)]
-        self.notes = [n for s, u in zip(specs, used) if u for n in s.notes]
+        self.notes = [located(n, s.loc) for s, u in zip(specs, used) if u for n in s.notes]
         comps: list[list[_Component]] = []
         for s, m in zip(self.specs, scene.materials):
             try:
                 comps.append(_flatten(s) or [_Component(black, False)])
             except ValueError as e:
-                from ..errors import SceneError
-
-                raise SceneError(m.origin or scene.path, None, f"material '{m.name}': {e}") from None
+                raise SceneError(m.loc or Loc(scene.path), f"material '{m.name}': {e}") from None
         if not comps:
             comps = [[_Component(black, False)]]
         self.K = max(len(c) for c in comps)
@@ -224,9 +223,7 @@ class MaterialTable:
                 try:
                     values[i].update(derive(dict(values[i])))
                 except ValueError as e:
-                    from ..errors import SceneError
-
-                    raise SceneError(self.rows[i].leaf.origin or scene.path, None, str(e)) from None
+                    raise SceneError(self.rows[i].leaf.loc or Loc(scene.path), str(e)) from None
         self._fields: dict[str, tuple] = {}
         for k in self.kinds:
             for name, t in self.lobes[k].FIELDS.items():

@@ -51,6 +51,7 @@ import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ..accel.protocol import INVALID
+from ..errors import located
 from ..options import RenderOptions
 from ..scene.model import Scene, Skybox
 from .bsdf import BSDFSample
@@ -154,7 +155,8 @@ class DeviceScene:
         skies = [light for light in scene.lights if isinstance(light, Skybox)]
         if skies:
             if len(skies) > 1:
-                self.warnings.append(f"{len(skies)} Skybox lights: using the first")
+                self.warnings.append(located(f"{len(skies)} Skybox lights: using the first",
+                                             getattr(skies[1], "loc", None)))
             sky = skies[0]
             self.environment = EnvironmentLight.from_file(sky.path, scale=getattr(sky, "scale", 1.0))
             self.warnings += self.environment.warnings
@@ -165,7 +167,7 @@ class DeviceScene:
             lo, hi = scene.bounds()
             msg = check_radius(lo, hi, skies[0].radius)
             if msg:
-                self.warnings.append(msg)
+                self.warnings.append(located(msg, getattr(sky, "loc", None)))
         self.background = tuple(float(c) for c in scene.background.color)
         self.ambient = tuple(float(c) for c in scene.background.ambient)
         #: an :class:`~drpt.render.instrument.Instrument` that measurement tools attach

@@ -68,10 +68,10 @@ def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupporte
                                    ("--ignore-unsupported", ignore_unsupported or ctx.get("ignore_unsupported")),
                                    ("--strict", strict or ctx.get("strict"))) if on]
     if given:
-        from ..errors import note
+        from ..errors import Loc, note
 
         verb = "applies" if len(given) == 1 else "apply"
-        note(f"{' and '.join(given)} {verb} to Mitsuba XML scenes only: ignored", file=path)
+        note(f"{' and '.join(given)} {verb} to Mitsuba XML scenes only: ignored", Loc(path))
     return _load_drpt_scene(path)
 
 

@@ -13,7 +13,7 @@ loop; the loop is then reported by :func:`check_input`.
 
 A file named by another file is stored in the scene model as a
 :class:`NamedPath`: a ``Path`` (equal to and hashing as the plain path) that
-also carries the file and line that named it. Images are read at render or
+also carries the :class:`~drpt.errors.Loc` (file and line) that named it. Images are read at render or
 export time, long after parsing; :func:`drpt.imageio.read_image` reports a
 problem with such a file at that line, e.g. ``scene.txt:12: sky.hdr:
 truncated data``.
@@ -27,31 +27,29 @@ import stat
 from os import PathLike
 from pathlib import Path
 
-from ..errors import SceneError
+from ..errors import Loc, SceneError
 
 __all__ = ["NamedPath", "named", "resolve", "is_devnull", "check_input", "read_bytes"]
 
-Ref = tuple[Path, int]  # (file, 1-based line) that named a file
-
 
 class NamedPath(type(Path())):
-    """An absolute path plus :attr:`named_at`, the ``(file, line)`` that named it.
+    """An absolute path plus :attr:`named_at`, the :class:`~drpt.errors.Loc` that named it.
 
     Compares, hashes and behaves as the plain path; paths derived from it
     (``parent``, ``/``) have ``named_at`` None. Copies and pickles keep it."""
 
-    named_at: Ref | None = None
+    named_at: Loc | None = None
 
     def __reduce__(self):
         return (named, (str(self), self.named_at))
 
 
-def named(path: str | PathLike, ref: Ref | None) -> Path:
+def named(path: str | PathLike, ref: Loc | None) -> Path:
     """``path`` as a :class:`NamedPath` named at ``ref`` (a plain path if ``ref`` is None)."""
     if ref is None:
         return Path(path)
     p = NamedPath(path)
-    p.named_at = (Path(ref[0]), int(ref[1]))
+    p.named_at = ref
     return p
 
 
@@ -82,39 +80,38 @@ def is_devnull(path: str | PathLike) -> bool:
     return resolve(path) == Path(os.devnull)
 
 
-def check_input(path: str | PathLike, *, ref: Ref | None = None, what: str = "file") -> None:
+def check_input(path: str | PathLike, *, ref: Loc | None = None, what: str = "file") -> None:
     """Raise :class:`SceneError` unless ``path`` is a regular file (or ``/dev/null``).
 
-    The error is located at ``ref`` (the file and line that named ``path``,
-    and the message names ``path``) when given, else at ``path`` itself.
-    ``what`` names the file's role ("OBJ file", "texture file")."""
+    The error is located at ``ref`` (the place that named ``path``, and the
+    message names ``path``) when given, else at ``path`` itself. ``what``
+    names the file's role ("OBJ file", "texture file")."""
     if ref is not None:
-        where_path, where_line, subject = ref[0], ref[1], f"{what} {path}"
+        where, subject = ref, f"{what} {path}"
     else:
-        where_path, where_line, subject = path, None, what
+        where, subject = Loc(path), what
     if "\0" in os.fspath(path):
         shown = os.fspath(path).replace("\0", "\\0")
         subject = f"{what} {shown}" if ref is not None else what
-        raise SceneError(where_path if ref is not None else shown, where_line,
+        raise SceneError(where if ref is not None else Loc(shown),
                          f"{subject}: a file name cannot contain a NUL byte")
     try:
         st = os.stat(path)
     except FileNotFoundError:
-        raise SceneError(where_path, where_line, f"{subject} not found") from None
+        raise SceneError(where, f"{subject} not found") from None
     except OSError as e:
         if e.errno == errno.ELOOP:
-            raise SceneError(where_path, where_line, f"{subject} is a symbolic link loop") from None
+            raise SceneError(where, f"{subject} is a symbolic link loop") from None
         if e.errno == errno.ENOTDIR:
-            raise SceneError(where_path, where_line,
-                             f"{subject} not found (a part of its path is not a directory)") from None
-        raise SceneError(where_path, where_line, f"cannot read {subject}: {e.strerror or e}") from None
+            raise SceneError(where, f"{subject} not found (a part of its path is not a directory)") from None
+        raise SceneError(where, f"cannot read {subject}: {e.strerror or e}") from None
     kind = _kind(st.st_mode)
     if kind is None or is_devnull(path):
         return
-    raise SceneError(where_path, where_line, f"{subject} is {kind}, not a regular file")
+    raise SceneError(where, f"{subject} is {kind}, not a regular file")
 
 
-def read_bytes(path: str | PathLike, *, ref: Ref | None = None, what: str = "file") -> bytes:
+def read_bytes(path: str | PathLike, *, ref: Loc | None = None, what: str = "file") -> bytes:
     """The contents of ``path`` after :func:`check_input`; ``b""`` for ``/dev/null``."""
     check_input(path, ref=ref, what=what)
     try:
@@ -122,5 +119,5 @@ def read_bytes(path: str | PathLike, *, ref: Ref | None = None, what: str = "fil
             return f.read()
     except OSError as e:
         if ref is not None:
-            raise SceneError(ref[0], ref[1], f"cannot read {what} {path}: {e.strerror or e}") from None
-        raise SceneError(path, None, f"cannot read {what}: {e.strerror or e}") from None
+            raise SceneError(ref, f"cannot read {what} {path}: {e.strerror or e}") from None
+        raise SceneError(Loc(path), f"cannot read {what}: {e.strerror or e}") from None

@@ -20,6 +20,10 @@ Conventions
   :data:`MAX_COORDINATE` in magnitude; the loader refuses larger ones.
   A direction vector's largest component is in [1e-12, 1e12] (others are
   stored normalized).
+* Materials, media, lights and skies carry ``loc``, the
+  :class:`~drpt.errors.Loc` (file and line) that defined them, for messages;
+  it takes no part in comparisons (two materials alike in all but their
+  place compare equal).
 """
 
 from __future__ import annotations
@@ -29,6 +33,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from ..errors import Loc
 
 if TYPE_CHECKING:
     from ..shading import BSDFSpec
@@ -135,7 +141,7 @@ class Material:
     reflective: Vec3 = (0.0, 0.0, 0.0)  # 6.837 reflectiveColor
     transparent: Vec3 = (0.0, 0.0, 0.0)  # 6.837 transparentColor
     map_kd: Path | None = None  # diffuse texture, absolute path
-    origin: str = ""  # "file:line" where it was defined, for messages
+    loc: Loc | None = field(default=None, compare=False)  # where it was defined (None: built in)
     # the MTL transmission filter and the PBR extension (None: not given)
     tf: Vec3 | None = None  # MTL Tf / Kt
     sheen: float | None = None  # PBR Ps
@@ -253,12 +259,16 @@ class PointLight:
     position: Vec3
     color: Vec3
     attenuation: Vec3 = (0.0, 0.0, 1.0)  # constant, linear, quadratic
+    #: where the file defines it (None: not from a file)
+    loc: Loc | None = field(default=None, compare=False)
 
 
 @dataclass
 class DirectionalLight:
     direction: Vec3  # direction the light travels
     color: Vec3  # irradiance on a surface facing the light
+    #: where the file defines it (None: not from a file)
+    loc: Loc | None = field(default=None, compare=False)
 
 
 @dataclass
@@ -280,6 +290,8 @@ class SpotLight:
     #: the light's orientation: a row-major 3x3 rotation whose columns are its local x, y, z
     #: (z = ``direction``) in world space; None: some frame around ``direction``
     frame: tuple | None = None
+    #: where the file defines it (None: not from a file)
+    loc: Loc | None = field(default=None, compare=False)
 
 
 @dataclass
@@ -298,6 +310,8 @@ class ProjectorLight:
     irradiance: Any = (1.0, 1.0, 1.0)
     aspect: float = 1.0  # the texture's width / height (1 for a constant)
     scale: float = 1.0
+    #: where the file defines it (None: not from a file)
+    loc: Loc | None = field(default=None, compare=False)
 
 
 @dataclass
@@ -307,6 +321,8 @@ class Skybox:
     scale: float = 1.0  # radiance multiplier (Mitsuba envmap's scale)
     #: 3x3 rotation from the map's frame to world (Mitsuba envmap's to_world); None: identity
     rotation: np.ndarray | None = None
+    #: where the file defines it (None: not from a file)
+    loc: Loc | None = field(default=None, compare=False)
 
 
 Light = PointLight | DirectionalLight | SpotLight | ProjectorLight | Skybox
@@ -347,7 +363,7 @@ class RenderSettings:
     aov_image: str | None = None
     #: the ``-D`` values the file was read with (``compare`` gives Mitsuba the same)
     defines: dict = field(default_factory=dict)
-    #: ``FILE:LINE`` of the element that gave a setting, by setting name (for errors)
+    #: the :class:`~drpt.errors.Loc` of the element that gave a setting, by setting name (for errors)
     origin: dict = field(default_factory=dict)
     #: what of the file drpt did not read as written, one located line each: parameters
     #: their plugins do not read (older exporters' files; Mitsuba 3 refuses them) and,
@@ -391,7 +407,7 @@ class Medium:
     scale: float = 1.0
     phase: str = "isotropic"
     g: float = 0.0
-    origin: str = ""
+    loc: Loc | None = field(default=None, compare=False)
     sigma_t_grid: GridVolume | None = None
     albedo_grid: GridVolume | None = None
     g2: float = 0.0

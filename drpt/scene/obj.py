@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import Loc, SceneError, SceneWarning
 from .files import resolve
 from .model import Material
 from .mtl import load_mtl
@@ -89,11 +89,11 @@ def geometric_normals(positions: np.ndarray) -> np.ndarray:
     return out
 
 
-def load_obj(path: str | Path, *, ref: tuple[Path, int] | None = None,
+def load_obj(path: str | Path, *, ref: Loc | None = None,
              mtl_cache: MtlCache | None = None) -> ObjMesh:
     """Load the OBJ file at ``path`` (see the module docstring).
 
-    ``ref`` is the (file, line) that named the OBJ, where a missing file is
+    ``ref`` is the place that named the OBJ, where a missing file is
     reported. ``mtl_cache`` maps absolute MTL paths to parsed libraries so a
     library shared by several OBJ files yields the same Material objects.
     """
@@ -118,7 +118,7 @@ def _mtllib(args: list[str], path: Path, lineno: int, cache: MtlCache) -> list[P
     """Resolve an ``mtllib`` line's file names (spaces in a name are tolerated
     when the joined name exists and the split ones do not)."""
     if not args:
-        raise SceneError(path, lineno, "mtllib without a file name")
+        raise SceneError(Loc(path, lineno), "mtllib without a file name")
     base = path.parent
     names = args
     if len(args) > 1 and not all((base / a).is_file() for a in args):
@@ -129,7 +129,7 @@ def _mtllib(args: list[str], path: Path, lineno: int, cache: MtlCache) -> list[P
     for name in names:
         p = resolve(base / name)
         if p not in cache:
-            cache[p] = load_mtl(p, ref=(path, lineno))
+            cache[p] = load_mtl(p, ref=Loc(path, lineno))
         out.append(p)
     return out
 
@@ -208,7 +208,7 @@ def parse_obj_text(text: str, path: Path, *, mtl_cache: MtlCache | None = None) 
     warned: set[str] = set()
 
     def err(msg: str) -> SceneError:
-        return SceneError(path, lineno, msg)
+        return SceneError(Loc(path, lineno), msg)
 
     def general(parts: list[str]) -> None:
         """Every statement the hot paths in the loop below did not take."""
@@ -244,7 +244,7 @@ def parse_obj_text(text: str, path: Path, *, mtl_cache: MtlCache | None = None) 
             pass
         elif key not in warned:
             warned.add(key)
-            warnings.warn(f"{path}:{lineno}: OBJ statement '{key}' is not supported and is ignored",
+            warnings.warn(SceneWarning(Loc(path, lineno), f"OBJ statement '{key}' is not supported and is ignored"),
                           stacklevel=4)
 
     def index(text: str, count: int, kind: str) -> str:
@@ -332,7 +332,7 @@ def parse_obj_text(text: str, path: Path, *, mtl_cache: MtlCache | None = None) 
     for name in names:
         if name not in materials:
             where = ", ".join(p.name for p in dict.fromkeys(libs)) or "no mtllib was given"
-            raise SceneError(path, usemtl_line[name], f"usemtl '{name}': no such material ({where})")
+            raise SceneError(Loc(path, usemtl_line[name]), f"usemtl '{name}': no such material ({where})")
 
     # ------------------------------------------------------------ arrays
     try:
@@ -340,7 +340,7 @@ def parse_obj_text(text: str, path: Path, *, mtl_cache: MtlCache | None = None) 
         Tarr = _to_float(T, lines, "vt")
         Narr = _to_float(N, lines, "vn")
     except _NumberError as e:
-        raise SceneError(path, e.line, f"'{e.key}': expected a finite number, found '{e.text}'") from None
+        raise SceneError(Loc(path, e.line), f"'{e.key}': expected a finite number, found '{e.text}'") from None
 
     K_arr = np.array(K, dtype=np.int64)
     F = len(K_arr)
@@ -352,7 +352,7 @@ def parse_obj_text(text: str, path: Path, *, mtl_cache: MtlCache | None = None) 
         if bad.any():
             corner = int(np.argmax(bad))
             f = int(np.searchsorted(np.cumsum(K_arr), corner, side="right"))
-            raise SceneError(path, _locate(lines, "f", f),
+            raise SceneError(Loc(path, _locate(lines, "f", f)),
                              f"{kind} index {arr[corner]} is out of range (the file defines {count})")
 
     # Fan triangulation: face with corners c0..c{k-1} -> (c0, cj, cj+1).

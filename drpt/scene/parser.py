@@ -115,7 +115,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import Loc, SceneError, SceneWarning
 from . import transform as tf
 from .files import check_input, named, resolve
 from .model import (
@@ -232,7 +232,10 @@ class _Parser:
 
     # ------------------------------------------------------------ helpers
     def error(self, line: int | None, message: str) -> SceneError:
-        return SceneError(self.path, line, message)
+        return SceneError(self.loc(line), message)
+
+    def loc(self, line: int | None) -> Loc:
+        return Loc(self.path, line)
 
     def ref(self, r: _Ref) -> int:
         key = id(r) if isinstance(r, Material) else r
@@ -290,7 +293,7 @@ class _Parser:
         """A material parameter: a finite number that fits float32."""
         def read(tok):
             value = self.ts.number(what)
-            check_range((value,), self.path, tok.line, what)
+            check_range((value,), self.loc(tok.line), what)
             return value
         return read
 
@@ -341,8 +344,8 @@ class _Parser:
         if self.camera is None and not self.seen:
             # An empty file (/dev/null, only comments): nothing to frame, the
             # image is the background whatever the view.
-            warnings.warn(f"{self.path}: the scene file has no blocks; it renders the background "
-                          "through a default camera", stacklevel=2)
+            warnings.warn(SceneWarning(self.loc(None), "the scene file has no blocks; it renders the "
+                                       "background through a default camera"), stacklevel=2)
             self.camera = PerspectiveCamera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 1.0, 0.0), 45.0)
         if self.camera is None:
             raise self.error(ts.last_line, "no camera: add a PerspectiveCamera or OrthographicCamera block")
@@ -353,7 +356,7 @@ class _Parser:
                 raise self.error(line, f"medium {k} is out of range ({have})")
         materials, index = self.resolve_materials()
         for sky, line in self.skyboxes:
-            check_input(sky, ref=(self.path, line), what="skybox file")
+            check_input(sky, ref=self.loc(line), what="skybox file")
         return Scene(
             path=self.path,
             camera=self.camera,
@@ -419,8 +422,8 @@ class _Parser:
             raise self.error(a_line, "apertureRadius needs focusDistance: the distance, along "
                                      "the camera direction, of the plane in focus")
         if aperture == 0.0 and focus is not None:
-            warnings.warn(f"{self.path}:{f_line}: focusDistance has no effect without an "
-                          "apertureRadius above 0 (a pinhole camera is sharp everywhere)",
+            warnings.warn(SceneWarning(self.loc(f_line), "focusDistance has no effect without an "
+                                       "apertureRadius above 0 (a pinhole camera is sharp everywhere)"),
                           stacklevel=2)
         return aperture, focus
 
@@ -450,7 +453,8 @@ class _Parser:
                 if not tf.normalize(got["direction"][0]).any():
                     raise self.error(got["direction"][1], "light direction has zero length")
                 self.check_light(got["color"][1], "DirectionalLight color", got["color"][0])
-                self.lights.append(DirectionalLight(_direction(got["direction"][0]), got["color"][0]))
+                self.lights.append(DirectionalLight(_direction(got["direction"][0]), got["color"][0],
+                                                    loc=self.loc(tok.line)))
             elif tok.text == "PointLight":
                 got = self.fields(tok.text, tok, {"position": self.vec("position"), "color": self.vec("color"),
                                                   "attenuation": self.vec("attenuation")})
@@ -461,7 +465,7 @@ class _Parser:
                 att, line = got.get("attenuation", ((0.0, 0.0, 1.0), tok.line))
                 if min(att) < 0 or max(att) <= 0:
                     raise self.error(line, "attenuation must be non-negative and not all zero")
-                self.lights.append(PointLight(got["position"][0], got["color"][0], att))
+                self.lights.append(PointLight(got["position"][0], got["color"][0], att, loc=self.loc(tok.line)))
             elif tok.text == "Skybox":
                 self.parse_skybox(tok)
             else:
@@ -491,9 +495,9 @@ class _Parser:
                                  + (" (is a '}' missing before it?)" if tok.text in _KNOWN else ""))
         if file_tok is None:
             raise self.error(opened.line, "Skybox needs a file name, e.g. 'Skybox { sky.hdr R 1000 }'")
-        p = named(self.file_ref(file_tok), (self.path, file_tok.line))
+        p = named(self.file_ref(file_tok), self.loc(file_tok.line))
         self.skyboxes.append((p, file_tok.line))
-        self.lights.append(Skybox(p, radius))
+        self.lights.append(Skybox(p, radius, loc=self.loc(opened.line)))
 
     # ------------------------------------------------------------ materials
     def parse_materials(self, opened: Token) -> None:
@@ -537,11 +541,11 @@ class _Parser:
             if not -1.0 < g < 1.0:
                 raise self.error(lines["g"], f"Medium g must be in (-1, 1), got {g:g}")
             self.media.append(Medium(f"medium_{len(self.media)}", tuple(sigma_t), tuple(albedo), float(scale),
-                                     "hg" if g else "isotropic", float(g), f"{self.path}:{tok.line}"))
+                                     "hg" if g else "isotropic", float(g), self.loc(tok.line)))
         self.check_count("numMedia", "Media", opened, n, len(self.media), "media")
 
     def parse_material(self, opened: Token, i: int) -> Material:
-        mat = Material(name=f"material_{i}", origin=f"{self.path}:{opened.line}")
+        mat = Material(name=f"material_{i}", loc=self.loc(opened.line))
         ts = self.ts
 
         def texture(tok):
@@ -557,7 +561,7 @@ class _Parser:
             while ((nxt := ts.peek()) is not None and nxt.line == tok.line and nxt.text not in ("{", "}")
                    and nxt.text.lower() not in _MTL_KEYS and nxt.text not in readers):
                 args.append(ts.next("value").text)
-            mat = apply_field(mat, key, args, self.path, tok.line, self.base)
+            mat = apply_field(mat, key, args, self.loc(tok.line), self.base)
             return True
 
         readers = {
@@ -587,11 +591,11 @@ class _Parser:
                 raise self.error(line, "passThrough takes no other appearance fields (the surface is invisible)")
             from ..shading import BSDFSpec
 
-            return replace(mat, bsdf=BSDFSpec("null", {}, [], [], mat.origin), **media)
+            return replace(mat, bsdf=BSDFSpec("null", {}, [], [], mat.loc), **media)
         mat = replace(mat, **media)
         for key in ("diffuseColor", "specularColor", "reflectiveColor", "transparentColor"):
             if key in got:
-                got[key] = (reflectance(got[key][0], self.path, got[key][1], key), got[key][1])
+                got[key] = (reflectance(got[key][0], self.loc(got[key][1]), key), got[key][1])
         names = {"diffuseColor": "kd", "specularColor": "ks", "exponent": "ns", "reflectiveColor": "reflective",
                  "transparentColor": "transparent", "indexOfRefraction": "ior", "texture": "map_kd"}
         given = {"diffuseColor": "kd", "specularColor": "ks", "exponent": "ns", "indexOfRefraction": "ni",
@@ -601,8 +605,8 @@ class _Parser:
 
     def texture_file(self, tok: Token) -> Path:
         p = self.file_ref(tok)
-        check_input(p, ref=(self.path, tok.line), what="texture file")
-        return named(p, (self.path, tok.line))
+        check_input(p, ref=self.loc(tok.line), what="texture file")
+        return named(p, self.loc(tok.line))
 
     # -------------------------------------------------------------- objects
     def parse_group(self, root: Token, m: np.ndarray, current: _Ref) -> None:
@@ -681,7 +685,7 @@ class _Parser:
     def check_light(self, line: int, what: str, color) -> None:
         """Light colours (and the background's radiance) must not be negative
         and must fit float32."""
-        check_range(color, self.path, line, what)
+        check_range(color, self.loc(line), what)
         if min(color) < 0.0:
             raise self.error(line, f"{what} {' '.join(f'{c:g}' for c in color)} must not be negative")
 
@@ -723,8 +727,8 @@ class _Parser:
             p, n = tf.tessellate_sphere(center, radius)
         p, n, _ = tf.transform_triangles(m, p, n)
         self.check_extent(opened.line, "Sphere", p)
-        warnings.warn(f"{self.path}:{opened.line}: Sphere under a non-uniform Transform was "
-                      f"tessellated into {len(p)} triangles", stacklevel=2)
+        warnings.warn(SceneWarning(self.loc(opened.line), "Sphere under a non-uniform Transform was "
+                                   f"tessellated into {len(p)} triangles"), stacklevel=2)
         self.tri_chunks.append((p, n, None, np.full(len(p), ref, np.int64)))
 
     def parse_plane(self, opened: Token, m: np.ndarray, current: _Ref) -> None:
@@ -760,9 +764,9 @@ class _Parser:
         p = self.file_ref(name_tok)
         mesh = self.obj_cache.get(p)
         if mesh is None:
-            mesh = self.obj_cache[p] = load_obj(p, ref=(self.path, line), mtl_cache=self.mtl_cache)
+            mesh = self.obj_cache[p] = load_obj(p, ref=self.loc(line), mtl_cache=self.mtl_cache)
         if not len(mesh):
-            warnings.warn(f"{self.path}:{line}: {p.name} has no faces", stacklevel=2)
+            warnings.warn(SceneWarning(self.loc(line), f"{p.name} has no faces"), stacklevel=2)
             return
         # face_material == -1 (no usemtl) picks the table's last entry.
         # Register materials in the order faces first use them; slot -1 (no
@@ -851,9 +855,9 @@ class _Parser:
         for _lib_path, lib in self.mtl_cache.items():
             for name, mat in lib.items():
                 first = named.setdefault(name, mat)
-                if first is not mat and replace(first, origin="") != replace(mat, origin=""):
-                    warnings.warn(f"{mat.origin}: material '{name}' is also defined at {first.origin}; "
-                                  "'mtl' references use the first", stacklevel=3)
+                if first is not mat and first != mat:  # (Material.loc takes no part in ==)
+                    warnings.warn(SceneWarning(mat.loc, f"material '{name}' is also defined at {first.loc}; "
+                                               "'mtl' references use the first"), stacklevel=3)
         default = None
         resolved: list[Material] = []
         for r in self.refs:
@@ -871,7 +875,7 @@ class _Parser:
                 r = named[r.name]
             elif r is None:
                 if default is None:
-                    default = Material(name=DEFAULT_MATERIAL_NAME, kd=(0.8, 0.8, 0.8), origin="built-in default")
+                    default = Material(name=DEFAULT_MATERIAL_NAME, kd=(0.8, 0.8, 0.8))
                 r = default
             resolved.append(r)
         materials = list(self.block_materials)

@@ -26,7 +26,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import SceneError
+from ..errors import Loc, SceneError
 from .files import read_bytes
 
 # A decimal number: optional sign, digits with an optional fraction, optional
@@ -54,10 +54,10 @@ def split_lines(text: str) -> list[str]:
     return lines
 
 
-def read_text(path: Path, *, ref: tuple[Path, int] | None = None, what: str = "file") -> str:
+def read_text(path: Path, *, ref: Loc | None = None, what: str = "file") -> str:
     """Read ``path`` as UTF-8 text; every failure becomes a :class:`SceneError`.
 
-    ``ref`` is the (file, line) that named ``path``; a missing file, or one
+    ``ref`` is the place that named ``path``; a missing file, or one
     that is not a regular file (see :func:`drpt.scene.files.check_input`),
     is reported there. Invalid UTF-8 is reported at the bad byte's line in
     ``path`` itself. ``/dev/null`` reads as empty text.
@@ -68,7 +68,7 @@ def read_text(path: Path, *, ref: tuple[Path, int] | None = None, what: str = "f
     except UnicodeDecodeError as e:
         before = data[: e.start]
         line = before.count(b"\n") + before.count(b"\r") - before.count(b"\r\n") + 1
-        raise SceneError(path, line, f"not valid UTF-8 text (byte 0x{data[e.start]:02x})") from None
+        raise SceneError(Loc(path, line), f"not valid UTF-8 text (byte 0x{data[e.start]:02x})") from None
 
 
 def tokenize(text: str) -> list[Token]:
@@ -105,7 +105,11 @@ class TokenStream:
 
     # ------------------------------------------------------------ basics
     def error(self, line: int | None, message: str) -> SceneError:
-        return SceneError(self.path, line, message)
+        return SceneError(self.loc(line), message)
+
+    def loc(self, line: int | None) -> Loc:
+        """The place ``line`` of this file."""
+        return Loc(self.path, line)
 
     def at_end(self) -> bool:
         return self.pos >= len(self.tokens)

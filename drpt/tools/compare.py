@@ -66,7 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DrptError, warn
+from ..errors import DrptError, Loc, SceneError, warn
 from .reference import (
     add_reference_args,
     cache_dir_from_args,
@@ -386,10 +386,10 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
             options = apply_scene_settings(options, scene, args)
         not_read = list(getattr(scene.settings, "not_read", ()))
         if not_read and not getattr(args, "ignore_unsupported", False):
-            raise DrptError(f"{scene_path}: drpt does not read all of the file ({not_read[0]}"
-                            + (f"; and {len(not_read) - 1} more" if len(not_read) > 1 else "")
-                            + "): Mitsuba's reference of the file as written would not be the scene "
-                            "drpt renders (--ignore-unsupported compares anyway, marked not like for like)")
+            raise SceneError(Loc(scene_path), f"drpt does not read all of the file ({not_read[0]}"
+                             + (f"; and {len(not_read) - 1} more" if len(not_read) > 1 else "")
+                             + "): Mitsuba's reference of the file as written would not be the scene "
+                             "drpt renders (--ignore-unsupported compares anyway, marked not like for like)")
         source = MitsubaXML.for_scene(scene, options)
     width, height, spp, seed = options.width, options.height, options.spp, options.seed
     bsdf, max_depth, rr_depth = options.bsdf, options.path.max_depth, options.path.rr_depth

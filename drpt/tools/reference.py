@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DrptError, note, warn
+from ..errors import DrptError, Loc, note, warn
 from ..filters import parse_filter
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -374,7 +374,7 @@ def _load_cached(path: Path):
             blocks = {b: z[f"block_var_{b}"].astype(np.float32) for b in BLOCK_SIZES}
         return mean, var, meta, blocks
     except Exception as e:  # a broken cache entry is re-rendered, not fatal
-        warn(f"ignoring unreadable cached reference: {e}", file=path)
+        warn(f"ignoring unreadable cached reference: {e}", Loc(path))
         return None
 
 

@@ -32,7 +32,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from ..errors import DrptError
+from ..errors import Loc, SceneError
 
 
 class MitsubaXML:
@@ -132,7 +132,7 @@ class MitsubaXML:
             state = mp.parse_file(config, str(self.path), **self.defines)
             mp.transform_all(config, state)
         except RuntimeError as e:
-            raise DrptError(f"{self.path}: Mitsuba cannot parse the file: {_short(e)}") from None
+            raise SceneError(Loc(self.path), f"Mitsuba cannot parse the file: {_short(e)}") from None
         finally:
             mi.set_file_resolver(resolver)
         # the resolver as the parser left it: the file's folder and its <path> folders,
@@ -155,11 +155,11 @@ class MitsubaXML:
         try:
             scene = mp.instantiate(config, state)
         except RuntimeError as e:
-            raise DrptError(f"{self.path}: Mitsuba refuses the file: {_short(e)}") from None
+            raise SceneError(Loc(self.path), f"Mitsuba refuses the file: {_short(e)}") from None
         finally:
             mi.set_file_resolver(resolver)
         if not isinstance(scene, mi.Scene):
-            raise DrptError(f"{self.path}: not a Mitsuba scene")
+            raise SceneError(Loc(self.path), "not a Mitsuba scene")
         integrator = None
         if self.integrator is not None:
             integrator = mi.load_dict({"type": "path", **self.integrator})
@@ -183,8 +183,8 @@ class MitsubaXML:
             image = (props.get("crop_width", w), props.get("crop_height", h))
             if tuple(self.size) != tuple(image):
                 if any(c is not None for c in crop):
-                    raise DrptError(f"{self.path}: the film's crop window is {image[0]}x{image[1]}: Mitsuba "
-                                    f"cannot render it at {self.size[0]}x{self.size[1]} (leave out --size)")
+                    raise SceneError(Loc(self.path), f"the film's crop window is {image[0]}x{image[1]}: Mitsuba "
+                                     f"cannot render it at {self.size[0]}x{self.size[1]} (leave out --size)")
                 props["width"], props["height"] = self.size
         if self.rfilter is not None:
             f = self.rfilter.to_mitsuba()

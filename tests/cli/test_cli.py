@@ -281,14 +281,17 @@ def test_scene_warnings_print_on_one_line_each(tmp_path, cornell):
 
 
 def test_warn_and_note_format(capsys):
-    from drpt.errors import note, warn
+    from drpt.errors import Loc, SceneWarning, note, warn
 
-    warn("two\nlines", file="a.txt", line=3)
+    warn("two\nlines", Loc("a.txt", 3))
     warn("no place")
-    note("ignored", file="b.mtl")
+    note("ignored", Loc("b.mtl"))
+    warn(SceneWarning(Loc("c.obj", 5), "its own place"))
+    warn(SceneWarning(None, "built in code"))
     assert capsys.readouterr().err.splitlines() == [
         "drpt: warning: a.txt:3: two lines", "drpt: warning: no place",
-        "drpt: note: b.mtl: ignored"]
+        "drpt: note: b.mtl: ignored", "drpt: warning: c.obj:5: its own place",
+        "drpt: warning: built in code"]
 
 
 @pytest.mark.parametrize("args, needle", [

@@ -10,7 +10,9 @@ and then
   (images equal to 1e-4: the two lobes are the same function then).
 
 Negative controls: the example with ``A = 1`` (no energy lost to the facets' shadowing) fails
-the furnace (albedo > 1), and a scene naming the kind without the ``PARAMS`` entry is refused."""
+the furnace (albedo > 1), a scene naming the kind without the ``PARAMS`` entry is refused, and
+without the ``TEXTURABLE`` entry (the fourth edit, for textures only) a texture on it is refused
+while constants are still read."""
 
 from __future__ import annotations
 
@@ -129,3 +131,14 @@ def test_the_kind_needs_its_params_entry(oren_nayar, monkeypatch):
     monkeypatch.setattr(bsdf_kinds, "ALL_KINDS", tuple(bsdf_kinds.PARAMS) + tuple(bsdf_kinds.COMPOSITES))
     with pytest.raises(ValueError, match="unknown BSDF kind"):
         complete(BSDFSpec("oren_nayar", {"sigma": 0.1}))
+
+
+def test_textures_need_the_texturable_entry(oren_nayar, monkeypatch, tmp_path):
+    from drpt.shading import BSDFSpec, Texture, complete
+
+    tex = Texture(tmp_path / "k.png", 0.5)
+    assert complete(BSDFSpec("oren_nayar", {"kd": tex})).params["kd"] is tex
+    monkeypatch.delitem(bsdf_kinds.TEXTURABLE, "oren_nayar")
+    with pytest.raises(ValueError, match="cannot be a texture"):
+        complete(BSDFSpec("oren_nayar", {"kd": tex}))
+    assert complete(BSDFSpec("oren_nayar", {"sigma": 0.2})).params == {"kd": bsdf_kinds.GRAY, "sigma": 0.2}

@@ -1,6 +1,8 @@
 """docs/architecture.md's Layout table names every module of the package under its folder, and
-every module it names exists (``__init__.py`` and ``__main__.py`` aside). Negative control: a
-table without one module, and one naming a module that does not exist, both fail the check."""
+every module it names exists (``__init__.py`` and ``__main__.py`` aside); its Tools paragraph,
+which says what each module of ``drpt/tools/`` is for, names every one of them and each of its
+folders. Negative controls: a table without one module, and one naming a module that does not
+exist, both fail the check; so does the Tools paragraph without one of the modules."""
 
 from __future__ import annotations
 
@@ -54,3 +56,19 @@ def test_the_check_catches_a_missing_and_an_invented_module(repo):
     table["drpt/tools"] = table["drpt/tools"] | {"nonexistent.py"}
     problems = _problems(table, tree)
     assert any("film.py" in p for p in problems) and any("nonexistent.py" in p for p in problems)
+
+
+def _tools_missing(paragraph: str, repo) -> list[str]:
+    """The modules (by name) and folders of ``drpt/tools/`` that ``paragraph`` does not name."""
+    tools = repo / "drpt" / "tools"
+    names = [p.stem for p in tools.glob("*.py") if p.name != "__init__.py"]
+    folders = [p.name for p in tools.iterdir() if p.is_dir() and (p / "__init__.py").exists()]
+    return [n for n in names if f"`{n}`" not in paragraph and f"`{n}.py`" not in paragraph] + \
+        [f for f in folders if f"`{f}/`" not in paragraph]
+
+
+def test_tools_paragraph_names_every_tool_module(repo):
+    text = (repo / DOC).read_text()
+    paragraph = text.split("**Tools** (`drpt/tools/`)", 1)[1].split("\n\n", 1)[0]
+    assert _tools_missing(paragraph, repo) == []
+    assert _tools_missing(paragraph.replace("`xmlref`", "xmlref"), repo) == ["xmlref"]  # the control

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-from drpt.errors import SceneError
+from drpt.errors import Loc, SceneError
 from drpt.export.mitsuba_bsdf import to_mitsuba
 from drpt.render.material import MaterialTable, _flatten
 from drpt.render.surface import Interaction
@@ -75,6 +75,25 @@ def test_two_textured_weights_are_refused(tmp_path):
                              [BSDFSpec("blendbsdf", {"weight": t}, [two(diffuse()), two(diffuse())])]))
     with pytest.raises(SceneError, match="textured weight"):
         MaterialTable(scene_with(spec))
+
+
+def test_errors_and_notes_name_the_material_s_place(tmp_path):
+    t = Texture(tmp_path / "w.png", 0.5)
+    spec = complete(BSDFSpec("mask", {"opacity": t},
+                             [BSDFSpec("blendbsdf", {"weight": t}, [two(diffuse()), two(diffuse())])]))
+    s = scene_with(spec)
+    s.materials[0].loc = Loc("lib.mtl", 7)
+    with pytest.raises(SceneError) as e:
+        MaterialTable(s)
+    assert e.value.loc == Loc("lib.mtl", 7) and "material 'm0'" in e.value.message
+    s.materials[0].loc = None  # a material built in code: at the scene file
+    with pytest.raises(SceneError) as e:
+        MaterialTable(s)
+    assert e.value.loc == Loc("t.txt")
+    bright = scene_with(diffuse())
+    bright.materials[0] = Material("hot", kd=(0.8, 0.8, 0.8), ks=(0.5, 0.5, 0.5), loc=Loc("lib.mtl", 3))
+    (note,) = MaterialTable(bright, "phong").notes  # Kd + Ks > 1
+    assert note.startswith("lib.mtl:3: material 'hot': Kd + Ks"), note
 
 
 # ------------------------------------------------------------------ sidedness

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drpt.errors import SceneError
+from drpt.errors import Loc, SceneError
 from drpt.scene import load_scene
 from drpt.scene.files import NamedPath, check_input, read_bytes
 from drpt.scene.mtl import load_mtl
@@ -310,7 +310,7 @@ def test_corrupt_sky_error_names_the_skybox_line(tmp_path):
     _corrupt_png(tmp_path / "sky.png")
     s = load_scene(scene(tmp_path, "Lights { numLights 1\n\nSkybox { sky.png } }\n" + group(TRI)))
     sky = s.lights[0].path
-    assert isinstance(sky, NamedPath) and sky.named_at == (tmp_path / "scene.txt", 4)
+    assert isinstance(sky, NamedPath) and sky.named_at == Loc(tmp_path / "scene.txt", 4)
     e = error_of(EnvironmentLight.from_file, sky)
     assert str(e).startswith(f"{tmp_path / 'scene.txt'}:4: sky.png: cannot read image")
 

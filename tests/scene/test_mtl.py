@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from drpt.errors import SceneError
+from drpt.errors import Loc, SceneError
 from drpt.scene.mtl import load_mtl
 
 
@@ -52,7 +52,7 @@ KE 4 5 6
     assert red.roughness == 0.3 and red.metalness == 0.7
     assert red.map_kd == (tmp_path / "tex" / "wood.png").resolve()
     assert red.map_kd.is_absolute()
-    assert red.origin == f"{p}:2"
+    assert red.loc == Loc(p, 2) and str(red.loc) == f"{p}:2"
     glow = mats["glow"]
     assert glow.kd == (0.0, 0.0, 0.0) and glow.emission == (10.0, 10.0, 10.0) and glow.is_emissive
     assert glow.dissolve == 0.75
@@ -125,7 +125,7 @@ def test_errors(tmp_path, text, line, fragment):
 def test_missing_file_reported_at_reference(tmp_path):
     ref = tmp_path / "x.obj"
     with pytest.raises(SceneError) as e:
-        load_mtl(tmp_path / "nope.mtl", ref=(ref, 7))
+        load_mtl(tmp_path / "nope.mtl", ref=Loc(ref, 7))
     assert str(e.value).startswith(f"{ref}:7:") and "nope.mtl" in str(e.value)
 
 

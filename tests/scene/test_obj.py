@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drpt.errors import SceneError
+from drpt.errors import Loc, SceneError
 from drpt.scene.obj import load_obj
 
 SEED = Path(__file__).resolve().parents[3] / "shared" / "seed"
@@ -173,7 +173,7 @@ def test_error_in_mtl_reported_in_mtl(tmp_path):
 def test_missing_file_reported_at_reference(tmp_path):
     ref = tmp_path / "scene.txt"
     with pytest.raises(SceneError) as e:
-        load_obj(tmp_path / "gone.obj", ref=(ref, 12))
+        load_obj(tmp_path / "gone.obj", ref=Loc(ref, 12))
     assert str(e.value).startswith(f"{ref}:12:") and "gone.obj" in str(e.value)
 
 

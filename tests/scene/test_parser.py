@@ -263,7 +263,7 @@ def test_sphere_mtl_forward_reference_and_mesh_materials(tmp_path):
     # first face has no usemtl -> the current MaterialIndex; second face -> lamp
     assert s.triangles.material.tolist() == [0, 2, 0, 2]
     assert s.materials[2].emission == (7, 7, 7) and s.emissive_materials == [2]
-    assert s.materials[1].origin.endswith("m.mtl:1")
+    assert s.materials[1].loc.file.endswith("m.mtl") and s.materials[1].loc.line == 1
 
 
 def test_mesh_without_usemtl_uses_default(tmp_path):

@@ -65,7 +65,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
 
-from ...errors import DrptError
+from ...errors import Loc, SceneError
 from ...options import PathOptions
 from ...scene.model import Scene
 from ..scene import DeviceScene
@@ -150,8 +150,8 @@ class MediumTable:
                 if isinstance(t, (int, float)):
                     t = (float(t),) * 3
                 if not (isinstance(t, tuple) and len(t) == 3):
-                    raise DrptError(f"{m.origin}: volpath: a thindielectric with a textured "
-                                    "specular_transmittance is not supported")
+                    raise SceneError(m.loc or Loc(scene.path), "volpath: a thindielectric with a textured "
+                                     "specular_transmittance is not supported")
                 kind.append(NULL_THIN)
                 eta.append(relative_ior(p["int_ior"], p["ext_ior"]))
                 trans.append(tuple(float(x) for x in t))

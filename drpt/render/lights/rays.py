@@ -43,7 +43,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-from ...errors import DrptError
+from ...errors import DrptError, Loc, SceneError
 from ..spawn import origin as spawn_origin
 from ..warp import (
     Frame,
@@ -108,8 +108,9 @@ class EmitterRays:
         dl = device_scene.delta_lights
         for light in dl.points:
             if tuple(float(a) for a in light.attenuation) != (0.0, 0.0, 1.0):
-                raise DrptError("light tracing needs physical point lights: attenuation "
-                                f"{tuple(light.attenuation)} is not (0, 0, 1)")
+                raise SceneError(getattr(light, "loc", None) or Loc(scene.path),
+                                 "light tracing needs physical point lights: attenuation "
+                                 f"{tuple(light.attenuation)} is not (0, 0, 1)")
         self.sources: list[tuple[str, object]] = []
         if device_scene.has_area_lights:
             self.sources.append(("area", None))

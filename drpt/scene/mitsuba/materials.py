@@ -1,6 +1,6 @@
 """Mitsuba ``<bsdf>`` and ``<texture>`` nodes as :class:`drpt.shading.BSDFSpec` trees.
 
-A BSDF node becomes ``BSDFSpec(kind, params, children, notes, origin)`` with
+A BSDF node becomes ``BSDFSpec(kind, params, children, notes, loc)`` with
 ``kind`` the Mitsuba plugin name and ``params`` under Mitsuba's parameter
 names (the vocabulary of :mod:`drpt.bsdf_kinds`), with one exception:
 ``diffuse``'s ``reflectance`` is drpt's ``kd``. Values: RGB triples (from
@@ -90,7 +90,7 @@ class Materials:
     def _spec(self, node: Node) -> BSDFSpec:
         r = self.reader
         kind = node.plugin
-        origin = node.where
+        loc = node.loc
         if kind in bsdf_kinds.PERTURBING:
             spec = self._perturbing(node)
         elif kind in bsdf_kinds.COMPOSITES:
@@ -109,9 +109,9 @@ class Materials:
             for name in params_def:
                 if node.has(name):
                     params[name] = self._value(node, kind, name, float(params_def[name]), texturable=True)
-            spec = BSDFSpec(kind, params, [self.spec(k) for k in kids], [], origin)
+            spec = BSDFSpec(kind, params, [self.spec(k) for k in kids], [], loc)
         elif kind == "null":  # a pure boundary (of a medium): the ray passes straight through
-            spec = BSDFSpec("null", {}, [], [], origin)
+            spec = BSDFSpec("null", {}, [], [], loc)
         elif kind in bsdf_kinds.PARAMS and kind not in ("phong", "cook_torrance", "mirror", "null"):
             renamed = RENAMED.get(kind, {})
             to_mitsuba = {d: m for m, d in renamed.items()}
@@ -124,13 +124,13 @@ class Materials:
                 default = bsdf_kinds.PARAMS[kind][drpt_name]
                 texturable = drpt_name in bsdf_kinds.TEXTURABLE.get(kind, ())
                 params[drpt_name] = self._value(node, kind, name, default, texturable)
-            spec = BSDFSpec(kind, params, [], [], origin)
+            spec = BSDFSpec(kind, params, [], [], loc)
             for c in node.children():
                 r.unsupported(c, f"{c.label} inside {node.label}")
         else:
             r.unsupported(node, f"BSDF plugin '{kind}'", fallback="Mitsuba's default diffuse BSDF")
             # (one warning: r.unsupported's; a note on the spec would print it again)
-            return BSDFSpec("diffuse", {"kd": bsdf_kinds.GRAY}, [], [], origin)
+            return BSDFSpec("diffuse", {"kd": bsdf_kinds.GRAY}, [], [], loc)
         r.check_unread(node)
         return spec
 
@@ -176,7 +176,7 @@ class Materials:
             params["scale"] = node.float("scale")
             if not math.isfinite(params["scale"]):
                 raise node.error(f"{node.label}: scale must be finite, got {params['scale']}")
-        return BSDFSpec(kind, params, [self.spec(kids[0])], [], node.where)
+        return BSDFSpec(kind, params, [self.spec(kids[0])], [], node.loc)
 
     # ------------------------------------------------------------ values
     def _value(self, node: Node, kind: str, name: str, default: Any, texturable: bool) -> Any:
@@ -237,7 +237,7 @@ class Materials:
             r.check_unread(node)
             if fallback is None:
                 fallback = 0.5 if scalar else bsdf_kinds.GRAY
-            return Texture(path, fallback, **opts)
+            return Texture(path, fallback, **opts, loc=node.loc)
         if node.plugin == "checkerboard":
             for name in ("color0", "color1"):
                 if node.is_ref(name):
@@ -249,7 +249,7 @@ class Materials:
             r.check_unread(node)
             if fallback is None:
                 fallback = 0.5 if scalar else bsdf_kinds.GRAY
-            return Checkerboard(fallback=fallback, color0=c0, color1=c1, to_uv=_uv_matrix(m))
+            return Checkerboard(fallback=fallback, color0=c0, color1=c1, to_uv=_uv_matrix(m), loc=node.loc)
         if node.plugin == "rawconstant":
             # a constant taken as given (no spectral upsampling): a vector or a float
             t = node._type("value") if node.has("value") else None
@@ -272,7 +272,7 @@ class Materials:
             r.check_unread(node)
             if fallback is None:
                 fallback = 0.5 if scalar else bsdf_kinds.GRAY
-            return MeshAttribute(fallback=fallback, name=name, scale=scale)
+            return MeshAttribute(fallback=fallback, name=name, scale=scale, loc=node.loc)
         r.unsupported(node, f"texture plugin '{node.plugin}'", fallback="0.5")
         return 0.5 if scalar else bsdf_kinds.GRAY
 

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import SceneError
+from ...errors import Loc, SceneError, SceneWarning
 
 VARIANT = "scalar_rgb"
 
@@ -50,7 +50,7 @@ def mitsuba():
     try:
         import mitsuba as mi
     except ImportError as e:  # pragma: no cover - mitsuba is a dependency of the XML reader
-        raise SceneError(None, None, f"reading Mitsuba XML needs the mitsuba package ({e})") from None
+        raise SceneError(Loc(), f"reading Mitsuba XML needs the mitsuba package ({e})") from None
     if mi.variant() != VARIANT and VARIANT in mi.variants():
         if mi.variant() is None:
             mi.set_variant(VARIANT)
@@ -77,14 +77,14 @@ def parser_error(path: Path, error: Exception) -> SceneError:
     last = text.split("\n")[-1] if "\n" in text else text
     m = _MESSAGE.search(_TAG.sub("", last))
     if m:
-        return SceneError(_locate(path, m.group(1)), int(m.group(2)), _one_line(m.group(3)))
+        return SceneError(Loc(_locate(path, m.group(1)), int(m.group(2))), _one_line(m.group(3)))
     m = _XML_FAILED.search(_TAG.sub("", text))
     if m:
-        return SceneError(_locate(path, m.group(1)), int(m.group(3)),
+        return SceneError(Loc(_locate(path, m.group(1)), int(m.group(3))),
                           f"malformed XML: {_one_line(m.group(2))}")
     from .precheck import located_offset
 
-    return located_offset(_TAG.sub("", text)) or SceneError(path, None, _one_line(text))
+    return located_offset(_TAG.sub("", text)) or SceneError(Loc(path), _one_line(text))
 
 
 def _locate(main: Path, name: str) -> Path:
@@ -137,7 +137,7 @@ class State:
         self.state = state
         self.files = [Path(str(f)) for f in state.files]
         self.nodes: dict[int, Node] = {}
-        self.notes: list[str] = []  # warnings found while reading values (clamped spectra)
+        self.notes: list[SceneWarning] = []  # warnings found while reading values (clamped spectra)
         self.version = str(state.versions[0]) if len(state.versions) else ""
 
     def node(self, index: int) -> Node:
@@ -162,13 +162,11 @@ class Node:
         self.plugin: str = raw.props.plugin_name()
         self.kind: str = str(raw.type).rsplit(".", 1)[-1].lower()  # "shape", "bsdf", ...
         self.id: str = raw.props.id()
-        loc = state.mp.file_location(state.state, raw)
-        m = _LOCATION.match(loc)
-        self.file = state.path
-        self.line: int | None = None
-        if m:
-            self.file = self._file(m.group(1))
-            self.line = int(m.group(2))
+        m = _LOCATION.match(state.mp.file_location(state.state, raw))
+        #: the XML file that holds the element (an <include>d one, or the scene's)
+        self.file: Path = self._file(m.group(1)) if m else state.path
+        #: the element's place, for messages (line None: Mitsuba did not say)
+        self.loc = Loc(self.file, int(m.group(2)) if m else None)
         self.read: set[str] = set()
 
     def _file(self, name: str) -> Path:
@@ -180,15 +178,15 @@ class Node:
 
     # ------------------------------------------------------------ messages
     @property
-    def where(self) -> str:
-        return f"{self.file}:{self.line}" if self.line is not None else str(self.file)
+    def line(self) -> int | None:
+        return self.loc.line
 
     @property
     def label(self) -> str:
         return f"{self.kind} '{self.plugin}'" + (f" (id '{self.id}')" if self.id else "")
 
     def error(self, message: str) -> SceneError:
-        return SceneError(self.file, self.line, message)
+        return SceneError(self.loc, message)
 
     def resolve_file(self, name: str) -> Path:
         """A file name of this node as an absolute path, found as Mitsuba's file resolver
@@ -209,7 +207,7 @@ class Node:
         from ..files import named
 
         # an image read at render time names this node's line in its errors
-        return named(p.resolve(), (self.file, self.line) if self.line is not None else None)
+        return named(p.resolve(), self.loc if self.loc.line is not None else None)
 
     # ------------------------------------------------------------ params
     def _is_child(self, key: str) -> bool:
@@ -346,9 +344,9 @@ class Node:
             logger.set_log_level(level)
         out = (float(rgb[0]), float(rgb[1]), float(rgb[2]))
         if out != (float(raw[0]), float(raw[1]), float(raw[2])) or min(out) == 0.0 < max(values):
-            self.state.notes.append(f"{self.where}: {self.label}: the spectrum of '{name}' is out of the "
-                                    f"sRGB gamut: clamped to {tuple(round(c, 6) for c in out)}, as Mitsuba's "
-                                    "RGB variants clamp it")
+            self.state.notes.append(SceneWarning(self.loc, f"{self.label}: the spectrum of '{name}' is out of "
+                                                 f"the sRGB gamut: clamped to {tuple(round(c, 6) for c in out)}, "
+                                                 "as Mitsuba's RGB variants clamp it"))
         return out
 
     def ref(self, name: str) -> Node:

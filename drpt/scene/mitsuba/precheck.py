@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import SceneError
+from ...errors import Loc, SceneError
 
 #: deepest element nesting accepted (Mitsuba's scenes nest a handful of levels)
 MAX_DEPTH = 100
@@ -70,14 +70,14 @@ def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int 
         nonlocal depth
         depth += 1
         if depth > MAX_DEPTH:
-            raise SceneError(path, p.CurrentLineNumber,
+            raise SceneError(Loc(path, p.CurrentLineNumber),
                              f"<{name}> is nested more than {MAX_DEPTH} elements deep")
         if name in _XYZ_TAGS and "value" in attrs:
             _check_xyz(path, p.CurrentLineNumber, name, attrs, defines)
         param = attrs.get("name")
         if param is not None and name not in ("default", "include", "scene"):
             if param in names[-1]:
-                raise SceneError(path, p.CurrentLineNumber, f"parameter '{param}' is given twice "
+                raise SceneError(Loc(path, p.CurrentLineNumber), f"parameter '{param}' is given twice "
                                  "in one element (Mitsuba refuses it)")
             names[-1].add(param)
         names.append(set())
@@ -112,10 +112,10 @@ def check_xml(path: Path, defines: dict[str, str] | None = None, *, _depth: int 
         if not os.path.lexists(target):
             continue  # Mitsuba reports a missing file
         if not _regular(target):
-            raise SceneError(path, line, f"<include> {name}: not a regular file")
+            raise SceneError(Loc(path, line), f"<include> {name}: not a regular file")
         stack = _stack + (os.path.realpath(path),)
         if os.path.realpath(target) in stack:
-            raise SceneError(path, line, f"<include> {name}: the file includes itself")
+            raise SceneError(Loc(path, line), f"<include> {name}: the file includes itself")
         if len(stack) < MAX_INCLUDES:
             check_xml(target, defines, _depth=at - 1, _stack=stack, _root=_root or path)
 
@@ -132,10 +132,10 @@ def _check_xyz(path: Path, line: int, tag: str, attrs: dict, defines: dict) -> N
     if "$" in value:
         return  # an undefined $name: Mitsuba says where
     if any(k in attrs for k in "xyz"):
-        raise SceneError(path, line, f"<{tag}> gives 'value' and x/y/z: give one or the other")
+        raise SceneError(Loc(path, line), f"<{tag}> gives 'value' and x/y/z: give one or the other")
     tokens = [t for t in re.split(r"[, ]", value) if t]
     if len(tokens) not in (1, 3):
-        raise SceneError(path, line, f"<{tag}> value {attrs['value']!r} must have 1 or 3 numbers, "
+        raise SceneError(Loc(path, line), f"<{tag}> value {attrs['value']!r} must have 1 or 3 numbers, "
                          f"has {len(tokens)}")
 
 
@@ -158,14 +158,14 @@ def located_offset(text: str) -> SceneError | None:
         data = path.read_bytes() if _regular(path) else b""
         root = re.search(rb"<[A-Za-z_]", data)
         line = data[:root.start()].count(b"\n") + 1 if root else 1
-        return SceneError(path, line, " ".join(m.group(2).split()))
+        return SceneError(Loc(path, line), " ".join(m.group(2).split()))
     path, offset = Path(m.group(1)), int(m.group(3))
     try:
         data = path.read_bytes() if _regular(path) else b""
     except OSError:
         data = b""
     line = data[:offset].count(b"\n") + 1
-    return SceneError(path, line, "malformed XML: " + " ".join(m.group(2).split()))
+    return SceneError(Loc(path, line), "malformed XML: " + " ".join(m.group(2).split()))
 
 
 def not_utf8(path: Path, defines: dict[str, str] | None = None) -> SceneError:
@@ -182,11 +182,11 @@ def not_utf8(path: Path, defines: dict[str, str] | None = None) -> SceneError:
         try:
             data.decode("utf-8")
         except UnicodeDecodeError as e:
-            return SceneError(f, data[:e.start].count(b"\n") + 1,
+            return SceneError(Loc(f, data[:e.start].count(b"\n") + 1),
                               f"malformed XML: byte {data[e.start]:#04x} is not UTF-8 text")
         for m in re.finditer(rb'<include[^>]*filename="([^"$]*)"', data):
             todo.append(f.parent / m.group(1).decode())
-    return SceneError(path, None, "malformed XML: Mitsuba's parser failed on bytes that are not UTF-8 text")
+    return SceneError(Loc(path), "malformed XML: Mitsuba's parser failed on bytes that are not UTF-8 text")
 
 
 # ------------------------------------------------------------------ plugins

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import DrptError, SceneError
+from ...errors import DrptError, Loc, SceneError, SceneWarning, located
 from ...options import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP
 from ...shading import MeshAttribute, Texture
 from ..model import (
@@ -88,7 +88,7 @@ def mitsuba_sample_count(plugin: str, spp: int) -> int:
     return spp
 
 
-def _material(name: str, origin: str, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
+def _material(name: str, loc: Loc, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
     texture = None
     if isinstance(emission, Texture):  # a textured area emitter: its mean radiance for the power
         from ...imageio import read_image
@@ -97,7 +97,7 @@ def _material(name: str, origin: str, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) 
         img = read_image(texture.path, linear=not texture.raw)
         img = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img[..., :3]
         emission = tuple(float(x) for x in img.reshape(-1, 3).mean(0))
-    return Material(name, emission=emission, origin=origin, bsdf=spec, emission_texture=texture,
+    return Material(name, emission=emission, loc=loc, bsdf=spec, emission_texture=texture,
                     **legacy_fields(spec))
 
 
@@ -107,7 +107,7 @@ class Reader:
         self.path = Path(path).expanduser().resolve()
         if not self.path.is_file():
             what = "not a regular file" if self.path.exists() else "no such file"
-            raise SceneError(path, None, what)
+            raise SceneError(Loc(path), what)
         self.ignore_unsupported = ignore_unsupported
         self.strict = strict
         self.state = State(self.path, dict(defines or {}))
@@ -115,7 +115,7 @@ class Reader:
         self.unread_params: list[str] = []
         self.not_read: list[str] = []  # what drpt left out or replaced, one line each
         self.defines = {k: str(v) for k, v in (defines or {}).items()}
-        self.warnings: list[str] = []
+        self.warnings: list[SceneWarning] = []
         # outputs
         self.mat_list: list[Material] = []
         self.mat_index: dict[tuple, int] = {}
@@ -137,17 +137,18 @@ class Reader:
         self.settings = RenderSettings()
 
     # ------------------------------------------------------------ reporting
-    def warn(self, message: str) -> None:
-        self.warnings.append(message)
+    def warn(self, loc: Loc, message: str) -> None:
+        """A warning about the file at ``loc``, given once the whole file is read."""
+        self.warnings.append(SceneWarning(loc, message))
 
     def unsupported(self, node: Node, what: str, fallback: str | None = None) -> None:
         """Refuse ``what`` at ``node`` (a SceneError), or with ``--ignore-unsupported``
         warn and go on (the caller uses ``fallback``, or leaves the node out)."""
         if not self.ignore_unsupported:
             raise node.error(f"unsupported {what} (--ignore-unsupported renders without it)")
-        message = f"{node.where}: unsupported {what}: " + (f"using {fallback}" if fallback else "left out")
-        self.warn(message)
-        self.not_read.append(message)
+        message = f"unsupported {what}: " + (f"using {fallback}" if fallback else "left out")
+        self.warn(node.loc, message)
+        self.not_read.append(located(message, node.loc))
 
     def drpt_ignores(self, node: Node, name: str, why: str) -> None:
         """A parameter the plugin reads that drpt does not honor."""
@@ -174,9 +175,9 @@ class Reader:
         if self.strict:
             raise node.error(f"{node.label} does not read parameter{'s' if len(names) > 1 else ''} "
                              f"{listed} (without --strict drpt ignores them)")
-        self.unread_params.append(f"{listed} of {node.label} at {node.where}")
-        self.not_read.append(f"{node.where}: parameter{'s' if len(names) > 1 else ''} {listed} of "
-                             f"{node.label}: not read")
+        self.unread_params.append(f"{listed} of {node.label} at {node.loc}")
+        self.not_read.append(located(f"parameter{'s' if len(names) > 1 else ''} {listed} of "
+                                     f"{node.label}: not read", node.loc))
 
     # ------------------------------------------------------------ the scene
     def read(self) -> Scene:
@@ -202,10 +203,10 @@ class Reader:
                 self.unsupported(child, f"{child.label}")
         if not sensors:
             raise root.error("the scene has no <sensor> (camera)") if root.line else \
-                SceneError(self.path, 1, "the scene has no <sensor> (camera)")
+                SceneError(Loc(self.path, 1), "the scene has no <sensor> (camera)")
         if len(sensors) > 1:
-            self.warn(f"{sensors[1].where}: {len(sensors)} sensors: drpt renders the first "
-                      f"({sensors[0].where}), as Mitsuba's render() does by default")
+            self.warn(sensors[1].loc, f"{len(sensors)} sensors: drpt renders the first "
+                      f"({sensors[0].loc}), as Mitsuba's render() does by default")
         self.sensor(sensors[0])
         if integrators:
             self.integrator(integrators[0])
@@ -218,7 +219,7 @@ class Reader:
 
     def _report(self) -> None:
         if self.unread_params:
-            self.warn(f"{self.path}: ignored parameters their plugins do not read (Mitsuba 3 refuses "
+            self.warn(Loc(self.path), "ignored parameters their plugins do not read (Mitsuba 3 refuses "
                       f"them; --strict makes this an error): {'; '.join(self.unread_params)}")
         for w in [*self.state.notes, *self.warnings]:
             warnings.warn(w, stacklevel=3)
@@ -261,7 +262,7 @@ class Reader:
                     [(mesh.attributes or {}).get(name, np.zeros((len(mesh), 3, c))) for mesh, _ in self.meshes])
             bad = ~np.isfinite(pos) | (np.abs(pos) > MAX_COORDINATE)
             if bad.any():
-                raise SceneError(self.path, None, f"{int(bad.any(axis=(1, 2)).sum())} triangles have "
+                raise SceneError(Loc(self.path), f"{int(bad.any(axis=(1, 2)).sum())} triangles have "
                                  f"coordinates beyond {MAX_COORDINATE:g} or not finite")
         else:
             tris = Triangles.empty()
@@ -323,7 +324,7 @@ class Reader:
                 if rounded > MAX_SPP:
                     raise sampler.error(f"{sampler.label}: sample_count {spp} rounds up to {rounded} "
                                         f"(as Mitsuba rounds it), beyond {MAX_SPP}")
-                self.warn(f"{sampler.where}: sampler '{sampler.plugin}': sample_count {spp} rounded up "
+                self.warn(sampler.loc, f"sampler '{sampler.plugin}': sample_count {spp} rounded up "
                           f"to {rounded}, as Mitsuba does")
             self.settings.spp = rounded
             if crop[2] * crop[3] * rounded > MAX_SAMPLES:
@@ -453,7 +454,7 @@ class Reader:
         s.integrator = {"ptracer": "ptracer", "volpath": "volpath", "volpathmis": "volpath"}.get(node.plugin, "path")
         if node.plugin in ("path", "ptracer", "volpath", "volpathmis"):
             s.max_depth = node.int("max_depth", -1)
-            s.origin["max_depth"] = node.where
+            s.origin["max_depth"] = node.loc
             s.rr_depth = node.int("rr_depth", 5)
             if s.max_depth is not None and not -1 <= s.max_depth <= MAX_DEPTH:
                 raise node.error(f"{node.label}: max_depth must be -1 or between 0 and {MAX_DEPTH}, "
@@ -568,7 +569,7 @@ class Reader:
         self.check_unread(node)
         self.medium_index[node.index] = len(self.media)
         medium = Medium(node.id or f"{node.plugin}@{node.line}", tuple(sigma_t), tuple(albedo),
-                        scale, phase, g, node.where, g2=g2, blend=blend)
+                        scale, phase, g, node.loc, g2=g2, blend=blend)
         if "sigma_t" in grids:  # (a constant extinction: a homogeneous medium, any albedo grid aside)
             medium.sigma_t_grid, medium.albedo_grid = grids["sigma_t"], grids.get("albedo")
             majorant = medium.sigma_t_grid.max * scale
@@ -646,13 +647,13 @@ class Reader:
         if key not in self.mat_index:
             if bsdf_node is not None:
                 name = bsdf_node.id or f"{bsdf_node.plugin}@{bsdf_node.line}"
-                origin = bsdf_node.where
+                loc = bsdf_node.loc
             else:
-                name, origin = "default", shape.where
+                name, loc = "default", shape.loc
             if isinstance(emission, Texture) or max(emission) > 0:
                 name += "+area"
             self.mat_index[key] = len(self.mat_list)
-            mat = _material(name, origin, spec, emission)
+            mat = _material(name, loc, spec, emission)
             mat.interior, mat.exterior = interior, exterior
             self.mat_list.append(mat)
         return self.mat_index[key]
@@ -693,7 +694,7 @@ class Reader:
                 self.meshes.append((mesh, k))
                 self.mesh_shapes.append((self.shape_count, True))
             else:
-                self.warn(f"{node.where}: {node.label} has no faces")
+                self.warn(node.loc, f"{node.label} has no faces")
         elif plugin == "sphere":
             center = node.vector("center", (0.0, 0.0, 0.0))
             radius = node.float("radius", 1.0)
@@ -713,7 +714,7 @@ class Reader:
             else:
                 why = ("flip_normals" if (flip ^ mirrored) else "a to_world that is not a similarity"
                        if not similar else "a texture (drpt's analytic spheres have no uvs)")
-                self.warn(f"{node.where}: {node.label} with {why} is tessellated "
+                self.warn(node.loc, f"{node.label} with {why} is tessellated "
                           f"({geo.SPHERE_STACKS}x{geo.SPHERE_SLICES} quads)")
                 self.meshes.append((geo.tessellate_sphere(local, flip ^ mirrored), k))
                 self.mesh_shapes.append((self.shape_count, False))
@@ -759,7 +760,7 @@ class Reader:
             if not max(abs(x) for x in pos) <= MAX_COORDINATE:
                 raise node.error(f"{node.label}: position {pos} is beyond {MAX_COORDINATE:g} or not finite")
             color = self._intensity(node, "intensity")
-            self.lights.append(PointLight(tuple(float(x) for x in pos), color))
+            self.lights.append(PointLight(tuple(float(x) for x in pos), color, loc=node.loc))
         elif p == "spot":
             m = np.eye(4) if m is None else m
             similar, _ = geo.is_similarity(m)
@@ -778,7 +779,7 @@ class Reader:
             frame = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0)
             self.lights.append(SpotLight(tuple(float(x) for x in m[:3, 3]), tuple(float(x) for x in axis),
                                          color, cutoff, beam, texture=texture,
-                                         frame=tuple(float(x) for x in frame.ravel())))
+                                         frame=tuple(float(x) for x in frame.ravel()), loc=node.loc))
         elif p == "projector":
             self.projector(node, np.eye(4) if m is None else m)
         elif p == "directional":
@@ -794,7 +795,7 @@ class Reader:
                 self.unsupported(node.ref("irradiance"), "textured irradiance", fallback="1")
                 e = (1.0, 1.0, 1.0)
             _nonnegative(node, "irradiance", e)
-            self.lights.append(DirectionalLight(tuple(float(x) for x in d), e))
+            self.lights.append(DirectionalLight(tuple(float(x) for x in d), e, loc=node.loc))
         elif p == "constant":
             if node.is_ref("radiance"):
                 self.unsupported(node.ref("radiance"), "textured constant emitter", fallback="1")
@@ -823,7 +824,7 @@ class Reader:
                 if not np.allclose(r, np.eye(3), atol=1e-12):
                     rot = r
             # Mitsuba's envmap is infinitely far; drpt's Skybox radius only feeds a warning
-            self.lights.append(Skybox(path, radius=1e30, scale=scale, rotation=rot))
+            self.lights.append(Skybox(path, radius=1e30, scale=scale, rotation=rot, loc=node.loc))
         else:
             self.unsupported(node, f"emitter '{p}'")
             return
@@ -867,13 +868,13 @@ class Reader:
         fov_x = 2.0 * math.degrees(math.atan(math.tan(math.radians(fov_y) / 2.0) * aspect))
         self.lights.append(ProjectorLight(tuple(float(x) for x in m[:3, 3]),
                                           tuple(float(x) for x in m[:3, :3].ravel()), fov_x, irr,
-                                          aspect, scale))
+                                          aspect, scale, loc=node.loc))
 
     def _environment(self, node: Node) -> None:
         seen = getattr(self, "_env_node", None)
         if seen is not None:
             raise node.error(f"only one environment emitter per scene (as in Mitsuba; the first is "
-                             f"at {seen.where})")
+                             f"at {seen.loc})")
         self._env_node = node
 
     def _intensity(self, node: Node, name: str) -> tuple:

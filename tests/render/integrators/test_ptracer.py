@@ -267,3 +267,20 @@ Group { numObjects 1
 """)
     with pytest.raises(DrptError, match="emissive planes"):
         _render(load_scene(lit), "ptracer", 4)
+
+
+def test_a_point_light_with_attenuation_is_refused_at_its_line(tmp_path):
+    from drpt.errors import Loc, SceneError
+
+    p = tmp_path / "att.txt"
+    p.write_text("""PerspectiveCamera { center 0 0 5 direction 0 0 -1 up 0 1 0 angle 40 }
+Lights { numLights 1
+  PointLight { position 0 2 2 color 1 1 1 attenuation 1 0 0 }
+}
+Group { numObjects 1
+  Sphere { center 0 0 0 radius 1 }
+}
+""")
+    with pytest.raises(SceneError, match="physical point lights") as e:
+        _render(load_scene(p), "ptracer", 4)
+    assert e.value.loc == Loc(p.resolve(), 3)

@@ -454,3 +454,21 @@ def test_check_radius():
     # infinite (plane) extents and empty boxes are ignored
     assert check_radius((-np.inf, 0, -1), (np.inf, 1, 1), 1000.0) is None
     assert check_radius((1, 1, 1), (-1, -1, -1), 1.0) is None
+
+
+def test_sky_warnings_name_the_skybox_line(tmp_path):
+    from drpt.errors import Loc
+    from drpt.options import RenderOptions
+    from drpt.render.scene import DeviceScene
+    from drpt.scene import load_scene
+
+    write_image(tmp_path / "sky.exr", gradient_map(8, 16))
+    p = tmp_path / "s.txt"
+    p.write_text("PerspectiveCamera { center 0 0 5 direction 0 0 -1 up 0 1 0 angle 40 }\n"
+                 "Lights { numLights 2\n  Skybox { sky.exr R 1 }\n  Skybox { sky.exr }\n}\n"
+                 "Group { numObjects 1\n  Sphere { center 0 0 0 radius 3 }\n}\n")
+    scene = load_scene(p)
+    assert [sky.loc for sky in scene.lights] == [Loc(p.resolve(), 3), Loc(p.resolve(), 4)]
+    warnings_ = DeviceScene(scene, RenderOptions(progress=False)).warnings
+    assert f"{p.resolve()}:4: 2 Skybox lights: using the first" in warnings_, warnings_
+    assert any(w.startswith(f"{p.resolve()}:3: skybox radius 1: geometry reaches") for w in warnings_), warnings_

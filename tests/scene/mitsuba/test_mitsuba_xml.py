@@ -177,7 +177,7 @@ def test_bsdf_specs():
     assert leaf.kind == "mask" and leaf.params == {"opacity": 0.7}
     (two,) = leaf.children
     assert two.kind == "twosided" and two.children[0].params["kd"].path == tex
-    assert all(m.origin.startswith(str(XML / "bsdfs.xml:")) for m in s.materials)
+    assert all(m.loc.file == str(XML / "bsdfs.xml") and m.loc.line for m in s.materials)
 
 
 def test_legacy_06_file_is_upgraded_and_unread_parameters_warned_once():
