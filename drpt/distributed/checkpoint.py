@@ -20,7 +20,7 @@ import json
 import os
 import pickle
 import stat
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path, PurePath
 
 import numpy as np
@@ -93,7 +93,7 @@ def options_key(opts) -> dict:
     """The options that shape the image (all but ``progress``), with the backend."""
     from ..backend import name
 
-    d = asdict(opts)
+    d = asdict(replace(opts, max_lanes=opts.lanes))  # None and the default it stands for alike
     d.pop("progress", None)
     d["backend"] = name()
     return d

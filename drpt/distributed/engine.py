@@ -194,10 +194,9 @@ class DaskEngine:
         except ImportError:
             raise DrptError("--workers/--cluster need Dask distributed: "
                             "pip install 'drpt[cluster]' (or pip install distributed)") from None
-        from ..backend import name, policy
+        from ..backend import name
 
-        if opts.max_lanes is None:  # the coordinator's, not each worker's, default
-            opts = replace(opts, max_lanes=policy().max_lanes)
+        opts = replace(opts, max_lanes=opts.lanes)  # the coordinator's, not each worker's, default
         if address is not None:
             check_address(address)
         self.scene, self.opts, self.backend = scene, opts, name()

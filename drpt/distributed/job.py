@@ -22,7 +22,6 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..backend import policy
 from ..errors import note
 from ..render.chunks import ChunkMerge, ChunkResult, plan_chunks
 from . import checkpoint
@@ -121,8 +120,7 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
 
     W, H, spp = opts.width, opts.height, opts.spp
     light_tracing = opts.integrator == "ptracer"
-    max_lanes = policy().max_lanes if opts.max_lanes is None else opts.max_lanes
-    chunks = plan_chunks(W, H, spp, max_lanes, opts.chunk_spp)
+    chunks = plan_chunks(W, H, spp, opts.lanes, opts.chunk_spp)
     key = checkpoint.scene_hash(scene)
     okey = checkpoint.options_key(opts)
     checkpoint.check_paths(output)

@@ -285,9 +285,8 @@ class Renderer:
 
     @property
     def max_lanes(self) -> int:
-        """Samples traced at once: the option, else the backend's default."""
-        lanes = self.opt.max_lanes
-        return policy().max_lanes if lanes is None else lanes
+        """Samples traced at once (:attr:`RenderOptions.lanes`)."""
+        return self.opt.lanes
 
     def _pass(self, pass_index: int, k: int, r0: int, rows: int) -> PassSums:
         """The :class:`PassSums` of the ``k`` samples of each pixel of rows

@@ -24,6 +24,7 @@ Conventions
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -98,6 +99,24 @@ class PerspectiveCamera:
     #: AOV is the distance from there; drpt's rays start at ``center`` (only the depth AOV
     #: reads it)
     near_clip: float = 0.0
+
+
+def vertical_fov(fov: float, axis: str, aspect: float) -> float:
+    """drpt's vertical field of view (degrees) for Mitsuba's ``fov`` along ``fov_axis``
+    on a film of ``aspect = width / height`` (Mitsuba's ``parse_fov``, then x to y)."""
+    if axis == "smaller":
+        axis = "y" if aspect > 1 else "x"
+    elif axis == "larger":
+        axis = "x" if aspect > 1 else "y"
+    t = math.tan(math.radians(fov) / 2.0)
+    if axis == "y":
+        ty = t
+    elif axis == "x":
+        ty = t / aspect
+    else:  # diagonal: the half diagonal is t, the half height t / sqrt(1 + aspect^2)
+        ty = t / math.sqrt(1.0 + aspect * aspect)
+    return math.degrees(2.0 * math.atan(ty))
+
 
 
 @dataclass
@@ -322,7 +341,7 @@ class Background:
 class RenderSettings:
     """How the scene file says to render it (a Mitsuba XML's film, sampler,
     integrator and filter); ``None``: the file does not say. Command-line
-    flags win over these (:func:`drpt.options.apply_scene_settings`)."""
+    flags win over these (:func:`drpt.options.with_scene_settings`)."""
 
     width: int | None = None
     height: int | None = None

@@ -15,7 +15,7 @@ binned SAH everywhere, ``bvh-morton``, ``bvh-ploc`` (bottom-up clustering),
 (the seed's rule, SAH only in nodes of at most ``2 * --sah-threshold``
 primitives, default 2000), so the seed's table (grid vs BVH without SAH vs
 BVH with SAH) is ``--accel grid,bvh-median,bvh-threshold,bvh-sah``. The other
-render flags are ``render``'s (:func:`drpt.options.add_render_flags`; ``--size``
+render flags are ``render``'s (:func:`drpt.cli.args.add_render_flags`; ``--size``
 default 256 256, ``--spp`` 16; ``--seed`` also seeds the random rays). Per
 accelerator:
 
@@ -73,7 +73,7 @@ RATIOS = [("ratio_build", "build / load"), ("ratio_primary", "primary hit"),
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``bench`` subcommand on an ``add_subparsers()`` object."""
-    from ..options import add_render_flags
+    from ..cli.args import add_render_flags
 
     p = subparsers.add_parser(
         "bench", allow_abbrev=False,
@@ -421,7 +421,8 @@ def main(args: argparse.Namespace) -> int:
 
     from ..accel import resolve_kind
     from ..backend import ensure
-    from ..options import options_from_args, parse_accel_list
+    from ..cli.args import options_from_args
+    from ..options import parse_accel_list
     from ..scene import load_scene
 
     # --accel, --sah-threshold and --min-leaf are bench's own (a list, and per-row values)

@@ -7,7 +7,7 @@ Two forms::
     python -m drpt compare A.exr B.exr [--out DIR]
 
 Scene form
-    The render flags are ``render``'s (:func:`drpt.options.add_render_flags`:
+    The render flags are ``render``'s (:func:`drpt.cli.args.add_render_flags`:
     ``--size`` (default 128 128), ``--spp`` (default 64), ``--bsdf``,
     ``--max-depth``, ``--rr-depth``, ``--accel``, ``--seed``, ``--backend``,
     ...). The scene is rendered by Mitsuba's ``path`` integrator on drpt's
@@ -86,7 +86,7 @@ __all__ = ["add_parser", "main", "compare_images", "compare_scene"]
 # ------------------------------------------------------------------ parser
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``compare`` subcommand on an ``add_subparsers()`` object."""
-    from ..options import add_render_flags
+    from ..cli.args import add_render_flags
 
     p = subparsers.add_parser(
         "compare", allow_abbrev=False,
@@ -111,7 +111,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``compare`` for parsed ``args``; user errors raise DrptError."""
-    from ..options import options_from_args
+    from ..cli.args import options_from_args
 
     inputs = [Path(s) for s in args.inputs]
     if len(inputs) > 2:
@@ -366,7 +366,7 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
 
     A Mitsuba XML scene: with ``args`` (the parsed command line), the file's own
     size, spp, depths, ``hide_emitters`` and filter apply where no flag was given
-    (:func:`~drpt.options.apply_scene_settings`), and Mitsuba renders the reference
+    (:func:`~drpt.options.with_scene_settings`), and Mitsuba renders the reference
     from the file itself (:class:`~drpt.tools.xmlref.MitsubaXML`), not from drpt's
     export: the same size, and the file's filter and integrator unless ``options``
     differ from them."""
@@ -379,11 +379,12 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
     scene = load_scene(scene_path)
     source = None
     if scene_path.suffix.lower() == ".xml":
-        from ..options import apply_scene_settings
+        from ..cli.args import given_settings
+        from ..options import with_scene_settings
         from .xmlref import MitsubaXML
 
         if args is not None:
-            options = apply_scene_settings(options, scene, args)
+            options, scene = with_scene_settings(options, scene, given_settings(args))
         not_read = list(getattr(scene.settings, "not_read", ()))
         if not_read and not getattr(args, "ignore_unsupported", False):
             raise DrptError(f"{scene_path}: drpt does not read all of the file ({not_read[0]}"

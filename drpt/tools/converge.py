@@ -6,7 +6,7 @@
                                   [--ref-batches B] [--levels E ...]
                                   [--cache DIR | --no-cache] [--out DIR]
 
-The render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
+The render flags are ``render``'s (:func:`drpt.cli.args.add_render_flags`,
 ``--size`` default 64 64; no ``--spp``: the levels set it). drpt and Mitsuba
 (``path`` on drpt's backend, the exported scene) each render
 the scene at 1, 2, 4, ..., ``--max-spp`` samples per pixel, every level with
@@ -97,7 +97,7 @@ __all__ = ["add_parser", "main", "noise_floor", "excess_rel_mse", "loglog_slope"
 # ------------------------------------------------------------------ parser
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``converge`` subcommand on an ``add_subparsers()`` object."""
-    from ..options import add_render_flags
+    from ..cli.args import add_render_flags
 
     p = subparsers.add_parser(
         "converge", allow_abbrev=False,
@@ -129,7 +129,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def main(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from ..options import options_from_args
+    from ..cli.args import options_from_args
 
     options = options_from_args(args, adaptive=False)  # (--adaptive adds rows of its own)
     if args.denoise:

@@ -9,7 +9,7 @@ The scenes are the entries of the committed reference table
 (:data:`drpt.tools.reference.REFERENCES`): each names a bundled scene file
 and the material mode and depth it is rendered with (``cornellbox`` and
 ``cornellbox_ct`` are the Cornell box read as Phong and as Cook-Torrance).
-The other render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
+The other render flags are ``render``'s (:func:`drpt.cli.args.add_render_flags`,
 ``--spp`` default 64). The dining room is generated first
 (:mod:`drpt.tools.scenegen.diningroom`, ~6 s) when ``scenes/diningroom/`` is
 missing.
@@ -62,7 +62,7 @@ __all__ = ["add_parser", "main", "downsample", "render_gallery"]
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``gallery`` subcommand on an ``add_subparsers()`` object."""
-    from ..options import add_render_flags
+    from ..cli.args import add_render_flags
 
     p = subparsers.add_parser(
         "gallery", allow_abbrev=False,
@@ -230,7 +230,7 @@ def _write_pages(out: Path, rows: list[dict]) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``gallery`` for parsed ``args``; user errors raise DrptError."""
-    from ..options import options_from_args
+    from ..cli.args import options_from_args
 
     options = options_from_args(args)
     names = None

@@ -7,7 +7,7 @@
                                [--depths D ...] [--rr-depths K ...] [--rr-probs P ...]
                                [--repeats R] [--cache DIR | --no-cache] [--out DIR]
 
-The render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
+The render flags are ``render``'s (:func:`drpt.cli.args.add_render_flags`,
 ``--size`` default 64 64, ``--spp`` 64) except the knobs it varies
 (``--max-depth``, ``--rr-depth``, ``--rr-prob``, ``--accel`` and the BVH's).
 
@@ -118,7 +118,7 @@ def default_knobs() -> list[str]:
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``knobs`` subcommand on an ``add_subparsers()`` object."""
-    from ..options import add_render_flags
+    from ..cli.args import add_render_flags
 
     p = subparsers.add_parser(
         "knobs", allow_abbrev=False,
@@ -146,7 +146,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..options import options_from_args
+    from ..cli.args import options_from_args
 
     options = options_from_args(args)
     scene = Path(args.scene)

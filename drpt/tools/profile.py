@@ -176,7 +176,7 @@ class ProfileOptions:
     """What ``profile`` renders (``render``, a :class:`~drpt.options.RenderOptions`;
     its progress bar is off) and how many timed renders per mode (``repeat``)."""
 
-    render: RenderOptions = field(default_factory=lambda: RenderOptions(width=128, height=128))
+    render: RenderOptions = field(default_factory=lambda: RenderOptions(width=128, height=128, spp=16))
     repeat: int = 1  # timed renders per mode; the fastest is kept
 
     @property
@@ -193,7 +193,7 @@ class ProfileOptions:
 
     @property
     def max_lanes(self) -> int:
-        return self.render.max_lanes
+        return self.render.lanes
 
     def as_dict(self) -> dict:
         return {**asdict(self.render), "repeat": self.repeat}
@@ -645,7 +645,7 @@ def save_chart(results: list[ModeResult], out: Path, title: str) -> None:
 # --------------------------------------------------------------------------- command line
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    from ..options import add_render_flags
+    from ..cli.args import add_render_flags
 
     p = subparsers.add_parser("profile", help="profile a render: megakernel vs wavefront, per stage",
                               description=__doc__.split("\n")[0], allow_abbrev=False)
@@ -666,7 +666,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..options import options_from_args
+    from ..cli.args import options_from_args
 
     options = options_from_args(args, mode="megakernel")  # profile_mode sets each mode
     if args.repeat <= 0:

@@ -32,6 +32,7 @@ from ..model import (
     Spheres,
     SpotLight,
     Triangles,
+    vertical_fov,
 )
 from . import geometry as geo
 from .materials import BSDFSpec, Materials, default_bsdf, legacy_fields
@@ -915,23 +916,6 @@ def _face_normals(p: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(g, axis=1, keepdims=True)
     g = g / np.where(n > 0, n, 1.0)
     return np.repeat(g[:, None, :], 3, axis=1)
-
-
-def vertical_fov(fov: float, axis: str, aspect: float) -> float:
-    """drpt's vertical field of view (degrees) for Mitsuba's ``fov`` along ``fov_axis``
-    on a film of ``aspect = width / height`` (Mitsuba's ``parse_fov``, then x to y)."""
-    if axis == "smaller":
-        axis = "y" if aspect > 1 else "x"
-    elif axis == "larger":
-        axis = "x" if aspect > 1 else "y"
-    t = math.tan(math.radians(fov) / 2.0)
-    if axis == "y":
-        ty = t
-    elif axis == "x":
-        ty = t / aspect
-    else:  # diagonal: the half diagonal is t, the half height t / sqrt(1 + aspect^2)
-        ty = t / math.sqrt(1.0 + aspect * aspect)
-    return math.degrees(2.0 * math.atan(ty))
 
 
 def orthographic_from_matrix(node: Node, m: np.ndarray, aspect: float,
