@@ -51,8 +51,13 @@ from collections import defaultdict
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from ..backend import ensure, jit_backend
+from ..cli.args import add_render_flags, options_from_args
 from ..errors import DrptError
 from ..options import RenderOptions
+from ..render.integrators.wavefront import OUTSIDE, WaveStats
+from ..render.renderer import Renderer, plan_passes
+from ..scene import load_scene
 
 MODES = ("megakernel", "wavefront")
 
@@ -202,8 +207,6 @@ class ProfileOptions:
 def _renderer(scene, popt: ProfileOptions):
     from dataclasses import replace
 
-    from ..render.renderer import Renderer
-
     return Renderer(scene, replace(popt.render, progress=False))
 
 
@@ -327,8 +330,6 @@ def _wavefront_stages(renderer, sort: bool) -> tuple[list[Stage], float, list[li
     paths per bounce of each pass."""
     import drjit as dr
 
-    from ..render.integrators.wavefront import OUTSIDE, WaveStats
-
     integ = renderer.integrator
     integ.sort = sort
     integ.stats = WaveStats(history=True)
@@ -362,8 +363,6 @@ def profile_mode(scene, popt: ProfileOptions, mode: str, base=None) -> ModeResul
     from dataclasses import replace
 
     import drjit as dr
-
-    from ..backend import jit_backend
 
     popt = replace(popt, render=replace(popt.render, mode=mode))
     samples = popt.width * popt.height * popt.spp
@@ -433,9 +432,6 @@ TAIL_AB = 16384  # the fused tail the A/B tries (paths left in a pass)
 
 
 def run_profile(scene_path: str | Path, popt: ProfileOptions, modes=MODES) -> list[ModeResult]:
-    from ..backend import ensure
-    from ..scene import load_scene
-
     scene_path = Path(scene_path)
     if not scene_path.is_file():
         raise DrptError(f"{scene_path}: scene file not found")
@@ -443,8 +439,6 @@ def run_profile(scene_path: str | Path, popt: ProfileOptions, modes=MODES) -> li
         raise DrptError(f"profile compares the path tracer's modes, not --integrator {popt.render.integrator}")
     scene = load_scene(scene_path)
     ensure()
-    from ..render.renderer import plan_passes
-
     out = []
     for m in modes:  # one device scene: the wavefront renderer is derived from the first
         out.append(profile_mode(scene, popt, m, out[0].renderer if out else None))
@@ -645,8 +639,6 @@ def save_chart(results: list[ModeResult], out: Path, title: str) -> None:
 # --------------------------------------------------------------------------- command line
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    from ..cli.args import add_render_flags
-
     p = subparsers.add_parser("profile", help="profile a render: megakernel vs wavefront, per stage",
                               description=__doc__.split("\n")[0], allow_abbrev=False)
     p.add_argument("scene", help="scene file")
@@ -666,8 +658,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..cli.args import options_from_args
-
     options = options_from_args(args, mode="megakernel")  # profile_mode sets each mode
     if args.repeat <= 0:
         raise DrptError(f"--repeat must be positive, got {args.repeat}")
