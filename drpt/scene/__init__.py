@@ -12,6 +12,8 @@ import contextlib
 import contextvars
 from pathlib import Path
 
+from ..errors import note
+from .mitsuba import load_mitsuba_xml
 from .model import (
     Background,
     Camera,
@@ -55,8 +57,6 @@ def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupporte
     says so when given for another file; ``None`` takes :func:`xml_flags`' value,
     else none / False)."""
     if Path(path).suffix.lower() == ".xml":
-        from .mitsuba import load_mitsuba_xml
-
         ctx = _XML_FLAGS.get() or {}
         return load_mitsuba_xml(
             path, ctx.get("defines") if defines is None else defines,
@@ -68,8 +68,6 @@ def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupporte
                                    ("--ignore-unsupported", ignore_unsupported or ctx.get("ignore_unsupported")),
                                    ("--strict", strict or ctx.get("strict"))) if on]
     if given:
-        from ..errors import note
-
         verb = "applies" if len(given) == 1 else "apply"
         note(f"{' and '.join(given)} {verb} to Mitsuba XML scenes only: ignored", file=path)
     return _load_drpt_scene(path)

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from ..shading import BSDFSpec
+    from ..shading import BSDFSpec  # an annotation only: drpt.shading imports this module
 
 Vec3 = tuple[float, float, float]
 

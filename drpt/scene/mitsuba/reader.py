@@ -11,7 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ...aovs import parse_aovs
 from ...errors import DrptError, SceneError
+from ...imageio import read_image
 from ...options import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP
 from ...shading import MeshAttribute, Texture
 from ..model import (
@@ -92,8 +94,6 @@ def mitsuba_sample_count(plugin: str, spp: int) -> int:
 def _material(name: str, origin: str, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
     texture = None
     if isinstance(emission, Texture):  # a textured area emitter: its mean radiance for the power
-        from ...imageio import read_image
-
         texture = emission
         img = read_image(texture.path, linear=not texture.raw)
         img = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img[..., :3]
@@ -426,8 +426,6 @@ class Reader:
         if node.plugin == "aov":
             # Mitsuba's aov: its first nested integrator renders the image; the AOVs named
             # by ``aovs`` (name:type pairs) become EXR layers (drpt.aovs)
-            from ...aovs import parse_aovs
-
             nested = [(k, c) for k, c in node.objects() if c.kind == "integrator"]
             for _, c in node.objects():
                 if c.kind != "integrator":
@@ -851,8 +849,6 @@ class Reader:
             if irr is None:
                 irr = (1.0, 1.0, 1.0)
             else:
-                from ...imageio import read_image
-
                 h, w = read_image(irr.path, linear=False).shape[:2]
                 aspect = w / h
         else:
