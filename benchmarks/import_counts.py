@@ -79,9 +79,16 @@ def _module_level_imports(tree: ast.Module):
             stack.extend(node.body)
 
 
+def _ancestors(name: str) -> list[str]:
+    parts = name.split(".")
+    return [".".join(parts[:i]) for i in range(1, len(parts))]
+
+
 def graph(root: Path = ROOT) -> dict[str, set[str]]:
     """``{module: modules it imports at module level}`` within drpt. ``from P import n``
-    is an edge to ``P.n`` when that is a module, else to ``P``."""
+    is an edge to ``P.n`` when that is a module, else to ``P``; importing a module also
+    runs its packages' ``__init__``, so an edge goes to each package above the target that
+    is not above the importer too (those are being imported already)."""
     mods = modules(root)
     out: dict[str, set[str]] = {}
     for name, path in mods.items():
@@ -98,7 +105,10 @@ def graph(root: Path = ROOT) -> dict[str, set[str]]:
                     mod = node.module or ""
                 targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in mods else mod
                            for a in node.names]
-            edges |= {t for t in targets if t in mods and t != name}
+            own = set(_ancestors(name))
+            for t in targets:
+                edges |= {m for m in (t, *_ancestors(t)) if m in mods and m not in own}
+            edges.discard(name)
         out[name] = edges
     return out
 

@@ -34,7 +34,7 @@ from .aovs import check_aovs
 from .backend import policy
 from .errors import DrptError
 from .filters import parse_filter
-from .scene.model import vertical_fov
+from .scene.model import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP, vertical_fov
 
 BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
 INTEGRATORS = ("path", "whitted", "ptracer", "volpath")
@@ -47,12 +47,10 @@ SAMPLERS = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "
 BVH_KINDS = ("bvh", "bvh2", "bvh4")
 GRID_MAX_RESOLUTION = 256
 
-# Limits of the numbers the renderer and the Mitsuba export hold (RenderOptions.validate):
-MAX_SIZE = 1 << 16  # pixels per side: pixel coordinates and their jitter are float32
-MAX_SPP = (1 << 32) - 1  # samples per pixel: Mitsuba's sample_count is 32-bit
-MAX_SAMPLES = 1 << 60  # width * height * spp: PCG32 sequence ids (pass * lanes + lane) stay < 2^63
+# Limits of the numbers the renderer and the Mitsuba export hold (RenderOptions.validate);
+# those a scene file's render settings also hold (MAX_SIZE, MAX_SPP, MAX_SAMPLES, MAX_DEPTH)
+# are drpt.scene.model's, which the XML reader checks:
 MAX_LANES = (1 << 32) - 1  # lanes per pass: lane ids are UInt32
-MAX_DEPTH = (1 << 32) - 1  # --max-depth, --rr-depth: path depths are UInt32
 MAX_SEED = (1 << 64) - 1  # the seed is hashed as a 64-bit integer
 
 #: the most samples per pixel of a --target-error or --time-limit render without --spp

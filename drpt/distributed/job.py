@@ -24,7 +24,9 @@ from pathlib import Path
 
 from ..errors import note
 from ..render.chunks import ChunkMerge, ChunkResult, plan_chunks
+from ..render.renderer import Renderer, finish, stop_estimate, stops
 from . import checkpoint
+from .engine import DaskEngine
 
 
 class LocalEngine:
@@ -32,8 +34,6 @@ class LocalEngine:
 
     def __init__(self, scene, opts):
         from dataclasses import replace
-
-        from ..render.renderer import Renderer
 
         self.renderer = Renderer(scene, replace(opts, progress=False))
         self.sent_warnings = False
@@ -116,8 +116,6 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     workers)."""
     from tqdm import tqdm
 
-    from ..render.renderer import finish, stop_estimate, stops
-
     W, H, spp = opts.width, opts.height, opts.spp
     light_tracing = opts.integrator == "ptracer"
     chunks = plan_chunks(W, H, spp, opts.lanes, opts.chunk_spp)
@@ -153,8 +151,6 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         engine = LocalEngine(scene, opts)
         report(engine.renderer.warnings)
     else:
-        from .engine import DaskEngine
-
         engine = DaskEngine(scene, key, opts, workers=workers, address=cluster,
                             connect_timeout=connect_timeout)
     t0 = last = time.perf_counter()

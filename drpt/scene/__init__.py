@@ -13,7 +13,6 @@ import contextvars
 from pathlib import Path
 
 from ..errors import note
-from .mitsuba import load_mitsuba_xml
 from .model import (
     Background,
     Camera,
@@ -32,7 +31,6 @@ from .model import (
     SpotLight,
     Triangles,
 )
-from .parser import load_scene as _load_drpt_scene
 
 #: load_scene's XML keyword arguments where a caller gives none (see :func:`xml_flags`)
 _XML_FLAGS: contextvars.ContextVar[dict | None] = contextvars.ContextVar("drpt_xml_flags", default=None)
@@ -56,7 +54,11 @@ def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupporte
     (``defines``, ``ignore_unsupported`` and ``strict`` apply to XML only, a note
     says so when given for another file; ``None`` takes :func:`xml_flags`' value,
     else none / False)."""
+    # the loaders, here and not at the top: they import drpt.shading and drpt.imageio, which
+    # import drpt.scene.model, so importing this package must not import them
     if Path(path).suffix.lower() == ".xml":
+        from .mitsuba import load_mitsuba_xml  # cycle: see above
+
         ctx = _XML_FLAGS.get() or {}
         return load_mitsuba_xml(
             path, ctx.get("defines") if defines is None else defines,
@@ -70,7 +72,9 @@ def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupporte
     if given:
         verb = "applies" if len(given) == 1 else "apply"
         note(f"{' and '.join(given)} {verb} to Mitsuba XML scenes only: ignored", file=path)
-    return _load_drpt_scene(path)
+    from .parser import load_scene as load_drpt_scene  # cycle: see above
+
+    return load_drpt_scene(path)
 
 
 __all__ = [

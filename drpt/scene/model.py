@@ -41,6 +41,12 @@ Vec3 = tuple[float, float, float]
 #: coordinate differences: (2e12)^3 = 8e36 still fits below float32's 3.4e38.
 MAX_COORDINATE = 1e12
 
+# Limits of the render settings a scene file may give (and of drpt.options.RenderOptions):
+MAX_SIZE = 1 << 16  # pixels per side: pixel coordinates and their jitter are float32
+MAX_SPP = (1 << 32) - 1  # samples per pixel: Mitsuba's sample_count is 32-bit
+MAX_SAMPLES = 1 << 60  # width * height * spp: PCG32 sequence ids (pass * lanes + lane) stay < 2^63
+MAX_DEPTH = (1 << 32) - 1  # --max-depth, --rr-depth: path depths are UInt32
+
 
 # --------------------------------------------------------------------- camera
 @dataclass(frozen=True)

@@ -14,10 +14,13 @@ import numpy as np
 from ...aovs import parse_aovs
 from ...errors import DrptError, SceneError
 from ...imageio import read_image
-from ...options import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP
 from ...shading import MeshAttribute, Texture
 from ..model import (
     MAX_COORDINATE,
+    MAX_DEPTH,
+    MAX_SAMPLES,
+    MAX_SIZE,
+    MAX_SPP,
     Background,
     DirectionalLight,
     FilmWindow,
