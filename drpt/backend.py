@@ -33,6 +33,7 @@ import os
 import sys
 from dataclasses import dataclass
 
+from . import llvm_tuning
 from .errors import DrptError
 
 MIN_LLVM = 16
@@ -203,8 +204,6 @@ def ensure_llvm() -> None:
             f"on this CPU: {INSTALL_HINT}"
         )
     _checked.add("llvm-version")
-    from . import llvm_tuning
-
     llvm_tuning.apply()
 
 
