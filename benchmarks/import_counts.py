@@ -6,8 +6,9 @@ Prints
 
 * the count of indented ``drpt`` imports, as
   ``grep -rnE "^\\s+(from \\.|from drpt|import drpt)" drpt | wc -l`` counts them (imports
-  inside functions, classes and module-level ``if``/``try`` blocks alike), and how many of
-  them lack a ``# reason`` comment on their line (``--list`` lists them all);
+  inside functions, classes and module-level ``if``/``try`` blocks alike, and docstring
+  lines that look like one), the same without the docstring lines, and how many of the
+  imports lack a ``# reason`` comment on their line (``--list`` lists them all);
 * the import cycles among drpt's modules through module-level imports: each strongly
   connected component of the graph whose edges are the ``import`` statements a module runs
   when it is imported (those inside functions and under ``if TYPE_CHECKING:`` excluded).
@@ -38,12 +39,24 @@ def modules(root: Path = ROOT) -> dict[str, Path]:
     return out
 
 
-def indented_imports(root: Path = ROOT) -> list[tuple[str, int, str]]:
-    """``(file, line number, line)`` of every indented drpt import (the grep's count)."""
+def _string_lines(tree: ast.Module) -> set[int]:
+    """Lines inside multi-line string constants (docstrings' examples)."""
+    out: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.end_lineno:
+            out.update(range(node.lineno + 1, node.end_lineno + 1))
+    return out
+
+
+def indented_imports(root: Path = ROOT, *, strings: bool = False) -> list[tuple[str, int, str]]:
+    """``(file, line number, line)`` of every indented drpt import; with ``strings``
+    also the lines of docstrings that look like one (what the grep counts)."""
     out = []
     for p in modules(root).values():
-        for i, line in enumerate(p.read_text().splitlines(), 1):
-            if INDENTED.match(line):
+        text = p.read_text()
+        skip = set() if strings else _string_lines(ast.parse(text))
+        for i, line in enumerate(text.splitlines(), 1):
+            if INDENTED.match(line) and i not in skip:
                 out.append((str(p.relative_to(root)), i, line.strip()))
     return out
 
@@ -153,7 +166,10 @@ def cycles(g: dict[str, set[str]]) -> list[list[str]]:
 
 def main(argv: list[str]) -> int:
     found = indented_imports()
+    grep = indented_imports(strings=True)
     missing = [f for f in found if not has_reason(f[2])]
+    print(f"indented drpt import lines (the grep's count): {len(grep)}, "
+          f"{len(grep) - len(found)} of them in docstrings")
     print(f"indented drpt imports: {len(found)} (without a # reason: {len(missing)})")
     for file, line, text in (found if "--list" in argv else missing):
         print(f"  {file}:{line}: {text}")

@@ -222,12 +222,12 @@ def test_albedo_of_masks_and_blends_is_mitsubas(tmp_path):
 
 # ------------------------------------------------------------------ the kernel
 def test_aov_kernel_is_traced_only_when_asked_for(monkeypatch, cornell):
-    from drpt.render import aov
+    from drpt.render import renderer
 
     def trap(*args, **kwargs):
         raise RuntimeError("traced")
 
-    monkeypatch.setattr(aov, "aov_values", trap)
+    monkeypatch.setattr(renderer, "aov_values", trap)  # the AOV kernel, as the renderer calls it
     opts = RenderOptions(width=4, height=4, spp=1, progress=False)
     r = Renderer(load_scene(cornell), opts).render()  # no AOVs: no AOV kernel
     assert r.aov is None

@@ -48,12 +48,14 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from .. import bsdf_kinds
+from ..errors import SceneError
 from ..scene.model import Scene
 from ..shading import BSDFSpec, Checkerboard, Texture, interpret_scene
 from . import perturb
 from .bsdf import BSDFSample, lobe
 from .perturb import PerturbedFrame
 from .surface import Interaction, _vec
+from .texture import TextureSet
 from .warp import Frame
 
 NONE = 0xFFFFFFFF
@@ -166,8 +168,6 @@ class MaterialTable:
             try:
                 comps.append(_flatten(s) or [_Component(black, False)])
             except ValueError as e:
-                from ..errors import SceneError
-
                 raise SceneError(m.origin or scene.path, None, f"material '{m.name}': {e}") from None
         if not comps:
             comps = [[_Component(black, False)]]
@@ -224,8 +224,6 @@ class MaterialTable:
                 try:
                     values[i].update(derive(dict(values[i])))
                 except ValueError as e:
-                    from ..errors import SceneError
-
                     raise SceneError(self.rows[i].leaf.origin or scene.path, None, str(e)) from None
         self._fields: dict[str, tuple] = {}
         for k in self.kinds:
@@ -286,8 +284,6 @@ class MaterialTable:
         # Textures: one set for every textured field and weight.
         self.textures = None
         if textures:
-            from .texture import TextureSet
-
             self.textures = TextureSet(textures, scene.triangles)
         # materials made only of Dirac lobes (glass, mirrors): Whitted follows them
         delta = [all(self.lobes[c.leaf.kind].DELTA for c in cs) for cs in comps]

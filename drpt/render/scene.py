@@ -43,6 +43,8 @@ from __future__ import annotations
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
+from .. import llvm_tuning
+from ..accel import build_accel
 from ..accel.protocol import INVALID
 from ..options import RenderOptions
 from ..scene.model import Scene, Skybox
@@ -121,9 +123,6 @@ class NoMaterials:
 
 class DeviceScene:
     def __init__(self, scene: Scene, options: RenderOptions):
-        from .. import llvm_tuning
-        from ..accel import build_accel
-
         llvm_tuning.apply()  # as the CLI's backend check does, for API users too
 
         self.accel = build_accel(scene, kind=options.accel, resolution=options.grid_resolution,
