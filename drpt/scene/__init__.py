@@ -57,7 +57,7 @@ def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupporte
     # the loaders, here and not at the top: they import drpt.shading and drpt.imageio, which
     # import drpt.scene.model, so importing this package must not import them
     if Path(path).suffix.lower() == ".xml":
-        from .mitsuba import load_mitsuba_xml  # cycle: see above
+        from .mitsuba import load_mitsuba_xml  # cycle: it imports drpt.shading, which imports drpt.scene.model
 
         ctx = _XML_FLAGS.get() or {}
         return load_mitsuba_xml(
@@ -72,7 +72,7 @@ def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupporte
     if given:
         verb = "applies" if len(given) == 1 else "apply"
         note(f"{' and '.join(given)} {verb} to Mitsuba XML scenes only: ignored", file=path)
-    from .parser import load_scene as load_drpt_scene  # cycle: see above
+    from .parser import load_scene as load_drpt_scene  # cycle: as load_mitsuba_xml above
 
     return load_drpt_scene(path)
 
