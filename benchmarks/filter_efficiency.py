@@ -30,7 +30,7 @@ def main(argv: list[str]) -> None:
     from drpt import llvm_tuning
     from drpt.backend import ensure, set_mitsuba_variant
     from drpt.export.mitsuba import to_mitsuba_dict
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
@@ -44,7 +44,7 @@ def main(argv: list[str]) -> None:
     scene = load_scene(path, defines={"spp": str(spp)}) if xml else load_scene(path)
     base = RenderOptions(width=size, height=size, spp=spp, filter=flt, progress=False)
     if xml:
-        base = replace(apply_scene_settings(RenderOptions(progress=False), scene), spp=spp)
+        base = replace(with_scene_settings(RenderOptions(progress=False), scene)[0], spp=spp)
     ways = {"splat": Renderer(scene, base),
             "filter sampling": Renderer(scene, replace(base, filter_sampling=True))}
     set_mitsuba_variant()

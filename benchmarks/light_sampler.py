@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drpt.options import RenderOptions, apply_scene_settings
+from drpt.options import RenderOptions, with_scene_settings
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
@@ -54,7 +54,7 @@ def scenes() -> list[tuple[str, Path, str]]:
 
 
 def options(scene, spp, seed, sampler, size):
-    opts = apply_scene_settings(RenderOptions(progress=False, seed=seed, light_sampler=sampler), scene)
+    opts, scene = with_scene_settings(RenderOptions(progress=False, seed=seed, light_sampler=sampler), scene)
     if scene.settings is None:
         opts = replace(opts, width=size, height=size)
     return replace(opts, spp=spp)

@@ -21,7 +21,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from drpt.options import RenderOptions, apply_scene_settings
+from drpt.options import RenderOptions, with_scene_settings
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
@@ -36,7 +36,7 @@ def main(argv: list[str]) -> int:
     scene = load_scene(scene_file)
     base = RenderOptions(width=size, height=size, spp=spp, progress=False,
                          bsdf=os.environ.get("DRPT_BSDF", "auto"))
-    base = apply_scene_settings(base, scene)
+    base, scene = with_scene_settings(base, scene)
     base = replace(base, width=size, height=size, spp=spp).validate()
     if len(argv) > 4:
         base = replace(base, filter=argv[4]).validate()

@@ -28,10 +28,12 @@ blocks of lanes).
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 from dataclasses import dataclass
 
+from . import llvm_tuning
 from .errors import DrptError
 
 MIN_LLVM = 16
@@ -123,6 +125,23 @@ def select_from_env() -> None:
         _bad_env = os.environ.get(ENV_VAR)
 
 
+def select_from_argv(argv: list[str]) -> None:
+    """Select the backend that ``--backend NAME`` in ``argv`` names, before any kernel
+    module is imported (the command line calls it first).
+
+    Without the flag the backend stays the one ``import drpt`` selected from
+    ``DRPT_BACKEND``. A backend other than LLVM is checked at once
+    (:func:`ensure`): without a GPU the command stops before it reads or writes
+    anything; LLVM is checked by the commands that render."""
+    pre = argparse.ArgumentParser(add_help=False, allow_abbrev=False)
+    pre.add_argument("--backend", default=None)
+    known, _ = pre.parse_known_args(argv)
+    if known.backend is not None:
+        select(known.backend)
+    if name() != "llvm":
+        ensure()
+
+
 def name() -> str:
     """The selected backend's name."""
     if _name is None:
@@ -185,8 +204,6 @@ def ensure_llvm() -> None:
             f"on this CPU: {INSTALL_HINT}"
         )
     _checked.add("llvm-version")
-    from . import llvm_tuning
-
     llvm_tuning.apply()
 
 

@@ -49,6 +49,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
+import drjit as dr
+
 #: LLVM CPU names where ``+fast-gather`` was measured to pay (AVX2 without AVX-512).
 FAST_GATHER_CPUS = ("znver3",)
 FEATURE = "+fast-gather"
@@ -73,8 +75,6 @@ _default: Settings | None = None  # Dr.Jit's own settings, before apply()
 @lru_cache(maxsize=1)
 def core() -> ctypes.CDLL | None:
     """``libdrjit-core.so`` with the functions bound, or ``None``."""
-    import drjit as dr
-
     try:
         lib = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
         lib.target_cpu = lib._Z19jit_llvm_target_cpuv
@@ -125,8 +125,6 @@ def blocks_for(n: int) -> Iterator[None]:
     if lib is None or not _llvm_ready():
         yield
         return
-    import drjit as dr
-
     before = lib.block_size()
     lib.set_block_size(block_size_for(n, dr.thread_count(), lib.vector_width()))
     try:
@@ -190,8 +188,5 @@ def _set(s: Settings) -> None:
 
 
 def _llvm_ready() -> bool:
-    import drjit as dr
-
-    from . import backend
-
-    return backend.name() == "llvm" and dr.has_backend(dr.JitBackend.LLVM)
+    # drjit.auto's arrays are on the backend drpt.backend.select chose
+    return dr.backend_v(dr.auto.Float) == dr.JitBackend.LLVM and dr.has_backend(dr.JitBackend.LLVM)

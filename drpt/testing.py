@@ -26,6 +26,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drpt.backend import mitsuba_variant
+from drpt.export.mitsuba import to_mitsuba_dict
+from drpt.export.mitsuba_bsdf import to_mitsuba
+from drpt.options import PathOptions, RenderOptions
+from drpt.render.renderer import Renderer
+from drpt.shading import BSDFSpec, complete
+
 __all__ = [
     "BATCHES", "SRGB_TO_XYZ", "Furnace", "ZTest", "assert_agree", "block_z", "block_z_correlated",
     "bsdf_chi2", "export_bsdf", "furnace", "mitsuba", "mitsuba_runs", "render_both", "run_chi2",
@@ -39,7 +46,6 @@ def mitsuba():
     (:func:`drpt.backend.mitsuba_variant`) set."""
     import mitsuba as mi
 
-    from drpt.backend import mitsuba_variant
     mi.set_variant(mitsuba_variant())
     return mi
 
@@ -72,9 +78,6 @@ def export_bsdf(kind, two_sided=False, **params):
     """drpt's Mitsuba dict (:func:`drpt.export.mitsuba_bsdf.to_mitsuba`) of a ``kind`` spec
     with ``params`` (defaults filled in), wrapped in ``twosided`` if asked; for
     ``mi.load_dict``."""
-    from drpt.export.mitsuba_bsdf import to_mitsuba
-    from drpt.shading import BSDFSpec, complete
-
     spec = BSDFSpec(kind, params)
     if two_sided:
         spec = BSDFSpec("twosided", children=[spec])
@@ -270,8 +273,6 @@ def mitsuba_runs(scene, W, H, spp, max_depth=-1, bsdf="phong", seed=1, rfilter="
     scene (:func:`drpt.export.mitsuba.to_mitsuba_dict`), ``spp / batches`` samples per pixel
     each, seeds ``seed + 100 + 7919 k``; the film's pixel filter is ``rfilter``."""
     mi = mitsuba()
-    from drpt.export.mitsuba import to_mitsuba_dict
-
     per = max(1, spp // batches)
     ms = mi.load_dict(to_mitsuba_dict(scene, W, H, per, max_depth=max_depth, seed=seed + 100,
                                       bsdf=bsdf, rfilter=rfilter))
@@ -287,9 +288,6 @@ def render_both(scene, W, H, spp, max_depth=-1, bsdf="phong", seed=1):
     >>> r, ref, ref_var = render_both(load_scene("scenes/cornell.txt"), 32, 32, 64)  # doctest: +SKIP
     >>> assert_agree(r, ref, ref_var)  # doctest: +SKIP
     """
-    from drpt.options import PathOptions, RenderOptions
-    from drpt.render.renderer import Renderer
-
     r = Renderer(scene, RenderOptions(width=W, height=H, spp=spp, seed=seed, bsdf=bsdf,
                                       progress=False, path=PathOptions(max_depth=max_depth))).render()
     runs = mitsuba_runs(scene, W, H, spp, max_depth=max_depth, bsdf=bsdf, seed=seed)

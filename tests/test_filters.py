@@ -61,7 +61,7 @@ def test_parse_filter_errors_are_one_line(text, needle):
 def test_filter_flag_and_options(capsys):
     import argparse
 
-    from drpt.options import add_render_flags, options_from_args
+    from drpt.cli.args import add_render_flags, options_from_args
 
     p = argparse.ArgumentParser()
     add_render_flags(p)

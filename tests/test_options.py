@@ -1,18 +1,19 @@
-"""drpt/options.py: the shared render flags, their checks, the accelerator names."""
+"""drpt/options.py (the options, their checks, the accelerator names, the scene's
+settings) and drpt/cli/args.py (the shared render flags that build them)."""
 
 import argparse
 
 import pytest
 
+from drpt.backend import policy
+from drpt.cli.args import FLAGS, add_render_flags, options_from_args
 from drpt.errors import DrptError
 from drpt.options import (
-    FLAGS,
     PathOptions,
     RenderOptions,
-    add_render_flags,
-    options_from_args,
     parse_accel,
     parse_accel_list,
+    with_scene_settings,
 )
 
 
@@ -35,10 +36,27 @@ def test_parse_accel():
 
 
 def test_defaults_match_render_options():
+    # one set of defaults: no flags give RenderOptions() itself
     o = options_from_args(_args([]))
+    assert o == RenderOptions()
     assert (o.width, o.height, o.spp, o.accel, o.bvh_method, o.integrator, o.bsdf) == (
         512, 512, 64, "auto", "auto", "path", "auto")
-    assert o.path == PathOptions() and o.max_lanes == 1 << 21 and o.progress
+    assert o.path == PathOptions() and o.max_lanes is None and o.progress
+    # every flag's parser default is the dataclass's (a command's own defaults aside)
+    p = argparse.ArgumentParser()
+    add_render_flags(p)
+    base = RenderOptions()
+    for a in p._actions:
+        if hasattr(base, a.dest) and a.default is not None:
+            assert a.default == getattr(base, a.dest), a.dest
+    # the negative control: a command's own default is not the dataclass's
+    assert options_from_args(_args([], spp=3)) != RenderOptions()
+
+
+def test_lanes_are_resolved_in_one_place():
+    assert RenderOptions().lanes == policy().max_lanes == 1 << 21
+    assert RenderOptions(max_lanes=70).lanes == 70
+    assert options_from_args(_args(["--max-lanes", "70"])).lanes == 70
 
 
 def test_accel_names_and_flags_agree():
@@ -85,3 +103,55 @@ def test_validate(opts, needle):
 def test_validate_returns_the_options():
     o = RenderOptions(accel="bvh", bvh_method="threshold", sah_threshold=0, bvh_min_leaf=4)
     assert o.validate() is o
+
+
+class _Settings:
+    """A Mitsuba XML's render settings (drpt.scene.model.RenderSettings), as far as
+    with_scene_settings reads them."""
+
+    def __init__(self, **kw):
+        self.width, self.height, self.spp = 32, 24, 8
+        self.integrator = self.max_depth = self.rr_depth = self.hide_emitters = None
+        self.rfilter, self.rfilter_params = "box", {}
+        self.fov = (40.0, "x")
+        self.__dict__.update(kw)
+
+
+def _xml_scene(**settings):
+    from pathlib import Path
+
+    from drpt.scene.model import PerspectiveCamera, Scene
+
+    camera = PerspectiveCamera(center=(0, 0, 0), direction=(0, 0, -1), up=(0, 1, 0), fov=30.0)
+    return Scene(path=Path("s.xml"), camera=camera, materials=[], settings=_Settings(**settings))
+
+
+def test_scene_settings_apply_where_not_given():
+    scene = _xml_scene(max_depth=3)
+    opts, out = with_scene_settings(RenderOptions(), scene)
+    assert (opts.width, opts.height, opts.spp, opts.path.max_depth) == (32, 24, 8, 3)
+    assert out is scene  # the film's own aspect: the camera stays
+    opts, _ = with_scene_settings(RenderOptions(spp=5, path=PathOptions(max_depth=2)), scene,
+                                  {"spp", "max_depth"})
+    assert (opts.spp, opts.path.max_depth) == (5, 2)
+    with pytest.raises(ValueError, match="unknown settings"):
+        with_scene_settings(RenderOptions(), scene, {"width"})
+    plain = _xml_scene()
+    plain.settings = None  # the seed's format: nothing to apply
+    assert with_scene_settings(RenderOptions(), plain) == (RenderOptions(), plain)
+
+
+def test_scene_settings_return_a_new_camera_and_change_nothing():
+    """Another aspect than the file's film keeps the fov along fov_axis (x here): the
+    camera comes back new, the scene passed in keeps its own."""
+    from drpt.scene.model import vertical_fov
+
+    scene = _xml_scene()
+    before = scene.camera
+    opts, out = with_scene_settings(RenderOptions(width=64, height=64), scene, {"size"})
+    assert (opts.width, opts.height) == (64, 64)
+    assert scene.camera is before and scene.camera.fov == 30.0  # unchanged
+    assert out is not scene and out.camera is not before
+    assert out.camera.fov == pytest.approx(vertical_fov(40.0, "x", 1.0))
+    assert out.camera.fov != pytest.approx(vertical_fov(40.0, "x", 32 / 24))  # the film's aspect: not it
+    assert out.materials is scene.materials  # a shallow copy: the rest is shared

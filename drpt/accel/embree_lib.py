@@ -33,6 +33,7 @@ from functools import lru_cache
 
 import drjit as dr
 
+from .. import backend
 from ..errors import DrptError
 
 # Embree 3 enums (rtcore_common.h, rtcore_buffer.h, rtcore_geometry.h, rtcore_scene.h)
@@ -144,8 +145,6 @@ def _load() -> tuple[Lib | None, str | None]:
 
 def reason() -> str | None:
     """Why the ``"embree"`` accelerator cannot run with the current backend, or ``None``."""
-    from .. import backend
-
     if backend.policy().name != "llvm":
         return f"the embree accelerator runs on the LLVM backend, not {backend.policy().name}"
     return _load()[1]

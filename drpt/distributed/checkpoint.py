@@ -20,13 +20,15 @@ import json
 import os
 import pickle
 import stat
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path, PurePath
 
 import numpy as np
 
+from .. import backend
 from ..errors import DrptError
 from ..options import LIGHT_TRACED
+from ..scene.model import Skybox
 
 SUFFIX = ".drpt-checkpoint"
 VERSION = 2  # 2: the description holds the sums' digest
@@ -66,8 +68,6 @@ def scene_hash(scene) -> str:
     _Pickler(buf, protocol=4).dump(scene)
     data = buf.getvalue()
     h = hashlib.sha256(data)
-    from ..scene.model import Skybox
-
     images = {str(m.map_kd) for m in scene.materials if m.map_kd is not None}
     images |= {str(p) for m in scene.materials for p in m.maps.values()}
     images |= {str(t.path) for m in scene.materials if m.bsdf is not None for t in m.bsdf.textures()}
@@ -92,11 +92,9 @@ def _scene_folder(scene) -> Path | None:
 
 def options_key(opts) -> dict:
     """The options that shape the image (all but ``progress``), with the backend."""
-    from ..backend import name
-
-    d = asdict(opts)
+    d = asdict(replace(opts, max_lanes=opts.lanes))  # None and the default it stands for alike
     d.pop("progress", None)
-    d["backend"] = name()
+    d["backend"] = backend.name()
     return d
 
 

@@ -29,8 +29,11 @@ import os
 from collections.abc import Iterable, Iterator
 from dataclasses import replace
 
+from .. import backend as backends
+from ..backend import ensure, name
 from ..errors import DrptError
 from ..render.chunks import ChunkResult
+from ..render.renderer import Renderer
 
 # Per worker process: the renderer of the last (scene hash, options) it traced.
 _RENDERERS: dict[str, object] = {}
@@ -41,12 +44,7 @@ def trace_chunk(key: str, scene, opts, index: int, backend: str = "llvm") -> Chu
     options) on the coordinator's Dr.Jit ``backend``. The first chunk of a
     render on a worker builds its renderer (and returns the scene's
     warnings); later ones reuse it."""
-    from .. import backend as backends
-
     backends.select(backend)
-    from ..backend import ensure
-    from ..render.renderer import Renderer
-
     renderer = _RENDERERS.get(key)
     new = renderer is None
     if new:
@@ -194,10 +192,7 @@ class DaskEngine:
         except ImportError:
             raise DrptError("--workers/--cluster need Dask distributed: "
                             "pip install 'drpt[cluster]' (or pip install distributed)") from None
-        from ..backend import name, policy
-
-        if opts.max_lanes is None:  # the coordinator's, not each worker's, default
-            opts = replace(opts, max_lanes=policy().max_lanes)
+        opts = replace(opts, max_lanes=opts.lanes)  # the coordinator's, not each worker's, default
         if address is not None:
             check_address(address)
         self.scene, self.opts, self.backend = scene, opts, name()

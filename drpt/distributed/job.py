@@ -22,11 +22,12 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..backend import policy
 from ..errors import note
 from ..options import LIGHT_TRACED
 from ..render.chunks import ChunkMerge, ChunkResult, plan_chunks
+from ..render.renderer import Renderer, finish, stop_estimate, stops
 from . import checkpoint
+from .engine import DaskEngine
 
 
 class LocalEngine:
@@ -34,8 +35,6 @@ class LocalEngine:
 
     def __init__(self, scene, opts):
         from dataclasses import replace
-
-        from ..render.renderer import Renderer
 
         self.renderer = Renderer(scene, replace(opts, progress=False))
         self.sent_warnings = False
@@ -120,12 +119,9 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     workers)."""
     from tqdm import tqdm
 
-    from ..render.renderer import finish, stop_estimate, stops
-
     W, H, spp = opts.width, opts.height, opts.spp
     light_tracing = opts.integrator in LIGHT_TRACED
-    max_lanes = policy().max_lanes if opts.max_lanes is None else opts.max_lanes
-    chunks = plan_chunks(W, H, spp, max_lanes, opts.chunk_spp)
+    chunks = plan_chunks(W, H, spp, opts.lanes, opts.chunk_spp)
     key = checkpoint.scene_hash(scene)
     okey = checkpoint.options_key(opts)
     checkpoint.check_paths(output)
@@ -158,8 +154,6 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         engine = LocalEngine(scene, opts)
         report(engine.renderer.warnings)
     else:
-        from .engine import DaskEngine
-
         engine = DaskEngine(scene, key, opts, workers=workers, address=cluster,
                             connect_timeout=connect_timeout)
     t0 = last = time.perf_counter()

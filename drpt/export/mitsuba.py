@@ -135,34 +135,14 @@ from drpt.shading import BSDFSpec, interpret_scene
 from .mitsuba_bsdf import _error as bsdf_error
 from .mitsuba_bsdf import _value as bsdf_value
 from .mitsuba_bsdf import to_mitsuba as bsdf_to_mitsuba
+from .mitsuba_envmap import to_mitsuba as envmap_to_mitsuba
+from .mitsuba_phong import register
+from .values import _RGB, _Matrix, _Point, _Vector
 
 __all__ = ["to_mitsuba_dict", "write_xml", "look_at_matrix", "PLANE_SCALE"]
 
 #: Half-size of an exported plane rectangle, in units of the scene diagonal.
 PLANE_SCALE = 1e3
-
-
-# --------------------------------------------------------- value wrappers
-# The scene is first described with these small typed values so that the
-# dict and the XML writers render the very same description.
-@dataclass(frozen=True)
-class _RGB:
-    value: tuple[float, float, float]
-
-
-@dataclass(frozen=True)
-class _Point:
-    value: tuple[float, float, float]
-
-
-@dataclass(frozen=True)
-class _Vector:
-    value: tuple[float, float, float]
-
-
-@dataclass(frozen=True)
-class _Matrix:
-    value: np.ndarray  # (4, 4)
 
 
 @dataclass
@@ -475,8 +455,6 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
                                  "irradiance": _RGB(_f3(irr)) if isinstance(irr, tuple)
                                  else bsdf_value(irr, light.loc or f"light {i}")}
         elif isinstance(light, Skybox):
-            from .mitsuba_envmap import to_mitsuba as envmap_to_mitsuba
-
             node = envmap_to_mitsuba(light, scale=getattr(light, "scale", 1.0))
             rotation = getattr(light, "rotation", None)
             if rotation is not None:
@@ -568,8 +546,6 @@ def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
     if mi.variant() is None:
         raise DrptError("Mitsuba has no variant set; call mi.set_variant('llvm_ad_rgb') first")
     desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter, hide_emitters)
-    from .mitsuba_phong import register
-
     register()  # drpt_phong, in case a material needs it
     # Shapes and top-level emitters are instantiated here, in document order.
     # load_dict would otherwise put the ready-made mi.Mesh objects before

@@ -37,25 +37,24 @@ from typing import Any
 import numpy as np
 
 from ..bsdf_kinds import COMPOSITES, PARAMS, PERTURBING
+from ..conductors import mitsuba_ior
 from ..errors import DrptError, Loc, SceneError
 from ..shading import BSDFSpec, Checkerboard, MeshAttribute, Texture
 from .mitsuba_dielectrics import KINDS as DIELECTRICS
 from .mitsuba_dielectrics import adjust as adjust_dielectric
+from .mitsuba_phong import PLUGIN_NAME
+from .values import _Matrix, _Vector
 
 __all__ = ["to_mitsuba"]
 
 
 def _to_uv(m):
     """A 4x4 ``to_uv`` as the exporter writes transforms (its matrix wrapper)."""
-    from .mitsuba import _Matrix
-
     return _Matrix(m)
 
 
 def _Vec(v):
     """A 3-vector as the exporter writes vectors (its wrapper: ``<vector>`` in XML)."""
-    from .mitsuba import _Vector
-
     return _Vector(tuple(float(x) for x in v))
 
 
@@ -113,8 +112,6 @@ def _leaf(spec: BSDFSpec) -> dict:
     if kind == "mirror":
         return {"type": "conductor", "material": "none", "specular_reflectance": val(p["ks"])}
     if kind == "phong":
-        from .mitsuba_phong import PLUGIN_NAME
-
         return {"type": PLUGIN_NAME, "kd": val(p["kd"]), "ks": val(p["ks"]), "ns": float(p["ns"])}
     if kind == "null":
         return {"type": "null"}
@@ -125,8 +122,6 @@ def _leaf(spec: BSDFSpec) -> dict:
     out: dict[str, Any] = {"type": kind}
     skip = set()
     if kind in ("conductor", "roughconductor"):
-        from ..conductors import mitsuba_ior
-
         out.update({k: val(v) for k, v in mitsuba_ior(p).items()})
         skip |= {"material", "eta", "k"}
     if p.get("alpha_u") is not None or p.get("alpha_v") is not None:

@@ -34,6 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from drpt.errors import DrptError, SceneError, SceneWarning
+from drpt.imageio import read_image, write_image
+from drpt.render.lights.envmap import sanitize_image
 from drpt.scene.model import Skybox
 
 __all__ = ["to_mitsuba", "TO_WORLD", "mitsuba_compatible_image"]
@@ -46,8 +48,6 @@ def mitsuba_compatible_image(image) -> tuple[np.ndarray, list[str]]:
     """``(image, reasons)``: the sanitised RGB map, padded to at least 2x3 so
     Mitsuba's lookup reproduces drpt's radiance field; ``reasons`` lists why
     it differs from the input (empty: the original file can be used)."""
-    from drpt.render.lights.envmap import sanitize_image
-
     raw = np.asarray(image)
     img, bad = sanitize_image(raw)
     reasons = []
@@ -73,8 +73,6 @@ def to_mitsuba(skybox: Skybox, scale: float = 1.0, out_dir: str | PathLike | Non
     copy ``<stem>.mitsuba.exr`` is written to ``out_dir`` (default: a new
     temporary directory) and used instead, with a warning.
     """
-    from drpt.imageio import read_image, write_image
-
     path = Path(skybox.path)
     if not path.is_file():
         loc = getattr(skybox, "loc", None)

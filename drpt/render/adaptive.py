@@ -46,6 +46,7 @@ from drjit.auto import PCG32, UInt32, UInt64
 from .. import llvm_tuning
 from ..backend import policy
 from ..errors import DrptError
+from .renderer import RenderResult, _check_range, _mix_seed
 
 #: mixed into the seed of the adaptive phases' random streams
 ADAPTIVE_STREAM = 0xADA5EED
@@ -129,8 +130,6 @@ def render_adaptive(renderer, reuse_pilot: bool = False):
     """The :class:`~drpt.render.renderer.RenderResult` of an adaptive render (module
     docstring). ``reuse_pilot`` (a negative control for tests only) averages all of a
     pixel's samples, each pilot's included, into it: biased."""
-    from .renderer import RenderResult, _check_range
-
     opts = renderer.opt
     check(opts)
     if not hasattr(renderer.integrator, "sample_sequence"):
@@ -174,8 +173,6 @@ def render_adaptive(renderer, reuse_pilot: bool = False):
 
 
 def _mix(seed: int, index: int) -> int:
-    from .renderer import _mix_seed
-
     return _mix_seed(seed ^ ADAPTIVE_STREAM, index)
 
 

@@ -14,6 +14,7 @@ import drjit as dr
 from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
 
 from ..aovs import GUIDES
+from ..errors import DrptError
 
 #: the most delta bounces a guide ray follows before it takes the surface it is on
 MAX_DELTA = 8
@@ -92,8 +93,6 @@ def index_arrays(model) -> tuple[UInt32, UInt32]:
     model read from Mitsuba XML (:attr:`drpt.scene.model.Triangles.shape_index`); a
     :class:`~drpt.errors.DrptError` for other scenes."""
     import numpy as np
-
-    from ..errors import DrptError
 
     tri, sph, pl = model.triangles, model.spheres, model.planes
     if (len(tri) and tri.shape_index is None) or (len(sph) and sph.shape_index is None) or len(pl):

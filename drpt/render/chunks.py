@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from .renderer import PassPlan
+    from .renderer import PassPlan  # an annotation only: the renderer imports this module
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,7 @@ def plan_chunks(width: int, height: int, spp: int, max_lanes: int,
     per pixel, and a chunk is the most whole sample steps of the pass plan
     that hold at most ``chunk_spp`` (at least one step); ``None`` is one
     sample step of :func:`~drpt.render.renderer.plan_passes`' plan per chunk."""
-    from .renderer import plan_passes
+    from .renderer import plan_passes  # cycle: the renderer imports this module
 
     plan = plan_passes(width, height, spp, max_lanes)
     if chunk_spp is None:

@@ -55,6 +55,7 @@ from . import perturb
 from .bsdf import BSDFSample, lobe
 from .perturb import PerturbedFrame
 from .surface import Interaction, _vec
+from .texture import TextureSet
 from .warp import Frame
 
 NONE = 0xFFFFFFFF
@@ -283,8 +284,6 @@ class MaterialTable:
         # Textures: one set for every textured field and weight.
         self.textures = None
         if textures:
-            from .texture import TextureSet
-
             self.textures = TextureSet(textures, scene.triangles)
         # materials made only of Dirac lobes (glass, mirrors): Whitted follows them
         delta = [all(self.lobes[c.leaf.kind].DELTA for c in cs) for cs in comps]

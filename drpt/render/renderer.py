@@ -62,10 +62,13 @@ import numpy as np
 from drjit.auto import PCG32, Array2f, Array3f, Array3f64, Bool, Float, UInt32, UInt64
 
 from .. import llvm_tuning
+from ..aovs import INDEX_KINDS, channel_count, traced
 from ..backend import policy
 from ..errors import DrptError
+from ..metrics import estimated_rel_mse
 from ..options import RenderOptions
 from ..scene.model import Camera, Scene
+from .aov import aov_values, index_arrays
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
 from .film import SplatFilm, gather_splats
@@ -73,6 +76,7 @@ from .filter_sampling import sample_position
 from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
 from .integrators.path import PathIntegrator
 from .integrators.ptracer import ParticleTracer
+from .integrators.volpath import VolPathIntegrator
 from .integrators.wavefront import WavefrontIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lights.rays import EmitterRays
@@ -103,8 +107,6 @@ class RenderResult:
     @property
     def estimated_rel_mse(self) -> float:
         """The relMSE this image is expected to have (:func:`drpt.metrics.estimated_rel_mse`)."""
-        from ..metrics import estimated_rel_mse
-
         return estimated_rel_mse(self.image, self.variance)
 
     @property
@@ -252,11 +254,7 @@ class Renderer:
 
     def _aov_index_arrays(self):
         """The ``(shape, prim)`` tables of the index AOVs (None when none is asked for)."""
-        from ..aovs import INDEX_KINDS
-
         if self._aov_ids is None and any(k in INDEX_KINDS for k in self.aov_kinds):
-            from .aov import index_arrays
-
             self._aov_ids = index_arrays(self.scene_model)
         return self._aov_ids
 
@@ -283,8 +281,6 @@ class Renderer:
             depth = options.path.max_depth
             return WhittedIntegrator(self.scene, WhittedOptions(max_depth=depth if depth > 0 else 16))
         if options.integrator == "volpath" and media:
-            from .integrators.volpath import VolPathIntegrator
-
             return VolPathIntegrator(self.scene, options.path, self.scene_model)
         if options.mode == "wavefront":
             return WavefrontIntegrator(self.scene, options.path, tail=options.wavefront_tail)
@@ -318,9 +314,8 @@ class Renderer:
 
     @property
     def max_lanes(self) -> int:
-        """Samples traced at once: the option, else the backend's default."""
-        lanes = self.opt.max_lanes
-        return policy().max_lanes if lanes is None else lanes
+        """Samples traced at once (:attr:`RenderOptions.lanes`)."""
+        return self.opt.lanes
 
     @property
     def plan(self) -> PassPlan:
@@ -360,8 +355,6 @@ class Renderer:
     @property
     def aov_kinds(self) -> list[str]:
         """The AOV kinds this render traces (:func:`drpt.aovs.traced`; empty: no AOV kernel)."""
-        from ..aovs import traced
-
         return [k for _, k in traced(self.opt.aovs, self.opt.denoise)]
 
     def _trace_aov_pass(self, pass_index: int, k: int, r0: int, rows: int) -> tuple[int, np.ndarray]:
@@ -372,8 +365,6 @@ class Renderer:
         as the beauty's (:func:`~drpt.render.film.gather_splats`), also for light tracing,
         whose image is splatted. Returns the first row and the ``(rows, W, C + 1)`` sums:
         the channels' weighted sums, then the weights' sum."""
-        from .aov import aov_values
-
         W, H = self.opt.width, self.opt.height
         n, lane, x, y = self._pass_lanes(k, r0, rows)
         rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed ^ AOV_STREAM, pass_index)),
@@ -662,8 +653,6 @@ class Renderer:
         weight = np.zeros((H, W, 2), np.float64) if self.splatting else None
         aov = None
         if self.aov_kinds:
-            from ..aovs import channel_count
-
             aov = np.zeros((H, W, channel_count(self.aov_kinds) + 1), np.float64)
         nonfinite = 0
         for i in chunks.passes_of(index):
@@ -711,7 +700,7 @@ class Renderer:
         from tqdm import tqdm
 
         if self.opt.adaptive:
-            from .adaptive import render_adaptive
+            from .adaptive import render_adaptive  # cycle: adaptive builds on this module
 
             return render_adaptive(self)
         W, H, spp = self.opt.width, self.opt.height, self.opt.spp

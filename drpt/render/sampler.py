@@ -122,7 +122,7 @@ class LDSampler:
     def for_pixels(cls, seed: int, pixel: UInt32, index: UInt32, step: UInt32 | int = 1) -> LDSampler:
         """A sampler of pixels ``pixel`` (their ids in the image), at sample
         ``index``; ``seed`` is the render's."""
-        from .renderer import _mix_seed
+        from .renderer import _mix_seed  # cycle: the renderer imports this module
 
         s = _mix_seed(seed, LD_STREAM)  # 64 bits: both halves go into the key
         key = mix32(mix32(UInt32(pixel) ^ dr.opaque(UInt32, s & 0xFFFFFFFF)) + dr.opaque(UInt32, s >> 32))
@@ -222,7 +222,7 @@ class ZSobolSampler(LDSampler):
     def for_pixels_xy(cls, seed: int, x: UInt32, y: UInt32, index: UInt32, step: UInt32 | int = 1):
         """A sampler of pixels ``(x, y)`` at sample ``index`` (``step``: as
         :meth:`LDSampler.for_pixels`); ``seed`` is the render's."""
-        from .renderer import _mix_seed
+        from .renderer import _mix_seed  # cycle: the renderer imports this module
 
         s = _mix_seed(seed, LD_STREAM) & 0xFFFFFFFF
         out = cls(_morton2(x, y) << cls.log2spp, index, UInt32(step))

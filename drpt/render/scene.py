@@ -50,6 +50,8 @@ import copy
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
+from .. import llvm_tuning
+from ..accel import build_accel
 from ..accel.protocol import INVALID
 from ..errors import located
 from ..options import RenderOptions
@@ -130,9 +132,6 @@ class NoMaterials:
 
 class DeviceScene:
     def __init__(self, scene: Scene, options: RenderOptions):
-        from .. import llvm_tuning
-        from ..accel import build_accel
-
         llvm_tuning.apply()  # as the CLI's backend check does, for API users too
 
         self.accel = build_accel(scene, kind=options.accel, resolution=options.grid_resolution,

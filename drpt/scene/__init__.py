@@ -12,6 +12,7 @@ import contextlib
 import contextvars
 from pathlib import Path
 
+from ..errors import Loc, note
 from .model import (
     Background,
     Camera,
@@ -30,7 +31,6 @@ from .model import (
     SpotLight,
     Triangles,
 )
-from .parser import load_scene as _load_drpt_scene
 
 #: load_scene's XML keyword arguments where a caller gives none (see :func:`xml_flags`)
 _XML_FLAGS: contextvars.ContextVar[dict | None] = contextvars.ContextVar("drpt_xml_flags", default=None)
@@ -54,8 +54,10 @@ def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupporte
     (``defines``, ``ignore_unsupported`` and ``strict`` apply to XML only, a note
     says so when given for another file; ``None`` takes :func:`xml_flags`' value,
     else none / False)."""
+    # the loaders, here and not at the top: they import drpt.shading and drpt.imageio, which
+    # import drpt.scene.model, so importing this package must not import them
     if Path(path).suffix.lower() == ".xml":
-        from .mitsuba import load_mitsuba_xml
+        from .mitsuba import load_mitsuba_xml  # cycle: it imports drpt.shading, which imports drpt.scene.model
 
         ctx = _XML_FLAGS.get() or {}
         return load_mitsuba_xml(
@@ -68,11 +70,11 @@ def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupporte
                                    ("--ignore-unsupported", ignore_unsupported or ctx.get("ignore_unsupported")),
                                    ("--strict", strict or ctx.get("strict"))) if on]
     if given:
-        from ..errors import Loc, note
-
         verb = "applies" if len(given) == 1 else "apply"
         note(f"{' and '.join(given)} {verb} to Mitsuba XML scenes only: ignored", Loc(path))
-    return _load_drpt_scene(path)
+    from .parser import load_scene as load_drpt_scene  # cycle: as load_mitsuba_xml above
+
+    return load_drpt_scene(path)
 
 
 __all__ = [

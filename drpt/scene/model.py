@@ -28,6 +28,7 @@ Conventions
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -37,7 +38,7 @@ import numpy as np
 from ..errors import Loc
 
 if TYPE_CHECKING:
-    from ..shading import BSDFSpec
+    from ..shading import BSDFSpec  # an annotation only: drpt.shading imports this module
 
 Vec3 = tuple[float, float, float]
 
@@ -45,6 +46,12 @@ Vec3 = tuple[float, float, float]
 #: works in float32, and the watertight triangle test multiplies three
 #: coordinate differences: (2e12)^3 = 8e36 still fits below float32's 3.4e38.
 MAX_COORDINATE = 1e12
+
+# Limits of the render settings a scene file may give (and of drpt.options.RenderOptions):
+MAX_SIZE = 1 << 16  # pixels per side: pixel coordinates and their jitter are float32
+MAX_SPP = (1 << 32) - 1  # samples per pixel: Mitsuba's sample_count is 32-bit
+MAX_SAMPLES = 1 << 60  # width * height * spp: PCG32 sequence ids (pass * lanes + lane) stay < 2^63
+MAX_DEPTH = (1 << 32) - 1  # --max-depth, --rr-depth: path depths are UInt32
 
 
 # --------------------------------------------------------------------- camera
@@ -104,6 +111,24 @@ class PerspectiveCamera:
     #: AOV is the distance from there; drpt's rays start at ``center`` (only the depth AOV
     #: reads it)
     near_clip: float = 0.0
+
+
+def vertical_fov(fov: float, axis: str, aspect: float) -> float:
+    """drpt's vertical field of view (degrees) for Mitsuba's ``fov`` along ``fov_axis``
+    on a film of ``aspect = width / height`` (Mitsuba's ``parse_fov``, then x to y)."""
+    if axis == "smaller":
+        axis = "y" if aspect > 1 else "x"
+    elif axis == "larger":
+        axis = "x" if aspect > 1 else "y"
+    t = math.tan(math.radians(fov) / 2.0)
+    if axis == "y":
+        ty = t
+    elif axis == "x":
+        ty = t / aspect
+    else:  # diagonal: the half diagonal is t, the half height t / sqrt(1 + aspect^2)
+        ty = t / math.sqrt(1.0 + aspect * aspect)
+    return math.degrees(2.0 * math.atan(ty))
+
 
 
 @dataclass
@@ -338,7 +363,7 @@ class Background:
 class RenderSettings:
     """How the scene file says to render it (a Mitsuba XML's film, sampler,
     integrator and filter); ``None``: the file does not say. Command-line
-    flags win over these (:func:`drpt.options.apply_scene_settings`)."""
+    flags win over these (:func:`drpt.options.with_scene_settings`)."""
 
     width: int | None = None
     height: int | None = None

@@ -116,6 +116,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import Loc, SceneError, SceneWarning
+from ..shading import BSDFSpec
 from . import transform as tf
 from .files import check_input, named, resolve
 from .model import (
@@ -589,8 +590,6 @@ class _Parser:
             _, line = got.pop("passThrough")
             if got or mat.given:
                 raise self.error(line, "passThrough takes no other appearance fields (the surface is invisible)")
-            from ..shading import BSDFSpec
-
             return replace(mat, bsdf=BSDFSpec("null", {}, [], [], mat.loc), **media)
         mat = replace(mat, **media)
         for key in ("diffuseColor", "specularColor", "reflectiveColor", "transparentColor"):

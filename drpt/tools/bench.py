@@ -15,7 +15,7 @@ binned SAH everywhere, ``bvh-morton``, ``bvh-ploc`` (bottom-up clustering),
 (the seed's rule, SAH only in nodes of at most ``2 * --sah-threshold``
 primitives, default 2000), so the seed's table (grid vs BVH without SAH vs
 BVH with SAH) is ``--accel grid,bvh-median,bvh-threshold,bvh-sah``. The other
-render flags are ``render``'s (:func:`drpt.options.add_render_flags`; ``--size``
+render flags are ``render``'s (:func:`drpt.cli.args.add_render_flags`; ``--size``
 default 256 256, ``--spp`` 16; ``--seed`` also seeds the random rays). Per
 accelerator:
 
@@ -51,7 +51,16 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import llvm_tuning
+from ..accel import build_accel, resolve_kind
+from ..backend import ensure, mitsuba_variant, set_mitsuba_variant
+from ..cli.args import add_render_flags, options_from_args
 from ..errors import DrptError
+from ..export.mitsuba import to_mitsuba_dict
+from ..options import BVH_KINDS, parse_accel, parse_accel_list
+from ..render.camera import RayCamera
+from ..render.renderer import Renderer
+from ..scene import load_scene
 from .table import markdown_table
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -73,8 +82,6 @@ RATIOS = [("ratio_build", "build / load"), ("ratio_primary", "primary hit"),
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``bench`` subcommand on an ``add_subparsers()`` object."""
-    from ..options import add_render_flags
-
     p = subparsers.add_parser(
         "bench", allow_abbrev=False,
         help="ray and render throughput of drpt vs Mitsuba 3",
@@ -134,8 +141,6 @@ def make_rays(scene, n: int, aspect: float, seed: int) -> dict[str, np.ndarray]:
     import drjit as dr
     from drjit.auto import Float, UInt32
 
-    from ..render.camera import RayCamera
-
     h = max(1, round(math.sqrt(n / aspect)))
     w = max(1, round(n / h))
     idx = dr.arange(UInt32, w * h)
@@ -171,8 +176,6 @@ def accel_options(base, name: str, sah_threshold: int = 2000, min_leaf: int = 1)
     is the K of the threshold rule, ``min_leaf`` the BVH's minimum leaf."""
     from dataclasses import replace
 
-    from ..options import BVH_KINDS, parse_accel
-
     kind, method = parse_accel(name)
     if kind not in BVH_KINDS:
         return replace(base, accel=kind).validate()
@@ -204,9 +207,6 @@ def device_rays(rays: dict) -> tuple:
 def bench_drpt(scene, options, rays: dict, repeat: int) -> dict:
     """drpt's numbers for ``options`` (accelerator, render size, spp, depth, bsdf)."""
     from drjit.auto import Float
-
-    from ..accel import build_accel
-    from ..render.renderer import Renderer
 
     build_kw = ({"method": options.bvh_method, "min_leaf": options.bvh_min_leaf,
                  "sah_threshold": options.sah_threshold}
@@ -279,8 +279,6 @@ def bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
                   repeat: int, rfilter: str = "box") -> dict:
     """Mitsuba's numbers, its kernels compiled for Dr.Jit's own LLVM target
     (Mitsuba as it ships, not drpt's tuning of it: :mod:`drpt.llvm_tuning`)."""
-    from .. import llvm_tuning
-
     with llvm_tuning.dr_default():
         return _bench_mitsuba(scene, rays, bsdf, size, spp, max_depth, repeat, rfilter)
 
@@ -289,9 +287,6 @@ def _bench_mitsuba(scene, rays: dict, bsdf: str, size, spp: int, max_depth: int,
                    repeat: int, rfilter: str) -> dict:
     import drjit as dr
     import mitsuba as mi
-
-    from ..backend import set_mitsuba_variant
-    from ..export.mitsuba import to_mitsuba_dict
 
     set_mitsuba_variant()
 
@@ -353,8 +348,6 @@ def format_table(rows: list[dict], mitsuba: bool) -> str:
                  ("mi_incoherent_mrays", "incoherent Mrays/s"),
                  ("mi_shadow_mrays", "shadow Mrays/s"), ("mi_render_s", "render s"),
                  ("mi_msamples_s", "Msamples/s")]
-        from ..backend import mitsuba_variant
-
         first = []  # each scene's first row: Mitsuba's numbers do not depend on the accel
         for r in rows:
             if all(f["scene"] != r["scene"] for f in first):
@@ -418,11 +411,6 @@ def chart(rows: list[dict], mitsuba: bool):
 def main(args: argparse.Namespace) -> int:
     """Run ``bench`` for parsed ``args``; user errors raise DrptError."""
     from dataclasses import replace
-
-    from ..accel import resolve_kind
-    from ..backend import ensure
-    from ..options import options_from_args, parse_accel_list
-    from ..scene import load_scene
 
     # --accel, --sah-threshold and --min-leaf are bench's own (a list, and per-row values)
     shared = argparse.Namespace(**{k: v for k, v in vars(args).items()

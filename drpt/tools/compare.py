@@ -7,7 +7,7 @@ Two forms::
     python -m drpt compare A.exr B.exr [--out DIR]
 
 Scene form
-    The render flags are ``render``'s (:func:`drpt.options.add_render_flags`:
+    The render flags are ``render``'s (:func:`drpt.cli.args.add_render_flags`:
     ``--size`` (default 128 128), ``--spp`` (default 64), ``--bsdf``,
     ``--max-depth``, ``--rr-depth``, ``--accel``, ``--seed``, ``--backend``,
     ...). The scene is rendered by Mitsuba's ``path`` integrator on drpt's
@@ -66,13 +66,22 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import metrics
+from ..cli.args import add_render_flags, given_settings, options_from_args
 from ..errors import DrptError, Loc, SceneError, warn
+from ..imageio import _LDR, read_image, write_image
+from ..metrics import BLOCK_SIZES, sidak_z
+from ..options import MAX_SEED, with_scene_settings
+from ..render.renderer import Renderer
+from ..scene import load_scene
 from .reference import (
     add_reference_args,
     cache_dir_from_args,
     check_reference_args,
+    get_control,
     get_reference,
 )
+from .xmlref import MitsubaXML
 
 IMAGE_EXTENSIONS = (".exr", ".hdr", ".pfm", ".png", ".jpg", ".jpeg", ".tga")
 CI_Z = 3.0  # the 99.7% interval
@@ -86,8 +95,6 @@ __all__ = ["add_parser", "main", "compare_images", "compare_scene"]
 # ------------------------------------------------------------------ parser
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``compare`` subcommand on an ``add_subparsers()`` object."""
-    from ..options import add_render_flags
-
     p = subparsers.add_parser(
         "compare", allow_abbrev=False,
         help="compare drpt with a Mitsuba 3 reference, or two images",
@@ -111,8 +118,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``compare`` for parsed ``args``; user errors raise DrptError."""
-    from ..options import options_from_args
-
     inputs = [Path(s) for s in args.inputs]
     if len(inputs) > 2:
         raise DrptError(f"compare takes a scene or two images, got {len(inputs)} arguments")
@@ -251,9 +256,6 @@ def compare_images(a: Path, b: Path, out: Path, gamma: float = 2.2) -> dict:
     8-bit images are decoded by ``x ** gamma``, the curve ``render`` writes them with;
     an 8-bit image against a float one compares both clamped to [0, 1], what the 8-bit
     one can hold."""
-    from .. import metrics
-    from ..imageio import _LDR, read_image
-
     x = _rgb(read_image(a, gamma=gamma), a)
     ref = _rgb(read_image(b, gamma=gamma), b)
     # an 8-bit image holds [0, 1]: the other one is compared as it would be written
@@ -293,8 +295,6 @@ def block_size(pixel_filter) -> int:
     """The block side of the verdict's test: at least 8 pixels and twice the filter's
     support (4 radii), so that the pixels whose filter reaches across an edge (whose
     few samples misjudge their own variance) are a minority of every block."""
-    from ..metrics import BLOCK_SIZES
-
     want = max(8.0, 4.0 * pixel_filter.radius)
     return next((b for b in BLOCK_SIZES if b >= want), BLOCK_SIZES[-1])
 
@@ -308,8 +308,6 @@ def block_test(x, var_x, ref, ref_block_var, b: int, alpha: float = ALPHA,
     threshold of level ``alpha``. The standard deviation has a floor of
     :data:`REL_FLOOR` times the reference block, so that noiseless regions (a sky
     seen directly) that differ by float rounding pass."""
-    from .. import metrics
-
     var = (metrics.block_variance_independent(var_x, b) / splat_j
            + np.asarray(ref_block_var, np.float64))
     floor = REL_FLOOR * np.abs(metrics.block_means(ref, b))
@@ -329,8 +327,6 @@ def confirm(z_first: np.ndarray, failing, z_second: np.ndarray, alpha: float = A
     """Whether a second, independent render fails the blocks that failed the first
     (the same sign, beyond the Sidak threshold over those blocks): a bias does, the
     rare bright samples of a heavy-tailed scene seldom land in the same blocks twice."""
-    from ..metrics import sidak_z
-
     if not failing:
         return False
     t = sidak_z(len(failing), alpha)
@@ -366,24 +362,16 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
 
     A Mitsuba XML scene: with ``args`` (the parsed command line), the file's own
     size, spp, depths, ``hide_emitters`` and filter apply where no flag was given
-    (:func:`~drpt.options.apply_scene_settings`), and Mitsuba renders the reference
+    (:func:`~drpt.options.with_scene_settings`), and Mitsuba renders the reference
     from the file itself (:class:`~drpt.tools.xmlref.MitsubaXML`), not from drpt's
     export: the same size, and the file's filter and integrator unless ``options``
     differ from them."""
-    from .. import metrics
-    from ..imageio import write_image
-    from ..render.renderer import Renderer
-    from ..scene import load_scene
-
     options.validate()
     scene = load_scene(scene_path)
     source = None
     if scene_path.suffix.lower() == ".xml":
-        from ..options import apply_scene_settings
-        from .xmlref import MitsubaXML
-
         if args is not None:
-            options = apply_scene_settings(options, scene, args)
+            options, scene = with_scene_settings(options, scene, given_settings(args))
         not_read = list(getattr(scene.settings, "not_read", ()))
         if not_read and not getattr(args, "ignore_unsupported", False):
             raise SceneError(Loc(scene_path), f"drpt does not read all of the file ({not_read[0]}"
@@ -425,16 +413,12 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
     if not test["passed"]:
         from dataclasses import replace
 
-        from ..options import MAX_SEED
-
         other = seed + 1 if seed < MAX_SEED else seed - 1
         again = Renderer(scene, replace(options, seed=other, progress=False)).render()
         second = block_test(again.image, again.variance, ref, ref_block_var, b, splat_j=splat_j)
         confirmed = confirm(test["_z"], test["failing"], second["_z"])
     control_info = control_test = None
     if control:
-        from .reference import get_control
-
         c_mean, c_var, control_info = get_control(
             scene, scene_path.stem, width, height, spp, bsdf=bsdf, max_depth=max_depth,
             rr_depth=rr_depth, seed=seed, cache_dir=cache_dir, progress=options.progress,

@@ -6,7 +6,7 @@
                                   [--ref-batches B] [--levels E ...]
                                   [--cache DIR | --no-cache] [--out DIR]
 
-The render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
+The render flags are ``render``'s (:func:`drpt.cli.args.add_render_flags`,
 ``--size`` default 64 64; no ``--spp``: the levels set it). drpt and Mitsuba
 (``path`` on drpt's backend, the exported scene) each render
 the scene at 1, 2, 4, ..., ``--max-spp`` samples per pixel, every level with
@@ -78,7 +78,15 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import llvm_tuning, metrics
+from ..cli.args import add_render_flags, options_from_args
+from ..denoise import denoise_result, require
 from ..errors import DrptError, warn
+from ..export.mitsuba import to_mitsuba_dict
+from ..metrics import rel_mse
+from ..render.renderer import Renderer
+from ..scene import load_scene
+from .compare import _prepare_out, _write_json
 from .reference import (
     add_reference_args,
     cache_dir_from_args,
@@ -97,8 +105,6 @@ __all__ = ["add_parser", "main", "noise_floor", "excess_rel_mse", "loglog_slope"
 # ------------------------------------------------------------------ parser
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``converge`` subcommand on an ``add_subparsers()`` object."""
-    from ..options import add_render_flags
-
     p = subparsers.add_parser(
         "converge", allow_abbrev=False,
         help="error vs spp and vs seconds, drpt against Mitsuba 3",
@@ -129,12 +135,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def main(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from ..options import options_from_args
-
     options = options_from_args(args, adaptive=False)  # (--adaptive adds rows of its own)
     if args.denoise:
-        from ..denoise import require
-
         require()
         options = replace(options, denoise=True)
     scene = Path(args.scene)
@@ -156,8 +158,6 @@ def noise_floor(ref, ref_var, eps: float = EPS) -> float:
 
 def excess_rel_mse(x, ref, ref_var, eps: float = EPS) -> float:
     """relMSE of ``x`` against ``ref`` minus the reference's noise floor."""
-    from ..metrics import rel_mse
-
     return rel_mse(x, ref, eps) - noise_floor(ref, ref_var, eps)
 
 
@@ -279,9 +279,6 @@ def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter=
     """A loaded Mitsuba scene and a ``render(spp, seed) -> (image, seconds)``."""
     import mitsuba as mi
 
-    from .. import llvm_tuning
-    from ..export.mitsuba import to_mitsuba_dict
-
     t0 = time.perf_counter()
     ms = mi.load_dict(to_mitsuba_dict(scene, width, height, 1, max_depth=max_depth,
                                       rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter))
@@ -298,8 +295,6 @@ def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter=
 
 def make_drpt(scene, options):
     """A built drpt Renderer and a ``render(spp, seed) -> (RenderResult)``."""
-    from ..render.renderer import Renderer
-
     renderer = Renderer(scene, options)
 
     def render(spp: int, s: int):
@@ -322,9 +317,6 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
     write the outputs; return the report."""
     from dataclasses import replace
 
-    from .. import metrics
-    from .compare import _prepare_out, _write_json
-
     options.validate()
     scene_path = Path(scene_path)
     width, height, seed, bsdf = options.width, options.height, options.seed, options.bsdf
@@ -338,8 +330,6 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
     if ref_spp <= max_spp:
         raise DrptError(f"--ref-spp ({ref_spp}) must exceed --max-spp ({max_spp}): the "
                         "reference must be better than the renders it judges")
-    from ..scene import load_scene
-
     scene = load_scene(scene_path)
     _prepare_out(out)
     reference = get_reference(
@@ -353,8 +343,6 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
     denoising = options.denoise
     renderer, drpt_render = make_drpt(scene, replace(options, spp=1, progress=False, denoise=False))
     if denoising:
-        from ..denoise import denoise_result
-
         _, dn_render = make_drpt(scene, replace(options, spp=1, progress=False))
         dn_render(1, seed + 999_998)  # warm-up
     for message in renderer.warnings:
@@ -430,8 +418,6 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
 def _denoised_row(render, denoise_result, spp: int, seed_a: int, seed_b: int, ref, floor: float) -> dict:
     """The ``drpt+oidn`` row of a level: two independent renders with guides, both
     denoised; the first's error, split into variance (from the pair) and bias."""
-    from .. import metrics
-
     r = render(spp, seed_a)
     t0 = time.perf_counter()
     d1 = denoise_result(r)

@@ -9,7 +9,7 @@ The scenes are the entries of the committed reference table
 (:data:`drpt.tools.reference.REFERENCES`): each names a bundled scene file
 and the material mode and depth it is rendered with (``cornellbox`` and
 ``cornellbox_ct`` are the Cornell box read as Phong and as Cook-Torrance).
-The other render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
+The other render flags are ``render``'s (:func:`drpt.cli.args.add_render_flags`,
 ``--spp`` default 64). The dining room is generated first
 (:mod:`drpt.tools.scenegen.diningroom`) when ``scenes/diningroom/`` is
 missing.
@@ -53,7 +53,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import metrics
+from ..backend import ensure
+from ..cli.args import add_render_flags, options_from_args
 from ..errors import DrptError, warn
+from ..imageio import read_image, write_image
+from ..render.renderer import Renderer
+from ..scene import load_scene
 from . import reference as refs
 from .table import markdown_table
 
@@ -62,8 +68,6 @@ __all__ = ["add_parser", "main", "downsample", "render_gallery"]
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``gallery`` subcommand on an ``add_subparsers()`` object."""
-    from ..options import add_render_flags
-
     p = subparsers.add_parser(
         "gallery", allow_abbrev=False,
         help="render every bundled scene to a gallery page with errors against Mitsuba 3",
@@ -104,12 +108,6 @@ def render_gallery(out: Path, options, names=None, size=None, scale: int = 2) ->
     ``options`` (a :class:`~drpt.options.RenderOptions`; each scene sets the
     size, material mode and depth); returns one row per scene."""
     from dataclasses import replace
-
-    from .. import metrics
-    from ..backend import ensure
-    from ..imageio import read_image, write_image
-    from ..render.renderer import Renderer
-    from ..scene import load_scene
 
     options.validate()
     spp = options.spp
@@ -230,8 +228,6 @@ def _write_pages(out: Path, rows: list[dict]) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``gallery`` for parsed ``args``; user errors raise DrptError."""
-    from ..options import options_from_args
-
     options = options_from_args(args)
     names = None
     if args.scenes:

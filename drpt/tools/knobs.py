@@ -7,7 +7,7 @@
                                [--depths D ...] [--rr-depths K ...] [--rr-probs P ...]
                                [--repeats R] [--cache DIR | --no-cache] [--out DIR]
 
-The render flags are ``render``'s (:func:`drpt.options.add_render_flags`,
+The render flags are ``render``'s (:func:`drpt.cli.args.add_render_flags`,
 ``--size`` default 64 64, ``--spp`` 64) except the knobs it varies
 (``--max-depth``, ``--rr-depth``, ``--rr-prob``, ``--accel`` and the BVH's).
 
@@ -78,8 +78,17 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import metrics
+from ..cli.args import add_render_flags, options_from_args
+from ..denoise import available, denoise_result, require
 from ..errors import DrptError
+from ..options import PathOptions
+from ..render.adaptive import check
+from ..render.renderer import Renderer
+from ..scene import load_scene
 from . import table as _table
+from .compare import _prepare_out, _write_json
+from .converge import noise_floor, write_csv
 from .reference import (
     add_reference_args,
     cache_dir_from_args,
@@ -111,15 +120,11 @@ class Config:
 
 def default_knobs() -> list[str]:
     """Every knob; ``denoise`` only where pyoidn is installed."""
-    from ..denoise import available
-
     return [k for k in KNOBS if k != "denoise" or available()]
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
     """Register the ``knobs`` subcommand on an ``add_subparsers()`` object."""
-    from ..options import add_render_flags
-
     p = subparsers.add_parser(
         "knobs", allow_abbrev=False,
         help="time, error and bias of each quality knob (depth, RR, accel, material)",
@@ -146,8 +151,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..options import options_from_args
-
     options = options_from_args(args)
     scene = Path(args.scene)
     out = Path(args.out) if args.out else Path(f"knobs_{scene.stem}")
@@ -230,13 +233,6 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
     the report."""
     from dataclasses import replace
 
-    from .. import metrics
-    from ..options import PathOptions
-    from ..render.renderer import Renderer
-    from ..scene import load_scene
-    from .compare import _prepare_out, _write_json
-    from .converge import noise_floor, write_csv
-
     options.validate()
     width, height, spp, seed, bsdf = (options.width, options.height, options.spp,
                                       options.seed, options.bsdf)
@@ -255,8 +251,6 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
     check_reference_args(ref_spp, ref_batches, -1, 5, announce=False)
     knobs = default_knobs() if knobs is None else knobs
     if "denoise" in knobs:
-        from ..denoise import require
-
         require()
     scene = load_scene(scene_path)
     _prepare_out(out)
@@ -290,8 +284,6 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
                                         rr_prob=c.rr_prob))
         try:
             if c.adaptive:
-                from ..render.adaptive import check
-
                 check(opts)  # (a splatting filter, light tracing, ...: one line, the row skipped)
             renderer = Renderer(scene, opts)
         except DrptError as e:  # a setting this scene cannot take (light tracing a rough glass)
@@ -385,8 +377,6 @@ def _render(renderer):
 
     r = renderer.render()
     if renderer.opt.denoise:
-        from ..denoise import denoise_result
-
         t0 = time.perf_counter()
         r.image = denoise_result(r)
         r.seconds += time.perf_counter() - t0

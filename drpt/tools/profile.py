@@ -52,9 +52,14 @@ from collections import defaultdict
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from ..backend import ensure, jit_backend
+from ..cli.args import add_render_flags, options_from_args
 from ..errors import DrptError
 from ..options import RenderOptions
 from ..render.instrument import Instrument
+from ..render.integrators.wavefront import OUTSIDE, WaveStats
+from ..render.renderer import Renderer, plan_passes
+from ..scene import load_scene
 
 MODES = ("megakernel", "wavefront")
 
@@ -178,7 +183,7 @@ class ProfileOptions:
     """What ``profile`` renders (``render``, a :class:`~drpt.options.RenderOptions`;
     its progress bar is off) and how many timed renders per mode (``repeat``)."""
 
-    render: RenderOptions = field(default_factory=lambda: RenderOptions(width=128, height=128))
+    render: RenderOptions = field(default_factory=lambda: RenderOptions(width=128, height=128, spp=16))
     repeat: int = 1  # timed renders per mode; the fastest is kept
 
     @property
@@ -195,7 +200,7 @@ class ProfileOptions:
 
     @property
     def max_lanes(self) -> int:
-        return self.render.max_lanes
+        return self.render.lanes
 
     def as_dict(self) -> dict:
         return {**asdict(self.render), "repeat": self.repeat}
@@ -203,8 +208,6 @@ class ProfileOptions:
 
 def _renderer(scene, popt: ProfileOptions):
     from dataclasses import replace
-
-    from ..render.renderer import Renderer
 
     return Renderer(scene, replace(popt.render, progress=False))
 
@@ -337,8 +340,6 @@ def _wavefront_stages(renderer, sort: bool) -> tuple[list[Stage], float, list[li
     paths per bounce of each pass."""
     import drjit as dr
 
-    from ..render.integrators.wavefront import OUTSIDE, WaveStats
-
     integ = renderer.integrator
     integ.sort = sort
     integ.stats = WaveStats(history=True)
@@ -372,8 +373,6 @@ def profile_mode(scene, popt: ProfileOptions, mode: str, base=None) -> ModeResul
     from dataclasses import replace
 
     import drjit as dr
-
-    from ..backend import jit_backend
 
     popt = replace(popt, render=replace(popt.render, mode=mode))
     samples = popt.width * popt.height * popt.spp
@@ -443,9 +442,6 @@ TAIL_AB = 16384  # the fused tail the A/B tries (paths left in a pass)
 
 
 def run_profile(scene_path: str | Path, popt: ProfileOptions, modes=MODES) -> list[ModeResult]:
-    from ..backend import ensure
-    from ..scene import load_scene
-
     scene_path = Path(scene_path)
     if not scene_path.is_file():
         raise DrptError(f"{scene_path}: scene file not found")
@@ -453,8 +449,6 @@ def run_profile(scene_path: str | Path, popt: ProfileOptions, modes=MODES) -> li
         raise DrptError(f"profile compares the path tracer's modes, not --integrator {popt.render.integrator}")
     scene = load_scene(scene_path)
     ensure()
-    from ..render.renderer import plan_passes
-
     out = []
     for m in modes:  # one device scene: the wavefront renderer is derived from the first
         out.append(profile_mode(scene, popt, m, out[0].renderer if out else None))
@@ -655,8 +649,6 @@ def save_chart(results: list[ModeResult], out: Path, title: str) -> None:
 # --------------------------------------------------------------------------- command line
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
-    from ..options import add_render_flags
-
     p = subparsers.add_parser("profile", help="profile a render: megakernel vs wavefront, per stage",
                               description=__doc__.split("\n")[0], allow_abbrev=False)
     p.add_argument("scene", help="scene file")
@@ -676,8 +668,6 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..options import options_from_args
-
     options = options_from_args(args, mode="megakernel")  # profile_mode sets each mode
     if args.repeat <= 0:
         raise DrptError(f"--repeat must be positive, got {args.repeat}")

@@ -53,8 +53,15 @@ from pathlib import Path
 
 import numpy as np
 
+from ..backend import ensure, mitsuba_variant, set_mitsuba_variant
 from ..errors import DrptError, Loc, note, warn
+from ..export import mitsuba as export
+from ..export.mitsuba import to_mitsuba_dict
 from ..filters import parse_filter
+from ..imageio import write_image
+from ..metrics import BLOCK_SIZES, block_means
+from ..scene import load_scene
+from ..scene.model import Skybox
 
 ROOT = Path(__file__).resolve().parents[2]
 CACHE_VERSION = 1
@@ -155,9 +162,6 @@ def render_committed(name: str, seed: int = 12345) -> Path:
     samples (seeds ``seed + k``) whose mean is the reference and whose
     spread, ``var(ddof=1) / B`` per pixel and channel, is written to
     :func:`variance_path`."""
-    from ..imageio import write_image
-    from ..scene import load_scene
-
     scene_file, w, h, spp, depth, mode = REFERENCES[name]
     batches = BATCHES.get(name, 1)
     per = spp // batches
@@ -223,8 +227,6 @@ def _batch_block_variances(runs: np.ndarray) -> dict:
     from the spread of independent renders ``runs`` (``(B, H, W, 3)``) of which the
     mean is taken: it holds the correlation a splatting filter gives neighbouring
     pixels, which a sum of per-pixel variances misses."""
-    from ..metrics import BLOCK_SIZES, block_means
-
     out = {}
     for b in BLOCK_SIZES:
         m = np.stack([block_means(r, b) for r in runs])
@@ -238,8 +240,6 @@ def _load(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter, s
 
     if source is not None:
         return source.load()
-    from ..export.mitsuba import to_mitsuba_dict
-
     return mi.load_dict(to_mitsuba_dict(scene, width, height, spp, max_depth=max_depth,
                                         rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter)), None
 
@@ -257,8 +257,6 @@ def _rgb(image) -> np.ndarray:
 
 def _mitsuba():
     """Mitsuba with the variant on drpt's backend; DrptError when unavailable."""
-    from ..backend import ensure, set_mitsuba_variant
-
     ensure()
     try:
         import mitsuba  # noqa: F401
@@ -332,9 +330,6 @@ def reference_key(scene, settings: dict) -> str:
     """SHA-256 (hex) identifying a reference render; see the module docs."""
     import mitsuba as mi
 
-    from ..export import mitsuba as export
-    from ..scene.model import Skybox
-
     h = hashlib.sha256()
 
     def add(tag: str, data: bytes) -> None:
@@ -363,7 +358,6 @@ def reference_key(scene, settings: dict) -> str:
 def _load_cached(path: Path):
     """``(mean, variance, meta, block variances)`` of a cache entry, or None (an entry
     from before the block variances counts as missing: it is rendered again)."""
-    from ..metrics import BLOCK_SIZES
 
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -407,8 +401,6 @@ class Reference:
     def info(self) -> dict:
         """What a report says about the reference (JSON-ready)."""
         import mitsuba as mi
-
-        from ..backend import mitsuba_variant
 
         s = self.settings
         return {"renderer": f"mitsuba {mi.__version__} {mitsuba_variant()} "
@@ -488,8 +480,6 @@ def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
     if spp < 2:
         raise DrptError(f"a per-pixel variance needs at least 2 samples per pixel, got {spp}")
     ms, integrator = _load(scene, width, height, 1, max_depth, rr_depth, seed, bsdf, rfilter, source)
-    from ..metrics import BLOCK_SIZES, block_means
-
     s1 = np.zeros((height, width, 3))
     s2 = np.zeros((height, width, 3))
     b1 = {b: 0.0 for b in BLOCK_SIZES}

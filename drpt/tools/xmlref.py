@@ -33,6 +33,9 @@ import json
 from pathlib import Path
 
 from ..errors import Loc, SceneError
+from ..filters import parse_filter
+from ..options import filter_spelling
+from .reference import CACHE_VERSION
 
 
 class MitsubaXML:
@@ -60,9 +63,6 @@ class MitsubaXML:
         """The reference source of a loaded XML ``scene`` rendered with ``options``
         (a validated :class:`~drpt.options.RenderOptions`): the film, filter and
         integrator edits are those where ``options`` differ from the file's own."""
-        from ..filters import parse_filter
-        from ..options import filter_spelling
-
         st = scene.settings
         size = (options.width, options.height)
         file_filter = parse_filter(filter_spelling(st.rfilter or "gaussian", st.rfilter_params))
@@ -88,8 +88,6 @@ class MitsubaXML:
     def key(self, settings: dict) -> str:
         """SHA-256 (hex) of a reference of this file with ``settings`` (module docs)."""
         import mitsuba as mi
-
-        from .reference import CACHE_VERSION
 
         state, _, resolver = self._parse()
         h = hashlib.sha256()

@@ -35,8 +35,13 @@ from pathlib import Path
 import numpy as np
 import viser
 
+from ..accel import KINDS
 from ..errors import DrptError
+from ..imageio import write_image
 from ..options import INTEGRATORS, RenderOptions
+from ..render.camera import camera_basis
+from ..render.progressive import Progressive
+from ..render.renderer import Renderer
 from ..scene.model import Camera, Scene
 from .pose import camera_block, camera_to_pose, look_at_point, pose_to_camera
 
@@ -92,8 +97,6 @@ class Viewer:
         return f"http://{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{self.server.get_port()}"
 
     def _build_page(self) -> None:
-        from ..accel import KINDS
-
         s, gui, opt = self.server, self.server.gui, self.options
         cam = self.scene_model.camera
         position, _wxyz, fov = camera_to_pose(cam)
@@ -257,9 +260,6 @@ class Viewer:
                 self._lock.notify_all()
 
     def _loop(self) -> None:
-        from ..render.progressive import Progressive
-        from ..render.renderer import Renderer
-
         renderer: Renderer | None = None
         built_for = None
         prog: Progressive | None = None
@@ -333,8 +333,6 @@ class Viewer:
                                f"{frame.samples_per_second / 1e6:.2f} Msamples/s · {frame.seconds:.1f} s")
 
     def _final_render(self, renderer, opt: RenderOptions, camera: Camera) -> None:
-        from ..imageio import write_image
-
         if self.output is None:
             raise DrptError("no output image for the render")
         self.progress.visible = True
@@ -352,8 +350,6 @@ class Viewer:
 
 
 def _basis(cam: Camera):
-    from ..render.camera import camera_basis
-
     return camera_basis(cam)
 
 

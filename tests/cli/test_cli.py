@@ -1,4 +1,4 @@
-"""The command line (drpt/cli.py): seed flags, outputs, user errors."""
+"""The command line (drpt/cli/): seed flags, outputs, user errors."""
 
 import subprocess
 import sys

@@ -91,7 +91,7 @@ def test_resumed_render_counts_only_the_samples_it_traced(tmp_path, capsys, corn
 
 
 def test_workers_left_idle_and_replaced_workers_are_explained(tmp_path, capsys, monkeypatch, cornell):
-    import drpt.distributed.engine as engine
+    import drpt.distributed.job as job_module
     from drpt.distributed.job import Job, WorkerStats, print_workers, run
     from drpt.errors import DrptError
     from drpt.options import RenderOptions
@@ -101,7 +101,7 @@ def test_workers_left_idle_and_replaced_workers_are_explained(tmp_path, capsys, 
         def __init__(self, *a, **k):
             raise DrptError("no cluster in this test")
 
-    monkeypatch.setattr(engine, "DaskEngine", NoCluster)
+    monkeypatch.setattr(job_module, "DaskEngine", NoCluster)  # the engine run() starts
     opts = RenderOptions(width=8, height=8, spp=4, progress=False)  # one chunk
     with pytest.raises(DrptError):
         run(load_scene(str(cornell)), opts, tmp_path / "x.exr", workers=2)

@@ -45,7 +45,7 @@ def _effective_default(top, action):
         if isinstance(d, float):
             return f"{d:g}"
         return " ".join(map(str, d)) if isinstance(d, (tuple, list)) else str(d)
-    from drpt.options import options_from_args
+    from drpt.cli.args import options_from_args
 
     opts = options_from_args(top.parse_args(["render", "scene.txt"]))
     return {"bsdf": opts.bsdf, "accel": opts.accel, "integrator": opts.integrator,
@@ -150,7 +150,7 @@ def test_render_help_names_every_output_type(parsers):
 
 def test_every_command_that_renders_defaults_to_auto_materials(parsers):
     """``profile`` profiled Phong while ``render`` rendered ``auto``."""
-    from drpt.options import options_from_args
+    from drpt.cli.args import options_from_args
 
     top, subs = parsers
     argv = {"export": ["scene.txt", "out.xml"], "bench": ["--accel", "auto"], "compare": ["scene.txt"]}

@@ -25,7 +25,7 @@ SIZE, SPP = 32, 128
 
 
 def _render(path: Path, opts=None):
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
@@ -33,7 +33,7 @@ def _render(path: Path, opts=None):
         warnings.simplefilter("ignore")
         scene = load_scene(path)
         base = opts or RenderOptions(progress=False, seed=7)
-        o = apply_scene_settings(base, scene)
+        o, scene = with_scene_settings(base, scene)
         return scene, o, Renderer(scene, o).render()
 
 

@@ -11,7 +11,7 @@ import pytest
 
 from drpt.aovs import parse_aovs, split
 from drpt.errors import DrptError, SceneError
-from drpt.options import RenderOptions, apply_scene_settings
+from drpt.options import RenderOptions, with_scene_settings
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
@@ -81,7 +81,7 @@ def test_the_aov_integrator_is_read(tmp_path):
     s = load_scene(_scene_file(tmp_path))
     assert s.settings.aovs == parse_aovs(AOVS) and s.settings.aov_image == "img"
     assert s.settings.max_depth == 3  # the nested integrator's settings
-    opts = apply_scene_settings(RenderOptions(progress=False), s)
+    opts, s = with_scene_settings(RenderOptions(progress=False), s)
     assert opts.aovs == parse_aovs(AOVS)
     with pytest.raises(SceneError, match=r"aov.xml:3: .*unknown AOV type 'bogus'"):
         load_scene(_scene_file(tmp_path, "d:bogus"))
@@ -101,7 +101,7 @@ def test_aovs_equal_mitsubas_aov_integrator(tmp_path, rfilter):
     path = _scene_file(tmp_path)
     ref = np.array(mi.render(mi.load_file(str(path), filter=rfilter), spp=64))[..., 3:]
     s = load_scene(path, defines={"filter": rfilter})
-    opts = apply_scene_settings(RenderOptions(progress=False), s)
+    opts, s = with_scene_settings(RenderOptions(progress=False), s)
     assert opts.filter.startswith(rfilter)
     ours = Renderer(s, opts).render().aov
     assert ours.shape == ref.shape == (32, 48, 16)
@@ -132,7 +132,7 @@ def test_shape_index_is_mitsubas(tmp_path):
     p.write_text(text[:first] + cube + text[first:])  # sphere, cube, sphere, disk
     ref = np.array(mi.render(mi.load_file(str(p), filter="box"), spp=64))[..., 3:]
     s = load_scene(p)
-    ours = Renderer(s, apply_scene_settings(RenderOptions(progress=False), s)).render().aov
+    ours = Renderer(s, with_scene_settings(RenderOptions(progress=False), s)[0]).render().aov
     assert sorted(np.unique(np.round(ref[..., 0]))) == [0, 1, 2, 3, 4]
     scale = np.abs(ref).max(axis=(0, 1))
     err = np.abs(ours - ref).mean(axis=(0, 1)) / scale
@@ -154,7 +154,7 @@ def test_uv_of_a_mesh_without_texture_coordinates_is_barycentric(tmp_path):
                  + '  <shape type="obj"><string name="filename" value="quad.obj"/></shape>\n</scene>')
     ref = np.array(mi.render(mi.load_file(str(p)), spp=16))[..., 3:]
     s = load_scene(p)
-    ours = Renderer(s, replace(apply_scene_settings(RenderOptions(progress=False), s), spp=16)).render().aov
+    ours = Renderer(s, replace(with_scene_settings(RenderOptions(progress=False), s)[0], spp=16)).render().aov
     assert np.abs(ours - ref).mean() < 0.03
     assert np.abs(ref).mean() > 0.2  # the negative control: zeros
 
@@ -178,7 +178,7 @@ def test_corpus_aovs_equal_mitsubas(rel):
     aov = mi.load_dict({"type": "aov", "aovs": ALL})
     ref = np.array(mi.render(mi.load_file(str(path)), integrator=aov, spp=16))[..., -16:]
     s = load_scene(path)
-    opts = replace(apply_scene_settings(RenderOptions(progress=False), s), spp=16, aovs=parse_aovs(ALL))
+    opts = replace(with_scene_settings(RenderOptions(progress=False), s)[0], spp=16, aovs=parse_aovs(ALL))
     ours = Renderer(s, opts).render().aov
     scale = np.maximum(np.abs(ref).max(axis=(0, 1)), 1e-6)
     err = np.abs(ours - ref).mean(axis=(0, 1)) / scale
@@ -214,7 +214,7 @@ def test_albedo_of_masks_and_blends_is_mitsubas(tmp_path):
     p.write_text(MASKS)
     ref = np.array(mi.render(mi.load_file(str(p)), spp=4))[..., 3:]
     s = load_scene(p)
-    ours = Renderer(s, replace(apply_scene_settings(RenderOptions(progress=False), s), spp=4)).render().aov
+    ours = Renderer(s, replace(with_scene_settings(RenderOptions(progress=False), s)[0], spp=4)).render().aov
     for px in ((8, 4), (8, 12)):
         assert np.allclose(ours[px], ref[px], atol=1e-6), (px, ours[px], ref[px])
     assert np.allclose(ours[8, 4], [0.2, 0.6, 0.3], atol=1e-6)  # not 0.3 x that
@@ -222,12 +222,12 @@ def test_albedo_of_masks_and_blends_is_mitsubas(tmp_path):
 
 # ------------------------------------------------------------------ the kernel
 def test_aov_kernel_is_traced_only_when_asked_for(monkeypatch, cornell):
-    from drpt.render import aov
+    from drpt.render import renderer
 
     def trap(*args, **kwargs):
         raise RuntimeError("traced")
 
-    monkeypatch.setattr(aov, "aov_values", trap)
+    monkeypatch.setattr(renderer, "aov_values", trap)  # the AOV kernel, as the renderer calls it
     opts = RenderOptions(width=4, height=4, spp=1, progress=False)
     r = Renderer(load_scene(cornell), opts).render()  # no AOVs: no AOV kernel
     assert r.aov is None
@@ -296,7 +296,7 @@ def test_guides_follow_mirrors_to_the_first_other_surface(tmp_path):
   <emitter type="constant"/>
 </scene>""")
     s = load_scene(p)
-    opts = replace(apply_scene_settings(RenderOptions(progress=False), s), spp=4,
+    opts = replace(with_scene_settings(RenderOptions(progress=False), s)[0], spp=4,
                    aovs=parse_aovs("albedo"), denoise=True)
     a = Renderer(s, opts).render().aov
     albedo, guide = a[..., :3], a[..., 3:6]

@@ -110,7 +110,7 @@ def test_scene_renders_like_mitsuba():
 
     from test_mitsuba_xml import _render_both
 
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
     from drpt.testing import assert_agree, block_z
@@ -123,6 +123,6 @@ def test_scene_renders_like_mitsuba():
     for m in scene.materials:
         kd = m.bsdf.params["kd"]
         m.bsdf.params["kd"] = replace(kd, filter_type="bilinear")
-    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=3), scene), spp=64)
+    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=3), scene)[0], spp=64)
     bad = Renderer(scene, opts).render()
     assert np.abs(block_z(bad.image, bad.variance, ref, var, block=4)).max() > 6.0

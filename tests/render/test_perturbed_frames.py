@@ -408,12 +408,12 @@ def test_wavefront_renders_perturbed_frames_like_mitsuba():
     import test_mitsuba_xml as tx
 
     from drpt.backend import mitsuba_variant
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.testing import assert_agree
 
     scene, _ = tx.load("bumpmap")
-    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=3), scene), spp=256, mode="wavefront")
+    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=3), scene)[0], spp=256, mode="wavefront")
     r = Renderer(scene, opts).render()
     mi.set_variant(mitsuba_variant())
     ms = mi.load_file(str(XML / "bumpmap.xml"), optimize=False, spp="32")

@@ -198,7 +198,7 @@ CORPUS_LD = ("bsdf_spheres/test_arealight_path.xml", "bsdf_spheres/test_textured
 
 
 def _corpus_ld(rel: str, spp: int, sampler: str = "ldsampler"):
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
     from support.corpus import _read, corpus_scene, reference_files, z_test
@@ -206,7 +206,7 @@ def _corpus_ld(rel: str, spp: int, sampler: str = "ldsampler"):
     path = corpus_scene(rel)
     ref, var = reference_files(path)
     scene = load_scene(path, defines={"spp": str(spp)})
-    opts = replace(apply_scene_settings(RenderOptions(progress=False), scene), spp=spp, sampler=sampler)
+    opts = replace(with_scene_settings(RenderOptions(progress=False), scene)[0], spp=spp, sampler=sampler)
     return z_test(Renderer(scene, opts).render().image, spp, _read(ref), _read(var))
 
 
@@ -241,7 +241,7 @@ XML_SCENE = """<scene version="3.0.0">
 
 @pytest.mark.parametrize("plugin", ["ldsampler", "stratified", "multijitter", "orthogonal", "independent"])
 def test_the_xml_sampler_and_its_seed_are_read(tmp_path, plugin):
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.scene import load_scene
 
     p = tmp_path / "s.xml"
@@ -255,14 +255,15 @@ def test_the_xml_sampler_and_its_seed_are_read(tmp_path, plugin):
             scene = load_scene(p)
     else:
         scene = load_scene(p)
-    opts = apply_scene_settings(RenderOptions(progress=False), scene)
+    opts, scene = with_scene_settings(RenderOptions(progress=False), scene)
     assert (opts.sampler, opts.seed) == (plugin, 5)
 
 
 def test_the_command_line_sampler_and_seed_win_over_the_files(tmp_path):
     import argparse
 
-    from drpt.options import add_render_flags, apply_scene_settings, options_from_args
+    from drpt.cli.args import add_render_flags, given_settings, options_from_args
+    from drpt.options import with_scene_settings
     from drpt.scene import load_scene
 
     p = tmp_path / "s.xml"
@@ -271,11 +272,11 @@ def test_the_command_line_sampler_and_seed_win_over_the_files(tmp_path):
     add_render_flags(parser)
     scene = load_scene(p)
     args = parser.parse_args(["--sampler", "independent", "--seed", "2"])
-    assert (lambda o: (o.sampler, o.seed))(apply_scene_settings(options_from_args(args), scene, args)) == \
-        ("independent", 2)
+    opts, _ = with_scene_settings(options_from_args(args), scene, given_settings(args))
+    assert (opts.sampler, opts.seed) == ("independent", 2)
     args = parser.parse_args([])
-    assert (lambda o: (o.sampler, o.seed))(apply_scene_settings(options_from_args(args), scene, args)) == \
-        ("ldsampler", 5)
+    opts, _ = with_scene_settings(options_from_args(args), scene, given_settings(args))
+    assert (opts.sampler, opts.seed) == ("ldsampler", 5)
 
 
 def test_light_tracing_beyond_2_32_paths_says_it_draws_independent_samples():

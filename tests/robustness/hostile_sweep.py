@@ -121,10 +121,11 @@ def checkpoint_cases(root: Path):
     code = (
         "import sys; from pathlib import Path\n"
         "from drpt.cli import build_parser\n"
-        "from drpt.options import options_from_args, apply_scene_settings\n"
+        "from drpt.cli.args import given_settings, options_from_args\n"
+        "from drpt.options import with_scene_settings\n"
         "from drpt.scene import load_scene\nfrom drpt.distributed.job import run\n"
         "a = build_parser().parse_args(['render', sys.argv[1], *sys.argv[3:]])\n"
-        "s = load_scene(sys.argv[1]); o = apply_scene_settings(options_from_args(a), s, a)\n"
+        "s = load_scene(sys.argv[1]); o, s = with_scene_settings(options_from_args(a), s, given_settings(a))\n"
         "def stop(m, r, e):\n    if m.next >= 2: raise KeyboardInterrupt\n"
         "try:\n    run(s, o, Path(sys.argv[2]), on_chunk=stop)\nexcept KeyboardInterrupt:\n    pass\n")
     good = base / "good.exr"

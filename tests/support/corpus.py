@@ -67,12 +67,12 @@ def cases(scenes: dict[str, int], not_yet: dict[str, str], not_yet_spp: int) -> 
 
 def render_as_authored(scene_path: Path, spp: int, seed: int = 0, **defines):
     """drpt's render of the corpus file at ``spp`` (RenderResult), the file's own settings."""
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
     scene = load_scene(scene_path, defines={"spp": str(spp), **defines})
-    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=seed), scene), spp=spp)
+    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=seed), scene)[0], spp=spp)
     return Renderer(scene, opts).render()
 
 

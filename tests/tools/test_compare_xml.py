@@ -60,6 +60,7 @@ def test_compare_xml_catches_drpt_reading_a_modified_file(tmp_path, monkeypatch)
     """drpt renders a copy with the floor's reflectance 0.7 -> 0.6, Mitsuba the original file:
     compare must fail it (were the reference drpt's export, it would agree)."""
     import drpt.scene as ds
+    import drpt.tools.compare as cmp
 
     src = (XML / "spot.xml").read_text()
     assert '<rgb name="reflectance" value="0.7"/>' in src
@@ -74,7 +75,7 @@ def test_compare_xml_catches_drpt_reading_a_modified_file(tmp_path, monkeypatch)
         return scene
 
     good, x0, ref0 = _compare(tmp_path, XML / "spot.xml", "--spp", "256", "--ref-spp", "1024", out="good")
-    monkeypatch.setattr(ds, "load_scene", load_modified)
+    monkeypatch.setattr(cmp, "load_scene", load_modified)  # the loader compare calls
     report, x, ref = _compare(tmp_path, XML / "spot.xml", "--spp", "256", "--ref-spp", "1024", out="bad")
     assert report["reference"]["cached"] and np.array_equal(ref, ref0)  # the same reference
     assert good["metrics"]["outside_ci"] < 0.03 and _mean_rel(x0, ref0) < 0.01

@@ -326,8 +326,8 @@ def test_page_in_headless_chromium(tmp_path, cornell):
 def test_view_flags(capsys):
     import argparse
 
+    from drpt.cli.args import add_view_flags, check_view_args
     from drpt.errors import DrptError
-    from drpt.options import add_view_flags, check_view_args
 
     p = argparse.ArgumentParser()
     add_view_flags(p)

@@ -87,6 +87,8 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Float
 
 from ...bsdf_kinds import PARAMS
+from ...iors import lookup_ior
+from ..texture import load_rgb
 from ..warp import INV_PI, square_to_cosine_hemisphere
 from . import BSDFSample
 from .dielectric import fresnel_dielectric
@@ -114,8 +116,6 @@ LUMINANCE = (0.212671, 0.715160, 0.072169)
 # ---------------------------------------------------------------- host side
 def resolve_ior(value: Any, name: str = "ior") -> float:
     """An IOR given as a number or one of Mitsuba's names (:func:`drpt.iors.lookup_ior`)."""
-    from ...iors import lookup_ior
-
     return lookup_ior(value, name)
 
 
@@ -161,8 +161,6 @@ def texture_mean(value: Any) -> float:
         return 0.5 * (float(np.mean(value.color0)) + float(np.mean(value.color1)))
     path = getattr(value, "path", None)
     if path is not None:
-        from ..texture import load_rgb
-
         img = load_rgb(path).astype(np.float64)
         return float(np.mean(img @ np.asarray(LUMINANCE)))
     if isinstance(value, (int, float)):

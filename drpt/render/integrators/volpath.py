@@ -65,9 +65,12 @@ import drjit as dr
 import numpy as np
 from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
 
+from ...bsdf_kinds import PARAMS
 from ...errors import Loc, SceneError
+from ...iors import relative_ior
 from ...options import PathOptions
 from ...scene.model import Scene
+from ..bsdf.thindielectric import reflectance
 from ..scene import DeviceScene
 from ..warp import Frame, square_to_uniform_sphere
 from .common import SHADOW_SHRINK, power_heuristic
@@ -116,9 +119,6 @@ class MediumTable:
     (``0``: vacuum)."""
 
     def __init__(self, scene: Scene):
-        from ...bsdf_kinds import PARAMS
-        from ...iors import relative_ior
-
         media = scene.media
         self.count = len(media)
         # (a heterogeneous medium is vacuum to the homogeneous code: its own in self.hetero)
@@ -202,8 +202,6 @@ class MediumTable:
         """What a shadow ray along ``d`` keeps crossing ``si``: 1 through a ``null``
         boundary, ``(1 - R') * specular_transmittance`` through a thindielectric sheet
         (Mitsuba's ``eval_null_transmission``), 0 through anything else."""
-        from ..bsdf.thindielectric import reflectance
-
         on = active & si.valid
         mat = dr.select(on, si.material, 0)
         kind = dr.gather(UInt32, self.null_kind, mat, on)

@@ -112,6 +112,7 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ...errors import DrptError
+from ...imageio import read_image
 
 __all__ = ["EnvironmentLight", "sanitize_image", "check_radius", "LUMINANCE"]
 
@@ -251,8 +252,6 @@ class EnvironmentLight:
     @classmethod
     def from_file(cls, path: str | PathLike, scale: float = 1.0) -> "EnvironmentLight":
         """Load a lat-long ``.hdr``/``.exr``/... map (``SceneError`` if unreadable)."""
-        from ...imageio import read_image
-
         return cls(read_image(path), scale=scale, name=Path(path).name)
 
     # ------------------------------------------------------------ lookup

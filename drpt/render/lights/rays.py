@@ -44,6 +44,7 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ...errors import DrptError, Loc, SceneError
+from ...scene.model import PointLight
 from ..spawn import origin as spawn_origin
 from ..warp import (
     Frame,
@@ -93,8 +94,6 @@ class VisiblePoint:
 
 class EmitterRays:
     def __init__(self, device_scene, scene):
-        from ...scene.model import PointLight
-
         self.scene = device_scene
         emissive = {i for i, m in enumerate(scene.materials) if max(m.emission) > 0.0}
         if len(scene.planes) and emissive & set(int(m) for m in scene.planes.material):

@@ -86,7 +86,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ...errors import DrptError
 from ..model import Scene
+from .precheck import not_utf8
+from .reader import Reader
 
 __all__ = ["load_mitsuba_xml", "parse_defines"]
 
@@ -94,20 +97,14 @@ __all__ = ["load_mitsuba_xml", "parse_defines"]
 def load_mitsuba_xml(path: str | Path, defines: dict[str, str] | None = None, *,
                      ignore_unsupported: bool = False, strict: bool = False) -> Scene:
     """Read the Mitsuba XML scene at ``path`` (``$name`` from ``defines``)."""
-    from .reader import Reader
-
     try:
         return Reader(path, defines, ignore_unsupported=ignore_unsupported, strict=strict).read()
     except UnicodeDecodeError:  # a name or value of bytes that are not UTF-8, which Mitsuba kept
-        from .precheck import not_utf8
-
         raise not_utf8(Path(path).expanduser().resolve(), defines) from None
 
 
 def parse_defines(items) -> dict[str, str]:
     """``["name=value", ...]`` (the ``-D`` flags) as a dict; a malformed one is a DrptError."""
-    from ...errors import DrptError
-
     out: dict[str, str] = {}
     for item in items or ():
         name, sep, value = item.partition("=")

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .nodes import Node
+from .nodes import Node, _one_line
 from .precheck import check_indices, check_mesh
 
 SPHERE_STACKS = 64
@@ -119,8 +119,6 @@ def load_mesh(node: Node, to_world: np.ndarray, attributes=()) -> Mesh:
     try:
         mesh = mi.load_dict(d)
     except RuntimeError as e:
-        from .nodes import _one_line
-
         raise node.error(f"{node.label}: {_one_line(str(e))}") from None
     except UnicodeDecodeError:  # Mitsuba's message quotes the file's bytes
         raise node.error(f"{node.label}: Mitsuba cannot read {d.get('filename', 'the mesh')} "

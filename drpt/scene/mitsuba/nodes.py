@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 
 from ...errors import Loc, SceneError, SceneWarning
+from ..files import named
+from .precheck import bare_load_crashes, check_xml, located_offset, not_utf8
 
 VARIANT = "scalar_rgb"
 
@@ -82,8 +84,6 @@ def parser_error(path: Path, error: Exception) -> SceneError:
     if m:
         return SceneError(Loc(_locate(path, m.group(1)), int(m.group(3))),
                           f"malformed XML: {_one_line(m.group(2))}")
-    from .precheck import located_offset
-
     return located_offset(_TAG.sub("", text)) or SceneError(Loc(path), _one_line(text))
 
 
@@ -104,8 +104,6 @@ class State:
         import mitsuba.parser as mp
 
         self.path = path
-        from .precheck import check_xml
-
         check_xml(path, defines)  # what would crash or block Mitsuba's parser
         config = mp.ParserConfig(VARIANT)
         # Mitsuba's load_file: a copy of the global file resolver with the scene's folder
@@ -122,8 +120,6 @@ class State:
         except RuntimeError as e:
             raise parser_error(path, e) from None
         except UnicodeDecodeError:  # its message quotes bytes that are not UTF-8
-            from .precheck import not_utf8
-
             raise not_utf8(path, defines) from None
         finally:
             mi.set_file_resolver(backup)
@@ -204,8 +200,6 @@ class Node:
         if not p.is_file():
             what = "not a regular file" if p.exists() else "no such file"
             raise self.error(f"{self.label}: {name}: {what}")
-        from ..files import named
-
         # an image read at render time names this node's line in its errors
         return named(p.resolve(), self.loc if self.loc.line is not None else None)
 
@@ -374,8 +368,6 @@ class Node:
         for k in self.props.keys():
             if self._type(k) != "ResolvedReference":
                 d[k] = self.props[k]
-        from .precheck import bare_load_crashes
-
         if bare_load_crashes(self.plugin, d):
             return None
         backup = mi.file_resolver()

@@ -11,11 +11,16 @@ from pathlib import Path
 
 import numpy as np
 
+from ...aovs import parse_aovs
 from ...errors import DrptError, Loc, SceneError, SceneWarning, located
-from ...options import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP
+from ...imageio import read_image
 from ...shading import MeshAttribute, Texture
 from ..model import (
     MAX_COORDINATE,
+    MAX_DEPTH,
+    MAX_SAMPLES,
+    MAX_SIZE,
+    MAX_SPP,
     Background,
     DirectionalLight,
     FilmWindow,
@@ -32,6 +37,7 @@ from ..model import (
     Spheres,
     SpotLight,
     Triangles,
+    vertical_fov,
 )
 from . import geometry as geo
 from .materials import BSDFSpec, Materials, default_bsdf, legacy_fields
@@ -91,8 +97,6 @@ def mitsuba_sample_count(plugin: str, spp: int) -> int:
 def _material(name: str, loc: Loc, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
     texture = None
     if isinstance(emission, Texture):  # a textured area emitter: its mean radiance for the power
-        from ...imageio import read_image
-
         texture = emission
         img = read_image(texture.path, linear=not texture.raw)
         img = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img[..., :3]
@@ -426,8 +430,6 @@ class Reader:
         if node.plugin == "aov":
             # Mitsuba's aov: its first nested integrator renders the image; the AOVs named
             # by ``aovs`` (name:type pairs) become EXR layers (drpt.aovs)
-            from ...aovs import parse_aovs
-
             nested = [(k, c) for k, c in node.objects() if c.kind == "integrator"]
             for _, c in node.objects():
                 if c.kind != "integrator":
@@ -851,8 +853,6 @@ class Reader:
             if irr is None:
                 irr = (1.0, 1.0, 1.0)
             else:
-                from ...imageio import read_image
-
                 h, w = read_image(irr.path, linear=False).shape[:2]
                 aspect = w / h
         else:
@@ -916,23 +916,6 @@ def _face_normals(p: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(g, axis=1, keepdims=True)
     g = g / np.where(n > 0, n, 1.0)
     return np.repeat(g[:, None, :], 3, axis=1)
-
-
-def vertical_fov(fov: float, axis: str, aspect: float) -> float:
-    """drpt's vertical field of view (degrees) for Mitsuba's ``fov`` along ``fov_axis``
-    on a film of ``aspect = width / height`` (Mitsuba's ``parse_fov``, then x to y)."""
-    if axis == "smaller":
-        axis = "y" if aspect > 1 else "x"
-    elif axis == "larger":
-        axis = "x" if aspect > 1 else "y"
-    t = math.tan(math.radians(fov) / 2.0)
-    if axis == "y":
-        ty = t
-    elif axis == "x":
-        ty = t / aspect
-    else:  # diagonal: the half diagonal is t, the half height t / sqrt(1 + aspect^2)
-        ty = t / math.sqrt(1.0 + aspect * aspect)
-    return math.degrees(2.0 * math.atan(ty))
 
 
 def orthographic_from_matrix(node: Node, m: np.ndarray, aspect: float,

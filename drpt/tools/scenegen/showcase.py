@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from drpt.imageio import write_image
+
 from . import SCENES
 from .diningroom import Mesh, box, grid_faces, lathe, quad, superellipsoid
 
@@ -304,8 +306,6 @@ def build_car() -> Mesh:
 
 def main(out: Path = SCENES / "showcase") -> int:
     from PIL import Image
-
-    from drpt.imageio import write_image
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -402,12 +402,12 @@ def test_bdpt_of_an_xml_scene_agrees_with_mitsubas_path(name):
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
-    from drpt.options import apply_scene_settings
+    from drpt.options import with_scene_settings
     from drpt.testing import block_z
 
     path = REPO / "tests" / "data" / "xml" / f"{name}.xml"
     scene = load_scene(path, defines={"spp": "256"})
-    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=3), scene), spp=256,
+    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=3), scene)[0], spp=256,
                    integrator="bdpt")
     r = Renderer(scene, opts).render()
     mi.set_variant(mitsuba_variant())

@@ -213,7 +213,7 @@ FURNACE = """<scene version="3.0.0">
 
 
 def _renderer(tmp_path: Path, **defines):
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
@@ -222,7 +222,7 @@ def _renderer(tmp_path: Path, **defines):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         scene = load_scene(path, defines={k: str(v) for k, v in defines.items()})
-    opts = apply_scene_settings(RenderOptions(progress=False, seed=1), scene)
+    opts, scene = with_scene_settings(RenderOptions(progress=False, seed=1), scene)
     return Renderer(scene, opts)
 
 
@@ -320,14 +320,14 @@ def test_hg_medium_renders_like_mitsuba_and_the_wrong_sign_does_not(tmp_path):
     ref, ref_var = runs.mean(0), runs.var(0, ddof=1) / 8
     worst = {}
     for g in ("0.6", "-0.6"):
-        from drpt.options import RenderOptions, apply_scene_settings
+        from drpt.options import RenderOptions, with_scene_settings
         from drpt.render.renderer import Renderer
         from drpt.scene import load_scene
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             sc = load_scene(path, defines={**defines, "g": g})
-        opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=5), sc), spp=512)
+        opts = replace(with_scene_settings(RenderOptions(progress=False, seed=5), sc)[0], spp=512)
         res = Renderer(sc, opts).render()
         worst[g] = float(np.abs(block_z(np.asarray(res.image, np.float64), res.variance, ref, ref_var)).max())
     assert worst["0.6"] < 5.0, worst
@@ -444,7 +444,7 @@ def test_a_camera_in_fog_renders_like_mitsuba(tmp_path):
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
     from drpt.testing import block_z
@@ -461,7 +461,7 @@ def test_a_camera_in_fog_renders_like_mitsuba(tmp_path):
             warnings.simplefilter("ignore")
             sc = load_scene(path, defines={"g": g})
         assert sc.camera_medium == 0
-        res = Renderer(sc, replace(apply_scene_settings(RenderOptions(progress=False, seed=2), sc),
+        res = Renderer(sc, replace(with_scene_settings(RenderOptions(progress=False, seed=2), sc)[0],
                                    spp=512)).render()
         worst[g] = float(np.abs(block_z(np.asarray(res.image, np.float64), res.variance, ref, ref_var)).max())
     assert worst["0.5"] < 5.0, worst
@@ -476,7 +476,7 @@ def test_blendphase_renders_like_mitsuba(tmp_path):
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
     from drpt.testing import block_z
@@ -502,7 +502,7 @@ def test_blendphase_renders_like_mitsuba(tmp_path):
             warnings.simplefilter("ignore")
             sc = load_scene(path, defines={**defines, "w": w})
         assert sc.media[0].phase == "blend"
-        res = Renderer(sc, replace(apply_scene_settings(RenderOptions(progress=False, seed=4), sc),
+        res = Renderer(sc, replace(with_scene_settings(RenderOptions(progress=False, seed=4), sc)[0],
                                    spp=512)).render()
         worst[w] = float(np.abs(block_z(np.asarray(res.image, np.float64), res.variance, ref, ref_var)).max())
     assert worst["0.7"] < 5.0, worst

@@ -14,7 +14,7 @@ W = H = 32
 
 
 def _renderer(scene_path, bsdf):
-    return Renderer(load_scene(scene_path), RenderOptions(width=W, height=H, bsdf=bsdf,
+    return Renderer(load_scene(scene_path), RenderOptions(width=W, height=H, spp=16, bsdf=bsdf,
                                                              progress=False))
 
 

@@ -173,11 +173,11 @@ def test_light_tracing_of_an_xml_scene_agrees_with_mitsubas_path(name):
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
-    from drpt.options import apply_scene_settings
+    from drpt.options import with_scene_settings
 
     path = XML / f"{name}.xml"
     scene = load_scene(path, defines={"spp": "512"})
-    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=3), scene), spp=512,
+    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=3), scene)[0], spp=512,
                    integrator="ptracer")
     r = Renderer(scene, opts).render()
     mi.set_variant(mitsuba_variant())
@@ -243,7 +243,7 @@ def test_splatted_renders_are_the_same_in_chunks_and_resumed(cornell, tmp_path, 
 
 
 def test_light_tracing_without_emitters_is_black_and_refuses_emissive_planes(tmp_path):
-    from drpt.options import apply_scene_settings
+    from drpt.options import with_scene_settings
 
     body = """<scene version="3.0.0"><integrator type="ptracer"/>
         <sensor type="perspective"><transform name="to_world"><lookat origin="0,0,4" target="0,0,0"
@@ -253,7 +253,7 @@ def test_light_tracing_without_emitters_is_black_and_refuses_emissive_planes(tmp
     dark = tmp_path / "dark.xml"
     dark.write_text(body)
     scene = load_scene(dark)
-    r = Renderer(scene, replace(apply_scene_settings(RenderOptions(progress=False), scene), spp=4)).render()
+    r = Renderer(scene, replace(with_scene_settings(RenderOptions(progress=False), scene)[0], spp=4)).render()
     assert r.nonfinite == 0 and not r.image.any()
     lit = tmp_path / "plane.txt"
     lit.write_text("""PerspectiveCamera { center 0 0 5 direction 0 0 -1 up 0 1 0 angle 40 }

@@ -28,7 +28,7 @@ def test_renders_like_mitsuba():
 
     from test_mitsuba_xml import XML, _render_both
 
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.testing import assert_agree, block_z
 
@@ -39,7 +39,7 @@ def test_renders_like_mitsuba():
     assert_agree(r, ref, var, zmax=4.5)
     for m in scene.materials:  # negative control: the emitters at their mean radiance
         m.emission_texture = None
-    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=3), scene), spp=128)
+    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=3), scene)[0], spp=128)
     bad = Renderer(scene, opts).render()
     assert np.abs(block_z(bad.image, bad.variance, ref, var)).max() > 6.0
 

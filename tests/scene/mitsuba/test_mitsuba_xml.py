@@ -306,26 +306,27 @@ def test_crop_window_and_thin_lens_reach_the_camera(tmp_path):
 
 def test_apply_scene_settings_flags_win(tmp_path):
     from drpt.cli import build_parser
-    from drpt.options import apply_scene_settings, options_from_args
+    from drpt.cli.args import given_settings, options_from_args
+    from drpt.options import with_scene_settings
 
     s, _ = load("spot")
     args = build_parser().parse_args(["render", "x.xml", "--spp", "5", "--max-depth", "2"])
-    opts = apply_scene_settings(options_from_args(args), s, args)
+    opts, s = with_scene_settings(options_from_args(args), s, given_settings(args))
     assert (opts.width, opts.height, opts.spp) == (32, 24, 5)
     assert (opts.path.max_depth, opts.path.rr_depth, opts.path.hide_emitters) == (2, 5, True)
     # a flag given at its default value still wins
     args = build_parser().parse_args(["render", "x.xml", "--size", "512", "512", "--filter", "box"])
-    opts = apply_scene_settings(options_from_args(args), s, args)
+    opts, s = with_scene_settings(options_from_args(args), s, given_settings(args))
     assert (opts.width, opts.height, opts.spp, opts.path.max_depth) == (512, 512, 16, 4)
     assert opts.filter == "box"
     lens, _ = load("lens")
     args = build_parser().parse_args(["render", "x.xml"])
-    assert apply_scene_settings(options_from_args(args), lens, args).filter == "gaussian:stddev=0.7"
+    assert with_scene_settings(options_from_args(args), lens, given_settings(args))[0].filter == "gaussian:stddev=0.7"
     args = build_parser().parse_args(["render", "x.xml", "--filter", "box"])
-    assert apply_scene_settings(options_from_args(args), lens, args).filter == "box"
+    assert with_scene_settings(options_from_args(args), lens, given_settings(args))[0].filter == "box"
     legacy, _ = load("legacy06")  # <rfilter type="gaussian"/>: Mitsuba's stddev 0.5
-    assert apply_scene_settings(options_from_args(args := build_parser().parse_args(["render", "x.xml"])),
-                                legacy, args).filter == "gaussian"
+    args = build_parser().parse_args(["render", "x.xml"])
+    assert with_scene_settings(options_from_args(args), legacy, given_settings(args))[0].filter == "gaussian"
 
 
 # ------------------------------------------------------------ against Mitsuba itself
@@ -498,10 +499,10 @@ def _render_both(scene, path: Path, spp: int, defines: dict | None = None, seed:
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
 
-    opts = replace(apply_scene_settings(RenderOptions(progress=False, seed=seed), scene), spp=spp, **options)
+    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=seed), scene)[0], spp=spp, **options)
     r = Renderer(scene, opts).render()
     mi.set_variant(mitsuba_variant())
     batches = 8
@@ -635,7 +636,7 @@ def test_mitsubas_blend_of_a_delta_and_a_smooth_lobe_is_biased():
     ``blend(w)`` must equal ``(1 - w) blend(0) + w blend(1)``: drpt's does, Mitsuba's does not."""
     from dataclasses import replace
 
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
 
     path = XML / "blend_delta.xml"
@@ -644,7 +645,7 @@ def test_mitsubas_blend_of_a_delta_and_a_smooth_lobe_is_biased():
     lin, vlin = 0.75 * a + 0.25 * b, 0.75 ** 2 * va + 0.25 ** 2 * vb
     m, vm = _mitsuba_mean_var(path, 1024, 3)
     scene, _ = load("blend_delta")
-    r = Renderer(scene, replace(apply_scene_settings(RenderOptions(progress=False, seed=4), scene),
+    r = Renderer(scene, replace(with_scene_settings(RenderOptions(progress=False, seed=4), scene)[0],
                                 spp=1024)).render()
     n = lin.shape[0] * lin.shape[1]
 
