@@ -13,7 +13,7 @@ Prints
   connected component of the graph whose edges are the ``import`` statements a module runs
   when it is imported (those inside functions and under ``if TYPE_CHECKING:`` excluded).
 
-``tests/test_imports.py`` asserts what this prints (fewer than 20 indented imports, each with
+``tests/package/test_imports.py`` asserts what this prints (fewer than 20 indented imports, each with
 its reason; no cycle) and imports every module alone.
 """
 
