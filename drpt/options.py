@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 from .errors import DrptError, note, warn
 
-BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
+BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.materials.interpret.MODES
 INTEGRATORS = ("path", "whitted", "ptracer", "volpath")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
@@ -74,7 +74,7 @@ class RenderOptions:
     bvh_method: str = "auto"  # BVH split rule, drpt.accel.METHODS (accel="bvh")
     sah_threshold: int | None = None  # K of bvh_method="threshold" (None: the seed's 2000)
     bvh_min_leaf: int = 1  # minimum primitives per BVH leaf (the seed's -resolution)
-    bsdf: str = "auto"  # how MTL materials are read, see drpt.shading
+    bsdf: str = "auto"  # how MTL materials are read, see drpt.materials.interpret
     integrator: str = "path"  # "path" (MIS path tracing), "whitted" or "ptracer" (light tracing)
     mode: str = "megakernel"  # path tracing as one fused kernel, or "wavefront" (a kernel per stage)
     wavefront_tail: int = 0  # wavefront: finish in one fused loop once at most this many paths live

@@ -73,7 +73,7 @@ def export_bsdf(kind, two_sided=False, **params):
     with ``params`` (defaults filled in), wrapped in ``twosided`` if asked; for
     ``mi.load_dict``."""
     from drpt.export.mitsuba_bsdf import to_mitsuba
-    from drpt.shading import BSDFSpec, complete
+    from drpt.materials.spec import BSDFSpec, complete
 
     spec = BSDFSpec(kind, params)
     if two_sided:

@@ -1,4 +1,4 @@
-"""A material's :class:`~drpt.shading.BSDFSpec` tree as Mitsuba 3 BSDF dicts.
+"""A material's :class:`~drpt.materials.spec.BSDFSpec` tree as Mitsuba 3 BSDF dicts.
 
 One node, one plugin (plain ``mi.load_dict`` dicts: RGB values as
 ``{"type": "rgb", "value": [r, g, b]}``, textures as ``bitmap`` with
@@ -36,9 +36,9 @@ from typing import Any
 
 import numpy as np
 
-from ..bsdf_kinds import COMPOSITES, PARAMS, PERTURBING
 from ..errors import DrptError
-from ..shading import BSDFSpec, Checkerboard, MeshAttribute, Texture
+from ..materials.bsdf_kinds import COMPOSITES, PARAMS, PERTURBING
+from ..materials.spec import BSDFSpec, Checkerboard, MeshAttribute, Texture
 from .mitsuba_dielectrics import KINDS as DIELECTRICS
 from .mitsuba_dielectrics import adjust as adjust_dielectric
 
@@ -119,7 +119,7 @@ def _leaf(spec: BSDFSpec) -> dict:
     out: dict[str, Any] = {"type": kind}
     skip = set()
     if kind in ("conductor", "roughconductor"):
-        from ..conductors import mitsuba_ior
+        from ..materials.conductors import mitsuba_ior
 
         out.update({k: val(v) for k, v in mitsuba_ior(p).items()})
         skip |= {"material", "eta", "k"}
@@ -135,7 +135,7 @@ def _leaf(spec: BSDFSpec) -> dict:
 
 
 def to_mitsuba(spec: BSDFSpec) -> dict:
-    """The Mitsuba dict of a complete :class:`~drpt.shading.BSDFSpec` tree."""
+    """The Mitsuba dict of a complete :class:`~drpt.materials.spec.BSDFSpec` tree."""
     if spec.kind not in COMPOSITES:
         return _leaf(spec)
     kids = [to_mitsuba(c) for c in spec.children]

@@ -1,7 +1,7 @@
 """Materials on the device: per-material BSDF trees flattened into lobes, and the dispatch.
 
-Each scene material is a :class:`~drpt.shading.BSDFSpec` tree
-(:func:`drpt.shading.interpret_scene` decides it, the same function the
+Each scene material is a :class:`~drpt.materials.spec.BSDFSpec` tree
+(:func:`drpt.materials.interpret.interpret_scene` decides it, the same function the
 Mitsuba exporter uses). The table flattens every tree into *components*:
 leaf lobes, each with a weight and a sidedness.
 
@@ -47,9 +47,10 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-from .. import bsdf_kinds
+from ..materials import bsdf_kinds
+from ..materials.interpret import interpret_scene
+from ..materials.spec import BSDFSpec, Checkerboard, Texture
 from ..scene.model import Scene
-from ..shading import BSDFSpec, Checkerboard, Texture, interpret_scene
 from . import perturb
 from .bsdf import BSDFSample, lobe
 from .perturb import PerturbedFrame

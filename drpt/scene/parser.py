@@ -585,7 +585,7 @@ class _Parser:
             _, line = got.pop("passThrough")
             if got or mat.given:
                 raise self.error(line, "passThrough takes no other appearance fields (the surface is invisible)")
-            from ..shading import BSDFSpec
+            from ..materials.spec import BSDFSpec
 
             return replace(mat, bsdf=BSDFSpec("null", {}, [], [], mat.origin), **media)
         mat = replace(mat, **media)

@@ -13,10 +13,10 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from drpt.errors import SceneError
 from drpt.export.mitsuba_bsdf import to_mitsuba
+from drpt.materials.spec import BSDFSpec, Texture, complete
 from drpt.render.material import MaterialTable, _flatten
 from drpt.render.surface import Interaction
 from drpt.scene.model import Background, Material, PerspectiveCamera, Planes, Scene, Spheres, Triangles
-from drpt.shading import BSDFSpec, Texture, complete
 from drpt.testing import mitsuba, to_mitsuba_vec3
 
 

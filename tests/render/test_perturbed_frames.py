@@ -28,10 +28,10 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from drpt.export.mitsuba import _to_dict
 from drpt.export.mitsuba_bsdf import to_mitsuba
+from drpt.materials.spec import BSDFSpec, Texture, complete
 from drpt.render.material import MaterialTable
 from drpt.render.surface import Interaction, triangle_tangents
 from drpt.scene.model import Background, Material, PerspectiveCamera, Planes, Scene, Spheres, Triangles
-from drpt.shading import BSDFSpec, Texture, complete
 from drpt.testing import mitsuba, spherical_chi2
 
 XML = Path(__file__).resolve().parents[1] / "data" / "xml"  # tests/data/xml

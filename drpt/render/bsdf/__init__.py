@@ -5,12 +5,12 @@
 ``roughdielectric``, ``principled``, ``principledthin``. (``normalmap`` and
 ``bumpmap`` are no lobes: they perturb the frame a lobe sees, :mod:`drpt.render.perturb`.)
 
-:data:`REGISTRY` maps each leaf kind of :mod:`drpt.bsdf_kinds` to its
+:data:`REGISTRY` maps each leaf kind of :mod:`drpt.materials.bsdf_kinds` to its
 module; :class:`drpt.render.material.MaterialTable` finds a kind's lobe
 there (:func:`lobe`) and traces only the kinds a scene has. A new BSDF is one
 module implementing :class:`BSDF`, one entry in :data:`REGISTRY`, its
-parameters in :data:`drpt.bsdf_kinds.PARAMS` (and, if MTL statements should
-produce it, a rule in :mod:`drpt.shading`; the Mitsuba exporter maps kinds
+parameters in :data:`drpt.materials.bsdf_kinds.PARAMS` (and, if MTL statements should
+produce it, a rule in :mod:`drpt.materials.interpret`; the Mitsuba exporter maps kinds
 named after a Mitsuba plugin by their names).
 
 The lobe interface

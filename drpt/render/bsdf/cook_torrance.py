@@ -20,7 +20,7 @@ below) and ``metalness`` (Float, ``m`` in [0, 1]).
 
 Roughness-to-alpha mapping
 --------------------------
-drpt's parameter *is* the GGX ``alpha``; :mod:`drpt.shading` sets it to the
+drpt's parameter *is* the GGX ``alpha``; :mod:`drpt.materials.interpret` sets it to the
 seed's ``Roughness^2`` (the seed's parser stores ``Roughness * Roughness`` and
 its GGX squares that again), with ``Roughness = 0.95`` when absent.
 Principled's ``roughness`` is the *perceptual* roughness ``r`` with

@@ -116,8 +116,8 @@ class MediumTable:
     (``0``: vacuum)."""
 
     def __init__(self, scene: Scene):
-        from ...bsdf_kinds import PARAMS
-        from ...iors import relative_ior
+        from ...materials.bsdf_kinds import PARAMS
+        from ...materials.iors import relative_ior
 
         media = scene.media
         self.count = len(media)

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import DrptError, SceneError
+from ...materials.spec import MeshAttribute, Texture
 from ...options import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP
-from ...shading import MeshAttribute, Texture
 from ..model import (
     MAX_COORDINATE,
     Background,
@@ -830,7 +830,7 @@ class Reader:
         self.check_unread(node)
 
     def _emitter_texture(self, node: Node, name: str):
-        """The bitmap of an emitter's texture parameter (a :class:`drpt.shading.Texture`)."""
+        """The bitmap of an emitter's texture parameter (a :class:`drpt.materials.spec.Texture`)."""
         tex = node.ref(name)
         spec = self.materials.texture(tex, fallback=(1.0, 1.0, 1.0)) if tex.kind == "texture" else None
         if type(spec) is not Texture:

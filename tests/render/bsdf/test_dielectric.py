@@ -16,7 +16,7 @@ import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float
 
 from dielectricutil import FakeTable, Spec
-from drpt import bsdf_kinds
+from drpt.materials import bsdf_kinds
 from drpt.render.bsdf import dielectric
 from drpt.testing import mitsuba
 
