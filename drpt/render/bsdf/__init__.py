@@ -1,8 +1,9 @@
-"""BSDF lobes, one module each: ``diffuse``, ``phong``, ``cook_torrance``
-(with ``microfacet`` for GGX), ``dielectric``, ``mirror``, ``null``,
+"""BSDF lobes, one module each: ``diffuse``, ``phong``, ``cook_torrance``,
+``dielectric``, ``mirror``, ``null``,
 ``plastic``, ``roughplastic`` (its coating tables precomputed by
 ``roughplastic_tables``), ``conductor``, ``roughconductor``, ``thindielectric``,
-``roughdielectric``, ``principled``, ``principledthin``. (``normalmap`` and
+``roughdielectric``, ``principled``, ``principledthin``; every microfacet lobe
+draws on the one ``microfacet.Distribution`` (GGX and Beckmann). (``normalmap`` and
 ``bumpmap`` are no lobes: they perturb the frame a lobe sees, :mod:`drpt.render.perturb`.)
 
 :data:`REGISTRY` maps each leaf kind of :mod:`drpt.materials.bsdf_kinds` to its
