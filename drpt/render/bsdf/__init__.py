@@ -76,9 +76,11 @@ class BSDF(Protocol):
     samples over [0, 1], read with ``table.table_lerp``). A field's value is
     the spec's parameter of that name or, when the module defines
     ``derive(params) -> dict`` (host side, once per component, ``ValueError``
-    for a bad parameter), that function's output. ``params(table, si,
-    active)`` gathers the lobe's parameter record with ``table.value`` and
-    may decide what to trace from ``table.specs_of(kind)``. ``DELTA``: only
+    for a bad parameter), that function's output
+    (:class:`drpt.materials.layout.MaterialLayout` lays them out). ``params(table,
+    si, active)`` gathers the lobe's parameter record with ``table.value`` and
+    may decide what to trace from ``table.specs_of(kind)``; ``table`` is the
+    lanes' rows of the material table (:class:`drpt.render.material.Rows`). ``DELTA``: only
     Dirac components (``eval`` and ``pdf`` are 0, next-event estimation is
     skipped); a lobe mixing a Dirac and a smooth part sets ``delta`` per
     sample instead. Optional ``COLOR``: the field the Whitted ambient term

@@ -343,7 +343,7 @@ def test_table_lerp_convention():
     for m, spec in enumerate(specs):
         data = rp.derive(spec.params)[rp.TABLE].astype(np.float32)
         si = SimpleNamespace(material=UInt32(np.full(x.size, m, np.uint32)))
-        got = np.array(table.table_lerp(rp.TABLE, si, Float(x), dr.full(Bool, True, x.size)))
+        got = np.array(table.at(si.material).table_lerp(rp.TABLE, si, Float(x), dr.full(Bool, True, x.size)))
         xs = x.astype(np.float64) * 63
         i = np.minimum(xs.astype(int), 62)
         want = data[i] + (data[i + 1] - data[i]) * (xs - i)
