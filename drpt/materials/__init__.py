@@ -8,7 +8,10 @@ before anything is uploaded.
 * :mod:`.interpret`: the rules that turn MTL (and 6.837) statements into one tree
   per material (``--bsdf`` modes);
 * :mod:`.iors` and :mod:`.conductors`: Mitsuba 3's named indices of refraction and
-  conductors.
+  conductors;
+* :mod:`.layout`: a scene's trees flattened into the host-side material layout
+  (lobe rows, per-material slots, parameter arrays, texture references) that
+  :mod:`drpt.render.material` uploads.
 
 Reading the files themselves is the scene readers' part (:mod:`drpt.scene.mtl`,
 :mod:`drpt.scene.mitsuba.materials`).

@@ -1,10 +1,10 @@
 """How a scene's materials are read: from file statements to one BSDF tree per material.
 
-Backend-free. The renderer (:mod:`drpt.render.material`) and the Mitsuba
-exporter both call :func:`interpret_scene`, so what drpt renders and what
+Backend-free. The renderer (through :mod:`drpt.materials.layout`) and the
+Mitsuba exporter both call :func:`interpret_scene`, so what drpt renders and what
 Mitsuba is given cannot drift apart.
 
-A material is a :class:`BSDFSpec` tree in the vocabulary of
+A material is a :class:`~drpt.materials.spec.BSDFSpec` tree in the vocabulary of
 :mod:`drpt.materials.bsdf_kinds` (Mitsuba's plugin names and parameters, plus drpt's
 own ``phong``, ``cook_torrance``, ``mirror``). A material that carries an
 explicit ``bsdf`` (a Mitsuba XML scene) is used as given; every other one
