@@ -147,10 +147,7 @@ class MaterialTable:
         self._data: dict[str, object] = {}
         self._tex: dict[str, UInt32] = {}
         for name, f in lay.fields.items():
-            if isinstance(f.type, tuple) or f.type != "rgb":
-                self._data[name] = Float(f.values)
-            else:
-                self._data[name] = _vec(f.values)
+            self._data[name] = _vec(f.values) if f.type == "rgb" else Float(f.values)
             if f.texture is not None:
                 self._tex[name] = UInt32(f.texture)
         # textured emission (Mitsuba's area radiance bitmap), by material
