@@ -33,6 +33,7 @@ does.
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
@@ -72,6 +73,18 @@ def _luminance(c: Array3f) -> Float:
 def _flag(v):
     """A layout flag on the device: a Python bool stays one (decided at trace time)."""
     return v if isinstance(v, bool) else Bool(v)
+
+
+@dataclass
+class _Slot:
+    """:class:`drpt.materials.layout.Slot` on the device (arrays indexed by material)."""
+
+    row: UInt32
+    weight: Float
+    texture: UInt32 | None
+    complement: Bool
+    kinds: list[str]
+    partial: bool
 
 
 class Rows:
@@ -138,10 +151,9 @@ class MaterialTable:
         # sidedness, per kind: True / False when uniform, else a per-row array
         self._two = {k: _flag(v) for k, v in lay.two_sided.items()}
         # slots (only when some material has several components)
-        self._slots = [{"row": UInt32(sl.row), "w": Float(sl.weight),
-                        "tex": None if sl.texture is None else UInt32(sl.texture),
-                        "complement": Bool(sl.complement), "kinds": sl.kinds, "partial": sl.partial}
-                       for sl in lay.slots]
+        self._slots = [_Slot(UInt32(sl.row), Float(sl.weight),
+                             None if sl.texture is None else UInt32(sl.texture), Bool(sl.complement),
+                             sl.kinds, sl.partial) for sl in lay.slots]
         # per-row fields of the kinds present
         self._types = {name: f.type for name, f in lay.fields.items()}
         self._data: dict[str, object] = {}
@@ -312,14 +324,14 @@ class MaterialTable:
         if self.K == 1:  # a material's one row is its index
             return si.material, None, si.valid
         s = self._slots[j]
-        row = dr.gather(UInt32, s["row"], si.material, si.valid)
-        present = si.valid & (row != NONE) if s["partial"] else si.valid
-        w = dr.gather(Float, s["w"], si.material, present)
-        if s["tex"] is not None:
-            ids = dr.gather(UInt32, s["tex"], si.material, present)
+        row = dr.gather(UInt32, s.row, si.material, si.valid)
+        present = si.valid & (row != NONE) if s.partial else si.valid
+        w = dr.gather(Float, s.weight, si.material, present)
+        if s.texture is not None:
+            ids = dr.gather(UInt32, s.texture, si.material, present)
             textured = present & (ids != NONE)
             t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True, si=si))
-            comp = dr.gather(Bool, s["complement"], si.material, present)
+            comp = dr.gather(Bool, s.complement, si.material, present)
             w = dr.select(textured, w * dr.select(comp, 1.0 - t, t), w)
         return row, dr.select(present, w, 0.0), present
 
@@ -329,7 +341,7 @@ class MaterialTable:
         if row is None:
             row, _, present = self._slot(si, j)
         rows = self.at(row)
-        kinds = self.kinds if (j is None or self.K == 1) else self._slots[j]["kinds"]
+        kinds = self.kinds if (j is None or self.K == 1) else self._slots[j].kinds
         if self._only is not None:
             kinds = [k for k in kinds if k in self._only]
         if len(self.kinds) == 1 or (self._only is not None and len(self._only) == 1 and self.K == 1):
