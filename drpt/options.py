@@ -36,7 +36,7 @@ from .errors import DrptError, Loc, SceneError
 from .filters import parse_filter
 from .scene.model import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP, vertical_fov
 
-BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
+BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.materials.interpret.MODES
 INTEGRATORS = ("path", "whitted", "ptracer", "volpath", "bdpt")
 #: integrators whose passes splat light paths over the whole image (their sums merge and
 #: finish as light tracing's, drpt.render.renderer.finish)
@@ -79,7 +79,7 @@ class RenderOptions:
     bvh_method: str = "auto"  # BVH split rule, drpt.accel.METHODS (accel="bvh")
     sah_threshold: int | None = None  # K of bvh_method="threshold" (None: the seed's 2000)
     bvh_min_leaf: int = 1  # minimum primitives per BVH leaf (the seed's -resolution)
-    bsdf: str = "auto"  # how MTL materials are read, see drpt.shading
+    bsdf: str = "auto"  # how MTL materials are read, see drpt.materials.interpret
     integrator: str = "path"  # "path" (MIS path tracing), "whitted", "ptracer" (light tracing), "bdpt", "volpath"
     mode: str = "megakernel"  # path tracing as one fused kernel, or "wavefront" (a kernel per stage)
     wavefront_tail: int = 0  # wavefront: finish in one fused loop once at most this many paths live

@@ -29,9 +29,9 @@ import numpy as np
 from drpt.backend import mitsuba_variant
 from drpt.export.mitsuba import to_mitsuba_dict
 from drpt.export.mitsuba_bsdf import to_mitsuba
+from drpt.materials.spec import BSDFSpec, complete
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.renderer import Renderer
-from drpt.shading import BSDFSpec, complete
 
 __all__ = [
     "BATCHES", "SRGB_TO_XYZ", "Furnace", "ZTest", "assert_agree", "block_z", "block_z_correlated",

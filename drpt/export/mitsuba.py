@@ -51,7 +51,7 @@ Film, sampler, integrator
     (-1 infinite, 1 emitters seen directly, 2 direct lighting), ``rr_depth``,
     ``hide_emitters`` (default false; a Mitsuba XML scene's own, through ``drpt export``).
 Materials
-    Each material goes through :func:`drpt.shading.interpret_scene` (the
+    Each material goes through :func:`drpt.materials.interpret.interpret_scene` (the
     same call the renderer makes, with the same ``bsdf`` mode), and
     :mod:`drpt.export.mitsuba_bsdf` writes its BSDF tree node for node as
     the Mitsuba plugins of the same names (``phong`` as ``drpt_phong``, a
@@ -119,6 +119,8 @@ import numpy as np
 
 from drpt.errors import DrptError, SceneWarning
 from drpt.filters import parse_filter
+from drpt.materials.interpret import interpret_scene
+from drpt.materials.spec import BSDFSpec
 from drpt.scene.model import (
     DirectionalLight,
     Material,
@@ -130,7 +132,6 @@ from drpt.scene.model import (
     Skybox,
     SpotLight,
 )
-from drpt.shading import BSDFSpec, interpret_scene
 
 from .mitsuba_bsdf import _error as bsdf_error
 from .mitsuba_bsdf import _value as bsdf_value
@@ -523,7 +524,7 @@ def _plain(node: Any) -> Any:
 
 
 def _bsdf(spec: BSDFSpec) -> dict:
-    """The Mitsuba BSDF for what drpt renders of a material (``spec``, see drpt.shading).
+    """The Mitsuba BSDF for what drpt renders of a material (``spec``, see drpt.materials.interpret).
 
     A missing texture file is an error, also where the texture is dropped."""
     for path in spec.dropped:

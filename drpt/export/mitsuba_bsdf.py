@@ -1,4 +1,4 @@
-"""A material's :class:`~drpt.shading.BSDFSpec` tree as Mitsuba 3 BSDF dicts.
+"""A material's :class:`~drpt.materials.spec.BSDFSpec` tree as Mitsuba 3 BSDF dicts.
 
 One node, one plugin (plain ``mi.load_dict`` dicts: RGB values as
 ``{"type": "rgb", "value": [r, g, b]}``, textures as ``bitmap`` with
@@ -36,10 +36,10 @@ from typing import Any
 
 import numpy as np
 
-from ..bsdf_kinds import COMPOSITES, PARAMS, PERTURBING
-from ..conductors import mitsuba_ior
 from ..errors import DrptError, Loc, SceneError
-from ..shading import BSDFSpec, Checkerboard, MeshAttribute, Texture
+from ..materials.bsdf_kinds import COMPOSITES, PARAMS, PERTURBING
+from ..materials.conductors import mitsuba_ior
+from ..materials.spec import BSDFSpec, Checkerboard, MeshAttribute, Texture
 from .mitsuba_dielectrics import KINDS as DIELECTRICS
 from .mitsuba_dielectrics import adjust as adjust_dielectric
 from .mitsuba_phong import PLUGIN_NAME
@@ -136,7 +136,7 @@ def _leaf(spec: BSDFSpec) -> dict:
 
 
 def to_mitsuba(spec: BSDFSpec) -> dict:
-    """The Mitsuba dict of a complete :class:`~drpt.shading.BSDFSpec` tree."""
+    """The Mitsuba dict of a complete :class:`~drpt.materials.spec.BSDFSpec` tree."""
     if spec.kind not in COMPOSITES:
         return _leaf(spec)
     kids = [to_mitsuba(c) for c in spec.children]

@@ -2,7 +2,7 @@
 ``roughdielectric`` needs beyond "``{"type": kind, **params}``" (backend-free).
 
 :func:`adjust` takes a spec's kind and parameters (defaults filled in, values
-as in :mod:`drpt.bsdf_kinds`) and returns the Mitsuba plugin name and the
+as in :mod:`drpt.materials.bsdf_kinds`) and returns the Mitsuba plugin name and the
 parameters to emit; converting the values (RGB tuples, textures) stays with
 the generic exporter. The adjustments:
 
@@ -18,14 +18,14 @@ the generic exporter. The adjustments:
   :mod:`drpt.render.bsdf.roughdielectric` renders there (the lobe's tests
   check the two sample for sample);
 * IOR names are passed through (Mitsuba knows the same names,
-  :mod:`drpt.iors`), numbers as floats.
+  :mod:`drpt.materials.iors`), numbers as floats.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from drpt.iors import relative_ior
+from drpt.materials.iors import relative_ior
 
 KINDS = ("dielectric", "thindielectric", "roughdielectric")
 _ROUGH_ONLY = ("distribution", "alpha", "alpha_u", "alpha_v", "sample_visible")

@@ -1,27 +1,19 @@
-"""Materials on the device: per-material BSDF trees flattened into lobes, and the dispatch.
+"""Materials on the device: the host layout uploaded, and the dispatch over its lobes.
 
-Each scene material is a :class:`~drpt.shading.BSDFSpec` tree
-(:func:`drpt.shading.interpret_scene` decides it, the same function the
-Mitsuba exporter uses). The table flattens every tree into *components*:
-leaf lobes, each with a weight and a sidedness.
+:class:`drpt.materials.layout.MaterialLayout` decides everything about a scene's
+materials on the host: each BSDF tree flattened into weighted, one- or two-sided
+components (*rows*), the slots of the materials with several, the per-row fields
+(constants or texture references), the emission. :class:`MaterialTable` uploads
+it and answers the integrators' queries over wide arrays. A lane's material
+(``si.material``) selects its rows; the lobes read their fields at the row through
+:class:`Rows`, so a row index is never passed off as a material.
 
-* ``twosided(x)``: ``x``'s components see the shading frame flipped to the
-  viewer's side (Mitsuba's ``twosided``); all other components see the
-  unflipped frame (``+z`` = shading normal = outside) and, being one-sided,
-  are black from behind unless they transmit.
-* ``blendbsdf(w; a, b)``: ``a``'s components weighted by ``1 - w``, ``b``'s by ``w``.
-* ``mask(o; x)``: a ``null`` component (the ray passes straight through)
-  weighted ``1 - o``, ``x``'s components by ``o``.
-
-Weights are constants or one texture (times a constant) per component. A
-material's components occupy *slots* ``0 .. K-1`` (``K`` = the most any
-material has). ``f`` and ``pdf`` are the weighted sums over the slots,
-exactly Mitsuba's ``blendbsdf``/``mask`` ``eval`` and ``pdf``. Sampling
-picks a slot by its weight (rescaling ``u1``), samples that component, and
-for a smooth sample returns the whole mixture's ``f / pdf`` and ``pdf``
-(one-sample MIS over the components: lower variance than the chosen
-component's own ratio, same expectation); a Dirac sample keeps the
-component's own weight (its selection probability cancels).
+``f`` and ``pdf`` are the weighted sums over the slots, exactly Mitsuba's
+``blendbsdf``/``mask`` ``eval`` and ``pdf``. Sampling picks a slot by its weight
+(rescaling ``u1``), samples that component, and for a smooth sample returns the
+whole mixture's ``f / pdf`` and ``pdf`` (one-sample MIS over the components: lower
+variance than the chosen component's own ratio, same expectation); a Dirac sample
+keeps the component's own weight (its selection probability cancels).
 
 Model only what the scene requires: only the lobe kinds present are traced
 (each under its own lane mask, merged with ``select``), only their fields
@@ -32,10 +24,10 @@ components are all two-sided (or all one-sided) flips without a per-lane
 test.
 
 Each lobe module (:mod:`drpt.render.bsdf`) reads its parameters through
-:meth:`MaterialTable.value`, :meth:`MaterialTable.table_lerp` and decides
-trace-time choices from :meth:`MaterialTable.specs_of`. Emission is
-per material and one-sided: it radiates only toward the side its shading
-normal points to, as Mitsuba's ``area`` emitter does.
+:meth:`Rows.value`, :meth:`Rows.table_lerp` and decides trace-time choices
+from :meth:`Rows.specs_of`. Emission is per material and one-sided: it radiates
+only toward the side its shading normal points to, as Mitsuba's ``area`` emitter
+does.
 """
 
 from __future__ import annotations
@@ -44,91 +36,17 @@ import copy
 from dataclasses import dataclass
 
 import drjit as dr
-import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-from .. import bsdf_kinds
-from ..errors import Loc, SceneError, located
+from ..materials.layout import NONE, MaterialLayout
+from ..materials.spec import BSDFSpec
 from ..scene.model import Scene
-from ..shading import BSDFSpec, Checkerboard, Texture, interpret_scene
 from . import perturb
 from .bsdf import BSDFSample, lobe
 from .perturb import PerturbedFrame
 from .surface import Interaction, _vec
 from .texture import TextureSet
 from .warp import Frame
-
-NONE = 0xFFFFFFFF
-
-
-@dataclass
-class _Component:
-    leaf: BSDFSpec
-    two_sided: bool
-    weight: float = 1.0
-    weight_texture: Texture | None = None  # weight *= tex (or 1 - tex when complement)
-    complement: bool = False
-    perturb: BSDFSpec | None = None  # the normalmap / bumpmap around the leaf
-    two_inner: bool = False  # a twosided between the perturbation and the leaf
-
-
-def _flatten(spec: BSDFSpec, two_sided: bool = False, c: _Component | None = None) -> list[_Component]:
-    """The components of ``spec`` (a complete tree), in depth-first order. ``two_sided``
-    (and a component's ``two_sided``) is a ``twosided`` around the component's
-    perturbation, if any (``two_inner``: one inside it)."""
-    c = c or _Component(spec, False)
-    if spec.kind == "twosided":
-        if len(spec.children) == 2:
-            raise ValueError("twosided with a different BSDF on each side is not supported")
-        if c.perturb is not None:
-            cc = copy.copy(c)
-            cc.two_inner = True
-            return _flatten(spec.children[0], two_sided, cc)
-        return _flatten(spec.children[0], True, c)
-    if spec.kind in bsdf_kinds.PERTURBING:
-        if c.perturb is not None:
-            raise ValueError(f"{spec.kind} inside {c.perturb.kind} is not supported")
-        cc = copy.copy(c)
-        v = spec.params.get(bsdf_kinds.PERTURBING[spec.kind])
-        if isinstance(v, Texture) or (spec.kind == "normalmap" and isinstance(v, tuple)):
-            cc.perturb = spec  # (a bump texture dropped for want of uvs perturbs nothing)
-        return _flatten(spec.children[0], two_sided, cc)
-    if spec.kind in ("blendbsdf", "mask"):
-        w = spec.params["weight" if spec.kind == "blendbsdf" else "opacity"]
-        if spec.kind == "mask":
-            parts = [(BSDFSpec("null"), True), (spec.children[0], False)]
-        else:
-            parts = [(spec.children[0], True), (spec.children[1], False)]
-        out = []
-        for child, complement in parts:
-            cc = copy.copy(c)
-            if isinstance(w, Texture):
-                if cc.weight_texture is not None:
-                    raise ValueError("nested blendbsdf/mask with more than one textured weight "
-                                     "are not supported")
-                cc.weight_texture, cc.complement = w, complement
-            else:
-                ww = min(max(float(w), 0.0), 1.0)
-                cc.weight *= (1.0 - ww) if complement else ww
-                if cc.weight == 0.0:
-                    continue
-            out += _flatten(child, two_sided, cc)
-        return out
-    return [_Component(spec, two_sided, c.weight, c.weight_texture, c.complement, c.perturb, c.two_inner)]
-
-
-def _anisotropic(leaf: BSDFSpec) -> bool:
-    """Whether ``leaf``'s response depends on the tangent's direction (host side):
-    distinct or textured ``alpha_u``/``alpha_v``, principled's ``anisotropic``."""
-    p = leaf.params
-    if leaf.kind in ("roughconductor", "roughdielectric"):
-        au, av = p.get("alpha_u"), p.get("alpha_v")
-        if au is None and av is None:
-            return False
-        return isinstance(au, Texture) or isinstance(av, Texture) or au != av
-    if leaf.kind in ("principled", "principledthin"):
-        return bsdf_kinds.given(p.get("anisotropic"))
-    return False
 
 
 def tangent_frame(n: Array3f, dp_du: Array3f) -> Frame:
@@ -153,180 +71,131 @@ def _luminance(c: Array3f) -> Float:
     return 0.212671 * c.x + 0.715160 * c.y + 0.072169 * c.z
 
 
+def _flag(v):
+    """A layout flag on the device: a Python bool stays one (decided at trace time)."""
+    return v if isinstance(v, bool) else Bool(v)
+
+
+@dataclass
+class _Slot:
+    """:class:`drpt.materials.layout.Slot` on the device (arrays indexed by material)."""
+
+    row: UInt32
+    weight: Float
+    texture: UInt32 | None
+    complement: Bool
+    kinds: list[str]
+    partial: bool
+
+
+class Rows:
+    """The lanes' rows of a :class:`MaterialTable` (``row``: UInt32, a row of the
+    layout per lane): the ``table`` a lobe's ``params(table, si, active)`` reads
+    its fields from, at ``row``, with textures looked up at ``si``."""
+
+    __slots__ = ("table", "row")
+
+    def __init__(self, table: MaterialTable, row: UInt32):
+        self.table, self.row = table, row
+
+    def value(self, name: str, si: Interaction, active: Bool):
+        """Field ``name`` of the lanes' rows: Array3f for ``"rgb"``, Float for
+        ``"float"``; a textured value is looked up at ``si.uv`` (a float field reads
+        the texture's luminance, as Mitsuba's ``bitmap`` does for a scalar parameter)."""
+        t = self.table._types[name]
+        cls = Array3f if t == "rgb" else Float
+        v = dr.gather(cls, self.table._data[name], self.row, active)
+        tid = self.table._tex.get(name)
+        if tid is not None:
+            ids = dr.gather(UInt32, tid, self.row, active)
+            textured = active & (ids != NONE)
+            looked = self.table.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f, si=si)
+            v = dr.select(textured, looked if cls is Array3f else _luminance(looked), v)
+        return v
+
+    def table_lerp(self, name: str, si: Interaction, x: Float, active: Bool) -> Float:
+        """Linear interpolation of the ``("table", N)`` field ``name`` of the lanes'
+        rows at ``x`` in [0, 1] (sample ``i`` at ``x = i / (N - 1)``; ``x`` clamped)."""
+        n = int(self.table._types[name][1])
+        pos = dr.clip(Float(x), 0.0, 1.0) * (n - 1)
+        i0 = dr.minimum(UInt32(pos), n - 2)
+        frac = pos - Float(i0)
+        base = self.row * n + i0
+        a = dr.gather(Float, self.table._data[name], base, active)
+        b = dr.gather(Float, self.table._data[name], base + 1, active)
+        return dr.fma(frac, b - a, a)
+
+    def specs_of(self, kind: str) -> list[BSDFSpec]:
+        """The leaf specs of ``kind`` in the scene (host side), for trace-time choices."""
+        return self.table.specs_of(kind)
+
+
 class MaterialTable:
+    """A scene's :class:`~drpt.materials.layout.MaterialLayout` on the device, and the
+    BSDF and emission queries over it."""
+
     def __init__(self, scene: Scene, mode: str = "auto"):
-        # Materials no primitive uses stay out of the kernels entirely.
-        used = np.zeros(len(scene.materials), bool)
-        for prims in (scene.triangles, scene.spheres, scene.planes):
-            used[np.asarray(prims.material, np.int64)] = True
-        black = BSDFSpec("diffuse", {"kd": (0.0, 0.0, 0.0)})
-        specs = interpret_scene(scene, mode)
-        self.specs: list[BSDFSpec] = [s if u else black for s, u in zip(specs, used)]
-        self.notes = [located(n, s.loc) for s, u in zip(specs, used) if u for n in s.notes]
-        comps: list[list[_Component]] = []
-        for s, m in zip(self.specs, scene.materials):
-            try:
-                comps.append(_flatten(s) or [_Component(black, False)])
-            except ValueError as e:
-                raise SceneError(m.loc or Loc(scene.path), f"material '{m.name}': {e}") from None
-        if not comps:
-            comps = [[_Component(black, False)]]
-        self.K = max(len(c) for c in comps)
+        lay = self.layout = MaterialLayout.build(scene, mode, lobe)
+        self.notes = lay.notes
+        self.K = lay.K
         # the lobe kinds of each material's components (host side: the wavefront
         # integrator's shading queues group materials by them)
-        self.material_kinds: list[tuple[str, ...]] = [tuple(sorted({c.leaf.kind for c in cs})) for cs in comps]
-        # rows: every component of every material, material by material
-        self.rows: list[_Component] = [c for cs in comps for c in cs]
-        self.kinds = sorted({c.leaf.kind for c in self.rows})
+        self.material_kinds = lay.material_kinds
+        self.kinds = lay.kinds
         # interactions carry dp/du (frames follow it, as Mitsuba's) only where some BSDF
         # depends on the tangent's direction; a scene without one traces no tangent code
-        perturbs = {c.perturb.kind for c in self.rows if c.perturb is not None}
-        self.tangents = 2 if "bumpmap" in perturbs else 1 if (
-            perturbs or any(_anisotropic(c.leaf) for c in self.rows)) else 0
+        self.tangents = lay.tangents
         self.lobes = {k: lobe(k) for k in self.kinds}
-        self._rows_of = {k: [i for i, c in enumerate(self.rows) if c.leaf.kind == k] for k in self.kinds}
-        kind_idx = np.array([self.kinds.index(c.leaf.kind) for c in self.rows], np.uint32)
-        self.kind = UInt32(kind_idx)
-        self.emission = _vec(np.array([m.emission for m in scene.materials], float)) \
-            if scene.materials else _vec(np.zeros((1, 3)))
-        self.has_emission = any(m.is_emissive for m in scene.materials)
-
+        self.kind = UInt32(lay.kind)
+        self.emission = _vec(lay.emission)
+        self.has_emission = lay.has_emission
         # sidedness, per kind: True / False when uniform, else a per-row array
-        self._two: dict[str, bool | Bool] = {}
-        for k, rows in self._rows_of.items():
-            flags = {self.rows[i].two_sided for i in rows}
-            if len(flags) == 1:
-                self._two[k] = flags.pop()
-            else:
-                self._two[k] = Bool(np.array([c.two_sided for c in self.rows], bool))
-
+        self._two = {k: _flag(v) for k, v in lay.two_sided.items()}
         # slots (only when some material has several components)
-        self._slots = []
-        if self.K > 1:
-            start = np.cumsum([0] + [len(c) for c in comps[:-1]])
-            for j in range(self.K):
-                row = np.array([start[m] + j if j < len(cs) else NONE for m, cs in enumerate(comps)], np.int64)
-                w = np.array([cs[j].weight if j < len(cs) else 0.0 for cs in comps], np.float32)
-                texs = [cs[j].weight_texture if j < len(cs) else None for cs in comps]
-                comp = np.array([cs[j].complement if j < len(cs) else False for cs in comps], bool)
-                kinds = sorted({self.rows[r].leaf.kind for r in row if r != NONE})
-                self._slots.append({"row": UInt32(row.astype(np.uint32)), "w": Float(w), "tex": texs,
-                                    "complement": Bool(comp), "kinds": kinds,
-                                    "partial": bool((row == NONE).any())})
-
+        self._slots = [_Slot(UInt32(sl.row), Float(sl.weight),
+                             None if sl.texture is None else UInt32(sl.texture), Bool(sl.complement),
+                             sl.kinds, sl.partial) for sl in lay.slots]
         # per-row fields of the kinds present
-        values: list[dict] = [dict(c.leaf.params) for c in self.rows]
-        for k in self.kinds:
-            derive = getattr(self.lobes[k], "derive", None)
-            if derive is None:
-                continue
-            for i in self._rows_of[k]:
-                try:
-                    values[i].update(derive(dict(values[i])))
-                except ValueError as e:
-                    raise SceneError(self.rows[i].leaf.loc or Loc(scene.path), str(e)) from None
-        self._fields: dict[str, tuple] = {}
-        for k in self.kinds:
-            for name, t in self.lobes[k].FIELDS.items():
-                if self._fields.setdefault(name, t) != t:  # one namespace for every kind's fields
-                    raise TypeError(f"BSDF field '{name}' of '{k}' is {t}, another kind's is "
-                                    f"{self._fields[name]}")
-        textures: list = []
-
-        def tex_id(t: Texture) -> int:
-            # an MTL-style image by its file; a procedural texture or an image with options as itself
-            key = t.path if t.is_plain and not isinstance(t, Checkerboard) else t
-            if key not in textures:
-                textures.append(key)
-            return textures.index(key)
-
+        self._types = {name: f.type for name, f in lay.fields.items()}
         self._data: dict[str, object] = {}
         self._tex: dict[str, UInt32] = {}
-        for name, t in self._fields.items():
-            vals = [v.get(name) for v in values]
-            if isinstance(t, tuple):  # ("table", N)
-                n = int(t[1])
-                arr = np.zeros((len(vals), n), np.float32)
-                for i, v in enumerate(vals):
-                    if v is not None:
-                        arr[i] = np.asarray(v, np.float32).reshape(n)
-                self._data[name] = Float(arr.ravel())
-                continue
-            width = 3 if t == "rgb" else 1
-            arr = np.zeros((len(vals), width))
-            tid = np.full(len(vals), NONE, np.int64)
-            for i, v in enumerate(vals):
-                if isinstance(v, Texture):
-                    tid[i] = tex_id(v)
-                    v = v.fallback
-                if v is None or isinstance(v, (str, bool)):
-                    continue
-                arr[i] = np.broadcast_to(np.asarray(v, float), (width,))
-            self._data[name] = _vec(arr) if width == 3 else Float(arr[:, 0].astype(np.float32))
-            if (tid != NONE).any():
-                self._tex[name] = UInt32(tid.astype(np.uint32))
-        for slot in self._slots:
-            ids = [tex_id(t) if t is not None else NONE for t in slot["tex"]]
-            slot["tex"] = UInt32(np.array(ids, np.int64).astype(np.uint32)) if any(
-                i != NONE for i in ids) else None
-
+        for name, f in lay.fields.items():
+            self._data[name] = _vec(f.values) if f.type == "rgb" else Float(f.values)
+            if f.texture is not None:
+                self._tex[name] = UInt32(f.texture)
         # textured emission (Mitsuba's area radiance bitmap), by material
-        etex = [tex_id(m.emission_texture) if getattr(m, "emission_texture", None) is not None else NONE
-                for m in scene.materials]
-        self._emit_tex = UInt32(np.array(etex, np.int64).astype(np.uint32)) if any(
-            i != NONE for i in etex) else None
-
+        self._emit_tex = None if lay.emission_texture is None else UInt32(lay.emission_texture)
         # Perturbed frames (normalmap, bumpmap): per row, only in scenes that have them
-        self._pkinds = sorted({c.leaf.kind for c in self.rows if c.perturb is not None})
-        if self._pkinds:
-            self._setup_perturb(tex_id)
-
+        self._pkinds = lay.perturbed_kinds
+        if lay.perturb is not None:
+            pt = lay.perturb
+            self._has_normal, self._has_bump = pt.has_normal, pt.has_bump
+            self._p_code, self._p_tex = UInt32(pt.code), UInt32(pt.texture)
+            self._p_const = None if pt.constant is None else _vec(pt.constant)
+            if pt.scale is not None:
+                self._p_scale = Float(pt.scale)
+            self._p_flip, self._p_shadow, self._p_inner = _flag(pt.flip), _flag(pt.shadow), _flag(pt.inner)
         # Textures: one set for every textured field and weight.
         self.textures = None
-        if textures:
-            self.textures = TextureSet(textures, scene.triangles)
+        if lay.textures:
+            self.textures = TextureSet(lay.textures, scene.triangles)
         # materials made only of Dirac lobes (glass, mirrors): Whitted follows them
-        delta = [all(self.lobes[c.leaf.kind].DELTA for c in cs) for cs in comps]
-        self._all_delta = all(delta)
-        self._mat_delta = None if (self._all_delta or not any(delta)) else Bool(np.array(delta, bool))
-        self._any_delta = any(delta)
+        delta = lay.material_delta
+        self._all_delta = bool(delta.all())
+        self._mat_delta = None if (self._all_delta or not delta.any()) else Bool(delta)
+        self._any_delta = bool(delta.any())
 
     _only: tuple[str, ...] | None = None  # a restricted view's kinds (see restricted)
 
-    def _setup_perturb(self, tex_id) -> None:
-        rows = self.rows
-        pert = [c.perturb for c in rows]
-        kinds = {p.kind for p in pert if p is not None}
-        self._has_normal, self._has_bump = "normalmap" in kinds, "bumpmap" in kinds
-        code = np.array([0 if p is None else 1 if p.kind == "normalmap" else 2 for p in pert], np.uint32)
-        self._p_code = UInt32(code)
-        values = [None if p is None else p.params[bsdf_kinds.PERTURBING[p.kind]] for p in pert]
-        ids = [tex_id(v) if isinstance(v, Texture) else NONE for v in values]
-        self._p_tex = UInt32(np.array(ids, np.int64).astype(np.uint32))
-        # a normal map's constant value (a texture's: its lookup replaces it)
-        consts = [(0.5, 0.5, 1.0) if not isinstance(v, tuple) else v for v in values]
-        self._p_const = _vec(np.array(consts, float)) if any(isinstance(v, tuple) for v in values) else None
-        if self._has_bump:
-            self._p_scale = Float(np.array([float(p.params["scale"]) if p is not None and p.kind == "bumpmap"
-                                            else 0.0 for p in pert], np.float32))
+    def at(self, row: UInt32) -> Rows:
+        """The lanes' rows ``row``: what the lobes read their fields through."""
+        return Rows(self, row)
 
-        def flag(name: str, values):
-            got = {v for v, p in zip(values, pert) if p is not None}
-            if len(got) == 1:
-                return got.pop()
-            return Bool(np.array(values, bool))
-
-        self._p_flip = flag("flip", [p is not None and bool(p.params["flip_invalid_normals"]) for p in pert])
-        self._p_shadow = flag("shadow", [p is not None and bool(p.params["use_shadowing_function"])
-                                         for p in pert])
-        self._p_inner = flag("inner", [c.two_inner for c in rows])
-
-    def _perturbed(self, si: Interaction, row_si: Interaction, mask: Bool, outer: Frame,
+    def _perturbed(self, si: Interaction, row: UInt32, mask: Bool, outer: Frame,
                    sh_frame: Frame) -> PerturbedFrame:
         """The frame the lanes' perturbed components see (:mod:`drpt.render.perturb`);
         ``outer``: the interaction's frame as the component sees it (mirrored inside
         ``twosided`` from behind), ``sh_frame``: the interaction's own."""
-        row = row_si.material
         code = dr.gather(UInt32, self._p_code, row, mask)
         tid = dr.gather(UInt32, self._p_tex, row, mask)
         wi_l = outer.to_local(si.wi)
@@ -379,36 +248,7 @@ class MaterialTable:
     # ------------------------------------------------------------------ parameters
     def specs_of(self, kind: str) -> list[BSDFSpec]:
         """The leaf specs of ``kind`` in the scene (host side), for trace-time choices."""
-        return [self.rows[i].leaf for i in self._rows_of.get(kind, [])]
-
-    def value(self, name: str, si: Interaction, active: Bool):
-        """Field ``name`` of the lanes' components (``si.material`` is the row):
-        Array3f for ``"rgb"``, Float for ``"float"``; a textured value is looked
-        up at ``si.uv`` (a float field reads the texture's luminance, as
-        Mitsuba's ``bitmap`` does for a scalar parameter)."""
-        t = self._fields[name]
-        cls = Array3f if t == "rgb" else Float
-        v = dr.gather(cls, self._data[name], si.material, active)
-        tid = self._tex.get(name)
-        if tid is not None:
-            ids = dr.gather(UInt32, tid, si.material, active)
-            textured = active & (ids != NONE)
-            looked = self.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f, si=si)
-            v = dr.select(textured, looked if cls is Array3f else _luminance(looked), v)
-        return v
-
-    def table_lerp(self, name: str, si: Interaction, x: Float, active: Bool) -> Float:
-        """Linear interpolation of the ``("table", N)`` field ``name`` of the lanes'
-        components at ``x`` in [0, 1] (sample ``i`` at ``x = i / (N - 1)``; ``x``
-        clamped)."""
-        n = int(self._fields[name][1])
-        pos = dr.clip(Float(x), 0.0, 1.0) * (n - 1)
-        i0 = dr.minimum(UInt32(pos), n - 2)
-        frac = pos - Float(i0)
-        base = si.material * n + i0
-        a = dr.gather(Float, self._data[name], base, active)
-        b = dr.gather(Float, self._data[name], base + 1, active)
-        return dr.fma(frac, b - a, a)
+        return self.layout.specs_of(kind)
 
     # ------------------------------------------------------------------ emission
     def emitted(self, si: Interaction) -> Array3f:
@@ -444,10 +284,10 @@ class MaterialTable:
         """The diffuse color of the lanes' first component (its kind's ``COLOR``
         field, e.g. ``kd``), for the Whitted ambient term; 0 for kinds without one."""
         out = Array3f(0.0)
-        for _, bsdf, mask, _, row_si in self._cases(si, 0):
+        for _, bsdf, mask, _, rows in self._cases(si, 0):
             name = getattr(bsdf, "COLOR", None)
             if name is not None:
-                out = dr.select(mask & active, self.value(name, row_si, mask & active), out)
+                out = dr.select(mask & active, rows.value(name, si, mask & active), out)
         return out
 
     def albedo(self, si: Interaction, active: Bool) -> Array3f:
@@ -460,19 +300,19 @@ class MaterialTable:
         up = Array3f(0.0, 0.0, 1.0)
         w_null = Float(0.0)
         for j in range(self.K):
-            row_si, w, present = self._slot(si, j)
-            for kind, bsdf, mask, frame, rsi in self._cases(si, j, row_si, present):
+            row, w, present = self._slot(si, j)
+            for kind, bsdf, mask, frame, rows in self._cases(si, j, row, present):
                 m = mask & active
                 name = getattr(bsdf, "COLOR", None)
                 if name is not None:
-                    a = self.value(name, rsi, m)
+                    a = rows.value(name, si, m)
                 elif kind == "null" and w is not None:
                     w_null = dr.select(m, w_null + w, w_null)
                     continue
                 elif bsdf.DELTA:
                     continue
                 else:
-                    a = bsdf.eval(bsdf.params(self, rsi, m), frame.to_local(si.wi), up) * dr.pi
+                    a = bsdf.eval(bsdf.params(rows, si, m), frame.to_local(si.wi), up) * dr.pi
                 out = dr.select(m, a if w is None else dr.fma(a, w, out), out)
         if "null" in self.kinds and self.K > 1:
             out = dr.select(w_null < 1.0, out / dr.maximum(1.0 - w_null, 1e-6), out)
@@ -480,35 +320,34 @@ class MaterialTable:
 
     # ------------------------------------------------------------------ dispatch
     def _slot(self, si: Interaction, j: int):
-        """(row-indexed interaction, weight or None, lanes with a component) of slot ``j``."""
-        if self.K == 1:
-            return si, None, si.valid
+        """(the lanes' rows, weight or None, lanes with a component) of slot ``j``."""
+        if self.K == 1:  # a material's one row is its index
+            return si.material, None, si.valid
         s = self._slots[j]
-        row = dr.gather(UInt32, s["row"], si.material, si.valid)
-        present = si.valid & (row != NONE) if s["partial"] else si.valid
-        w = dr.gather(Float, s["w"], si.material, present)
-        if s["tex"] is not None:
-            ids = dr.gather(UInt32, s["tex"], si.material, present)
+        row = dr.gather(UInt32, s.row, si.material, si.valid)
+        present = si.valid & (row != NONE) if s.partial else si.valid
+        w = dr.gather(Float, s.weight, si.material, present)
+        if s.texture is not None:
+            ids = dr.gather(UInt32, s.texture, si.material, present)
             textured = present & (ids != NONE)
             t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True, si=si))
-            comp = dr.gather(Bool, s["complement"], si.material, present)
+            comp = dr.gather(Bool, s.complement, si.material, present)
             w = dr.select(textured, w * dr.select(comp, 1.0 - t, t), w)
-        row_si = copy.copy(si)
-        row_si.material = row
-        return row_si, dr.select(present, w, 0.0), present
+        return row, dr.select(present, w, 0.0), present
 
-    def _cases(self, si: Interaction, j: int | None = None, row_si=None, present=None):
-        """(kind, lobe module, lane mask, local frame, row-indexed interaction) for each
-        kind of slot ``j`` (all kinds when ``j`` is None: ``row_si`` given)."""
-        if row_si is None:
-            row_si, _, present = self._slot(si, j)
-        kinds = self.kinds if (j is None or self.K == 1) else self._slots[j]["kinds"]
+    def _cases(self, si: Interaction, j: int | None = None, row=None, present=None):
+        """(kind, lobe module, lane mask, local frame, the lanes' :class:`Rows`) for each
+        kind of slot ``j`` (all kinds when ``j`` is None: ``row`` given)."""
+        if row is None:
+            row, _, present = self._slot(si, j)
+        rows = self.at(row)
+        kinds = self.kinds if (j is None or self.K == 1) else self._slots[j].kinds
         if self._only is not None:
             kinds = [k for k in kinds if k in self._only]
         if len(self.kinds) == 1 or (self._only is not None and len(self._only) == 1 and self.K == 1):
             kind_of = None
         else:
-            kind_of = dr.gather(UInt32, self.kind, row_si.material, present)
+            kind_of = dr.gather(UInt32, self.kind, row, present)
         flip = dr.dot(si.ns, si.wi) < 0.0
         flipped, plain = None, None
         tangent = None
@@ -523,9 +362,9 @@ class MaterialTable:
                 elif two is False:
                     frame = tangent
                 else:
-                    frame = _z_flipped(tangent, dr.gather(Bool, two, row_si.material, mask) & flip)
+                    frame = _z_flipped(tangent, dr.gather(Bool, two, row, mask) & flip)
                 if kind in self._pkinds:
-                    frame = self._perturbed(si, row_si, mask, frame, tangent)
+                    frame = self._perturbed(si, row, mask, frame, tangent)
             elif two is True:
                 flipped = flipped or Frame(dr.select(flip, -si.ns, si.ns))
                 frame = flipped
@@ -533,20 +372,20 @@ class MaterialTable:
                 plain = plain or Frame(si.ns)
                 frame = plain
             else:
-                f2 = dr.gather(Bool, two, row_si.material, mask) & flip
+                f2 = dr.gather(Bool, two, row, mask) & flip
                 frame = Frame(dr.select(f2, -si.ns, si.ns))
-            yield kind, self.lobes[kind], mask, frame, row_si
+            yield kind, self.lobes[kind], mask, frame, rows
 
     # ------------------------------------------------------------------
     def eval_pdf(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float]:
         """``f * |cos|`` and the sampling density (solid angle) for world ``wo``."""
         f, pdf = Array3f(0.0), Float(0.0)
         for j in range(self.K):
-            row_si, w, present = self._slot(si, j)
-            for _, bsdf, mask, frame, rsi in self._cases(si, j, row_si, present):
+            row, w, present = self._slot(si, j)
+            for _, bsdf, mask, frame, rows in self._cases(si, j, row, present):
                 if bsdf.DELTA:
                     continue  # nothing to evaluate
-                p = bsdf.params(self, rsi, mask)
+                p = bsdf.params(rows, si, mask)
                 wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
                 fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
                 if isinstance(frame, PerturbedFrame):
@@ -563,28 +402,26 @@ class MaterialTable:
     def sample(self, si: Interaction, u1: Float, u2: Array2f) -> tuple[Array3f, BSDFSample]:
         """Sample a world direction; returns it and the local :class:`BSDFSample`."""
         if self.K == 1:
-            row_si, present = si, si.valid
+            row, present = si.material, si.valid
         else:
             # pick a slot by its weight, reuse u1 rescaled within it
             row = UInt32(NONE)
             lo, chosen_w = Float(0.0), Float(1.0)
             picked = Bool(False)
             for j in range(self.K):
-                rsi, w, pres = self._slot(si, j)
+                rj, w, pres = self._slot(si, j)
                 take = pres & ~picked & ((u1 < lo + w) | Bool(j == self.K - 1)) & (w > 0.0)
-                row = dr.select(take, rsi.material, row)
+                row = dr.select(take, rj, row)
                 u_rest = dr.select(take, (u1 - lo) / dr.select(w > 0.0, w, 1.0), 0.0)
                 chosen_w = dr.select(take, w, chosen_w)
                 u1 = dr.select(take, dr.clip(u_rest, 0.0, 0.99999994), u1)
                 picked |= take
                 lo = lo + w
-            row_si = copy.copy(si)
-            row_si.material = row
             present = si.valid & picked
         out = BSDFSample()
         wo = Array3f(0.0, 0.0, 1.0)
-        for _, bsdf, mask, frame, rsi in self._cases(si, None, row_si, present):
-            p = bsdf.params(self, rsi, mask)
+        for _, bsdf, mask, frame, rows in self._cases(si, None, row, present):
+            p = bsdf.params(rows, si, mask)
             bs = bsdf.sample(p, frame.to_local(si.wi), u1, u2)
             wo_j = frame.to_world(bs.wo)
             if isinstance(frame, PerturbedFrame):

@@ -7,10 +7,10 @@ is dropped, a gray image is repeated to three channels) and uploaded as a
 and repeat wrapping (``WrapMode.Repeat``), on which ``eval`` interpolates
 *after* the sRGB decoding, as Mitsuba's ``bitmap`` does.
 
-A Mitsuba ``bitmap`` with other options (:class:`drpt.shading.Texture`'s
+A Mitsuba ``bitmap`` with other options (:class:`drpt.materials.spec.Texture`'s
 ``filter_type``, ``wrap_mode``, ``raw``, ``to_uv``) is a :class:`Bitmap`: the
 same Dr.Jit texture with that filter and wrap mode, looked up at ``to_uv``
-times Mitsuba's uv. A ``mesh_attribute`` (:class:`drpt.shading.MeshAttribute`)
+times Mitsuba's uv. A ``mesh_attribute`` (:class:`drpt.materials.spec.MeshAttribute`)
 reads the hit triangle's corner values instead (``lookup``'s ``si``), and a
 ``checkerboard`` is procedural; a scene without them traces none of this.
 
@@ -47,7 +47,7 @@ from drjit.auto import Array2f, Array3f, Bool, TensorXf, Texture2f, UInt32
 
 from ..errors import DrptError
 from ..imageio import read_image
-from ..shading import Checkerboard, MeshAttribute, Texture
+from ..materials.spec import Checkerboard, MeshAttribute, Texture
 
 __all__ = ["Bitmap", "TextureSet", "load_rgb"]
 
@@ -167,7 +167,7 @@ _WRAPS = {"repeat": dr.WrapMode.Repeat, "mirror": dr.WrapMode.Mirror, "clamp": d
 
 
 class Bitmap:
-    """Mitsuba's ``bitmap`` with its options (:class:`drpt.shading.Texture`): Dr.Jit's
+    """Mitsuba's ``bitmap`` with its options (:class:`drpt.materials.spec.Texture`): Dr.Jit's
     texture (the one Mitsuba's uses) with the filter and wrap mode, the texels sRGB-decoded
     unless ``raw``, looked up at ``to_uv`` times Mitsuba's uv."""
 
@@ -192,7 +192,7 @@ def _vec3(a: np.ndarray) -> Array3f:
 
 
 class _Attribute:
-    """Mitsuba's ``mesh_attribute`` (:class:`drpt.shading.MeshAttribute`): the attribute's
+    """Mitsuba's ``mesh_attribute`` (:class:`drpt.materials.spec.MeshAttribute`): the attribute's
     corner values of the hit triangle blended with the barycentric coordinates of the hit
     point, computed from the point as Mitsuba's ``barycentric_coordinates`` does (a face
     attribute has equal corners), times ``scale``; 1 channel is gray. Other primitives
@@ -230,7 +230,7 @@ class _Attribute:
 
 
 class _Checker:
-    """Mitsuba's ``checkerboard`` (:class:`drpt.shading.Checkerboard`) at Mitsuba's uv,
+    """Mitsuba's ``checkerboard`` (:class:`drpt.materials.spec.Checkerboard`) at Mitsuba's uv,
     ``(u, 1 - v)`` of drpt's OBJ-convention uv."""
 
     def __init__(self, spec):

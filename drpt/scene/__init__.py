@@ -54,10 +54,10 @@ def load_scene(path, *, defines: dict[str, str] | None = None, ignore_unsupporte
     (``defines``, ``ignore_unsupported`` and ``strict`` apply to XML only, a note
     says so when given for another file; ``None`` takes :func:`xml_flags`' value,
     else none / False)."""
-    # the loaders, here and not at the top: they import drpt.shading and drpt.imageio, which
+    # the loaders, here and not at the top: they import drpt.materials and drpt.imageio, which
     # import drpt.scene.model, so importing this package must not import them
     if Path(path).suffix.lower() == ".xml":
-        from .mitsuba import load_mitsuba_xml  # cycle: it imports drpt.shading, which imports drpt.scene.model
+        from .mitsuba import load_mitsuba_xml  # cycle: it imports drpt.materials, which imports drpt.scene.model
 
         ctx = _XML_FLAGS.get() or {}
         return load_mitsuba_xml(

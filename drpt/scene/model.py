@@ -38,7 +38,7 @@ import numpy as np
 from ..errors import Loc
 
 if TYPE_CHECKING:
-    from ..shading import BSDFSpec  # an annotation only: drpt.shading imports this module
+    from ..materials.spec import BSDFSpec  # an annotation only: drpt.materials imports this module
 
 Vec3 = tuple[float, float, float]
 
@@ -308,7 +308,7 @@ class SpotLight:
     color: Vec3
     cutoff_angle: float = 20.0  # degrees
     beam_width: float = 15.0  # degrees, at most cutoff_angle
-    #: Mitsuba's ``texture`` (a :class:`drpt.shading.Texture`) multiplying the intensity,
+    #: Mitsuba's ``texture`` (a :class:`drpt.materials.spec.Texture`) multiplying the intensity,
     #: looked up at ``uv = 0.5 + 0.5 (x, y) / (z tan(cutoff_angle))`` of the direction in the
     #: light's ``frame``; None: none
     texture: Any = None
@@ -322,7 +322,7 @@ class SpotLight:
 @dataclass
 class ProjectorLight:
     """Mitsuba's ``projector``: a perspective projection of ``irradiance`` (an RGB
-    triple or a :class:`drpt.shading.Texture`) from ``position``, looking along the
+    triple or a :class:`drpt.materials.spec.Texture`) from ``position``, looking along the
     ``frame``'s local ``+z``: a point at local ``(x, y, z)`` (``z > 0``) sees the value
     at Mitsuba's uv ``(0.5 - 0.5 x / (z t), 0.5 - 0.5 aspect y / (z t))`` (``t =
     tan(fov_x / 2)``, ``aspect`` the texture's width / height), zero outside [0, 1]^2,

@@ -22,7 +22,7 @@ starts a comment anywhere on a line; blank lines ignored)::
     map_Pr map_Pm map_d map_Ks map_Ps map_Pc map_Pcr map_Ke map_Ns [options] FILE
                                 textures of those parameters
 
-How these statements become a BSDF is :mod:`drpt.shading`'s table. The
+How these statements become a BSDF is :mod:`drpt.materials.interpret`'s table. The
 parser keeps the file's own meaning and records which statements each
 material gave (``Material.given``).
 

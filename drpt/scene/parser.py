@@ -116,7 +116,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import Loc, SceneError, SceneWarning
-from ..shading import BSDFSpec
+from ..materials.spec import BSDFSpec
 from . import transform as tf
 from .files import check_input, named, resolve
 from .model import (

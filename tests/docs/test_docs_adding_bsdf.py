@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 from drjit.auto import Array3f, Float
 
-from drpt import bsdf_kinds
+from drpt.materials import bsdf_kinds
 from drpt.render import bsdf as bsdf_pkg
 from drpt.testing import bsdf_chi2, furnace
 
@@ -101,10 +101,10 @@ def test_sampling_matches_pdf(oren_nayar, sigma):
 
 
 def _render(kind_of, cornell):
+    from drpt.materials.spec import BSDFSpec
     from drpt.options import RenderOptions
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
-    from drpt.shading import BSDFSpec
 
     scene = load_scene(cornell)
     mats = []
@@ -125,7 +125,7 @@ def test_a_scene_renders_it_like_diffuse_at_sigma_zero(oren_nayar, cornell):
 
 
 def test_the_kind_needs_its_params_entry(oren_nayar, monkeypatch):
-    from drpt.shading import BSDFSpec, complete
+    from drpt.materials.spec import BSDFSpec, complete
 
     monkeypatch.delitem(bsdf_kinds.PARAMS, "oren_nayar")
     monkeypatch.setattr(bsdf_kinds, "ALL_KINDS", tuple(bsdf_kinds.PARAMS) + tuple(bsdf_kinds.COMPOSITES))
@@ -134,7 +134,7 @@ def test_the_kind_needs_its_params_entry(oren_nayar, monkeypatch):
 
 
 def test_textures_need_the_texturable_entry(oren_nayar, monkeypatch, tmp_path):
-    from drpt.shading import BSDFSpec, Texture, complete
+    from drpt.materials.spec import BSDFSpec, Texture, complete
 
     tex = Texture(tmp_path / "k.png", 0.5)
     assert complete(BSDFSpec("oren_nayar", {"kd": tex})).params["kd"] is tex

@@ -238,7 +238,7 @@ def test_uv_orientation_matches_obj(tmp_path):
 
 def test_texture_without_uvs_is_kd_in_drpt_and_export(tmp_path):
     """A map_Kd in a scene without texture coordinates: one rule
-    (drpt.shading.interpret_scene) drops the texture for both, so drpt and
+    (drpt.materials.interpret.interpret_scene) drops the texture for both, so drpt and
     the exported scene both render Kd (green here, the texture is red), and
     both report the material."""
     from PIL import Image

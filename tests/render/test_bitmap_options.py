@@ -1,4 +1,4 @@
-"""Mitsuba ``bitmap`` options (drpt.shading.Texture, drpt.render.texture.Bitmap): ``filter_type``
+"""Mitsuba ``bitmap`` options (drpt.materials.spec.Texture, drpt.render.texture.Bitmap): ``filter_type``
 nearest, ``wrap_mode`` mirror and clamp, ``raw`` and ``to_uv`` look up what Mitsuba's ``bitmap``
 evaluates at the same uv (and a ``rawconstant`` is its value); the negative controls (nearest read
 as bilinear, mirror as repeat, raw decoded, to_uv dropped) do not. A scene with every combination
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Float, UInt32
 
+from drpt.materials.spec import Texture
 from drpt.render.texture import TextureSet
-from drpt.shading import Texture
 from drpt.testing import mitsuba
 from support import DATA
 

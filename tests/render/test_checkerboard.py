@@ -1,4 +1,4 @@
-"""Mitsuba's ``checkerboard`` texture (drpt.shading.Checkerboard, drpt.render.texture): its value at
+"""Mitsuba's ``checkerboard`` texture (drpt.materials.spec.Checkerboard, drpt.render.texture): its value at
 random uvs equals Mitsuba's ``eval`` (RGB parameters) and ``eval_1`` (float parameters, which swap
 the two colors and read an rgb value's channel mean), with a rotating, scaling, translating
 ``to_uv``; a corpus scene with checkerboards on a diffuse reflectance and on a roughconductor's
@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from drpt.materials.spec import Checkerboard
 from drpt.scene import load_scene
-from drpt.shading import Checkerboard
 
 pytestmark = pytest.mark.mitsuba
 XML = Path(__file__).resolve().parents[1] / "data" / "xml"  # tests/data/xml

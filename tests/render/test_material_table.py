@@ -13,10 +13,11 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from drpt.errors import Loc, SceneError
 from drpt.export.mitsuba_bsdf import to_mitsuba
-from drpt.render.material import MaterialTable, _flatten
+from drpt.materials.layout import flatten
+from drpt.materials.spec import BSDFSpec, Texture, complete
+from drpt.render.material import MaterialTable
 from drpt.render.surface import Interaction
 from drpt.scene.model import Background, Material, PerspectiveCamera, Planes, Scene, Spheres, Triangles
-from drpt.shading import BSDFSpec, Texture, complete
 from drpt.testing import mitsuba, to_mitsuba_vec3
 
 
@@ -58,14 +59,14 @@ def sphere_dirs(n, seed):
 def test_mask_and_blend_weights_multiply():
     spec = complete(BSDFSpec("mask", {"opacity": 0.4},
                              [BSDFSpec("blendbsdf", {"weight": 0.25}, [two(diffuse()), diffuse()])]))
-    comps = _flatten(spec)
+    comps = flatten(spec)
     assert [c.leaf.kind for c in comps] == ["null", "diffuse", "diffuse"]
     assert [c.weight for c in comps] == pytest.approx([0.6, 0.4 * 0.75, 0.4 * 0.25])
     assert [c.two_sided for c in comps] == [False, True, False]
 
 
 def test_zero_weights_drop_components():
-    comps = _flatten(complete(BSDFSpec("mask", {"opacity": 1.0}, [two(diffuse())])))
+    comps = flatten(complete(BSDFSpec("mask", {"opacity": 1.0}, [two(diffuse())])))
     assert [c.leaf.kind for c in comps] == ["diffuse"]
 
 

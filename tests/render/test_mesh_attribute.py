@@ -1,4 +1,4 @@
-"""Mitsuba's ``mesh_attribute`` texture (drpt.shading.MeshAttribute, drpt.render.texture._Attribute):
+"""Mitsuba's ``mesh_attribute`` texture (drpt.materials.spec.MeshAttribute, drpt.render.texture._Attribute):
 vertex attributes interpolated with the hit's barycentric coordinates and face attributes, 1 and 3
 channels, equal Mitsuba's ``eval`` at the same hits of the same PLY mesh (negative control: the
 corners blended in another order); scenes with a vertex-colored, a face-colored and a face-weighted
@@ -84,11 +84,11 @@ ALL = ('<bsdf type="blendbsdf" id="bsdf"><texture type="mesh_attribute" name="we
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("name", ["vertex_color", "face_color", "face_weight"])
 def test_lookups_equal_mitsubas_eval(tmp_path, name):
+    from drpt.materials.spec import MeshAttribute
     from drpt.options import RenderOptions
     from drpt.render.camera import RayCamera
     from drpt.render.scene import DeviceScene
     from drpt.render.texture import TextureSet
-    from drpt.shading import MeshAttribute
 
     mi = mitsuba()
     ply = _write_ply(tmp_path / "grid.ply")

@@ -28,10 +28,10 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from drpt.export.mitsuba import _to_dict
 from drpt.export.mitsuba_bsdf import to_mitsuba
+from drpt.materials.spec import BSDFSpec, Texture, complete
 from drpt.render.material import MaterialTable
 from drpt.render.surface import TangentInteraction, triangle_tangents
 from drpt.scene.model import Background, Material, PerspectiveCamera, Planes, Scene, Spheres, Triangles
-from drpt.shading import BSDFSpec, Texture, complete
 from drpt.testing import mitsuba, spherical_chi2
 
 XML = Path(__file__).resolve().parents[1] / "data" / "xml"  # tests/data/xml
@@ -276,12 +276,12 @@ def _drop_perturbation(scene):
 def test_negative_controls_fail(what, monkeypatch):
     from test_mitsuba_xml import _mean_z
 
-    import drpt.render.material as material
+    import drpt.materials.layout as layout
     import drpt.render.perturb as perturb
     from drpt.testing import block_z
 
     if what == "tangent from the normal alone":
-        monkeypatch.setattr(material, "_anisotropic", lambda leaf: False)
+        monkeypatch.setattr(layout, "anisotropic", lambda leaf: False)
         r, ref, var = _render("aniso_mesh")
     elif what == "bump map dropped":
         r, ref, var = _render("bumpmap", change=_drop_perturbation)
@@ -385,12 +385,12 @@ def test_corpus_textured_roughconductor_fails_with_the_tangent_from_the_normal(m
     it fails Mitsuba's z-test (85.8% of the pixel channels pass at 1024 spp, 99.75% needed)."""
     import warnings
 
-    import drpt.render.material as material
+    import drpt.materials.layout as layout
     from support.corpus import CORPUS, check_scene
 
     if not CORPUS.is_dir():
         pytest.skip("../shared/corpus/mitsuba-data is not present")
-    monkeypatch.setattr(material, "_anisotropic", lambda leaf: False)
+    monkeypatch.setattr(layout, "anisotropic", lambda leaf: False)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         z = check_scene("bsdf_spheres/test_textured_roughconductor_path.xml", 1024)

@@ -39,7 +39,7 @@ def render(path, bsdf="phong", accel="auto"):
 def test_diffuse_scene_traces_no_ggx_or_phong(monkeypatch, cornell, scenes_dir):
     from drpt.render.bsdf import cook_torrance, microfacet, phong
 
-    for mod, name in [(cook_torrance, "eval"), (cook_torrance, "sample"), (microfacet, "D"),
+    for mod, name in [(cook_torrance, "eval"), (cook_torrance, "sample"), (microfacet.Distribution, "D"),
                       (phong, "eval"), (phong, "sample")]:
         monkeypatch.setattr(mod, name, trap)
     render(cornell)  # Cornell box: diffuse only

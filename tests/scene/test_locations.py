@@ -11,8 +11,8 @@ import pytest
 
 from drpt.errors import Loc, SceneError, SceneWarning
 from drpt.imageio import read_image
+from drpt.materials.interpret import interpret
 from drpt.scene import load_scene
-from drpt.shading import interpret
 
 SCENE = """\
 PerspectiveCamera { center 0 0 5 direction 0 0 -1 up 0 1 0 angle 45 }

@@ -5,7 +5,7 @@ It implements what the lobe contract promises (``table.value(name, si,
 active)``, ``table.specs_of(kind)``) the way the contract describes it: a
 field's per-material value is the module's :func:`derive` output where it
 gives one, else the spec's parameter (defaults filled in from
-:mod:`drpt.bsdf_kinds`); ``value`` gathers it at ``si.material``. No
+:mod:`drpt.materials.bsdf_kinds`); ``value`` gathers it at ``si.material``. No
 textures. ``asked`` records the fields gathered, so a test can check what
 a kernel would trace.
 """
@@ -18,7 +18,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array3f, Float, UInt32
 
-from drpt import bsdf_kinds
+from drpt.materials import bsdf_kinds
 
 
 @dataclass

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from drpt.imageio import read_image
+from drpt.materials.interpret import interpret
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-from drpt.shading import interpret
 
 
 @pytest.fixture(scope="module")

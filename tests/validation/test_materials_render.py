@@ -118,7 +118,7 @@ def _with_bsdf(scene, name, spec):
 
 
 def _blend():
-    from drpt.shading import BSDFSpec
+    from drpt.materials.spec import BSDFSpec
 
     red = BSDFSpec("twosided", children=[BSDFSpec("diffuse", {"kd": (0.8, 0.2, 0.2)})])
     gold = BSDFSpec("twosided", children=[BSDFSpec("cook_torrance", {"kd": (0.9, 0.75, 0.3), "alpha": 0.05,
@@ -127,7 +127,7 @@ def _blend():
 
 
 def _mask_of_blend():
-    from drpt.shading import BSDFSpec
+    from drpt.materials.spec import BSDFSpec
 
     return BSDFSpec("mask", {"opacity": 0.6}, [_blend()])
 

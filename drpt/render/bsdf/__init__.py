@@ -1,16 +1,17 @@
-"""BSDF lobes, one module each: ``diffuse``, ``phong``, ``cook_torrance``
-(with ``microfacet`` for GGX), ``dielectric``, ``mirror``, ``null``,
+"""BSDF lobes, one module each: ``diffuse``, ``phong``, ``cook_torrance``,
+``dielectric``, ``mirror``, ``null``,
 ``plastic``, ``roughplastic`` (its coating tables precomputed by
 ``roughplastic_tables``), ``conductor``, ``roughconductor``, ``thindielectric``,
-``roughdielectric``, ``principled``, ``principledthin``. (``normalmap`` and
+``roughdielectric``, ``principled``, ``principledthin``; every microfacet lobe
+draws on the one ``microfacet.Distribution`` (GGX and Beckmann). (``normalmap`` and
 ``bumpmap`` are no lobes: they perturb the frame a lobe sees, :mod:`drpt.render.perturb`.)
 
-:data:`REGISTRY` maps each leaf kind of :mod:`drpt.bsdf_kinds` to its
+:data:`REGISTRY` maps each leaf kind of :mod:`drpt.materials.bsdf_kinds` to its
 module; :class:`drpt.render.material.MaterialTable` finds a kind's lobe
 there (:func:`lobe`) and traces only the kinds a scene has. A new BSDF is one
 module implementing :class:`BSDF`, one entry in :data:`REGISTRY`, its
-parameters in :data:`drpt.bsdf_kinds.PARAMS` (and, if MTL statements should
-produce it, a rule in :mod:`drpt.shading`; the Mitsuba exporter maps kinds
+parameters in :data:`drpt.materials.bsdf_kinds.PARAMS` (and, if MTL statements should
+produce it, a rule in :mod:`drpt.materials.interpret`; the Mitsuba exporter maps kinds
 named after a Mitsuba plugin by their names).
 
 The lobe interface
@@ -75,9 +76,11 @@ class BSDF(Protocol):
     samples over [0, 1], read with ``table.table_lerp``). A field's value is
     the spec's parameter of that name or, when the module defines
     ``derive(params) -> dict`` (host side, once per component, ``ValueError``
-    for a bad parameter), that function's output. ``params(table, si,
-    active)`` gathers the lobe's parameter record with ``table.value`` and
-    may decide what to trace from ``table.specs_of(kind)``. ``DELTA``: only
+    for a bad parameter), that function's output
+    (:class:`drpt.materials.layout.MaterialLayout` lays them out). ``params(table,
+    si, active)`` gathers the lobe's parameter record with ``table.value`` and
+    may decide what to trace from ``table.specs_of(kind)``; ``table`` is the
+    lanes' rows of the material table (:class:`drpt.render.material.Rows`). ``DELTA``: only
     Dirac components (``eval`` and ``pdf`` are 0, next-event estimation is
     skipped); a lobe mixing a Dirac and a smooth part sets ``delta`` per
     sample instead. Optional ``COLOR``: the field the Whitted ambient term

@@ -12,8 +12,8 @@ the plugin (``FrontSide``): ``wi.z <= 0`` is an invalid sample with weight 0
 (inside ``twosided`` the material layer flips the frame first).
 
 Parameters (Mitsuba's names): ``material`` (a name of
-:data:`drpt.conductors.MATERIALS`, or ``"none"``: ``eta = 0, k = 1``, F = 1),
-``eta``, ``k`` (override the material's; see :func:`drpt.conductors.resolve`),
+:data:`drpt.materials.conductors.MATERIALS`, or ``"none"``: ``eta = 0, k = 1``, F = 1),
+``eta``, ``k`` (override the material's; see :func:`drpt.materials.conductors.resolve`),
 ``specular_reflectance`` (rgb or texture, default 1). :func:`derive`
 resolves ``eta``/``k`` host-side into the fields ``cond_eta``, ``cond_k``.
 
@@ -38,7 +38,7 @@ from __future__ import annotations
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from ... import conductors
+from ...materials import conductors
 from . import BSDFSample
 
 #: Per-material values uploaded for this kind (``cond_*`` come from :func:`derive`).

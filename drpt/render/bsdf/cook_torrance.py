@@ -20,7 +20,7 @@ below) and ``metalness`` (Float, ``m`` in [0, 1]).
 
 Roughness-to-alpha mapping
 --------------------------
-drpt's parameter *is* the GGX ``alpha``; :mod:`drpt.shading` sets it to the
+drpt's parameter *is* the GGX ``alpha``; :mod:`drpt.materials.interpret` sets it to the
 seed's ``Roughness^2`` (the seed's parser stores ``Roughness * Roughness`` and
 its GGX squares that again), with ``Roughness = 0.95`` when absent.
 Principled's ``roughness`` is the *perceptual* roughness ``r`` with
@@ -49,7 +49,7 @@ toward the light; zero unless ``wi.z > 0`` and ``wo.z > 0``.
     f_r    = R_r (SW(wo.z) + SW(wi.z) + SW(wo.z) SW(wi.z) (R_r - 1))  (retro)
 
 ``D``, ``G1`` are GGX and Smith's GGX masking with alpha ``a``
-(:mod:`.microfacet`); G is *separable* (``G1 G1``, Mitsuba's choice), not
+(:class:`.microfacet.Distribution`, isotropic GGX, as principled's); G is *separable* (``G1 G1``, Mitsuba's choice), not
 height-correlated. ``F_diel`` is the exact unpolarized Fresnel reflectance
 of a dielectric interface with relative IOR ``eta = 2 / (1 - sqrt(0.08 *
 0.5)) - 1 = 1.5`` (principled's ``specular = 0.5``)::
@@ -76,8 +76,9 @@ With ``u1`` pick the diffuse lobe with probability ``P_d = (1 - m) / (2 - m)``
 (principled: weights ``1 - m`` for diffuse and 1 for the specular
 reflection, normalized), else the specular lobe; with ``u2``:
 
-* specular: a visible GGX normal ``n ~ D_wi`` (Heitz 2018,
-  :func:`.microfacet.sample_visible`), ``wo = reflect(wi, n)``; density
+* specular: a visible GGX normal ``n ~ D_wi``
+  (:meth:`.microfacet.Distribution.sample_visible_normal`, the sampler
+  principled uses), ``wo = reflect(wi, n)``; density
   ``D_wi(h) / (4 dot(wo, h))``;
 * diffuse: cosine-weighted hemisphere, density ``wo.z / pi``.
 
@@ -101,7 +102,7 @@ from drjit.auto import Array2f, Array3f, Float
 
 from ..warp import INV_PI, square_to_cosine_hemisphere
 from . import BSDFSample
-from . import microfacet as mf
+from .microfacet import Distribution, reflect
 
 #: principled's ``specular`` parameter (its default) and the relative IOR it implies.
 SPECULAR = 0.5
@@ -153,8 +154,15 @@ def fresnel_dielectric(cos_i: Float, eta: float = ETA) -> Float:
 
 
 def _alphas(p: CookTorranceParams):
+    """The specular lobe's distribution and ``r``, the alpha the retro-reflection term reads."""
     alpha = dr.clip(p.alpha, 0.0, 1.0)
-    return dr.maximum(alpha, ALPHA_MIN), dr.sqrt(alpha)
+    return distribution(alpha), dr.sqrt(alpha)
+
+
+def distribution(alpha: Float) -> Distribution:
+    """The specular lobe: isotropic GGX of width ``max(alpha, ALPHA_MIN)``, sampled by
+    visible normals (principled's main lobe, its clamp)."""
+    return Distribution(False, alpha, alpha_min=ALPHA_MIN)
 
 
 def diffuse_probability(p: CookTorranceParams) -> Float:
@@ -170,7 +178,7 @@ def _half(wi: Array3f, wo: Array3f, ok):
 
 def eval(p: CookTorranceParams, wi: Array3f, wo: Array3f) -> Array3f:
     ok = (wi.z > 0.0) & (wo.z > 0.0)
-    a, r = _alphas(p)
+    d, r = _alphas(p)
     m = dr.clip(p.metalness, 0.0, 1.0)
     c = p.base_color
     h = _half(wi, wo, ok)
@@ -180,7 +188,7 @@ def eval(p: CookTorranceParams, wi: Array3f, wo: Array3f) -> Array3f:
     # Specular: F D G / (4 cos_i cos_o), times cos_o.
     sw_h = _schlick_weight(c_h)
     F = (1.0 - m) * fresnel_dielectric(c_h) + m * (c + (1.0 - c) * sw_h)
-    spec = F * (mf.D(h, a) * mf.G(wi, wo, h, a) / (4.0 * cos_i))
+    spec = F * (d.D(h) * d.G(wi, wo, h) / (4.0 * cos_i))
 
     # Burley diffuse with retro-reflection, times cos_o.
     fi, fo = _schlick_weight(wi.z), _schlick_weight(wo.z)
@@ -195,7 +203,7 @@ def eval(p: CookTorranceParams, wi: Array3f, wo: Array3f) -> Array3f:
 
 def pdf(p: CookTorranceParams, wi: Array3f, wo: Array3f) -> Float:
     ok = (wi.z > 0.0) & (wo.z > 0.0)
-    a, _ = _alphas(p)
+    d, _ = _alphas(p)
     p_d = diffuse_probability(p)
     h = _half(wi, wo, ok)
     # D_wi(h) / (4 dot(wo, h)) = G1(wi, h) D(h) dot(wi, h) / (4 wi.z dot(wo, h));
@@ -204,19 +212,19 @@ def pdf(p: CookTorranceParams, wi: Array3f, wo: Array3f) -> Float:
     # grazing (h loses its horizontal part), and cancelling keeps the
     # specular weight exactly F G1(wo, h) <= 1 there.
     ok_h = (dr.dot(wi, h) > 0.0) & (dr.dot(wo, h) > 0.0)
-    spec = mf.G1(wi, h, a) * mf.D(h, a) / (4.0 * dr.select(ok, wi.z, 1.0))
+    spec = d.G1(wi, h) * d.D(h) / (4.0 * dr.select(ok, wi.z, 1.0))
     spec = dr.select(ok_h, spec, 0.0)
     v = (1.0 - p_d) * spec + p_d * (INV_PI * wo.z)
     return dr.select(ok, v, 0.0)
 
 
 def sample(p: CookTorranceParams, wi: Array3f, u1: Float, u2: Array2f) -> BSDFSample:
-    a, _ = _alphas(p)
+    d, _ = _alphas(p)
     front = wi.z > 0.0
     pick_diffuse = u1 < diffuse_probability(p)
     wi_s = dr.select(front, wi, Array3f(0.0, 0.0, 1.0))  # keep the warp finite
-    n = mf.sample_visible(wi_s, a, u2)
-    wo_spec = dr.normalize(mf.reflect(wi_s, n))
+    n = d.sample_visible_normal(wi_s, u2)
+    wo_spec = dr.normalize(reflect(wi_s, n))
     wo = dr.select(pick_diffuse, square_to_cosine_hemisphere(u2), wo_spec)
     valid = front & (wo.z > 0.0) & (pick_diffuse | (dr.dot(wi_s, n) > 0.0))
     pd = dr.select(valid, pdf(p, wi, wo), 0.0)

@@ -1,10 +1,10 @@
 """Smooth dielectric (glass): Fresnel-weighted choice of perfect reflection
 or refraction. Mitsuba 3's ``dielectric`` plugin, sample for sample.
 
-Parameters (Mitsuba's names and defaults, :data:`drpt.bsdf_kinds.PARAMS`)
+Parameters (Mitsuba's names and defaults, :data:`drpt.materials.bsdf_kinds.PARAMS`)
 -----------------------------------------------------------------------
 ``int_ior`` (default ``"bk7"`` = 1.5046), ``ext_ior`` (default ``"air"`` =
-1.000277): numbers or the medium names of :mod:`drpt.iors`; the lobe uses
+1.000277): numbers or the medium names of :mod:`drpt.materials.iors`; the lobe uses
 ``eta = int_ior / ext_ior`` only (:func:`derive`, computed in float32 as
 Mitsuba does; ``eta < 1`` is allowed: e.g. an air bubble in water).
 ``specular_reflectance``, ``specular_transmittance`` (RGB or texture,
@@ -59,7 +59,7 @@ from __future__ import annotations
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from ...iors import relative_ior
+from ...materials.iors import relative_ior
 from . import BSDFSample
 
 #: Per-material values the material table uploads (see :mod:`drpt.render.bsdf`):
@@ -69,7 +69,7 @@ DELTA = True
 
 
 def derive(params: dict) -> dict:
-    """``rel_ior = int_ior / ext_ior`` (names resolved by :mod:`drpt.iors`).
+    """``rel_ior = int_ior / ext_ior`` (names resolved by :mod:`drpt.materials.iors`).
     ``ValueError`` for an unknown name or an IOR that is not finite and > 0."""
     return {"rel_ior": relative_ior(params["int_ior"], params["ext_ior"])}
 

@@ -1,41 +1,18 @@
-"""Isotropic GGX (Trowbridge-Reitz) microfacet distribution: the normal
-distribution ``D``, Smith's masking ``G1``/``G`` and visible-normal (VNDF)
-sampling. Directions are local (``+z`` = macro-surface normal), unit length;
-``alpha`` is the GGX width (the slope standard deviation / sqrt 2; *not* an
-artist's "roughness": see :mod:`drpt.render.bsdf.cook_torrance` for that
-mapping). Pure Dr.Jit, usable in symbolic loops.
+"""Microfacet distributions: :class:`Distribution`, Mitsuba 3's
+``MicrofacetDistribution`` (Beckmann and GGX, isotropic or anisotropic, visible
+or all normals sampled), the one implementation every microfacet lobe uses
+(``cook_torrance``, ``roughconductor``, ``roughdielectric``, ``roughplastic``,
+``principled``, ``principledthin``), and :func:`reflect`.
 
-Formulas (``m`` a microfacet normal, ``v`` a direction, ``a = alpha``)
--------------------------------------------------------------------
-``D(m) = 1 / (pi a^2 (  (m.x^2 + m.y^2) / a^2 + m.z^2 )^2)``
-    normalized so that ``integral D(m) m.z dm = 1``; 0 where ``m.z <= 0``
-    (tested as ``D * m.z > 1e-20``, the same cut Mitsuba 3 makes).
-``G1(v, m) = 2 / (1 + sqrt(1 + a^2 (v.x^2 + v.y^2) / v.z^2))``
-    Smith's masking for GGX (``= 2 / (1 + sqrt(1 + a^2 tan^2 theta_v))``);
-    1 when ``v.x = v.y = 0``; 0 when ``dot(v, m) v.z <= 0`` (the back of a
-    facet cannot be seen).
-``G(wi, wo, m) = G1(wi, m) G1(wo, m)``
-    the *separable* (uncorrelated) form, as Mitsuba 3's
-    ``MicrofacetDistribution::G`` (which ``principled`` uses).
-``D_wi(m) = G1(wi, m) max(0, dot(wi, m)) D(m) / wi.z``
-    the distribution of normals visible from ``wi`` (Heitz 2014); its
-    integral over the sphere is exactly 1 for the Smith ``G1`` above.
-    :func:`pdf_visible` returns it (0 when ``wi.z <= 0``).
-
-Sampling: :func:`sample_visible` is Heitz 2018, "Sampling the GGX
-Distribution of Visible Normals" (JCGT 7(4)): stretch ``wi`` by ``(a, a, 1)``
-into the configuration with ``alpha = 1``, sample a point on the projected
-hemisphere (a disk, the half away from ``wi`` squashed by
-``(1 + cos theta)/2``), lift it onto the hemisphere and unstretch the
-normal. Its density is exactly :func:`pdf_visible` (checked by a chi-square
-test). Reflecting ``wi`` about ``m`` gives ``wo`` with density
-``D_wi(m) / (4 dot(wo, m))``.
-
-Robustness: every function clamps ``alpha`` to ``[ALPHA_MIN, 1]`` with
-``ALPHA_MIN = 1e-4``, the clamp Mitsuba's microfacet plugins apply (the
-``principled``-matching lobe clamps harder, to 1e-3, before calling here).
-``D`` at ``a = 1e-4`` peaks at ``1/(pi a^2) ~ 3.2e7``: finite in float32.
-Cosines down to 1e-6 (and exactly 0: ``G1 = 0``) give finite values.
+Directions are local (``+z`` = macro-surface normal), unit length; ``alpha``
+is the width of the distribution (for GGX the slope standard deviation /
+sqrt 2; *not* an artist's "roughness": each lobe states its mapping, e.g.
+:mod:`drpt.render.bsdf.cook_torrance`). Pure Dr.Jit, usable in symbolic loops.
+Formulas, sampling and their relation to Mitsuba's: :class:`Distribution`.
+Widths are clamped below to :data:`ALPHA_MIN` (Mitsuba's clamp; a lobe may
+clamp harder first, as ``principled`` and ``cook_torrance`` do to 1e-3); ``D`` at
+``alpha = 1e-4`` peaks at ``1/(pi alpha^2) ~ 3.2e7``, finite in float32, and
+cosines down to 1e-6 (and exactly 0: ``G1 = 0``) give finite values.
 """
 
 from __future__ import annotations
@@ -43,69 +20,8 @@ from __future__ import annotations
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Float
 
-#: Smallest GGX alpha used (Mitsuba 3's clamp for its microfacet plugins).
+#: Smallest microfacet alpha used (Mitsuba 3's clamp for its microfacet plugins).
 ALPHA_MIN = 1e-4
-
-
-def clamp_alpha(alpha) -> Float:
-    return dr.clip(Float(alpha), ALPHA_MIN, 1.0)
-
-
-def D(m: Array3f, alpha) -> Float:
-    """GGX normal distribution, a density over the solid angle of ``m``
-    normalized as ``integral D(m) cos(theta_m) dm = 1``."""
-    a = clamp_alpha(alpha)
-    x, y = m.x / a, m.y / a
-    t = x * x + y * y + m.z * m.z
-    d = dr.rcp(dr.pi * a * a * t * t)
-    return dr.select(d * m.z > 1e-20, d, 0.0)
-
-
-def G1(v: Array3f, m: Array3f, alpha) -> Float:
-    """Smith masking of GGX for direction ``v`` and microfacet normal ``m``."""
-    a = clamp_alpha(alpha)
-    xy = dr.square(a * v.x) + dr.square(a * v.y)
-    tan2 = xy / dr.square(v.z)  # +inf for v.z = 0 -> G1 = 0
-    g = 2.0 / (1.0 + dr.sqrt(1.0 + tan2))
-    g = dr.select(xy == 0.0, 1.0, g)
-    return dr.select(dr.dot(v, m) * v.z <= 0.0, 0.0, g)
-
-
-def G(wi: Array3f, wo: Array3f, m: Array3f, alpha) -> Float:
-    """Separable Smith shadowing-masking ``G1(wi) G1(wo)``."""
-    return G1(wi, m, alpha) * G1(wo, m, alpha)
-
-
-def pdf_visible(wi: Array3f, m: Array3f, alpha) -> Float:
-    """Density of :func:`sample_visible` (solid angle of ``m``)."""
-    ok = (wi.z > 0.0)
-    cos_im = dr.maximum(dr.dot(wi, m), 0.0)
-    v = G1(wi, m, alpha) * cos_im * D(m, alpha) / dr.select(ok, wi.z, 1.0)
-    return dr.select(ok, v, 0.0)
-
-
-def sample_visible(wi: Array3f, alpha, u: Array2f) -> Array3f:
-    """A microfacet normal visible from ``wi`` (``wi.z > 0``), density
-    :func:`pdf_visible`. Heitz 2018 (see the module docs)."""
-    a = clamp_alpha(alpha)
-    # 1. stretch to the alpha = 1 configuration
-    vh = dr.normalize(Array3f(a * wi.x, a * wi.y, wi.z))
-    # 2. orthonormal basis around vh (t1 horizontal)
-    lensq = vh.x * vh.x + vh.y * vh.y
-    inv = dr.rsqrt(dr.select(lensq > 0.0, lensq, 1.0))
-    t1 = dr.select(lensq > 0.0, Array3f(-vh.y * inv, vh.x * inv, 0.0), Array3f(1.0, 0.0, 0.0))
-    t2 = dr.cross(vh, t1)
-    # 3. uniform point on the disk, the half behind vh squashed
-    r = dr.sqrt(u.x)
-    s_phi, c_phi = dr.sincos(2.0 * dr.pi * u.y)
-    p1 = r * c_phi
-    p2 = r * s_phi
-    s = 0.5 * (1.0 + vh.z)
-    p2 = (1.0 - s) * dr.safe_sqrt(1.0 - p1 * p1) + s * p2
-    # 4. lift onto the hemisphere
-    nh = p1 * t1 + p2 * t2 + dr.safe_sqrt(1.0 - p1 * p1 - p2 * p2) * vh
-    # 5. unstretch
-    return dr.normalize(Array3f(a * nh.x, a * nh.y, dr.maximum(nh.z, 0.0)))
 
 
 def reflect(wi: Array3f, m: Array3f) -> Array3f:
@@ -119,7 +35,9 @@ def reflect(wi: Array3f, m: Array3f) -> Array3f:
 
 def _concentric_disk(u: Array2f) -> Array2f:
     """Shirley-Chiu concentric map of the unit square onto the unit disk
-    (the mapping Mitsuba's ``square_to_uniform_disk_concentric`` uses)."""
+    (the mapping Mitsuba's ``square_to_uniform_disk_concentric`` uses). At the
+    centre (``x = y = 0``) ``phi`` is already 0 (``r = x``, ``rp = y``), so it needs
+    no case of its own."""
     x = 2.0 * u.x - 1.0
     y = 2.0 * u.y - 1.0
     q13 = dr.abs(x) < dr.abs(y)
@@ -127,7 +45,6 @@ def _concentric_disk(u: Array2f) -> Array2f:
     rp = dr.select(q13, x, y)
     phi = (0.25 * dr.pi) * rp / dr.select(r == 0.0, 1.0, r)
     phi = dr.select(q13, 0.5 * dr.pi - phi, phi)
-    phi = dr.select((x == 0.0) & (y == 0.0), 0.0, phi)
     s, c = dr.sincos(phi)
     return Array2f(r * c, r * s)
 
@@ -141,7 +58,7 @@ class Distribution:
     (along the shading frame's ``x``) and ``alpha_v`` (along ``y``): Mitsuba
     3's ``MicrofacetDistribution`` (``include/mitsuba/render/microfacet.h``)
     formula for formula, same conventions, same clamp (``alpha >= 1e-4``, no
-    upper clamp).
+    upper clamp; ``alpha_min``).
 
     ``beckmann`` is a Python ``bool`` (only that distribution's code is
     traced) or a per-lane ``Bool`` (both are traced and selected per lane).
@@ -149,7 +66,9 @@ class Distribution:
     alpha_u``; the non-visible sampler then takes the cheaper isotropic
     branch, as Mitsuba's does when both alphas are the same variable).
     ``sample_visible`` (a Python bool) picks what :meth:`sample` and
-    :meth:`pdf` mean.
+    :meth:`pdf` mean. ``alpha_min`` is the lower clamp of the widths: Mitsuba's
+    microfacet plugins' 1e-4 by default, ``principled``'s 1e-3 for the lobes
+    that follow it (``cook_torrance``).
 
     Formulas (``m`` a microfacet normal, ``v`` a direction,
     ``au, av`` the widths, ``c = m.z``, ``s = (m.x/au)^2 + (m.y/av)^2``)::
@@ -200,11 +119,12 @@ class Distribution:
     gives for the same normal.
     """
 
-    def __init__(self, beckmann, alpha_u, alpha_v=None, sample_visible: bool = True):
+    def __init__(self, beckmann, alpha_u, alpha_v=None, sample_visible: bool = True,
+                 alpha_min: float = ALPHA_MIN):
         self.beckmann = beckmann
         self.isotropic = alpha_v is None
-        self.alpha_u = dr.maximum(Float(alpha_u), ALPHA_MIN)
-        self.alpha_v = self.alpha_u if self.isotropic else dr.maximum(Float(alpha_v), ALPHA_MIN)
+        self.alpha_u = dr.maximum(Float(alpha_u), alpha_min)
+        self.alpha_v = self.alpha_u if self.isotropic else dr.maximum(Float(alpha_v), alpha_min)
         self.sample_visible = bool(sample_visible)
 
     def _pick(self, beck, ggx):
@@ -279,8 +199,9 @@ class Distribution:
         py = (1.0 - s) * dr.safe_sqrt(1.0 - dr.square(p.x)) + s * p.y
         z = dr.safe_sqrt(1.0 - dr.square(p.x) - dr.square(py))
         sin_i = dr.safe_sqrt(1.0 - dr.square(cos_i))
-        # hemisphere point in the basis (t1, t2, wi) = ((0,-1,0), (-cos_i,0,sin_i), (sin_i,0,cos_i))
-        return Array3f(sin_i * z - cos_i * py, -p.x, sin_i * py + cos_i * z)
+        # hemisphere point in the basis (t1, t2, wi) = ((0,-1,0), (-cos_i,0,sin_i), (sin_i,0,cos_i)),
+        # its y negated (see sample_visible_normal)
+        return Array3f(sin_i * z - cos_i * py, p.x, sin_i * py + cos_i * z)
 
     def _slopes11_beckmann(self, cos_i: Float, u: Array2f) -> Array3f:
         """Visible normal of the alpha = 1 Beckmann for ``wi = (sin_i, 0, cos_i)`` (Jakob 2014)."""
@@ -298,7 +219,7 @@ class Distribution:
             x = x - value / (1.0 - slope * tan_i)
         sx = dr.erfinv(dr.clip(x, -_ERF_MAX, _ERF_MAX))
         sy = dr.erfinv(2.0 * uy - 1.0)
-        return Array3f(-sx, -sy, 1.0)
+        return Array3f(-sx, sy, 1.0)  # (y negated, see sample_visible_normal)
 
     def sample_visible_normal(self, wi: Array3f, u: Array2f) -> Array3f:
         """A normal visible from ``wi`` (``wi.z > 0``), density :meth:`pdf_visible`."""
@@ -311,9 +232,10 @@ class Distribution:
         cphi = dr.select(r2 > 0.0, wp.x * inv, 1.0)
         sphi = dr.select(r2 > 0.0, wp.y * inv, 0.0)
         n = self._pick(lambda: self._slopes11_beckmann(wp.z, u), lambda: self._slopes11_ggx(wp.z, u))
-        # rotate to wi's azimuth, unstretch
-        nx = cphi * n.x - sphi * n.y
-        ny = sphi * n.x + cphi * n.y
+        # rotate to wi's azimuth, unstretch (the _slopes11 functions return the normal
+        # with y negated: the rotation then needs no negation, to the same floats)
+        nx = cphi * n.x + sphi * n.y
+        ny = sphi * n.x - cphi * n.y
         return dr.normalize(Array3f(au * nx, av * ny, dr.maximum(n.z, 0.0)))
 
     def sample_all(self, u: Array2f) -> Array3f:

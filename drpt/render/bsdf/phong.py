@@ -6,7 +6,7 @@
 mirror reflection of ``wi`` about the normal (+z). The specular term is zero
 where ``cos(alpha) <= 0`` (also for ``n = 0``, where it is the constant
 ``1/pi`` on the half-sphere around ``r``). For ``max(kd + ks) <= 1`` the
-material reflects at most what it receives (:mod:`drpt.shading` scales the
+material reflects at most what it receives (:mod:`drpt.materials.interpret` scales the
 file's Kd/Ks so). ``cos(alpha)`` is computed as
 ``wi.z*wo.z - wi.x*wo.x - wi.y*wo.y``, symmetric in ``wi`` and ``wo``, so
 ``f`` is exactly reciprocal.

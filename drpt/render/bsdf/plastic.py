@@ -7,7 +7,7 @@ base (possibly bouncing between base and coating: the ``1 / (1 - ...)``
 term) and leaves through the coating. One-sided, as Mitsuba's plugin: zero
 unless ``wi.z > 0`` and ``wo.z > 0`` (``twosided`` makes it two-sided).
 
-Parameters (Mitsuba's names and defaults, :data:`drpt.bsdf_kinds.PARAMS`)
+Parameters (Mitsuba's names and defaults, :data:`drpt.materials.bsdf_kinds.PARAMS`)
 -------------------------------------------------------------------------
 ``diffuse_reflectance`` ``rho_d`` (rgb or texture, 0.5),
 ``specular_reflectance`` ``k_s`` (rgb or texture, 1; a tint of the specular
@@ -86,8 +86,8 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Float
 
-from ...bsdf_kinds import PARAMS
-from ...iors import lookup_ior
+from ...materials.bsdf_kinds import PARAMS
+from ...materials.iors import lookup_ior
 from ..texture import load_rgb
 from ..warp import INV_PI, square_to_cosine_hemisphere
 from . import BSDFSample
@@ -115,7 +115,7 @@ LUMINANCE = (0.212671, 0.715160, 0.072169)
 
 # ---------------------------------------------------------------- host side
 def resolve_ior(value: Any, name: str = "ior") -> float:
-    """An IOR given as a number or one of Mitsuba's names (:func:`drpt.iors.lookup_ior`)."""
+    """An IOR given as a number or one of Mitsuba's names (:func:`drpt.materials.iors.lookup_ior`)."""
     return lookup_ior(value, name)
 
 

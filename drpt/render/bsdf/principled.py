@@ -196,7 +196,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from ...bsdf_kinds import defaults, given
+from ...materials.bsdf_kinds import defaults, given
 from ..warp import INV_PI, square_to_cosine_hemisphere
 from . import BSDFSample
 from . import microfacet as mf
@@ -241,7 +241,7 @@ def _number(v) -> bool:
     return isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
 
 
-_given = given  # Mitsuba's get_flag (drpt.bsdf_kinds.given)
+_given = given  # Mitsuba's get_flag (drpt.materials.bsdf_kinds.given)
 
 
 def lobes_of(specs) -> Lobes:

@@ -42,7 +42,7 @@ import numbers
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from ...bsdf_kinds import given
+from ...materials.bsdf_kinds import given
 from ..warp import INV_PI, square_to_cosine_hemisphere
 from . import BSDFSample
 from . import microfacet as mf

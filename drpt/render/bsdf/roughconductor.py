@@ -9,11 +9,11 @@ distribution of widths ``alpha_u``, ``alpha_v``
 :func:`drpt.render.bsdf.conductor.fresnel_conductor` (complex IOR
 ``eta + i k`` per RGB channel) and a ``specular_reflectance`` tint ``r``.
 
-Parameters (Mitsuba's names and defaults, :data:`drpt.bsdf_kinds.PARAMS`):
+Parameters (Mitsuba's names and defaults, :data:`drpt.materials.bsdf_kinds.PARAMS`):
 ``distribution`` (``"beckmann"`` | ``"ggx"``, default beckmann), ``alpha``
 (0.1) or both ``alpha_u`` and ``alpha_v`` (anisotropic: ``alpha_u`` along the
 shading frame's ``x``, ``alpha_v`` along ``y``), ``sample_visible`` (True),
-``material`` / ``eta`` / ``k`` (see :mod:`drpt.conductors`),
+``material`` / ``eta`` / ``k`` (see :mod:`drpt.materials.conductors`),
 ``specular_reflectance``. ``alpha``, ``alpha_u``, ``alpha_v`` and
 ``specular_reflectance`` may be textures (a roughness texture is read as its
 luminance). :func:`derive` (host side) resolves the IOR and the alphas and
@@ -58,7 +58,7 @@ from __future__ import annotations
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from ... import conductors
+from ...materials import conductors
 from . import BSDFSample
 from .conductor import fresnel_conductor
 from .microfacet import Distribution, reflect

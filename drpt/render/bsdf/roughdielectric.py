@@ -2,10 +2,10 @@
 ``roughdielectric`` plugin (Walter et al. 2007, "Microfacet Models for
 Refraction through Rough Surfaces"), radiance transport.
 
-Parameters (Mitsuba's names and defaults, :data:`drpt.bsdf_kinds.PARAMS`)
+Parameters (Mitsuba's names and defaults, :data:`drpt.materials.bsdf_kinds.PARAMS`)
 -----------------------------------------------------------------------
 ``int_ior`` (``"bk7"``), ``ext_ior`` (``"air"``): numbers or names of
-:mod:`drpt.iors`; only ``eta = int_ior / ext_ior`` matters (float32, as
+:mod:`drpt.materials.iors`; only ``eta = int_ior / ext_ior`` matters (float32, as
 Mitsuba). ``specular_reflectance``, ``specular_transmittance``: RGB tints (or
 textures) of the reflected and the transmitted part. ``distribution``:
 ``"beckmann"`` (default) or ``"ggx"``. ``alpha`` (default 0.1), or both
@@ -92,8 +92,8 @@ import math
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from ...bsdf_kinds import defaults
-from ...iors import relative_ior
+from ...materials.bsdf_kinds import defaults
+from ...materials.iors import relative_ior
 from . import BSDFSample
 from .dielectric import fresnel_dielectric, tint
 from .microfacet import Distribution

@@ -6,7 +6,7 @@ coating's transmittance on the way in and out. One-sided, as Mitsuba's
 plugin: zero unless ``wi.z > 0`` and ``wo.z > 0``. Neither lobe is a Dirac
 (``DELTA = False``, ``BSDFSample.delta`` always False).
 
-Parameters (Mitsuba's names and defaults, :data:`drpt.bsdf_kinds.PARAMS`)
+Parameters (Mitsuba's names and defaults, :data:`drpt.materials.bsdf_kinds.PARAMS`)
 -------------------------------------------------------------------------
 ``diffuse_reflectance`` ``rho_d`` (rgb or texture, 0.5),
 ``specular_reflectance`` ``k_s`` (rgb or texture, 1), ``int_ior``
@@ -84,7 +84,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from ...bsdf_kinds import PARAMS
+from ...materials.bsdf_kinds import PARAMS
 from ..warp import INV_PI, square_to_cosine_hemisphere
 from . import BSDFSample, plastic
 from . import microfacet as mf

@@ -65,9 +65,9 @@ import drjit as dr
 import numpy as np
 from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
 
-from ...bsdf_kinds import PARAMS
 from ...errors import Loc, SceneError
-from ...iors import relative_ior
+from ...materials.bsdf_kinds import PARAMS
+from ...materials.iors import relative_ior
 from ...options import PathOptions
 from ...scene.model import Scene
 from ..bsdf.thindielectric import reflectance

@@ -46,13 +46,13 @@ Mitsuba                   drpt
 ``directional``           :class:`DirectionalLight` (irradiance)
 ``constant``              ``Background.color`` (radiance of escaping rays)
 ``envmap``                :class:`Skybox` with ``scale`` and ``rotation``
-``<bsdf>``                ``Material.bsdf``, a :class:`drpt.shading.BSDFSpec`
+``<bsdf>``                ``Material.bsdf``, a :class:`drpt.materials.spec.BSDFSpec`
                           tree (:mod:`.materials`); a shape without one gets
                           Mitsuba's default (diffuse 0.5; black on an emitter)
-``bitmap``                :class:`drpt.shading.Texture` on a texturable param
+``bitmap``                :class:`drpt.materials.spec.Texture` on a texturable param
                           (filter_type, wrap_mode, raw, to_uv)
-``checkerboard``          :class:`drpt.shading.Checkerboard` (procedural)
-``mesh_attribute``        :class:`drpt.shading.MeshAttribute` (vertex/face)
+``checkerboard``          :class:`drpt.materials.spec.Checkerboard` (procedural)
+``mesh_attribute``        :class:`drpt.materials.spec.MeshAttribute` (vertex/face)
 ``rawconstant``           its value
 ``orthographic``          :class:`OrthographicCamera`
 ========================  =====================================================

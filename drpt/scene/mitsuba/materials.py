@@ -1,14 +1,14 @@
-"""Mitsuba ``<bsdf>`` and ``<texture>`` nodes as :class:`drpt.shading.BSDFSpec` trees.
+"""Mitsuba ``<bsdf>`` and ``<texture>`` nodes as :class:`drpt.materials.spec.BSDFSpec` trees.
 
 A BSDF node becomes ``BSDFSpec(kind, params, children, notes, loc)`` with
 ``kind`` the Mitsuba plugin name and ``params`` under Mitsuba's parameter
-names (the vocabulary of :mod:`drpt.bsdf_kinds`), with one exception:
+names (the vocabulary of :mod:`drpt.materials.bsdf_kinds`), with one exception:
 ``diffuse``'s ``reflectance`` is drpt's ``kd``. Values: RGB triples (from
 ``<rgb>``, a uniform ``<spectrum>`` or a ``<float>`` on a color parameter),
 floats, strings (``material``, ``distribution``, named IORs such as
 ``int_ior="water"``: the lobe resolves them), booleans, or
-:class:`~drpt.shading.Texture` for a ``bitmap`` on a parameter the kind
-allows to be textured (:data:`drpt.bsdf_kinds.TEXTURABLE`).
+:class:`~drpt.materials.spec.Texture` for a ``bitmap`` on a parameter the kind
+allows to be textured (:data:`drpt.materials.bsdf_kinds.TEXTURABLE`).
 
 Composites: ``twosided`` (one child; Mitsuba's two-child form, a different
 BSDF on each side, is not supported), ``blendbsdf`` (two children,
@@ -17,8 +17,8 @@ BSDF on each side, is not supported), ``blendbsdf`` (two children,
 ``bitmap`` keeps Mitsuba's ``filter_type`` (bilinear, nearest), ``wrap_mode``
 (repeat, mirror, clamp), ``raw`` (its stored values, no sRGB decoding) and
 ``to_uv``; ``rawconstant`` is its constant value; ``checkerboard`` becomes
-:class:`~drpt.shading.Checkerboard`, ``mesh_attribute``
-:class:`~drpt.shading.MeshAttribute` (the reader loads the attribute with the mesh).
+:class:`~drpt.materials.spec.Checkerboard`, ``mesh_attribute``
+:class:`~drpt.materials.spec.MeshAttribute` (the reader loads the attribute with the mesh).
 
 Perturbed frames: ``normalmap`` (the texture ``normalmap``, or a ``rawconstant`` one:
 one normal everywhere) and ``bumpmap``
@@ -32,7 +32,7 @@ default ``diffuse``, reflectance 0.5) and other texture plugins (volumes...;
 fallback: 0.5). Parameters the plugin does
 not read (``int_ior`` on ``roughconductor``) are left unread, for the
 reader's one warning listing them (:meth:`~drpt.scene.mitsuba.reader.Reader.check_unread`).
-A tree drpt's material layer refuses (:func:`drpt.shading.complete`:
+A tree drpt's material layer refuses (:func:`drpt.materials.spec.complete`:
 ``twosided`` around a transmissive BSDF, ...) is an error at the BSDF's line.
 """
 
@@ -43,8 +43,8 @@ from typing import Any
 
 import numpy as np
 
-from ... import bsdf_kinds
-from ...shading import BSDFSpec, Checkerboard, MeshAttribute, Texture, complete
+from ...materials import bsdf_kinds
+from ...materials.spec import BSDFSpec, Checkerboard, MeshAttribute, Texture, complete
 from .nodes import Node
 
 
@@ -80,7 +80,7 @@ class Materials:
 
     @staticmethod
     def _check(node: Node, spec: BSDFSpec) -> None:
-        """drpt's own checks of a tree (:func:`drpt.shading.complete`: e.g. ``twosided``
+        """drpt's own checks of a tree (:func:`drpt.materials.spec.complete`: e.g. ``twosided``
         around a transmissive BSDF), as located errors."""
         try:
             complete(spec)

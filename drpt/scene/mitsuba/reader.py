@@ -14,7 +14,7 @@ import numpy as np
 from ...aovs import parse_aovs
 from ...errors import DrptError, Loc, SceneError, SceneWarning, located
 from ...imageio import read_image
-from ...shading import MeshAttribute, Texture
+from ...materials.spec import MeshAttribute, Texture
 from ..model import (
     MAX_COORDINATE,
     MAX_DEPTH,
@@ -833,7 +833,7 @@ class Reader:
         self.check_unread(node)
 
     def _emitter_texture(self, node: Node, name: str):
-        """The bitmap of an emitter's texture parameter (a :class:`drpt.shading.Texture`)."""
+        """The bitmap of an emitter's texture parameter (a :class:`drpt.materials.spec.Texture`)."""
         tex = node.ref(name)
         spec = self.materials.texture(tex, fallback=(1.0, 1.0, 1.0)) if tex.kind == "texture" else None
         if type(spec) is not Texture:

@@ -4,7 +4,7 @@ The room is the bundled Cornell box's (:mod:`.cornellbox`: the published
 dimensions in mm scaled by 1/100, white/red/green diffuse walls, the
 ceiling light with ``Ke 17 12 4``); the two blocks are replaced by four
 objects, each a material kind that the MTL statements select (see
-:mod:`drpt.shading`, auto mode):
+:mod:`drpt.materials.interpret`, auto mode):
 
 =============== ============================ ============================================
 object          MTL statements               read as (auto mode)

@@ -1,5 +1,5 @@
 """Conductors: drpt/render/bsdf/conductor.py (Mitsuba's ``conductor``) and
-roughconductor.py (Mitsuba's ``roughconductor``), drpt/conductors.py (the
+roughconductor.py (Mitsuba's ``roughconductor``), drpt/materials/conductors.py (the
 named materials' complex IORs):
 
 * the named-material table equals what the installed Mitsuba loads;
@@ -27,8 +27,8 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float, UInt32
 
-from drpt import conductors
-from drpt.bsdf_kinds import defaults
+from drpt.materials import conductors
+from drpt.materials.bsdf_kinds import defaults
 from drpt.render.bsdf import REGISTRY, lobe
 from drpt.render.bsdf import conductor as cd
 from drpt.render.bsdf import roughconductor as rc

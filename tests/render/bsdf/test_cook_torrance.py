@@ -1,5 +1,5 @@
-"""Cook-Torrance lobe (drpt/render/bsdf/cook_torrance.py, GGX helpers in
-microfacet.py) and its Mitsuba export (twosided(principled)):
+"""Cook-Torrance lobe (drpt/render/bsdf/cook_torrance.py, its GGX the
+``Distribution`` of microfacet.py) and its Mitsuba export (twosided(principled)):
 
 * the VNDF sampler and the full sampler match their pdfs (chi-square);
 * eval AND pdf equal Mitsuba 3's own ``principled`` eval/pdf (rel. 1e-4;
@@ -74,12 +74,12 @@ def _chi2(sample_func, pdf_func, dim, res, ires, sample_count=200_000):
 def test_vndf_sampling_matches_pdf(theta, alpha):
     def sample_func(u):
         a = np.array(u, dtype=np.float32)
-        m = mf.sample_visible(_dir(theta, a.shape[1]), Float(alpha), Array2f(a[0], a[1]))
+        m = mf.Distribution(False, alpha).sample_visible_normal(_dir(theta, a.shape[1]), Array2f(a[0], a[1]))
         return to_mitsuba_vec3(ROT @ np.array(m, dtype=np.float64))
 
     def pdf_func(w):
         m = to_drpt(ROT.T @ np.array(w, dtype=np.float64), Array3f)
-        return to_mitsuba_float(np.array(mf.pdf_visible(_dir(theta, dr.width(m)), m, Float(alpha))))
+        return to_mitsuba_float(np.array(mf.Distribution(False, alpha).pdf_visible(_dir(theta, dr.width(m)), m)))
 
     ok, msg = _chi2(sample_func, pdf_func, 2, *RES[alpha])
     assert ok, msg
@@ -342,14 +342,15 @@ def test_microfacet_normalizations(alpha):
     jac = np.sqrt(1 - cos_m**2) * alpha * cos_m**2
     m = Array3f(Float(np.sqrt(1 - cos_m**2).astype(np.float32)), Float(0.0),
                 Float(cos_m.astype(np.float32)))
-    d = np.array(mf.D(m, Float(alpha)), dtype=np.float64)
+    ggx = mf.Distribution(False, alpha)
+    d = np.array(ggx.D(m), dtype=np.float64)
     integral = 2 * np.pi * np.trapezoid(d * cos_m * jac, t)
     assert integral == pytest.approx(1.0, abs=2e-3)
     # G1 limits
     up = Array3f(0.0, 0.0, 1.0)
-    assert mf.G1(up, up, Float(alpha))[0] == 1.0
-    assert mf.G1(Array3f(1.0, 0.0, 0.0), up, Float(alpha))[0] == 0.0
-    g = mf.G1(Array3f(math.sqrt(1 - 1e-12), 0.0, 1e-6), up, Float(alpha))[0]
+    assert ggx.G1(up, up)[0] == 1.0
+    assert ggx.G1(Array3f(1.0, 0.0, 0.0), up)[0] == 0.0
+    g = ggx.G1(Array3f(math.sqrt(1 - 1e-12), 0.0, 1e-6), up)[0]
     assert 0.0 <= g < 2e-6 / alpha + 1e-6
     # pdf_visible integrates to 1 (MC with the sampler's own directions is
     # circular; use uniform hemisphere sampling for broad alpha only).
@@ -358,8 +359,8 @@ def test_microfacet_normalizations(alpha):
         v = _sphere_dirs(n, 31)
         v[2] = np.abs(v[2])
         for th in (0.0, 60.0, 89.0):
-            pv = np.array(mf.pdf_visible(_dir(th, n), to_drpt(v.astype(np.float32), Array3f),
-                                         Float(alpha)), dtype=np.float64)
+            pv = np.array(ggx.pdf_visible(_dir(th, n), to_drpt(v.astype(np.float32), Array3f)),
+                          dtype=np.float64)
             assert pv.mean() * 2 * np.pi == pytest.approx(1.0, abs=0.02)
 
 
@@ -406,9 +407,10 @@ def test_extremes_finite(alpha, metal, which):
     assert np.all(np.isfinite(fe)) and np.all(fe >= 0)
     assert np.all(np.isfinite(pe)) and np.all(pe >= 0)
     # VNDF alone
-    mm = np.array(mf.sample_visible(wi, Float(alpha), Array2f(u[1], u[2])))
+    ggx = mf.Distribution(False, alpha)
+    mm = np.array(ggx.sample_visible_normal(wi, Array2f(u[1], u[2])))
     assert np.all(np.isfinite(mm)) and np.all(mm[2] >= 0)
-    pv = np.array(mf.pdf_visible(wi, to_drpt(mm, Array3f), Float(alpha)))
+    pv = np.array(ggx.pdf_visible(wi, to_drpt(mm, Array3f)))
     assert np.all(np.isfinite(pv)) and np.all(pv >= 0)
 
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from drpt import bsdf_kinds
+from drpt.materials import bsdf_kinds
 from drpt.render.bsdf import dielectric
 from drpt.testing import mitsuba
 from support.dielectric import FakeTable, Spec

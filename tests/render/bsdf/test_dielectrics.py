@@ -1,7 +1,7 @@
 """Mitsuba 3's dielectric family beyond the smooth ``dielectric`` (which
 tests/render/bsdf/test_dielectric.py covers): ``thindielectric``
 (drpt/render/bsdf/thindielectric.py), ``roughdielectric``
-(drpt/render/bsdf/roughdielectric.py) and the named IORs (drpt/iors.py).
+(drpt/render/bsdf/roughdielectric.py) and the named IORs (drpt/materials/iors.py).
 
 * named IORs: every name gives Mitsuba's float32 value;
 * thindielectric: sample for sample equal to Mitsuba's plugin (lobe choice,
@@ -39,9 +39,9 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float
 
-from drpt import bsdf_kinds
 from drpt.export.mitsuba_dielectrics import adjust
-from drpt.iors import NAMED, lookup_ior, relative_ior
+from drpt.materials import bsdf_kinds
+from drpt.materials.iors import NAMED, lookup_ior, relative_ior
 from drpt.render.bsdf import REGISTRY, lobe
 from drpt.render.bsdf import dielectric as de
 from drpt.render.bsdf import roughdielectric as rd
@@ -745,7 +745,7 @@ def test_rough_index_matched_equals_exported_mitsuba_dielectric():
 
 # ------------------------------------------------------------------ renders
 def _render_specs():
-    from drpt.shading import BSDFSpec
+    from drpt.materials.spec import BSDFSpec
 
     return {
         "roughdielectric_ggx": BSDFSpec("roughdielectric", {

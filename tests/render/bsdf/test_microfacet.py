@@ -10,7 +10,7 @@
   pdf_all, at 0/45/80/89 degrees; a negative control (pdf with a wrong
   alpha) is rejected;
 * finite, non-negative output at alpha 1e-4 and cos 1e-6;
-* the module-level GGX functions agree with ``Distribution(False, a)``.
+* ``alpha_min`` is the lower clamp of the widths.
 """
 
 from __future__ import annotations
@@ -211,18 +211,21 @@ def test_extremes_finite():
     assert np.isfinite(np.array(d.G1(v, Array3f(0.0, 0.0, 1.0)))).all()
 
 
-def test_module_functions_equal_isotropic_ggx():
-    m = _sphere(5000, 11)
+def test_alpha_min_is_the_lower_clamp():
+    """``alpha_min`` replaces Mitsuba's 1e-4 clamp (cook_torrance passes principled's
+    1e-3): alpha 0 then is alpha 1e-3 exactly, and not the default clamp's 1e-4."""
+    m = _sphere(2000, 13)
     m[2] = np.abs(m[2])
-    wi = _sphere(5000, 12)
+    wi = _sphere(2000, 14)
     wi[2] = np.abs(wi[2]) + 0.01
     wi /= np.linalg.norm(wi, axis=0)
     dm, dwi = to_drpt(m, Array3f), to_drpt(wi, Array3f)
-    for a in (1e-3, 0.2, 1.0):
-        d = mf.Distribution(False, a)
-        _close(mf.D(dm, a), d.D(dm), 1e-5, 1e-30)
-        _close(mf.G1(dwi, dm, a), d.G1(dwi, dm), 1e-6)
-        _close(mf.pdf_visible(dwi, dm, a), d.pdf_visible(dwi, dm), 1e-5, 1e-30)
+    u = Array2f(Float(np.linspace(0.01, 0.99, 2000)), Float(np.linspace(0.98, 0.02, 2000)))
+    clamped, ref, default = (mf.Distribution(False, 0.0, alpha_min=1e-3), mf.Distribution(False, 1e-3),
+                             mf.Distribution(False, 0.0))
+    for f in (lambda d: d.D(dm), lambda d: d.G1(dwi, dm), lambda d: d.sample_visible_normal(dwi, u)):
+        assert np.array_equal(np.array(f(clamped)), np.array(f(ref)))
+    assert not np.array_equal(np.array(clamped.D(dm)), np.array(default.D(dm)))  # negative control
 
 
 # ---------------------------------------------------------------- chi-square

@@ -44,7 +44,7 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-from drpt.bsdf_kinds import PARAMS
+from drpt.materials.bsdf_kinds import PARAMS
 from drpt.render.bsdf import REGISTRY, lobe
 from drpt.render.bsdf import plastic as pl
 from drpt.render.bsdf import roughplastic as rp
@@ -333,8 +333,8 @@ def test_tables_equal_mitsuba(distr, alpha, eta):
 def test_table_lerp_convention():
     """The material table reads the transmittance table as Mitsuba's
     lerp_gather: x (N-1), index clamped to N-2, linear in between."""
+    from drpt.materials.spec import BSDFSpec, complete
     from drpt.render.material import MaterialTable
-    from drpt.shading import BSDFSpec, complete
 
     specs = [complete(BSDFSpec("roughplastic", {"alpha": 0.3, "distribution": "ggx"})),
              complete(BSDFSpec("roughplastic", {"alpha": 0.05, "int_ior": 1.0, "ext_ior": 1.6}))]
@@ -343,7 +343,7 @@ def test_table_lerp_convention():
     for m, spec in enumerate(specs):
         data = rp.derive(spec.params)[rp.TABLE].astype(np.float32)
         si = SimpleNamespace(material=UInt32(np.full(x.size, m, np.uint32)))
-        got = np.array(table.table_lerp(rp.TABLE, si, Float(x), dr.full(Bool, True, x.size)))
+        got = np.array(table.at(si.material).table_lerp(rp.TABLE, si, Float(x), dr.full(Bool, True, x.size)))
         xs = x.astype(np.float64) * 63
         i = np.minimum(xs.astype(int), 62)
         want = data[i] + (data[i + 1] - data[i]) * (xs - i)
@@ -778,8 +778,8 @@ def test_material_table_renders_plastics_as_mitsuba(tmp_path):
     from PIL import Image
 
     from drpt.export.mitsuba_bsdf import to_mitsuba
+    from drpt.materials.spec import BSDFSpec, Texture, complete
     from drpt.render.material import MaterialTable
-    from drpt.shading import BSDFSpec, Texture, complete
 
     img = np.random.default_rng(30).integers(0, 256, (4, 5, 3), dtype=np.uint8)
     Image.fromarray(img).save(tmp_path / "t.png")
@@ -849,7 +849,7 @@ def test_render_matches_mitsuba(tmp_path, spec):
     rendered by drpt and by Mitsuba through the exporter: block z-scores < 4.5."""
     from test_materials_render import _with_bsdf, make
 
-    from drpt.shading import BSDFSpec
+    from drpt.materials.spec import BSDFSpec
     from drpt.testing import assert_agree, render_both
 
     scene = _with_bsdf(make(tmp_path, "phong"), "phong", BSDFSpec(spec["kind"], dict(spec["params"])))

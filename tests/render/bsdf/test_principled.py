@@ -28,14 +28,14 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float, UInt32
 
-from drpt.bsdf_kinds import defaults, transmits
 from drpt.export.mitsuba_bsdf import to_mitsuba
+from drpt.materials.bsdf_kinds import defaults, transmits
+from drpt.materials.spec import BSDFSpec, Texture, complete
 from drpt.render.bsdf import REGISTRY, lobe
 from drpt.render.bsdf import principled as pr
 from drpt.render.material import MaterialTable
 from drpt.render.surface import Interaction
 from drpt.scene.model import Background, Material, PerspectiveCamera, Planes, Scene, Spheres, Triangles
-from drpt.shading import BSDFSpec, Texture, complete
 from drpt.testing import mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 
 RED = (0.8, 0.2, 0.4)

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 from drjit.auto import Array2f, Array3f, Float
 
-from drpt.bsdf_kinds import defaults
 from drpt.export.mitsuba_bsdf import to_mitsuba
+from drpt.materials.bsdf_kinds import defaults
+from drpt.materials.spec import BSDFSpec, complete
 from drpt.render.bsdf import principledthin as pt
-from drpt.shading import BSDFSpec, complete
 from drpt.testing import mitsuba, spherical_chi2, to_drpt
 
 RED = (0.8, 0.3, 0.2)

@@ -261,7 +261,7 @@ def test_shadow_rays_get_the_analytic_transmittance(tmp_path, bsdf):
     got = np.stack([np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.z)], 1)
     expect = np.exp(-2.0 * sigma)
     if bsdf == "thindielectric":
-        from drpt.iors import relative_ior
+        from drpt.materials.iors import relative_ior
 
         eta = relative_ior("bk7", "air")  # Mitsuba's default int_ior and ext_ior
         rr = ((eta - 1.0) / (eta + 1.0)) ** 2

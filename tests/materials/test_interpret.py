@@ -1,4 +1,4 @@
-"""Material interpretation (drpt/shading.py): which BSDF tree each material gets.
+"""Material interpretation (drpt/materials/interpret.py): which BSDF tree each material gets.
 
 The seed modes (phong, cook-torrance, diffuse) keep the seed renderer's
 reading; ``auto`` is the MTL table of the module docs, tested here through
@@ -7,9 +7,10 @@ the real MTL parser, one row at a time.
 
 import pytest
 
+from drpt.materials.interpret import interpret
+from drpt.materials.spec import BSDFSpec, Texture, complete
 from drpt.scene.model import Material
 from drpt.scene.mtl import parse_mtl_text
-from drpt.shading import BSDFSpec, Texture, complete, interpret
 
 
 def leaf(spec):

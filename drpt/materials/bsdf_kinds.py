@@ -1,6 +1,6 @@
 """The BSDF vocabulary: every kind drpt renders, its parameters and their defaults.
 
-Backend-free (no Dr.Jit): the scene readers, :mod:`drpt.shading`, the
+Backend-free (no Dr.Jit): the scene readers, :mod:`drpt.materials.interpret`, the
 Mitsuba exporter and the Mitsuba XML importer all describe materials with
 these names, and :mod:`drpt.render.material` uploads them.
 
@@ -21,7 +21,7 @@ else the ray passes straight through), and ``normalmap`` / ``bumpmap``
 (one child, seen in a shading frame perturbed by a texture: Mitsuba's
 plugins of those names, :mod:`drpt.render.perturb`).
 
-Values are floats, RGB triples, :class:`drpt.shading.Texture` (where a
+Values are floats, RGB triples, :class:`drpt.materials.spec.Texture` (where a
 kind's :data:`TEXTURABLE` allows it), or for string/bool parameters a
 Python ``str``/``bool`` (decided when a kernel is traced).
 """
@@ -118,7 +118,7 @@ PERTURBING: dict[str, str] = {"normalmap": "normalmap", "bumpmap": "texture"}
 #: is not listed: it transmits (and Mitsuba's ``twosided`` refuses it) exactly when its
 #: ``spec_trans`` is given and is not the number 0 -- a texture counts even if it is all 0
 #: (Mitsuba's ``get_flag``: :func:`given`). :func:`transmits` is the whole rule, which
-#: :func:`drpt.shading.complete` applies. Without transmission principled is still one-sided
+#: :func:`drpt.materials.spec.complete` applies. Without transmission principled is still one-sided
 #: (black from behind: its lobe sees the unflipped frame) unless wrapped in ``twosided``.
 TRANSMISSIVE = frozenset({"dielectric", "thindielectric", "roughdielectric", "null", "principledthin"})
 
