@@ -40,17 +40,15 @@ from __future__ import annotations
 import copy
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from ..errors import Loc, SceneError, located
+from ..scene.model import Scene
 from . import bsdf_kinds
 from .interpret import interpret_scene
 from .spec import BSDFSpec, Checkerboard, Texture
-
-if TYPE_CHECKING:
-    from ..scene.model import Scene
 
 #: "no row" / "no texture" in the index arrays (uint32).
 NONE = 0xFFFFFFFF

@@ -15,7 +15,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from drpt.errors import SceneError
+from drpt.errors import Loc, SceneError
 from drpt.materials.layout import NONE, MaterialLayout
 from drpt.materials.spec import BSDFSpec, Texture, complete
 from drpt.scene.model import Background, Material, PerspectiveCamera, Planes, Scene, Spheres, Triangles
@@ -53,7 +53,7 @@ def diffuse(c=(0.5, 0.5, 0.5)):
 def scene_with(*specs, used=None, emission=None, uvs=True):
     """One triangle per used material (all by default); material ``i`` is ``m<i>``."""
     cam = PerspectiveCamera((0, 0, 5), (0, 0, -1), (0, 1, 0), 40.0)
-    mats = [Material(f"m{i}", bsdf=s, origin=f"t.txt:{i + 1}") for i, s in enumerate(specs)]
+    mats = [Material(f"m{i}", bsdf=s, loc=Loc("t.txt", i + 1)) for i, s in enumerate(specs)]
     for i, e in (emission or {}).items():
         mats[i].emission = e
     used = list(range(len(specs))) if used is None else used
@@ -145,7 +145,7 @@ def test_texture_dropped_without_uvs_is_a_note(tmp_path):
 def test_refused_trees_and_parameters_name_the_material():
     with pytest.raises(SceneError, match="m0.*twosided with a different BSDF"):
         build(BSDFSpec("twosided", children=[diffuse(), diffuse()]))
-    # a parameter derive refuses: the leaf's origin, else the scene file
+    # a parameter derive refuses: the leaf's Loc, else the scene file
     with pytest.raises(SceneError, match="^t.txt: kd 9 refused$"):
         build(two(diffuse()), two(diffuse((9.0, 9.0, 9.0))))
 
