@@ -14,15 +14,20 @@ integrators' queries over wide Dr.Jit arrays:
   hit's own rounding-error bound, :mod:`drpt.render.spawn`);
 * materials: :meth:`emitted`, :meth:`eval_bsdf`, :meth:`sample_bsdf`,
   :meth:`is_delta`, :meth:`diffuse_color`;
-* emitters: :meth:`sample_area_emitter` and :meth:`pdf_area_emitter` (the
-  same density, for MIS), :meth:`delta_emitters`,
-  :meth:`sample_environment`, :meth:`eval_environment`,
-  :meth:`eval_pdf_environment`, and :attr:`background`.
+* emitters: :meth:`sample_emitter` (one emitter of any family, chosen by the
+  scene's :class:`~drpt.render.lights.selection.LightSelection`, and a direction
+  toward it: next-event estimation) and :meth:`pdf_emitter` (its density for what a
+  BSDF-sampled ray reached, for MIS), :meth:`eval_emitter` (the radiance a ray sees
+  and that density, in one query), and :attr:`background`. The family-level queries
+  stay for light tracing: :meth:`sample_area_emitter` and :meth:`pdf_area_emitter`
+  (the area family's own selection), :meth:`delta_emitters`,
+  :meth:`sample_environment`, :meth:`eval_environment`, :meth:`eval_pdf_environment`.
 
 Feature flags (plain Python bools, read while a kernel is traced) say what
 the scene has, so that kernels contain only the code it needs:
 ``has_area_lights``, ``has_delta_lights``, ``has_environment`` (a sky that
-is not black), ``has_background`` (a background color above 0 and no
+is not black), ``has_emitters`` (any of the three: next-event estimation has something
+to sample), ``has_background`` (a background color above 0 and no
 sky), ``has_ambient`` and ``has_smooth_bsdfs`` (some material is not a
 delta lobe: without one, next-event estimation is never traced).
 
@@ -41,35 +46,27 @@ instance (:meth:`intersect` then counts as traversal plus interaction).
 from __future__ import annotations
 
 import drjit as dr
+import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ..accel.protocol import INVALID
 from ..options import RenderOptions
 from ..scene.model import Scene, Skybox
 from .bsdf import BSDFSample
-from .lights.area import AreaLights
+from .lights import EmitterSample
+from .lights.area import AreaLights, toward
 from .lights.delta import DeltaLights
-from .lights.envmap import EnvironmentLight, RotatedEnvironment, UniformSphereSampling, check_radius
+from .lights.envmap import (
+    EnvironmentLight,
+    RotatedEnvironment,
+    SkyEmitter,
+    UniformSphereSampling,
+    check_radius,
+)
+from .lights.selection import LightSelection
 from .material import MaterialTable
 from .spawn import origin as spawn_origin
 from .surface import Interaction, SurfaceData
-
-
-class EmitterSample:
-    """A direction from a shading point toward a sampled emitter point:
-    unit ``wo``, the radiance ``le`` arriving along it, its solid-angle
-    density ``pdf`` and ``valid`` (the point faces the shading point and has
-    a positive density). ``p`` is the emitter point moved off the light
-    toward the shading point by its rounding-error bound
-    (:func:`drpt.render.spawn.origin`): the end of the shadow ray."""
-
-    def __init__(self, wo, p, le, pdf, valid):
-        self.wo: Array3f = wo
-        self.p: Array3f = p
-        self.le: Array3f = le
-        self.pdf: Float = pdf
-        self.valid: Bool = valid
-
 
 EMPTY_SCENE_WARNING = ("the scene has no primitives (no triangles, spheres or planes): "
                        "the image shows only its background or sky")
@@ -168,6 +165,26 @@ class DeviceScene:
         self.has_ambient = max(self.ambient) > 0.0
         self.has_smooth_bsdfs = not self.materials.is_specular_only()
 
+        # the emitters behind one interface, and the one selection over them
+        self.sky = None
+        if self.has_environment:
+            lo, hi = scene.bounds()
+            radius = float(np.linalg.norm(hi - lo)) / 2.0 if np.all(np.isfinite(lo)) else 1.0
+            self.sky = SkyEmitter(self.environment, radius)
+        families = [self.area_lights, self.delta_lights] + ([self.sky] if self.sky is not None else [])
+        self.set_light_selection(LightSelection(families, options.light_sampler))
+
+    def set_light_selection(self, selection) -> None:
+        """Use ``selection`` (a :class:`~drpt.render.lights.selection.LightSelection` or
+        another object with its interface) for :meth:`sample_emitter`: a static one's
+        probabilities are bound into the families' density tables, a spatially varying
+        one's (``static`` False) multiplied in at run time. Kernels traced before keep
+        the old selection."""
+        self.emitter_selection = selection
+        for i, family in enumerate(selection.families):
+            family.bind(selection.family_probabilities(i) if selection.static else None)
+        self.has_emitters = selection.count > 0
+
     # ------------------------------------------------------------ geometry
     def intersect(self, o: Array3f, d: Array3f, active: Bool) -> Interaction:
         """The closest hit of rays ``(o, d)`` (``si.valid`` False on a miss)."""
@@ -215,6 +232,87 @@ class DeviceScene:
         return self.materials.albedo(si, active)
 
     # ------------------------------------------------------------ emitters
+    def sample_emitter(self, si: Interaction, u_sel: Float, u2: Array2f, active: Bool) -> EmitterSample:
+        """One emitter chosen by the light selection from ``u_sel`` and a direction
+        from ``si.p`` toward it from ``u2`` (:class:`~drpt.render.lights.EmitterSample`):
+        ``pdf`` is the solid-angle density times the selection's probability (a delta
+        light's: the probability alone, with ``delta`` set). Only the families the
+        scene has are traced; lanes of a scene without emitters are invalid."""
+        sel = self.emitter_selection
+        n = dr.width(active)
+        if sel.count == 0:
+            z = dr.zeros(Float, n)
+            return EmitterSample(Array3f(0.0, 0.0, 1.0) + Array3f(z), Array3f(si.p), Array3f(z), z,
+                                 dr.zeros(Bool, n))
+        ref = si.p
+        k, pmf = sel.sample(u_sel, ref, active)
+        fams = sel.families
+        infinite = any(f.infinite for f in fams)
+        out = None
+        for family, off in zip(fams, sel.offsets):
+            if len(fams) == 1:
+                mine, slot = active, k
+            else:
+                mine = active & (k >= off) & (k < off + family.count)
+                slot = dr.select(mine, k - off, 0)
+            s = family.sample_direction(ref, slot, u2, mine)
+            if infinite and s.dist is None:
+                s.dist = dr.norm(s.p - ref)
+            if not family.delta and len(fams) > 1 and any(f.delta for f in fams):
+                s.delta = Bool(False)
+            if out is None:
+                out = s
+                continue
+            merged = [dr.select(mine, getattr(s, f), getattr(out, f)) for f in ("wo", "p", "le", "pdf", "valid")]
+            dist = dr.select(mine, s.dist, out.dist) if infinite else None
+            delta = dr.select(mine, Bool(s.delta), Bool(out.delta)) if any(f.delta for f in fams) else False
+            out = EmitterSample(*merged, dist, delta)
+        if not sel.static:
+            out.pdf = out.pdf * pmf
+        return out
+
+    def pdf_emitter(self, si: Interaction, d: Array3f, active: Bool) -> Float:
+        """The density :meth:`sample_emitter` has for what a ray of unit direction ``d``
+        reached: the area emitter point ``si`` (``si.t`` from where the ray started) or,
+        where the ray escaped, the sky; 0 elsewhere (no emitter, an emissive plane, a
+        background color)."""
+        return self.eval_emitter(si, d, active, radiance=False)[1]
+
+    def eval_emitter(self, si: Interaction, d: Array3f, active: Bool, radiance: bool = True,
+                     density: bool = True) -> tuple[Array3f | None, Float | None]:
+        """What a ray of unit direction ``d`` sees at ``si`` (``active`` lanes): the
+        radiance an emitter sends back along it (surface emission where it hit, the
+        background or sky where it escaped; zero elsewhere) and :meth:`pdf_emitter`,
+        with one lookup of the sky. ``radiance`` or ``density`` False: ``None`` in its
+        place (and none of its code traced)."""
+        sel = self.emitter_selection
+        hit = active & si.valid
+        escaped = active & ~si.valid
+        le = None
+        if radiance:  # (a scene without emissive materials traces no surface emission)
+            emits = getattr(self.materials, "has_emission", True)
+            le = dr.select(hit, self.emitted(si), 0.0) if emits else dr.zeros(Array3f, dr.width(hit))
+        pdf = Float(0.0) if density else None
+        if density and self.has_area_lights:
+            pdf = self.area_lights.pdf_direction(si, d, hit)
+            if not sel.static:
+                slot = self.area_lights.slot_of(si.prim, hit) + sel.offsets[sel.families.index(self.area_lights)]
+                pdf = pdf * sel.pmf(slot, si.p - d * si.t, hit)
+        if radiance and self.has_background:
+            le = dr.select(escaped, Array3f(*self.background), le)
+        if self.has_environment:
+            if density:
+                le_env, pdf_env = self.sky.eval_direction(d, escaped)
+                if not sel.static:
+                    slot = UInt32(sel.offsets[sel.families.index(self.sky)])
+                    pdf_env = pdf_env * sel.pmf(slot, si.p - d * si.t, escaped)
+                pdf = dr.select(escaped, pdf_env, pdf)
+            elif radiance:
+                le_env = self.environment.eval(d, escaped)
+            if radiance:
+                le = dr.select(escaped, le_env, le)
+        return le, pdf
+
     def sample_area_emitter(self, si: Interaction, u_select: Float, u: Array2f,
                             active: Bool) -> EmitterSample:
         """A point on an emissive triangle or sphere (chosen by the light sampler) seen
@@ -223,29 +321,13 @@ class DeviceScene:
         Only the front of an emitter (its shading normal's side) emits."""
         lights = self.area_lights
         ls = lights.sample(u_select, u, active, ref=si.p if lights.has_spheres else None)
-        to_light = ls.p - si.p
-        dist2 = dr.squared_norm(to_light)
-        wo = to_light * dr.rsqrt(dist2)
-        front = dr.dot(ls.n, wo) < 0.0  # the light emits toward the shading point
-        cos_light = dr.abs(dr.dot(ls.ng, wo))
-        valid = active & front & (cos_light > 0.0) & (ls.pdf_area > 0.0)
-        pdf = ls.pdf_area * dist2 / cos_light
-        if ls.solid_angle is not None:
-            pdf = dr.select(ls.solid_angle, ls.pdf_area, pdf)
-        p_end = spawn_origin(ls.p, ls.ng, ls.p_error, -wo)
-        return EmitterSample(wo, p_end, ls.le, pdf, valid)
+        return toward(si.p, ls, active)
 
     def pdf_area_emitter(self, si: Interaction, d: Array3f, active: Bool) -> Float:
         """The density :meth:`sample_area_emitter` has for the point ``si`` a
         ray of unit direction ``d`` hit (0 where ``si`` is not a sampled emitter)."""
-        pdf_a = self.area_lights.pdf_area(si.prim, active)
-        sees_light = active & (pdf_a > 0.0)
-        pdf = dr.select(sees_light, pdf_a * dr.square(si.t) / dr.abs(dr.dot(si.ng, d)), 0.0)
-        if self.area_lights.has_spheres:
-            ref = si.p - d * si.t  # where the ray came from
-            is_sph, pdf_s = self.area_lights.pdf_sphere(si.prim, si.p, ref, d, si.t, active & si.valid)
-            pdf = dr.select(is_sph, pdf_s, pdf)
-        return pdf
+        lights = self.area_lights
+        return lights._pdf_hit(si, d, active, lights.pdf_area_table, getattr(lights, "sph_prob", None))
 
     def delta_emitters(self, p: Array3f):
         """One ``DeltaSample`` per point and directional light, seen from ``p``."""
