@@ -280,14 +280,14 @@ class DeviceScene:
 
     def eval_emitter(self, si: Interaction, d: Array3f, active: Bool, radiance: bool = True,
                      density: bool = True) -> tuple[Array3f | None, Float | None]:
-        """What a ray of unit direction ``d`` sees at ``si`` (``active`` lanes): the
-        radiance an emitter sends back along it (surface emission where it hit, the
+        """What a ray of unit direction ``d`` sees at ``si`` (``active`` lanes; ``None``:
+        every lane): the radiance an emitter sends back along it (surface emission where it hit, the
         background or sky where it escaped; zero elsewhere) and :meth:`pdf_emitter`,
         with one lookup of the sky. ``radiance`` or ``density`` False: ``None`` in its
         place (and none of its code traced)."""
         sel = self.emitter_selection
-        hit = active & si.valid
-        escaped = active & ~si.valid
+        hit = si.valid if active is None else active & si.valid
+        escaped = ~si.valid if active is None else active & ~si.valid
         le = None
         if radiance:  # (a scene without emissive materials traces no surface emission)
             emits = getattr(self.materials, "has_emission", True)

@@ -180,14 +180,15 @@ def add_emission(scene: DeviceScene, opt: PathOptions, si, s, L: Array3f, active
     ``s.beta``. ``active`` masks the lanes (``None``: every lane is a live path).
     Shared by the megakernel and the wavefront integrator: one estimator."""
     nee = scene.has_emitters and scene.has_smooth_bsdfs
-    seen = dr.full(Bool, True, dr.width(si.valid)) if active is None else Bool(active)
+    seen = None if active is None else Bool(active)  # (None: every lane)
     if opt.hide_emitters:  # Mitsuba's hide_emitters: the camera sees no emitter or sky
-        seen &= s.depth > 0
-    le, pdf_l = scene.eval_emitter(si, s.d, seen, density=nee)
-    w = Float(1.0)
-    if nee:  # MIS against next-event estimation (none after a delta lobe or the camera)
-        w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
-    return L + dr.select(seen, s.beta * le * w, 0.0)
+        seen = s.depth > 0 if seen is None else seen & (s.depth > 0)
+    le, pdf_l = scene.eval_emitter(si, s.d, seen, density=nee)  # (zero where not seen)
+    if not nee:
+        return L + s.beta * le
+    # MIS against next-event estimation (none after a delta lobe or the camera)
+    w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
+    return L + s.beta * le * w
 
 
 def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32):
