@@ -68,6 +68,12 @@ from .material import MaterialTable
 from .spawn import origin as spawn_origin
 from .surface import Interaction, SurfaceData
 
+#: builders of further emitter families, ``build(device_scene, scene) -> Emitter | None``
+#: (:class:`drpt.render.lights.Emitter`; None or a family without slots: the scene has none);
+#: each family built joins the light selection after the area, delta and sky families
+#: (docs/architecture.md, "Adding an emitter")
+EMITTER_FAMILIES: list = []
+
 EMPTY_SCENE_WARNING = ("the scene has no primitives (no triangles, spheres or planes): "
                        "the image shows only its background or sky")
 
@@ -172,6 +178,7 @@ class DeviceScene:
             radius = float(np.linalg.norm(hi - lo)) / 2.0 if np.all(np.isfinite(lo)) else 1.0
             self.sky = SkyEmitter(self.environment, radius)
         families = [self.area_lights, self.delta_lights] + ([self.sky] if self.sky is not None else [])
+        families += [f for f in (build(self, scene) for build in EMITTER_FAMILIES) if f is not None]
         self.set_light_selection(LightSelection(families, options.light_sampler))
 
     def set_light_selection(self, selection) -> None:
@@ -278,13 +285,13 @@ class DeviceScene:
         background color)."""
         return self.eval_emitter(si, d, active, radiance=False)[1]
 
-    def eval_emitter(self, si: Interaction, d: Array3f, active: Bool, radiance: bool = True,
+    def eval_emitter(self, si: Interaction, d: Array3f, active: Bool | None, radiance: bool = True,
                      density: bool = True) -> tuple[Array3f | None, Float | None]:
         """What a ray of unit direction ``d`` sees at ``si`` (``active`` lanes; ``None``:
-        every lane): the radiance an emitter sends back along it (surface emission where it hit, the
-        background or sky where it escaped; zero elsewhere) and :meth:`pdf_emitter`,
-        with one lookup of the sky. ``radiance`` or ``density`` False: ``None`` in its
-        place (and none of its code traced)."""
+        every lane): the radiance an emitter sends back along it (surface emission where it
+        hit, the background or the infinite emitters where it escaped; zero elsewhere) and
+        :meth:`pdf_emitter`, with one lookup of each infinite emitter. ``radiance`` or
+        ``density`` False: ``None`` in its place (and none of its code traced)."""
         sel = self.emitter_selection
         hit = si.valid if active is None else active & si.valid
         escaped = ~si.valid if active is None else active & ~si.valid
@@ -292,25 +299,32 @@ class DeviceScene:
         if radiance:  # (a scene without emissive materials traces no surface emission)
             emits = getattr(self.materials, "has_emission", True)
             le = dr.select(hit, self.emitted(si), 0.0) if emits else dr.zeros(Array3f, dr.width(hit))
+            if self.has_background:
+                le = dr.select(escaped, Array3f(*self.background), le)
         pdf = Float(0.0) if density else None
-        if density and self.has_area_lights:
-            pdf = self.area_lights.pdf_direction(si, d, hit)
-            if not sel.static:
-                slot = self.area_lights.slot_of(si.prim, hit) + sel.offsets[sel.families.index(self.area_lights)]
-                pdf = pdf * sel.pmf(slot, si.p - d * si.t, hit)
-        if radiance and self.has_background:
-            le = dr.select(escaped, Array3f(*self.background), le)
-        if self.has_environment:
+        # (no sum to add to yet: surface densities are 0 where a ray escaped, and the reverse)
+        le_zero, pdf_zero, pdf_escaped_zero = not (radiance and self.has_background), True, True
+        for family, off in zip(sel.families, sel.offsets):
+            if family.delta:  # (never reached by a ray)
+                continue
+            if not family.infinite:  # a surface: its radiance is its material's emission
+                if density:
+                    pdf_f = family.pdf_direction(si, d, hit)
+                    if not sel.static:
+                        pdf_f = pdf_f * sel.pmf(family.slot_of(si.prim, hit) + off, si.p - d * si.t, hit)
+                    pdf = pdf_f if pdf_zero else pdf + pdf_f
+                    pdf_zero = False
+                continue
+            # at infinity: seen by the rays that escape
+            le_f, pdf_f = family.eval_direction(d, escaped, density=density)
             if density:
-                le_env, pdf_env = self.sky.eval_direction(d, escaped)
                 if not sel.static:
-                    slot = UInt32(sel.offsets[sel.families.index(self.sky)])
-                    pdf_env = pdf_env * sel.pmf(slot, si.p - d * si.t, escaped)
-                pdf = dr.select(escaped, pdf_env, pdf)
-            elif radiance:
-                le_env = self.environment.eval(d, escaped)
+                    pdf_f = pdf_f * sel.pmf(UInt32(off), si.p - d * si.t, escaped)
+                pdf = dr.select(escaped, pdf_f if pdf_escaped_zero else pdf + pdf_f, pdf)
+                pdf_escaped_zero = False
             if radiance:
-                le = dr.select(escaped, le_env, le)
+                le = dr.select(escaped, le_f if le_zero else le + le_f, le)
+                le_zero = False
         return le, pdf
 
     def sample_area_emitter(self, si: Interaction, u_select: Float, u: Array2f,

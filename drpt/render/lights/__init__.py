@@ -14,8 +14,8 @@ with a density *conditional on that slot*, and the scene multiplies it by the sl
 probability. An integrator therefore traces one shadow ray per vertex and never asks
 which family it got.
 
-Before this interface the families had their own, still used by light tracing
-(:mod:`drpt.render.lights.rays`) and kept as they are: :meth:`AreaLights.sample
+Light tracing (:mod:`drpt.render.lights.rays`) uses the families' own queries instead,
+for rays that leave the emitters: :meth:`AreaLights.sample
 <drpt.render.lights.area.AreaLights.sample>` (a point chosen by the family's own
 selection), :meth:`DeltaLights.samples <drpt.render.lights.delta.DeltaLights.samples>`
 (every light) and the environment's ``sample``/``eval_pdf``.
@@ -63,11 +63,16 @@ class EmitterSample:
 class Emitter(Protocol):
     """What every emitter family provides (:class:`~drpt.render.lights.area.AreaLights`,
     :class:`~drpt.render.lights.delta.DeltaLights`,
-    :class:`~drpt.render.lights.envmap.SkyEmitter`)."""
+    :class:`~drpt.render.lights.envmap.SkyEmitter`).
+
+    A family is a *surface* family (its slots are primitives of the scene, whose radiance
+    is their material's emission: :meth:`pdf_direction` and :meth:`slot_of` for what a ray
+    hit), a *delta* one (``delta``: never hit, no density) or an *infinite* one (``infinite``
+    and not ``delta``: seen by the rays that escape, :meth:`eval_direction`)."""
 
     #: slots the selection can choose (0: the family is absent and traces no code)
     count: int
-    #: every slot is a delta light (reached by shadow rays only; :meth:`pdf_direction` is 0)
+    #: every slot is a delta light (reached by shadow rays only)
     delta: bool
     #: some slot is at infinity (its samples have ``dist = inf``)
     infinite: bool
@@ -83,15 +88,31 @@ class Emitter(Protocol):
         selection gives each emitter the same probability, split by the shares."""
         ...
 
-    def sample_direction(self, ref: Array3f, slot: UInt32, u: Array2f, active: Bool) -> EmitterSample:
-        """A direction from ``ref`` toward the family's ``slot`` (lanes' indices within
-        the family), with its solid-angle density given the slot."""
+    def bind(self, prob: np.ndarray | None) -> None:
+        """The slots' selection probabilities, which :meth:`sample_direction` and the
+        densities include from now on (``None``: 1 each, densities conditional on the
+        slot, for a selection that varies in space)."""
         ...
 
-    def pdf_direction(self, si, d: Array3f, active: Bool, prob=None) -> Float:
+    def sample_direction(self, ref: Array3f, slot: UInt32, u: Array2f, active: Bool) -> EmitterSample:
+        """A direction from ``ref`` toward the family's ``slot`` (lanes' indices within
+        the family): its solid-angle density times the bound probability."""
+        ...
+
+    def pdf_direction(self, si, d: Array3f, active: Bool) -> Float:
         """The density :meth:`sample_direction` has for what a ray of unit direction
-        ``d`` reached: the interaction ``si`` (``si.t`` from the reference point;
-        an escaped ray for the sky), times the slot's probability ``prob`` where the
-        family holds it per slot (``None``: the family's own). 0 where the ray reached
+        ``d`` reached: the interaction ``si`` (``si.t`` from the reference point) or, for
+        an infinite family, the direction of a ray that escaped. 0 where the ray reached
         none of the family's slots."""
+        ...
+
+    # surface families:
+    def slot_of(self, prim: UInt32, active: Bool) -> UInt32:
+        """The slot of primitive ``prim``."""
+        ...
+
+    # infinite families:
+    def eval_direction(self, d: Array3f, active: Bool, density: bool = True) -> tuple[Array3f, Float | None]:
+        """The radiance arriving along unit ``-d`` from direction ``d`` and the density of
+        :meth:`sample_direction` for ``d`` (``density`` False: ``None``)."""
         ...

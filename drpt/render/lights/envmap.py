@@ -525,8 +525,11 @@ class SkyEmitter:
         return EmitterSample(wo, Array3f(ref), le, pdf, Bool(active) & (pdf > 0.0),
                              dr.full(Float, dr.inf, dr.width(pdf)), False)
 
-    def eval_direction(self, d: Array3f, active: Bool) -> tuple[Array3f, Float]:
-        """The radiance along unit ``d`` and the density of :meth:`sample_direction` for it."""
+    def eval_direction(self, d: Array3f, active: Bool, density: bool = True) -> tuple[Array3f, Float | None]:
+        """The radiance along unit ``d`` and the density of :meth:`sample_direction` for it
+        (``density`` False: ``None``, and only the radiance is looked up)."""
+        if not density:
+            return self.env.eval(d, active), None
         le, pdf = self.env.eval_pdf(d, active)
         return le, (pdf * self.prob if self.prob != 1.0 else pdf)
 
