@@ -5,9 +5,9 @@ surface at distance ``d`` facing it the irradiance
 ``E = color / (c + l d + q d^2)`` (the default ``(0, 0, 1)`` is the physical
 inverse-square law); a directional light gives ``E = color`` from
 ``-direction`` everywhere. A shading point then receives ``f * |cos| * E``.
-Every delta light is sampled at every vertex (they are few; the loop is
-unrolled at trace time). BSDF sampling can never hit them, so there is no
-MIS for them.
+Next-event estimation reaches them as slots of the scene's light selection (one
+light per sample, divided by its probability; the lights' code is unrolled at trace
+time). BSDF sampling can never hit them, so there is no MIS for them.
 
 A spot light (Mitsuba's ``spot``) is a point light whose intensity is
 multiplied by the falloff of the angle ``theta`` between its axis and the
