@@ -257,16 +257,15 @@ class DeviceScene:
         infinite = any(f.infinite for f in fams)
         out = None
         for family, off in zip(fams, sel.offsets):
-            if len(fams) == 1:
-                mine, slot = active, k
-            else:
-                mine = active & (k >= off) & (k < off + family.count)
+            mine, slot = active, k
+            if off > 0:  # (slots are numbered family by family)
+                mine = mine & (k >= off)
                 slot = dr.select(mine, k - off, 0)
+            if off + family.count < sel.count:
+                mine = mine & (k < off + family.count)
             s = family.sample_direction(ref, slot, u2, mine)
             if infinite and s.dist is None:
                 s.dist = dr.norm(s.p - ref)
-            if not family.delta and len(fams) > 1 and any(f.delta for f in fams):
-                s.delta = Bool(False)
             if out is None:
                 out = s
                 continue
