@@ -35,7 +35,7 @@ BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
 INTEGRATORS = ("path", "whitted", "ptracer", "volpath")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
-LIGHT_SAMPLERS = ("power", "uniform")  # drpt.render.lights.area
+LIGHT_SAMPLERS = ("mixed", "power", "uniform")  # drpt.render.lights.selection
 #: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy sampler, and
 #: Mitsuba's other sampler plugins, which draw from the low-discrepancy one
 SAMPLERS = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "orthogonal")
@@ -81,7 +81,7 @@ class RenderOptions:
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
     #: how next-event estimation picks an area light: "power" (each emissive primitive by its
     #: power) or "uniform" (Mitsuba's: each emitter alike, then a point by area)
-    light_sampler: str = "power"
+    light_sampler: str = "mixed"
     #: what the camera passes' random numbers are drawn from (:mod:`drpt.render.sampler`):
     #: "independent" (a PCG32 stream per lane) or a low-discrepancy sampler's name
     sampler: str = "independent"
@@ -397,8 +397,9 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                             default=RenderOptions.light_sampler,
                             help="how next-event estimation picks one emitter per vertex (emissive "
                                  "triangles and spheres, delta lights, the sky): power (each by its "
-                                 "emitted power) or uniform (Mitsuba's: every emitter alike, then a "
-                                 f"point by area) (default {RenderOptions.light_sampler})")
+                                 "emitted power), uniform (Mitsuba's: every emitter alike, then a "
+                                 "point by area) or mixed (half of each) "
+                                 f"(default {RenderOptions.light_sampler})")
     if want("filter"):
         parser.add_argument("--filter", dest="filter", metavar="box|tent|gaussian", action=_Given,
                             default=d["filter"],

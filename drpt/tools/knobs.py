@@ -79,6 +79,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DrptError
+from ..options import RenderOptions
 from . import table as _table
 from .reference import (
     add_reference_args,
@@ -104,7 +105,7 @@ class Config:
     rr_prob: float | None = None
     denoise: bool = False
     integrator: str = "path"
-    light_sampler: str = "power"
+    light_sampler: str = RenderOptions.light_sampler
     filter_sampling: bool = False
     adaptive: bool = False
 

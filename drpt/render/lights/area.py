@@ -3,11 +3,12 @@
 An emissive *primitive* (triangle or analytic sphere) is chosen from one
 discrete distribution ``P(k)``, then a point on it:
 
-* ``power`` (the default light sampler): ``P(k)`` proportional to the
+* ``power``: ``P(k)`` proportional to the
   primitive's power ``area_k * luminance_k``, so scenes with many small
   emitters are not noisier than one large emitter of the same power;
 * ``uniform`` (Mitsuba's): every *emitter* equally likely, then a primitive
-  of it by area: ``P(k) = area_k / (N * area_e(k))`` with ``N`` emitters.
+  of it by area: ``P(k) = area_k / (N * area_e(k))`` with ``N`` emitters;
+* ``mixed`` (the default): the mean of the two probabilities.
   An emitter is a shape: a Mitsuba XML shape, the faces of one material in
   drpt's own format (:meth:`drpt.scene.model.Triangles.emitter_ids`), each
   sphere.
@@ -58,17 +59,21 @@ from ..warp import Frame, square_to_uniform_sphere, square_to_uniform_triangle
 from . import EmitterSample
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-LIGHT_SAMPLERS = ("power", "uniform")  # drpt.options.LIGHT_SAMPLERS
+LIGHT_SAMPLERS = ("mixed", "power", "uniform")  # drpt.options.LIGHT_SAMPLERS
 
 
 def selection_weights(area: np.ndarray, lum: np.ndarray, emitter: np.ndarray,
                       sampler: str) -> np.ndarray:
     """Each primitive's weight in the light selection, ``P(k)`` up to a factor (zero
     for those that emit nothing): its power ``area * lum``, or ``uniform``: each
-    emitter (``emitter`` ids) alike, then its primitives by area."""
+    emitter (``emitter`` ids) alike, then its primitives by area, or ``mixed``: half
+    of each (both normalised)."""
     power = area * lum
     ok = (power > 0) & np.isfinite(power)
     w = np.zeros(len(area))
+    if sampler == "mixed" and ok.any():
+        p, u = (selection_weights(area, lum, emitter, s) for s in ("power", "uniform"))
+        return 0.5 * p / p.sum() + 0.5 * u / u.sum()
     if sampler == "power" or not ok.any():
         w[ok] = power[ok]
         return w
