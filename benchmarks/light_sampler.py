@@ -9,15 +9,16 @@ families (``mixed``, the only ones with that argument: the generated sky-and-sun
 with a point light, ``ptracer.xml`` rendered by the path tracer (area, point, spot and
 directional lights and a sky), ``projector_spot.xml``, and the corpus's media scenes with
 an area light and a sky, rendered by volpath) drpt renders ``REPEATS`` images (seeds 0..)
-at ``SPP`` (default 64) with ``--light-sampler power`` and ``uniform``, and measures
+at ``SPP`` (default 64) with each ``--light-sampler`` (``power``, ``uniform``, ``mixed``;
+those the checkout has), and measures
 each against a reference: the corpus scene's shipped Mitsuba reference, Mitsuba at 8192
 spp for the other XML scenes, and drpt at 8192 spp (power, another seed) for drpt's own
 format. It prints, per scene, the emitters, the mean relMSE
 (``mean((x - ref)^2 / (ref^2 + 0.01))``) of each sampler, the mean render seconds
-(compilation excluded: a discarded first render), and the ratios ``uniform / power`` of
-the relMSE at equal spp and at equal time (relMSE times seconds); below 1: uniform is
-better. Both samplers trace the same kernel (only the tables differ), so the time ratio
-is 1 up to the timing noise of short renders. For XML scenes Mitsuba's relMSE at the same
+(compilation excluded: a discarded first render), and each other rule's ratio to
+``power`` at equal time (relMSE times seconds; below 1: that rule is better). All rules
+trace the same kernel (only the tables differ), so the time ratio is 1 up to the timing
+noise of short renders. For XML scenes Mitsuba's relMSE at the same
 spp (its seeds 0..) and drpt's (power) over it follow.
 """
 
@@ -123,16 +124,19 @@ def emitters(device_scene) -> int:
 
 
 def main(spp=64, repeats=4, which="all", size=64):
-    print("| scene | emitters | relMSE power | relMSE uniform | uniform / power, equal spp | "
-          "s power | s uniform | uniform / power, equal time | Mitsuba relMSE | power / Mitsuba |\n"
-          "|---|---|---|---|---|---|---|---|---|---|")
+    from drpt.options import LIGHT_SAMPLERS
+
+    rules = [r for r in ("power", "uniform", "mixed") if r in LIGHT_SAMPLERS]
+    print("| scene | emitters | " + " | ".join(f"relMSE {r}" for r in rules) + " | "
+          + " | ".join(f"s {r}" for r in rules) + " | " + " | ".join(f"{r} / power, equal time" for r in rules[1:])
+          + " | Mitsuba relMSE | power / Mitsuba |\n" + "|---" * (3 * len(rules) + 3) + "|---|")
     todo = scenes() if which == "all" else mixed_scenes(Path(tempfile.mkdtemp()))
     for name, path, kind, extra in todo:
         defines = {**({"spp": str(spp)} if kind == "corpus" else {}), **extra}
         scene = load_scene(path, defines=defines) if defines else load_scene(path)
         ref = reference(name, path, kind, scene, size, extra)
         row = {}
-        for sampler in ("power", "uniform"):
+        for sampler in rules:
             r = Renderer(scene, options(scene, 1, 99, sampler, size))
             r.render()  # compile
             errs, secs = [], []
@@ -143,11 +147,12 @@ def main(spp=64, repeats=4, which="all", size=64):
                 secs.append(time.perf_counter() - t0)
                 errs.append(float(np.mean((img - ref) ** 2 / (ref ** 2 + 1e-2))))
             row[sampler] = (float(np.mean(errs)), float(np.mean(secs)), emitters(r.scene))
-        (ep, sp, count), (eu, su, _) = row["power"], row["uniform"]
+        ep, sp, count = row["power"]
         em = mitsuba_error(path, kind, spp, repeats, ref, extra)
         mcols = "| | |" if em is None else f"| {em:.4g} | {ep / em:.2f} |"
-        print(f"| {name} | {count} | {ep:.4g} | {eu:.4g} | {eu / ep:.2f} | "
-              f"{sp:.2f} | {su:.2f} | {eu * su / (ep * sp):.2f} {mcols}", flush=True)
+        print(f"| {name} | {count} | " + " | ".join(f"{row[r][0]:.4g}" for r in rules) + " | "
+              + " | ".join(f"{row[r][1]:.2f}" for r in rules) + " | "
+              + " | ".join(f"{row[r][0] * row[r][1] / (ep * sp):.2f}" for r in rules[1:]) + f" {mcols}", flush=True)
 
 
 if __name__ == "__main__":
