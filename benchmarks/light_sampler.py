@@ -129,7 +129,7 @@ def main(spp=64, repeats=4, which="all", size=64):
     rules = [r for r in ("power", "uniform", "mixed") if r in LIGHT_SAMPLERS]
     print("| scene | emitters | " + " | ".join(f"relMSE {r}" for r in rules) + " | "
           + " | ".join(f"s {r}" for r in rules) + " | " + " | ".join(f"{r} / power, equal time" for r in rules[1:])
-          + " | Mitsuba relMSE | power / Mitsuba |\n" + "|---" * (3 * len(rules) + 3) + "|---|")
+          + " | Mitsuba relMSE | power / Mitsuba |\n" + "|---" * (3 * len(rules) + 3) + "|")
     todo = scenes() if which == "all" else mixed_scenes(Path(tempfile.mkdtemp()))
     for name, path, kind, extra in todo:
         defines = {**({"spp": str(spp)} if kind == "corpus" else {}), **extra}
