@@ -15,9 +15,8 @@ the rules of ``--light-sampler``:
   allocation, but every emitter keeps at least half of its uniform share. Power's
   estimate fails where much of an emitter's power never reaches what the camera sees
   (the sky and directional lights are weighed by the scene's bounding sphere, ``pi
-  R^2``): on a scene with every kind of emitter ``power`` had 10x ``uniform``'s error,
-  while ``uniform`` had 2.2x ``power``'s on a sky with a sun; ``mixed`` stayed within
-  1.4x of the better of the two on every scene measured (docs/performance.md).
+  R^2``), and ``uniform`` where emitters differ much in power; ``mixed`` bounds both
+  failures (measured in docs/performance.md, "Light selection").
 
 The selection is *static*: its probabilities do not depend on the shading point, so the
 families fold them into their density tables (:meth:`Emitter.bind
