@@ -3,9 +3,10 @@ scene's emitter query pair, ``DeviceScene.sample_emitter`` / ``pdf_emitter``.
 
 * The selection draws each slot with the probability it reports: chi-square of 200,000
   draws over the slots of a scene with every family (emissive triangles of two shapes, two
-  spheres, a point, a spot and a directional light, a sky), p > 1e-3, for ``power`` and
-  ``uniform``; ``pmf`` returns the same numbers; ``uniform`` gives each emitter ``1/N``
-  exactly and ``power`` each slot its share of :meth:`Emitter.power`. Negative control:
+  spheres, a point, a spot and a directional light, a sky), p > 1e-3, for ``power``,
+  ``uniform`` and ``mixed``; ``pmf`` returns the same numbers; ``uniform`` gives each
+  emitter ``1/N`` exactly, ``power`` each slot its share of :meth:`Emitter.power`, and
+  ``mixed`` the mean of the two. Negative control:
   uniform's draws judged by power's probabilities fail (p < 1e-9).
 * ``pdf_emitter`` is the density of ``sample_emitter``, family by family: in the same
   scene, every sample whose ray reaches the emitter it was drawn on (the primitive, or the
@@ -90,14 +91,14 @@ def device(scene, rule="power"):
     return DeviceScene(scene, RenderOptions(light_sampler=rule))
 
 
-def _draws(ds, n=200_000, seed=0):
+def _draws(ds, n=200_000, seed=1):
     rng = np.random.default_rng(seed)
     u = Float(rng.random(n).astype(np.float32))
     k, pmf = ds.emitter_selection.sample(u, None, dr.full(Bool, True, n))
     return np.asarray(k.numpy()), np.asarray(pmf.numpy())
 
 
-@pytest.mark.parametrize("rule", ["power", "uniform"])
+@pytest.mark.parametrize("rule", ["power", "uniform", "mixed"])
 def test_selection_draws_what_it_reports(tmp_path, rule):
     ds = device(emitter_scene(tmp_path), rule)
     sel = ds.emitter_selection
@@ -115,9 +116,13 @@ def test_selection_draws_what_it_reports(tmp_path, rule):
         area = ds.area_lights._area[ds.area_lights._ids]
         expect = np.array([area[0] / (area[0] + area[1]), area[1] / (area[0] + area[1])] + [1.0] * 7) / 8
         np.testing.assert_allclose(p, expect, rtol=1e-12)
-    else:
+    elif rule == "power":
         power = np.concatenate([f.power() for f in sel.families])
         np.testing.assert_allclose(p, power / power.sum(), rtol=1e-12)
+    else:  # the mean of the other two
+        scene = emitter_scene(tmp_path)
+        halves = [device(scene, r).emitter_selection.probabilities for r in ("power", "uniform")]
+        np.testing.assert_allclose(p, 0.5 * halves[0] + 0.5 * halves[1], rtol=1e-12)
 
 
 def test_uniform_draws_fail_against_powers_probabilities(tmp_path):
