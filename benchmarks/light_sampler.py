@@ -1,19 +1,24 @@
 """Light selection by power against Mitsuba's uniform selection, at equal spp and equal time.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/light_sampler.py [SPP] [REPEATS]
+    PYTHONPATH=. .venv/bin/python benchmarks/light_sampler.py [SPP] [REPEATS] [all|mixed]
 
 For each scene with area lights (the bundled ones, the generated Veach MIS scene, the XML
 test scenes with several emitters, and the Mitsuba corpus scenes with area lights that drpt
-reads, when ``../shared/corpus`` is present) drpt renders ``REPEATS`` images (seeds 0..)
-at ``SPP`` (default 64) with ``--light-sampler power`` and ``uniform``, and measures
+reads, when ``../shared/corpus`` is present) and each scene whose emitters are of several
+families (``mixed``, the only ones with that argument: the generated sky-and-sun scene
+with a point light, ``ptracer.xml`` rendered by the path tracer (area, point, spot and
+directional lights and a sky), ``projector_spot.xml``, and the corpus's media scenes with
+an area light and a sky, rendered by volpath) drpt renders ``REPEATS`` images (seeds 0..)
+at ``SPP`` (default 64) with each ``--light-sampler`` (``power``, ``uniform``, ``mixed``;
+those the checkout has), and measures
 each against a reference: the corpus scene's shipped Mitsuba reference, Mitsuba at 8192
 spp for the other XML scenes, and drpt at 8192 spp (power, another seed) for drpt's own
 format. It prints, per scene, the emitters, the mean relMSE
 (``mean((x - ref)^2 / (ref^2 + 0.01))``) of each sampler, the mean render seconds
-(compilation excluded: a discarded first render), and the ratios ``uniform / power`` of
-the relMSE at equal spp and at equal time (relMSE times seconds); below 1: uniform is
-better. Both samplers trace the same kernel (only the tables differ), so the time ratio
-is 1 up to the timing noise of short renders. For XML scenes Mitsuba's relMSE at the same
+(compilation excluded: a discarded first render), and each other rule's ratio to
+``power`` at equal time (relMSE times seconds; below 1: that rule is better). All rules
+trace the same kernel (only the tables differ), so the time ratio is 1 up to the timing
+noise of short renders. For XML scenes Mitsuba's relMSE at the same
 spp (its seeds 0..) and drpt's (power) over it follow.
 """
 
@@ -36,6 +41,23 @@ CORPUS = ROOT.parent / "shared" / "corpus" / "mitsuba-data" / "tests" / "scenes"
 REF_SPP = 8192
 
 
+def mixed_scenes(tmp: Path) -> list[tuple[str, Path, str, dict]]:
+    """Scenes whose emitters are of several families: ``(name, path, reference kind,
+    defines)``."""
+    from drpt.tools.scenegen import envsun
+
+    xml = ROOT / "tests/data/xml"
+    out = [("envsun + point light (scenegen)", envsun.main(tmp / "envsun", point=True), "drpt", {}),
+           ("ptracer.xml (path)", xml / "ptracer.xml", "mitsuba", {"integrator": "path"}),
+           ("projector_spot.xml", xml / "projector_spot.xml", "mitsuba", {})]
+    for rel in ("participating_media/test_homo_emitter_inside_medium_volpath.xml",
+                "participating_media/test_homo_obj_inside_medium_volpath.xml",
+                "participating_media/test_surf_area_light_volpath.xml"):
+        if (CORPUS / rel).is_file():
+            out.append((rel, CORPUS / rel, "corpus", {}))
+    return out
+
+
 def scenes() -> list[tuple[str, Path, str]]:
     """``(name, path, reference kind)``: ``drpt``, ``mitsuba`` or ``corpus``."""
     from drpt.tools.scenegen import veach_mis
@@ -50,7 +72,7 @@ def scenes() -> list[tuple[str, Path, str]]:
     for rel in ("bsdf_spheres/test_arealight_path.xml", "various_emitters/test_various_emitters_ptracer.xml"):
         if (CORPUS / rel).is_file():
             out.append((rel, CORPUS / rel, "corpus"))
-    return out
+    return [(*x, {}) for x in out] + mixed_scenes(tmp)
 
 
 def options(scene, spp, seed, sampler, size):
@@ -60,7 +82,7 @@ def options(scene, spp, seed, sampler, size):
     return replace(opts, spp=spp)
 
 
-def reference(name, path, kind, scene, size):
+def reference(name, path, kind, scene, size, defines=None):
     from drpt.imageio import read_image
 
     if kind == "corpus":
@@ -72,13 +94,13 @@ def reference(name, path, kind, scene, size):
         from drpt.backend import mitsuba_variant
 
         mi.set_variant(mitsuba_variant())
-        ms = mi.load_file(str(path), optimize=False)
+        ms = mi.load_file(str(path), optimize=False, **(defines or {}))
         return np.mean([np.asarray(mi.render(ms, spp=REF_SPP // 8, seed=1000 + k), np.float64)[..., :3]
                         for k in range(8)], 0)
     return Renderer(scene, options(scene, REF_SPP, 10**6, "power", size)).render().image.astype(np.float64)
 
 
-def mitsuba_error(path, kind, spp, repeats, ref):
+def mitsuba_error(path, kind, spp, repeats, ref, extra=None):
     """Mitsuba's mean relMSE at ``spp`` on an XML scene (``None`` for drpt's own format)."""
     if kind == "drpt":
         return None
@@ -88,22 +110,33 @@ def mitsuba_error(path, kind, spp, repeats, ref):
 
     mi.set_variant(mitsuba_variant())
     defines = {"spp": str(spp)} if kind == "corpus" else {}
-    ms = mi.load_file(str(path), optimize=False, **defines)
+    ms = mi.load_file(str(path), optimize=False, **defines, **(extra or {}))
     errs = [np.mean((np.asarray(mi.render(ms, spp=spp, seed=k), np.float64)[..., :3] - ref) ** 2
                     / (ref ** 2 + 1e-2)) for k in range(repeats)]
     return float(np.mean(errs))
 
 
-def main(spp=64, repeats=4, size=64):
-    print("| scene | emitters | relMSE power | relMSE uniform | uniform / power, equal spp | "
-          "s power | s uniform | uniform / power, equal time | Mitsuba relMSE | power / Mitsuba |\n"
-          "|---|---|---|---|---|---|---|---|---|---|")
-    for name, path, kind in scenes():
-        defines = {"spp": str(spp)} if kind == "corpus" else None
+def emitters(device_scene) -> int:
+    sel = getattr(device_scene, "emitter_selection", None)
+    if sel is None:  # (a checkout before the one light selection: its area emitters)
+        return getattr(device_scene.area_lights, "emitters", 0)
+    return sum(len(np.unique(f.units()[0])) for f in sel.families)
+
+
+def main(spp=64, repeats=4, which="all", size=64):
+    from drpt.options import LIGHT_SAMPLERS
+
+    rules = [r for r in ("power", "uniform", "mixed") if r in LIGHT_SAMPLERS]
+    print("| scene | emitters | " + " | ".join(f"relMSE {r}" for r in rules) + " | "
+          + " | ".join(f"s {r}" for r in rules) + " | " + " | ".join(f"{r} / power, equal time" for r in rules[1:])
+          + " | Mitsuba relMSE | power / Mitsuba |\n" + "|---" * (3 * len(rules) + 3) + "|")
+    todo = scenes() if which == "all" else mixed_scenes(Path(tempfile.mkdtemp()))
+    for name, path, kind, extra in todo:
+        defines = {**({"spp": str(spp)} if kind == "corpus" else {}), **extra}
         scene = load_scene(path, defines=defines) if defines else load_scene(path)
-        ref = reference(name, path, kind, scene, size)
+        ref = reference(name, path, kind, scene, size, extra)
         row = {}
-        for sampler in ("power", "uniform"):
+        for sampler in rules:
             r = Renderer(scene, options(scene, 1, 99, sampler, size))
             r.render()  # compile
             errs, secs = [], []
@@ -113,13 +146,14 @@ def main(spp=64, repeats=4, size=64):
                 img = r2.render().image.astype(np.float64)
                 secs.append(time.perf_counter() - t0)
                 errs.append(float(np.mean((img - ref) ** 2 / (ref ** 2 + 1e-2))))
-            row[sampler] = (float(np.mean(errs)), float(np.mean(secs)), r.scene.area_lights)
-        (ep, sp, lights), (eu, su, _) = row["power"], row["uniform"]
-        em = mitsuba_error(path, kind, spp, repeats, ref)
+            row[sampler] = (float(np.mean(errs)), float(np.mean(secs)), emitters(r.scene))
+        ep, sp, count = row["power"]
+        em = mitsuba_error(path, kind, spp, repeats, ref, extra)
         mcols = "| | |" if em is None else f"| {em:.4g} | {ep / em:.2f} |"
-        print(f"| {name} | {getattr(lights, 'emitters', 0)} | {ep:.4g} | {eu:.4g} | {eu / ep:.2f} | "
-              f"{sp:.2f} | {su:.2f} | {eu * su / (ep * sp):.2f} {mcols}", flush=True)
+        print(f"| {name} | {count} | " + " | ".join(f"{row[r][0]:.4g}" for r in rules) + " | "
+              + " | ".join(f"{row[r][1]:.2f}" for r in rules) + " | "
+              + " | ".join(f"{row[r][0] * row[r][1] / (ep * sp):.2f}" for r in rules[1:]) + f" {mcols}", flush=True)
 
 
 if __name__ == "__main__":
-    main(*(int(a) for a in sys.argv[1:3]))
+    main(*(int(a) for a in sys.argv[1:3]), *sys.argv[3:4])

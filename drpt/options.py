@@ -43,7 +43,7 @@ INTEGRATORS = ("path", "whitted", "ptracer", "volpath", "bdpt")
 LIGHT_TRACED = ("ptracer", "bdpt")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
-LIGHT_SAMPLERS = ("power", "uniform")  # drpt.render.lights.area
+LIGHT_SAMPLERS = ("mixed", "power", "uniform")  # drpt.render.lights.selection
 #: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy sampler, and
 #: Mitsuba's other sampler plugins, which draw from the low-discrepancy one
 SAMPLERS = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "orthogonal")
@@ -86,7 +86,7 @@ class RenderOptions:
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
     #: how next-event estimation picks an area light: "power" (each emissive primitive by its
     #: power) or "uniform" (Mitsuba's: each emitter alike, then a point by area)
-    light_sampler: str = "power"
+    light_sampler: str = "mixed"
     #: what the camera passes' random numbers are drawn from (:mod:`drpt.render.sampler`):
     #: "independent" (a PCG32 stream per lane) or a low-discrepancy sampler's name
     sampler: str = "independent"

@@ -227,10 +227,11 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                  "uniformly over the sphere (for comparison)")
         parser.add_argument("--light-sampler", dest="light_sampler", choices=LIGHT_SAMPLERS,
                             default=base.light_sampler,
-                            help="how next-event estimation picks an area light (emissive "
-                                 "triangles and spheres): power (each primitive by its emitted "
-                                 "power) or uniform (Mitsuba's: every emitter alike, then a point "
-                                 f"by area) (default {base.light_sampler})")
+                            help="how next-event estimation picks one emitter per vertex (emissive "
+                                 "triangles and spheres, delta lights, the sky): power (each by its "
+                                 "emitted power), uniform (Mitsuba's: every emitter alike, then a "
+                                 "point by area) or mixed (half of each) "
+                                 f"(default {base.light_sampler})")
     if want("filter"):
         parser.add_argument("--filter", dest="filter", metavar="box|tent|gaussian", action=_Given,
                             default=d["filter"],

@@ -24,12 +24,11 @@ sequence over the whole image in Morton order instead, which spreads the
 remaining error as blue noise.
 
 A path draws its dimensions in a fixed order (camera: pixel position, then the
-lens; each bounce: light selection, light point, environment direction, BSDF
-lobe, BSDF direction, Russian roulette), so each decision of each bounce has a
-dimension of its own. Next-event estimation picks its light from the light
-point's pair (:func:`light_sample`), so the points stay stratified over all
-the emitters' surfaces. A sampler has PCG32's ``next_float32()`` plus
-``next_2d()``; :func:`next_2d` draws a pair from either (for PCG32 two
+lens; each bounce: light selection, light point, BSDF lobe, BSDF direction,
+Russian roulette), so each decision of each bounce has a dimension of its own.
+Next-event estimation picks its emitter from the light point's pair
+(:func:`light_sample`), so the points stay stratified over all the emitters.
+A sampler has PCG32's ``next_float32()`` plus ``next_2d()``; :func:`next_2d` draws a pair from either (for PCG32 two
 ``next_float32()`` calls, so the independent sampler's kernels are unchanged).
 """
 
@@ -169,13 +168,14 @@ def next_path(rng) -> None:
         rng.advance()
 
 
-def light_sample(scene, rng, u_sel: Float, u_light: Array2f, active) -> tuple[Float, Array2f]:
-    """The area light's selection and point samples for next-event estimation: with an
+def light_sample(scene, rng, u_sel: Float, u_light: Array2f, active, ref=None) -> tuple[Float, Array2f]:
+    """The light selection's and the emitter's samples for next-event estimation: with an
     :class:`LDSampler` both from the stratified pair ``u_light`` (the selection from its
-    first value, which is then rescaled: :meth:`~drpt.render.lights.area.AreaLights.reuse`),
-    else ``(u_sel, u_light)`` as drawn."""
+    first value, which is then rescaled:
+    :meth:`~drpt.render.lights.selection.LightSelection.reuse`, ``ref`` the shading
+    point), else ``(u_sel, u_light)`` as drawn."""
     if isinstance(rng, LDSampler):
-        return scene.area_lights.reuse(u_light, active)
+        return scene.emitter_selection.reuse(u_light, ref, active)
     return u_sel, u_light
 
 

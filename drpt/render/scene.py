@@ -14,15 +14,20 @@ integrators' queries over wide Dr.Jit arrays:
   hit's own rounding-error bound, :mod:`drpt.render.spawn`);
 * materials: :meth:`emitted`, :meth:`eval_bsdf`, :meth:`sample_bsdf`,
   :meth:`is_delta`, :meth:`diffuse_color`;
-* emitters: :meth:`sample_area_emitter` and :meth:`pdf_area_emitter` (the
-  same density, for MIS), :meth:`delta_emitters`,
-  :meth:`sample_environment`, :meth:`eval_environment`,
-  :meth:`eval_pdf_environment`, and :attr:`background`.
+* emitters: :meth:`sample_emitter` (one emitter of any family, chosen by the
+  scene's :class:`~drpt.render.lights.selection.LightSelection`, and a direction
+  toward it: next-event estimation) and :meth:`pdf_emitter` (its density for what a
+  BSDF-sampled ray reached, for MIS), :meth:`eval_emitter` (the radiance a ray sees
+  and that density, in one query), and :attr:`background`. The family-level queries
+  stay for light tracing: :meth:`sample_area_emitter` and :meth:`pdf_area_emitter`
+  (the area family's own selection), :meth:`delta_emitters`,
+  :meth:`sample_environment`, :meth:`eval_environment`, :meth:`eval_pdf_environment`.
 
 Feature flags (plain Python bools, read while a kernel is traced) say what
 the scene has, so that kernels contain only the code it needs:
 ``has_area_lights``, ``has_delta_lights``, ``has_environment`` (a sky that
-is not black), ``has_background`` (a background color above 0 and no
+is not black), ``has_emitters`` (any of the three: next-event estimation has something
+to sample), ``has_background`` (a background color above 0 and no
 sky), ``has_ambient`` and ``has_smooth_bsdfs`` (some material is not a
 delta lobe: without one, next-event estimation is never traced).
 
@@ -48,6 +53,7 @@ from __future__ import annotations
 import copy
 
 import drjit as dr
+import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from .. import llvm_tuning
@@ -58,29 +64,26 @@ from ..options import RenderOptions
 from ..scene.model import Scene, Skybox
 from .bsdf import BSDFSample
 from .instrument import Instrument
-from .lights.area import AreaLights
+from .lights import EmitterSample
+from .lights.area import AreaLights, toward
 from .lights.delta import DeltaLights
-from .lights.envmap import EnvironmentLight, RotatedEnvironment, UniformSphereSampling, check_radius
+from .lights.envmap import (
+    EnvironmentLight,
+    RotatedEnvironment,
+    SkyEmitter,
+    UniformSphereSampling,
+    check_radius,
+)
+from .lights.selection import LightSelection
 from .material import MaterialTable
 from .spawn import origin as spawn_origin
 from .surface import Interaction, SurfaceData
 
-
-class EmitterSample:
-    """A direction from a shading point toward a sampled emitter point:
-    unit ``wo``, the radiance ``le`` arriving along it, its solid-angle
-    density ``pdf`` and ``valid`` (the point faces the shading point and has
-    a positive density). ``p`` is the emitter point moved off the light
-    toward the shading point by its rounding-error bound
-    (:func:`drpt.render.spawn.origin`): the end of the shadow ray."""
-
-    def __init__(self, wo, p, le, pdf, valid):
-        self.wo: Array3f = wo
-        self.p: Array3f = p
-        self.le: Array3f = le
-        self.pdf: Float = pdf
-        self.valid: Bool = valid
-
+#: builders of further emitter families, ``build(device_scene, scene) -> Emitter | None``
+#: (:class:`drpt.render.lights.Emitter`; None or a family without slots: the scene has none);
+#: each family built joins the light selection after the area, delta and sky families
+#: (docs/architecture.md, "Adding an emitter")
+EMITTER_FAMILIES: list = []
 
 EMPTY_SCENE_WARNING = ("the scene has no primitives (no triangles, spheres or planes): "
                        "the image shows only its background or sky")
@@ -174,6 +177,16 @@ class DeviceScene:
         self.instrument: Instrument | None = None
         self._set_flags()
 
+        # the emitters behind one interface, and the one selection over them
+        self.sky = None
+        if self.has_environment:
+            lo, hi = scene.bounds()
+            radius = float(np.linalg.norm(hi - lo)) / 2.0 if np.all(np.isfinite(lo)) else 1.0
+            self.sky = SkyEmitter(self.environment, radius)
+        families = [self.area_lights, self.delta_lights] + ([self.sky] if self.sky is not None else [])
+        families += [f for f in (build(self, scene) for build in EMITTER_FAMILIES) if f is not None]
+        self.set_light_selection(LightSelection(families, options.light_sampler))
+
     def _set_flags(self) -> None:
         """The feature flags, from the scene's emitters and the materials it traces
         (the one place they are computed: :meth:`__init__` and :meth:`restricted`)."""
@@ -183,6 +196,17 @@ class DeviceScene:
         self.has_background = max(self.background) > 0.0 and not self.has_environment
         self.has_ambient = max(self.ambient) > 0.0
         self.has_smooth_bsdfs = not self.materials.is_specular_only()
+
+    def set_light_selection(self, selection) -> None:
+        """Use ``selection`` (a :class:`~drpt.render.lights.selection.LightSelection` or
+        another object with its interface) for :meth:`sample_emitter`: a static one's
+        probabilities are bound into the families' density tables, a spatially varying
+        one's (``static`` False) multiplied in at run time. Kernels traced before keep
+        the old selection."""
+        self.emitter_selection = selection
+        for i, family in enumerate(selection.families):
+            family.bind(selection.family_probabilities(i) if selection.static else None)
+        self.has_emitters = selection.count > 0
 
     def restricted(self, kinds) -> DeviceScene:
         """A view of this scene for lanes whose materials have components of the lobe
@@ -246,6 +270,93 @@ class DeviceScene:
         return self.materials.albedo(si, active)
 
     # ------------------------------------------------------------ emitters
+    def sample_emitter(self, si: Interaction, u_sel: Float, u2: Array2f, active: Bool) -> EmitterSample:
+        """One emitter chosen by the light selection from ``u_sel`` and a direction
+        from ``si.p`` toward it from ``u2`` (:class:`~drpt.render.lights.EmitterSample`):
+        ``pdf`` is the solid-angle density times the selection's probability (a delta
+        light's: the probability alone, with ``delta`` set). Only the families the
+        scene has are traced; lanes of a scene without emitters are invalid."""
+        sel = self.emitter_selection
+        n = dr.width(active)
+        if sel.count == 0:
+            z = dr.zeros(Float, n)
+            return EmitterSample(Array3f(0.0, 0.0, 1.0) + Array3f(z), Array3f(si.p), Array3f(z), z,
+                                 dr.zeros(Bool, n))
+        ref = si.p
+        k, pmf = sel.sample(u_sel, ref, active)
+        fams = sel.families
+        infinite = any(f.infinite for f in fams)
+        out = None
+        for family, off in zip(fams, sel.offsets):
+            mine, slot = active, k
+            if off > 0:  # (slots are numbered family by family)
+                mine = mine & (k >= off)
+                slot = dr.select(mine, k - off, 0)
+            if off + family.count < sel.count:
+                mine = mine & (k < off + family.count)
+            s = family.sample_direction(ref, slot, u2, mine)
+            if infinite and s.dist is None:
+                s.dist = dr.norm(s.p - ref)
+            if out is None:
+                out = s
+                continue
+            merged = [dr.select(mine, getattr(s, f), getattr(out, f)) for f in ("wo", "p", "le", "pdf", "valid")]
+            dist = dr.select(mine, s.dist, out.dist) if infinite else None
+            delta = dr.select(mine, Bool(s.delta), Bool(out.delta)) if any(f.delta for f in fams) else False
+            out = EmitterSample(*merged, dist, delta)
+        if not sel.static:
+            out.pdf = out.pdf * pmf
+        return out
+
+    def pdf_emitter(self, si: Interaction, d: Array3f, active: Bool) -> Float:
+        """The density :meth:`sample_emitter` has for what a ray of unit direction ``d``
+        reached: the area emitter point ``si`` (``si.t`` from where the ray started) or,
+        where the ray escaped, the sky; 0 elsewhere (no emitter, an emissive plane, a
+        background color)."""
+        return self.eval_emitter(si, d, active, radiance=False)[1]
+
+    def eval_emitter(self, si: Interaction, d: Array3f, active: Bool | None, radiance: bool = True,
+                     density: bool = True) -> tuple[Array3f | None, Float | None]:
+        """What a ray of unit direction ``d`` sees at ``si`` (``active`` lanes; ``None``:
+        every lane): the radiance an emitter sends back along it (surface emission where it
+        hit, the background or the infinite emitters where it escaped; zero elsewhere) and
+        :meth:`pdf_emitter`, with one lookup of each infinite emitter. ``radiance`` or
+        ``density`` False: ``None`` in its place (and none of its code traced)."""
+        sel = self.emitter_selection
+        hit = si.valid if active is None else active & si.valid
+        escaped = ~si.valid if active is None else active & ~si.valid
+        le = None
+        if radiance:  # (a scene without emissive materials traces no surface emission)
+            emits = getattr(self.materials, "has_emission", True)
+            le = dr.select(hit, self.emitted(si), 0.0) if emits else dr.zeros(Array3f, dr.width(hit))
+            if self.has_background:
+                le = dr.select(escaped, Array3f(*self.background), le)
+        pdf = Float(0.0) if density else None
+        # (no sum to add to yet: surface densities are 0 where a ray escaped, and the reverse)
+        le_zero, pdf_zero, pdf_escaped_zero = not (radiance and self.has_background), True, True
+        for family, off in zip(sel.families, sel.offsets):
+            if family.delta:  # (never reached by a ray)
+                continue
+            if not family.infinite:  # a surface: its radiance is its material's emission
+                if density:
+                    pdf_f = family.pdf_direction(si, d, hit)
+                    if not sel.static:
+                        pdf_f = pdf_f * sel.pmf(family.slot_of(si.prim, hit) + off, si.p - d * si.t, hit)
+                    pdf = pdf_f if pdf_zero else pdf + pdf_f
+                    pdf_zero = False
+                continue
+            # at infinity: seen by the rays that escape
+            le_f, pdf_f = family.eval_direction(d, escaped, density=density)
+            if density:
+                if not sel.static:
+                    pdf_f = pdf_f * sel.pmf(UInt32(off), si.p - d * si.t, escaped)
+                pdf = dr.select(escaped, pdf_f if pdf_escaped_zero else pdf + pdf_f, pdf)
+                pdf_escaped_zero = False
+            if radiance:
+                le = dr.select(escaped, le_f if le_zero else le + le_f, le)
+                le_zero = False
+        return le, pdf
+
     def sample_area_emitter(self, si: Interaction, u_select: Float, u: Array2f,
                             active: Bool) -> EmitterSample:
         """A point on an emissive triangle or sphere (chosen by the light sampler) seen
@@ -254,29 +365,13 @@ class DeviceScene:
         Only the front of an emitter (its shading normal's side) emits."""
         lights = self.area_lights
         ls = lights.sample(u_select, u, active, ref=si.p if lights.has_spheres else None)
-        to_light = ls.p - si.p
-        dist2 = dr.squared_norm(to_light)
-        wo = to_light * dr.rsqrt(dist2)
-        front = dr.dot(ls.n, wo) < 0.0  # the light emits toward the shading point
-        cos_light = dr.abs(dr.dot(ls.ng, wo))
-        valid = active & front & (cos_light > 0.0) & (ls.pdf_area > 0.0)
-        pdf = ls.pdf_area * dist2 / cos_light
-        if ls.solid_angle is not None:
-            pdf = dr.select(ls.solid_angle, ls.pdf_area, pdf)
-        p_end = spawn_origin(ls.p, ls.ng, ls.p_error, -wo)
-        return EmitterSample(wo, p_end, ls.le, pdf, valid)
+        return toward(si.p, ls, active)
 
     def pdf_area_emitter(self, si: Interaction, d: Array3f, active: Bool) -> Float:
         """The density :meth:`sample_area_emitter` has for the point ``si`` a
         ray of unit direction ``d`` hit (0 where ``si`` is not a sampled emitter)."""
-        pdf_a = self.area_lights.pdf_area(si.prim, active)
-        sees_light = active & (pdf_a > 0.0)
-        pdf = dr.select(sees_light, pdf_a * dr.square(si.t) / dr.abs(dr.dot(si.ng, d)), 0.0)
-        if self.area_lights.has_spheres:
-            ref = si.p - d * si.t  # where the ray came from
-            is_sph, pdf_s = self.area_lights.pdf_sphere(si.prim, si.p, ref, d, si.t, active & si.valid)
-            pdf = dr.select(is_sph, pdf_s, pdf)
-        return pdf
+        lights = self.area_lights
+        return lights._pdf_hit(si, d, active, lights.pdf_area_table, getattr(lights, "sph_prob", None))
 
     def delta_emitters(self, p: Array3f):
         """One ``DeltaSample`` per point and directional light, seen from ``p``."""

@@ -82,7 +82,7 @@ from .. import metrics
 from ..cli.args import add_render_flags, options_from_args
 from ..denoise import available, denoise_result, require
 from ..errors import DrptError
-from ..options import PathOptions
+from ..options import PathOptions, RenderOptions
 from ..render.adaptive import check
 from ..render.renderer import Renderer
 from ..scene import load_scene
@@ -113,7 +113,7 @@ class Config:
     rr_prob: float | None = None
     denoise: bool = False
     integrator: str = "path"
-    light_sampler: str = "power"
+    light_sampler: str = RenderOptions.light_sampler
     filter_sampling: bool = False
     adaptive: bool = False
 

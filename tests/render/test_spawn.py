@@ -271,8 +271,8 @@ def _scene_size_offset(monkeypatch, scene):
         mag = (dr.max(dr.abs(si.p)) + floor) * 2.0**-17
         return si.p + si.ng * dr.mulsign(mag, dr.dot(si.ng, d))
 
-    def area_old(self, si, u_sel, u2, active, mis):
-        ls = self.scene.sample_area_emitter(si, u_sel, u2, active)
+    def emitter_old(self, si, u_sel, u2, active, mis):
+        ls = self.scene.sample_emitter(si, u_sel, u2, active)
         f, pdf_b = self.scene.eval_bsdf(si, ls.wo)
         ok = ls.valid & (dr.max(f) > 0.0)
         so = self.scene.spawn(si, ls.wo)
@@ -281,7 +281,7 @@ def _scene_size_offset(monkeypatch, scene):
         return dr.select(ok, f * ls.le * (w / ls.pdf), 0.0)
 
     monkeypatch.setattr(DeviceScene, "spawn", spawn_old)
-    monkeypatch.setattr(DirectLight, "area", area_old)
+    monkeypatch.setattr(DirectLight, "emitter", emitter_old)
 
 
 def _moved(scene, scale=1.0, shift=0.0, quantize=False):

@@ -548,7 +548,7 @@ def test_knobs_rows_for_light_sampler_filter_and_integrator():
 
     rows = configs("auto", ("light", "filter", "integrator"))
     assert [(r.knob, r.light_sampler, r.filter_sampling, r.integrator) for r in rows] == [
-        ("default", "power", False, "path"), ("light sampler", "uniform", False, "path"),
-        ("integrator", "power", False, "ptracer"), ("integrator", "power", False, "bdpt")]
+        ("default", "mixed", False, "path"), ("light sampler", "uniform", False, "path"),
+        ("integrator", "mixed", False, "ptracer"), ("integrator", "mixed", False, "bdpt")]
     rows = configs("auto", ("filter",), filtered=True)
     assert [r.knob for r in rows] == ["default", "filter"] and rows[1].filter_sampling

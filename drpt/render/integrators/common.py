@@ -1,18 +1,12 @@
-"""Pieces both integrators share: MIS weights and direct-light estimators.
+"""Pieces the integrators share: MIS weights and the direct-light estimator.
 
-:class:`DirectLight` estimates light arriving at a surface point straight
-from the emitters, each estimator with its own shadow ray:
-
-* ``area``: one point on an emissive triangle or sphere (chosen by the light
-  sampler; on a sphere by the cone it subtends), weighted
-  by the power heuristic against BSDF sampling when ``mis`` is set;
-* ``delta``: every point and directional light;
-* ``env``: one direction from the environment map (by luminance), MIS
-  weighted against BSDF sampling when ``mis`` is set;
-
-Each queries the scene (:class:`drpt.render.scene.DeviceScene`) for the
-emitter sample, the BSDF and the shadow ray, and returns the contribution ``f * |cos| * L / pdf`` (times the MIS weight)
-for lanes where it applies and zero elsewhere; none can return NaN.
+:class:`DirectLight` estimates light arriving at a surface point straight from the
+emitters with one sample per vertex: one emitter chosen by the scene's light selection
+and a direction toward it (:meth:`drpt.render.scene.DeviceScene.sample_emitter`: an
+area emitter, a delta light or the sky), the BSDF toward it, weighted by the power
+heuristic against BSDF sampling when ``mis`` is set (never for delta lights, which BSDF
+sampling cannot hit), and one shadow ray. It returns ``f * |cos| * L / pdf`` (times the
+MIS weight) where the sample carries light and zero elsewhere; never NaN.
 """
 
 from __future__ import annotations
@@ -43,54 +37,39 @@ class ShadowQuery:
         return dr.select(ok, self.value, 0.0)
 
 
-class DirectLight:
-    """The direct-light estimators of a :class:`~drpt.render.scene.DeviceScene`.
+def shadow_segment(o: Array3f, es) -> tuple[Array3f, Float]:
+    """The shadow ray from ``o`` toward the emitter sample ``es``
+    (:class:`~drpt.render.lights.EmitterSample`): its unit direction and length, up to
+    ``es.p``, or along ``es.wo`` with length ``inf`` where the emitter is at infinity."""
+    to = es.p - o  # to the light point, both ends off their surfaces
+    dist = dr.norm(to)
+    d = to / dr.maximum(dist, 1e-30)
+    if es.dist is not None:
+        far = dr.isinf(es.dist)
+        d = dr.select(far, es.wo, d)
+        dist = dr.select(far, dr.inf, dist)
+    return d, dist
 
-    Each estimator ``X`` is ``X_queries`` (the emitter samples, BSDF values and
-    shadow rays, as :class:`ShadowQuery` objects) then their resolution."""
+
+class DirectLight:
+    """The direct-light estimator of a :class:`~drpt.render.scene.DeviceScene`:
+    :meth:`emitter_query` (the emitter sample, the BSDF value and the shadow ray, as a
+    :class:`ShadowQuery`), then its resolution (:meth:`emitter`)."""
 
     def __init__(self, scene):
         self.scene = scene
 
-    def area(self, si, u_sel: Float, u2: Array2f, active: Bool, mis: bool) -> Array3f:
-        return self.area_query(si, u_sel, u2, active, mis).resolve(self.scene)
+    def emitter(self, si, u_sel: Float, u2: Array2f, active: Bool, mis: bool) -> Array3f:
+        return self.emitter_query(si, u_sel, u2, active, mis).resolve(self.scene)
 
-    def area_query(self, si, u_sel: Float, u2: Array2f, active: Bool, mis: bool) -> ShadowQuery:
+    def emitter_query(self, si, u_sel: Float, u2: Array2f, active: Bool, mis: bool) -> ShadowQuery:
         scene = self.scene
-        ls = scene.sample_area_emitter(si, u_sel, u2, active)
-        f, pdf_b = scene.eval_bsdf(si, ls.wo)
-        ok = ls.valid & (dr.max(f) > 0.0)
-        so = scene.spawn(si, ls.wo)
-        to = ls.p - so  # to the light point, both ends off their surfaces
-        dist = dr.norm(to)
-        w = power_heuristic(ls.pdf, pdf_b) if mis else Float(1.0)
-        return ShadowQuery(f * ls.le * (w / ls.pdf), so, to / dr.maximum(dist, 1e-30),
-                           dist * SHADOW_SHRINK, ok)
-
-    def delta(self, si, active: Bool) -> Array3f:
-        total = Array3f(0.0)
-        for q in self.delta_queries(si, active):
-            total += q.resolve(self.scene)
-        return total
-
-    def delta_queries(self, si, active: Bool) -> list[ShadowQuery]:
-        scene = self.scene
-        out = []
-        for dl in scene.delta_emitters(si.p):
-            f, _ = scene.eval_bsdf(si, dl.wo)
-            ok = active & (dr.max(f) > 0.0) & (dr.max(dl.irradiance) > 0.0)
-            so = scene.spawn(si, dl.wo)
-            out.append(ShadowQuery(f * dl.irradiance, so, dl.wo, dl.dist * SHADOW_SHRINK, ok))
-        return out
-
-    def env_light(self, si, u2: Array2f, active: Bool, mis: bool) -> Array3f:
-        return self.env_query(si, u2, active, mis).resolve(self.scene)
-
-    def env_query(self, si, u2: Array2f, active: Bool, mis: bool) -> ShadowQuery:
-        scene = self.scene
-        wo, radiance, pdf_l = scene.sample_environment(u2, active)
-        f, pdf_b = scene.eval_bsdf(si, wo)
-        ok = active & (pdf_l > 0.0) & (dr.max(f) > 0.0)
-        so = scene.spawn(si, wo)
-        w = power_heuristic(pdf_l, pdf_b) if mis else Float(1.0)
-        return ShadowQuery(f * radiance * (w / dr.maximum(pdf_l, 1e-30)), so, wo, Float(dr.inf), ok)
+        es = scene.sample_emitter(si, u_sel, u2, active)
+        f, pdf_b = scene.eval_bsdf(si, es.wo)
+        ok = es.valid & (dr.max(f) > 0.0)
+        so = scene.spawn(si, es.wo)
+        d, dist = shadow_segment(so, es)
+        w = power_heuristic(es.pdf, pdf_b) if mis and es.delta is not True else Float(1.0)
+        if mis and isinstance(es.delta, Bool):  # (a scene with delta lights and others)
+            w = dr.select(es.delta, 1.0, w)
+        return ShadowQuery(f * es.le * (w / es.pdf), so, d, dist * SHADOW_SHRINK, ok)

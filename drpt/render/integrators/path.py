@@ -1,11 +1,13 @@
 """Unidirectional path tracing with next-event estimation and MIS.
 
-At every vertex the path gathers light two ways: a point sampled on an
-emissive triangle or sphere and a direction sampled on the environment map
-(next-event estimation, with shadow rays), and the emitter or sky the next
-BSDF-sampled ray happens to hit. Both estimates are weighted by the
-power heuristic, so glossy and diffuse surfaces, small and large lights are
-all handled without fireflies from the "wrong" strategy.
+At every vertex the path gathers light two ways: one emitter chosen by the
+scene's light selection (an emissive triangle or sphere, a delta light or the
+sky) and a direction toward it (next-event estimation, one shadow ray:
+:meth:`~drpt.render.scene.DeviceScene.sample_emitter`), and the emitter or sky
+the next BSDF-sampled ray happens to hit
+(:meth:`~drpt.render.scene.DeviceScene.eval_emitter`). Both estimates are
+weighted by the power heuristic, so glossy and diffuse surfaces, small and large
+lights are all handled without fireflies from the "wrong" strategy.
 
 Depth follows Mitsuba's ``path`` integrator: ``max_depth = 1`` shows only
 directly visible emitters, ``2`` adds direct lighting, ``-1`` is unbounded
@@ -159,7 +161,7 @@ class PathIntegrator:
         """One vertex of the path: the emission the ray sees, next-event
         estimation, BSDF sampling and Russian roulette."""
         opt = self.opt
-        nee = scene.has_area_lights and scene.has_smooth_bsdfs
+        nee = scene.has_emitters and scene.has_smooth_bsdfs
         si = scene.intersect(s.o, s.d, s.active)
 
         # ---- emitter hit by the previous ray (or seen by the camera)
@@ -169,17 +171,12 @@ class PathIntegrator:
         if opt.max_depth >= 0:
             active &= s.depth + 1 < opt.max_depth
 
-        # ---- next-event estimation
+        # ---- next-event estimation: one emitter, one shadow ray
         u_sel = rng.next_float32()
         u_light = next_2d(rng)
         if nee:
             u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
-            L = L + s.beta * self.direct.area(si, u_sel, u_light, active, mis=True)
-        if scene.has_delta_lights and scene.has_smooth_bsdfs:
-            L = L + s.beta * self.direct.delta(si, active)
-        u_env = next_2d(rng)
-        if scene.has_environment and scene.has_smooth_bsdfs:
-            L = L + s.beta * self.direct.env_light(si, u_env, active, mis=True)
+            L = L + s.beta * self.direct.emitter(si, u_sel, u_light, active, mis=True)
 
         # ---- BSDF sampling and Russian roulette: continue the path
         wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, rng)
@@ -195,27 +192,16 @@ def add_emission(scene: DeviceScene, opt: PathOptions, si, s, L: Array3f, active
     was a delta lobe), or the background and the sky it escapes to, times
     ``s.beta``. ``active`` masks the lanes (``None``: every lane is a live path).
     Shared by the megakernel and the wavefront integrator: one estimator."""
-    nee = scene.has_area_lights and scene.has_smooth_bsdfs
-    hit_emitter = si.valid if active is None else active & si.valid
-    hit_emitter = Bool(hit_emitter)
+    nee = scene.has_emitters and scene.has_smooth_bsdfs
+    seen = None if active is None else Bool(active)  # (None: every lane)
     if opt.hide_emitters:  # Mitsuba's hide_emitters: the camera sees no emitter or sky
-        hit_emitter &= s.depth > 0
-    le = scene.emitted(si)
-    w = Float(1.0)
-    if nee:
-        pdf_l = scene.pdf_area_emitter(si, s.d, hit_emitter)
-        w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
-    L = L + dr.select(hit_emitter, s.beta * le * w, 0.0)
-    escaped = ~si.valid if active is None else active & ~si.valid
-    if opt.hide_emitters:
-        escaped &= s.depth > 0
-    if scene.has_background:
-        L = L + dr.select(escaped, s.beta * Array3f(*scene.background), 0.0)
-    if scene.has_environment:
-        le_env, pdf_env = scene.eval_pdf_environment(s.d, escaped)
-        w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env))
-        L = L + dr.select(escaped, s.beta * le_env * w_env, 0.0)
-    return L
+        seen = s.depth > 0 if seen is None else seen & (s.depth > 0)
+    le, pdf_l = scene.eval_emitter(si, s.d, seen, density=nee)  # (zero where not seen)
+    if not nee:
+        return L + s.beta * le
+    # MIS against next-event estimation (none after a delta lobe or the camera)
+    w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
+    return L + s.beta * le * w
 
 
 def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32):

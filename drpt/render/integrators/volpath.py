@@ -27,16 +27,16 @@ collision and the ray goes on unchanged (a loop iteration that is not a scatteri
 Shadow rays use ratio tracking: ``1 - sigma_t(x) / majorant`` at each tentative collision, one
 random number each. Scenes without heterogeneous media trace none of this.
 
-Next-event estimation (area emitters, point-like lights, the environment map, or a
-constant background by uniform directions) runs at surfaces and at scattering events alike
-(the BSDF or the phase function evaluated toward the emitter sample, power-heuristic MIS
-against sampling them; in a scene with area emitters and a sky, one of the two is picked, with
-probability :data:`P_AREA` for the area emitters, so that each vertex traces one shadow ray
-besides those of point-like lights, as Mitsuba's emitter selection): the shadow ray's
+Next-event estimation (one emitter chosen by the scene's light selection, as in the path
+integrator: :meth:`~drpt.render.scene.DeviceScene.sample_emitter`) runs at surfaces and at
+scattering events alike (the BSDF or the phase function evaluated toward the emitter
+sample, power-heuristic MIS against sampling them, none for delta lights; one shadow ray
+per vertex). A constant background is not sampled: rays that escape see it, with MIS
+weight 1 (the path integrator's convention). The shadow ray's
 transmittance is computed analytically (``exp(-sigma_t d)`` per
 segment of homogeneous medium), through ``null`` boundaries (factor 1) and ``thindielectric``
 sheets (their transmission ``1 - 2R / (1 + R)``), changing medium at each transition; any
-other surface blocks it. (As in Mitsuba, the sky is ``2 max(R, |p - c|)`` away for this
+other surface blocks it. (As in Mitsuba, the sky and directional lights are ``2 max(R, |p - c|)`` away for this
 estimate, ``(c, R)`` the bounding sphere of the scene's shapes: in a medium that extends
 beyond the shapes, such as the sensor's, the sky is seen through that much of it, while a
 sampled ray that leaves every shape in such a medium scatters before it reaches the sky.)
@@ -72,19 +72,14 @@ from ...options import PathOptions
 from ...scene.model import Scene
 from ..bsdf.thindielectric import reflectance
 from ..scene import DeviceScene
-from ..warp import Frame, square_to_uniform_sphere
-from .common import SHADOW_SHRINK, power_heuristic
+from ..warp import Frame
+from .common import SHADOW_SHRINK, power_heuristic, shadow_segment
 from .path import PathIntegrator
 
 #: at most this many boundaries (null or thindielectric) a shadow ray passes; beyond, it is blocked
 MAX_SHADOW_CROSSINGS = 64
 
 NULL_NONE, NULL_BOUNDARY, NULL_THIN = 0, 1, 2
-
-#: where a scene has area emitters and a sky, the probability that next-event estimation
-#: samples the area emitters (else the sky): one shadow ray per vertex, as Mitsuba's
-P_AREA = 0.5
-
 
 def _vec(a) -> Array3f:
     a = np.ascontiguousarray(np.asarray(a, np.float32).reshape(-1, 3))
@@ -416,34 +411,19 @@ class VolPathIntegrator(PathIntegrator):
         scatter_live = scatter & (depth < opt.max_depth) if opt.max_depth >= 0 else Bool(scatter)
         surf = active & ~scatter & ~het_null
 
-        # ---- the emitter or sky the ray reaches
+        # ---- the emitter or sky the ray reaches, MIS-weighted against next-event estimation
+        # from the last real scattering vertex (null crossings do not count)
         L = s.L
-        nee_area = scene.has_area_lights
-        sky_nee = scene.has_environment or scene.has_background
-        # with area emitters and a sky, next-event estimation picks one of the two (one shadow ray)
-        pick = nee_area and sky_nee
-        p_area = P_AREA if pick else 1.0
+        nee = scene.has_emitters
         hide = (depth == 0) if opt.hide_emitters else Bool(False)
-        hit_emitter = surf & si.valid & ~hide
-        if getattr(scene.materials, "has_emission", True):
-            le = scene.emitted(si)
-            w = Float(1.0)
-            if nee_area:
-                si_ref = copy.copy(si)
-                si_ref.t = dr.norm(si.p - s.ref_p)
-                pdf_l = scene.pdf_area_emitter(si_ref, s.d, hit_emitter) * p_area
-                w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
-            L = L + dr.select(hit_emitter, beta * le * w, 0.0)
-        escaped = surf & ~si.valid & ~hide
-        if scene.has_background:  # sampled by next-event estimation too (below): MIS
-            w_bg = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, Float((1.0 - p_area) / (4.0 * dr.pi)
-                                                                                  if pick else 1.0 / (4.0 * dr.pi))))
-            L = L + dr.select(escaped, beta * Array3f(*scene.background) * w_bg, 0.0)
-        if scene.has_environment:
-            le_env, pdf_env = scene.eval_pdf_environment(s.d, escaped)
-            w_env = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_env * (1.0 - p_area) if pick
-                                                                 else pdf_env))
-            L = L + dr.select(escaped, beta * le_env * w_env, 0.0)
+        seen = surf & ~hide
+        si_ref = copy.copy(si)
+        si_ref.t = dr.norm(si.p - s.ref_p)
+        le, pdf_l = scene.eval_emitter(si_ref, s.d, seen, density=nee)
+        w = Float(1.0)
+        if nee:
+            w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
+        L = L + dr.select(seen, beta * le * w, 0.0)
 
         # ---- next-event estimation at the scattering vertex (surface or medium)
         on_surface = surf & si.valid
@@ -453,7 +433,6 @@ class VolPathIntegrator(PathIntegrator):
         vertex.p = dr.select(scatter, p_med, si.p)
         u_sel = rng.next_float32()
         u_light = Array2f(rng.next_float32(), rng.next_float32())
-        u_env = Array2f(rng.next_float32(), rng.next_float32())
 
         if media.has_blend:
             g2, wb = media.blend_lobe(s.medium, in_medium)
@@ -465,65 +444,24 @@ class VolPathIntegrator(PathIntegrator):
             def phase_pdf(wo):
                 return hg_pdf(g, dr.dot(wo, s.d))
 
-        def scatter_eval(wo):
-            f_s, pdf_s = scene.eval_bsdf(si, wo)
-            ph = phase_pdf(wo)
-            return dr.select(scatter, Array3f(ph), f_s), dr.select(scatter, ph, pdf_s)
-
-        def start(wo):
-            o = dr.select(scatter, p_med, scene.spawn(si, wo))
-            return o, dr.select(scatter, s.medium, media.after(si, wo, s.medium, on_surface))
-
-        def sky_sample():
-            if scene.has_environment:
-                return scene.sample_environment(u_env, nee_ok)
-            # a constant background (Mitsuba's constant emitter): uniform directions
-            wo = square_to_uniform_sphere(Array2f(u_env.y, u_env.x))
-            return wo, Array3f(*scene.background), Float(1.0 / (4.0 * dr.pi))
-
-        def sky_distance():
-            return 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
-
-        if pick:  # one shadow ray, to an area emitter (probability p_area) or to the sky
-            use_area = u_sel < p_area
-            ls = scene.sample_area_emitter(vertex, dr.minimum(u_sel / p_area, 0.99999994), u_light, nee_ok)
-            wo_e, rad_e, pdf_e = sky_sample()
-            wo_n = dr.select(use_area, ls.wo, wo_e)
-            f, pdf_b = scatter_eval(wo_n)
-            o, med = start(wo_n)
-            to = ls.p - o
-            dl = dr.norm(to)
-            ok = nee_ok & (dr.max(f) > 0.0) & dr.select(use_area, ls.valid, pdf_e > 0.0)
-            pdf_n = dr.select(use_area, ls.pdf * p_area, pdf_e * (1.0 - p_area))
-            w = power_heuristic(pdf_n, pdf_b) / dr.maximum(pdf_n, 1e-30)
-            tr_l = self.shadow(o, dr.select(use_area, to / dr.maximum(dl, 1e-30), wo_e),
-                               dr.select(use_area, dl, sky_distance()) * SHADOW_SHRINK, med, ok, rng)
-            L = L + dr.select(ok, beta * f * dr.select(use_area, ls.le, rad_e) * w * tr_l, 0.0)
-        elif nee_area:
-            ls = scene.sample_area_emitter(vertex, u_sel, u_light, nee_ok)
-            f, pdf_b = scatter_eval(ls.wo)
-            ok = nee_ok & ls.valid & (dr.max(f) > 0.0)
-            o, med = start(ls.wo)
-            to = ls.p - o
-            dl = dr.norm(to)
-            tr_l = self.shadow(o, to / dr.maximum(dl, 1e-30), dl * SHADOW_SHRINK, med, ok, rng)
-            wl = power_heuristic(ls.pdf, pdf_b) / ls.pdf
-            L = L + dr.select(ok, beta * f * ls.le * tr_l * wl, 0.0)
-        elif sky_nee:
-            wo_e, rad_e, pdf_e = sky_sample()
-            f, pdf_b = scatter_eval(wo_e)
-            ok = nee_ok & (pdf_e > 0.0) & (dr.max(f) > 0.0)
-            o, med = start(wo_e)
-            tr_l = self.shadow(o, wo_e, sky_distance() * SHADOW_SHRINK, med, ok, rng)
-            we = power_heuristic(pdf_e, pdf_b) / dr.maximum(pdf_e, 1e-30)
-            L = L + dr.select(ok, beta * f * rad_e * tr_l * we, 0.0)
-        if scene.has_delta_lights:
-            for dlt in scene.delta_emitters(vertex.p):
-                f, _ = scatter_eval(dlt.wo)
-                ok = nee_ok & (dr.max(f) > 0.0) & (dr.max(dlt.irradiance) > 0.0)
-                o, med = start(dlt.wo)
-                tr_l = self.shadow(o, dlt.wo, dlt.dist * SHADOW_SHRINK, med, ok, rng)
-                L = L + dr.select(ok, beta * f * dlt.irradiance * tr_l, 0.0)
+        if nee:  # one emitter, one shadow ray through the media
+            es = scene.sample_emitter(vertex, u_sel, u_light, nee_ok)
+            f_s, pdf_s = scene.eval_bsdf(si, es.wo)
+            ph = phase_pdf(es.wo)
+            f = dr.select(scatter, Array3f(ph), f_s)
+            pdf_b = dr.select(scatter, ph, pdf_s)
+            ok = nee_ok & es.valid & (dr.max(f) > 0.0)
+            o = dr.select(scatter, p_med, scene.spawn(si, es.wo))
+            med = dr.select(scatter, s.medium, media.after(si, es.wo, s.medium, on_surface))
+            d_sh, dist = shadow_segment(o, es)
+            if es.dist is not None:  # the sky (and directional lights) 2 max(R, |p - c|) away
+                sky = 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
+                dist = dr.select(dr.isinf(dist), sky, dist)
+            tr_l = self.shadow(o, d_sh, dist * SHADOW_SHRINK, med, ok, rng)
+            w = power_heuristic(es.pdf, pdf_b) if es.delta is not True else Float(1.0)
+            if isinstance(es.delta, Bool):
+                w = dr.select(es.delta, 1.0, w)
+            L = L + dr.select(ok, beta * f * es.le * tr_l * (w / es.pdf), 0.0)
 
         # ---- continue: sample the BSDF or the phase function
         u_lobe = rng.next_float32()

@@ -2,9 +2,9 @@
 
 :class:`WavefrontIntegrator` traces the same paths as
 :class:`~drpt.render.integrators.path.PathIntegrator` (``sample``: one path
-per lane; emission with MIS, next-event estimation of area, delta and
-environment lights with MIS, BSDF sampling, Russian roulette, the same nine
-random numbers per vertex drawn in the same order from the lane's PCG32
+per lane; emission with MIS, next-event estimation of one emitter chosen by
+the scene's light selection, with MIS, BSDF sampling, Russian roulette, the same
+seven random numbers per vertex drawn in the same order from the lane's PCG32
 stream or low-discrepancy sampler, :mod:`drpt.render.sampler`, whose state the
 buffers carry as two UInt64 arrays), but instead of one fused kernel with the bounce loop inside it, the
 bounce loop runs in Python and every stage is its own evaluated kernel over
@@ -36,12 +36,11 @@ structure-of-arrays buffers (one Dr.Jit array per field of
    the scene, whose feature flags are those of its kinds): light sampling
    and BSDF evaluation for next-event estimation (queued as shadow queries),
    BSDF sampling, Russian roulette, and writes the next ray and path state;
-5. **shadow rays** (``shadow rays``, ``shadow resolve``): the queues write their shadow queries into
-   one buffer set per estimator slot (area, each delta light, environment)
-   at their paths' positions; those with a non-zero contribution are
-   compacted (one ``dr.compress`` per slot) into one batch, traced by the
-   any-hit kernel; unoccluded contributions are added to the radiance buffer
-   in the megakernel's order.
+5. **shadow rays** (``shadow rays``, ``shadow resolve``): the queues write their shadow
+   queries (one per path: next-event estimation samples one emitter) into one buffer
+   set at their paths' positions; those with a non-zero contribution are
+   compacted (``dr.compress``) into one batch, traced by the any-hit kernel;
+   unoccluded contributions are added to the radiance buffer.
 
 With ``tail`` (``--wavefront-tail N``), once at most ``N`` paths of the pass
 are alive they finish in one symbolic loop of the megakernel's own bounce
@@ -364,7 +363,7 @@ class WavefrontIntegrator:
         ranges = self._partition(qid, nq)
         timer.done("partition", *(r[0] for r in ranges), lanes=n)
 
-        # shadow queries, one buffer set per estimator slot (area, delta lights, env),
+        # shadow queries, one buffer set per estimator slot (one: the sampled emitter),
         # written by every queue at its paths' positions
         queries: list[ShadowQuery] = []
         dr.eval(nxt, alive)
@@ -423,14 +422,9 @@ class WavefrontIntegrator:
         found: list[ShadowQuery] = []
         u_sel = rng.next_float32()
         u_light = next_2d(rng)
-        if scene.has_area_lights and scene.has_smooth_bsdfs:
+        if scene.has_emitters and scene.has_smooth_bsdfs:
             u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
-            found.append(queue.direct.area_query(si, u_sel, u_light, active, mis=True))
-        if scene.has_delta_lights and scene.has_smooth_bsdfs:
-            found += queue.direct.delta_queries(si, active)
-        u_env = next_2d(rng)
-        if scene.has_environment and scene.has_smooth_bsdfs:
-            found.append(queue.direct.env_query(si, u_env, active, mis=True))
+            found.append(queue.direct.emitter_query(si, u_sel, u_light, active, mis=True))
         for q in found:  # the path's throughput, as the megakernel's L + beta * estimate
             q.value = s.beta * q.value
             q.ok = q.ok & (dr.max(q.value) != 0.0)
@@ -444,8 +438,7 @@ class WavefrontIntegrator:
     def _shadow(self, queries: list[ShadowQuery], lanes: UInt32, L: Array3f, timer: _Timer) -> None:
         """Trace the bounce's shadow queries (one per estimator slot and path) as
         one batch, compacted to those that can contribute, then add the
-        unoccluded contributions slot by slot (the megakernel's order: area,
-        delta lights, environment)."""
+        unoccluded contributions slot by slot."""
         if not queries:
             return
         picks = [dr.compress(q.ok) for q in queries]

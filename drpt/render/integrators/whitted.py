@@ -5,9 +5,9 @@ A camera ray is followed through glass and mirrors (the delta lobes) and
 stops at the first other surface, where it gathers
 
 * ``ambient * Kd`` (the scene's ``Background{ambientLight}``),
-* direct light from every point and directional light, one sample on an
-  emissive triangle (chosen by power), one direction on the environment
-  map (by luminance), each with a shadow ray,
+* direct light: one emitter (an emissive triangle or sphere, a point, spot or
+  directional light, the environment map) chosen by the scene's light selection,
+  one direction toward it and a shadow ray,
 
 shaded with the material's full BSDF (so Phong materials show highlights).
 Emitters seen directly or through mirrors and glass count with their own
@@ -78,14 +78,9 @@ class WhittedIntegrator:
                                0.0)
             u_sel = rng.next_float32()
             u_light = next_2d(rng)
-            if scene.has_area_lights:
+            if scene.has_emitters:  # one emitter of any kind, one shadow ray
                 u_sel, u_light = light_sample(scene, rng, u_sel, u_light, shade)
-                L += beta * direct.area(si, u_sel, u_light, shade, mis=False)
-            if scene.has_delta_lights:
-                L += beta * direct.delta(si, shade)
-            u_env = next_2d(rng)
-            if scene.has_environment:
-                L += beta * direct.env_light(si, u_env, shade, mis=False)
+                L += beta * direct.emitter(si, u_sel, u_light, shade, mis=False)
 
             # Follow mirrors and glass; stop everywhere else.
             u_lobe = rng.next_float32()

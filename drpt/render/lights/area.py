@@ -3,11 +3,12 @@
 An emissive *primitive* (triangle or analytic sphere) is chosen from one
 discrete distribution ``P(k)``, then a point on it:
 
-* ``power`` (the default light sampler): ``P(k)`` proportional to the
+* ``power``: ``P(k)`` proportional to the
   primitive's power ``area_k * luminance_k``, so scenes with many small
   emitters are not noisier than one large emitter of the same power;
 * ``uniform`` (Mitsuba's): every *emitter* equally likely, then a primitive
-  of it by area: ``P(k) = area_k / (N * area_e(k))`` with ``N`` emitters.
+  of it by area: ``P(k) = area_k / (N * area_e(k))`` with ``N`` emitters;
+* ``mixed`` (the default): the mean of the two probabilities.
   An emitter is a shape: a Mitsuba XML shape, the faces of one material in
   drpt's own format (:meth:`drpt.scene.model.Triangles.emitter_ids`), each
   sphere.
@@ -31,6 +32,15 @@ the same expectation, other noise).
 
 Emissive planes are not sampled here; they are found by BSDF sampling only
 (their MIS weight is then 1, so the estimate stays unbiased).
+
+As an :class:`~drpt.render.lights.Emitter` (next-event estimation through
+:class:`~drpt.render.lights.selection.LightSelection`) a slot is one emissive
+primitive with positive selection weight, in the order of :attr:`AreaLights.ids`; its
+power is ``pi * area * luminance`` (one-sided Lambertian emission). :meth:`AreaLights.bind`
+gives the family the scene-wide selection's slot probabilities, and
+:meth:`~AreaLights.sample_direction` / :meth:`~AreaLights.pdf_direction` use them where
+:meth:`~AreaLights.sample` / :meth:`~AreaLights.pdf_area` use the family's own ``P(k)``
+(light tracing chooses among area emitters alone).
 """
 
 from __future__ import annotations
@@ -42,22 +52,28 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ...scene.model import Scene
+from ..spawn import origin as spawn_origin
 from ..spawn import sphere_error, triangle_point
 from ..surface import SurfaceData
 from ..warp import Frame, square_to_uniform_sphere, square_to_uniform_triangle
+from . import EmitterSample
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-LIGHT_SAMPLERS = ("power", "uniform")  # drpt.options.LIGHT_SAMPLERS
+LIGHT_SAMPLERS = ("mixed", "power", "uniform")  # drpt.options.LIGHT_SAMPLERS
 
 
 def selection_weights(area: np.ndarray, lum: np.ndarray, emitter: np.ndarray,
                       sampler: str) -> np.ndarray:
     """Each primitive's weight in the light selection, ``P(k)`` up to a factor (zero
     for those that emit nothing): its power ``area * lum``, or ``uniform``: each
-    emitter (``emitter`` ids) alike, then its primitives by area."""
+    emitter (``emitter`` ids) alike, then its primitives by area, or ``mixed``: half
+    of each (both normalised)."""
     power = area * lum
     ok = (power > 0) & np.isfinite(power)
     w = np.zeros(len(area))
+    if sampler == "mixed" and ok.any():
+        p, u = (selection_weights(area, lum, emitter, s) for s in ("power", "uniform"))
+        return 0.5 * p / p.sum() + 0.5 * u / u.sum()
     if sampler == "power" or not ok.any():
         w[ok] = power[ok]
         return w
@@ -82,6 +98,9 @@ class LightSample:
 
 
 class AreaLights:
+    delta = False
+    infinite = False
+
     def __init__(self, scene: Scene, surfaces: SurfaceData, materials=None, sampler: str = "power"):
         tris, sph = scene.triangles, scene.spheres
         emission = np.array([m.emission for m in scene.materials], float).reshape(-1, 3)
@@ -92,6 +111,7 @@ class AreaLights:
         self.materials = materials if getattr(materials, "_emit_tex", None) is not None else None
         self.count = 0
         self.n_tri = len(tris)
+        self.n_sph = len(sph)
         self.has_spheres = self.has_triangles = False
         if not (len(tris) + len(sph)) or not len(emission):
             return
@@ -135,6 +155,74 @@ class AreaLights:
         if self.n_tri == 0:
             # no triangles: the triangle branch is never traced, but keep a table to gather from
             self.pdf_area_table = Float(np.zeros(1, np.float32))
+        # the slots of the Emitter interface: the primitives of ids, in that order
+        self._area = all_area
+        self._ids = ids
+        self._power = np.pi * power[ids]
+        _, self._unit = np.unique(emitter[ids], return_inverse=True)
+        unit_area = np.bincount(self._unit, weights=all_area[ids])
+        self._share = all_area[ids] / unit_area[self._unit]
+        self.bind(prob[ids])
+
+    # ------------------------------------------------------------ Emitter interface
+    def power(self) -> np.ndarray:
+        """Each slot's power, ``pi * area * luminance`` (W; a textured emitter's mean)."""
+        return self._power if self.count else np.zeros(0)
+
+    def units(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each slot's emitter (a shape: :meth:`drpt.scene.model.Triangles.emitter_ids`, a
+        sphere) and its share of that emitter's area."""
+        if not self.count:
+            return np.zeros(0, np.int64), np.zeros(0)
+        return self._unit, self._share
+
+    def bind(self, prob: np.ndarray | None) -> None:
+        """The slot probabilities :meth:`sample_direction` and :meth:`pdf_direction` include
+        (``None``: 1 each, densities conditional on the slot), as per-primitive tables:
+        ``prob / area`` per triangle, ``prob`` per sphere, and each primitive's slot
+        (:meth:`slot_of`)."""
+        if not self.count:
+            return
+        p = np.ones(self.count) if prob is None else np.asarray(prob, np.float64)
+        full = np.zeros(len(self._area))
+        full[self._ids] = p
+        slot = np.zeros(len(self._area), np.uint32)
+        slot[self._ids] = np.arange(self.count, dtype=np.uint32)
+        self._slot = UInt32(slot)
+        tri = full[:self.n_tri] / np.where(full[:self.n_tri] > 0, self._area[:self.n_tri], 1.0)
+        self.nee_pdf_area = Float(tri.astype(np.float32)) if self.n_tri else Float(np.zeros(1, np.float32))
+        if self.has_spheres:
+            self.nee_sph_prob = Float(full[self.n_tri:].astype(np.float32))
+
+    def slot_of(self, prim: UInt32, active: Bool) -> UInt32:
+        """The slot of primitive ``prim`` (meaningful where :meth:`pdf_direction` is not 0)."""
+        return dr.gather(UInt32, self._slot, prim, active)
+
+    def sample_direction(self, ref: Array3f, slot: UInt32, u: Array2f, active: Bool) -> EmitterSample:
+        """A point on the primitive of ``slot`` seen from ``ref`` (a sphere's by the cone it
+        subtends), with the solid-angle density times the bound slot probability."""
+        face = dr.gather(UInt32, self.ids, slot, active)
+        le = dr.gather(Array3f, self.le, slot, active)
+        ls = self._point(face, u, le, active, ref if self.has_spheres else None,
+                         self.nee_pdf_area, getattr(self, "nee_sph_prob", None))
+        return toward(ref, ls, active)
+
+    def pdf_direction(self, si, d: Array3f, active: Bool) -> Float:
+        """The density of :meth:`sample_direction` for the point ``si`` a ray of unit
+        direction ``d`` hit at distance ``si.t`` (0 where it is not a slot's primitive)."""
+        return self._pdf_hit(si, d, active, self.nee_pdf_area, getattr(self, "nee_sph_prob", None))
+
+    def _pdf_hit(self, si, d: Array3f, active: Bool, table: Float, sph_prob) -> Float:
+        pdf_a = self.pdf_area(si.prim, active, table)
+        sees_light = active & (pdf_a > 0.0)
+        pdf = dr.select(sees_light, pdf_a * dr.square(si.t) / dr.abs(dr.dot(si.ng, d)), 0.0)
+        if self.has_spheres:
+            ref = si.p - d * si.t  # where the ray came from
+            is_sph, pdf_s = self.pdf_sphere(si.prim, si.p, ref, d, si.t, active & si.valid, sph_prob)
+            pdf = dr.select(is_sph, pdf_s, pdf)
+        return pdf
+
+    # ------------------------------------------------------------ the family's own selection
 
     def _select(self, u_select: Float, active: Bool):
         cdf = self.cdf
@@ -161,18 +249,24 @@ class AreaLights:
         cone of its cap seen from ``ref``, with the solid-angle density (``solid_angle``)."""
         k, face = self._select(u_select, active)
         le = dr.gather(Array3f, self.le, k, active)
+        return self._point(face, u, le, active, ref, self.pdf_area_table, getattr(self, "sph_prob", None))
+
+    def _point(self, face: UInt32, u: Array2f, le: Array3f, active: Bool, ref, table: Float,
+               sph_prob) -> LightSample:
+        """A point on primitive ``face`` with the density tables ``table`` (per triangle,
+        area density) and ``sph_prob`` (per sphere, its probability)."""
         if not self.has_spheres:
-            p, n_front, ng, err, pdf, le = self._triangle_point(face, u, le, active)
+            p, n_front, ng, err, pdf, le = self._triangle_point(face, u, le, active, table)
             return LightSample(p, n_front, ng, le, pdf, active, err)
         is_sph = face >= self.n_tri
         if self.has_triangles:
             tri = active & ~is_sph
-            p, n_front, ng, err, pdf, le = self._triangle_point(dr.select(is_sph, 0, face), u, le, tri)
+            p, n_front, ng, err, pdf, le = self._triangle_point(dr.select(is_sph, 0, face), u, le, tri, table)
         else:
             p, n_front, ng, err, pdf = (Array3f(0.0), Array3f(0.0, 0.0, 1.0), Array3f(0.0, 0.0, 1.0),
                                         Float(0.0), Float(0.0))
         sa = active & is_sph
-        sp, sn, serr, spdf, solid = self._sphere_point(face - self.n_tri, u, sa, ref)
+        sp, sn, serr, spdf, solid = self._sphere_point(face - self.n_tri, u, sa, ref, sph_prob)
         p = dr.select(is_sph, sp, p)
         n_front = dr.select(is_sph, sn, n_front)
         ng = dr.select(is_sph, sn, ng)
@@ -182,7 +276,7 @@ class AreaLights:
             solid = is_sph & solid
         return LightSample(p, n_front, ng, le, pdf, active, err, solid)
 
-    def _triangle_point(self, face: UInt32, u: Array2f, le: Array3f, active: Bool):
+    def _triangle_point(self, face: UInt32, u: Array2f, le: Array3f, active: Bool, table: Float):
         s = self.surfaces
         p0 = dr.gather(Array3f, s.p0, face, active)
         e1 = dr.gather(Array3f, s.e1, face, active)
@@ -204,16 +298,16 @@ class AreaLights:
                       + dr.gather(Array2f, s.uv2, face, active) * b.y)
             material = dr.gather(UInt32, s.material, face, active)
             le = self.materials.textured_emission(material, uv, le, active)
-        pdf = dr.gather(Float, self.pdf_area_table, face, active)
+        pdf = dr.gather(Float, table, face, active)
         return p, n_front, ng, err, pdf, le
 
-    def _sphere_point(self, j: UInt32, u: Array2f, active: Bool, ref: Array3f | None):
+    def _sphere_point(self, j: UInt32, u: Array2f, active: Bool, ref: Array3f | None, sph_prob: Float):
         """A point on sphere ``j``: ``(p, outward normal, p_error, density, solid_angle)``."""
         s = self.surfaces
         j = dr.select(active, j, 0)
         c = dr.gather(Array3f, s.sph_c, j, active)
         r = dr.gather(Float, s.sph_r, j, active)
-        prob = dr.gather(Float, self.sph_prob, j, active)
+        prob = dr.gather(Float, sph_prob, j, active)
         n = square_to_uniform_sphere(u)
         pdf = prob / (4.0 * dr.pi * r * r)
         solid = None
@@ -236,13 +330,14 @@ class AreaLights:
         p = c + n * r
         return p, n, sphere_error(p, r, n), pdf, solid
 
-    def pdf_area(self, prim: UInt32, active: Bool) -> Float:
-        """Area density with which :meth:`sample` picks a point on triangle ``prim``."""
+    def pdf_area(self, prim: UInt32, active: Bool, table: Float | None = None) -> Float:
+        """Area density with which :meth:`sample` picks a point on triangle ``prim``
+        (with ``table``: that per-triangle table's)."""
         is_tri = active & (prim < self.surfaces.n_tri)
-        return dr.gather(Float, self.pdf_area_table, prim, is_tri)
+        return dr.gather(Float, self.pdf_area_table if table is None else table, prim, is_tri)
 
     def pdf_sphere(self, prim: UInt32, p: Array3f, ref: Array3f, d: Array3f, dist: Float,
-                   active: Bool) -> tuple[Bool, Float]:
+                   active: Bool, sph_prob: Float | None = None) -> tuple[Bool, Float]:
         """The solid-angle density with which :meth:`sample` (with ``ref``) gives the
         direction ``d`` toward point ``p`` of sphere ``prim`` at ``dist``: ``(is_sphere, pdf)``."""
         s = self.surfaces
@@ -250,12 +345,29 @@ class AreaLights:
         j = dr.select(is_sph, prim - self.n_tri, 0)
         c = dr.gather(Array3f, s.sph_c, j, is_sph)
         r = dr.gather(Float, s.sph_r, j, is_sph)
-        prob = dr.gather(Float, self.sph_prob, j, is_sph)
+        prob = dr.gather(Float, self.sph_prob if sph_prob is None else sph_prob, j, is_sph)
         outside, omc, _, _ = cone_of(c, r, ref)
         n = dr.normalize(p - c)
         area = prob / (4.0 * dr.pi * r * r) * dr.square(dist) / dr.abs(dr.dot(n, d))
         pdf = dr.select(outside, prob * cone_pdf(omc), area)
         return is_sph, dr.select(is_sph & (prob > 0.0), pdf, 0.0)
+
+
+def toward(ref: Array3f, ls: LightSample, active: Bool) -> EmitterSample:
+    """The direction from ``ref`` toward the light point ``ls``, with its solid-angle
+    density: ``pdf_area * r^2 / |cos theta_light|``, or a sphere's cone density as it
+    is. Only the front of an emitter (its shading normal's side) emits."""
+    to_light = ls.p - ref
+    dist2 = dr.squared_norm(to_light)
+    wo = to_light * dr.rsqrt(dist2)
+    front = dr.dot(ls.n, wo) < 0.0  # the light emits toward the reference point
+    cos_light = dr.abs(dr.dot(ls.ng, wo))
+    valid = active & front & (cos_light > 0.0) & (ls.pdf_area > 0.0)
+    pdf = ls.pdf_area * dist2 / cos_light
+    if ls.solid_angle is not None:
+        pdf = dr.select(ls.solid_angle, ls.pdf_area, pdf)
+    p_end = spawn_origin(ls.p, ls.ng, ls.p_error, -wo)
+    return EmitterSample(wo, p_end, ls.le, pdf, valid)
 
 
 def cone_of(c: Array3f, r: Float, ref: Array3f):

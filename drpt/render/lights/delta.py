@@ -5,9 +5,9 @@ surface at distance ``d`` facing it the irradiance
 ``E = color / (c + l d + q d^2)`` (the default ``(0, 0, 1)`` is the physical
 inverse-square law); a directional light gives ``E = color`` from
 ``-direction`` everywhere. A shading point then receives ``f * |cos| * E``.
-Every delta light is sampled at every vertex (they are few; the loop is
-unrolled at trace time). BSDF sampling can never hit them, so there is no
-MIS for them.
+Next-event estimation reaches them as slots of the scene's light selection (one
+light per sample, divided by its probability; the lights' code is unrolled at trace
+time). BSDF sampling can never hit them, so there is no MIS for them.
 
 A spot light (Mitsuba's ``spot``) is a point light whose intensity is
 multiplied by the falloff of the angle ``theta`` between its axis and the
@@ -26,6 +26,14 @@ zero behind it and outside the image.
 
 Textures are looked up as Mitsuba's ``bitmap`` (:class:`drpt.render.texture.Bitmap`);
 a scene without textured spots or projectors traces none of this.
+
+As an :class:`~drpt.render.lights.Emitter` each light is one slot (in the order points,
+spots, projectors, directionals: that of :meth:`DeltaLights.samples`), with its power
+for the light selection: ``4 pi I`` for a point light (its attenuation aside), pbrt's
+``2 pi I ((1 - cos beam) + (cos beam - cos cutoff) / 2)`` for a spot, ``pi scale A v``
+for a projector (``A`` its image's area at distance 1, ``v`` its mean value), ``pi R^2
+E`` for a directional light (``R`` the radius of the scene's bounding sphere); luminances
+of the colors, textures counted by their mean.
 """
 
 from __future__ import annotations
@@ -34,10 +42,25 @@ import math
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array2f, Array3f, Float
+from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ...scene.model import DirectionalLight, PointLight, ProjectorLight, Scene, SpotLight
 from ..texture import Bitmap
+from . import EmitterSample
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _lum(c) -> float:
+    return float(np.asarray(c, float).reshape(3) @ LUMINANCE)
+
+
+def _mean_lum(bitmap: Bitmap) -> float:
+    """The mean luminance of a :class:`~drpt.render.texture.Bitmap`'s texels."""
+    a = np.asarray(bitmap.tex.value().numpy(), float)
+    if a.ndim == 3 and a.shape[-1] >= 3:
+        return float((a[..., :3] @ LUMINANCE).mean())
+    return float(a.mean())
 
 
 class DeltaSample:
@@ -48,6 +71,8 @@ class DeltaSample:
 
 
 class DeltaLights:
+    delta = True
+
     def __init__(self, scene: Scene):
         self.points = [l for l in scene.lights if isinstance(l, PointLight)]
         self.directionals = [l for l in scene.lights if isinstance(l, DirectionalLight)]
@@ -58,6 +83,56 @@ class DeltaLights:
         self._bitmaps = {id(l): Bitmap(l.texture) for l in self.spots if l.texture is not None}
         self._bitmaps.update({id(l): Bitmap(l.irradiance) for l in self.projectors
                               if not isinstance(l.irradiance, tuple)})
+        self.infinite = bool(self.directionals)
+        lo, hi = scene.bounds()
+        self._radius = float(np.linalg.norm(hi - lo)) / 2.0 if np.all(np.isfinite(lo)) else 1.0
+        self.bind(None)
+
+    # ------------------------------------------------------------ Emitter interface
+    def power(self) -> np.ndarray:
+        """Each light's power (W), estimated as the module's docs say."""
+        out = [4.0 * math.pi * _lum(l.color) for l in self.points]
+        for l in self.spots:
+            cb, cc = math.cos(math.radians(l.beam_width)), math.cos(math.radians(l.cutoff_angle))
+            tex = 1.0 if l.texture is None else _mean_lum(self._bitmaps[id(l)])
+            out.append(2.0 * math.pi * ((1.0 - cb) + (cb - cc) / 2.0) * _lum(l.color) * tex)
+        for l in self.projectors:
+            t = math.tan(math.radians(l.fov_x) / 2.0)
+            v = _lum(l.irradiance) if isinstance(l.irradiance, tuple) else _mean_lum(self._bitmaps[id(l)])
+            out.append(math.pi * float(l.scale) * 4.0 * t * t / l.aspect * v)
+        out += [math.pi * self._radius ** 2 * _lum(l.color) for l in self.directionals]
+        return np.maximum(np.nan_to_num(np.array(out, float), nan=0.0, posinf=0.0), 0.0)
+
+    def units(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every light is its own emitter."""
+        return np.arange(self.count), np.ones(self.count)
+
+    def bind(self, prob: np.ndarray | None) -> None:
+        """The lights' selection probabilities, the ``pdf`` of :meth:`sample_direction`
+        (``None``: 1 each)."""
+        self._prob = None if prob is None else [float(x) for x in prob]
+
+    def sample_direction(self, ref: Array3f, slot: UInt32, u: Array2f, active: Bool) -> EmitterSample:
+        """The light of ``slot`` seen from ``ref``: its direction, distance and irradiance;
+        ``pdf`` is the bound probability (a delta emitter has no density to sample)."""
+        out = None
+        for i, ds in enumerate(self.samples(ref)):
+            prob = Float(1.0 if self._prob is None else self._prob[i])
+            finite = i < self.count - len(self.directionals)
+            p = ref + ds.wo * ds.dist if finite else ref  # (unused at infinity)
+            s = EmitterSample(ds.wo, p, ds.irradiance, prob, active & (dr.max(ds.irradiance) > 0.0),
+                              Float(ds.dist), True)
+            if out is None:
+                out = s
+                continue
+            mine = slot == i
+            out = EmitterSample(*(dr.select(mine, getattr(s, f), getattr(out, f))
+                                  for f in ("wo", "p", "le", "pdf", "valid", "dist")), True)
+        return out
+
+    def pdf_direction(self, si, d: Array3f, active: Bool) -> Float:
+        """0: a ray never hits a delta light."""
+        return dr.zeros(Float, dr.width(d))
 
     def samples(self, p: Array3f):
         """One :class:`DeltaSample` per light, for shading points ``p``."""

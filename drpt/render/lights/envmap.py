@@ -113,8 +113,9 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ...errors import DrptError
 from ...imageio import read_image
+from . import EmitterSample
 
-__all__ = ["EnvironmentLight", "sanitize_image", "check_radius", "LUMINANCE"]
+__all__ = ["EnvironmentLight", "SkyEmitter", "sanitize_image", "check_radius", "LUMINANCE"]
 
 #: Luminance weights of linear sRGB / Rec. 709 (Mitsuba's ``luminance()``).
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -225,6 +226,9 @@ class EnvironmentLight:
         w = cell
         w *= omega[:, None].astype(np.float32)
         self.is_black = not (scale > 0.0 and np.any(w > 0.0))
+        #: the integral of the luminance over the sphere (W / m^2; a cell's mean is a quarter
+        #: of its corners' sum): the sky's power for the light selection (:class:`SkyEmitter`)
+        self.luminance_integral = float(scale * peak * w.sum(dtype=np.float64) / 4.0) if peak > 0.0 else 0.0
 
         north = 0.5 * (theta[:-1] + theta[1:]) <= 0.5 * math.pi
         t0 = np.where(north, one_minus_cos[:-1], one_plus_cos[:-1])
@@ -427,6 +431,7 @@ class UniformSphereSampling:
         self.env = env
         self.is_black = env.is_black
         self.warnings = env.warnings
+        self.luminance_integral = env.luminance_integral
 
     def eval(self, d: Array3f, active=True) -> Array3f:
         return self.env.eval(d, active)
@@ -459,6 +464,7 @@ class RotatedEnvironment:
         self.env = env
         self.is_black = env.is_black
         self.warnings = env.warnings
+        self.luminance_integral = env.luminance_integral
         self.rows = [tuple(float(x) for x in row) for row in r]  # R, row by row
         self.cols = [tuple(float(x) for x in r[:, k]) for k in range(3)]  # rows of R^T
 
@@ -481,3 +487,51 @@ class RotatedEnvironment:
     def sample(self, u: Array2f, active=True) -> tuple[Array3f, Array3f, Float]:
         d, le, pdf = self.env.sample(u, active)
         return self._apply(self.rows, d), le, pdf
+
+
+class SkyEmitter:
+    """The sky as an :class:`~drpt.render.lights.Emitter` of one slot (next-event
+    estimation through the scene's light selection): ``env`` is an
+    :class:`EnvironmentLight` (or its :class:`UniformSphereSampling` or
+    :class:`RotatedEnvironment`), ``radius`` that of the scene's bounding sphere. Its
+    power is ``pi R^2`` times the integral of its luminance over the sphere: what
+    enters the bounding sphere (pbrt-v4's ``ImageInfiniteLight::Phi``)."""
+
+    count = 1
+    delta = False
+    infinite = True
+
+    def __init__(self, env, radius: float):
+        self.env = env
+        self.radius = float(radius)
+        self.bind(None)
+
+    def power(self) -> np.ndarray:
+        return np.array([math.pi * self.radius ** 2 * getattr(self.env, "luminance_integral", 1.0)])
+
+    def units(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(1, np.int64), np.ones(1)
+
+    def bind(self, prob: np.ndarray | None) -> None:
+        """The sky's selection probability, included in its densities (``None``: 1)."""
+        self.prob = 1.0 if prob is None else float(prob[0])
+
+    def sample_direction(self, ref: Array3f, slot: UInt32, u: Array2f, active: Bool):
+        """A direction toward the sky by the map's luminance (``dist`` infinite)."""
+        wo, le, pdf = self.env.sample(u, active)
+        if self.prob != 1.0:
+            pdf = pdf * self.prob
+        return EmitterSample(wo, Array3f(ref), le, pdf, Bool(active) & (pdf > 0.0),
+                             dr.full(Float, dr.inf, dr.width(pdf)), False)
+
+    def eval_direction(self, d: Array3f, active: Bool, density: bool = True) -> tuple[Array3f, Float | None]:
+        """The radiance along unit ``d`` and the density of :meth:`sample_direction` for it
+        (``density`` False: ``None``, and only the radiance is looked up)."""
+        if not density:
+            return self.env.eval(d, active), None
+        le, pdf = self.env.eval_pdf(d, active)
+        return le, (pdf * self.prob if self.prob != 1.0 else pdf)
+
+    def pdf_direction(self, si, d: Array3f, active: Bool) -> Float:
+        """The density of the direction ``d`` of a ray that escaped (0 where ``si`` is a hit)."""
+        return self.eval_direction(d, active & ~si.valid)[1]

@@ -209,6 +209,19 @@ def test_sphere_light_renders_like_mitsuba(sampler):
     assert np.abs(z).max() < 4.5 and np.abs(zm).max() < 4.0, (np.abs(z).max(), zm)
 
 
+def _variances(name, spp, seeds):
+    """drpt's variance images of tests/data/xml/``name``.xml at ``spp`` for each seed."""
+    from dataclasses import replace
+
+    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    scene = load_scene(XML / f"{name}.xml")
+    base = replace(apply_scene_settings(RenderOptions(progress=False), scene), spp=spp)
+    return [Renderer(scene, replace(base, seed=s)).render().variance for s in seeds]
+
+
 def _relative_variance(img_var, ref):
     return float(np.mean(img_var / (ref ** 2 + 1e-2)))
 
@@ -219,7 +232,7 @@ def _relative_variance(img_var, ref):
 def test_veach_mis_error_is_mitsubas(monkeypatch, control):
     """Veach's MIS scene (tests/data/xml/veach_mis.xml, 64x48) at 64 spp: drpt agrees with
     Mitsuba (block z) and its variance per pixel (relative, as relMSE weighs it) is at most
-    2x Mitsuba's at the same spp (measured: 0.6x). Control: spheres left out of the light
+    2x Mitsuba's at the same spp (the median of four seeds; measured: 0.6-1.2x). Control: spheres left out of the light
     selection (found by BSDF sampling only, as before they were sampled) read over 5x."""
     if control:
         real = area_mod.selection_weights
@@ -230,8 +243,11 @@ def test_veach_mis_error_is_mitsubas(monkeypatch, control):
             return w
         monkeypatch.setattr(area_mod, "selection_weights", no_spheres)
     r, ref, var, z, _ = _agree_with_mitsuba("veach_mis", 64)
-    # _render_both's var: the variance of Mitsuba's mean of 8 batches of spp / 8, a render of spp
-    ratio = _relative_variance(r.variance, ref) / _relative_variance(var, ref)
+    # _render_both's var: the variance of Mitsuba's mean of 8 batches of spp / 8, a render of spp.
+    # drpt's: the median over four seeds (a single firefly in one render can move the mean
+    # relative variance 4x: over seeds 1-8 it ranges 0.017-0.11 against Mitsuba's 0.036)
+    ratio = np.median([_relative_variance(v, ref) for v in [r.variance] + _variances("veach_mis", 64, (4, 5, 6))])
+    ratio /= _relative_variance(var, ref)
     if control:
         assert ratio > 5, ratio
     else:
@@ -249,13 +265,15 @@ def test_sphere_light_negative_controls_fail(monkeypatch, what):
         real_pdf = area_mod.cone_pdf
         monkeypatch.setattr(area_mod, "cone_pdf", lambda omc: real_pdf(omc) * 1.3)
     else:
-        real_init = AreaLights.__init__
+        from drpt.render.lights.selection import LightSelection
 
-        def init(self, scene, surfaces, materials=None, sampler="power"):
-            real_init(self, scene, surfaces, materials, sampler="uniform")
-            power = AreaLights.__new__(AreaLights)
-            real_init(power, scene, surfaces, materials, sampler="power")
-            self.pdf_area_table, self.sph_prob = power.pdf_area_table, power.sph_prob
-        monkeypatch.setattr(AreaLights, "__init__", init)
+        real_init = LightSelection.__init__
+
+        def init(self, families, rule="power"):
+            real_init(self, families, "uniform")  # draws by the uniform CDF ...
+            power = LightSelection.__new__(LightSelection)
+            real_init(power, families, "power")
+            self.probabilities = power.probabilities  # ... and reports power's probabilities
+        monkeypatch.setattr(LightSelection, "__init__", init)
     _, _, _, z, zm = _agree_with_mitsuba("sphere_light", 256)
     assert np.abs(z).max() > 6 or np.abs(zm).max() > 6, (np.abs(z).max(), zm)
