@@ -4,10 +4,17 @@ of ``tests/`` is a package folder or module of ``drpt/`` (``tests/render/bsdf/``
 lists, every test file in ``tests/`` itself is named for a top-level module
 (``test_imageio.py`` for ``drpt/imageio.py``), and no two test files share a name (pytest
 imports them by name). Negative control: a flat test file of no module, a folder of no module
-and a duplicated name each fail the check."""
+and a duplicated name each fail the check.
+
+No file of ``tests/`` imports a test module (``from test_x import ...``, ``import test_x``):
+such an import finds the module only when pytest happened to import it first (its folder on
+``sys.path``), so the importing file fails when run alone. Helpers that several test files
+share are in the ``support`` package. Negative control: both forms, at module level and in a
+function, are caught; imports of ``support`` and of ``drpt.testing`` are not."""
 
 from __future__ import annotations
 
+import ast
 import re
 from pathlib import Path
 
@@ -43,6 +50,24 @@ def _problems(tests: Path, drpt: Path, extra: set[str]) -> list[str]:
     return out
 
 
+def _test_module_imports(tests: Path) -> list[str]:
+    """``file:line: import`` for every import of a test module (``test_*``) in ``tests``."""
+    out = []
+    for f in sorted(tests.rglob("*.py")):
+        for node in ast.walk(ast.parse(f.read_text(), str(f))):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            else:
+                continue
+            for name in names:
+                if name.split(".")[0].startswith("test_"):
+                    out.append(f"{f.relative_to(tests.parent)}:{node.lineno}: imports test module {name}: "
+                               "move what it shares to tests/support/")
+    return out
+
+
 def test_tests_mirror_the_package(repo):
     extra = _extra_folders(_section(repo))
     assert {"validation", "robustness", "docs", "support", "data"} <= extra
@@ -68,3 +93,24 @@ def test_the_check_catches_a_misplaced_test(repo, tmp_path):
     assert any("test_everything.py" in p for p in problems)
     assert any("tests/misc/" in p for p in problems)
     assert any("share a name" in p for p in problems)
+
+
+def test_no_test_file_imports_another(repo):
+    assert _test_module_imports(repo / "tests") == []
+
+
+def test_the_check_catches_an_import_of_a_test_module(tmp_path):
+    tests = tmp_path / "tests"
+    (tests / "render").mkdir(parents=True)
+    (tests / "render" / "test_ok.py").write_text(
+        "from drpt.testing import assert_agree\nfrom support.xml import XML\nimport support.corpus\n"
+        "NAME = 'test_other'\n")
+    assert _test_module_imports(tests) == []
+    (tests / "render" / "test_a.py").write_text("def f():\n    from test_other import helper\n")
+    (tests / "render" / "test_b.py").write_text("import test_other as t\n")
+    (tests / "render" / "test_c.py").write_text("import os, test_other.sub\n")
+    problems = _test_module_imports(tests)
+    assert len(problems) == 3, problems
+    assert problems[0].startswith("tests/render/test_a.py:2: imports test module test_other")
+    assert problems[1].startswith("tests/render/test_b.py:1: ")
+    assert problems[2].startswith("tests/render/test_c.py:1: imports test module test_other.sub")

@@ -108,16 +108,15 @@ def test_scene_renders_like_mitsuba():
     96 blocks x 3 channels); negative control: the nearest textures read bilinear fail it."""
     from dataclasses import replace
 
-    from test_mitsuba_xml import _render_both
-
     from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
     from drpt.testing import assert_agree, block_z
+    from support.xml import render_xml_both
 
     path = DATA / "xml" / "bitmap_options.xml"
     scene = load_scene(path)
-    r, ref, var = _render_both(scene, path, 64)
+    r, ref, var = render_xml_both(scene, path, 64)
     assert r.image.shape == (32, 48, 3) and ref.mean() > 0.05
     assert_agree(r, ref, var, zmax=4.5, block=4)
     for m in scene.materials:

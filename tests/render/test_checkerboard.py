@@ -65,17 +65,16 @@ def test_values_equal_mitsubas_eval_and_eval_1(tmp_path, to_uv):
 
 @pytest.mark.slow
 def test_checkerboard_scene_renders_like_mitsuba():
-    from test_mitsuba_xml import _render_both
-
     from drpt.testing import assert_agree, block_z
+    from support.xml import render_xml_both
 
     scene = load_scene(XML / "checker.xml")
-    r, ref, var = _render_both(scene, XML / "checker.xml", 256)
+    r, ref, var = render_xml_both(scene, XML / "checker.xml", 256)
     assert_agree(r, ref, var, zmax=4.5)
     # negative control: the floor's colors swapped
     for m in scene.materials:
         kd = m.bsdf.params.get("kd")
         if isinstance(kd, Checkerboard):
             m.bsdf.params["kd"] = replace(kd, color0=kd.color1, color1=kd.color0)
-    r0, _, _ = _render_both(scene, XML / "checker.xml", 256)
+    r0, _, _ = render_xml_both(scene, XML / "checker.xml", 256)
     assert np.abs(block_z(r0.image, r0.variance, ref, var)).max() > 6.0

@@ -118,17 +118,16 @@ def test_export_of_a_cropped_camera_is_mitsubas_film(tmp_path):
 @pytest.mark.slow
 @pytest.mark.mitsuba
 def test_cropped_scene_renders_like_mitsuba():
-    from test_mitsuba_xml import _render_both
-
     from drpt.testing import assert_agree, block_z
+    from support.xml import render_xml_both
 
     scene = load_scene(XML / "crop.xml")
-    r, ref, var = _render_both(scene, XML / "crop.xml", 256)
+    r, ref, var = render_xml_both(scene, XML / "crop.xml", 256)
     assert r.image.shape == (24, 32, 3) and ref.shape == (24, 32, 3)
     assert_agree(r, ref, var, zmax=4.5)
     # negative control: the centered whole film at the crop's size is not that image
     scene.camera = replace(scene.camera, window=None)
-    r0, _, _ = _render_both(scene, XML / "crop.xml", 256)
+    r0, _, _ = render_xml_both(scene, XML / "crop.xml", 256)
     z = block_z(r0.image, r0.variance, ref, var)
     assert np.abs(z).max() > 6.0
 

@@ -128,14 +128,13 @@ def test_lookups_equal_mitsubas_eval(tmp_path, name):
 def test_renders_like_mitsuba(tmp_path, name):
     """The mesh lit by a directional light, direct integrator, 128 spp, 4x4 block z-test
     (|z| < 4.5 over 64 blocks x 3 channels)."""
-    from test_mitsuba_xml import _render_both
-
     from drpt.testing import assert_agree
+    from support.xml import render_xml_both
 
     ply = _write_ply(tmp_path / "grid.ply")
     p = _scene_xml(tmp_path / "s.xml", ply, BSDFS[name])
     scene = load_scene(p)
-    r, ref, var = _render_both(scene, p, 128)
+    r, ref, var = render_xml_both(scene, p, 128)
     assert ref.mean() > 0.05
     assert_agree(r, ref, var, zmax=4.5, block=4)
 

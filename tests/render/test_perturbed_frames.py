@@ -238,26 +238,25 @@ def test_triangle_tangents_follow_the_uvs():
 
 # ------------------------------------------------------------------ renders against Mitsuba
 def _render(name: str, spp: int = 256, change=None):
-    import test_mitsuba_xml as tx
+    from support.xml import load, render_xml_both
 
-    scene, _ = tx.load(name)
+    scene, _ = load(name)
     if change is not None:
         change(scene)
-    return tx._render_both(scene, XML / f"{name}.xml", spp)
+    return render_xml_both(scene, XML / f"{name}.xml", spp)
 
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("name", ["aniso_mesh", "normalmap", "bumpmap"])
 def test_renders_like_mitsuba(name):
-    from test_mitsuba_xml import _mean_z
-
     from drpt.testing import assert_agree
+    from support.xml import mean_z
 
     r, ref, var = _render(name)
     assert r.image.shape == (24, 32, 3) and ref.mean() > 0.05
     assert_agree(r, ref, var, zmax=4.5)
-    z = _mean_z(r, ref, var)
+    z = mean_z(r, ref, var)
     assert np.abs(z).max() < 4.0, f"image mean z = {z}"
 
 
@@ -274,11 +273,10 @@ def _drop_perturbation(scene):
 @pytest.mark.parametrize("what", ["tangent from the normal alone", "bump map dropped",
                                   "normal map not remapped"])
 def test_negative_controls_fail(what, monkeypatch):
-    from test_mitsuba_xml import _mean_z
-
     import drpt.materials.layout as layout
     import drpt.render.perturb as perturb
     from drpt.testing import block_z
+    from support.xml import mean_z
 
     if what == "tangent from the normal alone":
         monkeypatch.setattr(layout, "anisotropic", lambda leaf: False)
@@ -289,7 +287,7 @@ def test_negative_controls_fail(what, monkeypatch):
         monkeypatch.setattr(perturb, "normalmap_normal", lambda rgb: rgb)
         r, ref, var = _render("normalmap")
     z = block_z(r.image, r.variance, ref, var)
-    zm = _mean_z(r, ref, var)
+    zm = mean_z(r, ref, var)
     assert np.abs(z).max() > 6 or np.abs(zm).max() > 6, \
         f"{what}: max |z| = {np.abs(z).max():.2f}, mean z {zm} (should fail)"
 
@@ -405,14 +403,14 @@ def test_wavefront_renders_perturbed_frames_like_mitsuba():
     from dataclasses import replace
 
     import mitsuba as mi
-    import test_mitsuba_xml as tx
 
     from drpt.backend import mitsuba_variant
     from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.testing import assert_agree
+    from support.xml import load
 
-    scene, _ = tx.load("bumpmap")
+    scene, _ = load("bumpmap")
     opts = replace(with_scene_settings(RenderOptions(progress=False, seed=3), scene)[0], spp=256, mode="wavefront")
     r = Renderer(scene, opts).render()
     mi.set_variant(mitsuba_variant())

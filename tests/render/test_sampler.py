@@ -143,18 +143,17 @@ class _DiagonalSampler(LDSampler):
                                                ("glossy", False, "ldsampler"), ("meshes", True, "ldsampler"),
                                                ("glossy", False, "zsobol"), ("lens", False, "zsobol")])
 def test_ldsampler_renders_like_mitsuba(name, control, kind, monkeypatch):
-    from test_mitsuba_xml import XML, _mean_z, _render_both, load
-
     from drpt.testing import block_z
+    from support.xml import XML, load, mean_z, render_xml_both
 
     if control:
         from drpt.render import renderer
 
         monkeypatch.setattr(renderer, "LDSampler", _DiagonalSampler)
     scene, _ = load(name)
-    r, ref, var = _render_both(scene, XML / f"{name}.xml", 256, sampler=kind)
+    r, ref, var = render_xml_both(scene, XML / f"{name}.xml", 256, sampler=kind)
     z = np.abs(block_z(r.image.astype(np.float64), r.variance, ref, var)).max()
-    zmean = np.abs(_mean_z(r, ref, var)).max()
+    zmean = np.abs(mean_z(r, ref, var)).max()
     if control:
         assert z > 4.5 or zmean > 4.0, (z, zmean)
     else:

@@ -2,11 +2,15 @@
 
 Test files import it as a package, ``from support import REPO`` or ``from support.corpus
 import check_scene``: pytest puts ``tests/`` on ``sys.path`` (``pythonpath`` in
-pyproject.toml). Statistical checks that users can run on their own BSDFs and images are in
-:mod:`drpt.testing`, not here.
+pyproject.toml). Test files never import each other (tests/docs/test_tests_layout.py checks
+it): a helper that a second test file needs moves here. Statistical checks that users can
+run on their own BSDFs and images are in :mod:`drpt.testing`, not here.
 
 * :mod:`support.corpus`: Mitsuba 3's render-test scenes in ``../shared``, rendered as
   authored and z-tested against their references;
+* :mod:`support.xml`: the Mitsuba XML corpus of ``tests/data/xml``, rendered by drpt and by
+  Mitsuba from the same file;
+* :mod:`support.materials`: the material test box that BSDFs are rendered in against Mitsuba;
 * :mod:`support.scenes`: small scenes written for the tests (``edge_scene``);
 * :mod:`support.dielectric`: a stand-in for the material table, to test lobes alone;
 * :mod:`support.accel`: random triangle soups, rays and the brute-force hits the

@@ -19,6 +19,7 @@ sample count).
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -30,6 +31,24 @@ from drpt.testing import SRGB_TO_XYZ, ZTest, to_xyz, z_test  # noqa: F401
 from . import SHARED
 
 CORPUS = SHARED / "corpus" / "mitsuba-data" / "tests" / "scenes"
+
+#: participating_media scene -> spp drpt renders it with (all pass Mitsuba's z-test); rendered
+#: by ``tests/render/integrators/test_media.py``, counted by the coverage test of
+#: ``tests/validation/test_mitsuba_corpus.py``, which renders the other folders
+MEDIA_SCENES = {
+    "participating_media/test_homo_area_light_volpath.xml": 512,
+    "participating_media/test_homo_dielectric_envmap_volpath.xml": 512,
+    "participating_media/test_homo_emitter_inside_medium_volpath.xml": 512,
+    "participating_media/test_homo_null_envmap_volpath.xml": 512,
+    "participating_media/test_homo_obj_inside_medium_volpath.xml": 512,
+    "participating_media/test_homo_roughdielectric_spot_volpath.xml": 512,
+    "participating_media/test_surf_area_light_volpath.xml": 512,
+    "participating_media/test_hetero_sigmat_albedo_volpath.xml": 512,
+    "participating_media/test_hetero_sigmat_volpath.xml": 512,
+}
+
+#: participating_media scene -> what drpt lacks to render it (strict xfail; none)
+MEDIA_NOT_YET: dict[str, str] = {}
 
 
 def corpus_scene(rel: str) -> Path:
@@ -82,3 +101,20 @@ def check_scene(rel: str, spp: int, seed: int = 0, **defines) -> ZTest:
     ref, var = reference_files(path)
     result = render_as_authored(path, spp, seed, **defines)
     return z_test(result.image, spp, _read(ref), _read(var))
+
+
+def perturbed(tmp_path: Path, rel: str, old: str, new: str) -> Path:
+    """A copy of corpus scene ``rel`` in ``tmp_path`` with ``old`` replaced by ``new`` (once),
+    its ``<path>`` and ``<include>`` made absolute so that it reads the same files (for the
+    negative controls: the copy with ``new = old`` must pass, the perturbed one fail)."""
+    src = corpus_scene(rel)
+    text = src.read_text()
+    assert text.count(old) == 1, old
+    text = text.replace(old, new)
+    text = re.sub(r'<path value="([^"]+)"', lambda m: f'<path value="{(src.parent / m.group(1)).resolve()}"', text)
+    text = re.sub(r'<include filename="([^"]+)"',
+                  lambda m: f'<include filename="{(src.parent / m.group(1)).resolve()}"', text)
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    out = tmp_path / src.name
+    out.write_text(text)
+    return out

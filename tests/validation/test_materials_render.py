@@ -1,91 +1,18 @@
 """Each material kind rendered by drpt and by Mitsuba 3 (through the
 exporter) agrees within noise: block z-scores, see drpt/testing.py.
 
-The scene: a floor, a back wall and a ceiling light (OBJ + MTL), one sphere
-of the material under test, a diffuse sphere beside it, max depth 6.
+The scene (:func:`support.materials.make`): a floor, a back wall and a ceiling light
+(OBJ + MTL), one sphere of the material under test, a diffuse sphere beside it, max depth 6.
 """
 
 import contextlib
 
 import pytest
 
-from drpt.scene import load_scene
 from drpt.testing import assert_agree, render_both
+from support.materials import make, with_bsdf
 
 pytestmark = pytest.mark.mitsuba
-
-MTL = """
-newmtl white
-Kd 0.7 0.7 0.7
-newmtl light
-Kd 0 0 0
-Ke 8 8 8
-newmtl phong
-Kd 0.3 0.4 0.6
-Ks 0.5 0.5 0.5
-Ns 60
-newmtl phong_sharp
-Kd 0.1 0.1 0.1
-Ks 0.8 0.8 0.8
-Ns 2000
-newmtl ct_gold
-Kd 0.9 0.75 0.3
-Roughness 0.2
-Mentalness 0.9
-newmtl ct_rough
-Kd 0.5 0.6 0.9
-Roughness 0.9
-Mentalness 0.9
-newmtl ct_plastic
-Kd 0.8 0.2 0.2
-Roughness 0.3
-Mentalness 0
-newmtl glass
-Ni 1.5
-d 0
-newmtl mirror
-illum 3
-Kd 0 0 0
-Ks 0.9 0.9 0.9
-"""
-
-OBJ = """
-mtllib box.mtl
-v -3 0 -3
-v 3 0 -3
-v 3 0 3
-v -3 0 3
-v -3 4 -3
-v 3 4 -3
-v -1 3.99 -1
-v 1 3.99 -1
-v 1 3.99 1
-v -1 3.99 1
-usemtl white
-f 1 4 3 2
-f 1 2 6 5
-usemtl light
-f 7 8 9 10
-"""
-
-SCENE = """
-PerspectiveCamera {{ center 0 1.6 6  direction 0 -0.15 -1  up 0 1 0  angle 40 }}
-Group {{
-    numObjects 3
-    TriangleMesh {{ obj_file box.obj }}
-    Sphere {{ center -0.7 0.8 0 radius 0.8  mtl {mtl} }}
-    Sphere {{ center 1.2 0.6 0.6 radius 0.6  mtl white }}
-}}
-"""
-
-
-def make(tmp_path, mtl):
-    (tmp_path / "box.mtl").write_text(MTL)
-    (tmp_path / "box.obj").write_text(OBJ)
-    p = tmp_path / "scene.txt"
-    p.write_text(SCENE.format(mtl=mtl))
-    return load_scene(p)
-
 
 CASES = [
     ("phong", "phong", "phong"),
@@ -109,14 +36,6 @@ def test_material_matches_mitsuba(tmp_path, mtl, mode, module):
 
 
 # ------------------------------------------------------------------ composites
-def _with_bsdf(scene, name, spec):
-    from dataclasses import replace
-
-    i = next(k for k, m in enumerate(scene.materials) if m.name == name)
-    scene.materials[i] = replace(scene.materials[i], bsdf=spec)
-    return scene
-
-
 def _blend():
     from drpt.materials.spec import BSDFSpec
 
@@ -134,7 +53,7 @@ def _mask_of_blend():
 
 @pytest.mark.parametrize("make_spec", [_blend, _mask_of_blend], ids=["blendbsdf", "mask(blendbsdf)"])
 def test_composites_match_mitsuba(tmp_path, make_spec):
-    scene = _with_bsdf(make(tmp_path, "phong"), "phong", make_spec())
+    scene = with_bsdf(make(tmp_path, "phong"), "phong", make_spec())
     r, ref, ref_var = render_both(scene, 48, 32, 128, max_depth=6, bsdf="auto")
     assert r.image.mean() > 0.02
     assert_agree(r, ref, ref_var)
@@ -177,6 +96,6 @@ def test_composite_negative_control(tmp_path, monkeypatch):
         return d
 
     monkeypatch.setattr(ex, "bsdf_to_mitsuba", biased)
-    scene = _with_bsdf(make(tmp_path, "phong"), "phong", _blend())
+    scene = with_bsdf(make(tmp_path, "phong"), "phong", _blend())
     r, ref, ref_var = render_both(scene, 48, 32, 128, max_depth=6, bsdf="auto")
     assert np.abs(block_z(r.image, r.variance, ref, ref_var)).max() > 4.5

@@ -4,7 +4,8 @@ and rendered by drpt *as authored* and z-tested against the shipped references a
 Sidak-corrected level, 99.75% of the pixel channels must pass).
 
 Every ``test_*.xml`` / ``scene_*.xml`` outside ``participating_media/`` (tested by
-``test_media.py``, whose lists the coverage test counts) and ``volprim_rf_basic/`` (volumetric
+``tests/render/integrators/test_media.py``; the coverage test counts its lists,
+:data:`support.corpus.MEDIA_SCENES` and ``MEDIA_NOT_YET``) and ``volprim_rf_basic/`` (volumetric
 primitives, out of drpt's scope) and the scenes with ``sdfgrid`` shapes (:data:`EXCLUDED`)
 is in :data:`SCENES` (rendered at the spp given, about a thousand: the z-test
 uses drpt's spp with the reference's per-sample variance, so fewer samples make it weaker,
@@ -21,11 +22,21 @@ from __future__ import annotations
 
 import re
 import warnings
-from pathlib import Path
 
 import pytest
 
-from support.corpus import CORPUS, cases, check_scene, corpus_scene, reference_files, render_as_authored, z_test
+from support.corpus import (
+    CORPUS,
+    MEDIA_NOT_YET,
+    MEDIA_SCENES,
+    cases,
+    check_scene,
+    corpus_scene,
+    perturbed,
+    reference_files,
+    render_as_authored,
+    z_test,
+)
 
 #: corpus scene -> spp drpt renders it with (all pass Mitsuba's z-test)
 SCENES = {
@@ -66,7 +77,7 @@ NOT_YET: dict[str, str] = {}
 DEFINES: dict[str, dict[str, str]] = {}
 
 #: scenes out of drpt's scope: volumetric primitives, and sdfgrid shapes (participating_media/
-#: is test_media.py's: MEDIA_SCENES and MEDIA_NOT_YET)
+#: is test_media.py's: support.corpus.MEDIA_SCENES and MEDIA_NOT_YET)
 EXCLUDED_FOLDERS = ("volprim_rf_basic",)
 EXCLUDED = {
     "various_shapes/test_various_shapes_path.xml": "sdfgrid shape (and ../../serialized meshes that are "
@@ -89,8 +100,6 @@ def test_the_lists_cover_the_corpus():
     found = {str(p.relative_to(CORPUS)) for p in CORPUS.rglob("*.xml")
              if re.match(r"(test|scene)_", p.name) and p.parent.name != "refs"
              and p.relative_to(CORPUS).parts[0] not in EXCLUDED_FOLDERS}
-    from test_media import MEDIA_NOT_YET, MEDIA_SCENES
-
     media = set(MEDIA_SCENES) | set(MEDIA_NOT_YET)
     found = {rel for rel in found if rel not in media}
     assert media <= {str(p.relative_to(CORPUS)) for p in CORPUS.rglob("participating_media/test_*.xml")}
@@ -101,22 +110,6 @@ def test_the_lists_cover_the_corpus():
 
 
 # ------------------------------------------------------------ negative controls
-def _perturbed(tmp_path: Path, rel: str, old: str, new: str) -> Path:
-    """A copy of corpus scene ``rel`` in ``tmp_path`` with ``old`` replaced by ``new`` (once),
-    its ``<path>`` and ``<include>`` made absolute so that it reads the same files."""
-    src = corpus_scene(rel)
-    text = src.read_text()
-    assert text.count(old) == 1, old
-    text = text.replace(old, new)
-    text = re.sub(r'<path value="([^"]+)"', lambda m: f'<path value="{(src.parent / m.group(1)).resolve()}"', text)
-    text = re.sub(r'<include filename="([^"]+)"',
-                  lambda m: f'<include filename="{(src.parent / m.group(1)).resolve()}"', text)
-    tmp_path.mkdir(parents=True, exist_ok=True)
-    out = tmp_path / src.name
-    out.write_text(text)
-    return out
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("rel, spp, old, new", [
     # the directional light 10% brighter
@@ -146,7 +139,7 @@ def test_negative_controls_fail_the_z_test(tmp_path, rel, spp, old, new):
     ref, var = (_read(p) for p in reference_files(corpus_scene(rel)))
     results = {}
     for name, value in (("copy", old), ("perturbed", new)):
-        path = _perturbed(tmp_path / name, rel, old, value)
+        path = perturbed(tmp_path / name, rel, old, value)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             results[name] = z_test(render_as_authored(path, spp).image, spp, ref, var)

@@ -763,11 +763,10 @@ def _render_specs():
 
 
 def _render_case(tmp_path, name):
-    from test_materials_render import _with_bsdf, make
-
     from drpt.testing import assert_agree, render_both
+    from support.materials import make, with_bsdf
 
-    scene = _with_bsdf(make(tmp_path, "phong"), "phong", _render_specs()[name])
+    scene = with_bsdf(make(tmp_path, "phong"), "phong", _render_specs()[name])
     r, ref, ref_var = render_both(scene, 48, 32, 128, max_depth=6, bsdf="auto")
     assert r.image.mean() > 0.02
     assert_agree(r, ref, ref_var)

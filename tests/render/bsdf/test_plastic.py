@@ -847,12 +847,11 @@ def test_material_table_renders_plastics_as_mitsuba(tmp_path):
 def test_render_matches_mitsuba(tmp_path, spec):
     """A sphere of the material in the test box (tests/validation/test_materials_render.py),
     rendered by drpt and by Mitsuba through the exporter: block z-scores < 4.5."""
-    from test_materials_render import _with_bsdf, make
-
     from drpt.materials.spec import BSDFSpec
     from drpt.testing import assert_agree, render_both
+    from support.materials import make, with_bsdf
 
-    scene = _with_bsdf(make(tmp_path, "phong"), "phong", BSDFSpec(spec["kind"], dict(spec["params"])))
+    scene = with_bsdf(make(tmp_path, "phong"), "phong", BSDFSpec(spec["kind"], dict(spec["params"])))
     r, ref, ref_var = render_both(scene, 48, 32, 128, max_depth=6, bsdf="auto")
     assert r.image.mean() > 0.02
     assert_agree(r, ref, ref_var)

@@ -175,18 +175,17 @@ def test_thin_sheets_render_like_mitsuba(control):
     transmission, must fail it."""
     from dataclasses import replace
 
-    import test_mitsuba_xml as tx
-
     from drpt.testing import block_z
+    from support.xml import XML, load, mean_z, render_xml_both
 
-    scene, _ = tx.load("thin")
+    scene, _ = load("thin")
     if control:
         for m in scene.materials:
             if m.bsdf.kind == "principledthin" and "diff_trans" in m.bsdf.params:
                 m.bsdf = replace(m.bsdf, params={**m.bsdf.params, "diff_trans": 0.0})
-    r, ref, var = tx._render_both(scene, tx.XML / "thin.xml", 256)
+    r, ref, var = render_xml_both(scene, XML / "thin.xml", 256)
     z = np.abs(block_z(r.image, r.variance, ref, var)).max()
-    zm = np.abs(tx._mean_z(r, ref, var)).max()
+    zm = np.abs(mean_z(r, ref, var)).max()
     if control:
         assert z > 6 or zm > 6, f"max |z| {z:.2f}, mean z {zm:.2f} (should fail)"
     else:

@@ -2,8 +2,8 @@
 
 * Mitsuba's own render tests of ``participating_media/`` rendered as authored and z-tested
   against the shipped references (:func:`support.corpus.check_scene`, as
-  ``test_mitsuba_corpus.py`` tests the other folders): :data:`MEDIA_SCENES` pass (all
-  nine), :data:`MEDIA_NOT_YET` would be strict xfails naming what drpt lacks. Negative
+  ``test_mitsuba_corpus.py`` tests the other folders): :data:`support.corpus.MEDIA_SCENES`
+  pass (all nine), ``MEDIA_NOT_YET`` would be strict xfails naming what drpt lacks. Negative
   controls: a wrong albedo, a heterogeneous medium's halved density, fail.
 * Henyey-Greenstein sampling: a chi-square test of sampled directions (cosine x azimuth
   bins) against the density's integral over each bin (p > 1e-3 passes; negative control:
@@ -30,23 +30,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from support.corpus import CORPUS, cases, check_scene, corpus_scene, reference_files, render_as_authored, z_test
-
-#: participating_media scene -> spp drpt renders it with (all pass Mitsuba's z-test)
-MEDIA_SCENES = {
-    "participating_media/test_homo_area_light_volpath.xml": 512,
-    "participating_media/test_homo_dielectric_envmap_volpath.xml": 512,
-    "participating_media/test_homo_emitter_inside_medium_volpath.xml": 512,
-    "participating_media/test_homo_null_envmap_volpath.xml": 512,
-    "participating_media/test_homo_obj_inside_medium_volpath.xml": 512,
-    "participating_media/test_homo_roughdielectric_spot_volpath.xml": 512,
-    "participating_media/test_surf_area_light_volpath.xml": 512,
-    "participating_media/test_hetero_sigmat_albedo_volpath.xml": 512,
-    "participating_media/test_hetero_sigmat_volpath.xml": 512,
-}
-
-#: participating_media scene -> what drpt lacks to render it (strict xfail; none)
-MEDIA_NOT_YET: dict[str, str] = {}
+from support.corpus import (
+    CORPUS,
+    MEDIA_NOT_YET,
+    MEDIA_SCENES,
+    cases,
+    check_scene,
+    corpus_scene,
+    perturbed,
+    reference_files,
+    render_as_authored,
+    z_test,
+)
 
 
 @pytest.mark.slow
@@ -104,15 +99,13 @@ def test_wrong_medium_fails_the_z_test(tmp_path, rel, old, new):
     one's density halved, fail against the reference; the unchanged copies pass (the
     failure is the perturbation's). (The z-test at 512 spp does not see a 20% lower
     density, scale 4 for 5, in the heterogeneous scene: a weak test there.)"""
-    from test_mitsuba_corpus import _perturbed
-
     from support.corpus import _read
 
     spp = 512
     ref, var = (_read(p) for p in reference_files(corpus_scene(rel)))
     results = {}
     for name, value in (("copy", old), ("perturbed", new)):
-        path = _perturbed(tmp_path / name, rel, old, value)
+        path = perturbed(tmp_path / name, rel, old, value)
         # (its include's own includes are found through the original folder, as a <path>)
         folder = corpus_scene(rel).parent
         path.write_text(path.read_text().replace("<scene version='2.0.0'>",

@@ -13,7 +13,7 @@ from drpt.scene import load_scene
 
 
 def test_reader_keeps_the_texture():
-    from test_mitsuba_xml import XML
+    from support.xml import XML
 
     s = load_scene(XML / "area_textured.xml")
     lights = [m for m in s.materials if m.emission_texture is not None]
@@ -26,15 +26,14 @@ def test_reader_keeps_the_texture():
 def test_renders_like_mitsuba():
     from dataclasses import replace
 
-    from test_mitsuba_xml import XML, _render_both
-
     from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.testing import assert_agree, block_z
+    from support.xml import XML, render_xml_both
 
     path = XML / "area_textured.xml"
     scene = load_scene(path)
-    r, ref, var = _render_both(scene, path, 128)
+    r, ref, var = render_xml_both(scene, path, 128)
     assert ref.mean() > 0.05
     assert_agree(r, ref, var, zmax=4.5)
     for m in scene.materials:  # negative control: the emitters at their mean radiance
@@ -49,10 +48,10 @@ def test_export_round_trip(tmp_path):
     """The exporter writes the textured radiance back: drpt reads the same textures from the
     exported file, and Mitsuba renders it as it renders the original (image means within 3%)."""
     import mitsuba as mi
-    from test_mitsuba_xml import XML
 
     from drpt.backend import mitsuba_variant
     from drpt.export.mitsuba import write_xml
+    from support.xml import XML
 
     s = load_scene(XML / "area_textured.xml")
     out = write_xml(s, tmp_path / "x.xml", 32, 24, 4, max_depth=3)

@@ -189,14 +189,13 @@ def test_cone_pdf_is_exact_for_tiny_and_distant_spheres():
 
 # ------------------------------------------------------------ renders against Mitsuba
 def _agree_with_mitsuba(name, spp, **opts):
-    from test_mitsuba_xml import _mean_z, _render_both
-
     from drpt.scene import load_scene
     from drpt.testing import block_z
+    from support.xml import mean_z, render_xml_both
 
     path = XML / f"{name}.xml"
-    r, ref, var = _render_both(load_scene(path), path, spp, **opts)
-    return r, ref, var, block_z(r.image, r.variance, ref, var), _mean_z(r, ref, var)
+    r, ref, var = render_xml_both(load_scene(path), path, spp, **opts)
+    return r, ref, var, block_z(r.image, r.variance, ref, var), mean_z(r, ref, var)
 
 
 @pytest.mark.slow

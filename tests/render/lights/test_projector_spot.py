@@ -121,13 +121,12 @@ def test_projector_analytic_radiance(tmp_path):
 def test_scene_renders_like_mitsuba():
     """tests/data/xml/projector_spot.xml: a textured projector and a textured spot on a floor
     and a sphere, direct lighting, drpt vs Mitsuba on the same file (8x8 block z-test)."""
-    from test_mitsuba_xml import XML, _render_both
-
     from drpt.testing import assert_agree
+    from support.xml import XML, render_xml_both
 
     path = XML / "projector_spot.xml"
     scene = load_scene(path)
-    r, ref, var = _render_both(scene, path, 64)
+    r, ref, var = render_xml_both(scene, path, 64)
     assert ref.mean() > 0.02
     assert_agree(r, ref, var, zmax=4.5)
 
@@ -149,10 +148,10 @@ def test_export_round_trip(tmp_path):
     """The exporter writes the projector and the textured spot back: Mitsuba's emitters of the
     exported XML give the same light as the original file's."""
     import mitsuba as mi
-    from test_mitsuba_xml import XML
 
     from drpt.backend import mitsuba_variant
     from drpt.export.mitsuba import write_xml
+    from support.xml import XML
 
     s = load_scene(XML / "projector_spot.xml")
     out = tmp_path / "out.xml"

@@ -31,19 +31,11 @@ import pytest
 from drpt.errors import SceneError
 from drpt.scene import load_scene
 from drpt.scene.model import DirectionalLight, PointLight, Skybox, SpotLight
-from support import DATA
+from support.xml import XML, load, mean_z, render_xml_both
 
-XML = DATA / "xml"
 #: corpus scenes of BSDFs drpt renders, z-tested against Mitsuba
 RENDER_CORPUS = ("sphere", "meshes", "instances", "spot", "envmap", "textured", "composites", "glossy",
                  "lens", "bsdfs", "ortho")
-
-
-def load(name: str, **kw):
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        scene = load_scene(XML / f"{name}.xml", **kw)
-    return scene, [str(w.message) for w in caught]
 
 
 def spec_of(scene, name):
@@ -491,30 +483,6 @@ def test_render_xml_with_its_own_settings_and_flags(tmp_path):
 
 
 # ------------------------------------------------------------ renders against Mitsuba
-def _render_both(scene, path: Path, spp: int, defines: dict | None = None, seed: int = 3, **options):
-    """drpt's render of ``scene`` (the file's settings, ``spp``, RenderOptions ``options``) and
-    Mitsuba's of ``path`` as the mean of 8 batches: ``(result, mean, variance of the mean)``."""
-    from dataclasses import replace
-
-    import mitsuba as mi
-
-    from drpt.backend import mitsuba_variant
-    from drpt.options import RenderOptions, with_scene_settings
-    from drpt.render.renderer import Renderer
-
-    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=seed), scene)[0], spp=spp, **options)
-    r = Renderer(scene, opts).render()
-    mi.set_variant(mitsuba_variant())
-    batches = 8
-    ms = mi.load_file(str(path), optimize=False, **{**(defines or {}), "spp": str(spp // batches)})
-    runs = np.stack([np.asarray(mi.render(ms, seed=seed + 100 + 7919 * k), np.float64)[..., :3]
-                     for k in range(batches)])
-    ref = runs.mean(0)
-    # blocks that see only a constant background have no variance in either image: allow
-    # float32 rounding (1e-5 relative) there instead of dividing by zero
-    return r, ref, runs.var(0, ddof=1) / batches + (1e-5 * ref) ** 2
-
-
 @pytest.mark.slow
 @pytest.mark.mitsuba
 @pytest.mark.parametrize("name", RENDER_CORPUS)
@@ -524,19 +492,11 @@ def test_corpus_renders_like_mitsuba(name):
     from drpt.testing import assert_agree
 
     scene, _ = load(name)
-    r, ref, var = _render_both(scene, XML / f"{name}.xml", 256)
+    r, ref, var = render_xml_both(scene, XML / f"{name}.xml", 256)
     assert r.image.shape == (24, 32, 3) and ref.mean() > 0.05
     assert_agree(r, ref, var, zmax=4.5)
-    z = _mean_z(r, ref, var)
+    z = mean_z(r, ref, var)
     assert np.abs(z).max() < 4.0, f"image mean z = {z}"
-
-
-def _mean_z(r, ref, var):
-    """z of the difference of the images' means, per channel (a bias of a fraction of a
-    percent over the whole image shows here before it shows in any one block)."""
-    n = ref.shape[0] * ref.shape[1]
-    se = np.sqrt(r.variance.mean((0, 1)) / n + var.mean((0, 1)) / n)
-    return (r.image.astype(np.float64).mean((0, 1)) - ref.mean((0, 1))) / se
 
 
 @pytest.mark.slow
@@ -545,7 +505,7 @@ def test_anisotropic_roughconductor_on_a_sphere_renders_like_mitsuba():
     from drpt.testing import assert_agree
 
     scene, _ = load("aniso")
-    r, ref, var = _render_both(scene, XML / "aniso.xml", 256)
+    r, ref, var = render_xml_both(scene, XML / "aniso.xml", 256)
     assert_agree(r, ref, var, zmax=4.5)
 
 
@@ -585,9 +545,9 @@ def test_negative_controls_fail_the_z_test(what):
         light.bsdf = replace(light.bsdf, params={"kd": (0.5, 0.5, 0.5)})
         path = XML / "composites.xml"
     # a 1% bias: 256 spp show it at z ~ 4.5, 1024 at ~ 9
-    r, ref, var = _render_both(scene, path, 1024 if what == "emitter bsdf" else 256)
+    r, ref, var = render_xml_both(scene, path, 1024 if what == "emitter bsdf" else 256)
     z = block_z(r.image, r.variance, ref, var)
-    zm = _mean_z(r, ref, var)
+    zm = mean_z(r, ref, var)
     assert np.abs(z).max() > 6 or np.abs(zm).max() > 6, \
         f"{what}: max |z| = {np.abs(z).max():.2f}, mean z {zm} (should fail)"
 

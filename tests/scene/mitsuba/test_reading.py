@@ -291,19 +291,18 @@ def test_files_written_by_other_tools_render_like_mitsuba(monkeypatch, name, con
     rendering the same file (8x8 block z-test below 4.5, image mean z below 4, as
     test_mitsuba_xml's corpus). Negative controls: the reader's old ways (named children
     dropped; reflectance spectra integrated without the D65 weighting) fail it."""
-    from test_mitsuba_xml import _mean_z, _render_both
-
     from drpt.testing import block_z
+    from support.xml import mean_z, render_xml_both
 
     path = STYLES / f"{name}.xml"
     if control is not None:
         monkeypatch.setattr(Node, *control)
     s, warns = _load(path, ignore_unsupported=control is not None)  # (a dropped child is unsupported)
     assert control is not None or not warns, warns
-    r, ref, var = _render_both(s, path, 256)
+    r, ref, var = render_xml_both(s, path, 256)
     assert r.image.shape == (24, 32, 3) and ref.mean() > 0.05 and ref.std() > 0.03  # not just the sky
     z = np.abs(block_z(r.image.astype(np.float64), r.variance, ref, var)).max()
-    zmean = np.abs(_mean_z(r, ref, var)).max()
+    zmean = np.abs(mean_z(r, ref, var)).max()
     if control is None:
         assert z < 4.5 and zmean < 4.0, (z, zmean)
     else:

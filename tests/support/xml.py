@@ -1,0 +1,67 @@
+"""The Mitsuba XML corpus of ``tests/data/xml`` (assets from ``make_assets.py``), read by drpt
+and rendered by drpt and by Mitsuba *from the same file*.
+
+* :data:`XML`: the corpus folder;
+* :func:`load`: a corpus scene read by drpt, with the warnings it gave;
+* :func:`render_xml_both`: drpt's render of a scene and Mitsuba's of its XML file, with the
+  variance of Mitsuba's mean, for :func:`drpt.testing.assert_agree` / :func:`drpt.testing.block_z`;
+* :func:`mean_z`: the z of the difference of the two images' means, per channel.
+
+``tests/scene/mitsuba/test_mitsuba_xml.py`` tests the corpus itself; the render tests of
+single features (samplers, films, lights, textures) use these helpers on their own files.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from drpt.scene import load_scene
+
+from . import DATA
+
+XML = DATA / "xml"
+"""The Mitsuba XML corpus written for the tests."""
+
+
+def load(name: str, **kw):
+    """``(scene, warnings)``: corpus scene ``XML/<name>.xml`` read by drpt (``kw`` go to
+    :func:`drpt.scene.load_scene`), and the messages of the warnings it gave."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = load_scene(XML / f"{name}.xml", **kw)
+    return scene, [str(w.message) for w in caught]
+
+
+def render_xml_both(scene, path: Path, spp: int, defines: dict | None = None, seed: int = 3, **options):
+    """drpt's render of ``scene`` (the file's settings, ``spp``, RenderOptions ``options``) and
+    Mitsuba's of ``path`` as the mean of 8 batches: ``(result, mean, variance of the mean)``."""
+    from dataclasses import replace
+
+    import mitsuba as mi
+
+    from drpt.backend import mitsuba_variant
+    from drpt.options import RenderOptions, with_scene_settings
+    from drpt.render.renderer import Renderer
+
+    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=seed), scene)[0], spp=spp, **options)
+    r = Renderer(scene, opts).render()
+    mi.set_variant(mitsuba_variant())
+    batches = 8
+    ms = mi.load_file(str(path), optimize=False, **{**(defines or {}), "spp": str(spp // batches)})
+    runs = np.stack([np.asarray(mi.render(ms, seed=seed + 100 + 7919 * k), np.float64)[..., :3]
+                     for k in range(batches)])
+    ref = runs.mean(0)
+    # blocks that see only a constant background have no variance in either image: allow
+    # float32 rounding (1e-5 relative) there instead of dividing by zero
+    return r, ref, runs.var(0, ddof=1) / batches + (1e-5 * ref) ** 2
+
+
+def mean_z(r, ref, var):
+    """z of the difference of the images' means, per channel (a bias of a fraction of a
+    percent over the whole image shows here before it shows in any one block)."""
+    n = ref.shape[0] * ref.shape[1]
+    se = np.sqrt(r.variance.mean((0, 1)) / n + var.mean((0, 1)) / n)
+    return (r.image.astype(np.float64).mean((0, 1)) - ref.mean((0, 1))) / se
