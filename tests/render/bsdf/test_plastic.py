@@ -845,7 +845,7 @@ def test_material_table_renders_plastics_as_mitsuba(tmp_path):
                                         "sample_visible": False}},
 ], ids=["plastic", "roughplastic-ggx", "roughplastic-beckmann-all"])
 def test_render_matches_mitsuba(tmp_path, spec):
-    """A sphere of the material in the test box (tests/validation/test_materials_render.py),
+    """A sphere of the material in the test box (support.materials, as in tests/validation/test_materials_render.py),
     rendered by drpt and by Mitsuba through the exporter: block z-scores < 4.5."""
     from drpt.materials.spec import BSDFSpec
     from drpt.testing import assert_agree, render_both

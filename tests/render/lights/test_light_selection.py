@@ -242,7 +242,7 @@ def test_veach_mis_error_is_mitsubas(monkeypatch, control):
             return w
         monkeypatch.setattr(area_mod, "selection_weights", no_spheres)
     r, ref, var, z, _ = _agree_with_mitsuba("veach_mis", 64)
-    # _render_both's var: the variance of Mitsuba's mean of 8 batches of spp / 8, a render of spp.
+    # render_xml_both's var: the variance of Mitsuba's mean of 8 batches of spp / 8, a render of spp.
     # drpt's: the median over four seeds (a single firefly in one render can move the mean
     # relative variance 4x: over seeds 1-8 it ranges 0.017-0.11 against Mitsuba's 0.036)
     ratio = np.median([_relative_variance(v, ref) for v in [r.variance] + _variances("veach_mis", 64, (4, 5, 6))])
