@@ -829,6 +829,14 @@ def save_chart(results: list[ModeResult], out: Path, title: str) -> None:
         ax.set_xlabel("ms (instrumented wavefront run, exclusive)")
         ax.set_title("wavefront stages")
         ax.legend(fontsize=8)
+    lt = next((r for r in results if r.mode in LIGHT_TRACERS and r.occupancy), None)
+    if wf is None and lt is not None:
+        kinds = lt.occupancy["rays_by_kind"]
+        ax.barh(list(kinds), list(kinds.values()))
+        ax.set_yticks(range(len(kinds)), list(kinds), fontsize=8)
+        ax.invert_yaxis()
+        ax.set_xlabel("queries (instrumented render)")
+        ax.set_title(f"{lt.mode}: rays and splats by kind")
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
