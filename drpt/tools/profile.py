@@ -40,6 +40,27 @@ CPU flags: an assumption about Dr.Jit's LLVM vector width).
 The verdict says which mode is faster and why, from these numbers: kernel
 time against time outside kernels (launches, synchronisation, Python), the
 megakernel's occupancy, memory.
+
+Light tracing (``--integrator ptracer|bdpt``)
+---------------------------------------------
+The renderer traces a light-tracing pass as one fused kernel (light subpath,
+for bdpt the camera subpath and every connection, the splats): there is no
+wavefront mode, so no coherence sort, fused tail or per-stage kernels, and
+the subpaths' times cannot be separated. What applies is measured as for the
+megakernel: warm-up, timed renders, kernel history split by kernel (the pass
+kernel against accumulation and readback), peak memory, samples/s (a sample
+is one light path, for bdpt one light subpath and one camera sample). An
+instrumented render (not timed) counts every query by its purpose through
+:meth:`Instrument.count <drpt.render.instrument.Instrument.count>`: closest
+hits of the light and camera subpaths, shadow rays (light vertex to camera
+``t = 1``, next-event ``s = 1``, connections ``s, t >= 2``, emitters seen by
+the camera) and splats; the scene's ``occluded`` hook counts the shadow rays
+once more, as a check. Per-lane counts give each subpath loop's SIMD
+occupancy as for the megakernel. With ``--mode both`` (the default) the path
+tracer's megakernel renders the same image size and spp for the trade
+(samples/s, rays per sample); ``--mode megakernel`` profiles the light tracer
+alone. Error per sample is not measured here (``drpt converge`` measures error
+against time).
 """
 
 from __future__ import annotations
@@ -56,12 +77,22 @@ from ..backend import ensure, jit_backend
 from ..cli.args import add_render_flags, options_from_args
 from ..errors import DrptError
 from ..options import RenderOptions
-from ..render.instrument import Instrument
+from ..render.instrument import HIT_CAMERA, HIT_LIGHT, SPLAT, Instrument
 from ..render.integrators.wavefront import OUTSIDE, WaveStats
 from ..render.renderer import Renderer, plan_passes
 from ..scene import load_scene
 
 MODES = ("megakernel", "wavefront")
+LIGHT_TRACERS = ("ptracer", "bdpt")
+#: the name of the fused pass kernel of each light-tracing integrator
+LIGHT_FUSED = {"ptracer": "fused light-tracing kernel (light paths + splats)",
+               "bdpt": "fused bdpt kernel (both subpaths + connections)"}
+#: what ``profile`` does not measure for a light-tracing integrator, and why
+LIGHT_NOT_APPLICABLE = [
+    "per-stage times: one fused kernel per pass (subpaths, connections and splats are not separate kernels)",
+    "wavefront mode, coherence sort and fused tail: light tracing has no wavefront integrator",
+    "error per sample: use drpt converge for error against time",
+]
 
 
 # --------------------------------------------------------------------------- history helpers
@@ -126,6 +157,8 @@ class ModeResult:
     unsorted_stages: list[Stage] = field(default_factory=list)
     tail_ab: dict = field(default_factory=dict)  # wavefront with the other fused-tail setting (A/B)
     passes: int | None = None
+    integrator: str = "path"
+    not_applicable: list[str] = field(default_factory=list)  # what is not measured for it, and why
 
     @property
     def kernel_ms(self) -> float:
@@ -154,6 +187,8 @@ class ModeResult:
     def as_dict(self) -> dict:
         return {
             "mode": self.mode,
+            "integrator": self.integrator,
+            "not_applicable": self.not_applicable,
             "warmup_seconds": self.warmup_s,
             "warmup_backend_ms": self.warmup_backend_ms,
             "seconds": self.seconds,
@@ -215,7 +250,7 @@ def _renderer(scene, popt: ProfileOptions):
 FUSED = "fused megakernel (camera + whole path loop)"
 
 
-def _megakernel_stages(entries: list[dict], rays: int) -> list[Stage]:
+def _megakernel_stages(entries: list[dict], rays: int, fused: str = FUSED) -> list[Stage]:
     """Megakernel history split by kernel (stages are fused and cannot be separated).
 
     The path kernels are the JIT kernels with at least half the operation
@@ -226,7 +261,7 @@ def _megakernel_stages(entries: list[dict], rays: int) -> list[Stage]:
     groups: dict[str, list[dict]] = defaultdict(list)
     for e in entries:
         if e["type"] == "JIT" and e["operation_count"] * 2 >= big:
-            groups[FUSED].append(e)
+            groups[fused].append(e)
         elif e["type"] == "JIT":
             groups["other JIT kernels (accumulation)"].append(e)
         else:
@@ -235,7 +270,7 @@ def _megakernel_stages(entries: list[dict], rays: int) -> list[Stage]:
     for name, es in groups.items():
         st = Stage(name)
         st.add(es)
-        if name.startswith("fused"):
+        if name == fused:
             st.rays = rays
         out.append(st)
     return out
@@ -283,7 +318,7 @@ class _LaneCounts(Instrument):
         self.iters: list = []  # per pass: UInt32 per lane
         self.shadows: list = []
 
-    def paths(self, lanes: int) -> None:
+    def paths(self, lanes: int, kinds: tuple[str, ...] = ()) -> None:
         import drjit as dr
         from drjit.auto import UInt32
 
@@ -335,6 +370,105 @@ def _megakernel_counts(renderer) -> dict:
             "closest_hit_rays": useful, "shadow_rays": int(sum(int(x.sum()) for x in shadows))}
 
 
+OCCLUDED = "shadow rays seen by the scene"
+
+
+class _KindCounts(_LaneCounts):
+    """An instrument counting, per lane of each pass, the light-tracing integrators'
+    queries by kind (:meth:`Instrument.count`) and the scene's shadow rays."""
+
+    def __init__(self):
+        self.passes: list[dict] = []  # per pass: kind -> UInt32 per lane
+
+    def paths(self, lanes: int, kinds: tuple[str, ...] = ()) -> None:
+        import drjit as dr
+        from drjit.auto import UInt32
+
+        self.n = lanes
+        counters = {k: dr.zeros(UInt32, lanes) for k in (*kinds, OCCLUDED)}
+        dr.eval(*counters.values())  # in memory before the kernel's loops
+        self.passes.append(counters)
+
+    def bounce(self, state) -> None:  # the path tracer's hook: not called by light tracing
+        pass
+
+    def occluded(self, o, d, tmax, active) -> None:
+        self._count(self.passes[-1][OCCLUDED], active)
+
+    def count(self, kind: str, active) -> None:
+        self._count(self.passes[-1][kind], active)
+
+
+def _loop_occupancy(per_lane: list, w: int) -> dict:
+    """SIMD occupancy of a loop from each lane's iterations (packets of ``w`` lanes
+    run until their longest lane is done)."""
+    import numpy as np
+
+    useful = executed = top = 0
+    for c in per_lane:
+        c = c.astype(np.int64)
+        packets = np.concatenate([c, np.zeros((-len(c)) % w, np.int64)]).reshape(-1, w)
+        useful += int(c.sum())
+        executed += int(packets.max(1).sum()) * w
+        top = max(top, int(c.max(initial=0)))
+    lanes = sum(len(c) for c in per_lane)
+    return {"occupancy": useful / max(executed, 1), "lane_iterations": useful,
+            "executed_lane_iterations": executed, "mean_iterations_per_lane": useful / max(lanes, 1),
+            "max_iterations_per_lane": top}
+
+
+def _light_counts(renderer) -> dict:
+    """Queries by kind of one light-tracing render, counted by an instrument on the
+    scene (:class:`_KindCounts`; not timed), and its subpath loops' SIMD occupancy."""
+    scene = renderer.scene
+    counts = _KindCounts()
+    scene.instrument = counts
+    try:
+        renderer.render()
+    finally:
+        scene.instrument = None
+    per_kind: dict[str, list] = defaultdict(list)
+    for p in counts.passes:
+        for k, c in p.items():
+            per_kind[k].append(c.numpy())
+    totals = {k: int(sum(int(c.sum()) for c in cs)) for k, cs in per_kind.items()}
+    w = _simd_width()
+    loops = {k: _loop_occupancy(per_kind[k], w) for k in (HIT_LIGHT, HIT_CAMERA) if k in per_kind}
+    kinds = {k: v for k, v in totals.items() if k != OCCLUDED}
+    return {"simd_width_assumed": w, "lanes": sum(len(c) for c in per_kind[OCCLUDED]),
+            "rays_by_kind": kinds,
+            "closest_hit_rays": sum(v for k, v in kinds.items() if k.startswith("closest hit")),
+            "shadow_rays": sum(v for k, v in kinds.items() if k.startswith("shadow")),
+            "shadow_rays_seen_by_scene": totals[OCCLUDED],
+            "splats": kinds.get(SPLAT, 0), "loops": loops}
+
+
+def profile_light(scene, popt: ProfileOptions, base=None) -> ModeResult:
+    """Profile a light-tracing integrator (``popt.render.integrator``, one of
+    :data:`LIGHT_TRACERS`): its fused pass kernel timed as the megakernel is, its
+    queries counted by kind; the renderer stays on the result (``result.renderer``)."""
+    import drjit as dr
+
+    name = popt.render.integrator
+    renderer = _renderer(scene, popt) if base is None else base
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.kernel_history_clear()
+        t0 = time.perf_counter()
+        renderer.render()
+        dr.sync_thread()
+        warmup = time.perf_counter() - t0
+        warm_backend = sum(e["backend_ms"] for e in _history())
+    dr.flush_malloc_cache()
+    dr.detail.malloc_clear_statistics()
+    seconds, entries = _timed(renderer, popt.repeat)
+    peak = int(dr.detail.malloc_watermark(jit_backend()))
+    result = ModeResult(name, warmup, warm_backend, seconds, popt.width * popt.height * popt.spp, peak,
+                        entries, integrator=name, not_applicable=list(LIGHT_NOT_APPLICABLE))
+    result.renderer = renderer
+    result.occupancy = _light_counts(renderer)
+    return result
+
+
 def _wavefront_stages(renderer, sort: bool) -> tuple[list[Stage], float, list[list[int]]]:
     """Stages of one instrumented wavefront render, its wall time and the live
     paths per bounce of each pass."""
@@ -377,6 +511,7 @@ def profile_mode(scene, popt: ProfileOptions, mode: str, base=None) -> ModeResul
     popt = replace(popt, render=replace(popt.render, mode=mode))
     samples = popt.width * popt.height * popt.spp
     renderer = _renderer(scene, popt) if base is None else base.derive(replace(popt.render, progress=False))
+    result_integrator = popt.render.integrator
     # Warm-up: compiles every kernel (or loads it from Dr.Jit's caches).
     with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
         dr.kernel_history_clear()
@@ -389,7 +524,7 @@ def profile_mode(scene, popt: ProfileOptions, mode: str, base=None) -> ModeResul
     dr.detail.malloc_clear_statistics()
     seconds, entries = _timed(renderer, popt.repeat)
     peak = int(dr.detail.malloc_watermark(jit_backend()))
-    result = ModeResult(mode, warmup, warm_backend, seconds, samples, peak, entries)
+    result = ModeResult(mode, warmup, warm_backend, seconds, samples, peak, entries, integrator=result_integrator)
     result.renderer = renderer
     if mode == "megakernel":
         result.occupancy = _megakernel_counts(renderer)
@@ -442,15 +577,30 @@ TAIL_AB = 16384  # the fused tail the A/B tries (paths left in a pass)
 
 
 def run_profile(scene_path: str | Path, popt: ProfileOptions, modes=MODES) -> list[ModeResult]:
+    """Profile ``modes`` of the path tracer, or with a light-tracing
+    ``popt.render.integrator`` that integrator and, where ``modes`` has both,
+    the path tracer's megakernel beside it."""
+    from dataclasses import replace
+
     scene_path = Path(scene_path)
     if not scene_path.is_file():
         raise DrptError(f"{scene_path}: scene file not found")
-    if popt.render.integrator != "path":
-        raise DrptError(f"profile compares the path tracer's modes, not --integrator {popt.render.integrator}")
+    integrator = popt.render.integrator
+    light = integrator in LIGHT_TRACERS
+    if integrator != "path" and not light:
+        raise DrptError(f"profile measures --integrator path, ptracer or bdpt, not --integrator {integrator}")
+    if light and tuple(modes) == ("wavefront",):
+        raise DrptError(f"--integrator {integrator} has no wavefront mode (one fused kernel per pass): "
+                        "use --mode both or megakernel")
     scene = load_scene(scene_path)
     ensure()
     out = []
-    for m in modes:  # one device scene: the wavefront renderer is derived from the first
+    if light:
+        out.append(profile_light(scene, popt))
+        # the path tracer beside it (same device scene, size, spp and seed)
+        modes = ("megakernel",) if len(modes) > 1 else ()
+        popt = replace(popt, render=replace(popt.render, integrator="path"))
+    for m in modes:  # one device scene: the other renderers are derived from the first
         out.append(profile_mode(scene, popt, m, out[0].renderer if out else None))
     for r in out:
         r.passes = len(plan_passes(popt.width, popt.height, popt.spp, popt.max_lanes))
@@ -465,8 +615,11 @@ def run_profile(scene_path: str | Path, popt: ProfileOptions, modes=MODES) -> li
                     r.seconds, r.entries = t, run_entries
     for r in out:
         del r.renderer
+        rays = r.occupancy.get("closest_hit_rays", 0) + r.occupancy.get("shadow_rays", 0)
         if r.mode == "megakernel":
-            r.stages = _megakernel_stages(r.entries, r.occupancy["closest_hit_rays"] + r.occupancy["shadow_rays"])
+            r.stages = _megakernel_stages(r.entries, rays)
+        elif r.mode in LIGHT_TRACERS:
+            r.stages = _megakernel_stages(r.entries, rays, LIGHT_FUSED[r.mode])
     return out
 
 
@@ -474,6 +627,9 @@ def verdict(results: list[ModeResult]) -> list[str]:
     """Which mode wins on this scene and why, from the measured numbers."""
     by = {r.mode: r for r in results}
     lines = []
+    lt = next((r for r in results if r.mode in LIGHT_TRACERS), None)
+    if lt is not None:
+        return _light_verdict(lt, by.get("megakernel"))
     wf = by.get("wavefront")
     if wf is not None and wf.unsorted_seconds:
         st = {s.name: s for s in wf.stages}
@@ -541,6 +697,24 @@ def verdict(results: list[ModeResult]) -> list[str]:
     return lines
 
 
+def _light_verdict(lt: ModeResult, mk: ModeResult | None) -> list[str]:
+    """A light-tracing integrator against the path tracer's megakernel: speed and rays
+    per sample (not error: see :data:`LIGHT_NOT_APPLICABLE`)."""
+    if mk is None:
+        return []
+    per = {r.mode: (r.occupancy.get("closest_hit_rays", 0) / max(r.samples, 1),
+                    r.occupancy.get("shadow_rays", 0) / max(r.samples, 1)) for r in (lt, mk)}
+    rel = lt.samples_per_second / max(mk.samples_per_second, 1e-12)
+    lines = [f"{lt.mode} vs path (megakernel): {rel:.2f}x the path tracer's samples/s "
+             f"({lt.samples_per_second / 1e6:.3f} vs {mk.samples_per_second / 1e6:.3f} Msamples/s; "
+             f"{lt.seconds:.3f} s vs {mk.seconds:.3f} s, best of the timed runs)"]
+    lines.append(f"  rays per sample: {lt.mode} {per[lt.mode][0]:.2f} closest hit + {per[lt.mode][1]:.2f} "
+                 f"shadow, path {per['megakernel'][0]:.2f} + {per['megakernel'][1]:.2f}; kernel time "
+                 f"{lt.kernel_ms:.1f} vs {mk.kernel_ms:.1f} ms, peak {_mem(lt.peak_bytes)} vs {_mem(mk.peak_bytes)}")
+    lines.append(f"  not measured for {lt.mode}: " + "; ".join(lt.not_applicable))
+    return lines
+
+
 # --------------------------------------------------------------------------- output
 
 def _fmt_rate(rays: int, ms: float) -> str:
@@ -560,7 +734,22 @@ def format_table(r: ModeResult) -> str:
     lines.append(f"  warm-up render {r.warmup_s:.2f} s (LLVM backend/compile {r.warmup_backend_ms:.0f} ms);"
                  f" timed run: codegen {r.codegen_ms:.1f} ms, backend {r.backend_ms:.1f} ms")
     occ = r.occupancy
-    if r.mode == "wavefront":
+    if r.mode in LIGHT_TRACERS:
+        lines.append(f"  {r.mode}: one fused kernel per pass, split by kernel only; queries counted by an "
+                     "instrumented render (not timed)")
+        if occ:
+            lines.append(f"  rays: {occ['closest_hit_rays']} closest hit, {occ['shadow_rays']} shadow, "
+                         f"{occ['splats']} splats into the film")
+            for kind, n in occ["rays_by_kind"].items():
+                lines.append(f"    {kind:44s} {n:10d}")
+            for kind, lp in occ["loops"].items():
+                lines.append(f"  {kind.split(': ')[-1]} loop: SIMD occupancy {100 * lp['occupancy']:.1f}% "
+                             f"(W = {occ['simd_width_assumed']} assumed), "
+                             f"{lp['mean_iterations_per_lane']:.2f} iterations per lane on average, "
+                             f"at most {lp['max_iterations_per_lane']}")
+        for na in r.not_applicable:
+            lines.append(f"  does not apply: {na}")
+    elif r.mode == "wavefront":
         staged = f"{r.staged_seconds:.3f} s" if r.staged_seconds is not None else "-"
         lines.append(f"  stages from an instrumented wavefront run ({staged} wall, synchronised at "
                      "every stage boundary); exclusive times")
@@ -640,6 +829,14 @@ def save_chart(results: list[ModeResult], out: Path, title: str) -> None:
         ax.set_xlabel("ms (instrumented wavefront run, exclusive)")
         ax.set_title("wavefront stages")
         ax.legend(fontsize=8)
+    lt = next((r for r in results if r.mode in LIGHT_TRACERS and r.occupancy), None)
+    if wf is None and lt is not None:
+        kinds = lt.occupancy["rays_by_kind"]
+        ax.barh(list(kinds), list(kinds.values()))
+        ax.set_yticks(range(len(kinds)), list(kinds), fontsize=8)
+        ax.invert_yaxis()
+        ax.set_xlabel("queries (instrumented render)")
+        ax.set_title(f"{lt.mode}: rays and splats by kind")
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
@@ -654,7 +851,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("scene", help="scene file")
     add_render_flags(p, omit=("mode",), size=(128, 128), spp=16, accel="auto", integrator="path")
     p.add_argument("--mode", choices=("both", *MODES), default="both",
-                   help="the execution modes to profile (default both, with the verdict)")
+                   help="the execution modes to profile (default both, with the verdict); with "
+                        "--integrator ptracer or bdpt: both = it and the path megakernel, megakernel = it alone")
     p.add_argument("--wavefront-tail", dest="wavefront_tail", type=int, default=0, metavar="N",
                    help="the wavefront's fused tail, as render's (default 0); the A/B also "
                         f"times the other setting ({TAIL_AB} when this is 0)")

@@ -8,6 +8,8 @@
   paths), counts exactly the bounces and shadow rays that the wavefront integrator
   counts on the host from its buffers (live paths per bounce, shadow-ray batches).
   Negative control: a depth limit changes the counts.
+* ptracer and bdpt: likewise no code without a counting instrument and the same image
+  with one; the shadow rays they count by kind are exactly those the scene traced.
 """
 
 from __future__ import annotations
@@ -94,3 +96,32 @@ def test_counts_equal_the_wavefronts(renderer):
     c2 = Counts()
     _render(short, c2)
     assert c2.totals()[0] < bounces and c2.totals() == _wavefront(short)
+
+
+class KindCounts(Counts):
+    """Counts plus the light-tracing integrators' queries by kind."""
+
+    def paths(self, lanes, kinds=()):
+        super().paths(lanes)
+        self.kinds = {k: dr.zeros(UInt32, lanes) for k in kinds}
+        dr.eval(*self.kinds.values())
+
+    def count(self, kind, active):
+        dr.scatter_add(self.kinds[kind], UInt32(1), dr.arange(UInt32, self.n), active | dr.zeros(Bool, self.n))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("integrator", ["ptracer", "bdpt"])
+def test_light_tracing_no_instrument_no_code(cornell, integrator):
+    """ptracer's and bdpt's kernels carry the counters only with a counting instrument
+    (the base class's no-op methods trace nothing), and the image is the same."""
+    r = Renderer(load_scene(cornell), RenderOptions(width=8, height=8, spp=2, seed=5, integrator=integrator,
+                                                    path=PathOptions(max_depth=4), progress=False))
+    img, ops = _render(r, None)
+    img_base, ops_base = _render(r, Instrument())
+    counts = KindCounts()
+    img_c, ops_c = _render(r, counts)
+    assert ops_base == ops and np.array_equal(img_base, img)
+    assert ops_c > ops and np.array_equal(img_c, img)
+    shadows = sum(int(c.numpy().sum()) for k, c in counts.kinds.items() if k.startswith("shadow"))
+    assert shadows == counts.totals()[1] > 0  # every shadow ray named, none twice

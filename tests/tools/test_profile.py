@@ -1,4 +1,5 @@
-"""``drpt profile``: megakernel and wavefront, kernel history, stages, occupancy, verdict, chart and JSON."""
+"""``drpt profile``: megakernel and wavefront, kernel history, stages, occupancy, verdict, chart and JSON;
+light tracing (ptracer, bdpt): query counts by kind against counts that follow from a scene's geometry."""
 
 from __future__ import annotations
 
@@ -159,3 +160,128 @@ def test_bad_options_are_errors(tmp_path, cornell):
         profile.main(_parse([str(cornell), "--out", str(tmp_path / "p.jpg")]))
     with pytest.raises(DrptError, match="integrator"):
         profile.main(_parse([str(cornell), "--integrator", "whitted", "--out", str(tmp_path / "p.png")]))
+
+
+# --------------------------------------------------------------------------- light tracing
+#
+# A scene whose query counts at --max-depth 2 follow from its geometry alone: a diffuse
+# infinite plane z = -1 seen straight down by the camera (every camera ray hits it), and an
+# emissive triangle at z = 3 facing down, outside the camera's view (nothing it could
+# occlude lies between the plane's visible points and the camera). With N = W H spp lanes:
+#
+# * bdpt: the light subpath traces one closest hit per lane (N); the camera subpath two
+#   (its first hit on the plane, then the diffuse bounce that ends the path at two
+#   segments: 2N); next-event estimation traces one shadow ray at each first hit (the
+#   light faces every point of the plane: N); a connection s, t >= 2 needs three segments
+#   (none); a light vertex is splatted where it projects into the image and its ray to
+#   the camera is clear (always here), so splats equal the t = 1 shadow rays, 0 < . < N.
+# * ptracer: N light-subpath hits; the emitter is outside the view (no emitter shadow ray).
+#
+# Negative control: the same triangle wound the other way faces up, away from the plane:
+# no next-event shadow ray, no splat (the counts follow the geometry, not the lane count).
+
+PLANE_SCENE = """PerspectiveCamera {{ center 0 0 5 direction 0 0 -1 up 0 1 0 angle 40 }}
+Lights {{ numLights 0 }}
+Background {{ color 0 0 0 }}
+Materials {{ numMaterials 2
+  Material {{ diffuseColor 0.5 0.5 0.5 }}
+  Material {{ diffuseColor 0 0 0 Ke 5 5 5 }}
+}}
+Group {{ numObjects 2
+  MaterialIndex 0
+  Plane {{ normal 0 0 1 offset -1 }}
+  MaterialIndex 1
+  Triangle {{ vertex0 2 0 3 vertex1 {v1} vertex2 {v2} }}
+}}
+"""
+DOWN = {"v1": "2 1 3", "v2": "3 0 3"}  # normal (v1 - v0) x (v2 - v0) = -z: toward the plane
+UP = {"v1": "3 0 3", "v2": "2 1 3"}
+
+
+def _plane_profile(tmp_path, integrator, facing, max_depth=2):
+    from drpt.options import PathOptions, RenderOptions
+
+    path = tmp_path / f"plane_{integrator}_{max_depth}_{'down' if facing is DOWN else 'up'}.txt"
+    path.write_text(PLANE_SCENE.format(**facing))
+    popt = profile.ProfileOptions(RenderOptions(width=8, height=8, spp=2, seed=3, integrator=integrator,
+                                                path=PathOptions(max_depth=max_depth)))
+    (r,) = profile.run_profile(path, popt, modes=("megakernel",))  # the light tracer alone
+    assert r.mode == integrator and r.samples == 8 * 8 * 2
+    return r.occupancy
+
+
+N = 8 * 8 * 2
+
+
+@pytest.mark.slow
+def test_bdpt_counts_at_depth_two(tmp_path):
+    occ = _plane_profile(tmp_path, "bdpt", DOWN)
+    k = occ["rays_by_kind"]
+    assert k["closest hit: light subpath"] == N
+    assert k["closest hit: camera subpath"] == 2 * N
+    assert k["shadow: next-event (s = 1)"] == N
+    assert k["shadow: connection (s, t >= 2)"] == 0
+    assert 0 < k["splat into the film"] == k["shadow: light vertex to camera (t = 1)"] < N
+    assert occ["closest_hit_rays"] == 3 * N and occ["splats"] == k["splat into the film"]
+    # every shadow ray the integrator names is one the scene traced
+    assert occ["shadow_rays"] == occ["shadow_rays_seen_by_scene"] == N + k["splat into the film"]
+    assert occ["loops"]["closest hit: light subpath"]["max_iterations_per_lane"] == 1
+    assert occ["loops"]["closest hit: camera subpath"]["occupancy"] == 1.0  # two per lane, every lane
+
+
+@pytest.mark.slow
+def test_bdpt_counts_negative_controls(tmp_path):
+    away = _plane_profile(tmp_path, "bdpt", UP)["rays_by_kind"]
+    assert away["shadow: next-event (s = 1)"] == 0 and away["splat into the film"] == 0
+    assert away["closest hit: light subpath"] == N  # queried, and missed everything
+    # one segment more: the light subpath's bounce off the plane is traced too (the
+    # camera subpath's second ray escapes to the sky, so it still traces 2N)
+    deeper = _plane_profile(tmp_path, "bdpt", DOWN, max_depth=3)["rays_by_kind"]
+    assert deeper["closest hit: light subpath"] == 2 * N != N
+
+
+@pytest.mark.slow
+def test_ptracer_counts_at_depth_two(tmp_path):
+    occ = _plane_profile(tmp_path, "ptracer", DOWN)
+    k = occ["rays_by_kind"]
+    assert set(k) == {"closest hit: light subpath", "shadow: emitter seen by the camera",
+                      "shadow: light vertex to camera (t = 1)", "splat into the film"}
+    assert k["closest hit: light subpath"] == N
+    assert k["shadow: emitter seen by the camera"] == 0  # outside the view
+    assert 0 < k["splat into the film"] == k["shadow: light vertex to camera (t = 1)"] < N
+    assert occ["shadow_rays"] == occ["shadow_rays_seen_by_scene"]
+    away = _plane_profile(tmp_path, "ptracer", UP)["rays_by_kind"]
+    assert away["splat into the film"] == 0 and away["closest hit: light subpath"] == N
+
+
+@pytest.mark.slow
+def test_light_tracing_report_and_json(tmp_path, cornell, capsys):
+    """The command line on bdpt: the report's text, the JSON, the path megakernel beside it."""
+    out = tmp_path / "bdpt.png"
+    assert profile.main(_parse([str(cornell), "--integrator", "bdpt", "--size", "8", "8", "--spp", "1",
+                                "--max-depth", "4", "--out", str(out)])) == 0
+    text = capsys.readouterr().out
+    data = json.loads(out.with_suffix(".json").read_text())
+    assert set(data["modes"]) == {"bdpt", "megakernel"}
+    b, mk = data["modes"]["bdpt"], data["modes"]["megakernel"]
+    assert b["integrator"] == "bdpt" and mk["integrator"] == "path"
+    assert b["samples"] == mk["samples"] == 64 and b["seconds"] > 0 and b["samples_per_second"] > 0
+    occ = b["occupancy"]
+    assert occ["rays_by_kind"]["closest hit: camera subpath"] >= 64
+    assert occ["rays_by_kind"]["shadow: connection (s, t >= 2)"] > 0  # four segments: connections
+    assert occ["shadow_rays"] == occ["shadow_rays_seen_by_scene"] > 0
+    # the stages split the history by kernel; the fused kernel carries every ray
+    assert sum(s["launches"] for s in b["stages"]) == b["launches"]
+    fused = next(s for s in b["stages"] if s["name"] == profile.LIGHT_FUSED["bdpt"])
+    assert fused["rays"] == occ["closest_hit_rays"] + occ["shadow_rays"] and fused["kernel_ms"] > 0
+    assert any("per-stage times" in x for x in b["not_applicable"])
+    for word in ("bdpt vs path (megakernel)", "rays per sample", "next-event (s = 1)",
+                 "does not apply", "camera subpath loop"):
+        assert word in text, word
+    assert any("bdpt vs path" in line for line in data["verdict"])
+
+
+def test_light_tracing_has_no_wavefront_mode(tmp_path, cornell):
+    with pytest.raises(DrptError, match="no wavefront mode"):
+        profile.main(_parse([str(cornell), "--integrator", "ptracer", "--mode", "wavefront",
+                             "--out", str(tmp_path / "p.png")]))

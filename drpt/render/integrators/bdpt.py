@@ -99,6 +99,7 @@ from ...errors import DrptError
 from ...options import PathOptions
 from ..camera import RayCamera
 from ..film import SplatFilm
+from ..instrument import HIT_CAMERA, HIT_LIGHT, SHADOW_CAMERA, SHADOW_CONNECT, SHADOW_NEE, SPLAT, count
 from ..lights.rays import INV_FOUR_PI, EmitterRays
 from ..sampler import next_2d
 from ..scene import DeviceScene
@@ -473,7 +474,9 @@ class BDPTIntegrator:
         so = scene.spawn(si, wc)
         to = cam.center - so
         dist = dr.norm(to)
+        count(scene, SHADOW_CAMERA, ok)
         ok &= ~scene.occluded(so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
         if strategies is not None:
             strategies.put(depth + 1, 1, x, y, value, ok)
@@ -522,6 +525,7 @@ class BDPTIntegrator:
         end = spawn_origin(ls.p, ls.ng, ls.p_error, -wo)
         seg = end - so
         dist = dr.norm(seg)
+        count(scene, SHADOW_NEE, ok)
         ok &= ~scene.occluded(so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         return dr.select(ok, value, 0.0)
 
@@ -542,6 +546,7 @@ class BDPTIntegrator:
             value = f * ds.irradiance * w
             ok = active & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
             so = scene.spawn(si, ds.wo)
+            count(scene, SHADOW_NEE, ok)
             ok &= ~scene.occluded(so, ds.wo, ds.dist * SHADOW_SHRINK, ok)
             total += dr.select(ok, value, 0.0)
         return total
@@ -558,6 +563,7 @@ class BDPTIntegrator:
                          1, t)
         value = f * radiance * (w / dr.maximum(pdf, 1e-30))
         ok = active & (pdf > 0.0) & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
+        count(scene, SHADOW_NEE, ok)
         ok &= ~scene.occluded(scene.spawn(si, wo), wo, Float(dr.inf), ok)
         return dr.select(ok, value, 0.0)
 
@@ -597,6 +603,7 @@ class BDPTIntegrator:
         end = spawn_origin(lv.p, lv.ng, lv.p_error, -w)
         seg = end - so
         dist = dr.norm(seg)
+        count(scene, SHADOW_CONNECT, ok)
         ok &= ~scene.occluded(so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         return dr.select(ok, value, 0.0)
 
@@ -617,12 +624,15 @@ class BDPTIntegrator:
         dropped = dr.zeros(UInt32, n)
         stored = dr.zeros(UInt32, n)
         lverts = None
+        if scene.instrument is not None:
+            scene.instrument.paths(n, (HIT_LIGHT, HIT_CAMERA, SHADOW_CAMERA, SHADOW_NEE, SHADOW_CONNECT, SPLAT))
         if NL > 0 and self.rays.count > 0 and scene.has_smooth_bsdfs:
             lverts = LightVertices(NL, getattr(scene.materials, "tangents", False))
             o, d, beta, dvcm, dvc, infinite, live = self._emit(rng, Bool(active))
             eta = dr.full(Float, 1.0, n)
             depth = dr.full(UInt32, 1, n)
             while live:
+                count(scene, HIT_LIGHT, live)
                 si = scene.intersect(o, d, live)
                 live &= si.valid
                 finite = dr.isfinite(beta.x) & dr.isfinite(beta.y) & dr.isfinite(beta.z)
@@ -671,6 +681,7 @@ class BDPTIntegrator:
         record = strategies is not None
 
         while live:
+            count(scene, HIT_CAMERA, live)
             si = scene.intersect(o, d, live)
             if self.has_sky or self.has_background:
                 c = self._escaped(d, beta, dvcm, dvc, k + 1, live & ~si.valid)

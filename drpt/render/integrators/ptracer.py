@@ -49,6 +49,7 @@ from ...errors import DrptError
 from ...options import PathOptions
 from ..camera import RayCamera
 from ..film import SplatFilm
+from ..instrument import HIT_LIGHT, SHADOW_CAMERA, SHADOW_EMITTER, SPLAT, count
 from ..lights.rays import EmitterRays
 from ..sampler import next_2d
 from ..scene import DeviceScene
@@ -97,7 +98,9 @@ class ParticleTracer:
         so = scene.spawn(si, wc)
         to = cam.center - so
         dist = dr.norm(to)
+        count(scene, SHADOW_CAMERA, ok)
         ok &= ~scene.occluded(so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
 
     def _visible_emitters(self, rng: PCG32, film: SplatFilm, active: Bool) -> None:
@@ -116,7 +119,9 @@ class ParticleTracer:
         d_len = dr.norm(to)
         d_sh = dr.select(at_inf, -wc, to / dr.maximum(d_len, 1e-30))
         tmax = dr.select(at_inf, dr.inf, d_len * SHADOW_SHRINK)
+        count(scene, SHADOW_EMITTER, ok)
         ok &= ~scene.occluded(so, d_sh, tmax, ok)
+        count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
 
     @dr.syntax
@@ -125,6 +130,8 @@ class ParticleTracer:
         non-finite contributions dropped (per lane)."""
         scene, opt = self.scene, self.opt
         max_depth = opt.max_depth
+        if scene.instrument is not None:
+            scene.instrument.paths(dr.width(active), (HIT_LIGHT, SHADOW_EMITTER, SHADOW_CAMERA, SPLAT))
         if max_depth != 0 and not opt.hide_emitters and self.rays.count > 0:
             self._visible_emitters(rng, film, Bool(active))
         u_sel = rng.next_float32()
@@ -139,6 +146,7 @@ class ParticleTracer:
             live &= depth < max_depth
         dropped = dr.zeros(UInt32, dr.width(active))
         while live:
+            count(scene, HIT_LIGHT, live)
             si = scene.intersect(o, d, live)
             live &= si.valid
             finite = dr.isfinite(beta.x) & dr.isfinite(beta.y) & dr.isfinite(beta.z)
