@@ -35,7 +35,7 @@ BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.shading.MODES
 INTEGRATORS = ("path", "whitted", "ptracer", "volpath")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
-LIGHT_SAMPLERS = ("power", "uniform")  # drpt.render.lights.area
+LIGHT_SAMPLERS = ("power", "uniform", "bvh")  # drpt.render.lights.area
 #: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy sampler, and
 #: Mitsuba's other sampler plugins, which draw from the low-discrepancy one
 SAMPLERS = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "orthogonal")
@@ -397,8 +397,9 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                             default=RenderOptions.light_sampler,
                             help="how next-event estimation picks an area light (emissive "
                                  "triangles and spheres): power (each primitive by its emitted "
-                                 "power) or uniform (Mitsuba's: every emitter alike, then a point "
-                                 f"by area) (default {RenderOptions.light_sampler})")
+                                 "power), uniform (Mitsuba's: every emitter alike, then a point "
+                                 "by area) or bvh (a light BVH: by each emitter's importance at "
+                                 f"the shading point) (default {RenderOptions.light_sampler})")
     if want("filter"):
         parser.add_argument("--filter", dest="filter", metavar="box|tent|gaussian", action=_Given,
                             default=d["filter"],

@@ -173,8 +173,9 @@ def light_sample(scene, rng, u_sel: Float, u_light: Array2f, active) -> tuple[Fl
     """The area light's selection and point samples for next-event estimation: with an
     :class:`LDSampler` both from the stratified pair ``u_light`` (the selection from its
     first value, which is then rescaled: :meth:`~drpt.render.lights.area.AreaLights.reuse`),
-    else ``(u_sel, u_light)`` as drawn."""
-    if isinstance(rng, LDSampler):
+    else ``(u_sel, u_light)`` as drawn. The light BVH's choice depends on the shading
+    point, so with it the selection keeps its own dimension."""
+    if isinstance(rng, LDSampler) and scene.area_lights.bvh is None:
         return scene.area_lights.reuse(u_light, active)
     return u_sel, u_light
 

@@ -222,7 +222,8 @@ class DeviceScene:
         on a triangle, the cone's density on a sphere seen from outside.
         Only the front of an emitter (its shading normal's side) emits."""
         lights = self.area_lights
-        ls = lights.sample(u_select, u, active, ref=si.p if lights.has_spheres else None)
+        ls = lights.sample(u_select, u, active,
+                           ref=si.p if lights.has_spheres or lights.bvh is not None else None)
         to_light = ls.p - si.p
         dist2 = dr.squared_norm(to_light)
         wo = to_light * dr.rsqrt(dist2)
@@ -238,12 +239,14 @@ class DeviceScene:
     def pdf_area_emitter(self, si: Interaction, d: Array3f, active: Bool) -> Float:
         """The density :meth:`sample_area_emitter` has for the point ``si`` a
         ray of unit direction ``d`` hit (0 where ``si`` is not a sampled emitter)."""
-        pdf_a = self.area_lights.pdf_area(si.prim, active)
+        lights = self.area_lights
+        ref = si.p - d * si.t  # where the ray came from
+        prob = lights.bvh_pmf(si.prim, ref, active & si.valid) if lights.bvh is not None else None
+        pdf_a = lights.pdf_area(si.prim, active, prob)
         sees_light = active & (pdf_a > 0.0)
         pdf = dr.select(sees_light, pdf_a * dr.square(si.t) / dr.abs(dr.dot(si.ng, d)), 0.0)
-        if self.area_lights.has_spheres:
-            ref = si.p - d * si.t  # where the ray came from
-            is_sph, pdf_s = self.area_lights.pdf_sphere(si.prim, si.p, ref, d, si.t, active & si.valid)
+        if lights.has_spheres:
+            is_sph, pdf_s = lights.pdf_sphere(si.prim, si.p, ref, d, si.t, active & si.valid, prob)
             pdf = dr.select(is_sph, pdf_s, pdf)
         return pdf
 

@@ -10,7 +10,16 @@ discrete distribution ``P(k)``, then a point on it:
   of it by area: ``P(k) = area_k / (N * area_e(k))`` with ``N`` emitters.
   An emitter is a shape: a Mitsuba XML shape, the faces of one material in
   drpt's own format (:meth:`drpt.scene.model.Triangles.emitter_ids`), each
-  sphere.
+  sphere;
+* ``bvh``: ``P(k)`` depends on the shading point: a light BVH over the
+  primitives (:mod:`drpt.render.lights.light_bvh`) picks one by its importance
+  there (power, distance, orientation), so that the lights near a point and
+  facing it get its samples. Its probabilities need the reference point:
+  :meth:`AreaLights.sample` with ``ref`` and :meth:`AreaLights.pdf_area` and
+  :meth:`AreaLights.pdf_sphere` with the same point; without one (light
+  tracing) it picks by power. No surface normal enters the importance: MIS
+  evaluates the probability at the point a BSDF-sampled ray left from
+  (``si.p - d * si.t``), and the path state carries no normal.
 
 On a triangle the point is uniform, so its area density is
 ``pdf_A(y) = P(k) / area_k`` and the solid-angle density seen from a shading
@@ -47,18 +56,19 @@ from ..surface import SurfaceData
 from ..warp import Frame, square_to_uniform_sphere, square_to_uniform_triangle
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-LIGHT_SAMPLERS = ("power", "uniform")  # drpt.options.LIGHT_SAMPLERS
+LIGHT_SAMPLERS = ("power", "uniform", "bvh")  # drpt.options.LIGHT_SAMPLERS
 
 
 def selection_weights(area: np.ndarray, lum: np.ndarray, emitter: np.ndarray,
                       sampler: str) -> np.ndarray:
     """Each primitive's weight in the light selection, ``P(k)`` up to a factor (zero
-    for those that emit nothing): its power ``area * lum``, or ``uniform``: each
-    emitter (``emitter`` ids) alike, then its primitives by area."""
+    for those that emit nothing): its power ``area * lum`` (``power``, and ``bvh``
+    without a reference point), or ``uniform``: each emitter (``emitter`` ids) alike,
+    then its primitives by area."""
     power = area * lum
     ok = (power > 0) & np.isfinite(power)
     w = np.zeros(len(area))
-    if sampler == "power" or not ok.any():
+    if sampler != "uniform" or not ok.any():
         w[ok] = power[ok]
         return w
     ids, inverse = np.unique(emitter[ok], return_inverse=True)
@@ -92,6 +102,7 @@ class AreaLights:
         self.materials = materials if getattr(materials, "_emit_tex", None) is not None else None
         self.count = 0
         self.n_tri = len(tris)
+        self.bvh = None  # the light BVH (sampler "bvh")
         self.has_spheres = self.has_triangles = False
         if not (len(tris) + len(sph)) or not len(emission):
             return
@@ -135,6 +146,62 @@ class AreaLights:
         if self.n_tri == 0:
             # no triangles: the triangle branch is never traced, but keep a table to gather from
             self.pdf_area_table = Float(np.zeros(1, np.float32))
+        if sampler == "bvh":
+            self._build_bvh(scene, ids, all_area, lum)
+
+    def _build_bvh(self, scene: Scene, ids: np.ndarray, all_area: np.ndarray, lum: np.ndarray):
+        """The light BVH over the selected primitives ``ids`` (its emitter ``k`` is
+        ``ids[k]``): a triangle's bounds, the cone of its normals (geometric and shading)
+        and power ``area * lum``; a sphere's bounds, every direction, and the power of
+        its cross-section ``pi r^2 lum`` (what any direction sees of it)."""
+        from .light_bvh import LightBVH
+
+        tris, sph = scene.triangles, scene.spheres
+        m = len(ids)
+        lo, hi = np.zeros((m, 3)), np.zeros((m, 3))
+        w = np.tile([0.0, 0.0, 1.0], (m, 1))
+        cos_o = np.full(m, -1.0)
+        phi = all_area[ids] * lum[ids]
+        is_tri = ids < self.n_tri
+        t = ids[is_tri]
+        if t.size:
+            p = tris.positions[t]
+            lo[is_tri], hi[is_tri] = p.min(axis=1), p.max(axis=1)
+            ng = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+            ng /= np.maximum(np.linalg.norm(ng, axis=1), 1e-300)[:, None]
+            dirs = ng[:, None, :]
+            if tris.normals is not None:
+                sn = tris.normals[t]
+                sn = sn / np.maximum(np.linalg.norm(sn, axis=2), 1e-300)[:, :, None]
+                dirs = np.concatenate([dirs, sn], axis=1)
+            axis = dirs.sum(axis=1)
+            alen = np.linalg.norm(axis, axis=1)
+            axis = np.where(alen[:, None] > 1e-9, axis / np.maximum(alen, 1e-300)[:, None], ng)
+            c = np.einsum("fkj,fj->fk", dirs, axis).min(axis=1)
+            w[is_tri] = axis
+            # a cone of half-angle >= 90 degrees would not hold the normals between them
+            cos_o[is_tri] = np.where((alen > 1e-9) & (c > 1e-3), np.clip(c, -1.0, 1.0) * (1 - 1e-6), -1.0)
+        s = ids[~is_tri] - self.n_tri
+        if s.size:
+            ctr, r = np.asarray(sph.center, float)[s], np.asarray(sph.radius, float)[s]
+            lo[~is_tri], hi[~is_tri] = ctr - r[:, None], ctr + r[:, None]
+            phi[~is_tri] = np.pi * r * r * lum[ids[~is_tri]]
+        self.bvh = LightBVH(lo, hi, w, cos_o, np.zeros(m), phi)
+        # per triangle: 1 / area (its area density is pmf / area); per primitive: its light
+        inv_area = np.zeros(max(self.n_tri, 1))
+        inv_area[t] = 1.0 / all_area[t]
+        self._inv_area = Float(inv_area.astype(np.float32))
+        light_of = np.full(self.n_tri + len(sph), 0xFFFFFFFF, np.uint32)
+        light_of[ids] = np.arange(m, dtype=np.uint32)
+        self._light_of = UInt32(light_of)
+
+    def bvh_pmf(self, prim: UInt32, ref: Array3f, active: Bool) -> Float:
+        """The light BVH's probability, seen from ``ref``, of choosing primitive ``prim``
+        (0 for primitives that are not lights)."""
+        active = active & (prim < self.n_tri + self.surfaces.n_sph)  # not a plane
+        k = dr.gather(UInt32, self._light_of, prim, active)
+        mine = active & (k != 0xFFFFFFFF)
+        return self.bvh.pmf(dr.select(mine, k, 0), ref, None, mine)
 
     def _select(self, u_select: Float, active: Bool):
         cdf = self.cdf
@@ -158,21 +225,32 @@ class AreaLights:
     def sample(self, u_select: Float, u: Array2f, active: Bool, ref: Array3f | None = None) -> LightSample:
         """A point on an emissive primitive, with its area density. On a sphere the
         point is uniform on it, or with ``ref`` (a shading point outside it) in the
-        cone of its cap seen from ``ref``, with the solid-angle density (``solid_angle``)."""
-        k, face = self._select(u_select, active)
+        cone of its cap seen from ``ref``, with the solid-angle density (``solid_angle``).
+        The light BVH chooses the primitive where ``ref`` is given."""
+        prob = None
+        if self.bvh is not None and ref is not None:
+            k, prob = self.bvh.sample(u_select, ref, None, active)
+            active = active & (prob > 0.0)
+            face = dr.gather(UInt32, self.ids, k, active)
+        else:
+            k, face = self._select(u_select, active)
         le = dr.gather(Array3f, self.le, k, active)
         if not self.has_spheres:
             p, n_front, ng, err, pdf, le = self._triangle_point(face, u, le, active)
+            if prob is not None:
+                pdf = prob * dr.gather(Float, self._inv_area, face, active)
             return LightSample(p, n_front, ng, le, pdf, active, err)
         is_sph = face >= self.n_tri
         if self.has_triangles:
             tri = active & ~is_sph
             p, n_front, ng, err, pdf, le = self._triangle_point(dr.select(is_sph, 0, face), u, le, tri)
+            if prob is not None:
+                pdf = prob * dr.gather(Float, self._inv_area, dr.select(is_sph, 0, face), tri)
         else:
             p, n_front, ng, err, pdf = (Array3f(0.0), Array3f(0.0, 0.0, 1.0), Array3f(0.0, 0.0, 1.0),
                                         Float(0.0), Float(0.0))
         sa = active & is_sph
-        sp, sn, serr, spdf, solid = self._sphere_point(face - self.n_tri, u, sa, ref)
+        sp, sn, serr, spdf, solid = self._sphere_point(face - self.n_tri, u, sa, ref, prob)
         p = dr.select(is_sph, sp, p)
         n_front = dr.select(is_sph, sn, n_front)
         ng = dr.select(is_sph, sn, ng)
@@ -207,13 +285,16 @@ class AreaLights:
         pdf = dr.gather(Float, self.pdf_area_table, face, active)
         return p, n_front, ng, err, pdf, le
 
-    def _sphere_point(self, j: UInt32, u: Array2f, active: Bool, ref: Array3f | None):
-        """A point on sphere ``j``: ``(p, outward normal, p_error, density, solid_angle)``."""
+    def _sphere_point(self, j: UInt32, u: Array2f, active: Bool, ref: Array3f | None,
+                      prob: Float | None = None):
+        """A point on sphere ``j`` (selected with probability ``prob``, else its ``P(k)``):
+        ``(p, outward normal, p_error, density, solid_angle)``."""
         s = self.surfaces
         j = dr.select(active, j, 0)
         c = dr.gather(Array3f, s.sph_c, j, active)
         r = dr.gather(Float, s.sph_r, j, active)
-        prob = dr.gather(Float, self.sph_prob, j, active)
+        if prob is None:
+            prob = dr.gather(Float, self.sph_prob, j, active)
         n = square_to_uniform_sphere(u)
         pdf = prob / (4.0 * dr.pi * r * r)
         solid = None
@@ -236,21 +317,29 @@ class AreaLights:
         p = c + n * r
         return p, n, sphere_error(p, r, n), pdf, solid
 
-    def pdf_area(self, prim: UInt32, active: Bool) -> Float:
-        """Area density with which :meth:`sample` picks a point on triangle ``prim``."""
+    def pdf_area(self, prim: UInt32, active: Bool, prob: Float | None = None) -> Float:
+        """Area density with which :meth:`sample` picks a point on triangle ``prim``;
+        ``prob``: the light BVH's probability of ``prim`` (:meth:`bvh_pmf`) where it chose."""
         is_tri = active & (prim < self.surfaces.n_tri)
+        if prob is not None:
+            return dr.select(is_tri, prob * dr.gather(Float, self._inv_area, prim, is_tri), 0.0)
         return dr.gather(Float, self.pdf_area_table, prim, is_tri)
 
     def pdf_sphere(self, prim: UInt32, p: Array3f, ref: Array3f, d: Array3f, dist: Float,
-                   active: Bool) -> tuple[Bool, Float]:
+                   active: Bool, prob: Float | None = None) -> tuple[Bool, Float]:
         """The solid-angle density with which :meth:`sample` (with ``ref``) gives the
-        direction ``d`` toward point ``p`` of sphere ``prim`` at ``dist``: ``(is_sphere, pdf)``."""
+        direction ``d`` toward point ``p`` of sphere ``prim`` at ``dist``: ``(is_sphere, pdf)``
+        (``prob``: the light BVH's probability of ``prim`` from ``ref``, if computed)."""
         s = self.surfaces
         is_sph = active & (prim >= self.n_tri) & (prim < self.n_tri + s.n_sph)
         j = dr.select(is_sph, prim - self.n_tri, 0)
         c = dr.gather(Array3f, s.sph_c, j, is_sph)
         r = dr.gather(Float, s.sph_r, j, is_sph)
-        prob = dr.gather(Float, self.sph_prob, j, is_sph)
+        if self.bvh is not None:
+            if prob is None:
+                prob = self.bvh_pmf(dr.select(is_sph, prim, 0), ref, is_sph)
+        else:
+            prob = dr.gather(Float, self.sph_prob, j, is_sph)
         outside, omc, _, _ = cone_of(c, r, ref)
         n = dr.normalize(p - c)
         area = prob / (4.0 * dr.pi * r * r) * dr.square(dist) / dr.abs(dr.dot(n, d))
