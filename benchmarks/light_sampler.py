@@ -1,20 +1,22 @@
-"""Light selection by power against Mitsuba's uniform selection, at equal spp and equal time.
+"""The light samplers (power, Mitsuba's uniform, the light BVH) at equal spp and equal time.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/light_sampler.py [SPP] [REPEATS]
+    PYTHONPATH=. .venv/bin/python benchmarks/light_sampler.py [SPP] [REPEATS] [SIZE]
 
-For each scene with area lights (the bundled ones, the generated Veach MIS scene, the XML
-test scenes with several emitters, and the Mitsuba corpus scenes with area lights that drpt
-reads, when ``../shared/corpus`` is present) drpt renders ``REPEATS`` images (seeds 0..)
-at ``SPP`` (default 64) with ``--light-sampler power`` and ``uniform``, and measures
-each against a reference: the corpus scene's shipped Mitsuba reference, Mitsuba at 8192
-spp for the other XML scenes, and drpt at 8192 spp (power, another seed) for drpt's own
-format. It prints, per scene, the emitters, the mean relMSE
+For each scene with area lights (the bundled ones, the generated Veach MIS scene and the
+50-light scene of :mod:`drpt.tools.scenegen.many_lights`, the XML test scenes with several
+emitters, and the Mitsuba corpus scenes with area lights that drpt reads, when
+``../shared/corpus`` is present) drpt renders ``REPEATS`` images (seeds 0..) at ``SPP``
+(default 64) with each ``--light-sampler``, and measures each against a reference: the
+corpus scene's shipped Mitsuba reference, Mitsuba at 8192 spp for the other XML scenes,
+and drpt at 8192 spp (power, another seed) for drpt's own format (``SIZE`` x ``SIZE``
+pixels, default 64). It prints, per scene, the emitters, the mean relMSE
 (``mean((x - ref)^2 / (ref^2 + 0.01))``) of each sampler, the mean render seconds
-(compilation excluded: a discarded first render), and the ratios ``uniform / power`` of
-the relMSE at equal spp and at equal time (relMSE times seconds); below 1: uniform is
-better. Both samplers trace the same kernel (only the tables differ), so the time ratio
-is 1 up to the timing noise of short renders. For XML scenes Mitsuba's relMSE at the same
-spp (its seeds 0..) and drpt's (power) over it follow.
+(compilation excluded: a discarded first render), and the ratios ``X / power`` of the
+relMSE at equal time (relMSE times seconds); below 1: X is better. ``power`` and
+``uniform`` trace the same kernel (only the tables differ), so their time ratio is 1 up
+to the timing noise of short renders; ``bvh`` walks the tree at every light sample and
+every emitter hit. For XML scenes Mitsuba's relMSE at the same spp (its seeds 0..)
+follows.
 """
 
 from __future__ import annotations
@@ -38,13 +40,17 @@ REF_SPP = 8192
 
 def scenes() -> list[tuple[str, Path, str]]:
     """``(name, path, reference kind)``: ``drpt``, ``mitsuba`` or ``corpus``."""
-    from drpt.tools.scenegen import veach_mis
+    from drpt.tools.scenegen import many_lights, veach_mis
 
     tmp = Path(tempfile.mkdtemp())
     out = [("cornellbox", ROOT / "scenes/cornellbox/cornellbox.txt", "drpt"),
            ("newscene", ROOT / "scenes/newscene/newscene.txt", "drpt"),
+           ("newscene_hard", ROOT / "scenes/newscene/newscene_hard.txt", "drpt"),
+           ("cornellbox_media", ROOT / "scenes/cornellbox_media/cornellbox_media.txt", "drpt"),
            ("veach_mis (scenegen, tessellated)",
-            next(p for p in veach_mis.main(tmp) if p.suffix == ".txt"), "drpt")]
+            next(p for p in veach_mis.main(tmp) if p.suffix == ".txt"), "drpt"),
+           ("many_lights (scenegen, 50 lights)",
+            next(p for p in many_lights.main(tmp, 50) if p.suffix == ".txt"), "drpt")]
     xml = ROOT / "tests/data/xml"
     out += [(f"{n}.xml", xml / f"{n}.xml", "mitsuba") for n in ("veach_mis", "sphere_light", "ptracer")]
     for rel in ("bsdf_spheres/test_arealight_path.xml", "various_emitters/test_various_emitters_ptracer.xml"):
@@ -94,16 +100,19 @@ def mitsuba_error(path, kind, spp, repeats, ref):
     return float(np.mean(errs))
 
 
+SAMPLERS = ("power", "uniform", "bvh")
+
+
 def main(spp=64, repeats=4, size=64):
-    print("| scene | emitters | relMSE power | relMSE uniform | uniform / power, equal spp | "
-          "s power | s uniform | uniform / power, equal time | Mitsuba relMSE | power / Mitsuba |\n"
-          "|---|---|---|---|---|---|---|---|---|---|")
+    print("| scene | emitters | relMSE power | uniform | bvh | s power | uniform | bvh | "
+          "uniform / power, equal time | bvh / power, equal time | Mitsuba relMSE |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|")
     for name, path, kind in scenes():
         defines = {"spp": str(spp)} if kind == "corpus" else None
         scene = load_scene(path, defines=defines) if defines else load_scene(path)
         ref = reference(name, path, kind, scene, size)
         row = {}
-        for sampler in ("power", "uniform"):
+        for sampler in SAMPLERS:
             r = Renderer(scene, options(scene, 1, 99, sampler, size))
             r.render()  # compile
             errs, secs = [], []
@@ -114,12 +123,14 @@ def main(spp=64, repeats=4, size=64):
                 secs.append(time.perf_counter() - t0)
                 errs.append(float(np.mean((img - ref) ** 2 / (ref ** 2 + 1e-2))))
             row[sampler] = (float(np.mean(errs)), float(np.mean(secs)), r.scene.area_lights)
-        (ep, sp, lights), (eu, su, _) = row["power"], row["uniform"]
+        ep, sp, lights = row["power"]
         em = mitsuba_error(path, kind, spp, repeats, ref)
-        mcols = "| | |" if em is None else f"| {em:.4g} | {ep / em:.2f} |"
-        print(f"| {name} | {getattr(lights, 'emitters', 0)} | {ep:.4g} | {eu:.4g} | {eu / ep:.2f} | "
-              f"{sp:.2f} | {su:.2f} | {eu * su / (ep * sp):.2f} {mcols}", flush=True)
+        errs = " | ".join(f"{row[k][0]:.4g}" for k in SAMPLERS)
+        secs = " | ".join(f"{row[k][1]:.2f}" for k in SAMPLERS)
+        ratios = " | ".join(f"{row[k][0] * row[k][1] / (ep * sp):.2f}" for k in SAMPLERS[1:])
+        print(f"| {name} | {getattr(lights, 'emitters', 0)} | {errs} | {secs} | {ratios} | "
+              f"{'' if em is None else f'{em:.4g}'} |", flush=True)
 
 
 if __name__ == "__main__":
-    main(*(int(a) for a in sys.argv[1:3]))
+    main(*(int(a) for a in sys.argv[1:4]))
