@@ -454,6 +454,29 @@ def test_converge_cli_smoke(tmp_path, capsys, cornell):
     assert len(list((tmp_path / "cache").glob("*.npz"))) == 1
 
 
+@pytest.mark.slow
+@pytest.mark.mitsuba
+def test_converge_takes_an_xml_scene_as_mitsuba_reads_it(tmp_path, monkeypatch, repo):
+    """An XML scene: the file's film size and max_depth apply (no flags given), and Mitsuba
+    renders the file itself for the reference and for its curve, not drpt's export."""
+    pytest.importorskip("mitsuba")
+    from drpt.tools import xmlref
+
+    loads = []
+    real = xmlref.MitsubaXML.load
+
+    def load(self):
+        loads.append(self.path.name)
+        return real(self)
+    monkeypatch.setattr(xmlref.MitsubaXML, "load", load)
+    out = tmp_path / "cv"
+    xml = repo / "tests" / "data" / "xml" / "sphere_light.xml"
+    assert _run(converge, xml, "--max-spp", "2", "--ref-spp", "16", "--no-cache", "--out", out, "-q") == 0
+    data = json.loads((out / "converge.json").read_text())
+    assert (data["width"], data["height"], data["max_depth"]) == (32, 24, 4)
+    assert loads == ["sphere_light.xml", "sphere_light.xml"]  # the reference, then the curve
+
+
 def test_converge_rejects_bad_arguments(tmp_path, cornell):
     from drpt.errors import DrptError
 
