@@ -5,9 +5,10 @@ check that a change leaves a scene's kernels as they were.
 
 ``MODE`` is the material mode (``--bsdf``, default ``auto``), ``ACCEL`` the
 accelerator (default ``auto``), ``SAMPLER`` the ``--sampler`` (default
-``independent``), ``LIGHTS`` the ``--light-sampler`` (default ``power``). Renders 32x32 at 4 spp with Dr.Jit's kernel history on and
-prints the operation counts of the three largest JIT kernels (the fused path
-kernel is the largest). Run it from each checkout's root with
+``independent``), ``LIGHTS`` the ``--light-sampler`` (default ``power``).
+Renders 32x32 at 4 spp with Dr.Jit's kernel history on and prints the
+operation counts of the three largest JIT kernels (the fused path kernel is
+the largest). Run it from each checkout's root with
 ``PYTHONPATH=.`` to compare two commits: equal counts mean the same code was
 traced (hashes may still differ with evaluation order).
 """

@@ -46,7 +46,6 @@ def scenes() -> list[tuple[str, Path, str]]:
     out = [("cornellbox", ROOT / "scenes/cornellbox/cornellbox.txt", "drpt"),
            ("newscene", ROOT / "scenes/newscene/newscene.txt", "drpt"),
            ("newscene_hard", ROOT / "scenes/newscene/newscene_hard.txt", "drpt"),
-           ("cornellbox_media", ROOT / "scenes/cornellbox_media/cornellbox_media.txt", "drpt"),
            ("veach_mis (scenegen, tessellated)",
             next(p for p in veach_mis.main(tmp) if p.suffix == ".txt"), "drpt"),
            ("many_lights (scenegen, 50 lights)",

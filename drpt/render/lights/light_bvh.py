@@ -45,7 +45,7 @@ import math
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array3f, Bool, Float, UInt32
+from drjit.auto import Array3f, Array4f, Bool, Float, UInt32
 
 ONE_MINUS_EPS = 0.99999994
 
@@ -154,17 +154,19 @@ class LightBVH:
         self.slot = slot
         self.phi_total = float(N_phi[0])
 
-        def f(x):
-            return Float(np.ascontiguousarray(x, np.float32))
-
-        self._c = Array3f(*(f(center[:, i]) for i in range(3)))
-        # the radius is rounded up so that float32 bounds still hold the emitters
-        self._r = f(radius * (1 + 1e-6) + 1e-7 * np.abs(center).max(axis=1))
-        self._w = Array3f(*(f(N_w[:, i]) for i in range(3)))
-        self._cos_o = f(N_co)
-        self._cos_e = f(N_ce)
-        # power relative to the root's, so that importances stay in float32's range
-        self._phi = f(N_phi / max(N_phi[0], 1e-300))
+        # one record of 12 floats per node, read with three packet gathers:
+        # (center, radius), (cone axis, cos theta_o), (cos theta_e, power, sin theta_o, 0); the
+        # radius rounded up so that float32 bounds still hold the emitters, the power
+        # relative to the root's, so that importances stay in float32's range
+        rec = np.zeros((self.nodes, 12))
+        rec[:, 0:3] = center
+        rec[:, 3] = radius * (1 + 1e-6) + 1e-7 * np.abs(center).max(axis=1)
+        rec[:, 4:7] = N_w
+        rec[:, 7] = N_co
+        rec[:, 8] = N_ce
+        rec[:, 9] = N_phi / max(N_phi[0], 1e-300)
+        rec[:, 10] = np.sqrt(np.maximum(1.0 - N_co * N_co, 0.0))
+        self._rec = Float(np.ascontiguousarray(rec.ravel(), np.float32))
         item = np.zeros(n_leaf, np.uint32)
         item[slot] = np.arange(m, dtype=np.uint32)
         self._item = UInt32(item)
@@ -173,12 +175,12 @@ class LightBVH:
     # -------------------------------------------------------------- device side
     def importance(self, node: UInt32, p: Array3f, n: Array3f | None, active: Bool) -> Float:
         """The importance of ``node`` seen from ``p`` (normal ``n`` or None)."""
-        c = dr.gather(Array3f, self._c, node, active)
-        r = dr.gather(Float, self._r, node, active)
-        w = dr.gather(Array3f, self._w, node, active)
-        cos_o = dr.gather(Float, self._cos_o, node, active)
-        cos_e = dr.gather(Float, self._cos_e, node, active)
-        phi = dr.gather(Float, self._phi, node, active)
+        a = dr.gather(Array4f, self._rec, 3 * node, active)
+        b = dr.gather(Array4f, self._rec, 3 * node + 1, active)
+        e = dr.gather(Array4f, self._rec, 3 * node + 2, active)
+        c, r = Array3f(a.x, a.y, a.z), a.w
+        w, cos_o = Array3f(b.x, b.y, b.z), b.w
+        cos_e, phi, sin_o = e.x, e.y, e.z
         dv = p - c
         d2 = dr.squared_norm(dv)
         r2 = r * r
@@ -190,7 +192,6 @@ class LightBVH:
         sin2_b = dr.minimum(r2 / dr.maximum(d2, 1e-30), 1.0)
         cos_b = dr.select(inside, -1.0, dr.safe_sqrt(1.0 - sin2_b))
         sin_b = dr.select(inside, 0.0, dr.sqrt(sin2_b))
-        sin_o = dr.safe_sqrt(1.0 - cos_o * cos_o)
         # theta' = max(0, theta_w - theta_o - theta_b), as cosines and sines
         within_o = cos_w > cos_o
         cos_x = dr.select(within_o, 1.0, cos_w * cos_o + sin_w * sin_o)
