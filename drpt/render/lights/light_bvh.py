@@ -82,13 +82,13 @@ def leaf_slots(centers: np.ndarray) -> tuple[int, np.ndarray]:
     each node's bounds of the points (``ceil(c/2)`` to the left child)."""
     m = len(centers)
     depth = max(0, math.ceil(math.log2(m))) if m > 1 else 0
-    seg = np.zeros(m, np.int64)
+    seg = np.zeros(m, np.int64)  # each point's node at the current level
+    order = np.arange(m)  # the points sorted by node (kept so from level to level)
     idx = np.arange(m)
     for level in range(depth):
         nseg = 1 << level
-        order = np.argsort(seg, kind="stable")
         s_sorted = seg[order]
-        counts = np.bincount(seg, minlength=nseg)
+        counts = np.bincount(s_sorted, minlength=nseg)
         starts = np.cumsum(counts) - counts
         nonempty = counts > 0
         c_sorted = centers[order]
@@ -97,8 +97,12 @@ def leaf_slots(centers: np.ndarray) -> tuple[int, np.ndarray]:
         lo[nonempty] = np.minimum.reduceat(c_sorted, starts[nonempty], axis=0)
         hi[nonempty] = np.maximum.reduceat(c_sorted, starts[nonempty], axis=0)
         axis = np.argmax(hi - lo, axis=1)
-        key = centers[idx, axis[seg]]
-        order = np.lexsort((key, seg))
+        # within each node by the coordinate along its longest axis, scaled into [0, 0.5]:
+        # one sort of node + that fraction orders by node, then by coordinate
+        a = axis[s_sorted]
+        lo_a, ext = lo[s_sorted, a], (hi - lo)[s_sorted, a]
+        frac = 0.5 * (c_sorted[idx, a] - lo_a) / np.where(ext > 0, ext, 1.0)
+        order = order[np.argsort(s_sorted + frac, kind="stable")]
         s_sorted = seg[order]
         rank = idx - starts[s_sorted]
         left = (counts + 1) // 2
