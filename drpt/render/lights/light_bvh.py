@@ -156,7 +156,6 @@ class LightBVH:
         self.nodes = len(N_phi)
         #: per emitter: its leaf slot (the bit trail, most significant bit = the root's branch)
         self.slot = slot
-        self.phi_total = float(N_phi[0])
 
         # one record of 12 floats per node, read with three packet gathers:
         # (center, radius), (cone axis, cos theta_o), (cos theta_e, power, sin theta_o, 0); the
