@@ -1,13 +1,14 @@
 """Operation count of the largest traced kernels of one render: a timing-free
 check that a change leaves a scene's kernels as they were.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/kernel_ops.py SCENE [MODE] [ACCEL] [SAMPLER]
+    PYTHONPATH=. .venv/bin/python benchmarks/kernel_ops.py SCENE [MODE] [ACCEL] [SAMPLER] [LIGHTS]
 
 ``MODE`` is the material mode (``--bsdf``, default ``auto``), ``ACCEL`` the
 accelerator (default ``auto``), ``SAMPLER`` the ``--sampler`` (default
-``independent``). Renders 32x32 at 4 spp with Dr.Jit's kernel history on and
-prints the operation counts of the three largest JIT kernels (the fused path
-kernel is the largest). Run it from each checkout's root with
+``independent``), ``LIGHTS`` the ``--light-sampler`` (default ``mixed``, the renderer's).
+Renders 32x32 at 4 spp with Dr.Jit's kernel history on and prints the
+operation counts of the three largest JIT kernels (the fused path kernel is
+the largest). Run it from each checkout's root with
 ``PYTHONPATH=.`` to compare two commits: equal counts mean the same code was
 traced (hashes may still differ with evaluation order).
 """
@@ -26,13 +27,15 @@ def main(argv: list[str]) -> int:
     mode = argv[1] if len(argv) > 1 else "auto"
     accel = argv[2] if len(argv) > 2 else "auto"
     sampler = argv[3] if len(argv) > 3 else "independent"
+    lights = argv[4] if len(argv) > 4 else RenderOptions.light_sampler
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     r = Renderer(load_scene(scene_file), RenderOptions(width=32, height=32, spp=4, bsdf=mode, accel=accel,
-                                                       sampler=sampler, progress=False))
+                                                       sampler=sampler, light_sampler=lights,
+                                                       progress=False))
     dr.kernel_history_clear()
     r.render()
     ops = sorted(k.get("operation_count", 0) for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT)
-    print(scene_file, mode, accel, sampler, ops[-3:])
+    print(scene_file, mode, accel, sampler, lights, ops[-3:])
     return 0
 
 
