@@ -1,6 +1,6 @@
 """The light samplers (power, Mitsuba's uniform, mixed, the light BVH) at equal spp and equal time.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/light_sampler.py [SPP] [REPEATS] [all|mixed]
+    PYTHONPATH=. .venv/bin/python benchmarks/light_sampler.py [SPP] [REPEATS] [all|mixed|NAMES]
 
 For each scene with area lights (the bundled ones, the generated Veach MIS scene and the
 50-light scene of :mod:`drpt.tools.scenegen.many_lights`, the XML
@@ -9,7 +9,8 @@ reads, when ``../shared/corpus`` is present) and each scene whose emitters are o
 families (``mixed``, the only ones with that argument: the generated sky-and-sun scene
 with a point light, ``ptracer.xml`` rendered by the path tracer (area, point, spot and
 directional lights and a sky), ``projector_spot.xml``, and the corpus's media scenes with
-an area light and a sky, rendered by volpath) drpt renders ``REPEATS`` images (seeds 0..)
+an area light and a sky, rendered by volpath; ``NAMES``: the scenes whose names start with
+one of these comma-separated prefixes) drpt renders ``REPEATS`` images (seeds 0..)
 at ``SPP`` (default 64) with each ``--light-sampler`` (``power``, ``uniform``, ``mixed``,
 ``bvh``; those the checkout has), and measures
 each against a reference: the corpus scene's shipped Mitsuba reference, Mitsuba at 8192
@@ -135,7 +136,10 @@ def main(spp=64, repeats=4, which="all", size=64):
     print("| scene | emitters | " + " | ".join(f"relMSE {r}" for r in rules) + " | "
           + " | ".join(f"s {r}" for r in rules) + " | " + " | ".join(f"{r} / power, equal time" for r in rules[1:])
           + " | Mitsuba relMSE | power / Mitsuba |\n" + "|---" * (3 * len(rules) + 3) + "|")
-    todo = scenes() if which == "all" else mixed_scenes(Path(tempfile.mkdtemp()))
+    if which in ("all", "mixed"):
+        todo = scenes() if which == "all" else mixed_scenes(Path(tempfile.mkdtemp()))
+    else:  # scenes whose names start with one of the comma-separated prefixes
+        todo = [x for x in scenes() if any(x[0].startswith(w) for w in which.split(","))]
     for name, path, kind, extra in todo:
         defines = {**({"spp": str(spp)} if kind == "corpus" else {}), **extra}
         scene = load_scene(path, defines=defines) if defines else load_scene(path)

@@ -86,11 +86,12 @@ from pathlib import Path
 import numpy as np
 
 from .. import llvm_tuning, metrics
-from ..cli.args import add_render_flags, options_from_args
+from ..cli.args import add_render_flags, given_settings, options_from_args
 from ..denoise import denoise_result, require
 from ..errors import DrptError, warn
 from ..export.mitsuba import to_mitsuba_dict
 from ..metrics import rel_mse
+from ..options import with_scene_settings
 from ..render.renderer import Renderer
 from ..scene import load_scene
 from .compare import _prepare_out, _write_json
@@ -100,6 +101,7 @@ from .reference import (
     check_reference_args,
     get_reference,
 )
+from .xmlref import MitsubaXML
 
 EPS = 1e-2  # relMSE's eps (drpt.metrics.rel_mse)
 DEFAULT_LEVELS = (1e-1, 3e-2, 1e-2)
@@ -338,10 +340,6 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
     scene = load_scene(scene_path)
     source = None
     if scene_path.suffix.lower() == ".xml":
-        from ..cli.args import given_settings
-        from ..options import with_scene_settings
-        from .xmlref import MitsubaXML
-
         if args is not None:
             options, scene = with_scene_settings(options, scene, given_settings(args))
             options.validate()

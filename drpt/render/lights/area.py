@@ -60,6 +60,7 @@ from ..spawn import sphere_error, triangle_point
 from ..surface import SurfaceData
 from ..warp import Frame, square_to_uniform_sphere, square_to_uniform_triangle
 from . import EmitterSample
+from .light_bvh import area_light_bvh
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh")  # drpt.options.LIGHT_SAMPLERS
@@ -201,8 +202,6 @@ class AreaLights:
     def bvh(self, scene: Scene):
         """A :class:`~drpt.render.lights.light_bvh.LightBVH` over this family's slots
         (item ``k`` is slot ``k``), from the primitives of ``scene`` it was built from."""
-        from .light_bvh import area_light_bvh
-
         return area_light_bvh(scene, self._ids, self.n_tri, self._area, self._lum)
 
     def slot_of(self, prim: UInt32, active: Bool) -> UInt32:

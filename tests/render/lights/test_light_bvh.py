@@ -331,3 +331,42 @@ def test_wrong_mis_pmf_fails_the_render_test(many_lights, monkeypatch):
     real = BVHSelection.pmf
     monkeypatch.setattr(BVHSelection, "pmf", lambda self, *a: real(self, *a) * 0.05)
     assert _max_z(many_lights, 128) > 6
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("control", [False, True], ids=["bvh", "control"])
+def test_every_family_render_agrees_with_mixed(many_lights, tmp_path, monkeypatch, control):
+    """The 50-light scene with a point light and a sky (with a sun) added: ``bvh``
+    (the area lights by the BVH, the point light and the sky by ``mixed``'s
+    probabilities) against ``mixed`` (block z-test, max |z| < 4.5). Negative control:
+    BSDF-sampled sky hits weighted with the sky's probability 20x too small (|z| > 6)."""
+    from drpt.imageio import write_image
+    from drpt.options import RenderOptions
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+    from drpt.testing import block_z
+
+    img = np.ones((16, 32, 3), np.float32) * 0.5
+    img[3:5, 20:23] = 200.0  # a sun
+    write_image(tmp_path / "sky.exr", img)
+    scene = load_scene(many_lights)
+    scene.lights += [PointLight((1.0, 3.0, 2.0), (30.0, 30.0, 30.0)), Skybox(tmp_path / "sky.exr")]
+    if control:
+        real = BVHSelection.pmf
+
+        def wrong(self, index, ref, active=True):
+            p = real(self, index, ref, active)
+            return dr.select(index >= self.area_count, p * 0.05, p)
+        monkeypatch.setattr(BVHSelection, "pmf", wrong)
+
+    def render(rule, seed):
+        opts = RenderOptions(width=64, height=48, spp=128, seed=seed, light_sampler=rule, progress=False)
+        r = Renderer(scene, opts)
+        assert type(r.scene.emitter_selection).__name__ == ("BVHSelection" if rule == "bvh" else "LightSelection")
+        return r.render()
+
+    a, b = render("bvh", 1), render("mixed", 2)
+    assert np.all(np.isfinite(a.image)) and a.nonfinite == 0
+    z = float(np.abs(block_z(a.image, a.variance, b.image, b.variance)).max())
+    print("max |z|", z)
+    assert (z > 6) if control else (z < 4.5)
