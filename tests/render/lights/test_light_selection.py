@@ -213,12 +213,13 @@ def _variances(name, spp, seeds):
     """drpt's variance images of tests/data/xml/``name``.xml at ``spp`` for each seed."""
     from dataclasses import replace
 
-    from drpt.options import RenderOptions, apply_scene_settings
+    from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
     scene = load_scene(XML / f"{name}.xml")
-    base = replace(apply_scene_settings(RenderOptions(progress=False), scene), spp=spp)
+    opts, scene = with_scene_settings(RenderOptions(progress=False), scene)
+    base = replace(opts, spp=spp)
     return [Renderer(scene, replace(base, seed=s)).render().variance for s in seeds]
 
 
