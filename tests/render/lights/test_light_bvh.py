@@ -18,7 +18,10 @@
   on a 50-light scene (megakernel, wavefront, ``ldsampler``) and on the bundled Cornell box
   (whose light is one quad: two triangles with the same bounds, so that the BVH picks as
   power does and the test checks its densities and MIS); negative control: MIS weights from a
-  pmf 20x too small fail it (|z| > 6).
+  pmf 20x too small fail it (|z| > 6);
+* the 50-light scene with a point light and a sky renders with ``bvh`` like ``mixed`` in the
+  path, Whitted and volumetric path integrators (max |z| < 4.5); negative control: the sky's
+  MIS probability 20x too small (|z| > 6).
 """
 
 import drjit as dr
@@ -334,12 +337,14 @@ def test_wrong_mis_pmf_fails_the_render_test(many_lights, monkeypatch):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("control", [False, True], ids=["bvh", "control"])
-def test_every_family_render_agrees_with_mixed(many_lights, tmp_path, monkeypatch, control):
+@pytest.mark.parametrize("integrator,control", [("path", False), ("whitted", False), ("volpath", False),
+                                               ("path", True)], ids=["path", "whitted", "volpath", "control"])
+def test_every_family_render_agrees_with_mixed(many_lights, tmp_path, monkeypatch, integrator, control):
     """The 50-light scene with a point light and a sky (with a sun) added: ``bvh``
     (the area lights by the BVH, the point light and the sky by ``mixed``'s
-    probabilities) against ``mixed`` (block z-test, max |z| < 4.5). Negative control:
-    BSDF-sampled sky hits weighted with the sky's probability 20x too small (|z| > 6)."""
+    probabilities) against ``mixed`` (block z-test, max |z| < 4.5), in the path, Whitted
+    and volumetric path integrators. Negative control: the probability of every slot but
+    the area lights' 20x too small in MIS, so BSDF-sampled sky hits weigh too much (|z| > 6)."""
     from drpt.imageio import write_image
     from drpt.options import RenderOptions
     from drpt.render.renderer import Renderer
@@ -360,7 +365,8 @@ def test_every_family_render_agrees_with_mixed(many_lights, tmp_path, monkeypatc
         monkeypatch.setattr(BVHSelection, "pmf", wrong)
 
     def render(rule, seed):
-        opts = RenderOptions(width=64, height=48, spp=128, seed=seed, light_sampler=rule, progress=False)
+        opts = RenderOptions(width=64, height=48, spp=128, seed=seed, light_sampler=rule, progress=False,
+                             integrator=integrator)
         r = Renderer(scene, opts)
         assert type(r.scene.emitter_selection).__name__ == ("BVHSelection" if rule == "bvh" else "LightSelection")
         return r.render()
@@ -368,5 +374,4 @@ def test_every_family_render_agrees_with_mixed(many_lights, tmp_path, monkeypatc
     a, b = render("bvh", 1), render("mixed", 2)
     assert np.all(np.isfinite(a.image)) and a.nonfinite == 0
     z = float(np.abs(block_z(a.image, a.variance, b.image, b.variance)).max())
-    print("max |z|", z)
     assert (z > 6) if control else (z < 4.5)
