@@ -27,7 +27,7 @@ Russian roulette from depth 5 with the adaptive probability
            the BVH; same image up to float order);
 ``bsdf``   the other material mode (Phong <-> Cook-Torrance). That changes the
            scene, so that row is compared with its own reference;
-``light``  ``--light-sampler uniform`` and ``bvh`` instead of ``power``;
+``light``  ``--light-sampler uniform`` and ``bvh`` instead of the default (``mixed``);
 ``sampler`` each of ``--sampler independent``, ``ldsampler`` and ``zsobol`` other than
            the default row's (``--sampler``, or the scene file's);
 ``filter`` ``--filter-sampling`` instead of the splatting film (only with a tent or
