@@ -1,24 +1,28 @@
-"""Light selection by power against Mitsuba's uniform selection, at equal spp and equal time.
+"""The light samplers (power, Mitsuba's uniform, mixed, the light BVH) at equal spp and equal time.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/light_sampler.py [SPP] [REPEATS] [all|mixed]
+    PYTHONPATH=. .venv/bin/python benchmarks/light_sampler.py [SPP] [REPEATS] [all|mixed|NAMES]
 
-For each scene with area lights (the bundled ones, the generated Veach MIS scene, the XML
+For each scene with area lights (the bundled ones, the generated Veach MIS scene and the
+50-light scene of :mod:`drpt.tools.scenegen.many_lights`, the XML
 test scenes with several emitters, and the Mitsuba corpus scenes with area lights that drpt
 reads, when ``../shared/corpus`` is present) and each scene whose emitters are of several
 families (``mixed``, the only ones with that argument: the generated sky-and-sun scene
 with a point light, ``ptracer.xml`` rendered by the path tracer (area, point, spot and
 directional lights and a sky), ``projector_spot.xml``, and the corpus's media scenes with
-an area light and a sky, rendered by volpath) drpt renders ``REPEATS`` images (seeds 0..)
-at ``SPP`` (default 64) with each ``--light-sampler`` (``power``, ``uniform``, ``mixed``;
-those the checkout has), and measures
+an area light and a sky, rendered by volpath; ``NAMES``: the scenes whose names start with
+one of these comma-separated prefixes) drpt renders ``REPEATS`` images (seeds 0..)
+at ``SPP`` (default 64) with each ``--light-sampler`` (``power``, ``uniform``, ``mixed``,
+``bvh``; those the checkout has), and measures
 each against a reference: the corpus scene's shipped Mitsuba reference, Mitsuba at 8192
 spp for the other XML scenes, and drpt at 8192 spp (power, another seed) for drpt's own
 format. It prints, per scene, the emitters, the mean relMSE
-(``mean((x - ref)^2 / (ref^2 + 0.01))``) of each sampler, the mean render seconds
-(compilation excluded: a discarded first render), and each other rule's ratio to
-``power`` at equal time (relMSE times seconds; below 1: that rule is better). All rules
-trace the same kernel (only the tables differ), so the time ratio is 1 up to the timing
-noise of short renders. For XML scenes Mitsuba's relMSE at the same
+(``mean((x - ref)^2 / (ref^2 + 0.01))``) of each sampler, the fastest render's seconds
+(compilation excluded: a discarded first render; the samplers' renders taken round robin,
+so that load from other processes spreads over all of them), and each other rule's ratio
+to ``power`` at equal time (relMSE times seconds; below 1: that rule is better).
+``power``, ``uniform`` and ``mixed`` trace the same kernel (only the tables differ), so
+their time ratio is 1 up to the timing noise of short renders; ``bvh`` walks the tree at
+every light sample and every emitter hit. For XML scenes Mitsuba's relMSE at the same
 spp (its seeds 0..) and drpt's (power) over it follow.
 """
 
@@ -60,13 +64,15 @@ def mixed_scenes(tmp: Path) -> list[tuple[str, Path, str, dict]]:
 
 def scenes() -> list[tuple[str, Path, str]]:
     """``(name, path, reference kind)``: ``drpt``, ``mitsuba`` or ``corpus``."""
-    from drpt.tools.scenegen import veach_mis
+    from drpt.tools.scenegen import many_lights, veach_mis
 
     tmp = Path(tempfile.mkdtemp())
     out = [("cornellbox", ROOT / "scenes/cornellbox/cornellbox.txt", "drpt"),
            ("newscene", ROOT / "scenes/newscene/newscene.txt", "drpt"),
            ("veach_mis (scenegen, tessellated)",
-            next(p for p in veach_mis.main(tmp) if p.suffix == ".txt"), "drpt")]
+            next(p for p in veach_mis.main(tmp) if p.suffix == ".txt"), "drpt"),
+           ("many_lights (scenegen, 50 lights)",
+            next(p for p in many_lights.main(tmp, 50) if p.suffix == ".txt"), "drpt")]
     xml = ROOT / "tests/data/xml"
     out += [(f"{n}.xml", xml / f"{n}.xml", "mitsuba") for n in ("veach_mis", "sphere_light", "ptracer")]
     for rel in ("bsdf_spheres/test_arealight_path.xml", "various_emitters/test_various_emitters_ptracer.xml"):
@@ -126,27 +132,33 @@ def emitters(device_scene) -> int:
 def main(spp=64, repeats=4, which="all", size=64):
     from drpt.options import LIGHT_SAMPLERS
 
-    rules = [r for r in ("power", "uniform", "mixed") if r in LIGHT_SAMPLERS]
+    rules = [r for r in ("power", "uniform", "mixed", "bvh") if r in LIGHT_SAMPLERS]
     print("| scene | emitters | " + " | ".join(f"relMSE {r}" for r in rules) + " | "
           + " | ".join(f"s {r}" for r in rules) + " | " + " | ".join(f"{r} / power, equal time" for r in rules[1:])
           + " | Mitsuba relMSE | power / Mitsuba |\n" + "|---" * (3 * len(rules) + 3) + "|")
-    todo = scenes() if which == "all" else mixed_scenes(Path(tempfile.mkdtemp()))
+    if which in ("all", "mixed"):
+        todo = scenes() if which == "all" else mixed_scenes(Path(tempfile.mkdtemp()))
+    else:  # scenes whose names start with one of the comma-separated prefixes
+        todo = [x for x in scenes() if any(x[0].startswith(w) for w in which.split(","))]
     for name, path, kind, extra in todo:
         defines = {**({"spp": str(spp)} if kind == "corpus" else {}), **extra}
         scene = load_scene(path, defines=defines) if defines else load_scene(path)
         ref = reference(name, path, kind, scene, size, extra)
-        row = {}
+        renderers = {}
         for sampler in rules:
-            r = Renderer(scene, options(scene, 1, 99, sampler, size))
+            renderers[sampler] = r = Renderer(scene, options(scene, 1, 99, sampler, size))
             r.render()  # compile
-            errs, secs = [], []
-            for seed in range(repeats):
-                r2 = r.derive(options(scene, spp, seed, sampler, size))
+        errs = {k: [] for k in rules}
+        secs = {k: [] for k in rules}
+        for seed in range(repeats):
+            for sampler in rules:
+                r2 = renderers[sampler].derive(options(scene, spp, seed, sampler, size))
                 t0 = time.perf_counter()
                 img = r2.render().image.astype(np.float64)
-                secs.append(time.perf_counter() - t0)
-                errs.append(float(np.mean((img - ref) ** 2 / (ref ** 2 + 1e-2))))
-            row[sampler] = (float(np.mean(errs)), float(np.mean(secs)), emitters(r.scene))
+                secs[sampler].append(time.perf_counter() - t0)
+                errs[sampler].append(float(np.mean((img - ref) ** 2 / (ref ** 2 + 1e-2))))
+        row = {k: (float(np.mean(errs[k])), float(np.min(secs[k])), emitters(renderers[k].scene))
+               for k in rules}
         ep, sp, count = row["power"]
         em = mitsuba_error(path, kind, spp, repeats, ref, extra)
         mcols = "| | |" if em is None else f"| {em:.4g} | {ep / em:.2f} |"

@@ -230,7 +230,9 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                             help="how next-event estimation picks one emitter per vertex (emissive "
                                  "triangles and spheres, delta lights, the sky): power (each by its "
                                  "emitted power), uniform (Mitsuba's: every emitter alike, then a "
-                                 "point by area) or mixed (half of each) "
+                                 "point by area), mixed (half of each) or bvh (the area emitters "
+                                 "by a light BVH: by their importance at the shading point; the "
+                                 "others as mixed) "
                                  f"(default {base.light_sampler})")
     if want("filter"):
         parser.add_argument("--filter", dest="filter", metavar="box|tent|gaussian", action=_Given,

@@ -173,8 +173,9 @@ def light_sample(scene, rng, u_sel: Float, u_light: Array2f, active, ref=None) -
     :class:`LDSampler` both from the stratified pair ``u_light`` (the selection from its
     first value, which is then rescaled:
     :meth:`~drpt.render.lights.selection.LightSelection.reuse`, ``ref`` the shading
-    point), else ``(u_sel, u_light)`` as drawn."""
-    if isinstance(rng, LDSampler):
+    point), else ``(u_sel, u_light)`` as drawn. A spatially varying selection (the light
+    BVH, ``static`` False) rescales ``u`` along its walk, so it keeps its own dimension."""
+    if isinstance(rng, LDSampler) and scene.emitter_selection.static:
         return scene.emitter_selection.reuse(u_light, ref, active)
     return u_sel, u_light
 

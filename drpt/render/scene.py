@@ -74,6 +74,7 @@ from .lights.envmap import (
     UniformSphereSampling,
     check_radius,
 )
+from .lights.light_bvh import BVHSelection
 from .lights.selection import LightSelection
 from .material import MaterialTable
 from .spawn import origin as spawn_origin
@@ -185,7 +186,12 @@ class DeviceScene:
             self.sky = SkyEmitter(self.environment, radius)
         families = [self.area_lights, self.delta_lights] + ([self.sky] if self.sky is not None else [])
         families += [f for f in (build(self, scene) for build in EMITTER_FAMILIES) if f is not None]
-        self.set_light_selection(LightSelection(families, options.light_sampler))
+        rule = options.light_sampler
+        if rule == "bvh" and self.area_lights.count > 0:
+            selection = BVHSelection(families, self.area_lights, self.area_lights.bvh(scene))
+        else:  # (bvh without area emitters: nothing for a BVH to choose among, mixed's rule)
+            selection = LightSelection(families, "mixed" if rule == "bvh" else rule)
+        self.set_light_selection(selection)
 
     def _set_flags(self) -> None:
         """The feature flags, from the scene's emitters and the materials it traces
@@ -304,8 +310,9 @@ class DeviceScene:
             dist = dr.select(mine, s.dist, out.dist) if infinite else None
             delta = dr.select(mine, Bool(s.delta), Bool(out.delta)) if any(f.delta for f in fams) else False
             out = EmitterSample(*merged, dist, delta)
-        if not sel.static:
+        if not sel.static:  # (pmf 0: the BVH found no emitter with importance at ref)
             out.pdf = out.pdf * pmf
+            out.valid = out.valid & (pmf > 0.0)
         return out
 
     def pdf_emitter(self, si: Interaction, d: Array3f, active: Bool) -> Float:
@@ -341,7 +348,9 @@ class DeviceScene:
                 if density:
                     pdf_f = family.pdf_direction(si, d, hit)
                     if not sel.static:
-                        pdf_f = pdf_f * sel.pmf(family.slot_of(si.prim, hit) + off, si.p - d * si.t, hit)
+                        mine = hit & (pdf_f > 0.0)  # where the ray came from:
+                        pdf_f = dr.select(mine, pdf_f * sel.pmf(family.slot_of(si.prim, mine) + off,
+                                                                si.p - d * si.t, mine), 0.0)
                     pdf = pdf_f if pdf_zero else pdf + pdf_f
                     pdf_zero = False
                 continue

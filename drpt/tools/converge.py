@@ -51,6 +51,13 @@ Ratios
     crossing after its last level above ``e``, interpolated log-log), drpt /
     Mitsuba, where both reach it. Below 1: drpt gets there sooner.
 
+Mitsuba XML scenes
+    As ``compare`` does them: the file's own size, depths, ``hide_emitters`` and
+    filter apply where no flag was given (:func:`~drpt.options.with_scene_settings`),
+    and Mitsuba renders the file itself (:class:`~drpt.tools.xmlref.MitsubaXML`), for
+    the reference and for its own curve, not drpt's export of it. A file drpt does not
+    read completely is refused unless ``--ignore-unsupported``.
+
 Denoising (``--denoise``, needs ``pyoidn``)
     drpt also renders each level with the denoiser's albedo and normal guides and
     denoises it with Intel Open Image Denoise (as ``render --denoise``): rows
@@ -79,11 +86,12 @@ from pathlib import Path
 import numpy as np
 
 from .. import llvm_tuning, metrics
-from ..cli.args import add_render_flags, options_from_args
+from ..cli.args import add_render_flags, given_settings, options_from_args
 from ..denoise import denoise_result, require
 from ..errors import DrptError, warn
 from ..export.mitsuba import to_mitsuba_dict
 from ..metrics import rel_mse
+from ..options import with_scene_settings
 from ..render.renderer import Renderer
 from ..scene import load_scene
 from .compare import _prepare_out, _write_json
@@ -93,6 +101,7 @@ from .reference import (
     check_reference_args,
     get_reference,
 )
+from .xmlref import MitsubaXML
 
 EPS = 1e-2  # relMSE's eps (drpt.metrics.rel_mse)
 DEFAULT_LEVELS = (1e-1, 3e-2, 1e-2)
@@ -143,7 +152,7 @@ def main(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(f"converge_{scene.stem}")
     report = converge_study(scene, out, options, max_spp=args.max_spp, ref_spp=args.ref_spp,
                             ref_batches=args.ref_batches, levels=args.levels,
-                            cache_dir=cache_dir_from_args(args), adaptive=args.adaptive)
+                            cache_dir=cache_dir_from_args(args), adaptive=args.adaptive, args=args)
     print(format_table(report))
     print(f"{out}: converge.csv, converge.json, converge.png")
     return 0
@@ -275,19 +284,26 @@ def time_to_error_ratios(t_a, e_a, t_b, e_b, levels) -> list[dict]:
 
 
 # ------------------------------------------------------------ rendering
-def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter="box"):
-    """A loaded Mitsuba scene and a ``render(spp, seed) -> (image, seconds)``."""
+def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter="box", source=None):
+    """A loaded Mitsuba scene and a ``render(spp, seed) -> (image, seconds)``: drpt's
+    export of ``scene``, or with ``source`` (a :class:`~drpt.tools.xmlref.MitsubaXML`)
+    that XML file as Mitsuba reads it."""
     import mitsuba as mi
 
     t0 = time.perf_counter()
-    ms = mi.load_dict(to_mitsuba_dict(scene, width, height, 1, max_depth=max_depth,
-                                      rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter))
+    integrator = None
+    if source is not None:
+        ms, integrator = source.load()
+    else:
+        ms = mi.load_dict(to_mitsuba_dict(scene, width, height, 1, max_depth=max_depth,
+                                          rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter))
     load_seconds = time.perf_counter() - t0
 
     def render(spp: int, s: int):
         with llvm_tuning.dr_default():  # Mitsuba as it ships (see drpt.llvm_tuning)
             t = time.perf_counter()
-            img = np.asarray(mi.render(ms, spp=int(spp), seed=int(s)), np.float32)
+            img = np.asarray(mi.render(ms, spp=int(spp), seed=int(s), integrator=integrator),
+                             np.float32)
             return img[..., :3], time.perf_counter() - t
 
     return render, load_seconds
@@ -311,14 +327,29 @@ def _log(progress: bool, msg: str) -> None:
 
 def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
                    ref_spp: int = 4096, ref_batches: int = 8, levels=DEFAULT_LEVELS,
-                   cache_dir: Path | None = None, adaptive: bool = False) -> dict:
+                   cache_dir: Path | None = None, adaptive: bool = False, args=None) -> dict:
     """Run the study (see the module docs) with drpt's ``options`` (a
     :class:`~drpt.options.RenderOptions`; the levels set its spp and seed);
-    write the outputs; return the report."""
+    write the outputs; return the report. A Mitsuba XML scene: with ``args`` (the
+    parsed command line) the file's settings apply where no flag was given, and
+    Mitsuba renders the file itself."""
     from dataclasses import replace
 
     options.validate()
     scene_path = Path(scene_path)
+    scene = load_scene(scene_path)
+    source = None
+    if scene_path.suffix.lower() == ".xml":
+        if args is not None:
+            options, scene = with_scene_settings(options, scene, given_settings(args))
+            options.validate()
+        not_read = list(getattr(scene.settings, "not_read", ()))
+        if not_read and not getattr(args, "ignore_unsupported", False):
+            raise DrptError(f"{scene_path}: drpt does not read all of the file ({not_read[0]}"
+                            + (f"; and {len(not_read) - 1} more" if len(not_read) > 1 else "")
+                            + "): Mitsuba's rendering of the file as written would not be the scene "
+                            "drpt renders (--ignore-unsupported measures anyway)")
+        source = MitsubaXML.for_scene(scene, options)
     width, height, seed, bsdf = options.width, options.height, options.seed, options.bsdf
     max_depth, rr_depth = options.path.max_depth, options.path.rr_depth
     progress = options.progress
@@ -330,12 +361,11 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
     if ref_spp <= max_spp:
         raise DrptError(f"--ref-spp ({ref_spp}) must exceed --max-spp ({max_spp}): the "
                         "reference must be better than the renders it judges")
-    scene = load_scene(scene_path)
     _prepare_out(out)
     reference = get_reference(
         scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
         bsdf=bsdf, max_depth=max_depth, rr_depth=rr_depth, seed=seed, cache_dir=cache_dir,
-        progress=progress, rfilter=options.filter)
+        progress=progress, rfilter=options.filter, source=source)
     ref, ref_var = reference.image, reference.variance
     import mitsuba as mi
 
@@ -352,7 +382,7 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
                                                 adaptive=True))
         ad_render(8, seed + 999_997)  # warm-up
     mits_render, mits_load = make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf,
-                                          options.filter)
+                                          options.filter, source)
     # Warm-up: compiles both renderers' kernels (reused at every spp), discarded.
     t = time.perf_counter()
     drpt_render(1, seed + 999_999)

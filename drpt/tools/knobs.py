@@ -3,7 +3,8 @@
 ::
 
     python -m drpt knobs SCENE [render flags] [--ref-spp M] [--ref-batches B]
-                               [--knobs depth rr accel bsdf light filter integrator adaptive denoise]
+                               [--knobs depth rr accel bsdf light sampler filter integrator adaptive
+                                        denoise]
                                [--depths D ...] [--rr-depths K ...] [--rr-probs P ...]
                                [--repeats R] [--cache DIR | --no-cache] [--out DIR]
 
@@ -26,7 +27,9 @@ Russian roulette from depth 5 with the adaptive probability
            the BVH; same image up to float order);
 ``bsdf``   the other material mode (Phong <-> Cook-Torrance). That changes the
            scene, so that row is compared with its own reference;
-``light``  ``--light-sampler uniform`` instead of ``power``;
+``light``  ``--light-sampler uniform`` and ``bvh`` instead of the default (``mixed``);
+``sampler`` each of ``--sampler independent``, ``ldsampler`` and ``zsobol`` other than
+           the default row's (``--sampler``, or the scene file's);
 ``filter`` ``--filter-sampling`` instead of the splatting film (only with a tent or
            Gaussian filter);
 ``integrator`` light tracing (``ptracer``) and bidirectional path tracing (``bdpt``); a
@@ -96,7 +99,10 @@ from .reference import (
     get_reference,
 )
 
-KNOBS = ("depth", "rr", "accel", "bsdf", "light", "filter", "integrator", "adaptive", "denoise")
+KNOBS = ("depth", "rr", "accel", "bsdf", "light", "sampler", "filter", "integrator", "adaptive",
+         "denoise")
+#: the ``sampler`` knob's settings
+SAMPLER_KNOB = ("independent", "ldsampler", "zsobol")
 RR_OFF_DEPTH = 64
 
 __all__ = ["add_parser", "main", "Config", "configs", "knobs_study", "image_bias"]
@@ -116,6 +122,7 @@ class Config:
     light_sampler: str = RenderOptions.light_sampler
     filter_sampling: bool = False
     adaptive: bool = False
+    sampler: str | None = None  # None: the default row's (the options')
 
 
 def default_knobs() -> list[str]:
@@ -166,9 +173,9 @@ def main(args: argparse.Namespace) -> int:
 
 
 def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
-            rr_probs=(0.5, 0.8), filtered: bool = False) -> list[Config]:
+            rr_probs=(0.5, 0.8), filtered: bool = False, sampler: str = "independent") -> list[Config]:
     """The default row, then one row per knob setting (``filter`` only for a tent or
-    Gaussian filter, ``filtered``)."""
+    Gaussian filter, ``filtered``; ``sampler``: the default row's ``--sampler``)."""
     rows = [Config("default", "auto accel, unbounded depth, RR from depth 5 (adaptive)", bsdf)]
     if "depth" in knobs:
         rows += [Config("max depth", str(d), bsdf, max_depth=d) for d in depths]
@@ -187,6 +194,10 @@ def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10
     if "light" in knobs:
         rows.append(Config("light sampler", "uniform (Mitsuba's: every emitter alike)", bsdf,
                            light_sampler="uniform"))
+        rows.append(Config("light sampler", "bvh (light BVH: importance at the shading point)", bsdf,
+                           light_sampler="bvh"))
+    if "sampler" in knobs:
+        rows += [Config("sampler", name, bsdf, sampler=name) for name in SAMPLER_KNOB if name != sampler]
     if "filter" in knobs and filtered:
         rows.append(Config("filter", "filter importance sampling instead of splatting", bsdf,
                            filter_sampling=True))
@@ -268,7 +279,7 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
         return refs[mode]
 
     cfgs = configs(bsdf, knobs, depths, rr_depths, rr_probs,
-                   filtered=not options.pixel_filter.is_box)
+                   filtered=not options.pixel_filter.is_box, sampler=options.sampler)
     renderers = []
     skipped = []
     for c in list(cfgs):
@@ -280,6 +291,7 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
                        bsdf=c.bsdf, adaptive=c.adaptive,
                        progress=False, denoise=c.denoise, integrator=c.integrator,
                        light_sampler=c.light_sampler, filter_sampling=c.filter_sampling,
+                       sampler=c.sampler or options.sampler,
                        path=PathOptions(max_depth=c.max_depth, rr_depth=c.rr_depth,
                                         rr_prob=c.rr_prob))
         try:

@@ -454,6 +454,29 @@ def test_converge_cli_smoke(tmp_path, capsys, cornell):
     assert len(list((tmp_path / "cache").glob("*.npz"))) == 1
 
 
+@pytest.mark.slow
+@pytest.mark.mitsuba
+def test_converge_takes_an_xml_scene_as_mitsuba_reads_it(tmp_path, monkeypatch, repo):
+    """An XML scene: the file's film size and max_depth apply (no flags given), and Mitsuba
+    renders the file itself for the reference and for its curve, not drpt's export."""
+    pytest.importorskip("mitsuba")
+    from drpt.tools import xmlref
+
+    loads = []
+    real = xmlref.MitsubaXML.load
+
+    def load(self):
+        loads.append(self.path.name)
+        return real(self)
+    monkeypatch.setattr(xmlref.MitsubaXML, "load", load)
+    out = tmp_path / "cv"
+    xml = repo / "tests" / "data" / "xml" / "sphere_light.xml"
+    assert _run(converge, xml, "--max-spp", "2", "--ref-spp", "16", "--no-cache", "--out", out, "-q") == 0
+    data = json.loads((out / "converge.json").read_text())
+    assert (data["width"], data["height"], data["max_depth"]) == (32, 24, 4)
+    assert loads == ["sphere_light.xml", "sphere_light.xml"]  # the reference, then the curve
+
+
 def test_converge_rejects_bad_arguments(tmp_path, cornell):
     from drpt.errors import DrptError
 
@@ -549,6 +572,43 @@ def test_knobs_rows_for_light_sampler_filter_and_integrator():
     rows = configs("auto", ("light", "filter", "integrator"))
     assert [(r.knob, r.light_sampler, r.filter_sampling, r.integrator) for r in rows] == [
         ("default", "mixed", False, "path"), ("light sampler", "uniform", False, "path"),
-        ("integrator", "mixed", False, "ptracer"), ("integrator", "mixed", False, "bdpt")]
+        ("light sampler", "bvh", False, "path"), ("integrator", "mixed", False, "ptracer"),
+        ("integrator", "mixed", False, "bdpt")]
     rows = configs("auto", ("filter",), filtered=True)
     assert [r.knob for r in rows] == ["default", "filter"] and rows[1].filter_sampling
+
+
+def test_knobs_sampler_rows_are_the_samplers_the_default_row_does_not_use():
+    from drpt.tools.knobs import configs
+
+    rows = configs("auto", ("sampler",))
+    assert [(r.knob, r.sampler) for r in rows] == [
+        ("default", None), ("sampler", "ldsampler"), ("sampler", "zsobol")]
+    rows = configs("auto", ("sampler",), sampler="zsobol")
+    assert [r.sampler for r in rows] == [None, "independent", "ldsampler"]
+
+
+@pytest.mark.slow
+@pytest.mark.mitsuba
+def test_knobs_sampler_row_renders_with_its_sampler(tmp_path, monkeypatch, cornell):
+    """The ``sampler`` knob renders each row with its own ``--sampler`` (and the table
+    reports each with its error and time)."""
+    pytest.importorskip("mitsuba")
+    from drpt.render.renderer import Renderer
+    from drpt.tools import knobs
+
+    seen = []
+    real = Renderer.__init__
+
+    def init(self, scene, options):
+        seen.append(options.sampler)
+        real(self, scene, options)
+    monkeypatch.setattr(Renderer, "__init__", init)
+    out = tmp_path / "k"
+    assert _run(knobs, cornell, "--size", "16", "16", "--spp", "16", "--ref-spp", "256",
+                "--knobs", "sampler", "--repeats", "1", "--out", str(out), "--quiet",
+                "--cache", str(tmp_path / "cache")) == 0
+    assert seen == ["independent", "ldsampler", "zsobol"]
+    data = json.loads((out / "knobs.json").read_text())
+    assert [r["setting"] for r in data["rows"]][1:] == ["ldsampler", "zsobol"]
+    assert all(r["seconds"] > 0 and np.isfinite(r["excess_rel_mse"]) for r in data["rows"])

@@ -8,7 +8,10 @@ discrete distribution ``P(k)``, then a point on it:
   emitters are not noisier than one large emitter of the same power;
 * ``uniform`` (Mitsuba's): every *emitter* equally likely, then a primitive
   of it by area: ``P(k) = area_k / (N * area_e(k))`` with ``N`` emitters;
-* ``mixed`` (the default): the mean of the two probabilities.
+* ``mixed`` (the default): the mean of the two probabilities;
+* ``bvh``: as ``mixed`` here (light tracing's choice); next-event estimation then
+  chooses among this family's slots by a light BVH at the shading point
+  (:mod:`drpt.render.lights.light_bvh`, :meth:`AreaLights.bvh`).
   An emitter is a shape: a Mitsuba XML shape, the faces of one material in
   drpt's own format (:meth:`drpt.scene.model.Triangles.emitter_ids`), each
   sphere.
@@ -57,9 +60,10 @@ from ..spawn import sphere_error, triangle_point
 from ..surface import SurfaceData
 from ..warp import Frame, square_to_uniform_sphere, square_to_uniform_triangle
 from . import EmitterSample
+from .light_bvh import area_light_bvh
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-LIGHT_SAMPLERS = ("mixed", "power", "uniform")  # drpt.options.LIGHT_SAMPLERS
+LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh")  # drpt.options.LIGHT_SAMPLERS
 
 
 def selection_weights(area: np.ndarray, lum: np.ndarray, emitter: np.ndarray,
@@ -67,11 +71,11 @@ def selection_weights(area: np.ndarray, lum: np.ndarray, emitter: np.ndarray,
     """Each primitive's weight in the light selection, ``P(k)`` up to a factor (zero
     for those that emit nothing): its power ``area * lum``, or ``uniform``: each
     emitter (``emitter`` ids) alike, then its primitives by area, or ``mixed``: half
-    of each (both normalised)."""
+    of each (both normalised; also ``bvh``'s)."""
     power = area * lum
     ok = (power > 0) & np.isfinite(power)
     w = np.zeros(len(area))
-    if sampler == "mixed" and ok.any():
+    if sampler in ("mixed", "bvh") and ok.any():
         p, u = (selection_weights(area, lum, emitter, s) for s in ("power", "uniform"))
         return 0.5 * p / p.sum() + 0.5 * u / u.sum()
     if sampler == "power" or not ok.any():
@@ -158,6 +162,7 @@ class AreaLights:
         # the slots of the Emitter interface: the primitives of ids, in that order
         self._area = all_area
         self._ids = ids
+        self._lum = lum
         self._power = np.pi * power[ids]
         _, self._unit = np.unique(emitter[ids], return_inverse=True)
         unit_area = np.bincount(self._unit, weights=all_area[ids])
@@ -193,6 +198,11 @@ class AreaLights:
         self.nee_pdf_area = Float(tri.astype(np.float32)) if self.n_tri else Float(np.zeros(1, np.float32))
         if self.has_spheres:
             self.nee_sph_prob = Float(full[self.n_tri:].astype(np.float32))
+
+    def bvh(self, scene: Scene):
+        """A :class:`~drpt.render.lights.light_bvh.LightBVH` over this family's slots
+        (item ``k`` is slot ``k``), from the primitives of ``scene`` it was built from."""
+        return area_light_bvh(scene, self._ids, self.n_tri, self._area, self._lum)
 
     def slot_of(self, prim: UInt32, active: Bool) -> UInt32:
         """The slot of primitive ``prim`` (meaningful where :meth:`pdf_direction` is not 0)."""

@@ -21,7 +21,8 @@ the rules of ``--light-sampler``:
 The selection is *static*: its probabilities do not depend on the shading point, so the
 families fold them into their density tables (:meth:`Emitter.bind
 <drpt.render.lights.Emitter.bind>`) and the scene never multiplies them at run time. A
-spatially varying selection (a light BVH) sets ``static = False`` and implements
+spatially varying selection (the light BVH,
+:class:`~drpt.render.lights.light_bvh.BVHSelection`) sets ``static = False`` and implements
 :meth:`sample` and :meth:`pmf` with the reference point ``ref``:
 :class:`~drpt.render.scene.DeviceScene` then binds nothing and multiplies each
 conditional density by :meth:`pmf` of the slot (:meth:`Emitter.slot_of

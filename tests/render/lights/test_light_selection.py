@@ -217,7 +217,8 @@ def _variances(name, spp, seeds):
     from drpt.scene import load_scene
 
     scene = load_scene(XML / f"{name}.xml")
-    base = replace(with_scene_settings(RenderOptions(progress=False), scene)[0], spp=spp)
+    opts, scene = with_scene_settings(RenderOptions(progress=False), scene)
+    base = replace(opts, spp=spp)
     return [Renderer(scene, replace(base, seed=s)).render().variance for s in seeds]
 
 
