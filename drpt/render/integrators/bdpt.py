@@ -107,7 +107,7 @@ from ..spawn import origin as spawn_origin
 from ..surface import Interaction, TangentInteraction
 from ..warp import Frame, square_to_cosine_hemisphere, square_to_uniform_sphere
 from .common import SHADOW_SHRINK
-from .ptracer import NONSYMMETRIC_LOBES
+from .ptracer import correction, refuse_unsupported
 
 #: the longest path BDPT traces (segments); its light vertices are stored per lane
 MAX_DEPTH = 16
@@ -128,17 +128,6 @@ def with_wi(si: Interaction, wi: Array3f) -> Interaction:
     out = copy.copy(si)
     out.wi = wi
     return out
-
-
-def correction(si: Interaction, w: Array3f) -> tuple[Float, Bool]:
-    """Veach's shading-normal correction for importance leaving ``si`` toward ``w``
-    (``si.wi`` toward the light), and whether both directions lie on the same side of
-    the shading and the geometric normal (as light tracing's)."""
-    wi_g, wi_s = dr.dot(si.ng, si.wi), dr.dot(si.ns, si.wi)
-    w_g, w_s = dr.dot(si.ng, w), dr.dot(si.ns, w)
-    ok = (wi_g * wi_s > 0.0) & (w_g * w_s > 0.0)
-    corr = dr.abs((wi_s * w_g) / (w_s * wi_g))
-    return dr.select(ok, corr, 0.0), ok
 
 
 def scatter_update(dvcm: Float, dvc: Float, pdf: Float, pdf_rev: Float, cos_out: Float,
@@ -323,14 +312,7 @@ class BDPTIntegrator:
     pinhole camera."""
 
     def __init__(self, scene: DeviceScene, rays: EmitterRays, camera: RayCamera, options: PathOptions):
-        if camera.orthographic or camera.thin_lens or camera.window is not None:
-            raise DrptError("bidirectional path tracing (bdpt) needs a pinhole perspective camera "
-                            "without a crop window")
-        kinds = set(getattr(scene.materials, "kinds", ()))
-        bad = sorted(kinds & set(NONSYMMETRIC_LOBES))
-        if bad:
-            raise DrptError(f"bidirectional path tracing (bdpt) does not support {', '.join(bad)} "
-                            "materials (their transmission is not symmetric)")
+        refuse_unsupported(scene, camera, "bidirectional path tracing (bdpt)")
         for kind, light in rays.sources:
             if kind not in SUPPORTED_SOURCES or (kind == "spot" and getattr(light, "texture", None) is not None):
                 name = f"{'textured ' if kind == 'spot' else ''}{kind} lights"

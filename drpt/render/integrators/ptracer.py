@@ -60,31 +60,40 @@ from .common import SHADOW_SHRINK
 NONSYMMETRIC_LOBES = ("roughdielectric", "principled")
 
 
+def refuse_unsupported(scene, camera, what: str) -> None:
+    """Raise :class:`~drpt.errors.DrptError` where ``what`` (an integrator that traces
+    paths from the lights, named for the message) cannot render the scene: a camera
+    other than a pinhole without a crop window (no point to connect to), or a material
+    whose transmission is not symmetric (:data:`NONSYMMETRIC_LOBES`)."""
+    if camera.orthographic or camera.thin_lens or camera.window is not None:
+        raise DrptError(f"{what} needs a pinhole perspective camera without a crop window")
+    kinds = set(getattr(scene.materials, "kinds", ()))
+    bad = sorted(kinds & set(NONSYMMETRIC_LOBES))
+    if bad:
+        raise DrptError(f"{what} does not support {', '.join(bad)} materials "
+                        "(their transmission is not symmetric)")
+
+
+def correction(si, w: Array3f) -> tuple[Float, Bool]:
+    """Veach's shading-normal correction for importance leaving ``si`` toward ``w``
+    (``si.wi`` toward the light), and whether both directions lie on the same side of
+    the shading and the geometric normal."""
+    wi_g, wi_s = dr.dot(si.ng, si.wi), dr.dot(si.ns, si.wi)
+    w_g, w_s = dr.dot(si.ng, w), dr.dot(si.ns, w)
+    ok = (wi_g * wi_s > 0.0) & (w_g * w_s > 0.0)
+    corr = dr.abs((wi_s * w_g) / (w_s * wi_g))
+    return dr.select(ok, corr, 0.0), ok
+
+
 class ParticleTracer:
     """Light tracing over a :class:`~drpt.render.scene.DeviceScene` seen by a pinhole camera."""
 
     def __init__(self, scene: DeviceScene, rays: EmitterRays, camera: RayCamera, options: PathOptions):
-        if camera.orthographic or camera.thin_lens or camera.window is not None:
-            raise DrptError("light tracing (ptracer) needs a pinhole perspective camera without a "
-                            "crop window")
-        kinds = set(getattr(scene.materials, "kinds", ()))
-        bad = sorted(kinds & set(NONSYMMETRIC_LOBES))
-        if bad:
-            raise DrptError(f"light tracing (ptracer) does not support {', '.join(bad)} materials "
-                            "(their transmission is not symmetric)")
+        refuse_unsupported(scene, camera, "light tracing (ptracer)")
         self.scene = scene
         self.rays = rays
         self.camera = camera
         self.opt = options
-
-    def _correction(self, si, w: Array3f) -> tuple[Float, Bool]:
-        """Veach's shading-normal correction for the direction ``w`` leaving ``si``
-        (``si.wi`` toward the light), and whether the two sides agree."""
-        wi_g, wi_s = dr.dot(si.ng, si.wi), dr.dot(si.ns, si.wi)
-        w_g, w_s = dr.dot(si.ng, w), dr.dot(si.ns, w)
-        ok = (wi_g * wi_s > 0.0) & (w_g * w_s > 0.0)
-        corr = dr.abs((wi_s * w_g) / (w_s * wi_g))
-        return dr.select(ok, corr, 0.0), ok
 
     def _connect(self, si, beta: Array3f, film: SplatFilm, active: Bool) -> None:
         """Splat vertex ``si`` (throughput ``beta``) into the film through the camera."""
@@ -92,7 +101,7 @@ class ParticleTracer:
         x, y, wc, _dist, importance, visible = cam.connect(si.p)
         ok = active & visible
         f, _ = scene.eval_bsdf(si, wc)
-        corr, sides = self._correction(si, wc)
+        corr, sides = correction(si, wc)
         value = beta * f * (corr * importance)
         ok &= sides & (dr.max(value) > 0.0)
         so = scene.spawn(si, wc)
@@ -157,7 +166,7 @@ class ParticleTracer:
             u_lobe = rng.next_float32()
             u_bsdf = next_2d(rng)
             wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
-            corr, sides = self._correction(si, wo)
+            corr, sides = correction(si, wo)
             beta = beta * bs.weight * (corr * dr.square(bs.eta))
             eta = eta * bs.eta
             live &= bs.valid & sides & (dr.max(beta) > 0.0)
