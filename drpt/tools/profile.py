@@ -443,14 +443,12 @@ def _light_counts(renderer) -> dict:
             "splats": kinds.get(SPLAT, 0), "loops": loops}
 
 
-def profile_light(scene, popt: ProfileOptions, base=None) -> ModeResult:
-    """Profile a light-tracing integrator (``popt.render.integrator``, one of
-    :data:`LIGHT_TRACERS`): its fused pass kernel timed as the megakernel is, its
-    queries counted by kind; the renderer stays on the result (``result.renderer``)."""
+def _measure(renderer, repeat: int) -> tuple[float, float, float, list[dict], int]:
+    """A warm-up render (it compiles every kernel, or loads it from Dr.Jit's caches): its
+    wall seconds and backend milliseconds; then the fastest of ``repeat`` timed renders
+    (:func:`_timed`: its seconds and kernel history) and the peak memory in bytes."""
     import drjit as dr
 
-    name = popt.render.integrator
-    renderer = _renderer(scene, popt) if base is None else base
     with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
         dr.kernel_history_clear()
         t0 = time.perf_counter()
@@ -460,8 +458,19 @@ def profile_light(scene, popt: ProfileOptions, base=None) -> ModeResult:
         warm_backend = sum(e["backend_ms"] for e in _history())
     dr.flush_malloc_cache()
     dr.detail.malloc_clear_statistics()
-    seconds, entries = _timed(renderer, popt.repeat)
+    seconds, entries = _timed(renderer, repeat)
     peak = int(dr.detail.malloc_watermark(jit_backend()))
+    return warmup, warm_backend, seconds, entries, peak
+
+
+def profile_light(scene, popt: ProfileOptions, base=None) -> ModeResult:
+    """Profile a light-tracing integrator (``popt.render.integrator``, one of
+    :data:`LIGHT_TRACERS`): its fused pass kernel timed as the megakernel is, its
+    queries counted by kind; the renderer stays on the result (``result.renderer``)."""
+
+    name = popt.render.integrator
+    renderer = _renderer(scene, popt) if base is None else base
+    warmup, warm_backend, seconds, entries, peak = _measure(renderer, popt.repeat)
     result = ModeResult(name, warmup, warm_backend, seconds, popt.width * popt.height * popt.spp, peak,
                         entries, integrator=name, not_applicable=list(LIGHT_NOT_APPLICABLE))
     result.renderer = renderer
@@ -506,24 +515,12 @@ def profile_mode(scene, popt: ProfileOptions, mode: str, base=None) -> ModeResul
     scene); the renderer stays on the result (``result.renderer``)."""
     from dataclasses import replace
 
-    import drjit as dr
 
     popt = replace(popt, render=replace(popt.render, mode=mode))
     samples = popt.width * popt.height * popt.spp
     renderer = _renderer(scene, popt) if base is None else base.derive(replace(popt.render, progress=False))
     result_integrator = popt.render.integrator
-    # Warm-up: compiles every kernel (or loads it from Dr.Jit's caches).
-    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
-        dr.kernel_history_clear()
-        t0 = time.perf_counter()
-        renderer.render()
-        dr.sync_thread()
-        warmup = time.perf_counter() - t0
-        warm_backend = sum(e["backend_ms"] for e in _history())
-    dr.flush_malloc_cache()
-    dr.detail.malloc_clear_statistics()
-    seconds, entries = _timed(renderer, popt.repeat)
-    peak = int(dr.detail.malloc_watermark(jit_backend()))
+    warmup, warm_backend, seconds, entries, peak = _measure(renderer, popt.repeat)
     result = ModeResult(mode, warmup, warm_backend, seconds, samples, peak, entries, integrator=result_integrator)
     result.renderer = renderer
     if mode == "megakernel":
