@@ -35,9 +35,11 @@ def load(name: str, **kw):
     return scene, [str(w.message) for w in caught]
 
 
-def render_xml_both(scene, path: Path, spp: int, defines: dict | None = None, seed: int = 3, **options):
+def render_xml_both(scene, path: Path, spp: int, defines: dict | None = None, seed: int = 3,
+                    ref_spp: int | None = None, **options):
     """drpt's render of ``scene`` (the file's settings, ``spp``, RenderOptions ``options``) and
-    Mitsuba's of ``path`` as the mean of 8 batches: ``(result, mean, variance of the mean)``."""
+    Mitsuba's of ``path`` (at ``ref_spp``, default ``spp``) as the mean of 8 batches:
+    ``(result, mean, variance of the mean)``."""
     from dataclasses import replace
 
     import mitsuba as mi
@@ -50,7 +52,8 @@ def render_xml_both(scene, path: Path, spp: int, defines: dict | None = None, se
     r = Renderer(scene, opts).render()
     mi.set_variant(mitsuba_variant())
     batches = 8
-    ms = mi.load_file(str(path), optimize=False, **{**(defines or {}), "spp": str(spp // batches)})
+    ms = mi.load_file(str(path), optimize=False,
+                      **{**(defines or {}), "spp": str((ref_spp or spp) // batches)})
     runs = np.stack([np.asarray(mi.render(ms, seed=seed + 100 + 7919 * k), np.float64)[..., :3]
                      for k in range(batches)])
     ref = runs.mean(0)

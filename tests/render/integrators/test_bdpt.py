@@ -399,26 +399,15 @@ def test_bdpt_of_an_xml_scene_agrees_with_mitsubas_path(name):
     light), both with max_depth 4 and Mitsuba's default Gaussian filter (bdpt splats its
     camera samples with normalized filter weights, as light tracing splats); Mitsuba's
     variance from 8 seeds; 8x8 blocks, |z| < 4.5, the means' z < 4."""
-    import mitsuba as mi
-
-    from drpt.backend import mitsuba_variant
-    from drpt.options import with_scene_settings
     from drpt.testing import block_z
+    from support.xml import XML, mean_z, render_xml_both
 
-    path = REPO / "tests" / "data" / "xml" / f"{name}.xml"
+    path = XML / f"{name}.xml"
     scene = load_scene(path, defines={"spp": "256"})
-    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=3), scene)[0], spp=256,
-                   integrator="bdpt")
-    r = Renderer(scene, opts).render()
-    mi.set_variant(mitsuba_variant())
     defines = {"integrator": "path"} if name == "ptracer" else {}
-    ms = mi.load_file(str(path), spp="64", **defines)
-    runs = np.stack([np.asarray(mi.render(ms, seed=100 + 7919 * k), np.float64)[..., :3] for k in range(8)])
-    ref = runs.mean(0)
-    var = runs.var(0, ddof=1) / 8 + (1e-5 * ref) ** 2
+    r, ref, var = render_xml_both(scene, path, 256, defines, ref_spp=512, integrator="bdpt")
     z = block_z(r.image, r.variance, ref, var)
-    n = ref.shape[0] * ref.shape[1]
-    zm = (r.image.mean((0, 1)) - ref.mean((0, 1))) / np.sqrt(r.variance.mean((0, 1)) / n + var.mean((0, 1)) / n)
+    zm = mean_z(r, ref, var)
     assert np.abs(z).max() < 4.5 and np.abs(zm).max() < 4.0, (np.abs(z).max(), np.abs(zm).max())
 
 

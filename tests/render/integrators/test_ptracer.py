@@ -170,22 +170,12 @@ def test_light_tracing_of_an_xml_scene_agrees_with_mitsubas_path(name):
     area_textured.xml (an area light with a bitmap radiance; Mitsuba's path) and
     sphere_light.xml (analytic sphere lights, where light paths start and which the camera
     sees, and a rectangle light; Mitsuba's path)."""
-    import mitsuba as mi
-
-    from drpt.backend import mitsuba_variant
-    from drpt.options import with_scene_settings
+    from support.xml import render_xml_both
 
     path = XML / f"{name}.xml"
     scene = load_scene(path, defines={"spp": "512"})
-    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=3), scene)[0], spp=512,
-                   integrator="ptracer")
-    r = Renderer(scene, opts).render()
-    mi.set_variant(mitsuba_variant())
     defines = {"integrator": "path"} if name == "ptracer" else {}
-    ms = mi.load_file(str(path), spp="64", **defines)
-    runs = np.stack([np.asarray(mi.render(ms, seed=100 + 7919 * k), np.float64)[..., :3] for k in range(8)])
-    ref = runs.mean(0)
-    var = runs.var(0, ddof=1) / 8 + (1e-5 * ref) ** 2
+    r, ref, var = render_xml_both(scene, path, 512, defines, integrator="ptracer")
 
     class Ref:
         image, variance = ref, var
