@@ -161,8 +161,9 @@ class RenderOptions:
         check_aovs(self.aovs)
         if not 0 <= self.wavefront_tail <= MAX_LANES:
             raise DrptError(f"--wavefront-tail must be between 0 and {MAX_LANES}, got {self.wavefront_tail}")
-        if self.mode == "wavefront" and self.integrator != "path":
-            raise DrptError(f"--mode wavefront runs the path integrator, not --integrator {self.integrator}")
+        if self.mode == "wavefront" and self.integrator not in ("path", "volpath"):
+            raise DrptError(f"--mode wavefront runs the path and volpath integrators, not --integrator "
+                            f"{self.integrator}")
         if self.bdpt_strategies and self.integrator != "bdpt":
             raise DrptError(f"--bdpt-strategies needs --integrator bdpt, not {self.integrator}")
         if self.accel == "grid" and self.grid_resolution is not None and \

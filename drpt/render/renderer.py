@@ -77,6 +77,7 @@ from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, s
 from .integrators.path import PathIntegrator
 from .integrators.ptracer import ParticleTracer
 from .integrators.volpath import VolPathIntegrator
+from .integrators.volwavefront import VolWavefrontIntegrator
 from .integrators.wavefront import WavefrontIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lights.rays import EmitterRays
@@ -281,6 +282,9 @@ class Renderer:
             depth = options.path.max_depth
             return WhittedIntegrator(self.scene, WhittedOptions(max_depth=depth if depth > 0 else 16))
         if options.integrator == "volpath" and media:
+            if options.mode == "wavefront":
+                return VolWavefrontIntegrator(self.scene, options.path, self.scene_model,
+                                              tail=options.wavefront_tail)
             return VolPathIntegrator(self.scene, options.path, self.scene_model)
         if options.mode == "wavefront":
             return WavefrontIntegrator(self.scene, options.path, tail=options.wavefront_tail)

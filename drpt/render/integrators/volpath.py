@@ -280,6 +280,51 @@ def _transmittance(sigma_t: Array3f, dist: Float) -> Array3f:
 
 
 @dataclass
+class Flight:
+    """What free-flight sampling decided for the lanes' segment
+    (:meth:`VolPathIntegrator.free_flight`), and which events the lanes may have:
+    ``medium`` and ``surface`` are Python flags, fixed when a kernel is traced (the
+    megakernel: both; the wavefront's medium queue: ``medium`` only, its surface queues:
+    ``surface`` only). The code of an event no lane has is not traced, and a field only
+    such an event reads may be None."""
+
+    beta: Array3f  # the throughput after the segment
+    depth: UInt32  # a real medium scattering event counted
+    scatter: Bool  # a real medium scattering event at p_med
+    scatter_live: Bool  # ... below the depth limit: the path scatters there
+    het_null: Bool  # a null collision (delta tracking): the ray goes on from p_med
+    surf: Bool  # the ray reached the surface si, or escaped
+    p_med: Array3f
+    in_medium: Bool
+    g: Float  # the medium's Henyey-Greenstein asymmetry
+    medium: bool = True
+    surface: bool = True
+
+
+def _either(fl: Flight, mask: Bool, medium, surface):
+    """``dr.select(mask, medium(), surface())``, or only the one of the two that ``fl``'s
+    lanes can need (``medium`` and ``surface`` are callables: the other is not traced)."""
+    if not fl.surface:
+        return medium()
+    if not fl.medium:
+        return surface()
+    return dr.select(mask, medium(), surface())
+
+
+class VolShadowQuery:
+    """Next-event estimation at a scattering vertex waiting for the transmittance ``tr`` of
+    its shadow segment (from ``o`` along unit ``d`` up to ``tmax``, starting in
+    ``medium``): it adds ``a * tr * b`` where ``ok``, the factors kept apart so that the
+    product rounds as one expression in the megakernel's order."""
+
+    def __init__(self, a: Array3f, b: Float, o: Array3f, d: Array3f, tmax: Float, medium: UInt32, ok: Bool):
+        self.a, self.b, self.o, self.d, self.tmax, self.medium, self.ok = a, b, o, d, tmax, medium, ok
+
+    def resolve(self, tr: Array3f) -> Array3f:
+        return dr.select(self.ok, self.a * tr * self.b, 0.0)
+
+
+@dataclass
 class VolPathState:
     """One path per lane (a Dr.Jit loop state)."""
 
@@ -365,8 +410,26 @@ class VolPathIntegrator(PathIntegrator):
         return tr
 
     def bounce(self, scene: DeviceScene, s: VolPathState, rng: PCG32) -> VolPathState:
-        opt, media = self.opt, self.media
-        # ---- Russian roulette and the depth limit (at the top, as Mitsuba's volpath)
+        """One segment and the event at its end (the megakernel's loop body), as the five
+        steps the wavefront integrator also runs, each on its own stage's lanes
+        (:mod:`drpt.render.integrators.volwavefront`): :meth:`roulette`, the closest hit,
+        :meth:`free_flight`, :meth:`emitted`, :meth:`nee_query` with :meth:`shadow`, and
+        :meth:`next_ray`."""
+        active, beta = self.roulette(s, rng)
+        si = scene.intersect(s.o, s.d, active)
+        fl = self.free_flight(s, si, active, beta, rng)
+        L = s.L + self.emitted(scene, s, si, fl)
+        on_surface = fl.surf & si.valid
+        phase = self.phase(s, fl)
+        q = self.nee_query(scene, s, si, fl, on_surface, phase, rng)
+        if q is not None:  # one emitter, one shadow ray through the media
+            L = L + q.resolve(self.shadow(q.o, q.d, q.tmax, q.medium, q.ok, rng))
+        return self.next_ray(scene, s, si, fl, on_surface, phase, L, rng)
+
+    def roulette(self, s: VolPathState, rng: PCG32) -> tuple[Bool, Array3f]:
+        """Russian roulette and the depth limit, at the top of a bounce as in Mitsuba's
+        volpath (one random number): the lanes that go on, and their throughput."""
+        opt = self.opt
         u_rr = rng.next_float32()
         if opt.rr_prob is not None:  # (--rr-prob: a fixed continuation probability)
             q = Float(opt.rr_prob)
@@ -377,9 +440,13 @@ class VolPathIntegrator(PathIntegrator):
         beta = dr.select(perform_rr, s.beta / q, s.beta)
         if opt.max_depth >= 0:
             active = active & (s.depth < opt.max_depth)
-        si = scene.intersect(s.o, s.d, active)
+        return active, beta
 
-        # ---- free-flight sampling in the ray's medium (spectral MIS over the channels)
+    def free_flight(self, s: VolPathState, si, active: Bool, beta: Array3f, rng: PCG32) -> Flight:
+        """Free-flight sampling along the ray up to ``si`` in the ray's medium (spectral
+        MIS over the channels; delta tracking in heterogeneous media): two random numbers,
+        three with heterogeneous media."""
+        opt, media = self.opt, self.media
         u_ch, u_t = rng.next_float32(), rng.next_float32()
         in_medium = active & (s.medium > 0)
         sigma_t, albedo, g = media.coefficients(s.medium, in_medium)
@@ -410,85 +477,130 @@ class VolPathIntegrator(PathIntegrator):
         depth = dr.select(scatter, s.depth + 1, s.depth)
         scatter_live = scatter & (depth < opt.max_depth) if opt.max_depth >= 0 else Bool(scatter)
         surf = active & ~scatter & ~het_null
+        return Flight(beta=beta, depth=depth, scatter=scatter, scatter_live=scatter_live, het_null=het_null,
+                      surf=surf, p_med=p_med, in_medium=in_medium, g=g)
 
-        # ---- the emitter or sky the ray reaches, MIS-weighted against next-event estimation
-        # from the last real scattering vertex (null crossings do not count)
-        L = s.L
+    def emitted(self, scene: DeviceScene, s: VolPathState, si, fl: Flight) -> Array3f:
+        """What the ray's throughput brings back from the emitter or sky it reaches
+        (``fl.surf`` lanes), MIS-weighted against next-event estimation from the last real
+        scattering vertex (null crossings do not count)."""
         nee = scene.has_emitters
-        hide = (depth == 0) if opt.hide_emitters else Bool(False)
-        seen = surf & ~hide
+        hide = (fl.depth == 0) if self.opt.hide_emitters else Bool(False)
+        seen = fl.surf & ~hide
         si_ref = copy.copy(si)
         si_ref.t = dr.norm(si.p - s.ref_p)
         le, pdf_l = scene.eval_emitter(si_ref, s.d, seen, density=nee)
         w = Float(1.0)
         if nee:
             w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
-        L = L + dr.select(seen, beta * le * w, 0.0)
+        return dr.select(seen, fl.beta * le * w, 0.0)
 
-        # ---- next-event estimation at the scattering vertex (surface or medium)
-        on_surface = surf & si.valid
-        nee_ok = on_surface & (depth + 1 < opt.max_depth) if opt.max_depth >= 0 else Bool(on_surface)
-        nee_ok = nee_ok | scatter_live  # (no in-place operators: they would change on_surface)
-        vertex = copy.copy(si)
-        vertex.p = dr.select(scatter, p_med, si.p)
-        u_sel = rng.next_float32()
-        u_light = Array2f(rng.next_float32(), rng.next_float32())
-
-        if media.has_blend:
-            g2, wb = media.blend_lobe(s.medium, in_medium)
+    def phase(self, s: VolPathState, fl: Flight):
+        """``(pdf, lobes)``: the density ``wo -> pdf`` of the phase function of the ray's
+        medium (scattering from ``s.d``) and a blended phase function's second lobe ``(g2,
+        weight)`` (None without blends); ``(None, None)`` where no lane has a medium event."""
+        if not fl.medium:
+            return None, None
+        g = fl.g
+        if self.media.has_blend:
+            g2, wb = self.media.blend_lobe(s.medium, fl.in_medium)
 
             def phase_pdf(wo):
                 c = dr.dot(wo, s.d)
                 return (1.0 - wb) * hg_pdf(g, c) + wb * hg_pdf(g2, c)
+            return phase_pdf, (g2, wb)
+
+        def phase_pdf(wo):
+            return hg_pdf(g, dr.dot(wo, s.d))
+        return phase_pdf, None
+
+    def nee_query(self, scene: DeviceScene, s: VolPathState, si, fl: Flight, on_surface: Bool, phase,
+                  rng: PCG32) -> VolShadowQuery | None:
+        """Next-event estimation at the scattering vertex (surface or medium), before its
+        shadow segment's transmittance: one emitter sample (three random numbers, drawn in
+        scenes without emitters too), the BSDF or the phase function toward it, the power
+        heuristic. None in a scene without emitters."""
+        opt, media = self.opt, self.media
+        if fl.surface:
+            nee_ok = on_surface & (fl.depth + 1 < opt.max_depth) if opt.max_depth >= 0 else Bool(on_surface)
+            if fl.medium:
+                nee_ok = nee_ok | fl.scatter_live  # (no in-place operators: they would change on_surface)
         else:
-            def phase_pdf(wo):
-                return hg_pdf(g, dr.dot(wo, s.d))
-
-        if nee:  # one emitter, one shadow ray through the media
-            es = scene.sample_emitter(vertex, u_sel, u_light, nee_ok)
+            nee_ok = Bool(fl.scatter_live)
+        vertex = copy.copy(si)
+        vertex.p = _either(fl, fl.scatter, lambda: fl.p_med, lambda: si.p)
+        u_sel = rng.next_float32()
+        u_light = Array2f(rng.next_float32(), rng.next_float32())
+        if not scene.has_emitters or not (fl.medium or scene.has_smooth_bsdfs):
+            return None  # (no emitter; or surfaces of delta lobes only: the estimate is 0)
+        phase_pdf = phase[0]
+        es = scene.sample_emitter(vertex, u_sel, u_light, nee_ok)
+        f_s = pdf_s = ph = None
+        if fl.surface:
             f_s, pdf_s = scene.eval_bsdf(si, es.wo)
+        if fl.medium:
             ph = phase_pdf(es.wo)
-            f = dr.select(scatter, Array3f(ph), f_s)
-            pdf_b = dr.select(scatter, ph, pdf_s)
-            ok = nee_ok & es.valid & (dr.max(f) > 0.0)
-            o = dr.select(scatter, p_med, scene.spawn(si, es.wo))
-            med = dr.select(scatter, s.medium, media.after(si, es.wo, s.medium, on_surface))
-            d_sh, dist = shadow_segment(o, es)
-            if es.dist is not None:  # the sky (and directional lights) 2 max(R, |p - c|) away
-                sky = 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
-                dist = dr.select(dr.isinf(dist), sky, dist)
-            tr_l = self.shadow(o, d_sh, dist * SHADOW_SHRINK, med, ok, rng)
-            w = power_heuristic(es.pdf, pdf_b) if es.delta is not True else Float(1.0)
-            if isinstance(es.delta, Bool):
-                w = dr.select(es.delta, 1.0, w)
-            L = L + dr.select(ok, beta * f * es.le * tr_l * (w / es.pdf), 0.0)
+        f = _either(fl, fl.scatter, lambda: Array3f(ph), lambda: f_s)
+        pdf_b = _either(fl, fl.scatter, lambda: ph, lambda: pdf_s)
+        ok = nee_ok & es.valid & (dr.max(f) > 0.0)
+        o = _either(fl, fl.scatter, lambda: fl.p_med, lambda: scene.spawn(si, es.wo))
+        med = _either(fl, fl.scatter, lambda: s.medium, lambda: media.after(si, es.wo, s.medium, on_surface))
+        d_sh, dist = shadow_segment(o, es)
+        if es.dist is not None:  # the sky (and directional lights) 2 max(R, |p - c|) away
+            sky = 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
+            dist = dr.select(dr.isinf(dist), sky, dist)
+        w = power_heuristic(es.pdf, pdf_b) if es.delta is not True else Float(1.0)
+        if isinstance(es.delta, Bool):
+            w = dr.select(es.delta, 1.0, w)
+        return VolShadowQuery(fl.beta * f * es.le, w / es.pdf, o, d_sh, dist * SHADOW_SHRINK, med, ok)
 
-        # ---- continue: sample the BSDF or the phase function
+    def next_ray(self, scene: DeviceScene, s: VolPathState, si, fl: Flight, on_surface: Bool, phase,
+                 L: Array3f, rng: PCG32) -> VolPathState:
+        """The path's next state: the BSDF sampled at a surface (a null boundary or a thin
+        sheet's transmission passed without a scattering event), the phase function at a
+        medium event, the same ray from a null collision (three random numbers)."""
+        media = self.media
+        phase_pdf, lobes = phase
         u_lobe = rng.next_float32()
         u2 = Array2f(rng.next_float32(), rng.next_float32())
-        wo, bs = scene.sample_bsdf(si, u_lobe, u2)
-        g_lobe = dr.select(u_lobe < wb, g2, g) if media.has_blend else g  # (Mitsuba's lobe choice)
-        wo_ph = hg_sample(g_lobe, Array2f(u2.x, u2.y), s.d)
-        wo_ph_pdf = phase_pdf(wo_ph)
-        if media.has_null:
-            kind = media.null_kind_of(si, on_surface)
-            passed = dr.dot(wo, si.ng) * dr.dot(s.d, si.ng) > 0.0
-            null = on_surface & (kind != NULL_NONE) & passed
-        else:
-            null = Bool(False)
-        real = on_surface & ~null
-        beta = dr.select(on_surface, beta * bs.weight, beta)
-        eta = dr.select(on_surface, s.eta * bs.eta, s.eta)
-        depth = dr.select(real, depth + 1, depth)
-        new_d = dr.select(scatter_live, wo_ph, Array3f(wo))
-        new_o = dr.select(scatter_live, p_med, scene.spawn(si, wo))
-        if media.has_hetero:  # a null collision: on along the same ray
-            new_d = dr.select(het_null, s.d, new_d)
-            new_o = dr.select(het_null, p_med, new_o)
-        medium = media.after(si, wo, s.medium, on_surface)
-        ref_p = dr.select(scatter_live, p_med, dr.select(real, si.p, s.ref_p))
-        prev_pdf = dr.select(scatter_live, wo_ph_pdf, dr.select(real, Float(bs.pdf), s.prev_pdf))
-        prev_delta = dr.select(scatter_live, False, dr.select(real, Bool(bs.delta), s.prev_delta))
-        live = scatter_live | (on_surface & bs.valid) | het_null
+        beta, eta, depth = fl.beta, s.eta, fl.depth
+        if fl.surface:
+            wo, bs = scene.sample_bsdf(si, u_lobe, u2)
+        if fl.medium:
+            g_lobe = dr.select(u_lobe < lobes[1], lobes[0], fl.g) if lobes is not None else fl.g  # (Mitsuba's)
+            wo_ph = hg_sample(g_lobe, Array2f(u2.x, u2.y), s.d)
+            wo_ph_pdf = phase_pdf(wo_ph)
+        ref_p, prev_pdf, prev_delta, medium = s.ref_p, s.prev_pdf, s.prev_delta, s.medium
+        if fl.surface:
+            if media.has_null:
+                kind = media.null_kind_of(si, on_surface)
+                passed = dr.dot(wo, si.ng) * dr.dot(s.d, si.ng) > 0.0
+                null = on_surface & (kind != NULL_NONE) & passed
+            else:
+                null = Bool(False)
+            real = on_surface & ~null
+            beta = dr.select(on_surface, beta * bs.weight, beta)
+            eta = dr.select(on_surface, s.eta * bs.eta, s.eta)
+            depth = dr.select(real, depth + 1, depth)
+        new_d = _either(fl, fl.scatter_live, lambda: wo_ph, lambda: Array3f(wo))
+        new_o = _either(fl, fl.scatter_live, lambda: fl.p_med, lambda: scene.spawn(si, wo))
+        if media.has_hetero and fl.medium:  # a null collision: on along the same ray
+            new_d = dr.select(fl.het_null, s.d, new_d)
+            new_o = dr.select(fl.het_null, fl.p_med, new_o)
+        if fl.surface:
+            medium = media.after(si, wo, s.medium, on_surface)
+            ref_p = dr.select(real, si.p, s.ref_p)
+            prev_pdf = dr.select(real, Float(bs.pdf), s.prev_pdf)
+            prev_delta = dr.select(real, Bool(bs.delta), s.prev_delta)
+        live = None
+        if fl.medium:
+            ref_p = dr.select(fl.scatter_live, fl.p_med, ref_p)
+            prev_pdf = dr.select(fl.scatter_live, wo_ph_pdf, prev_pdf)
+            prev_delta = dr.select(fl.scatter_live, False, prev_delta)
+            live = fl.scatter_live
+        if fl.surface:
+            live = on_surface & bs.valid if live is None else live | (on_surface & bs.valid)
+        if fl.medium:
+            live = live | fl.het_null
         return VolPathState(o=new_o, d=new_d, L=L, beta=beta, eta=eta, depth=depth, prev_pdf=prev_pdf,
                             prev_delta=prev_delta, ref_p=ref_p, medium=medium, active=live)

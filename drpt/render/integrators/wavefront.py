@@ -89,8 +89,8 @@ KEY_BITS = 3 + 3 * MORTON_BITS
 RADIX_BITS = 11
 
 OUTSIDE = "accumulation + readback (outside the passes' stages)"
-STAGES = ("compact + sort", "closest hit", "interaction", "emission", "partition", "shade",
-          "shadow rays", "shadow resolve", "fused tail")
+STAGES = ("compact + sort", "closest hit", "interaction", "emission", "free flight", "partition", "medium",
+          "shade", "shadow rays", "shadow resolve", "fused tail")
 
 
 @dataclass
@@ -122,7 +122,8 @@ def _take(v, idx: UInt32):
 
 
 def gather_state(s: WaveState, idx: UInt32) -> WaveState:
-    return WaveState(*(_take(getattr(s, f.name), idx) for f in fields(s)))
+    """The paths ``idx`` of ``s`` (a :class:`WaveState` or a subclass)."""
+    return type(s)(*(_take(getattr(s, f.name), idx) for f in fields(s)))
 
 
 def _spread(x: UInt32) -> UInt32:
@@ -278,13 +279,7 @@ class WavefrontIntegrator:
         n = max(dr.width(o), dr.width(d), dr.width(active), dr.width(rng_a))
         timer = _Timer(self.stats)
         L = dr.zeros(Array3f, n)
-        s = WaveState(lane=dr.arange(UInt32, n), o=Array3f(o) + dr.zeros(Array3f, n),
-                      d=Array3f(d) + dr.zeros(Array3f, n),
-                      beta=dr.full(Array3f, 1.0, n), eta=dr.full(Float, 1.0, n),
-                      depth=dr.zeros(UInt32, n), prev_pdf=dr.full(Float, 1.0, n),
-                      prev_delta=dr.full(Bool, True, n),
-                      rng_state=UInt64(rng_a) + dr.zeros(UInt64, n),
-                      rng_inc=UInt64(rng_b) + dr.zeros(UInt64, n))
+        s = self._start_state(o, d, n, rng_a, rng_b)
         alive = Bool(active) | dr.zeros(Bool, n)
         timer.done("compact + sort", s, alive, L)
         live = []
@@ -302,16 +297,29 @@ class WavefrontIntegrator:
             self.stats.live.append(live)
         return L
 
+    def _start_state(self, o: Array3f, d: Array3f, n: int, rng_a: UInt64, rng_b: UInt64) -> WaveState:
+        """The ``n`` camera paths' state (the megakernel's ``_start``, as buffers)."""
+        return WaveState(lane=dr.arange(UInt32, n), o=Array3f(o) + dr.zeros(Array3f, n),
+                         d=Array3f(d) + dr.zeros(Array3f, n),
+                         beta=dr.full(Array3f, 1.0, n), eta=dr.full(Float, 1.0, n),
+                         depth=dr.zeros(UInt32, n), prev_pdf=dr.full(Float, 1.0, n),
+                         prev_delta=dr.full(Bool, True, n),
+                         rng_state=UInt64(rng_a) + dr.zeros(UInt64, n),
+                         rng_inc=UInt64(rng_b) + dr.zeros(UInt64, n))
+
     # ------------------------------------------------------------------ stages
     def _finish(self, s: WaveState, L: Array3f, timer: _Timer) -> None:
         """The last few paths in one fused loop of the megakernel's bounce (the
         same random numbers in the same order), their radiance added at their lanes."""
         m = dr.width(s.lane)
         rng = unpack(self._rng_kind, UInt64(s.rng_state), UInt64(s.rng_inc))
-        state = PathState(o=s.o, d=s.d, L=dr.zeros(Array3f, m), beta=s.beta, eta=s.eta, depth=s.depth,
-                          prev_pdf=s.prev_pdf, prev_delta=s.prev_delta, active=dr.full(Bool, True, m))
-        dr.scatter_add(L, _fused_loop(self._fused, self.scene, state, rng), s.lane)
+        dr.scatter_add(L, _fused_loop(self._fused, self.scene, self._loop_state(s, m), rng), s.lane)
         timer.done("fused tail", L, lanes=m)
+
+    def _loop_state(self, s: WaveState, m: int) -> PathState:
+        """The ``m`` paths of ``s`` as the fused loop's state."""
+        return PathState(o=s.o, d=s.d, L=dr.zeros(Array3f, m), beta=s.beta, eta=s.eta, depth=s.depth,
+                         prev_pdf=s.prev_pdf, prev_delta=s.prev_delta, active=dr.full(Bool, True, m))
 
     def _compact(self, s: WaveState, alive: Bool, timer: _Timer) -> tuple[WaveState, int]:
         idx = dr.compress(alive)
