@@ -202,10 +202,10 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                      "is Whitted)")
     if want("mode"):
         parser.add_argument("--mode", choices=MODES, default=base.mode,
-                            help="how the path tracer runs: megakernel (default: the whole path loop "
-                                 "in one fused kernel) or wavefront (a kernel per stage and bounce: "
-                                 "compacted, ray-sorted paths, per-material shading queues, batched "
-                                 "shadow rays)")
+                            help="how the path tracer (path, volpath) runs: megakernel (default: the whole "
+                                 "path loop in one fused kernel) or wavefront (a kernel per stage and "
+                                 "bounce: compacted, ray-sorted paths, per-material shading queues and "
+                                 "with volpath a medium queue, batched shadow rays)")
         parser.add_argument("--wavefront-tail", dest="wavefront_tail", type=int, default=base.wavefront_tail,
                             metavar="N",
                             help="with --mode wavefront: once at most N paths of a pass are alive, finish "

@@ -63,6 +63,10 @@ pure function of its inputs; the sorts are stable, and a path's arithmetic
 does not depend on its position in the buffer, so a seed gives the same
 image bit for bit (the coherence sort changes the order, not the values).
 
+:mod:`~drpt.render.integrators.volwavefront` runs volpath on these stages (its
+subclass adds a medium queue; ``_start_state``, ``_loop_state`` and ``_stages`` are what
+it replaces).
+
 ``stats`` (a :class:`WaveStats`, set by ``drpt profile``) records per stage
 the wall time (``dr.sync_thread`` at every boundary), the kernels launched
 (from ``dr.kernel_history`` when ``KernelHistory`` is on), lanes and rays,
