@@ -368,6 +368,13 @@ class VolPathIntegrator(PathIntegrator):
                             ref_p=Array3f(o), medium=dr.full(UInt32, self.camera_medium, w),
                             active=Bool(active))
 
+    @property
+    def shadow_draws(self) -> bool:
+        """Whether :meth:`shadow` draws random numbers (ratio tracking, in scenes with a
+        heterogeneous medium): the wavefront then traces it inside its queues, between
+        next-event estimation and the next direction, as the megakernel does."""
+        return self.media.has_hetero
+
     @dr.syntax
     def shadow(self, o: Array3f, d: Array3f, tmax: Float, medium: UInt32, active: Bool,
                rng: PCG32 | None = None) -> Array3f:

@@ -70,10 +70,9 @@ _SURFACE = ("beta", "depth", "surf")
 _QUERY = ("a", "b", "o", "d", "tmax", "medium", "ok")
 
 
-def _loop_state(s: WaveState, active: Bool, beta: Array3f | None = None, depth: UInt32 | None = None,
-                L: Array3f | None = None) -> VolPathState:
-    return VolPathState(o=s.o, d=s.d, L=L, beta=s.beta if beta is None else beta, eta=s.eta,
-                        depth=s.depth if depth is None else depth, prev_pdf=s.prev_pdf,
+def _vol_state(s: WaveState, active: Bool, L: Array3f | None = None) -> VolPathState:
+    """The buffers ``s`` as volpath's loop state (what its per-event steps read)."""
+    return VolPathState(o=s.o, d=s.d, L=L, beta=s.beta, eta=s.eta, depth=s.depth, prev_pdf=s.prev_pdf,
                         prev_delta=s.prev_delta, ref_p=s.ref_p, medium=s.medium, active=active)
 
 
@@ -85,7 +84,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         super().__init__(scene, options, sort=sort, tail=tail)
         self._fused = VolPathIntegrator(scene, options, model)
         #: the shadow rays draw random numbers (ratio tracking): traced inside each queue
-        self.inline_shadows = self._fused.media.has_hetero
+        self.inline_shadows = self._fused.shadow_draws
 
     # ------------------------------------------------------------------ state
     def _start_state(self, o: Array3f, d: Array3f, n: int, rng_a: UInt64, rng_b: UInt64) -> VolWaveState:
@@ -97,7 +96,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
                             rng_inc=UInt64(rng_b) + dr.zeros(UInt64, n), ref_p=st.ref_p, medium=st.medium)
 
     def _loop_state(self, s: VolWaveState, m: int) -> VolPathState:
-        return _loop_state(s, dr.full(Bool, True, m), L=dr.zeros(Array3f, m))
+        return _vol_state(s, dr.full(Bool, True, m), L=dr.zeros(Array3f, m))
 
     def _rng(self, s: WaveState):
         return unpack(self._rng_kind, UInt64(s.rng_state), UInt64(s.rng_inc))
@@ -109,7 +108,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
 
         # ---- Russian roulette, closest hit
         rng = self._rng(s)
-        active, beta = integ.roulette(_loop_state(s, dr.full(Bool, True, n)), rng)
+        active, beta = integ.roulette(_vol_state(s, dr.full(Bool, True, n)), rng)
         hit = scene.intersect_preliminary(s.o, s.d, active)
         rng_a, rng_b = pack(rng)
         timer.done("closest hit", hit, active, beta, rng_a, rng_b, lanes=n, rays=n)
@@ -118,7 +117,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
 
         # ---- free flight and what the ray reaches
         rng = unpack(self._rng_kind, rng_a, rng_b)
-        vs = _loop_state(s, active)
+        vs = _vol_state(s, active)
         fl = integ.free_flight(vs, si, active, beta, rng)
         dr.scatter_add(L, integ.emitted(scene, vs, si, fl), s.lane)
         on_surface = fl.surf & si.valid
@@ -182,7 +181,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         integ = self._fused
         rng = self._rng(s)
         m = dr.width(s.lane)
-        vs = _loop_state(s, dr.full(Bool, True, m))
+        vs = _vol_state(s, dr.full(Bool, True, m))
         on_surface = Bool(fl.surf) & si.valid if fl.surface else Bool(False)
         phase = integ.phase(vs, fl)
         q = integ.nee_query(scene, vs, si, fl, on_surface, phase, rng)
