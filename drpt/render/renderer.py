@@ -138,6 +138,10 @@ class PassSums:
 
 #: mixed into the seed of the AOV kernel's random streams (its own, beside the beauty's)
 AOV_STREAM = 0xA0F5EED
+#: the seed's xor for bidirectional path tracing's pilot (:meth:`Renderer._calibrate_bdpt`)
+BDPT_PILOT_STREAM = 0xB1D1C0DE
+#: the pilot's lanes (at most; whole rows of one sample per pixel)
+BDPT_PILOT_LANES = 1 << 16
 
 
 def _mix_seed(seed: int, index: int) -> int:
@@ -506,20 +510,13 @@ class Renderer:
         lane a camera sample: the ``k`` samples of each pixel of rows ``r0..r0+rows``,
         pixel-major, uniform in their pixel."""
         if isinstance(self.integrator, BDPTIntegrator):
-            rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
-                        initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
-            _, _, x, y = self._pass_lanes(k, r0, rows)
-            u = next_2d(rng)
-            film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
-            camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+            if self.integrator.threshold is None:
+                self._calibrate_bdpt()
             strategies = None
             if self.opt.bdpt_strategies:
                 strategies = StrategyFilm(self.opt.width, self.opt.height,
                                           min(self.integrator.depth, STRATEGY_SEGMENTS))
-            bad = self.integrator.trace(rng, film, camera, Float(x) + u.x, Float(y) + u.y,
-                                        dr.full(Bool, True, n), strategies)
-            with llvm_tuning.blocks_for(n):
-                dr.eval(film.sum, film.sq, camera.sum, camera.sq, bad, strategies.sum if strategies else [])
+            film, camera, bad = self._bdpt_pass(self.opt.seed, pass_index, k, r0, rows, strategies)
             if strategies is not None:
                 sums = strategies.arrays()
                 self.strategy_sums = sums if self.strategy_sums is None else self.strategy_sums + sums
@@ -543,6 +540,36 @@ class Renderer:
             dr.eval(film.sum, film.sq, bad)
         img, sq, _ = film.arrays()
         return img, sq, int(dr.sum(bad)[0])
+
+    def _bdpt_pass(self, seed: int, pass_index: int, k: int, r0: int, rows: int,
+                   strategies: StrategyFilm | None = None, use_roulette: bool = True):
+        """Bidirectional path tracing's lanes of a pass, evaluated: ``(light film, camera
+        film, dropped)``."""
+        n = rows * self.opt.width * k
+        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(seed, pass_index)),
+                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+        _, _, x, y = self._pass_lanes(k, r0, rows)
+        u = next_2d(rng)
+        film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+        camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+        bad = self.integrator.trace(rng, film, camera, Float(x) + u.x, Float(y) + u.y,
+                                    dr.full(Bool, True, n), strategies, use_roulette)
+        with llvm_tuning.blocks_for(n):
+            dr.eval(film.sum, film.sq, camera.sum, camera.sq, bad, strategies.sum if strategies else [])
+        return film, camera, bad
+
+    def _calibrate_bdpt(self) -> None:
+        """Bidirectional path tracing's pilot: 1 sample per pixel of at most
+        :data:`BDPT_PILOT_LANES` pixels (a band of rows in the middle of the image) without
+        Russian roulette, from a stream of its own, estimates the image's mean pixel value,
+        from which :meth:`~drpt.render.integrators.bdpt.BDPTIntegrator.calibrate` sets the
+        roulette's threshold (the same kernel as the passes': the threshold is its input)."""
+        W, H = self.opt.width, self.opt.height
+        rows = max(1, min(H, BDPT_PILOT_LANES // W))
+        film, camera, _ = self._bdpt_pass(self.opt.seed ^ BDPT_PILOT_STREAM, 0, 1, (H - rows) // 2, rows,
+                                          use_roulette=False)
+        rgb = [float(dr.sum(film.sum[c])[0] + dr.sum(camera.sum[c])[0]) / (rows * W) for c in range(3)]
+        self.integrator.calibrate(0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2])
 
     def _pass_lanes(self, k: int, r0: int, rows: int) -> tuple[int, UInt32, UInt32, UInt32]:
         """``(n, lane, x, y)``: one lane per sample of a pass of ``k`` samples per pixel

@@ -11,7 +11,12 @@ itself is camera vertex 0), a path of ``s + t - 1`` segments:
   area light as :meth:`~drpt.render.lights.area.AreaLights.sample` draws it for
   the path tracer, every point, spot and directional light, a sky direction);
 * ``s >= 2, t >= 2``: a stored light vertex joined to a camera vertex by a
-  shadow ray;
+  shadow ray: each camera vertex is joined to one light vertex, chosen uniformly
+  among those that make a path of at most ``max_depth`` segments
+  (:func:`choose_vertex`), its contribution multiplied by their number (each
+  connection strategy's estimate keeps its expectation, so the MIS weights, which
+  ignore the choice, still sum to 1; one connection per camera vertex instead of one
+  per pair costs fewer shadow rays and BSDF evaluations than it adds variance);
 * ``t = 1``: a light vertex joined to the pinhole camera and splatted at the
   pixel it projects to (:class:`~drpt.render.film.SplatFilm`), as light tracing
   (:mod:`~drpt.render.integrators.ptracer`) does. ``(s, t) = (1, 1)`` is not
@@ -23,11 +28,24 @@ and a direction on it; it carries importance (refraction's ``eta^2`` undone,
 Veach's shading-normal correction). Its surface vertices that are not pure
 Dirac (mirror, smooth glass) are stored in per-lane local arrays
 (``dr.alloc_local``, one per field) of ``max_depth - 1`` entries; the camera
-subpath then runs as a Dr.Jit loop, and at each of its non-Dirac vertices an
-inner loop connects it to every stored light vertex. Both subpaths play Russian
+subpath then runs as a Dr.Jit loop, and each of its non-Dirac vertices is
+connected to one stored light vertex. Both subpaths play Russian
 roulette as the path tracer does (after ``rr_depth`` segments, probability
 ``min(max(beta) eta^2, 0.95)``); the MIS weights ignore it (they still sum to 1
 over the strategies of a path, so the estimate stays unbiased).
+
+**Roulette on connections and splats.** A connection's or a ``t = 1`` splat's
+MIS-weighted contribution is known before its shadow ray is traced; below a
+threshold it is traced with probability ``q = min(1, max(value) / threshold)`` and
+divided by ``q`` (:func:`roulette`: the same expectation, and no contribution is
+scaled above the threshold, so no fireflies). Small contributions (low weights,
+dim paths) then rarely cost a shadow ray and a splat. The threshold is
+:data:`ROULETTE_FRACTION` of the image's mean pixel value, which a pilot estimates
+before the first pass (``Renderer._calibrate_bdpt``: one sample per pixel of a
+band of rows, without roulette, from a random stream of its own;
+:meth:`BDPTIntegrator.calibrate` rounds it to a power of 2, so renders in other
+processes agree). The threshold depends only on the pilot's samples, so the
+passes' estimate is unbiased given it.
 
 **MIS weights.** The power heuristic over all strategies of a path, ``w_s =
 p_s^2 / sum_i p_i^2``, computed as pbrt computes it (ratios of the forward and
@@ -115,6 +133,10 @@ MAX_DEPTH = 16
 #: ``--bdpt-strategies`` writes an image per strategy of the paths of at most this many segments
 STRATEGY_SEGMENTS = 5
 
+#: connections and splats whose contribution is below this fraction of the image's mean
+#: pixel value play Russian roulette (:func:`roulette`)
+ROULETTE_FRACTION = 0.1
+
 SUPPORTED_SOURCES = ("area", "point", "spot", "directional", "sky", "background")
 
 
@@ -184,6 +206,23 @@ def emission_weight(pdf_nee: Float, emit: Float, dvcm: Float, dvc: Float) -> Flo
     light subpath's density of it and of the direction back along the ray."""
     w = dr.rcp(1.0 + _term(pdf_nee, dvcm) + _term(emit, dvc))
     return dr.select(dr.isfinite(w), w, 0.0)
+
+
+def choose_vertex(u: Float, stored: UInt32, room: UInt32) -> tuple[UInt32, UInt32]:
+    """The light vertex a camera vertex is joined to: index ``i`` uniform among the first
+    ``m = min(stored, room)`` stored ones (by ``u``), and ``m``, the inverse of its
+    probability, by which the connection's contribution is multiplied (``m = 0``: none)."""
+    m = dr.minimum(stored, room)
+    return dr.minimum(UInt32(u * Float(m)), dr.maximum(m, 1) - 1), m
+
+
+def roulette(value: Array3f, ok: Bool, u: Float, threshold: Float) -> tuple[Array3f, Bool]:
+    """Russian roulette on a contribution before its shadow ray is traced: kept with
+    probability ``q = min(1, max(value) / threshold)`` (``u < q``) and divided by ``q``, so
+    its expectation is unchanged; ``threshold = 0`` keeps every contribution as it is."""
+    q = dr.select(threshold > 0.0, dr.minimum(dr.max(value) / threshold, 1.0), 1.0)
+    ok = ok & (u < q)
+    return dr.select(ok, value / dr.select(ok, q, 1.0), 0.0), ok
 
 
 def mis_weights_reference(pdf_fwd: list[float], pdf_rev: list[float], delta: list[bool],
@@ -339,11 +378,22 @@ class BDPTIntegrator:
         #: a test hook: ``(s, t)``, the one strategy that counts, with weight 1 (None: all,
         #: MIS-weighted); the image is then that strategy's unweighted estimate
         self.only: tuple[int, int] | None = None
+        #: the contribution below which connections and splats play Russian roulette
+        #: (:func:`roulette`; 0: none), set by :meth:`calibrate`; None before
+        self.threshold: float | None = None
         self.has_sky = any(kind == "sky" for kind, _ in rays.sources)
         self.has_background = any(kind == "background" for kind, _ in rays.sources)
         #: a light subpath leaving an infinite emitter starts on a disk of the scene's
         #: bounding sphere's radius R, perpendicular to its direction: area density 1 / (pi R^2)
         self.disk_pdf = 1.0 / (math.pi * rays.radius * rays.radius)
+
+    def calibrate(self, mean: float) -> None:
+        """Set :attr:`threshold` from ``mean``, an estimate of the image's mean pixel value
+        (luminance): :data:`ROULETTE_FRACTION` of it, rounded to a power of 2 (renders
+        that estimate it in other processes, whose float sums differ in the last bits,
+        still agree)."""
+        t = ROULETTE_FRACTION * mean
+        self.threshold = 2.0 ** round(math.log2(t)) if t > 0.0 and math.isfinite(t) else 0.0
 
     # ------------------------------------------------------------ emitter densities
     def _delta_emit(self, light) -> float:
@@ -440,8 +490,10 @@ class BDPTIntegrator:
         return dr.select((UInt32(s) == self.only[0]) & (UInt32(t) == self.only[1]), 1.0, 0.0)
 
     def _splat(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float, film: SplatFilm,
-               active: Bool, depth: UInt32, strategies: StrategyFilm | None) -> None:
-        """``t = 1``: light vertex ``si`` joined to the camera, splatted into ``film``."""
+               active: Bool, depth: UInt32, strategies: StrategyFilm | None, u_rr: Float,
+               threshold: Float) -> None:
+        """``t = 1``: light vertex ``si`` joined to the camera, splatted into ``film`` (after
+        :func:`roulette` with ``u_rr`` and ``threshold``)."""
         scene, cam = self.scene, self.camera
         x, y, wc, _dist, importance, visible = cam.connect(si.p)
         ok = active & visible
@@ -453,6 +505,7 @@ class BDPTIntegrator:
                                            Float(0.0)), depth + 1, 1)
         value = beta * f * (corr * importance * w)
         ok &= sides & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
+        value, ok = roulette(value, ok, u_rr, threshold)
         so = scene.spawn(si, wc)
         to = cam.center - so
         dist = dr.norm(to)
@@ -564,8 +617,9 @@ class BDPTIntegrator:
 
     def _connect(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float,
                  lv: Interaction, beta_l: Array3f, dvcm_l: Float, dvc_l: Float, active: Bool,
-                 s: UInt32, t: UInt32) -> Array3f:
-        """``s >= 2, t >= 2``: camera vertex ``si`` joined to light vertex ``lv``."""
+                 s: UInt32, t: UInt32, u_rr: Float, threshold: Float) -> Array3f:
+        """``s >= 2, t >= 2``: camera vertex ``si`` joined to light vertex ``lv`` (after
+        :func:`roulette` with ``u_rr`` and ``threshold``)."""
         scene = self.scene
         to = lv.p - si.p
         dist2 = dr.squared_norm(to)
@@ -581,6 +635,7 @@ class BDPTIntegrator:
         weight = self._weight(connection_weight(pdf_l, dvcm_l, dvc_l, rev_l, pdf_c, dvcm, dvc, rev_c), s, t)
         value = beta * f_c * beta_l * f_l * (corr * inv_d2 * weight)
         ok = active & sides & (dist2 > 0.0) & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
+        value, ok = roulette(value, ok, u_rr, threshold)
         so = scene.spawn(si, w)
         end = spawn_origin(lv.p, lv.ng, lv.p_error, -w)
         seg = end - so
@@ -592,12 +647,15 @@ class BDPTIntegrator:
     # ------------------------------------------------------------ the subpaths
     @dr.syntax
     def trace(self, rng: PCG32, film: SplatFilm, camera_film: SplatFilm, px: Float, py: Float,
-              active: Bool, strategies: StrategyFilm | None = None) -> UInt32:
+              active: Bool, strategies: StrategyFilm | None = None, use_roulette: bool = True) -> UInt32:
         """One light subpath and one camera sample through image position ``(px, py)`` per
         lane: the ``t = 1`` strategies splatted into ``film``, the sum of the others into
         ``camera_film`` at ``(px, py)``, and with ``strategies`` each contribution also
         into its strategy's image; returns the non-finite contributions dropped (per
         lane)."""
+        # the roulette's threshold is a kernel input, so that the pilot (without roulette)
+        # and the passes trace one kernel
+        threshold = dr.opaque(Float, self.threshold if use_roulette and self.threshold else 0.0)
         scene, opt, cam = self.scene, self.opt, self.camera
         n = dr.width(active)
         D = self.depth
@@ -628,7 +686,8 @@ class BDPTIntegrator:
                 if connectible:
                     lverts.write(dr.minimum(stored, NL - 1), si, beta, dvcm, dvc, depth)
                     stored += 1
-                self._splat(si, beta, dvcm, dvc, film, connectible, depth, strategies)
+                self._splat(si, beta, dvcm, dvc, film, connectible, depth, strategies, rng.next_float32(),
+                            threshold)
 
                 u_lobe = rng.next_float32()
                 u_bsdf = next_2d(rng)
@@ -689,15 +748,16 @@ class BDPTIntegrator:
             if record:
                 strategies.put(1, k + 1, px, py, beta * nee, active)
             if lverts is not None:
-                i = dr.zeros(UInt32, n)
-                while connectible & (i < stored):
-                    lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
-                    c = self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
-                                      connectible & (depth_l + k < D), depth_l + 1, k + 1)
-                    L += c
-                    if record:
-                        strategies.put(depth_l + 1, k + 1, px, py, c, active)
-                    i += 1
+                # vertex j has depth >= j + 1: only the first D - k can make a path of <= D segments
+                i, m = choose_vertex(rng.next_float32(), stored, dr.select(k < D, D - k, 0))
+                pick = connectible & (m > 0)
+                lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, pick)
+                c = self._connect(si, beta, dvcm, dvc, lv, beta_l * Float(m), dvcm_l, dvc_l,
+                                  pick & (depth_l + k < D), depth_l + 1, k + 1, rng.next_float32(),
+                                  threshold)
+                L += c
+                if record:
+                    strategies.put(depth_l + 1, k + 1, px, py, c, active)
 
             u_lobe = rng.next_float32()
             u_bsdf = next_2d(rng)

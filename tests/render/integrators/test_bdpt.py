@@ -25,6 +25,7 @@ strategy of the wrong length as the negative control.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -481,3 +482,97 @@ def test_a_strategy_alone_negative_control(scenes, bounce_references):
     r.integrator.only = (2, 2)
     zb, _ = _agree(r.render(), bounce_references[1])
     assert zb > 6.0, zb
+
+
+# ------------------------------------------------------------ cheaper estimators
+def test_roulette_keeps_the_expectation():
+    """:func:`~drpt.render.integrators.bdpt.roulette` on contributions below, at and above
+    the threshold: the mean of ``value / q`` over 2^20 draws is the value (|z| < 4.5, z
+    from the sample's own standard error); above the threshold nothing is dropped; the
+    threshold 0 keeps everything as it is. Negative control: without the division by
+    ``q`` the means are too small (|z| > 6)."""
+    n = 1 << 20
+    rng = np.random.default_rng(5)
+    for v in (0.01, 0.3, 1.0, 4.0):
+        value = dr.full(B.Array3f, [v, 0.5 * v, 0.0], n)
+        u = Float(rng.random(n, dtype=np.float32))
+        out, ok = B.roulette(value, dr.full(Bool, True, n), u, Float(1.0))
+        x = out.x.numpy().astype(np.float64)
+        z = (x.mean() - v) / max(x.std() / np.sqrt(n), 1e-12)
+        assert abs(z) < 4.5, (v, z)
+        if v >= 1.0:
+            assert ok.numpy().all() and np.allclose(x, v)
+        if v < 1.0:
+            biased = np.where(ok.numpy(), v, 0.0)
+            zb = (biased.mean() - v) / (biased.std() / np.sqrt(n))
+            assert zb < -6.0, (v, zb)
+        same, ok0 = B.roulette(value, dr.full(Bool, True, n), u, Float(0.0))
+        assert ok0.numpy().all() and np.allclose(same.x.numpy(), v)
+
+
+def test_choose_vertex_is_uniform_over_the_usable_vertices():
+    """``choose_vertex``: index uniform in ``[0, min(stored, room))`` (chi-square-like check
+    of the counts, 6 sigma), returned with that count; no vertex where none is usable."""
+    n = 1 << 16
+    u = Float(np.random.default_rng(2).random(n, dtype=np.float32))
+    for stored, room, m_exp in ((5, 3, 3), (2, 7, 2), (4, 4, 4), (0, 5, 0), (3, 0, 0)):
+        i, m = B.choose_vertex(u, dr.full(B.UInt32, stored, n), dr.full(B.UInt32, room, n))
+        assert (m.numpy() == m_exp).all()
+        if m_exp:
+            counts = np.bincount(i.numpy(), minlength=m_exp)
+            assert len(counts) == m_exp
+            assert np.abs(counts - n / m_exp).max() < 6 * np.sqrt(n / m_exp)
+
+
+@pytest.mark.slow
+def test_a_connection_alone_needs_the_selection_probability(scenes, bounce_references, monkeypatch):
+    """(2, 2) alone joins each camera vertex to one of up to 2 light vertices (depth 3): with
+    the contribution times the number it chose from it is unbiased (test above); counted
+    once (the selection probability ignored) it is too dark (negative control)."""
+    choose = B.choose_vertex
+    monkeypatch.setattr(B, "choose_vertex", lambda u, stored, room: (choose(u, stored, room)[0],
+                                                                   dr.minimum(dr.minimum(stored, room), 1)))
+    r = _render(scenes["cornell"], "bdpt", 128, 3)
+    r.integrator.only = (2, 2)
+    zb, _ = _agree(r.render(), bounce_references[2])
+    assert zb > 6.0, zb
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("divide", [True, False])
+def test_heavy_roulette_is_unbiased_and_its_control_fails(scenes, references, monkeypatch, divide):
+    """The Cornell box with the roulette's threshold at 4x the image's mean (most
+    connections and splats rouletted) agrees with the path tracer (the test above's
+    thresholds); without the division by the survival probability it fails (|z| > 6)."""
+    if not divide:
+        monkeypatch.setattr(B, "roulette", lambda value, ok, u, threshold: (
+            value, ok & (u < dr.minimum(dr.max(value) / threshold, 1.0))))
+    depth, spp, _ = CASES["cornell"]
+    r = _render(scenes["cornell"], "bdpt", spp, depth)
+    r.render()  # calibrates
+    r.integrator.threshold *= 4.0 / B.ROULETTE_FRACTION
+    img = r.render()
+    zb, zm = _agree(img, _reference(scenes, references, "cornell"))
+    if divide:
+        assert zb < 4.5 and zm < 4.0, (zb, zm)
+    else:
+        assert zb > 6.0, zb
+
+
+@pytest.mark.slow
+def test_pilot_sets_a_power_of_two_threshold_near_the_mean(scenes):
+    """The pilot (``Renderer._calibrate_bdpt``) sets the threshold to a power of 2 within a
+    factor 2.5 of ``ROULETTE_FRACTION`` times the image's mean luminance (measured on the
+    render), the same in a second renderer (another process would agree too); an image
+    of nothing but black has threshold 0 (no roulette)."""
+    r = _render(scenes["cornell"], "bdpt", 16, 5)
+    img = r.render()
+    t = r.integrator.threshold
+    assert t > 0 and math.log2(t) == round(math.log2(t))
+    mean = float((img.image @ np.array([0.2126, 0.7152, 0.0722])).mean())
+    assert 1 / 2.5 < t / (B.ROULETTE_FRACTION * mean) < 2.5, (t, mean)
+    r2 = _render(scenes["cornell"], "bdpt", 16, 5)
+    r2.render()
+    assert r2.integrator.threshold == t
+    r.integrator.calibrate(0.0)
+    assert r.integrator.threshold == 0.0
