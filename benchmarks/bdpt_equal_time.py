@@ -5,12 +5,16 @@ a diffuse floor under a small spherical area light, with a back wall; and the se
 Cornell box with a glass sphere, authored here from its report, :func:`seed_glass_cornell`), both
 integrators render SIZE x SIZE at their spp after a warm-up render of 1 spp that
 compiles the kernels; a bdpt render of REF_SPP spp and another seed is the reference.
-Prints per integrator the seconds, the relMSE against the reference (minus the
+Prints per integrator the seconds (the fastest of REPEAT renders; also the process's CPU
+seconds, steadier on a loaded machine), the relMSE against the reference (minus the
 reference's own estimated relMSE) and relMSE x seconds (lower is better: the relMSE at
-equal time, up to a constant), then bdpt's relMSE x seconds over path's.
+equal time, up to a constant), then bdpt's relMSE x seconds over path's (by wall and by
+CPU seconds). ``--sampler`` sets both integrators' sampler (the reference's stays
+``independent``).
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/bdpt_equal_time.py [--size 64] [--depth 8]
 [--path-spp 256] [--bdpt-spp 64] [--ref-spp 2048] [--scenes cornell,caustic,glass] [--repeat 3]
+[--sampler independent]
 """
 
 from __future__ import annotations
@@ -103,6 +107,7 @@ def main() -> None:
     p.add_argument("--ref-spp", type=int, default=2048)
     p.add_argument("--scenes", default="cornell,caustic,glass")
     p.add_argument("--repeat", type=int, default=3, help="timed renders; the fastest counts")
+    p.add_argument("--sampler", default="independent", help="both integrators' --sampler")
     a = p.parse_args()
     repo = Path(__file__).resolve().parents[1]
     tmp = Path(tempfile.mkdtemp())
@@ -112,24 +117,28 @@ def main() -> None:
              "glass": tmp / "glass_cornell.txt"}
     for name in a.scenes.split(","):
         scene = load_scene(files[name])
-        base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth))
-        ref = Renderer(scene, replace(base, integrator="bdpt", spp=a.ref_spp, seed=99)).render()
+        base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth),
+                             sampler=a.sampler)
+        ref = Renderer(scene, replace(base, integrator="bdpt", spp=a.ref_spp, seed=99,
+                                      sampler="independent")).render()
         rows = {}
         for integrator, spp in (("path", a.path_spp), ("bdpt", a.bdpt_spp)):
             r = Renderer(scene, replace(base, integrator=integrator, spp=1, seed=1))
             r.render()  # compiles the kernels
             r = r.derive(replace(r.opt, spp=spp, seed=2))
-            seconds = math.inf
+            seconds, cpu = math.inf, math.inf
             for _ in range(a.repeat):  # the same seed: the same image, the fastest time
-                t = time.perf_counter()
+                t, c = time.perf_counter(), time.process_time()
                 img = r.render()
                 seconds = min(seconds, time.perf_counter() - t)
+                cpu = min(cpu, time.process_time() - c)
             err = rel_mse(img.image, ref.image) - ref.estimated_rel_mse
-            rows[integrator] = err * seconds
-            print(f"{name} {integrator}: {spp} spp, {seconds:.2f} s, relMSE {err:.4g}, "
+            rows[integrator] = (err * seconds, err * cpu)
+            print(f"{name} {integrator}: {spp} spp, {seconds:.2f} s ({cpu:.2f} s CPU), relMSE {err:.4g}, "
                   f"relMSE x s {err * seconds:.4g}")
-        print(f"{name}: bdpt / path relMSE at equal time {rows['bdpt'] / rows['path']:.3f} "
-              f"(reference: bdpt {a.ref_spp} spp, its estimated relMSE {ref.estimated_rel_mse:.3g})")
+        print(f"{name}: bdpt / path relMSE at equal time {rows['bdpt'][0] / rows['path'][0]:.3f} "
+              f"(by CPU seconds {rows['bdpt'][1] / rows['path'][1]:.3f}; reference: bdpt {a.ref_spp} spp, "
+              f"its estimated relMSE {ref.estimated_rel_mse:.3g})")
 
 
 if __name__ == "__main__":

@@ -237,15 +237,14 @@ class Renderer:
         self.camera = RayCamera(scene.camera, options.width, options.height)
         self.warnings: list[str] = self.scene.warnings
         self.integrator = self._make_integrator()
-        if uses_ld(options.sampler) and isinstance(self.integrator, BDPTIntegrator):
-            self.warnings.append(f"--sampler {options.sampler}: bdpt draws independent samples")
-        elif uses_ld(options.sampler) and not self.ld_sampling:
+        bdpt = isinstance(self.integrator, BDPTIntegrator)
+        if uses_ld(options.sampler) and not self.ld_sampling:
             self.warnings.append(f"--sampler {options.sampler}: light tracing beyond 2^32 paths "
                                  "(width x height x spp) draws independent samples")
-        elif options.sampler == "zsobol" and self.light_tracing:
+        elif options.sampler == "zsobol" and self.light_tracing and not bdpt:
             self.warnings.append("--sampler zsobol: light tracing draws from one ldsampler sequence "
                                  "of all its paths")
-        elif options.sampler == "zsobol" and self._zsobol is None and not self.light_tracing:
+        elif options.sampler == "zsobol" and self._zsobol is None and (bdpt or not self.light_tracing):
             self.warnings.append("--sampler zsobol: the image's Morton codes and the sample index "
                                  "need more than 32 bits: ldsampler's sequences instead")
         self._aov_ids = None
@@ -467,20 +466,23 @@ class Renderer:
     @property
     def ld_sampling(self) -> bool:
         """Whether passes draw from a low-discrepancy sampler
-        (:mod:`drpt.render.sampler`): ``--sampler`` other than ``independent``
-        (light tracing: one sequence of all its paths, while they are at most 2^32)."""
+        (light tracing: one sequence of all its paths, while they are at most 2^32;
+        bidirectional path tracing: its camera samples' sequences, as a camera pass's)."""
         o = self.opt
         if isinstance(self.integrator, BDPTIntegrator):
-            return False  # bdpt draws from PCG32 streams
+            return uses_ld(o.sampler)
         return uses_ld(o.sampler) and (not self.light_tracing or o.width * o.height * o.spp <= 1 << 32)
 
-    def _sampler(self, pass_index: int, n: int, x: UInt32, y: UInt32, j: UInt32, step):
+    def _sampler(self, pass_index: int, n: int, x: UInt32, y: UInt32, j: UInt32, step,
+                 seed: int | None = None):
         """The random numbers of a camera pass's ``n`` lanes: the lane's PCG32 stream
         of ``(seed, pass, lane)``, or with :attr:`ld_sampling` an
         :class:`~drpt.render.sampler.LDSampler` of pixel ``(x, y)`` whose first sample
-        is the pass's first sample plus ``j``, its next ``step`` further on."""
+        is the pass's first sample plus ``j``, its next ``step`` further on (``seed``:
+        the render's unless given)."""
+        seed = self.opt.seed if seed is None else seed
         if not self.ld_sampling:
-            return PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
+            return PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(seed, pass_index)),
                          initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
         plan = self.chunks.passes
         s0 = pass_index // plan.bands * plan.k  # plan[pass_index]'s first sample (also past spp:
@@ -488,9 +490,9 @@ class Renderer:
         index = j + dr.opaque(UInt32, s0)
         zsobol = self._zsobol
         if zsobol is not None:
-            return zsobol.for_pixels_xy(self.opt.seed, x, y, index, step)
+            return zsobol.for_pixels_xy(seed, x, y, index, step)
         pixel = y * dr.opaque(UInt32, self.opt.width) + x
-        return LDSampler.for_pixels(self.opt.seed, pixel, index, step)
+        return LDSampler.for_pixels(seed, pixel, index, step)
 
     @property
     def _zsobol(self):
@@ -544,11 +546,9 @@ class Renderer:
     def _bdpt_pass(self, seed: int, pass_index: int, k: int, r0: int, rows: int,
                    strategies: StrategyFilm | None = None, use_roulette: bool = True):
         """Bidirectional path tracing's lanes of a pass, evaluated: ``(light film, camera
-        film, dropped)``."""
-        n = rows * self.opt.width * k
-        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(seed, pass_index)),
-                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
-        _, _, x, y = self._pass_lanes(k, r0, rows)
+        film, dropped)``; their random numbers as a camera pass's (:meth:`_sampler`)."""
+        n, lane, x, y = self._pass_lanes(k, r0, rows)
+        rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1, seed)
         u = next_2d(rng)
         film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
         camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)

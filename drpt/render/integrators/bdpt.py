@@ -11,12 +11,14 @@ itself is camera vertex 0), a path of ``s + t - 1`` segments:
   area light as :meth:`~drpt.render.lights.area.AreaLights.sample` draws it for
   the path tracer, every point, spot and directional light, a sky direction);
 * ``s >= 2, t >= 2``: a stored light vertex joined to a camera vertex by a
-  shadow ray: each camera vertex is joined to one light vertex, chosen uniformly
-  among those that make a path of at most ``max_depth`` segments
-  (:func:`choose_vertex`), its contribution multiplied by their number (each
-  connection strategy's estimate keeps its expectation, so the MIS weights, which
-  ignore the choice, still sum to 1; one connection per camera vertex instead of one
-  per pair costs fewer shadow rays and BSDF evaluations than it adds variance);
+  shadow ray. In scenes without Dirac lobes each camera vertex is joined to one light
+  vertex, chosen uniformly among those that make a path of at most ``max_depth``
+  segments (:func:`choose_vertex`), its contribution multiplied by their number (each
+  connection strategy's estimate keeps its expectation; the MIS weights count the
+  connections' densities over :data:`CONNECTION_CHOICES`): one connection per camera
+  vertex instead of one per pair costs fewer shadow rays and BSDF evaluations than it
+  adds variance. With glass or mirrors (:attr:`BDPTIntegrator.one_connection` false)
+  every pair is joined, in an inner loop;
 * ``t = 1``: a light vertex joined to the pinhole camera and splatted at the
   pixel it projects to (:class:`~drpt.render.film.SplatFilm`), as light tracing
   (:mod:`~drpt.render.integrators.ptracer`) does. ``(s, t) = (1, 1)`` is not
@@ -29,7 +31,7 @@ Veach's shading-normal correction). Its surface vertices that are not pure
 Dirac (mirror, smooth glass) are stored in per-lane local arrays
 (``dr.alloc_local``, one per field) of ``max_depth - 1`` entries; the camera
 subpath then runs as a Dr.Jit loop, and each of its non-Dirac vertices is
-connected to one stored light vertex. Both subpaths play Russian
+connected to one stored light vertex, or to each. Both subpaths play Russian
 roulette as the path tracer does (after ``rr_depth`` segments, probability
 ``min(max(beta) eta^2, 0.95)``); the MIS weights ignore it (they still sum to 1
 over the strategies of a path, so the estimate stays unbiased).
@@ -119,7 +121,7 @@ from ..camera import RayCamera
 from ..film import SplatFilm
 from ..instrument import HIT_CAMERA, HIT_LIGHT, SHADOW_CAMERA, SHADOW_CONNECT, SHADOW_NEE, SPLAT, count
 from ..lights.rays import INV_FOUR_PI, EmitterRays
-from ..sampler import next_2d
+from ..sampler import LDSampler, next_2d
 from ..scene import DeviceScene
 from ..spawn import origin as spawn_origin
 from ..surface import Interaction, TangentInteraction
@@ -133,9 +135,23 @@ MAX_DEPTH = 16
 #: ``--bdpt-strategies`` writes an image per strategy of the paths of at most this many segments
 STRATEGY_SEGMENTS = 5
 
+#: the MIS weights count a connection strategy (``s, t >= 2``) as sampled with its
+#: density over this (each camera vertex is joined to one of the stored light vertices,
+#: about this many): the power heuristic over ``p_i / n_i`` (``n_i`` this for connections,
+#: 1 for the others) still sums to 1 over the strategies of a path. Carried as a factor
+#: ``k = m(CONNECTION_CHOICES)`` on the subpaths' starting ``dvcm``, ``dvc`` (the terms of
+#: the strategies that are not connections) and ``1 / k`` on the weights of those
+#: strategies (``nee_weight``, ``emission_weight``, the splat's ``connection_weight``)
+CONNECTION_CHOICES = 2.0
+
 #: connections and splats whose contribution is below this fraction of the image's mean
 #: pixel value play Russian roulette (:func:`roulette`)
 ROULETTE_FRACTION = 0.1
+
+#: with a low-discrepancy sampler (``--sampler ldsampler``...), the camera subpath's first
+#: dimension (the light subpath's take fewer: at most 5 + 5 per vertex); the pixel
+#: position takes 0 and 1
+CAMERA_DIMENSION = 128
 
 SUPPORTED_SOURCES = ("area", "point", "spot", "directional", "sky", "background")
 
@@ -176,35 +192,39 @@ def _term(p: Float, rest: Float) -> Float:
 
 
 def connection_weight(pdf_l: Float, dvcm_l: Float, dvc_l: Float, rev_l: Float,
-                      pdf_c: Float, dvcm_c: Float, dvc_c: Float, rev_c: Float) -> Float:
+                      pdf_c: Float, dvcm_c: Float, dvc_c: Float, rev_c: Float, k_l: float = 1.0) -> Float:
     """Weight of joining a light vertex to a camera vertex: ``pdf_l`` the area density of
     the light vertex sampled from the camera vertex, ``rev_l`` the light vertex's BSDF
-    density toward its predecessor seen from the camera vertex (and the other way round)."""
-    wl = _term(pdf_l, dvcm_l + _term(rev_l, dvc_l))
+    density toward its predecessor seen from the camera vertex (and the other way round);
+    for the ``t = 1`` splat (``pdf_c = 0``) ``k_l`` is :attr:`BDPTIntegrator.k` (see
+    :data:`CONNECTION_CHOICES`)."""
+    wl = _term(pdf_l, dvcm_l + _term(rev_l, dvc_l)) / k_l
     wc = _term(pdf_c, dvcm_c + _term(rev_c, dvc_c))
     w = dr.rcp(1.0 + wl + wc)
     return dr.select(dr.isfinite(w), w, 0.0)
 
 
 def nee_weight(pdf_bsdf: Float, pdf_light: Float, emit: Float, cos_c: Float, cos_l: Float,
-               dvcm: Float, dvc: Float, rev: Float) -> Float:
+               dvcm: Float, dvc: Float, rev: Float, k: float = 1.0) -> Float:
     """Weight of next-event estimation (``s = 1``) at a camera vertex: ``pdf_bsdf`` the
     BSDF's density toward the light point (0 for a delta light), ``pdf_light`` the point's
     density as a solid angle (for a delta light: ``dist^2``, its area density 1), ``emit``
     the light subpath's density of that point and direction, ``cos_c`` and ``cos_l`` the
     geometric cosines at the camera vertex and the light, ``rev`` the BSDF's density
-    toward the camera vertex's predecessor seen from the light."""
+    toward the camera vertex's predecessor seen from the light; ``k``:
+    :attr:`BDPTIntegrator.k`."""
     wl = mis(pdf_bsdf / pdf_light)
-    wc = _term(emit * cos_c / (pdf_light * cos_l), dvcm + _term(rev, dvc))
+    wc = _term(emit * cos_c / (pdf_light * cos_l), dvcm + _term(rev, dvc)) / k
     w = dr.rcp(1.0 + wl + wc)
     return dr.select(dr.isfinite(w), w, 0.0)
 
 
-def emission_weight(pdf_nee: Float, emit: Float, dvcm: Float, dvc: Float) -> Float:
+def emission_weight(pdf_nee: Float, emit: Float, dvcm: Float, dvc: Float, k: float = 1.0) -> Float:
     """Weight of a camera subpath hitting an emitter (``s = 0``) after at least one
     bounce: ``pdf_nee`` next-event estimation's area density of the point, ``emit`` the
-    light subpath's density of it and of the direction back along the ray."""
-    w = dr.rcp(1.0 + _term(pdf_nee, dvcm) + _term(emit, dvc))
+    light subpath's density of it and of the direction back along the ray; ``k``:
+    :attr:`BDPTIntegrator.k`."""
+    w = dr.rcp(1.0 + _term(pdf_nee, dvcm) + _term(emit, dvc) / k)
     return dr.select(dr.isfinite(w), w, 0.0)
 
 
@@ -227,7 +247,7 @@ def roulette(value: Array3f, ok: Bool, u: Float, threshold: Float) -> tuple[Arra
 
 def mis_weights_reference(pdf_fwd: list[float], pdf_rev: list[float], delta: list[bool],
                           p_nee: float, light_is_delta: bool, n_light_paths: float = 1.0,
-                          ) -> list[float]:
+                          connection_scale: float = 1.0) -> list[float]:
     """The power-heuristic weights of every strategy ``s = 0 .. k`` of one path of ``k``
     segments, computed pbrt's way (plain floats, for the tests).
 
@@ -237,8 +257,9 @@ def mis_weights_reference(pdf_fwd: list[float], pdf_rev: list[float], delta: lis
     includes the pixel density), ``delta[i]``: ``x_i`` scattered by a Dirac lobe;
     ``p_nee``: next-event estimation's area density of ``x_0``. Strategy ``s`` takes
     ``x_0 .. x_{s-1}`` from the light; ``s = 1`` samples ``x_0`` by ``p_nee``, ``s = k``
-    (``t = 1``) is counted ``n_light_paths`` times; ``s = k + 1`` (``t = 0``) and ``(1,
-    1)`` do not exist. Returns ``[w_0, .., w_k]``."""
+    (``t = 1``) is counted ``n_light_paths`` times, the connections (``2 <= s <= k - 1``)
+    ``connection_scale`` times; ``s = k + 1`` (``t = 0``) and ``(1, 1)`` do not exist.
+    Returns ``[w_0, .., w_k]``."""
     k = len(pdf_fwd) - 1
 
     def density(s):
@@ -253,6 +274,8 @@ def mis_weights_reference(pdf_fwd: list[float], pdf_rev: list[float], delta: lis
             p *= pdf_rev[i]
         if s == k:
             p *= n_light_paths
+        elif s >= 2:
+            p *= connection_scale
         # a connection between x_{s-1} and x_s needs both to be non-Dirac
         if s >= 1 and (delta[s - 1] or delta[s]):
             return 0.0
@@ -378,6 +401,16 @@ class BDPTIntegrator:
         #: a test hook: ``(s, t)``, the one strategy that counts, with weight 1 (None: all,
         #: MIS-weighted); the image is then that strategy's unweighted estimate
         self.only: tuple[int, int] | None = None
+        #: whether each camera vertex is joined to one light vertex (:func:`choose_vertex`),
+        #: or to every one: in scenes with Dirac lobes (glass, mirrors) a connection can be the
+        #: only strategy that samples a caustic path well, and choosing among the vertices
+        #: multiplies such paths' contributions (rare fireflies that cost more than the
+        #: connections saved)
+        kinds = getattr(scene.materials, "kinds", ())
+        self.one_connection = not any(scene.materials.lobes[kind].DELTA for kind in kinds)
+        #: the MIS weights' factor for connections: ``m(CONNECTION_CHOICES)`` with
+        #: :attr:`one_connection`, else 1 (see :data:`CONNECTION_CHOICES`)
+        self.k = mis(CONNECTION_CHOICES) if self.one_connection else 1.0
         #: the contribution below which connections and splats play Russian roulette
         #: (:func:`roulette`; 0: none), set by :meth:`calibrate`; None before
         self.threshold: float | None = None
@@ -446,8 +479,8 @@ class BDPTIntegrator:
                 ok = mine & (emit > 0.0)
                 inv = dr.select(ok, dr.rcp(emit), 0.0)
                 bi = ls.le * (local.z * inv)
-                vcm = mis(ls.pdf_area * inv)
-                vc = mis(dr.abs(dr.dot(ls.ng, di)) * inv)
+                vcm = self.k * mis(ls.pdf_area * inv)
+                vc = self.k * mis(dr.abs(dr.dot(ls.ng, di)) * inv)
             elif kind in ("sky", "background"):
                 # next-event estimation samples the sky's direction by the same density (the
                 # background not at all); no cosine at an infinite emitter
@@ -462,14 +495,14 @@ class BDPTIntegrator:
                 ok = mine & (emit > 0.0)
                 inv = dr.select(ok, dr.rcp(emit), 0.0)
                 bi = le * inv
-                vcm = mis(pdf * inv) if kind == "sky" else Float(0.0)
-                vc = mis(inv)
+                vcm = self.k * mis(pdf * inv) if kind == "sky" else Float(0.0)
+                vc = self.k * mis(inv)
                 infinite |= mine
             else:
                 oi, di, w = rays._source_ray(kind, light, u_reuse, u_pos, u_dir, mine)
                 emit = self._delta_emit(light)
                 bi = w * float(rays.count)
-                vcm = Float(mis(1.0 / emit))
+                vcm = Float(self.k * mis(1.0 / emit))
                 vc = Float(0.0)
                 if kind == "directional":
                     infinite |= mine
@@ -502,7 +535,7 @@ class BDPTIntegrator:
         corr, sides = correction(si, wc)
         pdf_cam = importance * dr.abs(dr.dot(si.ng, wc))
         w = self._weight(connection_weight(pdf_cam, dvcm, dvc, rev, Float(0.0), Float(0.0), Float(0.0),
-                                           Float(0.0)), depth + 1, 1)
+                                           Float(0.0), self.k), depth + 1, 1)
         value = beta * f * (corr * importance * w)
         ok &= sides & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         value, ok = roulette(value, ok, u_rr, threshold)
@@ -525,7 +558,7 @@ class BDPTIntegrator:
         cos_e = dr.maximum(dr.dot(si.ns, si.wi), 0.0)
         emit = self.pick * pdf_a * cos_e / math.pi
         w = dr.select(t == 2, 0.0 if self.opt.hide_emitters else 1.0,
-                      emission_weight(pdf_a, emit, dvcm, dvc))
+                      emission_weight(pdf_a, emit, dvcm, dvc, self.k))
         w = self._weight(w, 0, t)
         return dr.select(active, beta * le * w, 0.0)
 
@@ -553,7 +586,7 @@ class BDPTIntegrator:
         _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
         emit = self.pick * pdf_a * cos_front / math.pi
         cos_c = dr.abs(dr.dot(si.ng, wo))
-        w = self._weight(nee_weight(fwd, pdf_w, emit, cos_c, cos_l, dvcm, dvc, rev), 1, t)
+        w = self._weight(nee_weight(fwd, pdf_w, emit, cos_c, cos_l, dvcm, dvc, rev, self.k), 1, t)
         value = f * ls.le * (w / pdf)
         ok &= (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         so = scene.spawn(si, wo)
@@ -577,7 +610,7 @@ class BDPTIntegrator:
             far = getattr(light, "position", None) is None
             pdf_light = Float(1.0) if far else dr.square(ds.dist)
             w = self._weight(nee_weight(Float(0.0), pdf_light, Float(self._delta_emit(light)), cos_c,
-                                        Float(1.0), dvcm, dvc, rev), 1, t)
+                                        Float(1.0), dvcm, dvc, rev, self.k), 1, t)
             value = f * ds.irradiance * w
             ok = active & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
             so = scene.spawn(si, ds.wo)
@@ -594,8 +627,8 @@ class BDPTIntegrator:
         f, fwd = scene.eval_bsdf(si, wo)
         _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
         emit = self.pick * pdf * self.disk_pdf
-        w = self._weight(nee_weight(fwd, pdf, emit, dr.abs(dr.dot(si.ng, wo)), Float(1.0), dvcm, dvc, rev),
-                         1, t)
+        w = self._weight(nee_weight(fwd, pdf, emit, dr.abs(dr.dot(si.ng, wo)), Float(1.0), dvcm, dvc, rev,
+                                    self.k), 1, t)
         value = f * radiance * (w / dr.maximum(pdf, 1e-30))
         ok = active & (pdf > 0.0) & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         count(scene, SHADOW_NEE, ok)
@@ -611,7 +644,8 @@ class BDPTIntegrator:
         else:
             le, pdf = Array3f(*map(float, self.scene.background)), Float(0.0)  # no NEE of it
         emit = self.pick * (pdf if self.has_sky else INV_FOUR_PI) * self.disk_pdf
-        w = dr.select(t == 2, 0.0 if self.opt.hide_emitters else 1.0, emission_weight(pdf, emit, dvcm, dvc))
+        w = dr.select(t == 2, 0.0 if self.opt.hide_emitters else 1.0,
+                      emission_weight(pdf, emit, dvcm, dvc, self.k))
         w = self._weight(w, 0, t)
         return dr.select(active, beta * le * w, 0.0)
 
@@ -709,10 +743,13 @@ class BDPTIntegrator:
                 d = Array3f(wo)
 
         # ---- the camera subpath
+        if isinstance(rng, LDSampler):
+            # its dimensions from a fixed one on, whatever the light subpath's length
+            rng.dim = dr.full(UInt32, CAMERA_DIMENSION, n)
         o, d = cam.ray(px, py)
         cos_cam = dr.dot(d, cam.f)
         area = 4.0 * dr.sqrt(dr.squared_norm(cam.r) * dr.squared_norm(cam.u))
-        dvcm = mis(area * cos_cam * cos_cam * cos_cam)
+        dvcm = self.k * mis(area * cos_cam * cos_cam * cos_cam)
         dvc = dr.zeros(Float, n)
         beta = dr.full(Array3f, 1.0, n)
         eta = dr.full(Float, 1.0, n)
@@ -747,7 +784,7 @@ class BDPTIntegrator:
             L += beta * nee
             if record:
                 strategies.put(1, k + 1, px, py, beta * nee, active)
-            if lverts is not None:
+            if lverts is not None and self.one_connection:
                 # vertex j has depth >= j + 1: only the first D - k can make a path of <= D segments
                 i, m = choose_vertex(rng.next_float32(), stored, dr.select(k < D, D - k, 0))
                 pick = connectible & (m > 0)
@@ -758,6 +795,17 @@ class BDPTIntegrator:
                 L += c
                 if record:
                     strategies.put(depth_l + 1, k + 1, px, py, c, active)
+            elif lverts is not None:
+                i = dr.zeros(UInt32, n)
+                while connectible & (i < stored):
+                    lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
+                    c = self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
+                                      connectible & (depth_l + k < D), depth_l + 1, k + 1,
+                                      rng.next_float32(), threshold)
+                    L += c
+                    if record:
+                        strategies.put(depth_l + 1, k + 1, px, py, c, active)
+                    i += 1
 
             u_lobe = rng.next_float32()
             u_bsdf = next_2d(rng)

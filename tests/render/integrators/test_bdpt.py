@@ -70,16 +70,20 @@ def _random_paths(rng, n, k, delta_light, infinite=False):
     return P
 
 
-def _pbrt_weights(P, j, k, delta_light, N):
+def _pbrt_weights(P, j, k, delta_light, N, choices=1.0):
     fwd = [P["pL0"][j]] + [(P["e0"][j] if i == 1 else P["a"][j, i - 1]) * P["cm"][j, i] / P["d2"][j, i - 1]
                            for i in range(1, k + 1)]
     rev = [(P["cdir"][j] if i == k - 1 else P["b"][j, i + 1]) * P["cp"][j, i] / P["d2"][j, i]
            for i in range(k)] + [1.0]
-    return B.mis_weights_reference(fwd, rev, list(P["delta"][j]), P["pnee"][j], delta_light, N)
+    return B.mis_weights_reference(fwd, rev, list(P["delta"][j]), P["pnee"][j], delta_light, N, 1.0 / choices)
 
 
-def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False):
-    """Each strategy's weight from the integrator's functions, per path (Dr.Jit lanes)."""
+def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False, choices=1.0, k_weights=None):
+    """Each strategy's weight from the integrator's functions, per path (Dr.Jit lanes), with
+    connections counted as chosen among ``choices`` (the subpaths' starting quantities times
+    ``K = choices^2``, as the integrator's)."""
+    K = choices * choices
+    KW = K if k_weights is None else k_weights  # (the negative control's: another one in the weights)
     F = {key: (Float(v.astype(np.float32)) if v.ndim == 1 else [Float(v[:, i].astype(np.float32))
                                                                    for i in range(v.shape[1])])
          for key, v in P.items() if key != "delta"}
@@ -87,8 +91,8 @@ def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False):
     emit = F["pL0"] * F["e0"]
 
     def light_side(s):  # dvcm, dvc at x_{s-1}
-        dvcm = B.mis(F["pnee"] / emit)
-        dvc = Float(0.0) if delta_light else B.mis(F["cp"][0] / emit)
+        dvcm = K * B.mis(F["pnee"] / emit)
+        dvc = Float(0.0) if delta_light else K * B.mis(F["cp"][0] / emit)
         for j in range(1, s):
             # the first segment from an infinite emitter has no length (as the integrator's)
             dvcm, dvc = B.hit_update(dvcm, dvc, Float(1.0) if infinite and j == 1 else F["d2"][j - 1],
@@ -99,7 +103,7 @@ def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False):
         return dvcm, dvc
 
     def camera_side(s):  # dvcm, dvc at x_s
-        dvcm, dvc = B.mis(N / F["cdir"]), Float(0.0)
+        dvcm, dvc = K * B.mis(N / F["cdir"]), Float(0.0)
         for i in range(k - 1, s - 1, -1):
             if i == 0 and infinite:
                 break  # an escaped ray: nothing to convert
@@ -112,20 +116,20 @@ def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False):
     for s in range(k + 1):
         if s == 0:
             dvcm, dvc = camera_side(0)
-            w = Float(0.0) if delta_light else B.emission_weight(F["pnee"], emit, dvcm, dvc)
+            w = Float(0.0) if delta_light else B.emission_weight(F["pnee"], emit, dvcm, dvc, KW)
             w = w if k > 1 else Float(0.0 if delta_light else 1.0)  # seen by the camera: weight 1
         elif s == 1:
             dvcm, dvc = camera_side(1)
             pdf_light = F["pnee"] * F["d2"][0] / F["cp"][0]
             fwd = Float(0.0) if delta_light else F["b"][1]
-            w = B.nee_weight(fwd, pdf_light, emit, F["cm"][1], F["cp"][0], dvcm, dvc, F["a"][1])
+            w = B.nee_weight(fwd, pdf_light, emit, F["cm"][1], F["cp"][0], dvcm, dvc, F["a"][1], KW)
             w = dr.select(D[1], 0.0, w) if k > 1 else Float(0.0)
         else:
             dvcm_l, dvc_l = light_side(s)
             pdf_l = (F["cdir"] / N if s == k else F["b"][s]) * F["cp"][s - 1] / F["d2"][s - 1]
             if s == k:
                 w = B.connection_weight(pdf_l, dvcm_l, dvc_l, F["b"][s - 1], Float(0.0), Float(0.0),
-                                        Float(0.0), Float(0.0))
+                                        Float(0.0), Float(0.0), KW)
             else:
                 dvcm_c, dvc_c = camera_side(s)
                 pdf_c = F["a"][s - 1] * F["cm"][s] / F["d2"][s - 1]
@@ -138,16 +142,19 @@ def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False):
 
 @pytest.mark.parametrize("k", [1, 2, 3, 5, 7])
 @pytest.mark.parametrize("light", ["area", "point", "sky", "directional"])
-def test_mis_weights_match_pbrts_and_sum_to_one(k, light):
+@pytest.mark.parametrize("choices", [1.0, B.CONNECTION_CHOICES, 3.5])
+def test_mis_weights_match_pbrts_and_sum_to_one(k, light, choices):
     """``sky``: an infinite emitter (the reference's densities of ``x_0`` and ``x_1`` are
     then solid angles and the disk's density times the cosine at ``x_1``, the integrator's
-    skip the first segment's distance); ``directional``: infinite and Dirac."""
+    skip the first segment's distance); ``directional``: infinite and Dirac. ``choices``:
+    connections counted with their density over it (``CONNECTION_CHOICES``), in the
+    reference too."""
     delta_light, infinite = light in ("point", "directional"), light in ("sky", "directional")
     rng = np.random.default_rng(10 * k + len(light))
     n, N = 300, 64.0
     P = _random_paths(rng, n, k, delta_light, infinite)
-    got = _recursive(P, k, delta_light, N, infinite=infinite)
-    ref = np.array([_pbrt_weights(P, j, k, delta_light, N) for j in range(n)])
+    got = _recursive(P, k, delta_light, N, infinite=infinite, choices=choices)
+    ref = np.array([_pbrt_weights(P, j, k, delta_light, N, choices) for j in range(n)])
     # paths no strategy samples (a point light seen directly, or through Dirac vertices only)
     # have no weights
     possible = ref.sum(1) > 0
@@ -162,6 +169,16 @@ def test_mis_weights_negative_control():
     k, n = 5, 300
     P = _random_paths(np.random.default_rng(3), n, k, False)
     got = _recursive(P, k, False, 64.0, wrong_rev=True)
+    assert np.abs(got.sum(1) - 1.0).max() > 1e-2
+
+
+def test_mis_weights_connection_factor_negative_control():
+    """The connections' factor on the subpaths' starting quantities without its ``1 / k`` in
+    the other strategies' weights breaks the sum."""
+    k, n = 5, 300
+    P = _random_paths(np.random.default_rng(4), n, k, False)
+    assert np.abs(_recursive(P, k, False, 64.0, choices=2.0).sum(1) - 1.0).max() < 2e-4
+    got = _recursive(P, k, False, 64.0, choices=2.0, k_weights=1.0)
     assert np.abs(got.sum(1) - 1.0).max() > 1e-2
 
 
