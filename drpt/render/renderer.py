@@ -466,6 +466,7 @@ class Renderer:
     @property
     def ld_sampling(self) -> bool:
         """Whether passes draw from a low-discrepancy sampler
+        (:mod:`drpt.render.sampler`): ``--sampler`` other than ``independent``
         (light tracing: one sequence of all its paths, while they are at most 2^32;
         bidirectional path tracing: its camera samples' sequences, as a camera pass's)."""
         o = self.opt

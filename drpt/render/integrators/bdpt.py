@@ -84,7 +84,12 @@ estimation and emitter hits use the same quantities. Spheres' next-event
 estimation samples the cone they subtend; the weights use the uniform area
 density the light subpath starts with for every strategy (as pbrt does): still
 weights that sum to 1. :func:`mis_weights_reference` computes the same weights
-pbrt's way, from a whole path's densities (the tests compare them).
+pbrt's way, from a whole path's densities (the tests compare them). Where each camera
+vertex is joined to one light vertex, the weights count the connections' densities over
+:data:`CONNECTION_CHOICES`: the starting ``dvcm`` and ``dvc`` of both subpaths (the
+terms of the strategies that are not connections) are multiplied by ``k =
+m(CONNECTION_CHOICES)``, and the weights of those strategies divide their other
+subpath's sum by ``k``.
 
 **Limits.** The light subpath is stored, so paths are at most ``max_depth``
 segments, and at most :data:`MAX_DEPTH`; ``max_depth = -1`` means
