@@ -139,6 +139,10 @@ class PassSums:
 
 #: mixed into the seed of the AOV kernel's random streams (its own, beside the beauty's)
 AOV_STREAM = 0xA0F5EED
+#: the seed's xor for bidirectional path tracing's pilot (:meth:`Renderer._calibrate_bdpt`)
+BDPT_PILOT_STREAM = 0xB1D1C0DE
+#: the pilot's lanes (at most; whole rows of one sample per pixel)
+BDPT_PILOT_LANES = 1 << 16
 
 
 def _mix_seed(seed: int, index: int) -> int:
@@ -234,15 +238,14 @@ class Renderer:
         self.camera = RayCamera(scene.camera, options.width, options.height)
         self.warnings: list[str] = self.scene.warnings
         self.integrator = self._make_integrator()
-        if uses_ld(options.sampler) and isinstance(self.integrator, BDPTIntegrator):
-            self.warnings.append(f"--sampler {options.sampler}: bdpt draws independent samples")
-        elif uses_ld(options.sampler) and not self.ld_sampling:
+        bdpt = isinstance(self.integrator, BDPTIntegrator)
+        if uses_ld(options.sampler) and not self.ld_sampling:
             self.warnings.append(f"--sampler {options.sampler}: light tracing beyond 2^32 paths "
                                  "(width x height x spp) draws independent samples")
-        elif options.sampler == "zsobol" and self.light_tracing:
+        elif options.sampler == "zsobol" and self.light_tracing and not bdpt:
             self.warnings.append("--sampler zsobol: light tracing draws from one ldsampler sequence "
                                  "of all its paths")
-        elif options.sampler == "zsobol" and self._zsobol is None and not self.light_tracing:
+        elif options.sampler == "zsobol" and self._zsobol is None and (bdpt or not self.light_tracing):
             self.warnings.append("--sampler zsobol: the image's Morton codes and the sample index "
                                  "need more than 32 bits: ldsampler's sequences instead")
         self._aov_ids = None
@@ -468,19 +471,23 @@ class Renderer:
     def ld_sampling(self) -> bool:
         """Whether passes draw from a low-discrepancy sampler
         (:mod:`drpt.render.sampler`): ``--sampler`` other than ``independent``
-        (light tracing: one sequence of all its paths, while they are at most 2^32)."""
+        (light tracing: one sequence of all its paths, while they are at most 2^32;
+        bidirectional path tracing: its camera samples' sequences, as a camera pass's)."""
         o = self.opt
         if isinstance(self.integrator, BDPTIntegrator):
-            return False  # bdpt draws from PCG32 streams
+            return uses_ld(o.sampler)
         return uses_ld(o.sampler) and (not self.light_tracing or o.width * o.height * o.spp <= 1 << 32)
 
-    def _sampler(self, pass_index: int, n: int, x: UInt32, y: UInt32, j: UInt32, step):
+    def _sampler(self, pass_index: int, n: int, x: UInt32, y: UInt32, j: UInt32, step,
+                 seed: int | None = None):
         """The random numbers of a camera pass's ``n`` lanes: the lane's PCG32 stream
         of ``(seed, pass, lane)``, or with :attr:`ld_sampling` an
         :class:`~drpt.render.sampler.LDSampler` of pixel ``(x, y)`` whose first sample
-        is the pass's first sample plus ``j``, its next ``step`` further on."""
+        is the pass's first sample plus ``j``, its next ``step`` further on (``seed``:
+        the render's unless given)."""
+        seed = self.opt.seed if seed is None else seed
         if not self.ld_sampling:
-            return PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
+            return PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(seed, pass_index)),
                          initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
         plan = self.chunks.passes
         s0 = pass_index // plan.bands * plan.k  # plan[pass_index]'s first sample (also past spp:
@@ -488,9 +495,9 @@ class Renderer:
         index = j + dr.opaque(UInt32, s0)
         zsobol = self._zsobol
         if zsobol is not None:
-            return zsobol.for_pixels_xy(self.opt.seed, x, y, index, step)
+            return zsobol.for_pixels_xy(seed, x, y, index, step)
         pixel = y * dr.opaque(UInt32, self.opt.width) + x
-        return LDSampler.for_pixels(self.opt.seed, pixel, index, step)
+        return LDSampler.for_pixels(seed, pixel, index, step)
 
     @property
     def _zsobol(self):
@@ -510,20 +517,13 @@ class Renderer:
         lane a camera sample: the ``k`` samples of each pixel of rows ``r0..r0+rows``,
         pixel-major, uniform in their pixel."""
         if isinstance(self.integrator, BDPTIntegrator):
-            rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
-                        initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
-            _, _, x, y = self._pass_lanes(k, r0, rows)
-            u = next_2d(rng)
-            film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
-            camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+            if self.integrator.threshold is None:
+                self._calibrate_bdpt()
             strategies = None
             if self.opt.bdpt_strategies:
                 strategies = StrategyFilm(self.opt.width, self.opt.height,
                                           min(self.integrator.depth, STRATEGY_SEGMENTS))
-            bad = self.integrator.trace(rng, film, camera, Float(x) + u.x, Float(y) + u.y,
-                                        dr.full(Bool, True, n), strategies)
-            with llvm_tuning.blocks_for(n):
-                dr.eval(film.sum, film.sq, camera.sum, camera.sq, bad, strategies.sum if strategies else [])
+            film, camera, bad = self._bdpt_pass(self.opt.seed, pass_index, k, r0, rows, strategies)
             if strategies is not None:
                 sums = strategies.arrays()
                 self.strategy_sums = sums if self.strategy_sums is None else self.strategy_sums + sums
@@ -547,6 +547,34 @@ class Renderer:
             dr.eval(film.sum, film.sq, bad)
         img, sq, _ = film.arrays()
         return img, sq, int(dr.sum(bad)[0])
+
+    def _bdpt_pass(self, seed: int, pass_index: int, k: int, r0: int, rows: int,
+                   strategies: StrategyFilm | None = None, use_roulette: bool = True):
+        """Bidirectional path tracing's lanes of a pass, evaluated: ``(light film, camera
+        film, dropped)``; their random numbers as a camera pass's (:meth:`_sampler`)."""
+        n, lane, x, y = self._pass_lanes(k, r0, rows)
+        rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1, seed)
+        u = next_2d(rng)
+        film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+        camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+        bad = self.integrator.trace(rng, film, camera, Float(x) + u.x, Float(y) + u.y,
+                                    dr.full(Bool, True, n), strategies, use_roulette)
+        with llvm_tuning.blocks_for(n):
+            dr.eval(film.sum, film.sq, camera.sum, camera.sq, bad, strategies.sum if strategies else [])
+        return film, camera, bad
+
+    def _calibrate_bdpt(self) -> None:
+        """Bidirectional path tracing's pilot: 1 sample per pixel of at most
+        :data:`BDPT_PILOT_LANES` pixels (a band of rows in the middle of the image) without
+        Russian roulette, from a stream of its own, estimates the image's mean pixel value,
+        from which :meth:`~drpt.render.integrators.bdpt.BDPTIntegrator.calibrate` sets the
+        roulette's threshold (the same kernel as the passes': the threshold is its input)."""
+        W, H = self.opt.width, self.opt.height
+        rows = max(1, min(H, BDPT_PILOT_LANES // W))
+        film, camera, _ = self._bdpt_pass(self.opt.seed ^ BDPT_PILOT_STREAM, 0, 1, (H - rows) // 2, rows,
+                                          use_roulette=False)
+        rgb = [float(dr.sum(film.sum[c])[0] + dr.sum(camera.sum[c])[0]) / (rows * W) for c in range(3)]
+        self.integrator.calibrate(0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2])
 
     def _pass_lanes(self, k: int, r0: int, rows: int) -> tuple[int, UInt32, UInt32, UInt32]:
         """``(n, lane, x, y)``: one lane per sample of a pass of ``k`` samples per pixel

@@ -11,7 +11,14 @@ itself is camera vertex 0), a path of ``s + t - 1`` segments:
   area light as :meth:`~drpt.render.lights.area.AreaLights.sample` draws it for
   the path tracer, every point, spot and directional light, a sky direction);
 * ``s >= 2, t >= 2``: a stored light vertex joined to a camera vertex by a
-  shadow ray;
+  shadow ray. In scenes without Dirac lobes each camera vertex is joined to one light
+  vertex, chosen uniformly among those that make a path of at most ``max_depth``
+  segments (:func:`choose_vertex`), its contribution multiplied by their number (each
+  connection strategy's estimate keeps its expectation; the MIS weights count the
+  connections' densities over :data:`CONNECTION_CHOICES`): one connection per camera
+  vertex instead of one per pair costs fewer shadow rays and BSDF evaluations than it
+  adds variance. With glass or mirrors (:attr:`BDPTIntegrator.one_connection` false)
+  every pair is joined, in an inner loop;
 * ``t = 1``: a light vertex joined to the pinhole camera and splatted at the
   pixel it projects to (:class:`~drpt.render.film.SplatFilm`), as light tracing
   (:mod:`~drpt.render.integrators.ptracer`) does. ``(s, t) = (1, 1)`` is not
@@ -23,11 +30,24 @@ and a direction on it; it carries importance (refraction's ``eta^2`` undone,
 Veach's shading-normal correction). Its surface vertices that are not pure
 Dirac (mirror, smooth glass) are stored in per-lane local arrays
 (``dr.alloc_local``, one per field) of ``max_depth - 1`` entries; the camera
-subpath then runs as a Dr.Jit loop, and at each of its non-Dirac vertices an
-inner loop connects it to every stored light vertex. Both subpaths play Russian
+subpath then runs as a Dr.Jit loop, and each of its non-Dirac vertices is
+connected to one stored light vertex, or to each. Both subpaths play Russian
 roulette as the path tracer does (after ``rr_depth`` segments, probability
 ``min(max(beta) eta^2, 0.95)``); the MIS weights ignore it (they still sum to 1
 over the strategies of a path, so the estimate stays unbiased).
+
+**Roulette on connections and splats.** A connection's or a ``t = 1`` splat's
+MIS-weighted contribution is known before its shadow ray is traced; below a
+threshold it is traced with probability ``q = min(1, max(value) / threshold)`` and
+divided by ``q`` (:func:`roulette`: the same expectation, and no contribution is
+scaled above the threshold, so no fireflies). Small contributions (low weights,
+dim paths) then rarely cost a shadow ray and a splat. The threshold is
+:data:`ROULETTE_FRACTION` of the image's mean pixel value, which a pilot estimates
+before the first pass (``Renderer._calibrate_bdpt``: one sample per pixel of a
+band of rows, without roulette, from a random stream of its own;
+:meth:`BDPTIntegrator.calibrate` rounds it to a power of 2, so renders in other
+processes agree). The threshold depends only on the pilot's samples, so the
+passes' estimate is unbiased given it.
 
 **MIS weights.** The power heuristic over all strategies of a path, ``w_s =
 p_s^2 / sum_i p_i^2``, computed as pbrt computes it (ratios of the forward and
@@ -64,7 +84,12 @@ estimation and emitter hits use the same quantities. Spheres' next-event
 estimation samples the cone they subtend; the weights use the uniform area
 density the light subpath starts with for every strategy (as pbrt does): still
 weights that sum to 1. :func:`mis_weights_reference` computes the same weights
-pbrt's way, from a whole path's densities (the tests compare them).
+pbrt's way, from a whole path's densities (the tests compare them). Where each camera
+vertex is joined to one light vertex, the weights count the connections' densities over
+:data:`CONNECTION_CHOICES`: the starting ``dvcm`` and ``dvc`` of both subpaths (the
+terms of the strategies that are not connections) are multiplied by ``k =
+m(CONNECTION_CHOICES)``, and the weights of those strategies divide their other
+subpath's sum by ``k``.
 
 **Limits.** The light subpath is stored, so paths are at most ``max_depth``
 segments, and at most :data:`MAX_DEPTH`; ``max_depth = -1`` means
@@ -101,7 +126,7 @@ from ..camera import RayCamera
 from ..film import SplatFilm
 from ..instrument import HIT_CAMERA, HIT_LIGHT, SHADOW_CAMERA, SHADOW_CONNECT, SHADOW_NEE, SPLAT, count
 from ..lights.rays import INV_FOUR_PI, EmitterRays
-from ..sampler import next_2d
+from ..sampler import LDSampler, next_2d
 from ..scene import DeviceScene
 from ..spawn import origin as spawn_origin
 from ..surface import Interaction, TangentInteraction
@@ -114,6 +139,24 @@ MAX_DEPTH = 16
 
 #: ``--bdpt-strategies`` writes an image per strategy of the paths of at most this many segments
 STRATEGY_SEGMENTS = 5
+
+#: the MIS weights count a connection strategy (``s, t >= 2``) as sampled with its
+#: density over this (each camera vertex is joined to one of the stored light vertices,
+#: about this many): the power heuristic over ``p_i / n_i`` (``n_i`` this for connections,
+#: 1 for the others) still sums to 1 over the strategies of a path. Carried as a factor
+#: ``k = m(CONNECTION_CHOICES)`` on the subpaths' starting ``dvcm``, ``dvc`` (the terms of
+#: the strategies that are not connections) and ``1 / k`` on the weights of those
+#: strategies (``nee_weight``, ``emission_weight``, the splat's ``connection_weight``)
+CONNECTION_CHOICES = 2.0
+
+#: connections and splats whose contribution is below this fraction of the image's mean
+#: pixel value play Russian roulette (:func:`roulette`)
+ROULETTE_FRACTION = 0.1
+
+#: with a low-discrepancy sampler (``--sampler ldsampler``...), the camera subpath's first
+#: dimension (the light subpath's take fewer: at most 5 + 5 per vertex); the pixel
+#: position takes 0 and 1
+CAMERA_DIMENSION = 128
 
 SUPPORTED_SOURCES = ("area", "point", "spot", "directional", "sky", "background")
 
@@ -154,41 +197,62 @@ def _term(p: Float, rest: Float) -> Float:
 
 
 def connection_weight(pdf_l: Float, dvcm_l: Float, dvc_l: Float, rev_l: Float,
-                      pdf_c: Float, dvcm_c: Float, dvc_c: Float, rev_c: Float) -> Float:
+                      pdf_c: Float, dvcm_c: Float, dvc_c: Float, rev_c: Float, k_l: float = 1.0) -> Float:
     """Weight of joining a light vertex to a camera vertex: ``pdf_l`` the area density of
     the light vertex sampled from the camera vertex, ``rev_l`` the light vertex's BSDF
-    density toward its predecessor seen from the camera vertex (and the other way round)."""
-    wl = _term(pdf_l, dvcm_l + _term(rev_l, dvc_l))
+    density toward its predecessor seen from the camera vertex (and the other way round);
+    for the ``t = 1`` splat (``pdf_c = 0``) ``k_l`` is :attr:`BDPTIntegrator.k` (see
+    :data:`CONNECTION_CHOICES`)."""
+    wl = _term(pdf_l, dvcm_l + _term(rev_l, dvc_l)) / k_l
     wc = _term(pdf_c, dvcm_c + _term(rev_c, dvc_c))
     w = dr.rcp(1.0 + wl + wc)
     return dr.select(dr.isfinite(w), w, 0.0)
 
 
 def nee_weight(pdf_bsdf: Float, pdf_light: Float, emit: Float, cos_c: Float, cos_l: Float,
-               dvcm: Float, dvc: Float, rev: Float) -> Float:
+               dvcm: Float, dvc: Float, rev: Float, k: float = 1.0) -> Float:
     """Weight of next-event estimation (``s = 1``) at a camera vertex: ``pdf_bsdf`` the
     BSDF's density toward the light point (0 for a delta light), ``pdf_light`` the point's
     density as a solid angle (for a delta light: ``dist^2``, its area density 1), ``emit``
     the light subpath's density of that point and direction, ``cos_c`` and ``cos_l`` the
     geometric cosines at the camera vertex and the light, ``rev`` the BSDF's density
-    toward the camera vertex's predecessor seen from the light."""
+    toward the camera vertex's predecessor seen from the light; ``k``:
+    :attr:`BDPTIntegrator.k`."""
     wl = mis(pdf_bsdf / pdf_light)
-    wc = _term(emit * cos_c / (pdf_light * cos_l), dvcm + _term(rev, dvc))
+    wc = _term(emit * cos_c / (pdf_light * cos_l), dvcm + _term(rev, dvc)) / k
     w = dr.rcp(1.0 + wl + wc)
     return dr.select(dr.isfinite(w), w, 0.0)
 
 
-def emission_weight(pdf_nee: Float, emit: Float, dvcm: Float, dvc: Float) -> Float:
+def emission_weight(pdf_nee: Float, emit: Float, dvcm: Float, dvc: Float, k: float = 1.0) -> Float:
     """Weight of a camera subpath hitting an emitter (``s = 0``) after at least one
     bounce: ``pdf_nee`` next-event estimation's area density of the point, ``emit`` the
-    light subpath's density of it and of the direction back along the ray."""
-    w = dr.rcp(1.0 + _term(pdf_nee, dvcm) + _term(emit, dvc))
+    light subpath's density of it and of the direction back along the ray; ``k``:
+    :attr:`BDPTIntegrator.k`."""
+    w = dr.rcp(1.0 + _term(pdf_nee, dvcm) + _term(emit, dvc) / k)
     return dr.select(dr.isfinite(w), w, 0.0)
+
+
+def choose_vertex(u: Float, stored: UInt32, room: UInt32) -> tuple[UInt32, UInt32]:
+    """The light vertex a camera vertex is joined to: index ``i`` uniform among the first
+    ``m = min(stored, room)`` stored ones (by ``u``), and ``m``, the inverse of its
+    probability, by which the connection's contribution is multiplied (``m = 0``: none)."""
+    m = dr.minimum(stored, room)
+    return dr.minimum(UInt32(u * Float(m)), dr.maximum(m, 1) - 1), m
+
+
+def roulette(value: Array3f, ok: Bool, u: Float, threshold: Float) -> tuple[Array3f, Bool]:
+    """Russian roulette on a contribution before its shadow ray is traced: kept with
+    probability ``q = min(1, max(value) / threshold)`` (``u < q``) and divided by ``q``, so
+    its expectation is unchanged; ``threshold = 0`` keeps every contribution as it is."""
+    q = dr.select(threshold > 0.0, dr.minimum(dr.max(value) / threshold, 1.0), 1.0)
+    ok = ok & (u < q)
+    return dr.select(ok, value / dr.select(ok, q, 1.0), 0.0), ok
 
 
 def mis_weights_reference(pdf_fwd: list[float], pdf_rev: list[float], delta: list[bool],
                           p_nee: float, light_is_delta: bool, n_light_paths: float = 1.0,
-                          ) -> list[float]:
+                          connection_scale: float = 1.0) -> list[float]:
     """The power-heuristic weights of every strategy ``s = 0 .. k`` of one path of ``k``
     segments, computed pbrt's way (plain floats, for the tests).
 
@@ -198,8 +262,9 @@ def mis_weights_reference(pdf_fwd: list[float], pdf_rev: list[float], delta: lis
     includes the pixel density), ``delta[i]``: ``x_i`` scattered by a Dirac lobe;
     ``p_nee``: next-event estimation's area density of ``x_0``. Strategy ``s`` takes
     ``x_0 .. x_{s-1}`` from the light; ``s = 1`` samples ``x_0`` by ``p_nee``, ``s = k``
-    (``t = 1``) is counted ``n_light_paths`` times; ``s = k + 1`` (``t = 0``) and ``(1,
-    1)`` do not exist. Returns ``[w_0, .., w_k]``."""
+    (``t = 1``) is counted ``n_light_paths`` times, the connections (``2 <= s <= k - 1``)
+    ``connection_scale`` times; ``s = k + 1`` (``t = 0``) and ``(1, 1)`` do not exist.
+    Returns ``[w_0, .., w_k]``."""
     k = len(pdf_fwd) - 1
 
     def density(s):
@@ -214,6 +279,8 @@ def mis_weights_reference(pdf_fwd: list[float], pdf_rev: list[float], delta: lis
             p *= pdf_rev[i]
         if s == k:
             p *= n_light_paths
+        elif s >= 2:
+            p *= connection_scale
         # a connection between x_{s-1} and x_s needs both to be non-Dirac
         if s >= 1 and (delta[s - 1] or delta[s]):
             return 0.0
@@ -339,11 +406,32 @@ class BDPTIntegrator:
         #: a test hook: ``(s, t)``, the one strategy that counts, with weight 1 (None: all,
         #: MIS-weighted); the image is then that strategy's unweighted estimate
         self.only: tuple[int, int] | None = None
+        #: whether each camera vertex is joined to one light vertex (:func:`choose_vertex`),
+        #: or to every one: in scenes with Dirac lobes (glass, mirrors) a connection can be the
+        #: only strategy that samples a caustic path well, and choosing among the vertices
+        #: multiplies such paths' contributions (rare fireflies that cost more than the
+        #: connections saved)
+        kinds = getattr(scene.materials, "kinds", ())
+        self.one_connection = not any(scene.materials.lobes[kind].DELTA for kind in kinds)
+        #: the MIS weights' factor for connections: ``m(CONNECTION_CHOICES)`` with
+        #: :attr:`one_connection`, else 1 (see :data:`CONNECTION_CHOICES`)
+        self.k = mis(CONNECTION_CHOICES) if self.one_connection else 1.0
+        #: the contribution below which connections and splats play Russian roulette
+        #: (:func:`roulette`; 0: none), set by :meth:`calibrate`; None before
+        self.threshold: float | None = None
         self.has_sky = any(kind == "sky" for kind, _ in rays.sources)
         self.has_background = any(kind == "background" for kind, _ in rays.sources)
         #: a light subpath leaving an infinite emitter starts on a disk of the scene's
         #: bounding sphere's radius R, perpendicular to its direction: area density 1 / (pi R^2)
         self.disk_pdf = 1.0 / (math.pi * rays.radius * rays.radius)
+
+    def calibrate(self, mean: float) -> None:
+        """Set :attr:`threshold` from ``mean``, an estimate of the image's mean pixel value
+        (luminance): :data:`ROULETTE_FRACTION` of it, rounded to a power of 2 (renders
+        that estimate it in other processes, whose float sums differ in the last bits,
+        still agree)."""
+        t = ROULETTE_FRACTION * mean
+        self.threshold = 2.0 ** round(math.log2(t)) if t > 0.0 and math.isfinite(t) else 0.0
 
     # ------------------------------------------------------------ emitter densities
     def _delta_emit(self, light) -> float:
@@ -396,8 +484,8 @@ class BDPTIntegrator:
                 ok = mine & (emit > 0.0)
                 inv = dr.select(ok, dr.rcp(emit), 0.0)
                 bi = ls.le * (local.z * inv)
-                vcm = mis(ls.pdf_area * inv)
-                vc = mis(dr.abs(dr.dot(ls.ng, di)) * inv)
+                vcm = self.k * mis(ls.pdf_area * inv)
+                vc = self.k * mis(dr.abs(dr.dot(ls.ng, di)) * inv)
             elif kind in ("sky", "background"):
                 # next-event estimation samples the sky's direction by the same density (the
                 # background not at all); no cosine at an infinite emitter
@@ -412,14 +500,14 @@ class BDPTIntegrator:
                 ok = mine & (emit > 0.0)
                 inv = dr.select(ok, dr.rcp(emit), 0.0)
                 bi = le * inv
-                vcm = mis(pdf * inv) if kind == "sky" else Float(0.0)
-                vc = mis(inv)
+                vcm = self.k * mis(pdf * inv) if kind == "sky" else Float(0.0)
+                vc = self.k * mis(inv)
                 infinite |= mine
             else:
                 oi, di, w = rays._source_ray(kind, light, u_reuse, u_pos, u_dir, mine)
                 emit = self._delta_emit(light)
                 bi = w * float(rays.count)
-                vcm = Float(mis(1.0 / emit))
+                vcm = Float(self.k * mis(1.0 / emit))
                 vc = Float(0.0)
                 if kind == "directional":
                     infinite |= mine
@@ -440,8 +528,10 @@ class BDPTIntegrator:
         return dr.select((UInt32(s) == self.only[0]) & (UInt32(t) == self.only[1]), 1.0, 0.0)
 
     def _splat(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float, film: SplatFilm,
-               active: Bool, depth: UInt32, strategies: StrategyFilm | None) -> None:
-        """``t = 1``: light vertex ``si`` joined to the camera, splatted into ``film``."""
+               active: Bool, depth: UInt32, strategies: StrategyFilm | None, u_rr: Float,
+               threshold: Float) -> None:
+        """``t = 1``: light vertex ``si`` joined to the camera, splatted into ``film`` (after
+        :func:`roulette` with ``u_rr`` and ``threshold``)."""
         scene, cam = self.scene, self.camera
         x, y, wc, _dist, importance, visible = cam.connect(si.p)
         ok = active & visible
@@ -450,9 +540,10 @@ class BDPTIntegrator:
         corr, sides = correction(si, wc)
         pdf_cam = importance * dr.abs(dr.dot(si.ng, wc))
         w = self._weight(connection_weight(pdf_cam, dvcm, dvc, rev, Float(0.0), Float(0.0), Float(0.0),
-                                           Float(0.0)), depth + 1, 1)
+                                           Float(0.0), self.k), depth + 1, 1)
         value = beta * f * (corr * importance * w)
         ok &= sides & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
+        value, ok = roulette(value, ok, u_rr, threshold)
         so = scene.spawn(si, wc)
         to = cam.center - so
         dist = dr.norm(to)
@@ -472,7 +563,7 @@ class BDPTIntegrator:
         cos_e = dr.maximum(dr.dot(si.ns, si.wi), 0.0)
         emit = self.pick * pdf_a * cos_e / math.pi
         w = dr.select(t == 2, 0.0 if self.opt.hide_emitters else 1.0,
-                      emission_weight(pdf_a, emit, dvcm, dvc))
+                      emission_weight(pdf_a, emit, dvcm, dvc, self.k))
         w = self._weight(w, 0, t)
         return dr.select(active, beta * le * w, 0.0)
 
@@ -500,7 +591,7 @@ class BDPTIntegrator:
         _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
         emit = self.pick * pdf_a * cos_front / math.pi
         cos_c = dr.abs(dr.dot(si.ng, wo))
-        w = self._weight(nee_weight(fwd, pdf_w, emit, cos_c, cos_l, dvcm, dvc, rev), 1, t)
+        w = self._weight(nee_weight(fwd, pdf_w, emit, cos_c, cos_l, dvcm, dvc, rev, self.k), 1, t)
         value = f * ls.le * (w / pdf)
         ok &= (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         so = scene.spawn(si, wo)
@@ -524,7 +615,7 @@ class BDPTIntegrator:
             far = getattr(light, "position", None) is None
             pdf_light = Float(1.0) if far else dr.square(ds.dist)
             w = self._weight(nee_weight(Float(0.0), pdf_light, Float(self._delta_emit(light)), cos_c,
-                                        Float(1.0), dvcm, dvc, rev), 1, t)
+                                        Float(1.0), dvcm, dvc, rev, self.k), 1, t)
             value = f * ds.irradiance * w
             ok = active & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
             so = scene.spawn(si, ds.wo)
@@ -541,8 +632,8 @@ class BDPTIntegrator:
         f, fwd = scene.eval_bsdf(si, wo)
         _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
         emit = self.pick * pdf * self.disk_pdf
-        w = self._weight(nee_weight(fwd, pdf, emit, dr.abs(dr.dot(si.ng, wo)), Float(1.0), dvcm, dvc, rev),
-                         1, t)
+        w = self._weight(nee_weight(fwd, pdf, emit, dr.abs(dr.dot(si.ng, wo)), Float(1.0), dvcm, dvc, rev,
+                                    self.k), 1, t)
         value = f * radiance * (w / dr.maximum(pdf, 1e-30))
         ok = active & (pdf > 0.0) & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         count(scene, SHADOW_NEE, ok)
@@ -558,14 +649,16 @@ class BDPTIntegrator:
         else:
             le, pdf = Array3f(*map(float, self.scene.background)), Float(0.0)  # no NEE of it
         emit = self.pick * (pdf if self.has_sky else INV_FOUR_PI) * self.disk_pdf
-        w = dr.select(t == 2, 0.0 if self.opt.hide_emitters else 1.0, emission_weight(pdf, emit, dvcm, dvc))
+        w = dr.select(t == 2, 0.0 if self.opt.hide_emitters else 1.0,
+                      emission_weight(pdf, emit, dvcm, dvc, self.k))
         w = self._weight(w, 0, t)
         return dr.select(active, beta * le * w, 0.0)
 
     def _connect(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float,
                  lv: Interaction, beta_l: Array3f, dvcm_l: Float, dvc_l: Float, active: Bool,
-                 s: UInt32, t: UInt32) -> Array3f:
-        """``s >= 2, t >= 2``: camera vertex ``si`` joined to light vertex ``lv``."""
+                 s: UInt32, t: UInt32, u_rr: Float, threshold: Float) -> Array3f:
+        """``s >= 2, t >= 2``: camera vertex ``si`` joined to light vertex ``lv`` (after
+        :func:`roulette` with ``u_rr`` and ``threshold``)."""
         scene = self.scene
         to = lv.p - si.p
         dist2 = dr.squared_norm(to)
@@ -581,6 +674,7 @@ class BDPTIntegrator:
         weight = self._weight(connection_weight(pdf_l, dvcm_l, dvc_l, rev_l, pdf_c, dvcm, dvc, rev_c), s, t)
         value = beta * f_c * beta_l * f_l * (corr * inv_d2 * weight)
         ok = active & sides & (dist2 > 0.0) & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
+        value, ok = roulette(value, ok, u_rr, threshold)
         so = scene.spawn(si, w)
         end = spawn_origin(lv.p, lv.ng, lv.p_error, -w)
         seg = end - so
@@ -592,12 +686,15 @@ class BDPTIntegrator:
     # ------------------------------------------------------------ the subpaths
     @dr.syntax
     def trace(self, rng: PCG32, film: SplatFilm, camera_film: SplatFilm, px: Float, py: Float,
-              active: Bool, strategies: StrategyFilm | None = None) -> UInt32:
+              active: Bool, strategies: StrategyFilm | None = None, use_roulette: bool = True) -> UInt32:
         """One light subpath and one camera sample through image position ``(px, py)`` per
         lane: the ``t = 1`` strategies splatted into ``film``, the sum of the others into
         ``camera_film`` at ``(px, py)``, and with ``strategies`` each contribution also
         into its strategy's image; returns the non-finite contributions dropped (per
         lane)."""
+        # the roulette's threshold is a kernel input, so that the pilot (without roulette)
+        # and the passes trace one kernel
+        threshold = dr.opaque(Float, self.threshold if use_roulette and self.threshold else 0.0)
         scene, opt, cam = self.scene, self.opt, self.camera
         n = dr.width(active)
         D = self.depth
@@ -628,7 +725,8 @@ class BDPTIntegrator:
                 if connectible:
                     lverts.write(dr.minimum(stored, NL - 1), si, beta, dvcm, dvc, depth)
                     stored += 1
-                self._splat(si, beta, dvcm, dvc, film, connectible, depth, strategies)
+                self._splat(si, beta, dvcm, dvc, film, connectible, depth, strategies, rng.next_float32(),
+                            threshold)
 
                 u_lobe = rng.next_float32()
                 u_bsdf = next_2d(rng)
@@ -650,10 +748,13 @@ class BDPTIntegrator:
                 d = Array3f(wo)
 
         # ---- the camera subpath
+        if isinstance(rng, LDSampler):
+            # its dimensions from a fixed one on, whatever the light subpath's length
+            rng.dim = dr.full(UInt32, CAMERA_DIMENSION, n)
         o, d = cam.ray(px, py)
         cos_cam = dr.dot(d, cam.f)
         area = 4.0 * dr.sqrt(dr.squared_norm(cam.r) * dr.squared_norm(cam.u))
-        dvcm = mis(area * cos_cam * cos_cam * cos_cam)
+        dvcm = self.k * mis(area * cos_cam * cos_cam * cos_cam)
         dvc = dr.zeros(Float, n)
         beta = dr.full(Array3f, 1.0, n)
         eta = dr.full(Float, 1.0, n)
@@ -688,12 +789,24 @@ class BDPTIntegrator:
             L += beta * nee
             if record:
                 strategies.put(1, k + 1, px, py, beta * nee, active)
-            if lverts is not None:
+            if lverts is not None and self.one_connection:
+                # vertex j has depth >= j + 1: only the first D - k can make a path of <= D segments
+                i, m = choose_vertex(rng.next_float32(), stored, dr.select(k < D, D - k, 0))
+                pick = connectible & (m > 0)
+                lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, pick)
+                c = self._connect(si, beta, dvcm, dvc, lv, beta_l * Float(m), dvcm_l, dvc_l,
+                                  pick & (depth_l + k < D), depth_l + 1, k + 1, rng.next_float32(),
+                                  threshold)
+                L += c
+                if record:
+                    strategies.put(depth_l + 1, k + 1, px, py, c, active)
+            elif lverts is not None:
                 i = dr.zeros(UInt32, n)
                 while connectible & (i < stored):
                     lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
                     c = self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
-                                      connectible & (depth_l + k < D), depth_l + 1, k + 1)
+                                      connectible & (depth_l + k < D), depth_l + 1, k + 1,
+                                      rng.next_float32(), threshold)
                     L += c
                     if record:
                         strategies.put(depth_l + 1, k + 1, px, py, c, active)
