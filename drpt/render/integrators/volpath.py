@@ -78,6 +78,8 @@ from .path import PathIntegrator
 
 #: at most this many boundaries (null or thindielectric) a shadow ray passes; beyond, it is blocked
 MAX_SHADOW_CROSSINGS = 64
+#: a shadow ray's transmittance through homogeneous media is exact down to this value, tracked below it
+SHADOW_TAU = 0.4
 
 NULL_NONE, NULL_BOUNDARY, NULL_THIN = 0, 1, 2
 
@@ -279,6 +281,13 @@ def _transmittance(sigma_t: Array3f, dist: Float) -> Array3f:
     return dr.select(sigma_t > 0.0, dr.exp(-sigma_t * dist), 1.0)
 
 
+def _survivor_weight(sigma_t: Array3f, sig_r: Float, seg: Float, exact: Float) -> Array3f:
+    """``exp(-sigma_t seg)`` divided by the probability that a shadow ray survives ``seg``:
+    ``exp(-sig_r max(seg - exact, 0))``."""
+    excess = dr.select(sig_r > 0.0, dr.maximum(seg - exact, 0.0), 0.0)
+    return dr.select(sigma_t > 0.0, dr.exp(sig_r * excess - sigma_t * seg), 1.0)
+
+
 @dataclass
 class VolPathState:
     """One path per lane (a Dr.Jit loop state)."""
@@ -329,15 +338,28 @@ class VolPathIntegrator(PathIntegrator):
         """The transmittance of the segment from ``o`` along unit ``d`` up to ``tmax``
         (``inf``: to the sky), starting in ``medium``: media, null boundaries and
         thindielectric sheets pass light, other surfaces block it. Homogeneous media
-        attenuate exactly; heterogeneous ones by ratio tracking (``rng``: one number per
-        step, only in scenes with such media)."""
+        attenuate exactly, or, with ``rng``, exactly while the transmittance stays above
+        :data:`SHADOW_TAU` and by tracking beyond it (see the module's docs: an unbiased
+        estimate); heterogeneous ones by ratio tracking (``rng``: one number per step, only
+        in scenes with such media)."""
         scene, media = self.scene, self.media
+        track = rng is not None and SHADOW_TAU > 0.0
         tr = dr.full(Array3f, 1.0, dr.width(active))
         live = Bool(active)
         o, d, tmax, medium = Array3f(o), Array3f(d), Float(tmax), UInt32(medium)
         crossings = UInt32(0)
         while live:
-            si = scene.intersect(o, d, live)
+            sigma_t, _, _ = media.coefficients(medium, live)
+            end = Float(tmax)
+            sig_r, exact, collide = Float(0.0), Float(0.0), Bool(False)
+            if track:  # a collision sampled past the exact stretch ends the ray (inf or NaN in vacuum: none)
+                sig_r = dr.minimum(dr.minimum(sigma_t.x, sigma_t.y), sigma_t.z)
+                exact = dr.maximum(dr.log(dr.max(tr) * (1.0 / SHADOW_TAU)), 0.0) / sig_r
+                t_c = exact - dr.log(1.0 - rng.next_float32()) / sig_r
+                collide = live & (t_c < tmax)
+                end = dr.select(collide, t_c, tmax)
+            # (only surfaces before the collision matter: a shorter ray traverses less)
+            si = scene.intersect(o, d, live, dr.select(end < dr.largest(Float), end, dr.largest(Float)))
             ahead = live & si.valid & (si.t < tmax)
             seg = dr.select(ahead, si.t, tmax)
             step = Bool(False)
@@ -352,8 +374,11 @@ class VolPathIntegrator(PathIntegrator):
                     tmax = dr.select(hit, tmax - t, tmax)
                     step = step | hit
             blocked = ahead & ~step
-            sigma_t, _, _ = media.coefficients(medium, live)
-            tr = dr.select(live & ~step, tr * _transmittance(sigma_t, seg), tr)
+            if track:
+                tr = dr.select(live & ~step, tr * _survivor_weight(sigma_t, sig_r, seg, exact), tr)
+                tr = dr.select(collide & ~ahead, 0.0, tr)
+            else:
+                tr = dr.select(live & ~step, tr * _transmittance(sigma_t, seg), tr)
             tr = dr.select(blocked, tr * media.null_transmission(si, d, blocked), tr)
             medium = media.after(si, d, medium, blocked)
             o2 = scene.spawn(si, d)
@@ -377,7 +402,6 @@ class VolPathIntegrator(PathIntegrator):
         beta = dr.select(perform_rr, s.beta / q, s.beta)
         if opt.max_depth >= 0:
             active = active & (s.depth < opt.max_depth)
-        si = scene.intersect(s.o, s.d, active)
 
         # ---- free-flight sampling in the ray's medium (spectral MIS over the channels)
         u_ch, u_t = rng.next_float32(), rng.next_float32()
@@ -386,6 +410,8 @@ class VolPathIntegrator(PathIntegrator):
         ch = dr.minimum(UInt32(u_ch * 3.0), 2)
         m = dr.select(ch == 0, sigma_t.x, dr.select(ch == 1, sigma_t.y, sigma_t.z))
         t = -dr.log(1.0 - u_t) / m  # inf where m = 0
+        # (only surfaces before the sampled distance matter: a shorter ray traverses less)
+        si = scene.intersect(s.o, s.d, active, dr.select(t < dr.largest(Float), t, dr.largest(Float)))
         t_surf = dr.select(si.valid, si.t, dr.inf)
         scatter = in_medium & (t < t_surf)
         dist = dr.select(scatter, t, t_surf)
