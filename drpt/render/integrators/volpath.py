@@ -32,15 +32,24 @@ integrator: :meth:`~drpt.render.scene.DeviceScene.sample_emitter`) runs at surfa
 scattering events alike (the BSDF or the phase function evaluated toward the emitter
 sample, power-heuristic MIS against sampling them, none for delta lights; one shadow ray
 per vertex). A constant background is not sampled: rays that escape see it, with MIS
-weight 1 (the path integrator's convention). The shadow ray's
-transmittance is computed analytically (``exp(-sigma_t d)`` per
-segment of homogeneous medium), through ``null`` boundaries (factor 1) and ``thindielectric``
-sheets (their transmission ``1 - 2R / (1 + R)``), changing medium at each transition; any
-other surface blocks it. (As in Mitsuba, the sky and directional lights are ``2 max(R, |p - c|)`` away for this
-estimate, ``(c, R)`` the bounding sphere of the scene's shapes: in a medium that extends
-beyond the shapes, such as the sensor's, the sky is seen through that much of it, while a
-sampled ray that leaves every shape in such a medium scatters before it reaches the sky.)
-An emitter a BSDF or phase sample hits afterwards is weighted
+weight 1 (the path integrator's convention). The shadow ray passes ``null`` boundaries
+(factor 1) and ``thindielectric`` sheets (their transmission ``1 - 2R / (1 + R)``), changing
+medium at each transition; any other surface blocks it. (As in Mitsuba, the sky and
+directional lights are ``2 max(R, |p - c|)`` away for this estimate, ``(c, R)`` the bounding
+sphere of the scene's shapes: in a medium that extends beyond the shapes, such as the
+sensor's, the sky is seen through that much of it, while a sampled ray that leaves every
+shape in such a medium scatters before it reaches the sky.) Its transmittance through a
+homogeneous medium is exact (``exp(-sigma_t d)`` per segment) while the largest channel of
+the ray's transmittance so far stays above :data:`SHADOW_TAU`; beyond that point a collision
+distance is sampled with ``min(sigma_t)`` (tracking, which Mitsuba's shadow rays do all the
+way): a collision before the next surface ends the ray with transmittance 0, and a ray that
+gets past divides by its survival probability ``exp(-min(sigma_t) x)`` (``x`` the tracked
+distance), so the estimate is unbiased and never above 1 (a medium with a channel of zero
+extinction stays exact). Shadow rays that keep more than ``SHADOW_TAU`` get no extra
+variance, while those deep in dense media stop about one mean free path past the threshold
+instead of following every boundary to the light. The free-flight and shadow rays look for
+surfaces only up to their sampled collision (a shorter ray traverses less of the
+accelerator). An emitter a BSDF or phase sample hits afterwards is weighted
 against the density next-event estimation has for it from the last real scattering vertex
 (null crossings do not count), as Mitsuba does.
 

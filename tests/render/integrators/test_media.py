@@ -12,7 +12,9 @@
   sphere: camera rays through the center of an absorbing sphere (albedo 0) in a white
   furnace average ``exp(-2 sigma_t)`` per channel (|z| < 4 over 2^16 paths; negative control:
   a 25% longer chord is far off), and shadow rays through null and thindielectric
-  boundaries get it exactly.
+  boundaries get it exactly; with a random stream (exact down to ``SHADOW_TAU``, tracked
+  beyond) in expectation (|z| < 4 over 2^16 rays; negative control: the tracked part without
+  the division by its survival probability is |z| > 8 off).
 * An HG medium lit by a directional light from behind renders like Mitsuba's (8x8 block
   z-test, max |z| < 5); negative control: drpt with ``-g`` does not.
 * Numerics: extinctions 0, 1e-6, 1e6, albedo 0 and 1, g = +-0.99: finite images; an albedo-1
