@@ -228,13 +228,14 @@ class DeviceScene:
         return view
 
     # ------------------------------------------------------------ geometry
-    def intersect(self, o: Array3f, d: Array3f, active: Bool) -> Interaction:
-        """The closest hit of rays ``(o, d)`` (``si.valid`` False on a miss)."""
-        return self.interaction(o, d, self.intersect_preliminary(o, d, active))
+    def intersect(self, o: Array3f, d: Array3f, active: Bool, tmax: Float | None = None) -> Interaction:
+        """The closest hit of rays ``(o, d)`` (``si.valid`` False on a miss), closer than
+        ``tmax`` if given (a shorter ray traverses less of the accelerator)."""
+        return self.interaction(o, d, self.intersect_preliminary(o, d, active, tmax))
 
-    def intersect_preliminary(self, o: Array3f, d: Array3f, active: Bool):
-        """The accelerator's closest hit (:class:`drpt.accel.Hit`), any distance."""
-        return self.accel.intersect(o, d, Float(dr.largest(Float)), active)
+    def intersect_preliminary(self, o: Array3f, d: Array3f, active: Bool, tmax: Float | None = None):
+        """The accelerator's closest hit (:class:`drpt.accel.Hit`), any distance or closer than ``tmax``."""
+        return self.accel.intersect(o, d, Float(dr.largest(Float)) if tmax is None else tmax, active)
 
     def interaction(self, o: Array3f, d: Array3f, hit) -> Interaction:
         """Position, normals, material and uv of a hit (:class:`~drpt.render.surface.Interaction`)."""

@@ -32,15 +32,24 @@ integrator: :meth:`~drpt.render.scene.DeviceScene.sample_emitter`) runs at surfa
 scattering events alike (the BSDF or the phase function evaluated toward the emitter
 sample, power-heuristic MIS against sampling them, none for delta lights; one shadow ray
 per vertex). A constant background is not sampled: rays that escape see it, with MIS
-weight 1 (the path integrator's convention). The shadow ray's
-transmittance is computed analytically (``exp(-sigma_t d)`` per
-segment of homogeneous medium), through ``null`` boundaries (factor 1) and ``thindielectric``
-sheets (their transmission ``1 - 2R / (1 + R)``), changing medium at each transition; any
-other surface blocks it. (As in Mitsuba, the sky and directional lights are ``2 max(R, |p - c|)`` away for this
-estimate, ``(c, R)`` the bounding sphere of the scene's shapes: in a medium that extends
-beyond the shapes, such as the sensor's, the sky is seen through that much of it, while a
-sampled ray that leaves every shape in such a medium scatters before it reaches the sky.)
-An emitter a BSDF or phase sample hits afterwards is weighted
+weight 1 (the path integrator's convention). The shadow ray passes ``null`` boundaries
+(factor 1) and ``thindielectric`` sheets (their transmission ``1 - 2R / (1 + R)``), changing
+medium at each transition; any other surface blocks it. (As in Mitsuba, the sky and
+directional lights are ``2 max(R, |p - c|)`` away for this estimate, ``(c, R)`` the bounding
+sphere of the scene's shapes: in a medium that extends beyond the shapes, such as the
+sensor's, the sky is seen through that much of it, while a sampled ray that leaves every
+shape in such a medium scatters before it reaches the sky.) Its transmittance through a
+homogeneous medium is exact (``exp(-sigma_t d)`` per segment) while the largest channel of
+the ray's transmittance so far stays above :data:`SHADOW_TAU`; beyond that point a collision
+distance is sampled with ``min(sigma_t)`` (tracking, which Mitsuba's shadow rays do all the
+way): a collision before the next surface ends the ray with transmittance 0, and a ray that
+gets past divides by its survival probability ``exp(-min(sigma_t) x)`` (``x`` the tracked
+distance), so the estimate is unbiased and never above 1 (a medium with a channel of zero
+extinction stays exact). Shadow rays that keep more than ``SHADOW_TAU`` get no extra
+variance, while those deep in dense media stop about one mean free path past the threshold
+instead of following every boundary to the light. The free-flight and shadow rays look for
+surfaces only up to their sampled collision (a shorter ray traverses less of the
+accelerator). An emitter a BSDF or phase sample hits afterwards is weighted
 against the density next-event estimation has for it from the last real scattering vertex
 (null crossings do not count), as Mitsuba does.
 
@@ -78,6 +87,8 @@ from .path import PathIntegrator
 
 #: at most this many boundaries (null or thindielectric) a shadow ray passes; beyond, it is blocked
 MAX_SHADOW_CROSSINGS = 64
+#: a shadow ray's transmittance through homogeneous media is exact down to this value, tracked below it
+SHADOW_TAU = 0.4
 
 NULL_NONE, NULL_BOUNDARY, NULL_THIN = 0, 1, 2
 
@@ -279,6 +290,20 @@ def _transmittance(sigma_t: Array3f, dist: Float) -> Array3f:
     return dr.select(sigma_t > 0.0, dr.exp(-sigma_t * dist), 1.0)
 
 
+def reach(t: Float) -> Float:
+    """How far a closest-hit query need look for a ray whose medium collision was sampled
+    at ``t``: only surfaces before it matter (a shorter ray traverses less); the largest
+    float where ``t`` is infinite."""
+    return dr.select(t < dr.largest(Float), t, dr.largest(Float))
+
+
+def _survivor_weight(sigma_t: Array3f, sig_r: Float, seg: Float, exact: Float) -> Array3f:
+    """``exp(-sigma_t seg)`` divided by the probability that a shadow ray survives ``seg``:
+    ``exp(-sig_r max(seg - exact, 0))``."""
+    excess = dr.select(sig_r > 0.0, dr.maximum(seg - exact, 0.0), 0.0)
+    return dr.select(sigma_t > 0.0, dr.exp(sig_r * excess - sigma_t * seg), 1.0)
+
+
 @dataclass
 class Flight:
     """What free-flight sampling decided for the lanes' segment
@@ -370,10 +395,12 @@ class VolPathIntegrator(PathIntegrator):
 
     @property
     def shadow_draws(self) -> bool:
-        """Whether :meth:`shadow` draws random numbers (ratio tracking, in scenes with a
-        heterogeneous medium): the wavefront then traces it inside its queues, between
-        next-event estimation and the next direction, as the megakernel does."""
-        return self.media.has_hetero
+        """Whether :meth:`shadow` draws random numbers (ratio tracking in heterogeneous
+        media, tracking below :data:`SHADOW_TAU` in homogeneous ones): the wavefront then
+        traces it inside its queues, between next-event estimation and the next direction,
+        as the megakernel does (with ``SHADOW_TAU = 0`` and only homogeneous media, in one
+        batch after them)."""
+        return self.media.has_hetero or SHADOW_TAU > 0.0
 
     @dr.syntax
     def shadow(self, o: Array3f, d: Array3f, tmax: Float, medium: UInt32, active: Bool,
@@ -381,15 +408,28 @@ class VolPathIntegrator(PathIntegrator):
         """The transmittance of the segment from ``o`` along unit ``d`` up to ``tmax``
         (``inf``: to the sky), starting in ``medium``: media, null boundaries and
         thindielectric sheets pass light, other surfaces block it. Homogeneous media
-        attenuate exactly; heterogeneous ones by ratio tracking (``rng``: one number per
-        step, only in scenes with such media)."""
+        attenuate exactly, or, with ``rng``, exactly while the transmittance stays above
+        :data:`SHADOW_TAU` and by tracking beyond it (see the module's docs: an unbiased
+        estimate); heterogeneous ones by ratio tracking (``rng``: one number per step, only
+        in scenes with such media)."""
         scene, media = self.scene, self.media
+        track = rng is not None and SHADOW_TAU > 0.0
         tr = dr.full(Array3f, 1.0, dr.width(active))
         live = Bool(active)
         o, d, tmax, medium = Array3f(o), Array3f(d), Float(tmax), UInt32(medium)
         crossings = UInt32(0)
         while live:
-            si = scene.intersect(o, d, live)
+            sigma_t, _, _ = media.coefficients(medium, live)
+            end = Float(tmax)
+            sig_r, exact, collide = Float(0.0), Float(0.0), Bool(False)
+            if track:  # a collision sampled past the exact stretch ends the ray (inf or NaN in vacuum: none)
+                sig_r = dr.minimum(dr.minimum(sigma_t.x, sigma_t.y), sigma_t.z)
+                exact = dr.maximum(dr.log(dr.max(tr) * (1.0 / SHADOW_TAU)), 0.0) / sig_r
+                t_c = exact - dr.log(1.0 - rng.next_float32()) / sig_r
+                collide = live & (t_c < tmax)
+                end = dr.select(collide, t_c, tmax)
+            # (only surfaces before the collision matter: a shorter ray traverses less)
+            si = scene.intersect(o, d, live, reach(end))
             ahead = live & si.valid & (si.t < tmax)
             seg = dr.select(ahead, si.t, tmax)
             step = Bool(False)
@@ -404,8 +444,11 @@ class VolPathIntegrator(PathIntegrator):
                     tmax = dr.select(hit, tmax - t, tmax)
                     step = step | hit
             blocked = ahead & ~step
-            sigma_t, _, _ = media.coefficients(medium, live)
-            tr = dr.select(live & ~step, tr * _transmittance(sigma_t, seg), tr)
+            if track:
+                tr = dr.select(live & ~step, tr * _survivor_weight(sigma_t, sig_r, seg, exact), tr)
+                tr = dr.select(collide & ~ahead, 0.0, tr)
+            else:
+                tr = dr.select(live & ~step, tr * _transmittance(sigma_t, seg), tr)
             tr = dr.select(blocked, tr * media.null_transmission(si, d, blocked), tr)
             medium = media.after(si, d, medium, blocked)
             o2 = scene.spawn(si, d)
@@ -423,8 +466,9 @@ class VolPathIntegrator(PathIntegrator):
         :meth:`free_flight`, :meth:`emitted`, :meth:`nee_query` with :meth:`shadow`, and
         :meth:`next_ray`."""
         active, beta = self.roulette(s, rng)
-        si = scene.intersect(s.o, s.d, active)
-        fl = self.free_flight(s, si, active, beta, rng)
+        draw = self.flight_draw(s, active, rng)
+        si = scene.intersect(s.o, s.d, active, reach(draw[2]))
+        fl = self.free_flight(s, si, active, beta, rng, draw)
         L = s.L + self.emitted(scene, s, si, fl)
         on_surface = fl.surf & si.valid
         phase = self.phase(s, fl)
@@ -449,17 +493,27 @@ class VolPathIntegrator(PathIntegrator):
             active = active & (s.depth < opt.max_depth)
         return active, beta
 
-    def free_flight(self, s: VolPathState, si, active: Bool, beta: Array3f, rng: PCG32) -> Flight:
-        """Free-flight sampling along the ray up to ``si`` in the ray's medium (spectral
-        MIS over the channels; delta tracking in heterogeneous media): two random numbers,
-        three with heterogeneous media."""
-        opt, media = self.opt, self.media
+    def flight_draw(self, s: VolPathState, active: Bool, rng: PCG32) -> tuple[Float, Float, Float]:
+        """The free-flight draw, before the closest hit: ``(u_ch, u_t, t)``, two random
+        numbers and the collision distance they sample in the ray's medium (spectral MIS:
+        a channel ``u_ch`` picks, ``inf`` in vacuum). The closest hit need look no further
+        than ``t`` (:func:`reach`); :meth:`free_flight` takes the draw."""
         u_ch, u_t = rng.next_float32(), rng.next_float32()
         in_medium = active & (s.medium > 0)
-        sigma_t, albedo, g = media.coefficients(s.medium, in_medium)
+        sigma_t, _, _ = self.media.coefficients(s.medium, in_medium)
         ch = dr.minimum(UInt32(u_ch * 3.0), 2)
         m = dr.select(ch == 0, sigma_t.x, dr.select(ch == 1, sigma_t.y, sigma_t.z))
-        t = -dr.log(1.0 - u_t) / m  # inf where m = 0
+        return u_ch, u_t, -dr.log(1.0 - u_t) / m  # inf where m = 0
+
+    def free_flight(self, s: VolPathState, si, active: Bool, beta: Array3f, rng: PCG32,
+                    draw: tuple[Float, Float, Float]) -> Flight:
+        """Free-flight sampling along the ray up to ``si`` in the ray's medium with
+        :meth:`flight_draw`'s ``draw`` (spectral MIS over the channels; delta tracking in
+        heterogeneous media, one more random number)."""
+        opt, media = self.opt, self.media
+        _, u_t, t = draw
+        in_medium = active & (s.medium > 0)
+        sigma_t, albedo, g = media.coefficients(s.medium, in_medium)
         t_surf = dr.select(si.valid, si.t, dr.inf)
         scatter = in_medium & (t < t_surf)
         dist = dr.select(scatter, t, t_surf)

@@ -50,7 +50,7 @@ from ...options import PathOptions
 from ...scene.model import Scene
 from ..sampler import pack, unpack
 from ..scene import DeviceScene
-from .volpath import Flight, VolPathIntegrator, VolPathState, VolShadowQuery
+from .volpath import Flight, VolPathIntegrator, VolPathState, VolShadowQuery, reach
 from .wavefront import WavefrontIntegrator, WaveState, _take, _Timer, gather_state
 
 
@@ -109,16 +109,17 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         # ---- Russian roulette, closest hit
         rng = self._rng(s)
         active, beta = integ.roulette(_vol_state(s, dr.full(Bool, True, n)), rng)
-        hit = scene.intersect_preliminary(s.o, s.d, active)
+        draw = integ.flight_draw(_vol_state(s, active), active, rng)
+        hit = scene.intersect_preliminary(s.o, s.d, active, reach(draw[2]))
         rng_a, rng_b = pack(rng)
-        timer.done("closest hit", hit, active, beta, rng_a, rng_b, lanes=n, rays=n)
+        timer.done("closest hit", hit, active, beta, rng_a, rng_b, *draw, lanes=n, rays=n)
         si = scene.interaction(s.o, s.d, hit)
         timer.done("interaction", si, lanes=n)
 
         # ---- free flight and what the ray reaches
         rng = unpack(self._rng_kind, rng_a, rng_b)
         vs = _vol_state(s, active)
-        fl = integ.free_flight(vs, si, active, beta, rng)
+        fl = integ.free_flight(vs, si, active, beta, rng, draw)
         dr.scatter_add(L, integ.emitted(scene, vs, si, fl), s.lane)
         on_surface = fl.surf & si.valid
         s = VolWaveState(**{**{f.name: getattr(s, f.name) for f in fields(s)},

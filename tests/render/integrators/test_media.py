@@ -12,7 +12,9 @@
   sphere: camera rays through the center of an absorbing sphere (albedo 0) in a white
   furnace average ``exp(-2 sigma_t)`` per channel (|z| < 4 over 2^16 paths; negative control:
   a 25% longer chord is far off), and shadow rays through null and thindielectric
-  boundaries get it exactly.
+  boundaries get it exactly; with a random stream (exact down to ``SHADOW_TAU``, tracked
+  beyond) in expectation (|z| < 4 over 2^16 rays; negative control: the tracked part without
+  the division by its survival probability is |z| > 8 off).
 * An HG medium lit by a directional light from behind renders like Mitsuba's (8x8 block
   z-test, max |z| < 5); negative control: drpt with ``-g`` does not.
 * Numerics: extinctions 0, 1e-6, 1e6, albedo 0 and 1, g = +-0.99: finite images; an albedo-1
@@ -260,6 +262,51 @@ def test_shadow_rays_get_the_analytic_transmittance(tmp_path, bsdf):
         rr = ((eta - 1.0) / (eta + 1.0)) ** 2
         expect = expect * (1.0 - 2.0 * rr / (1.0 + rr)) ** 2
     assert np.allclose(got, expect[None], rtol=2e-4), (got[0], expect)
+
+
+@pytest.mark.parametrize("bsdf", ["null", "thindielectric"])
+def test_shadow_tracking_is_unbiased(tmp_path, bsdf, monkeypatch):
+    """With a random stream, a shadow ray is exact while its transmittance stays above
+    :data:`~drpt.render.integrators.volpath.SHADOW_TAU`, then survives each further
+    distance with the probability ``exp(-min(sigma_t) t)`` and divides by it. Through the
+    unit sphere's center (chord 2, extinction (3, 2, 1.5): every lane tracks past the
+    threshold), the mean of 2^16 shadow rays is ``exp(-2 sigma_t)`` times the sheets'
+    transmission per channel (|z| < 4), every value finite and at most 1. Negative control:
+    the same estimator without the division by the survival probability is |z| > 8 off."""
+    import drjit as dr
+    from drjit.auto import PCG32, Array3f, Bool, Float, UInt32
+
+    from drpt.render.integrators import volpath
+
+    sigma = np.array([3.0, 2.0, 1.5])
+    expect = np.exp(-2.0 * sigma)
+    if bsdf == "thindielectric":
+        from drpt.materials.iors import relative_ior
+
+        eta = relative_ior("bk7", "air")
+        rr = ((eta - 1.0) / (eta + 1.0)) ** 2
+        expect = expect * (1.0 - 2.0 * rr / (1.0 + rr)) ** 2
+    assert np.exp(-2.0 * sigma.min()) < volpath.SHADOW_TAU  # (the tracked part is exercised)
+    r = _renderer(tmp_path, sigma=", ".join(map(str, sigma)), bsdf=bsdf)
+    n = 1 << 16
+
+    def shadow_means():
+        tr = r.integrator.shadow(dr.full(Array3f, [0.0, 0.0, 5.0], n), dr.full(Array3f, [0.0, 0.0, -1.0], n),
+                                 dr.full(Float, float("inf"), n), dr.zeros(UInt32, n), dr.full(Bool, True, n),
+                                 PCG32(n, 7))
+        x = np.stack([np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.z)], 1).astype(np.float64)
+        assert np.isfinite(x).all() and x.min() >= 0.0 and x.max() <= 1.0 + 1e-6
+        return x.mean(0), x.std(0, ddof=1) / math.sqrt(n)
+
+    mean, se = shadow_means()
+    assert np.all(np.abs(mean - expect) < 4 * se), (mean, expect, se)
+
+    def forgetful(sigma_t, sig_r, seg, exact):  # no division by the survival probability
+        return dr.select(sigma_t > 0.0, dr.exp(-sigma_t * seg), 1.0)
+
+    monkeypatch.setattr(volpath, "_survivor_weight", forgetful)
+    mean, se = shadow_means()
+    assert np.all(np.abs(mean - expect) > 8 * np.maximum(se, 1e-12)), (mean, expect, se)
 
 
 # ------------------------------------------------------------ numerics
