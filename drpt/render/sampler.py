@@ -34,6 +34,9 @@ A sampler has PCG32's ``next_float32()`` plus ``next_2d()``; :func:`next_2d` dra
 
 from __future__ import annotations
 
+import functools
+import math
+
 import drjit as dr
 from drjit.auto import Array2f, Float, UInt32
 
@@ -269,6 +272,214 @@ class ZSobolSampler(LDSampler):
         x = owen_reversed(i, mix32(h ^ 0x68E31DA4))
         y = owen_reversed(sobol1_reversed(i), mix32(h ^ 0xB5297A4D))
         return Array2f(to_float(x), to_float(y))
+
+
+
+#: rounds of :func:`permute`'s swap-or-not shuffle
+PERMUTE_ROUNDS = 8
+
+
+def permute(x: UInt32, n: int, seed: UInt32) -> UInt32:
+    """A random permutation of ``0 .. n - 1`` (``n`` a Python int, at most 2^31), chosen by
+    ``seed``, applied to ``x``: what Kensler's hash-based permutation ("Correlated
+    Multi-Jittered Sampling", 2013; Mitsuba's ``permute_kensler``) is to Mitsuba's samplers,
+    built without its cycle-walking loop as a swap-or-not shuffle (Hoang, Morris and
+    Rogaway, 2012): each round pairs ``x`` with ``K - x mod n`` (``K`` a random point of the
+    round) and swaps the two when a hash of the larger is odd, which is a bijection of any
+    range, with no loop and the same work for every lane."""
+    if n <= 1:
+        return dr.zeros(UInt32, dr.width(x))
+    x = UInt32(x)
+    k = mix32(seed ^ 0x2F6B3C1D)
+    for _ in range(PERMUTE_ROUNDS):
+        k = k * 0x2C1B3C6D + 0x297A2D39  # the round's key (an LCG step of the hashed seed)
+        big = dr.mul_hi(mix32(k), n)  # K, uniform in [0, n)
+        partner = dr.select(x > big, big + n - x, big - x)
+        t = (dr.maximum(x, partner) ^ k) * 0x9E3779B1
+        t = (t ^ (t >> 15)) * 0x85EBCA77
+        x = dr.select((t >> 31) != 0, partner, x)
+    return x
+
+
+def _jitter(h: UInt32, r: UInt32, jitter: bool, salt: int = 0x1B873593) -> Float:
+    """A sample's offset inside its stratum: uniform from a hash of the dimension's seed
+    ``h``, the sample ``r`` and ``salt`` (Mitsuba draws it from the lane's PCG32), or the
+    stratum's middle without ``jitter``."""
+    if not jitter:
+        return dr.full(Float, 0.5, dr.width(r))
+    return to_float(mix32(mix32(h ^ salt) + r * 0x85EBCA6B))
+
+
+class StrataSampler(LDSampler):
+    """The base of Mitsuba's stratified, multijitter and orthogonal samplers (see
+    :func:`strata_sampler`): a pixel's samples are ``count`` strata per dimension, each
+    dimension's strata shuffled among the samples by :func:`permute` with a seed hashed from
+    ``(key, block, dimension)``, a sample's offset inside its stratum hashed from the same
+    and its index. Sample ``index`` of a pixel is sample ``index mod count`` of its block
+    ``index // count``: every ``count`` consecutive samples from a multiple of ``count`` are
+    stratified, and a render beyond ``count`` samples (a live view's frames) draws fresh
+    blocks. As :class:`LDSampler`'s, a value depends on the seed, pixel, sample index and
+    dimension only, so chunked and resumed renders are the plain one bit for bit.
+    Subclasses set the class attributes (:func:`strata_sampler`)."""
+
+    count = 1  # samples per block (Mitsuba's sample_count, rounded as it rounds it)
+    jitter = True
+
+    def _block(self) -> tuple[UInt32, UInt32]:
+        """``(seed, r)``: the hash of the lane's pixel key and block, and the sample's place in
+        its block."""
+        if self.count == 1:
+            return mix32(self.key + self.index * 0x632BE5AB), dr.zeros(UInt32, dr.width(self.index))
+        block = self.index // self.count
+        return mix32(self.key + block * 0x632BE5AB), self.index - block * self.count
+
+    def _dim_seed(self, seed: UInt32, dim: UInt32) -> UInt32:
+        return mix32(seed ^ (dim * 0x9E3779B9))
+
+
+class Stratified(StrataSampler):
+    """Mitsuba's ``stratified``: ``count = res^2``; a 1-D draw puts a pixel's samples one in
+    each of ``count`` intervals, a 2-D draw one in each cell of the ``res x res`` grid (the
+    cells shuffled among the samples, each dimension by its own permutation)."""
+
+    res = 1
+
+    def next_float32(self) -> Float:
+        seed, r = self._block()
+        h = self._dim_seed(seed, self.dim)
+        self.dim += 1
+        p = permute(r, self.count, h)
+        return dr.minimum((Float(p) + _jitter(h, r, self.jitter)) * (1.0 / self.count), ONE_MINUS)
+
+    def next_2d(self) -> Array2f:
+        seed, r = self._block()
+        h = self._dim_seed(seed, self.dim)
+        self.dim += 2
+        p = permute(r, self.count, h)
+        y = p // self.res if self.res > 1 else dr.zeros(UInt32, dr.width(p))
+        x = p - y * self.res
+        jx, jy = _jitter(h, r, self.jitter), _jitter(h, r, self.jitter, 0xCC9E2D51)
+        return Array2f(dr.minimum((Float(x) + jx) * (1.0 / self.res), ONE_MINUS),
+                       dr.minimum((Float(y) + jy) * (1.0 / self.res), ONE_MINUS))
+
+
+class Multijitter(StrataSampler):
+    """Mitsuba's ``multijitter`` (Kensler's correlated multi-jittered sampling): ``count =
+    nx ny`` with ``ny = floor(sqrt(spp))``, ``nx = ceil(spp / ny)``; a 2-D draw puts one
+    sample in each cell of the ``nx x ny`` grid and, inside its cell, in the sub-column and
+    sub-row that makes the ``x`` values one per ``1 / count`` interval and the ``y`` values
+    too (the sub-cells shuffled by one permutation per axis for the whole pixel); a 1-D draw
+    is stratified's."""
+
+    nx = ny = 1
+
+    def next_float32(self) -> Float:
+        seed, r = self._block()
+        h = self._dim_seed(seed, self.dim)
+        self.dim += 1
+        p = permute(r, self.count, h)
+        return dr.minimum((Float(p) + _jitter(h, r, self.jitter)) * (1.0 / self.count), ONE_MINUS)
+
+    def next_2d(self) -> Array2f:
+        seed, r = self._block()
+        h = self._dim_seed(seed, self.dim)
+        self.dim += 2
+        s = permute(r, self.count, h)
+        y = s // self.nx if self.nx > 1 else s
+        x = s - y * self.nx
+        sx = permute(x, self.nx, mix32(h ^ 0x68BC21EB))  # x's sub-row inside its cell
+        sy = permute(y, self.ny, mix32(h ^ 0x02E5BE93))  # y's sub-column
+        jx, jy = _jitter(h, r, self.jitter), _jitter(h, r, self.jitter, 0xCC9E2D51)
+        u = (Float(x) + (Float(sy) + jx) * (1.0 / self.ny)) * (1.0 / self.nx)
+        v = (Float(y) + (Float(sx) + jy) * (1.0 / self.nx)) * (1.0 / self.ny)
+        return Array2f(dr.minimum(u, ONE_MINUS), dr.minimum(v, ONE_MINUS))
+
+
+class Orthogonal(StrataSampler):
+    """Mitsuba's ``orthogonal``: an orthogonal array of strength ``strength`` over a prime
+    ``res`` (``count = res^2``), with multi-jittered offsets. Every dimension of a sample
+    reads the same row of the array (the pixel's rows shuffled once per block). Strength 2
+    is Bose's construction: row ``(a0, a1)`` has ``a0`` in dimension 0, ``a1`` in 1 and ``a0
+    + (j - 1) a1 mod res`` in dimension ``j >= 2``, so any two dimensions among ``0 ..
+    res`` put one sample in each of the ``res x res`` cells of their square (dimension ``j``
+    and ``j + res`` hold the same column, as in Mitsuba); inside its stratum a value's
+    sub-stratum is its partner dimension's (``j xor 1``) column, so a 2-D draw from an even
+    dimension is also multi-jittered. Strength ``t > 2`` is Bush's construction: row ``i``'s
+    base-``res`` digits are a polynomial's coefficients, dimension ``j`` holds its value at
+    ``j``, and ``res^2`` of its ``res^t`` rows are drawn, as Mitsuba draws them (a pixel's
+    samples then are not the whole array). A 2-D draw is two 1-D draws."""
+
+    res = 2
+    strength = 2
+
+    def next_float32(self) -> Float:
+        seed, r = self._block()
+        j = UInt32(self.dim)
+        self.dim += 1
+        p, q = self.res, j % self.res
+        h = self._dim_seed(seed, j)
+        if self.strength == 2:
+            i = permute(r, self.count, seed)  # the row: the same for every dimension
+            a0 = i // p
+            a1 = i - a0 * p
+            partner = j ^ 1
+
+            def column(c):
+                m = (c + (p - 1)) % p  # (c - 1) mod p
+                v = (a0 + m * a1) % p
+                return dr.select(c == 0, a0, dr.select(c == 1, a1, v))
+
+            stratum = permute(column(j), p, mix32(h ^ 0x51633E2D))
+            sub = permute(column(partner), p, mix32(h ^ 0x68BC21EB))
+            m = p
+        else:
+            rows = p ** self.strength
+            i = permute(r, rows, seed)
+            phi = dr.zeros(UInt32, dr.width(i))
+            digits = []
+            rest = UInt32(i)
+            for _ in range(self.strength):
+                nxt = rest // p
+                digits.append(rest - nxt * p)
+                rest = nxt
+            for d in reversed(digits):  # Horner, mod p at each step
+                phi = (phi * q + d) % p
+            m = rows // p
+            stratum = permute(phi, p, mix32(h ^ 0x51633E2D))
+            sub = permute((i // p) % m, m, mix32(h ^ 0x68BC21EB))
+        u = (Float(stratum) + (Float(sub) + _jitter(h, r, self.jitter)) * (1.0 / m)) * (1.0 / p)
+        return dr.minimum(u, ONE_MINUS)
+
+    def next_2d(self) -> Array2f:
+        u = self.next_float32()
+        return Array2f(u, self.next_float32())
+
+
+#: the largest float32 below 1
+ONE_MINUS = float.fromhex("0x1.fffffep-1")
+
+#: the samplers of :func:`strata_sampler`, by ``--sampler`` name
+STRATA = {"stratified": Stratified, "multijitter": Multijitter, "orthogonal": Orthogonal}
+
+
+@functools.lru_cache(maxsize=None)
+def strata_sampler(name: str, spp: int, jitter: bool = True, strength: int = 2) -> type:
+    """The class of Mitsuba's sampler ``name`` (``stratified``, ``multijitter`` or
+    ``orthogonal``) for ``spp`` samples per pixel: its strata laid out for the sample count
+    Mitsuba rounds ``spp`` to (:func:`drpt.scene.mitsuba.reader.mitsuba_sample_count`;
+    with fewer samples, a pixel's are the first ``spp`` of its shuffled strata)."""
+    from ..scene.mitsuba.reader import mitsuba_sample_count
+
+    count = mitsuba_sample_count(name, spp)
+    attrs = {"count": count, "jitter": bool(jitter)}
+    if name == "stratified":
+        attrs["res"] = math.isqrt(count)
+    elif name == "multijitter":
+        attrs["ny"] = math.isqrt(spp)
+        attrs["nx"] = count // attrs["ny"]
+    else:
+        attrs["res"], attrs["strength"] = math.isqrt(count), int(strength)
+    return type(f"{STRATA[name].__name__}_{count}", (STRATA[name],), attrs)
 
 
 def pack(rng) -> tuple:

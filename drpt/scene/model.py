@@ -374,6 +374,8 @@ class RenderSettings:
     hide_emitters: bool | None = None
     sampler: str | None = None  # the sampler plugin's name (drpt.render.sampler)
     seed: int | None = None  # the sampler's seed
+    jitter: bool | None = None  # stratified, multijitter, orthogonal: jitter inside strata
+    strength: int | None = None  # orthogonal: the orthogonal array's strength
     rfilter: str | None = None  # reconstruction filter name: "box", "tent", "gaussian"
     rfilter_params: dict = field(default_factory=dict)  # Mitsuba's names: radius, stddev
     #: Mitsuba's ``(fov, fov_axis)`` as the file gives them: an image size of another

@@ -48,9 +48,8 @@ from .nodes import Node, State
 _SILENT = {
     "film": ("pixel_format", "component_format", "file_format", "banner", "compensate",
              "sample_border"),
-    # (stratified, multijitter and orthogonal draw from drpt's ldsampler: their jitter and
-    # strength shape only the noise)
-    "sampler": ("jitter", "strength", "scramble_seed"),
+    # (Mitsuba 0.6's ldsampler's scramble_seed: drpt's ldsampler scrambles from the seed)
+    "sampler": ("scramble_seed",),
     "integrator": ("samples_per_pass", "block_size", "emitter_samples", "bsdf_samples",
                    "shading_samples"),
     "sensor": ("near_clip", "far_clip", "shutter_open", "shutter_close"),
@@ -334,6 +333,15 @@ class Reader:
             if crop[2] * crop[3] * rounded > MAX_SAMPLES:
                 raise sampler.error(f"{sampler.label}: {crop[2]} x {crop[3]} pixels x {rounded} samples is "
                                     f"more than drpt's 2^60")
+            if sampler.plugin in ("stratified", "multijitter", "orthogonal"):
+                self.settings.jitter = sampler.bool("jitter", True)
+            if sampler.plugin == "orthogonal":
+                strength = sampler.int("strength", 2)
+                res = math.isqrt(rounded)
+                if strength is None or strength < 2 or res ** strength > 1 << 31:
+                    raise sampler.error(f"{sampler.label}: strength must be at least 2, with "
+                                        f"{res}^strength rows at most 2^31, got {strength}")
+                self.settings.strength = strength
             self.check_unread(sampler)
 
         aspect = width / height
