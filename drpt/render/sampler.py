@@ -23,6 +23,16 @@ a pixel (from a multiple of ``2^m``) keep the stratification. Mitsuba's ``ldsamp
 sequence over the whole image in Morton order instead, which spreads the
 remaining error as blue noise.
 
+``stratified``, ``multijitter`` and ``orthogonal`` are Mitsuba's plugins of
+those names (:class:`Stratified`, :class:`Multijitter`, :class:`Orthogonal`,
+made for a sample count by :func:`strata_sampler`): a pixel's samples are a set
+of strata per draw (a square grid; Kensler's correlated multi-jittered grid;
+the rows of a multi-jittered orthogonal array over a prime), shuffled among the
+samples by a random permutation (:func:`permute`) hashed from the seed, the
+pixel and the dimension, with hashed offsets inside the strata. They keep
+:class:`LDSampler`'s state, so everything that carries or packs one carries
+them.
+
 A path draws its dimensions in a fixed order (camera: pixel position, then the
 lens; each bounce: light selection, light point, BSDF lobe, BSDF direction,
 Russian roulette), so each decision of each bounce has a dimension of its own.
