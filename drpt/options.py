@@ -164,9 +164,14 @@ class RenderOptions:
                 raise DrptError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
         if self.strength < 2:
             raise DrptError(f"--strength must be at least 2, got {self.strength}")
-        if self.sampler == "orthogonal" and self.strength > 2:
+        if self.sampler in ("stratified", "multijitter", "orthogonal"):
             from .scene.mitsuba.reader import mitsuba_sample_count
 
+            count = mitsuba_sample_count(self.sampler, self.spp)
+            if count > 1 << 31:
+                raise DrptError(f"--sampler {self.sampler}: --spp {self.spp} rounds up to {count}, "
+                                "more than its 2^31 strata")
+        if self.sampler == "orthogonal" and self.strength > 2:
             res = math.isqrt(mitsuba_sample_count("orthogonal", self.spp))
             if res ** self.strength > 1 << 31:
                 raise DrptError(f"--strength {self.strength}: an orthogonal array of {res}^{self.strength} "
