@@ -285,30 +285,46 @@ class ZSobolSampler(LDSampler):
 
 
 
-#: rounds of :func:`permute`'s swap-or-not shuffle
-PERMUTE_ROUNDS = 8
+#: rounds of :func:`permute`'s hash
+PERMUTE_ROUNDS = 5
 
 
 def permute(x: UInt32, n: int, seed: UInt32) -> UInt32:
     """A random permutation of ``0 .. n - 1`` (``n`` a Python int, at most 2^31), chosen by
-    ``seed``, applied to ``x``: what Kensler's hash-based permutation ("Correlated
-    Multi-Jittered Sampling", 2013; Mitsuba's ``permute_kensler``) is to Mitsuba's samplers,
-    built without its cycle-walking loop as a swap-or-not shuffle (Hoang, Morris and
-    Rogaway, 2012): each round pairs ``x`` with ``K - x mod n`` (``K`` a random point of the
-    round) and swaps the two when a hash of the larger is odd, which is a bijection of any
-    range, with no loop and the same work for every lane."""
+    ``seed``, applied to ``x < n``: the role of Kensler's hash-based permutation ("Correlated
+    Multi-Jittered Sampling", 2013; Mitsuba's ``permute_kensler``) in Mitsuba's samplers, by
+    the same method, cycle walking: a bijective hash of the ``k``-bit integers (``2^k >= n``)
+    keyed by ``seed`` is applied to ``x``, and again while the value is ``n`` or more; on the
+    cycle through ``x`` the first value below ``n`` is ``x``'s image, so the whole is a
+    bijection of ``0 .. n - 1`` (about ``2^k / n < 2`` applications on average). The hash is
+    :data:`PERMUTE_ROUNDS` rounds of a key XOR, a multiplication by an odd number of the
+    key, a multiplication by a constant and two xorshifts of the ``k`` bits (each a
+    bijection); the round keys are steps of an LCG from a hash of ``seed``."""
     if n <= 1:
         return dr.zeros(UInt32, dr.width(x))
-    x = UInt32(x)
-    k = mix32(seed ^ 0x2F6B3C1D)
+    k = (n - 1).bit_length()
+    mask = (1 << k) - 1
+    sh, sh2 = max(1, k // 2), max(1, (k + 1) // 3)
+    s = mix32(seed ^ 0x2F6B3C1D)
+    keys = []
     for _ in range(PERMUTE_ROUNDS):
-        k = k * 0x2C1B3C6D + 0x297A2D39  # the round's key (an LCG step of the hashed seed)
-        big = dr.mul_hi(mix32(k), n)  # K, uniform in [0, n)
-        partner = dr.select(x > big, big + n - x, big - x)
-        t = (dr.maximum(x, partner) ^ k) * 0x9E3779B1
-        t = (t ^ (t >> 15)) * 0x85EBCA77
-        x = dr.select((t >> 31) != 0, partner, x)
-    return x
+        s = s * 0x2C1B3C6D + 0x297A2D39
+        keys.append(s ^ (s >> 16))
+
+    def bijection(v, keys):
+        for key in keys:
+            v = ((v ^ key) * (key >> 15 | 1)) & mask
+            v = v ^ (v >> sh)
+            v = ((v + (key >> 7)) * 0x2C1B3C6D) & mask
+            v = v ^ (v >> sh2)
+        return v
+
+    x = bijection(UInt32(x), keys)
+    if n == mask + 1:  # a power of two: every value is in range
+        return x
+    out = dr.while_loop((x, *keys), lambda v, *_: v >= n,
+                        lambda v, *ks: (bijection(v, ks), *ks))
+    return out[0]
 
 
 def _jitter(h: UInt32, r: UInt32, jitter: bool, salt: int = 0x1B873593) -> Float:

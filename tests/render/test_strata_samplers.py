@@ -2,9 +2,10 @@
 ``permute``, ``Stratified``, ``Multijitter``, ``Orthogonal``, ``strata_sampler``).
 
 * ``permute`` is a bijection of ``0 .. n - 1`` for every seed, and a uniformly random one: the
-  24 permutations of 4 elements over 4800 seeds, and where each of 7 elements goes over 14000
-  seeds, pass a chi-square test at p > 1e-4 (fixed seeds; a correct permutation fails with
-  probability 1e-4). Negative control: 2 rounds of the shuffle instead of 8 fail it.
+  24 permutations of 4 elements over 4800 seeds, where each of 7 elements goes over 14000
+  seeds, and where two elements go together (n = 8, 16, 121; 20000 seeds) pass a chi-square
+  test at p > 1e-4 (fixed seeds; a correct permutation fails each with probability 1e-4).
+  Negative control: 2 rounds of the hash instead of 5 fail them all.
 * Stratified as claimed, for a pixel's ``count`` samples (block 0 and block 1, first and later
   dimensions): ``stratified``, one sample in each of the ``res x res`` cells of a 2-D draw and
   in each ``1 / count`` interval of a 1-D draw; ``multijitter``, one in each of its
@@ -71,15 +72,23 @@ def _permutation_ps():
     s = UInt32(np.repeat(np.arange(seeds) + 12345, 7).astype(np.uint32))
     p = permute(x, 7, s).numpy().reshape(seeds, 7)
     where = _chi2_p(np.stack([np.bincount(p[:, k], minlength=7) for k in range(7)]))
-    return whole, where
+    pairs = []
+    for n in (8, 16, 121):  # where two elements go together (a power of two: no cycle walking)
+        seeds = 20000
+        x = dr.arange(UInt32, n * seeds) % n
+        s = UInt32(np.repeat(np.arange(seeds) * 7 + 99, n).astype(np.uint32))
+        p = permute(x, n, s).numpy().reshape(seeds, n)
+        off = [a * n + b for a in range(n) for b in range(n) if a != b]
+        pairs += [_chi2_p(np.bincount(p[:, a] * n + p[:, b], minlength=n * n)[off]) for a, b in ((0, 2), (1, 5))]
+    return whole, where, min(pairs)
 
 
 def test_permute_is_uniformly_random(monkeypatch):
-    whole, where = _permutation_ps()
-    assert whole > 1e-4 and where > 1e-4, (whole, where)
+    ps = _permutation_ps()
+    assert min(ps) > 1e-4, ps
     monkeypatch.setattr(smp, "PERMUTE_ROUNDS", 2)  # negative control: too few rounds
-    whole, where = _permutation_ps()
-    assert whole < 1e-4 and where < 1e-4, (whole, where)
+    ps = _permutation_ps()
+    assert max(ps) < 1e-4, ps
 
 
 # ------------------------------------------------------------------ stratification
