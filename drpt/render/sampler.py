@@ -351,13 +351,27 @@ class StrataSampler(LDSampler):
     count = 1  # samples per block (Mitsuba's sample_count, rounded as it rounds it)
     jitter = True
 
-    def _block(self) -> tuple[UInt32, UInt32]:
-        """``(seed, r)``: the hash of the lane's pixel key and block, and the sample's place in
-        its block."""
+    DRJIT_STRUCT = {**LDSampler.DRJIT_STRUCT, "block": UInt32, "r": UInt32}
+
+    def __init__(self, key=None, index=None, step=None):
+        super().__init__(key, index, step)
+        self._enter_block()
+
+    def _enter_block(self) -> None:
+        """``block``: the hash of the lane's pixel key and block; ``r``: the sample's place in
+        its block (computed once per sample: every draw reads them)."""
         if self.count == 1:
-            return mix32(self.key + self.index * 0x632BE5AB), dr.zeros(UInt32, dr.width(self.index))
+            self.block, self.r = mix32(self.key + self.index * 0x632BE5AB), dr.zeros(UInt32, dr.width(self.index))
+            return
         block = self.index // self.count
-        return mix32(self.key + block * 0x632BE5AB), self.index - block * self.count
+        self.block, self.r = mix32(self.key + block * 0x632BE5AB), self.index - block * self.count
+
+    def _block(self) -> tuple[UInt32, UInt32]:
+        return self.block, self.r
+
+    def advance(self) -> None:
+        super().advance()
+        self._enter_block()
 
     def _dim_seed(self, seed: UInt32, dim: UInt32) -> UInt32:
         return mix32(seed ^ (dim * 0x9E3779B9))
@@ -437,6 +451,13 @@ class Orthogonal(StrataSampler):
 
     res = 2
     strength = 2
+    DRJIT_STRUCT = {**StrataSampler.DRJIT_STRUCT, "row": UInt32}
+
+    def _enter_block(self) -> None:
+        """Also ``row``: the sample's row of the array (the same for all its dimensions)."""
+        super()._enter_block()
+        rows = self.count if self.strength == 2 else self.res ** self.strength
+        self.row = permute(self.r, rows, self.block)
 
     def next_float32(self) -> Float:
         seed, r = self._block()
@@ -444,8 +465,8 @@ class Orthogonal(StrataSampler):
         self.dim += 1
         p, q = self.res, j % self.res
         h = self._dim_seed(seed, j)
+        i = self.row
         if self.strength == 2:
-            i = permute(r, self.count, seed)  # the row: the same for every dimension
             a0 = i // p
             a1 = i - a0 * p
             partner = j ^ 1
@@ -460,7 +481,6 @@ class Orthogonal(StrataSampler):
             m = p
         else:
             rows = p ** self.strength
-            i = permute(r, rows, seed)
             phi = dr.zeros(UInt32, dr.width(i))
             digits = []
             rest = UInt32(i)
