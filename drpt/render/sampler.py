@@ -327,6 +327,10 @@ def permute(x: UInt32, n: int, seed: UInt32) -> UInt32:
     return out[0]
 
 
+#: the largest float32 below 1
+ONE_MINUS = float.fromhex("0x1.fffffep-1")
+
+
 def _jitter(h: UInt32, r: UInt32, jitter: bool, salt: int = 0x1B873593) -> Float:
     """A sample's offset inside its stratum: uniform from a hash of the dimension's seed
     ``h``, the sample ``r`` and ``salt`` (Mitsuba draws it from the lane's PCG32), or the
@@ -376,6 +380,14 @@ class StrataSampler(LDSampler):
     def _dim_seed(self, seed: UInt32, dim: UInt32) -> UInt32:
         return mix32(seed ^ (dim * 0x9E3779B9))
 
+    def next_float32(self) -> Float:
+        """A 1-D draw: the pixel's samples one in each interval ``1 / count``."""
+        seed, r = self._block()
+        h = self._dim_seed(seed, self.dim)
+        self.dim += 1
+        p = permute(r, self.count, h)
+        return dr.minimum((Float(p) + _jitter(h, r, self.jitter)) * (1.0 / self.count), ONE_MINUS)
+
 
 class Stratified(StrataSampler):
     """Mitsuba's ``stratified``: ``count = res^2``; a 1-D draw puts a pixel's samples one in
@@ -383,13 +395,6 @@ class Stratified(StrataSampler):
     cells shuffled among the samples, each dimension by its own permutation)."""
 
     res = 1
-
-    def next_float32(self) -> Float:
-        seed, r = self._block()
-        h = self._dim_seed(seed, self.dim)
-        self.dim += 1
-        p = permute(r, self.count, h)
-        return dr.minimum((Float(p) + _jitter(h, r, self.jitter)) * (1.0 / self.count), ONE_MINUS)
 
     def next_2d(self) -> Array2f:
         seed, r = self._block()
@@ -409,16 +414,9 @@ class Multijitter(StrataSampler):
     sample in each cell of the ``nx x ny`` grid and, inside its cell, in the sub-column and
     sub-row that makes the ``x`` values one per ``1 / count`` interval and the ``y`` values
     too (the sub-cells shuffled by one permutation per axis for the whole pixel); a 1-D draw
-    is stratified's."""
+    is :class:`Stratified`'s."""
 
     nx = ny = 1
-
-    def next_float32(self) -> Float:
-        seed, r = self._block()
-        h = self._dim_seed(seed, self.dim)
-        self.dim += 1
-        p = permute(r, self.count, h)
-        return dr.minimum((Float(p) + _jitter(h, r, self.jitter)) * (1.0 / self.count), ONE_MINUS)
 
     def next_2d(self) -> Array2f:
         seed, r = self._block()
@@ -499,10 +497,6 @@ class Orthogonal(StrataSampler):
     def next_2d(self) -> Array2f:
         u = self.next_float32()
         return Array2f(u, self.next_float32())
-
-
-#: the largest float32 below 1
-ONE_MINUS = float.fromhex("0x1.fffffep-1")
 
 #: the samplers of :func:`strata_sampler`, by ``--sampler`` name
 STRATA = {"stratified": Stratified, "multijitter": Multijitter, "orthogonal": Orthogonal}
