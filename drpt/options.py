@@ -91,7 +91,7 @@ class RenderOptions:
     #: "independent" (a PCG32 stream per lane) or a low-discrepancy sampler's name
     sampler: str = "independent"
     #: stratified, multijitter, orthogonal: a random offset inside each stratum (Mitsuba's
-    #: ``jitter``), or its middle (``--no-jitter``)
+    #: ``jitter``), or its middle (``--jitter off``)
     jitter: bool = True
     #: orthogonal: the orthogonal array's strength (Mitsuba's ``strength``, ``--strength``)
     strength: int = 2

@@ -551,7 +551,7 @@ class Renderer:
             # first_sample + j (W H spp <= 2^32: ld_sampling)
             first = self.chunks.passes.first_sample(pass_index) & 0xFFFFFFFF  # (a live view: wraps)
             rng = self._ld_class.for_pixels(self.opt.seed, UInt32(0),
-                                       dr.arange(UInt32, n) + dr.opaque(UInt32, first))
+                                            dr.arange(UInt32, n) + dr.opaque(UInt32, first))
         else:
             rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
                         initseq=dr.opaque(UInt64, pass_index * self.max_lanes))

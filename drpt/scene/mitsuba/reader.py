@@ -48,7 +48,7 @@ from .nodes import Node, State
 _SILENT = {
     "film": ("pixel_format", "component_format", "file_format", "banner", "compensate",
              "sample_border"),
-    # (Mitsuba 0.6's ldsampler's scramble_seed: drpt's ldsampler scrambles from the seed)
+    # (scramble_seed, of older files' samplers, shapes only the noise)
     "sampler": ("scramble_seed",),
     "integrator": ("samples_per_pass", "block_size", "emitter_samples", "bsdf_samples",
                    "shading_samples"),
