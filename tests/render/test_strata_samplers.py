@@ -18,7 +18,8 @@
   over 16384 pixels, and 2-D histograms of pairs of dimensions of one sample, pass a chi-square
   test at p > 1e-4. Negative control: values bent by ``u^1.15``, and a pair that reuses a
   dimension, fail it.
-* Renders agree with Mitsuba's own same sampler on ``tests/data/xml/samplers.xml`` by the 8x8
+* Renders agree with Mitsuba's own same sampler on ``tests/data/xml/samplers.xml`` (and
+  ``veach_mis.xml`` with ``multijitter``) by the 8x8
   block z-test (``|z| < 4.5``, image mean ``|z| < 4``; drpt's variance comes from the samples'
   squares, which for stratified samples overestimates the variance of the mean: the test is
   conservative), and with Mitsuba's corpus references (``../shared``, skips without it).
@@ -301,8 +302,11 @@ SPPS = {"stratified": (64, 64), "multijitter": (64, 64), "orthogonal": (49, 49)}
 
 @pytest.mark.slow
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("kind,control", [(k, False) for k in KINDS] + [("stratified", True)])
-def test_renders_agree_with_mitsubas_same_sampler(kind, control, monkeypatch):
+@pytest.mark.parametrize("name,kind,control", [("samplers", k, False) for k in KINDS]
+                         + [("veach_mis", "multijitter", False), ("samplers", "stratified", True)])
+def test_renders_agree_with_mitsubas_same_sampler(name, kind, control, monkeypatch, tmp_path):
+    """``samplers.xml`` takes the sampler as ``$sampler``; ``veach_mis.xml`` (no assets) is
+    copied with its sampler plugin replaced."""
     from drpt.scene import load_scene
     from drpt.testing import block_z
     from support.xml import XML, mean_z, render_xml_both
@@ -310,10 +314,15 @@ def test_renders_agree_with_mitsubas_same_sampler(kind, control, monkeypatch):
     if control:
         _diagonal(monkeypatch)
     spp, ref_batch = SPPS[kind]
-    defines = {"sampler": kind, "spp": str(spp)}
-    scene = load_scene(XML / "samplers.xml", defines=defines)
-    r, ref, var = render_xml_both(scene, XML / "samplers.xml", spp, defines={"sampler": kind},
-                                  ref_spp=8 * ref_batch)
+    path = XML / f"{name}.xml"
+    if name != "samplers":
+        text = path.read_text()
+        assert '<sampler type="independent">' in text
+        path = tmp_path / path.name
+        path.write_text(text.replace('<sampler type="independent">', f'<sampler type="{kind}">'))
+    defines = {"sampler": kind} if name == "samplers" else {}
+    scene = load_scene(path, defines={**defines, "spp": str(spp)})
+    r, ref, var = render_xml_both(scene, path, spp, defines=defines, ref_spp=8 * ref_batch)
     z = np.abs(block_z(r.image.astype(np.float64), r.variance, ref, var)).max()
     zmean = np.abs(mean_z(r, ref, var)).max()
     if control:
