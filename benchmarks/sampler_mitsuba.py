@@ -28,7 +28,7 @@ from drpt.backend import mitsuba_variant
 from drpt.options import RenderOptions, with_scene_settings
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-from drpt.scene.mitsuba.reader import mitsuba_sample_count
+from drpt.scene.model import mitsuba_sample_count
 
 SAMPLERS = tuple(os.environ.get("DRPT_SAMPLERS", "independent,stratified,multijitter,orthogonal,"
                                                   "ldsampler").split(","))

@@ -34,7 +34,7 @@ from .aovs import check_aovs
 from .backend import policy
 from .errors import DrptError, Loc, SceneError
 from .filters import parse_filter
-from .scene.model import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP, vertical_fov
+from .scene.model import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP, mitsuba_sample_count, vertical_fov
 
 BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.materials.interpret.MODES
 INTEGRATORS = ("path", "whitted", "ptracer", "volpath", "bdpt")
@@ -165,8 +165,6 @@ class RenderOptions:
         if self.strength < 2:
             raise DrptError(f"--strength must be at least 2, got {self.strength}")
         if self.sampler in ("stratified", "multijitter", "orthogonal"):
-            from .scene.mitsuba.reader import mitsuba_sample_count
-
             count = mitsuba_sample_count(self.sampler, self.spp)
             if count > 1 << 31:
                 raise DrptError(f"--sampler {self.sampler}: --spp {self.spp} rounds up to {count}, "

@@ -51,6 +51,7 @@ import drjit as dr
 from drjit.auto import Array2f, Float, UInt32
 
 from ..options import SAMPLERS  # noqa: F401  (the --sampler names)
+from ..scene.model import mitsuba_sample_count
 
 #: mixed into the seed of the low-discrepancy sampler's hashes
 LD_STREAM = 0x5A3B1E
@@ -506,10 +507,8 @@ STRATA = {"stratified": Stratified, "multijitter": Multijitter, "orthogonal": Or
 def strata_sampler(name: str, spp: int, jitter: bool = True, strength: int = 2) -> type:
     """The class of Mitsuba's sampler ``name`` (``stratified``, ``multijitter`` or
     ``orthogonal``) for ``spp`` samples per pixel: its strata laid out for the sample count
-    Mitsuba rounds ``spp`` to (:func:`drpt.scene.mitsuba.reader.mitsuba_sample_count`;
+    Mitsuba rounds ``spp`` to (:func:`drpt.scene.model.mitsuba_sample_count`;
     with fewer samples, a pixel's are the first ``spp`` of its shuffled strata)."""
-    from ..scene.mitsuba.reader import mitsuba_sample_count
-
     count = mitsuba_sample_count(name, spp)
     attrs = {"count": count, "jitter": bool(jitter)}
     if name == "stratified":

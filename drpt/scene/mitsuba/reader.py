@@ -37,6 +37,7 @@ from ..model import (
     Spheres,
     SpotLight,
     Triangles,
+    mitsuba_sample_count,
     vertical_fov,
 )
 from . import geometry as geo
@@ -63,34 +64,6 @@ RFILTERS = {"box": (), "tent": ("radius",), "gaussian": ("stddev",)}
 MAX_MAJORANT_DEPTH = 1e5
 SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
 FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
-
-
-def mitsuba_sample_count(plugin: str, spp: int) -> int:
-    """The samples per pixel Mitsuba's sampler ``plugin`` takes for ``sample_count`` ``spp``
-    (its ``set_sample_count``): ``ldsampler`` a square power of two (at least 4),
-    ``stratified`` a square, ``multijitter`` ``r (ceil(spp / r))`` with ``r = floor(sqrt(spp))``,
-    ``orthogonal`` the square of a prime; ``independent`` (and any other) ``spp``."""
-    if plugin == "ldsampler":
-        res = 2
-        while res * res < spp:
-            res = 1 << res.bit_length()  # Mitsuba's round_to_power_of_two(res + 1)
-        return res * res
-    if plugin == "stratified":
-        res = math.isqrt(spp)
-        return spp if res * res == spp else (res + 1) ** 2
-    if plugin == "multijitter":
-        r1 = math.isqrt(spp)
-        return r1 * -(-spp // r1)
-    if plugin == "orthogonal":
-        res = max(2, math.isqrt(spp - 1) + 1)  # the smallest res with res^2 >= spp
-
-        def prime(x: int) -> bool:
-            return all(x % d for d in range(2, math.isqrt(x) + 1))
-
-        while not prime(res):
-            res += 1
-        return res * res
-    return spp
 
 
 def _material(name: str, loc: Loc, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
