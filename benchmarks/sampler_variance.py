@@ -4,7 +4,9 @@
 
 Renders ``SCENE`` at ``SIZE`` x ``SIZE`` with ``SPP`` samples per pixel and ``SEEDS`` seeds
 (and the ``--filter`` ``FILTER``, default the scene's) with each ``--sampler``
-(independent, ldsampler, zsobol; ``DRPT_BSDF`` sets ``--bsdf``), interleaved in one process, and prints per
+(independent, ldsampler, zsobol, stratified, multijitter, orthogonal, or the comma-separated
+list ``DRPT_SAMPLERS``, independent first; ``DRPT_BSDF`` sets ``--bsdf``), interleaved in one
+process, and prints per
 sampler the mean over pixels of the variance of a pixel's value across seeds (a
 low-discrepancy sampler's samples are not independent, so the variance comes from
 independent renders, not from one render's samples), its ratio to the independent
@@ -25,7 +27,8 @@ from drpt.options import RenderOptions, with_scene_settings
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
-SAMPLERS = ("independent", "ldsampler", "zsobol")
+SAMPLERS = tuple(os.environ.get("DRPT_SAMPLERS", "independent,ldsampler,zsobol,stratified,multijitter,"
+                                                  "orthogonal").split(","))
 
 
 def main(argv: list[str]) -> int:

@@ -34,7 +34,7 @@ from .aovs import check_aovs
 from .backend import policy
 from .errors import DrptError, Loc, SceneError
 from .filters import parse_filter
-from .scene.model import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP, vertical_fov
+from .scene.model import MAX_DEPTH, MAX_SAMPLES, MAX_SIZE, MAX_SPP, mitsuba_sample_count, vertical_fov
 
 BSDF_MODES = ("auto", "phong", "cook-torrance", "diffuse")  # drpt.materials.interpret.MODES
 INTEGRATORS = ("path", "whitted", "ptracer", "volpath", "bdpt")
@@ -44,8 +44,8 @@ LIGHT_TRACED = ("ptracer", "bdpt")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
 LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh")  # drpt.render.lights.selection
-#: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy sampler, and
-#: Mitsuba's other sampler plugins, which draw from the low-discrepancy one
+#: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy samplers, and
+#: Mitsuba's stratified, multi-jittered and orthogonal-array samplers
 SAMPLERS = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "orthogonal")
 BVH_KINDS = ("bvh", "bvh2", "bvh4")
 GRID_MAX_RESOLUTION = 256
@@ -90,6 +90,11 @@ class RenderOptions:
     #: what the camera passes' random numbers are drawn from (:mod:`drpt.render.sampler`):
     #: "independent" (a PCG32 stream per lane) or a low-discrepancy sampler's name
     sampler: str = "independent"
+    #: stratified, multijitter, orthogonal: a random offset inside each stratum (Mitsuba's
+    #: ``jitter``), or its middle (``--jitter off``)
+    jitter: bool = True
+    #: orthogonal: the orthogonal array's strength (Mitsuba's ``strength``, ``--strength``)
+    strength: int = 2
     filter: str = "box"  # pixel reconstruction filter, drpt.filters.parse_filter's spelling
     filter_sampling: bool = False  # tent/gaussian: draw samples from the filter instead of splatting
     #: stop once the estimated relMSE (drpt.metrics.estimated_rel_mse) is at most this, or
@@ -157,6 +162,18 @@ class RenderOptions:
                                      ("--sampler", self.sampler, SAMPLERS)):
             if value not in allowed:
                 raise DrptError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
+        if self.strength < 2:
+            raise DrptError(f"--strength must be at least 2, got {self.strength}")
+        if self.sampler in ("stratified", "multijitter", "orthogonal"):
+            count = mitsuba_sample_count(self.sampler, self.spp)
+            if count > 1 << 31:
+                raise DrptError(f"--sampler {self.sampler}: --spp {self.spp} rounds up to {count}, "
+                                "more than its 2^31 strata")
+        if self.sampler == "orthogonal" and self.strength > 2:
+            res = math.isqrt(mitsuba_sample_count("orthogonal", self.spp))
+            if res ** self.strength > 1 << 31:
+                raise DrptError(f"--strength {self.strength}: an orthogonal array of {res}^{self.strength} "
+                                f"rows (--spp {self.spp}) is more than drpt's 2^31")
         parse_filter(self.filter)  # raises DrptError on a bad --filter
         check_aovs(self.aovs)
         if not 0 <= self.wavefront_tail <= MAX_LANES:
@@ -246,7 +263,7 @@ def filter_spelling(name: str, params: dict) -> str:
 
 
 #: the names of :func:`with_scene_settings`'s ``given``: settings the caller fixed
-GIVEN = ("size", "spp", "seed", "sampler", "integrator", "max_depth", "rr_depth", "filter")
+GIVEN = ("size", "spp", "seed", "sampler", "jitter", "strength", "integrator", "max_depth", "rr_depth", "filter")
 
 
 def with_scene_settings(opts: RenderOptions, scene,
@@ -291,6 +308,9 @@ def with_scene_settings(opts: RenderOptions, scene,
         fields["aovs"] = tuple(st.aovs)  # Mitsuba's aov integrator (--aovs replaces them)
     if getattr(st, "sampler", None) is not None and "sampler" not in given:
         fields["sampler"] = st.sampler
+    for name in ("jitter", "strength"):  # the sampler's parameters (when it is the file's)
+        if getattr(st, name, None) is not None and name not in given and "sampler" not in given:
+            fields[name] = getattr(st, name)
     if getattr(st, "seed", None) is not None and "seed" not in given:
         fields["seed"] = st.seed
     if st.rfilter is not None and "filter" not in given:

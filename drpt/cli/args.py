@@ -154,10 +154,17 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                             help="sample generator: independent (a random stream per sample) or "
                                  "ldsampler (a padded Owen-scrambled Sobol (0,2)-sequence per "
                                  "pixel: less noise per sample), zsobol (one such sequence over the "
-                                 "image in Morton order: its error as blue noise); stratified, "
-                                 "multijitter and "
-                                 "orthogonal (Mitsuba's names) draw from ldsampler's sequence "
+                                 "image in Morton order: its error as blue noise), Mitsuba's "
+                                 "stratified (a square grid of strata), multijitter (Kensler's "
+                                 "correlated multi-jittered grid) and orthogonal (a multi-jittered "
+                                 "orthogonal array over a prime) "
                                  f"(default {base.sampler}, or the scene file's)")
+        parser.add_argument("--jitter", choices=("on", "off"), default=None, action=_Given,
+                            help="stratified, multijitter, orthogonal: a random offset inside each "
+                                 "stratum (on, the default, or the scene file's) or its middle")
+        parser.add_argument("--strength", type=int, default=None, action=_Given,
+                            help="orthogonal: the orthogonal array's strength (default 2, or the "
+                                 "scene file's)")
     if want("accel"):
         parser.add_argument("--accel", choices=_AccelChoices(KINDS), default=d["accel"],
                             metavar="{" + ",".join(KINDS) + "}",
@@ -396,6 +403,8 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          env_sampling=get("env_sampling", base.env_sampling),
                          light_sampler=get("light_sampler", base.light_sampler),
                          sampler=get("sampler") or base.sampler,
+                         jitter=base.jitter if get("jitter") is None else get("jitter") == "on",
+                         strength=get("strength") or base.strength,
                          filter=get("filter", base.filter),
                          filter_sampling=bool(get("filter_sampling", base.filter_sampling)),
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),

@@ -81,7 +81,7 @@ from .integrators.volwavefront import VolWavefrontIntegrator
 from .integrators.wavefront import WavefrontIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lights.rays import EmitterRays
-from .sampler import LDSampler, ZSobolSampler, next_2d, uses_ld
+from .sampler import STRATA, LDSampler, ZSobolSampler, next_2d, strata_sampler, uses_ld
 from .scene import DeviceScene
 
 
@@ -248,6 +248,14 @@ class Renderer:
         elif options.sampler == "zsobol" and self._zsobol is None and (bdpt or not self.light_tracing):
             self.warnings.append("--sampler zsobol: the image's Morton codes and the sample index "
                                  "need more than 32 bits: ldsampler's sequences instead")
+        if options.sampler in STRATA and self.ld_sampling:
+            count = self._ld_class.count
+            if count != options.spp and not self.light_tracing:
+                self.warnings.append(f"--sampler {options.sampler}: its strata are laid out for "
+                                     f"{count} samples per pixel (--spp {options.spp} rounded as "
+                                     f"Mitsuba rounds sample_count): each pixel's samples "
+                                     f"{'are' if count > options.spp else 'begin with'} "
+                                     f"{min(count, options.spp)} of them")
         self._aov_ids = None
         if self.aov_kinds:
             self._aov_index_arrays()  # a scene without shape data is an error before rendering
@@ -497,7 +505,17 @@ class Renderer:
         if zsobol is not None:
             return zsobol.for_pixels_xy(seed, x, y, index, step)
         pixel = y * dr.opaque(UInt32, self.opt.width) + x
-        return LDSampler.for_pixels(seed, pixel, index, step)
+        return self._ld_class.for_pixels(seed, pixel, index, step)
+
+    @property
+    def _ld_class(self) -> type:
+        """The low-discrepancy sampler's class of the camera and light passes: ``LDSampler``,
+        or for Mitsuba's ``stratified``, ``multijitter`` and ``orthogonal`` the class of this
+        spp, jitter and strength (:func:`~drpt.render.sampler.strata_sampler`)."""
+        o = self.opt
+        if o.sampler in STRATA:
+            return strata_sampler(o.sampler, o.spp, o.jitter, o.strength)
+        return LDSampler
 
     @property
     def _zsobol(self):
@@ -536,8 +554,8 @@ class Renderer:
                 # one sequence of all the render's light paths: lane j of a pass is path
             # first_sample + j (W H spp <= 2^32: ld_sampling)
             first = self.chunks.passes.first_sample(pass_index) & 0xFFFFFFFF  # (a live view: wraps)
-            rng = LDSampler.for_pixels(self.opt.seed, UInt32(0),
-                                       dr.arange(UInt32, n) + dr.opaque(UInt32, first))
+            rng = self._ld_class.for_pixels(self.opt.seed, UInt32(0),
+                                            dr.arange(UInt32, n) + dr.opaque(UInt32, first))
         else:
             rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
                         initseq=dr.opaque(UInt64, pass_index * self.max_lanes))

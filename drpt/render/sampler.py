@@ -23,6 +23,16 @@ a pixel (from a multiple of ``2^m``) keep the stratification. Mitsuba's ``ldsamp
 sequence over the whole image in Morton order instead, which spreads the
 remaining error as blue noise.
 
+``stratified``, ``multijitter`` and ``orthogonal`` are Mitsuba's plugins of
+those names (:class:`Stratified`, :class:`Multijitter`, :class:`Orthogonal`,
+made for a sample count by :func:`strata_sampler`): a pixel's samples are a set
+of strata per draw (a square grid; Kensler's correlated multi-jittered grid;
+the rows of a multi-jittered orthogonal array over a prime), shuffled among the
+samples by a random permutation (:func:`permute`) hashed from the seed, the
+pixel and the dimension, with hashed offsets inside the strata. They keep
+:class:`LDSampler`'s state, so everything that carries or packs one carries
+them.
+
 A path draws its dimensions in a fixed order (camera: pixel position, then the
 lens; each bounce: light selection, light point, BSDF lobe, BSDF direction,
 Russian roulette), so each decision of each bounce has a dimension of its own.
@@ -34,10 +44,14 @@ A sampler has PCG32's ``next_float32()`` plus ``next_2d()``; :func:`next_2d` dra
 
 from __future__ import annotations
 
+import functools
+import math
+
 import drjit as dr
 from drjit.auto import Array2f, Float, UInt32
 
 from ..options import SAMPLERS  # noqa: F401  (the --sampler names)
+from ..scene.model import mitsuba_sample_count
 
 #: mixed into the seed of the low-discrepancy sampler's hashes
 LD_STREAM = 0x5A3B1E
@@ -269,6 +283,242 @@ class ZSobolSampler(LDSampler):
         x = owen_reversed(i, mix32(h ^ 0x68E31DA4))
         y = owen_reversed(sobol1_reversed(i), mix32(h ^ 0xB5297A4D))
         return Array2f(to_float(x), to_float(y))
+
+
+
+#: rounds of :func:`permute`'s hash
+PERMUTE_ROUNDS = 5
+
+
+def permute(x: UInt32, n: int, seed: UInt32) -> UInt32:
+    """A random permutation of ``0 .. n - 1`` (``n`` a Python int, at most 2^31), chosen by
+    ``seed``, applied to ``x < n``: the role of Kensler's hash-based permutation ("Correlated
+    Multi-Jittered Sampling", 2013; Mitsuba's ``permute_kensler``) in Mitsuba's samplers, by
+    the same method, cycle walking: a bijective hash of the ``k``-bit integers (``2^k >= n``)
+    keyed by ``seed`` is applied to ``x``, and again while the value is ``n`` or more; on the
+    cycle through ``x`` the first value below ``n`` is ``x``'s image, so the whole is a
+    bijection of ``0 .. n - 1`` (about ``2^k / n < 2`` applications on average). The hash is
+    :data:`PERMUTE_ROUNDS` rounds of a key XOR, a multiplication by an odd number of the
+    key, a multiplication by a constant and two xorshifts of the ``k`` bits (each a
+    bijection); the round keys are steps of an LCG from a hash of ``seed``."""
+    if n <= 1:
+        return dr.zeros(UInt32, dr.width(x))
+    k = (n - 1).bit_length()
+    mask = (1 << k) - 1
+    sh, sh2 = max(1, k // 2), max(1, (k + 1) // 3)
+    s = mix32(seed ^ 0x2F6B3C1D)
+    keys = []
+    for _ in range(PERMUTE_ROUNDS):
+        s = s * 0x2C1B3C6D + 0x297A2D39
+        keys.append(s ^ (s >> 16))
+
+    def bijection(v, keys):
+        for key in keys:
+            v = ((v ^ key) * (key >> 15 | 1)) & mask
+            v = v ^ (v >> sh)
+            v = ((v + (key >> 7)) * 0x2C1B3C6D) & mask
+            v = v ^ (v >> sh2)
+        return v
+
+    x = bijection(UInt32(x), keys)
+    if n == mask + 1:  # a power of two: every value is in range
+        return x
+    out = dr.while_loop((x, *keys), lambda v, *_: v >= n,
+                        lambda v, *ks: (bijection(v, ks), *ks))
+    return out[0]
+
+
+#: the largest float32 below 1
+ONE_MINUS = float.fromhex("0x1.fffffep-1")
+
+
+def _jitter(h: UInt32, r: UInt32, jitter: bool, salt: int = 0x1B873593) -> Float:
+    """A sample's offset inside its stratum: uniform from a hash of the dimension's seed
+    ``h``, the sample ``r`` and ``salt`` (Mitsuba draws it from the lane's PCG32), or the
+    stratum's middle without ``jitter``."""
+    if not jitter:
+        return dr.full(Float, 0.5, dr.width(r))
+    return to_float(mix32(mix32(h ^ salt) + r * 0x85EBCA6B))
+
+
+class StrataSampler(LDSampler):
+    """The base of Mitsuba's stratified, multijitter and orthogonal samplers (see
+    :func:`strata_sampler`): a pixel's samples are ``count`` strata per dimension, each
+    dimension's strata shuffled among the samples by :func:`permute` with a seed hashed from
+    ``(key, block, dimension)``, a sample's offset inside its stratum hashed from the same
+    and its index. Sample ``index`` of a pixel is sample ``index mod count`` of its block
+    ``index // count``: every ``count`` consecutive samples from a multiple of ``count`` are
+    stratified, and a render beyond ``count`` samples (a live view's frames) draws fresh
+    blocks. As :class:`LDSampler`'s, a value depends on the seed, pixel, sample index and
+    dimension only, so chunked and resumed renders are the plain one bit for bit.
+    Subclasses set the class attributes (:func:`strata_sampler`)."""
+
+    count = 1  # samples per block (Mitsuba's sample_count, rounded as it rounds it)
+    jitter = True
+
+    DRJIT_STRUCT = {**LDSampler.DRJIT_STRUCT, "block": UInt32, "r": UInt32}
+
+    def __init__(self, key=None, index=None, step=None):
+        super().__init__(key, index, step)
+        self._enter_block()
+
+    def _enter_block(self) -> None:
+        """``block``: the hash of the lane's pixel key and block; ``r``: the sample's place in
+        its block (computed once per sample: every draw reads them)."""
+        if self.count == 1:
+            self.block, self.r = mix32(self.key + self.index * 0x632BE5AB), dr.zeros(UInt32, dr.width(self.index))
+            return
+        block = self.index // self.count
+        self.block, self.r = mix32(self.key + block * 0x632BE5AB), self.index - block * self.count
+
+    def _block(self) -> tuple[UInt32, UInt32]:
+        return self.block, self.r
+
+    def advance(self) -> None:
+        super().advance()
+        self._enter_block()
+
+    def _dim_seed(self, seed: UInt32, dim: UInt32) -> UInt32:
+        return mix32(seed ^ (dim * 0x9E3779B9))
+
+    def next_float32(self) -> Float:
+        """A 1-D draw: the pixel's samples one in each interval ``1 / count``."""
+        seed, r = self._block()
+        h = self._dim_seed(seed, self.dim)
+        self.dim += 1
+        p = permute(r, self.count, h)
+        return dr.minimum((Float(p) + _jitter(h, r, self.jitter)) * (1.0 / self.count), ONE_MINUS)
+
+
+class Stratified(StrataSampler):
+    """Mitsuba's ``stratified``: ``count = res^2``; a 1-D draw puts a pixel's samples one in
+    each of ``count`` intervals, a 2-D draw one in each cell of the ``res x res`` grid (the
+    cells shuffled among the samples, each dimension by its own permutation)."""
+
+    res = 1
+
+    def next_2d(self) -> Array2f:
+        seed, r = self._block()
+        h = self._dim_seed(seed, self.dim)
+        self.dim += 2
+        p = permute(r, self.count, h)
+        y = p // self.res if self.res > 1 else dr.zeros(UInt32, dr.width(p))
+        x = p - y * self.res
+        jx, jy = _jitter(h, r, self.jitter), _jitter(h, r, self.jitter, 0xCC9E2D51)
+        return Array2f(dr.minimum((Float(x) + jx) * (1.0 / self.res), ONE_MINUS),
+                       dr.minimum((Float(y) + jy) * (1.0 / self.res), ONE_MINUS))
+
+
+class Multijitter(StrataSampler):
+    """Mitsuba's ``multijitter`` (Kensler's correlated multi-jittered sampling): ``count =
+    nx ny`` with ``ny = floor(sqrt(spp))``, ``nx = ceil(spp / ny)``; a 2-D draw puts one
+    sample in each cell of the ``nx x ny`` grid and, inside its cell, in the sub-column and
+    sub-row that makes the ``x`` values one per ``1 / count`` interval and the ``y`` values
+    too (the sub-cells shuffled by one permutation per axis for the whole pixel); a 1-D draw
+    is :class:`Stratified`'s."""
+
+    nx = ny = 1
+
+    def next_2d(self) -> Array2f:
+        seed, r = self._block()
+        h = self._dim_seed(seed, self.dim)
+        self.dim += 2
+        s = permute(r, self.count, h)
+        y = s // self.nx if self.nx > 1 else s
+        x = s - y * self.nx
+        sx = permute(x, self.nx, mix32(h ^ 0x68BC21EB))  # x's sub-row inside its cell
+        sy = permute(y, self.ny, mix32(h ^ 0x02E5BE93))  # y's sub-column
+        jx, jy = _jitter(h, r, self.jitter), _jitter(h, r, self.jitter, 0xCC9E2D51)
+        u = (Float(x) + (Float(sy) + jx) * (1.0 / self.ny)) * (1.0 / self.nx)
+        v = (Float(y) + (Float(sx) + jy) * (1.0 / self.nx)) * (1.0 / self.ny)
+        return Array2f(dr.minimum(u, ONE_MINUS), dr.minimum(v, ONE_MINUS))
+
+
+class Orthogonal(StrataSampler):
+    """Mitsuba's ``orthogonal``: an orthogonal array of strength ``strength`` over a prime
+    ``res`` (``count = res^2``), with multi-jittered offsets. Every dimension of a sample
+    reads the same row of the array (the pixel's rows shuffled once per block). Strength 2
+    is Bose's construction: row ``(a0, a1)`` has ``a0`` in dimension 0, ``a1`` in 1 and ``a0
+    + (j - 1) a1 mod res`` in dimension ``j >= 2``, so any two dimensions among ``0 ..
+    res`` put one sample in each of the ``res x res`` cells of their square (dimension ``j``
+    and ``j + res`` hold the same column, as in Mitsuba); inside its stratum a value's
+    sub-stratum is its partner dimension's (``j xor 1``) column, so a 2-D draw from an even
+    dimension is also multi-jittered. Strength ``t > 2`` is Bush's construction: row ``i``'s
+    base-``res`` digits are a polynomial's coefficients, dimension ``j`` holds its value at
+    ``j``, and ``res^2`` of its ``res^t`` rows are drawn, as Mitsuba draws them (a pixel's
+    samples then are not the whole array). A 2-D draw is two 1-D draws."""
+
+    res = 2
+    strength = 2
+    DRJIT_STRUCT = {**StrataSampler.DRJIT_STRUCT, "row": UInt32}
+
+    def _enter_block(self) -> None:
+        """Also ``row``: the sample's row of the array (the same for all its dimensions)."""
+        super()._enter_block()
+        rows = self.count if self.strength == 2 else self.res ** self.strength
+        self.row = permute(self.r, rows, self.block)
+
+    def next_float32(self) -> Float:
+        seed, r = self._block()
+        j = UInt32(self.dim)
+        self.dim += 1
+        p, q = self.res, j % self.res
+        h = self._dim_seed(seed, j)
+        i = self.row
+        if self.strength == 2:
+            a0 = i // p
+            a1 = i - a0 * p
+            partner = j ^ 1
+
+            def column(c):
+                m = (c + (p - 1)) % p  # (c - 1) mod p
+                v = (a0 + m * a1) % p
+                return dr.select(c == 0, a0, dr.select(c == 1, a1, v))
+
+            stratum = permute(column(j), p, mix32(h ^ 0x51633E2D))
+            sub = permute(column(partner), p, mix32(h ^ 0x68BC21EB))
+            m = p
+        else:
+            rows = p ** self.strength
+            phi = dr.zeros(UInt32, dr.width(i))
+            digits = []
+            rest = UInt32(i)
+            for _ in range(self.strength):
+                nxt = rest // p
+                digits.append(rest - nxt * p)
+                rest = nxt
+            for d in reversed(digits):  # Horner, mod p at each step
+                phi = (phi * q + d) % p
+            m = rows // p
+            stratum = permute(phi, p, mix32(h ^ 0x51633E2D))
+            sub = permute((i // p) % m, m, mix32(h ^ 0x68BC21EB))
+        u = (Float(stratum) + (Float(sub) + _jitter(h, r, self.jitter)) * (1.0 / m)) * (1.0 / p)
+        return dr.minimum(u, ONE_MINUS)
+
+    def next_2d(self) -> Array2f:
+        u = self.next_float32()
+        return Array2f(u, self.next_float32())
+
+#: the samplers of :func:`strata_sampler`, by ``--sampler`` name
+STRATA = {"stratified": Stratified, "multijitter": Multijitter, "orthogonal": Orthogonal}
+
+
+@functools.lru_cache(maxsize=None)
+def strata_sampler(name: str, spp: int, jitter: bool = True, strength: int = 2) -> type:
+    """The class of Mitsuba's sampler ``name`` (``stratified``, ``multijitter`` or
+    ``orthogonal``) for ``spp`` samples per pixel: its strata laid out for the sample count
+    Mitsuba rounds ``spp`` to (:func:`drpt.scene.model.mitsuba_sample_count`;
+    with fewer samples, a pixel's are the first ``spp`` of its shuffled strata)."""
+    count = mitsuba_sample_count(name, spp)
+    attrs = {"count": count, "jitter": bool(jitter)}
+    if name == "stratified":
+        attrs["res"] = math.isqrt(count)
+    elif name == "multijitter":
+        attrs["ny"] = math.isqrt(spp)
+        attrs["nx"] = count // attrs["ny"]
+    else:
+        attrs["res"], attrs["strength"] = math.isqrt(count), int(strength)
+    return type(f"{STRATA[name].__name__}_{count}", (STRATA[name],), attrs)
 
 
 def pack(rng) -> tuple:

@@ -51,6 +51,34 @@ MAX_COORDINATE = 1e12
 MAX_SIZE = 1 << 16  # pixels per side: pixel coordinates and their jitter are float32
 MAX_SPP = (1 << 32) - 1  # samples per pixel: Mitsuba's sample_count is 32-bit
 MAX_SAMPLES = 1 << 60  # width * height * spp: PCG32 sequence ids (pass * lanes + lane) stay < 2^63
+
+
+def mitsuba_sample_count(plugin: str, spp: int) -> int:
+    """The samples per pixel Mitsuba's sampler ``plugin`` takes for ``sample_count`` ``spp``
+    (its ``set_sample_count``): ``ldsampler`` a square power of two (at least 4),
+    ``stratified`` a square, ``multijitter`` ``r (ceil(spp / r))`` with ``r = floor(sqrt(spp))``,
+    ``orthogonal`` the square of a prime; ``independent`` (and any other) ``spp``."""
+    if plugin == "ldsampler":
+        res = 2
+        while res * res < spp:
+            res = 1 << res.bit_length()  # Mitsuba's round_to_power_of_two(res + 1)
+        return res * res
+    if plugin == "stratified":
+        res = math.isqrt(spp)
+        return spp if res * res == spp else (res + 1) ** 2
+    if plugin == "multijitter":
+        r1 = math.isqrt(spp)
+        return r1 * -(-spp // r1)
+    if plugin == "orthogonal":
+        res = max(2, math.isqrt(spp - 1) + 1)  # the smallest res with res^2 >= spp
+
+        def prime(x: int) -> bool:
+            return all(x % d for d in range(2, math.isqrt(x) + 1))
+
+        while not prime(res):
+            res += 1
+        return res * res
+    return spp
 MAX_DEPTH = (1 << 32) - 1  # --max-depth, --rr-depth: path depths are UInt32
 
 
@@ -374,6 +402,8 @@ class RenderSettings:
     hide_emitters: bool | None = None
     sampler: str | None = None  # the sampler plugin's name (drpt.render.sampler)
     seed: int | None = None  # the sampler's seed
+    jitter: bool | None = None  # stratified, multijitter, orthogonal: jitter inside strata
+    strength: int | None = None  # orthogonal: the orthogonal array's strength
     rfilter: str | None = None  # reconstruction filter name: "box", "tent", "gaussian"
     rfilter_params: dict = field(default_factory=dict)  # Mitsuba's names: radius, stddev
     #: Mitsuba's ``(fov, fov_axis)`` as the file gives them: an image size of another

@@ -28,8 +28,8 @@ Russian roulette from depth 5 with the adaptive probability
 ``bsdf``   the other material mode (Phong <-> Cook-Torrance). That changes the
            scene, so that row is compared with its own reference;
 ``light``  ``--light-sampler uniform`` and ``bvh`` instead of the default (``mixed``);
-``sampler`` each of ``--sampler independent``, ``ldsampler`` and ``zsobol`` other than
-           the default row's (``--sampler``, or the scene file's);
+``sampler`` each of ``--sampler independent``, ``ldsampler``, ``zsobol``, ``stratified``,
+           ``multijitter`` and ``orthogonal`` other than the default row's (``--sampler``, or the scene file's);
 ``filter`` ``--filter-sampling`` instead of the splatting film (only with a tent or
            Gaussian filter);
 ``integrator`` light tracing (``ptracer``) and bidirectional path tracing (``bdpt``); a
@@ -102,7 +102,7 @@ from .reference import (
 KNOBS = ("depth", "rr", "accel", "bsdf", "light", "sampler", "filter", "integrator", "adaptive",
          "denoise")
 #: the ``sampler`` knob's settings
-SAMPLER_KNOB = ("independent", "ldsampler", "zsobol")
+SAMPLER_KNOB = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "orthogonal")
 RR_OFF_DEPTH = 64
 
 __all__ = ["add_parser", "main", "Config", "configs", "knobs_study", "image_bias"]

@@ -583,9 +583,11 @@ def test_knobs_sampler_rows_are_the_samplers_the_default_row_does_not_use():
 
     rows = configs("auto", ("sampler",))
     assert [(r.knob, r.sampler) for r in rows] == [
-        ("default", None), ("sampler", "ldsampler"), ("sampler", "zsobol")]
+        ("default", None), ("sampler", "ldsampler"), ("sampler", "zsobol"), ("sampler", "stratified"),
+        ("sampler", "multijitter"), ("sampler", "orthogonal")]
     rows = configs("auto", ("sampler",), sampler="zsobol")
-    assert [r.sampler for r in rows] == [None, "independent", "ldsampler"]
+    assert [r.sampler for r in rows] == [None, "independent", "ldsampler", "stratified", "multijitter",
+                                         "orthogonal"]
 
 
 @pytest.mark.slow
@@ -608,7 +610,8 @@ def test_knobs_sampler_row_renders_with_its_sampler(tmp_path, monkeypatch, corne
     assert _run(knobs, cornell, "--size", "16", "16", "--spp", "16", "--ref-spp", "256",
                 "--knobs", "sampler", "--repeats", "1", "--out", str(out), "--quiet",
                 "--cache", str(tmp_path / "cache")) == 0
-    assert seen == ["independent", "ldsampler", "zsobol"]
+    others = ["ldsampler", "zsobol", "stratified", "multijitter", "orthogonal"]
+    assert seen == ["independent", *others]
     data = json.loads((out / "knobs.json").read_text())
-    assert [r["setting"] for r in data["rows"]][1:] == ["ldsampler", "zsobol"]
+    assert [r["setting"] for r in data["rows"]][1:] == others
     assert all(r["seconds"] > 0 and np.isfinite(r["excess_rel_mse"]) for r in data["rows"])

@@ -25,8 +25,9 @@ Mitsuba                   drpt
                           become ``--filter`` unless it is given
 ``independent`` (etc.)    ``settings.spp`` = ``sample_count`` (default 4,
                           rounded up as Mitsuba's plugin rounds it),
-                          ``settings.sampler`` (its name: ``--sampler``)
-                          and ``settings.seed`` = ``seed``
+                          ``settings.sampler`` (its name: ``--sampler``),
+                          ``settings.seed`` = ``seed``, and ``jitter``,
+                          ``strength`` (``--jitter``, ``--strength``)
 ``path``                  ``settings``: max_depth, rr_depth, hide_emitters
 ``moment``                its nested integrator; ``settings.moment`` names the
                           moment AOVs an EXR output gets
@@ -78,7 +79,7 @@ stated fallback) with a warning each. Parameters that a plugin does not
 read (files from older exporters: ``strict_normals`` on ``path``,
 ``int_ior`` on ``roughconductor``) are listed in one warning; with
 ``strict`` the first is an error. Parameters drpt reads but that change
-nothing in its image (film pixel formats, a sampler's jitter, clip planes) are
+nothing in its image (film pixel formats, clip planes) are
 read silently.
 """
 

@@ -37,6 +37,7 @@ from ..model import (
     Spheres,
     SpotLight,
     Triangles,
+    mitsuba_sample_count,
     vertical_fov,
 )
 from . import geometry as geo
@@ -48,9 +49,8 @@ from .nodes import Node, State
 _SILENT = {
     "film": ("pixel_format", "component_format", "file_format", "banner", "compensate",
              "sample_border"),
-    # (stratified, multijitter and orthogonal draw from drpt's ldsampler: their jitter and
-    # strength shape only the noise)
-    "sampler": ("jitter", "strength", "scramble_seed"),
+    # (scramble_seed, of older files' samplers, shapes only the noise)
+    "sampler": ("scramble_seed",),
     "integrator": ("samples_per_pass", "block_size", "emitter_samples", "bsdf_samples",
                    "shading_samples"),
     "sensor": ("near_clip", "far_clip", "shutter_open", "shutter_close"),
@@ -64,34 +64,6 @@ RFILTERS = {"box": (), "tent": ("radius",), "gaussian": ("stddev",)}
 MAX_MAJORANT_DEPTH = 1e5
 SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
 FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
-
-
-def mitsuba_sample_count(plugin: str, spp: int) -> int:
-    """The samples per pixel Mitsuba's sampler ``plugin`` takes for ``sample_count`` ``spp``
-    (its ``set_sample_count``): ``ldsampler`` a square power of two (at least 4),
-    ``stratified`` a square, ``multijitter`` ``r (ceil(spp / r))`` with ``r = floor(sqrt(spp))``,
-    ``orthogonal`` the square of a prime; ``independent`` (and any other) ``spp``."""
-    if plugin == "ldsampler":
-        res = 2
-        while res * res < spp:
-            res = 1 << res.bit_length()  # Mitsuba's round_to_power_of_two(res + 1)
-        return res * res
-    if plugin == "stratified":
-        res = math.isqrt(spp)
-        return spp if res * res == spp else (res + 1) ** 2
-    if plugin == "multijitter":
-        r1 = math.isqrt(spp)
-        return r1 * -(-spp // r1)
-    if plugin == "orthogonal":
-        res = max(2, math.isqrt(spp - 1) + 1)  # the smallest res with res^2 >= spp
-
-        def prime(x: int) -> bool:
-            return all(x % d for d in range(2, math.isqrt(x) + 1))
-
-        while not prime(res):
-            res += 1
-        return res * res
-    return spp
 
 
 def _material(name: str, loc: Loc, spec: BSDFSpec, emission=(0.0, 0.0, 0.0)) -> Material:
@@ -334,6 +306,15 @@ class Reader:
             if crop[2] * crop[3] * rounded > MAX_SAMPLES:
                 raise sampler.error(f"{sampler.label}: {crop[2]} x {crop[3]} pixels x {rounded} samples is "
                                     f"more than drpt's 2^60")
+            if sampler.plugin in ("stratified", "multijitter", "orthogonal"):
+                self.settings.jitter = sampler.bool("jitter", True)
+            if sampler.plugin == "orthogonal":
+                strength = sampler.int("strength", 2)
+                res = math.isqrt(rounded)
+                if strength is None or strength < 2 or res ** strength > 1 << 31:
+                    raise sampler.error(f"{sampler.label}: strength must be at least 2, with "
+                                        f"{res}^strength rows at most 2^31, got {strength}")
+                self.settings.strength = strength
             self.check_unread(sampler)
 
         aspect = width / height

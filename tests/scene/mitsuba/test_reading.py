@@ -312,17 +312,16 @@ def test_files_written_by_other_tools_render_like_mitsuba(monkeypatch, name, con
 def test_a_parameter_mitsuba_reads_and_drpt_does_not_is_unsupported(tmp_path, monkeypatch):
     """The unread-parameter warning names only parameters Mitsuba's plugin refuses too (drpt
     asks Mitsuba, loading the plugin with the node's parameters); one Mitsuba reads is an
-    unsupported parameter instead. Simulated with the stratified sampler's jitter, which drpt
+    unsupported parameter instead. Simulated with the film's pixel_format, which drpt
     reads without using it."""
     from drpt.scene.mitsuba import reader
 
-    monkeypatch.setitem(reader._SILENT, "sampler", ())
-    body = SENSOR.replace("</film>", '</film><sampler type="stratified"><boolean name="jitter" value="false"/>'
-                          "</sampler>")
+    monkeypatch.setitem(reader._SILENT, "film", ())
+    body = SENSOR.replace("</film>", '<string name="pixel_format" value="rgb"/></film>')
     p = _write(tmp_path / "s.xml", body)
     with pytest.raises(SceneError) as e:
         _load(p)
-    assert "unsupported parameter 'jitter' of sampler 'stratified' (Mitsuba reads it, drpt does not)" in str(e.value)
+    assert "unsupported parameter 'pixel_format' of film 'hdrfilm' (Mitsuba reads it, drpt does not)" in str(e.value)
     s, warns = _load(p, ignore_unsupported=True)
-    assert len(warns) == 1 and "jitter" in warns[0] and "do not read" not in warns[0], warns
-    assert "jitter" in s.settings.not_read[0]
+    assert len(warns) == 1 and "pixel_format" in warns[0] and "do not read" not in warns[0], warns
+    assert "pixel_format" in s.settings.not_read[0]
