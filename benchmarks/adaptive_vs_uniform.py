@@ -84,9 +84,10 @@ def oracle(renderer, spp: int) -> tuple[float, float, int]:
     renders of ``spp`` samples per pixel: the **self** bound allocates by render 1's
     estimate and scores it on render 1 (optimistic: an estimate's noise looks like
     structure worth sampling), the **cross-validated** one allocates by render 1's
-    estimate averaged over ``k x k`` pixels and scores it on render 2's (the best ``k`` of
-    1, 3, 5, 9, 15), as a pilot of ``spp`` samples per pixel, at no cost, could.
-    Returns ``(self, cross-validated, k)``."""
+    estimate averaged over ``k x k`` pixels and mixed with a uniform share ``u`` and scores
+    it on render 2's (the best ``k`` of 1, 3, 5, 9, 15 and ``u`` of 0, 0.1, 0.3, 0.5), as a
+    pilot of ``spp`` samples per pixel, at no cost, could. Returns ``(self,
+    cross-validated, k, u)``."""
     from drpt.render.adaptive import _smooth, trace_counts
 
     W, H = renderer.opt.width, renderer.opt.height
@@ -100,12 +101,14 @@ def oracle(renderer, spp: int) -> tuple[float, float, int]:
         est.append(((var / (m * m + 0.01)).sum(-1).reshape(H, W), (work / spp).reshape(H, W)))
     (v1, c1), (v2, c2) = est
     self_bound = float(np.mean(np.sqrt(v1 * c1)) ** 2 / (np.mean(v1) * np.mean(c1)))
-    best = (math.inf, 1)
+    best = (math.inf, 1, 0.0)
     for k in (1, 3, 5, 9, 15):
-        n = np.sqrt(np.maximum(_smooth(v1, k), 1e-30) / _smooth(c1, k))
-        n *= c2.sum() / (n * c2).sum()  # the work of one sample per pixel, on render 2's costs
-        best = min(best, (float((v2 / n).sum() / v2.sum()), k))
-    return self_bound, best[0], best[1]
+        s = np.sqrt(np.maximum(_smooth(v1, k), 0.0) / _smooth(c1, k))
+        for u in (0.0, 0.1, 0.3, 0.5):
+            n = (1.0 - u) * s / s.mean() + u
+            n *= c2.sum() / (n * c2).sum()  # the work of one sample per pixel, on render 2's costs
+            best = min(best, (float((v2 / np.maximum(n, 1e-30)).sum() / v2.sum()), k, u))
+    return (self_bound, *best)
 
 
 def main() -> int:
@@ -131,9 +134,9 @@ def main() -> int:
         ref = base.render()
         floor = float(np.mean(ref.variance / (ref.image.astype(np.float64) ** 2 + 0.01)))
         if a.oracle:
-            sb, cv, k = oracle(base, a.oracle)
+            sb, cv, k, u = oracle(base, a.oracle)
             print(f"{Path(path).name}: per-pixel allocation bound at equal work, from {a.oracle} spp: "
-                  f"self {sb:.3f}, cross-validated {cv:.3f} ({k}x{k} pixels)", flush=True)
+                  f"self {sb:.3f}, cross-validated {cv:.3f} ({k}x{k} pixels, uniform share {u})", flush=True)
         ratios, per_sample, cycles, sums = [], [], [], np.zeros(4)
         for spp in a.spp:
             for adaptive in (False, True, True):  # warm-up: compile the kernels
