@@ -10,6 +10,16 @@ reference (relMSE minus the reference's own noise floor ``mean(var_ref / (ref^2 
 ``(err_adaptive * t_adaptive) / (err_uniform * t_uniform)`` (below 1: adaptive wins),
 the geometric mean over the levels and repeats.
 
+The **mean** ratio, ``(sum err_adaptive / sum err_uniform) x (sum t_adaptive / sum
+t_uniform)`` over the same renders, is the ratio of the expected errors at equal time:
+where a few rare paths carry a render's error (a caustic), single renders' ratios scatter
+over decades and their geometric mean says little.
+
+A scene ``caustic`` is :mod:`drpt.tools.scenegen.caustic`, written into a temporary folder.
+
+With ``--oracle N`` also the best any per-pixel allocation of the same work could do
+(:func:`oracle`), from two independent uniform renders of ``N`` spp.
+
 With ``--threshold`` also a Cycles-style noise-threshold scheme at the same budget
 (:func:`noise_threshold`): rounds of samples to the pixels whose estimated error is
 above a threshold (each round's median), every sample averaged into its pixel. Its
@@ -25,6 +35,7 @@ import argparse
 import dataclasses
 import math
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -64,6 +75,42 @@ def noise_threshold(renderer, spp: int, rounds: int = 8):
     return (s / n[:, None]).reshape(H, W, 3).astype(np.float32)
 
 
+def oracle(renderer, spp: int) -> tuple[float, float, int]:
+    """The expected error, relative to uniform sampling of the same work, of per-pixel
+    Neyman allocation with the per-pixel variance and cost known: ``n_p`` in proportion to
+    ``sqrt(v_p / c_p)`` (``v_p`` a pixel's relative per-sample variance ``sum_c var_c /
+    (mean_c^2 + 0.01)``, ``c_p`` its bounces per sample) gives ``(sum sqrt(v c))^2 /
+    (sum v sum c)`` of uniform's error (Cauchy-Schwarz: at most 1). Two independent
+    renders of ``spp`` samples per pixel: the **self** bound allocates by render 1's
+    estimate and scores it on render 1 (optimistic: an estimate's noise looks like
+    structure worth sampling), the **cross-validated** one allocates by render 1's
+    estimate averaged over ``k x k`` pixels and mixed with a uniform share ``u`` and scores
+    it on render 2's (the best ``k`` of 1, 3, 5, 9, 15 and ``u`` of 0, 0.1, 0.3, 0.5), as a
+    pilot of ``spp`` samples per pixel, at no cost, could. Returns ``(self,
+    cross-validated, k, u)``."""
+    from drpt.render.adaptive import _smooth, trace_counts
+
+    W, H = renderer.opt.width, renderer.opt.height
+    P = W * H
+    est = []
+    for k in range(2):
+        s, q, _, work = trace_counts(renderer.derive(dataclasses.replace(renderer.opt, seed=1001 + k)),
+                                     20, np.full(P, spp, np.int64), P)
+        m = s / spp
+        var = np.maximum(q / spp - m * m, 0.0) * spp / (spp - 1)
+        est.append(((var / (m * m + 0.01)).sum(-1).reshape(H, W), (work / spp).reshape(H, W)))
+    (v1, c1), (v2, c2) = est
+    self_bound = float(np.mean(np.sqrt(v1 * c1)) ** 2 / (np.mean(v1) * np.mean(c1)))
+    best = (math.inf, 1, 0.0)
+    for k in (1, 3, 5, 9, 15):
+        s = np.sqrt(np.maximum(_smooth(v1, k), 0.0) / _smooth(c1, k))
+        for u in (0.0, 0.1, 0.3, 0.5):
+            n = (1.0 - u) * s / s.mean() + u
+            n *= c2.sum() / (n * c2).sum()  # the work of one sample per pixel, on render 2's costs
+            best = min(best, (float((v2 / np.maximum(n, 1e-30)).sum() / v2.sum()), k, u))
+    return (self_bound, *best)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenes", nargs="+")
@@ -72,14 +119,25 @@ def main() -> int:
     ap.add_argument("--ref-spp", type=int, default=2048)
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--threshold", action="store_true", help="also the Cycles-style scheme")
+    ap.add_argument("--oracle", type=int, default=0, metavar="N",
+                    help="also the per-pixel allocation bound from two renders of N spp")
     a = ap.parse_args()
     W, H = a.size
+    tmp = Path(tempfile.mkdtemp())
     for path in a.scenes:
+        if path == "caustic":
+            from drpt.tools.scenegen import caustic
+
+            path = str(caustic.main(tmp)[0])
         scene = load_scene(path)
         base = Renderer(scene, RenderOptions(width=W, height=H, spp=a.ref_spp, seed=999, progress=False))
         ref = base.render()
         floor = float(np.mean(ref.variance / (ref.image.astype(np.float64) ** 2 + 0.01)))
-        ratios, per_sample, cycles = [], [], []
+        if a.oracle:
+            sb, cv, k, u = oracle(base, a.oracle)
+            print(f"{Path(path).name}: per-pixel allocation bound at equal work, from {a.oracle} spp: "
+                  f"self {sb:.3f}, cross-validated {cv:.3f} ({k}x{k} pixels, uniform share {u})", flush=True)
+        ratios, per_sample, cycles, sums = [], [], [], np.zeros(4)
         for spp in a.spp:
             for adaptive in (False, True, True):  # warm-up: compile the kernels
                 base.derive(dataclasses.replace(base.opt, spp=max(spp, 8), seed=1, adaptive=adaptive)).render()
@@ -96,6 +154,7 @@ def main() -> int:
                     row[adaptive] = (err, t)
                 (eu, tu), (ea, ta) = row[False], row[True]
                 ratios.append(ea * ta / (eu * tu))
+                sums += (eu, tu, ea, ta)
                 per_sample.append(ea / eu)
                 extra = ""
                 if a.threshold:
@@ -112,7 +171,8 @@ def main() -> int:
         g = math.exp(sum(math.log(x) for x in ratios) / len(ratios))
         gs = math.exp(sum(math.log(x) for x in per_sample) / len(per_sample))
         print(f"{Path(path).name}: equal-time error ratio (adaptive / uniform) {g:.3f}, at equal spp "
-              f"{gs:.3f} (reference floor {floor:.3g})", flush=True)
+              f"{gs:.3f}; mean ratio at equal time {sums[2] * sums[3] / (sums[0] * sums[1]):.3f}, at "
+              f"equal spp {sums[2] / sums[0]:.3f} (reference floor {floor:.3g})", flush=True)
         if cycles:
             gc = math.exp(sum(math.log(x) for x in cycles) / len(cycles))
             print(f"{Path(path).name}: noise-threshold (biased) equal-time error ratio {gc:.3f}", flush=True)

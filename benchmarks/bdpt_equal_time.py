@@ -1,8 +1,9 @@
 """Equal-time error of bidirectional path tracing against the path tracer (not a test).
 
-For each scene (the bundled Cornell box; a caustic scene authored here: a glass sphere on
-a diffuse floor under a small spherical area light, with a back wall; and the seed's
-Cornell box with a glass sphere, authored here from its report, :func:`seed_glass_cornell`), both
+For each scene (the bundled Cornell box; the caustic scene of
+:mod:`drpt.tools.scenegen.caustic`: a glass sphere on a diffuse floor under a small
+spherical area light, with a back wall; and the seed's Cornell box with a glass sphere,
+authored here from its report, :func:`seed_glass_cornell`), both
 integrators render SIZE x SIZE at their spp after a warm-up render of 1 spp that
 compiles the kernels; a bdpt render of REF_SPP spp and another seed is the reference.
 Prints per integrator the seconds (the fastest of REPEAT renders; also the process's CPU
@@ -26,26 +27,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-CAUSTIC = """
-PerspectiveCamera { center 0 1.2 4 direction 0 -0.3 -1 up 0 1 0 angle 40 }
-Materials { numMaterials 3
-  Material { diffuseColor 0.7 0.7 0.7 }
-  Material { transparentColor 1 1 1 indexOfRefraction 1.5 }
-  Material { Ke 400 380 340 }
-}
-Group { numObjects 6
-  MaterialIndex 0
-  Triangle { vertex0 -3 0 -3 vertex1 3 0 3 vertex2 3 0 -3 }
-  Triangle { vertex0 -3 0 -3 vertex1 -3 0 3 vertex2 3 0 3 }
-  Triangle { vertex0 -3 0 -2 vertex1 3 0 -2 vertex2 3 3 -2 }
-  Triangle { vertex0 -3 0 -2 vertex1 3 3 -2 vertex2 -3 3 -2 }
-  MaterialIndex 1
-  Sphere { center 0 0.6 0 radius 0.6 }
-  MaterialIndex 2
-  Sphere { center 0.8 2.4 0.4 radius 0.05 }
-}
-"""
-
+from drpt.tools.scenegen.caustic import SCENE as CAUSTIC
 
 
 def seed_glass_cornell() -> str:

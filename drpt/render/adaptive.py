@@ -6,13 +6,15 @@ lanes (:meth:`~drpt.render.integrators.path.PathIntegrator.sample_sequence`) who
 per-lane sample counts come from per-pixel count arrays:
 
 1. **Two pilots**, A and B, of ``a = max(2, spp // 8)`` independent samples in every
-   pixel. From each, every pixel's relative per-sample variance ``sum_c var_c /
-   (mean_c^2 + 0.01)`` (the quantity relMSE sums), averaged over the ``SMOOTH x
-   SMOOTH`` pixels around it (a pilot of a few samples is too noisy alone).
+   pixel. From each, every pixel's relative per-sample standard deviation ``sqrt(sum_c
+   var_c / (mean_c^2 + 0.01))`` (relMSE sums the variances), ``OWN_SHARE`` of it and the
+   rest its mean over the ``SMOOTH x SMOOTH`` pixels around it (a pilot of a few samples
+   is too noisy alone; averaged as standard deviations, one outlier sample weighs less
+   than averaged as variances).
 2. **Allocation**: the rest of the budget, the work of ``(spp - 2a) W H`` samples, in two halves:
    half over the pixels as pilot A's estimate says and half as pilot B's, each in
-   proportion to ``(1 - UNIFORM_SHARE) s / mean(s) + UNIFORM_SHARE``, ``s`` the square
-   root of the smoothed relative variance over the smoothed cost per sample (from the
+   proportion to ``(1 - UNIFORM_SHARE) s / mean(s) + UNIFORM_SHARE``, ``s`` that
+   estimate over the square root of the smoothed cost per sample (from the
    pilot's bounces per sample: Neyman allocation for equal time, mixed with a uniform
    share as a guard against a pilot that missed a pixel's rare paths), at least 1 sample
    each, as many as cost what ``spp - 2a`` samples per pixel spread uniformly would: the
@@ -52,8 +54,11 @@ from .renderer import RenderResult, _check_range, _mix_seed
 ADAPTIVE_STREAM = 0xADA5EED
 #: the share of the allocated samples given out uniformly (the rest: Neyman allocation)
 UNIFORM_SHARE = 0.1
-#: the side of the square of pixels whose pilot variances are averaged
-SMOOTH = 3
+#: the side of the square of pixels whose pilot estimates (square roots of relative
+#: variances) are averaged
+SMOOTH = 5
+#: the weight of a pixel's own pilot estimate next to that average
+OWN_SHARE = 0.25
 #: allocate by relative variance over cost (bounces per sample), not variance alone
 COST_AWARE = True
 #: lanes per kernel, in units of the backend's min_lanes
@@ -106,13 +111,14 @@ def allocate(mean: np.ndarray, var: np.ndarray, budget: float, cost: np.ndarray 
              ) -> np.ndarray:
     """Samples per pixel ``(H, W)`` int64, at least 1 each, from a pilot's per-pixel means
     and per-sample variances ``(H, W, 3)``: in proportion to ``sqrt(relative variance)``
-    (mixed with a uniform share), ``budget`` in all. With each pixel's cost per sample
-    ``(H, W)`` (bounces), in proportion to ``sqrt(relative variance / cost)`` (the error
-    at equal time falls most so), as many as cost the work of ``budget`` samples spread
-    uniformly: an adaptive render takes about a uniform render's time."""
+    (partly averaged over the pixels around, mixed with a uniform share), ``budget`` in
+    all. With each pixel's cost per sample ``(H, W)`` (bounces), in proportion to
+    ``sqrt(relative variance / cost)`` (the error at equal time falls most so), as many as
+    cost the work of ``budget`` samples spread uniformly: an adaptive render takes about a
+    uniform render's time."""
     H, W, _ = mean.shape
-    rel = (var / (np.square(mean) + 0.01)).sum(-1)
-    s = np.sqrt(np.maximum(_smooth(rel, SMOOTH), 0.0))  # (cumulative sums round below 0)
+    r = np.sqrt((var / (np.square(mean) + 0.01)).sum(-1))
+    s = OWN_SHARE * r + (1.0 - OWN_SHARE) * np.maximum(_smooth(r, SMOOTH), 0.0)  # (sums round below 0)
     c = np.maximum(_smooth(cost, SMOOTH), 1.0) if cost is not None and COST_AWARE else None
     if c is not None:
         s = s / np.sqrt(c)

@@ -213,3 +213,19 @@ def test_veach_mis_scene(tmp_path):
         r = d - 2 * np.dot(d, n) * n
         to_mid = (middle - c) / np.linalg.norm(middle - c)
         assert np.dot(r, to_mid) > 0.9999
+
+
+def test_caustic_scene(tmp_path):
+    """A glass sphere on a diffuse floor, lit only by a small emissive sphere: the scene
+    of the equal-time benchmarks' caustic, and it renders finite, lit pixels."""
+    from drpt.tools.scenegen import caustic
+
+    (path,) = caustic.main(tmp_path)
+    scene = load_scene(path)
+    kinds = [interpret(m, "auto").kind for m in scene.materials]
+    glass, light = scene.spheres.material
+    assert kinds[glass] == "dielectric" and scene.materials[light].is_emissive
+    assert [m.is_emissive for m in scene.materials].count(True) == 1
+    assert np.allclose(scene.spheres.radius, [0.6, 0.05])
+    img = Renderer(scene, RenderOptions(width=16, height=16, spp=16, progress=False)).render().image
+    assert np.isfinite(img).all() and img.mean() > 0
