@@ -28,10 +28,12 @@ Dr.Jit's own LLVM settings), the variance is across the rounds' images. The rati
 drpt/Mitsuba is what to read: the rounds interleave, so load from other processes slows both.
 The target is issue 27's: 2x on the bundled and corpus scenes, 1.5x on Veach's and the room.
 
-Output: a Markdown table (stdout), the skipped scenes, and with ``--json FILE`` the numbers.
+Output: a Markdown table (stdout), the skipped scenes, and with ``--json FILE`` the numbers
+(rewritten after every scene).
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/equal_time_vs_mitsuba.py [--rounds 5]
-[--min-size 192] [--max-samples 1000000] [--only WORD,...] [--no-corpus] [--json FILE]
+[--min-size 192] [--max-samples 1000000] [--only WORD,...] [--skip WORD,...] [--no-corpus]
+[--json FILE]
 """
 
 from __future__ import annotations
@@ -82,7 +84,7 @@ def corpus_files() -> list[Path]:
                   if re.match(r"(test|scene)_", p.name) and p.parent.name != "refs")
 
 
-def cases(only: list[str], corpus: bool, room_dir: Path) -> list[Case]:
+def cases(only: list[str], corpus: bool, room_dir: Path, skip: list[str] = ()) -> list[Case]:
     from drpt.tools import reference as refs
     from drpt.tools.scenegen import living_room
 
@@ -93,7 +95,7 @@ def cases(only: list[str], corpus: bool, room_dir: Path) -> list[Case]:
     out.append(Case("living_room", TARGET_MIS_ROOM, room_dir / "living_room.xml"))
     if corpus:
         out += [Case(str(p.relative_to(CORPUS)), TARGET_OTHERS, p) for p in corpus_files()]
-    out = [c for c in out if not only or any(w in c.name for w in only)]
+    out = [c for c in out if (not only or any(w in c.name for w in only)) and not any(w in c.name for w in skip)]
     if any(c.name == "living_room" for c in out):
         living_room.main(room_dir)
     return out
@@ -167,6 +169,7 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--min-size", type=int, default=192)
     ap.add_argument("--max-samples", type=int, default=1_000_000)
     ap.add_argument("--only", default="", help="comma-separated words; keep scenes whose name has one")
+    ap.add_argument("--skip", default="", help="comma-separated words; leave out scenes whose name has one")
     ap.add_argument("--no-corpus", action="store_true")
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args(argv)
@@ -175,7 +178,8 @@ def main(argv=None) -> list[dict]:
     rows, skipped = [], []
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="drpt-eqtime-") as tmp:
-        for case in cases([w for w in a.only.split(",") if w], not a.no_corpus, Path(tmp)):
+        for case in cases([w for w in a.only.split(",") if w], not a.no_corpus, Path(tmp),
+                          [w for w in a.skip.split(",") if w]):
             t0 = time.perf_counter()
             try:
                 ways, info = prepare(case, a.min_size, a.max_samples)
@@ -194,11 +198,18 @@ def main(argv=None) -> list[dict]:
             rows.append(row)
             print(f"{case.name}: efficiency x{row['efficiency_ratio']:.2f} ({time.perf_counter() - t0:.0f} s, "
                   f"load {row['load']:.1f})", file=sys.stderr, flush=True)
+            if a.json is not None:  # after every scene: a long run that is stopped keeps its rows
+                _write_json(a, rows, skipped, load0)
     print(format_table(rows, skipped, a, load0))
     if a.json is not None:
-        a.json.write_text(json.dumps({"commit": _commit(), "cpu": _cpu(), "args": vars(a) | {"json": str(a.json)},
-                                      "rows": rows, "skipped": skipped}, indent=1))
+        _write_json(a, rows, skipped, load0)
     return rows
+
+
+def _write_json(a, rows: list[dict], skipped: list, load0: float) -> None:
+    a.json.write_text(json.dumps({"commit": _commit(), "cpu": _cpu(), "load_at_start": load0,
+                                  "args": {**vars(a), "json": str(a.json)}, "rows": rows,
+                                  "skipped": skipped}, indent=1))
 
 
 def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
