@@ -228,13 +228,14 @@ class DeviceScene:
         return view
 
     # ------------------------------------------------------------ geometry
-    def intersect(self, o: Array3f, d: Array3f, active: Bool) -> Interaction:
-        """The closest hit of rays ``(o, d)`` (``si.valid`` False on a miss)."""
-        return self.interaction(o, d, self.intersect_preliminary(o, d, active))
+    def intersect(self, o: Array3f, d: Array3f, active: Bool, coherent: Bool | bool = False) -> Interaction:
+        """The closest hit of rays ``(o, d)`` (``si.valid`` False on a miss); ``coherent``:
+        the lanes of camera rays (a traversal hint, :meth:`drpt.accel.protocol.Accelerator.intersect`)."""
+        return self.interaction(o, d, self.intersect_preliminary(o, d, active, coherent))
 
-    def intersect_preliminary(self, o: Array3f, d: Array3f, active: Bool):
+    def intersect_preliminary(self, o: Array3f, d: Array3f, active: Bool, coherent: Bool | bool = False):
         """The accelerator's closest hit (:class:`drpt.accel.Hit`), any distance."""
-        return self.accel.intersect(o, d, Float(dr.largest(Float)), active)
+        return self.accel.intersect(o, d, Float(dr.largest(Float)), active, coherent)
 
     def interaction(self, o: Array3f, d: Array3f, hit) -> Interaction:
         """Position, normals, material and uv of a hit (:class:`~drpt.render.surface.Interaction`)."""
