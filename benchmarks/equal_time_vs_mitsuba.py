@@ -177,6 +177,7 @@ def main(argv=None) -> list[dict]:
     set_mitsuba_variant()
     rows, skipped = [], []
     load0 = os.getloadavg()[0]
+    a.commit = _commit()  # (at the start: the checkout may move on while a long run goes on)
     with tempfile.TemporaryDirectory(prefix="drpt-eqtime-") as tmp:
         for case in cases([w for w in a.only.split(",") if w], not a.no_corpus, Path(tmp),
                           [w for w in a.skip.split(",") if w]):
@@ -207,13 +208,13 @@ def main(argv=None) -> list[dict]:
 
 
 def _write_json(a, rows: list[dict], skipped: list, load0: float) -> None:
-    a.json.write_text(json.dumps({"commit": _commit(), "cpu": _cpu(), "load_at_start": load0,
+    a.json.write_text(json.dumps({"commit": a.commit, "cpu": _cpu(), "load_at_start": load0,
                                   "args": {**vars(a), "json": str(a.json)}, "rows": rows,
                                   "skipped": skipped}, indent=1))
 
 
 def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
-    lines = [f"commit {_commit()}, {_cpu()}, {os.cpu_count()} cores; {a.rounds} rounds, "
+    lines = [f"commit {getattr(a, 'commit', None) or _commit()}, {_cpu()}, {os.cpu_count()} cores; {a.rounds} rounds, "
              f"min size {a.min_size}, max samples {a.max_samples}; load average {load0:.1f} at the start",
              "",
              "| scene | size | spp | drpt s | Mitsuba s | Mitsuba s / drpt s | variance drpt / Mitsuba "
