@@ -6,8 +6,8 @@ one render each: drpt's splatting film (the default), drpt's filter importance
 sampling (``--filter-sampling``) and Mitsuba (the exported scene, or the XML file
 itself, with Dr.Jit's own LLVM settings). Each round uses another seed. Prints per
 way the median render seconds, the mean per-pixel variance across the rounds'
-images (at equal spp) and the efficiency ``1 / (seconds * variance)``, and the
-ratios to Mitsuba.
+images (at equal spp) and the efficiency ``1 / (seconds * variance)``
+(:func:`drpt.tools.converge.efficiency_rounds`), and the ratios to Mitsuba.
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/filter_efficiency.py SCENE [FILTER] [SIZE] [SPP] [ROUNDS]
 (defaults gaussian, 128, 64, 8; FILTER is ignored for an XML file, which names its own).
@@ -15,9 +15,7 @@ Run: PYTHONPATH=. .venv/bin/python benchmarks/filter_efficiency.py SCENE [FILTER
 
 from __future__ import annotations
 
-import statistics
 import sys
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -33,6 +31,7 @@ def main(argv: list[str]) -> None:
     from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
+    from drpt.tools.converge import efficiency_rounds
 
     path = Path(argv[0])
     flt = argv[1] if len(argv) > 1 else "gaussian"
@@ -54,28 +53,15 @@ def main(argv: list[str]) -> None:
         else:
             ms = mi.load_dict(to_mitsuba_dict(scene, base.width, base.height, spp, rfilter=base.filter,
                                               bsdf=base.bsdf))
-    times: dict[str, list[float]] = {k: [] for k in (*ways, "mitsuba")}
-    images: dict[str, list[np.ndarray]] = {k: [] for k in times}
-    for r in ways.values():  # compile
-        r.render()
-    with llvm_tuning.dr_default():
-        mi.render(ms, spp=spp)
-    for k in range(rounds):
-        for name, r in ways.items():
-            t = time.perf_counter()
-            img = r.derive(replace(r.opt, seed=k)).render().image
-            times[name].append(time.perf_counter() - t)
-            images[name].append(img.astype(np.float64))
+    def drpt(r):
+        return lambda seed: r.derive(replace(r.opt, seed=seed)).render().image
+
+    def mitsuba(seed):
         with llvm_tuning.dr_default():
-            t = time.perf_counter()
-            img = np.asarray(mi.render(ms, spp=spp, seed=k), np.float64)[..., :3]
-            times["mitsuba"].append(time.perf_counter() - t)
-            images["mitsuba"].append(img)
-    out = {}
-    for name in times:
-        sec = statistics.median(times[name])
-        var = float(np.stack(images[name]).var(0, ddof=1).mean())
-        out[name] = (sec, var, 1.0 / (sec * var))
+            return np.asarray(mi.render(ms, spp=spp, seed=seed))[..., :3]
+
+    res = efficiency_rounds({**{name: drpt(r) for name, r in ways.items()}, "mitsuba": mitsuba}, rounds)
+    out = {name: (v["seconds"], v["variance"], v["efficiency"]) for name, v in res.items()}
     m = out["mitsuba"]
     print(f"{path.name}: {base.width}x{base.height}, {spp} spp, filter {base.filter}, {rounds} rounds")
     for name, (sec, var, eff) in out.items():

@@ -44,7 +44,8 @@ class BruteForce:
         """The registry's constructor (:mod:`drpt.accel.registry`)."""
         return cls(scene)
 
-    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
+    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                  coherent: Bool | bool = False) -> Hit:
         """Closest hit with ``0 < t < tmax``."""
         return self.geo.hit(*self._trace(o, d, tmax, active))
 

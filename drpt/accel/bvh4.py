@@ -242,7 +242,8 @@ class BVH4:
                    min_leaf=p.min_leaf, sah_threshold=p.sah_threshold)
 
     # ---------------------------------------------------------------- queries
-    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
+    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                  coherent: Bool | bool = False) -> Hit:
         """Closest hit with ``0 < t < tmax``."""
         return self.geo.hit(*self._trace(o, d, tmax, active, any_hit=False))
 

@@ -155,11 +155,15 @@ class EmbreeAccel:
         return cls(scene)
 
     # ---------------------------------------------------------------- queries
-    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
-        """Closest hit with ``0 < t < tmax``."""
+    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                  coherent: Bool | bool = False) -> Hit:
+        """Closest hit with ``0 < t < tmax``; ``coherent`` (lanes of camera rays) selects
+        Embree's coherent traversal for their packets (Dr.Jit's ``jit_llvm_ray_trace``
+        input, Mitsuba's ``ray_intersect(..., coherent)``): the same hits, faster for
+        rays that share an origin and nearby directions."""
         o, d, active, bt, bj, bu, bv = self.geo.begin_query(o, d, tmax, active, False)
         if self.geo.N:
-            valid, t, u, v, prim, geom = self._query(o, d, bt, active, shadow=False)[:6]
+            valid, t, u, v, prim, geom = self._query(o, d, bt, active, shadow=False, coherent=coherent)[:6]
             prim = dr.select(geom == 0, prim, prim + self.geo.F)
             tri = valid & (geom == 0)
             bt = dr.select(valid, t, bt)
@@ -176,11 +180,12 @@ class EmbreeAccel:
             hit |= self._query(o, d, Float(tmax), active, shadow=True)[0]
         return hit
 
-    def _query(self, o: Array3f, d: Array3f, tfar: Float, active: Bool, shadow: bool):
+    def _query(self, o: Array3f, d: Array3f, tfar: Float, active: Bool, shadow: bool,
+               coherent: Bool | bool = False):
         """Embree's packet query: ``(hit,)`` for shadow rays, else ``(valid, t, u, v,
         primID, geomID, instID, hit_inst)``."""
         L = self._lib
-        args = (Bool(False), Bool(active), o.x, o.y, o.z, Float(TNEAR), d.x, d.y, d.z,
+        args = (Bool(coherent), Bool(active), o.x, o.y, o.z, Float(TNEAR), d.x, d.y, d.z,
                 Float(0.0), Float(tfar), UInt32(0xFFFFFFFF), UInt32(0), UInt32(0))
         widths = {dr.width(a) for a in args} - {1}
         if len(widths) > 1:  # Dr.Jit would raise in C++, which aborts through ctypes

@@ -282,7 +282,8 @@ class UniformGrid:
         return cls(scene, resolution=p.resolution)
 
     # ---------------------------------------------------------------- queries
-    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
+    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                  coherent: Bool | bool = False) -> Hit:
         """Closest hit with ``0 < t < tmax``."""
         return self.geo.hit(*self._trace(o, d, tmax, active, any_hit=False))
 

@@ -59,7 +59,8 @@ class InlineList:
         """The registry's constructor (:mod:`drpt.accel.registry`)."""
         return cls(scene)
 
-    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
+    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                  coherent: Bool | bool = False) -> Hit:
         """Closest hit with ``0 < t < tmax``."""
         bt, bj, bu, bv = self._trace(o, d, tmax, active)
         valid = bj != INVALID

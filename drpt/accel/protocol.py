@@ -71,8 +71,11 @@ class Accelerator(Protocol):
     nbytes: int
     stats: dict
 
-    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Hit:
-        """Closest hit with ``0 < t < tmax``."""
+    def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                  coherent: Bool | bool = False) -> Hit:
+        """Closest hit with ``0 < t < tmax``. ``coherent`` marks the lanes whose rays are
+        coherent (camera rays): a hint an accelerator may use (Embree's coherent
+        traversal, as Mitsuba asks it for camera rays); the hits are the same."""
         ...
 
     def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:

@@ -228,14 +228,17 @@ class DeviceScene:
         return view
 
     # ------------------------------------------------------------ geometry
-    def intersect(self, o: Array3f, d: Array3f, active: Bool, tmax: Float | None = None) -> Interaction:
+    def intersect(self, o: Array3f, d: Array3f, active: Bool, tmax: Float | None = None,
+                  coherent: Bool | bool = False) -> Interaction:
         """The closest hit of rays ``(o, d)`` (``si.valid`` False on a miss), closer than
-        ``tmax`` if given (a shorter ray traverses less of the accelerator)."""
-        return self.interaction(o, d, self.intersect_preliminary(o, d, active, tmax))
+        ``tmax`` if given (a shorter ray traverses less of the accelerator); ``coherent``:
+        the lanes of camera rays (a traversal hint, :meth:`drpt.accel.protocol.Accelerator.intersect`)."""
+        return self.interaction(o, d, self.intersect_preliminary(o, d, active, tmax, coherent))
 
-    def intersect_preliminary(self, o: Array3f, d: Array3f, active: Bool, tmax: Float | None = None):
+    def intersect_preliminary(self, o: Array3f, d: Array3f, active: Bool, tmax: Float | None = None,
+                              coherent: Bool | bool = False):
         """The accelerator's closest hit (:class:`drpt.accel.Hit`), any distance or closer than ``tmax``."""
-        return self.accel.intersect(o, d, Float(dr.largest(Float)) if tmax is None else tmax, active)
+        return self.accel.intersect(o, d, Float(dr.largest(Float)) if tmax is None else tmax, active, coherent)
 
     def interaction(self, o: Array3f, d: Array3f, hit) -> Interaction:
         """Position, normals, material and uv of a hit (:class:`~drpt.render.surface.Interaction`)."""

@@ -108,7 +108,7 @@ DEFAULT_LEVELS = (1e-1, 3e-2, 1e-2)
 
 __all__ = ["add_parser", "main", "noise_floor", "excess_rel_mse", "loglog_slope",
            "interp_loglog", "equal_time_ratios", "time_to_error", "time_to_error_ratios",
-           "converge_study", "spp_levels"]
+           "converge_study", "spp_levels", "efficiency_rounds"]
 
 
 # ------------------------------------------------------------------ parser
@@ -281,6 +281,38 @@ def time_to_error_ratios(t_a, e_a, t_b, e_b, levels) -> list[dict]:
         ratio = sa / sb if sa is not None and sb is not None else None
         rows.append({"level": float(level), "seconds_a": sa, "seconds_b": sb, "ratio": ratio})
     return rows
+
+
+def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict:
+    """Equal-spp efficiency of several ways of rendering one image, measured interleaved.
+
+    ``ways``: name -> ``render(seed) -> image`` (an ``(H, W, C)`` array; all ways at the
+    same spp). Each way renders once with ``warm_seed`` (discarded: it compiles the
+    kernels), then the ways take turns for ``rounds`` rounds, round ``k`` with seed ``k``,
+    so that load from other processes falls on all of them alike. Returns name ->
+    ``{"seconds": median wall seconds of a render, "variance": per-pixel variance across
+    the rounds' images (ddof 1) averaged over pixels and channels, "efficiency":
+    1 / (seconds * variance)}``: the inverse of the variance a render reaches per second.
+    """
+    if rounds < 2:
+        raise DrptError(f"efficiency needs at least 2 rounds, got {rounds}")
+    for render in ways.values():
+        render(warm_seed)
+    times: dict = {name: [] for name in ways}
+    images: dict = {name: [] for name in ways}
+    for k in range(rounds):
+        for name, render in ways.items():
+            t = time.perf_counter()
+            img = np.asarray(render(k), np.float64)
+            times[name].append(time.perf_counter() - t)
+            images[name].append(img)
+    out = {}
+    for name in ways:
+        sec = float(np.median(times[name]))
+        var = float(np.stack(images[name]).var(0, ddof=1).mean())
+        out[name] = {"seconds": sec, "variance": var,
+                     "efficiency": 1.0 / (sec * var) if sec * var > 0 else float("inf")}
+    return out
 
 
 # ------------------------------------------------------------ rendering

@@ -61,6 +61,28 @@ def test_embree_vs_brute(sym):
 
 
 @needs_embree
+def test_coherent_camera_rays_hit_what_incoherent_ones_hit():
+    """``coherent`` (Embree's coherent traversal, for camera rays) changes no hit: for every
+    lane mask (none, all, every other lane) the hits equal the incoherent query's, and the
+    inactive lanes still report nothing (negative control: a query whose lanes are all
+    inactive returns no hit, so a flag that took the place of the mask would fail)."""
+    sc, o, d, _ = mixed_scene_and_rays()
+    R = len(o)
+    O, D = rays(o, d)
+    e = build_accel(sc, "embree")
+    tmax = Float(np.full(R, INF, np.float32))
+    base = e.intersect(O, D, tmax)
+    for coherent in (True, Bool(np.arange(R) % 2 == 0)):
+        h = e.intersect(O, D, tmax, True, coherent)
+        assert np.array_equal(h.valid.numpy(), base.valid.numpy())
+        assert np.array_equal(h.prim.numpy(), base.prim.numpy())
+        assert np.allclose(h.t.numpy()[base.valid.numpy()], base.t.numpy()[base.valid.numpy()], rtol=1e-6)
+    assert base.valid.numpy().any()
+    off = e.intersect(O, D, tmax, Bool(np.zeros(R, bool)), True)
+    assert not off.valid.numpy().any()
+
+
+@needs_embree
 def test_embree_tmax_and_mask():
     """``tmax`` cuts hits off and inactive lanes report nothing; planes beyond a
     nearer triangle do not win; a sphere-only scene maps ids past the triangles."""

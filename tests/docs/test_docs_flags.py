@@ -204,7 +204,9 @@ def test_wavefront_is_the_megakernel_s_image_exactly_as_far_as_the_docs_say():
 # flags of other programs the docs quote (dask worker's, git's, benchmarks/ scripts'), and
 # cli.md's example of a mistyped one
 OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "--sizee", "--sp",
-                  "--threshold", "--oracle"}  # (benchmarks/adaptive_vs_uniform.py)
+                  "--threshold", "--oracle",  # (benchmarks/adaptive_vs_uniform.py)
+                  "--only", "--skip", "--min-size", "--max-samples", "--rounds",
+                  "--no-corpus"}  # (benchmarks/equal_time_vs_mitsuba.py)
 
 
 def test_every_flag_the_docs_name_exists(parsers):

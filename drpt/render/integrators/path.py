@@ -162,7 +162,7 @@ class PathIntegrator:
         estimation, BSDF sampling and Russian roulette."""
         opt = self.opt
         nee = scene.has_emitters and scene.has_smooth_bsdfs
-        si = scene.intersect(s.o, s.d, s.active)
+        si = scene.intersect(s.o, s.d, s.active, coherent=s.depth == 0)  # (camera rays: coherent)
 
         # ---- emitter hit by the previous ray (or seen by the camera)
         L = add_emission(scene, opt, si, s, s.L, s.active)

@@ -349,7 +349,7 @@ class WavefrontIntegrator:
         n = dr.width(s.lane)
 
         # ---- closest hit
-        hit = scene.intersect_preliminary(s.o, s.d, dr.full(Bool, True, n))
+        hit = scene.intersect_preliminary(s.o, s.d, dr.full(Bool, True, n), coherent=s.depth == 0)
         timer.done("closest hit", hit, lanes=n, rays=n)
         si = scene.interaction(s.o, s.d, hit)
         timer.done("interaction", si, lanes=n)

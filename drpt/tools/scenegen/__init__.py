@@ -14,6 +14,9 @@ command line, which ``scenes/make_<name>.py`` runs:
   PBR materials for ``tests/validation/test_materials_mitsuba.py``, not committed: their
   ``main(out)`` and ``scenes/make_<name>.py OUT_DIR`` need the folder
   (:mod:`.meshes` holds the mesh builders and OBJ writer they share).
+* :mod:`.living_room`: a textured living room with several area lights and a sky
+  through a window, written as Mitsuba XML (``scenes/make_living_room.py OUT_DIR``),
+  not committed: ``benchmarks/equal_time_vs_mitsuba.py`` generates it.
 """
 
 from pathlib import Path

@@ -1,0 +1,239 @@
+"""Equal-time efficiency of drpt against Mitsuba 3 on every scene drpt is judged on (not a test).
+
+Scenes, in this order (``--only`` keeps those whose name contains one of its words):
+
+* the bundled scenes: every entry of :data:`drpt.tools.reference.REFERENCES` (the gallery's:
+  the scene file, its material mode and depth; the dining room is generated when missing),
+  which Mitsuba renders as drpt exports it;
+* ``veach_mis.xml``: Veach's MIS scene as Mitsuba XML (``tests/data/xml``);
+* ``living_room``: the textured multi-light room of :mod:`drpt.tools.scenegen.living_room`,
+  generated into a temporary folder;
+* the corpus: every ``test_*.xml`` / ``scene_*.xml`` of Mitsuba's render tests
+  (``../shared/corpus/mitsuba-data/tests/scenes``, skipped when absent) that drpt renders with
+  a path tracer (``path``, ``direct``, ``volpath``). A file drpt refuses (a plugin it lacks,
+  a parameter it does not read) or renders by light tracing is listed under the table with
+  the reason, not measured.
+
+An XML scene renders with its own settings (film, filter, sampler, integrator and depths), drpt
+reading the file and Mitsuba rendering that very file (:class:`drpt.tools.xmlref.MitsubaXML`),
+both larger than authored: the film is scaled by the smallest integer ``k >= 1`` that makes its
+longer side at least ``--min-size`` (default 192; Mitsuba's test scenes are 32 to 128 pixels
+wide). The sample count is the file's (64 for the bundled scenes), cut to ``--max-samples``
+per image (default 1e6, at least 4 spp) so that a round takes seconds; both renderers use the
+same. Efficiency is ``1 / (seconds x mean per-pixel variance)``: each renderer renders the scene
+once to compile, then the two take turns for ``--rounds`` rounds (default 5), round ``k`` with
+seed ``k`` (:func:`drpt.tools.converge.efficiency_rounds`); seconds are the median wall time
+of a render (drpt: ``Renderer.render``; Mitsuba: ``mi.render`` and the copy to numpy, with
+Dr.Jit's own LLVM settings), the variance is across the rounds' images. The ratio
+drpt/Mitsuba is what to read: the rounds interleave, so load from other processes slows both.
+The target is issue 27's: 2x on the bundled and corpus scenes, 1.5x on Veach's and the room.
+
+Output: a Markdown table (stdout), the skipped scenes, and with ``--json FILE`` the numbers
+(rewritten after every scene).
+
+Run: PYTHONPATH=. .venv/bin/python benchmarks/equal_time_vs_mitsuba.py [--rounds 5]
+[--min-size 192] [--max-samples 1000000] [--only WORD,...] [--skip WORD,...] [--no-corpus]
+[--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CORPUS = ROOT.parent / "shared" / "corpus" / "mitsuba-data" / "tests" / "scenes"
+VEACH = ROOT / "tests" / "data" / "xml" / "veach_mis.xml"
+#: issue 27's targets: drpt's efficiency over Mitsuba's
+TARGET_MIS_ROOM, TARGET_OTHERS = 1.5, 2.0
+BUNDLED_SPP = 64
+
+
+@dataclass
+class Case:
+    name: str
+    target: float
+    path: Path
+    bundled: tuple | None = None  # (width, height, depth, bsdf mode) of a REFERENCES entry
+
+
+def scale_for(width: int, height: int, min_size: int) -> int:
+    """The smallest integer factor ``k >= 1`` with ``k * max(width, height) >= min_size``."""
+    return max(1, math.ceil(min_size / max(width, height)))
+
+
+def spp_for(own: int, pixels: int, max_samples: int) -> int:
+    """``own`` samples per pixel, cut to ``max_samples`` per image, at least 4 (or ``own``)."""
+    return max(min(own, 4), min(own, max_samples // max(pixels, 1)))
+
+
+def corpus_files() -> list[Path]:
+    if not CORPUS.is_dir():
+        return []
+    return sorted(p for p in CORPUS.rglob("*.xml")
+                  if re.match(r"(test|scene)_", p.name) and p.parent.name != "refs")
+
+
+def cases(only: list[str], corpus: bool, room_dir: Path, skip: list[str] = ()) -> list[Case]:
+    from drpt.tools import reference as refs
+    from drpt.tools.scenegen import living_room
+
+    out = []
+    for name, (scene_file, w, h, _spp, depth, mode) in refs.REFERENCES.items():
+        out.append(Case(name, TARGET_OTHERS, Path(scene_file), (w, h, depth, mode)))
+    out.append(Case("veach_mis.xml", TARGET_MIS_ROOM, VEACH))
+    out.append(Case("living_room", TARGET_MIS_ROOM, room_dir / "living_room.xml"))
+    if corpus:
+        out += [Case(str(p.relative_to(CORPUS)), TARGET_OTHERS, p) for p in corpus_files()]
+    out = [c for c in out if (not only or any(w in c.name for w in only)) and not any(w in c.name for w in skip)]
+    if any(c.name == "living_room" for c in out):
+        living_room.main(room_dir)
+    return out
+
+
+def prepare(case: Case, min_size: int, max_samples: int):
+    """``(ways, info)`` for :func:`~drpt.tools.converge.efficiency_rounds`: drpt's and Mitsuba's
+    ``render(seed) -> image`` at the same size, spp and settings. Raises DrptError where drpt
+    refuses the scene (or would not path trace it)."""
+    from drpt.errors import DrptError
+    from drpt.options import PathOptions, RenderOptions, with_scene_settings
+    from drpt.scene import load_scene
+    from drpt.tools import reference as refs
+    from drpt.tools.converge import make_drpt, make_mitsuba
+    from drpt.tools.xmlref import MitsubaXML
+
+    source = None
+    if case.bundled is not None:
+        w, h, depth, mode = case.bundled
+        scene = load_scene(refs.scene_path(str(case.path)))
+        k = scale_for(w, h, min_size)
+        opts = RenderOptions(width=k * w, height=k * h, spp=BUNDLED_SPP, bsdf=mode, progress=False,
+                             integrator="volpath" if scene.media else "path",
+                             path=PathOptions(max_depth=depth)).validate()
+    else:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scene = load_scene(case.path)
+        not_read = list(getattr(scene.settings, "not_read", ()))
+        if not_read:
+            raise DrptError(f"drpt does not read all of the file ({not_read[0]})")
+        own, _ = with_scene_settings(RenderOptions(progress=False), scene)
+        if own.integrator not in ("path", "volpath"):
+            raise DrptError(f"rendered by drpt's {own.integrator}, not a path tracer")
+        k = scale_for(own.width, own.height, min_size)
+        opts, scene = with_scene_settings(
+            RenderOptions(width=k * own.width, height=k * own.height, progress=False), scene,
+            given=frozenset({"size"}))
+        source = MitsubaXML.for_scene(scene, opts)
+    spp = spp_for(opts.spp, opts.width * opts.height, max_samples)
+    opts = replace(opts, spp=spp)
+    _, drpt_render = make_drpt(scene, opts)
+    mits_render, _ = make_mitsuba(scene, opts.width, opts.height, opts.path.max_depth,
+                                  opts.path.rr_depth, 0, opts.bsdf, opts.filter, source)
+    ways = {"drpt": lambda seed: drpt_render(spp, seed).image,
+            "mitsuba": lambda seed: mits_render(spp, seed)[0]}
+    return ways, {"width": opts.width, "height": opts.height, "spp": spp, "integrator": opts.integrator}
+
+
+def _cpu() -> str:
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=False).stdout
+        return next(line.split(":", 1)[1].strip() for line in out.splitlines() if line.startswith("Model name"))
+    except (OSError, StopIteration):
+        return "unknown CPU"
+
+
+def _commit() -> str:
+    out = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                         text=True, check=False)
+    return out.stdout.strip() or "unknown"
+
+
+def main(argv=None) -> list[dict]:
+    from drpt.backend import ensure, set_mitsuba_variant
+    from drpt.errors import DrptError
+    from drpt.tools.converge import efficiency_rounds
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--min-size", type=int, default=192)
+    ap.add_argument("--max-samples", type=int, default=1_000_000)
+    ap.add_argument("--only", default="", help="comma-separated words; keep scenes whose name has one")
+    ap.add_argument("--skip", default="", help="comma-separated words; leave out scenes whose name has one")
+    ap.add_argument("--no-corpus", action="store_true")
+    ap.add_argument("--json", type=Path, default=None)
+    a = ap.parse_args(argv)
+    ensure()
+    set_mitsuba_variant()
+    rows, skipped = [], []
+    load0 = os.getloadavg()[0]
+    a.commit = _commit()  # (at the start: the checkout may move on while a long run goes on)
+    with tempfile.TemporaryDirectory(prefix="drpt-eqtime-") as tmp:
+        for case in cases([w for w in a.only.split(",") if w], not a.no_corpus, Path(tmp),
+                          [w for w in a.skip.split(",") if w]):
+            t0 = time.perf_counter()
+            try:
+                ways, info = prepare(case, a.min_size, a.max_samples)
+                res = efficiency_rounds(ways, a.rounds)
+            except DrptError as e:
+                skipped.append((case.name, str(e).splitlines()[0].replace(f"{CORPUS}/", "")))
+                print(f"{case.name}: skipped: {skipped[-1][1]}", file=sys.stderr, flush=True)
+                continue
+            d, m = res["drpt"], res["mitsuba"]
+            row = {"scene": case.name, "target": case.target, **info,
+                   "drpt_seconds": d["seconds"], "mitsuba_seconds": m["seconds"],
+                   "drpt_variance": d["variance"], "mitsuba_variance": m["variance"],
+                   "time_ratio": m["seconds"] / d["seconds"],
+                   "variance_ratio": d["variance"] / m["variance"] if m["variance"] > 0 else float("nan"),
+                   "efficiency_ratio": d["efficiency"] / m["efficiency"], "load": os.getloadavg()[0]}
+            rows.append(row)
+            print(f"{case.name}: efficiency x{row['efficiency_ratio']:.2f} ({time.perf_counter() - t0:.0f} s, "
+                  f"load {row['load']:.1f})", file=sys.stderr, flush=True)
+            if a.json is not None:  # after every scene: a long run that is stopped keeps its rows
+                _write_json(a, rows, skipped, load0)
+    print(format_table(rows, skipped, a, load0))
+    if a.json is not None:
+        _write_json(a, rows, skipped, load0)
+    return rows
+
+
+def _write_json(a, rows: list[dict], skipped: list, load0: float) -> None:
+    a.json.write_text(json.dumps({"commit": a.commit, "cpu": _cpu(), "load_at_start": load0,
+                                  "args": {**vars(a), "json": str(a.json)}, "rows": rows,
+                                  "skipped": skipped}, indent=1))
+
+
+def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
+    lines = [f"commit {getattr(a, 'commit', None) or _commit()}, {_cpu()}, {os.cpu_count()} cores; {a.rounds} rounds, "
+             f"min size {a.min_size}, max samples {a.max_samples}; load average {load0:.1f} at the start",
+             "",
+             "| scene | size | spp | drpt s | Mitsuba s | Mitsuba s / drpt s | variance drpt / Mitsuba "
+             "| efficiency drpt / Mitsuba | target |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        ok = "yes" if r["efficiency_ratio"] >= r["target"] else "**no**"
+        lines.append(f"| {r['scene']} | {r['width']}x{r['height']} | {r['spp']} | {r['drpt_seconds']:.3f} "
+                     f"| {r['mitsuba_seconds']:.3f} | {r['time_ratio']:.2f} | {r['variance_ratio']:.2f} "
+                     f"| {r['efficiency_ratio']:.2f} | {r['target']:g}x {ok} |")
+    if rows:
+        g = math.exp(sum(math.log(r["efficiency_ratio"]) for r in rows) / len(rows))
+        lines.append(f"\n{sum(r['efficiency_ratio'] >= r['target'] for r in rows)} of {len(rows)} scenes "
+                     f"meet their target; geometric mean of the efficiency ratios {g:.2f}")
+    if skipped:
+        lines.append("\nNot measured:")
+        lines += [f"* {name}: {why}" for name, why in skipped]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,52 @@
+"""benchmarks/equal_time_vs_mitsuba.py: the size and spp rules, and a run on one scene (not its
+timings)."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+
+import pytest
+
+from support import REPO
+
+_PATH = REPO / "benchmarks" / "equal_time_vs_mitsuba.py"
+_spec = importlib.util.spec_from_file_location("equal_time_bench", _PATH)
+bench = importlib.util.module_from_spec(_spec)
+sys.modules["equal_time_bench"] = bench  # (its dataclass looks its module up there)
+_spec.loader.exec_module(bench)
+
+
+def test_scale_makes_the_longer_side_at_least_min_size():
+    assert bench.scale_for(48, 48, 192) == 4
+    assert bench.scale_for(64, 48, 192) == 3
+    assert bench.scale_for(200, 120, 192) == 1
+    assert bench.scale_for(128, 72, 192) == 2
+
+
+def test_spp_is_the_files_cut_to_the_sample_budget():
+    assert bench.spp_for(32, 192 * 192, 1_000_000) == 27
+    assert bench.spp_for(16, 64 * 64, 1_000_000) == 16
+    assert bench.spp_for(128, 1000 * 1000, 1_000_000) == 4  # at least 4
+    assert bench.spp_for(2, 1000 * 1000, 1_000_000) == 2  # never more than the file's
+
+
+def test_the_list_has_every_target_scene(tmp_path):
+    from drpt.tools.reference import REFERENCES
+
+    names = [c.name for c in bench.cases([], False, tmp_path)]
+    assert names[: len(REFERENCES)] == list(REFERENCES)
+    assert names[len(REFERENCES):] == ["veach_mis.xml", "living_room"]
+    assert (tmp_path / "living_room.xml").is_file()
+
+
+@pytest.mark.slow
+@pytest.mark.mitsuba
+def test_runs_on_one_scene(capsys):
+    rows = bench.main(["--only", "veach", "--no-corpus", "--rounds", "2", "--min-size", "32",
+                       "--max-samples", "20000"])
+    assert [r["scene"] for r in rows] == ["veach_mis.xml"]
+    r = rows[0]
+    assert (r["width"], r["height"], r["spp"]) == (64, 48, 6) and r["target"] == 1.5
+    assert r["efficiency_ratio"] > 0 and r["drpt_variance"] > 0
+    assert "| veach_mis.xml | 64x48 | 6 |" in capsys.readouterr().out
