@@ -181,13 +181,13 @@ def pcg_streams(n: int, key: int):
 
     Not :class:`drjit.auto.PCG32`'s ``PCG32(n, initstate, initseq)``: it gives lane ``i``
     the state ``initstate + i`` and the increment ``initseq + i``, and such streams are
-    correlated (the pair of first values of lanes ``i`` and ``i + 2`` misses a uniform
-    8 x 8 histogram by chi-square 24,000 over 2^20 lanes). The renderer gives a pixel's
+    correlated (the pairs of values of nearby lanes fail a chi-square test of
+    independence by far: tests/render/test_sampler.py). The renderer gives a pixel's
     samples and its neighbours' adjacent or regularly spaced lanes, so a pixel filter that
-    splats a sample into its neighbours (and light tracing's film) summed correlated
-    samples: 1.3x Mitsuba's per-pixel variance at a light's edge on the Cornell box
-    (docs/performance.md, "Pixel filters"). Mitsuba hashes its streams (``sample_tea_32``)
-    for the same reason."""
+    splats a sample into its neighbours summed correlated samples, and a pixel at a
+    light's edge was noisier than Mitsuba's (docs/performance.md, "Per-pixel variance
+    against Mitsuba's"). Mitsuba hashes its streams (``sample_tea_32``) for the same
+    reason."""
     from drjit.auto import PCG32, UInt64
 
     lane = UInt64(dr.arange(UInt32, n)) + 1
