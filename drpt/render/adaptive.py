@@ -43,12 +43,13 @@ import time
 
 import drjit as dr
 import numpy as np
-from drjit.auto import PCG32, UInt32, UInt64
+from drjit.auto import UInt32
 
 from .. import llvm_tuning
 from ..backend import policy
 from ..errors import DrptError
 from .renderer import RenderResult, _check_range, _mix_seed
+from .sampler import pcg_streams
 
 #: mixed into the seed of the adaptive phases' random streams
 ADAPTIVE_STREAM = 0xADA5EED
@@ -228,8 +229,7 @@ def _trace_lanes(renderer, index: int, pixel: np.ndarray, count: np.ndarray, W: 
     p = UInt32(pixel.astype(np.uint32))
     x = p % dr.opaque(UInt32, W)
     y = p // dr.opaque(UInt32, W)
-    rng = PCG32(n, initstate=dr.opaque(UInt64, _mix(renderer.opt.seed, index)),
-                initseq=dr.opaque(UInt64, index * renderer.max_lanes))
+    rng = pcg_streams(n, _mix(renderer.opt.seed, index))
     camera_ray = renderer._camera_ray(x, y)
     acc, acc2, nbad, steps = renderer.integrator.sample_sequence(
         rng, camera_ray, UInt32(count.astype(np.uint32)), wide=wide, bounces=True)

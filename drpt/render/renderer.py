@@ -12,8 +12,10 @@ packet no longer waits for its longest path at every bounce (its gain:
 docs/performance.md, "Execution model"). The Whitted integrator runs one sample per lane. Lanes are
 ordered pixel-major, so a pixel's lanes are adjacent and ``dr.block_sum``
 adds them (a pixel is the mean of its own samples). Each
-lane draws from its own PCG32 stream, selected by ``(seed, pass, lane)``, so
-a render is deterministic for a given seed and pass layout.
+lane draws from its own PCG32 stream, selected by ``(seed, pass, lane)``
+(:func:`~drpt.render.sampler.pcg_streams`: state and increment hashed from them, so
+neighbouring lanes' streams are independent), so a render is deterministic for a
+given seed and pass layout.
 
 The plan (:class:`PassPlan`) is arithmetic on the pass index, not a list:
 planning 10^7 spp at 4096x4096 takes no memory. Sums in the lanes and
@@ -59,7 +61,7 @@ from dataclasses import dataclass
 
 import drjit as dr
 import numpy as np
-from drjit.auto import PCG32, Array2f, Array3f, Array3f64, Bool, Float, UInt32, UInt64
+from drjit.auto import Array2f, Array3f, Array3f64, Bool, Float, UInt32
 
 from .. import llvm_tuning
 from ..aovs import INDEX_KINDS, channel_count, traced
@@ -81,7 +83,7 @@ from .integrators.volwavefront import VolWavefrontIntegrator
 from .integrators.wavefront import WavefrontIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lights.rays import EmitterRays
-from .sampler import STRATA, LDSampler, ZSobolSampler, next_2d, strata_sampler, uses_ld
+from .sampler import STRATA, LDSampler, ZSobolSampler, next_2d, pcg_streams, strata_sampler, uses_ld
 from .scene import DeviceScene
 
 
@@ -382,8 +384,7 @@ class Renderer:
         the channels' weighted sums, then the weights' sum."""
         W, H = self.opt.width, self.opt.height
         n, lane, x, y = self._pass_lanes(k, r0, rows)
-        rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed ^ AOV_STREAM, pass_index)),
-                    initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+        rng = pcg_streams(n, _mix_seed(self.opt.seed ^ AOV_STREAM, pass_index))
         flt = self.opt.pixel_filter
         splat = not flt.is_box and (self.light_tracing or not self.opt.filter_sampling)
         if splat:
@@ -495,8 +496,7 @@ class Renderer:
         the render's unless given)."""
         seed = self.opt.seed if seed is None else seed
         if not self.ld_sampling:
-            return PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(seed, pass_index)),
-                         initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+            return pcg_streams(n, _mix_seed(seed, pass_index))
         plan = self.chunks.passes
         s0 = pass_index // plan.bands * plan.k  # plan[pass_index]'s first sample (also past spp:
         # a live view's frames go on)
@@ -557,8 +557,7 @@ class Renderer:
             rng = self._ld_class.for_pixels(self.opt.seed, UInt32(0),
                                             dr.arange(UInt32, n) + dr.opaque(UInt32, first))
         else:
-            rng = PCG32(n, initstate=dr.opaque(UInt64, _mix_seed(self.opt.seed, pass_index)),
-                        initseq=dr.opaque(UInt64, pass_index * self.max_lanes))
+            rng = pcg_streams(n, _mix_seed(self.opt.seed, pass_index))
         film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
         bad = self.integrator.trace(rng, film, dr.full(Bool, True, n))
         with llvm_tuning.blocks_for(n):

@@ -168,6 +168,51 @@ class LDSampler:
         self.dim = dr.zeros(UInt32, dr.width(self.dim))
 
 
+_GOLDEN64 = 0x9E3779B97F4A7C15
+#: mixed into the key of the streams' increments (their states take the key itself)
+_SEQ_KEY = 0xD1B54A32D192ED03
+
+
+def _splitmix64(z):
+    """SplitMix64's finaliser (Stafford's mix 13) of UInt64 ``z`` (on the device) or of a
+    Python int (on the host): a bijection on 64 bits, every input bit changing about
+    half of the output bits."""
+    if isinstance(z, int):
+        m = 0xFFFFFFFFFFFFFFFF
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & m
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & m
+        return z ^ (z >> 31)
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EB
+    return z ^ (z >> 31)
+
+
+def pcg_streams(n: int, key: int):
+    """``n`` PCG32 streams, one per lane, for the 64-bit ``key`` (a hash of the seed and
+    the pass): lane ``i``'s initial state and increment are SplitMix64 hashes of ``key +
+    (i + 1) * gamma`` (the increment's with a second key), computed on the device from
+    opaque keys (one kernel for every pass).
+
+    Not :class:`drjit.auto.PCG32`'s ``PCG32(n, initstate, initseq)``: it gives lane ``i``
+    the state ``initstate + i`` and the increment ``initseq + i``, and such streams are
+    correlated (the pairs of values of nearby lanes fail a chi-square test of
+    independence by far: tests/render/test_sampler.py). The renderer gives a pixel's
+    samples and its neighbours' adjacent or regularly spaced lanes, so a pixel filter that
+    splats a sample into its neighbours summed correlated samples, and a pixel at a
+    light's edge was noisier than Mitsuba's (docs/performance.md, "Per-pixel variance
+    against Mitsuba's"). Mitsuba hashes its streams (``sample_tea_32``) for the same
+    reason."""
+    from drjit.auto import PCG32, UInt64
+
+    lane = UInt64(dr.arange(UInt32, n)) + 1
+    k_state = dr.opaque(UInt64, key & 0xFFFFFFFFFFFFFFFF)
+    k_seq = dr.opaque(UInt64, _splitmix64((key ^ _SEQ_KEY) & 0xFFFFFFFFFFFFFFFF))
+    step = lane * _GOLDEN64
+    rng = PCG32(n)
+    rng.seed(_splitmix64(k_state + step), _splitmix64(k_seq + step))
+    return rng
+
+
 def next_2d(rng) -> Array2f:
     """A 2-D sample from ``rng``: :meth:`LDSampler.next_2d`, or two draws of a PCG32."""
     if isinstance(rng, LDSampler):

@@ -50,7 +50,7 @@ MAX_COORDINATE = 1e12
 # Limits of the render settings a scene file may give (and of drpt.options.RenderOptions):
 MAX_SIZE = 1 << 16  # pixels per side: pixel coordinates and their jitter are float32
 MAX_SPP = (1 << 32) - 1  # samples per pixel: Mitsuba's sample_count is 32-bit
-MAX_SAMPLES = 1 << 60  # width * height * spp: PCG32 sequence ids (pass * lanes + lane) stay < 2^63
+MAX_SAMPLES = 1 << 60  # width * height * spp: sample indices (pass * lanes + lane) stay < 2^63
 
 
 def mitsuba_sample_count(plugin: str, spp: int) -> int:

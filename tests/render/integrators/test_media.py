@@ -648,17 +648,22 @@ def test_own_format_media_errors(tmp_path, change, message):
 
 def test_rr_prob_keeps_the_furnace(tmp_path):
     """``--rr-prob`` (a fixed continuation probability) in volpath: the albedo-1 furnace still
-    averages the background (within 4 standard errors)."""
+    averages the background (within 4 standard errors). The estimate's weight after ``n``
+    scatterings is ``q^-n``: its variance is finite only where a path scatters again with
+    probability below ``q``, and the standard error from the samples is trustworthy only
+    well inside that. So a thin medium (optical radius 0.5) and ``q = 0.8``, 256 spp: over
+    24 seeds ``|z| < 3`` (the former ``sigma_t = 3``, ``q = 0.5``, whose variance is
+    infinite, failed about 1 seed in 4 at any spp, with these streams and the former)."""
     from dataclasses import replace as dc_replace
 
     from drpt.render.renderer import Renderer
 
-    r = _renderer(tmp_path, sigma="3, 3, 3", rr=1)
-    res = Renderer(r.scene_model, dc_replace(r.opt, path=dc_replace(r.opt.path, rr_prob=0.5), spp=64)).render()
+    r = _renderer(tmp_path, sigma="0.5, 0.5, 0.5", rr=1)
+    res = Renderer(r.scene_model, dc_replace(r.opt, path=dc_replace(r.opt.path, rr_prob=0.8), spp=256)).render()
     img = np.asarray(res.image)
     se = math.sqrt(float(np.sum(res.variance))) / img.size
     assert np.isfinite(img).all() and abs(float(img.mean()) - 1.0) < 4.0 * se, (img.mean(), se)
-    assert img.std() > 0.01  # roulette did play
+    assert img.std() > 0.003  # roulette did play (without it every pixel is 1)
 
 
 def test_no_media_scene_has_parameters_drpt_calls_unread():
