@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .meshes import folder_cli
+
 SCENE = """\
 # caustic (drpt.tools.scenegen.caustic): a glass sphere on a diffuse floor under a small light.
 PerspectiveCamera { center 0 1.2 4 direction 0 -0.3 -1 up 0 1 0 angle 40 }
@@ -50,8 +52,6 @@ def main(out: Path) -> list[Path]:
 
 def cli(argv=None) -> None:
     """``python -m drpt.tools.scenegen.caustic OUT_DIR``."""
-    from .meshes import folder_cli
-
     folder_cli(main, __doc__.splitlines()[0], argv)
 
 
