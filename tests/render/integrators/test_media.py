@@ -512,7 +512,9 @@ def test_a_camera_in_fog_renders_like_mitsuba(tmp_path):
 def test_blendphase_renders_like_mitsuba(tmp_path):
     """Mitsuba's blendphase (0.3 of a backward HG lobe, g -0.7, and an isotropic one) in the
     furnace sphere lit from behind: drpt against 8 Mitsuba runs, 8x8 blocks, max |z| < 5;
-    negative control: the weights swapped, 0.7 of the HG lobe (max |z| > 6; measured 7.0)."""
+    negative control: the weights swapped, 0.7 of the HG lobe, fails the same bound (max |z|
+    >= 5; measured 7.0; at 512 drpt spp it read 5.4, hence 2048: most of the noise is then
+    the reference's)."""
     import mitsuba as mi
 
     from drpt.backend import mitsuba_variant
@@ -543,10 +545,11 @@ def test_blendphase_renders_like_mitsuba(tmp_path):
             sc = load_scene(path, defines={**defines, "w": w})
         assert sc.media[0].phase == "blend"
         res = Renderer(sc, replace(with_scene_settings(RenderOptions(progress=False, seed=4), sc)[0],
-                                   spp=512)).render()
+                                   spp=2048)).render()
         worst[w] = float(np.abs(block_z(np.asarray(res.image, np.float64), res.variance, ref, ref_var)).max())
+    print(worst)
     assert worst["0.7"] < 5.0, worst
-    assert worst["0.3"] > 6.0, worst
+    assert worst["0.3"] >= 5.0, worst
 
 
 def test_a_too_dense_grid_is_refused(tmp_path):
