@@ -11,7 +11,8 @@ integrators' queries over wide Dr.Jit arrays:
 * geometry: :meth:`intersect` (closest hit and its interaction, from
   :meth:`intersect_preliminary` and :meth:`interaction`), :meth:`occluded`,
   :meth:`spawn` (the origin of a ray leaving a surface, moved off it by the
-  hit's own rounding-error bound, :mod:`drpt.render.spawn`);
+  hit's own rounding-error bound, :mod:`drpt.render.spawn`), :meth:`skip_area_emitters`
+  (a ray continued past the emissive surfaces it hits: ``hide_emitters``' camera rays);
 * materials: :meth:`emitted`, :meth:`eval_bsdf`, :meth:`sample_bsdf`,
   :meth:`is_delta`, :meth:`diffuse_color`;
 * emitters: :meth:`sample_emitter` (one emitter of any family, chosen by the
