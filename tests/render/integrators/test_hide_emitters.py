@@ -5,7 +5,8 @@
 every emitter along it, so the camera sees what lies behind an area light.
 
 * The skip itself: rays through a sphere light (two emitter hits) reach the wall behind it,
-  ``t`` measured from the ray's origin; lanes not asked to skip, or on no emitter, keep their hit.
+  ``t`` measured from the ray's origin; lanes not asked to skip, or on no emitter, keep their hit;
+  the number of steps is bounded (a lane still on an emitter at the bound keeps that hit).
 * ``tests/data/xml/hide_emitters.xml`` (a rectangle light and a sphere light in front of a
   wall, a box of fog in front of the sphere) renders like Mitsuba on the same file with the
   path integrator (megakernel and wavefront) and volpath (megakernel and wavefront): 4x4 block
@@ -84,3 +85,20 @@ def test_renders_like_mitsuba(monkeypatch, integrator, mode):
     opts = replace(with_scene_settings(RenderOptions(progress=False, seed=3), scene)[0], spp=SPP, mode=mode)
     bad = Renderer(scene, opts).render()
     assert np.abs(block_z(bad.image, bad.variance, ref, var, block=4)).max() > 8.0
+
+
+def test_skip_is_bounded(monkeypatch):
+    """At most ``MAX_EMITTER_SKIPS`` steps: with a bound of 1, a ray through the sphere light
+    stops where it leaves the sphere (its second emitter hit) and keeps that hit."""
+    import drjit as dr
+    from drjit.auto import Array3f, Bool
+
+    import drpt.render.scene as scene_mod
+
+    monkeypatch.setattr(scene_mod, "MAX_EMITTER_SKIPS", 1)
+    scene = _device_scene()
+    o = Array3f([0.5], [0.6], [3.0])
+    d = Array3f(0.0, 0.0, -1.0) + dr.zeros(Array3f, 1)
+    out = scene.skip_area_emitters(o, d, scene.intersect(o, d, Bool(True)), Bool(True))
+    assert np.allclose(out.t.numpy(), [3.3354], atol=1e-3)
+    assert list(scene.materials.is_emissive(out, Bool(True)).numpy()) == [True]
