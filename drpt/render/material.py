@@ -149,6 +149,13 @@ class MaterialTable:
         self.kind = UInt32(lay.kind)
         self.emission = _vec(lay.emission)
         self.has_emission = lay.has_emission
+        # per material: whether it emits (Mitsuba's shape with an area emitter), for
+        # hide_emitters' skipping of area emitters along camera rays
+        if lay.has_emission:
+            glows = lay.emission.max(axis=1) > 0.0
+            if lay.emission_texture is not None:
+                glows = glows | (lay.emission_texture != NONE)
+            self._emissive = Bool(glows)
         # sidedness, per kind: True / False when uniform, else a per-row array
         self._two = {k: _flag(v) for k, v in lay.two_sided.items()}
         # slots (only when some material has several components)
@@ -260,6 +267,14 @@ class MaterialTable:
             le = self.textured_emission(si.material, si.uv, le, si.valid)
         front = si.valid & (dr.dot(si.ns, si.wi) > 0.0)
         return dr.select(front, le, 0.0)
+
+    def is_emissive(self, si: Interaction, active: Bool) -> Bool:
+        """Lanes of ``active`` whose hit's material emits, on either face (Mitsuba's
+        ``shape->emitter() != nullptr``); only traced for scenes with emission."""
+        if not self.has_emission:
+            return Bool(False)
+        hit = active & si.valid
+        return hit & dr.gather(Bool, self._emissive, si.material, hit)
 
     def textured_emission(self, material: UInt32, uv: Array2f, le: Array3f, active: Bool) -> Array3f:
         """``le`` where the material's emission is constant, its texture at OBJ ``uv`` where

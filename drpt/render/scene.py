@@ -11,7 +11,8 @@ integrators' queries over wide Dr.Jit arrays:
 * geometry: :meth:`intersect` (closest hit and its interaction, from
   :meth:`intersect_preliminary` and :meth:`interaction`), :meth:`occluded`,
   :meth:`spawn` (the origin of a ray leaving a surface, moved off it by the
-  hit's own rounding-error bound, :mod:`drpt.render.spawn`);
+  hit's own rounding-error bound, :mod:`drpt.render.spawn`), :meth:`skip_area_emitters`
+  (a ray continued past the emissive surfaces it hits: ``hide_emitters``' camera rays);
 * materials: :meth:`emitted`, :meth:`eval_bsdf`, :meth:`sample_bsdf`,
   :meth:`is_delta`, :meth:`diffuse_color`;
 * emitters: :meth:`sample_emitter` (one emitter of any family, chosen by the
@@ -85,6 +86,9 @@ from .surface import Interaction, SurfaceData
 #: each family built joins the light selection after the area, delta and sky families
 #: (docs/architecture.md, "Adding an emitter")
 EMITTER_FAMILIES: list = []
+
+#: the most emissive surfaces :meth:`DeviceScene.skip_area_emitters` passes along one ray
+MAX_EMITTER_SKIPS = 16
 
 EMPTY_SCENE_WARNING = ("the scene has no primitives (no triangles, spheres or planes): "
                        "the image shows only its background or sky")
@@ -253,6 +257,29 @@ class DeviceScene:
     def spawn(self, si: Interaction, d: Array3f) -> Array3f:
         """The origin of a ray leaving ``si`` toward ``d`` without hitting it again."""
         return spawn_origin(si.p, si.ng, si.p_error, d)
+
+    def skip_area_emitters(self, o: Array3f, d: Array3f, si: Interaction, active: Bool,
+                           coherent: Bool | bool = False) -> Interaction:
+        """``si``, the closest hit of rays ``(o, d)``, where it is on an emissive surface
+        (``active`` lanes) replaced by the first hit past all emissive surfaces along the
+        ray (a miss if none): Mitsuba's ``skip_area_emitters``, which ``hide_emitters`` runs
+        on camera rays so that the camera sees what lies behind an area light. Each step
+        spawns past the emitter it hit and intersects again, at most
+        :data:`MAX_EMITTER_SKIPS` times (a lane still on an emitter then keeps that hit).
+        The result's ``t`` is measured from ``o``."""
+        if not self.materials.has_emission:
+            return si  # (no emissive surface in the scene: nothing traced)
+        skip = self.materials.is_emissive(si, active)
+
+        def body(cur, live, k):
+            nxt = self.intersect(self.spawn(cur, d), d, live, coherent=coherent)
+            cur = dr.select(live, nxt, cur)
+            return cur, self.materials.is_emissive(nxt, live) & (k + 1 < MAX_EMITTER_SKIPS), k + 1
+
+        out, _, _ = dr.while_loop((si, Bool(skip), dr.zeros(UInt32, dr.width(skip))),
+                                  lambda cur, live, k: live, body)
+        out.t = dr.select(skip & out.valid, dr.norm(out.p - o), out.t)
+        return dr.select(skip, out, si)
 
     # ------------------------------------------------------------ materials
     def emitted(self, si: Interaction) -> Array3f:

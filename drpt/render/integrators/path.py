@@ -12,7 +12,9 @@ lights are all handled without fireflies from the "wrong" strategy.
 Depth follows Mitsuba's ``path`` integrator: ``max_depth = 1`` shows only
 directly visible emitters, ``2`` adds direct lighting, ``-1`` is unbounded
 (Russian roulette ends paths); ``hide_emitters`` (Mitsuba's) drops what the
-camera ray itself sees of emitters and the sky. Russian roulette starts once ``depth >=
+camera ray itself sees of emitters and the sky, and continues it past the area
+emitters it hits (:func:`skip_hidden_emitters`): the camera sees what lies behind
+an area light. Russian roulette starts once ``depth >=
 rr_depth``: by default a path continues with probability
 ``min(max(throughput), 0.95)``; with ``rr_prob`` set (the seed's
 ``-RR_cutdown``) it continues with that fixed probability. Surviving paths are
@@ -163,6 +165,7 @@ class PathIntegrator:
         opt = self.opt
         nee = scene.has_emitters and scene.has_smooth_bsdfs
         si = scene.intersect(s.o, s.d, s.active, coherent=s.depth == 0)  # (camera rays: coherent)
+        si = skip_hidden_emitters(scene, opt, si, s, s.active)
 
         # ---- emitter hit by the previous ray (or seen by the camera)
         L = add_emission(scene, opt, si, s, s.L, s.active)
@@ -184,6 +187,19 @@ class PathIntegrator:
         return PathState(o=scene.spawn(si, wo), d=Array3f(wo), L=L, beta=beta, eta=eta,
                          depth=depth, prev_pdf=Float(bs.pdf), prev_delta=Bool(bs.delta),
                          active=active)
+
+
+def skip_hidden_emitters(scene: DeviceScene, opt: PathOptions, si, s, active: Bool | None):
+    """``si`` with ``hide_emitters``' camera rays (depth 0, ``active`` lanes; ``None``:
+    every lane) continued past the area emitters they hit
+    (:meth:`~drpt.render.scene.DeviceScene.skip_area_emitters`), as Mitsuba's ``path``
+    does: the camera sees what lies behind an area light. Traced only with
+    ``hide_emitters`` in a scene with emissive surfaces. Shared by the megakernel and the
+    wavefront integrator."""
+    if not (opt.hide_emitters and scene.materials.has_emission):
+        return si
+    camera = s.depth == 0 if active is None else active & (s.depth == 0)
+    return scene.skip_area_emitters(s.o, s.d, si, camera, coherent=True)
 
 
 def add_emission(scene: DeviceScene, opt: PathOptions, si, s, L: Array3f, active: Bool | None) -> Array3f:

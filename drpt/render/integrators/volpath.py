@@ -469,6 +469,7 @@ class VolPathIntegrator(PathIntegrator):
         draw = self.flight_draw(s, active, rng)
         si = scene.intersect(s.o, s.d, active, reach(draw[2]))
         fl = self.free_flight(s, si, active, beta, rng, draw)
+        si = self.skip_emitters(scene, s, si, fl)
         L = s.L + self.emitted(scene, s, si, fl)
         on_surface = fl.surf & si.valid
         phase = self.phase(s, fl)
@@ -540,6 +541,17 @@ class VolPathIntegrator(PathIntegrator):
         surf = active & ~scatter & ~het_null
         return Flight(beta=beta, depth=depth, scatter=scatter, scatter_live=scatter_live, het_null=het_null,
                       surf=surf, p_med=p_med, in_medium=in_medium, g=g)
+
+    def skip_emitters(self, scene: DeviceScene, s: VolPathState, si, fl: Flight):
+        """``si`` with ``hide_emitters``' camera rays that reach an area emitter (``fl.surf``
+        lanes at depth 0) continued past all area emitters along them
+        (:meth:`~drpt.render.scene.DeviceScene.skip_area_emitters`), as Mitsuba's
+        ``volpath`` does after free-flight sampling (the segment past the emitter adds no
+        medium interaction). Traced only with ``hide_emitters`` in a scene with emissive
+        surfaces."""
+        if not (self.opt.hide_emitters and scene.materials.has_emission):
+            return si
+        return scene.skip_area_emitters(s.o, s.d, si, fl.surf & (fl.depth == 0), coherent=True)
 
     def emitted(self, scene: DeviceScene, s: VolPathState, si, fl: Flight) -> Array3f:
         """What the ray's throughput brings back from the emitter or sky it reaches

@@ -120,6 +120,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         rng = unpack(self._rng_kind, rng_a, rng_b)
         vs = _vol_state(s, active)
         fl = integ.free_flight(vs, si, active, beta, rng, draw)
+        si = integ.skip_emitters(scene, vs, si, fl)
         dr.scatter_add(L, integ.emitted(scene, vs, si, fl), s.lane)
         on_surface = fl.surf & si.valid
         s = VolWaveState(**{**{f.name: getattr(s, f.name) for f in fields(s)},

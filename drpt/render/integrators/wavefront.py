@@ -86,7 +86,7 @@ from ..sampler import light_sample, next_2d, pack, unpack
 from ..scene import DeviceScene
 from ..surface import Interaction
 from .common import DirectLight, ShadowQuery
-from .path import PathIntegrator, PathState, add_emission, continue_path
+from .path import PathIntegrator, PathState, add_emission, continue_path, skip_hidden_emitters
 
 MORTON_BITS = 6  # per axis
 KEY_BITS = 3 + 3 * MORTON_BITS
@@ -351,7 +351,7 @@ class WavefrontIntegrator:
         # ---- closest hit
         hit = scene.intersect_preliminary(s.o, s.d, dr.full(Bool, True, n), coherent=s.depth == 0)
         timer.done("closest hit", hit, lanes=n, rays=n)
-        si = scene.interaction(s.o, s.d, hit)
+        si = skip_hidden_emitters(scene, opt, scene.interaction(s.o, s.d, hit), s, None)
         timer.done("interaction", si, lanes=n)
 
         # ---- emission (the megakernel's own code)
