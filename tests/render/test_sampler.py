@@ -39,6 +39,7 @@ from drjit.auto import PCG32, Array2f, UInt32, UInt64
 from scipy.stats import chi2
 
 from drpt.render.sampler import LDSampler, ZSobolSampler, pcg_streams, sobol1_reversed
+from support.xml import sampler_scene
 
 
 def _sobol1_matrix(i: int) -> int:
@@ -235,14 +236,6 @@ def test_corpus_z_test_catches_a_sampler_that_reuses_a_dimension(monkeypatch):
     assert not t.passed, str(t)
 
 
-XML_SCENE = """<scene version="3.0.0">
-    <sensor type="perspective"><float name="fov" value="40"/>
-        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/>
-            <rfilter type="box"/></film>
-        SAMPLER</sensor>
-    <shape type="sphere"><bsdf type="diffuse"/></shape>
-    <emitter type="constant"/>
-</scene>"""
 
 
 @pytest.mark.parametrize("plugin", ["ldsampler", "stratified", "multijitter", "orthogonal", "independent"])
@@ -251,7 +244,7 @@ def test_the_xml_sampler_and_its_seed_are_read(tmp_path, plugin):
     from drpt.scene import load_scene
 
     p = tmp_path / "s.xml"
-    p.write_text(XML_SCENE.replace("SAMPLER", f'<sampler type="{plugin}"><integer name="sample_count" '
+    p.write_text(sampler_scene(f'<sampler type="{plugin}"><integer name="sample_count" '
                                    'value="16"/><integer name="seed" value="5"/>'
                                    '<boolean name="jitter" value="true"/></sampler>'
                                    if plugin != "independent" else
@@ -273,7 +266,7 @@ def test_the_command_line_sampler_and_seed_win_over_the_files(tmp_path):
     from drpt.scene import load_scene
 
     p = tmp_path / "s.xml"
-    p.write_text(XML_SCENE.replace("SAMPLER", '<sampler type="ldsampler"><integer name="seed" value="5"/></sampler>'))
+    p.write_text(sampler_scene('<sampler type="ldsampler"><integer name="seed" value="5"/></sampler>'))
     parser = argparse.ArgumentParser()
     add_render_flags(parser)
     scene = load_scene(p)

@@ -41,6 +41,7 @@ from scipy.stats import chi2
 
 from drpt.render import sampler as smp
 from drpt.render.sampler import Multijitter, Orthogonal, Stratified, permute, strata_sampler
+from support.xml import sampler_scene
 
 KINDS = ("stratified", "multijitter", "orthogonal")
 
@@ -229,14 +230,6 @@ def test_deterministic_for_a_seed_and_decorrelated_across_seeds(kind):
 
 
 # ------------------------------------------------------------------ reading and options
-XML_SCENE = """<scene version="3.0.0">
-    <sensor type="perspective"><float name="fov" value="40"/>
-        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/>
-            <rfilter type="box"/></film>
-        SAMPLER</sensor>
-    <shape type="sphere"><bsdf type="diffuse"/></shape>
-    <emitter type="constant"/>
-</scene>"""
 
 
 def test_the_xml_jitter_and_strength_are_read_and_the_command_line_wins(tmp_path):
@@ -247,7 +240,7 @@ def test_the_xml_jitter_and_strength_are_read_and_the_command_line_wins(tmp_path
     from drpt.scene import load_scene
 
     p = tmp_path / "s.xml"
-    p.write_text(XML_SCENE.replace("SAMPLER", '<sampler type="orthogonal"><integer name="sample_count" '
+    p.write_text(sampler_scene('<sampler type="orthogonal"><integer name="sample_count" '
                                    'value="9"/><boolean name="jitter" value="false"/>'
                                    '<integer name="strength" value="3"/></sampler>'))
     opts, _ = with_scene_settings(RenderOptions(progress=False), load_scene(p))
@@ -265,7 +258,7 @@ def test_a_bad_strength_is_one_located_error(tmp_path, strength):
     from drpt.scene import load_scene
 
     p = tmp_path / "s.xml"
-    p.write_text(XML_SCENE.replace("SAMPLER", '<sampler type="orthogonal">'
+    p.write_text(sampler_scene('<sampler type="orthogonal">'
                                    f'<integer name="strength" value="{strength}"/></sampler>'))
     with pytest.raises(SceneError, match="strength must be at least 2") as e:
         load_scene(p)

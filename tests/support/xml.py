@@ -68,3 +68,19 @@ def mean_z(r, ref, var):
     n = ref.shape[0] * ref.shape[1]
     se = np.sqrt(r.variance.mean((0, 1)) / n + var.mean((0, 1)) / n)
     return (r.image.astype(np.float64).mean((0, 1)) - ref.mean((0, 1))) / se
+
+
+SAMPLER_SCENE = """<scene version="3.0.0">
+    <sensor type="perspective"><float name="fov" value="40"/>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/>
+            <rfilter type="box"/></film>
+        SAMPLER</sensor>
+    <shape type="sphere"><bsdf type="diffuse"/></shape>
+    <emitter type="constant"/>
+</scene>"""
+
+
+def sampler_scene(sampler: str) -> str:
+    """An 8x6 XML scene (a diffuse sphere under a constant sky) whose sensor holds ``sampler``
+    (the ``<sampler>`` element's text), for the tests that read a sampler from XML."""
+    return SAMPLER_SCENE.replace("SAMPLER", sampler)
