@@ -79,11 +79,12 @@ def _grid(a: np.ndarray, b: np.ndarray, spec: str) -> None:
         for c in range(cols):
             cell = np.zeros((height, width), bool)
             cell[r * height // rows:(r + 1) * height // rows, c * width // cols:(c + 1) * width // cols] = True
-            vb = b.var(0, ddof=1)[cell]
+            ac, bc = a[:, cell], b[:, cell]
+            vb = bc.var(0, ddof=1)
             if vb.sum() <= 1e-4 * total:
                 continue  # a cell without noise: no ratio to read
-            print(f"    ({r}, {c}): {_ratio(a, b, cell):.3f} +- {_jackknife(a, b, cell):.3f}, "
-                  f"{vb.sum() / total:.1%}, mean {a[:, cell].mean() / b[:, cell].mean():.4f}")
+            print(f"    ({r}, {c}): {_ratio(ac, bc):.3f} +- {_jackknife(ac, bc):.3f}, "
+                  f"{vb.sum() / total:.1%}, mean {ac.mean() / bc.mean():.4f}")
 
 
 def main(argv: list[str]) -> None:
