@@ -1,6 +1,7 @@
 """Per-pixel variance at equal spp, drpt's path tracer against Mitsuba's (not a test).
 
     PYTHONPATH=. .venv/bin/python benchmarks/variance_vs_mitsuba.py SCENE [FILTER SIZE SPP ROUNDS [MAX_DEPTH]]
+        [--scale K] [--grid COLSxROWS] [--light-sampler NAME]
 
 Renders ``SCENE`` (drpt's format: at ``SIZE`` x ``SIZE`` with ``--filter FILTER``, default
 gaussian 128; a Mitsuba XML file: its own film, filter and integrator) with ``SPP`` samples
@@ -19,6 +20,13 @@ one process, and prints:
 ``MAX_DEPTH`` (drpt's format only) sets both renderers' ``max_depth`` (1: the emitters the
 camera sees, 2: direct light). ``filter_efficiency.py`` compares the filters' ways and
 times; this compares the estimators' noise.
+
+Options (anywhere on the line): ``--scale K`` renders a Mitsuba XML file's film ``K`` times
+its authored size (both renderers; ``equal_time_vs_mitsuba.py`` scales the corpus films to
+192 pixels); ``--grid COLSxROWS`` also prints the ratio, its jackknife error and the share of
+Mitsuba's variance in each cell of a ``COLS`` x ``ROWS`` grid over the image (the corpus's
+``bsdf_spheres`` grid is ``5x3``: one BSDF a cell), to find the region that holds an excess;
+``--light-sampler NAME`` sets drpt's (default: drpt's default).
 """
 
 from __future__ import annotations
@@ -37,6 +45,48 @@ def _ratio(a: np.ndarray, b: np.ndarray, mask=None) -> float:
     return float(va.mean() / vb.mean())
 
 
+def _jackknife(a: np.ndarray, b: np.ndarray, mask=None) -> float:
+    """The leave-one-round-out standard error of ``_ratio``."""
+    rounds = a.shape[0]
+    keep = np.ones(rounds, bool)
+    jack = []
+    for k in range(rounds):
+        keep[k] = False
+        jack.append(_ratio(a[keep], b[keep], mask))
+        keep[k] = True
+    return float(np.sqrt((rounds - 1) / rounds * np.sum((np.array(jack) - np.mean(jack)) ** 2)))
+
+
+def _options(argv: list[str]) -> tuple[list[str], dict]:
+    """The positional arguments, and the ``--name value`` options."""
+    pos, opts = [], {}
+    it = iter(argv)
+    for arg in it:
+        if arg in ("--scale", "--grid", "--light-sampler"):
+            opts[arg[2:]] = next(it)
+        else:
+            pos.append(arg)
+    return pos, opts
+
+
+def _grid(a: np.ndarray, b: np.ndarray, spec: str) -> None:
+    cols, rows = (int(x) for x in spec.lower().split("x"))
+    height, width = a.shape[1:3]
+    total = b.var(0, ddof=1).sum()
+    print(f"  per cell of a {cols}x{rows} grid (row, column from the top left): ratio +- error, "
+          "share of Mitsuba's variance, mean image ratio")
+    for r in range(rows):
+        for c in range(cols):
+            cell = np.zeros((height, width), bool)
+            cell[r * height // rows:(r + 1) * height // rows, c * width // cols:(c + 1) * width // cols] = True
+            ac, bc = a[:, cell], b[:, cell]
+            vb = bc.var(0, ddof=1)
+            if vb.sum() <= 1e-4 * total:
+                continue  # a cell without noise: no ratio to read
+            print(f"    ({r}, {c}): {_ratio(ac, bc):.3f} +- {_jackknife(ac, bc):.3f}, "
+                  f"{vb.sum() / total:.1%}, mean {ac.mean() / bc.mean():.4f}")
+
+
 def main(argv: list[str]) -> None:
     import mitsuba as mi
 
@@ -47,6 +97,7 @@ def main(argv: list[str]) -> None:
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
+    argv, extra = _options(argv)
     path = Path(argv[0])
     flt = argv[1] if len(argv) > 1 else "gaussian"
     size = int(argv[2]) if len(argv) > 2 else 128
@@ -58,15 +109,25 @@ def main(argv: list[str]) -> None:
     if xml:
         scene = load_scene(path, defines={"spp": str(spp)})
         opt, scene = with_scene_settings(RenderOptions(progress=False), scene)
+        k = int(extra.get("scale", 1))
+        if k != 1:
+            opt, scene = with_scene_settings(RenderOptions(width=k * opt.width, height=k * opt.height,
+                                                           progress=False), scene, given=frozenset({"size"}))
         opt = replace(opt, spp=spp)
     else:
         scene = load_scene(path)
         opt = RenderOptions(width=size, height=size, spp=spp, filter=flt, progress=False,
                             path=PathOptions(max_depth=depth))
+    if "light-sampler" in extra:
+        opt = replace(opt, light_sampler=extra["light-sampler"])
     renderer = Renderer(scene, opt)
     set_mitsuba_variant()
+    integrator = None  # Mitsuba's, where the scaled film's file replaces it
     with llvm_tuning.dr_default():
-        if xml:
+        if xml and int(extra.get("scale", 1)) != 1:
+            from drpt.tools.xmlref import MitsubaXML
+            ms, integrator = MitsubaXML.for_scene(scene, opt).load()
+        elif xml:
             ms = mi.load_file(str(path), spp=str(spp))
         else:
             ms = mi.load_dict(to_mitsuba_dict(scene, opt.width, opt.height, spp, max_depth=depth,
@@ -75,16 +136,11 @@ def main(argv: list[str]) -> None:
     for k in range(rounds):
         ours.append(renderer.derive(replace(renderer.opt, seed=k)).render().image.astype(np.float64))
         with llvm_tuning.dr_default():
-            theirs.append(np.asarray(mi.render(ms, spp=spp, seed=k), np.float64)[..., :3])
+            theirs.append(np.asarray(mi.render(ms, spp=spp, seed=k, integrator=integrator),
+                                     np.float64)[..., :3])
     a, b = np.stack(ours), np.stack(theirs)
     ratio = _ratio(a, b)
-    keep = np.ones(rounds, bool)
-    jack = []
-    for k in range(rounds):  # leave one round out
-        keep[k] = False
-        jack.append(_ratio(a[keep], b[keep]))
-        keep[k] = True
-    err = float(np.sqrt((rounds - 1) / rounds * np.sum((np.array(jack) - np.mean(jack)) ** 2)))
+    err = _jackknife(a, b)
     both = (a.var(0, ddof=1) + b.var(0, ddof=1)).sum(-1)
     top = both >= np.quantile(both, 0.99)
     share = float(both[top].sum() / both.sum())
@@ -93,6 +149,8 @@ def main(argv: list[str]) -> None:
     print(f"  variance drpt / Mitsuba {ratio:.3f} +- {err:.3f}; the top 1% of pixels hold "
           f"{share:.0%} of the variance, outside them {_ratio(a, b, ~top):.3f}; "
           f"mean image drpt / Mitsuba {a.mean() / b.mean():.4f}")
+    if "grid" in extra:
+        _grid(a, b, extra["grid"])
 
 
 if __name__ == "__main__":

@@ -206,7 +206,8 @@ def test_wavefront_is_the_megakernel_s_image_exactly_as_far_as_the_docs_say():
 OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "--sizee", "--sp",
                   "--threshold", "--oracle",  # (benchmarks/adaptive_vs_uniform.py)
                   "--only", "--skip", "--min-size", "--max-samples", "--rounds",
-                  "--no-corpus"}  # (benchmarks/equal_time_vs_mitsuba.py)
+                  "--no-corpus",  # (benchmarks/equal_time_vs_mitsuba.py)
+                  "--scale", "--grid"}  # (benchmarks/variance_vs_mitsuba.py)
 
 
 def test_every_flag_the_docs_name_exists(parsers):

@@ -1,0 +1,45 @@
+"""benchmarks/variance_vs_mitsuba.py: its option parsing, the jackknife error and the
+per-cell breakdown (on synthetic rounds: no render)."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+
+from support import REPO
+
+_spec = importlib.util.spec_from_file_location("variance_bench", REPO / "benchmarks" / "variance_vs_mitsuba.py")
+bench = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(bench)
+
+
+def test_options_anywhere_on_the_line():
+    pos, opts = bench._options(["s.xml", "--grid", "5x3", "box", "0", "--scale", "4", "27"])
+    assert pos == ["s.xml", "box", "0", "27"]
+    assert opts == {"grid": "5x3", "scale": "4"}
+
+
+def _rounds(rng, scale):
+    """16 rounds of an 8x10 image; column block 2 (of 5) has ``scale`` times the noise."""
+    x = rng.normal(size=(16, 8, 10, 3))
+    x[:, :, 4:6] *= scale
+    return x
+
+
+def test_jackknife_error_is_the_ratios_spread():
+    rng = np.random.default_rng(3)
+    a, b = _rounds(rng, 1.0), _rounds(rng, 1.0)
+    r, e = bench._ratio(a, b), bench._jackknife(a, b)
+    assert 0.0 < e < 0.2 and abs(r - 1.0) < 4 * e
+    assert bench._jackknife(a, a) < 1e-12  # no spread where the ratio is 1 in every subset
+
+
+def test_grid_names_the_noisy_cell(capsys):
+    rng = np.random.default_rng(4)
+    bench._grid(_rounds(rng, 3.0), _rounds(rng, 1.0), "5x2")
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.strip().startswith("(")]
+    ratios = {ln.split(":")[0].strip(): float(ln.split(":")[1].split("+-")[0]) for ln in lines}
+    assert len(ratios) == 10
+    assert ratios["(0, 2)"] > 6 and ratios["(1, 2)"] > 6  # 9x the variance
+    assert all(0.5 < v < 2.0 for k, v in ratios.items() if not k.endswith("2)"))
