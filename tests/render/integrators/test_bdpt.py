@@ -468,16 +468,16 @@ class _Image:
 
 @pytest.fixture(scope="module")
 def bounce_references(scenes):
-    """The Cornell box's paths of exactly 1 and exactly 2 bounces (the path tracer without
-    what the camera sees directly: depth 2, and depth 3 minus depth 2, other seeds)."""
+    """The Cornell box's paths of exactly 1 and exactly 2 bounces: the path tracer's depth 2
+    minus depth 1 (what the camera sees directly), depth 3 minus depth 2, each render its own
+    seed. (Not ``hide_emitters``: as in Mitsuba it lets camera rays see past the light.)"""
     cornell = scenes["cornell"]
 
     def path(depth, seed):
-        r = _render(cornell, "path", 1024, depth, seed=seed)
-        return r.derive(replace(r.opt, path=replace(r.opt.path, hide_emitters=True))).render()
+        return _render(cornell, "path", 1024, depth, seed=seed).render()
 
-    one, two, one_b = path(2, 11), path(3, 12), path(2, 13)
-    return {1: _Image(one.image, one.variance),
+    zero, one, two, one_b = path(1, 14), path(2, 11), path(3, 12), path(2, 13)
+    return {1: _Image(one.image - zero.image, one.variance + zero.variance),
             2: _Image(two.image - one_b.image, two.variance + one_b.variance)}
 
 
