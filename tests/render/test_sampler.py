@@ -39,6 +39,7 @@ from drjit.auto import PCG32, Array2f, UInt32, UInt64
 from scipy.stats import chi2
 
 from drpt.render.sampler import LDSampler, ZSobolSampler, pcg_streams, sobol1_reversed
+from support.corpus import check_scene
 from support.xml import sampler_scene
 
 
@@ -204,25 +205,12 @@ CORPUS_LD = ("bsdf_spheres/test_arealight_path.xml", "bsdf_spheres/test_textured
              "various_emitters/test_various_emitters_ptracer.xml")
 
 
-def _corpus_ld(rel: str, spp: int, sampler: str = "ldsampler"):
-    from drpt.options import RenderOptions, with_scene_settings
-    from drpt.render.renderer import Renderer
-    from drpt.scene import load_scene
-    from support.corpus import _read, corpus_scene, reference_files, z_test
-
-    path = corpus_scene(rel)
-    ref, var = reference_files(path)
-    scene = load_scene(path, defines={"spp": str(spp)})
-    opts = replace(with_scene_settings(RenderOptions(progress=False), scene)[0], spp=spp, sampler=sampler)
-    return z_test(Renderer(scene, opts).render().image, spp, _read(ref), _read(var))
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("rel", CORPUS_LD)
 def test_corpus_scenes_pass_with_the_ldsampler(rel):
     """Mitsuba's render-test z-test (:mod:`support.corpus`) of corpus scenes rendered with the
     low-discrepancy sampler at 256 spp (skips without ../shared)."""
-    t = _corpus_ld(rel, 256)
+    t = check_scene(rel, 256, sampler="ldsampler")
     assert t.passed, str(t)
 
 
@@ -232,7 +220,7 @@ def test_corpus_z_test_catches_a_sampler_that_reuses_a_dimension(monkeypatch):
     from drpt.render import renderer
 
     monkeypatch.setattr(renderer, "LDSampler", _DiagonalSampler)
-    t = _corpus_ld(CORPUS_LD[0], 256)
+    t = check_scene(CORPUS_LD[0], 256, sampler="ldsampler")
     assert not t.passed, str(t)
 
 

@@ -41,6 +41,7 @@ from scipy.stats import chi2
 
 from drpt.render import sampler as smp
 from drpt.render.sampler import Multijitter, Orthogonal, Stratified, permute, strata_sampler
+from support.corpus import check_scene
 from support.xml import sampler_scene
 
 KINDS = ("stratified", "multijitter", "orthogonal")
@@ -328,33 +329,19 @@ def test_renders_agree_with_mitsubas_same_sampler(name, kind, control, monkeypat
 CORPUS = ("bsdf_spheres/test_arealight_path.xml", "spot_light/test_spot_direct.xml")
 
 
-def _corpus(rel: str, kind: str):
-    from drpt.options import RenderOptions, with_scene_settings
-    from drpt.render.renderer import Renderer
-    from drpt.scene import load_scene
-    from support.corpus import _read, corpus_scene, reference_files, z_test
-
-    spp = 289 if kind == "orthogonal" else 256
-    path = corpus_scene(rel)
-    ref, var = reference_files(path)
-    scene = load_scene(path, defines={"spp": str(spp)})
-    opts = replace(with_scene_settings(RenderOptions(progress=False), scene)[0], spp=spp, sampler=kind)
-    return z_test(Renderer(scene, opts).render().image, spp, _read(ref), _read(var))
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("rel,kind", [(CORPUS[0], k) for k in KINDS] + [(CORPUS[1], "multijitter")])
 def test_corpus_scenes_pass_with_the_strata_samplers(rel, kind):
     """Mitsuba's render-test z-test (:mod:`support.corpus`) of corpus scenes rendered with
     each sampler (skips without ../shared)."""
-    t = _corpus(rel, kind)
+    t = check_scene(rel, 289 if kind == "orthogonal" else 256, sampler=kind)
     assert t.passed, str(t)
 
 
 @pytest.mark.slow
 def test_corpus_z_test_catches_a_sampler_that_reuses_a_dimension(monkeypatch):
     _diagonal(monkeypatch)
-    t = _corpus(CORPUS[0], "stratified")
+    t = check_scene(CORPUS[0], 256, sampler="stratified")
     assert not t.passed, str(t)
 
 

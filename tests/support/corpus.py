@@ -84,22 +84,27 @@ def cases(scenes: dict[str, int], not_yet: dict[str, str], not_yet_spp: int) -> 
     return out
 
 
-def render_as_authored(scene_path: Path, spp: int, seed: int = 0, **defines):
-    """drpt's render of the corpus file at ``spp`` (RenderResult), the file's own settings."""
+def render_as_authored(scene_path: Path, spp: int, seed: int = 0, *, sampler: str | None = None,
+                       **defines):
+    """drpt's render of the corpus file at ``spp`` (RenderResult), the file's own settings
+    (``sampler``: another sampler than the file's)."""
     from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
     scene = load_scene(scene_path, defines={"spp": str(spp), **defines})
     opts = replace(with_scene_settings(RenderOptions(progress=False, seed=seed), scene)[0], spp=spp)
+    if sampler is not None:
+        opts = replace(opts, sampler=sampler)
     return Renderer(scene, opts).render()
 
 
-def check_scene(rel: str, spp: int, seed: int = 0, **defines) -> ZTest:
-    """Render corpus scene ``rel`` as authored and z-test it against its reference."""
+def check_scene(rel: str, spp: int, seed: int = 0, *, sampler: str | None = None, **defines) -> ZTest:
+    """Render corpus scene ``rel`` as authored (with ``sampler`` if given) and z-test it
+    against its reference."""
     path = corpus_scene(rel)
     ref, var = reference_files(path)
-    result = render_as_authored(path, spp, seed, **defines)
+    result = render_as_authored(path, spp, seed, sampler=sampler, **defines)
     return z_test(result.image, spp, _read(ref), _read(var))
 
 
