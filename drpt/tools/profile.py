@@ -340,18 +340,24 @@ class _LaneCounts(Instrument):
         self._count(self.shadows[-1], active)
 
 
-def _megakernel_counts(renderer) -> dict:
-    """Per-lane loop iterations and shadow rays of one megakernel render,
-    counted by an instrument on the scene (:class:`_LaneCounts`; not timed)."""
-    import numpy as np
-
+def _counted_render(renderer, counts):
+    """Render once with ``counts`` as the scene's instrument (detached afterwards, also on
+    an error); return ``counts``."""
     scene = renderer.scene
-    counts = _LaneCounts()
     scene.instrument = counts
     try:
         renderer.render()
     finally:
         scene.instrument = None
+    return counts
+
+
+def _megakernel_counts(renderer) -> dict:
+    """Per-lane loop iterations and shadow rays of one megakernel render,
+    counted by an instrument on the scene (:class:`_LaneCounts`; not timed)."""
+    import numpy as np
+
+    counts = _counted_render(renderer, _LaneCounts())
     iters = [c.numpy() for c in counts.iters]
     shadows = [c.numpy() for c in counts.shadows]
     w = _simd_width()
@@ -420,13 +426,7 @@ def _loop_occupancy(per_lane: list, w: int) -> dict:
 def _light_counts(renderer) -> dict:
     """Queries by kind of one light-tracing render, counted by an instrument on the
     scene (:class:`_KindCounts`; not timed), and its subpath loops' SIMD occupancy."""
-    scene = renderer.scene
-    counts = _KindCounts()
-    scene.instrument = counts
-    try:
-        renderer.render()
-    finally:
-        scene.instrument = None
+    counts = _counted_render(renderer, _KindCounts())
     per_kind: dict[str, list] = defaultdict(list)
     for p in counts.passes:
         for k, c in p.items():
