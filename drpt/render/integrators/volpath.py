@@ -31,7 +31,11 @@ Next-event estimation (one emitter chosen by the scene's light selection, as in 
 integrator: :meth:`~drpt.render.scene.DeviceScene.sample_emitter`) runs at surfaces and at
 scattering events alike (the BSDF or the phase function evaluated toward the emitter
 sample, power-heuristic MIS against sampling them, none for delta lights; one shadow ray
-per vertex). A constant background is not sampled: rays that escape see it, with MIS
+per vertex). Vertices whose shadow ray starts in a *blind* medium, one enclosed by closed
+surfaces that block shadow rays with every emitter outside their bounding boxes
+(:mod:`~drpt.render.integrators.enclosure`, decided from the scene when the kernel is
+traced), skip it: its transmittance would be 0. Where every medium is blind, medium events
+trace no next-event estimation at all. A constant background is not sampled: rays that escape see it, with MIS
 weight 1 (the path integrator's convention). The shadow ray passes ``null`` boundaries
 (factor 1) and ``thindielectric`` sheets (their transmission ``1 - 2R / (1 + R)``), changing
 medium at each transition; any other surface blocks it. (As in Mitsuba, the sky and
@@ -68,7 +72,7 @@ whose kernel does not change.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import drjit as dr
 import numpy as np
@@ -83,6 +87,7 @@ from ..bsdf.thindielectric import reflectance
 from ..scene import DeviceScene
 from ..warp import Frame
 from .common import SHADOW_SHRINK, power_heuristic, shadow_segment
+from .enclosure import blind_media
 from .path import PathIntegrator
 
 #: at most this many boundaries (null or thindielectric) a shadow ray passes; beyond, it is blocked
@@ -174,6 +179,12 @@ class MediumTable:
         self.thin_eta = Float(np.array(eta, np.float32))
         self.null_trans = _vec(trans)
         self.has_null = any(k != NULL_NONE for k in kind)
+        # media where next-event estimation cannot see a light (enclosure.blind_media)
+        blind = blind_media(scene)
+        self.has_blind = bool(blind)
+        self.all_blind = self.count > 0 and len(blind) == self.count
+        if self.has_blind:
+            self.blind = Bool(np.array([False] + [i in blind for i in range(self.count)], bool))
 
     def coefficients(self, medium: UInt32, active: Bool) -> tuple[Array3f, Array3f, Float]:
         """``(sigma_t, albedo, g)`` of the lanes' media (zeros in vacuum)."""
@@ -183,6 +194,11 @@ class MediumTable:
         al = dr.gather(Array3f, self.albedo, i, inside)
         g = dr.gather(Float, self.g, i, inside)
         return dr.select(inside, st, 0.0), al, g
+
+    def is_blind(self, medium: UInt32, active: Bool) -> Bool:
+        """Lanes whose medium is blind (:func:`~.enclosure.blind_media`: no shadow ray from it
+        reaches a light); only in scenes with such a medium."""
+        return dr.gather(Bool, self.blind, medium, active) & active
 
     def blend_lobe(self, medium: UInt32, active: Bool) -> tuple[Float, Float]:
         """``(g2, weight)`` of the lanes' blended phase functions (weight 0: one lobe)."""
@@ -592,8 +608,15 @@ class VolPathIntegrator(PathIntegrator):
         """Next-event estimation at the scattering vertex (surface or medium), before its
         shadow segment's transmittance: one emitter sample (three random numbers, drawn in
         scenes without emitters too), the BSDF or the phase function toward it, the power
-        heuristic. None in a scene without emitters."""
+        heuristic. None in a scene without emitters. Lanes whose shadow ray would start in a
+        blind medium (:func:`~.enclosure.blind_media`) get none; where every medium is blind,
+        the code for medium events is not traced (nor any, in a queue of medium events)."""
         opt, media = self.opt, self.media
+        if fl.medium and media.all_blind:  # (drawn below all the same: the same stream)
+            fl = replace(fl, medium=False) if fl.surface else None
+        if fl is None:
+            rng.next_float32(), rng.next_float32(), rng.next_float32()
+            return None
         if fl.surface:
             nee_ok = on_surface & (fl.depth + 1 < opt.max_depth) if opt.max_depth >= 0 else Bool(on_surface)
             if fl.medium:
@@ -618,6 +641,8 @@ class VolPathIntegrator(PathIntegrator):
         ok = nee_ok & es.valid & (dr.max(f) > 0.0)
         o = _either(fl, fl.scatter, lambda: fl.p_med, lambda: scene.spawn(si, es.wo))
         med = _either(fl, fl.scatter, lambda: s.medium, lambda: media.after(si, es.wo, s.medium, on_surface))
+        if media.has_blind:
+            ok = ok & ~media.is_blind(med, ok)
         d_sh, dist = shadow_segment(o, es)
         if es.dist is not None:  # the sky (and directional lights) 2 max(R, |p - c|) away
             sky = 2.0 * dr.maximum(self.sky_radius, dr.norm(vertex.p - Array3f(*self.sky_center)))
