@@ -25,7 +25,11 @@ delta tracking as Mitsuba's: a tentative collision at a distance sampled with th
 probability ``sigma_t(x) / majorant`` (the throughput times the albedo there), else a null
 collision and the ray goes on unchanged (a loop iteration that is not a scattering event).
 Shadow rays use ratio tracking: ``1 - sigma_t(x) / majorant`` at each tentative collision, one
-random number each. Scenes without heterogeneous media trace none of this.
+random number each. Scenes without heterogeneous media trace none of this. Where every homogeneous medium's
+extinction is gray (the same in R, G and B: ``MediumTable.gray``), the channel pick and the
+weights are left out: the sampled distance is the same for every channel, the transmittance
+cancels against its density, and the weight is the albedo at a scattering event, 1 at a surface
+(``u_ch`` is drawn all the same).
 
 Next-event estimation (one emitter chosen by the scene's light selection, as in the path
 integrator: :meth:`~drpt.render.scene.DeviceScene.sample_emitter`) runs at surfaces and at
@@ -179,6 +183,10 @@ class MediumTable:
         self.thin_eta = Float(np.array(eta, np.float32))
         self.null_trans = _vec(trans)
         self.has_null = any(k != NULL_NONE for k in kind)
+        # every homogeneous extinction the same in R, G and B (a heterogeneous one is a single
+        # channel): one channel's free flight samples all three, no spectral MIS
+        self.gray = all(m.extinction[0] == m.extinction[1] == m.extinction[2]
+                        for m in media if m.is_homogeneous)
         # media where next-event estimation cannot see a light (enclosure.blind_media)
         blind = blind_media(scene)
         self.has_blind = bool(blind)
@@ -518,6 +526,8 @@ class VolPathIntegrator(PathIntegrator):
         u_ch, u_t = rng.next_float32(), rng.next_float32()
         in_medium = active & (s.medium > 0)
         sigma_t, _, _ = self.media.coefficients(s.medium, in_medium)
+        if self.media.gray:  # (u_ch drawn all the same: the same stream)
+            return u_ch, u_t, -dr.log(1.0 - u_t) / sigma_t.x
         ch = dr.minimum(UInt32(u_ch * 3.0), 2)
         m = dr.select(ch == 0, sigma_t.x, dr.select(ch == 1, sigma_t.y, sigma_t.z))
         return u_ch, u_t, -dr.log(1.0 - u_t) / m  # inf where m = 0
@@ -533,13 +543,16 @@ class VolPathIntegrator(PathIntegrator):
         sigma_t, albedo, g = media.coefficients(s.medium, in_medium)
         t_surf = dr.select(si.valid, si.t, dr.inf)
         scatter = in_medium & (t < t_surf)
-        dist = dr.select(scatter, t, t_surf)
-        tr = _transmittance(sigma_t, dist)
-        pdf = dr.select(scatter, tr * sigma_t, tr)
-        mean_pdf = (pdf.x + pdf.y + pdf.z) * (1.0 / 3.0)
-        ratio = dr.select(mean_pdf > 0.0, tr / mean_pdf, 0.0)
-        beta = dr.select(in_medium, beta * ratio, beta)
-        beta = dr.select(scatter, beta * sigma_t * albedo, beta)
+        if media.gray:  # the transmittance and the density cancel: 1 at the surface, albedo at a collision
+            beta = dr.select(scatter, beta * albedo, beta)
+        else:
+            dist = dr.select(scatter, t, t_surf)
+            tr = _transmittance(sigma_t, dist)
+            pdf = dr.select(scatter, tr * sigma_t, tr)
+            mean_pdf = (pdf.x + pdf.y + pdf.z) * (1.0 / 3.0)
+            ratio = dr.select(mean_pdf > 0.0, tr / mean_pdf, 0.0)
+            beta = dr.select(in_medium, beta * ratio, beta)
+            beta = dr.select(scatter, beta * sigma_t * albedo, beta)
         p_med = s.o + s.d * t
         het_null = Bool(False)
         if media.has_hetero:  # delta tracking against the majorant (Mitsuba's null collisions)

@@ -1,5 +1,5 @@
-"""Next-event estimation left out where it cannot see a light
-(:mod:`drpt.render.integrators.enclosure`).
+"""Next-event estimation left out where it cannot see a light, and one-channel free flight in
+gray media (:mod:`drpt.render.integrators.enclosure`, ``MediumTable.gray``).
 
 * Decisions, from small Mitsuba XML scenes (nothing rendered): a medium inside a closed
   dielectric (or rough dielectric, or diffuse) sphere or cube lit from outside is blind; an
@@ -13,6 +13,9 @@
   shadow rays left out carried exactly 0. Negative control: skipping it for the same
   medium behind a ``thindielectric`` sheet (not blind: light passes) darkens the image by
   far more (the mean by more than 5%).
+* Gray media: the one-channel free flight renders the same image as the spectral MIS
+  (same random numbers, relative 1e-4); negative control: a chromatic medium rendered as
+  gray (its first channel's extinction for all three) has a channel mean more than 10% off.
 """
 
 from __future__ import annotations
@@ -128,13 +131,13 @@ def test_closed_outward_on_triangles():
     assert not closed_outward(tet[:0])
 
 
-def test_blind_flags_of_the_medium_table(tmp_path):
+def test_gray_and_blind_flags_of_the_medium_table(tmp_path):
     from drpt.render.integrators.volpath import MediumTable
 
     t = MediumTable(_scene(tmp_path))
-    assert t.has_blind and t.all_blind
+    assert t.gray and t.has_blind and t.all_blind
     t = MediumTable(_scene(tmp_path, sigma="1, 2, 3", bsdf="null"))
-    assert not t.has_blind and not t.all_blind
+    assert not t.gray and not t.has_blind and not t.all_blind
 
 
 # ------------------------------------------------------------------ images
@@ -184,3 +187,21 @@ def test_skipping_blind_next_event_estimation_changes_nothing_but_the_work(tmp_p
     thin = _scene(tmp_path, bsdf="thindielectric")
     seen, dropped = _render(thin), _render(thin, _skip_all)
     assert dropped.mean() < 0.95 * seen.mean(), (dropped.mean(), seen.mean())
+
+
+def test_gray_free_flight_renders_like_spectral_mis(tmp_path):
+    def spectral(media):
+        media.gray = False
+
+    def forced_gray(media):
+        media.gray = True
+
+    scene = _scene(tmp_path, bsdf="null")
+    gray, mis = _render(scene), _render(scene, spectral)
+    assert gray.mean() > 0.0
+    assert np.allclose(gray, mis, rtol=1e-4, atol=1e-6 * mis.max())
+    # negative control: a chromatic medium taken for gray (channel 0's extinction everywhere)
+    chroma = _scene(tmp_path, bsdf="null", sigma="0.2, 3, 9")
+    right, wrong = _render(chroma), _render(chroma, forced_gray)
+    off = np.abs(wrong.mean((0, 1)) - right.mean((0, 1))) / right.mean((0, 1))
+    assert off.max() > 0.1, off  # (0.19 in the green channel)
