@@ -23,7 +23,9 @@ A heterogeneous medium (:class:`Heterogeneous`: a one-channel extinction grid) i
 delta tracking as Mitsuba's: a tentative collision at a distance sampled with the majorant
 (``scale`` times the grid's maximum) from where the ray enters the grid's box is real with
 probability ``sigma_t(x) / majorant`` (the throughput times the albedo there), else a null
-collision and the ray goes on unchanged (a loop iteration that is not a scattering event).
+collision and the ray goes on unchanged (a loop iteration that is not a scattering event; the
+megakernel keeps the closest hit it found, as Mitsuba keeps its ``si``, instead of traversing
+the accelerator again).
 Shadow rays use ratio tracking: ``1 - sigma_t(x) / majorant`` at each tentative collision, one
 random number each. Scenes without heterogeneous media trace none of this. Where every homogeneous medium's
 extinction is gray (the same in R, G and B: ``MediumTable.gray``), the channel pick and the
@@ -82,6 +84,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
 
+from ...accel.protocol import INVALID, Hit
 from ...errors import Loc, SceneError
 from ...materials.bsdf_kinds import PARAMS
 from ...materials.iors import relative_ior
@@ -348,6 +351,7 @@ class Flight:
     g: Float  # the medium's Henyey-Greenstein asymmetry
     medium: bool = True
     surface: bool = True
+    t_med: Float | None = None  # heterogeneous media: the distance of the tentative collision at p_med
 
 
 def _either(fl: Flight, mask: Bool, medium, surface):
@@ -388,6 +392,10 @@ class VolPathState:
     ref_p: Array3f  # the last real scattering event (the MIS density of the emitter d hits)
     medium: UInt32  # 1-based medium id of the ray, 0 in vacuum
     active: Bool
+    #: heterogeneous media (the megakernel): after a null collision the ray goes on along the
+    #: same line, so its closest hit is the one already found (``reuse``), ``ahead.t`` from ``o``
+    ahead: Hit | None = None
+    reuse: Bool | None = None
 
 
 class VolPathIntegrator(PathIntegrator):
@@ -411,11 +419,16 @@ class VolPathIntegrator(PathIntegrator):
     def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> VolPathState:
         w = dr.width(active)
         beta = dr.full(Array3f, 1.0, w) if weight is None else Array3f(weight, weight, weight)
+        ahead = reuse = None
+        if self.media.has_hetero:
+            ahead = Hit(dr.full(Float, dr.inf, w), dr.full(UInt32, INVALID, w), dr.zeros(Float, w),
+                        dr.zeros(Float, w), dr.zeros(Bool, w))
+            reuse = dr.zeros(Bool, w)
         return VolPathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=beta, eta=dr.full(Float, 1.0, w),
                             depth=dr.zeros(UInt32, w), prev_pdf=dr.full(Float, 1.0, w),
                             prev_delta=dr.full(Bool, not self.opt.hide_emitters, w),
                             ref_p=Array3f(o), medium=dr.full(UInt32, self.camera_medium, w),
-                            active=Bool(active))
+                            active=Bool(active), ahead=ahead, reuse=reuse)
 
     @property
     def shadow_draws(self) -> bool:
@@ -491,7 +504,12 @@ class VolPathIntegrator(PathIntegrator):
         :meth:`next_ray`."""
         active, beta = self.roulette(s, rng)
         draw = self.flight_draw(s, active, rng)
-        si = scene.intersect(s.o, s.d, active, reach(draw[2]))
+        if s.reuse is None:
+            si = scene.intersect(s.o, s.d, active, reach(draw[2]))
+        else:  # (no traversal after a null collision: the hit ahead is known)
+            hit = scene.intersect_preliminary(s.o, s.d, active & ~s.reuse, reach(draw[2]))
+            hit = dr.select(s.reuse, s.ahead, hit)
+            si = scene.interaction(s.o, s.d, hit)
         fl = self.free_flight(s, si, active, beta, rng, draw)
         si = self.skip_emitters(scene, s, si, fl)
         L = s.L + self.emitted(scene, s, si, fl)
@@ -500,7 +518,11 @@ class VolPathIntegrator(PathIntegrator):
         q = self.nee_query(scene, s, si, fl, on_surface, phase, rng)
         if q is not None:  # one emitter, one shadow ray through the media
             L = L + q.resolve(self.shadow(q.o, q.d, q.tmax, q.medium, q.ok, rng))
-        return self.next_ray(scene, s, si, fl, on_surface, phase, L, rng)
+        nxt = self.next_ray(scene, s, si, fl, on_surface, phase, L, rng)
+        if s.reuse is not None:
+            nxt.reuse = Bool(fl.het_null)
+            nxt.ahead = Hit(hit.t - fl.t_med, hit.prim, hit.u, hit.v, hit.valid)
+        return nxt
 
     def roulette(self, s: VolPathState, rng: PCG32) -> tuple[Bool, Array3f]:
         """Russian roulette and the depth limit, at the top of a bounce as in Mitsuba's
@@ -554,22 +576,24 @@ class VolPathIntegrator(PathIntegrator):
             beta = dr.select(in_medium, beta * ratio, beta)
             beta = dr.select(scatter, beta * sigma_t * albedo, beta)
         p_med = s.o + s.d * t
-        het_null = Bool(False)
+        het_null, t_med = Bool(False), None
         if media.has_hetero:  # delta tracking against the majorant (Mitsuba's null collisions)
             u_null = rng.next_float32()
+            t_med = Float(t)
             for h in media.hetero:
                 cand, t_h = h.collide(s.o, s.d, t_surf, u_t, in_medium & (s.medium == h.id))
                 p_h = s.o + s.d * t_h
                 real = cand & (u_null * h.majorant < h.sigma_t(p_h, cand))
                 beta = dr.select(real, beta * h.albedo(p_h, real), beta)
                 p_med = dr.select(cand, p_h, p_med)
+                t_med = dr.select(cand, t_h, t_med)
                 scatter = scatter | real
                 het_null = het_null | (cand & ~real)
         depth = dr.select(scatter, s.depth + 1, s.depth)
         scatter_live = scatter & (depth < opt.max_depth) if opt.max_depth >= 0 else Bool(scatter)
         surf = active & ~scatter & ~het_null
         return Flight(beta=beta, depth=depth, scatter=scatter, scatter_live=scatter_live, het_null=het_null,
-                      surf=surf, p_med=p_med, in_medium=in_medium, g=g)
+                      surf=surf, p_med=p_med, in_medium=in_medium, g=g, t_med=t_med)
 
     def skip_emitters(self, scene: DeviceScene, s: VolPathState, si, fl: Flight):
         """``si`` with ``hide_emitters``' camera rays that reach an area emitter (``fl.surf``
