@@ -25,13 +25,14 @@ delta tracking as Mitsuba's: a tentative collision at a distance sampled with th
 probability ``sigma_t(x) / majorant`` (the throughput times the albedo there), else a null
 collision and the ray goes on unchanged (a loop iteration that is not a scattering event; the
 megakernel keeps the closest hit it found, as Mitsuba keeps its ``si``, instead of traversing
-the accelerator again).
-Shadow rays use ratio tracking: ``1 - sigma_t(x) / majorant`` at each tentative collision, one
-random number each. Scenes without heterogeneous media trace none of this. Where every homogeneous medium's
-extinction is gray (the same in R, G and B: ``MediumTable.gray``), the channel pick and the
-weights are left out: the sampled distance is the same for every channel, the transmittance
-cancels against its density, and the weight is the albedo at a scattering event, 1 at a surface
-(``u_ch`` is drawn all the same).
+the accelerator again). Shadow rays use ratio tracking: ``1 - sigma_t(x) / majorant`` at each
+tentative collision, one random number each (the closest hit kept across them too). Scenes
+without heterogeneous media trace none of this.
+
+Where every homogeneous medium's extinction is gray (the same in R, G and B:
+``MediumTable.gray``), the channel pick and the weights are left out: the sampled distance is
+the same for every channel, the transmittance cancels against its density, and the weight is
+the albedo at a scattering event, 1 at a surface (``u_ch`` is drawn all the same).
 
 Next-event estimation (one emitter chosen by the scene's light selection, as in the path
 integrator: :meth:`~drpt.render.scene.DeviceScene.sample_emitter`) runs at surfaces and at
@@ -455,6 +456,12 @@ class VolPathIntegrator(PathIntegrator):
         live = Bool(active)
         o, d, tmax, medium = Array3f(o), Array3f(d), Float(tmax), UInt32(medium)
         crossings = UInt32(0)
+        known = reuse = None  # heterogeneous media: the closest hit, kept across tentative collisions
+        if media.has_hetero:
+            w = dr.width(active)
+            known = Hit(dr.full(Float, dr.inf, w), dr.full(UInt32, INVALID, w), dr.zeros(Float, w),
+                        dr.zeros(Float, w), dr.zeros(Bool, w))
+            reuse = dr.zeros(Bool, w)
         while live:
             sigma_t, _, _ = media.coefficients(medium, live)
             end = Float(tmax)
@@ -466,7 +473,11 @@ class VolPathIntegrator(PathIntegrator):
                 collide = live & (t_c < tmax)
                 end = dr.select(collide, t_c, tmax)
             # (only surfaces before the collision matter: a shorter ray traverses less)
-            si = scene.intersect(o, d, live, reach(end))
+            if media.has_hetero:  # (after a tentative collision the ray goes on: the same hit)
+                known = dr.select(reuse, known, scene.intersect_preliminary(o, d, live & ~reuse, reach(end)))
+                si = scene.interaction(o, d, known)
+            else:
+                si = scene.intersect(o, d, live, reach(end))
             ahead = live & si.valid & (si.t < tmax)
             seg = dr.select(ahead, si.t, tmax)
             step = Bool(False)
@@ -479,7 +490,9 @@ class VolPathIntegrator(PathIntegrator):
                     tr = dr.select(hit, tr * dr.maximum(1.0 - h.sigma_t(p, hit) / h.majorant, 0.0), tr)
                     p_step = dr.select(hit, p, p_step)
                     tmax = dr.select(hit, tmax - t, tmax)
+                    known.t = dr.select(hit, known.t - t, known.t)
                     step = step | hit
+                reuse = Bool(step)
             blocked = ahead & ~step
             if track:
                 tr = dr.select(live & ~step, tr * _survivor_weight(sigma_t, sig_r, seg, exact), tr)
