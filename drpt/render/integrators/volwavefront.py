@@ -46,6 +46,7 @@ from dataclasses import dataclass, fields
 import drjit as dr
 from drjit.auto import Array3f, Bool, Float, UInt32, UInt64
 
+from ...accel.protocol import Hit
 from ...options import PathOptions
 from ...scene.model import Scene
 from ..sampler import pack, unpack
@@ -60,6 +61,14 @@ class VolWaveState(WaveState):
 
     ref_p: Array3f  # the last real scattering event
     medium: UInt32  # 1-based medium id of the ray, 0 in vacuum
+    #: heterogeneous media: after a null collision, the closest hit already found (its t from
+    #: o) and the lanes that reuse it (VolPathState.ahead / reuse); None in other scenes
+    ahead_t: Float | None = None
+    ahead_prim: UInt32 | None = None
+    ahead_u: Float | None = None
+    ahead_v: Float | None = None
+    ahead_valid: Bool | None = None
+    reuse: Bool | None = None
 
 
 #: the Flight arrays the free-flight stage writes for the queues
@@ -70,10 +79,20 @@ _SURFACE = ("beta", "depth", "surf")
 _QUERY = ("a", "b", "o", "d", "tmax", "medium", "ok")
 
 
+def _ahead(hit: Hit | None, reuse: Bool | None) -> dict:
+    """:class:`VolWaveState`'s fields of a kept hit (none without heterogeneous media)."""
+    if reuse is None:
+        return {}
+    return dict(ahead_t=Float(hit.t), ahead_prim=UInt32(hit.prim), ahead_u=Float(hit.u), ahead_v=Float(hit.v),
+                ahead_valid=Bool(hit.valid), reuse=Bool(reuse))
+
+
 def _vol_state(s: WaveState, active: Bool, L: Array3f | None = None) -> VolPathState:
     """The buffers ``s`` as volpath's loop state (what its per-event steps read)."""
+    ahead = None if s.reuse is None else Hit(s.ahead_t, s.ahead_prim, s.ahead_u, s.ahead_v, s.ahead_valid)
     return VolPathState(o=s.o, d=s.d, L=L, beta=s.beta, eta=s.eta, depth=s.depth, prev_pdf=s.prev_pdf,
-                        prev_delta=s.prev_delta, ref_p=s.ref_p, medium=s.medium, active=active)
+                        prev_delta=s.prev_delta, ref_p=s.ref_p, medium=s.medium, active=active, ahead=ahead,
+                        reuse=s.reuse)
 
 
 class VolWavefrontIntegrator(WavefrontIntegrator):
@@ -93,7 +112,8 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         return VolWaveState(lane=dr.arange(UInt32, n), o=st.o, d=st.d, beta=st.beta, eta=st.eta,
                             depth=st.depth, prev_pdf=st.prev_pdf, prev_delta=st.prev_delta,
                             rng_state=UInt64(rng_a) + dr.zeros(UInt64, n),
-                            rng_inc=UInt64(rng_b) + dr.zeros(UInt64, n), ref_p=st.ref_p, medium=st.medium)
+                            rng_inc=UInt64(rng_b) + dr.zeros(UInt64, n), ref_p=st.ref_p, medium=st.medium,
+                            **_ahead(st.ahead, st.reuse))
 
     def _loop_state(self, s: VolWaveState, m: int) -> VolPathState:
         return _vol_state(s, dr.full(Bool, True, m), L=dr.zeros(Array3f, m))
@@ -110,7 +130,11 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         rng = self._rng(s)
         active, beta = integ.roulette(_vol_state(s, dr.full(Bool, True, n)), rng)
         draw = integ.flight_draw(_vol_state(s, active), active, rng)
-        hit = scene.intersect_preliminary(s.o, s.d, active, reach(draw[2]))
+        if s.reuse is None:
+            hit = scene.intersect_preliminary(s.o, s.d, active, reach(draw[2]))
+        else:  # (no traversal after a null collision: the hit ahead is known)
+            hit = scene.intersect_preliminary(s.o, s.d, active & ~s.reuse, reach(draw[2]))
+            hit = dr.select(s.reuse, Hit(s.ahead_t, s.ahead_prim, s.ahead_u, s.ahead_v, s.ahead_valid), hit)
         rng_a, rng_b = pack(rng)
         timer.done("closest hit", hit, active, beta, rng_a, rng_b, *draw, lanes=n, rays=n)
         si = scene.interaction(s.o, s.d, hit)
@@ -155,7 +179,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
                          medium=medium, surface=not medium)
             out, live, found, add = self._event(qscene, qs, qsi, qfl)
             for f in fields(nxt):
-                if f.name != "lane":
+                if f.name != "lane" and getattr(nxt, f.name) is not None:
                     dr.scatter(getattr(nxt, f.name), getattr(out, f.name), idx)
             dr.scatter(alive, live, idx)
             if add is not None:  # (shadow rays traced in the queue's kernel)
@@ -170,6 +194,12 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
                     dr.scatter(getattr(query, f), getattr(found, f), idx)
             timer.done("medium" if medium else "shade", nxt, alive, L,
                        *((getattr(query, f) for f in _QUERY) if query is not None else ()), lanes=count)
+
+        if s.reuse is not None:  # the lanes' next ray after a null collision: the same hit
+            nxt = VolWaveState(**{**{f.name: getattr(nxt, f.name) for f in fields(nxt)},
+                                  **_ahead(Hit(hit.t - fl.t_med, hit.prim, hit.u, hit.v, hit.valid),
+                                           Bool(fl.het_null))})
+            dr.eval(nxt.ahead_t, nxt.ahead_prim, nxt.ahead_u, nxt.ahead_v, nxt.ahead_valid, nxt.reuse)
 
         # ---- shadow rays: one batch
         if query is not None:

@@ -119,7 +119,9 @@ def _arrays(obj) -> list:
 
 
 def _take(v, idx: UInt32):
-    """``v[idx]`` (a width-1 value is a broadcast constant: kept)."""
+    """``v[idx]`` (a width-1 value is a broadcast constant: kept; None stays None)."""
+    if v is None:
+        return None
     if dr.width(v) == 1:
         return type(v)(v)
     return dr.gather(type(v), v, idx)
