@@ -25,7 +25,9 @@ better than uniform at equal time. The rules whose selection is static (``unifor
 one time, the fastest of all their renders (the time of a short render on a loaded machine
 is noise that would otherwise swamp their ratios); ``bvh`` walks its tree at every light
 sample and every emitter hit and is timed alone (its fastest render; compilation excluded:
-a discarded first render). Last, per rule, the geometric mean of its efficiency over the
+a discarded first render). ``pilot`` measures its selection when the renderer is built
+(:mod:`drpt.render.lights.pilot`): its column "pilot s" is that build's seconds less
+``mixed``'s, which the render seconds leave out. Last, per rule, the geometric mean of its efficiency over the
 scenes and its worst scene.
 """
 
@@ -60,22 +62,22 @@ def scenes() -> list[tuple[str, Path, str, dict]]:
 
     tmp = Path(tempfile.mkdtemp())
     first = lambda paths, suffix: next(p for p in paths if p.suffix == suffix)  # noqa: E731
-    out = [("veach_mis (scenegen, tessellated)", first(veach_mis.main(tmp / "veach"), ".txt"), "drpt", {}),
-           ("many_lights (scenegen, 50 lights)", first(many_lights.main(tmp / "many", 50), ".txt"), "drpt", {}),
-           ("envsun + point light (scenegen)", envsun.main(tmp / "envsun", point=True), "drpt", {}),
-           ("living_room (scenegen, 64x64)", first(living_room.main(tmp / "living"), ".xml"), "mitsuba",
-            {"w": "64", "h": "64"})]
-    out += [(f"seed {n}.txt", SEED / f"{n}.txt", "drpt", {}) for n in ("cornellbox", "newscene")]
     xml = ROOT / "tests/data/xml"
-    out += [(f"{n}.xml", xml / f"{n}.xml", "mitsuba", {})
-            for n in ("veach_mis", "sphere_light", "area_textured", "hide_emitters", "thin", "projector_spot",
-                      "ptracer")]
+    out = [(f"{n}.xml", xml / f"{n}.xml", "mitsuba", {})
+           for n in ("veach_mis", "sphere_light", "area_textured", "hide_emitters", "thin", "projector_spot",
+                     "ptracer")]
     out.append(("ptracer.xml (path)", xml / "ptracer.xml", "mitsuba", {"integrator": "path"}))
     out += [(f"bsdf_spheres/{n}", CORPUS / "bsdf_spheres" / f"test_{n}_path.xml", "corpus", {}) for n in SPHERES]
     out += [(rel.split("/test_")[1].rsplit("_", 1)[0], CORPUS / rel, "corpus", {})
             for rel in ("participating_media/test_homo_emitter_inside_medium_volpath.xml",
                         "participating_media/test_surf_area_light_volpath.xml",
                         "various_emitters/test_various_emitters_ptracer.xml")]
+    out += [("veach_mis (scenegen, tessellated)", first(veach_mis.main(tmp / "veach"), ".txt"), "drpt", {}),
+            ("many_lights (scenegen, 50 lights)", first(many_lights.main(tmp / "many", 50), ".txt"), "drpt", {}),
+            ("envsun + point light (scenegen)", envsun.main(tmp / "envsun", point=True), "drpt", {})]
+    out += [(f"seed {n}.txt", SEED / f"{n}.txt", "drpt", {}) for n in ("cornellbox", "newscene")]
+    out.append(("living_room (scenegen, 64x64)", first(living_room.main(tmp / "living"), ".xml"), "mitsuba",
+                {"w": "64", "h": "64"}))
     return [x for x in out if x[1].is_file()]
 
 
@@ -108,8 +110,8 @@ def emitters(device_scene) -> int:
     return sum(len(np.unique(f.units()[0])) for f in device_scene.emitter_selection.families)
 
 
-def measure(path, kind, defines, rules, spp, repeats) -> tuple[int, dict, dict]:
-    """The scene's emitter count and each rule's mean relMSE and seconds."""
+def measure(path, kind, defines, rules, spp, repeats) -> tuple[int, dict, dict, dict]:
+    """The scene's emitter count and each rule's mean relMSE, seconds and build seconds."""
     defines = {**({"spp": str(spp)} if kind == "corpus" else {}), **defines}
     scene = load_scene(path, defines=defines) if defines else load_scene(path)
     ref = reference(path, kind, scene, defines)
@@ -129,7 +131,8 @@ def measure(path, kind, defines, rules, spp, repeats) -> tuple[int, dict, dict]:
     static = [r for r in rules if renderers[r].scene.emitter_selection.static]
     shared = min(min(secs[r]) for r in static)
     seconds = {r: shared if r in static else min(secs[r]) for r in rules}
-    return emitters(renderers[rules[0]].scene), {r: float(np.mean(errs[r])) for r in rules}, seconds
+    build = {r: renderers[r].build_seconds for r in rules}
+    return emitters(renderers[rules[0]].scene), {r: float(np.mean(errs[r])) for r in rules}, seconds, build
 
 
 def main(spp=64, repeats=4, which=None):
@@ -140,20 +143,21 @@ def main(spp=64, repeats=4, which=None):
     print(f"{spp} spp, {repeats} seeds; efficiency: relMSE x seconds of uniform over the rule's\n")
     print("| scene | emitters | " + " | ".join(f"relMSE {r}" for r in rules) + " | s static | "
           + " | ".join(f"s {r}" for r in others if r == "bvh") + " | "
-          + " | ".join(f"{r} / uniform" for r in others) + " |")
-    print("|---" * (2 + len(rules) + 1 + ("bvh" in others) + len(others)) + "|")
+          + " | ".join(f"{r} / uniform" for r in others) + " |" + (" pilot s |" if "pilot" in rules else ""))
+    print("|---" * (2 + len(rules) + 1 + ("bvh" in others) + len(others) + ("pilot" in rules)) + "|")
     todo = scenes()
     if which:
         todo = [x for x in todo if any(x[0].startswith(w) for w in which.split(","))]
     eff = {r: [] for r in others}
     for name, path, kind, defines in todo:
-        count, err, sec = measure(path, kind, defines, rules, spp, repeats)
+        count, err, sec, build = measure(path, kind, defines, rules, spp, repeats)
         row = {r: err["uniform"] * sec["uniform"] / (err[r] * sec[r]) for r in others}
         for r in others:
             eff[r].append((row[r], name))
         print(f"| {name} | {count} | " + " | ".join(f"{err[r]:.4g}" for r in rules) + f" | {sec['uniform']:.2f} | "
               + " | ".join(f"{sec[r]:.2f}" for r in others if r == "bvh") + " | "
-              + " | ".join(f"{row[r]:.2f}" for r in others) + " |", flush=True)
+              + " | ".join(f"{row[r]:.2f}" for r in others) + " |"
+              + (f" {build['pilot'] - build['mixed']:.2f} |" if "pilot" in rules else ""), flush=True)
     print(f"\nover {len(todo)} scenes, efficiency relative to uniform:")
     for r in others:
         vals = np.array([v for v, _ in eff[r]])
