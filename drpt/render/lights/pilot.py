@@ -7,8 +7,10 @@ scene's bounding sphere, a directional light over a large floor. The pilot measu
 instead: :data:`PILOT_LANES` camera rays through random film positions (a fixed seed, so
 that every render of the scene, and every chunk of a distributed one, gets the same
 selection), at each first hit one next-event estimate with ``uniform`` selection (the
-BSDF times the emitter's radiance over the sample's density, occluded or not, without
-MIS), and the second moment ``M_j`` of the estimate given emitter ``j`` (the estimate times
+BSDF times the emitter's radiance over the sample's density, occluded or not, with the
+power heuristic's weight against BSDF sampling as the path tracer's: where BSDF sampling
+finds a light well, a small sharp highlight, next-event estimation has little to do
+there), and the second moment ``M_j`` of the estimate given emitter ``j`` (the estimate times
 ``j``'s uniform probability). A static selection's variance is ``sum_j M_j / p_j`` less a
 constant, smallest for ``p_j`` proportional to ``sqrt(M_j)``; the pilot's selection is
 
@@ -62,7 +64,7 @@ def second_moments(scene, camera, width: int, height: int, lanes: int = PILOT_LA
     u_sel = rng.next_float32()
     u2 = Array2f(rng.next_float32(), rng.next_float32())
     k, pmf = uni.sample(u_sel, si.p, si.valid)
-    c = DirectLight(scene).emitter(si, u_sel, u2, si.valid, mis=False)
+    c = DirectLight(scene).emitter(si, u_sel, u2, si.valid, mis=True)
     v = dr.select(si.valid, (c.x + c.y + c.z) / 3.0 * pmf, 0.0)
     k, v, pmf = UInt32(k), Float(v), Float(pmf)
     dr.eval(k, v, pmf)
