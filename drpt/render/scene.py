@@ -77,7 +77,7 @@ from .lights.envmap import (
     check_radius,
 )
 from .lights.light_bvh import BVHSelection
-from .lights.pilot import pilot_selection
+from .lights.pilot import LIGHT_TRACERS, pilot_selection
 from .lights.selection import LightSelection
 from .material import MaterialTable
 from .spawn import origin as spawn_origin
@@ -198,7 +198,8 @@ class DeviceScene:
         else:  # (bvh without area emitters: nothing for a BVH to choose among, mixed's rule)
             selection = LightSelection(families, "mixed" if rule in ("bvh", "pilot") else rule)
         self.set_light_selection(selection)
-        if rule == "pilot" and not self.is_empty:  # measured through the scene's camera
+        if rule == "pilot" and not self.is_empty and options.integrator not in LIGHT_TRACERS:
+            # measured through the scene's camera (light tracers pick as mixed: no pilot)
             self.set_light_selection(pilot_selection(self, RayCamera(scene.camera, options.width, options.height),
                                                      options.width, options.height))
 

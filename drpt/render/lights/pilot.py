@@ -25,7 +25,9 @@ selection's (weighted) variance is ``sum_j M_j / p_j`` less a constant, smallest
 
 (an emitter's slots split as ``uniform`` splits them: by area), so that every emitter keeps
 a share of its uniform probability for the points the pilot does not see (deeper bounces,
-points in media). Where no pilot estimate carries light it is ``mixed``'s.
+points in media). Where no pilot estimate carries light it is ``mixed``'s, and so it is
+for the integrators of :data:`LIGHT_TRACERS`, whose light subpaths pick as ``mixed`` and
+which never ask the selection: they run no pilot.
 """
 
 from __future__ import annotations
@@ -36,6 +38,8 @@ from drjit.auto import PCG32, Array2f, Bool, Float, UInt32
 
 from .selection import LightSelection, slot_weights
 
+#: the integrators that trace no next-event estimation through the selection
+LIGHT_TRACERS = ("ptracer", "bdpt")
 #: camera rays of the pilot
 PILOT_LANES = 1 << 16
 #: each emitter's share of its uniform probability that the pilot's measurement cannot take away

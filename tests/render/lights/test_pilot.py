@@ -10,7 +10,8 @@ reaches nothing the camera sees).
 * The selection draws each slot with the probability it reports (chi-square of 200,000
   draws, p > 1e-3; negative control: the same draws judged by ``uniform``'s probabilities
   fail, p < 1e-9) and ``pmf`` returns the same numbers.
-* It is deterministic (a fixed pilot seed): two builds give the same probabilities.
+* It is deterministic (a fixed pilot seed): two builds give the same probabilities. The
+  light tracers (``ptracer``, ``bdpt``) run no pilot: their selection is ``mixed``'s.
 * The image is ``uniform``'s in expectation: the mean difference of the floor's pixels at
   64 spp, 32x32, within 4 standard errors (of the differences' spread over the pixels);
   negative control: the pilot's image 10% too dark fails.
@@ -94,3 +95,9 @@ def test_pilot_image_is_uniforms_in_expectation(pilot):
         d = scale * a[floor] - b[floor]
         z = d.mean() / (d.std() / np.sqrt(d.size))
         assert (abs(z) < 4) == (scale == 1.0), (scale, z)
+
+
+@pytest.mark.parametrize("integrator", ["ptracer", "bdpt"])
+def test_light_tracers_run_no_pilot(integrator):
+    sel = DeviceScene(_scene(), RenderOptions(light_sampler="pilot", integrator=integrator)).emitter_selection
+    assert not isinstance(sel, PilotSelection) and sel.rule == "mixed"
