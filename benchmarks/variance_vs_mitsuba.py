@@ -75,6 +75,12 @@ def _options(argv: list[str]) -> tuple[list[str], dict]:
     return pos, opts
 
 
+def _size(text: str) -> tuple[int, int]:
+    """``SIZE``: ``N`` (N x N) or ``WxH``."""
+    size = text.lower().split("x")
+    return int(size[0]), int(size[-1])
+
+
 def _grid(a: np.ndarray, b: np.ndarray, spec: str) -> None:
     cols, rows = (int(x) for x in spec.lower().split("x"))
     height, width = a.shape[1:3]
@@ -106,8 +112,7 @@ def main(argv: list[str]) -> None:
     argv, extra = _options(argv)
     path = Path(argv[0])
     flt = argv[1] if len(argv) > 1 else "gaussian"
-    size = argv[2].lower().split("x") if len(argv) > 2 else ["128"]
-    width, height = int(size[0]), int(size[-1])
+    width, height = _size(argv[2] if len(argv) > 2 else "128")
     spp = int(argv[3]) if len(argv) > 3 else 64
     rounds = int(argv[4]) if len(argv) > 4 else 32
     depth = int(argv[5]) if len(argv) > 5 else -1
