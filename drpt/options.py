@@ -43,7 +43,7 @@ INTEGRATORS = ("path", "whitted", "ptracer", "volpath", "bdpt")
 LIGHT_TRACED = ("ptracer", "bdpt")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
-LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh")  # drpt.render.lights.selection
+LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh", "pilot")  # drpt.render.lights.selection
 #: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy samplers, and
 #: Mitsuba's stratified, multi-jittered and orthogonal-array samplers
 SAMPLERS = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "orthogonal")

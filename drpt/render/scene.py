@@ -64,6 +64,7 @@ from ..errors import located
 from ..options import RenderOptions
 from ..scene.model import Scene, Skybox
 from .bsdf import BSDFSample
+from .camera import RayCamera
 from .instrument import Instrument
 from .lights import EmitterSample
 from .lights.area import AreaLights, toward
@@ -76,6 +77,7 @@ from .lights.envmap import (
     check_radius,
 )
 from .lights.light_bvh import BVHSelection
+from .lights.pilot import LIGHT_TRACERS, pilot_selection
 from .lights.selection import LightSelection
 from .material import MaterialTable
 from .spawn import origin as spawn_origin
@@ -194,8 +196,12 @@ class DeviceScene:
         if rule == "bvh" and self.area_lights.count > 0:
             selection = BVHSelection(families, self.area_lights, self.area_lights.bvh(scene))
         else:  # (bvh without area emitters: nothing for a BVH to choose among, mixed's rule)
-            selection = LightSelection(families, "mixed" if rule == "bvh" else rule)
+            selection = LightSelection(families, "mixed" if rule in ("bvh", "pilot") else rule)
         self.set_light_selection(selection)
+        if rule == "pilot" and not self.is_empty and options.integrator not in LIGHT_TRACERS:
+            # measured through the scene's camera (light tracers pick as mixed: no pilot)
+            self.set_light_selection(pilot_selection(self, RayCamera(scene.camera, options.width, options.height),
+                                                     options.width, options.height))
 
     def _set_flags(self) -> None:
         """The feature flags, from the scene's emitters and the materials it traces

@@ -18,6 +18,9 @@ def test_options_anywhere_on_the_line():
     pos, opts = bench._options(["s.xml", "--grid", "5x3", "box", "0", "--scale", "4", "27"])
     assert pos == ["s.xml", "box", "0", "27"]
     assert opts == {"grid": "5x3", "scale": "4"}
+    pos, opts = bench._options(["s.txt", "--bsdf", "phong", "box", "160x120"])
+    assert pos == ["s.txt", "box", "160x120"] and opts == {"bsdf": "phong"}
+    assert bench._size("160x120") == (160, 120) and bench._size("96") == (96, 96)
 
 
 def _rounds(rng, scale):

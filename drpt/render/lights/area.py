@@ -63,7 +63,7 @@ from . import EmitterSample
 from .light_bvh import area_light_bvh
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh")  # drpt.options.LIGHT_SAMPLERS
+LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh", "pilot")  # drpt.options.LIGHT_SAMPLERS
 
 
 def selection_weights(area: np.ndarray, lum: np.ndarray, emitter: np.ndarray,
@@ -75,7 +75,7 @@ def selection_weights(area: np.ndarray, lum: np.ndarray, emitter: np.ndarray,
     power = area * lum
     ok = (power > 0) & np.isfinite(power)
     w = np.zeros(len(area))
-    if sampler in ("mixed", "bvh") and ok.any():
+    if sampler in ("mixed", "bvh", "pilot") and ok.any():
         p, u = (selection_weights(area, lum, emitter, s) for s in ("power", "uniform"))
         return 0.5 * p / p.sum() + 0.5 * u / u.sum()
     if sampler == "power" or not ok.any():

@@ -38,7 +38,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-RULES = ("mixed", "power", "uniform")  # drpt.options.LIGHT_SAMPLERS
+RULES = ("mixed", "power", "uniform")  # drpt.options.LIGHT_SAMPLERS (also pilot.py's and light_bvh.py's)
 
 
 def slot_weights(families: list, rule: str) -> np.ndarray:
@@ -62,16 +62,18 @@ def slot_weights(families: list, rule: str) -> np.ndarray:
 
 
 class LightSelection:
-    """One discrete distribution over the slots of ``families`` (``rule``: ``power`` or
-    ``uniform``). ``count`` is 0 where no slot carries light."""
+    """One discrete distribution over the slots of ``families`` (``rule``: one of
+    :data:`RULES`, or given ``weights``: the unnormalised probability of every slot of the
+    families with slots, ``rule`` then only its name). ``count`` is 0 where no slot carries
+    light."""
 
     static = True
 
-    def __init__(self, families: list, rule: str = "power"):
+    def __init__(self, families: list, rule: str = "power", weights: np.ndarray | None = None):
         self.rule = rule
         self.families = [f for f in families if f.count > 0]
         self.offsets = list(np.cumsum([0] + [f.count for f in self.families])[:-1].astype(int))
-        w = slot_weights(self.families, rule)
+        w = slot_weights(self.families, rule) if weights is None else np.asarray(weights, np.float64)
         total = float(w.sum())
         self.count = len(w) if total > 0.0 else 0
         #: each slot's probability (float64, host side; for tests and tools)

@@ -1,0 +1,103 @@
+"""The pilot light selection (drpt/render/lights/pilot.py, ``--light-sampler pilot``).
+
+The scene: a diffuse floor facing the camera, a dim triangle light above it facing down
+onto it, and a light ten times as bright beside the floor, facing away from it (its light
+reaches nothing the camera sees).
+
+* The measurement: the bright light's second moment is 0 (no pilot estimate gets light from
+  it), so it keeps exactly its defensive share ``DEFENSIVE / 2``, and the dim one the rest;
+  ``power`` (the negative control) gives the bright one over 90%.
+* The selection draws each slot with the probability it reports (chi-square of 200,000
+  draws, p > 1e-3; negative control: the same draws judged by ``uniform``'s probabilities
+  fail, p < 1e-9) and ``pmf`` returns the same numbers.
+* It is deterministic (a fixed pilot seed): two builds give the same probabilities. The
+  light tracers (``ptracer``, ``bdpt``) run no pilot: their selection is ``mixed``'s.
+* The image is ``uniform``'s in expectation: the mean difference of the floor's pixels at
+  64 spp, 32x32, within 4 standard errors (of the differences' spread over the pixels);
+  negative control: the pilot's image 10% too dark fails.
+"""
+
+import drjit as dr
+import numpy as np
+import pytest
+from drjit.auto import Bool, Float, UInt32
+from scipy import stats
+
+from drpt.options import RenderOptions
+from drpt.render.lights.pilot import DEFENSIVE, PilotSelection, units
+from drpt.render.renderer import Renderer
+from drpt.render.scene import DeviceScene
+from drpt.scene.model import Material, PerspectiveCamera, Scene, Triangles
+
+CAM = PerspectiveCamera((0, 0, 5), (0, 0, -1), (0, 1, 0), 40)
+
+
+def _scene():
+    floor = [[[-2, -2, 0], [2, -2, 0], [2, 2, 0]], [[-2, -2, 0], [2, 2, 0], [-2, 2, 0]]]
+    dim = [[-0.8, -0.3, 1.5], [-0.8, 0.3, 1.5], [-0.2, 0.0, 1.5]]  # normal -z: onto the floor
+    bright = [[3, -0.3, 0.7], [3, 0.3, 0.7], [3, 0, 1.3]]  # normal +x: away from it
+    return Scene(path=None, camera=CAM,
+                 materials=[Material("floor", kd=(0.5, 0.5, 0.5)), Material("dim", emission=(2, 2, 2)),
+                            Material("bright", emission=(20, 20, 20))],
+                 triangles=Triangles(np.array(floor + [dim, bright], float), np.array([0, 0, 1, 2], np.int32),
+                                     shape=np.array([0, 0, 1, 2])))
+
+
+def _unit_probabilities(ds):
+    sel = ds.emitter_selection
+    return np.bincount(units(sel.families), weights=sel.probabilities)
+
+
+@pytest.fixture(scope="module")
+def pilot():
+    return DeviceScene(_scene(), RenderOptions(light_sampler="pilot", width=32, height=32))
+
+
+def test_pilot_leaves_the_light_that_misses_the_floor_its_defensive_share(pilot):
+    assert isinstance(pilot.emitter_selection, PilotSelection)
+    m = pilot.emitter_selection.moments
+    assert m[0] > 0.0 and m[1] == 0.0
+    np.testing.assert_allclose(_unit_probabilities(pilot), [1.0 - DEFENSIVE / 2, DEFENSIVE / 2], rtol=1e-12)
+    power = DeviceScene(_scene(), RenderOptions(light_sampler="power", width=32, height=32))
+    assert _unit_probabilities(power)[1] > 0.9  # negative control
+
+
+def test_pilot_draws_what_it_reports(pilot):
+    sel = pilot.emitter_selection
+    rng = np.random.default_rng(3)
+    n = 200_000
+    k, pmf = sel.sample(Float(rng.random(n).astype(np.float32)), None, dr.full(Bool, True, n))
+    k, pmf = k.numpy(), pmf.numpy()
+    counts = np.bincount(k, minlength=sel.count)
+    assert stats.chisquare(counts, sel.probabilities * n)[1] > 1e-3
+    np.testing.assert_allclose(pmf, sel.probabilities[k], rtol=1e-6)
+    np.testing.assert_allclose(sel.pmf(UInt32(np.arange(sel.count, dtype=np.uint32))).numpy(),
+                               sel.probabilities, rtol=1e-6)
+    uni = DeviceScene(_scene(), RenderOptions(light_sampler="uniform")).emitter_selection.probabilities
+    assert stats.chisquare(counts, uni * n)[1] < 1e-9  # negative control
+
+
+def test_pilot_is_deterministic(pilot):
+    again = DeviceScene(_scene(), RenderOptions(light_sampler="pilot", width=32, height=32))
+    np.testing.assert_array_equal(again.emitter_selection.probabilities, pilot.emitter_selection.probabilities)
+
+
+def _floor(rule):
+    r = Renderer(_scene(), RenderOptions(light_sampler=rule, width=32, height=32, spp=64, seed=5,
+                                         progress=False))
+    return r.render().image.astype(np.float64)[4:28, 4:28].mean(-1)
+
+
+def test_pilot_image_is_uniforms_in_expectation(pilot):
+    a, b = _floor("pilot"), _floor("uniform")
+    floor = (a < 1.0) & (b < 1.0)  # (the lights' own pixels are at least 2)
+    for scale in (1.0, 0.9):  # (0.9: the negative control, a 10% bias)
+        d = scale * a[floor] - b[floor]
+        z = d.mean() / (d.std() / np.sqrt(d.size))
+        assert (abs(z) < 4) == (scale == 1.0), (scale, z)
+
+
+@pytest.mark.parametrize("integrator", ["ptracer", "bdpt"])
+def test_light_tracers_run_no_pilot(integrator):
+    sel = DeviceScene(_scene(), RenderOptions(light_sampler="pilot", integrator=integrator)).emitter_selection
+    assert not isinstance(sel, PilotSelection) and sel.rule == "mixed"
