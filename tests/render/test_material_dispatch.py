@@ -56,17 +56,27 @@ def assert_same(a, b):
     assert np.array_equal(a, b), f"{np.count_nonzero(a != b)} values differ, largest by {np.max(np.abs(a - b))}"
 
 
+@pytest.fixture
+def scene(request, mixed, scenes_dir):
+    """The scene file a test's ``options`` name: "mixed", or "newscene" (diffuse and
+    Cook-Torrance: two kinds that light tracing and bdpt accept)."""
+    return mixed if request.param == "mixed" else scenes_dir / "newscene" / "newscene.txt"
+
+
 #: what runs the table's queries: the megakernel path tracer (eval_pdf, sample), the
 #: wavefront integrator's fused tail (the path bounce on the whole table; its shading
-#: queues are one kind each here), Whitted (sample, diffuse_color), the albedo AOV (albedo)
-USERS = {"path": {}, "wavefront": {"mode": "wavefront", "wavefront_tail": 256},
-         "whitted": {"integrator": "whitted"}, "albedo": {"aovs": (("albedo", "albedo"),)}}
+#: queues are one kind each here), Whitted (sample, diffuse_color), the albedo AOV (albedo),
+#: bdpt and light tracing (eval_pdf at both ends of a connection, sample)
+USERS = {"path": ("mixed", {}), "wavefront": ("mixed", {"mode": "wavefront", "wavefront_tail": 256}),
+         "whitted": ("mixed", {"integrator": "whitted"}), "albedo": ("mixed", {"aovs": (("albedo", "albedo"),)}),
+         "bdpt": ("newscene", {"integrator": "bdpt"}), "ptracer": ("newscene", {"integrator": "ptracer"})}
+_USERS = pytest.mark.parametrize(("scene", "options"), USERS.values(), ids=USERS.keys(), indirect=["scene"])
 
 
-@pytest.mark.parametrize("options", USERS.values(), ids=USERS.keys())
-def test_per_kind_images_equal_masked(mixed, monkeypatch, options):
-    masked, aov_m = render(mixed, "masked", monkeypatch, **options)
-    kinds, aov_k = render(mixed, "kinds", monkeypatch, **options)
+@_USERS
+def test_per_kind_images_equal_masked(scene, monkeypatch, options):
+    masked, aov_m = render(scene, "masked", monkeypatch, **options)
+    kinds, aov_k = render(scene, "kinds", monkeypatch, **options)
     assert masked.mean() > 0.01  # something was rendered
     assert_same(masked, kinds)
     if aov_m is not None:
@@ -83,13 +93,13 @@ def test_negative_control_another_seed_differs(mixed, monkeypatch):
         assert_same(a, b)
 
 
-@pytest.mark.parametrize("options", USERS.values(), ids=USERS.keys())
-def test_several_kinds_trace_branches(mixed, monkeypatch, options):
+@_USERS
+def test_several_kinds_trace_branches(scene, monkeypatch, options):
     """Where a scene has several kinds the two dispatches trace different kernels (the
     branches' own frames and merges make the per-kind one larger): the image comparisons
     above compare two kernels, not one with itself."""
-    masked = largest_kernel_ops(mixed, "masked", monkeypatch, **options)
-    kinds = largest_kernel_ops(mixed, "kinds", monkeypatch, **options)
+    masked = largest_kernel_ops(scene, "masked", monkeypatch, **options)
+    kinds = largest_kernel_ops(scene, "kinds", monkeypatch, **options)
     assert kinds > masked
 
 
