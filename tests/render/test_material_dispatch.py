@@ -84,6 +84,18 @@ def test_per_kind_images_equal_masked(scene, monkeypatch, options):
         assert_same(aov_m, aov_k)
 
 
+@pytest.mark.slow
+def test_evaluated_loops_and_conditionals_equal_masked(mixed, monkeypatch):
+    """With Dr.Jit's loops and conditionals evaluated (a kernel per step, each branch
+    run on its lanes' mask) the per-kind dispatch still computes the masked one's image."""
+    with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, False), \
+            dr.scoped_set_flag(dr.JitFlag.SymbolicConditionals, False):
+        masked, _ = render(mixed, "masked", monkeypatch, size=16, spp=2)
+        kinds, _ = render(mixed, "kinds", monkeypatch, size=16, spp=2)
+    assert masked.mean() > 0.01
+    assert_same(masked, kinds)
+
+
 def test_negative_control_another_seed_differs(mixed, monkeypatch):
     """The bit comparison detects a change in what the lanes compute: the same
     scene and dispatch with another seed differs."""
