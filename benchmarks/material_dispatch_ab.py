@@ -169,6 +169,7 @@ def main(argv=None) -> list[dict]:
     ensure()
     only = [w for w in a.only.split(",") if w]
     load0 = os.getloadavg()[0]
+    commit = _commit()  # (at the start: the checkout may move on while a long run goes on)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name, path in scenes(Path(tmp), only):
@@ -178,7 +179,7 @@ def main(argv=None) -> list[dict]:
                   f"speedup {row['speedup']:.2f}x, identical {row['identical']}", file=sys.stderr, flush=True)
             if a.json:
                 a.json.write_text(json.dumps(rows, indent=1))
-    print(f"{_cpu()}, commit {_commit()}, {a.rounds} rounds, load average {load0:.1f} -> "
+    print(f"{_cpu()}, commit {commit}, {a.rounds} rounds, load average {load0:.1f} -> "
           f"{os.getloadavg()[0]:.1f}\n")
     print("| scene | kinds | size, spp | ops masked -> kinds | s masked | s kinds | speedup | identical |")
     print("|---|---|---|---|---|---|---|---|")
