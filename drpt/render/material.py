@@ -15,13 +15,23 @@ whole mixture's ``f / pdf`` and ``pdf`` (one-sample MIS over the components: low
 variance than the chosen component's own ratio, same expectation); a Dirac sample
 keeps the component's own weight (its selection probability cancels).
 
-Model only what the scene requires: only the lobe kinds present are traced
-(each under its own lane mask, merged with ``select``), only their fields
-are uploaded, a field is looked up in a texture only when some material
+Model only what the scene requires: only the lobe kinds present are traced,
+only their fields are uploaded, a field is looked up in a texture only when some material
 gives it one, a scene where every material is one component (the usual
 case) has ``K = 1`` with no weights and no slot gathers, and a kind whose
 components are all two-sided (or all one-sided) flips without a per-lane
 test.
+
+Dispatch over kinds: in a table (or :meth:`MaterialTable.restricted` view) with
+several lobe kinds, each kind's whole case (its fields and textures, its shading
+frame, ``eval``/``pdf``/``sample``) runs inside a symbolic ``dr.if_stmt`` on the
+lanes of that kind (label ``drpt_bsdf_kind``): the LLVM backend branches per SIMD
+packet, so a packet pays only for the kinds its lanes have, instead of every
+lane evaluating every kind under a mask. :attr:`MaterialTable.dispatch`
+``"masked"`` selects the other way (every kind traced for every lane, merged
+with ``select``), for A/B measurements and tests; both compute the same values
+from the same random numbers, so their images are bit-identical. A table with
+one kind has no branch either way (its kernel is the same).
 
 Each lobe module (:mod:`drpt.render.bsdf`) reads its parameters through
 :meth:`Rows.value`, :meth:`Rows.table_lerp` and decides trace-time choices
@@ -33,6 +43,7 @@ does.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import drjit as dr
@@ -42,7 +53,7 @@ from ..materials.layout import NONE, MaterialLayout
 from ..materials.spec import BSDFSpec
 from ..scene.model import Scene
 from . import perturb
-from .bsdf import BSDFSample, lobe
+from .bsdf import BSDF, BSDFSample, lobe
 from .perturb import PerturbedFrame
 from .surface import Interaction, _vec
 from .texture import TextureSet
@@ -86,6 +97,30 @@ class _Slot:
     complement: Bool
     kinds: list[str]
     partial: bool
+
+
+@dataclass
+class _Case:
+    """One lobe kind of a slot, as :meth:`MaterialTable._cases` yields it: its lanes
+    (``mask``), their rows, and ``frame()``, the lanes' local shading frame as that kind
+    sees it (traced where it is called: inside the kind's branch when ``branched``)."""
+
+    kind: str
+    bsdf: BSDF
+    mask: Bool
+    rows: Rows
+    frame: Callable[[], Frame]
+    branched: bool  # the case runs in its own dr.if_stmt (MaterialTable.dispatch "kinds")
+
+    def run(self, fn: Callable[..., tuple], state: tuple, lanes: Bool | None = None) -> tuple:
+        """``fn(*state)``, the new state: ``fn`` traces the case and merges its values into
+        ``state`` on its lanes itself (``dr.select``), so that the masked dispatch is ``fn``
+        alone; a branched case runs it in a symbolic ``dr.if_stmt`` on ``lanes`` (default
+        :attr:`mask`; the other lanes keep ``state``)."""
+        if not self.branched:
+            return fn(*state)
+        return dr.if_stmt(state, self.mask if lanes is None else lanes, fn, lambda *old: old,
+                          label="drpt_bsdf_kind")
 
 
 class Rows:
@@ -194,6 +229,12 @@ class MaterialTable:
 
     _only: tuple[str, ...] | None = None  # a restricted view's kinds (see restricted)
 
+    #: how lanes reach their lobe kind's code where a table traces several kinds: ``"kinds"``,
+    #: each kind's case in its own symbolic ``dr.if_stmt`` (a SIMD packet runs only the kinds
+    #: its lanes have); ``"masked"``, every kind for every lane, merged with ``dr.select``.
+    #: Same images; read at trace time (set it before a kernel is traced, e.g. for an A/B).
+    dispatch: str = "kinds"
+
     def at(self, row: UInt32) -> Rows:
         """The lanes' rows ``row``: what the lobes read their fields through."""
         return Rows(self, row)
@@ -299,10 +340,15 @@ class MaterialTable:
         """The diffuse color of the lanes' first component (its kind's ``COLOR``
         field, e.g. ``kd``), for the Whitted ambient term; 0 for kinds without one."""
         out = Array3f(0.0)
-        for _, bsdf, mask, _, rows in self._cases(si, 0):
-            name = getattr(bsdf, "COLOR", None)
+        for case in self._cases(si, 0):
+            name = getattr(case.bsdf, "COLOR", None)
             if name is not None:
-                out = dr.select(mask & active, rows.value(name, si, mask & active), out)
+                m = case.mask & active
+
+                def color(out, m=m, rows=case.rows, name=name):
+                    return (dr.select(m, rows.value(name, si, m), out),)
+
+                (out,) = case.run(color, (out,), m)
         return out
 
     def albedo(self, si: Interaction, active: Bool) -> Array3f:
@@ -316,19 +362,24 @@ class MaterialTable:
         w_null = Float(0.0)
         for j in range(self.K):
             row, w, present = self._slot(si, j)
-            for kind, bsdf, mask, frame, rows in self._cases(si, j, row, present):
-                m = mask & active
+            for case in self._cases(si, j, row, present):
+                m = case.mask & active
+                bsdf, rows = case.bsdf, case.rows
                 name = getattr(bsdf, "COLOR", None)
-                if name is not None:
-                    a = rows.value(name, si, m)
-                elif kind == "null" and w is not None:
+                if name is None and case.kind == "null" and w is not None:
                     w_null = dr.select(m, w_null + w, w_null)
                     continue
-                elif bsdf.DELTA:
+                if name is None and bsdf.DELTA:
                     continue
-                else:
-                    a = bsdf.eval(bsdf.params(rows, si, m), frame.to_local(si.wi), up) * dr.pi
-                out = dr.select(m, a if w is None else dr.fma(a, w, out), out)
+
+                def reflectance(out, m=m, bsdf=bsdf, rows=rows, name=name, frame=case.frame, w=w):
+                    if name is not None:
+                        a = rows.value(name, si, m)
+                    else:
+                        a = bsdf.eval(bsdf.params(rows, si, m), frame().to_local(si.wi), up) * dr.pi
+                    return (dr.select(m, a if w is None else dr.fma(a, w, out), out),)
+
+                (out,) = case.run(reflectance, (out,), m)
         if "null" in self.kinds and self.K > 1:
             out = dr.select(w_null < 1.0, out / dr.maximum(1.0 - w_null, 1e-6), out)
         return out
@@ -351,8 +402,12 @@ class MaterialTable:
         return row, dr.select(present, w, 0.0), present
 
     def _cases(self, si: Interaction, j: int | None = None, row=None, present=None):
-        """(kind, lobe module, lane mask, local frame, the lanes' :class:`Rows`) for each
-        kind of slot ``j`` (all kinds when ``j`` is None: ``row`` given)."""
+        """A :class:`_Case` for each kind of slot ``j`` (all kinds when ``j`` is None:
+        ``row`` given). Cases are branched (:attr:`dispatch` ``"kinds"``) where lanes
+        have several kinds; each branched case traces its frame alone, while masked
+        cases share the tangent and flipped frames (computed once, for every lane)."""
+        if self.dispatch not in ("kinds", "masked"):
+            raise ValueError(f"MaterialTable.dispatch must be 'kinds' or 'masked', not {self.dispatch!r}")
         if row is None:
             row, _, present = self._slot(si, j)
         rows = self.at(row)
@@ -363,33 +418,53 @@ class MaterialTable:
             kind_of = None
         else:
             kind_of = dr.gather(UInt32, self.kind, row, present)
+        branched = kind_of is not None and self.dispatch == "kinds"
         flip = dr.dot(si.ns, si.wi) < 0.0
-        flipped, plain = None, None
-        tangent = None
+        shared: dict[str, Frame] = {}
         for kind in kinds:
             i = self.kinds.index(kind)
             mask = present if kind_of is None else present & (kind_of == i)
-            two = self._two[kind]
-            if si.dp_du is not None:  # frames follow dp/du; twosided mirrors z
-                tangent = tangent or tangent_frame(si.ns, si.dp_du)
-                if two is True:
-                    frame = _z_flipped(tangent, flip)
-                elif two is False:
-                    frame = tangent
-                else:
-                    frame = _z_flipped(tangent, dr.gather(Bool, two, row, mask) & flip)
-                if kind in self._pkinds:
-                    frame = self._perturbed(si, row, mask, frame, tangent)
-            elif two is True:
-                flipped = flipped or Frame(dr.select(flip, -si.ns, si.ns))
-                frame = flipped
+
+            def frame(kind=kind, mask=mask, base=({} if branched else shared)):
+                return self._frame(si, row, mask, flip, kind, base)
+
+            if not branched:  # traced here, as the masked dispatch always has
+                f = frame()
+
+                def frame(f=f):
+                    return f
+
+            yield _Case(kind, self.lobes[kind], mask, rows, frame, branched)
+
+    def _frame(self, si: Interaction, row: UInt32, mask: Bool, flip: Bool, kind: str,
+               base: dict) -> Frame:
+        """The local shading frame of the lanes ``mask`` of ``kind`` (``flip``: the lanes
+        seeing the shading normal from behind); ``base`` caches the frames that do not
+        depend on the kind (the tangent frame, the flipped and plain normal frames)."""
+        two = self._two[kind]
+        if si.dp_du is not None:  # frames follow dp/du; twosided mirrors z
+            if "tangent" not in base:
+                base["tangent"] = tangent_frame(si.ns, si.dp_du)
+            tangent = base["tangent"]
+            if two is True:
+                frame = _z_flipped(tangent, flip)
             elif two is False:
-                plain = plain or Frame(si.ns)
-                frame = plain
+                frame = tangent
             else:
-                f2 = dr.gather(Bool, two, row, mask) & flip
-                frame = Frame(dr.select(f2, -si.ns, si.ns))
-            yield kind, self.lobes[kind], mask, frame, rows
+                frame = _z_flipped(tangent, dr.gather(Bool, two, row, mask) & flip)
+            if kind in self._pkinds:
+                frame = self._perturbed(si, row, mask, frame, tangent)
+            return frame
+        if two is True:
+            if "flipped" not in base:
+                base["flipped"] = Frame(dr.select(flip, -si.ns, si.ns))
+            return base["flipped"]
+        if two is False:
+            if "plain" not in base:
+                base["plain"] = Frame(si.ns)
+            return base["plain"]
+        f2 = dr.gather(Bool, two, row, mask) & flip
+        return Frame(dr.select(f2, -si.ns, si.ns))
 
     # ------------------------------------------------------------------
     def eval_pdf(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float]:
@@ -397,21 +472,23 @@ class MaterialTable:
         f, pdf = Array3f(0.0), Float(0.0)
         for j in range(self.K):
             row, w, present = self._slot(si, j)
-            for _, bsdf, mask, frame, rows in self._cases(si, j, row, present):
-                if bsdf.DELTA:
+            for case in self._cases(si, j, row, present):
+                if case.bsdf.DELTA:
                     continue  # nothing to evaluate
-                p = bsdf.params(rows, si, mask)
-                wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
-                fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
-                if isinstance(frame, PerturbedFrame):
-                    fac = frame.factor(wo)
-                    fj, pj = fj * fac, dr.select(fac > 0.0, pj, 0.0)
-                if w is None:
-                    f = dr.select(mask, fj, f)
-                    pdf = dr.select(mask, pj, pdf)
-                else:
-                    f = dr.select(mask, dr.fma(fj, w, f), f)
-                    pdf = dr.select(mask, dr.fma(pj, w, pdf), pdf)
+
+                def evaluate(f, pdf, case=case, w=w):
+                    bsdf, mask, frame = case.bsdf, case.mask, case.frame()
+                    p = bsdf.params(case.rows, si, mask)
+                    wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
+                    fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
+                    if isinstance(frame, PerturbedFrame):
+                        fac = frame.factor(wo)
+                        fj, pj = fj * fac, dr.select(fac > 0.0, pj, 0.0)
+                    if w is None:
+                        return dr.select(mask, fj, f), dr.select(mask, pj, pdf)
+                    return dr.select(mask, dr.fma(fj, w, f), f), dr.select(mask, dr.fma(pj, w, pdf), pdf)
+
+                f, pdf = case.run(evaluate, (f, pdf))
         return f, pdf
 
     def sample(self, si: Interaction, u1: Float, u2: Array2f) -> tuple[Array3f, BSDFSample]:
@@ -435,16 +512,20 @@ class MaterialTable:
             present = si.valid & picked
         out = BSDFSample()
         wo = Array3f(0.0, 0.0, 1.0)
-        for _, bsdf, mask, frame, rows in self._cases(si, None, row, present):
-            p = bsdf.params(rows, si, mask)
-            bs = bsdf.sample(p, frame.to_local(si.wi), u1, u2)
-            wo_j = frame.to_world(bs.wo)
-            if isinstance(frame, PerturbedFrame):
-                fac = frame.factor(wo_j)
-                ok = fac > 0.0
-                bs.weight, bs.pdf, bs.valid = bs.weight * fac, dr.select(ok, bs.pdf, 0.0), bs.valid & ok
-            out = dr.select(mask, bs, out)
-            wo = dr.select(mask, wo_j, wo)
+        for case in self._cases(si, None, row, present):
+
+            def draw(out, wo, case=case, u1=u1):
+                bsdf, mask, frame = case.bsdf, case.mask, case.frame()
+                p = bsdf.params(case.rows, si, mask)
+                bs = bsdf.sample(p, frame.to_local(si.wi), u1, u2)
+                wo_j = frame.to_world(bs.wo)
+                if isinstance(frame, PerturbedFrame):
+                    fac = frame.factor(wo_j)
+                    ok = fac > 0.0
+                    bs.weight, bs.pdf, bs.valid = bs.weight * fac, dr.select(ok, bs.pdf, 0.0), bs.valid & ok
+                return dr.select(mask, bs, out), dr.select(mask, wo_j, wo)
+
+            out, wo = case.run(draw, (out, wo))
         out.valid &= present
         if self.K > 1 and not self.is_specular_only():
             # a smooth sample weighs the whole mixture: f_mix / pdf_mix
