@@ -248,7 +248,7 @@ class PathIntegrator:
         """A new path along the ray ``(o, d)``: no radiance, throughput
         ``weight`` (``None``: 1), IOR product 1, depth 0, and no MIS for what
         the first ray hits (as after a delta lobe)."""
-        w = dr.width(active)
+        w = max(dr.width(active), dr.width(o), dr.width(d))
         beta = dr.full(Array3f, 1.0, w) if weight is None else Array3f(weight, weight, weight)
         return PathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=beta,
                          eta=dr.full(Float, 1.0, w), depth=dr.zeros(UInt32, w),
