@@ -119,9 +119,10 @@ class PathIntegrator:
     @property
     def straight(self) -> bool:
         """Whether paths are traced unrolled (:attr:`unrolled`, a short fixed depth, and no
-        instrument, which counts the loop's bounces)."""
-        return (self.unrolled and 0 < self.opt.max_depth <= UNROLLED_MAX_DEPTH
-                and self.scene.instrument is None)
+        instrument, which counts the loop's bounces). A subclass with a bounce of its own
+        (volpath: media along every segment, the last one too) keeps the loop."""
+        return (self.unrolled and type(self).bounce is PathIntegrator.bounce
+                and 0 < self.opt.max_depth <= UNROLLED_MAX_DEPTH and self.scene.instrument is None)
 
     def unrolled_path(self, rng, state: PathState) -> Array3f:
         """The radiance of the paths starting at ``state`` (``max_depth`` segments at most),

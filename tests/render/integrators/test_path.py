@@ -124,13 +124,19 @@ def test_unrolled_path_is_the_loops_path(scenes_dir, monkeypatch, case, depth):
 
 
 def test_unrolled_only_for_short_fixed_depths(scenes_dir):
-    """Depths 1 to UNROLLED_MAX_DEPTH are unrolled; deeper and unbounded paths run the loop."""
+    """Depths 1 to UNROLLED_MAX_DEPTH are unrolled; deeper and unbounded paths run the loop, and
+    so does volpath (a bounce of its own: media along the last segment too)."""
     from drpt.render.integrators.path import UNROLLED_MAX_DEPTH
+    from drpt.render.integrators.volpath import VolPathIntegrator
 
     scene = load_scene(scenes_dir / "cornellbox/cornellbox.txt")
     assert _depth_renderer(scene, UNROLLED_MAX_DEPTH).integrator.straight
     assert not _depth_renderer(scene, UNROLLED_MAX_DEPTH + 1).integrator.straight
     assert not _depth_renderer(scene, -1).integrator.straight
+    fog = Renderer(load_scene(scenes_dir / "cornellbox_media/cornellbox_media.txt"),
+                   RenderOptions(width=W, height=H, spp=1, integrator="volpath", progress=False,
+                                 path=PathOptions(max_depth=2)))
+    assert isinstance(fog.integrator, VolPathIntegrator) and not fog.integrator.straight
 
 
 def _sequence_means(r, unrolled, monkeypatch, seed, k):
