@@ -9,9 +9,10 @@ then False; round ``k`` with seed ``k``). Prints per scene the median render sec
 way, their ratio (loop / unrolled: above 1, the unrolled path is faster), whether the scene
 is unrolled at all (``0 < max_depth <= UNROLLED_MAX_DEPTH``) and the relative difference of
 the two ways' mean pixel values over all rounds (the same expectation: noise only).
+``--max-depth N`` renders every scene with that depth instead of its own.
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/unrolled_paths.py [--rounds 5] [--only WORD,...]
-[--min-size 192] [--max-samples 1000000]
+[--min-size 192] [--max-samples 1000000] [--max-depth N]
 """
 
 from __future__ import annotations
@@ -29,8 +30,9 @@ import numpy as np
 DEFAULT_ONLY = "mesh_attributes,projector,instancing,texture_interp,spot_light,floating_sphere,infinite_mirrors"
 
 
-def renderer_for(path, min_size: int, max_samples: int):
-    """drpt's renderer of the XML file ``path`` at the equal-time benchmark's size and spp."""
+def renderer_for(path, min_size: int, max_samples: int, max_depth: int | None = None):
+    """drpt's renderer of the XML file ``path`` at the equal-time benchmark's size and spp
+    (and ``max_depth``, if given, in place of the file's)."""
     from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
@@ -42,7 +44,10 @@ def renderer_for(path, min_size: int, max_samples: int):
     k = eq.scale_for(own.width, own.height, min_size)
     opts, scene = with_scene_settings(RenderOptions(width=k * own.width, height=k * own.height, progress=False),
                                       scene, given=frozenset({"size"}))
-    return Renderer(scene, replace(opts, spp=eq.spp_for(opts.spp, opts.width * opts.height, max_samples)))
+    opts = replace(opts, spp=eq.spp_for(opts.spp, opts.width * opts.height, max_samples))
+    if max_depth is not None:
+        opts = replace(opts, path=replace(opts.path, max_depth=max_depth))
+    return Renderer(scene, opts)
 
 
 def main(argv=None) -> None:
@@ -54,6 +59,7 @@ def main(argv=None) -> None:
     ap.add_argument("--only", default=DEFAULT_ONLY)
     ap.add_argument("--min-size", type=int, default=192)
     ap.add_argument("--max-samples", type=int, default=1_000_000)
+    ap.add_argument("--max-depth", type=int, default=None)
     a = ap.parse_args(argv)
     ensure()
     only = [w for w in a.only.split(",") if w]
@@ -64,7 +70,7 @@ def main(argv=None) -> None:
         name = str(path.relative_to(eq.CORPUS))
         if not any(w in name for w in only):
             continue
-        r = renderer_for(path, a.min_size, a.max_samples)
+        r = renderer_for(path, a.min_size, a.max_samples, a.max_depth)
         if not isinstance(r.integrator, PathIntegrator):
             continue
         ways = {True: [], False: []}
