@@ -141,7 +141,6 @@ class SplatFilm:
         return stack(self.sum), stack(self.sq + self.moment), stack(self.w) if self.weights else None
 
 
-@dr.syntax
 def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: int,
                   px: Float, py: Float, L: Array3f, ok: Bool, moment: bool = False):
     """What :class:`SplatFilm` with ``weights`` sums for camera samples, computed per
@@ -149,10 +148,27 @@ def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int,
 
     The samples are a pass's, pixel-major: lanes ``p k .. p k + k - 1`` are the ``k``
     samples of pixel ``p`` of rows ``r0 .. r0 + rows`` (positions ``px``, ``py`` inside
-    that pixel, radiance ``L``, ``ok`` where it counts). A receiving pixel's sums run over
-    the samples of the source pixels within ``R = ceil(r + 1/2) - 1`` pixels of it (the
-    only ones whose samples its filter of radius ``r`` reaches), in a fixed order.
+    that pixel, radiance ``L``, finite, ``ok`` where it counts). A receiving pixel's sums
+    run over the samples of the source pixels within ``R = ceil(r + 1/2) - 1`` pixels of
+    it (the only ones whose samples its filter of radius ``r`` reaches), in a fixed order:
+    each source pixel's ``k`` samples are summed in float32 (cheap: full-width SIMD, no
+    conversions), and these partial sums added in float64. Where a float32 partial sum
+    (or square) overflows, the pass is gathered again with float64 partial sums.
     Returns ``(y0, sum, sumsq, weight)`` as :meth:`SplatFilm.arrays` (rows from ``y0``)."""
+    import numpy as np
+
+    out = _gather(flt, width, height, r0, rows, k, px, py, L, ok, moment, Float)
+    if not all(np.isfinite(a).all() for a in out[1:]):  # (radiance near the float32 maximum)
+        out = _gather(flt, width, height, r0, rows, k, px, py, L, ok, moment, Float64)
+    return out
+
+
+@dr.syntax
+def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: int,
+            px: Float, py: Float, L: Array3f, ok: Bool, moment: bool, Partial: type):
+    """:func:`gather_splats` with partial sums (per source pixel) of type ``Partial``
+    (``Float`` or ``Float64``): an outer loop over the source pixels, an inner one over
+    each one's samples."""
     import numpy as np
 
     W = width
@@ -165,40 +181,39 @@ def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int,
     cx, cy = Float(ox) + 0.5, Float(oy) + 0.5
     side = 2 * R + 1
     kk = dr.opaque(UInt32, k)
-    total = dr.opaque(UInt32, side * side * k)
+    sources = dr.opaque(UInt32, side * side)
     # a plain function, not the filter: the loop would take a dataclass for loop state
     weight = functools.partial(filter_weight, flt)
+    channels = 3 + 3 + 2 + (6 if moment else 0)  # sum, squares, weights, channel products
 
-    zero = dr.zeros(Float64, n)
-    s0, s1, s2 = Float64(zero), Float64(zero), Float64(zero)
-    q0, q1, q2 = Float64(zero), Float64(zero), Float64(zero)
-    w0, w1 = Float64(zero), Float64(zero)
-    m = [Float64(zero) for _ in range(6)] if moment else []
-    it = dr.zeros(UInt32, n)
-    while it < total:
-        off = it // kk
-        j = it - off * kk
-        sx = ox + Int32(off % side) - R
-        sy = oy + Int32(off // side) - R
-        valid = (sx >= 0) & (sx < W) & (sy >= r0) & (sy < r0 + rows)
-        lane = UInt32((sy - r0) * W + sx) * kk + j
-        valid &= dr.gather(Bool, ok, lane, valid)
-        x = dr.gather(Float, px, lane, valid)
-        y = dr.gather(Float, py, lane, valid)
-        v = dr.gather(Array3f, L, lane, valid)
-        w = Float64(dr.select(valid, weight(cx - x) * weight(cy - y), 0.0))
-        a, b, c = Float64(v.x) * w, Float64(v.y) * w, Float64(v.z) * w
-        s0, s1, s2 = s0 + a, s1 + b, s2 + c
-        q0, q1, q2 = q0 + a * a, q1 + b * b, q2 + c * c
-        w0, w1 = w0 + w, w1 + w * w
-        if moment:
-            r_, g_, b_ = Float64(v.x), Float64(v.y), Float64(v.z)
-            m = [m[0] + w * r_ * r_, m[1] + w * g_ * g_, m[2] + w * b_ * b_,
-                 m[3] + w * r_ * g_, m[4] + w * r_ * b_, m[5] + w * g_ * b_]
-        it += 1
-    dr.eval(s0, s1, s2, q0, q1, q2, w0, w1, m)
+    total = [dr.zeros(Float64, n) for _ in range(channels)]
+    src = dr.zeros(UInt32, n)
+    while src < sources:
+        sx = ox + Int32(src % side) - R
+        sy = oy + Int32(src // side) - R
+        inside = (sx >= 0) & (sx < W) & (sy >= r0) & (sy < r0 + rows)
+        first = dr.select(inside, UInt32((sy - r0) * W + sx) * kk, 0)
+        part = [dr.zeros(Partial, n) for _ in range(channels)]
+        j = dr.zeros(UInt32, n)
+        while inside & (j < kk):
+            lane = first + j
+            valid = dr.gather(Bool, ok, lane)
+            x = dr.gather(Float, px, lane, valid)
+            y = dr.gather(Float, py, lane, valid)
+            v = dr.gather(Array3f, L, lane, valid)
+            w = Partial(dr.select(valid, weight(cx - x) * weight(cy - y), 0.0))
+            r_, g_, b_ = Partial(v.x), Partial(v.y), Partial(v.z)
+            a, b, c = r_ * w, g_ * w, b_ * w
+            terms = [a, b, c, a * a, b * b, c * c, w, w * w]
+            if moment:
+                terms += [a * r_, b * g_, c * b_, a * g_, a * b_, b * b_]
+            part = [part[i] + terms[i] for i in range(channels)]
+            j += 1
+        total = [total[i] + Float64(part[i]) for i in range(channels)]
+        src += 1
+    dr.eval(total)
 
     def stack(cs):
         return np.stack([c.numpy() for c in cs], axis=-1).reshape(y1 - y0, W, len(cs))
 
-    return y0, stack([s0, s1, s2]), stack([q0, q1, q2, *m]), stack([w0, w1])
+    return y0, stack(total[:3]), stack(total[3:6] + total[8:]), stack(total[6:8])

@@ -901,10 +901,16 @@ SRGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423],
 
 def xyz_second_moment(m: np.ndarray) -> np.ndarray:
     """Per pixel, the mean of ``X^2, Y^2, Z^2`` over the samples, from the means ``m`` of
-    ``r^2, g^2, b^2, rg, rb, gb`` (``X = a . rgb`` gives ``X^2 = a^T (rgb rgb^T) a``)."""
-    rr, gg, bb, rg, rb, gb = (m[..., i] for i in range(6))
-    a = SRGB_TO_XYZ
-    out = [a[i, 0] ** 2 * rr + a[i, 1] ** 2 * gg + a[i, 2] ** 2 * bb
-           + 2 * (a[i, 0] * a[i, 1] * rg + a[i, 0] * a[i, 2] * rb + a[i, 1] * a[i, 2] * gb)
-           for i in range(3)]
-    return np.stack(out, -1)
+    ``r^2, g^2, b^2, rg, rb, gb`` (``X = a . rgb`` gives ``X^2 = a^T (rgb rgb^T) a``): one
+    matrix product with :data:`_XYZ_SQUARES`."""
+    return m[..., :6] @ _XYZ_SQUARES
+
+
+def _xyz_squares() -> np.ndarray:
+    """The ``6 x 3`` matrix taking ``(r^2, g^2, b^2, rg, rb, gb)`` to ``(X^2, Y^2, Z^2)``."""
+    a = np.asarray(SRGB_TO_XYZ, np.float64)
+    return np.stack([a[:, 0] ** 2, a[:, 1] ** 2, a[:, 2] ** 2,
+                     2 * a[:, 0] * a[:, 1], 2 * a[:, 0] * a[:, 2], 2 * a[:, 1] * a[:, 2]])
+
+
+_XYZ_SQUARES = _xyz_squares()

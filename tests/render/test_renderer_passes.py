@@ -77,3 +77,18 @@ def test_render_passes_sum_to_the_render(cornell):
     past = r.render_pass(10)
     assert past.lo == 2 and np.array_equal(past.sum, longer.render_pass(10).sum)
     assert not np.array_equal(past.sum, r.render_pass(7).sum)  # same rows, another sample step
+
+
+def test_xyz_second_moment_is_the_square_of_each_samples_xyz():
+    """From the products ``(r^2, g^2, b^2, rg, rb, gb)`` of one sample the XYZ second moment
+    is ``(A rgb)^2`` for each sample, and means of several samples are the mean of those.
+    Negative control: the products in another order give another answer."""
+    from drpt.render.renderer import SRGB_TO_XYZ, xyz_second_moment
+
+    rgb = np.random.default_rng(1).random((4, 5, 3))
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    m = np.stack([r * r, g * g, b * b, r * g, r * b, g * b], -1)
+    want = (rgb @ SRGB_TO_XYZ.T) ** 2
+    assert np.allclose(xyz_second_moment(m), want, rtol=1e-12)
+    assert np.allclose(xyz_second_moment(m.mean((0, 1))), want.mean((0, 1)), rtol=1e-12)
+    assert not np.allclose(xyz_second_moment(m[..., [0, 1, 2, 5, 4, 3]]), want, rtol=1e-3)

@@ -36,6 +36,23 @@ returns their sums. Both tell the scene's instrument
 Every question about the scene goes to the
 :class:`~drpt.render.scene.DeviceScene`; its feature flags decide at trace
 time which estimators are compiled.
+
+Short paths are written out ("unrolled"): with ``0 < max_depth <=``
+:data:`UNROLLED_MAX_DEPTH` (and no instrument attached) a path is its camera ray,
+``max_depth - 1`` full vertices (:meth:`PathIntegrator.bounce`, one after another in
+straight-line code, no symbolic loop) and a last segment that only looks for what
+it can see (:meth:`PathIntegrator.last_segment`): the emitter it hits or the sky it
+escapes to, with no next-event estimation, BSDF sample or roulette, which the loop
+computes there and throws away. Straight-line code also lets Dr.Jit drop what nothing
+reads: the last hit's shading frame and texture lookups, and, where the last segment
+can see nothing at all (:func:`nothing_seen`: no emissive surface, no sky or
+background; e.g. direct lighting by point, spot or projector lights), the last
+BSDF sample and the last ray. Every lane traces its camera ray in the same Embree
+query (coherent for the whole packet). The estimator is the loop's and draws the same
+random numbers for a path's live vertices, so one path per lane (:meth:`sample`) gives
+the loop's image; :meth:`sample_sequence`'s later paths start at other points of a
+PCG32 stream (the loop also draws at its last vertex), so their images differ by noise.
+:attr:`PathIntegrator.unrolled` False keeps the loop (A/B measurements).
 """
 
 from __future__ import annotations
@@ -50,6 +67,9 @@ from ...options import PathOptions
 from ..sampler import light_sample, next_2d, next_path
 from ..scene import DeviceScene
 from .common import DirectLight, power_heuristic
+
+#: the largest ``max_depth`` whose paths are traced as straight-line code (``0 < max_depth``)
+UNROLLED_MAX_DEPTH = 3
 
 
 @dataclass
@@ -76,17 +96,67 @@ def bank(sums: tuple, L):
     return out
 
 
+def nothing_seen(scene: DeviceScene) -> bool:
+    """Whether a ray can see nothing in ``scene`` (read at trace time): no emissive
+    surface, no background color and no emitter at infinity, the only things
+    :meth:`~drpt.render.scene.DeviceScene.eval_emitter` returns radiance for. Then a
+    path's last segment adds nothing and is not traced."""
+    emits = getattr(scene.materials, "has_emission", True)
+    infinite = any(f.infinite and not f.delta for f in scene.emitter_selection.families)
+    return not (emits or scene.has_background or infinite)
+
+
 class PathIntegrator:
+    #: trace paths of ``0 < max_depth <= UNROLLED_MAX_DEPTH`` as straight-line code
+    #: (the module docstring); False: always the bounce loop (for A/B comparisons)
+    unrolled = True
+
     def __init__(self, scene: DeviceScene, options: PathOptions):
         self.scene = scene
         self.direct = DirectLight(scene)
         self.opt = options
 
-    @dr.syntax
+    @property
+    def straight(self) -> bool:
+        """Whether paths are traced unrolled (:attr:`unrolled`, a short fixed depth, and no
+        instrument, which counts the loop's bounces). A subclass with a bounce of its own
+        (volpath: media along every segment, the last one too) keeps the loop."""
+        return (self.unrolled and type(self).bounce is PathIntegrator.bounce
+                and 0 < self.opt.max_depth <= UNROLLED_MAX_DEPTH and self.scene.instrument is None)
+
+    def unrolled_path(self, rng, state: PathState) -> Array3f:
+        """The radiance of the paths starting at ``state`` (``max_depth`` segments at most),
+        traced as straight-line code: ``max_depth - 1`` full vertices, then
+        :meth:`last_segment`."""
+        scene = self.scene
+        for _ in range(self.opt.max_depth - 1):
+            state = self.bounce(scene, state, rng)
+        return self.last_segment(scene, state)
+
+    def last_segment(self, scene: DeviceScene, s: PathState) -> Array3f:
+        """``s.L`` plus what the path's last ray (depth ``max_depth - 1``) sees: the
+        emission it hits or the sky, as :meth:`bounce` adds it, without the vertex's
+        next-event estimation and BSDF sample (a further segment would exceed
+        ``max_depth``). Nothing is traced where the ray can see nothing (:func:`nothing_seen`)."""
+        if nothing_seen(scene):
+            return s.L
+        camera = self.opt.max_depth == 1
+        si = scene.intersect(s.o, s.d, s.active, coherent=camera)
+        if camera:
+            si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
+        return add_emission(scene, self.opt, si, s, s.L, s.active)
+
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:
         """Radiance arriving at ``o`` from direction ``-d``, one sample per lane."""
-        scene = self.scene
         state = self._start(o, d, Bool(active))
+        if self.straight:
+            return self.unrolled_path(rng, state)
+        return self._loop_sample(rng, state)
+
+    @dr.syntax
+    def _loop_sample(self, rng: PCG32, state: PathState) -> Array3f:
+        """:meth:`sample` by the bounce loop."""
+        scene = self.scene
         inst = scene.instrument
         if inst is not None:
             inst.paths(dr.width(state.active))
@@ -96,7 +166,6 @@ class PathIntegrator:
             state = self.bounce(scene, state, rng)
         return state.L
 
-    @dr.syntax
     def sample_sequence(self, rng: PCG32, camera_ray: Callable, count: UInt32, wide: bool = False,
                         moment: bool = False, bounces: bool = False) -> tuple:
         """``count`` paths per lane, one after another (path regeneration).
@@ -120,8 +189,14 @@ class PathIntegrator:
         value is the number of bounces the lane traced, its work (adaptive sampling's cost
         estimate, :mod:`drpt.render.adaptive`; without it the kernel has no such counter).
         """
+        run = self._unrolled_sequence if self.straight else self._loop_sequence
+        return run(rng, camera_ray, UInt32(count), wide, moment, bounces)
+
+    @dr.syntax
+    def _loop_sequence(self, rng, camera_ray: Callable, left: UInt32, wide: bool, moment: bool,
+                       bounces: bool) -> tuple:
+        """:meth:`sample_sequence` by the bounce loop."""
         scene = self.scene
-        left = UInt32(count)
         o, d, *weight = camera_ray(rng)
         state = self._start(o, d, left > 0, *weight)
         Sum = Array3f64 if wide else Array3f
@@ -148,11 +223,33 @@ class PathIntegrator:
                 state = self._start(o, d, left > 0, *weight)
         return (*sums[:2], dropped, *sums[2:], *steps)
 
+    @dr.syntax
+    def _unrolled_sequence(self, rng, camera_ray: Callable, left: UInt32, wide: bool, moment: bool,
+                           bounces: bool) -> tuple:
+        """:meth:`sample_sequence` with each path traced unrolled (:meth:`unrolled_path`):
+        a loop over a lane's paths, one whole path per iteration. ``bounces`` counts
+        ``max_depth`` per path."""
+        Sum = Array3f64 if wide else Array3f
+        sums = (Sum(0.0), Sum(0.0)) + ((Sum(0.0),) if moment else ())
+        dropped = UInt32(0)
+        steps = (UInt32(0),) if bounces else ()
+        while left > 0:
+            o, d, *weight = camera_ray(rng)
+            L = self.unrolled_path(rng, self._start(o, d, Bool(True), *weight))
+            finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
+            sums = bank(sums, Sum(dr.select(finite, L, 0.0)))
+            dropped += dr.select(finite, 0, 1)
+            if bounces:
+                steps = (steps[0] + self.opt.max_depth,)
+            left -= 1
+            next_path(rng)
+        return (*sums[:2], dropped, *sums[2:], *steps)
+
     def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> PathState:
         """A new path along the ray ``(o, d)``: no radiance, throughput
         ``weight`` (``None``: 1), IOR product 1, depth 0, and no MIS for what
         the first ray hits (as after a delta lobe)."""
-        w = dr.width(active)
+        w = max(dr.width(active), dr.width(o), dr.width(d))
         beta = dr.full(Array3f, 1.0, w) if weight is None else Array3f(weight, weight, weight)
         return PathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=beta,
                          eta=dr.full(Float, 1.0, w), depth=dr.zeros(UInt32, w),

@@ -1,12 +1,14 @@
 """PathIntegrator's two entry points: one path per lane (``sample``) and path
-regeneration (``sample_sequence``, what the renderer runs)."""
+regeneration (``sample_sequence``, what the renderer runs); short paths traced unrolled
+(straight-line code, ``PathIntegrator.unrolled``) against the bounce loop."""
 
 import drjit as dr
 import numpy as np
 import pytest
 from drjit.auto import PCG32, Bool, Float, UInt32
 
-from drpt.options import RenderOptions
+from drpt.options import PathOptions, RenderOptions
+from drpt.render.integrators.path import PathIntegrator, nothing_seen
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
@@ -66,3 +68,103 @@ def test_sequence_mean_matches_independent_paths(scenes_dir):
         diff = (seq[c] - single[c]).sum()
         se = np.sqrt(seq_var[c].sum() + single_var[c].sum())
         assert se > 0 and abs(diff) < 5 * se, (c, diff, se)
+
+
+# ------------------------------------------------------------ unrolled short paths
+def _depth_renderer(scene, depth, hide=False):
+    return Renderer(scene, RenderOptions(width=W, height=H, spp=16, bsdf="phong", progress=False,
+                                         path=PathOptions(max_depth=depth, hide_emitters=hide)))
+
+
+def _spot_without_sky():
+    """tests/data/xml/spot.xml without its constant sky: a spot light only, nothing a ray can see."""
+    from dataclasses import replace
+
+    from drpt.scene.model import Background
+    from support.xml import XML
+
+    return replace(load_scene(XML / "spot.xml"), background=Background((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)))
+
+
+def _one_path_per_lane(r, unrolled, monkeypatch, seed=7):
+    monkeypatch.setattr(PathIntegrator, "unrolled", unrolled)
+    n = W * H
+    rng = PCG32(n, initstate=seed)
+    o, d = _camera_ray(r, dr.arange(UInt32, n))(rng)
+    L = r.integrator.sample(rng, o, d, Bool(True))
+    dr.eval(L)
+    return L.numpy()
+
+
+@pytest.mark.parametrize("case, depth", [("cornell", 1), ("cornell", 2), ("cornell", 3),
+                                         ("spot", 1), ("spot", 2), ("hidden", 1), ("hidden", 2)])
+def test_unrolled_path_is_the_loops_path(scenes_dir, monkeypatch, case, depth):
+    """One path per lane, the same random stream: the unrolled path (camera ray, full vertices,
+    a last segment that only looks for emitters) gives the bounce loop's radiance bit for bit,
+    with an area light (Cornell box), with a spot light only (nothing a ray can see: the last
+    segment is not traced) and with hide_emitters (the camera ray sees what lies behind the
+    area lights of tests/data/xml/hide_emitters.xml). Negative control: the loop one segment
+    deeper differs."""
+    from support.xml import XML
+
+    scene = {"cornell": lambda: load_scene(scenes_dir / "cornellbox/cornellbox.txt"),
+             "spot": _spot_without_sky,
+             "hidden": lambda: load_scene(XML / "hide_emitters.xml")}[case]()
+    r = _depth_renderer(scene, depth, hide=case == "hidden")
+    assert r.integrator.straight and type(r.integrator) is PathIntegrator
+    assert nothing_seen(r.scene) == (case == "spot")
+    unrolled = _one_path_per_lane(r, True, monkeypatch)
+    assert np.array_equal(unrolled, _one_path_per_lane(r, False, monkeypatch))
+    # a real comparison: lit pixels (at depth 1 only the light itself, or with a spot light
+    # or hide_emitters nothing: black is the right image)
+    lit = 0.2 if depth > 1 else {"cornell": 0.005, "spot": 0.0, "hidden": 0.0}[case]
+    assert (unrolled > 0).mean() >= lit
+    deeper = _depth_renderer(scene, depth + 1, hide=case == "hidden")
+    assert not np.array_equal(unrolled, _one_path_per_lane(deeper, False, monkeypatch))
+
+
+def test_unrolled_only_for_short_fixed_depths(scenes_dir):
+    """Depths 1 to UNROLLED_MAX_DEPTH are unrolled; deeper and unbounded paths run the loop, and
+    so does volpath (a bounce of its own: media along the last segment too)."""
+    from drpt.render.integrators.path import UNROLLED_MAX_DEPTH
+    from drpt.render.integrators.volpath import VolPathIntegrator
+
+    scene = load_scene(scenes_dir / "cornellbox/cornellbox.txt")
+    assert _depth_renderer(scene, UNROLLED_MAX_DEPTH).integrator.straight
+    assert not _depth_renderer(scene, UNROLLED_MAX_DEPTH + 1).integrator.straight
+    assert not _depth_renderer(scene, -1).integrator.straight
+    fog = Renderer(load_scene(scenes_dir / "cornellbox_media/cornellbox_media.txt"),
+                   RenderOptions(width=W, height=H, spp=1, integrator="volpath", progress=False,
+                                 path=PathOptions(max_depth=2)))
+    assert isinstance(fog.integrator, VolPathIntegrator) and not fog.integrator.straight
+
+
+def _sequence_means(r, unrolled, monkeypatch, seed, k):
+    """Per-pixel means of ``k`` regenerated paths per lane and the variances of the means."""
+    monkeypatch.setattr(PathIntegrator, "unrolled", unrolled)
+    n = W * H
+    acc, acc2, dropped = r.integrator.sample_sequence(
+        PCG32(n, initstate=seed), _camera_ray(r, dr.arange(UInt32, n)), dr.full(UInt32, k, n))
+    dr.eval(acc, acc2, dropped)
+    assert dr.sum(dropped)[0] == 0
+    mean = acc.numpy() / k
+    return mean, np.maximum(acc2.numpy() / k - mean**2, 0.0) / k
+
+
+@pytest.mark.parametrize("depth", [1, 2])
+def test_unrolled_sequence_mean_matches_the_loop(scenes_dir, monkeypatch, depth):
+    """Path regeneration, 64 paths per lane on the Cornell box: the unrolled sequence's image
+    sum agrees with the loop's (other random streams) within 5 standard errors per channel (a
+    pure-noise |z| above 5 has probability 6e-7). Negative control: the loop two segments deeper
+    (the direct light the unrolled depth 1 lacks; two more bounces after depth 2) is more than 5
+    standard errors away."""
+    scene = load_scene(scenes_dir / "cornellbox/cornellbox.txt")
+    r = _depth_renderer(scene, depth)
+    a, va = _sequence_means(r, True, monkeypatch, 1, 64)
+    b, vb = _sequence_means(r, False, monkeypatch, 2, 64)
+    c, vc = _sequence_means(_depth_renderer(scene, depth + 2), False, monkeypatch, 2, 64)
+    for ch in range(3):
+        se = np.sqrt(va[ch].sum() + vb[ch].sum())
+        assert se > 0 and abs((a[ch] - b[ch]).sum()) < 5 * se, (ch, (a[ch] - b[ch]).sum(), se)
+        se_c = np.sqrt(va[ch].sum() + vc[ch].sum())
+        assert abs((a[ch] - c[ch]).sum()) > 5 * se_c, (ch, (a[ch] - c[ch]).sum(), se_c)
