@@ -32,9 +32,11 @@ Dirac (mirror, smooth glass) are stored in per-lane local arrays
 (``dr.alloc_local``, one per field) of ``max_depth - 1`` entries; the camera
 subpath then runs as a Dr.Jit loop, and each of its non-Dirac vertices is
 connected to one stored light vertex, or to each. Both subpaths play Russian
-roulette as the path tracer does (after ``rr_depth`` segments, probability
-``min(max(beta) eta^2, 0.95)``); the MIS weights ignore it (they still sum to 1
-over the strategies of a path, so the estimate stays unbiased).
+roulette after ``rr_depth`` segments: the camera subpath as the path tracer does
+(probability ``min(max(beta) eta^2, 0.95)``), the light subpath on its throughput relative
+to the power it left its emitter with (:func:`light_survival`: a bright light's subpaths
+are not kept to the last bounce, nor a dim light's cut at once); the MIS weights ignore
+roulette (they still sum to 1 over the strategies of a path, so the estimate stays unbiased).
 
 **Roulette on connections and splats.** A connection's or a ``t = 1`` splat's
 MIS-weighted contribution is known before its shadow ray is traced; below a
@@ -239,6 +241,17 @@ def choose_vertex(u: Float, stored: UInt32, room: UInt32) -> tuple[UInt32, UInt3
     probability, by which the connection's contribution is multiplied (``m = 0``: none)."""
     m = dr.minimum(stored, room)
     return dr.minimum(UInt32(u * Float(m)), dr.maximum(m, 1) - 1), m
+
+
+def light_survival(beta: Array3f, power: Float, eta: Float) -> Float:
+    """The light subpath's Russian roulette: the probability of going on, ``min(max(beta) /
+    power * eta^2, 0.95)``, its throughput relative to ``power``, the largest channel of its
+    throughput as it left the emitter. The path tracer's rule on ``max(beta)`` alone would
+    read the light's radiometric scale (a subpath from a light of radiance 10 would survive
+    at 0.95 to the last bounce, one from a dim light would die at once); relative to the
+    emitted power it reads what the surfaces reflected, as the camera subpath's does."""
+    rel = dr.select(power > 0.0, dr.max(beta) / power, 0.0)
+    return dr.minimum(rel * dr.square(eta), 0.95)
 
 
 def roulette(value: Array3f, ok: Bool, u: Float, threshold: Float) -> tuple[Array3f, Bool]:
@@ -708,6 +721,7 @@ class BDPTIntegrator:
         if NL > 0 and self.rays.count > 0 and scene.has_smooth_bsdfs:
             lverts = LightVertices(NL, getattr(scene.materials, "tangents", False))
             o, d, beta, dvcm, dvc, infinite, live = self._emit(rng, Bool(active))
+            power = dr.max(beta)  # the subpath's emitted power: its roulette's unit
             eta = dr.full(Float, 1.0, n)
             depth = dr.full(UInt32, 1, n)
             while live:
@@ -741,7 +755,7 @@ class BDPTIntegrator:
                 live &= depth < D
                 u_rr = rng.next_float32()
                 use_rr = depth > opt.rr_depth
-                q = dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
+                q = light_survival(beta, power, eta)
                 live &= ~use_rr | (u_rr < q)
                 beta = dr.select(use_rr, beta / q, beta)
                 o = scene.spawn(si, wo)

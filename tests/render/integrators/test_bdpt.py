@@ -582,6 +582,51 @@ def test_heavy_roulette_is_unbiased_and_its_control_fails(scenes, references, mo
         assert zb > 6.0, zb
 
 
+def test_light_survival_reads_the_reflected_share_not_the_lights_scale():
+    """:func:`~drpt.render.integrators.bdpt.light_survival` is ``min(max(beta) / power *
+    eta^2, 0.95)``: the same for a light 1000 times brighter or dimmer (throughput and
+    power scaled alike), 0 for no power. Negative control: the path tracer's rule on
+    ``max(beta)`` alone gives a bright light's subpaths 0.95 and a dim one's almost 0."""
+    beta = B.Array3f([0.3, 2.0, 40.0], [0.2, 1.0, 10.0], [0.1, 0.5, 5.0])
+    power = Float([1.0, 4.0, 100.0])
+    eta = Float([1.0, 1.0, 1.5])
+    q = B.light_survival(beta, power, eta).numpy()
+    assert np.allclose(q, [0.3, 0.5, 0.9], rtol=1e-6), q
+    for scale in (1e-3, 1e3):
+        scaled = B.light_survival(beta * scale, power * scale, eta).numpy()
+        assert np.allclose(scaled, q, rtol=1e-5), (scale, scaled)
+        plain = np.minimum(dr.max(beta * scale).numpy() * eta.numpy() ** 2, 0.95)
+        assert np.abs(plain - q).max() > 0.25, (scale, plain)
+    assert B.light_survival(beta, Float([0.0, 0.0, 0.0]), eta).numpy().max() == 0.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("control", [False, True])
+def test_light_subpath_roulette_is_unbiased_and_its_control_fails(scenes, monkeypatch, control):
+    """The Cornell box at ``max_depth`` 6 with ``rr_depth`` 1, so that the light subpath
+    plays its roulette (:func:`~drpt.render.integrators.bdpt.light_survival`) at every
+    bounce: bdpt agrees with the path tracer of the same depths (the block z-test above).
+    Negative control: survival probabilities doubled and not clamped (a subpath survives
+    with ``min(1, 2q)`` but is divided by ``2q``) darken the light subpaths' strategies and
+    fail (|z| > 6)."""
+    if control:
+        survival = B.light_survival
+        monkeypatch.setattr(B, "light_survival", lambda beta, power, eta: 2.0 * survival(beta, power, eta))
+
+    def render(integrator, spp, seed):
+        opts = RenderOptions(width=32, height=32, spp=spp, seed=seed, integrator=integrator, progress=False,
+                             path=PathOptions(max_depth=6, rr_depth=1))
+        if "variance" in RenderOptions.__dataclass_fields__:
+            opts = replace(opts, variance=True)
+        return Renderer(scenes["cornell"], opts).render()
+
+    zb, zm = _agree(render("bdpt", 256, 1), render("path", 1024, 7))
+    if control:
+        assert zb > 6.0, zb
+    else:
+        assert zb < 4.5 and zm < 4.0, (zb, zm)
+
+
 @pytest.mark.slow
 def test_pilot_sets_a_power_of_two_threshold_near_the_mean(scenes):
     """The pilot (``Renderer._calibrate_bdpt``) sets the threshold to a power of 2 within a
