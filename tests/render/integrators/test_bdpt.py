@@ -237,7 +237,7 @@ def _spot_scene(point):
 
 def _render(scene, integrator, spp, depth, seed=1, size=32):
     opts = RenderOptions(width=size, height=size, spp=spp, seed=seed, integrator=integrator,
-                         progress=False, path=PathOptions(max_depth=depth))
+                         progress=False, path=PathOptions(max_depth=depth), variance=True)
     return Renderer(scene, opts)
 
 
@@ -407,6 +407,87 @@ def test_resume_after_an_interrupt_gives_the_uninterrupted_image(tmp_path):
     state = json.loads(meta.read_text())
     assert 0 < state["next"] < state["chunks"]
     assert np.array_equal(whole, _cli_render(tmp_path, "cut", "--chunk-spp", str(chunk), "--resume", spp=spp))
+
+
+# ------------------------------------------------------------ the variance film
+@pytest.mark.parametrize("integrator", ["bdpt", "ptracer"])
+def test_without_variance_no_squares_are_summed_and_the_image_is_the_same(scenes, monkeypatch, integrator):
+    """``RenderOptions.variance`` off (the default): the light-traced passes' films keep no
+    squares and the result's variance is NaN; the image is the one a render with the
+    variance gives (float32, bit for bit). On: every film sums its squares, the variance
+    is finite. Negative control: the images of another seed differ."""
+    from drpt.render import renderer as R
+
+    made = []
+
+    class Film(R.SplatFilm):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            made.append(bool(self.sq))
+
+    monkeypatch.setattr(R, "SplatFilm", Film)
+    opts = RenderOptions(width=16, height=16, spp=8, seed=3, integrator=integrator, progress=False,
+                         path=PathOptions(max_depth=5))
+    off = Renderer(scenes["cornell"], opts).render()
+    assert made and not any(made), made
+    assert np.isnan(off.variance).all() and off.image.shape == off.variance.shape
+    made.clear()
+    on = Renderer(scenes["cornell"], replace(opts, variance=True)).render()
+    assert made and all(made), made
+    assert np.isfinite(on.variance).all() and on.variance.max() > 0.0
+    assert np.array_equal(off.image, on.image)
+    assert not np.array_equal(off.image, Renderer(scenes["cornell"], replace(opts, seed=4)).render().image)
+
+
+def test_a_stop_rule_or_adaptive_sampling_sums_the_squares():
+    """:attr:`RenderOptions.light_variance`: the variance option, or a target error, a time
+    limit or adaptive sampling (which read the estimated variance)."""
+    o = RenderOptions(integrator="bdpt")
+    assert not o.light_variance
+    for change in ({"variance": True}, {"target_error": 0.01}, {"time_limit": 5.0}, {"adaptive": True}):
+        assert replace(o, **change).light_variance, change
+
+
+def test_checkpoints_record_the_variance_flag_of_light_tracing_only():
+    """The checkpoint's options key holds ``variance`` (the squares summed or not) for
+    ptracer and bdpt, not for the camera integrators (whose squares are always summed:
+    their checkpoints are those of before the option)."""
+    from drpt.distributed.checkpoint import options_key
+
+    for integrator in ("bdpt", "ptracer"):
+        o = RenderOptions(integrator=integrator)
+        assert options_key(o)["variance"] is False
+        assert options_key(replace(o, variance=True))["variance"] is True
+        assert options_key(replace(o, time_limit=3.0))["variance"] is True
+    for integrator in ("path", "volpath", "whitted"):
+        o = RenderOptions(integrator=integrator)
+        assert "variance" not in options_key(o)
+        assert options_key(o) == options_key(replace(o, variance=True))
+
+
+@pytest.mark.parametrize("first,then", [(False, True), (True, False)])
+def test_resume_refuses_another_variance_flag(tmp_path, scenes, first, then):
+    """A bdpt render interrupted with one ``variance`` flag is refused when resumed with the
+    other: one line naming the checkpoint and the option (the CLI exits 2 on it); resumed
+    with its own flag it finishes (control)."""
+    from drpt.distributed.job import run
+
+    opts = RenderOptions(width=8, height=8, spp=4, seed=7, integrator="bdpt", progress=False, chunk_spp=1,
+                         path=PathOptions(max_depth=4), variance=first)
+
+    def interrupt(merged, result, engine):
+        if merged.next >= 2:
+            raise KeyboardInterrupt
+
+    out = tmp_path / "cut.exr"
+    with pytest.raises(KeyboardInterrupt):
+        run(scenes["cornell"], opts, out, on_chunk=interrupt, checkpoint_seconds=0.0)
+    with pytest.raises(DrptError) as e:
+        run(scenes["cornell"], replace(opts, variance=then), out, resume=True)
+    message = str(e.value)
+    assert "\n" not in message and "variance" in message and "cut.exr" in message, message
+    done = run(scenes["cornell"], opts, out, resume=True).result
+    assert done.image.shape == (8, 8, 3) and np.isnan(done.variance).all() != first
 
 
 # ------------------------------------------------------------ against Mitsuba
@@ -615,9 +696,7 @@ def test_light_subpath_roulette_is_unbiased_and_its_control_fails(scenes, monkey
 
     def render(integrator, spp, seed):
         opts = RenderOptions(width=32, height=32, spp=spp, seed=seed, integrator=integrator, progress=False,
-                             path=PathOptions(max_depth=6, rr_depth=1))
-        if "variance" in RenderOptions.__dataclass_fields__:
-            opts = replace(opts, variance=True)
+                             path=PathOptions(max_depth=6, rr_depth=1), variance=True)
         return Renderer(scenes["cornell"], opts).render()
 
     zb, zm = _agree(render("bdpt", 256, 1), render("path", 1024, 7))
