@@ -43,7 +43,9 @@ MIS-weighted contribution is known before its shadow ray is traced; below a
 threshold it is traced with probability ``q = min(1, max(value) / threshold)`` and
 divided by ``q`` (:func:`roulette`: the same expectation, and no contribution is
 scaled above the threshold, so no fireflies). Small contributions (low weights,
-dim paths) then rarely cost a shadow ray and a splat. The threshold is
+dim paths) then rarely cost a shadow ray and a splat: the shadow rays of connections,
+splats and next-event estimation are traced inside a symbolic ``if``
+(:func:`occluded_where`), so SIMD packets none of whose lanes kept one skip the query. The threshold is
 :data:`ROULETTE_FRACTION` of the image's mean pixel value, which a pilot estimates
 before the first pass (``Renderer._calibrate_bdpt``: one sample per pixel of a
 band of rows, without roulette, from a random stream of its own;
@@ -252,6 +254,18 @@ def light_survival(beta: Array3f, power: Float, eta: Float) -> Float:
     emitted power it reads what the surfaces reflected, as the camera subpath's does."""
     rel = dr.select(power > 0.0, dr.max(beta) / power, 0.0)
     return dr.minimum(rel * dr.square(eta), 0.95)
+
+
+@dr.syntax
+def occluded_where(scene: DeviceScene, o: Array3f, d: Array3f, tmax: Float, active: Bool) -> Bool:
+    """``scene.occluded`` for the ``active`` lanes, inside a symbolic ``if``: the LLVM
+    backend compiles it to a branch taken only by SIMD packets with an active lane, so a
+    shadow ray that few lanes need (a rouletted connection or splat, a light vertex
+    beyond the path length) is not traced, masked, for every packet. False elsewhere."""
+    hit = dr.zeros(Bool, dr.width(active))
+    if active:
+        hit = scene.occluded(o, d, tmax, active)
+    return hit
 
 
 def roulette(value: Array3f, ok: Bool, u: Float, threshold: Float) -> tuple[Array3f, Bool]:
@@ -561,7 +575,7 @@ class BDPTIntegrator:
         to = cam.center - so
         dist = dr.norm(to)
         count(scene, SHADOW_CAMERA, ok)
-        ok &= ~scene.occluded(so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        ok &= ~occluded_where(scene, so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
         if strategies is not None:
@@ -612,7 +626,7 @@ class BDPTIntegrator:
         seg = end - so
         dist = dr.norm(seg)
         count(scene, SHADOW_NEE, ok)
-        ok &= ~scene.occluded(so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        ok &= ~occluded_where(scene, so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         return dr.select(ok, value, 0.0)
 
     def _nee_delta(self, si: Interaction, dvcm: Float, dvc: Float, active: Bool, t: UInt32) -> Array3f:
@@ -693,7 +707,7 @@ class BDPTIntegrator:
         seg = end - so
         dist = dr.norm(seg)
         count(scene, SHADOW_CONNECT, ok)
-        ok &= ~scene.occluded(so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        ok &= ~occluded_where(scene, so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         return dr.select(ok, value, 0.0)
 
     # ------------------------------------------------------------ the subpaths
