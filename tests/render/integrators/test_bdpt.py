@@ -681,6 +681,27 @@ def test_light_survival_reads_the_reflected_share_not_the_lights_scale():
     assert B.light_survival(beta, Float([0.0, 0.0, 0.0]), eta).numpy().max() == 0.0
 
 
+def test_occluded_where_is_the_masked_shadow_query(scenes):
+    """:func:`~drpt.render.integrators.bdpt.occluded_where` (the query inside a symbolic
+    ``if``) gives ``scene.occluded`` on the active lanes and False on the others, for random
+    segments inside the Cornell box with a sparse mask (1 lane in 16: whole SIMD packets
+    skip it) and a full one; both answers occur."""
+    rng = np.random.default_rng(3)
+    r = _render(scenes["cornell"], "bdpt", 1, 5)
+    n = 4096
+    lo, hi = np.array([0.1, 0.1, 0.1]), np.array([5.4, 5.4, 5.5])  # inside the box (cornellbox.obj)
+    a = lo + (hi - lo) * rng.random((n, 3))
+    b = lo + (hi - lo) * rng.random((n, 3))
+    seg = b - a
+    dist = np.linalg.norm(seg, axis=1)
+    o, d = B.Array3f(*a.T.astype(np.float32)), B.Array3f(*(seg / dist[:, None]).T.astype(np.float32))
+    tmax = Float(dist.astype(np.float32))
+    for active in (rng.random(n) < 1 / 16, np.ones(n, bool)):
+        want = r.scene.occluded(o, d, tmax, Bool(active)).numpy() & active
+        got = B.occluded_where(r.scene, o, d, tmax, Bool(active)).numpy()
+        assert np.array_equal(got, want) and want.any() and (active & ~want).any()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("control", [False, True])
 def test_light_subpath_roulette_is_unbiased_and_its_control_fails(scenes, monkeypatch, control):
