@@ -765,7 +765,7 @@ def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, mo
         monkeypatch.setattr(B, "next_2d", diagonal)
     depth, spp, _ = CASES["cornell"]
     opts = RenderOptions(width=32, height=32, spp=spp, seed=1, integrator="bdpt", sampler=sampler,
-                         progress=False, path=PathOptions(max_depth=depth))
+                         progress=False, path=PathOptions(max_depth=depth), variance=True)
     r = Renderer(scenes["cornell"], opts)
     assert not any("sampler" in w for w in r.warnings), r.warnings
     zb, zm = _agree(r.render(), _reference(scenes, references, "cornell"))
