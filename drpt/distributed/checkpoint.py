@@ -230,6 +230,10 @@ def load(output: Path, scene_hash: str, options: dict, chunks) -> Checkpoint:
     if d["options"] != json.loads(json.dumps(options)):
         diff = sorted(k for k in set(d["options"]) | set(options)
                       if d["options"].get(k) != json.loads(json.dumps(options)).get(k))
+        if diff == ["variance"]:
+            had = "with" if d["options"].get("variance") else "without"
+            raise refuse(f"rendered {had} the squared splats a variance estimate needs (RenderOptions.variance, "
+                         "--target-error, --time-limit, --adaptive): resume it as it was rendered")
         raise refuse(f"rendered with other options ({', '.join(diff)} differ): give the flags of "
                      "the interrupted render")
     p = chunks.passes

@@ -45,8 +45,8 @@ divided by ``q`` (:func:`roulette`: the same expectation, and no contribution is
 scaled above the threshold, so no fireflies). Small contributions (low weights,
 dim paths) then rarely cost a shadow ray and a splat: the shadow rays of connections,
 splats and next-event estimation are traced inside a symbolic ``if``
-(:func:`occluded_where`), so SIMD packets none of whose lanes kept one skip the query. The threshold is
-:data:`ROULETTE_FRACTION` of the image's mean pixel value, which a pilot estimates
+(:func:`occluded_where`), so SIMD packets none of whose lanes kept one skip the query.
+The threshold is :data:`ROULETTE_FRACTION` of the image's mean pixel value, which a pilot estimates
 before the first pass (``Renderer._calibrate_bdpt``: one sample per pixel of a
 band of rows, without roulette, from a random stream of its own;
 :meth:`BDPTIntegrator.calibrate` rounds it to a power of 2, so renders in other
