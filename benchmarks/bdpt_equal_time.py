@@ -13,14 +13,23 @@ equal time, up to a constant), then bdpt's relMSE x seconds over path's (by wall
 CPU seconds). ``--sampler`` sets both integrators' sampler (the reference's stays
 ``independent``).
 
+``--seeds N`` renders each integrator with seeds ``2 .. N + 1``, path and bdpt in turns
+(ABAB: both see the same load), and sums the relMSE and the seconds over the seeds (one
+seed's error is heavy-tailed where caustics are; the ratio of sums is the equal-time
+ratio of the N-seed renders). ``--reference PATH`` keeps the references in the folder
+``PATH`` (``SCENE-SIZE-DEPTH-REFSPP.npz``: the image and its estimated relMSE), rendered
+there the first time and read afterwards, so that runs of two commits are scored against
+the same images.
+
 Run: PYTHONPATH=. .venv/bin/python benchmarks/bdpt_equal_time.py [--size 64] [--depth 8]
 [--path-spp 256] [--bdpt-spp 64] [--ref-spp 2048] [--scenes cornell,caustic,glass] [--repeat 3]
-[--sampler independent]
+[--sampler independent] [--seeds 1] [--reference PATH]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import tempfile
 import time
@@ -90,6 +99,9 @@ def main() -> None:
     p.add_argument("--scenes", default="cornell,caustic,glass")
     p.add_argument("--repeat", type=int, default=3, help="timed renders; the fastest counts")
     p.add_argument("--sampler", default="independent", help="both integrators' --sampler")
+    p.add_argument("--seeds", type=int, default=1, help="renders of seeds 2 .. N + 1 each, in turns")
+    p.add_argument("--reference", type=Path, default=None,
+                   help="a folder that keeps the references (rendered there when missing)")
     a = p.parse_args()
     repo = Path(__file__).resolve().parents[1]
     tmp = Path(tempfile.mkdtemp())
@@ -101,26 +113,59 @@ def main() -> None:
         scene = load_scene(files[name])
         base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth),
                              sampler=a.sampler)
-        ref = Renderer(scene, replace(base, integrator="bdpt", spp=a.ref_spp, seed=99,
-                                      sampler="independent")).render()
-        rows = {}
+        ref_image, ref_err = reference(scene, base, name, a)
+        renderers = {}
         for integrator, spp in (("path", a.path_spp), ("bdpt", a.bdpt_spp)):
             r = Renderer(scene, replace(base, integrator=integrator, spp=1, seed=1))
             r.render()  # compiles the kernels
-            r = r.derive(replace(r.opt, spp=spp, seed=2))
-            seconds, cpu = math.inf, math.inf
-            for _ in range(a.repeat):  # the same seed: the same image, the fastest time
-                t, c = time.perf_counter(), time.process_time()
-                img = r.render()
-                seconds = min(seconds, time.perf_counter() - t)
-                cpu = min(cpu, time.process_time() - c)
-            err = rel_mse(img.image, ref.image) - ref.estimated_rel_mse
+            renderers[integrator] = r.derive(replace(r.opt, spp=spp))
+        totals = {k: [0.0, 0.0, 0.0] for k in renderers}  # relMSE, seconds, CPU seconds
+        for seed in range(2, a.seeds + 2):
+            for integrator, r in renderers.items():  # in turns: the same load for both
+                r = r.derive(replace(r.opt, seed=seed))
+                seconds, cpu = math.inf, math.inf
+                for _ in range(a.repeat):  # the same seed: the same image, the fastest time
+                    t, c = time.perf_counter(), time.process_time()
+                    img = r.render()
+                    seconds = min(seconds, time.perf_counter() - t)
+                    cpu = min(cpu, time.process_time() - c)
+                err = rel_mse(img.image, ref_image) - ref_err
+                for i, v in enumerate((err, seconds, cpu)):
+                    totals[integrator][i] += v
+                print(f"{name} {integrator} seed {seed}: {r.opt.spp} spp, {seconds:.2f} s ({cpu:.2f} s CPU), "
+                      f"relMSE {err:.4g}, relMSE x s {err * seconds:.4g}", flush=True)
+        rows = {}
+        for integrator, (err, seconds, cpu) in totals.items():
             rows[integrator] = (err * seconds, err * cpu)
-            print(f"{name} {integrator}: {spp} spp, {seconds:.2f} s ({cpu:.2f} s CPU), relMSE {err:.4g}, "
-                  f"relMSE x s {err * seconds:.4g}")
+            print(f"{name} {integrator}: {a.seeds} seeds, {seconds:.2f} s ({cpu:.2f} s CPU), "
+                  f"relMSE (mean) {err / a.seeds:.4g}")
         print(f"{name}: bdpt / path relMSE at equal time {rows['bdpt'][0] / rows['path'][0]:.3f} "
-              f"(by CPU seconds {rows['bdpt'][1] / rows['path'][1]:.3f}; reference: bdpt {a.ref_spp} spp, "
-              f"its estimated relMSE {ref.estimated_rel_mse:.3g})")
+              f"(by CPU seconds {rows['bdpt'][1] / rows['path'][1]:.3f}; {a.seeds} seeds; reference: bdpt "
+              f"{a.ref_spp} spp, its estimated relMSE {ref_err:.3g})", flush=True)
+
+
+def reference(scene, base, name: str, a) -> tuple:
+    """``(image, estimated relMSE)`` of the reference: a bdpt render of ``a.ref_spp`` spp,
+    seed 99, ``independent``, with its variance; kept in (or read from) the folder
+    ``a.reference`` when given."""
+    import numpy as np
+
+    from drpt.render.renderer import Renderer
+
+    path = None
+    if a.reference is not None:
+        path = a.reference / f"{name}-{a.size}-{a.depth}-{a.ref_spp}.npz"
+        if path.exists():
+            data = np.load(path)
+            return data["image"], float(data["rel_mse"])
+    opt = replace(base, integrator="bdpt", spp=a.ref_spp, seed=99, sampler="independent")
+    if "variance" in {f.name for f in dataclasses.fields(opt)}:
+        opt = replace(opt, variance=True)  # (its estimated relMSE is subtracted)
+    ref = Renderer(scene, opt).render()
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, image=ref.image, rel_mse=ref.estimated_rel_mse)
+    return ref.image, ref.estimated_rel_mse
 
 
 if __name__ == "__main__":

@@ -118,6 +118,11 @@ class RenderOptions:
     #: bdpt: also sum each connection strategy's contributions (``--bdpt-strategies``,
     #: :meth:`drpt.render.renderer.Renderer.strategy_images`)
     bdpt_strategies: bool = False
+    #: ptracer, bdpt: also sum the squared splats (the variance film), from which the
+    #: result's per-pixel ``variance`` is estimated; off, light-traced renders skip those
+    #: float64 scatter-adds and their ``variance`` is NaN, unless a stop rule or adaptive
+    #: sampling reads it (:attr:`light_variance`). Camera-sampled integrators always have it
+    variance: bool = False
 
     def validate(self) -> RenderOptions:
         """Raise :class:`~drpt.errors.DrptError` on a value the renderer cannot
@@ -212,6 +217,13 @@ class RenderOptions:
 
             check(self)
         return self
+
+    @property
+    def light_variance(self) -> bool:
+        """Whether light-traced passes (ptracer, bdpt) sum their squared splats:
+        :attr:`variance`, or ``--target-error``, ``--time-limit`` or ``--adaptive``, which
+        read the estimated variance."""
+        return self.variance or self.target_error is not None or self.time_limit is not None or self.adaptive
 
     @property
     def pixel_filter(self):

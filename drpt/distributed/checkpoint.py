@@ -91,9 +91,15 @@ def _scene_folder(scene) -> Path | None:
 
 
 def options_key(opts) -> dict:
-    """The options that shape the image (all but ``progress``), with the backend."""
+    """The options that shape the image (all but ``progress``), with the backend. Light
+    tracing's (ptracer, bdpt) record whether their squared splats are summed
+    (:attr:`~drpt.options.RenderOptions.light_variance`: a checkpoint without them cannot
+    go on as one with them); the other integrators always sum their squares."""
     d = asdict(replace(opts, max_lanes=opts.lanes))  # None and the default it stands for alike
     d.pop("progress", None)
+    d.pop("variance", None)
+    if opts.integrator in LIGHT_TRACED:
+        d["variance"] = opts.light_variance
     d["backend"] = backend.name()
     return d
 
@@ -224,6 +230,10 @@ def load(output: Path, scene_hash: str, options: dict, chunks) -> Checkpoint:
     if d["options"] != json.loads(json.dumps(options)):
         diff = sorted(k for k in set(d["options"]) | set(options)
                       if d["options"].get(k) != json.loads(json.dumps(options)).get(k))
+        if diff == ["variance"]:
+            had = "with" if d["options"].get("variance") else "without"
+            raise refuse(f"rendered {had} the squared splats a variance estimate needs (RenderOptions.variance, "
+                         "--target-error, --time-limit, --adaptive): resume it as it was rendered")
         raise refuse(f"rendered with other options ({', '.join(diff)} differ): give the flags of "
                      "the interrupted render")
     p = chunks.passes

@@ -225,7 +225,8 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
         raise
     if isinstance(engine, LocalEngine):
         build = engine.renderer.build_seconds
-    job.result = finish(merged, time.perf_counter() - t0, build, light_tracing, consume=True)
+    job.result = finish(merged, time.perf_counter() - t0, build, light_tracing, consume=True,
+                        variance=opts.light_variance)
     # the samples traced now: a resumed render's checkpoint was rendered before
     job.result.samples = W * H * (merged.spp - job.resumed_spp)
     return job

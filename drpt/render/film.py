@@ -60,10 +60,12 @@ class SplatFilm:
     ``width x height`` image (all rows by default), filtered by ``flt``: light tracing's
     with ``weights=False``, camera samples' (with the sums of the weights) with
     ``weights=True``, and, with ``moment`` too, the channels' products for Mitsuba's
-    ``moment`` integrator (the module docstring has the sums and their meaning)."""
+    ``moment`` integrator (the module docstring has the sums and their meaning). Without
+    ``squares`` (light tracing without a variance estimate) the sums of squares are not
+    kept (:meth:`arrays` gives zeros)."""
 
     def __init__(self, width: int, height: int, flt: PixelFilter, weights: bool = False,
-                 y0: int = 0, rows: int | None = None, moment: bool = False):
+                 y0: int = 0, rows: int | None = None, moment: bool = False, squares: bool = True):
         self.width, self.height = width, height
         self.filter = flt
         self.weights = weights
@@ -71,7 +73,7 @@ class SplatFilm:
         self.rows = height - y0 if rows is None else rows
         n = width * self.rows
         self.sum = [dr.zeros(Float64, n) for _ in range(3)]
-        self.sq = [dr.zeros(Float64, n) for _ in range(3)]
+        self.sq = [dr.zeros(Float64, n) for _ in range(3)] if squares else []
         self.w = [dr.zeros(Float64, n) for _ in range(2)] if weights else []
         # with moment (camera samples): sum(w L_a L_b) for r^2, g^2, b^2, rg, rb, gb, after sq
         self.moment = [dr.zeros(Float64, n) for _ in range(6)] if moment and weights else []
@@ -83,7 +85,8 @@ class SplatFilm:
         for c in range(3):
             v = Float64(value[c] if w is None else value[c] * w)
             dr.scatter_reduce(dr.ReduceOp.Add, self.sum[c], v, index, active)
-            dr.scatter_reduce(dr.ReduceOp.Add, self.sq[c], v * v, index, active)
+            if self.sq:
+                dr.scatter_reduce(dr.ReduceOp.Add, self.sq[c], v * v, index, active)
         if self.weights:
             w = Float64(1.0) if w is None else Float64(w)
             dr.scatter_reduce(dr.ReduceOp.Add, self.w[0], w, index, active)
@@ -138,7 +141,8 @@ class SplatFilm:
             return np.stack([c.numpy() for c in cs], axis=-1).reshape(self.rows, self.width, len(cs)
                                                                       ).astype(np.float64)
 
-        return stack(self.sum), stack(self.sq + self.moment), stack(self.w) if self.weights else None
+        sq = stack(self.sq + self.moment) if self.sq else np.zeros((self.rows, self.width, 3), np.float64)
+        return stack(self.sum), sq, stack(self.w) if self.weights else None
 
 
 def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: int,

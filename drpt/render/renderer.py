@@ -91,6 +91,7 @@ from .scene import DeviceScene
 class RenderResult:
     image: np.ndarray  # (H, W, 3) float32, linear radiance
     variance: np.ndarray  # (H, W, 3) float64, estimated variance of each pixel's mean
+    # (NaN for light tracing without RenderOptions.light_variance: its squares were not summed)
     # (float64: the square of radiance near the float32 maximum is beyond float32)
     seconds: float
     build_seconds: float
@@ -558,7 +559,7 @@ class Renderer:
                                             dr.arange(UInt32, n) + dr.opaque(UInt32, first))
         else:
             rng = pcg_streams(n, _mix_seed(self.opt.seed, pass_index))
-        film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+        film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter, squares=self.opt.light_variance)
         bad = self.integrator.trace(rng, film, dr.full(Bool, True, n))
         with llvm_tuning.blocks_for(n):
             dr.eval(film.sum, film.sq, bad)
@@ -572,8 +573,9 @@ class Renderer:
         n, lane, x, y = self._pass_lanes(k, r0, rows)
         rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1, seed)
         u = next_2d(rng)
-        film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
-        camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter)
+        squares = self.opt.light_variance
+        film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter, squares=squares)
+        camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter, squares=squares)
         bad = self.integrator.trace(rng, film, camera, Float(x) + u.x, Float(y) + u.y,
                                     dr.full(Bool, True, n), strategies, use_roulette)
         with llvm_tuning.blocks_for(n):
@@ -772,18 +774,22 @@ class Renderer:
                     bar.set_postfix_str(f"relMSE ~{estimate:.3g}")
                     if stops(estimate, merged, self.opt, time.perf_counter() - t0):
                         break
-        return finish(merged, time.perf_counter() - t0, self.build_seconds, self.light_tracing, consume=True)
+        return finish(merged, time.perf_counter() - t0, self.build_seconds, self.light_tracing, consume=True,
+                      variance=self.opt.light_variance)
 
 
 def finish(merged: ChunkMerge, seconds: float, build_seconds: float,
-           light_tracing: bool = False, consume: bool = False) -> RenderResult:
+           light_tracing: bool = False, consume: bool = False, variance: bool = True) -> RenderResult:
     """The image and variance of a finished merge (:func:`_finish_image`), with the
     AOVs' means where the merge has AOV sums (each pixel's weighted sums over its
     weights' sum). With ``consume`` (the render's last word on the merge) a camera
     render's mean and variance are computed in the merge's own sums, which are then
     no longer sums: no image-sized temporaries beyond the float32 image and one
-    channel."""
+    channel. A light-traced merge without ``variance`` (its squares were not summed,
+    :attr:`~drpt.options.RenderOptions.light_variance`) has a NaN variance."""
     result = _finish_image(merged, seconds, build_seconds, light_tracing, consume)
+    if light_tracing and not variance:
+        result.variance = np.full(result.image.shape, np.nan)
     if merged.aov is not None:
         ws = merged.aov[..., -1:]
         ok = ws > 0.0

@@ -131,7 +131,7 @@ def render_gallery(out: Path, options, names=None, size=None, scale: int = 2) ->
         t0 = time.perf_counter()
         scene = load_scene(refs.scene_path(scene_file))
         load_s = time.perf_counter() - t0
-        renderer = Renderer(scene, replace(options, width=W, height=H, bsdf=mode,
+        renderer = Renderer(scene, replace(options, width=W, height=H, bsdf=mode, variance=True,
                                            path=replace(options.path, max_depth=depth),
                                            # (a scene with media: volpath, as its reference)
                                            integrator="volpath" if scene.media else options.integrator))

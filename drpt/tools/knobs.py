@@ -288,7 +288,7 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
             cfgs.remove(c)
             continue
         opts = replace(options, spp=8 if c.adaptive else 1, seed=seed + 999_999, accel=c.accel,
-                       bsdf=c.bsdf, adaptive=c.adaptive,
+                       bsdf=c.bsdf, adaptive=c.adaptive, variance=True,
                        progress=False, denoise=c.denoise, integrator=c.integrator,
                        light_sampler=c.light_sampler, filter_sampling=c.filter_sampling,
                        sampler=c.sampler or options.sampler,

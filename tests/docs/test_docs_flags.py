@@ -207,7 +207,8 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--threshold", "--oracle",  # (benchmarks/adaptive_vs_uniform.py)
                   "--only", "--skip", "--min-size", "--max-samples", "--rounds",
                   "--no-corpus",  # (benchmarks/equal_time_vs_mitsuba.py)
-                  "--scale", "--grid"}  # (benchmarks/variance_vs_mitsuba.py)
+                  "--scale", "--grid",  # (benchmarks/variance_vs_mitsuba.py)
+                  "--scenes", "--seeds", "--repeat", "--reference", "--parts", "--depth"}  # (bdpt_*.py)
 
 
 def test_every_flag_the_docs_name_exists(parsers):

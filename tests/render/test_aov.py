@@ -244,7 +244,7 @@ def test_aovs_leave_the_image_bit_for_bit(flags, cornell):
     are those of a render without AOVs (light tracing's variance to float64 rounding: its
     film adds splats atomically, in varying order, :mod:`drpt.render.film`)."""
     scene = load_scene(cornell)
-    opts = RenderOptions(width=12, height=10, spp=3, progress=False, **flags)
+    opts = RenderOptions(width=12, height=10, spp=3, progress=False, variance=True, **flags)
     plain = Renderer(scene, opts).render()
     with_aovs = Renderer(scene, replace(opts, aovs=parse_aovs("depth,uv,albedo"), denoise=True)).render()
     assert np.array_equal(plain.image, with_aovs.image)

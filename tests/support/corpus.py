@@ -93,7 +93,8 @@ def render_as_authored(scene_path: Path, spp: int, seed: int = 0, *, sampler: st
     from drpt.scene import load_scene
 
     scene = load_scene(scene_path, defines={"spp": str(spp), **defines})
-    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=seed), scene)[0], spp=spp)
+    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=seed), scene)[0], spp=spp,
+                   variance=True)  # (light tracing's too: the tests read it)
     if sampler is not None:
         opts = replace(opts, sampler=sampler)
     return Renderer(scene, opts).render()

@@ -48,7 +48,8 @@ def render_xml_both(scene, path: Path, spp: int, defines: dict | None = None, se
     from drpt.options import RenderOptions, with_scene_settings
     from drpt.render.renderer import Renderer
 
-    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=seed), scene)[0], spp=spp, **options)
+    opts = replace(with_scene_settings(RenderOptions(progress=False, seed=seed), scene)[0], spp=spp,
+                   **{"variance": True, **options})  # (light tracing's too: the tests read it)
     r = Renderer(scene, opts).render()
     mi.set_variant(mitsuba_variant())
     batches = 8

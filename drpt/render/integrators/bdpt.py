@@ -32,17 +32,21 @@ Dirac (mirror, smooth glass) are stored in per-lane local arrays
 (``dr.alloc_local``, one per field) of ``max_depth - 1`` entries; the camera
 subpath then runs as a Dr.Jit loop, and each of its non-Dirac vertices is
 connected to one stored light vertex, or to each. Both subpaths play Russian
-roulette as the path tracer does (after ``rr_depth`` segments, probability
-``min(max(beta) eta^2, 0.95)``); the MIS weights ignore it (they still sum to 1
-over the strategies of a path, so the estimate stays unbiased).
+roulette after ``rr_depth`` segments: the camera subpath as the path tracer does
+(probability ``min(max(beta) eta^2, 0.95)``), the light subpath on its throughput relative
+to the power it left its emitter with (:func:`light_survival`: a bright light's subpaths
+are not kept to the last bounce, nor a dim light's cut at once); the MIS weights ignore
+roulette (they still sum to 1 over the strategies of a path, so the estimate stays unbiased).
 
 **Roulette on connections and splats.** A connection's or a ``t = 1`` splat's
 MIS-weighted contribution is known before its shadow ray is traced; below a
 threshold it is traced with probability ``q = min(1, max(value) / threshold)`` and
 divided by ``q`` (:func:`roulette`: the same expectation, and no contribution is
 scaled above the threshold, so no fireflies). Small contributions (low weights,
-dim paths) then rarely cost a shadow ray and a splat. The threshold is
-:data:`ROULETTE_FRACTION` of the image's mean pixel value, which a pilot estimates
+dim paths) then rarely cost a shadow ray and a splat: the shadow rays of connections,
+splats and next-event estimation are traced inside a symbolic ``if``
+(:func:`occluded_where`), so SIMD packets none of whose lanes kept one skip the query.
+The threshold is :data:`ROULETTE_FRACTION` of the image's mean pixel value, which a pilot estimates
 before the first pass (``Renderer._calibrate_bdpt``: one sample per pixel of a
 band of rows, without roulette, from a random stream of its own;
 :meth:`BDPTIntegrator.calibrate` rounds it to a power of 2, so renders in other
@@ -239,6 +243,29 @@ def choose_vertex(u: Float, stored: UInt32, room: UInt32) -> tuple[UInt32, UInt3
     probability, by which the connection's contribution is multiplied (``m = 0``: none)."""
     m = dr.minimum(stored, room)
     return dr.minimum(UInt32(u * Float(m)), dr.maximum(m, 1) - 1), m
+
+
+def light_survival(beta: Array3f, power: Float, eta: Float) -> Float:
+    """The light subpath's Russian roulette: the probability of going on, ``min(max(beta) /
+    power * eta^2, 0.95)``, its throughput relative to ``power``, the largest channel of its
+    throughput as it left the emitter. The path tracer's rule on ``max(beta)`` alone would
+    read the light's radiometric scale (a subpath from a light of radiance 10 would survive
+    at 0.95 to the last bounce, one from a dim light would die at once); relative to the
+    emitted power it reads what the surfaces reflected, as the camera subpath's does."""
+    rel = dr.select(power > 0.0, dr.max(beta) / power, 0.0)
+    return dr.minimum(rel * dr.square(eta), 0.95)
+
+
+@dr.syntax
+def occluded_where(scene: DeviceScene, o: Array3f, d: Array3f, tmax: Float, active: Bool) -> Bool:
+    """``scene.occluded`` for the ``active`` lanes, inside a symbolic ``if``: the LLVM
+    backend compiles it to a branch taken only by SIMD packets with an active lane, so a
+    shadow ray that few lanes need (a rouletted connection or splat, a light vertex
+    beyond the path length) is not traced, masked, for every packet. False elsewhere."""
+    hit = dr.zeros(Bool, dr.width(active))
+    if active:
+        hit = scene.occluded(o, d, tmax, active)
+    return hit
 
 
 def roulette(value: Array3f, ok: Bool, u: Float, threshold: Float) -> tuple[Array3f, Bool]:
@@ -548,7 +575,7 @@ class BDPTIntegrator:
         to = cam.center - so
         dist = dr.norm(to)
         count(scene, SHADOW_CAMERA, ok)
-        ok &= ~scene.occluded(so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        ok &= ~occluded_where(scene, so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
         if strategies is not None:
@@ -599,7 +626,7 @@ class BDPTIntegrator:
         seg = end - so
         dist = dr.norm(seg)
         count(scene, SHADOW_NEE, ok)
-        ok &= ~scene.occluded(so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        ok &= ~occluded_where(scene, so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         return dr.select(ok, value, 0.0)
 
     def _nee_delta(self, si: Interaction, dvcm: Float, dvc: Float, active: Bool, t: UInt32) -> Array3f:
@@ -680,7 +707,7 @@ class BDPTIntegrator:
         seg = end - so
         dist = dr.norm(seg)
         count(scene, SHADOW_CONNECT, ok)
-        ok &= ~scene.occluded(so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        ok &= ~occluded_where(scene, so, seg / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         return dr.select(ok, value, 0.0)
 
     # ------------------------------------------------------------ the subpaths
@@ -708,6 +735,7 @@ class BDPTIntegrator:
         if NL > 0 and self.rays.count > 0 and scene.has_smooth_bsdfs:
             lverts = LightVertices(NL, getattr(scene.materials, "tangents", False))
             o, d, beta, dvcm, dvc, infinite, live = self._emit(rng, Bool(active))
+            power = dr.max(beta)  # the subpath's emitted power: its roulette's unit
             eta = dr.full(Float, 1.0, n)
             depth = dr.full(UInt32, 1, n)
             while live:
@@ -741,7 +769,7 @@ class BDPTIntegrator:
                 live &= depth < D
                 u_rr = rng.next_float32()
                 use_rr = depth > opt.rr_depth
-                q = dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
+                q = light_survival(beta, power, eta)
                 live &= ~use_rr | (u_rr < q)
                 beta = dr.select(use_rr, beta / q, beta)
                 o = scene.spawn(si, wo)

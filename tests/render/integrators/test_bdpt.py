@@ -237,7 +237,7 @@ def _spot_scene(point):
 
 def _render(scene, integrator, spp, depth, seed=1, size=32):
     opts = RenderOptions(width=size, height=size, spp=spp, seed=seed, integrator=integrator,
-                         progress=False, path=PathOptions(max_depth=depth))
+                         progress=False, path=PathOptions(max_depth=depth), variance=True)
     return Renderer(scene, opts)
 
 
@@ -407,6 +407,88 @@ def test_resume_after_an_interrupt_gives_the_uninterrupted_image(tmp_path):
     state = json.loads(meta.read_text())
     assert 0 < state["next"] < state["chunks"]
     assert np.array_equal(whole, _cli_render(tmp_path, "cut", "--chunk-spp", str(chunk), "--resume", spp=spp))
+
+
+# ------------------------------------------------------------ the variance film
+@pytest.mark.parametrize("integrator", ["bdpt", "ptracer"])
+def test_without_variance_no_squares_are_summed_and_the_image_is_the_same(scenes, monkeypatch, integrator):
+    """``RenderOptions.variance`` off (the default): the light-traced passes' films keep no
+    squares and the result's variance is NaN; the image is the one a render with the
+    variance gives (float32, bit for bit). On: every film sums its squares, the variance
+    is finite. Negative control: the images of another seed differ."""
+    from drpt.render import renderer as R
+
+    made = []
+
+    class Film(R.SplatFilm):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            made.append(bool(self.sq))
+
+    monkeypatch.setattr(R, "SplatFilm", Film)
+    opts = RenderOptions(width=16, height=16, spp=8, seed=3, integrator=integrator, progress=False,
+                         path=PathOptions(max_depth=5))
+    off = Renderer(scenes["cornell"], opts).render()
+    assert made and not any(made), made
+    assert np.isnan(off.variance).all() and off.image.shape == off.variance.shape
+    made.clear()
+    on = Renderer(scenes["cornell"], replace(opts, variance=True)).render()
+    assert made and all(made), made
+    assert np.isfinite(on.variance).all() and on.variance.max() > 0.0
+    assert np.array_equal(off.image, on.image)
+    assert not np.array_equal(off.image, Renderer(scenes["cornell"], replace(opts, seed=4)).render().image)
+
+
+def test_a_stop_rule_or_adaptive_sampling_sums_the_squares():
+    """:attr:`RenderOptions.light_variance`: the variance option, or a target error, a time
+    limit or adaptive sampling (which read the estimated variance)."""
+    o = RenderOptions(integrator="bdpt")
+    assert not o.light_variance
+    for change in ({"variance": True}, {"target_error": 0.01}, {"time_limit": 5.0}, {"adaptive": True}):
+        assert replace(o, **change).light_variance, change
+
+
+def test_checkpoints_record_the_variance_flag_of_light_tracing_only():
+    """The checkpoint's options key holds ``variance`` (the squares summed or not) for
+    ptracer and bdpt, not for the camera integrators (whose squares are always summed:
+    their checkpoints are those of before the option)."""
+    from drpt.distributed.checkpoint import options_key
+
+    for integrator in ("bdpt", "ptracer"):
+        o = RenderOptions(integrator=integrator)
+        assert options_key(o)["variance"] is False
+        assert options_key(replace(o, variance=True))["variance"] is True
+        assert options_key(replace(o, time_limit=3.0))["variance"] is True
+    for integrator in ("path", "volpath", "whitted"):
+        o = RenderOptions(integrator=integrator)
+        assert "variance" not in options_key(o)
+        assert options_key(o) == options_key(replace(o, variance=True))
+
+
+@pytest.mark.parametrize("first,then", [(False, True), (True, False)])
+def test_resume_refuses_another_variance_flag(tmp_path, scenes, first, then):
+    """A bdpt render interrupted with one ``variance`` flag is refused when resumed with the
+    other: one line naming the checkpoint and the option (the CLI exits 2 on it); resumed
+    with its own flag it finishes (control)."""
+    from drpt.distributed.job import run
+
+    opts = RenderOptions(width=8, height=8, spp=4, seed=7, integrator="bdpt", progress=False, chunk_spp=1,
+                         path=PathOptions(max_depth=4), variance=first)
+
+    def interrupt(merged, result, engine):
+        if merged.next >= 2:
+            raise KeyboardInterrupt
+
+    out = tmp_path / "cut.exr"
+    with pytest.raises(KeyboardInterrupt):
+        run(scenes["cornell"], opts, out, on_chunk=interrupt, checkpoint_seconds=0.0)
+    with pytest.raises(DrptError) as e:
+        run(scenes["cornell"], replace(opts, variance=then), out, resume=True)
+    message = str(e.value)
+    assert "\n" not in message and "cut.exr" in message, message
+    assert f"rendered {'with' if first else 'without'} the squared splats" in message, message
+    done = run(scenes["cornell"], opts, out, resume=True).result
+    assert done.image.shape == (8, 8, 3) and np.isnan(done.variance).all() != first
 
 
 # ------------------------------------------------------------ against Mitsuba
@@ -582,6 +664,70 @@ def test_heavy_roulette_is_unbiased_and_its_control_fails(scenes, references, mo
         assert zb > 6.0, zb
 
 
+def test_light_survival_reads_the_reflected_share_not_the_lights_scale():
+    """:func:`~drpt.render.integrators.bdpt.light_survival` is ``min(max(beta) / power *
+    eta^2, 0.95)``: the same for a light 1000 times brighter or dimmer (throughput and
+    power scaled alike), 0 for no power. Negative control: the path tracer's rule on
+    ``max(beta)`` alone gives a bright light's subpaths 0.95 and a dim one's almost 0."""
+    beta = B.Array3f([0.3, 2.0, 40.0], [0.2, 1.0, 10.0], [0.1, 0.5, 5.0])
+    power = Float([1.0, 4.0, 100.0])
+    eta = Float([1.0, 1.0, 1.5])
+    q = B.light_survival(beta, power, eta).numpy()
+    assert np.allclose(q, [0.3, 0.5, 0.9], rtol=1e-6), q
+    for scale in (1e-3, 1e3):
+        scaled = B.light_survival(beta * scale, power * scale, eta).numpy()
+        assert np.allclose(scaled, q, rtol=1e-5), (scale, scaled)
+        plain = np.minimum(dr.max(beta * scale).numpy() * eta.numpy() ** 2, 0.95)
+        assert np.abs(plain - q).max() > 0.25, (scale, plain)
+    assert B.light_survival(beta, Float([0.0, 0.0, 0.0]), eta).numpy().max() == 0.0
+
+
+def test_occluded_where_is_the_masked_shadow_query(scenes):
+    """:func:`~drpt.render.integrators.bdpt.occluded_where` (the query inside a symbolic
+    ``if``) gives ``scene.occluded`` on the active lanes and False on the others, for random
+    segments inside the Cornell box with a sparse mask (1 lane in 16: whole SIMD packets
+    skip it) and a full one; both answers occur."""
+    rng = np.random.default_rng(3)
+    r = _render(scenes["cornell"], "bdpt", 1, 5)
+    n = 4096
+    lo, hi = np.array([0.1, 0.1, 0.1]), np.array([5.4, 5.4, 5.5])  # inside the box (cornellbox.obj)
+    a = lo + (hi - lo) * rng.random((n, 3))
+    b = lo + (hi - lo) * rng.random((n, 3))
+    seg = b - a
+    dist = np.linalg.norm(seg, axis=1)
+    o, d = B.Array3f(*a.T.astype(np.float32)), B.Array3f(*(seg / dist[:, None]).T.astype(np.float32))
+    tmax = Float(dist.astype(np.float32))
+    for active in (rng.random(n) < 1 / 16, np.ones(n, bool)):
+        want = r.scene.occluded(o, d, tmax, Bool(active)).numpy() & active
+        got = B.occluded_where(r.scene, o, d, tmax, Bool(active)).numpy()
+        assert np.array_equal(got, want) and want.any() and (active & ~want).any()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("control", [False, True])
+def test_light_subpath_roulette_is_unbiased_and_its_control_fails(scenes, monkeypatch, control):
+    """The Cornell box at ``max_depth`` 6 with ``rr_depth`` 1, so that the light subpath
+    plays its roulette (:func:`~drpt.render.integrators.bdpt.light_survival`) at every
+    bounce: bdpt agrees with the path tracer of the same depths (the block z-test above).
+    Negative control: survival probabilities doubled and not clamped (a subpath survives
+    with ``min(1, 2q)`` but is divided by ``2q``) darken the light subpaths' strategies and
+    fail (|z| > 6)."""
+    if control:
+        survival = B.light_survival
+        monkeypatch.setattr(B, "light_survival", lambda beta, power, eta: 2.0 * survival(beta, power, eta))
+
+    def render(integrator, spp, seed):
+        opts = RenderOptions(width=32, height=32, spp=spp, seed=seed, integrator=integrator, progress=False,
+                             path=PathOptions(max_depth=6, rr_depth=1), variance=True)
+        return Renderer(scenes["cornell"], opts).render()
+
+    zb, zm = _agree(render("bdpt", 256, 1), render("path", 1024, 7))
+    if control:
+        assert zb > 6.0, zb
+    else:
+        assert zb < 4.5 and zm < 4.0, (zb, zm)
+
+
 @pytest.mark.slow
 def test_pilot_sets_a_power_of_two_threshold_near_the_mean(scenes):
     """The pilot (``Renderer._calibrate_bdpt``) sets the threshold to a power of 2 within a
@@ -620,7 +766,7 @@ def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, mo
         monkeypatch.setattr(B, "next_2d", diagonal)
     depth, spp, _ = CASES["cornell"]
     opts = RenderOptions(width=32, height=32, spp=spp, seed=1, integrator="bdpt", sampler=sampler,
-                         progress=False, path=PathOptions(max_depth=depth))
+                         progress=False, path=PathOptions(max_depth=depth), variance=True)
     r = Renderer(scenes["cornell"], opts)
     assert not any("sampler" in w for w in r.warnings), r.warnings
     zb, zm = _agree(r.render(), _reference(scenes, references, "cornell"))

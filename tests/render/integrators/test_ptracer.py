@@ -97,7 +97,7 @@ def test_gathered_splats_equal_the_scattered_ones(flt):
 # ------------------------------------------------------------ the estimator
 def _render(scene, integrator, spp, seed=1, **kw):
     opts = RenderOptions(width=32, height=32, spp=spp, seed=seed, integrator=integrator, progress=False,
-                         path=PathOptions(max_depth=4, **kw))
+                         path=PathOptions(max_depth=4, **kw), variance=True)
     return Renderer(scene, opts)
 
 
@@ -214,7 +214,7 @@ def test_splatted_renders_are_the_same_in_chunks_and_resumed(cornell, tmp_path, 
 
     kw = {"filter": "gaussian"} if what == "gaussian splatting" else {"integrator": "ptracer"}
     opts = RenderOptions(width=16, height=12, spp=8, chunk_spp=1, seed=4, progress=False,
-                         max_lanes=96, **kw)
+                         max_lanes=96, variance=True, **kw)
     plain = Renderer(cornell, opts).render()
 
     def interrupt(merged, result, engine):

@@ -1,0 +1,126 @@
+"""What each of bdpt's cheaper estimators buys, A/B in one process (not a test).
+
+Each PART is rendered with it (B) and without it (A), in turns (ABAB over the seeds, the
+same load for both), from one renderer per variant whose kernels are compiled by a
+1-spp render first:
+
+* ``variance``: ``RenderOptions.variance`` off (B) against on (A, the squared splats
+  summed);
+* ``occluded``: the connections', splats' and next-event estimation's shadow rays inside a
+  symbolic ``if`` (B, :func:`~drpt.render.integrators.bdpt.occluded_where`) against masked
+  rays for every packet (A);
+* ``roulette``: the light subpath's roulette relative to its emitted power (B,
+  :func:`~drpt.render.integrators.bdpt.light_survival`) against the path tracer's rule on
+  ``max(beta)`` (A).
+
+Prints per part the CPU seconds (the process's, summed over the seeds; steadier than wall
+seconds on a loaded machine), the relMSE (summed, against the reference of
+``bdpt_equal_time.py``, minus its estimated relMSE) and B / A of the seconds, of the error
+and of their product (the error at equal time: below 1, B is better). Images are the same
+for ``variance`` (checked) and equal in expectation for the others.
+
+Run: PYTHONPATH=. .venv/bin/python benchmarks/bdpt_parts_ab.py [--scenes cornell,glass]
+[--parts variance,occluded,roulette] [--size 64] [--depth 8] [--spp 64] [--ref-spp 2048]
+[--seeds 4] [--reference PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bdpt_equal_time as eq  # noqa: E402 (the sibling benchmark: its scenes and references)
+
+PARTS = ("variance", "occluded", "roulette")
+
+
+def _old_survival(beta, power, eta):
+    """The path tracer's rule: ``min(max(beta) eta^2, 0.95)`` in the light's units."""
+    import drjit as dr
+
+    return dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
+
+
+def _masked_occluded(scene, o, d, tmax, active):
+    """Every packet traces the shadow ray, masked."""
+    return scene.occluded(o, d, tmax, active)
+
+
+def main() -> None:
+    import numpy as np
+
+    from drpt.metrics import rel_mse
+    from drpt.options import PathOptions, RenderOptions
+    from drpt.render.integrators import bdpt as B
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    p = argparse.ArgumentParser()
+    p.add_argument("--scenes", default="cornell,glass")
+    p.add_argument("--parts", default=",".join(PARTS))
+    p.add_argument("--size", type=int, default=64)
+    p.add_argument("--depth", type=int, default=8)
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--ref-spp", type=int, default=2048)
+    p.add_argument("--seeds", type=int, default=4)
+    p.add_argument("--reference", type=Path, default=None)
+    a = p.parse_args()
+    a.sampler = "independent"
+    tmp = Path(tempfile.mkdtemp())
+    (tmp / "caustic.txt").write_text(eq.CAUSTIC)
+    (tmp / "glass_cornell.txt").write_text(eq.seed_glass_cornell())
+    repo = Path(__file__).resolve().parents[1]
+    files = {"cornell": repo / "scenes" / "cornellbox" / "cornellbox.txt", "caustic": tmp / "caustic.txt",
+             "glass": tmp / "glass_cornell.txt"}
+    patches = {"occluded": ("occluded_where", _masked_occluded), "roulette": ("light_survival", _old_survival)}
+    for name in a.scenes.split(","):
+        scene = load_scene(files[name])
+        base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth),
+                             integrator="bdpt")
+        ref_image, ref_err = eq.reference(scene, base, name, a)
+        for part in a.parts.split(","):
+            new = getattr(B, patches[part][0]) if part in patches else None
+
+            def variant(which: str, part=part, new=new, base=base):
+                """Set the module's function (A: the old one) and the options of ``which``."""
+                if part in patches:
+                    setattr(B, patches[part][0], patches[part][1] if which == "A" else new)
+                return replace(base, variance=(which == "A")) if part == "variance" else base
+
+            renderers = {}
+            for which in "AB":
+                opt = variant(which)
+                r = Renderer(scene, replace(opt, spp=1, seed=1))
+                r.render()  # compiles the kernels
+                renderers[which] = r
+            totals = {w: [0.0, 0.0] for w in "AB"}
+            images = {}
+            for seed in range(2, a.seeds + 2):
+                for which in "AB":
+                    opt = variant(which)
+                    r = renderers[which].derive(replace(opt, spp=a.spp, seed=seed))
+                    c = time.process_time()
+                    img = r.render()
+                    totals[which][0] += time.process_time() - c
+                    totals[which][1] += rel_mse(img.image, ref_image) - ref_err
+                    images[which] = img.image
+                if part == "variance" and not np.array_equal(images["A"], images["B"]):
+                    print(f"{name} variance: the images of seed {seed} differ", flush=True)
+            if part in patches:
+                setattr(B, patches[part][0], new)
+            (ca, ea), (cb, eb) = totals["A"], totals["B"]
+            print(f"{name} {part}: A {ca:.2f} s CPU, relMSE {ea / a.seeds:.4g}; B {cb:.2f} s CPU, relMSE "
+                  f"{eb / a.seeds:.4g}; B / A: seconds {cb / ca:.3f}, error {eb / ea:.3f}, error x seconds "
+                  f"{eb * cb / (ea * ca):.3f} ({a.seeds} seeds, {a.spp} spp)", flush=True)
+            if not math.isfinite(eb / ea):
+                print(f"{name} {part}: no error to compare", flush=True)
+
+
+if __name__ == "__main__":
+    main()
