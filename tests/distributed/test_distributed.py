@@ -299,6 +299,11 @@ def test_resume_refuses_a_checkpoint_of_other_options(tmp_path, capsys, repo, co
                "--resume", "-o", str(out)])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "other options (seed differ)" in err[0]
+    # an option inside another is named by its path
+    rc = main(["render", str(cornell), *FLAGS, "--spp", str(SPP), "--chunk-spp", str(CHUNK), "--hide-emitters",
+               "on", "--resume", "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "other options (path.hide_emitters differ)" in err[0], err
     rc = main(["render", str(cornell), *FLAGS, "--spp", "8", "--resume", "-o", str(tmp_path / "none.exr")])
     assert rc == 2 and "no checkpoint" in capsys.readouterr().err
 
