@@ -61,6 +61,7 @@ from ..options import BVH_KINDS, parse_accel, parse_accel_list
 from ..render.camera import RayCamera
 from ..render.renderer import Renderer
 from ..scene import load_scene
+from ..scene.files import check_input
 from .table import markdown_table
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -426,8 +427,7 @@ def main(args: argparse.Namespace) -> int:
             raise DrptError(f"{name} must be positive, got {v}")
     paths = [Path(s) for s in args.scenes] or DEFAULT_SCENES
     for p in paths:
-        if not p.is_file():
-            raise DrptError(f"{p}: scene file not found")
+        check_input(p, what="scene file")  # (missing, a folder, ...: one line)
     out = Path(args.out)
     ensure()
     mitsuba = not args.no_mitsuba

@@ -348,3 +348,20 @@ def test_hide_emitters_flag_overrides_the_scene_file_and_is_exported(tmp_path):
         out = tmp_path / f"{value}.xml"
         assert main(["export", CORNELL, str(out), "--size", "8", "8", "--hide-emitters", value]) == 0
         assert load_scene(out).settings.hide_emitters is (value == "on")
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["profile", "{folder}"], "scene file is a directory"),
+    (["bench", "{folder}", "--size", "8", "8"], "scene file is a directory"),
+    (["profile", "{folder}/missing.txt"], "scene file not found"),
+    (["export", CORNELL, "{folder}/x.png"], "written as an .xml file"),
+    (["export", CORNELL, "{folder}"], "is a folder"),
+])
+def test_tools_given_a_folder_or_a_wrong_output_say_so_in_one_line(tmp_path, capsys, args, needle):
+    """A folder where a scene file goes, an image name where export's .xml goes: one line
+    naming what is wrong, status 2 (profile and bench said "not found" of a folder, and
+    export wrote its XML under the image's name)."""
+    rc = main([a.format(folder=tmp_path) for a in args])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and err[0].startswith("drpt: error: ") and needle in err[0], err
+    assert not (tmp_path / "x.png").exists()
