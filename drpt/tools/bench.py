@@ -106,7 +106,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         "(default 2000, the seed's)")
     p.add_argument("--min-leaf", type=int, default=1, metavar="N",
                    help="minimum primitives per leaf of the BVH variants (default 1)")
-    add_render_flags(p, omit=("accel",), size=(256, 256), spp=16)
+    add_render_flags(p, omit=("accel", "hide_emitters"), size=(256, 256), spp=16)
     p.add_argument("--rays", type=int, default=1 << 20,
                    help="rays per ray benchmark (default 1048576)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per number, best kept "
