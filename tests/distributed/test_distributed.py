@@ -336,3 +336,37 @@ def test_scene_hash_is_the_same_in_every_process(cornell):
         hashes.add(subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                                   check=True).stdout.strip())
     assert len(hashes) == 1, hashes
+
+
+@pytest.mark.slow
+def test_workers_with_dasks_default_ports_taken(tmp_path, capsys, cornell):
+    """With Dask's default scheduler and dashboard ports (8786, 8787) in use, a --workers
+    render takes free ports silently: the image, and no Dask warning. Negative control:
+    the same cluster with the scheduler's HTTP server left on 8787 warns."""
+    pytest.importorskip("distributed")
+    import socket
+    import warnings
+
+    held = []
+    for port in (8786, 8787):
+        s = socket.socket()
+        try:
+            s.bind(("127.0.0.1", port))
+            s.listen(1)
+            held.append(s)
+        except OSError:  # (taken already: as good)
+            s.close()
+    try:
+        capsys.readouterr()
+        _render(cornell, tmp_path, "w2", "--workers", "2", spp=2)
+        err = capsys.readouterr().err
+        assert "already in use" not in err and "Traceback" not in err, err
+        from distributed import LocalCluster
+
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            LocalCluster(n_workers=0, processes=False, dashboard_address=None).close()
+        assert any("already in use" in str(w.message) for w in seen), [str(w.message) for w in seen]
+    finally:
+        for s in held:
+            s.close()
