@@ -344,19 +344,11 @@ def test_workers_with_dasks_default_ports_taken(tmp_path, capsys, cornell):
     render takes free ports silently: the image, and no Dask warning. Negative control:
     the same cluster with the scheduler's HTTP server left on 8787 warns."""
     pytest.importorskip("distributed")
-    import socket
     import warnings
 
-    held = []
-    for port in (8786, 8787):
-        s = socket.socket()
-        try:
-            s.bind(("127.0.0.1", port))
-            s.listen(1)
-            held.append(s)
-        except OSError:  # (taken already: as good)
-            s.close()
-    try:
+    from support.ports import taken
+
+    with taken(8786, 8787):
         capsys.readouterr()
         _render(cornell, tmp_path, "w2", "--workers", "2", spp=2)
         err = capsys.readouterr().err
@@ -367,6 +359,3 @@ def test_workers_with_dasks_default_ports_taken(tmp_path, capsys, cornell):
             warnings.simplefilter("always")
             LocalCluster(n_workers=0, processes=False, dashboard_address=None).close()
         assert any("already in use" in str(w.message) for w in seen), [str(w.message) for w in seen]
-    finally:
-        for s in held:
-            s.close()

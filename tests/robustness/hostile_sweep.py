@@ -443,19 +443,12 @@ def cli_cases(root: Path):
     yield name, rc, err if "path.max_depth" in err or rc != 2 else err.replace("drpt: error: ", "drpt: ", 1), None
 
     # Dask's default scheduler and dashboard ports in use: a local cluster picks free ones
-    held = []
-    for port in (8786, 8787):
-        sock = socket.socket()
-        try:
-            sock.bind(("127.0.0.1", port))
-            sock.listen(1)
-            held.append(sock)
-        except OSError:
-            sock.close()
+    sys.path.insert(0, str(REPO / "tests"))
+    from support.ports import taken
+
     ported = root / "ported.exr"
-    rc, err, _ = run(["render", scene, *small, "--workers", "2", "-o", ported], timeout=120)
-    for sock in held:
-        sock.close()
+    with taken(8786, 8787):
+        rc, err, _ = run(["render", scene, *small, "--workers", "2", "-o", ported], timeout=120)
     yield "dask_ports_in_use", rc, err, lambda: (mean_of(ported) is not None and mean_of(ported) > 0
                                                  and "already in use" not in err)
 

@@ -17,7 +17,8 @@ run on their own BSDFs and images are in :mod:`drpt.testing`, not here.
   accelerator tests compare against;
 * :mod:`support.fuzz` and :mod:`support.fuzzformats`: seeded mutations of input files;
 * :mod:`support.resume`: renders interrupted after some chunks and resumed from their
-  checkpoint.
+  checkpoint;
+* :mod:`support.ports`: ports of this machine held in use.
 """
 
 from __future__ import annotations
