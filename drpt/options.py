@@ -275,7 +275,8 @@ def filter_spelling(name: str, params: dict) -> str:
 
 
 #: the names of :func:`with_scene_settings`'s ``given``: settings the caller fixed
-GIVEN = ("size", "spp", "seed", "sampler", "jitter", "strength", "integrator", "max_depth", "rr_depth", "filter")
+GIVEN = ("size", "spp", "seed", "sampler", "jitter", "strength", "integrator", "max_depth", "rr_depth",
+         "hide_emitters", "filter")
 
 
 def with_scene_settings(opts: RenderOptions, scene,
@@ -312,7 +313,7 @@ def with_scene_settings(opts: RenderOptions, scene,
         path["max_depth"] = st.max_depth
     if "rr_depth" not in given and st.rr_depth is not None:
         path["rr_depth"] = st.rr_depth
-    if st.hide_emitters is not None:
+    if st.hide_emitters is not None and "hide_emitters" not in given:
         path["hide_emitters"] = st.hide_emitters
     if getattr(st, "moment", None) is not None:
         fields["moment"] = True

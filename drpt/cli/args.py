@@ -2,7 +2,7 @@
 spellings among them, and the :class:`~drpt.options.RenderOptions` they give.
 
 * :func:`add_render_flags` adds the shared render flags to a command's
-  parser (size, spp, seed, depths and Russian roulette, the accelerator and
+  parser (size, spp, seed, depths and Russian roulette, hide_emitters, the accelerator and
   its BVH rule, integrator, material mode, sky sampling, pixel filter,
   lanes, backend, quiet; for ``render`` also the seed renderer's flags);
   their defaults are :class:`~drpt.options.RenderOptions`' own, so a command
@@ -43,8 +43,8 @@ from ..options import (
 from ..scene.mitsuba import parse_defines
 
 # Flag groups of add_render_flags; a command leaves out those that it sets itself.
-FLAGS = ("size", "spp", "seed", "max_depth", "rr_depth", "rr_prob", "accel", "integrator", "mode",
-         "bsdf", "env_sampling", "filter", "max_lanes", "backend", "quiet", "scene")
+FLAGS = ("size", "spp", "seed", "max_depth", "rr_depth", "rr_prob", "hide_emitters", "accel", "integrator",
+         "mode", "bsdf", "env_sampling", "filter", "max_lanes", "backend", "quiet", "scene")
 
 
 class _AccelChoices(tuple):
@@ -72,7 +72,7 @@ class _Given(argparse._StoreAction):
 
 def given_flags(args: argparse.Namespace) -> set[str]:
     """The dests of the tracked render flags (size, spp, seed, sampler, max_depth,
-    rr_depth, integrator, filter) given on the command line."""
+    rr_depth, hide_emitters, integrator, filter) given on the command line."""
     return set(getattr(args, "_given", ()))
 
 
@@ -147,6 +147,13 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
             parser.add_argument("-RR_cutdown", dest="rr_cutdown", type=float, default=None,
                                 help="seed flag: fixed continuation probability p at every "
                                      "bounce")
+    if want("hide_emitters"):
+        parser.add_argument("--hide-emitters", dest="hide_emitters", choices=("on", "off"), default=None,
+                            action=_Given,
+                            help="Mitsuba's hide_emitters: camera rays see no emitter, sky or "
+                                 "background, and pass through the area lights they hit to what "
+                                 "lies behind (on), or see them (off) (default off, or the scene "
+                                 "file's)")
     if want("seed"):
         parser.add_argument("--seed", type=int, default=d["seed"], action=_Given,
                             help=f"random seed (default {d['seed']})")
@@ -408,7 +415,8 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          filter=get("filter", base.filter),
                          filter_sampling=bool(get("filter_sampling", base.filter_sampling)),
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),
-                                          rr_depth=rr_depth, rr_prob=rr_prob),
+                                          rr_depth=rr_depth, rr_prob=rr_prob,
+                                          hide_emitters=get("hide_emitters") == "on"),
                          max_lanes=get("max_lanes"), chunk_spp=get("chunk_spp"),
                          target_error=get("target_error"), time_limit=get("time_limit"),
                          adaptive=bool(get("adaptive", False)),

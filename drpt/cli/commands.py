@@ -295,6 +295,11 @@ def cmd_export(args: argparse.Namespace) -> int:
     if not args.output.strip():
         raise DrptError("the output is empty: give the .xml file to write")
     out = Path(args.output)
+    if out.is_dir():
+        raise DrptError(f"{out}: is a folder; give the .xml file to write")
+    if out.suffix.lower() != ".xml":  # (an image name given where the scene goes)
+        raise DrptError(f"{out}: the Mitsuba scene is written as an .xml file, not "
+                        f"'{out.suffix or out.name}'")
     if str(out.parent) != "" and not out.parent.is_dir():  # render's rule: no folder is made
         raise DrptError(f"{out}: folder {out.parent} does not exist")
     scene = load_scene(args.scene)

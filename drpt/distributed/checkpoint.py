@@ -186,6 +186,18 @@ def remove(output: Path) -> None:
             unlink(tmp)
 
 
+def _flat(options: dict, prefix: str = "") -> dict:
+    """``options`` with the options inside others named by a dotted path (``path.max_depth``),
+    so that a refused resume names the option that differs, not only its group."""
+    flat = {}
+    for k, v in options.items():
+        if isinstance(v, dict) and v:
+            flat.update(_flat(v, f"{prefix}{k}."))
+        else:
+            flat[f"{prefix}{k}"] = v
+    return flat
+
+
 # the description's fields and their types (bool is not an int here)
 _FIELDS = {"version": int, "scene_hash": str, "options": dict, "chunks": int, "next": int,
            "spp": int, "nonfinite": int, "digest": str}
@@ -228,10 +240,10 @@ def load(output: Path, scene_hash: str, options: dict, chunks) -> Checkpoint:
     if d["scene_hash"] != scene_hash:
         raise refuse(f"a checkpoint of another scene (its content changed): {meta.name}")
     if d["options"] != json.loads(json.dumps(options)):
-        diff = sorted(k for k in set(d["options"]) | set(options)
-                      if d["options"].get(k) != json.loads(json.dumps(options)).get(k))
+        was, now = _flat(d["options"]), _flat(json.loads(json.dumps(options)))
+        diff = sorted(k for k in set(was) | set(now) if was.get(k) != now.get(k))
         if diff == ["variance"]:
-            had = "with" if d["options"].get("variance") else "without"
+            had = "with" if was.get("variance") else "without"
             raise refuse(f"rendered {had} the squared splats a variance estimate needs (RenderOptions.variance, "
                          "--target-error, --time-limit, --adaptive): resume it as it was rendered")
         raise refuse(f"rendered with other options ({', '.join(diff)} differ): give the flags of "

@@ -229,8 +229,12 @@ class DaskEngine:
                 main = threading.current_thread() is threading.main_thread()
                 old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
                 try:
+                    # no dashboard; the scheduler's HTTP server (which it starts anyway, on
+                    # 8787 unless told, with a warning when that is taken) on a free port
+                    # of this machine only
                     self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
                                                 processes=True, dashboard_address=None,
+                                                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                                                 silence_logs=logging.ERROR)
                 finally:
                     if main:

@@ -61,6 +61,7 @@ from ..options import BVH_KINDS, parse_accel, parse_accel_list
 from ..render.camera import RayCamera
 from ..render.renderer import Renderer
 from ..scene import load_scene
+from ..scene.files import check_input
 from .table import markdown_table
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -105,7 +106,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         "(default 2000, the seed's)")
     p.add_argument("--min-leaf", type=int, default=1, metavar="N",
                    help="minimum primitives per leaf of the BVH variants (default 1)")
-    add_render_flags(p, omit=("accel",), size=(256, 256), spp=16)
+    add_render_flags(p, omit=("accel", "hide_emitters"), size=(256, 256), spp=16)
     p.add_argument("--rays", type=int, default=1 << 20,
                    help="rays per ray benchmark (default 1048576)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per number, best kept "
@@ -426,8 +427,7 @@ def main(args: argparse.Namespace) -> int:
             raise DrptError(f"{name} must be positive, got {v}")
     paths = [Path(s) for s in args.scenes] or DEFAULT_SCENES
     for p in paths:
-        if not p.is_file():
-            raise DrptError(f"{p}: scene file not found")
+        check_input(p, what="scene file")  # (missing, a folder, ...: one line)
     out = Path(args.out)
     ensure()
     mitsuba = not args.no_mitsuba

@@ -389,7 +389,8 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
     reference = get_reference(
         scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
         bsdf=bsdf, max_depth=max_depth, rr_depth=rr_depth, seed=seed, cache_dir=cache_dir,
-        progress=options.progress, rfilter=options.filter, source=source)
+        progress=options.progress, rfilter=options.filter, source=source,
+        hide_emitters=options.path.hide_emitters)
     ref, ref_var = reference.image, reference.variance
 
     options = replace(options, variance=True)  # (light tracing's too: the tests read it)
@@ -422,7 +423,7 @@ def compare_scene(scene_path: Path, out: Path, options, ref_spp: int = 1024,
         c_mean, c_var, control_info = get_control(
             scene, scene_path.stem, width, height, spp, bsdf=bsdf, max_depth=max_depth,
             rr_depth=rr_depth, seed=seed, cache_dir=cache_dir, progress=options.progress,
-            rfilter=options.filter, source=source)
+            rfilter=options.filter, source=source, hide_emitters=options.path.hide_emitters)
         summary["outside_ci_control"] = metrics.outside_ci(c_mean, c_var, ref, ref_var, CI_Z)
         # the control's block variances come from its single-sample renders (a splatting
         # filter correlates its pixels); the test otherwise is drpt's

@@ -316,7 +316,8 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
 
 
 # ------------------------------------------------------------ rendering
-def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter="box", source=None):
+def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter="box", source=None,
+                 hide_emitters=False):
     """A loaded Mitsuba scene and a ``render(spp, seed) -> (image, seconds)``: drpt's
     export of ``scene``, or with ``source`` (a :class:`~drpt.tools.xmlref.MitsubaXML`)
     that XML file as Mitsuba reads it."""
@@ -328,7 +329,8 @@ def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter=
         ms, integrator = source.load()
     else:
         ms = mi.load_dict(to_mitsuba_dict(scene, width, height, 1, max_depth=max_depth,
-                                          rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter))
+                                          rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter,
+                                          hide_emitters=hide_emitters))
     load_seconds = time.perf_counter() - t0
 
     def render(spp: int, s: int):
@@ -397,7 +399,8 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
     reference = get_reference(
         scene, scene_path.stem, width, height, ref_spp=ref_spp, ref_batches=ref_batches,
         bsdf=bsdf, max_depth=max_depth, rr_depth=rr_depth, seed=seed, cache_dir=cache_dir,
-        progress=progress, rfilter=options.filter, source=source)
+        progress=progress, rfilter=options.filter, source=source,
+        hide_emitters=options.path.hide_emitters)
     ref, ref_var = reference.image, reference.variance
     import mitsuba as mi
 
@@ -414,7 +417,7 @@ def converge_study(scene_path: Path, out: Path, options, max_spp: int = 256,
                                                 adaptive=True))
         ad_render(8, seed + 999_997)  # warm-up
     mits_render, mits_load = make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf,
-                                          options.filter, source)
+                                          options.filter, source, options.path.hide_emitters)
     # Warm-up: compiles both renderers' kernels (reused at every spp), discarded.
     t = time.perf_counter()
     drpt_render(1, seed + 999_999)

@@ -138,7 +138,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         description="render SCENE with drpt changing one quality knob at a time; report "
                     "time, samples/s, error against a Mitsuba reference and bias")
     p.add_argument("scene", help="scene file")
-    add_render_flags(p, omit=("max_depth", "rr_depth", "rr_prob", "accel"), size=(64, 64),
+    add_render_flags(p, omit=("max_depth", "rr_depth", "rr_prob", "hide_emitters", "accel"), size=(64, 64),
                      spp=64)
     p.add_argument("--knobs", nargs="+", choices=KNOBS, default=None,
                    help="which knobs to vary (default all; denoise where pyoidn is installed)")

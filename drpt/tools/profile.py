@@ -81,6 +81,7 @@ from ..render.instrument import HIT_CAMERA, HIT_LIGHT, SPLAT, Instrument
 from ..render.integrators.wavefront import OUTSIDE, WaveStats
 from ..render.renderer import Renderer, plan_passes
 from ..scene import load_scene
+from ..scene.files import check_input
 
 MODES = ("megakernel", "wavefront")
 LIGHT_TRACERS = ("ptracer", "bdpt")
@@ -580,8 +581,7 @@ def run_profile(scene_path: str | Path, popt: ProfileOptions, modes=MODES) -> li
     from dataclasses import replace
 
     scene_path = Path(scene_path)
-    if not scene_path.is_file():
-        raise DrptError(f"{scene_path}: scene file not found")
+    check_input(scene_path, what="scene file")  # (missing, a folder, ...: one line)
     integrator = popt.render.integrator
     light = integrator in LIGHT_TRACERS
     if integrator != "path" and not light:

@@ -183,7 +183,7 @@ def render_committed(name: str, seed: int = 12345) -> Path:
 def render_batches(scene, width: int, height: int, batch_spp: int, batches: int, seed: int,
                    seed_step: int = 7919, max_depth: int = -1, rr_depth: int = 5,
                    bsdf: str = "phong", progress: bool = True, rfilter: str = "box", source=None,
-                   blocks: bool = False):
+                   blocks: bool = False, hide_emitters: bool = False):
     """Mitsuba's ``path`` integrator on the exported ``scene``, ``batches`` times
     at ``batch_spp`` samples per pixel, batch ``k`` with seed ``seed + seed_step * k``.
 
@@ -191,7 +191,7 @@ def render_batches(scene, width: int, height: int, batch_spp: int, batches: int,
     (``var(ddof=1) / batches``; zero for one batch), both float32, the
     render seconds and the ``load_dict`` seconds (with ``blocks``, a fifth item:
     :func:`_batch_block_variances`). ``rfilter`` is the film's
-    pixel filter (``--filter``'s spelling). Mitsuba's variant must be set
+    pixel filter (``--filter``'s spelling); ``hide_emitters`` the integrator's. Mitsuba's variant must be set
     (:func:`drpt.backend.set_mitsuba_variant`).
 
     With ``source`` (a :class:`drpt.tools.xmlref.MitsubaXML`), Mitsuba renders that
@@ -201,7 +201,7 @@ def render_batches(scene, width: int, height: int, batch_spp: int, batches: int,
 
     t0 = time.perf_counter()
     ms, integrator = _load(scene, width, height, batch_spp, max_depth, rr_depth, seed, bsdf,
-                           rfilter, source)
+                           rfilter, source, hide_emitters)
     load_seconds = time.perf_counter() - t0
     runs = []
     t0 = time.perf_counter()
@@ -234,14 +234,16 @@ def _batch_block_variances(runs: np.ndarray) -> dict:
     return out
 
 
-def _load(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter, source):
+def _load(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter, source,
+          hide_emitters=False):
     """``(mi.Scene, integrator or None)``: the export of ``scene``, or ``source``'s XML."""
     import mitsuba as mi
 
     if source is not None:
         return source.load()
     return mi.load_dict(to_mitsuba_dict(scene, width, height, spp, max_depth=max_depth,
-                                        rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter)), None
+                                        rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter,
+                                        hide_emitters=hide_emitters)), None
 
 
 def _rgb(image) -> np.ndarray:
@@ -342,7 +344,8 @@ def reference_key(scene, settings: dict) -> str:
                          settings["height"], settings["batch_spp"],
                          max_depth=settings["max_depth"], rr_depth=settings["rr_depth"],
                          seed=settings["ref_seed"], bsdf=settings["bsdf"],
-                         rfilter=settings.get("rfilter", "box"))
+                         rfilter=settings.get("rfilter", "box"),
+                         hide_emitters=settings.get("hide_emitters", False))
         for f in sorted(Path(tmp).rglob("*")):
             if f.is_file():
                 add("export:" + str(f.relative_to(tmp)), f.read_bytes())
@@ -417,14 +420,15 @@ class Reference:
 def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024,
                   ref_batches: int = 8, bsdf: str = "phong", max_depth: int = -1,
                   rr_depth: int = 5, seed: int = 0, cache_dir: Path | None = None,
-                  progress: bool = True, rfilter: str = "box", source=None) -> Reference:
+                  progress: bool = True, rfilter: str = "box", source=None,
+                  hide_emitters: bool = False) -> Reference:
     """The Mitsuba reference of a loaded ``scene``: from the cache, or rendered (and cached).
 
     Checks the settings and sets up Mitsuba's variant on drpt's backend.
     The reference's seed is ``seed + 100000`` (batch ``k``: ``+ 7919 k``).
     With ``source`` (a :class:`drpt.tools.xmlref.MitsubaXML`), Mitsuba renders
-    that XML file (keyed by :meth:`~drpt.tools.xmlref.MitsubaXML.key`), not the export.
-    User mistakes raise DrptError.
+    that XML file (keyed by :meth:`~drpt.tools.xmlref.MitsubaXML.key`), not the export,
+    whose integrator has ``hide_emitters`` otherwise. User mistakes raise DrptError.
     """
     if min(width, height) <= 0:
         raise DrptError(f"size must be positive, got {width}x{height}")
@@ -437,6 +441,8 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
     pixel_filter = parse_filter(rfilter)
     if not pixel_filter.is_box:  # (box references keep the cache keys they always had)
         settings["rfilter"] = str(pixel_filter)
+    if hide_emitters and source is None:  # (as must references without it)
+        settings["hide_emitters"] = True
     key = reference_key(scene, settings) if source is None else source.key(settings)
     cache_file = None if cache_dir is None else Path(cache_dir) / f"{stem}_{key[:24]}.npz"
     cached = _load_cached(cache_file) if cache_file is not None and cache_file.is_file() else None
@@ -448,7 +454,8 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
         ref, ref_var, secs, load_secs, blocks = render_batches(
             scene, width, height, per, int(ref_batches), settings["ref_seed"],
             max_depth=max_depth, rr_depth=rr_depth, bsdf=bsdf, progress=progress,
-            rfilter=settings.get("rfilter", "box"), source=source, blocks=True)
+            rfilter=settings.get("rfilter", "box"), source=source, blocks=True,
+            hide_emitters=settings.get("hide_emitters", False))
         if ref.shape != (height, width, 3):
             raise DrptError(f"the Mitsuba reference is {ref.shape[1]}x{ref.shape[0]}, drpt renders "
                             f"{width}x{height}")
@@ -463,7 +470,8 @@ def get_reference(scene, stem: str, width: int, height: int, ref_spp: int = 1024
 
 def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
                           max_depth: int = -1, rr_depth: int = 5, bsdf: str = "phong",
-                          progress: bool = True, rfilter: str = "box", source=None):
+                          progress: bool = True, rfilter: str = "box", source=None,
+                          hide_emitters: bool = False):
     """Mitsuba's ``path`` on the exported ``scene`` (or ``source``'s XML) as ``spp`` renders of one sample per
     pixel (render ``k`` with seed ``seed + k``): the per-pixel mean and the variance of
     that mean estimated the way drpt estimates its own, ``var(samples, ddof=1) / spp``.
@@ -479,7 +487,8 @@ def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
 
     if spp < 2:
         raise DrptError(f"a per-pixel variance needs at least 2 samples per pixel, got {spp}")
-    ms, integrator = _load(scene, width, height, 1, max_depth, rr_depth, seed, bsdf, rfilter, source)
+    ms, integrator = _load(scene, width, height, 1, max_depth, rr_depth, seed, bsdf, rfilter, source,
+                           hide_emitters)
     s1 = np.zeros((height, width, 3))
     s2 = np.zeros((height, width, 3))
     b1 = {b: 0.0 for b in BLOCK_SIZES}
@@ -511,7 +520,7 @@ def render_single_samples(scene, width: int, height: int, spp: int, seed: int,
 def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str = "phong",
                 max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
                 cache_dir: Path | None = None, progress: bool = True, rfilter: str = "box",
-                source=None):
+                source=None, hide_emitters: bool = False):
     """Mitsuba at drpt's ``spp`` with drpt's per-pixel variance estimator
     (:func:`render_single_samples`, seed ``seed + 200000``), cached like a reference
     (key: the export and every setting, ``"control"`` among them).
@@ -526,6 +535,8 @@ def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str =
     settings = {"control": True, "width": int(width), "height": int(height), "batch_spp": 1,
                 "spp": int(spp), "max_depth": int(max_depth), "rr_depth": int(rr_depth),
                 "bsdf": bsdf, "ref_seed": int(seed) + 200000, "rfilter": str(parse_filter(rfilter))}
+    if hide_emitters and source is None:
+        settings["hide_emitters"] = True
     key = reference_key(scene, settings) if source is None else source.key(settings)
     cache_file = None if cache_dir is None else Path(cache_dir) / f"{stem}_control_{key[:24]}.npz"
     cached = _load_cached(cache_file) if cache_file is not None and cache_file.is_file() else None
@@ -535,7 +546,7 @@ def get_control(scene, stem: str, width: int, height: int, spp: int, bsdf: str =
         mean, var, secs, blocks = render_single_samples(
             scene, width, height, spp, settings["ref_seed"], max_depth=max_depth,
             rr_depth=rr_depth, bsdf=bsdf, progress=progress, rfilter=settings["rfilter"],
-            source=source)
+            source=source, hide_emitters=settings.get("hide_emitters", False))
         meta = {"seconds": secs, "key": key, "settings": settings}
         if cache_file is not None:
             _save_cached(cache_file, mean, var, meta, blocks)

@@ -47,7 +47,8 @@ class MitsubaXML:
         size: the image size to render, ``(width, height)``; None: the file's.
         rfilter: a :class:`~drpt.filters.PixelFilter` replacing the film's, or None.
         integrator: ``{"max_depth", "rr_depth", "hide_emitters"}`` of a ``path``
-            integrator replacing the file's, or None.
+            integrator replacing the file's (where the render's depths or
+            ``hide_emitters`` differ from the file's), or None.
     """
 
     def __init__(self, path, defines: dict | None = None, *, size=None,
@@ -70,7 +71,8 @@ class MitsubaXML:
         depths = (st.max_depth if st.max_depth is not None else -1,
                   st.rr_depth if st.rr_depth is not None else 5)
         integrator = None
-        if (options.path.max_depth, options.path.rr_depth) != depths:
+        if ((options.path.max_depth, options.path.rr_depth) != depths
+                or options.path.hide_emitters != bool(st.hide_emitters)):
             integrator = {"max_depth": int(options.path.max_depth), "rr_depth": int(options.path.rr_depth),
                           "hide_emitters": bool(options.path.hide_emitters)}
             if options.integrator == "volpath":  # (Mitsuba's path would ignore the media)

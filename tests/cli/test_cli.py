@@ -309,3 +309,59 @@ def test_flag_parsing_errors_are_one_line(capsys, args, needle):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("drpt: error: ") and needle in err[0], err
     assert not err[0].startswith("drpt: error: drpt"), err  # no doubled prefix
+
+
+# ------------------------------------------------------------ --hide-emitters
+@pytest.mark.parametrize("command", ["render", "view", "export", "profile", "compare", "converge"])
+def test_hide_emitters_flag_on_every_rendering_command(command):
+    """``--hide-emitters on|off`` sets :attr:`~drpt.options.PathOptions.hide_emitters` and
+    counts as given (a scene file's own ``hide_emitters`` does not replace it); without it
+    the default is off and not given. Negative control: another value is refused."""
+    from drpt.cli import build_parser
+    from drpt.cli.args import given_settings, options_from_args
+
+    extra = {"export": ["out.xml"]}.get(command, [])
+    mode = {"profile": {"mode": "megakernel"}}.get(command, {})
+    parse = build_parser().parse_args
+    for value, want in (("on", True), ("off", False)):
+        a = parse([command, CORNELL, *extra, "--hide-emitters", value])
+        assert options_from_args(a, **mode).path.hide_emitters is want
+        assert "hide_emitters" in given_settings(a)
+    a = parse([command, CORNELL, *extra])
+    assert options_from_args(a, **mode).path.hide_emitters is False and "hide_emitters" not in given_settings(a)
+    with pytest.raises(SystemExit):
+        parse([command, CORNELL, *extra, "--hide-emitters", "yes"])
+
+
+def test_hide_emitters_flag_overrides_the_scene_file_and_is_exported(tmp_path):
+    """A Mitsuba XML with ``hide_emitters`` true: without the flag the file's setting holds,
+    ``--hide-emitters off`` replaces it; ``drpt export`` writes the setting into the XML's
+    integrator, which reads back as written."""
+    from drpt.options import RenderOptions, with_scene_settings
+    from drpt.scene import load_scene
+    from support.xml import XML
+
+    scene = load_scene(XML / "hide_emitters.xml")
+    assert with_scene_settings(RenderOptions(), scene)[0].path.hide_emitters is True
+    assert with_scene_settings(RenderOptions(), scene, {"hide_emitters"})[0].path.hide_emitters is False
+    for value in ("on", "off"):
+        out = tmp_path / f"{value}.xml"
+        assert main(["export", CORNELL, str(out), "--size", "8", "8", "--hide-emitters", value]) == 0
+        assert load_scene(out).settings.hide_emitters is (value == "on")
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["profile", "{folder}"], "scene file is a directory"),
+    (["bench", "{folder}", "--size", "8", "8"], "scene file is a directory"),
+    (["profile", "{folder}/missing.txt"], "scene file not found"),
+    (["export", CORNELL, "{folder}/x.png"], "written as an .xml file"),
+    (["export", CORNELL, "{folder}"], "is a folder"),
+])
+def test_tools_given_a_folder_or_a_wrong_output_say_so_in_one_line(tmp_path, capsys, args, needle):
+    """A folder where a scene file goes, an image name where export's .xml goes: one line
+    naming what is wrong, status 2 (profile and bench said "not found" of a folder, and
+    export wrote its XML under the image's name)."""
+    rc = main([a.format(folder=tmp_path) for a in args])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and err[0].startswith("drpt: error: ") and needle in err[0], err
+    assert not (tmp_path / "x.png").exists()

@@ -60,28 +60,19 @@ def test_resumed_render_counts_only_the_samples_it_traced(tmp_path, capsys, corn
     """After --resume the summary's samples/s counted the checkpoint's samples as rendered
     now (3x too high when two thirds came from it)."""
     from drpt.cli import main as drpt_main
-    from drpt.distributed.job import run
     from drpt.options import RenderOptions
     from drpt.scene import load_scene
+    from support.resume import interrupt, interrupted_then_resumed
 
     out = tmp_path / "x.exr"
     from drpt.backend import policy
 
     opts = RenderOptions(width=8, height=8, spp=6, chunk_spp=1, progress=False,
                          max_lanes=policy().max_lanes)  # what the command line gives
-
-    def stop(merged, result, engine):
-        if merged.next >= 4:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        run(load_scene(str(cornell)), opts, out, checkpoint_seconds=0, on_chunk=stop)
-    capsys.readouterr()
-    job = run(load_scene(str(cornell)), opts, out, resume=True)
+    job = interrupted_then_resumed(load_scene(str(cornell)), opts, out, after=4)
     assert job.resumed_spp == 4
     assert job.result.samples == 8 * 8 * 2
-    with pytest.raises(KeyboardInterrupt):
-        run(load_scene(str(cornell)), opts, out, checkpoint_seconds=0, on_chunk=stop)
+    interrupt(load_scene(str(cornell)), opts, out, after=4)
     capsys.readouterr()
     flags = ["render", str(cornell), "--size", "8", "8", "--spp", "6", "--chunk-spp", "1", "-o", str(out), "-q"]
     assert drpt_main([*flags, "--resume"]) == 0

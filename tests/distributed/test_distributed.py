@@ -299,6 +299,11 @@ def test_resume_refuses_a_checkpoint_of_other_options(tmp_path, capsys, repo, co
                "--resume", "-o", str(out)])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "other options (seed differ)" in err[0]
+    # an option inside another is named by its path
+    rc = main(["render", str(cornell), *FLAGS, "--spp", str(SPP), "--chunk-spp", str(CHUNK), "--hide-emitters",
+               "on", "--resume", "-o", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "other options (path.hide_emitters differ)" in err[0], err
     rc = main(["render", str(cornell), *FLAGS, "--spp", "8", "--resume", "-o", str(tmp_path / "none.exr")])
     assert rc == 2 and "no checkpoint" in capsys.readouterr().err
 
@@ -331,3 +336,26 @@ def test_scene_hash_is_the_same_in_every_process(cornell):
         hashes.add(subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                                   check=True).stdout.strip())
     assert len(hashes) == 1, hashes
+
+
+@pytest.mark.slow
+def test_workers_with_dasks_default_ports_taken(tmp_path, capsys, cornell):
+    """With Dask's default scheduler and dashboard ports (8786, 8787) in use, a --workers
+    render takes free ports silently: the image, and no Dask warning. Negative control:
+    the same cluster with the scheduler's HTTP server left on 8787 warns."""
+    pytest.importorskip("distributed")
+    import warnings
+
+    from support.ports import taken
+
+    with taken(8786, 8787):
+        capsys.readouterr()
+        _render(cornell, tmp_path, "w2", "--workers", "2", spp=2)
+        err = capsys.readouterr().err
+        assert "already in use" not in err and "Traceback" not in err, err
+        from distributed import LocalCluster
+
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            LocalCluster(n_workers=0, processes=False, dashboard_address=None).close()
+        assert any("already in use" in str(w.message) for w in seen), [str(w.message) for w in seen]

@@ -256,22 +256,15 @@ def test_aovs_leave_the_image_bit_for_bit(flags, cornell):
 
 
 def test_chunked_and_resumed_aovs_equal_the_plain_render(tmp_path, cornell):
-    from drpt.distributed import job
+    from support.resume import interrupted_then_resumed
 
     scene = load_scene(cornell)
     opts = RenderOptions(width=16, height=12, spp=8, progress=False, aovs=parse_aovs("depth,albedo"),
                          denoise=True, max_lanes=16 * 12 * 2)
     plain = Renderer(scene, opts).render()
     chunked = replace(opts, chunk_spp=2)
-    out = tmp_path / "x.exr"
-
-    def stop(merged, result, engine):
-        if merged.next == 2:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        job.run(scene, chunked, out, on_chunk=stop)
-    resumed = job.run(scene, chunked, out, resume=True).result
+    resumed = interrupted_then_resumed(scene, chunked, tmp_path / "x.exr", after=2,
+                                       checkpoint_seconds=None).result
     assert np.array_equal(plain.image, resumed.image)
     assert np.array_equal(plain.aov, resumed.aov)
     assert plain.aov.shape == (12, 16, 4 + 6)

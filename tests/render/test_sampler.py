@@ -177,10 +177,10 @@ def test_ldsampler_renders_like_mitsuba(name, control, kind, monkeypatch):
 def test_chunked_and_resumed_renders_are_the_plain_render(tmp_path, kw):
     """A render in chunks of one sample per pixel, interrupted after 3 chunks and resumed from
     its checkpoint, gives the plain render's image bit for bit; another seed another image."""
-    from drpt.distributed.job import run
     from drpt.options import RenderOptions
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
+    from support.resume import interrupted_then_resumed
 
     scene = load_scene("scenes/cornellbox/cornellbox.txt")
     o = RenderOptions(width=16, height=12, spp=12, seed=7, progress=False,
@@ -188,15 +188,7 @@ def test_chunked_and_resumed_renders_are_the_plain_render(tmp_path, kw):
     plain = Renderer(scene, o).render()
     other = Renderer(scene, replace(o, seed=8)).render()
     assert (plain.image != other.image).any()
-
-    def interrupt(merged, result, engine):
-        if merged.next >= 3:
-            raise KeyboardInterrupt
-
-    out = tmp_path / "cut.exr"
-    with pytest.raises(KeyboardInterrupt):
-        run(scene, o, out, on_chunk=interrupt, checkpoint_seconds=0.0)
-    assert np.array_equal(run(scene, o, out, resume=True).result.image, plain.image)
+    assert np.array_equal(interrupted_then_resumed(scene, o, tmp_path / "cut.exr").result.image, plain.image)
 
 
 #: Mitsuba corpus scenes rendered with --sampler ldsampler (their files ask for independent)

@@ -348,25 +348,17 @@ def test_corpus_z_test_catches_a_sampler_that_reuses_a_dimension(monkeypatch):
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["multijitter", "orthogonal"])
 def test_chunked_and_resumed_renders_are_the_plain_render(tmp_path, kind):
-    from drpt.distributed.job import run
     from drpt.options import RenderOptions
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
+    from support.resume import interrupted_then_resumed
 
     scene = load_scene("scenes/cornellbox/cornellbox.txt")
     o = RenderOptions(width=16, height=12, spp=9, seed=7, progress=False, max_lanes=16 * 12 * 4,
                       chunk_spp=1, sampler=kind)
     plain = Renderer(scene, o).render()
     assert (plain.image != Renderer(scene, replace(o, seed=8)).render().image).any()
-
-    def interrupt(merged, result, engine):
-        if merged.next >= 3:
-            raise KeyboardInterrupt
-
-    out = tmp_path / "cut.exr"
-    with pytest.raises(KeyboardInterrupt):
-        run(scene, o, out, on_chunk=interrupt, checkpoint_seconds=0.0)
-    assert np.array_equal(run(scene, o, out, resume=True).result.image, plain.image)
+    assert np.array_equal(interrupted_then_resumed(scene, o, tmp_path / "cut.exr").result.image, plain.image)
 
 
 @pytest.mark.slow

@@ -58,18 +58,11 @@ def test_time_limit_stops_and_unreachable_targets_render_everything(scene, tmp_p
 
 def test_resumed_target_error_render_stops_where_the_whole_one_does(scene, tmp_path):
     from drpt.distributed.job import run
+    from support.resume import interrupted_then_resumed
 
     opts = _opts(target_error=2e-3)
     whole = run(scene, opts, tmp_path / "whole.exr").result
-
-    def interrupt(merged, result, engine):
-        if merged.next >= 2:
-            raise KeyboardInterrupt
-
-    out = tmp_path / "cut.exr"
-    with pytest.raises(KeyboardInterrupt):
-        run(scene, opts, out, on_chunk=interrupt, checkpoint_seconds=0.0)
-    job = run(scene, opts, out, resume=True)
+    job = interrupted_then_resumed(scene, opts, tmp_path / "cut.exr", after=2)
     assert job.resumed_spp > 0 and job.result.spp + job.resumed_spp == whole.spp
     assert np.array_equal(job.result.image, whole.image)
 

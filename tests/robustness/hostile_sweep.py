@@ -360,10 +360,103 @@ def output_cases(root: Path):
     yield "whitted_empty", rc, err, lambda: mean_of(out) == 0.0
 
 
+# ------------------------------------------------------------------ command line
+def cli_cases(root: Path):
+    """Bad flag values, outputs drpt cannot write, folders given as files, a missing
+    scene, tools given a folder, a resume refused for a nested option, a Dask port in
+    use: each one line and exit status 2 (the port in use: a correct image)."""
+    scene = REPO / "scenes" / "cornellbox" / "cornellbox.txt"
+    out = root / "x.exr"
+    small = ["--size", "8", "8", "--spp", "1", "-q"]
+    folder = root / "folder"
+    folder.mkdir()
+    (root / "dir.png").mkdir()
+    (root / "file").write_text("not a folder\n")
+
+    def case(name, args, check=None, timeout=TIMEOUT):
+        rc, err, _ = run(args, timeout=timeout)
+        return name, rc, err, check
+
+    def render(name, *more, scene=scene, output=out):
+        return case(name, ["render", scene, *small, *more, "-o", output])
+
+    yield render("spp_negative", "--spp", "-1")
+    yield render("spp_2^40", "--spp", str(1 << 40))
+    yield render("spp_word", "--spp", "many")
+    yield render("size_zero", "--size", "0", "0")
+    yield render("size_negative", "--size", "-8", "8")
+    yield render("size_2^20", "--size", str(1 << 20), "8")
+    yield render("size_float", "--size", "8.5", "8")
+    yield render("size_one_value", "--size", "8")
+    yield render("max_depth_-5", "--max-depth", "-5")
+    yield render("rr_prob_nan", "--rr-prob", "nan")
+    yield render("rr_prob_0", "--rr-prob", "0")
+    yield render("seed_negative", "--seed", "-1")
+    yield render("seed_2^70", "--seed", str(1 << 70))
+    yield render("filter_bogus", "--filter", "lanczos:taps=x")
+    yield render("filter_radius_-1", "--filter", "tent:radius=-1")
+    yield render("hide_emitters_yes", "--hide-emitters", "yes")
+    yield render("max_lanes_0", "--max-lanes", "0")
+    yield render("time_limit_-1", "--time-limit", "-1")
+    yield render("target_error_nan", "--target-error", "nan")
+    yield render("chunk_spp_0", "--chunk-spp", "0")
+    yield render("workers_0", "--workers", "0")
+    yield render("gamma_nan", "--gamma", "nan", output=root / "x.png")
+    yield render("define_no_value", "-D", "novalue")
+    yield render("aovs_bogus", "--aovs", "albedo:nosuchtype")
+    yield render("resume_no_checkpoint", "--resume", output=root / "never.exr")
+    yield render("missing_scene", scene=root / "missing.txt")
+    yield render("scene_is_folder", scene=folder)
+    yield render("scene_empty_file", scene=root / "file")
+    yield render("output_is_folder", output=root / "dir.png")
+    yield render("output_folder_missing", output=root / "no" / "x.exr")
+    yield render("output_under_a_file", output=root / "file" / "x.exr")
+    yield render("output_in_proc", output=Path("/proc/drpt-x.exr"))
+    yield render("output_bad_type", output=root / "x.jpg")
+    yield case("export_output_folder", ["export", scene, folder])
+    yield case("export_output_png", ["export", scene, root / "x.png"])
+    yield case("export_scene_folder", ["export", folder, root / "x.xml"])
+    yield case("profile_folder", ["profile", folder, *small])
+    yield case("bench_folder", ["bench", folder, "--size", "8", "8", "--spp", "1"])
+    yield case("compare_folder", ["compare", folder, *small])
+    yield case("converge_missing", ["converge", root / "missing.txt"])
+    yield case("knobs_folder", ["knobs", folder])
+    yield case("view_port_70000", ["view", scene, "--port", "70000"])
+
+    # a resume refused for an option inside another (PathOptions' max_depth): the refusal
+    # names it (path.max_depth), not only the group (path)
+    cut = root / "cut.exr"
+    flags = ["--size", "16", "16", "--spp", "4", "--chunk-spp", "1", "-q", "--max-depth", "3"]
+    code = (
+        "import sys; from pathlib import Path\n"
+        "from drpt.cli import build_parser\n"
+        "from drpt.cli.args import options_from_args\n"
+        "from drpt.scene import load_scene\nfrom drpt.distributed.job import run\n"
+        "a = build_parser().parse_args(['render', sys.argv[1], *sys.argv[3:]])\n"
+        "def stop(m, r, e):\n    if m.next >= 2: raise KeyboardInterrupt\n"
+        "try:\n    run(load_scene(sys.argv[1]), options_from_args(a), Path(sys.argv[2]), on_chunk=stop,"
+        " checkpoint_seconds=0)\nexcept KeyboardInterrupt:\n    pass\n")
+    subprocess.run([PY, "-c", code, scene, cut, *flags], cwd=REPO, capture_output=True,
+                   env={**os.environ, "PYTHONPATH": str(REPO)})
+    flags[-1] = "4"
+    name, rc, err, _ = case("resume_nested_option", ["render", scene, *flags, "--resume", "-o", cut])
+    yield name, rc, err if "path.max_depth" in err or rc != 2 else err.replace("drpt: error: ", "drpt: ", 1), None
+
+    # Dask's default scheduler and dashboard ports in use: a local cluster picks free ones
+    sys.path.insert(0, str(REPO / "tests"))
+    from support.ports import taken
+
+    ported = root / "ported.exr"
+    with taken(8786, 8787):
+        rc, err, _ = run(["render", scene, *small, "--workers", "2", "-o", ported], timeout=120)
+    yield "dask_ports_in_use", rc, err, lambda: (mean_of(ported) is not None and mean_of(ported) > 0
+                                                 and "already in use" not in err)
+
+
 FAMILIES = {"checkpoint": checkpoint_cases, "xml": xml_cases, "cluster": cluster_cases,
-            "output": output_cases}
+            "output": output_cases, "cli": cli_cases}
 LOCATED = {"xml"}  # families whose errors must name FILE:LINE
-MUST_RENDER = {"moved_folder", "scale_1e9", "scale_1e11", "whitted_empty"}  # valid input
+MUST_RENDER = {"moved_folder", "scale_1e9", "scale_1e11", "whitted_empty", "dask_ports_in_use"}  # valid input
 
 
 def main(argv):

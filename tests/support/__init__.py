@@ -15,7 +15,10 @@ run on their own BSDFs and images are in :mod:`drpt.testing`, not here.
 * :mod:`support.dielectric`: a stand-in for the material table, to test lobes alone;
 * :mod:`support.accel`: random triangle soups, rays and the brute-force hits the
   accelerator tests compare against;
-* :mod:`support.fuzz` and :mod:`support.fuzzformats`: seeded mutations of input files.
+* :mod:`support.fuzz` and :mod:`support.fuzzformats`: seeded mutations of input files;
+* :mod:`support.resume`: renders interrupted after some chunks and resumed from their
+  checkpoint;
+* :mod:`support.ports`: ports of this machine held in use.
 """
 
 from __future__ import annotations

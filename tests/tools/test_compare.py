@@ -312,3 +312,30 @@ def test_one_sample_per_pixel_is_refused(tmp_path):
     with pytest.raises(DrptError, match="--spp must be at least 2"):
         run(CORNELL, "--spp", "1", "--size", "8", "8", "--out", tmp_path / "o",
             "--cache", tmp_path / "c", "-q")
+
+
+@pytest.mark.slow
+@pytest.mark.mitsuba
+def test_hide_emitters_reaches_the_mitsuba_reference(tmp_path, monkeypatch):
+    """``--hide-emitters on`` on drpt's own scene format: Mitsuba's reference (the export)
+    hides the emitters too, and is cached apart from the one that shows them; the
+    verdict agrees. Negative control: a reference that does not hide them (the flag
+    dropped on its way to Mitsuba, as before) fails the block z-test where the light is."""
+    import drpt.tools.compare as compare_mod
+
+    cache, out = tmp_path / "cache", tmp_path / "out"
+    args = [CORNELL, "--size", "24", "24", "--spp", "64", "--ref-spp", "256", "--cache", cache, "--out", out, "-q"]
+    assert run(*args, "--hide-emitters", "on") == 0
+    hidden = json.loads((out / "metrics.json").read_text())["metrics"]
+    assert hidden["verdict"] == "agrees", hidden
+    ref_hidden = read_image(out / "reference.exr")
+    assert run(*args) == 0
+    assert len(list(cache.glob("*.npz"))) == 2
+    assert read_image(out / "reference.exr").max() > 2 * ref_hidden.max()  # the light itself
+
+    real = compare_mod.get_reference
+    monkeypatch.setattr(compare_mod, "get_reference",
+                        lambda *a, **kw: real(*a, **{**kw, "hide_emitters": False}))
+    run(*args, "--hide-emitters", "on")
+    bad = json.loads((out / "metrics.json").read_text())["metrics"]
+    assert bad["verdict"] != "agrees" and bad["block_max_abs_z"] > 2 * bad["block_threshold"], bad

@@ -185,3 +185,21 @@ def test_compare_a_cropped_film(tmp_path):
         rc = main(["compare", str(XML / "crop.xml"), "--out", str(tmp_path / "s"), "--size", "64", "48",
                    "--cache", str(tmp_path / "cache"), "-q"])
     assert rc == 2  # Mitsuba cannot render the window at another size: one-line error
+
+
+def test_hide_emitters_flag_edits_mitsubas_integrator():
+    """``--hide-emitters`` other than the file's own edits Mitsuba's integrator (as the
+    depths do); the file's own value leaves the file's integrator as it is."""
+    from drpt.cli import build_parser
+    from drpt.cli.args import given_settings, options_from_args
+    from drpt.options import with_scene_settings
+    from drpt.scene import load_scene
+    from drpt.tools.xmlref import MitsubaXML
+
+    scene = load_scene(XML / "spot.xml")
+    assert scene.settings.hide_emitters is True
+    for value, edit in (("off", {"max_depth": 4, "rr_depth": 5, "hide_emitters": False}), ("on", None)):
+        a = build_parser().parse_args(["compare", str(XML / "spot.xml"), "--hide-emitters", value])
+        options, _ = with_scene_settings(options_from_args(a), scene, given_settings(a))
+        got = MitsubaXML.for_scene(scene, options).integrator
+        assert got == edit, (value, got)

@@ -24,6 +24,11 @@ itself is camera vertex 0), a path of ``s + t - 1`` segments:
   (:mod:`~drpt.render.integrators.ptracer`) does. ``(s, t) = (1, 1)`` is not
   used (emitters the camera sees come from ``s = 0`` with weight 1), as in pbrt.
 
+**hide_emitters** (Mitsuba's): strategies ``(0, 2)`` (the camera sees an emitter, the sky or
+the background) weigh 0, and, as in the path tracer, the camera ray passes through the area
+emitters it hits (:meth:`~drpt.render.scene.DeviceScene.skip_area_emitters`), as does the
+shadow ray of a ``t = 1`` splat: the camera sees what lies behind an area light, lit by it.
+
 The light subpath starts as light tracing's: a source chosen uniformly among
 the scene's emitters (:class:`~drpt.render.lights.rays.EmitterRays`), a point
 and a direction on it; it carries importance (refraction's ``eta^2`` undone,
@@ -575,11 +580,32 @@ class BDPTIntegrator:
         to = cam.center - so
         dist = dr.norm(to)
         count(scene, SHADOW_CAMERA, ok)
-        ok &= ~occluded_where(scene, so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        ok &= ~self._camera_occluded(so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
         count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
         if strategies is not None:
             strategies.put(depth + 1, 1, x, y, value, ok)
+
+    def _camera_occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool) -> Bool:
+        """Whether the segment of ray ``(o, d)`` up to ``tmax`` toward the camera is blocked. With
+        ``hide_emitters`` in a scene with emissive surfaces, camera rays pass through area
+        emitters (:meth:`_camera_hit`), so only what is not emissive blocks this segment."""
+        scene = self.scene
+        if not (self.opt.hide_emitters and scene.materials.has_emission):
+            return occluded_where(scene, o, d, tmax, active)
+        si = scene.intersect(o, d, active)
+        si = scene.skip_area_emitters(o, d, si, active & si.valid)
+        return active & si.valid & (si.t < tmax)
+
+    def _camera_hit(self, o: Array3f, d: Array3f, si: Interaction, k: UInt32, live: Bool) -> Interaction:
+        """``si``, the camera subpath's hit, continued past the area emitters that the camera
+        ray (``k == 1``) hits with ``hide_emitters``, as the path tracer's
+        (:func:`~drpt.render.integrators.path.skip_hidden_emitters`): the camera sees what
+        lies behind an area light. Traced only with ``hide_emitters`` in a scene with
+        emissive surfaces."""
+        if not (self.opt.hide_emitters and self.scene.materials.has_emission):
+            return si
+        return self.scene.skip_area_emitters(o, d, si, live & (k == 1), coherent=True)
 
     def _emission(self, si: Interaction, d: Array3f, beta: Array3f, dvcm: Float, dvc: Float,
                   t: UInt32, active: Bool) -> Array3f:
@@ -793,7 +819,7 @@ class BDPTIntegrator:
 
         while live:
             count(scene, HIT_CAMERA, live)
-            si = scene.intersect(o, d, live)
+            si = self._camera_hit(o, d, scene.intersect(o, d, live), k, live)
             if self.has_sky or self.has_background:
                 c = self._escaped(d, beta, dvcm, dvc, k + 1, live & ~si.valid)
                 L += c

@@ -210,21 +210,13 @@ def test_splatted_renders_are_the_same_in_chunks_and_resumed(cornell, tmp_path, 
     """A splatting film's sums (and weights) add across chunks and a checkpoint: a render
     interrupted after 3 of 8 chunks and resumed gives the plain render's image bit for bit
     (light tracing: its variance to 1e-12, the film's float64 atomic sums vary in their last bits)."""
-    from drpt.distributed.job import run
+    from support.resume import interrupted_then_resumed
 
     kw = {"filter": "gaussian"} if what == "gaussian splatting" else {"integrator": "ptracer"}
     opts = RenderOptions(width=16, height=12, spp=8, chunk_spp=1, seed=4, progress=False,
                          max_lanes=96, variance=True, **kw)
     plain = Renderer(cornell, opts).render()
-
-    def interrupt(merged, result, engine):
-        if merged.next >= 3:
-            raise KeyboardInterrupt
-
-    out = tmp_path / "cut.exr"
-    with pytest.raises(KeyboardInterrupt):
-        run(cornell, opts, out, on_chunk=interrupt, checkpoint_seconds=0.0)
-    resumed = run(cornell, opts, out, resume=True).result
+    resumed = interrupted_then_resumed(cornell, opts, tmp_path / "cut.exr").result
     assert np.array_equal(resumed.image, plain.image)
     if what == "gaussian splatting":  # gathered sums: the same order every time
         assert np.array_equal(resumed.variance, plain.variance)
