@@ -36,6 +36,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import PCG32, Array2f, Bool, Float, UInt32
 
+from ..integrators.common import DirectLight
 from .selection import LightSelection, slot_weights
 
 #: the integrators that trace no next-event estimation through the selection
@@ -65,8 +66,6 @@ def second_moments(scene, camera, width: int, height: int, lanes: int = PILOT_LA
     :class:`~drpt.render.scene.DeviceScene`) seen through ``camera`` (a
     :class:`~drpt.render.camera.RayCamera` of a ``width`` x ``height`` film). Binds the
     ``uniform`` selection into the scene."""
-    from ..integrators.common import DirectLight
-
     families = scene.emitter_selection.families
     uni = LightSelection(families, "uniform")
     scene.set_light_selection(uni)
