@@ -77,7 +77,8 @@ def test_the_estimate_is_calibrated(scene):
     from drpt.render.renderer import Renderer
 
     for integrator in ("path", "ptracer"):
-        base = RenderOptions(width=32, height=32, spp=64, seed=1, integrator=integrator, progress=False)
+        base = RenderOptions(width=32, height=32, spp=64, seed=1, integrator=integrator, progress=False,
+                             variance=True)
         r = Renderer(scene, base).render()
         ref = Renderer(scene, replace(base, spp=1024, seed=2)).render()
         measured = rel_mse(r.image, ref.image) - ref.estimated_rel_mse

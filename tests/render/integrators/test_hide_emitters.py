@@ -143,7 +143,7 @@ def test_bdpt_hides_emitters_as_path_does(tmp_path, monkeypatch):
     assert ref.image.mean() > 0.05
 
     def bdpt():
-        r = Renderer(scene, replace(opts, spp=256, seed=3, integrator="bdpt")).render()
+        r = Renderer(scene, replace(opts, spp=256, seed=3, integrator="bdpt", variance=True)).render()
         assert np.all(np.isfinite(r.image)) and r.nonfinite == 0
         return float(np.abs(block_z(r.image, r.variance, ref.image, ref.variance, block=4)).max())
 
