@@ -737,19 +737,33 @@ class BDPTIntegrator:
         return dr.select(ok, value, 0.0)
 
     # ------------------------------------------------------------ the subpaths
-    @dr.syntax
     def trace(self, rng: PCG32, film: SplatFilm, camera_film: SplatFilm, px: Float, py: Float,
               active: Bool, strategies: StrategyFilm | None = None, use_roulette: bool = True) -> UInt32:
         """One light subpath and one camera sample through image position ``(px, py)`` per
         lane: the ``t = 1`` strategies splatted into ``film``, the sum of the others into
         ``camera_film`` at ``(px, py)``, and with ``strategies`` each contribution also
         into its strategy's image; returns the non-finite contributions dropped (per
-        lane)."""
-        # the roulette's threshold is a kernel input, so that the pilot (without roulette)
-        # and the passes trace one kernel
-        threshold = dr.opaque(Float, self.threshold if use_roulette and self.threshold else 0.0)
+        lane).
+
+        Traced with Dr.Jit's ``OptimizeLoops`` off: the two subpath loops carry state that
+        does not change (the pixel position, the roulette's threshold and the emitted
+        power, the random streams' increments), and with the flag on Dr.Jit records each
+        loop body a second time to drop those variables, which doubles the Python tracing
+        that every pass pays. The LLVM backend removes such loop-invariant phis itself, so
+        the kernel computes the same values (the images are the same, to the bit)."""
+        with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
+            return self._trace(rng, film, camera_film, px, py, active, strategies, use_roulette)
+
+    @dr.syntax
+    def _trace(self, rng: PCG32, film: SplatFilm, camera_film: SplatFilm, px: Float, py: Float,
+               active: Bool, strategies: StrategyFilm | None, use_roulette: bool) -> UInt32:
+        """:meth:`trace`'s body (traced once per loop with ``OptimizeLoops`` off)."""
         scene, opt, cam = self.scene, self.opt, self.camera
         n = dr.width(active)
+        # the roulette's threshold is a kernel input, so that the pilot (without roulette)
+        # and the passes trace one kernel; one entry per lane, as wide as the loops, which
+        # carry it unchanged (a width-1 loop variable makes Dr.Jit record the loop again)
+        threshold = dr.opaque(Float, self.threshold if use_roulette and self.threshold else 0.0, n)
         D = self.depth
         NL = D - 1
         has_deltas = len(self.deltas) > 0 and scene.has_smooth_bsdfs
@@ -856,7 +870,9 @@ class BDPTIntegrator:
                     strategies.put(depth_l + 1, k + 1, px, py, c, active)
             elif lverts is not None:
                 i = dr.zeros(UInt32, n)
-                while connectible & (i < stored):
+                # si is read, not changed: outside the loop's state (its width-1 fields would
+                # make Dr.Jit record the loop again)
+                while dr.hint(connectible & (i < stored), exclude=[si]):
                     lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
                     c = self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
                                       connectible & (depth_l + k < D), depth_l + 1, k + 1,
