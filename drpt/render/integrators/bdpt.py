@@ -273,6 +273,16 @@ def occluded_where(scene: DeviceScene, o: Array3f, d: Array3f, tmax: Float, acti
     return hit
 
 
+def widen(state, n: int) -> None:
+    """Give the fields of ``state`` (a Dr.Jit struct: a sampler) that hold one value for all
+    lanes ``n`` entries, in place (the same values): as loop state, a field of another width
+    than the loop's makes Dr.Jit record the loop's body again."""
+    for name in getattr(type(state), "DRJIT_STRUCT", {}):
+        value = getattr(state, name)
+        if dr.width(value) == 1 and n > 1:
+            setattr(state, name, value + dr.zeros(type(value), n))
+
+
 def roulette(value: Array3f, ok: Bool, u: Float, threshold: Float) -> tuple[Array3f, Bool]:
     """Russian roulette on a contribution before its shadow ray is traced: kept with
     probability ``q = min(1, max(value) / threshold)`` (``u < q``) and divided by ``q``, so
@@ -764,6 +774,7 @@ class BDPTIntegrator:
         # and the passes trace one kernel; one entry per lane, as wide as the loops, which
         # carry it unchanged (a width-1 loop variable makes Dr.Jit record the loop again)
         threshold = dr.opaque(Float, self.threshold if use_roulette and self.threshold else 0.0, n)
+        widen(rng, n)  # (a low-discrepancy sampler's step is one value for all lanes)
         D = self.depth
         NL = D - 1
         has_deltas = len(self.deltas) > 0 and scene.has_smooth_bsdfs

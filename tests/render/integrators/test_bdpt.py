@@ -776,14 +776,18 @@ def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, mo
         assert zb < 4.5 and zm < 4.0, (zb, zm)
 
 
-@pytest.mark.parametrize("name", ["cornell", "specular", "point", "sky"])
-def test_the_subpath_loops_are_traced_once_and_the_image_is_the_same(scenes, monkeypatch, name):
+@pytest.mark.parametrize("name,sampler", [("cornell", "independent"), ("cornell", "ldsampler"),
+                                          ("cornell", "zsobol"), ("cornell", "stratified"),
+                                          ("specular", "independent"), ("point", "independent"),
+                                          ("sky", "independent")])
+def test_the_subpath_loops_are_traced_once_and_the_image_is_the_same(scenes, monkeypatch, name, sampler):
     """``trace`` records each loop's body once (``OptimizeLoops`` off, no loop variable of
-    another width than the loop's): per trace one call of ``_splat`` (where the light loop's
-    body is recorded) and of ``_connect`` (the camera loop's, or in the specular scene its
-    inner loop over the light vertices); its image is, bit for bit, the one of the body
-    traced with the flag on. Negative control: with ``OptimizeLoops`` on, Dr.Jit records the
-    loops again to drop their loop-invariant state (two calls, or more, each)."""
+    another width than the loop's, also a low-discrepancy sampler's step): per trace one
+    call of ``_splat`` (where the light loop's body is recorded) and of ``_connect`` (the
+    camera loop's, or in the specular scene its inner loop over the light vertices); its
+    image is, bit for bit, the one of the body traced with the flag on. Negative control:
+    with ``OptimizeLoops`` on, Dr.Jit records the loops again to drop their loop-invariant
+    state (two calls, or more, each)."""
     calls = {"_splat": 0, "_connect": 0}
     def counting(method):
         f = getattr(B.BDPTIntegrator, method)
@@ -797,7 +801,7 @@ def test_the_subpath_loops_are_traced_once_and_the_image_is_the_same(scenes, mon
     for method in calls:
         monkeypatch.setattr(B.BDPTIntegrator, method, counting(method))
     opts = RenderOptions(width=16, height=16, spp=4, seed=3, integrator="bdpt", progress=False,
-                         path=PathOptions(max_depth=5))
+                         path=PathOptions(max_depth=5), sampler=sampler)
     renderer = Renderer(scenes[name], opts)
     renderer.render()  # the pilot, then the pass: two traces
     assert calls == {"_splat": 2, "_connect": 2}, calls
