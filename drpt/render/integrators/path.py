@@ -124,6 +124,17 @@ class PathIntegrator:
         return (self.unrolled and type(self).bounce is PathIntegrator.bounce
                 and 0 < self.opt.max_depth <= UNROLLED_MAX_DEPTH and self.scene.instrument is None)
 
+    @property
+    def pixel_coherent(self) -> bool:
+        """Whether a pixel's paths follow nearly the same surfaces (read at trace time): a
+        scene without smooth BSDFs (every vertex a mirror, smooth conductor or glass) traced
+        by this class's own bounce (volpath's media scatter: not so). Path lengths then vary
+        from pixel to pixel far more than between one pixel's samples, so the renderer gives
+        each of a pixel's samples its own lane (:meth:`~drpt.render.renderer.Renderer.render_pass`):
+        a SIMD packet's lanes trace one pixel's nearly identical paths, its ray queries stay
+        coherent at every depth and its lanes end together."""
+        return not self.scene.has_smooth_bsdfs and type(self).bounce is PathIntegrator.bounce
+
     def unrolled_path(self, rng, state: PathState) -> Array3f:
         """The radiance of the paths starting at ``state`` (``max_depth`` segments at most),
         traced as straight-line code: ``max_depth - 1`` full vertices, then
