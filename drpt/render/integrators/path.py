@@ -24,7 +24,10 @@ crossed), so paths inside glass are not killed for their radiance scaling.
 
 Delta lobes (glass, mirrors) have nothing to evaluate: next-event estimation
 contributes nothing there and the emitter their ray hits counts in full
-(``prev_delta``). A scene of only delta materials traces no NEE code.
+(``prev_delta``). A scene of only delta materials traces no NEE code, and its
+paths are *pixel-coherent* (:attr:`PathIntegrator.pixel_coherent`): the renderer
+gives each sample its own lane, so a SIMD packet holds one pixel's nearly identical
+paths, and every ray query asks for coherent traversal, not only the camera's.
 
 Two entry points run the same bounce (:meth:`PathIntegrator.bounce`,
 ``bounce(scene, state, rng) -> state``, the loop state a :class:`PathState`;
@@ -131,8 +134,9 @@ class PathIntegrator:
         by this class's own bounce (volpath's media scatter: not so). Path lengths then vary
         from pixel to pixel far more than between one pixel's samples, so the renderer gives
         each of a pixel's samples its own lane (:meth:`~drpt.render.renderer.Renderer.render_pass`):
-        a SIMD packet's lanes trace one pixel's nearly identical paths, its ray queries stay
-        coherent at every depth and its lanes end together."""
+        a SIMD packet's lanes trace one pixel's nearly identical paths and end together, and
+        every ray query, not only the camera's, asks for coherent traversal (Embree's packet
+        traversal; the same hits, in less time)."""
         return not self.scene.has_smooth_bsdfs and type(self).bounce is PathIntegrator.bounce
 
     def unrolled_path(self, rng, state: PathState) -> Array3f:
@@ -152,7 +156,7 @@ class PathIntegrator:
         if nothing_seen(scene):
             return s.L
         camera = self.opt.max_depth == 1
-        si = scene.intersect(s.o, s.d, s.active, coherent=camera)
+        si = scene.intersect(s.o, s.d, s.active, coherent=camera or self.pixel_coherent)
         if camera:
             si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
         return add_emission(scene, self.opt, si, s, s.L, s.active)
@@ -272,7 +276,9 @@ class PathIntegrator:
         estimation, BSDF sampling and Russian roulette."""
         opt = self.opt
         nee = scene.has_emitters and scene.has_smooth_bsdfs
-        si = scene.intersect(s.o, s.d, s.active, coherent=s.depth == 0)  # (camera rays: coherent)
+        # camera rays are coherent; with pixel_coherent every ray of a packet is
+        coherent = True if self.pixel_coherent else s.depth == 0
+        si = scene.intersect(s.o, s.d, s.active, coherent=coherent)
         si = skip_hidden_emitters(scene, opt, si, s, s.active)
 
         # ---- emitter hit by the previous ray (or seen by the camera)
