@@ -293,7 +293,7 @@ class PathIntegrator:
         u_light = next_2d(rng)
         if nee:
             u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
-            L = L + s.beta * self.direct.emitter(si, u_sel, u_light, active, mis=True)
+            L = self._nee(scene, si, s.beta, L, u_sel, u_light, active)
 
         # ---- BSDF sampling and Russian roulette: continue the path
         wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, rng)
@@ -301,6 +301,24 @@ class PathIntegrator:
         return PathState(o=scene.spawn(si, wo), d=Array3f(wo), L=L, beta=beta, eta=eta,
                          depth=depth, prev_pdf=Float(bs.pdf), prev_delta=Bool(bs.delta),
                          active=active)
+
+
+    def _nee(self, scene: DeviceScene, si, beta: Array3f, L: Array3f, u_sel: Float, u_light,
+             active: Bool) -> Array3f:
+        """``L`` plus next-event estimation's MIS-weighted direct light at ``si`` (the random
+        numbers already drawn). In a scene with both delta-only and smooth materials it runs
+        in a symbolic ``if`` on the lanes whose material is not delta-only (label
+        ``drpt_nee``): a packet whose lanes are all on mirrors or glass, where the estimate
+        is zero, skips the emitter sample, the BSDF evaluation and the shadow ray."""
+        mats = scene.materials
+        if not (getattr(mats, "_any_delta", False) and not getattr(mats, "_all_delta", True)):
+            return L + beta * self.direct.emitter(si, u_sel, u_light, active, mis=True)
+        lanes = active & ~mats.is_delta(si)
+
+        def estimate(L):
+            return (L + beta * self.direct.emitter(si, u_sel, u_light, lanes, mis=True),)
+
+        return dr.if_stmt((L,), lanes, estimate, lambda L: (L,), label="drpt_nee")[0]
 
 
 def skip_hidden_emitters(scene: DeviceScene, opt: PathOptions, si, s, active: Bool | None):
