@@ -24,7 +24,9 @@ crossed), so paths inside glass are not killed for their radiance scaling.
 
 Delta lobes (glass, mirrors) have nothing to evaluate: next-event estimation
 contributes nothing there and the emitter their ray hits counts in full
-(``prev_delta``). A scene of only delta materials traces no NEE code, and its
+(``prev_delta``); in a scene that also has smooth materials the estimate runs in a
+symbolic ``if`` on the lanes off delta-only materials, so that a packet on mirrors and glass
+skips it. A scene of only delta materials traces no NEE code, and its
 paths are *pixel-coherent* (:attr:`PathIntegrator.pixel_coherent`): the renderer
 gives each sample its own lane, so a SIMD packet holds one pixel's nearly identical
 paths, and every ray query asks for coherent traversal, not only the camera's.
