@@ -328,6 +328,12 @@ class MaterialTable:
         """Whether every lobe this table traces (a :meth:`restricted` view: its kinds') is a delta lobe."""
         return all(self.lobes[k].DELTA for k in (self.kinds if self._only is None else self._only))
 
+    @property
+    def mixes_delta(self) -> bool:
+        """Whether some materials are made only of Dirac lobes and others are not (host side,
+        read at trace time): then :meth:`is_delta` is a per-lane gather."""
+        return self._any_delta and not self._all_delta
+
     def is_delta(self, si: Interaction) -> Bool:
         """Lanes whose material has only Dirac lobes (glass, mirror)."""
         if not self._any_delta:

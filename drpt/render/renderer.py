@@ -432,9 +432,13 @@ class Renderer:
         # Lanes per pixel: with path regeneration m = ceil(min_lanes / pixels)
         # (at most k), each running about k / m samples, else one lane per
         # sample. Fewer, longer lanes balance better (docs/performance.md,
-        # "Execution model"), but too few lanes leave the device idle.
+        # "Execution model"), but too few lanes leave the device idle. Where a
+        # pixel's paths follow the same mirrors (PathIntegrator.pixel_coherent)
+        # a lane per sample keeps each packet on one pixel's paths: m = k.
         min_lanes = policy().min_lanes
         m = min(k, -(-min_lanes // pixels)) if sequential else k
+        if sequential and getattr(self.integrator, "pixel_coherent", False):
+            m = k
         n = pixels * m
         lane = dr.arange(UInt32, n)
         mm, kk = dr.opaque(UInt32, m), dr.opaque(UInt32, k)

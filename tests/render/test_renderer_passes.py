@@ -92,3 +92,99 @@ def test_xyz_second_moment_is_the_square_of_each_samples_xyz():
     assert np.allclose(xyz_second_moment(m), want, rtol=1e-12)
     assert np.allclose(xyz_second_moment(m.mean((0, 1))), want.mean((0, 1)), rtol=1e-12)
     assert not np.allclose(xyz_second_moment(m[..., [0, 1, 2, 5, 4, 3]]), want, rtol=1e-3)
+
+
+MIRROR_XML = """<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="8"/></integrator>
+  <sensor type="perspective">
+    <transform name="to_world"><lookat origin="0, 0, -4" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="7"/><integer name="height" value="5"/>
+      <rfilter type="box"/></film>
+  </sensor>
+  <emitter type="constant"><rgb name="radiance" value="0.5"/></emitter>
+  <shape type="sphere"><bsdf type="{bsdf}"/></shape>
+</scene>"""
+
+
+@pytest.mark.parametrize("bsdf,per_sample", [("conductor", True), ("diffuse", False)])
+def test_a_mirror_only_scene_traces_a_lane_per_sample(tmp_path, monkeypatch, bsdf, per_sample):
+    """Where no BSDF is smooth (``PathIntegrator.pixel_coherent``) a pixel's samples each get
+    a lane (a packet follows one pixel's mirror paths), whatever ``min_lanes`` asks, and every
+    ray query asks for coherent traversal; a diffuse scene (the negative control) keeps
+    ``min_lanes``' one lane per pixel here and coherence for camera rays only (a per-lane
+    mask). Both trace every sample once."""
+    import dataclasses
+
+    import drjit as dr
+
+    from drpt import backend
+    from drpt.render import renderer
+    from drpt.render.integrators.path import PathIntegrator
+    from drpt.render.scene import DeviceScene
+    from drpt.scene import load_scene
+
+    policy = dataclasses.replace(backend.policy(), min_lanes=1)
+    monkeypatch.setattr(renderer, "policy", lambda: policy)
+    widths = []
+    traced = PathIntegrator.sample_sequence
+
+    def recording(self, rng, camera_ray, count, *args, **kw):
+        widths.append(dr.width(count))
+        return traced(self, rng, camera_ray, count, *args, **kw)
+
+    monkeypatch.setattr(PathIntegrator, "sample_sequence", recording)
+    coherent = []
+    intersect = DeviceScene.intersect
+
+    def asking(self, o, d, active, *args, **kw):
+        coherent.append(kw.get("coherent", False))
+        return intersect(self, o, d, active, *args, **kw)
+
+    monkeypatch.setattr(DeviceScene, "intersect", asking)
+    (tmp_path / "s.xml").write_text(MIRROR_XML.format(bsdf=bsdf))
+    spp = 6
+    rend = renderer.Renderer(load_scene(tmp_path / "s.xml"), renderer.RenderOptions(
+        width=7, height=5, spp=spp, progress=False))
+    assert rend.integrator.pixel_coherent == per_sample
+    r = rend.render()
+    assert widths == [7 * 5 * (spp if per_sample else 1)]
+    assert coherent and all((c is True) == per_sample for c in coherent), coherent
+    assert r.samples == 7 * 5 * spp
+    assert np.all(np.isfinite(r.image)) and r.image.max() > 0.0
+
+
+def test_coherent_queries_change_no_pixel_of_a_mirror_scene(tmp_path, monkeypatch):
+    """``pixel_coherent``'s coherent traversal is a hint to Embree: the same hits, so a mirror
+    scene's image is bit-identical with every query incoherent (the same random numbers are
+    drawn either way). The spheres face each other, so paths bounce between them."""
+    from drpt.accel import embree_lib
+    from drpt.render import renderer
+    from drpt.render.scene import DeviceScene
+    from drpt.scene import load_scene
+
+    if embree_lib.reason() is not None:
+        pytest.skip(f"Embree unavailable: {embree_lib.reason()}")
+    xml = MIRROR_XML.format(bsdf="conductor").replace(
+        '<shape type="sphere">', '<shape type="sphere"><point name="center" x="0.9" y="0" z="0"/>'
+    ).replace('</scene>', '<shape type="sphere"><point name="center" x="-1.1" y="0" z="0"/>'
+              '<bsdf type="conductor"/></shape></scene>')
+    (tmp_path / "s.xml").write_text(xml)
+    scene = load_scene(tmp_path / "s.xml")
+
+    def image():
+        return renderer.Renderer(scene, renderer.RenderOptions(width=7, height=5, spp=8, accel="embree",
+                                                               progress=False)).render().image
+
+    coherent = image()
+    intersect = DeviceScene.intersect
+    asked = []
+
+    def incoherent(self, o, d, active, *args, **kw):
+        asked.append(kw.pop("coherent", False))
+        return intersect(self, o, d, active, *args, coherent=False, **kw)
+
+    monkeypatch.setattr(DeviceScene, "intersect", incoherent)
+    plain = image()
+    assert asked and all(c is True for c in asked)
+    assert coherent.max() > 0.0
+    np.testing.assert_array_equal(plain, coherent)

@@ -24,7 +24,12 @@ crossed), so paths inside glass are not killed for their radiance scaling.
 
 Delta lobes (glass, mirrors) have nothing to evaluate: next-event estimation
 contributes nothing there and the emitter their ray hits counts in full
-(``prev_delta``). A scene of only delta materials traces no NEE code.
+(``prev_delta``); in a scene that also has smooth materials the estimate runs in a
+symbolic ``if`` on the lanes off delta-only materials, so that a packet on mirrors and glass
+skips it. A scene of only delta materials traces no NEE code, and its
+paths are *pixel-coherent* (:attr:`PathIntegrator.pixel_coherent`): the renderer
+gives each sample its own lane, so a SIMD packet holds one pixel's nearly identical
+paths, and every ray query asks for coherent traversal, not only the camera's.
 
 Two entry points run the same bounce (:meth:`PathIntegrator.bounce`,
 ``bounce(scene, state, rng) -> state``, the loop state a :class:`PathState`;
@@ -124,6 +129,18 @@ class PathIntegrator:
         return (self.unrolled and type(self).bounce is PathIntegrator.bounce
                 and 0 < self.opt.max_depth <= UNROLLED_MAX_DEPTH and self.scene.instrument is None)
 
+    @property
+    def pixel_coherent(self) -> bool:
+        """Whether a pixel's paths follow nearly the same surfaces (read at trace time): a
+        scene without smooth BSDFs (every vertex a mirror, smooth conductor or glass) traced
+        by this class's own bounce (volpath's media scatter: not so). Path lengths then vary
+        from pixel to pixel far more than between one pixel's samples, so the renderer gives
+        each of a pixel's samples its own lane (:meth:`~drpt.render.renderer.Renderer.render_pass`):
+        a SIMD packet's lanes trace one pixel's nearly identical paths and end together, and
+        every ray query, not only the camera's, asks for coherent traversal (Embree's packet
+        traversal; the same hits, in less time)."""
+        return not self.scene.has_smooth_bsdfs and type(self).bounce is PathIntegrator.bounce
+
     def unrolled_path(self, rng, state: PathState) -> Array3f:
         """The radiance of the paths starting at ``state`` (``max_depth`` segments at most),
         traced as straight-line code: ``max_depth - 1`` full vertices, then
@@ -141,7 +158,7 @@ class PathIntegrator:
         if nothing_seen(scene):
             return s.L
         camera = self.opt.max_depth == 1
-        si = scene.intersect(s.o, s.d, s.active, coherent=camera)
+        si = scene.intersect(s.o, s.d, s.active, coherent=camera or self.pixel_coherent)
         if camera:
             si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
         return add_emission(scene, self.opt, si, s, s.L, s.active)
@@ -261,7 +278,9 @@ class PathIntegrator:
         estimation, BSDF sampling and Russian roulette."""
         opt = self.opt
         nee = scene.has_emitters and scene.has_smooth_bsdfs
-        si = scene.intersect(s.o, s.d, s.active, coherent=s.depth == 0)  # (camera rays: coherent)
+        # camera rays are coherent; with pixel_coherent every ray of a packet is
+        coherent = True if self.pixel_coherent else s.depth == 0
+        si = scene.intersect(s.o, s.d, s.active, coherent=coherent)
         si = skip_hidden_emitters(scene, opt, si, s, s.active)
 
         # ---- emitter hit by the previous ray (or seen by the camera)
@@ -276,7 +295,7 @@ class PathIntegrator:
         u_light = next_2d(rng)
         if nee:
             u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
-            L = L + s.beta * self.direct.emitter(si, u_sel, u_light, active, mis=True)
+            L = self._nee(scene, si, s.beta, L, u_sel, u_light, active)
 
         # ---- BSDF sampling and Russian roulette: continue the path
         wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, rng)
@@ -284,6 +303,24 @@ class PathIntegrator:
         return PathState(o=scene.spawn(si, wo), d=Array3f(wo), L=L, beta=beta, eta=eta,
                          depth=depth, prev_pdf=Float(bs.pdf), prev_delta=Bool(bs.delta),
                          active=active)
+
+
+    def _nee(self, scene: DeviceScene, si, beta: Array3f, L: Array3f, u_sel: Float, u_light,
+             active: Bool) -> Array3f:
+        """``L`` plus next-event estimation's MIS-weighted direct light at ``si`` (the random
+        numbers already drawn). In a scene with both delta-only and smooth materials it runs
+        in a symbolic ``if`` on the lanes whose material is not delta-only (label
+        ``drpt_nee``): a packet whose lanes are all on mirrors or glass, where the estimate
+        is zero, skips the emitter sample, the BSDF evaluation and the shadow ray."""
+        mats = scene.materials
+        if not getattr(mats, "mixes_delta", False):  # (the empty scene's stand-in has none)
+            return L + beta * self.direct.emitter(si, u_sel, u_light, active, mis=True)
+        lanes = active & ~mats.is_delta(si)
+
+        def estimate(L):
+            return (L + beta * self.direct.emitter(si, u_sel, u_light, lanes, mis=True),)
+
+        return dr.if_stmt((L,), lanes, estimate, lambda L: (L,), label="drpt_nee")[0]
 
 
 def skip_hidden_emitters(scene: DeviceScene, opt: PathOptions, si, s, active: Bool | None):

@@ -168,3 +168,51 @@ def test_unrolled_sequence_mean_matches_the_loop(scenes_dir, monkeypatch, depth)
         assert se > 0 and abs((a[ch] - b[ch]).sum()) < 5 * se, (ch, (a[ch] - b[ch]).sum(), se)
         se_c = np.sqrt(va[ch].sum() + vc[ch].sum())
         assert abs((a[ch] - c[ch]).sum()) > 5 * se_c, (ch, (a[ch] - c[ch]).sum(), se_c)
+
+
+MIXED_XML = """<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="{depth}"/></integrator>
+  <sensor type="perspective">
+    <transform name="to_world"><lookat origin="0, 0, -5" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="12"/><integer name="height" value="8"/>
+      <rfilter type="box"/></film>
+  </sensor>
+  <emitter type="constant"><rgb name="radiance" value="0.5"/></emitter>
+  <shape type="sphere"><point name="center" x="-1.05" y="0" z="0"/><bsdf type="{left}"/></shape>
+  <shape type="sphere"><point name="center" x="1.05" y="0" z="0"/><bsdf type="diffuse"/></shape>
+  <shape type="rectangle">
+    <transform name="to_world"><lookat origin="0, 3, 0" target="0, 0, 0" up="0, 0, 1"/></transform>
+    <emitter type="area"><rgb name="radiance" value="5"/></emitter>
+  </shape>
+</scene>"""
+
+
+@pytest.mark.parametrize("depth", [2, 6])  # unrolled and the bounce loop
+@pytest.mark.parametrize("left,branched", [("conductor", True), ("diffuse", False)])
+def test_nee_branch_on_smooth_lanes_is_the_masked_estimate(tmp_path, monkeypatch, depth, left, branched):
+    """In a scene with delta-only and smooth materials next-event estimation runs in a
+    symbolic ``if`` on the lanes off delta-only materials (``drpt_nee``): the same random
+    numbers and the same image, bit for bit, as every lane estimating masked (zero on a
+    mirror). A scene without delta materials (the control) traces no such branch."""
+    (tmp_path / "s.xml").write_text(MIXED_XML.format(depth=depth, left=left))
+    scene = load_scene(tmp_path / "s.xml")
+    labels = []
+    if_stmt = dr.if_stmt
+
+    def recording(*args, **kw):
+        labels.append(kw.get("label"))
+        return if_stmt(*args, **kw)
+
+    monkeypatch.setattr(dr, "if_stmt", recording)
+
+    def image():
+        return Renderer(scene, RenderOptions(width=12, height=8, spp=8, progress=False,
+                                             path=PathOptions(max_depth=depth))).render().image
+
+    branch = image()
+    assert ("drpt_nee" in labels) == branched
+    monkeypatch.setattr(PathIntegrator, "_nee", lambda self, scene, si, beta, L, u_sel, u_light, active:
+                        L + beta * self.direct.emitter(si, u_sel, u_light, active, mis=True))
+    masked = image()
+    assert masked.max() > 0.0
+    np.testing.assert_array_equal(branch, masked)
