@@ -51,12 +51,13 @@ sphere of the scene's shapes: in a medium that extends beyond the shapes, such a
 sensor's, the sky is seen through that much of it, while a sampled ray that leaves every
 shape in such a medium scatters before it reaches the sky.) Its transmittance through a
 homogeneous medium is exact (``exp(-sigma_t d)`` per segment) while the largest channel of
-the ray's transmittance so far stays above :data:`SHADOW_TAU`; beyond that point a collision
-distance is sampled with ``min(sigma_t)`` (tracking, which Mitsuba's shadow rays do all the
+the ray's transmittance so far stays above a threshold (:func:`shadow_tau`, per scene:
+:data:`SHADOW_TAU`, or 1 where the camera sees the media only through sheets); beyond that
+point a collision distance is sampled with ``min(sigma_t)`` (tracking, which Mitsuba's shadow rays do all the
 way): a collision before the next surface ends the ray with transmittance 0, and a ray that
 gets past divides by its survival probability ``exp(-min(sigma_t) x)`` (``x`` the tracked
 distance), so the estimate is unbiased and never above 1 (a medium with a channel of zero
-extinction stays exact). Shadow rays that keep more than ``SHADOW_TAU`` get no extra
+extinction stays exact). Shadow rays that keep more than the threshold get no extra
 variance, while those deep in dense media stop about one mean free path past the threshold
 instead of following every boundary to the light. The free-flight and shadow rays look for
 surfaces only up to their sampled collision (a shorter ray traverses less of the
@@ -102,8 +103,41 @@ from .path import PathIntegrator
 MAX_SHADOW_CROSSINGS = 64
 #: a shadow ray's transmittance through homogeneous media is exact down to this value, tracked below it
 SHADOW_TAU = 0.4
+#: the same threshold in scenes whose media the camera sees only through thindielectric sheets
+#: (:func:`shadow_tau`): 1, tracking from the start, as Mitsuba's shadow rays do
+SHADOW_TAU_SHEETS = 1.0
 
 NULL_NONE, NULL_BOUNDARY, NULL_THIN = 0, 1, 2
+
+def shadow_tau(scene: Scene, blind: frozenset[int] = frozenset()) -> float:
+    """The scene's threshold below which shadow rays track homogeneous media (decided when
+    the kernel is traced): :data:`SHADOW_TAU_SHEETS` when the camera is in vacuum and every
+    medium but the ``blind`` ones (0-based, :func:`~drpt.render.integrators.enclosure.blind_media`:
+    their shadow rays are not traced) has only ``thindielectric`` surfaces on either side,
+    else :data:`SHADOW_TAU`.
+
+    Why: tracking ends most shadow rays deep in a medium at their first sampled collision
+    instead of following every boundary to the light (less work), at the price of a 0-or-more
+    estimate where the exact one is smooth (more variance). Where a pixel sees a medium only
+    through sheets, each camera ray already picks reflection or transmission at random there,
+    and that choice, not the shadow estimate, dominates the pixel's variance; where a ``null``
+    boundary (or none: the camera's own medium) shows the medium directly, the shadow
+    estimate is most of what the pixel sees. Measured on the corpus
+    (docs/performance.md, "Shadow tracking per scene"): ``obj_inside_medium`` (sheets only)
+    +10% efficiency at 1, ``emitter_inside_medium`` (sheets only) +1%, ``null_envmap`` (null
+    boundaries) -18%, ``area_light`` (a null and a sheet) -6%."""
+    if getattr(scene, "camera_medium", None) is not None:
+        return SHADOW_TAU
+    seen = set()
+    for m in scene.materials or []:
+        sides = {i for i in (m.interior, m.exterior) if i is not None} - set(blind)
+        if not sides:
+            continue
+        if m.bsdf is None or m.bsdf.kind != "thindielectric":
+            return SHADOW_TAU
+        seen |= sides
+    return SHADOW_TAU_SHEETS if seen else SHADOW_TAU
+
 
 def _vec(a) -> Array3f:
     a = np.ascontiguousarray(np.asarray(a, np.float32).reshape(-1, 3))
@@ -406,6 +440,7 @@ class VolPathIntegrator(PathIntegrator):
     def __init__(self, scene: DeviceScene, options: PathOptions, model: Scene):
         super().__init__(scene, options)
         self.media = MediumTable(model)
+        self.shadow_tau = shadow_tau(model, blind_media(model))
         cm = getattr(model, "camera_medium", None)
         self.camera_medium = 0 if cm is None else cm + 1
         # Mitsuba's sky, for next-event estimation, is 2 max(R, |p - c|) away from the point p,
@@ -434,11 +469,11 @@ class VolPathIntegrator(PathIntegrator):
     @property
     def shadow_draws(self) -> bool:
         """Whether :meth:`shadow` draws random numbers (ratio tracking in heterogeneous
-        media, tracking below :data:`SHADOW_TAU` in homogeneous ones): the wavefront then
+        media, tracking below the scene's :func:`shadow_tau` in homogeneous ones): the wavefront then
         traces it inside its queues, between next-event estimation and the next direction,
-        as the megakernel does (with ``SHADOW_TAU = 0`` and only homogeneous media, in one
+        as the megakernel does (with a threshold 0 and only homogeneous media, in one
         batch after them)."""
-        return self.media.has_hetero or SHADOW_TAU > 0.0
+        return self.media.has_hetero or self.shadow_tau > 0.0
 
     @dr.syntax
     def shadow(self, o: Array3f, d: Array3f, tmax: Float, medium: UInt32, active: Bool,
@@ -447,11 +482,11 @@ class VolPathIntegrator(PathIntegrator):
         (``inf``: to the sky), starting in ``medium``: media, null boundaries and
         thindielectric sheets pass light, other surfaces block it. Homogeneous media
         attenuate exactly, or, with ``rng``, exactly while the transmittance stays above
-        :data:`SHADOW_TAU` and by tracking beyond it (see the module's docs: an unbiased
+        the scene's :func:`shadow_tau` and by tracking beyond it (see the module's docs: an unbiased
         estimate); heterogeneous ones by ratio tracking (``rng``: one number per step, only
         in scenes with such media)."""
         scene, media = self.scene, self.media
-        track = rng is not None and SHADOW_TAU > 0.0
+        track = rng is not None and self.shadow_tau > 0.0
         tr = dr.full(Array3f, 1.0, dr.width(active))
         live = Bool(active)
         o, d, tmax, medium = Array3f(o), Array3f(d), Float(tmax), UInt32(medium)
@@ -468,7 +503,10 @@ class VolPathIntegrator(PathIntegrator):
             sig_r, exact, collide = Float(0.0), Float(0.0), Bool(False)
             if track:  # a collision sampled past the exact stretch ends the ray (inf or NaN in vacuum: none)
                 sig_r = dr.minimum(dr.minimum(sigma_t.x, sigma_t.y), sigma_t.z)
-                exact = dr.maximum(dr.log(dr.max(tr) * (1.0 / SHADOW_TAU)), 0.0) / sig_r
+                if self.shadow_tau >= 1.0:  # (tracked from the start)
+                    exact = Float(0.0)
+                else:
+                    exact = dr.maximum(dr.log(dr.max(tr) * (1.0 / self.shadow_tau)), 0.0) / sig_r
                 t_c = exact - dr.log(1.0 - rng.next_float32()) / sig_r
                 collide = live & (t_c < tmax)
                 end = dr.select(collide, t_c, tmax)
