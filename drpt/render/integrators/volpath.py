@@ -227,6 +227,7 @@ class MediumTable:
                         for m in media if m.is_homogeneous)
         # media where next-event estimation cannot see a light (enclosure.blind_media)
         blind = blind_media(scene)
+        self.blind_set = blind
         self.has_blind = bool(blind)
         self.all_blind = self.count > 0 and len(blind) == self.count
         if self.has_blind:
@@ -440,7 +441,7 @@ class VolPathIntegrator(PathIntegrator):
     def __init__(self, scene: DeviceScene, options: PathOptions, model: Scene):
         super().__init__(scene, options)
         self.media = MediumTable(model)
-        self.shadow_tau = shadow_tau(model, blind_media(model))
+        self.shadow_tau = shadow_tau(model, self.media.blind_set)
         cm = getattr(model, "camera_medium", None)
         self.camera_medium = 0 if cm is None else cm + 1
         # Mitsuba's sky, for next-event estimation, is 2 max(R, |p - c|) away from the point p,
