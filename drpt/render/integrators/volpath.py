@@ -492,12 +492,6 @@ class VolPathIntegrator(PathIntegrator):
         live = Bool(active)
         o, d, tmax, medium = Array3f(o), Array3f(d), Float(tmax), UInt32(medium)
         crossings = UInt32(0)
-        known = reuse = None  # heterogeneous media: the closest hit, kept across tentative collisions
-        if media.has_hetero:
-            w = dr.width(active)
-            known = Hit(dr.full(Float, dr.inf, w), dr.full(UInt32, INVALID, w), dr.zeros(Float, w),
-                        dr.zeros(Float, w), dr.zeros(Bool, w))
-            reuse = dr.zeros(Bool, w)
         while live:
             sigma_t, _, _ = media.coefficients(medium, live)
             end = Float(tmax)
@@ -512,41 +506,50 @@ class VolPathIntegrator(PathIntegrator):
                 collide = live & (t_c < tmax)
                 end = dr.select(collide, t_c, tmax)
             # (only surfaces before the collision matter: a shorter ray traverses less)
-            if media.has_hetero:  # (after a tentative collision the ray goes on: the same hit)
-                known = dr.select(reuse, known, scene.intersect_preliminary(o, d, live & ~reuse, reach(end)))
-                si = scene.interaction(o, d, known)
-            else:
-                si = scene.intersect(o, d, live, reach(end))
+            si = scene.intersect(o, d, live, reach(end))
             ahead = live & si.valid & (si.t < tmax)
             seg = dr.select(ahead, si.t, tmax)
-            step = Bool(False)
-            p_step = Array3f(o)
-            if media.has_hetero:
-                u = rng.next_float32()
-                for h in media.hetero:
-                    hit, t = h.collide(o, d, seg, u, live & (medium == h.id))
-                    p = o + d * t
-                    tr = dr.select(hit, tr * dr.maximum(1.0 - h.sigma_t(p, hit) / h.majorant, 0.0), tr)
-                    p_step = dr.select(hit, p, p_step)
-                    tmax = dr.select(hit, tmax - t, tmax)
-                    known.t = dr.select(hit, known.t - t, known.t)
-                    step = step | hit
-                reuse = Bool(step)
-            blocked = ahead & ~step
+            blocked = Bool(ahead)
             if track:
-                tr = dr.select(live & ~step, tr * _survivor_weight(sigma_t, sig_r, seg, exact), tr)
+                tr = dr.select(live, tr * _survivor_weight(sigma_t, sig_r, seg, exact), tr)
                 tr = dr.select(collide & ~ahead, 0.0, tr)
             else:
-                tr = dr.select(live & ~step, tr * _transmittance(sigma_t, seg), tr)
+                tr = dr.select(live, tr * _transmittance(sigma_t, seg), tr)
+            if media.has_hetero:  # ratio tracking up to the surface, in a loop of its own
+                o, tr, tmax, seg = self._ratio_track(o, d, tr, tmax, seg, medium, live, rng)
             tr = dr.select(blocked, tr * media.null_transmission(si, d, blocked), tr)
             medium = media.after(si, d, medium, blocked)
             o2 = scene.spawn(si, d)
             tmax = dr.select(blocked, tmax - dr.dot(o2 - o, d), tmax)
-            o = dr.select(blocked, o2, dr.select(step, p_step, o))
+            o = dr.select(blocked, o2, o)
             crossings = dr.select(blocked, crossings + 1, crossings)
             tr = dr.select(blocked & (crossings >= MAX_SHADOW_CROSSINGS), 0.0, tr)
-            live = (blocked | step) & (dr.max(tr) > 0.0) & (crossings < MAX_SHADOW_CROSSINGS)
+            live = blocked & (dr.max(tr) > 0.0) & (crossings < MAX_SHADOW_CROSSINGS)
         return tr
+
+    @dr.syntax
+    def _ratio_track(self, o: Array3f, d: Array3f, tr: Array3f, tmax: Float, seg: Float, medium: UInt32,
+                     active: Bool, rng: PCG32):
+        """Ratio tracking through the heterogeneous medium ``medium`` from ``o`` up to ``seg``
+        along ``d``: each tentative collision (sampled with the majorant, one random number)
+        multiplies ``tr`` by ``1 - sigma_t / majorant``. Returns ``o``, ``tr``, ``tmax`` and
+        ``seg`` moved to the last collision (the surface at ``seg`` stays where it was). Its own
+        loop: a tentative collision costs no surface interaction."""
+        o, tr, tmax, seg = Array3f(o), Array3f(tr), Float(tmax), Float(seg)
+        stepping = Bool(active)
+        while stepping:
+            u = rng.next_float32()
+            step = Bool(False)
+            for h in self.media.hetero:
+                hit, t = h.collide(o, d, seg, u, stepping & (medium == h.id))
+                p = o + d * t
+                tr = dr.select(hit, tr * dr.maximum(1.0 - h.sigma_t(p, hit) / h.majorant, 0.0), tr)
+                o = dr.select(hit, p, o)
+                tmax = dr.select(hit, tmax - t, tmax)
+                seg = dr.select(hit, seg - t, seg)
+                step = step | hit
+            stepping = step & (dr.max(tr) > 0.0)
+        return o, tr, tmax, seg
 
     def bounce(self, scene: DeviceScene, s: VolPathState, rng: PCG32) -> VolPathState:
         """One segment and the event at its end (the megakernel's loop body), as the five
