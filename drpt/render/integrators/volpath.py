@@ -86,7 +86,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
 
-from ...accel.protocol import INVALID, Hit
+from ...accel.protocol import Hit
 from ...errors import Loc, SceneError
 from ...materials.bsdf_kinds import PARAMS
 from ...materials.iors import relative_ior
@@ -456,11 +456,7 @@ class VolPathIntegrator(PathIntegrator):
     def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> VolPathState:
         w = dr.width(active)
         beta = dr.full(Array3f, 1.0, w) if weight is None else Array3f(weight, weight, weight)
-        ahead = reuse = None
-        if self.media.has_hetero:
-            ahead = Hit(dr.full(Float, dr.inf, w), dr.full(UInt32, INVALID, w), dr.zeros(Float, w),
-                        dr.zeros(Float, w), dr.zeros(Bool, w))
-            reuse = dr.zeros(Bool, w)
+        ahead = reuse = None  # (no kept hit: free flight consumes null collisions itself)
         return VolPathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=beta, eta=dr.full(Float, 1.0, w),
                             depth=dr.zeros(UInt32, w), prev_pdf=dr.full(Float, 1.0, w),
                             prev_delta=dr.full(Bool, not self.opt.hide_emitters, w),
@@ -633,22 +629,46 @@ class VolPathIntegrator(PathIntegrator):
         p_med = s.o + s.d * t
         het_null, t_med = Bool(False), None
         if media.has_hetero:  # delta tracking against the majorant (Mitsuba's null collisions)
-            u_null = rng.next_float32()
-            t_med = Float(t)
-            for h in media.hetero:
-                cand, t_h = h.collide(s.o, s.d, t_surf, u_t, in_medium & (s.medium == h.id))
-                p_h = s.o + s.d * t_h
-                real = cand & (u_null * h.majorant < h.sigma_t(p_h, cand))
-                beta = dr.select(real, beta * h.albedo(p_h, real), beta)
-                p_med = dr.select(cand, p_h, p_med)
-                t_med = dr.select(cand, t_h, t_med)
-                scatter = scatter | real
-                het_null = het_null | (cand & ~real)
+            # (null collisions in a loop of their own: het_null stays False, the path's loop
+            # sees only real collisions and surfaces)
+            real, p_h, t_med, beta = self._delta_track(s.o, s.d, t_surf, u_t, in_medium, s.medium, beta, rng)
+            p_med = dr.select(real, p_h, p_med)
+            scatter = scatter | real
         depth = dr.select(scatter, s.depth + 1, s.depth)
         scatter_live = scatter & (depth < opt.max_depth) if opt.max_depth >= 0 else Bool(scatter)
         surf = active & ~scatter & ~het_null
         return Flight(beta=beta, depth=depth, scatter=scatter, scatter_live=scatter_live, het_null=het_null,
                       surf=surf, p_med=p_med, in_medium=in_medium, g=g, t_med=t_med)
+
+    @dr.syntax
+    def _delta_track(self, o: Array3f, d: Array3f, t_surf: Float, u: Float, active: Bool, medium: UInt32,
+                     beta: Array3f, rng: PCG32):
+        """Delta tracking through the heterogeneous medium ``medium`` from ``o`` along ``d``
+        up to ``t_surf``, null collisions included, in a loop of its own (the first tentative
+        collision drawn with ``u``, each further one with a new number, and one number per
+        tentative collision to accept it with ``sigma_t / majorant``). Returns the lanes
+        that found a real collision, its point and distance from ``o``, and ``beta`` times
+        the albedo there."""
+        real = Bool(False)
+        p, t_acc = Array3f(o), Float(0.0)
+        end = Float(t_surf)
+        going = Bool(active)
+        while going:
+            u_null = rng.next_float32()
+            step = Bool(False)
+            for h in self.media.hetero:
+                cand, t_h = h.collide(p, d, end, u, going & (medium == h.id))
+                p_h = p + d * t_h
+                hit = cand & (u_null * h.majorant < h.sigma_t(p_h, cand))
+                beta = dr.select(hit, beta * h.albedo(p_h, hit), beta)
+                p = dr.select(cand, p_h, p)
+                t_acc = dr.select(cand, t_acc + t_h, t_acc)
+                end = dr.select(cand, end - t_h, end)
+                real = real | hit
+                step = step | (cand & ~hit)
+            going = step
+            u = rng.next_float32()
+        return real, p, t_acc, beta
 
     def skip_emitters(self, scene: DeviceScene, s: VolPathState, si, fl: Flight):
         """``si`` with ``hide_emitters``' camera rays that reach an area emitter (``fl.surf``
