@@ -23,10 +23,11 @@ A heterogeneous medium (:class:`Heterogeneous`: a one-channel extinction grid) i
 delta tracking as Mitsuba's: a tentative collision at a distance sampled with the majorant
 (``scale`` times the grid's maximum) from where the ray enters the grid's box is real with
 probability ``sigma_t(x) / majorant`` (the throughput times the albedo there), else a null
-collision and the ray goes on unchanged (a loop iteration that is not a scattering event; the
-megakernel keeps the closest hit it found, as Mitsuba keeps its ``si``, instead of traversing
-the accelerator again). Shadow rays use ratio tracking: ``1 - sigma_t(x) / majorant`` at each
-tentative collision, one random number each (the closest hit kept across them too). Scenes
+collision and the ray goes on unchanged (two random numbers each). Null collisions run in a
+loop of their own inside free flight up to the closest surface (Mitsuba runs each through its
+whole path loop): the path's loop, megakernel and wavefront alike, sees only real collisions
+and surfaces. Shadow rays use ratio tracking: ``1 - sigma_t(x) / majorant`` at each tentative
+collision, one random number each, also in a loop of their own up to the next surface. Scenes
 without heterogeneous media trace none of this.
 
 Where every homogeneous medium's extinction is gray (the same in R, G and B:
@@ -86,7 +87,6 @@ import drjit as dr
 import numpy as np
 from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
 
-from ...accel.protocol import Hit
 from ...errors import Loc, SceneError
 from ...materials.bsdf_kinds import PARAMS
 from ...materials.iors import relative_ior
@@ -380,14 +380,12 @@ class Flight:
     depth: UInt32  # a real medium scattering event counted
     scatter: Bool  # a real medium scattering event at p_med
     scatter_live: Bool  # ... below the depth limit: the path scatters there
-    het_null: Bool  # a null collision (delta tracking): the ray goes on from p_med
     surf: Bool  # the ray reached the surface si, or escaped
     p_med: Array3f
     in_medium: Bool
     g: Float  # the medium's Henyey-Greenstein asymmetry
     medium: bool = True
     surface: bool = True
-    t_med: Float | None = None  # heterogeneous media: the distance of the tentative collision at p_med
 
 
 def _either(fl: Flight, mask: Bool, medium, surface):
@@ -428,10 +426,6 @@ class VolPathState:
     ref_p: Array3f  # the last real scattering event (the MIS density of the emitter d hits)
     medium: UInt32  # 1-based medium id of the ray, 0 in vacuum
     active: Bool
-    #: heterogeneous media (the megakernel): after a null collision the ray goes on along the
-    #: same line, so its closest hit is the one already found (``reuse``), ``ahead.t`` from ``o``
-    ahead: Hit | None = None
-    reuse: Bool | None = None
 
 
 class VolPathIntegrator(PathIntegrator):
@@ -456,12 +450,11 @@ class VolPathIntegrator(PathIntegrator):
     def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> VolPathState:
         w = dr.width(active)
         beta = dr.full(Array3f, 1.0, w) if weight is None else Array3f(weight, weight, weight)
-        ahead = reuse = None  # (no kept hit: free flight consumes null collisions itself)
         return VolPathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=beta, eta=dr.full(Float, 1.0, w),
                             depth=dr.zeros(UInt32, w), prev_pdf=dr.full(Float, 1.0, w),
                             prev_delta=dr.full(Bool, not self.opt.hide_emitters, w),
                             ref_p=Array3f(o), medium=dr.full(UInt32, self.camera_medium, w),
-                            active=Bool(active), ahead=ahead, reuse=reuse)
+                            active=Bool(active))
 
     @property
     def shadow_draws(self) -> bool:
@@ -555,12 +548,7 @@ class VolPathIntegrator(PathIntegrator):
         :meth:`next_ray`."""
         active, beta = self.roulette(s, rng)
         draw = self.flight_draw(s, active, rng)
-        if s.reuse is None:
-            si = scene.intersect(s.o, s.d, active, reach(draw[2]))
-        else:  # (no traversal after a null collision: the hit ahead is known)
-            hit = scene.intersect_preliminary(s.o, s.d, active & ~s.reuse, reach(draw[2]))
-            hit = dr.select(s.reuse, s.ahead, hit)
-            si = scene.interaction(s.o, s.d, hit)
+        si = scene.intersect(s.o, s.d, active, reach(draw[2]))
         fl = self.free_flight(s, si, active, beta, rng, draw)
         si = self.skip_emitters(scene, s, si, fl)
         L = s.L + self.emitted(scene, s, si, fl)
@@ -569,11 +557,7 @@ class VolPathIntegrator(PathIntegrator):
         q = self.nee_query(scene, s, si, fl, on_surface, phase, rng)
         if q is not None:  # one emitter, one shadow ray through the media
             L = L + q.resolve(self.shadow(q.o, q.d, q.tmax, q.medium, q.ok, rng))
-        nxt = self.next_ray(scene, s, si, fl, on_surface, phase, L, rng)
-        if s.reuse is not None:
-            nxt.reuse = Bool(fl.het_null)
-            nxt.ahead = Hit(hit.t - fl.t_med, hit.prim, hit.u, hit.v, hit.valid)
-        return nxt
+        return self.next_ray(scene, s, si, fl, on_surface, phase, L, rng)
 
     def roulette(self, s: VolPathState, rng: PCG32) -> tuple[Bool, Array3f]:
         """Russian roulette and the depth limit, at the top of a bounce as in Mitsuba's
@@ -627,18 +611,15 @@ class VolPathIntegrator(PathIntegrator):
             beta = dr.select(in_medium, beta * ratio, beta)
             beta = dr.select(scatter, beta * sigma_t * albedo, beta)
         p_med = s.o + s.d * t
-        het_null, t_med = Bool(False), None
-        if media.has_hetero:  # delta tracking against the majorant (Mitsuba's null collisions)
-            # (null collisions in a loop of their own: het_null stays False, the path's loop
-            # sees only real collisions and surfaces)
-            real, p_h, t_med, beta = self._delta_track(s.o, s.d, t_surf, u_t, in_medium, s.medium, beta, rng)
+        if media.has_hetero:  # delta tracking against the majorant, null collisions in its own loop
+            real, p_h, beta = self._delta_track(s.o, s.d, t_surf, u_t, in_medium, s.medium, beta, rng)
             p_med = dr.select(real, p_h, p_med)
             scatter = scatter | real
         depth = dr.select(scatter, s.depth + 1, s.depth)
         scatter_live = scatter & (depth < opt.max_depth) if opt.max_depth >= 0 else Bool(scatter)
-        surf = active & ~scatter & ~het_null
-        return Flight(beta=beta, depth=depth, scatter=scatter, scatter_live=scatter_live, het_null=het_null,
-                      surf=surf, p_med=p_med, in_medium=in_medium, g=g, t_med=t_med)
+        surf = active & ~scatter
+        return Flight(beta=beta, depth=depth, scatter=scatter, scatter_live=scatter_live,
+                      surf=surf, p_med=p_med, in_medium=in_medium, g=g)
 
     @dr.syntax
     def _delta_track(self, o: Array3f, d: Array3f, t_surf: Float, u: Float, active: Bool, medium: UInt32,
@@ -647,10 +628,10 @@ class VolPathIntegrator(PathIntegrator):
         up to ``t_surf``, null collisions included, in a loop of its own (the first tentative
         collision drawn with ``u``, each further one with a new number, and one number per
         tentative collision to accept it with ``sigma_t / majorant``). Returns the lanes
-        that found a real collision, its point and distance from ``o``, and ``beta`` times
+        that found a real collision, its point, and ``beta`` times
         the albedo there."""
         real = Bool(False)
-        p, t_acc = Array3f(o), Float(0.0)
+        p = Array3f(o)
         end = Float(t_surf)
         going = Bool(active)
         while going:
@@ -662,13 +643,12 @@ class VolPathIntegrator(PathIntegrator):
                 hit = cand & (u_null * h.majorant < h.sigma_t(p_h, cand))
                 beta = dr.select(hit, beta * h.albedo(p_h, hit), beta)
                 p = dr.select(cand, p_h, p)
-                t_acc = dr.select(cand, t_acc + t_h, t_acc)
                 end = dr.select(cand, end - t_h, end)
                 real = real | hit
                 step = step | (cand & ~hit)
             going = step
             u = rng.next_float32()
-        return real, p, t_acc, beta
+        return real, p, beta
 
     def skip_emitters(self, scene: DeviceScene, s: VolPathState, si, fl: Flight):
         """``si`` with ``hide_emitters``' camera rays that reach an area emitter (``fl.surf``
@@ -768,7 +748,7 @@ class VolPathIntegrator(PathIntegrator):
                  L: Array3f, rng: PCG32) -> VolPathState:
         """The path's next state: the BSDF sampled at a surface (a null boundary or a thin
         sheet's transmission passed without a scattering event), the phase function at a
-        medium event, the same ray from a null collision (three random numbers)."""
+        medium event (three random numbers)."""
         media = self.media
         phase_pdf, lobes = phase
         u_lobe = rng.next_float32()
@@ -794,9 +774,6 @@ class VolPathIntegrator(PathIntegrator):
             depth = dr.select(real, depth + 1, depth)
         new_d = _either(fl, fl.scatter_live, lambda: wo_ph, lambda: Array3f(wo))
         new_o = _either(fl, fl.scatter_live, lambda: fl.p_med, lambda: scene.spawn(si, wo))
-        if media.has_hetero and fl.medium:  # a null collision: on along the same ray
-            new_d = dr.select(fl.het_null, s.d, new_d)
-            new_o = dr.select(fl.het_null, fl.p_med, new_o)
         if fl.surface:
             medium = media.after(si, wo, s.medium, on_surface)
             ref_p = dr.select(real, si.p, s.ref_p)
@@ -810,7 +787,5 @@ class VolPathIntegrator(PathIntegrator):
             live = fl.scatter_live
         if fl.surface:
             live = on_surface & bs.valid if live is None else live | (on_surface & bs.valid)
-        if fl.medium:
-            live = live | fl.het_null
         return VolPathState(o=new_o, d=new_d, L=L, beta=beta, eta=eta, depth=depth, prev_pdf=prev_pdf,
                             prev_delta=prev_delta, ref_p=ref_p, medium=medium, active=live)
