@@ -12,13 +12,13 @@ functions on its lanes, with the same random numbers in the same order:
 2. **free flight** (``free flight``): distance sampling in the ray's medium (``free_flight``)
    and what the ray reaches if it reaches a surface or escapes (``emitted``, added to the
    radiance buffer); the lanes are then sorted by event (a counting sort, as the
-   wavefront's queues): a medium event (a scattering event below the depth limit, or a
-   heterogeneous medium's null collision) goes to the **medium queue**, a surface to the
+   wavefront's queues): a medium event (a scattering event below the depth limit) goes to
+   the **medium queue**, a surface to the
    shading queue of its material's lobe kinds, and the rest (escaped, absorbed, a
    scattering event at the depth limit) end;
 3. **medium queue** (``medium``): next-event estimation with the phase function and phase
    sampling (``nee_query`` and ``next_ray`` of a :class:`~drpt.render.integrators.volpath.Flight`
-   with ``medium`` only: no BSDF code is traced); a null collision goes on along its ray;
+   with ``medium`` only: no BSDF code is traced);
 4. **shading queues** (``shade``): next-event estimation with the BSDF and BSDF sampling,
    null boundaries and medium transitions (``surface`` only, on the queue's
    :meth:`~drpt.render.scene.DeviceScene.restricted` scene: only its lobes are traced);
@@ -46,7 +46,6 @@ from dataclasses import dataclass, fields
 import drjit as dr
 from drjit.auto import Array3f, Bool, Float, UInt32, UInt64
 
-from ...accel.protocol import Hit
 from ...options import PathOptions
 from ...scene.model import Scene
 from ..sampler import pack, unpack
@@ -61,38 +60,20 @@ class VolWaveState(WaveState):
 
     ref_p: Array3f  # the last real scattering event
     medium: UInt32  # 1-based medium id of the ray, 0 in vacuum
-    #: heterogeneous media: after a null collision, the closest hit already found (its t from
-    #: o) and the lanes that reuse it (VolPathState.ahead / reuse); None in other scenes
-    ahead_t: Float | None = None
-    ahead_prim: UInt32 | None = None
-    ahead_u: Float | None = None
-    ahead_v: Float | None = None
-    ahead_valid: Bool | None = None
-    reuse: Bool | None = None
 
 
 #: the Flight arrays the free-flight stage writes for the queues
-_FLIGHT = ("beta", "depth", "scatter", "scatter_live", "het_null", "surf", "p_med", "in_medium", "g")
+_FLIGHT = ("beta", "depth", "scatter", "scatter_live", "surf", "p_med", "in_medium", "g")
 #: those a surface queue reads
 _SURFACE = ("beta", "depth", "surf")
 #: the shadow query's buffers
 _QUERY = ("a", "b", "o", "d", "tmax", "medium", "ok")
 
 
-def _ahead(hit: Hit | None, reuse: Bool | None) -> dict:
-    """:class:`VolWaveState`'s fields of a kept hit (none without heterogeneous media)."""
-    if reuse is None:
-        return {}
-    return dict(ahead_t=Float(hit.t), ahead_prim=UInt32(hit.prim), ahead_u=Float(hit.u), ahead_v=Float(hit.v),
-                ahead_valid=Bool(hit.valid), reuse=Bool(reuse))
-
-
 def _vol_state(s: WaveState, active: Bool, L: Array3f | None = None) -> VolPathState:
     """The buffers ``s`` as volpath's loop state (what its per-event steps read)."""
-    ahead = None if s.reuse is None else Hit(s.ahead_t, s.ahead_prim, s.ahead_u, s.ahead_v, s.ahead_valid)
     return VolPathState(o=s.o, d=s.d, L=L, beta=s.beta, eta=s.eta, depth=s.depth, prev_pdf=s.prev_pdf,
-                        prev_delta=s.prev_delta, ref_p=s.ref_p, medium=s.medium, active=active, ahead=ahead,
-                        reuse=s.reuse)
+                        prev_delta=s.prev_delta, ref_p=s.ref_p, medium=s.medium, active=active)
 
 
 class VolWavefrontIntegrator(WavefrontIntegrator):
@@ -112,8 +93,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         return VolWaveState(lane=dr.arange(UInt32, n), o=st.o, d=st.d, beta=st.beta, eta=st.eta,
                             depth=st.depth, prev_pdf=st.prev_pdf, prev_delta=st.prev_delta,
                             rng_state=UInt64(rng_a) + dr.zeros(UInt64, n),
-                            rng_inc=UInt64(rng_b) + dr.zeros(UInt64, n), ref_p=st.ref_p, medium=st.medium,
-                            **_ahead(st.ahead, st.reuse))
+                            rng_inc=UInt64(rng_b) + dr.zeros(UInt64, n), ref_p=st.ref_p, medium=st.medium)
 
     def _loop_state(self, s: VolWaveState, m: int) -> VolPathState:
         return _vol_state(s, dr.full(Bool, True, m), L=dr.zeros(Array3f, m))
@@ -130,11 +110,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         rng = self._rng(s)
         active, beta = integ.roulette(_vol_state(s, dr.full(Bool, True, n)), rng)
         draw = integ.flight_draw(_vol_state(s, active), active, rng)
-        if s.reuse is None:
-            hit = scene.intersect_preliminary(s.o, s.d, active, reach(draw[2]))
-        else:  # (no traversal after a null collision: the hit ahead is known)
-            hit = scene.intersect_preliminary(s.o, s.d, active & ~s.reuse, reach(draw[2]))
-            hit = dr.select(s.reuse, Hit(s.ahead_t, s.ahead_prim, s.ahead_u, s.ahead_v, s.ahead_valid), hit)
+        hit = scene.intersect_preliminary(s.o, s.d, active, reach(draw[2]))
         rng_a, rng_b = pack(rng)
         timer.done("closest hit", hit, active, beta, rng_a, rng_b, *draw, lanes=n, rays=n)
         si = scene.interaction(s.o, s.d, hit)
@@ -151,7 +127,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
                             **dict(zip(("rng_state", "rng_inc"), pack(rng)))})
         nq = len(self.queues)
         med_q = nq  # the medium queue after the surface queues; nq + 1: the paths that end
-        qid = dr.select(fl.scatter_live | fl.het_null, med_q, nq + 1)
+        qid = dr.select(fl.scatter_live, med_q, nq + 1)
         if nq:
             qid = dr.select(on_surface, dr.gather(UInt32, self._queue_of, si.material, on_surface), qid)
         timer.done("free flight", L, qid, s.rng_state, s.rng_inc,
@@ -194,12 +170,6 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
                     dr.scatter(getattr(query, f), getattr(found, f), idx)
             timer.done("medium" if medium else "shade", nxt, alive, L,
                        *((getattr(query, f) for f in _QUERY) if query is not None else ()), lanes=count)
-
-        if s.reuse is not None:  # the lanes' next ray after a null collision: the same hit
-            nxt = VolWaveState(**{**{f.name: getattr(nxt, f.name) for f in fields(nxt)},
-                                  **_ahead(Hit(hit.t - fl.t_med, hit.prim, hit.u, hit.v, hit.valid),
-                                           Bool(fl.het_null))})
-            dr.eval(nxt.ahead_t, nxt.ahead_prim, nxt.ahead_u, nxt.ahead_v, nxt.ahead_valid, nxt.reuse)
 
         # ---- shadow rays: one batch
         if query is not None:

@@ -309,6 +309,31 @@ def test_shadow_tracking_is_unbiased(tmp_path, bsdf, monkeypatch):
     assert np.all(np.abs(mean - expect) > 8 * np.maximum(se, 1e-12)), (mean, expect, se)
 
 
+@pytest.mark.parametrize("bsdf, tracked", [("thindielectric", True), ("null", False)])
+def test_shadow_tracking_threshold_is_chosen_per_scene(tmp_path, bsdf, tracked):
+    """:func:`~drpt.render.integrators.volpath.shadow_tau`: a medium seen only through
+    thindielectric sheets tracks shadow rays from the start (``SHADOW_TAU_SHEETS``), so
+    through a thin medium (chord 2, extinction 0.1: transmittance 0.82, above ``SHADOW_TAU``)
+    some of 2^12 shadow rays end at a sampled collision (transmittance 0). Negative control:
+    the same medium behind a null boundary keeps ``SHADOW_TAU`` and gets the exact
+    transmittance on every ray."""
+    import drjit as dr
+    from drjit.auto import PCG32, Array3f, Bool, Float, UInt32
+
+    from drpt.render.integrators import volpath
+
+    r = _renderer(tmp_path, sigma="0.1, 0.1, 0.1", bsdf=bsdf)
+    want = volpath.SHADOW_TAU_SHEETS if tracked else volpath.SHADOW_TAU
+    assert volpath.shadow_tau(r.scene_model) == want and r.integrator.shadow_tau == want
+    assert np.exp(-0.2) > volpath.SHADOW_TAU  # (exact all the way with the default threshold)
+    n = 1 << 12
+    tr = r.integrator.shadow(dr.full(Array3f, [0.0, 0.0, 5.0], n), dr.full(Array3f, [0.0, 0.0, -1.0], n),
+                             dr.full(Float, float("inf"), n), dr.zeros(UInt32, n), dr.full(Bool, True, n),
+                             PCG32(n, 7))
+    zeros = int(np.count_nonzero(np.asarray(tr.x) == 0.0))
+    assert (zeros > n // 20) if tracked else (zeros == 0), zeros
+
+
 # ------------------------------------------------------------ numerics
 @pytest.mark.parametrize("sigma", [0.0, 1e-6, 3.0, 1e6])
 @pytest.mark.parametrize("albedo", [0.0, 1.0])
