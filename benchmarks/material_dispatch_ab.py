@@ -33,7 +33,6 @@ import json
 import math
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -43,10 +42,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-CORPUS = ROOT.parent / "shared" / "corpus" / "mitsuba-data" / "tests" / "scenes"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+# the sibling benchmark: the corpus's place, the CPU's name and the commit, as it prints them
+from equal_time_vs_mitsuba import CORPUS, ROOT, VEACH, _commit, _cpu  # noqa: E402
+
 GRIDS = [CORPUS / "bsdf_spheres" / f"test_{e}_path.xml" for e in ("arealight", "constant", "envmap", "pointlight")]
-VEACH = ROOT / "tests" / "data" / "xml" / "veach_mis.xml"
 DISPATCHES = ("masked", "kinds")
 
 
@@ -140,20 +140,6 @@ def measure(name: str, path: Path, rounds: int, min_size: int, max_samples: int)
             "ops_masked": ops["masked"], "ops_kinds": ops["kinds"],
             "s_masked": med["masked"], "s_kinds": med["kinds"], "speedup": med["masked"] / med["kinds"],
             "identical": identical, "seconds": secs}
-
-
-def _cpu() -> str:
-    try:
-        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=False).stdout
-        return next(line.split(":", 1)[1].strip() for line in out.splitlines() if line.startswith("Model name"))
-    except (OSError, StopIteration):
-        return "unknown CPU"
-
-
-def _commit() -> str:
-    out = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                         text=True, check=False)
-    return out.stdout.strip() or "unknown"
 
 
 def main(argv=None) -> list[dict]:
