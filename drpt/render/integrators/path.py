@@ -92,13 +92,16 @@ class PathState:
     active: Bool
 
 
-def bank(sums: tuple, L):
+def bank(sums: tuple, dropped: UInt32, L: Array3f, Sum: type) -> tuple[tuple, UInt32]:
     """``sums`` (of samples, of their squares and, when there are three, of the products
-    of their channels ``(rg, rb, gb)``) with the sample ``L`` added."""
+    of their channels ``(rg, rb, gb)``, each of type ``Sum``) with the path's radiance ``L``
+    added where it is finite, and ``dropped`` counting the lanes where it is not."""
+    finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
+    L = Sum(dr.select(finite, L, 0.0))
     out = (sums[0] + L, sums[1] + L * L)
     if len(sums) > 2:
-        out += (sums[2] + type(L)(L.x * L.y, L.x * L.z, L.y * L.z),)
-    return out
+        out += (sums[2] + Sum(L.x * L.y, L.x * L.z, L.y * L.z),)
+    return out, dropped + dr.select(finite, 0, 1)
 
 
 def nothing_seen(scene: DeviceScene) -> bool:
@@ -230,10 +233,7 @@ class PathIntegrator:
             if bounces:
                 steps = (steps[0] + 1,)
             if ~state.active & (left > 0):  # the path ended: bank it, start the next
-                L = state.L
-                finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
-                sums = bank(sums, Sum(dr.select(finite, L, 0.0)))
-                dropped += dr.select(finite, 0, 1)
+                sums, dropped = bank(sums, dropped, state.L, Sum)
                 left -= 1
                 next_path(rng)
                 o, d, *weight = camera_ray(rng)
@@ -253,9 +253,7 @@ class PathIntegrator:
         while left > 0:
             o, d, *weight = camera_ray(rng)
             L = self.unrolled_path(rng, self._start(o, d, Bool(True), *weight))
-            finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
-            sums = bank(sums, Sum(dr.select(finite, L, 0.0)))
-            dropped += dr.select(finite, 0, 1)
+            sums, dropped = bank(sums, dropped, L, Sum)
             if bounces:
                 steps = (steps[0] + self.opt.max_depth,)
             left -= 1
