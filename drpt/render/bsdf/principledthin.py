@@ -134,12 +134,13 @@ def _alphas(aniso: Float, r: Float, anisotropic: bool):
     return dr.maximum(ALPHA_MIN, r2 / aspect), dr.maximum(ALPHA_MIN, r2 * aspect)
 
 
-def _distributions(p: ThinParams):
-    """The GGX of the specular reflection and of the specular transmission."""
-    an = "anisotropic" in p.flags
-    refl = mf.Distribution(False, *_alphas(p.anisotropic, p.roughness, an))
-    trans = mf.Distribution(False, *_alphas(p.anisotropic, (0.65 * p.eta - 0.35) * p.roughness, an))
-    return refl, trans
+def _distribution(p: ThinParams, transmit: Bool) -> mf.Distribution:
+    """The GGX of the specular reflection, or where ``transmit`` that of the specular
+    transmission (roughness scaled by ``0.65 eta - 0.35``). A direction is either reflected
+    or transmitted, so one distribution per lane serves both lobes: its ``D``, ``G`` and
+    visible normals are those of the lane's lobe, to the float."""
+    r = dr.select(transmit, (0.65 * p.eta - 0.35) * p.roughness, p.roughness)
+    return mf.Distribution(False, *_alphas(p.anisotropic, r, "anisotropic" in p.flags))
 
 
 def _probabilities(p: ThinParams):
@@ -185,7 +186,8 @@ def eval(p: ThinParams, wi: Array3f, wo: Array3f) -> Array3f:
     abs_o = dr.abs(g.cos_o)
     value = Array3f(0.0)
     if "spec_trans" in fl:
-        refl, trans = _distributions(p)
+        dist = _distribution(p, g.refract)
+        D, G = dist.D(g.h), dist.G(g.wi, g.wo, g.h)
         F = fresnel(dr.dot(g.wi, g.h), p.eta)[0]
         on = g.active & (st > 0.0) & g.reflect & g.compat_r
         if "spec_tint" in fl:
@@ -193,9 +195,9 @@ def eval(p: ThinParams, wi: Array3f, wo: Array3f) -> Array3f:
             f_thin = dr.lerp(Array3f(F), _schlick(_tint(c) * r0, dr.dot(g.wi, g.h), p.eta), p.spec_tint)
         else:
             f_thin = Array3f(F)
-        value += dr.select(on, f_thin * (st * refl.D(g.h) * refl.G(g.wi, g.wo, g.h) / (4.0 * safe_i)), 0.0)
+        value += dr.select(on, f_thin * (st * D * G / (4.0 * safe_i)), 0.0)
         on = g.active & g.refract & (st > 0.0) & g.compat_t
-        t = st * (1.0 - F) * trans.D(g.h) * trans.G(g.wi, g.wo, g.h) / (4.0 * safe_i)
+        t = st * (1.0 - F) * D * G / (4.0 * safe_i)
         value += dr.select(on, c * t, 0.0)
 
     on = g.active & g.reflect & (st < 1.0) & (dt < 1.0)
@@ -226,12 +228,12 @@ def pdf(p: ThinParams, wi: Array3f, wo: Array3f) -> Float:
     psr, pst, pdr, pdt = _probabilities(p)
     v = Float(0.0)
     if "spec_trans" in p.flags:
-        refl, trans = _distributions(p)
+        pv = _distribution(p, g.refract).pdf_visible(g.wi, g.h)
         jac = dr.abs(dr.rcp(4.0 * dr.dot(g.wo_r, g.h)))
         on = g.compat_r & g.reflect
-        v += dr.select(on, psr * refl.pdf_visible(g.wi, g.h) * jac, 0.0)
+        v += dr.select(on, psr * pv * jac, 0.0)
         on = g.compat_t & g.refract
-        v += dr.select(on, pst * trans.pdf_visible(g.wi, g.h) * jac, 0.0)
+        v += dr.select(on, pst * pv * jac, 0.0)
     v += dr.select(g.reflect, pdr * INV_PI * g.cos_o, 0.0)
     if "diff_trans" in p.flags:
         v += dr.select(g.refract, pdt * INV_PI * (-g.cos_o), 0.0)
@@ -249,14 +251,12 @@ def sample(p: ThinParams, wi: Array3f, u1: Float, u2: Array2f) -> BSDFSample:
     pick_dt = u1 >= psr + pst + pdr
     ok = Bool(active)
     if "spec_trans" in p.flags:
-        refl, trans = _distributions(p)
-        m_r = refl.sample_visible_normal(wi_up, u2)
-        wo_r = 2.0 * dr.dot(wi_up, m_r) * m_r - wi_up
-        ok &= ~pick_sr | ((dr.dot(wi_up, m_r) > 0.0) & (dr.dot(wo_r, m_r) > 0.0) & (wo_r.z > 0.0))
-        m_t = trans.sample_visible_normal(wi_up, u2)
-        wo_t = 2.0 * dr.dot(wi_up, m_t) * m_t - wi_up
-        wo_t = Array3f(wo_t.x, wo_t.y, -wo_t.z)
-        ok &= ~pick_st | ((dr.dot(wi_up, m_t) > 0.0) & (dr.dot(wo_t, -m_t) > 0.0) & (wo_t.z < 0.0))
+        # one visible normal, of the picked lobe's distribution
+        m = _distribution(p, pick_st).sample_visible_normal(wi_up, u2)
+        wo_r = 2.0 * dr.dot(wi_up, m) * m - wi_up
+        ok &= ~pick_sr | ((dr.dot(wi_up, m) > 0.0) & (dr.dot(wo_r, m) > 0.0) & (wo_r.z > 0.0))
+        wo_t = Array3f(wo_r.x, wo_r.y, -wo_r.z)
+        ok &= ~pick_st | ((dr.dot(wi_up, m) > 0.0) & (dr.dot(wo_t, -m) > 0.0) & (wo_t.z < 0.0))
         wo = dr.select(pick_sr, wo_r, dr.select(pick_st, wo_t, wo))
     if "diff_trans" in p.flags:
         wo = dr.select(pick_dt, -square_to_cosine_hemisphere(u2), wo)
