@@ -10,25 +10,42 @@ from drjit.auto import Array2f, Array3f, Float
 INV_PI = 1.0 / dr.pi
 
 
-def square_to_uniform_disk_concentric(u: Array2f) -> Array2f:
-    """Uniform point on the unit disk: Shirley and Chiu's concentric map (no
-    clumping at the rim), the mapping of Mitsuba's function of that name."""
+def concentric_polar(u: Array2f) -> tuple[Float, Float]:
+    """``(r, phi)`` of :func:`square_to_uniform_disk_concentric`'s point ``r (cos phi,
+    sin phi)`` (``r`` signed). A lobe that picks one of several warps per lane can take
+    the sine and cosine of the picked angle once (``dr.sincos`` is the costly part) and
+    still produce each warp's point to the float."""
     a = 2.0 * u.x - 1.0
     b = 2.0 * u.y - 1.0
     use_a = dr.abs(a) > dr.abs(b)
     r = dr.select(use_a, a, b)
     phi = dr.select(use_a, (dr.pi / 4.0) * (b / a), (dr.pi / 2.0) - (dr.pi / 4.0) * (a / b))
     phi = dr.select((a == 0) & (b == 0), 0.0, phi)
+    return r, phi
+
+
+def polar_to_disk(r: Float, phi: Float) -> Array2f:
+    """The point ``r (cos phi, sin phi)``."""
     s, c = dr.sincos(phi)
     return Array2f(r * c, r * s)
 
 
-def square_to_cosine_hemisphere(u: Array2f) -> Array3f:
-    """Cosine-weighted direction around +z (Malley: concentric disk, lifted)."""
-    p = square_to_uniform_disk_concentric(u)
+def square_to_uniform_disk_concentric(u: Array2f) -> Array2f:
+    """Uniform point on the unit disk: Shirley and Chiu's concentric map (no
+    clumping at the rim), the mapping of Mitsuba's function of that name."""
+    return polar_to_disk(*concentric_polar(u))
+
+
+def disk_to_cosine_hemisphere(p: Array2f) -> Array3f:
+    """A point ``p`` of the unit disk lifted to the hemisphere around +z (Malley)."""
     x, y = p.x, p.y
     z = dr.safe_sqrt(1.0 - x * x - y * y)
     return Array3f(x, y, z)
+
+
+def square_to_cosine_hemisphere(u: Array2f) -> Array3f:
+    """Cosine-weighted direction around +z (Malley: concentric disk, lifted)."""
+    return disk_to_cosine_hemisphere(square_to_uniform_disk_concentric(u))
 
 
 def cosine_hemisphere_pdf(cos_theta: Float) -> Float:

@@ -33,11 +33,12 @@ def reflect(wi: Array3f, m: Array3f) -> Array3f:
 # Mitsuba 3's MicrofacetDistribution: Beckmann and GGX, anisotropic
 # ---------------------------------------------------------------------------
 
-def _concentric_disk(u: Array2f) -> Array2f:
-    """Shirley-Chiu concentric map of the unit square onto the unit disk
-    (the mapping Mitsuba's ``square_to_uniform_disk_concentric`` uses). At the
-    centre (``x = y = 0``) ``phi`` is already 0 (``r = x``, ``rp = y``), so it needs
-    no case of its own."""
+def concentric_polar(u: Array2f) -> tuple[Float, Float]:
+    """``(r, phi)`` of the Shirley-Chiu concentric map of the unit square onto the unit
+    disk (the mapping Mitsuba's ``square_to_uniform_disk_concentric`` uses), whose point
+    is ``r (cos phi, sin phi)`` (``r`` signed). At the centre (``x = y = 0``) ``phi`` is
+    already 0 (``r = x``, ``rp = y``), so it needs no case of its own. (The map of
+    :func:`drpt.render.warp.concentric_polar` computed in another order: other floats.)"""
     x = 2.0 * u.x - 1.0
     y = 2.0 * u.y - 1.0
     q13 = dr.abs(x) < dr.abs(y)
@@ -45,6 +46,12 @@ def _concentric_disk(u: Array2f) -> Array2f:
     rp = dr.select(q13, x, y)
     phi = (0.25 * dr.pi) * rp / dr.select(r == 0.0, 1.0, r)
     phi = dr.select(q13, 0.5 * dr.pi - phi, phi)
+    return r, phi
+
+
+def _concentric_disk(u: Array2f) -> Array2f:
+    """The point of :func:`concentric_polar` on the unit disk."""
+    r, phi = concentric_polar(u)
     s, c = dr.sincos(phi)
     return Array2f(r * c, r * s)
 
@@ -192,9 +199,10 @@ class Distribution:
         m = self.sample_visible_normal(wi, u) if self.sample_visible else self.sample_all(u)
         return m, self.pdf(wi, m)
 
-    def _slopes11_ggx(self, cos_i: Float, u: Array2f) -> Array3f:
-        """Visible normal of the alpha = 1 GGX for ``wi = (sin_i, 0, cos_i)``."""
-        p = _concentric_disk(u)
+    def _slopes11_ggx(self, cos_i: Float, u: Array2f, disk: Array2f | None = None) -> Array3f:
+        """Visible normal of the alpha = 1 GGX for ``wi = (sin_i, 0, cos_i)``; ``disk``:
+        ``u``'s point of :func:`_concentric_disk`, when the caller has it."""
+        p = _concentric_disk(u) if disk is None else disk
         s = 0.5 * (1.0 + cos_i)
         py = (1.0 - s) * dr.safe_sqrt(1.0 - dr.square(p.x)) + s * p.y
         z = dr.safe_sqrt(1.0 - dr.square(p.x) - dr.square(py))
@@ -221,8 +229,13 @@ class Distribution:
         sy = dr.erfinv(2.0 * uy - 1.0)
         return Array3f(-sx, sy, 1.0)  # (y negated, see sample_visible_normal)
 
-    def sample_visible_normal(self, wi: Array3f, u: Array2f) -> Array3f:
-        """A normal visible from ``wi`` (``wi.z > 0``), density :meth:`pdf_visible`."""
+    def sample_visible_normal(self, wi: Array3f, u: Array2f, disk: Array2f | None = None) -> Array3f:
+        """A normal visible from ``wi`` (``wi.z > 0``), density :meth:`pdf_visible`.
+        ``disk`` (GGX only): ``r (cos phi, sin phi)`` of :func:`concentric_polar` at ``u``,
+        computed by the caller (the same normal, to the float; a lobe choosing between
+        this and another warp of ``u`` per lane then takes one ``sincos``)."""
+        if disk is not None and self.beckmann is not False:
+            raise ValueError("sample_visible_normal: disk is for GGX only")
         au, av = self.alpha_u, self.alpha_v
         wp = dr.normalize(Array3f(au * wi.x, av * wi.y, wi.z))
         # azimuth of wp from its x, y (Mitsuba takes sin^2 theta = 1 - z^2, which
@@ -231,7 +244,7 @@ class Distribution:
         inv = dr.rsqrt(dr.select(r2 > 0.0, r2, 1.0))
         cphi = dr.select(r2 > 0.0, wp.x * inv, 1.0)
         sphi = dr.select(r2 > 0.0, wp.y * inv, 0.0)
-        n = self._pick(lambda: self._slopes11_beckmann(wp.z, u), lambda: self._slopes11_ggx(wp.z, u))
+        n = self._pick(lambda: self._slopes11_beckmann(wp.z, u), lambda: self._slopes11_ggx(wp.z, u, disk))
         # rotate to wi's azimuth, unstretch (the _slopes11 functions return the normal
         # with y negated: the rotation then needs no negation, to the same floats)
         nx = cphi * n.x + sphi * n.y

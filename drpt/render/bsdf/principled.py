@@ -197,7 +197,7 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float
 
 from ...materials.bsdf_kinds import defaults, given
-from ..warp import INV_PI, square_to_cosine_hemisphere
+from ..warp import INV_PI, concentric_polar, disk_to_cosine_hemisphere, polar_to_disk, square_to_cosine_hemisphere
 from . import BSDFSample
 from . import microfacet as mf
 
@@ -439,8 +439,13 @@ def gtr1_D(m: Array3f, a: Float) -> Float:
     return dr.select(d * m.z > 1e-20, d, 0.0)
 
 
-def gtr1_sample(a: Float, u: Array2f) -> Array3f:
-    s_phi, c_phi = dr.sincos(2.0 * dr.pi * u.x)
+def gtr1_sample(a: Float, u: Array2f, cs: Array2f | None = None) -> Array3f:
+    """A clearcoat normal (density ``gtr1_D(m, a) m.z``); ``cs``: ``(cos, sin)`` of its
+    azimuth ``2 pi u.x``, when the caller has them."""
+    if cs is None:
+        s_phi, c_phi = dr.sincos(2.0 * dr.pi * u.x)
+    else:
+        c_phi, s_phi = cs.x, cs.y
     a2 = a * a
     cos2 = (1.0 - dr.power(a2, 1.0 - u.y)) / (1.0 - a2)
     sin_t = dr.sqrt(dr.maximum(0.0, 1.0 - cos2))
@@ -630,13 +635,18 @@ def sample(p: PrincipledParams, wi: Array3f, u1: Float, u2: Array2f) -> BSDFSamp
         valid |= pick_t & ok_t
         eta = dr.select(pick_t, eta_it, eta)
     if lb.clearcoat:
-        n_cc = gtr1_sample(_cc_alpha(p), u2)
+        # one sincos for the clearcoat's azimuth and the cosine hemisphere's disk point
+        r_h, phi_h = concentric_polar(u2)
+        disk = polar_to_disk(dr.select(pick_c, 1.0, r_h), dr.select(pick_c, 2.0 * dr.pi * u2.x, phi_h))
+        wo_d = disk_to_cosine_hemisphere(disk)
+        n_cc = gtr1_sample(_cc_alpha(p), u2, disk)
         wo_c = _reflect(wi, n_cc)
         s_c = dr.mulsign(n_cc, cos_i)
         ok_c = (cos_i * wo_c.z > 0.0) & (dr.dot(wi, s_c) > 0.0) & (dr.dot(wo_c, s_c) > 0.0)
         wo = dr.select(pick_c, wo_c, wo)
         valid |= pick_c & ok_c
-    wo_d = square_to_cosine_hemisphere(u2)
+    else:
+        wo_d = square_to_cosine_hemisphere(u2)
     wo = dr.select(pick_d, wo_d, wo)
     valid |= pick_d & (cos_i * wo_d.z > 0.0)
     valid &= active

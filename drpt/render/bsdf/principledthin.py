@@ -43,7 +43,7 @@ import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float
 
 from ...materials.bsdf_kinds import given
-from ..warp import INV_PI, square_to_cosine_hemisphere
+from ..warp import INV_PI, concentric_polar, disk_to_cosine_hemisphere, polar_to_disk, square_to_cosine_hemisphere
 from . import BSDFSample
 from . import microfacet as mf
 from .principled import ALPHA_MIN, _schlick, _sw, _tint, fresnel
@@ -245,21 +245,30 @@ def sample(p: ThinParams, wi: Array3f, u1: Float, u2: Array2f) -> BSDFSample:
     active = wi.z != 0.0
     wi_up = dr.select(active, dr.mulsign(wi, wi.z), Array3f(0.0, 0.0, 1.0))
     psr, pst, pdr, _ = _probabilities(p)
-    wo = square_to_cosine_hemisphere(u2)  # diffuse reflection
     pick_sr = u1 < psr
     pick_st = (u1 >= psr) & (u1 < psr + pst)
     pick_dt = u1 >= psr + pst + pdr
     ok = Bool(active)
     if "spec_trans" in p.flags:
+        # the picked lobe's point of the disk, one sincos: the visible-normal sampler's
+        # concentric map for a specular lobe, the cosine hemisphere's for a diffuse one
+        spec = pick_sr | pick_st
+        (r_m, phi_m), (r_h, phi_h) = mf.concentric_polar(u2), concentric_polar(u2)
+        disk = polar_to_disk(dr.select(spec, r_m, r_h), dr.select(spec, phi_m, phi_h))
+        hemi = disk_to_cosine_hemisphere(disk)
+        wo = hemi  # diffuse reflection
         # one visible normal, of the picked lobe's distribution
-        m = _distribution(p, pick_st).sample_visible_normal(wi_up, u2)
+        m = _distribution(p, pick_st).sample_visible_normal(wi_up, u2, disk)
         wo_r = 2.0 * dr.dot(wi_up, m) * m - wi_up
         ok &= ~pick_sr | ((dr.dot(wi_up, m) > 0.0) & (dr.dot(wo_r, m) > 0.0) & (wo_r.z > 0.0))
         wo_t = Array3f(wo_r.x, wo_r.y, -wo_r.z)
         ok &= ~pick_st | ((dr.dot(wi_up, m) > 0.0) & (dr.dot(wo_t, -m) > 0.0) & (wo_t.z < 0.0))
         wo = dr.select(pick_sr, wo_r, dr.select(pick_st, wo_t, wo))
+    else:
+        hemi = square_to_cosine_hemisphere(u2)
+        wo = hemi  # diffuse reflection
     if "diff_trans" in p.flags:
-        wo = dr.select(pick_dt, -square_to_cosine_hemisphere(u2), wo)
+        wo = dr.select(pick_dt, -hemi, wo)
     else:
         ok &= ~pick_dt
     wo = dr.mulsign(wo, wi.z)

@@ -21,6 +21,7 @@ import pytest
 from drjit.auto import Array2f, Array3f, Float
 
 from drpt.render.bsdf import microfacet as mf
+from drpt.render.warp import square_to_uniform_disk_concentric
 from drpt.testing import mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 
 # (beckmann, alpha_u, alpha_v or None for isotropic)
@@ -226,6 +227,30 @@ def test_alpha_min_is_the_lower_clamp():
     for f in (lambda d: d.D(dm), lambda d: d.G1(dwi, dm), lambda d: d.sample_visible_normal(dwi, u)):
         assert np.array_equal(np.array(f(clamped)), np.array(f(ref)))
     assert not np.array_equal(np.array(clamped.D(dm)), np.array(default.D(dm)))  # negative control
+
+
+def test_visible_normal_from_the_callers_disk_point():
+    """``sample_visible_normal(wi, u, disk)`` with ``disk`` the point of
+    ``concentric_polar(u)`` (what a lobe sharing one ``sincos`` between warps passes) is the
+    normal drawn from ``u`` alone, to the float; another point (the warp module's map of
+    the same ``u``, other floats) changes some normals (negative control); Beckmann refuses
+    a disk point."""
+    wi = _sphere(4000, 21)
+    wi[2] = np.abs(wi[2]) + 0.01
+    wi /= np.linalg.norm(wi, axis=0)
+    dwi = to_drpt(wi, Array3f)
+    rng = np.random.default_rng(22)
+    u = Array2f(Float(rng.random(4000, dtype=np.float32)), Float(rng.random(4000, dtype=np.float32)))
+    d = mf.Distribution(False, 0.3, 0.1)
+    r, phi = mf.concentric_polar(u)
+    s, c = dr.sincos(phi)
+    disk = Array2f(r * c, r * s)
+    assert np.array_equal(np.array(d.sample_visible_normal(dwi, u, disk)), np.array(d.sample_visible_normal(dwi, u)))
+    other = square_to_uniform_disk_concentric(u)
+    assert not np.array_equal(np.array(d.sample_visible_normal(dwi, u, other)),
+                              np.array(d.sample_visible_normal(dwi, u)))
+    with pytest.raises(ValueError):
+        mf.Distribution(True, 0.3).sample_visible_normal(dwi, u, disk)
 
 
 # ---------------------------------------------------------------- chi-square
