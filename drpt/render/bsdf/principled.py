@@ -495,7 +495,6 @@ class _Geometry:
         self.compat_t = ok & (dr.dot(wi, s) > 0.0) & (dr.dot(wo, -s) > 0.0)
         self.F = fresnel(self.wi_h, p.eta)[0]
         self.dist = distribution(p)
-        self.wi_up = dr.mulsign(wi, self.cos_i)
         self.one_m, self.brdf, self.bsdf = _weights(p)
 
 
@@ -585,7 +584,7 @@ def pdf(p: PrincipledParams, wi: Array3f, wo: Array3f) -> Float:
     pd, pc, pt, ps, ok = _probabilities(p, g.front, g.F, g.bsdf, g.brdf)
     safe_i = dr.select(g.active, dr.abs(g.cos_i), 1.0)
     D = g.dist.D(g.h)
-    g1 = g.dist.G1(g.wi_up, g.h)
+    g1 = g.dist.G1(wi, g.h)  # = G1(wi_up, h) to the float (G1 is even in v); eval's
     refl = g.reflect & g.compat_r
     # D_wi'(h) / (4 |dot(wo, h)|), dot(wi, h) = dot(wo, h) cancelled (see the module docs)
     v = dr.select(refl, ps * (g1 * D / (4.0 * safe_i)), 0.0)
