@@ -47,6 +47,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import drjit as dr
+import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ..materials.layout import NONE, MaterialLayout
@@ -144,7 +145,8 @@ class Rows:
         if tid is not None:
             ids = dr.gather(UInt32, tid, self.row, active)
             textured = active & (ids != NONE)
-            looked = self.table.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f, si=si)
+            looked = self.table.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f, si=si,
+                                                only=self.table._tex_ids[name])
             v = dr.select(textured, looked if cls is Array3f else _luminance(looked), v)
         return v
 
@@ -201,10 +203,13 @@ class MaterialTable:
         self._types = {name: f.type for name, f in lay.fields.items()}
         self._data: dict[str, object] = {}
         self._tex: dict[str, UInt32] = {}
+        self._tex_ids: dict[str, tuple[int, ...]] = {}
         for name, f in lay.fields.items():
             self._data[name] = _vec(f.values) if f.type == "rgb" else Float(f.values)
             if f.texture is not None:
                 self._tex[name] = UInt32(f.texture)
+                # the field's textures: a lookup traces only these, not the scene's others
+                self._tex_ids[name] = tuple(sorted({int(t) for t in np.asarray(f.texture)} - {int(NONE)}))
         # textured emission (Mitsuba's area radiance bitmap), by material
         self._emit_tex = None if lay.emission_texture is None else UInt32(lay.emission_texture)
         # Perturbed frames (normalmap, bumpmap): per row, only in scenes that have them

@@ -98,13 +98,15 @@ class TextureSet:
         return len(self.textures)
 
     def lookup(self, tex_id: UInt32, uv: Array2f, active: Bool = True, scalar: bool = False,
-               si=None) -> Array3f:
+               si=None, only=None) -> Array3f:
         """Bilinear, repeat-wrapped linear RGB of texture ``tex_id`` at OBJ ``uv``
         (a procedural texture: its value there; ``scalar``: the one a float
         parameter reads, whose luminance the caller takes; a mesh attribute: its
-        value at the interaction ``si``'s point of its primitive).
+        value at the interaction ``si``'s point of its primitive). ``only``: the ids
+        ``tex_id`` can hold (host side, e.g. a material field's textures): the other
+        textures are not traced.
 
-        Lanes that are inactive or whose id is out of range give 0."""
+        Lanes that are inactive or whose id is out of range (or not in ``only``) give 0."""
         if not self.textures:
             return Array3f(0.0)
         active = Bool(active)
@@ -112,8 +114,14 @@ class TextureSet:
         if len(self.textures) == 1:
             m = active & (tex_id == 0)
             return dr.select(m, _eval(self.textures[0], pos, uv, m, scalar, si), 0.0)
+        if only is not None and len(only) == 1:
+            k = only[0]
+            m = active & (tex_id == k)
+            return dr.select(m, _eval(self.textures[k], pos, uv, m, scalar, si), 0.0)
         out = Array3f(0.0)
         for k, tex in enumerate(self.textures):
+            if only is not None and k not in only:
+                continue
             m = active & (tex_id == k)
             out = dr.select(m, _eval(tex, pos, uv, m, scalar, si), out)
         return out

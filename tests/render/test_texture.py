@@ -164,6 +164,24 @@ def test_several_textures_and_masks(exr, png):
     np.testing.assert_array_equal(got[:, 3], 0.0)
 
 
+def test_only_the_named_textures(exr, png):
+    """``lookup(..., only=ids)`` (a material field's textures) gives every lane whose id is
+    in ``ids`` what the full lookup gives, to the float, with one id and with several; a
+    lane whose id is not in ``ids`` reads 0 (the negative control: it is not 0 in full)."""
+    (pe, _), (pp, _) = exr, png
+    ts = TextureSet([pe, pp, pe])
+    uv = [[0.1, 0.3, 0.55, 0.8], [0.2, 0.9, 0.45, 0.6]]
+    ids = [1, 1, 0, 2]
+    full = _lookup(ts, uv, ids, True)
+    one = np.array(ts.lookup(UInt32(ids), Array2f(Float(uv[0]), Float(uv[1])), True, only=(1,)))
+    np.testing.assert_array_equal(one[:, :2], full[:, :2])
+    np.testing.assert_array_equal(one[:, 2:], 0.0)
+    assert np.all(full[:, 2:] != 0.0)
+    two = np.array(ts.lookup(UInt32(ids), Array2f(Float(uv[0]), Float(uv[1])), True, only=(0, 1)))
+    np.testing.assert_array_equal(two[:, :3], full[:, :3])
+    np.testing.assert_array_equal(two[:, 3], 0.0)
+
+
 def test_empty_set_traces_nothing():
     ts = TextureSet([])
     assert len(ts) == 0
