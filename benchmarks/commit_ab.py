@@ -1,0 +1,105 @@
+"""Render time of this checkout's drpt against another commit's, interleaved in one process (not a test).
+
+    PYTHONPATH=. .venv/bin/python benchmarks/commit_ab.py COMMIT SCENE... [--rounds 30] [--scale 4] [--spp N]
+
+``COMMIT``'s ``drpt/`` (``git archive``) is unpacked into a temporary folder as the package
+``drpt_ab`` and imported beside this checkout's ``drpt``; each ``SCENE`` (an XML file or a
+drpt scene) gets one :class:`~drpt.render.renderer.Renderer` from each package (its film
+scaled ``--scale`` times, an XML's ``spp`` define and the render's spp ``--spp``, default the
+scene's own), which renders once to compile, then ``--rounds`` rounds of one render each, the
+order alternating (AB, BA, ...) so that load from other processes falls on both. Round ``k``
+uses seed ``k`` for both; the script says whether every pair of images was bit-identical (a
+pure speed change must keep them so). It prints each side's median seconds (``Renderer.render``,
+tracing included) and the median and quartiles of the per-round ratios ``COMMIT / this``
+(above 1: this checkout is faster), the measure to quote on a loaded machine.
+
+The commit's package resolves its relative imports inside itself; the few absolute ``drpt``
+imports in it (the Mitsuba exporter) reach this checkout's, which rendering does not use.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import subprocess
+import sys
+import tarfile
+import tempfile
+import time
+from dataclasses import replace
+from io import BytesIO
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def unpack(commit: str, into: Path) -> str:
+    """``commit``'s ``drpt/`` as the package ``drpt_ab`` under ``into`` (put on ``sys.path``);
+    returns the commit's short hash."""
+    data = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "drpt"], check=True,
+                          capture_output=True).stdout
+    with tarfile.open(fileobj=BytesIO(data)) as tar:
+        tar.extractall(into, filter="data")
+    (into / "drpt").rename(into / "drpt_ab")
+    return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", commit], check=True,
+                          capture_output=True, text=True).stdout.strip()
+
+
+def renderer(pkg: str, path: Path, scale: int, spp: int | None):
+    """A renderer of ``path`` from package ``pkg`` (``drpt`` or ``drpt_ab``)."""
+    opts = importlib.import_module(f"{pkg}.options")
+    rend = importlib.import_module(f"{pkg}.render.renderer")
+    sc = importlib.import_module(f"{pkg}.scene")
+    defines = {"spp": str(spp)} if (spp and path.suffix == ".xml") else None
+    scene = sc.load_scene(path, defines=defines) if defines else sc.load_scene(path)
+    opt, scene = opts.with_scene_settings(opts.RenderOptions(progress=False), scene)
+    if scale != 1:
+        opt, scene = opts.with_scene_settings(
+            opts.RenderOptions(width=scale * opt.width, height=scale * opt.height, progress=False),
+            scene, given=frozenset({"size"}))
+    if spp:
+        opt = replace(opt, spp=spp)
+    return rend.Renderer(scene, opt)
+
+
+def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("commit")
+    ap.add_argument("scenes", nargs="+", type=Path)
+    ap.add_argument("--rounds", type=int, default=30)
+    ap.add_argument("--scale", type=int, default=4)
+    ap.add_argument("--spp", type=int, default=None)
+    a = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        short = unpack(a.commit, Path(tmp))
+        sys.path.insert(0, tmp)
+        from drpt.backend import ensure
+
+        ensure()
+        print(f"{short} (A) against this checkout (B), {a.rounds} rounds alternating, film x{a.scale}")
+        for path in a.scenes:
+            rs = {"A": renderer("drpt_ab", path, a.scale, a.spp), "B": renderer("drpt", path, a.scale, a.spp)}
+            for r in rs.values():
+                r.render()
+            ts: dict[str, list[float]] = {"A": [], "B": []}
+            same = True
+            for k in range(a.rounds):
+                imgs = {}
+                for side in ("A", "B") if k % 2 == 0 else ("B", "A"):
+                    r = rs[side]
+                    t0 = time.perf_counter()
+                    imgs[side] = r.derive(replace(r.opt, seed=k)).render().image
+                    ts[side].append(time.perf_counter() - t0)
+                same &= bool(np.array_equal(imgs["A"], imgs["B"]))
+            ta, tb = np.array(ts["A"]), np.array(ts["B"])
+            ratio = ta / tb
+            q1, q3 = np.quantile(ratio, [0.25, 0.75])
+            print(f"{path.name}: A {np.median(ta):.3f} s, B {np.median(tb):.3f} s; A / B per round: median "
+                  f"{np.median(ratio):.3f} (quartiles {q1:.3f}-{q3:.3f}); images bit-identical: {same}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
