@@ -5,7 +5,8 @@
   sets that switch every part on (specular reflection and transmission with spec_tint,
   anisotropy, diffuse transmission, sheen with tint, flatness, the sampling rates); a
   perturbed parameter is caught by the same comparison (negative control);
-* chi-square of sample against pdf from both sides, and a wrong pdf is rejected;
+* chi-square of sample against pdf from both sides, and a wrong pdf is rejected (wrong lobe
+  probabilities; the transmission with the reflection's GGX width);
 * weight == eval / pdf, finiteness at the extremes; the reader, the exporter and
   ``twosided``'s refusal (it transmits, as in Mitsuba);
 * the sampling weight's mean and second moment at Mitsuba's (the same random numbers into
@@ -130,6 +131,16 @@ def test_sampling_matches_pdf(name, side):
 @pytest.mark.mitsuba
 def test_chi2_negative_control():
     ok, _ = _chi2(CASES["all"], 1.0, {**CASES["all"], "diff_trans": 0.6})
+    assert not ok
+
+
+@pytest.mark.mitsuba
+def test_chi2_negative_control_transmission_width():
+    """Sampling draws each lane's visible normal from its lobe's GGX (the transmission's
+    roughness scaled by ``0.65 eta - 0.35``): a pdf whose transmission has the reflection's
+    width (``eta = 1.35 / 0.65`` makes the scale 1; ``eta`` enters the pdf nowhere else) is
+    rejected."""
+    ok, _ = _chi2(CASES["glossy"], 1.0, {**CASES["glossy"], "eta": 1.35 / 0.65})
     assert not ok
 
 
