@@ -579,10 +579,13 @@ class Renderer:
         n, lane, x, y = self._pass_lanes(k, r0, rows)
         photons = None
         if self.integrator.merging and strategies is None:
-            # caustic photons of n light subpaths of their own stream (BDPTIntegrator.photons);
-            # the radius by sample step, the same in every band of rows
-            rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1, seed ^ BDPT_PHOTON_STREAM)
-            photons = self.integrator.photons(rng, n, pass_index // self.chunks.passes.bands)
+            # caustic photons of the first m lanes' light subpaths, from a stream of their own
+            # (BDPTIntegrator.photons); the radius by sample step, the same in every band of rows
+            m = self.integrator.photon_paths(n)
+            first = dr.arange(UInt32, m)
+            rng = self._sampler(pass_index, m, dr.gather(UInt32, x, first), dr.gather(UInt32, y, first),
+                                first % dr.opaque(UInt32, k), 1, seed ^ BDPT_PHOTON_STREAM)
+            photons = self.integrator.photons(rng, m, pass_index // self.chunks.passes.bands)
         rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1, seed)
         u = next_2d(rng)
         squares = self.opt.light_variance

@@ -853,13 +853,17 @@ class BDPTIntegrator:
             d = Array3f(wo)
         return p, wo_p, power, depth_p, valid
 
-    def photons(self, rng: PCG32, n: int, step: int) -> PhotonGrid:
-        """The caustic photons of ``N = n / PHOTON_SHARE`` light subpaths (:meth:`trace_photons`;
-        ``rng`` has ``n`` lanes, the first ``N`` trace) in a
-        :class:`~drpt.render.photons.PhotonGrid` of radius :meth:`merge_radius` of ``step``,
-        evaluated; its ``scale`` (a kernel input) is ``1 / (pi r^2 N)``."""
-        m = max(1, n // PHOTON_SHARE)
-        p, wo, power, depth, valid = self.trace_photons(rng, dr.arange(UInt32, n) < dr.opaque(UInt32, m))
+    @staticmethod
+    def photon_paths(n: int) -> int:
+        """The photon subpaths of a pass of ``n`` camera samples: ``n / PHOTON_SHARE``."""
+        return max(1, n // PHOTON_SHARE)
+
+    def photons(self, rng: PCG32, m: int, step: int) -> PhotonGrid:
+        """The caustic photons of ``m`` light subpaths (:meth:`trace_photons`, ``rng`` of
+        ``m`` lanes) in a :class:`~drpt.render.photons.PhotonGrid` of radius
+        :meth:`merge_radius` of ``step``, evaluated; its ``scale`` (a kernel input) is ``1 /
+        (pi r^2 m)``."""
+        p, wo, power, depth, valid = self.trace_photons(rng, dr.full(Bool, True, m))
         r = self.merge_radius(step)
         grid = PhotonGrid(p, valid, r, {"wo": wo, "power": power, "depth": depth})
         grid.scale = dr.opaque(Float, 1.0 / (math.pi * r * r * m))
