@@ -146,7 +146,7 @@ def main() -> None:
 
 def reference(scene, base, name: str, a) -> tuple:
     """``(image, estimated relMSE)`` of the reference: a bdpt render of ``a.ref_spp`` spp,
-    seed 99, ``independent``, with its variance; kept in (or read from) the folder
+    seed 99, ``independent``, without caustic merging, with its variance; kept in (or read from) the folder
     ``a.reference`` when given."""
     import numpy as np
 
@@ -159,8 +159,11 @@ def reference(scene, base, name: str, a) -> tuple:
             data = np.load(path)
             return data["image"], float(data["rel_mse"])
     opt = replace(base, integrator="bdpt", spp=a.ref_spp, seed=99, sampler="independent")
-    if "variance" in {f.name for f in dataclasses.fields(opt)}:
+    names = {f.name for f in dataclasses.fields(opt)}
+    if "variance" in names:
         opt = replace(opt, variance=True)  # (its estimated relMSE is subtracted)
+    if "bdpt_merge" in names:
+        opt = replace(opt, bdpt_merge=False)  # (unbiased: caustic merging is consistent, not unbiased)
     ref = Renderer(scene, opt).render()
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -4,9 +4,10 @@ The glass sphere of :func:`bdpt_equal_time.seed_glass_cornell` shows, through it
 caustic it casts on the floor: paths light -> glass -> floor -> glass -> camera (``L S+ D S+
 E``). No connection strategy samples them (their one diffuse vertex has a Dirac vertex on
 both sides: no light vertex can be joined to a camera vertex, and no vertex seen through
-the glass can be splatted to the camera); only ``s = 0``, the camera subpath hitting the
-light by BSDF sampling, does: the path tracer's own way. So bdpt cannot do better than the
-path tracer on them per sample, and pays its dearer samples there.
+the glass can be splatted to the camera); without caustic merging (``--bdpt-merge off``) only
+``s = 0``, the camera subpath hitting the light by BSDF sampling, does: the path tracer's own
+way, so bdpt cannot do better than the path tracer on them per sample, and pays its dearer
+samples there. With merging (the default) caustic photons estimate them.
 
 The pixels that see the glass sphere (all 4x4 sub-pixel rays of the pixel's camera hit it
 first) are split from the rest. Both integrators render SEEDS seeds in turns (path

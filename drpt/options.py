@@ -118,6 +118,11 @@ class RenderOptions:
     #: bdpt: also sum each connection strategy's contributions (``--bdpt-strategies``,
     #: :meth:`drpt.render.renderer.Renderer.strategy_images`)
     bdpt_strategies: bool = False
+    #: bdpt: estimate the paths camera S+ D S+ area light (caustics seen through glass or in
+    #: mirrors) by merging caustic photons (``--bdpt-merge on|off``,
+    #: :attr:`drpt.render.integrators.bdpt.BDPTIntegrator.merging`); only scenes with Dirac
+    #: lobes and area lights trace any of it
+    bdpt_merge: bool = True
     #: ptracer, bdpt: also sum the squared splats (the variance film), from which the
     #: result's per-pixel ``variance`` is estimated; off, light-traced renders skip those
     #: float64 scatter-adds and their ``variance`` is NaN, unless a stop rule or adaptive

@@ -67,6 +67,11 @@ def _add_render_args(p: argparse.ArgumentParser) -> None:
                    help="with --integrator bdpt: also write each connection strategy's "
                         "MIS-weighted image (paths of at most 5 segments) as "
                         "OUT.bdpt_dD_sS_tT.EXT")
+    p.add_argument("--bdpt-merge", dest="bdpt_merge", choices=("on", "off"), default=None,
+                   help="with --integrator bdpt in scenes with glass or mirrors and area lights: "
+                        "estimate caustics seen through them (camera S+ D S+ light) by merging "
+                        "caustic photons (progressive photon mapping: consistent, biased at any "
+                        "finite spp) instead of only by hitting the light (default on)")
 
 
 def _check_output(output: Path) -> None:
@@ -130,6 +135,10 @@ def cmd_render(args: argparse.Namespace) -> int:
     scene = load_scene(scene_path)
     opts, scene = with_scene_settings(opts, scene, given_settings(args))
     opts = _aov_options(opts, args, output)
+    if args.bdpt_merge is not None:
+        if opts.integrator != "bdpt":
+            raise DrptError(f"--bdpt-merge needs --integrator bdpt, not {opts.integrator}")
+        opts = replace(opts, bdpt_merge=args.bdpt_merge == "on")
     if args.bdpt_strategies:
         opts = replace(opts, bdpt_strategies=True).validate()
         if args.workers is not None or args.cluster is not None or args.resume or opts.adaptive:

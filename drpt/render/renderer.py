@@ -144,6 +144,8 @@ class PassSums:
 AOV_STREAM = 0xA0F5EED
 #: the seed's xor for bidirectional path tracing's pilot (:meth:`Renderer._calibrate_bdpt`)
 BDPT_PILOT_STREAM = 0xB1D1C0DE
+#: the seed's xor for bidirectional path tracing's caustic photons (:meth:`Renderer._bdpt_pass`)
+BDPT_PHOTON_STREAM = 0x9E0F0CA5
 #: the pilot's lanes (at most; whole rows of one sample per pixel)
 BDPT_PILOT_LANES = 1 << 16
 
@@ -289,7 +291,7 @@ class Renderer:
                 raise DrptError("the moment integrator cannot wrap bdpt (its light paths have no "
                                 "per-pixel samples)")
             bdpt = BDPTIntegrator(self.scene, EmitterRays(self.scene, self.scene_model), self.camera,
-                                  options.path)
+                                  options.path, merge=options.bdpt_merge)
             self.warnings += [w for w in bdpt.warnings if w not in self.warnings]
             return bdpt
         if options.integrator == "whitted":
@@ -575,13 +577,22 @@ class Renderer:
         """Bidirectional path tracing's lanes of a pass, evaluated: ``(light film, camera
         film, dropped)``; their random numbers as a camera pass's (:meth:`_sampler`)."""
         n, lane, x, y = self._pass_lanes(k, r0, rows)
+        photons = None
+        if self.integrator.merging and strategies is None:
+            # caustic photons of the first m lanes' light subpaths, from a stream of their own
+            # (BDPTIntegrator.photons); the radius by sample step, the same in every band of rows
+            m = self.integrator.photon_paths(n)
+            first = dr.arange(UInt32, m)
+            rng = self._sampler(pass_index, m, dr.gather(UInt32, x, first), dr.gather(UInt32, y, first),
+                                first % dr.opaque(UInt32, k), 1, seed ^ BDPT_PHOTON_STREAM)
+            photons = self.integrator.photons(rng, m, pass_index // self.chunks.passes.bands)
         rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1, seed)
         u = next_2d(rng)
         squares = self.opt.light_variance
         film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter, squares=squares)
         camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter, squares=squares)
         bad = self.integrator.trace(rng, film, camera, Float(x) + u.x, Float(y) + u.y,
-                                    dr.full(Bool, True, n), strategies, use_roulette)
+                                    dr.full(Bool, True, n), strategies, use_roulette, photons)
         with llvm_tuning.blocks_for(n):
             dr.eval(film.sum, film.sq, camera.sum, camera.sq, bad, strategies.sum if strategies else [])
         return film, camera, bad
