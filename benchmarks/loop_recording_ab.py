@@ -44,17 +44,6 @@ SCENES = ("cornellbox", "cornellbox_media", "bsdf_spheres/test_arealight_path.xm
           "participating_media/test_hetero_sigmat_volpath.xml")
 
 
-def methods():
-    """``(owner, name)`` of every function traced under ``loops_once``."""
-    from drpt.render import film
-    from drpt.render.integrators.path import PathIntegrator
-    from drpt.render.integrators.ptracer import ParticleTracer
-    from drpt.render.integrators.volpath import VolPathIntegrator
-
-    return [(PathIntegrator, "sample"), (PathIntegrator, "sample_sequence"), (ParticleTracer, "trace"),
-            (VolPathIntegrator, "shadow"), (VolPathIntegrator, "_delta_track"), (film, "_gather")]
-
-
 class Variants:
     """Switches the ``loops_once`` functions between ``once`` (as drpt has them) and
     ``twice`` (``OptimizeLoops`` on), and times the outermost call of them."""
@@ -66,7 +55,10 @@ class Variants:
         self.depth = 0
         self.variant = "once"
         self.original = {}
-        for owner, name in methods():
+        from drpt.render.loops import decorated
+        from drpt.render.renderer import Renderer  # noqa: F401 (every integrator: their loops_once functions)
+
+        for owner, name in decorated():
             once = owner.__dict__[name]
             self.original[(owner, name)] = once
 

@@ -9,8 +9,9 @@ increments, read-only inputs. A loop variable of another width than the loop's (
 sum, a sampler's step shared by all lanes) also makes it record the body again.
 
 The integrators and the film trace their loops under :func:`loops_once` (the flag off) with
-their loop state as wide as the loop (:func:`widen`), so each body is recorded once (nested
-loops once per recording of the loop that holds them). The LLVM backend removes the
+their loop state as wide as the loop (:func:`widen`) and read-only values of other widths
+out of it (``dr.hint(cond, exclude=[...])``), so each body is recorded once (nested loops
+once per recording of the loop that holds them); :func:`decorated` lists those functions. The LLVM backend removes the
 loop-invariant phis itself: the kernel computes the same values, and the images are the
 same bit for bit (``tests/render/test_loops.py``).
 """
@@ -18,8 +19,12 @@ same bit for bit (``tests/render/test_loops.py``).
 from __future__ import annotations
 
 import functools
+import sys
 
 import drjit as dr
+
+#: every function that :func:`loops_once` returned (the wrappers)
+DECORATED: list = []
 
 
 def loops_once(method):
@@ -32,7 +37,22 @@ def loops_once(method):
         with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
             return method(*args, **kwargs)
 
+    DECORATED.append(traced)
     return traced
+
+
+def decorated() -> list[tuple[object, str]]:
+    """``(owner, name)`` of every :func:`loops_once` function of the modules imported so far
+    (the renderer imports every integrator): the class or module that holds it and its
+    name there, for tools that trace them otherwise (the tests' negative control with
+    ``OptimizeLoops`` on, ``benchmarks/loop_recording_ab.py``)."""
+    out = []
+    for module in dict.fromkeys(f.__module__ for f in DECORATED):
+        owners = [sys.modules[module]]
+        owners += [c for c in vars(owners[0]).values() if isinstance(c, type) and c.__module__ == module]
+        out += [(owner, name) for owner in owners for name, value in vars(owner).items()
+                if any(value is f for f in DECORATED)]
+    return out
 
 
 def widen(state, n: int) -> None:

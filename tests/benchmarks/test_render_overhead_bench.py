@@ -24,19 +24,13 @@ def _load(name: str):
 def corpus_scene(monkeypatch):
     """The scene's name; the functions the benchmarks patch are restored afterwards."""
     import drpt.render.renderer as R
-    from drpt.render import film
-    from drpt.render.integrators.path import PathIntegrator
-    from drpt.render.integrators.ptracer import ParticleTracer
-    from drpt.render.integrators.volpath import VolPathIntegrator
+    from drpt.render.loops import decorated
     from support.corpus import CORPUS
 
     if not (CORPUS / "floating_sphere" / "test_directional_direct.xml").is_file():
         pytest.skip("../shared/corpus/mitsuba-data is not present")
-    for owner, names in ((R, ("llvm_tuning", "finish")), (R.Renderer, ("_trace_pass",)),
-                         (PathIntegrator, ("sample", "sample_sequence")), (ParticleTracer, ("trace",)),
-                         (VolPathIntegrator, ("shadow", "_delta_track")), (film, ("_gather",))):
-        for name in names:
-            monkeypatch.setattr(owner, name, owner.__dict__[name])
+    for owner, name in [(R, "llvm_tuning"), (R, "finish"), (R.Renderer, "_trace_pass"), *decorated()]:
+        monkeypatch.setattr(owner, name, owner.__dict__[name])
     return "test_directional_direct"
 
 

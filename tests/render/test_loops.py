@@ -13,18 +13,11 @@ import numpy as np
 import pytest
 
 from drpt.options import PathOptions, RenderOptions
-from drpt.render import film
-from drpt.render.integrators.path import PathIntegrator
-from drpt.render.integrators.ptracer import ParticleTracer
-from drpt.render.integrators.volpath import VolPathIntegrator
+from drpt.render.loops import decorated
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 from support import SCENES
 from support.loops import recordings
-
-#: the methods (and the film's function) traced under ``loops_once``
-ONCE = [(PathIntegrator, "sample"), (PathIntegrator, "sample_sequence"), (ParticleTracer, "trace"),
-        (VolPathIntegrator, "shadow"), (VolPathIntegrator, "_delta_track"), (film, "_gather")]
 
 HETERO = """<scene version="3.0.0">
     <integrator type="volpath"><integer name="max_depth" value="6"/></integrator>
@@ -58,6 +51,8 @@ CASES = {
     "path loop, ldsampler": ("cornellbox/cornellbox.txt", {"sampler": "ldsampler"}),
     "path unrolled": ("cornellbox/cornellbox.txt", {"path": PathOptions(max_depth=3)}),
     "path splatted": ("cornellbox/cornellbox.txt", {"filter": "gaussian"}),
+    "whitted": ("cornellbox/cornellbox.txt", {"integrator": "whitted"}),
+    "wavefront's fused tail": ("cornellbox/cornellbox.txt", {"mode": "wavefront", "wavefront_tail": 64}),
     "ptracer": ("cornellbox/cornellbox.txt", {"integrator": "ptracer"}),
     "ptracer, ldsampler": ("cornellbox/cornellbox.txt", {"integrator": "ptracer", "sampler": "ldsampler"}),
     "volpath": ("cornellbox_media/cornellbox_media.txt", {"integrator": "volpath"}),
@@ -67,8 +62,8 @@ CASES = {
 
 
 def _optimized(monkeypatch):
-    """Every ``loops_once`` method traced with ``OptimizeLoops`` on instead."""
-    for cls, name in ONCE:
+    """Every ``loops_once`` function traced with ``OptimizeLoops`` on instead."""
+    for cls, name in decorated():
         inner = getattr(cls, name).__wrapped__
 
         def on(*a, inner=inner, **kw):
@@ -93,12 +88,25 @@ def test_loops_are_recorded_once_and_the_image_is_the_same(case, monkeypatch, tm
     renderer = Renderer(load_scene(path), opts)
     with recordings() as once:
         image = renderer.render().image
-    wavefront = extra.get("mode") == "wavefront"
-    assert once and (wavefront or set(once.values()) == {1}), dict(once)
+    per_bounce = extra.get("mode") == "wavefront"
+    assert once and (per_bounce or set(once.values()) == {1}), dict(once)
     _optimized(monkeypatch)
     with recordings() as counts:
         assert np.array_equal(renderer.render().image, image)
-    if wavefront:
+    if per_bounce:
         assert all(counts[k] >= 2 * v for k, v in once.items()), (dict(counts), dict(once))
     else:
         assert max(counts.values()) >= 2, dict(counts)
+
+
+def test_decorated_lists_every_loops_once_function():
+    """``decorated()`` finds each ``loops_once`` function where it lives (the negative
+    control above traces them all with the flag on); a plain function is not listed."""
+    import drpt.render.renderer  # noqa: F401 (imports every integrator)
+    from drpt.render.integrators.bdpt import BDPTIntegrator
+    from drpt.render.integrators.path import PathIntegrator
+
+    found = decorated()
+    assert (PathIntegrator, "sample_sequence") in found and len(found) == len(set(found)) >= 8, found
+    assert all(hasattr(owner.__dict__[name], "__wrapped__") for owner, name in found)
+    assert (BDPTIntegrator, "_trace") not in found
