@@ -16,7 +16,7 @@ from drpt.options import PathOptions, RenderOptions
 from drpt.render.loops import decorated
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-from support import SCENES
+from support import REPO, SCENES
 from support.loops import recordings
 
 HETERO = """<scene version="3.0.0">
@@ -52,6 +52,8 @@ CASES = {
     "path unrolled": ("cornellbox/cornellbox.txt", {"path": PathOptions(max_depth=3)}),
     "path splatted": ("cornellbox/cornellbox.txt", {"filter": "gaussian"}),
     "whitted": ("cornellbox/cornellbox.txt", {"integrator": "whitted"}),
+    "AOV guides past glass": (REPO / "tests" / "data" / "xml" / "bsdfs.xml",
+                              {"aovs": (("albedo", "guide_albedo"),), "path": PathOptions(max_depth=3)}),
     "wavefront's fused tail": ("cornellbox/cornellbox.txt", {"mode": "wavefront", "wavefront_tail": 64}),
     "ptracer": ("cornellbox/cornellbox.txt", {"integrator": "ptracer"}),
     "ptracer, ldsampler": ("cornellbox/cornellbox.txt", {"integrator": "ptracer", "sampler": "ldsampler"}),
@@ -82,7 +84,7 @@ def test_loops_are_recorded_once_and_the_image_is_the_same(case, monkeypatch, tm
     to drop their unchanged state, and the counter sees it (every loop of the wavefront's
     kernels twice as often, or more)."""
     scene_file, extra = CASES[case]
-    path = _hetero(tmp_path) if scene_file is None else SCENES / scene_file
+    path = _hetero(tmp_path) if scene_file is None else SCENES / scene_file  # (or an absolute path)
     opts = RenderOptions(width=16, height=16, spp=4, seed=3, progress=False,
                          **({"path": PathOptions(max_depth=6)} | extra))
     renderer = Renderer(load_scene(path), opts)
