@@ -5,15 +5,19 @@ calling its body once with symbolic variables (a *recording*: a Python trace of 
 body, paid by every render). By default (``dr.JitFlag.OptimizeLoops``) it records the body a
 second time to drop the loop state that the body leaves unchanged, and ``@dr.syntax`` puts
 every variable a loop reads into its state: the pixel position, the random streams'
-increments, read-only inputs. A loop variable of another width than the loop's (a width-1
-sum, a sampler's step shared by all lanes) also makes it record the body again.
+increments, read-only inputs. Even with the flag off, a loop variable that the body reads
+but does not change, of another width than the loop's (a width-1 opaque constant, a
+sampler's step shared by all lanes, an array the body gathers from), makes it record the body
+again; a width-1 variable that the body assigns a wide value (a sum started at 0) does not.
 
-The integrators and the film trace their loops under :func:`loops_once` (the flag off) with
-their loop state as wide as the loop (:func:`widen`) and read-only values of other widths
-out of it (``dr.hint(cond, exclude=[...])``), so each body is recorded once (nested loops
-once per recording of the loop that holds them); :func:`decorated` lists those functions. The LLVM backend removes the
-loop-invariant phis itself: the kernel computes the same values, and the images are the
-same bit for bit (``tests/render/test_loops.py``).
+The integrators, the film, the AOV kernel and the device scene's ray queries (the
+accelerators' traversal loops, also where no integrator loop holds them: the wavefront's
+per-bounce kernels) trace their loops under :func:`loops_once` (the flag off), with their
+loop state as wide as the loop (:func:`widen`) and read-only values of other widths out of
+it (``dr.hint(cond, exclude=[...])``), so each body is recorded once (nested loops once per
+recording of the loop that holds them); :func:`decorated` lists those functions. The LLVM
+backend removes the loop-invariant phis itself: the kernel computes the same values, and the
+images are the same bit for bit (``tests/render/test_loops.py``).
 """
 
 from __future__ import annotations

@@ -60,6 +60,7 @@ CASES = {
     "volpath": ("cornellbox_media/cornellbox_media.txt", {"integrator": "volpath"}),
     "volpath heterogeneous": (None, {"integrator": "volpath"}),
     "volpath heterogeneous wavefront": (None, {"integrator": "volpath", "mode": "wavefront"}),
+    "wavefront, BVH traversal": ("cornellbox/cornellbox.txt", {"mode": "wavefront", "accel": "bvh"}),
 }
 
 
