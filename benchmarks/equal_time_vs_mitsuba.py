@@ -101,15 +101,15 @@ def cases(only: list[str], corpus: bool, room_dir: Path, skip: list[str] = ()) -
     return out
 
 
-def prepare(case: Case, min_size: int, max_samples: int):
-    """``(ways, info)`` for :func:`~drpt.tools.converge.efficiency_rounds`: drpt's and Mitsuba's
-    ``render(seed) -> image`` at the same size, spp and settings. Raises DrptError where drpt
-    refuses the scene (or would not path trace it)."""
+def setup(case: Case, min_size: int, max_samples: int):
+    """``(scene, options, source)``: drpt's scene and render options of ``case`` (its size,
+    spp and settings, as the module docstring says) and the XML that Mitsuba renders (None
+    for a bundled scene: drpt's export). Raises DrptError where drpt refuses the scene (or
+    would not path trace it)."""
     from drpt.errors import DrptError
     from drpt.options import PathOptions, RenderOptions, with_scene_settings
     from drpt.scene import load_scene
     from drpt.tools import reference as refs
-    from drpt.tools.converge import make_drpt, make_mitsuba
     from drpt.tools.xmlref import MitsubaXML
 
     source = None
@@ -136,7 +136,17 @@ def prepare(case: Case, min_size: int, max_samples: int):
             given=frozenset({"size"}))
         source = MitsubaXML.for_scene(scene, opts)
     spp = spp_for(opts.spp, opts.width * opts.height, max_samples)
-    opts = replace(opts, spp=spp)
+    return scene, replace(opts, spp=spp), source
+
+
+def prepare(case: Case, min_size: int, max_samples: int):
+    """``(ways, info)`` for :func:`~drpt.tools.converge.efficiency_rounds`: drpt's and Mitsuba's
+    ``render(seed) -> image`` at the same size, spp and settings (:func:`setup`). Raises
+    DrptError where drpt refuses the scene (or would not path trace it)."""
+    from drpt.tools.converge import make_drpt, make_mitsuba
+
+    scene, opts, source = setup(case, min_size, max_samples)
+    spp = opts.spp
     _, drpt_render = make_drpt(scene, opts)
     mits_render, _ = make_mitsuba(scene, opts.width, opts.height, opts.path.max_depth,
                                   opts.path.rr_depth, 0, opts.bsdf, opts.filter, source)

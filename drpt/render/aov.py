@@ -15,11 +15,13 @@ from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
 
 from ..aovs import GUIDES
 from ..errors import DrptError
+from .loops import loops_once
 
 #: the most delta bounces a guide ray follows before it takes the surface it is on
 MAX_DELTA = 8
 
 
+@loops_once
 @dr.syntax
 def _past_delta(scene, rng: PCG32, o: Array3f, d: Array3f) -> tuple[Array3f, Array3f]:
     """The ray, per lane, whose first hit is the first non-delta surface (or a miss)

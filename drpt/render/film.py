@@ -45,6 +45,7 @@ import drjit as dr
 from drjit.auto import Array3f, Bool, Float, Float64, Int32, UInt32
 
 from ..filters import PixelFilter
+from .loops import loops_once
 
 
 def filter_weight(flt: PixelFilter, d: Float) -> Float:
@@ -167,12 +168,13 @@ def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int,
     return out
 
 
+@loops_once
 @dr.syntax
 def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: int,
             px: Float, py: Float, L: Array3f, ok: Bool, moment: bool, Partial: type):
     """:func:`gather_splats` with partial sums (per source pixel) of type ``Partial``
     (``Float`` or ``Float64``): an outer loop over the source pixels, an inner one over
-    each one's samples."""
+    each one's samples, each recorded once (:func:`~drpt.render.loops.loops_once`)."""
     import numpy as np
 
     W = width
@@ -192,14 +194,16 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
 
     total = [dr.zeros(Float64, n) for _ in range(channels)]
     src = dr.zeros(UInt32, n)
-    while src < sources:
+    # the samples and the counts are read, not changed, and of another width than the loops:
+    # outside their state (as loop variables they would make Dr.Jit record each loop again)
+    while dr.hint(src < sources, exclude=[px, py, L, ok, kk, sources]):
         sx = ox + Int32(src % side) - R
         sy = oy + Int32(src // side) - R
         inside = (sx >= 0) & (sx < W) & (sy >= r0) & (sy < r0 + rows)
         first = dr.select(inside, UInt32((sy - r0) * W + sx) * kk, 0)
         part = [dr.zeros(Partial, n) for _ in range(channels)]
         j = dr.zeros(UInt32, n)
-        while inside & (j < kk):
+        while dr.hint(inside & (j < kk), exclude=[px, py, L, ok, kk]):
             lane = first + j
             valid = dr.gather(Bool, ok, lane)
             x = dr.gather(Float, px, lane, valid)

@@ -365,7 +365,8 @@ class Renderer:
             sums = self._trace_splat_pass(pass_index, k, r0, rows)
         else:
             img, sq, nbad = self._trace_pass(pass_index, k, r0, rows, wide=False)
-            if not (np.isfinite(img).all() and np.isfinite(sq).all()):
+            # (a sum of finite float32 values is finite in float64: no temporary per element)
+            if not (np.isfinite(img.sum(dtype=np.float64)) and np.isfinite(sq.sum(dtype=np.float64))):
                 img, sq, nbad = self._trace_pass(pass_index, k, r0, rows, wide=True)
             sums = PassSums(r0, img, sq, nbad)
         if self.aov_kinds:
@@ -475,9 +476,13 @@ class Renderer:
             acc2 = acc * acc
             cross = [type(acc)(acc.x * acc.y, acc.x * acc.z, acc.y * acc.z)] if self.opt.moment else []
             nbad = dr.sum(UInt32(bad))
-        sums = [dr.block_sum(c, m) for c in (acc.x, acc.y, acc.z)]
+        # a pixel's lanes summed (one lane per pixel: its sums, no reduction launched)
+        def pixel_sums(c):
+            return c if m == 1 else dr.block_sum(c, m)
+
+        sums = [pixel_sums(c) for c in (acc.x, acc.y, acc.z)]
         # squares, then with RenderOptions.moment (a Mitsuba moment integrator) the products rg, rb, gb
-        sqsums = [dr.block_sum(c, m) for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
+        sqsums = [pixel_sums(c) for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
         dr.eval(sums, sqsums, nbad)
         img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)
         sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, len(sqsums))
@@ -867,13 +872,13 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
                             merged.nonfinite)
     # Unbiased sample variance of one sample, divided by spp: variance of the mean,
     # max(sumsq / spp - mean^2, 0) * spp / max(spp - 1, 1) / spp, in that order, in place
-    moment2 = None
-    if merged.sumsq.shape[-1] == 6:
-        moment2 = xyz_second_moment(merged.sumsq / spp)
-    var = merged.sumsq if consume and merged.sumsq.shape[-1] == 3 else merged.sumsq[..., :3].copy()
-    var /= spp
-    for c in range(3):  # one channel's temporary at a time
-        var[..., c] -= np.square(mean[..., c])
+    # (consume: the squares' means in the merge's own array, the same division as sumsq / spp)
+    second = np.divide(merged.sumsq, spp, out=merged.sumsq if consume else None)
+    moment2 = xyz_second_moment(second) if second.shape[-1] == 6 else None
+    var = second if second.shape[-1] == 3 else second[..., :3].copy()
+    square = np.empty(mean.shape[:-1])  # one channel's temporary, for each channel in turn
+    for c in range(3):
+        var[..., c] -= np.square(mean[..., c], out=square)
     np.maximum(var, 0.0, out=var)
     var *= spp
     var /= max(spp - 1, 1)

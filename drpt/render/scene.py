@@ -79,6 +79,7 @@ from .lights.envmap import (
 from .lights.light_bvh import BVHSelection
 from .lights.pilot import LIGHT_TRACERS, pilot_selection
 from .lights.selection import LightSelection
+from .loops import loops_once
 from .material import MaterialTable
 from .spawn import origin as spawn_origin
 from .surface import Interaction, SurfaceData
@@ -245,17 +246,21 @@ class DeviceScene:
         the lanes of camera rays (a traversal hint, :meth:`drpt.accel.protocol.Accelerator.intersect`)."""
         return self.interaction(o, d, self.intersect_preliminary(o, d, active, tmax, coherent))
 
+    @loops_once
     def intersect_preliminary(self, o: Array3f, d: Array3f, active: Bool, tmax: Float | None = None,
                               coherent: Bool | bool = False):
-        """The accelerator's closest hit (:class:`drpt.accel.Hit`), any distance or closer than ``tmax``."""
+        """The accelerator's closest hit (:class:`drpt.accel.Hit`), any distance or closer than ``tmax``
+        (a traversal loop recorded once: :func:`~drpt.render.loops.loops_once`)."""
         return self.accel.intersect(o, d, Float(dr.largest(Float)) if tmax is None else tmax, active, coherent)
 
     def interaction(self, o: Array3f, d: Array3f, hit) -> Interaction:
         """Position, normals, material and uv of a hit (:class:`~drpt.render.surface.Interaction`)."""
         return self.surfaces.interaction(o, d, hit)
 
+    @loops_once
     def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool) -> Bool:
-        """Lanes whose ray ``(o, d)`` hits anything at ``0 < t < tmax``."""
+        """Lanes whose ray ``(o, d)`` hits anything at ``0 < t < tmax`` (a traversal loop
+        recorded once)."""
         if self.instrument is not None:
             self.instrument.occluded(o, d, tmax, active)
         return self.accel.occluded(o, d, tmax, active)

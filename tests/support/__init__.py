@@ -18,7 +18,8 @@ run on their own BSDFs and images are in :mod:`drpt.testing`, not here.
 * :mod:`support.fuzz` and :mod:`support.fuzzformats`: seeded mutations of input files;
 * :mod:`support.resume`: renders interrupted after some chunks and resumed from their
   checkpoint;
-* :mod:`support.ports`: ports of this machine held in use.
+* :mod:`support.ports`: ports of this machine held in use;
+* :mod:`support.loops`: how often Dr.Jit records each symbolic loop while a render is traced.
 """
 
 from __future__ import annotations

@@ -163,6 +163,7 @@ from ..camera import RayCamera
 from ..film import SplatFilm
 from ..instrument import HIT_CAMERA, HIT_LIGHT, SHADOW_CAMERA, SHADOW_CONNECT, SHADOW_NEE, SPLAT, count
 from ..lights.rays import INV_FOUR_PI, EmitterRays
+from ..loops import widen
 from ..photons import PhotonGrid
 from ..sampler import LDSampler, next_2d
 from ..scene import DeviceScene
@@ -314,16 +315,6 @@ def occluded_where(scene: DeviceScene, o: Array3f, d: Array3f, tmax: Float, acti
     if active:
         hit = scene.occluded(o, d, tmax, active)
     return hit
-
-
-def widen(state, n: int) -> None:
-    """Give the fields of ``state`` (a Dr.Jit struct: a sampler) that hold one value for all
-    lanes ``n`` entries, in place (the same values): as loop state, a field of another width
-    than the loop's makes Dr.Jit record the loop's body again."""
-    for name in getattr(type(state), "DRJIT_STRUCT", {}):
-        value = getattr(state, name)
-        if dr.width(value) == 1 and n > 1:
-            setattr(state, name, value + dr.zeros(type(value), n))
 
 
 def roulette(value: Array3f, ok: Bool, u: Float, threshold: Float) -> tuple[Array3f, Bool]:

@@ -69,6 +69,7 @@ import drjit as dr
 from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32
 
 from ...options import PathOptions
+from ..loops import loops_once, widen
 from ..sampler import light_sample, next_2d, next_path
 from ..scene import DeviceScene
 from .common import DirectLight, power_heuristic
@@ -166,8 +167,10 @@ class PathIntegrator:
             si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
         return add_emission(scene, self.opt, si, s, s.L, s.active)
 
+    @loops_once
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:
-        """Radiance arriving at ``o`` from direction ``-d``, one sample per lane."""
+        """Radiance arriving at ``o`` from direction ``-d``, one sample per lane (the bounce
+        loop recorded once: :func:`~drpt.render.loops.loops_once`)."""
         state = self._start(o, d, Bool(active))
         if self.straight:
             return self.unrolled_path(rng, state)
@@ -186,6 +189,7 @@ class PathIntegrator:
             state = self.bounce(scene, state, rng)
         return state.L
 
+    @loops_once
     def sample_sequence(self, rng: PCG32, camera_ray: Callable, count: UInt32, wide: bool = False,
                         moment: bool = False, bounces: bool = False) -> tuple:
         """``count`` paths per lane, one after another (path regeneration).
@@ -208,6 +212,8 @@ class PathIntegrator:
         color spaces; without it the kernel has no such sum). With ``bounces`` the last
         value is the number of bounces the lane traced, its work (adaptive sampling's cost
         estimate, :mod:`drpt.render.adaptive`; without it the kernel has no such counter).
+        The loops are recorded once (:func:`~drpt.render.loops.loops_once`:
+        their state as wide as ``count``).
         """
         run = self._unrolled_sequence if self.straight else self._loop_sequence
         return run(rng, camera_ray, UInt32(count), wide, moment, bounces)
@@ -217,12 +223,14 @@ class PathIntegrator:
                        bounces: bool) -> tuple:
         """:meth:`sample_sequence` by the bounce loop."""
         scene = self.scene
+        n = dr.width(left)
+        widen(rng, n)  # (a low-discrepancy sampler's step is one value for all lanes)
         o, d, *weight = camera_ray(rng)
         state = self._start(o, d, left > 0, *weight)
         Sum = Array3f64 if wide else Array3f
-        sums = (Sum(0.0), Sum(0.0)) + ((Sum(0.0),) if moment else ())
-        dropped = UInt32(0)
-        steps = (UInt32(0),) if bounces else ()
+        sums = (dr.zeros(Sum, n), dr.zeros(Sum, n)) + ((dr.zeros(Sum, n),) if moment else ())
+        dropped = dr.zeros(UInt32, n)
+        steps = (dr.zeros(UInt32, n),) if bounces else ()
         inst = scene.instrument
         if inst is not None:
             inst.paths(dr.width(left))
@@ -246,10 +254,12 @@ class PathIntegrator:
         """:meth:`sample_sequence` with each path traced unrolled (:meth:`unrolled_path`):
         a loop over a lane's paths, one whole path per iteration. ``bounces`` counts
         ``max_depth`` per path."""
+        n = dr.width(left)
+        widen(rng, n)  # (a low-discrepancy sampler's step is one value for all lanes)
         Sum = Array3f64 if wide else Array3f
-        sums = (Sum(0.0), Sum(0.0)) + ((Sum(0.0),) if moment else ())
-        dropped = UInt32(0)
-        steps = (UInt32(0),) if bounces else ()
+        sums = (dr.zeros(Sum, n), dr.zeros(Sum, n)) + ((dr.zeros(Sum, n),) if moment else ())
+        dropped = dr.zeros(UInt32, n)
+        steps = (dr.zeros(UInt32, n),) if bounces else ()
         while left > 0:
             o, d, *weight = camera_ray(rng)
             L = self.unrolled_path(rng, self._start(o, d, Bool(True), *weight))

@@ -51,6 +51,7 @@ from ..camera import RayCamera
 from ..film import SplatFilm
 from ..instrument import HIT_LIGHT, SHADOW_CAMERA, SHADOW_EMITTER, SPLAT, count
 from ..lights.rays import EmitterRays
+from ..loops import loops_once, widen
 from ..sampler import next_2d
 from ..scene import DeviceScene
 from ..spawn import origin as spawn_origin
@@ -133,11 +134,14 @@ class ParticleTracer:
         count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
 
+    @loops_once
     @dr.syntax
     def trace(self, rng: PCG32, film: SplatFilm, active: Bool) -> UInt32:
         """One light path per lane, splatted into ``film``; returns the number of
-        non-finite contributions dropped (per lane)."""
+        non-finite contributions dropped (per lane). The path loop is recorded once
+        (:func:`~drpt.render.loops.loops_once`)."""
         scene, opt = self.scene, self.opt
+        widen(rng, dr.width(active))  # (a low-discrepancy sampler's step is one value for all lanes)
         max_depth = opt.max_depth
         if scene.instrument is not None:
             scene.instrument.paths(dr.width(active), (HIT_LIGHT, SHADOW_EMITTER, SHADOW_CAMERA, SPLAT))

@@ -93,6 +93,7 @@ from ...materials.iors import relative_ior
 from ...options import PathOptions
 from ...scene.model import Scene
 from ..bsdf.thindielectric import reflectance
+from ..loops import loops_once
 from ..scene import DeviceScene
 from ..warp import Frame
 from .common import SHADOW_SHRINK, power_heuristic, shadow_segment
@@ -465,6 +466,7 @@ class VolPathIntegrator(PathIntegrator):
         batch after them)."""
         return self.media.has_hetero or self.shadow_tau > 0.0
 
+    @loops_once
     @dr.syntax
     def shadow(self, o: Array3f, d: Array3f, tmax: Float, medium: UInt32, active: Bool,
                rng: PCG32 | None = None) -> Array3f:
@@ -621,6 +623,7 @@ class VolPathIntegrator(PathIntegrator):
         return Flight(beta=beta, depth=depth, scatter=scatter, scatter_live=scatter_live,
                       surf=surf, p_med=p_med, in_medium=in_medium, g=g)
 
+    @loops_once
     @dr.syntax
     def _delta_track(self, o: Array3f, d: Array3f, t_surf: Float, u: Float, active: Bool, medium: UInt32,
                      beta: Array3f, rng: PCG32):

@@ -82,6 +82,7 @@ import drjit as dr
 from drjit.auto import PCG32, Array3f, Array3u, Bool, Float, UInt32, UInt64
 
 from ...options import PathOptions
+from ..loops import loops_once
 from ..sampler import light_sample, next_2d, pack, unpack
 from ..scene import DeviceScene
 from ..surface import Interaction
@@ -251,6 +252,7 @@ class _Queue:
         self.direct = DirectLight(self.scene)
 
 
+@loops_once
 @dr.syntax
 def _fused_loop(integ: PathIntegrator, scene: DeviceScene, state: PathState, rng: PCG32) -> Array3f:
     while state.active:

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import drjit as dr
 from drjit.auto import PCG32, Array3f, Bool, UInt32
 
+from ..loops import loops_once
 from ..sampler import light_sample, next_2d
 from ..scene import DeviceScene
 from .common import DirectLight
@@ -53,6 +54,7 @@ class WhittedIntegrator:
         self.direct = DirectLight(scene)
         self.opt = options
 
+    @loops_once
     @dr.syntax
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:
         scene, direct = self.scene, self.direct

@@ -1,0 +1,115 @@
+"""drpt.render.loops: each integrator's symbolic loops, and the film's, are recorded once per
+trace (``loops_once``), and the image is, bit for bit, the one of the loops recorded with
+Dr.Jit's ``OptimizeLoops`` on. (bdpt's subpath loops: ``test_bdpt.py``'s
+``test_the_subpath_loops_are_traced_once_and_the_image_is_the_same``.)
+"""
+
+from __future__ import annotations
+
+import struct
+
+import drjit as dr
+import numpy as np
+import pytest
+
+from drpt.options import PathOptions, RenderOptions
+from drpt.render.loops import decorated
+from drpt.render.renderer import Renderer
+from drpt.scene import load_scene
+from support import REPO, SCENES
+from support.loops import recordings
+
+HETERO = """<scene version="3.0.0">
+    <integrator type="volpath"><integer name="max_depth" value="6"/></integrator>
+    <medium id="m" type="heterogeneous">
+        <float name="scale" value="3"/>
+        <volume name="sigma_t" type="gridvolume"><string name="filename" value="g.vol"/></volume>
+        <rgb name="albedo" value="0.8, 0.7, 0.6"/>
+    </medium>
+    <sensor type="perspective">
+        <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/></transform>
+    </sensor>
+    <emitter type="point"><point name="position" x="2" y="2" z="2"/><rgb name="intensity" value="20"/></emitter>
+    <shape type="sphere"><bsdf type="null"/><ref name="interior" id="m"/></shape>
+    <shape type="rectangle"><transform name="to_world"><translate z="-2"/><scale x="3" y="3"/></transform>
+        <bsdf type="diffuse"/></shape>
+</scene>
+"""
+
+
+def _hetero(tmp_path):
+    grid = [0.2, 1.0, 0.5, 2.0, 1.5, 0.1, 0.7, 1.2]
+    (tmp_path / "g.vol").write_bytes(b"VOL\x03" + struct.pack("<5i", 1, 2, 2, 2, 1)
+                                     + struct.pack("<6f", -1, -1, -1, 1, 1, 1) + struct.pack("<8f", *grid))
+    (tmp_path / "h.xml").write_text(HETERO)
+    return tmp_path / "h.xml"
+
+
+CASES = {
+    # name: (scene, options)
+    "path loop": ("cornellbox/cornellbox.txt", {}),
+    "path loop, ldsampler": ("cornellbox/cornellbox.txt", {"sampler": "ldsampler"}),
+    "path unrolled": ("cornellbox/cornellbox.txt", {"path": PathOptions(max_depth=3)}),
+    "path splatted": ("cornellbox/cornellbox.txt", {"filter": "gaussian"}),
+    "whitted": ("cornellbox/cornellbox.txt", {"integrator": "whitted"}),
+    "AOV guides past glass": (REPO / "tests" / "data" / "xml" / "bsdfs.xml",
+                              {"aovs": (("albedo", "guide_albedo"),), "path": PathOptions(max_depth=3)}),
+    "wavefront's fused tail": ("cornellbox/cornellbox.txt", {"mode": "wavefront", "wavefront_tail": 64}),
+    "ptracer": ("cornellbox/cornellbox.txt", {"integrator": "ptracer"}),
+    "ptracer, ldsampler": ("cornellbox/cornellbox.txt", {"integrator": "ptracer", "sampler": "ldsampler"}),
+    "volpath": ("cornellbox_media/cornellbox_media.txt", {"integrator": "volpath"}),
+    "volpath heterogeneous": (None, {"integrator": "volpath"}),
+    "volpath heterogeneous wavefront": (None, {"integrator": "volpath", "mode": "wavefront"}),
+    "wavefront, BVH traversal": ("cornellbox/cornellbox.txt", {"mode": "wavefront", "accel": "bvh"}),
+}
+
+
+def _optimized(monkeypatch):
+    """Every ``loops_once`` function traced with ``OptimizeLoops`` on instead."""
+    for cls, name in decorated():
+        inner = getattr(cls, name).__wrapped__
+
+        def on(*a, inner=inner, **kw):
+            with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, True):
+                return inner(*a, **kw)
+
+        monkeypatch.setattr(cls, name, on)
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_loops_are_recorded_once_and_the_image_is_the_same(case, monkeypatch, tmp_path):
+    """A render records each loop's body once (nested loops once per recording of their
+    outer loop, which is once; the wavefront traces a kernel per bounce, each with its
+    loops). Its image equals, bit for bit, the one whose loops are recorded with
+    ``OptimizeLoops`` on. Negative control: with the flag on, Dr.Jit records the loops again
+    to drop their unchanged state, and the counter sees it (every loop of the wavefront's
+    kernels twice as often, or more)."""
+    scene_file, extra = CASES[case]
+    path = _hetero(tmp_path) if scene_file is None else SCENES / scene_file  # (or an absolute path)
+    opts = RenderOptions(width=16, height=16, spp=4, seed=3, progress=False,
+                         **({"path": PathOptions(max_depth=6)} | extra))
+    renderer = Renderer(load_scene(path), opts)
+    with recordings() as once:
+        image = renderer.render().image
+    per_bounce = extra.get("mode") == "wavefront"
+    assert once and (per_bounce or set(once.values()) == {1}), dict(once)
+    _optimized(monkeypatch)
+    with recordings() as counts:
+        assert np.array_equal(renderer.render().image, image)
+    if per_bounce:
+        assert all(counts[k] >= 2 * v for k, v in once.items()), (dict(counts), dict(once))
+    else:
+        assert max(counts.values()) >= 2, dict(counts)
+
+
+def test_decorated_lists_every_loops_once_function():
+    """``decorated()`` finds each ``loops_once`` function where it lives (the negative
+    control above traces them all with the flag on); a plain function is not listed."""
+    import drpt.render.renderer  # noqa: F401 (imports every integrator)
+    from drpt.render.integrators.bdpt import BDPTIntegrator
+    from drpt.render.integrators.path import PathIntegrator
+
+    found = decorated()
+    assert (PathIntegrator, "sample_sequence") in found and len(found) == len(set(found)) >= 8, found
+    assert all(hasattr(owner.__dict__[name], "__wrapped__") for owner, name in found)
+    assert (BDPTIntegrator, "_trace") not in found
