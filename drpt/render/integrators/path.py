@@ -118,6 +118,9 @@ class PathIntegrator:
     #: trace paths of ``0 < max_depth <= UNROLLED_MAX_DEPTH`` as straight-line code
     #: (the module docstring); False: always the bounce loop (for A/B comparisons)
     unrolled = True
+    #: the unrolled path's vertices shade in a symbolic ``if`` on their live lanes
+    #: (:meth:`bounce`'s ``branch``); False: straight-line, masked (for A/B comparisons)
+    branched = True
 
     def __init__(self, scene: DeviceScene, options: PathOptions):
         self.scene = scene
@@ -150,7 +153,7 @@ class PathIntegrator:
         :meth:`last_segment`."""
         scene = self.scene
         for _ in range(self.opt.max_depth - 1):
-            state = self.bounce(scene, state, rng)
+            state = self.bounce(scene, state, rng, branch=self.branched)
         return self.last_segment(scene, state)
 
     def last_segment(self, scene: DeviceScene, s: PathState) -> Array3f:
@@ -271,9 +274,13 @@ class PathIntegrator:
                          prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
                          active=Bool(active))
 
-    def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32) -> PathState:
+    def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32, branch: bool = False) -> PathState:
         """One vertex of the path: the emission the ray sees, next-event
-        estimation, BSDF sampling and Russian roulette."""
+        estimation, BSDF sampling and Russian roulette. With ``branch`` (the unrolled
+        path's vertices) the vertex's shading, everything after the emission, runs in a
+        symbolic ``if`` on the lanes whose path goes on (label ``drpt_vertex``): a SIMD
+        packet whose rays all escaped or ended skips it. The vertex's random numbers are
+        drawn before the branch, in the loop's order, so the image is the same either way."""
         opt = self.opt
         nee = scene.has_emitters and scene.has_smooth_bsdfs
         # camera rays are coherent; with pixel_coherent every ray of a packet is
@@ -288,19 +295,33 @@ class PathIntegrator:
         if opt.max_depth >= 0:
             active &= s.depth + 1 < opt.max_depth
 
-        # ---- next-event estimation: one emitter, one shadow ray
+        # ---- the vertex's random numbers: light selection and emitter, lobe, direction, roulette
         u_sel = rng.next_float32()
         u_light = next_2d(rng)
         if nee:
             u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
-            L = self._nee(scene, si, s.beta, L, u_sel, u_light, active)
+        u_path = draw_continue(rng)
 
-        # ---- BSDF sampling and Russian roulette: continue the path
-        wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, rng)
-        active &= live
-        return PathState(o=scene.spawn(si, wo), d=Array3f(wo), L=L, beta=beta, eta=eta,
-                         depth=depth, prev_pdf=Float(bs.pdf), prev_delta=Bool(bs.delta),
-                         active=active)
+        def shade(L):
+            # ---- next-event estimation: one emitter, one shadow ray
+            if nee:
+                L = self._nee(scene, si, s.beta, L, u_sel, u_light, active)
+            # ---- BSDF sampling and Russian roulette: continue the path
+            wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, None, u_path)
+            return (scene.spawn(si, wo), Array3f(wo), L, beta, eta, depth, Float(bs.pdf),
+                    Bool(bs.delta), active & live)
+
+        if branch:
+            def skip(L):
+                return (Array3f(s.o), Array3f(s.d), L, Array3f(s.beta), Float(s.eta), s.depth + 1,
+                        Float(s.prev_pdf), Bool(s.prev_delta), Bool(False))
+
+            out = dr.if_stmt((L,), active, shade, skip, label="drpt_vertex")
+        else:
+            out = shade(L)
+        o, d, L, beta, eta, depth, prev_pdf, prev_delta, active = out
+        return PathState(o=o, d=d, L=L, beta=beta, eta=eta, depth=depth, prev_pdf=prev_pdf,
+                         prev_delta=prev_delta, active=active)
 
 
     def _nee(self, scene: DeviceScene, si, beta: Array3f, L: Array3f, u_sel: Float, u_light,
@@ -352,20 +373,26 @@ def add_emission(scene: DeviceScene, opt: PathOptions, si, s, L: Array3f, active
     return L + s.beta * le * w
 
 
-def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32):
+def draw_continue(rng) -> tuple:
+    """:func:`continue_path`'s random numbers ``(u_lobe, u_bsdf, u_rr)``, in its order."""
+    u_lobe = rng.next_float32()
+    u_bsdf = next_2d(rng)
+    return u_lobe, u_bsdf, rng.next_float32()
+
+
+def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32 | None, u: tuple | None = None):
     """Sample the BSDF at ``si`` and play Russian roulette for path state ``s``
-    (three random numbers: lobe, direction, roulette). Returns ``(wo, bs, beta,
+    (three random numbers: lobe, direction, roulette; drawn from ``rng``, or ``u``
+    as :func:`draw_continue` drew them). Returns ``(wo, bs, beta,
     eta, depth, live)``: the new direction and sample, the throughput (divided
     by the survival probability where roulette played), the product of relative
     IORs, the depth, and the lanes whose path goes on. Shared by the megakernel
     and the wavefront integrator."""
-    u_lobe = rng.next_float32()
-    u_bsdf = next_2d(rng)
+    u_lobe, u_bsdf, u_rr = draw_continue(rng) if u is None else u
     wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
     beta = s.beta * bs.weight
     eta = s.eta * bs.eta
     depth = s.depth + 1
-    u_rr = rng.next_float32()
     if opt.rr_prob is not None:
         q = Float(opt.rr_prob)
     else:
