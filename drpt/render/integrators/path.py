@@ -118,8 +118,9 @@ class PathIntegrator:
     #: trace paths of ``0 < max_depth <= UNROLLED_MAX_DEPTH`` as straight-line code
     #: (the module docstring); False: always the bounce loop (for A/B comparisons)
     unrolled = True
-    #: the unrolled path's vertices shade in a symbolic ``if`` on their live lanes
-    #: (:meth:`bounce`'s ``branch``); False: straight-line, masked (for A/B comparisons)
+    #: the unrolled path's vertices and last segment run in symbolic ``if`` statements on
+    #: their live lanes (:meth:`bounce`'s ``branch``, :meth:`last_segment`); False:
+    #: straight-line, masked (for A/B comparisons)
     branched = True
 
     def __init__(self, scene: DeviceScene, options: PathOptions):
@@ -160,14 +161,23 @@ class PathIntegrator:
         """``s.L`` plus what the path's last ray (depth ``max_depth - 1``) sees: the
         emission it hits or the sky, as :meth:`bounce` adds it, without the vertex's
         next-event estimation and BSDF sample (a further segment would exceed
-        ``max_depth``). Nothing is traced where the ray can see nothing (:func:`nothing_seen`)."""
+        ``max_depth``). Nothing is traced where the ray can see nothing (:func:`nothing_seen`).
+        After a vertex (``max_depth > 1``) with :attr:`branched`, the segment runs in a symbolic
+        ``if`` on the live lanes (label ``drpt_last``): a packet whose paths all ended skips
+        its ray query."""
         if nothing_seen(scene):
             return s.L
         camera = self.opt.max_depth == 1
-        si = scene.intersect(s.o, s.d, s.active, coherent=camera or self.pixel_coherent)
-        if camera:
-            si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
-        return add_emission(scene, self.opt, si, s, s.L, s.active)
+
+        def look(L):
+            si = scene.intersect(s.o, s.d, s.active, coherent=camera or self.pixel_coherent)
+            if camera:
+                si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
+            return (add_emission(scene, self.opt, si, s, L, s.active),)
+
+        if camera or not self.branched:  # (every camera ray is live)
+            return look(s.L)[0]
+        return dr.if_stmt((s.L,), s.active, look, lambda L: (L,), label="drpt_last")[0]
 
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:
         """Radiance arriving at ``o`` from direction ``-d``, one sample per lane."""
