@@ -146,6 +146,9 @@ AOV_STREAM = 0xA0F5EED
 BDPT_PILOT_STREAM = 0xB1D1C0DE
 #: the pilot's lanes (at most; whole rows of one sample per pixel)
 BDPT_PILOT_LANES = 1 << 16
+#: paths per lane (at most) where the path tracer traces short paths unrolled
+#: (:attr:`~drpt.render.integrators.path.PathIntegrator.straight`): see :meth:`Renderer._trace_pass`
+STRAIGHT_PATHS_PER_LANE = 3
 
 
 def _mix_seed(seed: int, index: int) -> int:
@@ -435,10 +438,17 @@ class Renderer:
         # "Execution model"), but too few lanes leave the device idle. Where a
         # pixel's paths follow the same mirrors (PathIntegrator.pixel_coherent)
         # a lane per sample keeps each packet on one pixel's paths: m = k.
+        # Unrolled short paths (PathIntegrator.straight) all take the same work, so
+        # path regeneration's balancing has nothing to gain from long lanes, and a pixel's
+        # paths share their hits and misses: m = ceil(k / STRAIGHT_PATHS_PER_LANE) lanes
+        # keep a 16-lane packet on one or two pixels' paths (whole packets skip what their
+        # escaped paths need not trace) at few lanes' overhead (docs/performance.md).
         min_lanes = policy().min_lanes
         m = min(k, -(-min_lanes // pixels)) if sequential else k
         if sequential and getattr(self.integrator, "pixel_coherent", False):
             m = k
+        elif sequential and getattr(self.integrator, "straight", False):
+            m = max(m, -(-k // STRAIGHT_PATHS_PER_LANE))
         n = pixels * m
         lane = dr.arange(UInt32, n)
         mm, kk = dr.opaque(UInt32, m), dr.opaque(UInt32, k)
