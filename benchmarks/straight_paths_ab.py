@@ -11,10 +11,12 @@ the ways take turns (round ``k`` with seed ``k``):
   lanes, :attr:`~drpt.render.integrators.path.PathIntegrator.branched`; ``ceil(k / 3)`` lanes per
   pixel, :data:`~drpt.render.renderer.STRAIGHT_PATHS_PER_LANE`);
 * ``masked``: ``branched`` False (straight-line code, every lane masked; the same image);
-* ``one-lane``: ``branched`` False and ``min_lanes``' lanes per pixel (one at 192x192), the
-  layout and code before both.
+* ``closest``: ``emitter_first`` False (the last segment by the closest hit, where the scene's
+  emitters are a few triangles and nothing else is seen; the same image to float rounding);
+* ``one-lane``: all three off and ``min_lanes``' lanes per pixel (one at 192x192): the
+  layout and code before them.
 
-Prints per scene the median render seconds of each way, the median over rounds of the
+Prints per scene the median render seconds of ``now``, the median over rounds of the
 per-round ratio way / ``now`` (the ways of a round run back to back, so load from other
 processes falls on them alike: read these), and whether ``masked``'s images are ``now``'s bit
 for bit (they must be).
@@ -56,11 +58,12 @@ def main(argv=None) -> list[dict]:
     ensure()
     only = [w for w in a.only.split(",") if w]
     per_lane = renderer.STRAIGHT_PATHS_PER_LANE
-    ways = {"now": (True, per_lane), "masked": (False, per_lane), "one-lane": (False, 1 << 30)}
+    ways = {"now": (True, True, per_lane), "masked": (False, True, per_lane),
+            "closest": (True, False, per_lane), "one-lane": (False, False, 1 << 30)}
     print(f"commit {eq._commit()}, {eq._cpu()}; {a.rounds} rounds; load average {os.getloadavg()[0]:.1f}")
-    print("\n| scene | size, spp | now s | masked s | one-lane s | masked / now | one-lane / now "
+    print("\n| scene | size, spp | now s | masked / now | closest / now | one-lane / now "
           "| masked image = now's |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|")
     rows = []
     for path in eq.corpus_files():
         name = str(path.relative_to(eq.CORPUS))
@@ -73,21 +76,22 @@ def main(argv=None) -> list[dict]:
         same = True
         for rnd in range(a.rounds + 1):
             images = {}
-            for w, (branched, lanes) in ways.items():
-                PathIntegrator.branched, renderer.STRAIGHT_PATHS_PER_LANE = branched, lanes
+            for w, (branched, first, lanes) in ways.items():
+                PathIntegrator.branched, PathIntegrator.emitter_first = branched, first
+                renderer.STRAIGHT_PATHS_PER_LANE = lanes
                 r.opt.seed = rnd
                 t0 = time.perf_counter()
                 images[w] = r.render().image
                 if rnd > 0:  # (round 0 compiles)
                     secs[w].append(time.perf_counter() - t0)
             same &= bool(np.array_equal(images["now"], images["masked"]))
-        PathIntegrator.branched, renderer.STRAIGHT_PATHS_PER_LANE = True, per_lane
+        PathIntegrator.branched = PathIntegrator.emitter_first = True
+        renderer.STRAIGHT_PATHS_PER_LANE = per_lane
 
         ratio = {w: statistics.median(t / n for t, n in zip(secs[w], secs["now"])) for w in ways}
         med = {w: statistics.median(secs[w]) for w in ways}
-        print(f"| {name} | {r.opt.width}x{r.opt.height}, {r.opt.spp} | {med['now']:.3f} | {med['masked']:.3f} "
-              f"| {med['one-lane']:.3f} | {ratio['masked']:.2f} | {ratio['one-lane']:.2f} "
-              f"| {'yes' if same else 'NO'} |", flush=True)
+        print(f"| {name} | {r.opt.width}x{r.opt.height}, {r.opt.spp} | {med['now']:.3f} | {ratio['masked']:.2f} "
+              f"| {ratio['closest']:.2f} | {ratio['one-lane']:.2f} | {'yes' if same else 'NO'} |", flush=True)
         rows.append({"scene": name, "seconds": secs, "ratio": ratio, "identical": same})
     return rows
 

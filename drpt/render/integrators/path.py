@@ -62,6 +62,7 @@ PCG32 stream (the loop also draws at its last vertex), so their images differ by
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -71,7 +72,7 @@ from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32
 from ...options import PathOptions
 from ..sampler import light_sample, next_2d, next_path
 from ..scene import DeviceScene
-from .common import DirectLight, power_heuristic
+from .common import SHADOW_SHRINK, DirectLight, power_heuristic
 
 #: the largest ``max_depth`` whose paths are traced as straight-line code (``0 < max_depth``)
 UNROLLED_MAX_DEPTH = 3
@@ -122,6 +123,9 @@ class PathIntegrator:
     #: their live lanes (:meth:`bounce`'s ``branch``, :meth:`last_segment`); False:
     #: straight-line, masked (for A/B comparisons)
     branched = True
+    #: the unrolled path's last segment looks for a few emissive triangles first where they
+    #: are all a ray can see (:attr:`emitters_first`); False: the closest hit (A/B comparisons)
+    emitter_first = True
 
     def __init__(self, scene: DeviceScene, options: PathOptions):
         self.scene = scene
@@ -175,9 +179,39 @@ class PathIntegrator:
                 si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
             return (add_emission(scene, self.opt, si, s, L, s.active),)
 
+        if self.emitters_first:
+            look = functools.partial(self._look_at_emitters, scene, s)
         if camera or not self.branched:  # (every camera ray is live)
             return look(s.L)[0]
         return dr.if_stmt((s.L,), s.active, look, lambda L: (L,), label="drpt_last")[0]
+
+    @property
+    def emitters_first(self) -> bool:
+        """Whether the unrolled path's last segment (after a vertex) looks for emitters first
+        (:meth:`_look_at_emitters`): read at trace time, with :attr:`emitter_first` on, where
+        the only things a ray can see are a few emissive triangles
+        (:attr:`~drpt.render.scene.DeviceScene.emissive`: no sky, background, or emissive
+        sphere)."""
+        scene = self.scene
+        if not (self.emitter_first and self.opt.max_depth > 1 and getattr(scene, "emissive", None) is not None):
+            return False
+        infinite = any(f.infinite and not f.delta for f in scene.emitter_selection.families)
+        return not (infinite or scene.has_background)
+
+    def _look_at_emitters(self, scene: DeviceScene, s: PathState, L: Array3f) -> tuple[Array3f]:
+        """``(L plus the emission the ray s.d sees,)``, found emitter first: the nearest
+        emissive triangle along the ray (the scene's few, compiled inline), then one shadow
+        ray up to it (any hit, stopped just short of it). A ray that misses every emitter
+        (most rays, with a small light) traces nothing in the scene; one that reaches an
+        emitter sees what the closest hit would have found there, so the estimate is the
+        closest hit's up to float rounding (the distance and barycentrics of another
+        triangle test)."""
+        hit = scene.emissive.intersect(s.o, s.d, s.active)
+        near = s.active & hit.valid
+        blocked = scene.occluded(s.o, s.d, hit.t * SHADOW_SHRINK, near)
+        hit.valid = near & ~blocked
+        si = scene.interaction(s.o, s.d, hit)
+        return (add_emission(scene, self.opt, si, s, L, s.active),)
 
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:
         """Radiance arriving at ``o`` from direction ``-d``, one sample per lane."""
