@@ -5,8 +5,9 @@ bounded at any image size and sample count: a pass covers a band of rows with
 ``k`` samples per pixel (``k`` as large as the budget allows). The path
 tracer runs them with *path regeneration*
 (:meth:`~drpt.render.integrators.path.PathIntegrator.sample_sequence`): each
-pixel gets ``m`` Dr.Jit lanes (from ``drpt.backend.policy().min_lanes``,
-see :meth:`Renderer.render_pass`), each lane traces its
+pixel gets ``m`` Dr.Jit lanes (from ``drpt.backend.policy().min_lanes``; short
+unrolled paths at least ``ceil(k / 3)``, :data:`STRAIGHT_PATHS_PER_LANE`;
+see :meth:`Renderer._trace_pass`), each lane traces its
 share of the ``k`` samples one path after another and sums them, so a SIMD
 packet no longer waits for its longest path at every bounce (its gain:
 docs/performance.md, "Execution model"). The Whitted integrator runs one sample per lane. Lanes are
@@ -148,6 +149,9 @@ BDPT_PILOT_STREAM = 0xB1D1C0DE
 BDPT_PHOTON_STREAM = 0x9E0F0CA5
 #: the pilot's lanes (at most; whole rows of one sample per pixel)
 BDPT_PILOT_LANES = 1 << 16
+#: paths per lane (at most) where the path tracer traces short paths unrolled
+#: (:attr:`~drpt.render.integrators.path.PathIntegrator.straight`): see :meth:`Renderer._trace_pass`
+STRAIGHT_PATHS_PER_LANE = 3
 
 
 def _mix_seed(seed: int, index: int) -> int:
@@ -438,10 +442,17 @@ class Renderer:
         # "Execution model"), but too few lanes leave the device idle. Where a
         # pixel's paths follow the same mirrors (PathIntegrator.pixel_coherent)
         # a lane per sample keeps each packet on one pixel's paths: m = k.
+        # Unrolled short paths (PathIntegrator.straight) all take the same work, so
+        # path regeneration's balancing has nothing to gain from long lanes, and a pixel's
+        # paths share their hits and misses: m = ceil(k / STRAIGHT_PATHS_PER_LANE) lanes
+        # keep a 16-lane packet on one or two pixels' paths (whole packets skip what their
+        # escaped paths need not trace) at few lanes' overhead (docs/performance.md).
         min_lanes = policy().min_lanes
         m = min(k, -(-min_lanes // pixels)) if sequential else k
         if sequential and getattr(self.integrator, "pixel_coherent", False):
             m = k
+        elif sequential and getattr(self.integrator, "straight", False):
+            m = max(m, -(-k // STRAIGHT_PATHS_PER_LANE))
         n = pixels * m
         lane = dr.arange(UInt32, n)
         mm, kk = dr.opaque(UInt32, m), dr.opaque(UInt32, k)

@@ -141,6 +141,54 @@ class NoMaterials:
     albedo = diffuse_color
 
 
+#: the most emissive triangles :func:`emissive_inline` compiles into a kernel
+EMISSIVE_INLINE_MAX = 16
+
+
+class EmissiveList:
+    """The scene's emissive triangles as an inline accelerator of their own
+    (:class:`~drpt.accel.inline.InlineList`: each triangle's test compiled into the kernel
+    with its vertices as constants): :meth:`intersect` finds the nearest emissive surface
+    along a ray without traversing the scene, and returns it with its global primitive id."""
+
+    def __init__(self, ids: np.ndarray, positions: np.ndarray):
+        from ..accel.inline import InlineList
+
+        class _Prims(list):  # the part of a Scene InlineList reads
+            positions = None
+
+        tris = _Prims(range(len(ids)))
+        tris.positions = positions
+        self.count = len(ids)
+        self._list = InlineList(type("EmissiveScene", (), {"triangles": tris, "spheres": [], "planes": []}))
+        self._ids = UInt32(np.asarray(ids, np.uint32))
+
+    def intersect(self, o: Array3f, d: Array3f, active: Bool):
+        """The nearest emissive triangle hit by ``(o, d)`` (a :class:`~drpt.accel.protocol.Hit`
+        whose ``prim`` is the scene's primitive id)."""
+        hit = self._list.intersect(o, d, Float(dr.largest(Float)), active)
+        hit.prim = dr.select(hit.valid, dr.gather(UInt32, self._ids, hit.prim, hit.valid), INVALID)
+        return hit
+
+
+def emissive_inline(scene: Scene) -> EmissiveList | None:
+    """An :class:`EmissiveList` of ``scene``'s emissive triangles, or None where there are
+    none, more than :data:`EMISSIVE_INLINE_MAX`, or emissive spheres or planes."""
+    emits = np.array([m.is_emissive or getattr(m, "emission_texture", None) is not None
+                      for m in scene.materials], bool)
+    if not len(emits) or not emits.any():
+        return None
+    if any(len(g) and emits[np.asarray(g.material, np.int64)].any() for g in (scene.spheres, scene.planes)):
+        return None
+    tris = scene.triangles
+    if not len(tris):
+        return None
+    ids = np.nonzero(emits[np.asarray(tris.material, np.int64)])[0]
+    if not 0 < len(ids) <= EMISSIVE_INLINE_MAX:
+        return None
+    return EmissiveList(ids, np.asarray(tris.positions)[ids])
+
+
 class DeviceScene:
     def __init__(self, scene: Scene, options: RenderOptions):
         llvm_tuning.apply()  # as the CLI's backend check does, for API users too
@@ -157,6 +205,9 @@ class DeviceScene:
             self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None or uv_aov,
                                         tangents=self.materials.tangents)
         self.area_lights = AreaLights(scene, self.surfaces, self.materials, sampler=options.light_sampler)
+        #: the emissive surfaces alone, where they are at most EMISSIVE_INLINE_MAX triangles
+        #: (:func:`emissive_inline`), else None
+        self.emissive = emissive_inline(scene)
         self.delta_lights = DeltaLights(scene)
         self.warnings: list[str] = list(self.materials.notes)
         if self.is_empty:

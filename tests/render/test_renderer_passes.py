@@ -188,3 +188,53 @@ def test_coherent_queries_change_no_pixel_of_a_mirror_scene(tmp_path, monkeypatc
     assert asked and all(c is True for c in asked)
     assert coherent.max() > 0.0
     np.testing.assert_array_equal(plain, coherent)
+
+
+SKY_XML = """<scene version="3.0.0">
+  <sensor type="perspective">
+    <transform name="to_world"><lookat origin="0, 0, 0" target="0, 0, 1" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="7"/><integer name="height" value="5"/>
+      <rfilter type="box"/></film>
+  </sensor>
+  <emitter type="constant"><rgb name="radiance" value="0.5"/></emitter>
+  <shape type="sphere"><point name="center" x="0" y="0" z="-50"/><bsdf type="diffuse"/></shape>
+</scene>"""
+
+
+@pytest.mark.parametrize("depth,spp", [(2, 1), (2, 3), (2, 4), (3, 13), (8, 13)])
+def test_unrolled_paths_trace_a_few_paths_per_lane(tmp_path, monkeypatch, depth, spp):
+    """Short paths traced unrolled (``PathIntegrator.straight``) get ``ceil(spp / 3)`` lanes per
+    pixel (:data:`~drpt.render.renderer.STRAIGHT_PATHS_PER_LANE`), whatever ``min_lanes`` asks,
+    and every pixel still sums exactly ``spp`` samples (a constant sky, nothing in view: 0.5 and
+    zero variance only then). Negative control: the bounce loop (depth 8) keeps ``min_lanes``'
+    one lane per pixel."""
+    import dataclasses
+
+    import drjit as dr
+
+    from drpt import backend
+    from drpt.options import PathOptions
+    from drpt.render import renderer
+    from drpt.render.integrators.path import PathIntegrator
+    from drpt.scene import load_scene
+
+    policy = dataclasses.replace(backend.policy(), min_lanes=1)
+    monkeypatch.setattr(renderer, "policy", lambda: policy)
+    widths = []
+    traced = PathIntegrator.sample_sequence
+
+    def recording(self, rng, camera_ray, count, *args, **kw):
+        widths.append(dr.width(count))
+        return traced(self, rng, camera_ray, count, *args, **kw)
+
+    monkeypatch.setattr(PathIntegrator, "sample_sequence", recording)
+    (tmp_path / "s.xml").write_text(SKY_XML)
+    rend = renderer.Renderer(load_scene(tmp_path / "s.xml"), renderer.RenderOptions(
+        width=7, height=5, spp=spp, progress=False, path=PathOptions(max_depth=depth)))
+    assert rend.integrator.straight == (depth <= 3)
+    r = rend.render()
+    per_pixel = -(-spp // renderer.STRAIGHT_PATHS_PER_LANE) if depth <= 3 else 1
+    assert widths == [7 * 5 * per_pixel]
+    assert r.samples == 7 * 5 * spp
+    assert np.array_equal(r.image, np.full((5, 7, 3), 0.5, np.float32))
+    assert np.all(r.variance == 0.0)

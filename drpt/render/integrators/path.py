@@ -62,6 +62,7 @@ PCG32 stream (the loop also draws at its last vertex), so their images differ by
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -72,7 +73,7 @@ from ...options import PathOptions
 from ..loops import loops_once, widen
 from ..sampler import light_sample, next_2d, next_path
 from ..scene import DeviceScene
-from .common import DirectLight, power_heuristic
+from .common import SHADOW_SHRINK, DirectLight, power_heuristic
 
 #: the largest ``max_depth`` whose paths are traced as straight-line code (``0 < max_depth``)
 UNROLLED_MAX_DEPTH = 3
@@ -119,6 +120,13 @@ class PathIntegrator:
     #: trace paths of ``0 < max_depth <= UNROLLED_MAX_DEPTH`` as straight-line code
     #: (the module docstring); False: always the bounce loop (for A/B comparisons)
     unrolled = True
+    #: the unrolled path's vertices and last segment run in symbolic ``if`` statements on
+    #: their live lanes (:meth:`bounce`'s ``branch``, :meth:`last_segment`); False:
+    #: straight-line, masked (for A/B comparisons)
+    branched = True
+    #: the unrolled path's last segment looks for a few emissive triangles first where they
+    #: are all a ray can see (:attr:`emitters_first`); False: the closest hit (A/B comparisons)
+    emitter_first = True
 
     def __init__(self, scene: DeviceScene, options: PathOptions):
         self.scene = scene
@@ -151,21 +159,60 @@ class PathIntegrator:
         :meth:`last_segment`."""
         scene = self.scene
         for _ in range(self.opt.max_depth - 1):
-            state = self.bounce(scene, state, rng)
+            state = self.bounce(scene, state, rng, branch=self.branched)
         return self.last_segment(scene, state)
 
     def last_segment(self, scene: DeviceScene, s: PathState) -> Array3f:
         """``s.L`` plus what the path's last ray (depth ``max_depth - 1``) sees: the
         emission it hits or the sky, as :meth:`bounce` adds it, without the vertex's
         next-event estimation and BSDF sample (a further segment would exceed
-        ``max_depth``). Nothing is traced where the ray can see nothing (:func:`nothing_seen`)."""
+        ``max_depth``). Nothing is traced where the ray can see nothing (:func:`nothing_seen`).
+        After a vertex (``max_depth > 1``) with :attr:`branched`, the segment runs in a symbolic
+        ``if`` on the live lanes (label ``drpt_last``): a packet whose paths all ended skips
+        its ray query."""
         if nothing_seen(scene):
             return s.L
         camera = self.opt.max_depth == 1
-        si = scene.intersect(s.o, s.d, s.active, coherent=camera or self.pixel_coherent)
-        if camera:
-            si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
-        return add_emission(scene, self.opt, si, s, s.L, s.active)
+
+        def look(L):
+            si = scene.intersect(s.o, s.d, s.active, coherent=camera or self.pixel_coherent)
+            if camera:
+                si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
+            return (add_emission(scene, self.opt, si, s, L, s.active),)
+
+        if self.emitters_first:
+            look = functools.partial(self._look_at_emitters, scene, s)
+        if camera or not self.branched:  # (every camera ray is live)
+            return look(s.L)[0]
+        return dr.if_stmt((s.L,), s.active, look, lambda L: (L,), label="drpt_last")[0]
+
+    @property
+    def emitters_first(self) -> bool:
+        """Whether the unrolled path's last segment (after a vertex) looks for emitters first
+        (:meth:`_look_at_emitters`): read at trace time, with :attr:`emitter_first` on, where
+        the only things a ray can see are a few emissive triangles
+        (:attr:`~drpt.render.scene.DeviceScene.emissive`: no sky, background, or emissive
+        sphere)."""
+        scene = self.scene
+        if not (self.emitter_first and self.opt.max_depth > 1 and getattr(scene, "emissive", None) is not None):
+            return False
+        infinite = any(f.infinite and not f.delta for f in scene.emitter_selection.families)
+        return not (infinite or scene.has_background)
+
+    def _look_at_emitters(self, scene: DeviceScene, s: PathState, L: Array3f) -> tuple[Array3f]:
+        """``(L plus the emission the ray s.d sees,)``, found emitter first: the nearest
+        emissive triangle along the ray (the scene's few, compiled inline), then one shadow
+        ray up to it (any hit, stopped just short of it). A ray that misses every emitter
+        (most rays, with a small light) traces nothing in the scene; one that reaches an
+        emitter sees what the closest hit would have found there, so the estimate is the
+        closest hit's up to float rounding (the distance and barycentrics of another
+        triangle test)."""
+        hit = scene.emissive.intersect(s.o, s.d, s.active)
+        near = s.active & hit.valid
+        blocked = scene.occluded(s.o, s.d, hit.t * SHADOW_SHRINK, near)
+        hit.valid = near & ~blocked
+        si = scene.interaction(s.o, s.d, hit)
+        return (add_emission(scene, self.opt, si, s, L, s.active),)
 
     @loops_once
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:
@@ -281,9 +328,13 @@ class PathIntegrator:
                          prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
                          active=Bool(active))
 
-    def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32) -> PathState:
+    def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32, branch: bool = False) -> PathState:
         """One vertex of the path: the emission the ray sees, next-event
-        estimation, BSDF sampling and Russian roulette."""
+        estimation, BSDF sampling and Russian roulette. With ``branch`` (the unrolled
+        path's vertices) the vertex's shading, everything after the emission, runs in a
+        symbolic ``if`` on the lanes whose path goes on (label ``drpt_vertex``): a SIMD
+        packet whose rays all escaped or ended skips it. The vertex's random numbers are
+        drawn before the branch, in the loop's order, so the image is the same either way."""
         opt = self.opt
         nee = scene.has_emitters and scene.has_smooth_bsdfs
         # camera rays are coherent; with pixel_coherent every ray of a packet is
@@ -298,19 +349,33 @@ class PathIntegrator:
         if opt.max_depth >= 0:
             active &= s.depth + 1 < opt.max_depth
 
-        # ---- next-event estimation: one emitter, one shadow ray
+        # ---- the vertex's random numbers: light selection and emitter, lobe, direction, roulette
         u_sel = rng.next_float32()
         u_light = next_2d(rng)
         if nee:
             u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
-            L = self._nee(scene, si, s.beta, L, u_sel, u_light, active)
+        u_path = draw_continue(rng)
 
-        # ---- BSDF sampling and Russian roulette: continue the path
-        wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, rng)
-        active &= live
-        return PathState(o=scene.spawn(si, wo), d=Array3f(wo), L=L, beta=beta, eta=eta,
-                         depth=depth, prev_pdf=Float(bs.pdf), prev_delta=Bool(bs.delta),
-                         active=active)
+        def shade(L):
+            # ---- next-event estimation: one emitter, one shadow ray
+            if nee:
+                L = self._nee(scene, si, s.beta, L, u_sel, u_light, active)
+            # ---- BSDF sampling and Russian roulette: continue the path
+            wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, None, u_path)
+            return (scene.spawn(si, wo), Array3f(wo), L, beta, eta, depth, Float(bs.pdf),
+                    Bool(bs.delta), active & live)
+
+        if branch:
+            def skip(L):
+                return (Array3f(s.o), Array3f(s.d), L, Array3f(s.beta), Float(s.eta), s.depth + 1,
+                        Float(s.prev_pdf), Bool(s.prev_delta), Bool(False))
+
+            out = dr.if_stmt((L,), active, shade, skip, label="drpt_vertex")
+        else:
+            out = shade(L)
+        o, d, L, beta, eta, depth, prev_pdf, prev_delta, active = out
+        return PathState(o=o, d=d, L=L, beta=beta, eta=eta, depth=depth, prev_pdf=prev_pdf,
+                         prev_delta=prev_delta, active=active)
 
 
     def _nee(self, scene: DeviceScene, si, beta: Array3f, L: Array3f, u_sel: Float, u_light,
@@ -362,20 +427,26 @@ def add_emission(scene: DeviceScene, opt: PathOptions, si, s, L: Array3f, active
     return L + s.beta * le * w
 
 
-def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32):
+def draw_continue(rng) -> tuple:
+    """:func:`continue_path`'s random numbers ``(u_lobe, u_bsdf, u_rr)``, in its order."""
+    u_lobe = rng.next_float32()
+    u_bsdf = next_2d(rng)
+    return u_lobe, u_bsdf, rng.next_float32()
+
+
+def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32 | None, u: tuple | None = None):
     """Sample the BSDF at ``si`` and play Russian roulette for path state ``s``
-    (three random numbers: lobe, direction, roulette). Returns ``(wo, bs, beta,
+    (three random numbers: lobe, direction, roulette; drawn from ``rng``, or ``u``
+    as :func:`draw_continue` drew them). Returns ``(wo, bs, beta,
     eta, depth, live)``: the new direction and sample, the throughput (divided
     by the survival probability where roulette played), the product of relative
     IORs, the depth, and the lanes whose path goes on. Shared by the megakernel
     and the wavefront integrator."""
-    u_lobe = rng.next_float32()
-    u_bsdf = next_2d(rng)
+    u_lobe, u_bsdf, u_rr = draw_continue(rng) if u is None else u
     wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
     beta = s.beta * bs.weight
     eta = s.eta * bs.eta
     depth = s.depth + 1
-    u_rr = rng.next_float32()
     if opt.rr_prob is not None:
         q = Float(opt.rr_prob)
     else:
