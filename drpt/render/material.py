@@ -47,6 +47,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import drjit as dr
+import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ..materials.layout import NONE, MaterialLayout
@@ -226,6 +227,12 @@ class MaterialTable:
         self._all_delta = bool(delta.all())
         self._mat_delta = None if (self._all_delta or not delta.any()) else Bool(delta)
         self._any_delta = bool(delta.any())
+        # materials blending two or more smooth components (blendbsdf of two lobes, ...):
+        # only theirs need the whole mixture evaluated after sampling (see sample); a
+        # mask's pass-through beside one smooth lobe does not
+        blends = np.array([sum(not self.lobes[c.leaf.kind].DELTA for c in cs) > 1
+                           for cs in lay.components], bool)
+        self._blends_smooth = True if blends.all() else Bool(blends) if blends.any() else False
 
     _only: tuple[str, ...] | None = None  # a restricted view's kinds (see restricted)
 
@@ -534,11 +541,22 @@ class MaterialTable:
             out, wo = case.run(draw, (out, wo))
         out.valid &= present
         if self.K > 1 and not self.is_specular_only():
-            # a smooth sample weighs the whole mixture: f_mix / pdf_mix
             smooth = out.valid & ~out.delta
-            f, pdf = self.eval_pdf(si, wo)
-            ok = smooth & (pdf > 0.0)
-            out.weight = dr.select(smooth, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0), out.weight)
-            out.pdf = dr.select(smooth, pdf, out.pdf)
-            out.valid &= ~smooth | ok
+            # A smooth sample weighs the whole mixture: f_mix / pdf_mix. Where the chosen
+            # component is its material's only smooth one (the others Dirac: a mask's
+            # pass-through), f_mix = w f_j and pdf_mix = w pdf_j (Dirac lobes add nothing
+            # off their direction), so the ratio is the component's own weight and the
+            # density its own times its slot's weight w: no second evaluation.
+            blends = self._blends_smooth
+            if blends is not True:
+                single = smooth if blends is False else smooth & ~dr.gather(Bool, blends, si.material, smooth)
+                out.pdf = dr.select(single, out.pdf * chosen_w, out.pdf)
+                out.valid &= ~single | (out.pdf > 0.0)
+            if blends is not False:
+                mixed = smooth if blends is True else smooth & dr.gather(Bool, blends, si.material, smooth)
+                f, pdf = self.eval_pdf(si, wo)
+                ok = mixed & (pdf > 0.0)
+                out.weight = dr.select(mixed, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0), out.weight)
+                out.pdf = dr.select(mixed, pdf, out.pdf)
+                out.valid &= ~mixed | ok
         return wo, out
