@@ -83,6 +83,12 @@ def _luminance(c: Array3f) -> Float:
     return 0.212671 * c.x + 0.715160 * c.y + 0.072169 * c.z
 
 
+def _among(ids) -> tuple[int, ...]:
+    """The texture ids an index array references (:data:`NONE` left out), host side."""
+    a = np.asarray(ids, np.int64)
+    return tuple(int(i) for i in np.unique(a[a != NONE]))
+
+
 def _flag(v):
     """A layout flag on the device: a Python bool stays one (decided at trace time)."""
     return v if isinstance(v, bool) else Bool(v)
@@ -98,6 +104,7 @@ class _Slot:
     complement: Bool
     kinds: list[str]
     partial: bool
+    among: tuple[int, ...] | None  # the texture ids of the weights
 
 
 @dataclass
@@ -145,7 +152,8 @@ class Rows:
         if tid is not None:
             ids = dr.gather(UInt32, tid, self.row, active)
             textured = active & (ids != NONE)
-            looked = self.table.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f, si=si)
+            looked = self.table.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f, si=si,
+                                                among=self.table._tex_among[name])
             v = dr.select(textured, looked if cls is Array3f else _luminance(looked), v)
         return v
 
@@ -197,23 +205,28 @@ class MaterialTable:
         # slots (only when some material has several components)
         self._slots = [_Slot(UInt32(sl.row), Float(sl.weight),
                              None if sl.texture is None else UInt32(sl.texture), Bool(sl.complement),
-                             sl.kinds, sl.partial) for sl in lay.slots]
+                             sl.kinds, sl.partial, None if sl.texture is None else _among(sl.texture))
+                       for sl in lay.slots]
         # per-row fields of the kinds present
         self._types = {name: f.type for name, f in lay.fields.items()}
         self._data: dict[str, object] = {}
         self._tex: dict[str, UInt32] = {}
+        self._tex_among: dict[str, tuple[int, ...]] = {}  # per textured field, the ids it references
         for name, f in lay.fields.items():
             self._data[name] = _vec(f.values) if f.type == "rgb" else Float(f.values)
             if f.texture is not None:
                 self._tex[name] = UInt32(f.texture)
+                self._tex_among[name] = _among(f.texture)
         # textured emission (Mitsuba's area radiance bitmap), by material
         self._emit_tex = None if lay.emission_texture is None else UInt32(lay.emission_texture)
+        self._emit_among = None if lay.emission_texture is None else _among(lay.emission_texture)
         # Perturbed frames (normalmap, bumpmap): per row, only in scenes that have them
         self._pkinds = lay.perturbed_kinds
         if lay.perturb is not None:
             pt = lay.perturb
             self._has_normal, self._has_bump = pt.has_normal, pt.has_bump
             self._p_code, self._p_tex = UInt32(pt.code), UInt32(pt.texture)
+            self._p_among = _among(pt.texture)
             self._p_const = None if pt.constant is None else _vec(pt.constant)
             if pt.scale is not None:
                 self._p_scale = Float(pt.scale)
@@ -263,11 +276,12 @@ class MaterialTable:
         if self._has_normal:
             m = mask & (code == 1)
             if self._p_const is None:
-                rgb = self.textures.lookup(tid, si.uv, m, si=si)
+                rgb = self.textures.lookup(tid, si.uv, m, si=si, among=self._p_among)
             else:
                 rgb = dr.gather(Array3f, self._p_const, row, m)
                 if self.textures is not None:
-                    rgb = dr.select(tid != NONE, self.textures.lookup(tid, si.uv, m & (tid != NONE), si=si), rgb)
+                    rgb = dr.select(tid != NONE, self.textures.lookup(tid, si.uv, m & (tid != NONE), si=si,
+                                                                      among=self._p_among), rgb)
             nn = perturb.normalmap_normal(rgb)
             if flip is not False:
                 nn = dr.select(flip, perturb.flip_invalid(nn, wi_l), nn)
@@ -329,7 +343,7 @@ class MaterialTable:
         it has one (only traced for scenes with a textured emitter)."""
         ids = dr.gather(UInt32, self._emit_tex, material, active)
         textured = active & (ids != NONE)
-        return dr.select(textured, self.textures.lookup(ids, uv, textured), le)
+        return dr.select(textured, self.textures.lookup(ids, uv, textured, among=self._emit_among), le)
 
     def is_specular_only(self) -> bool:
         """Whether every lobe this table traces (a :meth:`restricted` view: its kinds') is a delta lobe."""
@@ -409,7 +423,7 @@ class MaterialTable:
         if s.texture is not None:
             ids = dr.gather(UInt32, s.texture, si.material, present)
             textured = present & (ids != NONE)
-            t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True, si=si))
+            t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True, si=si, among=s.among))
             comp = dr.gather(Bool, s.complement, si.material, present)
             w = dr.select(textured, w * dr.select(comp, 1.0 - t, t), w)
         return row, dr.select(present, w, 0.0), present

@@ -164,6 +164,34 @@ def test_several_textures_and_masks(exr, png):
     np.testing.assert_array_equal(got[:, 3], 0.0)
 
 
+def test_among_traces_only_the_textures_named(exr, png):
+    """``lookup(..., among=ids)`` gives the same values as the whole set on lanes whose id
+    is in ``ids``, 0 on the others, and traces only those textures' lookups (fewer
+    operations: a field evaluates only the textures it references)."""
+    (pe, img), (pp, lin) = exr, png
+    ts = TextureSet([pe, pp])
+    u, v = _center_uv(1, 2)
+    h, w = lin.shape[:2]
+    u2, v2 = _center_uv(2, 3, h, w)
+    uv = Array2f(Float([u, u2]), Float([v, v2]))
+    ids = UInt32([0, 1])
+    both = np.array(ts.lookup(ids, uv, True))
+    only1 = np.array(ts.lookup(ids, uv, True, among=(1,)))
+    np.testing.assert_array_equal(only1[:, 1], both[:, 1])
+    np.testing.assert_array_equal(only1[:, 0], 0.0)  # texture 0 is not looked up
+    np.testing.assert_allclose(both[:, 0], img[1, 2], atol=1e-6)
+    assert np.all(np.array(ts.lookup(ids, uv, True, among=())) == 0.0)
+
+    def ops(among):
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        dr.kernel_history_clear()
+        uv3 = Array2f(Float([u, u2, u2]), Float([v, v2, v2])) + 0 * dr.arange(Float, 3)  # traced, not literal
+        dr.eval(ts.lookup(UInt32([0, 1, 1]), uv3, True, among=among))
+        return sum(k.get("operation_count", 0) for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT)
+
+    assert ops((1,)) < ops(None)
+
+
 def test_empty_set_traces_nothing():
     ts = TextureSet([])
     assert len(ts) == 0
