@@ -83,6 +83,12 @@ def _luminance(c: Array3f) -> Float:
     return 0.212671 * c.x + 0.715160 * c.y + 0.072169 * c.z
 
 
+def _among(ids) -> tuple[int, ...]:
+    """The texture ids an index array references (:data:`NONE` left out), host side."""
+    a = np.asarray(ids, np.int64)
+    return tuple(int(i) for i in np.unique(a[a != NONE]))
+
+
 def _flag(v):
     """A layout flag on the device: a Python bool stays one (decided at trace time)."""
     return v if isinstance(v, bool) else Bool(v)
@@ -98,6 +104,7 @@ class _Slot:
     complement: Bool
     kinds: list[str]
     partial: bool
+    among: tuple[int, ...] | None  # the texture ids of the weights
 
 
 @dataclass
@@ -146,7 +153,7 @@ class Rows:
             ids = dr.gather(UInt32, tid, self.row, active)
             textured = active & (ids != NONE)
             looked = self.table.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f, si=si,
-                                                only=self.table._tex_ids[name])
+                                                among=self.table._tex_among[name])
             v = dr.select(textured, looked if cls is Array3f else _luminance(looked), v)
         return v
 
@@ -198,26 +205,28 @@ class MaterialTable:
         # slots (only when some material has several components)
         self._slots = [_Slot(UInt32(sl.row), Float(sl.weight),
                              None if sl.texture is None else UInt32(sl.texture), Bool(sl.complement),
-                             sl.kinds, sl.partial) for sl in lay.slots]
+                             sl.kinds, sl.partial, None if sl.texture is None else _among(sl.texture))
+                       for sl in lay.slots]
         # per-row fields of the kinds present
         self._types = {name: f.type for name, f in lay.fields.items()}
         self._data: dict[str, object] = {}
         self._tex: dict[str, UInt32] = {}
-        self._tex_ids: dict[str, tuple[int, ...]] = {}
+        self._tex_among: dict[str, tuple[int, ...]] = {}  # per textured field, the ids it references
         for name, f in lay.fields.items():
             self._data[name] = _vec(f.values) if f.type == "rgb" else Float(f.values)
             if f.texture is not None:
                 self._tex[name] = UInt32(f.texture)
-                # the field's textures: a lookup traces only these, not the scene's others
-                self._tex_ids[name] = tuple(sorted({int(t) for t in np.asarray(f.texture)} - {int(NONE)}))
+                self._tex_among[name] = _among(f.texture)
         # textured emission (Mitsuba's area radiance bitmap), by material
         self._emit_tex = None if lay.emission_texture is None else UInt32(lay.emission_texture)
+        self._emit_among = None if lay.emission_texture is None else _among(lay.emission_texture)
         # Perturbed frames (normalmap, bumpmap): per row, only in scenes that have them
         self._pkinds = lay.perturbed_kinds
         if lay.perturb is not None:
             pt = lay.perturb
             self._has_normal, self._has_bump = pt.has_normal, pt.has_bump
             self._p_code, self._p_tex = UInt32(pt.code), UInt32(pt.texture)
+            self._p_among = _among(pt.texture)
             self._p_const = None if pt.constant is None else _vec(pt.constant)
             if pt.scale is not None:
                 self._p_scale = Float(pt.scale)
@@ -231,6 +240,12 @@ class MaterialTable:
         self._all_delta = bool(delta.all())
         self._mat_delta = None if (self._all_delta or not delta.any()) else Bool(delta)
         self._any_delta = bool(delta.any())
+        # materials blending two or more smooth components (blendbsdf of two lobes, ...):
+        # only theirs need the whole mixture evaluated after sampling (see sample); a
+        # mask's pass-through beside one smooth lobe does not
+        blends = np.array([sum(not self.lobes[c.leaf.kind].DELTA for c in cs) > 1
+                           for cs in lay.components], bool)
+        self._blends_smooth = True if blends.all() else Bool(blends) if blends.any() else False
 
     _only: tuple[str, ...] | None = None  # a restricted view's kinds (see restricted)
 
@@ -261,11 +276,12 @@ class MaterialTable:
         if self._has_normal:
             m = mask & (code == 1)
             if self._p_const is None:
-                rgb = self.textures.lookup(tid, si.uv, m, si=si)
+                rgb = self.textures.lookup(tid, si.uv, m, si=si, among=self._p_among)
             else:
                 rgb = dr.gather(Array3f, self._p_const, row, m)
                 if self.textures is not None:
-                    rgb = dr.select(tid != NONE, self.textures.lookup(tid, si.uv, m & (tid != NONE), si=si), rgb)
+                    rgb = dr.select(tid != NONE, self.textures.lookup(tid, si.uv, m & (tid != NONE), si=si,
+                                                                      among=self._p_among), rgb)
             nn = perturb.normalmap_normal(rgb)
             if flip is not False:
                 nn = dr.select(flip, perturb.flip_invalid(nn, wi_l), nn)
@@ -327,7 +343,7 @@ class MaterialTable:
         it has one (only traced for scenes with a textured emitter)."""
         ids = dr.gather(UInt32, self._emit_tex, material, active)
         textured = active & (ids != NONE)
-        return dr.select(textured, self.textures.lookup(ids, uv, textured), le)
+        return dr.select(textured, self.textures.lookup(ids, uv, textured, among=self._emit_among), le)
 
     def is_specular_only(self) -> bool:
         """Whether every lobe this table traces (a :meth:`restricted` view: its kinds') is a delta lobe."""
@@ -407,7 +423,7 @@ class MaterialTable:
         if s.texture is not None:
             ids = dr.gather(UInt32, s.texture, si.material, present)
             textured = present & (ids != NONE)
-            t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True, si=si))
+            t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True, si=si, among=s.among))
             comp = dr.gather(Bool, s.complement, si.material, present)
             w = dr.select(textured, w * dr.select(comp, 1.0 - t, t), w)
         return row, dr.select(present, w, 0.0), present
@@ -539,11 +555,22 @@ class MaterialTable:
             out, wo = case.run(draw, (out, wo))
         out.valid &= present
         if self.K > 1 and not self.is_specular_only():
-            # a smooth sample weighs the whole mixture: f_mix / pdf_mix
             smooth = out.valid & ~out.delta
-            f, pdf = self.eval_pdf(si, wo)
-            ok = smooth & (pdf > 0.0)
-            out.weight = dr.select(smooth, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0), out.weight)
-            out.pdf = dr.select(smooth, pdf, out.pdf)
-            out.valid &= ~smooth | ok
+            # A smooth sample weighs the whole mixture: f_mix / pdf_mix. Where the chosen
+            # component is its material's only smooth one (the others Dirac: a mask's
+            # pass-through), f_mix = w f_j and pdf_mix = w pdf_j (Dirac lobes add nothing
+            # off their direction), so the ratio is the component's own weight and the
+            # density its own times its slot's weight w: no second evaluation.
+            blends = self._blends_smooth
+            if blends is not True:
+                single = smooth if blends is False else smooth & ~dr.gather(Bool, blends, si.material, smooth)
+                out.pdf = dr.select(single, out.pdf * chosen_w, out.pdf)
+                out.valid &= ~single | (out.pdf > 0.0)
+            if blends is not False:
+                mixed = smooth if blends is True else smooth & dr.gather(Bool, blends, si.material, smooth)
+                f, pdf = self.eval_pdf(si, wo)
+                ok = mixed & (pdf > 0.0)
+                out.weight = dr.select(mixed, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0), out.weight)
+                out.pdf = dr.select(mixed, pdf, out.pdf)
+                out.valid &= ~mixed | ok
         return wo, out

@@ -421,10 +421,37 @@ class DeviceScene:
         every lane): the radiance an emitter sends back along it (surface emission where it
         hit, the background or the infinite emitters where it escaped; zero elsewhere) and
         :meth:`pdf_emitter`, with one lookup of each infinite emitter. ``radiance`` or
-        ``density`` False: ``None`` in its place (and none of its code traced)."""
-        sel = self.emitter_selection
+        ``density`` False: ``None`` in its place (and none of its code traced).
+
+        The lookups run in a symbolic ``if`` on the lanes that hit an emissive surface or
+        escaped (the others see nothing: zero radiance, zero density), so that a SIMD packet
+        none of whose rays reached a light skips them: in a room lit by small lights and a
+        window, most packets."""
         hit = si.valid if active is None else active & si.valid
         escaped = ~si.valid if active is None else active & ~si.valid
+        n = dr.width(hit)
+
+        def nothing(*_):
+            return (dr.zeros(Array3f, n),) * radiance + (dr.zeros(Float, n),) * density
+
+        def lookup(si, d, hit, escaped):
+            le, pdf = self._eval_emitter(si, d, hit, escaped, radiance, density)
+            return tuple(v for v in (le, pdf) if v is not None)
+
+        emits = getattr(self.materials, "has_emission", True)
+        sky = self.has_background or any(f.infinite and not f.delta for f in self.emitter_selection.families)
+        if not (emits or sky):
+            out = list(nothing())
+        else:
+            sees = self.materials.is_emissive(si, hit) if emits else Bool(False)
+            sees = sees | escaped if sky else sees
+            out = list(dr.if_stmt((si, d, hit, escaped), sees, lookup, nothing, label="drpt_eval_emitter"))
+        return (out.pop(0) if radiance else None), (out.pop(0) if density else None)
+
+    def _eval_emitter(self, si: Interaction, d: Array3f, hit: Bool, escaped: Bool, radiance: bool,
+                      density: bool) -> tuple[Array3f | None, Float | None]:
+        """:meth:`eval_emitter`'s lookups for the lanes ``hit`` (a surface) and ``escaped``."""
+        sel = self.emitter_selection
         le = None
         if radiance:  # (a scene without emissive materials traces no surface emission)
             emits = getattr(self.materials, "has_emission", True)

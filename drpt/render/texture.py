@@ -29,12 +29,13 @@ against Mitsuba, including wrap-around at the borders, by
 Dispatch and cost
 -----------------
 Dr.Jit textures cannot be selected per lane, so :meth:`lookup` evaluates
-each texture of the set under its own mask (``tex_id == k``) and merges the
-results with ``select``: the traced kernel contains one bilinear lookup per
-texture (code size and a few masked instructions grow linearly with the
-number of textures; memory traffic only occurs on active lanes). One
-texture needs no mask beyond ``active``. An empty set traces nothing and
-returns 0.
+each texture a call site can meet (``among``: the materials pass the ids the
+field, weight or map references; by default every texture of the set) under
+its own mask (``tex_id == k``) and merges the results with ``select``: the
+traced kernel contains one bilinear lookup per such texture (code size and a
+few masked instructions grow linearly with their number; memory traffic only
+occurs on active lanes). One texture needs no mask beyond ``active``. An
+empty set traces nothing and returns 0.
 """
 
 from __future__ import annotations
@@ -98,32 +99,30 @@ class TextureSet:
         return len(self.textures)
 
     def lookup(self, tex_id: UInt32, uv: Array2f, active: Bool = True, scalar: bool = False,
-               si=None, only=None) -> Array3f:
+               si=None, among: tuple[int, ...] | None = None) -> Array3f:
         """Bilinear, repeat-wrapped linear RGB of texture ``tex_id`` at OBJ ``uv``
         (a procedural texture: its value there; ``scalar``: the one a float
         parameter reads, whose luminance the caller takes; a mesh attribute: its
-        value at the interaction ``si``'s point of its primitive). ``only``: the ids
-        ``tex_id`` can hold (host side, e.g. a material field's textures): the other
-        textures are not traced.
+        value at the interaction ``si``'s point of its primitive).
 
-        Lanes that are inactive or whose id is out of range (or not in ``only``) give 0."""
-        if not self.textures:
+        ``among``: the ids ``tex_id`` can hold on active lanes (host side, e.g. the textures
+        one field references); only those are traced, so a floor's reflectance does not
+        evaluate a leaf's opacity map. ``None``: every texture of the set.
+
+        Lanes that are inactive or whose id is out of range (or not in ``among``) give 0."""
+        ids = range(len(self.textures)) if among is None else among
+        if not ids:
             return Array3f(0.0)
         active = Bool(active)
         pos = Array2f(uv.x, 1.0 - uv.y)
-        if len(self.textures) == 1:
-            m = active & (tex_id == 0)
-            return dr.select(m, _eval(self.textures[0], pos, uv, m, scalar, si), 0.0)
-        if only is not None and len(only) == 1:
-            k = only[0]
+        if len(ids) == 1:
+            k = ids[0]
             m = active & (tex_id == k)
             return dr.select(m, _eval(self.textures[k], pos, uv, m, scalar, si), 0.0)
         out = Array3f(0.0)
-        for k, tex in enumerate(self.textures):
-            if only is not None and k not in only:
-                continue
+        for k in ids:
             m = active & (tex_id == k)
-            out = dr.select(m, _eval(tex, pos, uv, m, scalar, si), out)
+            out = dr.select(m, _eval(self.textures[k], pos, uv, m, scalar, si), out)
         return out
 
 

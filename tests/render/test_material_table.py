@@ -156,3 +156,42 @@ def test_mask_passes_through_with_one_minus_opacity():
     # a smooth sample weighs the mixture: f_mix / pdf_mix = kd for a masked Lambertian
     w = np.array(bs.weight)[:, ~delta]
     np.testing.assert_allclose(w, np.array([[0.3], [0.6], [0.9]]) * np.ones_like(w), rtol=1e-5)
+
+
+def _rough(alpha=0.2):
+    return BSDFSpec("roughconductor", {"alpha": alpha, "specular_reflectance": (0.7, 0.6, 0.5)})
+
+
+@pytest.mark.parametrize("specs", [
+    # every material one smooth lobe beside Dirac ones: the shortcut alone
+    ("mask_rough", (BSDFSpec("mask", {"opacity": 0.35}, [_rough()]), diffuse())),
+    # every multi-component material blends two smooth lobes: the evaluation alone
+    ("blend", (CASES["blend"](),)),
+    # both kinds of material in one table: chosen per lane
+    ("both", (BSDFSpec("mask", {"opacity": 0.35}, [_rough()]), CASES["blend"](), diffuse())),
+], ids=lambda s: s[0])
+def test_sampled_weight_and_pdf_are_the_mixture_s(specs):
+    """A smooth sample's ``weight`` is ``f_mix / pdf_mix`` and its ``pdf`` is ``pdf_mix``
+    (:meth:`MaterialTable.eval_pdf` at the sampled direction), whether the table evaluates
+    the mixture again (two smooth lobes) or takes the component's own (one smooth lobe
+    beside a mask's pass-through). Negative control: without the slot's weight in the
+    density, the masked lobe's pdf is off by ``1 / 0.35``."""
+    _, specs = specs
+    table = MaterialTable(scene_with(*(complete(s) for s in specs)))
+    n = 4000
+    for m in range(len(specs)):
+        wi = sphere_dirs(n, 10 + m)
+        wi[2] = np.abs(wi[2]) + 1e-3
+        wi /= np.linalg.norm(wi, axis=0)
+        u = np.random.default_rng(20 + m).random((3, n)).astype(np.float32)
+        si = interaction(wi, m)
+        wo, bs = table.sample(si, Float(u[0]), Array2f(u[1], u[2]))
+        f, pdf = table.eval_pdf(si, wo)
+        smooth = np.array(bs.valid) & ~np.array(bs.delta)
+        assert smooth.sum() > n // 4
+        p_s, p_e = np.array(bs.pdf)[smooth], np.array(pdf)[smooth]
+        np.testing.assert_allclose(p_s, p_e, rtol=1e-4)
+        w_e = np.array(f)[:, smooth] / p_e
+        np.testing.assert_allclose(np.array(bs.weight)[:, smooth], w_e, rtol=1e-4, atol=1e-6)
+        if specs[m].kind == "mask":  # negative control: the component's own density is not the mixture's
+            assert not np.allclose(p_s / 0.35, p_e, rtol=1e-2)

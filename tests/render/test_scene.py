@@ -7,9 +7,14 @@ so it traces no next-event estimation, while views of smooth kinds and the whole
 scene have one; the emitter flags are the scene's; the view shares the device data
 and leaves the scene as it was (negative control: the whole scene's flag stays on).
 A view traces only its kinds' lobes (the wavefront's queues: their kernels).
+
+``eval_emitter``'s symbolic ``if`` (on the lanes that hit a light or escaped to a sky)
+gives the lookups' own values on every lane (Veach's scene, an environment map).
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import pytest
 
@@ -79,3 +84,47 @@ def test_a_view_traces_only_its_lobes(scene, monkeypatch):
     traced.clear()
     scene.sample_bsdf(si, dr.full(Float, 0.5, n), dr.full(Array2f, 0.5, n))
     assert sorted(traced) == sorted(table.kinds)  # the whole scene traces every kind
+
+
+# ------------------------------------------------------------------ eval_emitter's branch
+XML = Path(__file__).parents[1] / "data" / "xml"
+
+
+@pytest.mark.parametrize("name", ["veach_mis.xml", "envmap.xml"])
+def test_eval_emitter_branch_gives_the_lookups_values(name, monkeypatch):
+    """:meth:`DeviceScene.eval_emitter` runs its lookups in a symbolic ``if`` on the lanes
+    that hit an emissive surface or escaped (to a sky); its radiance and density equal the
+    lookups' own on every lane (Veach's scene: sphere and rectangle lights, escaping rays
+    that see nothing; ``envmap.xml``: a sky). Rays from points around the scene toward its
+    lights and every other way; some hit a light, some escape. Negative control: with no
+    lane in the branch (``sees`` forced off), the values are 0 where the lookups' are not."""
+    import numpy as np
+    from drjit.auto import Array3f, Bool, Float
+
+    scene = DeviceScene(load_scene(XML / name), RenderOptions(width=8, height=8, spp=1))
+    rng = np.random.default_rng(3)
+    n = 4096
+    o = rng.uniform(-3, 3, (3, n)).astype(np.float32)
+    o[1] = np.abs(o[1])
+    targets = np.array([[-3.75, 0.2, -0.5], [-1.25, 0.2, -0.5], [1.25, 0.2, -0.5], [3.75, 0.2, -0.5],
+                        [0.0, 8.0, 2.0]], np.float32).T
+    d = np.where(rng.random(n) < 0.5, targets[:, rng.integers(0, 5, n)] - o, rng.normal(size=(3, n)))
+    d = (d / np.linalg.norm(d, axis=0)).astype(np.float32)
+    O, D = Array3f(*(Float(x) for x in o)), Array3f(*(Float(x) for x in d))
+    active = Bool(rng.random(n) < 0.9)
+    si = scene.intersect(O, D, active)
+    le, pdf = scene.eval_emitter(si, D, active)
+    hit, escaped = active & si.valid, active & ~si.valid
+    le0, pdf0 = scene._eval_emitter(si, D, hit, escaped, True, True)
+    le, pdf, le0, pdf0 = (np.array(v) for v in (le, pdf, le0, pdf0))
+    assert (le0.max(0) > 0).sum() > 50 and (pdf0 > 0).sum() > 50  # lights were reached
+    assert np.array(escaped).sum() > 50
+    np.testing.assert_array_equal(le, le0)
+    np.testing.assert_array_equal(pdf, pdf0)
+    # negative control: the branch decides which lanes get values (none here)
+    monkeypatch.setattr(scene.materials, "is_emissive", lambda si, active: Bool(False) & active)
+    monkeypatch.setattr(scene, "has_background", False)
+    for f in scene.emitter_selection.families:
+        monkeypatch.setattr(f, "infinite", False)
+    le1, pdf1 = (np.array(v) for v in scene.eval_emitter(si, D, active))
+    assert np.all(pdf1 == 0) and np.all(le1 == 0) and not np.array_equal(pdf1, pdf0)
