@@ -59,6 +59,7 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from .. import llvm_tuning
 from ..accel import build_accel
+from ..accel.inline import InlineList
 from ..accel.protocol import INVALID
 from ..errors import located
 from ..options import RenderOptions
@@ -152,8 +153,6 @@ class EmissiveList:
     along a ray without traversing the scene, and returns it with its global primitive id."""
 
     def __init__(self, ids: np.ndarray, positions: np.ndarray):
-        from ..accel.inline import InlineList
-
         class _Prims(list):  # the part of a Scene InlineList reads
             positions = None
 
