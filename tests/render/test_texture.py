@@ -207,6 +207,44 @@ def test_among_gives_the_full_lookups_values_on_its_ids_and_traces_only_them(exr
     assert ops((0, 1, 2)) == ops(None)
 
 
+def test_gradient_among_gives_the_full_gradients_on_its_ids_and_traces_only_them(exr, png):
+    """``gradient(..., among=ids)`` (the bump maps' textures) gives every lane whose id is in
+    ``ids`` the full gradient, to the float, and 0 elsewhere (negative control: not 0 in
+    full), tracing fewer operations than the full gradient (negative control: ``among``
+    naming every texture traces as many)."""
+    (pe, _), (pp, _) = exr, png
+    ts = TextureSet([pe, pp, pe])
+    uv = [[0.1, 0.3, 0.55, 0.8], [0.2, 0.9, 0.45, 0.6]]
+    ids = [1, 1, 0, 2]
+
+    def grad(among, traced=False):
+        st = Array2f(Float(uv[0]), Float(uv[1]))
+        if traced:
+            st = st + 0 * dr.arange(Float, 4)  # (not literals)
+        return ts.gradient(UInt32(ids), st, True, among=among)
+
+    full = np.array(grad(None))
+    assert np.all(np.abs(full).sum(axis=0) != 0.0)
+    one = np.array(grad((1,)))
+    np.testing.assert_array_equal(one[:, :2], full[:, :2])
+    np.testing.assert_array_equal(one[:, 2:], 0.0)
+    np.testing.assert_array_equal(np.array(grad((0, 1, 2))), full)
+
+    def ops(among):
+        flag = dr.flag(dr.JitFlag.KernelHistory)
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        try:
+            dr.kernel_history_clear()
+            dr.eval(grad(among, traced=True))
+            return sum(k.get("operation_count", 0) for k in dr.kernel_history()
+                       if k.get("type") == dr.KernelType.JIT)
+        finally:
+            dr.set_flag(dr.JitFlag.KernelHistory, flag)
+
+    assert ops((1,)) < ops(None)
+    assert ops((0, 1, 2)) == ops(None)
+
+
 def test_empty_set_traces_nothing():
     ts = TextureSet([])
     assert len(ts) == 0
