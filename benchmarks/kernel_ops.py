@@ -11,7 +11,9 @@ Renders 32x32 at 4 spp with Dr.Jit's kernel history on and prints the
 operation counts of the three largest JIT kernels (the fused path kernel is
 the largest). Run it from each checkout's root with
 ``PYTHONPATH=.`` to compare two commits: equal counts mean the same code was
-traced (hashes may still differ with evaluation order).
+traced (hashes may still differ with evaluation order). ``--all-textures`` (first
+argument) makes every texture lookup and gradient trace every texture of the scene
+(their ``among`` ignored), to count what ``among`` saves.
 """
 
 import sys
@@ -24,6 +26,13 @@ from drpt.scene import load_scene
 
 
 def main(argv: list[str]) -> int:
+    if argv and argv[0] == "--all-textures":
+        argv = argv[1:]
+        from drpt.render.texture import TextureSet
+
+        lookup, gradient = TextureSet.lookup, TextureSet.gradient
+        TextureSet.lookup = lambda self, *a, among=None, **k: lookup(self, *a, **k)
+        TextureSet.gradient = lambda self, *a, among=None, **k: gradient(self, *a, **k)
     scene_file = argv[0]
     mode = argv[1] if len(argv) > 1 else "auto"
     accel = argv[2] if len(argv) > 2 else "auto"

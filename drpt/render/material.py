@@ -226,7 +226,10 @@ class MaterialTable:
             pt = lay.perturb
             self._has_normal, self._has_bump = pt.has_normal, pt.has_bump
             self._p_code, self._p_tex = UInt32(pt.code), UInt32(pt.texture)
-            self._p_among = _among(pt.texture)
+            # per kind, the texture ids its rows reference (each kind traces only its own)
+            codes, texs = np.asarray(pt.code), np.asarray(pt.texture)
+            self._p_among_normal = _among(texs[codes == 1])
+            self._p_among_bump = _among(texs[codes == 2])
             self._p_const = None if pt.constant is None else _vec(pt.constant)
             if pt.scale is not None:
                 self._p_scale = Float(pt.scale)
@@ -276,12 +279,12 @@ class MaterialTable:
         if self._has_normal:
             m = mask & (code == 1)
             if self._p_const is None:
-                rgb = self.textures.lookup(tid, si.uv, m, si=si, among=self._p_among)
+                rgb = self.textures.lookup(tid, si.uv, m, si=si, among=self._p_among_normal)
             else:
                 rgb = dr.gather(Array3f, self._p_const, row, m)
                 if self.textures is not None:
                     rgb = dr.select(tid != NONE, self.textures.lookup(tid, si.uv, m & (tid != NONE), si=si,
-                                                                      among=self._p_among), rgb)
+                                                                      among=self._p_among_normal), rgb)
             nn = perturb.normalmap_normal(rgb)
             if flip is not False:
                 nn = dr.select(flip, perturb.flip_invalid(nn, wi_l), nn)
@@ -292,7 +295,8 @@ class MaterialTable:
             s = dr.select(m, perturb.normalmap_tangent(nn), s)
         if self._has_bump:
             m = mask & (code == 2)
-            grad = self.textures.gradient(tid, si.uv, m) * dr.gather(Float, self._p_scale, row, m)
+            grad = self.textures.gradient(tid, si.uv, m, among=self._p_among_bump)
+            grad = grad * dr.gather(Float, self._p_scale, row, m)
             nb = perturb.bump_normal(grad, si.ns, si.ng, si.dp_du, si.dp_dv, sh_frame)
             if flip is not False:
                 nb = dr.select(flip, perturb.flip_invalid(nb, wi_l), nb)

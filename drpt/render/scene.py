@@ -57,7 +57,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-from .. import llvm_tuning
+from .. import backend, llvm_tuning
 from ..accel import build_accel
 from ..accel.inline import InlineList
 from ..accel.protocol import INVALID
@@ -142,10 +142,6 @@ class NoMaterials:
     albedo = diffuse_color
 
 
-#: the most emissive triangles :func:`emissive_inline` compiles into a kernel
-EMISSIVE_INLINE_MAX = 16
-
-
 class EmissiveList:
     """The scene's emissive triangles as an inline accelerator of their own
     (:class:`~drpt.accel.inline.InlineList`: each triangle's test compiled into the kernel
@@ -172,7 +168,9 @@ class EmissiveList:
 
 def emissive_inline(scene: Scene) -> EmissiveList | None:
     """An :class:`EmissiveList` of ``scene``'s emissive triangles, or None where there are
-    none, more than :data:`EMISSIVE_INLINE_MAX`, or emissive spheres or planes."""
+    none, emissive spheres or planes, or more triangles than the backend compiles inline
+    (:func:`drpt.backend.policy`'s ``inline_max_prims``, the rule of ``--accel auto``: a
+    list that short costs a ray less than a traversal; read when the scene is built)."""
     emits = np.array([m.is_emissive or getattr(m, "emission_texture", None) is not None
                       for m in scene.materials], bool)
     if not len(emits) or not emits.any():
@@ -183,7 +181,7 @@ def emissive_inline(scene: Scene) -> EmissiveList | None:
     if not len(tris):
         return None
     ids = np.nonzero(emits[np.asarray(tris.material, np.int64)])[0]
-    if not 0 < len(ids) <= EMISSIVE_INLINE_MAX:
+    if not 0 < len(ids) <= backend.policy().inline_max_prims:
         return None
     return EmissiveList(ids, np.asarray(tris.positions)[ids])
 
@@ -204,7 +202,7 @@ class DeviceScene:
             self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None or uv_aov,
                                         tangents=self.materials.tangents)
         self.area_lights = AreaLights(scene, self.surfaces, self.materials, sampler=options.light_sampler)
-        #: the emissive surfaces alone, where they are at most EMISSIVE_INLINE_MAX triangles
+        #: the emissive surfaces alone, where they are few triangles
         #: (:func:`emissive_inline`), else None
         self.emissive = emissive_inline(scene)
         self.delta_lights = DeltaLights(scene)

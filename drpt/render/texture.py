@@ -126,15 +126,22 @@ class TextureSet:
         return out
 
 
-    def gradient(self, tex_id: UInt32, uv: Array2f, active: Bool = True) -> Array2f:
+    def gradient(self, tex_id: UInt32, uv: Array2f, active: Bool = True,
+                 among: tuple[int, ...] | None = None) -> Array2f:
         """The derivatives of texture ``tex_id``'s luminance along Mitsuba's ``u`` and
         ``v`` (``(u, 1 - v)`` of drpt's ``uv``) at ``uv``: Mitsuba's ``bitmap.eval_1_grad``,
         the bilinear interpolant's differences of the four texels around ``uv`` times the
-        resolution. 0 for procedural textures and inactive lanes."""
+        resolution. 0 for procedural textures and inactive lanes.
+
+        ``among``: as :meth:`lookup`'s, the ids ``tex_id`` can hold on active lanes (the
+        bump maps' textures); only those are traced, other lanes give 0. ``None``: every
+        texture of the set."""
         active = Bool(active)
         pos = Array2f(uv.x, 1.0 - uv.y)
         out = Array2f(0.0)
-        for k, (tex, (h, w)) in enumerate(zip(self.textures, self.shapes)):
+        ids = range(len(self.textures)) if among is None else among
+        for k in ids:
+            tex, (h, w) = self.textures[k], self.shapes[k]
             image = getattr(tex, "tex", tex)  # an image texture, possibly wrapped with options
             if not hasattr(image, "eval_fetch") or image.filter_mode() != dr.FilterMode.Linear:
                 continue  # procedural, or nearest (whose gradient is 0 almost everywhere)

@@ -208,6 +208,7 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--only", "--skip", "--min-size", "--max-samples", "--rounds",
                   "--no-corpus",  # (benchmarks/equal_time_vs_mitsuba.py)
                   "--scale", "--grid",  # (benchmarks/variance_vs_mitsuba.py)
+                  "--all-textures",  # (benchmarks/kernel_ops.py)
                   "--scenes", "--seeds", "--repeat", "--reference", "--parts", "--depth"}  # (bdpt_*.py)
 
 

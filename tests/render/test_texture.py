@@ -164,50 +164,85 @@ def test_several_textures_and_masks(exr, png):
     np.testing.assert_array_equal(got[:, 3], 0.0)
 
 
-def test_among_gives_the_full_lookups_values_on_its_ids(exr, png):
+def test_among_gives_the_full_lookups_values_on_its_ids_and_traces_only_them(exr, png):
     """``lookup(..., among=ids)`` (a material field's textures) gives every lane whose id is
-    in ``ids`` what the full lookup gives, to the float, with one id and with several; a
-    lane whose id is not in ``ids`` reads 0 (the negative control: it is not 0 in full)."""
+    in ``ids`` what the full lookup gives, to the float, with one id, several and none; a
+    lane whose id is not in ``ids`` reads 0 (negative control: it is not 0 in full). It
+    traces only those textures' lookups: fewer operations than the full lookup (negative
+    control: ``among`` naming every texture traces as many as the full lookup)."""
+    (pe, img), (pp, _) = exr, png
+    ts = TextureSet([pe, pp, pe])
+    uv = [[0.1, 0.3, 0.55, 0.8], [0.2, 0.9, 0.45, 0.6]]
+    ids = [1, 1, 0, 2]
+
+    def lookup(among):
+        return np.array(ts.lookup(UInt32(ids), Array2f(Float(uv[0]), Float(uv[1])), True, among=among))
+
+    full = _lookup(ts, uv, ids, True)
+    assert np.all(full != 0.0)
+    u, v = _center_uv(1, 2)
+    np.testing.assert_allclose(_lookup(ts, [[u], [v]], [0], True)[:, 0], img[1, 2], atol=1e-6)
+    one = lookup((1,))
+    np.testing.assert_array_equal(one[:, :2], full[:, :2])
+    np.testing.assert_array_equal(one[:, 2:], 0.0)
+    two = lookup((0, 1))
+    np.testing.assert_array_equal(two[:, :3], full[:, :3])
+    np.testing.assert_array_equal(two[:, 3], 0.0)
+    np.testing.assert_array_equal(lookup(()), 0.0)
+    np.testing.assert_array_equal(lookup((0, 1, 2)), full)
+
+    def ops(among):
+        flag = dr.flag(dr.JitFlag.KernelHistory)
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        try:
+            dr.kernel_history_clear()
+            traced = Array2f(Float(uv[0]), Float(uv[1])) + 0 * dr.arange(Float, 4)  # (not literals)
+            dr.eval(ts.lookup(UInt32(ids), traced, True, among=among))
+            return sum(k.get("operation_count", 0) for k in dr.kernel_history()
+                       if k.get("type") == dr.KernelType.JIT)
+        finally:
+            dr.set_flag(dr.JitFlag.KernelHistory, flag)
+
+    assert ops((1,)) < ops((0, 1)) < ops(None)
+    assert ops((0, 1, 2)) == ops(None)
+
+
+def test_gradient_among_gives_the_full_gradients_on_its_ids_and_traces_only_them(exr, png):
+    """``gradient(..., among=ids)`` (the bump maps' textures) gives every lane whose id is in
+    ``ids`` the full gradient, to the float, and 0 elsewhere (negative control: not 0 in
+    full), tracing fewer operations than the full gradient (negative control: ``among``
+    naming every texture traces as many)."""
     (pe, _), (pp, _) = exr, png
     ts = TextureSet([pe, pp, pe])
     uv = [[0.1, 0.3, 0.55, 0.8], [0.2, 0.9, 0.45, 0.6]]
     ids = [1, 1, 0, 2]
-    full = _lookup(ts, uv, ids, True)
-    one = np.array(ts.lookup(UInt32(ids), Array2f(Float(uv[0]), Float(uv[1])), True, among=(1,)))
+
+    def grad(among, traced=False):
+        st = Array2f(Float(uv[0]), Float(uv[1]))
+        if traced:
+            st = st + 0 * dr.arange(Float, 4)  # (not literals)
+        return ts.gradient(UInt32(ids), st, True, among=among)
+
+    full = np.array(grad(None))
+    assert np.all(np.abs(full).sum(axis=0) != 0.0)
+    one = np.array(grad((1,)))
     np.testing.assert_array_equal(one[:, :2], full[:, :2])
     np.testing.assert_array_equal(one[:, 2:], 0.0)
-    assert np.all(full[:, 2:] != 0.0)
-    two = np.array(ts.lookup(UInt32(ids), Array2f(Float(uv[0]), Float(uv[1])), True, among=(0, 1)))
-    np.testing.assert_array_equal(two[:, :3], full[:, :3])
-    np.testing.assert_array_equal(two[:, 3], 0.0)
-
-
-def test_among_traces_only_the_textures_named(exr, png):
-    """``lookup(..., among=ids)`` gives the same values as the whole set on lanes whose id
-    is in ``ids``, 0 on the others, and traces only those textures' lookups (fewer
-    operations: a field evaluates only the textures it references)."""
-    (pe, img), (pp, lin) = exr, png
-    ts = TextureSet([pe, pp])
-    u, v = _center_uv(1, 2)
-    h, w = lin.shape[:2]
-    u2, v2 = _center_uv(2, 3, h, w)
-    uv = Array2f(Float([u, u2]), Float([v, v2]))
-    ids = UInt32([0, 1])
-    both = np.array(ts.lookup(ids, uv, True))
-    only1 = np.array(ts.lookup(ids, uv, True, among=(1,)))
-    np.testing.assert_array_equal(only1[:, 1], both[:, 1])
-    np.testing.assert_array_equal(only1[:, 0], 0.0)  # texture 0 is not looked up
-    np.testing.assert_allclose(both[:, 0], img[1, 2], atol=1e-6)
-    assert np.all(np.array(ts.lookup(ids, uv, True, among=())) == 0.0)
+    np.testing.assert_array_equal(np.array(grad((0, 1, 2))), full)
 
     def ops(among):
+        flag = dr.flag(dr.JitFlag.KernelHistory)
         dr.set_flag(dr.JitFlag.KernelHistory, True)
-        dr.kernel_history_clear()
-        uv3 = Array2f(Float([u, u2, u2]), Float([v, v2, v2])) + 0 * dr.arange(Float, 3)  # traced, not literal
-        dr.eval(ts.lookup(UInt32([0, 1, 1]), uv3, True, among=among))
-        return sum(k.get("operation_count", 0) for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT)
+        try:
+            dr.kernel_history_clear()
+            dr.eval(grad(among, traced=True))
+            return sum(k.get("operation_count", 0) for k in dr.kernel_history()
+                       if k.get("type") == dr.KernelType.JIT)
+        finally:
+            dr.set_flag(dr.JitFlag.KernelHistory, flag)
 
     assert ops((1,)) < ops(None)
+    assert ops((0, 1, 2)) == ops(None)
 
 
 def test_empty_set_traces_nothing():

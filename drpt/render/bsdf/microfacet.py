@@ -20,6 +20,8 @@ from __future__ import annotations
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Float
 
+from ..warp import square_to_uniform_disk_concentric
+
 #: Smallest microfacet alpha used (Mitsuba 3's clamp for its microfacet plugins).
 ALPHA_MIN = 1e-4
 
@@ -32,29 +34,6 @@ def reflect(wi: Array3f, m: Array3f) -> Array3f:
 # ---------------------------------------------------------------------------
 # Mitsuba 3's MicrofacetDistribution: Beckmann and GGX, anisotropic
 # ---------------------------------------------------------------------------
-
-def concentric_polar(u: Array2f) -> tuple[Float, Float]:
-    """``(r, phi)`` of the Shirley-Chiu concentric map of the unit square onto the unit
-    disk (the mapping Mitsuba's ``square_to_uniform_disk_concentric`` uses), whose point
-    is ``r (cos phi, sin phi)`` (``r`` signed). At the centre (``x = y = 0``) ``phi`` is
-    already 0 (``r = x``, ``rp = y``), so it needs no case of its own. (The map of
-    :func:`drpt.render.warp.concentric_polar` computed in another order: other floats.)"""
-    x = 2.0 * u.x - 1.0
-    y = 2.0 * u.y - 1.0
-    q13 = dr.abs(x) < dr.abs(y)
-    r = dr.select(q13, y, x)
-    rp = dr.select(q13, x, y)
-    phi = (0.25 * dr.pi) * rp / dr.select(r == 0.0, 1.0, r)
-    phi = dr.select(q13, 0.5 * dr.pi - phi, phi)
-    return r, phi
-
-
-def _concentric_disk(u: Array2f) -> Array2f:
-    """The point of :func:`concentric_polar` on the unit disk."""
-    r, phi = concentric_polar(u)
-    s, c = dr.sincos(phi)
-    return Array2f(r * c, r * s)
-
 
 #: |erf(x)| bound of the Beckmann slope sampler (``erfinv(+-1)`` is NaN in Dr.Jit).
 _ERF_MAX = 1.0 - 1.2e-7
@@ -201,8 +180,9 @@ class Distribution:
 
     def _slopes11_ggx(self, cos_i: Float, u: Array2f, disk: Array2f | None = None) -> Array3f:
         """Visible normal of the alpha = 1 GGX for ``wi = (sin_i, 0, cos_i)``; ``disk``:
-        ``u``'s point of :func:`_concentric_disk`, when the caller has it."""
-        p = _concentric_disk(u) if disk is None else disk
+        ``u``'s point of :func:`~drpt.render.warp.square_to_uniform_disk_concentric`, when
+        the caller has it."""
+        p = square_to_uniform_disk_concentric(u) if disk is None else disk
         s = 0.5 * (1.0 + cos_i)
         py = (1.0 - s) * dr.safe_sqrt(1.0 - dr.square(p.x)) + s * p.y
         z = dr.safe_sqrt(1.0 - dr.square(p.x) - dr.square(py))
@@ -231,7 +211,8 @@ class Distribution:
 
     def sample_visible_normal(self, wi: Array3f, u: Array2f, disk: Array2f | None = None) -> Array3f:
         """A normal visible from ``wi`` (``wi.z > 0``), density :meth:`pdf_visible`.
-        ``disk`` (GGX only): ``r (cos phi, sin phi)`` of :func:`concentric_polar` at ``u``,
+        ``disk`` (GGX only): ``r (cos phi, sin phi)`` of
+        :func:`drpt.render.warp.concentric_polar` at ``u``,
         computed by the caller (the same normal, to the float; a lobe choosing between
         this and another warp of ``u`` per lane then takes one ``sincos``)."""
         if disk is not None and self.beckmann is not False:

@@ -250,11 +250,9 @@ def sample(p: ThinParams, wi: Array3f, u1: Float, u2: Array2f) -> BSDFSample:
     pick_dt = u1 >= psr + pst + pdr
     ok = Bool(active)
     if "spec_trans" in p.flags:
-        # the picked lobe's point of the disk, one sincos: the visible-normal sampler's
-        # concentric map for a specular lobe, the cosine hemisphere's for a diffuse one
-        spec = pick_sr | pick_st
-        (r_m, phi_m), (r_h, phi_h) = mf.concentric_polar(u2), concentric_polar(u2)
-        disk = polar_to_disk(dr.select(spec, r_m, r_h), dr.select(spec, phi_m, phi_h))
+        # one concentric disk point (one sincos) for the cosine hemisphere of a diffuse
+        # lobe and the visible-normal sampler of a specular one (both map u2 so)
+        disk = polar_to_disk(*concentric_polar(u2))
         hemi = disk_to_cosine_hemisphere(disk)
         wo = hemi  # diffuse reflection
         # one visible normal, of the picked lobe's distribution

@@ -73,7 +73,7 @@ from ...options import PathOptions
 from ..loops import loops_once, widen
 from ..sampler import light_sample, next_2d, next_path
 from ..scene import DeviceScene
-from .common import SHADOW_SHRINK, DirectLight, power_heuristic
+from .common import DirectLight, power_heuristic
 
 #: the largest ``max_depth`` whose paths are traced as straight-line code (``0 < max_depth``)
 UNROLLED_MAX_DEPTH = 3
@@ -202,16 +202,23 @@ class PathIntegrator:
     def _look_at_emitters(self, scene: DeviceScene, s: PathState, L: Array3f) -> tuple[Array3f]:
         """``(L plus the emission the ray s.d sees,)``, found emitter first: the nearest
         emissive triangle along the ray (the scene's few, compiled inline), then one shadow
-        ray up to it (any hit, stopped just short of it). A ray that misses every emitter
-        (most rays, with a small light) traces nothing in the scene; one that reaches an
-        emitter sees what the closest hit would have found there, so the estimate is the
-        closest hit's up to float rounding (the distance and barycentrics of another
-        triangle test)."""
+        ray (any hit) up to it. The shadow ray ends where the ray crosses the emitter's plane
+        moved toward ``s.o`` by the hit point's error bound ``p_error``
+        (:mod:`~drpt.render.spawn`'s offset, ``t - p_error / |cos|``): an occluder farther
+        from the emitter than that bound (a few float spacings) blocks it, as the closest hit
+        would find it first; there is no relative margin such as next-event estimation's
+        :data:`~drpt.render.integrators.common.SHADOW_SHRINK`. A ray that misses every
+        emitter (most rays, with a small light) traces nothing in the scene; one that
+        reaches an emitter sees what the closest hit would have found there, so the estimate
+        is the closest hit's up to float rounding (the distance and barycentrics of another
+        triangle test, and occluders within ``p_error`` of the emitter)."""
         hit = scene.emissive.intersect(s.o, s.d, s.active)
         near = s.active & hit.valid
-        blocked = scene.occluded(s.o, s.d, hit.t * SHADOW_SHRINK, near)
-        hit.valid = near & ~blocked
         si = scene.interaction(s.o, s.d, hit)
+        cos = dr.abs(dr.dot(si.ng, s.d))
+        tmax = si.t - si.p_error / dr.maximum(cos, 1e-30)
+        blocked = scene.occluded(s.o, s.d, tmax, near)
+        si.valid = near & ~blocked
         return (add_emission(scene, self.opt, si, s, L, s.active),)
 
     @loops_once

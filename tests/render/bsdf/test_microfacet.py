@@ -21,7 +21,7 @@ import pytest
 from drjit.auto import Array2f, Array3f, Float
 
 from drpt.render.bsdf import microfacet as mf
-from drpt.render.warp import square_to_uniform_disk_concentric
+from drpt.render.warp import concentric_polar, polar_to_disk
 from drpt.testing import mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
 
 # (beckmann, alpha_u, alpha_v or None for isotropic)
@@ -230,10 +230,10 @@ def test_alpha_min_is_the_lower_clamp():
 
 
 def test_visible_normal_from_the_callers_disk_point():
-    """``sample_visible_normal(wi, u, disk)`` with ``disk`` the point of
+    """``sample_visible_normal(wi, u, disk)`` with ``disk`` the point of the warp module's
     ``concentric_polar(u)`` (what a lobe sharing one ``sincos`` between warps passes) is the
-    normal drawn from ``u`` alone, to the float; another point (the warp module's map of
-    the same ``u``, other floats) changes some normals (negative control); Beckmann refuses
+    normal drawn from ``u`` alone, to the float; another point (the same disk point
+    mirrored about the diagonal) changes some normals (negative control); Beckmann refuses
     a disk point."""
     wi = _sphere(4000, 21)
     wi[2] = np.abs(wi[2]) + 0.01
@@ -242,11 +242,9 @@ def test_visible_normal_from_the_callers_disk_point():
     rng = np.random.default_rng(22)
     u = Array2f(Float(rng.random(4000, dtype=np.float32)), Float(rng.random(4000, dtype=np.float32)))
     d = mf.Distribution(False, 0.3, 0.1)
-    r, phi = mf.concentric_polar(u)
-    s, c = dr.sincos(phi)
-    disk = Array2f(r * c, r * s)
+    disk = polar_to_disk(*concentric_polar(u))
     assert np.array_equal(np.array(d.sample_visible_normal(dwi, u, disk)), np.array(d.sample_visible_normal(dwi, u)))
-    other = square_to_uniform_disk_concentric(u)
+    other = Array2f(disk.y, disk.x)
     assert not np.array_equal(np.array(d.sample_visible_normal(dwi, u, other)),
                               np.array(d.sample_visible_normal(dwi, u)))
     with pytest.raises(ValueError):

@@ -294,3 +294,63 @@ def test_last_segment_finds_emitters_first_as_the_closest_hit_does(scenes_dir, t
     sky = Renderer(load_scene(tmp_path / "s.xml"), RenderOptions(
         width=8, height=8, spp=1, progress=False, path=PathOptions(max_depth=depth)))
     assert sky.scene.emissive is not None and not sky.integrator.emitters_first
+
+
+#: a floor under a 2x2 panel light at y = 2 (facing down) with a diffuser over half of it
+#: ``gap`` below the panel
+DIFFUSER_XML = """<scene version="3.0.0">
+  <sensor type="perspective">
+    <transform name="to_world"><lookat origin="0, 1, -4" target="0, 0.5, 0" up="0, 1, 0"/></transform>
+  </sensor>
+  <shape type="rectangle"><bsdf type="diffuse"/>
+    <transform name="to_world"><scale value="3"/><lookat origin="0, 0, 0" target="0, 1, 0" up="0, 0, 1"/></transform>
+  </shape>
+  <shape type="rectangle">
+    <transform name="to_world"><lookat origin="0, 2, 0" target="0, 0, 0" up="0, 0, 1"/></transform>
+    <emitter type="area"><rgb name="radiance" value="5"/></emitter>
+  </shape>
+  <shape type="rectangle"><bsdf type="diffuse"/>
+    <transform name="to_world"><scale x="0.5" y="1" z="1"/>
+      <lookat origin="0.5, {y}, 0" target="0.5, 0, 0" up="0, 0, 1"/></transform>
+  </shape>
+</scene>"""
+
+
+def _short_of_emitter(self, scene, s, L):
+    """``_look_at_emitters`` with its shadow ray stopped a relative ``2**-12`` short of the
+    emitter (next-event estimation's ``SHADOW_SHRINK``): the negative control's rule."""
+    from drpt.render.integrators.common import SHADOW_SHRINK
+    from drpt.render.integrators.path import add_emission
+
+    hit = scene.emissive.intersect(s.o, s.d, s.active)
+    near = s.active & hit.valid
+    hit.valid = near & ~scene.occluded(s.o, s.d, hit.t * SHADOW_SHRINK, near)
+    return (add_emission(scene, self.opt, scene.interaction(s.o, s.d, hit), s, L, s.active),)
+
+
+@pytest.mark.parametrize("accel", ["embree", "bvh"])
+def test_emitters_first_sees_a_diffuser_just_in_front_of_the_light(tmp_path, monkeypatch, accel):
+    """A diffuser 5e-5 in front of a panel light (2 to 4 units from the floor points whose
+    rays reach it: far inside a relative 2**-12, far outside float rounding) blocks the
+    emitters-first shadow ray as the closest hit finds it first: every pixel within 1e-5
+    relative of the closest hit's image. Negative control: a shadow ray stopped a relative
+    2**-12 short of the light (next-event estimation's rule) misses the diffuser and sees
+    the light through it, beyond that tolerance and by over 100x the rounding."""
+    (tmp_path / "s.xml").write_text(DIFFUSER_XML.replace("{y}", repr(2.0 - 5e-5)))
+    scene = load_scene(tmp_path / "s.xml")
+
+    def image(first, look=None):
+        monkeypatch.setattr(PathIntegrator, "emitter_first", first)
+        if look is not None:
+            monkeypatch.setattr(PathIntegrator, "_look_at_emitters", look)
+        r = Renderer(scene, RenderOptions(width=24, height=24, spp=8, progress=False, accel=accel,
+                                          path=PathOptions(max_depth=2)))
+        assert r.integrator.emitters_first == first
+        return r.render().image
+
+    first, closest = image(True), image(False)
+    assert (first > 0).mean() > 0.3  # (the floor)
+    np.testing.assert_allclose(first, closest, rtol=1e-5, atol=1e-7)
+    short = image(True, _short_of_emitter)
+    assert not np.allclose(short, closest, rtol=1e-5, atol=1e-7)
+    assert np.abs(short - closest).max() > 100 * np.abs(first - closest).max()
