@@ -163,7 +163,7 @@ from ..camera import RayCamera
 from ..film import SplatFilm
 from ..instrument import HIT_CAMERA, HIT_LIGHT, SHADOW_CAMERA, SHADOW_CONNECT, SHADOW_NEE, SPLAT, count
 from ..lights.rays import INV_FOUR_PI, EmitterRays
-from ..loops import widen
+from ..loops import loops_once, widen
 from ..photons import PhotonGrid
 from ..sampler import LDSampler, next_2d
 from ..scene import DeviceScene
@@ -801,6 +801,7 @@ class BDPTIntegrator:
             r2 *= (i + MERGE_ALPHA) / (i + 1)
         return MERGE_RADIUS * self.rays.radius * math.sqrt(r2)
 
+    @loops_once
     @dr.syntax
     def trace_photons(self, rng: PCG32, active: Bool):
         """One light subpath per lane, from the area lights only, followed through Dirac
