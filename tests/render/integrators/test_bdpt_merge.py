@@ -83,6 +83,20 @@ def test_bdpt_merge_needs_bdpt(tmp_path, capsys):
     assert len(err) == 1 and "--bdpt-merge needs --integrator bdpt" in err[0]
 
 
+def test_bdpt_strategies_refuse_explicit_merging(tmp_path, capsys):
+    """The strategy images render without merging: an explicit ``--bdpt-merge on`` with
+    ``--bdpt-strategies`` is one clear line, exit 2 (``off`` or none renders)."""
+    from drpt.cli import main
+
+    scene = REPO / "scenes" / "cornellbox" / "cornellbox.txt"
+    args = ["render", str(scene), "--size", "8", "8", "--spp", "1", "-q", "--integrator", "bdpt",
+            "--bdpt-strategies", "-o", str(tmp_path / "x.exr")]
+    assert main([*args, "--bdpt-merge", "on"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--bdpt-strategies renders without caustic merging" in err[0], err
+    assert main([*args, "--bdpt-merge", "off"]) == 0
+
+
 def _difference_z(glass, monkeypatch=None, power_scale: float = 1.0, seeds: int = 12):
     """``(max |z| over the blocks, |z| of the image)`` of ``on - off`` (module docstring)."""
     if power_scale != 1.0:
