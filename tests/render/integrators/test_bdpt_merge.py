@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import importlib.util
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -60,7 +59,6 @@ def test_merging_is_traced_only_where_the_scene_needs_it(glass):
     assert not Renderer(cornell, _opts(True)).integrator.merging  # no Dirac lobes
     assert Renderer(glass, _opts(True)).integrator.merging
     assert not Renderer(glass, _opts(False)).integrator.merging
-    assert not Renderer(glass, replace(_opts(True), integrator="path")).integrator.__dict__.get("merging", False)
 
 
 def test_the_radius_shrinks_as_progressive_photon_mapping_s(glass):
