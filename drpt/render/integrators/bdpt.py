@@ -40,7 +40,9 @@ weights are unchanged, and ``s = 0`` had weight 1 on these):
   sum_p f(wi, wo_p) power_p / (pi r^2 N)`` over the photons within ``r`` whose paths fit in
   ``max_depth`` segments (``f`` without its cosine; :meth:`BDPTIntegrator._merge`);
 * the camera subpath's area-light hits whose path is camera S+ D S+ light count 0 (it
-  tracks where it is in that pattern).
+  tracks where it is in that pattern), unless it sampled a Dirac lobe at D (plastic's
+  coating, a mask's pass-through: merging evaluates D's smooth lobes only, so ``s = 0``
+  keeps those paths); each path is counted by exactly one of the two.
 
 ``r`` is :data:`MERGE_RADIUS` of the scene's bounding radius in the first sample step and
 shrinks by progressive photon mapping's rule (Knaus and Zwicker 2011, :data:`MERGE_ALPHA`)
@@ -1044,6 +1046,11 @@ class BDPTIntegrator:
             wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
             _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
             dvcm, dvc = scatter_update(dvcm, dvc, bs.pdf, rev, dr.abs(dr.dot(si.ng, wo)), bs.delta)
+            if merge:
+                # a Dirac lobe sampled at the merged vertex (plastic's coating, a mask's
+                # pass-through): merging evaluates the smooth lobes only, so the path is not
+                # one it estimates, and s = 0 keeps it
+                phase = dr.select((phase == 1) & bs.delta, UInt32(3), phase)
             beta = beta * bs.weight
             eta = eta * bs.eta
             live &= bs.valid & (dr.max(beta) > 0.0)
