@@ -44,9 +44,11 @@ weights are unchanged, and ``s = 0`` had weight 1 on these):
   coating, a mask's pass-through: merging evaluates D's smooth lobes only, so ``s = 0``
   keeps those paths); each path is counted by exactly one of the two.
 
-``r`` is :data:`MERGE_RADIUS` of the scene's bounding radius in the first sample step and
-shrinks by progressive photon mapping's rule (Knaus and Zwicker 2011, :data:`MERGE_ALPHA`)
-over the steps, so the estimate is consistent, not unbiased: at any finite spp it is the
+``r`` is :data:`MERGE_RADIUS` of the scene's bounding radius at the first sample per pixel
+and shrinks by progressive photon mapping's rule (Knaus and Zwicker 2011, :data:`MERGE_ALPHA`)
+over the samples per pixel, a pass merging at the mean of its samples' ``r^2``
+(:meth:`BDPTIntegrator.merge_radius`: the same image whatever the lanes per pass), so the
+estimate is consistent, not unbiased: at any finite spp it is the
 caustic's irradiance blurred over disks of radius ``r`` (an ``O(r^2)`` bias where the caustic
 is smooth, more at its edges and where another surface lies within ``r``). Scenes without
 Dirac lobes or area lights trace none of it; the sky's and the background's caustics seen
@@ -201,7 +203,7 @@ CAMERA_DIMENSION = 128
 
 SUPPORTED_SOURCES = ("area", "point", "spot", "directional", "sky", "background")
 
-#: caustic merging's radius in the first sample step, as a fraction of the scene's bounding
+#: caustic merging's radius at the first sample per pixel, as a fraction of the scene's bounding
 #: radius (:meth:`BDPTIntegrator.merge_radius`)
 MERGE_RADIUS = 0.01
 
@@ -793,14 +795,22 @@ class BDPTIntegrator:
         return dr.select(ok, value, 0.0)
 
     # ------------------------------------------------------------ caustic merging
-    def merge_radius(self, step: int) -> float:
-        """The merging radius of sample step ``step`` (0, 1, ...): :data:`MERGE_RADIUS` of the
-        scene's bounding radius at step 0, its square shrinking by ``(i + alpha) / (i + 1)``
-        from step ``i`` to ``i + 1`` (:data:`MERGE_ALPHA`), as progressive photon mapping's
-        (Knaus and Zwicker 2011): the squared radius falls as ``step^(alpha - 1)``."""
-        r2 = 1.0
-        for i in range(1, step + 1):
-            r2 *= (i + MERGE_ALPHA) / (i + 1)
+    def merge_radius(self, first: int, k: int) -> float:
+        """The merging radius of a pass of samples ``first .. first + k - 1`` (sample indices
+        per pixel, from 0). Per sample ``s`` the squared radius follows progressive photon
+        mapping's rule (Knaus and Zwicker 2011): ``r_0^2 = (MERGE_RADIUS R)^2`` (``R`` the
+        scene's bounding radius), ``r_{s+1}^2 = r_s^2 (s + 1 + alpha) / (s + 2)``
+        (:data:`MERGE_ALPHA`), so ``r_s^2 = r_0^2 Gamma(s + 1 + alpha) / (Gamma(1 + alpha)
+        Gamma(s + 2))``, falling as ``s^(alpha - 1)``. A pass merges with one radius: the
+        one whose square is the mean of ``r_s^2`` over its samples, so the image's ``O(r^2)``
+        bias, the mean of its samples', depends on the spp alone, not on how the samples
+        are split into passes (lanes per pass, bands, chunks, workers, resumes)."""
+        a = MERGE_ALPHA
+
+        def total(m: int) -> float:  # sum of r_s^2 / r_0^2 over s < m, in closed form
+            return math.expm1(math.lgamma(m + 1 + a) - math.lgamma(m + 1) - math.lgamma(1 + a)) / a
+
+        r2 = (total(first + k) - total(first)) / k
         return MERGE_RADIUS * self.rays.radius * math.sqrt(r2)
 
     @loops_once
@@ -852,13 +862,13 @@ class BDPTIntegrator:
         """The photon subpaths of a pass of ``n`` camera samples: ``n / PHOTON_SHARE``."""
         return max(1, n // PHOTON_SHARE)
 
-    def photons(self, rng: PCG32, m: int, step: int) -> PhotonGrid:
+    def photons(self, rng: PCG32, m: int, first: int, k: int) -> PhotonGrid:
         """The caustic photons of ``m`` light subpaths (:meth:`trace_photons`, ``rng`` of
         ``m`` lanes) in a :class:`~drpt.render.photons.PhotonGrid` of radius
-        :meth:`merge_radius` of ``step``, evaluated; its ``scale`` (a kernel input) is ``1 /
-        (pi r^2 m)``."""
+        :meth:`merge_radius` of the pass's samples ``first .. first + k - 1``, evaluated;
+        its ``scale`` (a kernel input) is ``1 / (pi r^2 m)``."""
         p, wo, power, depth, valid = self.trace_photons(rng, dr.full(Bool, True, m))
-        r = self.merge_radius(step)
+        r = self.merge_radius(first, k)
         grid = PhotonGrid(p, valid, r, {"wo": wo, "power": power, "depth": depth})
         grid.scale = dr.opaque(Float, 1.0 / (math.pi * r * r * m))
         return grid

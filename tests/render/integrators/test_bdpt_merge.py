@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import importlib.util
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -61,13 +62,62 @@ def test_merging_is_traced_only_where_the_scene_needs_it(glass):
     assert not Renderer(glass, _opts(False)).integrator.merging
 
 
-def test_the_radius_shrinks_as_progressive_photon_mapping_s(glass):
+def test_the_radius_shrinks_per_sample_as_progressive_photon_mapping_s(glass):
+    """Per sample ``s`` (a pass of one sample per pixel) the squared radius follows Knaus and
+    Zwicker's recurrence; a pass of ``k`` samples merges at the mean of its samples' squared
+    radii. Negative control: the pass's first sample's radius alone differs."""
     integ = Renderer(glass, _opts(True)).integrator
-    r = [integ.merge_radius(i) for i in range(200)]
+    r = [integ.merge_radius(s, 1) for s in range(200)]
     assert r[0] == pytest.approx(B.MERGE_RADIUS * integ.rays.radius)
-    assert all(b < a for a, b in zip(r, r[1:]))
-    # r_i^2 ~ i^(alpha - 1): the ratio of squared radii over a factor 10 of steps
+    for s in range(199):
+        assert (r[s + 1] / r[s]) ** 2 == pytest.approx((s + 1 + B.MERGE_ALPHA) / (s + 2), rel=1e-9)
+    # r_s^2 ~ s^(alpha - 1): the ratio of squared radii over a factor 10 of samples
     assert (r[199] / r[19]) ** 2 == pytest.approx((200 / 20) ** (B.MERGE_ALPHA - 1.0), rel=0.03)
+    for first, k in ((0, 256), (16, 16), (100, 37)):
+        mean = np.mean([x * x for x in r[first:first + k]] if first + k <= 200
+                       else [integ.merge_radius(s, 1) ** 2 for s in range(first, first + k)])
+        assert integ.merge_radius(first, k) ** 2 == pytest.approx(mean, rel=1e-9)
+        assert integ.merge_radius(first, k) < 0.999 * r[first]
+
+
+def _radii(scene, monkeypatch, **extra) -> list[tuple[int, int, float]]:
+    """``(first, k, radius)`` of each photon map a bdpt render of ``scene`` builds (its passes
+    and the pilot's, which merges at sample 0)."""
+    seen = []
+    photons = B.BDPTIntegrator.photons
+
+    def recording(self, rng, m, first, k):
+        grid = photons(self, rng, m, first, k)
+        seen.append((first, k, grid.radius))
+        return grid
+
+    monkeypatch.setattr(B.BDPTIntegrator, "photons", recording)
+    Renderer(scene, replace(_opts(True, size=16, spp=16), **extra)).render()
+    monkeypatch.undo()
+    return seen
+
+
+def test_the_radius_follows_the_samples_per_pixel_not_the_passes(glass, monkeypatch):
+    """A 16x16, 16 spp render in one pass and in four (``max_lanes`` of 4 samples per
+    pixel) merges each pass at the mean squared radius of its
+    samples, so the mean of ``r^2`` over all samples is the same in both: the per-sample
+    schedule's mean over the 16 samples. Negative control: the old rule (the pass's sample
+    step as the schedule's index) gives the two layouts different means."""
+    integ = Renderer(glass, _opts(True)).integrator
+    want = np.mean([integ.merge_radius(s, 1) ** 2 for s in range(16)])
+    one = _radii(glass, monkeypatch)
+    many = _radii(glass, monkeypatch, max_lanes=16 * 16 * 4)
+    # the pilot's map first, then the passes'
+    assert [(f, k) for f, k, _ in one[1:]] == [(0, 16)]
+    assert [(f, k) for f, k, _ in many[1:]] == [(4 * i, 4) for i in range(4)]
+    for seen in (one, many):
+        assert all(r == integ.merge_radius(f, k) for f, k, r in seen)
+        passes = seen[1:]
+        mean = sum(k * r * r for _, k, r in passes) / sum(k for _, k, _r in passes)
+        assert mean == pytest.approx(want, rel=1e-9)
+    old = [integ.merge_radius(0, 1) ** 2 * np.prod([(i + B.MERGE_ALPHA) / (i + 1) for i in range(1, step + 1)])
+           for step in range(4)]
+    assert abs(np.mean(old) - integ.merge_radius(0, 1) ** 2) > 0.05 * integ.merge_radius(0, 1) ** 2
 
 
 def test_bdpt_merge_needs_bdpt(tmp_path, capsys):
@@ -128,8 +178,8 @@ def _difference_z(glass, monkeypatch=None, power_scale: float = 1.0, seeds: int 
     if power_scale != 1.0:
         photons = B.BDPTIntegrator.photons
 
-        def scaled(self, rng, n, step):
-            grid = photons(self, rng, n, step)
+        def scaled(self, rng, n, first, k):
+            grid = photons(self, rng, n, first, k)
             grid.fields["power"] = grid.fields["power"] * power_scale
             return grid
 
