@@ -990,8 +990,10 @@ class BDPTIntegrator:
         live = Bool(active) & (D > 0)
         record = strategies is not None
         merge = photons is not None and not record and self.only is None
-        # merging: where the camera subpath is, 0: S* (only Dirac vertices so far), 1: S+ D,
-        # 2: S+ D S+ (an area light hit now ends a path that merging estimates), 3: other
+        # merging: where the camera subpath is, 0: S* (only Dirac vertices so far), 1: S+ D
+        # (merged at D), 2: S+ D S+ (an area light hit now ends a path that merging
+        # estimates), 3: other (also S+ D with a Dirac lobe sampled at D); S and D by the
+        # material (scene.is_delta), as the photons' vertices are
         phase = dr.zeros(UInt32, n)
 
         while live:
