@@ -144,6 +144,9 @@ def cmd_render(args: argparse.Namespace) -> int:
         if args.workers is not None or args.cluster is not None or args.resume or opts.adaptive:
             raise DrptError("--bdpt-strategies renders in one process: --workers, --cluster, --resume "
                             "and --adaptive do not apply")
+        if args.bdpt_merge == "on":
+            raise DrptError("--bdpt-strategies renders without caustic merging (its strategy images "
+                            "have no merging strategy): give --bdpt-merge off or leave it out")
 
     if args.workers is not None and args.cluster is not None:
         raise DrptError("give --workers N (a local cluster) or --cluster ADDRESS, not both")

@@ -596,12 +596,14 @@ class Renderer:
         photons = None
         if self.integrator.merging and strategies is None:
             # caustic photons of the first m lanes' light subpaths, from a stream of their own
-            # (BDPTIntegrator.photons); the radius by sample step, the same in every band of rows
+            # (BDPTIntegrator.photons); the radius from the pass's samples per pixel (its
+            # first and its k), the same in every band of rows and whatever the lanes per pass
+            plan = self.chunks.passes
             m = self.integrator.photon_paths(n)
             first = dr.arange(UInt32, m)
             rng = self._sampler(pass_index, m, dr.gather(UInt32, x, first), dr.gather(UInt32, y, first),
                                 first % dr.opaque(UInt32, k), 1, seed ^ BDPT_PHOTON_STREAM)
-            photons = self.integrator.photons(rng, m, pass_index // self.chunks.passes.bands)
+            photons = self.integrator.photons(rng, m, pass_index // plan.bands * plan.k, k)
         rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1, seed)
         u = next_2d(rng)
         squares = self.opt.light_variance

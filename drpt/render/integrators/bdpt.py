@@ -40,11 +40,15 @@ weights are unchanged, and ``s = 0`` had weight 1 on these):
   sum_p f(wi, wo_p) power_p / (pi r^2 N)`` over the photons within ``r`` whose paths fit in
   ``max_depth`` segments (``f`` without its cosine; :meth:`BDPTIntegrator._merge`);
 * the camera subpath's area-light hits whose path is camera S+ D S+ light count 0 (it
-  tracks where it is in that pattern).
+  tracks where it is in that pattern), unless it sampled a Dirac lobe at D (plastic's
+  coating, a mask's pass-through: merging evaluates D's smooth lobes only, so ``s = 0``
+  keeps those paths); each path is counted by exactly one of the two.
 
-``r`` is :data:`MERGE_RADIUS` of the scene's bounding radius in the first sample step and
-shrinks by progressive photon mapping's rule (Knaus and Zwicker 2011, :data:`MERGE_ALPHA`)
-over the steps, so the estimate is consistent, not unbiased: at any finite spp it is the
+``r`` is :data:`MERGE_RADIUS` of the scene's bounding radius at the first sample per pixel
+and shrinks by progressive photon mapping's rule (Knaus and Zwicker 2011, :data:`MERGE_ALPHA`)
+over the samples per pixel, a pass merging at the mean of its samples' ``r^2``
+(:meth:`BDPTIntegrator.merge_radius`: the same image whatever the lanes per pass), so the
+estimate is consistent, not unbiased: at any finite spp it is the
 caustic's irradiance blurred over disks of radius ``r`` (an ``O(r^2)`` bias where the caustic
 is smooth, more at its edges and where another surface lies within ``r``). Scenes without
 Dirac lobes or area lights trace none of it; the sky's and the background's caustics seen
@@ -163,7 +167,7 @@ from ..camera import RayCamera
 from ..film import SplatFilm
 from ..instrument import HIT_CAMERA, HIT_LIGHT, SHADOW_CAMERA, SHADOW_CONNECT, SHADOW_NEE, SPLAT, count
 from ..lights.rays import INV_FOUR_PI, EmitterRays
-from ..loops import widen
+from ..loops import loops_once, widen
 from ..photons import PhotonGrid
 from ..sampler import LDSampler, next_2d
 from ..scene import DeviceScene
@@ -199,7 +203,7 @@ CAMERA_DIMENSION = 128
 
 SUPPORTED_SOURCES = ("area", "point", "spot", "directional", "sky", "background")
 
-#: caustic merging's radius in the first sample step, as a fraction of the scene's bounding
+#: caustic merging's radius at the first sample per pixel, as a fraction of the scene's bounding
 #: radius (:meth:`BDPTIntegrator.merge_radius`)
 MERGE_RADIUS = 0.01
 
@@ -791,16 +795,25 @@ class BDPTIntegrator:
         return dr.select(ok, value, 0.0)
 
     # ------------------------------------------------------------ caustic merging
-    def merge_radius(self, step: int) -> float:
-        """The merging radius of sample step ``step`` (0, 1, ...): :data:`MERGE_RADIUS` of the
-        scene's bounding radius at step 0, its square shrinking by ``(i + alpha) / (i + 1)``
-        from step ``i`` to ``i + 1`` (:data:`MERGE_ALPHA`), as progressive photon mapping's
-        (Knaus and Zwicker 2011): the squared radius falls as ``step^(alpha - 1)``."""
-        r2 = 1.0
-        for i in range(1, step + 1):
-            r2 *= (i + MERGE_ALPHA) / (i + 1)
+    def merge_radius(self, first: int, k: int) -> float:
+        """The merging radius of a pass of samples ``first .. first + k - 1`` (sample indices
+        per pixel, from 0). Per sample ``s`` the squared radius follows progressive photon
+        mapping's rule (Knaus and Zwicker 2011): ``r_0^2 = (MERGE_RADIUS R)^2`` (``R`` the
+        scene's bounding radius), ``r_{s+1}^2 = r_s^2 (s + 1 + alpha) / (s + 2)``
+        (:data:`MERGE_ALPHA`), so ``r_s^2 = r_0^2 Gamma(s + 1 + alpha) / (Gamma(1 + alpha)
+        Gamma(s + 2))``, falling as ``s^(alpha - 1)``. A pass merges with one radius: the
+        one whose square is the mean of ``r_s^2`` over its samples, so the image's ``O(r^2)``
+        bias, the mean of its samples', depends on the spp alone, not on how the samples
+        are split into passes (lanes per pass, bands, chunks, workers, resumes)."""
+        a = MERGE_ALPHA
+
+        def total(m: int) -> float:  # sum of r_s^2 / r_0^2 over s < m, in closed form
+            return math.expm1(math.lgamma(m + 1 + a) - math.lgamma(m + 1) - math.lgamma(1 + a)) / a
+
+        r2 = (total(first + k) - total(first)) / k
         return MERGE_RADIUS * self.rays.radius * math.sqrt(r2)
 
+    @loops_once
     @dr.syntax
     def trace_photons(self, rng: PCG32, active: Bool):
         """One light subpath per lane, from the area lights only, followed through Dirac
@@ -849,13 +862,13 @@ class BDPTIntegrator:
         """The photon subpaths of a pass of ``n`` camera samples: ``n / PHOTON_SHARE``."""
         return max(1, n // PHOTON_SHARE)
 
-    def photons(self, rng: PCG32, m: int, step: int) -> PhotonGrid:
+    def photons(self, rng: PCG32, m: int, first: int, k: int) -> PhotonGrid:
         """The caustic photons of ``m`` light subpaths (:meth:`trace_photons`, ``rng`` of
         ``m`` lanes) in a :class:`~drpt.render.photons.PhotonGrid` of radius
-        :meth:`merge_radius` of ``step``, evaluated; its ``scale`` (a kernel input) is ``1 /
-        (pi r^2 m)``."""
+        :meth:`merge_radius` of the pass's samples ``first .. first + k - 1``, evaluated;
+        its ``scale`` (a kernel input) is ``1 / (pi r^2 m)``."""
         p, wo, power, depth, valid = self.trace_photons(rng, dr.full(Bool, True, m))
-        r = self.merge_radius(step)
+        r = self.merge_radius(first, k)
         grid = PhotonGrid(p, valid, r, {"wo": wo, "power": power, "depth": depth})
         grid.scale = dr.opaque(Float, 1.0 / (math.pi * r * r * m))
         return grid
@@ -977,8 +990,10 @@ class BDPTIntegrator:
         live = Bool(active) & (D > 0)
         record = strategies is not None
         merge = photons is not None and not record and self.only is None
-        # merging: where the camera subpath is, 0: S* (only Dirac vertices so far), 1: S+ D,
-        # 2: S+ D S+ (an area light hit now ends a path that merging estimates), 3: other
+        # merging: where the camera subpath is, 0: S* (only Dirac vertices so far), 1: S+ D
+        # (merged at D), 2: S+ D S+ (an area light hit now ends a path that merging
+        # estimates), 3: other (also S+ D with a Dirac lobe sampled at D); S and D by the
+        # material (scene.is_delta), as the photons' vertices are
         phase = dr.zeros(UInt32, n)
 
         while live:
@@ -1043,6 +1058,11 @@ class BDPTIntegrator:
             wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
             _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
             dvcm, dvc = scatter_update(dvcm, dvc, bs.pdf, rev, dr.abs(dr.dot(si.ng, wo)), bs.delta)
+            if merge:
+                # a Dirac lobe sampled at the merged vertex (plastic's coating, a mask's
+                # pass-through): merging evaluates the smooth lobes only, so the path is not
+                # one it estimates, and s = 0 keeps it
+                phase = dr.select((phase == 1) & bs.delta, UInt32(3), phase)
             beta = beta * bs.weight
             eta = eta * bs.eta
             live &= bs.valid & (dr.max(beta) > 0.0)
