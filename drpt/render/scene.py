@@ -439,11 +439,25 @@ class DeviceScene:
         sky = self.has_background or any(f.infinite and not f.delta for f in self.emitter_selection.families)
         if not (emits or sky):
             out = list(nothing())
+        elif not self._costly_emitter_lookups():  # (the branch would cost more than it skips)
+            out = list(lookup(si, d, hit, escaped))
         else:
             sees = self.materials.is_emissive(si, hit) if emits else Bool(False)
             sees = sees | escaped if sky else sees
             out = list(dr.if_stmt((si, d, hit, escaped), sees, lookup, nothing, label="drpt_eval_emitter"))
         return (out.pop(0) if radiance else None), (out.pop(0) if density else None)
+
+    def _costly_emitter_lookups(self) -> bool:
+        """Whether :meth:`eval_emitter`'s lookups are worth a symbolic ``if``: an environment
+        (a texture lookup), emissive spheres (a cone's density), textured emission or a
+        light selection that depends on the point. Constant emission on triangles with a
+        static selection is a few gathers, cheaper than the branch (the Cornell box's path
+        kernel: 3% more CPU time with it, docs/performance.md)."""
+        sel = self.emitter_selection
+        return (any(f.infinite and not f.delta for f in sel.families)
+                or getattr(self.area_lights, "has_spheres", False)
+                or getattr(self.materials, "_emit_tex", None) is not None
+                or not sel.static)
 
     def _eval_emitter(self, si: Interaction, d: Array3f, hit: Bool, escaped: Bool, radiance: bool,
                       density: bool) -> tuple[Array3f | None, Float | None]:

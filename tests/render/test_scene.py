@@ -128,3 +128,15 @@ def test_eval_emitter_branch_gives_the_lookups_values(name, monkeypatch):
         monkeypatch.setattr(f, "infinite", False)
     le1, pdf1 = (np.array(v) for v in scene.eval_emitter(si, D, active))
     assert np.all(pdf1 == 0) and np.all(le1 == 0) and not np.array_equal(pdf1, pdf0)
+
+
+def test_eval_emitter_branches_only_where_the_lookups_cost_more():
+    """The symbolic ``if`` is traced for emissive spheres (Veach's scene) and not for
+    constant emission on triangles with a static selection (the Cornell box), whose path
+    kernel it made slower; the negative control is the Veach scene itself."""
+    root = Path(__file__).resolve().parents[2]
+    opts = RenderOptions(width=8, height=8, spp=1, progress=False)
+    cornell = DeviceScene(load_scene(root / "scenes" / "cornellbox" / "cornellbox.txt"), opts)
+    veach = DeviceScene(load_scene(root / "tests" / "data" / "xml" / "veach_mis.xml"), opts)
+    assert not cornell._costly_emitter_lookups()
+    assert veach._costly_emitter_lookups()
