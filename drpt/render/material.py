@@ -324,6 +324,11 @@ class MaterialTable:
         return self.layout.specs_of(kind)
 
     # ------------------------------------------------------------------ emission
+    @property
+    def has_emission_texture(self) -> bool:
+        """Whether some material's emission is a texture (Mitsuba's area radiance bitmap)."""
+        return self._emit_tex is not None
+
     def emitted(self, si: Interaction) -> Array3f:
         """Radiance leaving ``si`` toward ``si.wi`` (zero on back faces)."""
         if not self.has_emission:

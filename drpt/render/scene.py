@@ -115,6 +115,7 @@ class NoMaterials:
     textures = None
     notes: list[str] = []
     has_emission = False
+    has_emission_texture = False
 
     def is_specular_only(self) -> bool:
         return True  # no BSDF to sample lights for: next-event estimation is not traced
@@ -455,8 +456,8 @@ class DeviceScene:
         kernel: 3% more CPU time with it, docs/performance.md)."""
         sel = self.emitter_selection
         return (any(f.infinite and not f.delta for f in sel.families)
-                or getattr(self.area_lights, "has_spheres", False)
-                or getattr(self.materials, "_emit_tex", None) is not None
+                or self.area_lights.has_spheres
+                or self.materials.has_emission_texture
                 or not sel.static)
 
     def _eval_emitter(self, si: Interaction, d: Array3f, hit: Bool, escaped: Bool, radiance: bool,

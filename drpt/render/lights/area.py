@@ -112,7 +112,7 @@ class AreaLights:
         self.sampler = sampler
         # textured emitters (Mitsuba's area radiance bitmap): the radiance at the sampled
         # point's uv (their power, for the choice of a triangle, is the texture's mean)
-        self.materials = materials if getattr(materials, "_emit_tex", None) is not None else None
+        self.materials = materials if getattr(materials, "has_emission_texture", False) else None
         self.count = 0
         self.n_tri = len(tris)
         self.n_sph = len(sph)
