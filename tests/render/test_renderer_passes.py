@@ -94,6 +94,24 @@ def test_xyz_second_moment_is_the_square_of_each_samples_xyz():
     assert not np.allclose(xyz_second_moment(m[..., [0, 1, 2, 5, 4, 3]]), want, rtol=1e-3)
 
 
+def _record_lane_widths(monkeypatch) -> list:
+    """The lane count of every ``PathIntegrator.sample_sequence`` traced from now on (the
+    method wrapped for the test), in order."""
+    import drjit as dr
+
+    from drpt.render.integrators.path import PathIntegrator
+
+    widths = []
+    traced = PathIntegrator.sample_sequence
+
+    def recording(self, rng, camera_ray, count, *args, **kw):
+        widths.append(dr.width(count))
+        return traced(self, rng, camera_ray, count, *args, **kw)
+
+    monkeypatch.setattr(PathIntegrator, "sample_sequence", recording)
+    return widths
+
+
 MIRROR_XML = """<scene version="3.0.0">
   <integrator type="path"><integer name="max_depth" value="8"/></integrator>
   <sensor type="perspective">
@@ -115,24 +133,14 @@ def test_a_mirror_only_scene_traces_a_lane_per_sample(tmp_path, monkeypatch, bsd
     mask). Both trace every sample once."""
     import dataclasses
 
-    import drjit as dr
-
     from drpt import backend
     from drpt.render import renderer
-    from drpt.render.integrators.path import PathIntegrator
     from drpt.render.scene import DeviceScene
     from drpt.scene import load_scene
 
     policy = dataclasses.replace(backend.policy(), min_lanes=1)
     monkeypatch.setattr(renderer, "policy", lambda: policy)
-    widths = []
-    traced = PathIntegrator.sample_sequence
-
-    def recording(self, rng, camera_ray, count, *args, **kw):
-        widths.append(dr.width(count))
-        return traced(self, rng, camera_ray, count, *args, **kw)
-
-    monkeypatch.setattr(PathIntegrator, "sample_sequence", recording)
+    widths = _record_lane_widths(monkeypatch)
     coherent = []
     intersect = DeviceScene.intersect
 
@@ -210,24 +218,14 @@ def test_unrolled_paths_trace_a_few_paths_per_lane(tmp_path, monkeypatch, depth,
     one lane per pixel."""
     import dataclasses
 
-    import drjit as dr
-
     from drpt import backend
     from drpt.options import PathOptions
     from drpt.render import renderer
-    from drpt.render.integrators.path import PathIntegrator
     from drpt.scene import load_scene
 
     policy = dataclasses.replace(backend.policy(), min_lanes=1)
     monkeypatch.setattr(renderer, "policy", lambda: policy)
-    widths = []
-    traced = PathIntegrator.sample_sequence
-
-    def recording(self, rng, camera_ray, count, *args, **kw):
-        widths.append(dr.width(count))
-        return traced(self, rng, camera_ray, count, *args, **kw)
-
-    monkeypatch.setattr(PathIntegrator, "sample_sequence", recording)
+    widths = _record_lane_widths(monkeypatch)
     (tmp_path / "s.xml").write_text(SKY_XML)
     rend = renderer.Renderer(load_scene(tmp_path / "s.xml"), renderer.RenderOptions(
         width=7, height=5, spp=spp, progress=False, path=PathOptions(max_depth=depth)))

@@ -170,6 +170,20 @@ def test_unrolled_sequence_mean_matches_the_loop(scenes_dir, monkeypatch, depth)
         assert abs((a[ch] - c[ch]).sum()) > 5 * se_c, (ch, (a[ch] - c[ch]).sum(), se_c)
 
 
+def _record_if_labels(monkeypatch) -> list:
+    """The labels of the symbolic ``if`` statements traced from now on (``dr.if_stmt``
+    wrapped for the test), in order."""
+    labels = []
+    if_stmt = dr.if_stmt
+
+    def recording(*args, **kw):
+        labels.append(kw.get("label"))
+        return if_stmt(*args, **kw)
+
+    monkeypatch.setattr(dr, "if_stmt", recording)
+    return labels
+
+
 MIXED_XML = """<scene version="3.0.0">
   <integrator type="path"><integer name="max_depth" value="{depth}"/></integrator>
   <sensor type="perspective">
@@ -196,14 +210,7 @@ def test_nee_branch_on_smooth_lanes_is_the_masked_estimate(tmp_path, monkeypatch
     mirror). A scene without delta materials (the control) traces no such branch."""
     (tmp_path / "s.xml").write_text(MIXED_XML.format(depth=depth, left=left))
     scene = load_scene(tmp_path / "s.xml")
-    labels = []
-    if_stmt = dr.if_stmt
-
-    def recording(*args, **kw):
-        labels.append(kw.get("label"))
-        return if_stmt(*args, **kw)
-
-    monkeypatch.setattr(dr, "if_stmt", recording)
+    labels = _record_if_labels(monkeypatch)
 
     def image():
         return Renderer(scene, RenderOptions(width=12, height=8, spp=8, progress=False,
@@ -228,14 +235,7 @@ def test_branched_vertex_is_the_straight_line_vertex(tmp_path, monkeypatch, dept
     (the comparison sees the random numbers)."""
     (tmp_path / "s.xml").write_text(MIXED_XML.format(depth=depth, left="diffuse"))
     scene = load_scene(tmp_path / "s.xml")
-    labels = []
-    if_stmt = dr.if_stmt
-
-    def recording(*args, **kw):
-        labels.append(kw.get("label"))
-        return if_stmt(*args, **kw)
-
-    monkeypatch.setattr(dr, "if_stmt", recording)
+    labels = _record_if_labels(monkeypatch)
 
     def image(branched, seed=0):
         monkeypatch.setattr(PathIntegrator, "branched", branched)
