@@ -84,24 +84,17 @@ class Clock:
             return out
 
         R.Renderer._trace_pass = timed_pass
-        finish = R.finish
 
-        def timed_finish(*a, **kw):
-            t0 = clock()
-            out = finish(*a, **kw)
-            t["finish"] = clock() - t0
-            return out
+        def timed(key, fn):  # ``fn`` with its last call's duration kept as ``t[key]``
+            def call(*a, **kw):
+                t0 = clock()
+                out = fn(*a, **kw)
+                t[key] = clock() - t0
+                return out
+            return call
 
-        R.finish = timed_finish
-        sample_sequence = PathIntegrator.__dict__["sample_sequence"]
-
-        def timed_sequence(*a, **kw):
-            t0 = clock()
-            out = sample_sequence(*a, **kw)
-            t["trace"] = clock() - t0
-            return out
-
-        PathIntegrator.sample_sequence = timed_sequence
+        R.finish = timed("finish", R.finish)
+        PathIntegrator.sample_sequence = timed("trace", PathIntegrator.__dict__["sample_sequence"])
 
     def render(self, render, spp: int, seed: int) -> dict[str, float]:
         t = self.t
