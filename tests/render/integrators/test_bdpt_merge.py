@@ -230,3 +230,33 @@ def test_a_dirac_lobe_sampled_at_the_merged_vertex_keeps_its_light_hit(plastic):
 def test_plastic_negative_control_photons_of_twice_their_power(plastic, monkeypatch):
     zb, zt = _difference_z(plastic, monkeypatch, power_scale=2.0, size=16, spp=64)
     assert zt > 6.0, (zb, zt)
+
+
+# ------------------------------------------------------------ chunks, workers, resume
+@pytest.mark.slow
+def test_merging_in_chunks_and_resumed_gives_the_plain_image(glass, monkeypatch, tmp_path):
+    """A render in chunks merges each chunk at the radius of its own samples' indices in the
+    whole render (``first`` is the chunk's first sample, not 0), so the image does not depend on
+    where the render was cut: interrupted after 2 of 4 chunks and resumed, it is the plain
+    render's image bit for bit (float32). The radius is 10x the default so that a 16x16, 8 spp
+    render merges at all (at the default no pixel of it does); Dask workers, other processes,
+    would not see that patch, and trace the same chunk function (test_bdpt.py checks their
+    images). Negative control: merging off gives another image, so merged paths are in it."""
+    from support.resume import interrupted_then_resumed
+
+    monkeypatch.setattr(B, "MERGE_RADIUS", 10 * B.MERGE_RADIUS)
+    opts = replace(_opts(True, size=16, spp=8), chunk_spp=2)
+    seen = []
+    photons = B.BDPTIntegrator.photons
+
+    def recording(self, rng, m, first, k):
+        seen.append((first, k))
+        return photons(self, rng, m, first, k)
+
+    with monkeypatch.context() as m:
+        m.setattr(B.BDPTIntegrator, "photons", recording)
+        plain = Renderer(glass, opts).render()
+    assert [p for p in seen if p != (0, 1)] == [(0, 2), (2, 2), (4, 2), (6, 2)]  # the pilot merges at (0, 1)
+    assert not np.array_equal(Renderer(glass, replace(opts, bdpt_merge=False)).render().image, plain.image)
+    resumed = interrupted_then_resumed(glass, opts, tmp_path / "cut.exr", after=2).result
+    assert np.array_equal(resumed.image, plain.image)
