@@ -191,7 +191,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         reason = f"{job.stopped} reached" if job.stopped else f"all {opts.spp} spp"
         stop = f", estimated relMSE {result.estimated_rel_mse:.3g} ({reason})"
     print(f"{output}: {opts.width}x{opts.height}, {spp}, {result.seconds:.2f} s ({extra}), "
-          f"{result.samples_per_second / 1e6:.2f} Msamples/s{stop}")
+          f"{result.samples_per_second / 1e6:.3g} Msamples/s{stop}")
     if opts.progress and (args.workers is not None or args.cluster is not None):
         print_workers(job)
     return 0
