@@ -189,12 +189,14 @@ class EmbreeAccel:
             bv = dr.select(tri, v, bv)
         return self.geo.hit(bt, bj, bu, bv)
 
-    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
-        """Whether anything is hit with ``0 < t < tmax`` (any-hit)."""
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                 coherent: Bool | bool = False) -> Bool:
+        """Whether anything is hit with ``0 < t < tmax`` (any-hit); ``coherent`` as
+        :meth:`intersect`'s."""
         o, d, active, bt, bj, _, _ = self.geo.begin_query(o, d, tmax, active, True)
         hit = bj != INVALID
         if self.geo.N:
-            hit |= self._query(o, d, Float(tmax), active, shadow=True)[0]
+            hit |= self._query(o, d, Float(tmax), active, shadow=True, coherent=coherent)[0]
         return hit
 
     def _query(self, o: Array3f, d: Array3f, tfar: Float, active: Bool, shadow: bool,

@@ -83,6 +83,23 @@ def test_coherent_camera_rays_hit_what_incoherent_ones_hit():
 
 
 @needs_embree
+def test_coherent_shadow_rays_find_what_incoherent_ones_find():
+    """``occluded``'s ``coherent`` (Embree's coherent traversal) changes no answer, for every
+    lane mask; a query whose lanes are all inactive reports nothing (the negative control
+    that the flag does not take the place of the mask)."""
+    sc, o, d, rng = mixed_scene_and_rays()
+    R = len(o)
+    O, D = rays(o, d)
+    e = build_accel(sc, "embree")
+    tm = Float(np.float32(rng.random(R) * 6))
+    base = e.occluded(O, D, tm).numpy()
+    assert base.any() and not base.all()
+    for coherent in (True, Bool(np.arange(R) % 2 == 0)):
+        assert np.array_equal(e.occluded(O, D, tm, True, coherent).numpy(), base)
+    assert not e.occluded(O, D, tm, Bool(np.zeros(R, bool)), True).numpy().any()
+
+
+@needs_embree
 def test_embree_tmax_and_mask():
     """``tmax`` cuts hits off and inactive lanes report nothing; planes beyond a
     nearer triangle do not win; a sphere-only scene maps ids past the triangles."""
