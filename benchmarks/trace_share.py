@@ -42,8 +42,9 @@ def closest_twice(self, o, d, active, tmax=None, coherent=False):
     return dr.select(h2.t < h1.t, h2, h1)
 
 
-def shadow_twice(self, o, d, tmax, active):
-    return self.accel.occluded(o, d, tmax, active) | self.accel.occluded(*_copy(o, d), tmax, active)
+def shadow_twice(self, o, d, tmax, active, coherent=False):
+    return (self.accel.occluded(o, d, tmax, active, coherent)
+            | self.accel.occluded(*_copy(o, d), tmax, active, coherent))
 
 
 VARIANTS = {"as is": ONCE, "closest hit twice": (closest_twice, ONCE[1]),
