@@ -3,8 +3,9 @@
 Rays start at 8 random points inside ``tests/data/xml/uvsphere.obj`` (a closed unit uv sphere,
 576 triangles) and aim at its vertices and at 39 points along each triangle edge, where a
 non-watertight triangle test lets rays slip between neighbours. Every ray must hit the
-sphere; the script counts the misses with ``RTC_SCENE_FLAG_ROBUST`` (drpt's setting,
-Mitsuba's) and without it.
+sphere; the script counts the misses with ``RTC_SCENE_FLAG_ROBUST`` (drpt's setting for its
+own format) and without it (Mitsuba's default, and drpt's for an XML file that does not set
+``embree_use_robust_intersections``).
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/embree_robust_leak.py
 """
@@ -45,7 +46,6 @@ def targets() -> np.ndarray:
 def main() -> None:
     from drjit.auto import Array3f, Bool, Float
 
-    from drpt.accel import embree_lib as lib
     from drpt.backend import ensure
     from drpt.options import RenderOptions
     from drpt.render.scene import DeviceScene
@@ -54,13 +54,14 @@ def main() -> None:
     ensure()
     pts = targets()
     origins = np.random.default_rng(1).uniform(-0.3, 0.3, (8, 3))
-    robust_flag = lib.SCENE_FLAG_ROBUST
     with tempfile.TemporaryDirectory() as tmp:
         xml = Path(tmp) / "sphere.xml"
         xml.write_text(XML.format(obj=OBJ))
         for robust in (True, False):
-            lib.SCENE_FLAG_ROBUST = robust_flag if robust else 0  # (read when the scene is built)
-            scene = DeviceScene(load_scene(xml), RenderOptions(accel="embree", progress=False))
+            model = load_scene(xml)
+            model.settings.embree_robust = robust  # (the file's embree_use_robust_intersections)
+            scene = DeviceScene(model, RenderOptions(accel="embree", progress=False))
+            assert scene.accel.robust is robust
             misses = total = 0
             for o in origins:
                 d = pts - o
@@ -72,7 +73,6 @@ def main() -> None:
                 misses += int(dr.sum(dr.select(si.valid, 0, 1))[0])
                 total += n
             print(f"robust {'on ' if robust else 'off'}: {misses} of {total} rays miss")
-    lib.SCENE_FLAG_ROBUST = robust_flag
 
 
 if __name__ == "__main__":

@@ -35,15 +35,16 @@ def _copy(o, d):
     return Array3f(o) * one, Array3f(d) * one
 
 
-def closest_twice(self, o, d, active):
-    far = Float(dr.largest(Float))
-    h1 = self.accel.intersect(o, d, far, active)
-    h2 = self.accel.intersect(*_copy(o, d), far, active)
+def closest_twice(self, o, d, active, tmax=None, coherent=False):
+    far = Float(dr.largest(Float)) if tmax is None else tmax
+    h1 = self.accel.intersect(o, d, far, active, coherent)
+    h2 = self.accel.intersect(*_copy(o, d), far, active, coherent)
     return dr.select(h2.t < h1.t, h2, h1)
 
 
-def shadow_twice(self, o, d, tmax, active):
-    return self.accel.occluded(o, d, tmax, active) | self.accel.occluded(*_copy(o, d), tmax, active)
+def shadow_twice(self, o, d, tmax, active, coherent=False):
+    return (self.accel.occluded(o, d, tmax, active, coherent)
+            | self.accel.occluded(*_copy(o, d), tmax, active, coherent))
 
 
 VARIANTS = {"as is": ONCE, "closest hit twice": (closest_twice, ONCE[1]),

@@ -49,7 +49,8 @@ class BruteForce:
         """Closest hit with ``0 < t < tmax``."""
         return self.geo.hit(*self._trace(o, d, tmax, active))
 
-    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                 coherent: Bool | bool = False) -> Bool:
         """Whether anything is hit with ``0 < t < tmax``."""
         _, bj, _, _ = self._trace(o, d, tmax, active)
         return bj != INVALID

@@ -247,7 +247,8 @@ class BVH4:
         """Closest hit with ``0 < t < tmax``."""
         return self.geo.hit(*self._trace(o, d, tmax, active, any_hit=False))
 
-    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                 coherent: Bool | bool = False) -> Bool:
         """Whether anything is hit with ``0 < t < tmax`` (any-hit, early exit)."""
         _, bj, _, _ = self._trace(o, d, tmax, active, any_hit=True)
         return bj != INVALID

@@ -4,7 +4,7 @@
 (:class:`~drpt.accel.protocol.Accelerator`: the same global primitive ids, ``Hit``
 records and ``0 < t < tmax`` rule). It hands the scene's triangles and spheres to
 Embree 3 (one triangle mesh, geometry id 0, and one set of sphere points, id 1, in the
-scene's order, robust mode, high build quality: Mitsuba 3's settings), and every
+scene's order, high build quality as Mitsuba 3 builds it; robust mode: :func:`robust_for`), and every
 ``intersect`` / ``occluded`` call adds a packet query of Embree to the kernel being
 traced, through Dr.Jit's ``jit_llvm_ray_trace`` (:mod:`drpt.accel.embree_lib`). The
 query is a call inside the kernel: it works in symbolic loops (the megakernel's path
@@ -21,6 +21,13 @@ diverges, which a lane-per-ray Dr.Jit kernel cannot express. ``--accel auto`` th
 ``inline_max_prims`` primitives on the LLVM backend when Embree 3 loads
 (:func:`drpt.accel.registry.resolve_kind`), and drpt's BVH otherwise (CUDA, no Embree,
 or a BVH rule asked for).
+
+Robust mode: Embree's watertight triangle test and conservative box tests, on for drpt's
+own scene format; a Mitsuba XML scene follows its ``embree_use_robust_intersections``,
+off by default as in Mitsuba 3 (:func:`robust_for`). Off, rays aimed within rounding of a
+shared edge or vertex can slip between two triangles (``benchmarks/embree_robust_leak.py``
+aims rays there to count them), and the queries take about 15% less time
+(docs/performance.md, "Embree").
 
 Agreement with drpt's own tests (``tests/accel/test_embree.py``): the same hits up to
 ties between primitives at equal ``t`` and rounding of ``t, u, v`` (Embree's robust
@@ -50,6 +57,15 @@ from .primitives import SceneGeometry
 from .protocol import INVALID, AccelParams, Hit
 
 TNEAR = float(np.finfo(np.float32).tiny)  # excludes t = 0, as every accelerator does
+
+
+def robust_for(scene) -> bool:
+    """Whether ``scene``'s Embree BVH uses Embree's robust triangle test: as its file says
+    (:attr:`~drpt.scene.model.RenderSettings.embree_robust`: a Mitsuba XML's
+    ``embree_use_robust_intersections``, off unless set, as in Mitsuba), else on (drpt's own
+    format, whose scenes were measured with it)."""
+    said = getattr(getattr(scene, "settings", None), "embree_robust", None)
+    return True if said is None else bool(said)
 
 
 _retired: list = []  # (lib, Embree scene, pointer variables, vertex arrays) of collected accelerators
@@ -104,7 +120,8 @@ class EmbreeAccel:
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": geo.N}
         bytes0 = L.device_bytes
         esc = L.rtcNewScene(L.device)
-        L.rtcSetSceneFlags(esc, lib.SCENE_FLAG_ROBUST)
+        self.robust = robust_for(scene)
+        L.rtcSetSceneFlags(esc, lib.SCENE_FLAG_ROBUST if self.robust else 0)
         L.rtcSetSceneBuildQuality(esc, lib.BUILD_QUALITY_HIGH)
         if F:
             # Embree reads vertices with 16-byte loads: one spare vertex at the end
@@ -172,12 +189,14 @@ class EmbreeAccel:
             bv = dr.select(tri, v, bv)
         return self.geo.hit(bt, bj, bu, bv)
 
-    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
-        """Whether anything is hit with ``0 < t < tmax`` (any-hit)."""
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                 coherent: Bool | bool = False) -> Bool:
+        """Whether anything is hit with ``0 < t < tmax`` (any-hit); ``coherent`` as
+        :meth:`intersect`'s."""
         o, d, active, bt, bj, _, _ = self.geo.begin_query(o, d, tmax, active, True)
         hit = bj != INVALID
         if self.geo.N:
-            hit |= self._query(o, d, Float(tmax), active, shadow=True)[0]
+            hit |= self._query(o, d, Float(tmax), active, shadow=True, coherent=coherent)[0]
         return hit
 
     def _query(self, o: Array3f, d: Array3f, tfar: Float, active: Bool, shadow: bool,

@@ -66,7 +66,8 @@ class InlineList:
         valid = bj != INVALID
         return Hit(dr.select(valid, bt, float("inf")), bj, bu, bv, valid)
 
-    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                 coherent: Bool | bool = False) -> Bool:
         """Whether anything is hit with ``0 < t < tmax``: :meth:`intersect`'s
         tests, each against ``tmax`` itself, or-ed (no running closest
         distance, so the tests do not wait on each other)."""

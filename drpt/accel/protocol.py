@@ -78,6 +78,9 @@ class Accelerator(Protocol):
         traversal, as Mitsuba asks it for camera rays); the hits are the same."""
         ...
 
-    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True) -> Bool:
-        """Whether anything is hit with ``0 < t < tmax``."""
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
+                 coherent: Bool | bool = False) -> Bool:
+        """Whether anything is hit with ``0 < t < tmax``. ``coherent``: as :meth:`intersect`'s
+        (the shadow rays of camera-ray hits toward one light start at nearby points and share
+        their direction); the answer is the same."""
         ...

@@ -307,12 +307,14 @@ class DeviceScene:
         return self.surfaces.interaction(o, d, hit)
 
     @loops_once
-    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool) -> Bool:
+    def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool,
+                 coherent: Bool | bool = False) -> Bool:
         """Lanes whose ray ``(o, d)`` hits anything at ``0 < t < tmax`` (a traversal loop
-        recorded once)."""
+        recorded once); ``coherent``: the lanes whose rays are coherent, a traversal hint
+        (:meth:`drpt.accel.protocol.Accelerator.occluded`), the same answer."""
         if self.instrument is not None:
             self.instrument.occluded(o, d, tmax, active)
-        return self.accel.occluded(o, d, tmax, active)
+        return self.accel.occluded(o, d, tmax, active, coherent)
 
     def spawn(self, si: Interaction, d: Array3f) -> Array3f:
         """The origin of a ray leaving ``si`` toward ``d`` without hitting it again."""

@@ -416,6 +416,9 @@ class RenderSettings:
     #: the nested integrator's name (its image is also written as ``<name>.R/G/B``)
     aovs: tuple = ()
     aov_image: str | None = None
+    #: Embree's robust triangle test (``RTC_SCENE_FLAG_ROBUST``, :mod:`drpt.accel.embree`): a
+    #: Mitsuba XML's ``embree_use_robust_intersections`` (Mitsuba's default: off)
+    embree_robust: bool | None = None
     #: the ``-D`` values the file was read with (``compare`` gives Mitsuba the same)
     defines: dict = field(default_factory=dict)
     #: the :class:`~drpt.errors.Loc` of the element that gave a setting, by setting name (for errors)

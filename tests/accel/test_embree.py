@@ -83,6 +83,23 @@ def test_coherent_camera_rays_hit_what_incoherent_ones_hit():
 
 
 @needs_embree
+def test_coherent_shadow_rays_find_what_incoherent_ones_find():
+    """``occluded``'s ``coherent`` (Embree's coherent traversal) changes no answer, for every
+    lane mask; a query whose lanes are all inactive reports nothing (the negative control
+    that the flag does not take the place of the mask)."""
+    sc, o, d, rng = mixed_scene_and_rays()
+    R = len(o)
+    O, D = rays(o, d)
+    e = build_accel(sc, "embree")
+    tm = Float(np.float32(rng.random(R) * 6))
+    base = e.occluded(O, D, tm).numpy()
+    assert base.any() and not base.all()
+    for coherent in (True, Bool(np.arange(R) % 2 == 0)):
+        assert np.array_equal(e.occluded(O, D, tm, True, coherent).numpy(), base)
+    assert not e.occluded(O, D, tm, Bool(np.zeros(R, bool)), True).numpy().any()
+
+
+@needs_embree
 def test_embree_tmax_and_mask():
     """``tmax`` cuts hits off and inactive lanes report nothing; planes beyond a
     nearer triangle do not win; a sphere-only scene maps ids past the triangles."""
@@ -169,3 +186,43 @@ def test_scene_outlives_its_accelerator_until_queries_ran():
     gc.collect()
     emb._reap()
     assert emb._retired == []
+
+
+_SPHERE_XML = """<scene version="3.0.0">{flag}
+  <sensor type="perspective"><float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>
+  <shape type="obj"><string name="filename" value="{obj}"/><bsdf type="diffuse"/></shape>
+</scene>"""
+
+
+@needs_embree
+def test_robust_mode_follows_the_file(tmp_path):
+    """Embree's robust triangle test is on for drpt's own scenes and, in a Mitsuba XML, as its
+    ``embree_use_robust_intersections`` says (Mitsuba's default: off). Rays from inside a closed
+    uv sphere aimed at its vertices all hit it in robust mode; without it some slip between
+    neighbouring triangles (the negative control that the flag reaches Embree)."""
+    from pathlib import Path
+
+    from drpt.scene import load_scene
+
+    obj = Path(__file__).resolve().parents[1] / "data" / "xml" / "uvsphere.obj"
+    verts = np.array([[float(x) for x in line.split()[1:4]] for line in obj.read_text().splitlines()
+                      if line.startswith("v ")])
+    # each vertex aimed at from 64 points near the center
+    O = np.float64([0.1, -0.2, 0.05]) + np.random.default_rng(1).uniform(-1e-3, 1e-3, (len(verts) * 64, 3))
+    D = verts.repeat(64, axis=0) - O
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    misses = {}
+    for flag, robust in (("", False), ('<boolean name="embree_use_robust_intersections" value="true"/>', True),
+                         ('<boolean name="embree_use_robust_intersections" value="false"/>', False)):
+        path = tmp_path / f"sphere_{len(flag)}.xml"
+        path.write_text(_SPHERE_XML.format(flag=flag, obj=obj))
+        scene = load_scene(path)
+        assert scene.settings.embree_robust is robust and scene.settings.not_read == ()
+        e = EmbreeAccel(scene)
+        assert e.robust is robust
+        h = e.intersect(*rays(O, D), Float(INF))
+        misses[robust] = int((~h.valid.numpy()).sum())
+    assert misses[True] == 0 and misses[False] > 0, misses
+    assert EmbreeAccel(make_scene(soup(np.random.default_rng(3), 200))).robust  # drpt's own: robust

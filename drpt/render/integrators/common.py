@@ -26,14 +26,17 @@ class ShadowQuery:
     """A direct-light estimate waiting for its shadow ray: the contribution
     ``value`` (already weighted, before visibility), counted where ``ok`` and
     the segment from ``o`` along unit ``d`` is clear up to ``tmax``.
-    :meth:`resolve` traces it at once (the megakernel); the wavefront
-    integrator collects the queries of a bounce and traces them as one batch."""
+    :meth:`resolve` traces it at once (the megakernel), as a coherent query on the lanes
+    ``coherent`` (a traversal hint: the same answer); the wavefront integrator collects
+    the queries of a bounce and traces them as one batch."""
 
-    def __init__(self, value: Array3f, o: Array3f, d: Array3f, tmax: Float, ok: Bool):
+    def __init__(self, value: Array3f, o: Array3f, d: Array3f, tmax: Float, ok: Bool,
+                 coherent: Bool | bool = False):
         self.value, self.o, self.d, self.tmax, self.ok = value, o, d, tmax, ok
+        self.coherent = coherent
 
     def resolve(self, scene) -> Array3f:
-        ok = self.ok & ~scene.occluded(self.o, self.d, self.tmax, self.ok)
+        ok = self.ok & ~scene.occluded(self.o, self.d, self.tmax, self.ok, self.coherent)
         return dr.select(ok, self.value, 0.0)
 
 
@@ -59,10 +62,14 @@ class DirectLight:
     def __init__(self, scene):
         self.scene = scene
 
-    def emitter(self, si, u_sel: Float, u2: Array2f, active: Bool, mis: bool) -> Array3f:
-        return self.emitter_query(si, u_sel, u2, active, mis).resolve(self.scene)
+    def emitter(self, si, u_sel: Float, u2: Array2f, active: Bool, mis: bool,
+                coherent: Bool | bool = False) -> Array3f:
+        return self.emitter_query(si, u_sel, u2, active, mis, coherent).resolve(self.scene)
 
-    def emitter_query(self, si, u_sel: Float, u2: Array2f, active: Bool, mis: bool) -> ShadowQuery:
+    def emitter_query(self, si, u_sel: Float, u2: Array2f, active: Bool, mis: bool,
+                      coherent: Bool | bool = False) -> ShadowQuery:
+        """The estimate at ``si`` waiting for its shadow ray (:class:`ShadowQuery`), whose
+        query is coherent on the lanes ``coherent`` (e.g. the hits of camera rays)."""
         scene = self.scene
         es = scene.sample_emitter(si, u_sel, u2, active)
         f, pdf_b = scene.eval_bsdf(si, es.wo)
@@ -72,4 +79,4 @@ class DirectLight:
         w = power_heuristic(es.pdf, pdf_b) if mis and es.delta is not True else Float(1.0)
         if mis and isinstance(es.delta, Bool):  # (a scene with delta lights and others)
             w = dr.select(es.delta, 1.0, w)
-        return ShadowQuery(f * es.le * (w / es.pdf), so, d, dist * SHADOW_SHRINK, ok)
+        return ShadowQuery(f * es.le * (w / es.pdf), so, d, dist * SHADOW_SHRINK, ok, coherent)

@@ -116,6 +116,17 @@ def nothing_seen(scene: DeviceScene) -> bool:
     return not (emits or scene.has_background or infinite)
 
 
+def coherent_shadows(scene: DeviceScene) -> bool:
+    """Whether the shadow rays of next-event estimation at the camera rays' hits are traced as
+    coherent queries (read at trace time): where no emitter at infinity but delta ones (a
+    directional light) can be chosen. Such rays start at nearby points toward a light's few
+    points (a point, spot or area light), or are parallel, and Embree's coherent traversal is
+    faster for them (``test_instancing_path.xml``: 7-8%); toward an environment map or a sky
+    their directions spread over the sphere, and it is slower (4-5% on the single-sphere
+    corpus scenes, whose light is a mix of both). The answer is the same."""
+    return not any(f.infinite and not f.delta for f in scene.emitter_selection.families)
+
+
 class PathIntegrator:
     #: trace paths of ``0 < max_depth <= UNROLLED_MAX_DEPTH`` as straight-line code
     #: (the module docstring); False: always the bounce loop (for A/B comparisons)
@@ -366,7 +377,8 @@ class PathIntegrator:
         def shade(L):
             # ---- next-event estimation: one emitter, one shadow ray
             if nee:
-                L = self._nee(scene, si, s.beta, L, u_sel, u_light, active)
+                coherent_shadow = (s.depth == 0) if coherent_shadows(scene) else False
+                L = self._nee(scene, si, s.beta, L, u_sel, u_light, active, coherent_shadow)
             # ---- BSDF sampling and Russian roulette: continue the path
             wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, None, u_path)
             return (scene.spawn(si, wo), Array3f(wo), L, beta, eta, depth, Float(bs.pdf),
@@ -386,19 +398,20 @@ class PathIntegrator:
 
 
     def _nee(self, scene: DeviceScene, si, beta: Array3f, L: Array3f, u_sel: Float, u_light,
-             active: Bool) -> Array3f:
+             active: Bool, coherent: Bool | bool = False) -> Array3f:
         """``L`` plus next-event estimation's MIS-weighted direct light at ``si`` (the random
-        numbers already drawn). In a scene with both delta-only and smooth materials it runs
+        numbers already drawn), its shadow ray a coherent query on the lanes ``coherent``
+        (the vertices that camera rays hit). In a scene with both delta-only and smooth materials it runs
         in a symbolic ``if`` on the lanes whose material is not delta-only (label
         ``drpt_nee``): a packet whose lanes are all on mirrors or glass, where the estimate
         is zero, skips the emitter sample, the BSDF evaluation and the shadow ray."""
         mats = scene.materials
         if not getattr(mats, "mixes_delta", False):  # (the empty scene's stand-in has none)
-            return L + beta * self.direct.emitter(si, u_sel, u_light, active, mis=True)
+            return L + beta * self.direct.emitter(si, u_sel, u_light, active, mis=True, coherent=coherent)
         lanes = active & ~mats.is_delta(si)
 
         def estimate(L):
-            return (L + beta * self.direct.emitter(si, u_sel, u_light, lanes, mis=True),)
+            return (L + beta * self.direct.emitter(si, u_sel, u_light, lanes, mis=True, coherent=coherent),)
 
         return dr.if_stmt((L,), lanes, estimate, lambda L: (L,), label="drpt_nee")[0]
 

@@ -186,6 +186,8 @@ class Reader:
         self.sensor(sensors[0])
         if integrators:
             self.integrator(integrators[0])
+        # Mitsuba's Embree scene: robust triangle tests only where the file asks
+        self.settings.embree_robust = bool(root.bool("embree_use_robust_intersections", False))
         self.check_unread(root)
         self.settings.defines = dict(self.defines)
         self.settings.not_read = tuple(self.not_read)

@@ -2,13 +2,16 @@
 regeneration (``sample_sequence``, what the renderer runs); short paths traced unrolled
 (straight-line code, ``PathIntegrator.unrolled``) against the bounce loop."""
 
+from pathlib import Path
+
 import drjit as dr
 import numpy as np
 import pytest
 from drjit.auto import PCG32, Bool, Float, UInt32
 
 from drpt.options import PathOptions, RenderOptions
-from drpt.render.integrators.path import PathIntegrator, nothing_seen
+from drpt.render.integrators import path as path_module
+from drpt.render.integrators.path import PathIntegrator, coherent_shadows, nothing_seen
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 
@@ -218,7 +221,7 @@ def test_nee_branch_on_smooth_lanes_is_the_masked_estimate(tmp_path, monkeypatch
 
     branch = image()
     assert ("drpt_nee" in labels) == branched
-    monkeypatch.setattr(PathIntegrator, "_nee", lambda self, scene, si, beta, L, u_sel, u_light, active:
+    monkeypatch.setattr(PathIntegrator, "_nee", lambda self, scene, si, beta, L, u_sel, u_light, active, *_:
                         L + beta * self.direct.emitter(si, u_sel, u_light, active, mis=True))
     masked = image()
     assert masked.max() > 0.0
@@ -354,3 +357,58 @@ def test_emitters_first_sees_a_diffuser_just_in_front_of_the_light(tmp_path, mon
     short = image(True, _short_of_emitter)
     assert not np.allclose(short, closest, rtol=1e-5, atol=1e-7)
     assert np.abs(short - closest).max() > 100 * np.abs(first - closest).max()
+
+
+SPHERE_LIT_XML = """<scene version="3.0.0">
+  <sensor type="perspective">
+    <transform name="to_world"><lookat origin="0, 0, -4" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="12"/>
+      <rfilter type="box"/></film>
+  </sensor>
+  <emitter type="point"><point name="position" x="-2" y="3" z="-3"/><rgb name="intensity" value="20"/></emitter>
+  {sky}
+  <shape type="obj"><string name="filename" value="{obj}"/><bsdf type="diffuse"/></shape>
+  <shape type="rectangle"><transform name="to_world"><scale value="4"/><translate z="2"/></transform>
+    <bsdf type="diffuse"/></shape>
+</scene>"""
+
+
+@pytest.mark.parametrize("depth", [2, 5])  # unrolled and the bounce loop
+def test_coherent_shadow_rays_change_no_pixel(tmp_path, monkeypatch, depth):
+    """Next-event estimation's shadow rays at the camera rays' hits are coherent Embree queries
+    where no emitter at infinity but delta ones can be chosen (:func:`coherent_shadows`: a point
+    light, not with an environment map): a traversal hint, so the image is the same, bit for bit,
+    as with every shadow ray incoherent. The control that the hint reaches the queries: the
+    recorded ``coherent`` arguments of the shadow queries are a Bool with the hint, False
+    without it."""
+    from drpt.render.scene import DeviceScene
+
+    obj = Path(__file__).resolve().parents[2] / "data" / "xml" / "uvsphere.obj"
+    sky_map = f'<emitter type="envmap"><string name="filename" value="{obj.parent / "sky.exr"}"/></emitter>'
+    # (a constant emitter is the background, which next-event estimation does not sample)
+    for sky, expect in (("", True), ('<emitter type="constant"><rgb name="radiance" value="0.2"/></emitter>', True),
+                        (sky_map, False)):
+        (tmp_path / "s.xml").write_text(SPHERE_LIT_XML.format(sky=sky, obj=obj))
+        scene = load_scene(tmp_path / "s.xml")
+        opts = RenderOptions(width=16, height=12, spp=8, accel="embree", progress=False,
+                             path=PathOptions(max_depth=depth))
+        assert coherent_shadows(Renderer(scene, opts).scene) is expect
+    seen = []
+    occluded = DeviceScene.occluded
+
+    def spy(self, o, d, tmax, active, coherent=False):
+        seen.append(coherent)
+        return occluded(self, o, d, tmax, active, coherent)
+
+    monkeypatch.setattr(DeviceScene, "occluded", spy)
+    (tmp_path / "s.xml").write_text(SPHERE_LIT_XML.format(sky="", obj=obj))
+    r = Renderer(load_scene(tmp_path / "s.xml"), RenderOptions(width=16, height=12, spp=8, accel="embree",
+                                                              progress=False, path=PathOptions(max_depth=depth)))
+    hinted = r.render().image
+    assert seen and all(isinstance(c, Bool) for c in seen)
+    seen.clear()
+    monkeypatch.setattr(path_module, "coherent_shadows", lambda scene: False)
+    plain = r.render().image
+    assert seen and all(c is False for c in seen)
+    assert plain.max() > 0.0
+    np.testing.assert_array_equal(hinted, plain)
