@@ -11,9 +11,10 @@ itself is camera vertex 0), a path of ``s + t - 1`` segments:
   area light as :meth:`~drpt.render.lights.area.AreaLights.sample` draws it for
   the path tracer, every point, spot and directional light, a sky direction);
 * ``s >= 2, t >= 2``: a stored light vertex joined to a camera vertex by a
-  shadow ray. In scenes without Dirac lobes each camera vertex is joined to one light
-  vertex, chosen uniformly among those that make a path of at most ``max_depth``
-  segments (:func:`choose_vertex`), its contribution multiplied by their number (each
+  shadow ray, only those that make a path of at most ``max_depth`` segments
+  (:func:`connection_room`). In scenes without Dirac lobes each camera vertex is joined to
+  one light vertex, chosen uniformly among them (:func:`choose_vertex`), its contribution
+  multiplied by their number (each
   connection strategy's estimate keeps its expectation; the MIS weights count the
   connections' densities over :data:`CONNECTION_CHOICES`): one connection per camera
   vertex instead of one per pair costs fewer shadow rays and BSDF evaluations than it
@@ -288,6 +289,16 @@ def emission_weight(pdf_nee: Float, emit: Float, dvcm: Float, dvc: Float, k: flo
     :attr:`BDPTIntegrator.k`."""
     w = dr.rcp(1.0 + _term(pdf_nee, dvcm) + _term(emit, dvc) / k)
     return dr.select(dr.isfinite(w), w, 0.0)
+
+
+def connection_room(k: UInt32, depth: int) -> UInt32:
+    """How many of the stored light vertices camera vertex ``k`` (the camera is vertex 0)
+    can be joined to within a path of at most ``depth`` segments: light vertex ``j`` has a
+    subpath of at least ``j + 1`` segments, and joined to camera vertex ``k`` it makes a path
+    of ``depth_j + k + 1``, so only ``j < depth - k - 1`` can (the later ones, always too
+    long, cost a BSDF evaluation each, and with one vertex chosen they would be chosen in
+    vain)."""
+    return dr.select(k + 1 < depth, UInt32(depth) - k - 1, 0)
 
 
 def choose_vertex(u: Float, stored: UInt32, room: UInt32) -> tuple[UInt32, UInt32]:
@@ -1028,9 +1039,9 @@ class BDPTIntegrator:
             L += beta * nee
             if record:
                 strategies.put(1, k + 1, px, py, beta * nee, active)
+            room = connection_room(k, D)
             if lverts is not None and self.one_connection:
-                # vertex j has depth >= j + 1: only the first D - k can make a path of <= D segments
-                i, m = choose_vertex(rng.next_float32(), stored, dr.select(k < D, D - k, 0))
+                i, m = choose_vertex(rng.next_float32(), stored, room)
                 pick = connectible & (m > 0)
                 lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, pick)
                 c = self._connect(si, beta, dvcm, dvc, lv, beta_l * Float(m), dvcm_l, dvc_l,
@@ -1043,7 +1054,8 @@ class BDPTIntegrator:
                 i = dr.zeros(UInt32, n)
                 # si is read, not changed: outside the loop's state (its width-1 fields would
                 # make Dr.Jit record the loop again)
-                while dr.hint(connectible & (i < stored), exclude=[si]):
+                usable = dr.minimum(stored, room)
+                while dr.hint(connectible & (i < usable), exclude=[si]):
                     lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
                     c = self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
                                       connectible & (depth_l + k < D), depth_l + 1, k + 1,

@@ -629,6 +629,19 @@ def test_choose_vertex_is_uniform_over_the_usable_vertices():
             assert np.abs(counts - n / m_exp).max() < 6 * np.sqrt(n / m_exp)
 
 
+def test_connection_room_counts_the_light_vertices_that_fit_in_the_path():
+    """``connection_room(k, D)``: light vertex ``j`` (a subpath of at least ``j + 1``
+    segments) can be joined to camera vertex ``k`` within ``D`` segments exactly when ``j <
+    room``, for the shortest subpaths (``depth_j = j + 1``, no Dirac vertex before it): the
+    vertices past the room can never be joined, and the last one inside it can."""
+    for depth in range(1, 10):
+        k = np.arange(0, depth + 2, dtype=np.uint32)
+        room = B.connection_room(B.UInt32(k), depth).numpy()
+        for kk, r in zip(k, room):
+            fits = [j for j in range(B.MAX_DEPTH) if (j + 1) + kk + 1 <= depth]
+            assert r == len(fits), (depth, kk, r, fits)
+
+
 @pytest.mark.slow
 def test_a_connection_alone_needs_the_selection_probability(scenes, bounce_references, monkeypatch):
     """(2, 2) alone joins each camera vertex to one of up to 2 light vertices (depth 3): with
