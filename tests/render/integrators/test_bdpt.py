@@ -643,17 +643,23 @@ def test_connection_room_counts_the_light_vertices_that_fit_in_the_path():
 
 
 @pytest.mark.slow
-def test_a_connection_alone_needs_the_selection_probability(scenes, bounce_references, monkeypatch):
-    """(2, 2) alone joins each camera vertex to one of up to 2 light vertices (depth 3): with
-    the contribution times the number it chose from it is unbiased (test above); counted
-    once (the selection probability ignored) it is too dark (negative control)."""
-    choose = B.choose_vertex
-    monkeypatch.setattr(B, "choose_vertex", lambda u, stored, room: (choose(u, stored, room)[0],
-                                                                   dr.minimum(dr.minimum(stored, room), 1)))
-    r = _render(scenes["cornell"], "bdpt", 128, 3)
+@pytest.mark.parametrize("control", [False, True])
+def test_a_connection_alone_needs_the_selection_probability(scenes, bounce_references, monkeypatch, control):
+    """(2, 2) alone at depth 4 joins the first camera vertex to one of up to 2 light vertices
+    (``connection_room``: depth 1 makes (2, 2), depth 2 (3, 2), which counts 0 here): with
+    the contribution times the number it chose from it is the image of paths of 2 bounces;
+    counted once (the selection probability ignored) it is too dark (negative control)."""
+    if control:
+        choose = B.choose_vertex
+        monkeypatch.setattr(B, "choose_vertex", lambda u, stored, room: (
+            choose(u, stored, room)[0], dr.minimum(dr.minimum(stored, room), 1)))
+    r = _render(scenes["cornell"], "bdpt", 128, 4)
     r.integrator.only = (2, 2)
-    zb, _ = _agree(r.render(), bounce_references[2])
-    assert zb > 6.0, zb
+    zb, zm = _agree(r.render(), bounce_references[2])
+    if control:
+        assert zb > 6.0, zb
+    else:
+        assert zb < 4.5 and zm < 4.0, (zb, zm)
 
 
 @pytest.mark.slow
