@@ -85,10 +85,10 @@ dim paths) then rarely cost a shadow ray and a splat: the shadow rays of connect
 splats and next-event estimation are traced inside a symbolic ``if``
 (:func:`occluded_where`), so SIMD packets none of whose lanes kept one skip the query.
 The threshold is :data:`ROULETTE_FRACTION` of the image's mean pixel value, which a pilot estimates
-before the first pass (``Renderer._calibrate_bdpt``: one sample per pixel of a
-band of rows, without roulette, from a random stream of its own;
-:meth:`BDPTIntegrator.calibrate` rounds it to a power of 2, so renders in other
-processes agree). The threshold depends only on the pilot's samples, so the
+before the first pass (``Renderer._calibrate_bdpt``: the path tracer's one sample per
+pixel of a band of rows, from a random stream of its own: the same expectation as bdpt's
+at a fraction of its kernel's cost; :meth:`BDPTIntegrator.calibrate` rounds it to a power
+of 2, so renders in other processes agree). The threshold depends only on the pilot's samples, so the
 passes' estimate is unbiased given it.
 
 **MIS weights.** The power heuristic over all strategies of a path, ``w_s =
@@ -929,8 +929,8 @@ class BDPTIntegrator:
         """:meth:`trace`'s body (traced once per loop with ``OptimizeLoops`` off)."""
         scene, opt, cam = self.scene, self.opt, self.camera
         n = dr.width(active)
-        # the roulette's threshold is a kernel input, so that the pilot (without roulette)
-        # and the passes trace one kernel; one entry per lane, as wide as the loops, which
+        # the roulette's threshold is a kernel input, so that renders of other thresholds
+        # (and without roulette) trace one kernel; one entry per lane, as wide as the loops, which
         # carry it unchanged (a width-1 loop variable makes Dr.Jit record the loop again)
         threshold = dr.opaque(Float, self.threshold if use_roulette and self.threshold else 0.0, n)
         widen(rng, n)  # (a low-discrepancy sampler's step is one value for all lanes)
