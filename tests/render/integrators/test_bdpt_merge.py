@@ -81,8 +81,8 @@ def test_the_radius_shrinks_per_sample_as_progressive_photon_mapping_s(glass):
 
 
 def _radii(scene, monkeypatch, **extra) -> list[tuple[int, int, float]]:
-    """``(first, k, radius)`` of each photon map a bdpt render of ``scene`` builds (its passes
-    and the pilot's, which merges at sample 0)."""
+    """``(first, k, radius)`` of each photon map a bdpt render of ``scene`` builds (one per
+    pass; its pilot, the path tracer's, builds none)."""
     seen = []
     photons = B.BDPTIntegrator.photons
 
