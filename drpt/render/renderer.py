@@ -58,7 +58,7 @@ from __future__ import annotations
 import copy
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import drjit as dr
 import numpy as np
@@ -589,7 +589,7 @@ class Renderer:
         return img, sq, int(dr.sum(bad)[0])
 
     def _bdpt_pass(self, seed: int, pass_index: int, k: int, r0: int, rows: int,
-                   strategies: StrategyFilm | None = None, use_roulette: bool = True):
+                   strategies: StrategyFilm | None = None):
         """Bidirectional path tracing's lanes of a pass, evaluated: ``(light film, camera
         film, dropped)``; their random numbers as a camera pass's (:meth:`_sampler`)."""
         n, lane, x, y = self._pass_lanes(k, r0, rows)
@@ -610,23 +610,26 @@ class Renderer:
         film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter, squares=squares)
         camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter, squares=squares)
         bad = self.integrator.trace(rng, film, camera, Float(x) + u.x, Float(y) + u.y,
-                                    dr.full(Bool, True, n), strategies, use_roulette, photons)
+                                    dr.full(Bool, True, n), strategies, True, photons)
         with llvm_tuning.blocks_for(n):
             dr.eval(film.sum, film.sq, camera.sum, camera.sq, bad, strategies.sum if strategies else [])
         return film, camera, bad
 
     def _calibrate_bdpt(self) -> None:
-        """Bidirectional path tracing's pilot: 1 sample per pixel of at most
-        :data:`BDPT_PILOT_LANES` pixels (a band of rows in the middle of the image) without
-        Russian roulette, from a stream of its own, estimates the image's mean pixel value,
-        from which :meth:`~drpt.render.integrators.bdpt.BDPTIntegrator.calibrate` sets the
-        roulette's threshold (the same kernel as the passes': the threshold is its input)."""
+        """Bidirectional path tracing's pilot: the path tracer's 1 sample per pixel of at most
+        :data:`BDPT_PILOT_LANES` pixels (a band of rows in the middle of the image), from a
+        stream of its own, estimates the image's mean pixel value, from which
+        :meth:`~drpt.render.integrators.bdpt.BDPTIntegrator.calibrate` sets the roulette's
+        threshold. The path tracer has bdpt's expectation, and its kernel costs a fraction of
+        bdpt's to trace and to run (a pilot of bdpt's kernel would cost 11-15% of a 64-spp bdpt
+        render of 64x64 pixels: docs/performance.md)."""
         W, H = self.opt.width, self.opt.height
         rows = max(1, min(H, BDPT_PILOT_LANES // W))
-        film, camera, _ = self._bdpt_pass(self.opt.seed ^ BDPT_PILOT_STREAM, 0, 1, (H - rows) // 2, rows,
-                                          use_roulette=False)
-        rgb = [float(dr.sum(film.sum[c])[0] + dr.sum(camera.sum[c])[0]) / (rows * W) for c in range(3)]
-        self.integrator.calibrate(0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2])
+        pilot = self.derive(replace(self.opt, integrator="path", spp=1, bdpt_strategies=False,
+                                    seed=self.opt.seed ^ BDPT_PILOT_STREAM))
+        img, _, _ = pilot._trace_pass(0, 1, (H - rows) // 2, rows, False)
+        rgb = img.reshape(-1, 3).astype(np.float64).mean(0)
+        self.integrator.calibrate(float(0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]))
 
     def _pass_lanes(self, k: int, r0: int, rows: int) -> tuple[int, UInt32, UInt32, UInt32]:
         """``(n, lane, x, y)``: one lane per sample of a pass of ``k`` samples per pixel

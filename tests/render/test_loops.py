@@ -113,9 +113,8 @@ def test_loops_are_recorded_once_and_the_image_is_the_same(case, monkeypatch, tm
     with recordings() as once:
         image = renderer.render().image
     per_bounce = extra.get("mode") == "wavefront"
-    # (a first bdpt render traces its pilot, then its pass: each loop twice; a second the pass)
-    traces = 2 if extra.get("integrator") == "bdpt" else 1
-    assert once and (per_bounce or set(once.values()) == {traces}), dict(once)
+    # (a first bdpt render traces its pilot, the path tracer's, then its pass: each loop once)
+    assert once and (per_bounce or set(once.values()) == {1}), dict(once)
     _optimized(monkeypatch)
     with recordings() as counts:
         assert np.array_equal(renderer.render().image, image)

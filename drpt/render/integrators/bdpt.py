@@ -11,9 +11,10 @@ itself is camera vertex 0), a path of ``s + t - 1`` segments:
   area light as :meth:`~drpt.render.lights.area.AreaLights.sample` draws it for
   the path tracer, every point, spot and directional light, a sky direction);
 * ``s >= 2, t >= 2``: a stored light vertex joined to a camera vertex by a
-  shadow ray. In scenes without Dirac lobes each camera vertex is joined to one light
-  vertex, chosen uniformly among those that make a path of at most ``max_depth``
-  segments (:func:`choose_vertex`), its contribution multiplied by their number (each
+  shadow ray, only those that make a path of at most ``max_depth`` segments
+  (:func:`connection_room`). In scenes without Dirac lobes each camera vertex is joined to
+  one light vertex, chosen uniformly among them (:func:`choose_vertex`), its contribution
+  multiplied by their number (each
   connection strategy's estimate keeps its expectation; the MIS weights count the
   connections' densities over :data:`CONNECTION_CHOICES`): one connection per camera
   vertex instead of one per pair costs fewer shadow rays and BSDF evaluations than it
@@ -84,10 +85,10 @@ dim paths) then rarely cost a shadow ray and a splat: the shadow rays of connect
 splats and next-event estimation are traced inside a symbolic ``if``
 (:func:`occluded_where`), so SIMD packets none of whose lanes kept one skip the query.
 The threshold is :data:`ROULETTE_FRACTION` of the image's mean pixel value, which a pilot estimates
-before the first pass (``Renderer._calibrate_bdpt``: one sample per pixel of a
-band of rows, without roulette, from a random stream of its own;
-:meth:`BDPTIntegrator.calibrate` rounds it to a power of 2, so renders in other
-processes agree). The threshold depends only on the pilot's samples, so the
+before the first pass (``Renderer._calibrate_bdpt``: the path tracer's one sample per
+pixel of a band of rows, from a random stream of its own: the same expectation as bdpt's
+at a fraction of its kernel's cost; :meth:`BDPTIntegrator.calibrate` rounds it to a power
+of 2, so renders in other processes agree). The threshold depends only on the pilot's samples, so the
 passes' estimate is unbiased given it.
 
 **MIS weights.** The power heuristic over all strategies of a path, ``w_s =
@@ -288,6 +289,16 @@ def emission_weight(pdf_nee: Float, emit: Float, dvcm: Float, dvc: Float, k: flo
     :attr:`BDPTIntegrator.k`."""
     w = dr.rcp(1.0 + _term(pdf_nee, dvcm) + _term(emit, dvc) / k)
     return dr.select(dr.isfinite(w), w, 0.0)
+
+
+def connection_room(k: UInt32, depth: int) -> UInt32:
+    """How many of the stored light vertices camera vertex ``k`` (the camera is vertex 0)
+    can be joined to within a path of at most ``depth`` segments: light vertex ``j`` has a
+    subpath of at least ``j + 1`` segments, and joined to camera vertex ``k`` it makes a path
+    of ``depth_j + k + 1``, so only ``j < depth - k - 1`` can (the later ones, always too
+    long, cost a BSDF evaluation each, and with one vertex chosen they would be chosen in
+    vain)."""
+    return dr.select(k + 1 < depth, UInt32(depth) - k - 1, 0)
 
 
 def choose_vertex(u: Float, stored: UInt32, room: UInt32) -> tuple[UInt32, UInt32]:
@@ -918,8 +929,8 @@ class BDPTIntegrator:
         """:meth:`trace`'s body (traced once per loop with ``OptimizeLoops`` off)."""
         scene, opt, cam = self.scene, self.opt, self.camera
         n = dr.width(active)
-        # the roulette's threshold is a kernel input, so that the pilot (without roulette)
-        # and the passes trace one kernel; one entry per lane, as wide as the loops, which
+        # the roulette's threshold is a kernel input, so that renders of other thresholds
+        # (and without roulette) trace one kernel; one entry per lane, as wide as the loops, which
         # carry it unchanged (a width-1 loop variable makes Dr.Jit record the loop again)
         threshold = dr.opaque(Float, self.threshold if use_roulette and self.threshold else 0.0, n)
         widen(rng, n)  # (a low-discrepancy sampler's step is one value for all lanes)
@@ -1028,9 +1039,9 @@ class BDPTIntegrator:
             L += beta * nee
             if record:
                 strategies.put(1, k + 1, px, py, beta * nee, active)
+            room = connection_room(k, D)
             if lverts is not None and self.one_connection:
-                # vertex j has depth >= j + 1: only the first D - k can make a path of <= D segments
-                i, m = choose_vertex(rng.next_float32(), stored, dr.select(k < D, D - k, 0))
+                i, m = choose_vertex(rng.next_float32(), stored, room)
                 pick = connectible & (m > 0)
                 lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, pick)
                 c = self._connect(si, beta, dvcm, dvc, lv, beta_l * Float(m), dvcm_l, dvc_l,
@@ -1043,7 +1054,8 @@ class BDPTIntegrator:
                 i = dr.zeros(UInt32, n)
                 # si is read, not changed: outside the loop's state (its width-1 fields would
                 # make Dr.Jit record the loop again)
-                while dr.hint(connectible & (i < stored), exclude=[si]):
+                usable = dr.minimum(stored, room)
+                while dr.hint(connectible & (i < usable), exclude=[si]):
                     lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
                     c = self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
                                       connectible & (depth_l + k < D), depth_l + 1, k + 1,

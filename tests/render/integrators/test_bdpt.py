@@ -629,18 +629,37 @@ def test_choose_vertex_is_uniform_over_the_usable_vertices():
             assert np.abs(counts - n / m_exp).max() < 6 * np.sqrt(n / m_exp)
 
 
+def test_connection_room_counts_the_light_vertices_that_fit_in_the_path():
+    """``connection_room(k, D)``: light vertex ``j`` (a subpath of at least ``j + 1``
+    segments) can be joined to camera vertex ``k`` within ``D`` segments exactly when ``j <
+    room``, for the shortest subpaths (``depth_j = j + 1``, no Dirac vertex before it): the
+    vertices past the room can never be joined, and the last one inside it can."""
+    for depth in range(1, 10):
+        k = np.arange(0, depth + 2, dtype=np.uint32)
+        room = B.connection_room(B.UInt32(k), depth).numpy()
+        for kk, r in zip(k, room):
+            fits = [j for j in range(B.MAX_DEPTH) if (j + 1) + kk + 1 <= depth]
+            assert r == len(fits), (depth, kk, r, fits)
+
+
 @pytest.mark.slow
-def test_a_connection_alone_needs_the_selection_probability(scenes, bounce_references, monkeypatch):
-    """(2, 2) alone joins each camera vertex to one of up to 2 light vertices (depth 3): with
-    the contribution times the number it chose from it is unbiased (test above); counted
-    once (the selection probability ignored) it is too dark (negative control)."""
-    choose = B.choose_vertex
-    monkeypatch.setattr(B, "choose_vertex", lambda u, stored, room: (choose(u, stored, room)[0],
-                                                                   dr.minimum(dr.minimum(stored, room), 1)))
-    r = _render(scenes["cornell"], "bdpt", 128, 3)
+@pytest.mark.parametrize("control", [False, True])
+def test_a_connection_alone_needs_the_selection_probability(scenes, bounce_references, monkeypatch, control):
+    """(2, 2) alone at depth 4 joins the first camera vertex to one of up to 2 light vertices
+    (``connection_room``: depth 1 makes (2, 2), depth 2 (3, 2), which counts 0 here): with
+    the contribution times the number it chose from it is the image of paths of 2 bounces;
+    counted once (the selection probability ignored) it is too dark (negative control)."""
+    if control:
+        choose = B.choose_vertex
+        monkeypatch.setattr(B, "choose_vertex", lambda u, stored, room: (
+            choose(u, stored, room)[0], dr.minimum(dr.minimum(stored, room), 1)))
+    r = _render(scenes["cornell"], "bdpt", 128, 4)
     r.integrator.only = (2, 2)
-    zb, _ = _agree(r.render(), bounce_references[2])
-    assert zb > 6.0, zb
+    zb, zm = _agree(r.render(), bounce_references[2])
+    if control:
+        assert zb > 6.0, zb
+    else:
+        assert zb < 4.5 and zm < 4.0, (zb, zm)
 
 
 @pytest.mark.slow
@@ -803,8 +822,8 @@ def test_the_subpath_loops_are_traced_once_and_the_image_is_the_same(scenes, mon
     opts = RenderOptions(width=16, height=16, spp=4, seed=3, integrator="bdpt", progress=False,
                          path=PathOptions(max_depth=5), sampler=sampler)
     renderer = Renderer(scenes[name], opts)
-    renderer.render()  # the pilot, then the pass: two traces
-    assert calls == {"_splat": 2, "_connect": 2}, calls
+    renderer.render()  # the pass: one trace (the pilot is the path tracer's)
+    assert calls == {"_splat": 1, "_connect": 1}, calls
     image = renderer.render().image
 
     def optimized(self, *a):

@@ -81,8 +81,8 @@ def test_the_radius_shrinks_per_sample_as_progressive_photon_mapping_s(glass):
 
 
 def _radii(scene, monkeypatch, **extra) -> list[tuple[int, int, float]]:
-    """``(first, k, radius)`` of each photon map a bdpt render of ``scene`` builds (its passes
-    and the pilot's, which merges at sample 0)."""
+    """``(first, k, radius)`` of each photon map a bdpt render of ``scene`` builds (one per
+    pass; its pilot, the path tracer's, builds none)."""
     seen = []
     photons = B.BDPTIntegrator.photons
 
@@ -107,12 +107,12 @@ def test_the_radius_follows_the_samples_per_pixel_not_the_passes(glass, monkeypa
     want = np.mean([integ.merge_radius(s, 1) ** 2 for s in range(16)])
     one = _radii(glass, monkeypatch)
     many = _radii(glass, monkeypatch, max_lanes=16 * 16 * 4)
-    # the pilot's map first, then the passes'
-    assert [(f, k) for f, k, _ in one[1:]] == [(0, 16)]
-    assert [(f, k) for f, k, _ in many[1:]] == [(4 * i, 4) for i in range(4)]
+    # the passes' maps (the pilot is the path tracer's: it traces none)
+    assert [(f, k) for f, k, _ in one] == [(0, 16)]
+    assert [(f, k) for f, k, _ in many] == [(4 * i, 4) for i in range(4)]
     for seen in (one, many):
         assert all(r == integ.merge_radius(f, k) for f, k, r in seen)
-        passes = seen[1:]
+        passes = seen
         mean = sum(k * r * r for _, k, r in passes) / sum(k for _, k, _r in passes)
         assert mean == pytest.approx(want, rel=1e-9)
     old = [integ.merge_radius(0, 1) ** 2 * np.prod([(i + B.MERGE_ALPHA) / (i + 1) for i in range(1, step + 1)])
