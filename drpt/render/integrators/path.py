@@ -71,12 +71,15 @@ from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32
 
 from ...options import PathOptions
 from ..loops import loops_once, widen
-from ..sampler import light_sample, next_2d, next_path
+from ..sampler import light_sample, next_2d, next_path, skip_draws
 from ..scene import DeviceScene
 from .common import DirectLight, power_heuristic
 
 #: the largest ``max_depth`` whose paths are traced as straight-line code (``0 < max_depth``)
 UNROLLED_MAX_DEPTH = 3
+#: the random numbers a vertex draws from a PCG32 (:meth:`PathIntegrator.bounce`): light
+#: selection 1, light point 2, BSDF lobe 1, direction 2, roulette 1
+VERTEX_DRAWS = 7
 
 
 @dataclass
@@ -127,6 +130,13 @@ class PathIntegrator:
     #: the unrolled path's last segment looks for a few emissive triangles first where they
     #: are all a ray can see (:attr:`emitters_first`); False: the closest hit (A/B comparisons)
     emitter_first = True
+    #: in the unrolled path's vertex branches (:attr:`branched`), what only the branch's lanes
+    #: use is made in the branch: the vertex's PCG32 draws (the stream moved past them in one
+    #: step before it, :func:`~drpt.render.sampler.skip_draws`) and, where nothing before the
+    #: branch reads more of the hit than whether there is one (no emissive surfaces), its
+    #: interaction (position, normals, material). A packet whose rays all escaped makes
+    #: neither; the image is the same bit for bit. False: both before the branch (A/B)
+    deferred = True
 
     def __init__(self, scene: DeviceScene, options: PathOptions):
         self.scene = scene
@@ -346,7 +356,8 @@ class PathIntegrator:
         nee = scene.has_emitters and scene.has_smooth_bsdfs
         # camera rays are coherent; with pixel_coherent every ray of a packet is
         coherent = True if self.pixel_coherent else s.depth == 0
-        si = scene.intersect(s.o, s.d, s.active, coherent=coherent)
+        hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=coherent)
+        si = scene.interaction(s.o, s.d, hit)
         si = skip_hidden_emitters(scene, opt, si, s, s.active)
 
         # ---- emitter hit by the previous ray (or seen by the camera)
@@ -357,19 +368,28 @@ class PathIntegrator:
             active &= s.depth + 1 < opt.max_depth
 
         # ---- the vertex's random numbers: light selection and emitter, lobe, direction, roulette
-        u_sel = rng.next_float32()
-        u_light = next_2d(rng)
-        if nee:
-            u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
-        u_path = draw_continue(rng)
+        def draw(rng):
+            u_sel = rng.next_float32()
+            u_light = next_2d(rng)
+            if nee:
+                u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
+            return u_sel, u_light, draw_continue(rng)
+
+        # in the branch, what only its lanes use is made there (:attr:`deferred`)
+        deferred = branch and self.deferred
+        start = skip_draws(rng, VERTEX_DRAWS) if deferred else None
+        drawn = draw(rng) if start is None else None
+        lazy = deferred and not getattr(scene.materials, "has_emission", True)
 
         def shade(L):
+            u_sel, u_light, u_path = drawn if start is None else draw(start)
+            hit_si = scene.interaction(s.o, s.d, hit) if lazy else si
             # ---- next-event estimation: one emitter, one shadow ray
             if nee:
-                L = self._nee(scene, si, s.beta, L, u_sel, u_light, active)
+                L = self._nee(scene, hit_si, s.beta, L, u_sel, u_light, active)
             # ---- BSDF sampling and Russian roulette: continue the path
-            wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, None, u_path)
-            return (scene.spawn(si, wo), Array3f(wo), L, beta, eta, depth, Float(bs.pdf),
+            wo, bs, beta, eta, depth, live = continue_path(scene, opt, hit_si, s, None, u_path)
+            return (scene.spawn(hit_si, wo), Array3f(wo), L, beta, eta, depth, Float(bs.pdf),
                     Bool(bs.delta), active & live)
 
         if branch:
