@@ -137,6 +137,11 @@ class PathIntegrator:
     #: interaction (position, normals, material). A packet whose rays all escaped makes
     #: neither; the image is the same bit for bit. False: both before the branch (A/B)
     deferred = True
+    #: the unrolled path's camera rays are tested against boxes around the shapes before the
+    #: accelerator's query, which only the lanes reaching one run
+    #: (:meth:`~drpt.render.scene.DeviceScene.intersect_preliminary`'s ``cull``): the same
+    #: hits. False: every camera ray queries the accelerator (A/B)
+    cull = True
 
     def __init__(self, scene: DeviceScene, options: PathOptions):
         self.scene = scene
@@ -168,8 +173,8 @@ class PathIntegrator:
         traced as straight-line code: ``max_depth - 1`` full vertices, then
         :meth:`last_segment`."""
         scene = self.scene
-        for _ in range(self.opt.max_depth - 1):
-            state = self.bounce(scene, state, rng, branch=self.branched)
+        for i in range(self.opt.max_depth - 1):
+            state = self.bounce(scene, state, rng, branch=self.branched, camera=i == 0)
         return self.last_segment(scene, state)
 
     def last_segment(self, scene: DeviceScene, s: PathState) -> Array3f:
@@ -185,7 +190,9 @@ class PathIntegrator:
         camera = self.opt.max_depth == 1
 
         def look(L):
-            si = scene.intersect(s.o, s.d, s.active, coherent=camera or self.pixel_coherent)
+            hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=camera or self.pixel_coherent,
+                                              cull=camera and self.cull)
+            si = scene.interaction(s.o, s.d, hit)
             if camera:
                 si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
             return (add_emission(scene, self.opt, si, s, L, s.active),)
@@ -345,18 +352,21 @@ class PathIntegrator:
                          prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
                          active=Bool(active))
 
-    def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32, branch: bool = False) -> PathState:
+    def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32, branch: bool = False,
+               camera: bool = False) -> PathState:
         """One vertex of the path: the emission the ray sees, next-event
         estimation, BSDF sampling and Russian roulette. With ``branch`` (the unrolled
         path's vertices) the vertex's shading, everything after the emission, runs in a
         symbolic ``if`` on the lanes whose path goes on (label ``drpt_vertex``): a SIMD
         packet whose rays all escaped or ended skips it. The vertex's random numbers are
-        drawn before the branch, in the loop's order, so the image is the same either way."""
+        drawn in the loop's order (in the branch: :attr:`deferred`), so the image is the same
+        either way. ``camera``: the rays are the camera's (the unrolled path's first vertex),
+        whose query skips the rays passing beside every shape (:attr:`cull`)."""
         opt = self.opt
         nee = scene.has_emitters and scene.has_smooth_bsdfs
         # camera rays are coherent; with pixel_coherent every ray of a packet is
         coherent = True if self.pixel_coherent else s.depth == 0
-        hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=coherent)
+        hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=coherent, cull=camera and self.cull)
         si = scene.interaction(s.o, s.d, hit)
         si = skip_hidden_emitters(scene, opt, si, s, s.active)
 

@@ -1,11 +1,14 @@
-"""The unrolled short path's vertex branch (drpt/render/integrators/path.py,
-``PathIntegrator.deferred``): the vertex's PCG32 draws and, without emissive surfaces, the
-hit's interaction are made inside the branch on its live lanes; the image is the one with
-both made before the branch, bit for bit."""
+"""The unrolled short path (drpt/render/integrators/path.py): the vertex branch makes the
+vertex's PCG32 draws and, without emissive surfaces, the hit's interaction on its live lanes
+(``PathIntegrator.deferred``), and camera rays query the accelerator only where they reach a
+shape's box (``PathIntegrator.cull``); the images are those without either, bit for bit."""
 
+import drjit as dr
 import numpy as np
 import pytest
 
+from drpt.accel import embree_lib
+from drpt.accel.boxes import ShapeBoxes
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.integrators import path
 from drpt.render.integrators.path import PathIntegrator
@@ -51,3 +54,33 @@ def test_deferred_vertex_work_is_the_same_image(tmp_path, monkeypatch, depth):
     np.testing.assert_array_equal(image(True), before)
     monkeypatch.setattr(path, "VERTEX_DRAWS", path.VERTEX_DRAWS - 1)
     assert not np.array_equal(image(True), before)
+
+
+@pytest.mark.skipif(embree_lib.reason() is not None, reason=f"{embree_lib.reason()}")
+def test_camera_rays_culled_by_the_shape_boxes_are_the_same_image(tmp_path, monkeypatch):
+    """The unrolled path's camera rays query the accelerator (Embree) only where they reach a
+    shape's box (``cull``, label ``drpt_cull``): the image of every ray querying it, bit for
+    bit. Negative control: boxes that leave out the floor lose its pixels."""
+    (tmp_path / "s.xml").write_text(FLOATING_XML.format(depth=2))
+    scene = load_scene(tmp_path / "s.xml")
+    labels = []
+    if_stmt = dr.if_stmt
+    monkeypatch.setattr(dr, "if_stmt",
+                        lambda *a, label=None, **k: labels.append(label) or if_stmt(*a, label=label, **k))
+
+    def image(cull, boxes=None):
+        monkeypatch.setattr(PathIntegrator, "cull", cull)
+        labels.clear()
+        r = Renderer(scene, RenderOptions(width=64, height=48, spp=6, seed=2, progress=False, accel="embree",
+                                          path=PathOptions(max_depth=2)))
+        assert r.scene.boxes is not None and len(r.scene.boxes) == 2
+        if boxes is not None:
+            r.scene.boxes = boxes(r.scene.boxes)
+        out = r.render().image
+        assert ("drpt_cull" in labels) == cull
+        return out
+
+    culled = image(True)
+    np.testing.assert_array_equal(culled, image(False))
+    sphere_only = image(True, lambda b: ShapeBoxes(b.lo[1:].astype(float), b.hi[1:].astype(float)))
+    assert (sphere_only == 0).mean() > (culled == 0).mean() + 0.1
