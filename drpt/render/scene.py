@@ -298,7 +298,7 @@ class DeviceScene:
         """The closest hit of rays ``(o, d)`` (``si.valid`` False on a miss), closer than
         ``tmax`` if given (a shorter ray traverses less of the accelerator); ``coherent``:
         the lanes of camera rays (a traversal hint, :meth:`drpt.accel.protocol.Accelerator.intersect`)."""
-        return self.interaction(o, d, self.intersect_preliminary(o, d, active, tmax, coherent))
+        return self.interaction(o, d, self.intersect_preliminary(o, d, active, tmax, coherent=coherent))
 
     @loops_once
     def intersect_preliminary(self, o: Array3f, d: Array3f, active: Bool, tmax: Float | None = None,
