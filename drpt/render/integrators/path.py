@@ -53,7 +53,10 @@ reads: the last hit's shading frame and texture lookups, and, where the last seg
 can see nothing at all (:func:`nothing_seen`: no emissive surface, no sky or
 background; e.g. direct lighting by point, spot or projector lights), the last
 BSDF sample and the last ray. Every lane traces its camera ray in the same Embree
-query (coherent for the whole packet). The estimator is the loop's and draws the same
+query (coherent for the whole packet), on the lanes whose ray reaches a box around a shape
+(:attr:`PathIntegrator.cull`); a vertex makes its random numbers and, without emissive
+surfaces, its hit's interaction inside its branch (:attr:`PathIntegrator.deferred`), so a
+packet of escaped rays pays for neither. The estimator is the loop's and draws the same
 random numbers for a path's live vertices, so one path per lane (:meth:`sample`) gives
 the loop's image; :meth:`sample_sequence`'s later paths start at other points of a
 PCG32 stream (the loop also draws at its last vertex), so their images differ by noise.
