@@ -14,12 +14,16 @@ the ways take turns (round ``k`` with seed ``k``):
 * ``closest``: ``emitter_first`` False (the last segment by the closest hit, where the scene's
   emitters are a few triangles and nothing else is seen; the same image to float rounding);
 * ``one-lane``: all three off and ``min_lanes``' lanes per pixel (one at 192x192): the
-  layout and code before them.
+  layout and code before them;
+* ``eager``: :attr:`~drpt.render.integrators.path.PathIntegrator.deferred` False (the vertex's
+  draws and interaction before its branch, on every lane; the same image);
+* ``unculled``: :attr:`~drpt.render.integrators.path.PathIntegrator.cull` False (every camera
+  ray queries the accelerator; the same image).
 
 Prints per scene the median render seconds of ``now``, the median over rounds of the
 per-round ratio way / ``now`` (the ways of a round run back to back, so load from other
-processes falls on them alike: read these), and whether ``masked``'s images are ``now``'s bit
-for bit (they must be).
+processes falls on them alike: read these), and whether ``masked``'s, ``eager``'s and
+``unculled``'s images are ``now``'s bit for bit (they must be).
 Run: PYTHONPATH=. .venv/bin/python benchmarks/straight_paths_ab.py [--rounds 6] [--only WORD,...]
 [--min-size 192] [--max-samples 1000000]
 """
@@ -58,12 +62,14 @@ def main(argv=None) -> list[dict]:
     ensure()
     only = [w for w in a.only.split(",") if w]
     per_lane = renderer.STRAIGHT_PATHS_PER_LANE
-    ways = {"now": (True, True, per_lane), "masked": (False, True, per_lane),
-            "closest": (True, False, per_lane), "one-lane": (False, False, 1 << 30)}
+    ways = {"now": (True, True, per_lane, True, True), "masked": (False, True, per_lane, True, True),
+            "closest": (True, False, per_lane, True, True), "one-lane": (False, False, 1 << 30, True, True),
+            "eager": (True, True, per_lane, False, True), "unculled": (True, True, per_lane, True, False)}
+    same_image = ("masked", "eager", "unculled")
     print(f"commit {eq._commit()}, {eq._cpu()}; {a.rounds} rounds; load average {os.getloadavg()[0]:.1f}")
     print("\n| scene | size, spp | now s | masked / now | closest / now | one-lane / now "
-          "| masked image = now's |")
-    print("|---|---|---|---|---|---|---|")
+          "| eager / now | unculled / now | masked, eager, unculled images = now's |")
+    print("|---|---|---|---|---|---|---|---|---|")
     rows = []
     for path in eq.corpus_files():
         name = str(path.relative_to(eq.CORPUS))
@@ -76,22 +82,25 @@ def main(argv=None) -> list[dict]:
         same = True
         for rnd in range(a.rounds + 1):
             images = {}
-            for w, (branched, first, lanes) in ways.items():
+            for w, (branched, first, lanes, deferred, cull) in ways.items():
                 PathIntegrator.branched, PathIntegrator.emitter_first = branched, first
+                PathIntegrator.deferred, PathIntegrator.cull = deferred, cull
                 renderer.STRAIGHT_PATHS_PER_LANE = lanes
                 r.opt.seed = rnd
                 t0 = time.perf_counter()
                 images[w] = r.render().image
                 if rnd > 0:  # (round 0 compiles)
                     secs[w].append(time.perf_counter() - t0)
-            same &= bool(np.array_equal(images["now"], images["masked"]))
+            same &= all(np.array_equal(images["now"], images[w]) for w in same_image)
         PathIntegrator.branched = PathIntegrator.emitter_first = True
+        PathIntegrator.deferred = PathIntegrator.cull = True
         renderer.STRAIGHT_PATHS_PER_LANE = per_lane
 
         ratio = {w: statistics.median(t / n for t, n in zip(secs[w], secs["now"])) for w in ways}
         med = {w: statistics.median(secs[w]) for w in ways}
         print(f"| {name} | {r.opt.width}x{r.opt.height}, {r.opt.spp} | {med['now']:.3f} | {ratio['masked']:.2f} "
-              f"| {ratio['closest']:.2f} | {ratio['one-lane']:.2f} | {'yes' if same else 'NO'} |", flush=True)
+              f"| {ratio['closest']:.2f} | {ratio['one-lane']:.2f} | {ratio['eager']:.2f} "
+              f"| {ratio['unculled']:.2f} | {'yes' if same else 'NO'} |", flush=True)
         rows.append({"scene": name, "seconds": secs, "ratio": ratio, "identical": same})
     return rows
 

@@ -159,13 +159,154 @@ def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int,
     each source pixel's ``k`` samples are summed in float32 (cheap: full-width SIMD, no
     conversions), and these partial sums added in float64. Where a float32 partial sum
     (or square) overflows, the pass is gathered again with float64 partial sums.
-    Returns ``(y0, sum, sumsq, weight)`` as :meth:`SplatFilm.arrays` (rows from ``y0``)."""
+    Returns ``(y0, sum, sumsq, weight)`` as :meth:`SplatFilm.arrays` (rows from ``y0``).
+
+    Two ways compute these very sums, bit for bit: each receiving pixel's loop over its
+    source pixels' samples (:func:`_gather`: every sample read and weighted once per pixel it
+    reaches, ``(2R + 1)^2`` times), or, where a pass has :data:`SOURCE_MIN_SAMPLES` or more
+    samples per pixel and the partial sums fit :data:`SOURCE_PARTIALS_BYTES`
+    (:func:`_source_groups`), each source pixel's loop over its own samples, which weights
+    each sample once for all the pixels it reaches and keeps one partial sum per receiving
+    offset (:func:`_by_source`); the receiving pixels then add their neighbours' partial sums."""
     import numpy as np
 
-    out = _gather(flt, width, height, r0, rows, k, px, py, L, ok, moment, Float)
+    def run(Partial):
+        groups = _source_groups(flt, width, rows, k, moment, Partial)
+        if groups is None:
+            return _gather(flt, width, height, r0, rows, k, px, py, L, ok, moment, Partial)
+        return _by_source(flt, width, height, r0, rows, k, px, py, L, ok, moment, Partial, groups)
+
+    out = run(Float)
     if not all(np.isfinite(a).all() for a in out[1:]):  # (radiance near the float32 maximum)
-        out = _gather(flt, width, height, r0, rows, k, px, py, L, ok, moment, Float64)
+        out = run(Float64)
     return out
+
+
+#: the most bytes of partial sums (per source pixel and receiving offset) that
+#: :func:`_by_source` holds at once; beyond, it runs its offsets in groups of rows, and where
+#: one row does not fit, :func:`gather_splats` gathers per receiving pixel
+SOURCE_PARTIALS_BYTES = 1 << 27
+#: the fewest samples per pixel of a pass that :func:`gather_splats` sums per source pixel:
+#: with fewer, the receiving pixels' reads of each sample cost less than adding up the
+#: ``(2R + 1)^2`` partial sums of each channel (measured on the Gaussian of stddev 0.5 with
+#: the moment products: docs/performance.md, "Splat gathering per source pixel")
+SOURCE_MIN_SAMPLES = 12
+
+
+def _reach(flt: PixelFilter) -> int:
+    """``R``: the filter of radius ``r`` reaches the pixels within ``R = ceil(r + 1/2) - 1``
+    pixels of a sample's own, along each axis."""
+    return int(math.ceil(flt.radius + 0.5)) - 1
+
+
+def _channels(moment: bool) -> int:
+    return 3 + 3 + 2 + (6 if moment else 0)  # sum, squares, weights, channel products
+
+
+def _source_groups(flt: PixelFilter, width: int, rows: int, k: int, moment: bool,
+                   Partial: type) -> list[list[int]] | None:
+    """The receiving rows' offsets ``dy`` (source row minus receiving row, ``-R .. R``) in
+    groups that :func:`_by_source` traces one after another, each group's partial sums within
+    :data:`SOURCE_PARTIALS_BYTES`; None where the pass has fewer than
+    :data:`SOURCE_MIN_SAMPLES` samples per pixel or one row of offsets does not fit."""
+    R = _reach(flt)
+    side = 2 * R + 1
+    size = 8 if Partial is Float64 else 4
+    row_bytes = side * _channels(moment) * rows * width * size
+    per = SOURCE_PARTIALS_BYTES // max(row_bytes, 1)
+    if k < SOURCE_MIN_SAMPLES or per < 1:
+        return None
+    dys = list(range(-R, R + 1))
+    return [dys[i:i + per] for i in range(0, side, per)]
+
+
+def _by_source(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: int, px: Float,
+               py: Float, L: Array3f, ok: Bool, moment: bool, Partial: type, groups: list[list[int]]):
+    """:func:`_gather`'s sums, bit for bit, from per-source partial sums: for each group of
+    receiving offsets (:func:`_source_groups`, in :func:`_gather`'s order of source pixels),
+    one kernel sums each source pixel's samples into one partial sum per offset and channel
+    (:func:`_source_partials`: the same float32 additions, in the same order, as
+    :func:`_gather`'s inner loop), and one adds them to the receiving pixels' float64 sums, in
+    :func:`_gather`'s order."""
+    import numpy as np
+
+    W = width
+    R = _reach(flt)
+    side = 2 * R + 1
+    channels = _channels(moment)
+    y0, y1 = max(0, r0 - R), min(height, r0 + rows + R)
+    n = (y1 - y0) * W
+    out = dr.arange(UInt32, n)
+    ox = Int32(out % W)
+    oy = Int32(out // W) + y0
+    total = [dr.zeros(Float64, n) for _ in range(channels)]
+    for dys in groups:
+        part = _source_partials(flt, W, r0, rows, k, px, py, L, ok, moment, Partial, [-d for d in dys])
+        dr.eval(part)
+        for g, dy in enumerate(dys):
+            sy = oy + dy
+            for dx in range(-R, R + 1):
+                sx = ox + dx
+                inside = (sx >= 0) & (sx < W) & (sy >= r0) & (sy < r0 + rows)
+                src = UInt32((sy - r0) * W + sx)
+                base = (g * side + R - dx) * channels  # (the receiving offset is -dx, -dy)
+                total = [total[i] + Float64(dr.gather(Partial, part[base + i], src, inside))
+                         for i in range(channels)]
+        dr.eval(total)
+
+    def stack(cs):
+        return np.stack([c.numpy() for c in cs], axis=-1).reshape(y1 - y0, W, len(cs))
+
+    return y0, stack(total[:3]), stack(total[3:6] + total[8:]), stack(total[6:8])
+
+
+@loops_once
+@dr.syntax
+def _source_partials(flt: PixelFilter, width: int, r0: int, rows: int, k: int, px: Float, py: Float,
+                     L: Array3f, ok: Bool, moment: bool, Partial: type, fs: list[int]) -> list:
+    """For each source pixel of rows ``r0 .. r0 + rows`` and each receiving offset ``(e, f)``
+    (the receiving pixel minus the source pixel; ``f`` in ``fs``, ``e`` in ``-R .. R``), the
+    sums of its samples' terms as :func:`_gather` adds them for that receiving pixel (``w L``,
+    ``(w L)^2``, ``w``, ``w^2`` and with ``moment`` ``w L_a L_b``; ``w`` the filter's weight at
+    the receiving pixel's center), of type ``Partial``: a flat list, ``f``-major, then ``e``,
+    then the channel. One loop over each pixel's samples (recorded once), which weights a
+    sample along each axis once for all the offsets."""
+    W = width
+    R = _reach(flt)
+    npix = rows * W
+    p = dr.arange(UInt32, npix)
+    sx = Int32(p % W)
+    sy = Int32(p // W) + r0
+    # the receiving pixels' centers, as _gather computes them from their own row and column
+    cxs = [Float(sx + e) + 0.5 for e in range(-R, R + 1)]
+    cys = [Float(sy + f) + 0.5 for f in fs]
+    kk = dr.opaque(UInt32, k)
+    first = p * kk
+    weight = functools.partial(filter_weight, flt)
+    channels = _channels(moment)
+    part = [dr.zeros(Partial, npix) for _ in range(len(fs) * len(cxs) * channels)]
+    j = dr.zeros(UInt32, npix)
+    # the samples and the count are read, not changed, and of another width than the loop
+    while dr.hint(j < kk, exclude=[px, py, L, ok, kk]):
+        lane = first + j
+        valid = dr.gather(Bool, ok, lane)
+        x = dr.gather(Float, px, lane, valid)
+        y = dr.gather(Float, py, lane, valid)
+        v = dr.gather(Array3f, L, lane, valid)
+        wx = [weight(c - x) for c in cxs]
+        wy = [weight(c - y) for c in cys]
+        r_, g_, b_ = Partial(v.x), Partial(v.y), Partial(v.z)
+        terms = []
+        for wf in wy:
+            for we in wx:
+                w = Partial(dr.select(valid, we * wf, 0.0))
+                a, b, c = r_ * w, g_ * w, b_ * w
+                terms += [a, b, c, a * a, b * b, c * c, w, w * w]
+                if moment:
+                    terms += [a * r_, b * g_, c * b_, a * g_, a * b_, b * b_]
+        part = [part[i] + terms[i] for i in range(len(part))]
+        j += 1
+    return part
 
 
 @loops_once

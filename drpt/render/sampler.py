@@ -48,7 +48,7 @@ import functools
 import math
 
 import drjit as dr
-from drjit.auto import Array2f, Float, UInt32
+from drjit.auto import PCG32, Array2f, Float, UInt32, UInt64
 
 from ..options import SAMPLERS  # noqa: F401  (the --sampler names)
 from ..scene.model import mitsuba_sample_count
@@ -225,6 +225,27 @@ def next_path(rng) -> None:
     the lane's next sample index; a PCG32 stream just goes on."""
     if isinstance(rng, LDSampler):
         rng.advance()
+
+
+#: PCG32's multiplier (its state steps ``state * PCG32_MULT + inc`` mod 2^64, as Dr.Jit's)
+PCG32_MULT = 0x5851F42D4C957F2D
+
+
+def skip_draws(rng, count: int):
+    """Where ``rng`` is a PCG32: a copy of it as it is, and ``rng`` itself moved past ``count``
+    draws in one step (``state * M^count + inc * (1 + M + ... + M^(count - 1))`` mod 2^64: two
+    multiplications instead of ``count`` dependent ones); the copy then draws what ``rng``
+    would have drawn. For draws that only some lanes use, made in a symbolic ``if`` on them
+    (:meth:`~drpt.render.integrators.path.PathIntegrator.bounce`): a packet that skips the
+    branch pays for neither the values nor the chain of steps. Any other sampler: None,
+    ``rng`` unchanged (an :class:`LDSampler`'s draws are a dimension counter)."""
+    if not isinstance(rng, PCG32):
+        return None
+    start = PCG32(rng)
+    mult = pow(PCG32_MULT, count, 1 << 64)
+    add = sum(pow(PCG32_MULT, i, 1 << 64) for i in range(count)) % (1 << 64)
+    rng.state = rng.state * UInt64(mult) + rng.inc * UInt64(add)
+    return start
 
 
 def light_sample(scene, rng, u_sel: Float, u_light: Array2f, active, ref=None) -> tuple[Float, Array2f]:

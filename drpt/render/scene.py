@@ -59,8 +59,9 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from .. import backend, llvm_tuning
 from ..accel import build_accel
+from ..accel.boxes import ShapeBoxes
 from ..accel.inline import InlineList
-from ..accel.protocol import INVALID
+from ..accel.protocol import INVALID, Hit
 from ..errors import located
 from ..options import RenderOptions
 from ..scene.model import Scene, Skybox
@@ -194,6 +195,10 @@ class DeviceScene:
         self.accel = build_accel(scene, kind=options.accel, resolution=options.grid_resolution,
                                  method=options.bvh_method, min_leaf=options.bvh_min_leaf,
                                  sah_threshold=options.sah_threshold)
+        #: boxes around the shapes (:mod:`drpt.accel.boxes`) for the queries that cull the
+        #: rays missing them (``intersect_preliminary``'s ``cull``); None without planes' bounds
+        #: or where the primitives are compiled inline (their own tests cost as little)
+        self.boxes = None if isinstance(self.accel, InlineList) else ShapeBoxes.of(scene)
         self.is_empty = len(scene.triangles) + len(scene.spheres) + len(scene.planes) == 0
         if self.is_empty:
             self.materials, self.surfaces = NoMaterials(), NoSurfaces()
@@ -293,14 +298,31 @@ class DeviceScene:
         """The closest hit of rays ``(o, d)`` (``si.valid`` False on a miss), closer than
         ``tmax`` if given (a shorter ray traverses less of the accelerator); ``coherent``:
         the lanes of camera rays (a traversal hint, :meth:`drpt.accel.protocol.Accelerator.intersect`)."""
-        return self.interaction(o, d, self.intersect_preliminary(o, d, active, tmax, coherent))
+        return self.interaction(o, d, self.intersect_preliminary(o, d, active, tmax, coherent=coherent))
 
     @loops_once
     def intersect_preliminary(self, o: Array3f, d: Array3f, active: Bool, tmax: Float | None = None,
-                              coherent: Bool | bool = False):
+                              coherent: Bool | bool = False, cull: bool = False):
         """The accelerator's closest hit (:class:`drpt.accel.Hit`), any distance or closer than ``tmax``
-        (a traversal loop recorded once: :func:`~drpt.render.loops.loops_once`)."""
-        return self.accel.intersect(o, d, Float(dr.largest(Float)) if tmax is None else tmax, active, coherent)
+        (a traversal loop recorded once: :func:`~drpt.render.loops.loops_once`). With ``cull``
+        (rays that often pass beside every shape: camera rays) and the scene's :attr:`boxes`,
+        the query runs in a symbolic ``if`` (label ``drpt_cull``) on the lanes whose ray reaches
+        a shape's box; the others are misses (the protocol's: ``t`` inf, ``prim`` INVALID),
+        so a packet of rays passing beside everything skips the query; the same hits."""
+        tmax = Float(dr.largest(Float)) if tmax is None else tmax
+        if not (cull and self.boxes is not None):
+            return self.accel.intersect(o, d, tmax, active, coherent)
+        reach = Bool(active) & self.boxes.reach(o, d)
+        n = dr.width(reach)
+
+        def query(o, d, reach):
+            return self.accel.intersect(o, d, tmax, reach, coherent)
+
+        def miss(o, d, reach):
+            return Hit(dr.full(Float, float("inf"), n), dr.full(UInt32, INVALID, n), dr.zeros(Float, n),
+                       dr.zeros(Float, n), dr.zeros(Bool, n))
+
+        return dr.if_stmt((Array3f(o), Array3f(d), reach), reach, query, miss, label="drpt_cull")
 
     def interaction(self, o: Array3f, d: Array3f, hit) -> Interaction:
         """Position, normals, material and uv of a hit (:class:`~drpt.render.surface.Interaction`)."""

@@ -1,6 +1,7 @@
 """gather_splats' sums (drpt/render/film.py): float32 partial sums per source pixel added in
-float64 give the float64 sums to float32 rounding, and radiance near the float32 maximum, whose
-float32 partial sums overflow, is gathered again in float64."""
+float64 give the float64 sums to float32 rounding, radiance near the float32 maximum, whose
+float32 partial sums overflow, is gathered again in float64, and the per-source way gives the
+per-receiving-pixel way's sums bit for bit."""
 
 import drjit as dr
 import numpy as np
@@ -8,7 +9,8 @@ import pytest
 from drjit.auto import PCG32, Array3f, Float, Float64, UInt32
 
 from drpt.filters import PixelFilter
-from drpt.render.film import SplatFilm, _gather, gather_splats
+from drpt.render import film
+from drpt.render.film import SplatFilm, _by_source, _gather, _source_groups, gather_splats
 
 W, H, K = 9, 7, 6
 
@@ -55,3 +57,41 @@ def test_radiance_near_float32_max_is_gathered_in_float64():
         assert np.all(np.isfinite(a)) and np.allclose(a, b, rtol=1e-5, atol=0.0)
     _, s32, q32, _ = _gather(flt, W, H, 0, H, K, x, y, L, ok, True, Float)
     assert not (np.isfinite(s32).all() and np.isfinite(q32).all())
+
+
+@pytest.mark.parametrize("flt", [PixelFilter("gaussian", 0.5), PixelFilter("tent", 1.5)])
+@pytest.mark.parametrize("moment", [False, True])
+def test_per_source_sums_are_the_per_pixel_ones(flt, moment):
+    """The per-source way (each source pixel's samples weighted once, partial sums per
+    receiving offset; in one group of offset rows and in one row per group) gives
+    :func:`_gather`'s sums bit for bit, on a band of rows in the middle of the image, in
+    float32 and float64. Negative control: one sample's radiance changed in its last bits
+    changes the sums."""
+    r0, rows = 2, 4
+    x, y, L, ok = _samples(1.0)
+    keep = dr.arange(UInt32, dr.width(x)) < rows * W * K
+    x, y, L, ok = (dr.gather(type(v), v, dr.arange(UInt32, rows * W * K)) for v in (x, y, L, ok & keep))
+    y = y + r0
+    R = film._reach(flt)
+    for Partial in (Float, Float64):
+        want = _gather(flt, W, H, r0, rows, K, x, y, L, ok, moment, Partial)
+        for g in ([list(range(-R, R + 1))], [[d] for d in range(-R, R + 1)]):
+            got = _by_source(flt, W, H, r0, rows, K, x, y, L, ok, moment, Partial, g)
+            assert got[0] == want[0] and all(np.array_equal(a, b) for a, b in zip(got[1:], want[1:]))
+    bumped = Array3f(L)
+    bumped.x = dr.select(dr.arange(UInt32, dr.width(x)) == 7, L.x * (1.0 + 2.0**-22), L.x)
+    off = _by_source(flt, W, H, r0, rows, K, x, y, bumped, ok, moment, Float, [list(range(-R, R + 1))])
+    assert not np.array_equal(off[1], want[1])
+
+
+def test_per_source_way_where_it_pays():
+    """:func:`_source_groups` sums per source pixel from SOURCE_MIN_SAMPLES samples per pixel
+    on, in groups of offset rows within SOURCE_PARTIALS_BYTES, and not where one row does
+    not fit."""
+    g = PixelFilter("gaussian", 0.5)
+    assert _source_groups(g, 192, 192, film.SOURCE_MIN_SAMPLES - 1, True, Float) is None
+    assert _source_groups(g, 192, 192, film.SOURCE_MIN_SAMPLES, True, Float) == [[-2, -1, 0, 1, 2]]
+    row = 5 * 14 * 4  # bytes of one row of offsets per source pixel (moment, float32)
+    big = film.SOURCE_PARTIALS_BYTES // row  # source pixels of one row's budget
+    assert _source_groups(g, big // 2, 1, 16, True, Float) == [[-2, -1], [0, 1], [2]]
+    assert _source_groups(g, big + 1, 1, 16, True, Float) is None

@@ -142,13 +142,13 @@ def test_a_mirror_only_scene_traces_a_lane_per_sample(tmp_path, monkeypatch, bsd
     monkeypatch.setattr(renderer, "policy", lambda: policy)
     widths = _record_lane_widths(monkeypatch)
     coherent = []
-    intersect = DeviceScene.intersect
+    query = DeviceScene.intersect_preliminary
 
     def asking(self, o, d, active, *args, **kw):
         coherent.append(kw.get("coherent", False))
-        return intersect(self, o, d, active, *args, **kw)
+        return query(self, o, d, active, *args, **kw)
 
-    monkeypatch.setattr(DeviceScene, "intersect", asking)
+    monkeypatch.setattr(DeviceScene, "intersect_preliminary", asking)
     (tmp_path / "s.xml").write_text(MIRROR_XML.format(bsdf=bsdf))
     spp = 6
     rend = renderer.Renderer(load_scene(tmp_path / "s.xml"), renderer.RenderOptions(
@@ -184,14 +184,14 @@ def test_coherent_queries_change_no_pixel_of_a_mirror_scene(tmp_path, monkeypatc
                                                                progress=False)).render().image
 
     coherent = image()
-    intersect = DeviceScene.intersect
+    query = DeviceScene.intersect_preliminary
     asked = []
 
     def incoherent(self, o, d, active, *args, **kw):
         asked.append(kw.pop("coherent", False))
-        return intersect(self, o, d, active, *args, coherent=False, **kw)
+        return query(self, o, d, active, *args, coherent=False, **kw)
 
-    monkeypatch.setattr(DeviceScene, "intersect", incoherent)
+    monkeypatch.setattr(DeviceScene, "intersect_preliminary", incoherent)
     plain = image()
     assert asked and all(c is True for c in asked)
     assert coherent.max() > 0.0

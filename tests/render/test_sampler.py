@@ -425,3 +425,23 @@ def test_arange_seeded_pcg_streams_fail_the_independence_test():
     limit = chi2.ppf(1 - 1e-6, 63)
     rng = PCG32(n, initstate=UInt64(0x243F6A8885A308D3), initseq=UInt64(0))
     assert _worst_pair_chi2(rng, n) > 10 * limit
+
+
+def test_skip_draws_jumps_a_pcg32_past_its_draws():
+    """skip_draws moves a PCG32 past ``count`` draws in one step, and the copy it returns draws
+    what the stream would have drawn: the same values, then the same state. Negative control:
+    a jump one draw short leaves another state. An LDSampler is left as it is (None)."""
+    from drpt.render.sampler import skip_draws
+
+    rng, ref = pcg_streams(64, 11), pcg_streams(64, 11)
+    want = [ref.next_float32() for _ in range(7)]
+    start = skip_draws(rng, 7)
+    got = [start.next_float32() for _ in range(7)]
+    assert all(np.array_equal(a.numpy(), b.numpy()) for a, b in zip(got, want))
+    assert np.array_equal(rng.state.numpy(), ref.state.numpy())
+    assert np.array_equal(start.state.numpy(), ref.state.numpy())
+    short = pcg_streams(64, 11)
+    skip_draws(short, 6)
+    assert not np.array_equal(short.state.numpy(), ref.state.numpy())
+    ld = LDSampler.for_pixels(1, dr.arange(UInt32, 4), dr.zeros(UInt32, 4))
+    assert skip_draws(ld, 7) is None

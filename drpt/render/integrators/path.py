@@ -53,7 +53,10 @@ reads: the last hit's shading frame and texture lookups, and, where the last seg
 can see nothing at all (:func:`nothing_seen`: no emissive surface, no sky or
 background; e.g. direct lighting by point, spot or projector lights), the last
 BSDF sample and the last ray. Every lane traces its camera ray in the same Embree
-query (coherent for the whole packet). The estimator is the loop's and draws the same
+query (coherent for the whole packet), on the lanes whose ray reaches a box around a shape
+(:attr:`PathIntegrator.cull`); a vertex makes its random numbers and, without emissive
+surfaces, its hit's interaction inside its branch (:attr:`PathIntegrator.deferred`), so a
+packet of escaped rays pays for neither. The estimator is the loop's and draws the same
 random numbers for a path's live vertices, so one path per lane (:meth:`sample`) gives
 the loop's image; :meth:`sample_sequence`'s later paths start at other points of a
 PCG32 stream (the loop also draws at its last vertex), so their images differ by noise.
@@ -71,12 +74,15 @@ from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32
 
 from ...options import PathOptions
 from ..loops import loops_once, widen
-from ..sampler import light_sample, next_2d, next_path
+from ..sampler import light_sample, next_2d, next_path, skip_draws
 from ..scene import DeviceScene
 from .common import DirectLight, power_heuristic
 
 #: the largest ``max_depth`` whose paths are traced as straight-line code (``0 < max_depth``)
 UNROLLED_MAX_DEPTH = 3
+#: the random numbers a vertex draws from a PCG32 (:meth:`PathIntegrator.bounce`): light
+#: selection 1, light point 2, BSDF lobe 1, direction 2, roulette 1
+VERTEX_DRAWS = 7
 
 
 @dataclass
@@ -138,6 +144,18 @@ class PathIntegrator:
     #: the unrolled path's last segment looks for a few emissive triangles first where they
     #: are all a ray can see (:attr:`emitters_first`); False: the closest hit (A/B comparisons)
     emitter_first = True
+    #: in the unrolled path's vertex branches (:attr:`branched`), what only the branch's lanes
+    #: use is made in the branch: the vertex's PCG32 draws (the stream moved past them in one
+    #: step before it, :func:`~drpt.render.sampler.skip_draws`) and, where nothing before the
+    #: branch reads more of the hit than whether there is one (no emissive surfaces), its
+    #: interaction (position, normals, material). A packet whose rays all escaped makes
+    #: neither; the image is the same bit for bit. False: both before the branch (A/B)
+    deferred = True
+    #: the unrolled path's camera rays are tested against boxes around the shapes before the
+    #: accelerator's query, which only the lanes reaching one run
+    #: (:meth:`~drpt.render.scene.DeviceScene.intersect_preliminary`'s ``cull``): the same
+    #: hits. False: every camera ray queries the accelerator (A/B)
+    cull = True
 
     def __init__(self, scene: DeviceScene, options: PathOptions):
         self.scene = scene
@@ -169,8 +187,8 @@ class PathIntegrator:
         traced as straight-line code: ``max_depth - 1`` full vertices, then
         :meth:`last_segment`."""
         scene = self.scene
-        for _ in range(self.opt.max_depth - 1):
-            state = self.bounce(scene, state, rng, branch=self.branched)
+        for i in range(self.opt.max_depth - 1):
+            state = self.bounce(scene, state, rng, branch=self.branched, camera=i == 0)
         return self.last_segment(scene, state)
 
     def last_segment(self, scene: DeviceScene, s: PathState) -> Array3f:
@@ -186,7 +204,9 @@ class PathIntegrator:
         camera = self.opt.max_depth == 1
 
         def look(L):
-            si = scene.intersect(s.o, s.d, s.active, coherent=camera or self.pixel_coherent)
+            hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=camera or self.pixel_coherent,
+                                              cull=camera and self.cull)
+            si = scene.interaction(s.o, s.d, hit)
             if camera:
                 si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
             return (add_emission(scene, self.opt, si, s, L, s.active),)
@@ -346,18 +366,22 @@ class PathIntegrator:
                          prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
                          active=Bool(active))
 
-    def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32, branch: bool = False) -> PathState:
+    def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32, branch: bool = False,
+               camera: bool = False) -> PathState:
         """One vertex of the path: the emission the ray sees, next-event
         estimation, BSDF sampling and Russian roulette. With ``branch`` (the unrolled
         path's vertices) the vertex's shading, everything after the emission, runs in a
         symbolic ``if`` on the lanes whose path goes on (label ``drpt_vertex``): a SIMD
         packet whose rays all escaped or ended skips it. The vertex's random numbers are
-        drawn before the branch, in the loop's order, so the image is the same either way."""
+        drawn in the loop's order (in the branch: :attr:`deferred`), so the image is the same
+        either way. ``camera``: the rays are the camera's (the unrolled path's first vertex),
+        whose query skips the rays passing beside every shape (:attr:`cull`)."""
         opt = self.opt
         nee = scene.has_emitters and scene.has_smooth_bsdfs
         # camera rays are coherent; with pixel_coherent every ray of a packet is
         coherent = True if self.pixel_coherent else s.depth == 0
-        si = scene.intersect(s.o, s.d, s.active, coherent=coherent)
+        hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=coherent, cull=camera and self.cull)
+        si = scene.interaction(s.o, s.d, hit)
         si = skip_hidden_emitters(scene, opt, si, s, s.active)
 
         # ---- emitter hit by the previous ray (or seen by the camera)
@@ -368,20 +392,29 @@ class PathIntegrator:
             active &= s.depth + 1 < opt.max_depth
 
         # ---- the vertex's random numbers: light selection and emitter, lobe, direction, roulette
-        u_sel = rng.next_float32()
-        u_light = next_2d(rng)
-        if nee:
-            u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
-        u_path = draw_continue(rng)
+        def draw(rng):
+            u_sel = rng.next_float32()
+            u_light = next_2d(rng)
+            if nee:
+                u_sel, u_light = light_sample(scene, rng, u_sel, u_light, active)
+            return u_sel, u_light, draw_continue(rng)
+
+        # in the branch, what only its lanes use is made there (:attr:`deferred`)
+        deferred = branch and self.deferred
+        start = skip_draws(rng, VERTEX_DRAWS) if deferred else None
+        drawn = draw(rng) if start is None else None
+        lazy = deferred and not getattr(scene.materials, "has_emission", True)
 
         def shade(L):
+            u_sel, u_light, u_path = drawn if start is None else draw(start)
+            hit_si = scene.interaction(s.o, s.d, hit) if lazy else si
             # ---- next-event estimation: one emitter, one shadow ray
             if nee:
                 coherent_shadow = (s.depth == 0) if coherent_shadows(scene) else False
-                L = self._nee(scene, si, s.beta, L, u_sel, u_light, active, coherent_shadow)
+                L = self._nee(scene, hit_si, s.beta, L, u_sel, u_light, active, coherent_shadow)
             # ---- BSDF sampling and Russian roulette: continue the path
-            wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, None, u_path)
-            return (scene.spawn(si, wo), Array3f(wo), L, beta, eta, depth, Float(bs.pdf),
+            wo, bs, beta, eta, depth, live = continue_path(scene, opt, hit_si, s, None, u_path)
+            return (scene.spawn(hit_si, wo), Array3f(wo), L, beta, eta, depth, Float(bs.pdf),
                     Bool(bs.delta), active & live)
 
         if branch:

@@ -1,0 +1,82 @@
+"""Boxes around the shapes (drpt.accel.boxes): every ray that hits a primitive reaches a box
+(grazing rays through vertices and edges, rays in the plane of a flat shape, axis-aligned
+directions), rays passing beside the shapes are culled, and the boxes are per shape, one
+around all, or none (planes)."""
+
+from __future__ import annotations
+
+import numpy as np
+from drjit.auto import Array3f
+
+from drpt.accel.boxes import MAX_BOXES, ShapeBoxes
+from drpt.scene import model as M
+from support.accel import brute_hits, icosphere, make_scene, rays
+
+
+def _scene():
+    """A small icosphere far from the origin, a flat quad in z = 0 and two spheres (shapes
+    1, 2, 2 and 3)."""
+    v, f = icosphere(2)
+    ico = v[f] * 0.3 + np.array([40.0, 3.0, 2.0])
+    quad = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]], float)
+    tris = np.concatenate([ico, quad])
+    sc = make_scene(tris, spheres=([[0.0, 0.0, 3.0], [5.0, 5.0, 1.0]], [0.5, 0.2]))
+    sc.triangles.shape_index = np.array([1] * len(ico) + [2, 2], np.int32)
+    return sc, ico, quad
+
+
+def _rays(ico, quad, seed=5):
+    """Rays from outside every box toward the icosphere's vertices and edge points, the
+    quad's corners and edges, within its plane, along the axes, and in random directions."""
+    rng = np.random.default_rng(seed)
+    targets = np.concatenate([ico.reshape(-1, 3), (ico[:, 0] + ico[:, 1]) / 2,
+                              quad.reshape(-1, 3), (quad[:, 0] + quad[:, 2]) / 2,
+                              rng.random((400, 3)) * [4, 4, 0] - [2, 2, 0]])
+    o = rng.normal(size=(len(targets), 3)) * 30
+    d = targets - o
+    # in the quad's plane, toward its edges and corners; along the axes onto its face
+    flat_t = np.concatenate([quad.reshape(-1, 3), rng.random((200, 3)) * [2, 2, 0] - [1, 1, 0]])
+    flat_o = np.concatenate([np.c_[rng.normal(size=(len(flat_t), 2)) * 20, np.zeros(len(flat_t))]])
+    axis_o = np.c_[rng.random((200, 2)) * 2.2 - 1.1, np.full(200, 7.0)]
+    axis_d = np.tile([0.0, 0.0, -1.0], (200, 1))
+    beside = rng.normal(size=(2000, 3)) * 30
+    o = np.concatenate([o, flat_o, axis_o, beside])
+    d = np.concatenate([d, flat_t - flat_o, axis_d, rng.normal(size=(2000, 3))])
+    return o, d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def test_every_hit_reaches_a_box_and_the_others_are_mostly_culled():
+    """Brute force's hits (grazing, in-plane and axis-aligned rays among them) all reach a
+    box; of the rays that hit nothing most are culled. Negative control: the boxes shrunk by
+    a hundredth drop rays that hit."""
+    sc, ico, quad = _scene()
+    o, d = _rays(ico, quad)
+    hit = brute_hits(sc, o, d).valid.numpy()
+    boxes = ShapeBoxes.of(sc)
+    assert len(boxes) == 4
+    O, D = rays(o, d)
+    reach = boxes.reach(O, D).numpy()
+    assert hit.sum() > 300
+    assert np.all(reach[hit])
+    assert reach[~hit].mean() < 0.5
+    shrunk = ShapeBoxes(boxes.lo.astype(float) + 0.01, boxes.hi.astype(float) - 0.01)
+    assert not np.all(shrunk.reach(O, D).numpy()[hit])
+
+
+def test_boxes_per_shape_one_around_many_none_with_planes():
+    """One box per shape up to MAX_BOXES, one around all beyond; none for a scene with a
+    plane (unbounded) or without primitives."""
+    c = np.arange(3 * (MAX_BOXES + 1), dtype=float).reshape(-1, 3) * 3
+    few = ShapeBoxes.of(make_scene(spheres=(c[:MAX_BOXES], np.ones(MAX_BOXES))))
+    many = ShapeBoxes.of(make_scene(spheres=(c, np.ones(len(c)))))
+    assert len(few) == MAX_BOXES and len(many) == 1
+    assert np.all(many.lo[0] < c.min(0) - 1) and np.all(many.hi[0] > c.max(0) + 1)
+    assert ShapeBoxes.of(make_scene(spheres=(c, np.ones(len(c))), planes=([[0.0, 0.0, 1.0]], [0.0]))) is None
+    empty = M.Scene(path=None, camera=make_scene().camera, materials=[M.Material("m")])
+    assert ShapeBoxes.of(empty) is None
+    # a ray along +x from the left of the first sphere (center (0, 3, 6)) reaches its box (two
+    # direction components zero), one above it does not, nor one leaving it backwards
+    x = Array3f(1.0, 0.0, 0.0)
+    assert few.reach(Array3f(-5.0, 3.0, 6.0), x).numpy().all()
+    assert not few.reach(Array3f(-5.0, 3.0, 50.0), x).numpy().any()
+    assert not few.reach(Array3f(-5.0, 3.0, 6.0), -x).numpy().any()
