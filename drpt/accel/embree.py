@@ -1,15 +1,15 @@
 """Embree 3's BVH, queried from inside drpt's Dr.Jit kernels: the ``"embree"`` accelerator.
 
 :class:`EmbreeAccel` has the interface of every accelerator
-(:class:`~drpt.accel.protocol.Accelerator`: the same global primitive ids, ``Hit``
-records and ``0 < t < tmax`` rule). It hands the scene's triangles and spheres to
-Embree 3 (one triangle mesh, geometry id 0, and one set of sphere points, id 1, in the
-scene's order, high build quality as Mitsuba 3 builds it; robust mode: :func:`robust_for`), and every
-``intersect`` / ``occluded`` call adds a packet query of Embree to the kernel being
-traced, through Dr.Jit's ``jit_llvm_ray_trace`` (:mod:`drpt.accel.embree_lib`). The
-query is a call inside the kernel: it works in symbolic loops (the megakernel's path
-loop) as in the wavefront's kernels, and the rest of the kernel stays drpt's code.
-Planes are tested by brute force first (:class:`~drpt.accel.primitives.SceneGeometry`),
+(:class:`~drpt.accel.protocol.Accelerator`: the same global primitive ids, ``Hit`` records
+and ``0 < t < tmax`` rule). It hands the scene's triangles and spheres to Embree 3 (one
+triangle mesh, geometry id 0, and one set of sphere points, id 1, in the scene's order, high
+build quality as Mitsuba 3 builds it; robust mode: :func:`drpt.scene.model.embree_robust`),
+and every ``intersect`` / ``occluded`` call adds a packet query of Embree to the kernel
+being traced, through Dr.Jit's ``jit_llvm_ray_trace`` (:mod:`drpt.accel.embree_lib`). The
+query is a call inside the kernel: it works in symbolic loops (the megakernel's path loop)
+as in the wavefront's kernels, and the rest of the kernel stays drpt's code. Planes are
+tested by brute force first (:class:`~drpt.accel.primitives.SceneGeometry`),
 and Embree's ``tfar`` is the nearest plane hit.
 
 Why: on large scenes drpt's own 4-wide BVH (:mod:`drpt.accel.bvh4`, one ray per SIMD
@@ -24,8 +24,8 @@ or a BVH rule asked for).
 
 Robust mode: Embree's watertight triangle test and conservative box tests, on for drpt's
 own scene format; a Mitsuba XML scene follows its ``embree_use_robust_intersections``,
-off by default as in Mitsuba 3 (:func:`robust_for`). Off, rays aimed within rounding of a
-shared edge or vertex can slip between two triangles (``benchmarks/embree_robust_leak.py``
+off by default as in Mitsuba 3 (:func:`drpt.scene.model.embree_robust`). Off, rays aimed
+within rounding of a shared edge or vertex can slip between two triangles (``benchmarks/embree_robust_leak.py``
 aims rays there to count them), and the queries take about 15% less time
 (docs/performance.md, "Embree").
 
@@ -52,20 +52,13 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array3f, Bool, Float, UInt32
 
+from drpt.scene.model import embree_robust
+
 from . import embree_lib as lib
 from .primitives import SceneGeometry
 from .protocol import INVALID, AccelParams, Hit
 
 TNEAR = float(np.finfo(np.float32).tiny)  # excludes t = 0, as every accelerator does
-
-
-def robust_for(scene) -> bool:
-    """Whether ``scene``'s Embree BVH uses Embree's robust triangle test: as its file says
-    (:attr:`~drpt.scene.model.RenderSettings.embree_robust`: a Mitsuba XML's
-    ``embree_use_robust_intersections``, off unless set, as in Mitsuba), else on (drpt's own
-    format, whose scenes were measured with it)."""
-    said = getattr(getattr(scene, "settings", None), "embree_robust", None)
-    return True if said is None else bool(said)
 
 
 _retired: list = []  # (lib, Embree scene, pointer variables, vertex arrays) of collected accelerators
@@ -120,7 +113,7 @@ class EmbreeAccel:
         self.stats = {"nodes": 0, "leaves": 0, "max_depth": 0, "prims": geo.N}
         bytes0 = L.device_bytes
         esc = L.rtcNewScene(L.device)
-        self.robust = robust_for(scene)
+        self.robust = embree_robust(scene)
         L.rtcSetSceneFlags(esc, lib.SCENE_FLAG_ROBUST if self.robust else 0)
         L.rtcSetSceneBuildQuality(esc, lib.BUILD_QUALITY_HIGH)
         if F:

@@ -50,6 +50,9 @@ Film, sampler, integrator
     ``sample_count`` and ``seed``, ``path`` integrator with ``max_depth``
     (-1 infinite, 1 emitters seen directly, 2 direct lighting), ``rr_depth``,
     ``hide_emitters`` (default false; a Mitsuba XML scene's own, through ``drpt export``).
+    The scene's ``embree_use_robust_intersections`` is the triangle test drpt traces it
+    with (:func:`drpt.scene.model.embree_robust`: true for drpt's own format, the file's
+    for a Mitsuba XML), so that Mitsuba and drpt reading the export trace the same.
 Materials
     Each material goes through :func:`drpt.materials.interpret.interpret_scene` (the
     same call the renderer makes, with the same ``bsdf`` mode), and
@@ -131,6 +134,7 @@ from drpt.scene.model import (
     Scene,
     Skybox,
     SpotLight,
+    embree_robust,
 )
 
 from .mitsuba_bsdf import _error as bsdf_error
@@ -272,6 +276,8 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
         "rr_depth": int(rr_depth),
         "hide_emitters": bool(hide_emitters),
     }
+    # the triangle test drpt traces the scene with (Mitsuba's default is the other for drpt's format)
+    out["embree_use_robust_intersections"] = embree_robust(scene)
 
     cam = scene.camera
     origin = np.asarray(_f3(cam.center))
@@ -555,7 +561,7 @@ def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
     # this keeps dict and XML renders sample for sample.
     out: dict[str, Any] = {}
     for key, node in desc.items():
-        if key in ("type", "integrator", "sensor"):
+        if key in ("type", "integrator", "sensor") or isinstance(node, bool):
             out[key] = _to_dict(node, mi)
         elif isinstance(node, _MeshData):
             out[key] = _build_mesh(node, mi)
@@ -636,6 +642,8 @@ def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: in
                 ply = mesh_dir / f"{node.name}.ply"
                 _write_ply(ply, *node.arrays(), attributes=node.attributes)
                 lines += _xml_mesh(node, f"{mesh_dir.name}/{ply.name}", key, 1)
+            elif isinstance(node, bool):  # a property of the scene itself
+                lines += _xml_value(key, node, 1)
             else:
                 lines += _xml_plugin(node, None, key, 1)
         lines.append("</scene>")

@@ -510,3 +510,12 @@ class Scene:
             c, r = self.spheres.center, self.spheres.radius[:, None]
             lo, hi = np.minimum(lo, (c - r).min(0)), np.maximum(hi, (c + r).max(0))
         return lo, hi
+
+
+def embree_robust(scene) -> bool:
+    """Whether ``scene`` is traced with Embree's robust triangle test (:mod:`drpt.accel.embree`),
+    as its file says: a Mitsuba XML's ``embree_use_robust_intersections`` (off unless set, as in
+    Mitsuba 3), on for drpt's own format, whose scenes were measured with it. The Mitsuba export
+    writes it, so that Mitsuba and drpt reading the export trace the same test."""
+    said = getattr(getattr(scene, "settings", None), "embree_robust", None)
+    return True if said is None else bool(said)

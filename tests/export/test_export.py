@@ -463,3 +463,27 @@ def test_media_export_as_homogeneous_media_with_volpath(tmp_path):
     hetero = dc_replace(scene, media=[dc_replace(scene.media[0], sigma_t_grid=grid), scene.media[1]])
     with pytest.raises(DrptError, match="heterogeneous medium"):
         write_xml(hetero, tmp_path / "h.xml", 16, 16, 4)
+
+
+def test_the_export_carries_the_triangle_test_drpt_traces(tmp_path):
+    """drpt's own format is traced with Embree's robust triangle test, so its export asks
+    Mitsuba for it (Mitsuba's default is off) and drpt reading the export keeps it; a
+    Mitsuba XML scene that does not ask for it is exported without it."""
+    from drpt.scene import load_scene
+    from drpt.scene.model import embree_robust
+
+    scene = _mixed_scene(tmp_path)
+    assert embree_robust(scene)
+    assert to_mitsuba_dict(scene, W, H, 4)["embree_use_robust_intersections"] is True
+    xml = write_xml(scene, tmp_path / "own" / "scene.xml", W, H, 4)
+    assert '<boolean name="embree_use_robust_intersections" value="true"/>' in xml.read_text()
+    assert load_scene(xml).settings.embree_robust is True
+    plain = tmp_path / "plain.xml"
+    plain.write_text("""<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm">
+        <integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>
+        <shape type="sphere"/><emitter type="constant"/></scene>""")
+    read = load_scene(plain)
+    assert not embree_robust(read)
+    again = write_xml(read, tmp_path / "again" / "scene.xml", 8, 8, 4)
+    assert '<boolean name="embree_use_robust_intersections" value="false"/>' in again.read_text()
+    assert load_scene(again).settings.embree_robust is False
