@@ -222,6 +222,16 @@ class MediumTable:
         self.thin_eta = Float(np.array(eta, np.float32))
         self.null_trans = _vec(trans)
         self.has_null = any(k != NULL_NONE for k in kind)
+        self.has_thin = NULL_THIN in kind
+        # one set of coefficients for every medium (no heterogeneous one): the kernels read
+        # them as literals, no gathers (and a gray extinction's channels are then one value)
+        homo = {(tuple(m.extinction), tuple(m.albedo), m.g if m.phase == "hg" else 0.0)
+                for m in media if m.phase in ("isotropic", "hg")}
+        self.uniform = None
+        if len(homo) == 1 and all(m.is_homogeneous and m.phase in ("isotropic", "hg") for m in media):
+            (st, al, g), = homo
+            self.uniform = (tuple(float(np.float32(x)) for x in st), tuple(float(np.float32(x)) for x in al),
+                            float(np.float32(g)))
         # every homogeneous extinction the same in R, G and B (a heterogeneous one is a single
         # channel): one channel's free flight samples all three, no spectral MIS
         self.gray = all(m.extinction[0] == m.extinction[1] == m.extinction[2]
@@ -235,8 +245,12 @@ class MediumTable:
             self.blind = Bool(np.array([False] + [i in blind for i in range(self.count)], bool))
 
     def coefficients(self, medium: UInt32, active: Bool) -> tuple[Array3f, Array3f, Float]:
-        """``(sigma_t, albedo, g)`` of the lanes' media (zeros in vacuum)."""
+        """``(sigma_t, albedo, g)`` of the lanes' media (``sigma_t`` zero in vacuum; the
+        albedo and ``g`` there: zeros, or with :attr:`uniform` media its values)."""
         inside = active & (medium > 0)
+        if self.uniform is not None:
+            st, al, g = self.uniform
+            return dr.select(inside, Array3f(*st), 0.0), Array3f(*al), Float(g)
         i = dr.select(inside, medium - 1, 0)
         st = dr.gather(Array3f, self.sigma_t, i, inside)
         al = dr.gather(Array3f, self.albedo, i, inside)
@@ -275,6 +289,8 @@ class MediumTable:
         on = active & si.valid
         mat = dr.select(on, si.material, 0)
         kind = dr.gather(UInt32, self.null_kind, mat, on)
+        if not self.has_thin:  # (null boundaries pass everything, other surfaces nothing)
+            return dr.select(on & (kind == NULL_BOUNDARY), Array3f(1.0), Array3f(0.0))
         eta = dr.gather(Float, self.thin_eta, mat, on)
         t = dr.gather(Array3f, self.null_trans, mat, on)
         r = reflectance(dr.dot(si.ns, d), eta)
