@@ -33,7 +33,18 @@ without heterogeneous media trace none of this.
 Where every homogeneous medium's extinction is gray (the same in R, G and B:
 ``MediumTable.gray``), the channel pick and the weights are left out: the sampled distance is
 the same for every channel, the transmittance cancels against its density, and the weight is
-the albedo at a scattering event, 1 at a surface (``u_ch`` is drawn all the same).
+the albedo at a scattering event, 1 at a surface (``u_ch`` is drawn all the same). Where every
+medium has the same coefficients (``MediumTable.uniform``: one homogeneous medium, as in every
+corpus scene), the kernels read them as literals instead of gathering them per lane, and a
+gray extinction's three channels are then one value (Dr.Jit merges equal expressions).
+
+A ``thindielectric`` sheet hit from vacuum (a camera ray at a medium's sheet boundary)
+reflects a few percent of the rays at full weight, and what the mirror direction sees (the
+sky, mostly) was the largest part of such a pixel's variance. The emission the mirrored ray
+reaches first is counted at the sheet (one closest hit, ``R'`` times the sheet's
+``specular_reflectance``: :meth:`VolPathIntegrator.sheet_split`), the path still picks
+reflection or transmission as before, and where it reflects the emission its next segment
+reaches is not counted again; what the reflected path finds beyond (lit surfaces) is.
 
 Next-event estimation (one emitter chosen by the scene's light selection, as in the path
 integrator: :meth:`~drpt.render.scene.DeviceScene.sample_emitter`) runs at surfaces and at
@@ -98,7 +109,7 @@ from ..scene import DeviceScene
 from ..warp import Frame
 from .common import SHADOW_SHRINK, power_heuristic, shadow_segment
 from .enclosure import blind_media
-from .path import PathIntegrator
+from .path import PathIntegrator, nothing_seen
 
 #: at most this many boundaries (null or thindielectric) a shadow ray passes; beyond, it is blocked
 MAX_SHADOW_CROSSINGS = 64
@@ -109,6 +120,19 @@ SHADOW_TAU = 0.4
 SHADOW_TAU_SHEETS = 1.0
 
 NULL_NONE, NULL_BOUNDARY, NULL_THIN = 0, 1, 2
+
+
+def _sheet_tint(spec) -> tuple[float, float, float] | None:
+    """A ``thindielectric`` material's constant ``specular_reflectance`` as RGB (None: a
+    texture); zero for any other BSDF."""
+    if spec is None or spec.kind != "thindielectric":
+        return (0.0, 0.0, 0.0)
+    v = {**PARAMS["thindielectric"], **spec.params}.get("specular_reflectance", 1.0)
+    if isinstance(v, (int, float)):
+        return (float(v),) * 3
+    if isinstance(v, tuple) and len(v) == 3:
+        return tuple(float(x) for x in v)
+    return None
 
 def shadow_tau(scene: Scene, blind: frozenset[int] = frozenset()) -> float:
     """The scene's threshold below which shadow rays track homogeneous media (decided when
@@ -191,6 +215,8 @@ class MediumTable:
         exterior = [0 if m.exterior is None else m.exterior + 1 for m in mats]
         transition = [m.is_medium_transition for m in mats]
         kind, eta, trans = [], [], []
+        # thin sheets' specular_reflectance (VolPathIntegrator.sheet_split; None: a texture)
+        tints = [_sheet_tint(m.bsdf) for m in mats] or [(0.0, 0.0, 0.0)]
         for m in mats:
             spec = m.bsdf
             k = spec.kind if spec is not None else ""
@@ -221,6 +247,8 @@ class MediumTable:
         self.null_kind = UInt32(np.array(kind, np.uint32))
         self.thin_eta = Float(np.array(eta, np.float32))
         self.null_trans = _vec(trans)
+        self.sheet_tints = all(t is not None for t in tints)  # (no texture to read)
+        self.sheet_tint = _vec([t if t is not None else (0.0, 0.0, 0.0) for t in tints])
         self.has_null = any(k != NULL_NONE for k in kind)
         self.has_thin = NULL_THIN in kind
         # one set of coefficients for every medium (no heterogeneous one): the kernels read
@@ -449,6 +477,10 @@ class VolPathIntegrator(PathIntegrator):
     """Mitsuba's ``volpath`` (see the module's docs). Its
     ``sample`` and ``sample_sequence`` are :class:`PathIntegrator`'s."""
 
+    #: count the emission mirrored by thin sheets seen from vacuum at the sheet
+    #: (:meth:`sheet_split`); False: the path's own reflection only (for A/B comparisons)
+    split_sheets = True
+
     def __init__(self, scene: DeviceScene, options: PathOptions, model: Scene):
         super().__init__(scene, options)
         self.media = MediumTable(model)
@@ -571,11 +603,15 @@ class VolPathIntegrator(PathIntegrator):
         si = self.skip_emitters(scene, s, si, fl)
         L = s.L + self.emitted(scene, s, si, fl)
         on_surface = fl.surf & si.valid
+        split = self.sheet_split(s, si, fl, on_surface)
+        if split is not None:
+            L = L + split[0]
         phase = self.phase(s, fl)
         q = self.nee_query(scene, s, si, fl, on_surface, phase, rng)
         if q is not None:  # one emitter, one shadow ray through the media
             L = L + q.resolve(self.shadow(q.o, q.d, q.tmax, q.medium, q.ok, rng))
-        return self.next_ray(scene, s, si, fl, on_surface, phase, L, rng)
+        return self.next_ray(scene, s, si, fl, on_surface, phase, L, rng,
+                             split=None if split is None else split[1])
 
     def roulette(self, s: VolPathState, rng: PCG32) -> tuple[Bool, Array3f]:
         """Russian roulette and the depth limit, at the top of a bounce as in Mitsuba's
@@ -693,7 +729,55 @@ class VolPathIntegrator(PathIntegrator):
         w = Float(1.0)
         if nee:
             w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
+        if self.splits_sheets:  # (counted at the sheet already: sheet_split)
+            w = dr.select(s.prev_pdf < 0.0, 0.0, w)
         return dr.select(seen, fl.beta * le * w, 0.0)
+
+    @property
+    def splits_sheets(self) -> bool:
+        """Whether :meth:`sheet_split` is traced (read at trace time): :attr:`split_sheets`
+        on, a scene with ``thindielectric`` sheets of constant ``specular_reflectance``,
+        and something a ray can see (an emissive surface, a background or an emitter at
+        infinity)."""
+        return (self.split_sheets and self.media.has_thin and self.media.sheet_tints
+                and not nothing_seen(self.scene))
+
+    def sheet_split(self, s: VolPathState, si, fl: Flight, on_surface: Bool) -> tuple[Array3f, Bool] | None:
+        """The emission seen in the mirror direction of a ``thindielectric`` sheet hit from
+        vacuum, counted at the sheet: ``(term, split)``, ``term`` the throughput times the
+        sheet's reflectance ``R' = 2R / (1 + R)`` times its ``specular_reflectance`` times
+        what the mirrored ray reaches first (an emitter, the background or the sky: one
+        closest hit), for the lanes ``split``: a sheet hit on a ``fl.surf`` lane in vacuum
+        whose mirrored ray stays in vacuum and may still add emission (``depth + 1 <
+        max_depth``).
+
+        The path still picks reflection or transmission at random (the same numbers, the
+        same weights); where it reflects, the emission its next segment reaches is left
+        out (:meth:`next_ray` marks the lane with ``prev_pdf = -1``, :meth:`emitted` skips
+        it; a null crossing clears the mark), so the estimate keeps its expectation and
+        loses the variance of that choice for the reflected light. Where a camera sees a
+        medium through a sheet, the sky the sheet mirrors (a few percent of the rays, at
+        full weight) is most of a pixel's noise. (Smooth ``dielectric`` surfaces are not
+        split: on the corpus water spheres the extra ray cost more than the variance it
+        saved, docs/performance.md.) None where :attr:`splits_sheets` is off (nothing
+        traced)."""
+        if not (fl.surface and self.splits_sheets):
+            return None
+        media, opt, scene = self.media, self.opt, self.scene
+        wi = -s.d
+        cos = dr.dot(si.ns, wi)  # (the BSDF's shading frame: wi.z)
+        wr = si.ns * (2.0 * cos) - wi  # the mirror direction
+        on = on_surface & (s.medium == 0)
+        split = on & (media.null_kind_of(si, on) == NULL_THIN)
+        if opt.max_depth >= 0:
+            split = split & (fl.depth + 1 < opt.max_depth)
+        split = split & (media.after(si, wr, s.medium, split) == 0)
+        mat = dr.select(split, si.material, 0)
+        r = reflectance(cos, dr.gather(Float, media.thin_eta, mat, split))
+        tint = dr.gather(Array3f, media.sheet_tint, mat, split)
+        si_r = scene.intersect(scene.spawn(si, wr), wr, split)
+        le, _ = scene.eval_emitter(si_r, wr, split, density=False)
+        return dr.select(split, fl.beta * tint * r * le, 0.0), split
 
     def phase(self, s: VolPathState, fl: Flight):
         """``(pdf, lobes)``: the density ``wo -> pdf`` of the phase function of the ray's
@@ -764,10 +848,12 @@ class VolPathIntegrator(PathIntegrator):
         return VolShadowQuery(fl.beta * f * es.le, w / es.pdf, o, d_sh, dist * SHADOW_SHRINK, med, ok)
 
     def next_ray(self, scene: DeviceScene, s: VolPathState, si, fl: Flight, on_surface: Bool, phase,
-                 L: Array3f, rng: PCG32) -> VolPathState:
+                 L: Array3f, rng: PCG32, split: Bool | None = None) -> VolPathState:
         """The path's next state: the BSDF sampled at a surface (a null boundary or a thin
         sheet's transmission passed without a scattering event), the phase function at a
-        medium event (three random numbers)."""
+        medium event (three random numbers). ``split``: :meth:`sheet_split`'s lanes, whose
+        reflection gets ``prev_pdf = -1`` (its emission counted); a null crossing clears
+        the mark (what lies beyond it was not counted)."""
         media = self.media
         phase_pdf, lobes = phase
         u_lobe = rng.next_float32()
@@ -797,6 +883,9 @@ class VolPathIntegrator(PathIntegrator):
             medium = media.after(si, wo, s.medium, on_surface)
             ref_p = dr.select(real, si.p, s.ref_p)
             prev_pdf = dr.select(real, Float(bs.pdf), s.prev_pdf)
+            if split is not None:  # (reflected: back to the side the ray came from)
+                mirrored = split & (dr.dot(wo, si.ng) * dr.dot(s.d, si.ng) < 0.0)
+                prev_pdf = dr.select(mirrored, -1.0, dr.select(prev_pdf < 0.0, 0.0, prev_pdf))
             prev_delta = dr.select(real, Bool(bs.delta), s.prev_delta)
         live = None
         if fl.medium:

@@ -309,6 +309,51 @@ def test_shadow_tracking_is_unbiased(tmp_path, bsdf, monkeypatch):
     assert np.all(np.abs(mean - expect) > 8 * np.maximum(se, 1e-12)), (mean, expect, se)
 
 
+def test_sheet_split_keeps_the_mean_and_cuts_the_variance(tmp_path, monkeypatch):
+    """:meth:`~drpt.render.integrators.volpath.VolPathIntegrator.sheet_split`: camera rays
+    at the center of a dark sphere (albedo 0, chord 2, extinction 5) behind
+    thindielectric sheets in a white sky: the sky the front sheet mirrors is most of what
+    they see. The sky the front sheet mirrors, counted at the
+    sheet, keeps the mean of 2^16 paths (|z| < 4 against the path's own reflection alone,
+    ``split_sheets`` off) and cuts the variance (below 0.2x). Negative control: counting
+    the sky at the sheet and again where the reflected path reaches it (no skip in
+    ``emitted``) is |z| > 8 off."""
+    import drjit as dr
+    from drjit.auto import PCG32, Array3f, Bool
+
+    from drpt.render.integrators.volpath import VolPathIntegrator
+
+    r = _renderer(tmp_path, albedo="0, 0, 0", sigma="5, 5, 5", bsdf="thindielectric")
+    integ = r.integrator
+    assert integ.splits_sheets
+    n = 1 << 16
+
+    def paths(split: bool):
+        integ.split_sheets = split
+        L = integ.sample(PCG32(n, 11), dr.full(Array3f, [0.0, 0.0, 5.0], n), dr.full(Array3f, [0.0, 0.0, -1.0], n),
+                         dr.full(Bool, True, n))
+        x = np.asarray(L.x).astype(np.float64)
+        assert np.isfinite(x).all()
+        return x.mean(), x.var(ddof=1)
+
+    (m_on, v_on), (m_off, v_off) = paths(True), paths(False)
+    z = (m_on - m_off) / math.sqrt((v_on + v_off) / n)
+    assert abs(z) < 4 and v_on < 0.2 * v_off, (m_on, m_off, z, v_on, v_off)
+
+    emitted = VolPathIntegrator.emitted
+
+    def counted_twice(self, *args):  # the reflected path's sky not skipped
+        self.split_sheets = False
+        try:
+            return emitted(self, *args)
+        finally:
+            self.split_sheets = True
+
+    monkeypatch.setattr(VolPathIntegrator, "emitted", counted_twice)
+    m_bad, v_bad = paths(True)
+    assert abs(m_bad - m_off) > 8 * math.sqrt((v_bad + v_off) / n), (m_bad, m_off)
+
+
 @pytest.mark.parametrize("bsdf, tracked", [("thindielectric", True), ("null", False)])
 def test_shadow_tracking_threshold_is_chosen_per_scene(tmp_path, bsdf, tracked):
     """:func:`~drpt.render.integrators.volpath.shadow_tau`: a medium seen only through
