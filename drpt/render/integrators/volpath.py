@@ -108,7 +108,7 @@ from ..loops import loops_once
 from ..scene import DeviceScene
 from ..warp import Frame
 from .common import SHADOW_SHRINK, power_heuristic, shadow_segment
-from .enclosure import blind_media
+from .enclosure import blind_media, media_see_emitters
 from .path import PathIntegrator, nothing_seen
 
 #: at most this many boundaries (null or thindielectric) a shadow ray passes; beyond, it is blocked
@@ -269,6 +269,8 @@ class MediumTable:
         self.blind_set = blind
         self.has_blind = bool(blind)
         self.all_blind = self.count > 0 and len(blind) == self.count
+        # a ray in a medium may end its segment at an emitter (enclosure.media_see_emitters)
+        self.see_emitters = self.count > 0 and media_see_emitters(scene)
         if self.has_blind:
             self.blind = Bool(np.array([False] + [i in blind for i in range(self.count)], bool))
 
@@ -431,6 +433,9 @@ class Flight:
     g: Float  # the medium's Henyey-Greenstein asymmetry
     medium: bool = True
     surface: bool = True
+    #: with :attr:`VolPathIntegrator.counts_through`: the throughput times the transmittance
+    #: up to the surface beyond (in_medium lanes), what its emission is counted with
+    through: Array3f | None = None
 
 
 def _either(fl: Flight, mask: Bool, medium, surface):
@@ -477,6 +482,9 @@ class VolPathIntegrator(PathIntegrator):
     """Mitsuba's ``volpath`` (see the module's docs). Its
     ``sample`` and ``sample_sequence`` are :class:`PathIntegrator`'s."""
 
+    #: count the emission at the end of a segment in a homogeneous medium by its
+    #: transmittance (:attr:`counts_through`); False: where the free flight got there (A/B)
+    count_through = True
     #: count the emission mirrored by thin sheets seen from vacuum at the sheet
     #: (:meth:`sheet_split`); False: the path's own reflection only (for A/B comparisons)
     split_sheets = True
@@ -598,10 +606,11 @@ class VolPathIntegrator(PathIntegrator):
         :meth:`next_ray`."""
         active, beta = self.roulette(s, rng)
         draw = self.flight_draw(s, active, rng)
-        si = scene.intersect(s.o, s.d, active, reach(draw[2]))
+        si = scene.intersect(s.o, s.d, active, self.query_reach(draw[2]))
         fl = self.free_flight(s, si, active, beta, rng, draw)
         si = self.skip_emitters(scene, s, si, fl)
         L = s.L + self.emitted(scene, s, si, fl)
+        si = self.past_collision(si, fl)
         on_surface = fl.surf & si.valid
         split = self.sheet_split(s, si, fl, on_surface)
         if split is not None:
@@ -650,6 +659,7 @@ class VolPathIntegrator(PathIntegrator):
         heterogeneous media, one more random number)."""
         opt, media = self.opt, self.media
         _, u_t, t = draw
+        beta_in = beta
         in_medium = active & (s.medium > 0)
         sigma_t, albedo, g = media.coefficients(s.medium, in_medium)
         t_surf = dr.select(si.valid, si.t, dr.inf)
@@ -669,11 +679,14 @@ class VolPathIntegrator(PathIntegrator):
             real, p_h, beta = self._delta_track(s.o, s.d, t_surf, u_t, in_medium, s.medium, beta, rng)
             p_med = dr.select(real, p_h, p_med)
             scatter = scatter | real
+        through = None
+        if self.counts_through:  # (the throughput before this segment's weights)
+            through = dr.select(in_medium, beta_in * _transmittance(sigma_t, t_surf), 0.0)
         depth = dr.select(scatter, s.depth + 1, s.depth)
         scatter_live = scatter & (depth < opt.max_depth) if opt.max_depth >= 0 else Bool(scatter)
         surf = active & ~scatter
         return Flight(beta=beta, depth=depth, scatter=scatter, scatter_live=scatter_live,
-                      surf=surf, p_med=p_med, in_medium=in_medium, g=g)
+                      surf=surf, p_med=p_med, in_medium=in_medium, g=g, through=through)
 
     @loops_once
     @dr.syntax
@@ -721,8 +734,12 @@ class VolPathIntegrator(PathIntegrator):
         (``fl.surf`` lanes), MIS-weighted against next-event estimation from the last real
         scattering vertex (null crossings do not count)."""
         nee = scene.has_emitters
-        hide = (fl.depth == 0) if self.opt.hide_emitters else Bool(False)
+        hide = (s.depth == 0) if self.opt.hide_emitters else Bool(False)  # (the segment's depth)
         seen = fl.surf & ~hide
+        weight = fl.beta
+        if fl.through is not None:  # in a medium: by its transmittance, whether the ray got there or not
+            seen = (seen & ~fl.in_medium) | (fl.in_medium & ~hide)
+            weight = dr.select(fl.in_medium, fl.through, fl.beta)
         si_ref = copy.copy(si)
         si_ref.t = dr.norm(si.p - s.ref_p)
         le, pdf_l = scene.eval_emitter(si_ref, s.d, seen, density=nee)
@@ -731,7 +748,37 @@ class VolPathIntegrator(PathIntegrator):
             w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
         if self.splits_sheets:  # (counted at the sheet already: sheet_split)
             w = dr.select(s.prev_pdf < 0.0, 0.0, w)
-        return dr.select(seen, fl.beta * le * w, 0.0)
+        return dr.select(seen, weight * le * w, 0.0)
+
+    @property
+    def counts_through(self) -> bool:
+        """Whether a ray in a medium counts the emission of what lies at the end of its
+        segment by the transmittance up to it (read at trace time: :attr:`count_through`
+        on, homogeneous media only, and a medium in which a ray can reach an emitter:
+        :func:`~.enclosure.media_see_emitters`; elsewhere the term is always 0, a
+        medium bounded by null surfaces under a sky included). The closest hit then
+        looks the whole way (:meth:`query_reach`), and :meth:`emitted` adds, for every
+        lane in a medium, the throughput times ``exp(-sigma_t t)`` times the emission at
+        the hit or the sky (zero at an infinite distance), where the sampled free flight
+        added it at full weight on the lanes that got there: the same expectation, without
+        the variance of whether this ray got there. The lanes that scattered first go on
+        as before (:meth:`past_collision`)."""
+        return (self.count_through and self.media.see_emitters and not self.media.has_hetero
+                and not nothing_seen(self.scene))
+
+    def query_reach(self, t: Float) -> Float | None:
+        """How far the closest hit of a segment whose medium collision was sampled at
+        ``t`` looks: :func:`reach`, or the whole way (None) with :attr:`counts_through`."""
+        return None if self.counts_through else reach(t)
+
+    def past_collision(self, si, fl: Flight):
+        """``si`` as the rest of the bounce sees it: with :attr:`counts_through` (the hit
+        found past a sampled collision) no hit on the lanes that scattered."""
+        if fl.through is None:
+            return si
+        si = copy.copy(si)
+        si.valid = si.valid & ~fl.scatter
+        return si
 
     @property
     def splits_sheets(self) -> bool:

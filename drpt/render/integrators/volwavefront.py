@@ -50,7 +50,7 @@ from ...options import PathOptions
 from ...scene.model import Scene
 from ..sampler import pack, unpack
 from ..scene import DeviceScene
-from .volpath import Flight, VolPathIntegrator, VolPathState, VolShadowQuery, reach
+from .volpath import Flight, VolPathIntegrator, VolPathState, VolShadowQuery
 from .wavefront import WavefrontIntegrator, WaveState, _take, _Timer, gather_state
 
 
@@ -110,7 +110,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         rng = self._rng(s)
         active, beta = integ.roulette(_vol_state(s, dr.full(Bool, True, n)), rng)
         draw = integ.flight_draw(_vol_state(s, active), active, rng)
-        hit = scene.intersect_preliminary(s.o, s.d, active, reach(draw[2]))
+        hit = scene.intersect_preliminary(s.o, s.d, active, integ.query_reach(draw[2]))
         rng_a, rng_b = pack(rng)
         timer.done("closest hit", hit, active, beta, rng_a, rng_b, *draw, lanes=n, rays=n)
         si = scene.interaction(s.o, s.d, hit)
@@ -122,6 +122,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         fl = integ.free_flight(vs, si, active, beta, rng, draw)
         si = integ.skip_emitters(scene, vs, si, fl)
         dr.scatter_add(L, integ.emitted(scene, vs, si, fl), s.lane)
+        si = integ.past_collision(si, fl)
         on_surface = fl.surf & si.valid
         s = VolWaveState(**{**{f.name: getattr(s, f.name) for f in fields(s)},
                             **dict(zip(("rng_state", "rng_inc"), pack(rng)))})
