@@ -46,6 +46,14 @@ reaches first is counted at the sheet (one closest hit, ``R'`` times the sheet's
 reflection or transmission as before, and where it reflects the emission its next segment
 reaches is not counted again; what the reflected path finds beyond (lit surfaces) is.
 
+Where a ray in a homogeneous medium can reach an emitter before it leaves the medium (an
+emitter inside the medium, or the camera's medium: :func:`~.enclosure.media_see_emitters`),
+the emission at the end of each segment in the medium is counted on every lane by its
+transmittance ``exp(-sigma_t t)`` instead of at full weight on the lanes whose free flight got
+there (:attr:`VolPathIntegrator.counts_through`; the closest hit then looks past the sampled
+collision). Elsewhere, as in a medium bounded by null surfaces under a sky, that emission is
+always zero and none of this is traced.
+
 Next-event estimation (one emitter chosen by the scene's light selection, as in the path
 integrator: :meth:`~drpt.render.scene.DeviceScene.sample_emitter`) runs at surfaces and at
 scattering events alike (the BSDF or the phase function evaluated toward the emitter
