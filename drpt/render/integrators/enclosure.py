@@ -107,9 +107,10 @@ def enclosed_media(scene: Scene) -> dict[int, list[Box]]:
     return out
 
 
-def _emitter_boxes(scene: Scene) -> list[Box]:
+def _emitter_boxes(scene: Scene, lights: bool = True) -> list[Box]:
     """Boxes around every emitter that has a place (area emitters' geometry, by material;
-    point, spot and projector lights' positions); infinite for an emissive plane."""
+    with ``lights``, point, spot and projector lights' positions); infinite for an emissive
+    plane."""
     boxes: list[Box] = []
     emissive = scene.emissive_materials
     tris, sph, planes = scene.triangles, scene.spheres, scene.planes
@@ -126,7 +127,7 @@ def _emitter_boxes(scene: Scene) -> list[Box]:
             lo, hi = np.minimum(lo, (c - r).min(0)), np.maximum(hi, (c + r).max(0))
         if np.all(lo <= hi):
             boxes.append((lo, hi))
-    for light in scene.lights:
+    for light in scene.lights if lights else ():
         if isinstance(light, (PointLight, SpotLight, ProjectorLight)):
             p = np.asarray(light.position, np.float64)
             boxes.append((p, p))
@@ -143,3 +144,35 @@ def blind_media(scene: Scene) -> frozenset[int]:
     emitters = _emitter_boxes(scene)
     return frozenset(i for i, boxes in enclosed_media(scene).items()
                      if not any(_overlap(e, b) for e in emitters for b in boxes))
+
+
+def _interior_box(scene: Scene, medium: int) -> Box | None:
+    """The bounding box of the shapes whose interior is ``medium`` (infinite with a plane;
+    None: no such shape)."""
+    mats = scene.materials or []
+    inside = [k for k, m in enumerate(mats) if m.interior == medium]
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    if len(scene.planes) and np.isin(scene.planes.material, inside).any():
+        return np.full(3, -np.inf), np.full(3, np.inf)
+    tris, sph = scene.triangles, scene.spheres
+    if len(tris) and np.isin(tris.material, inside).any():
+        p = tris.positions[np.isin(tris.material, inside)].reshape(-1, 3)
+        lo, hi = np.minimum(lo, p.min(0)), np.maximum(hi, p.max(0))
+    if len(sph) and np.isin(sph.material, inside).any():
+        on = np.isin(sph.material, inside)
+        c, r = sph.center[on], sph.radius[on][:, None]
+        lo, hi = np.minimum(lo, (c - r).min(0)), np.maximum(hi, (c + r).max(0))
+    return (lo, hi) if np.all(lo <= hi) else None
+
+
+def media_see_emitters(scene: Scene) -> bool:
+    """Whether a ray in a medium can reach an emitter, the sky or the background without
+    leaving the medium (host side, conservative): the camera is in a medium, or a medium is
+    some shape's exterior (it may reach anything), or an emissive surface's bounding box
+    overlaps the bounding box of the shapes a medium is the interior of (a ray inside them
+    ends its segment within that box)."""
+    if scene.camera_medium is not None or any(m.exterior is not None for m in scene.materials or []):
+        return True
+    emitters = _emitter_boxes(scene, lights=False)
+    boxes = [b for b in (_interior_box(scene, i) for i in range(len(scene.media))) if b is not None]
+    return any(_overlap(e, b) for e in emitters for b in boxes)

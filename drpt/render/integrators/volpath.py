@@ -33,7 +33,26 @@ without heterogeneous media trace none of this.
 Where every homogeneous medium's extinction is gray (the same in R, G and B:
 ``MediumTable.gray``), the channel pick and the weights are left out: the sampled distance is
 the same for every channel, the transmittance cancels against its density, and the weight is
-the albedo at a scattering event, 1 at a surface (``u_ch`` is drawn all the same).
+the albedo at a scattering event, 1 at a surface (``u_ch`` is drawn all the same). Where every
+medium has the same coefficients (``MediumTable.uniform``: one homogeneous medium, as in every
+corpus scene), the kernels read them as literals instead of gathering them per lane, and a
+gray extinction's three channels are then one value (Dr.Jit merges equal expressions).
+
+A ``thindielectric`` sheet hit from vacuum (a camera ray at a medium's sheet boundary)
+reflects a few percent of the rays at full weight, and what the mirror direction sees (the
+sky, mostly) was the largest part of such a pixel's variance. The emission the mirrored ray
+reaches first is counted at the sheet (one closest hit, ``R'`` times the sheet's
+``specular_reflectance``: :meth:`VolPathIntegrator.sheet_split`), the path still picks
+reflection or transmission as before, and where it reflects the emission its next segment
+reaches is not counted again; what the reflected path finds beyond (lit surfaces) is.
+
+Where a ray in a homogeneous medium can reach an emitter before it leaves the medium (an
+emitter inside the medium, or the camera's medium: :func:`~.enclosure.media_see_emitters`),
+the emission at the end of each segment in the medium is counted on every lane by its
+transmittance ``exp(-sigma_t t)`` instead of at full weight on the lanes whose free flight got
+there (:attr:`VolPathIntegrator.counts_through`; the closest hit then looks past the sampled
+collision). Elsewhere, as in a medium bounded by null surfaces under a sky, that emission is
+always zero and none of this is traced.
 
 Next-event estimation (one emitter chosen by the scene's light selection, as in the path
 integrator: :meth:`~drpt.render.scene.DeviceScene.sample_emitter`) runs at surfaces and at
@@ -97,8 +116,8 @@ from ..loops import loops_once
 from ..scene import DeviceScene
 from ..warp import Frame
 from .common import SHADOW_SHRINK, power_heuristic, shadow_segment
-from .enclosure import blind_media
-from .path import PathIntegrator
+from .enclosure import blind_media, media_see_emitters
+from .path import PathIntegrator, nothing_seen
 
 #: at most this many boundaries (null or thindielectric) a shadow ray passes; beyond, it is blocked
 MAX_SHADOW_CROSSINGS = 64
@@ -109,6 +128,19 @@ SHADOW_TAU = 0.4
 SHADOW_TAU_SHEETS = 1.0
 
 NULL_NONE, NULL_BOUNDARY, NULL_THIN = 0, 1, 2
+
+
+def _sheet_tint(spec) -> tuple[float, float, float] | None:
+    """A ``thindielectric`` material's constant ``specular_reflectance`` as RGB (None: a
+    texture); zero for any other BSDF."""
+    if spec is None or spec.kind != "thindielectric":
+        return (0.0, 0.0, 0.0)
+    v = {**PARAMS["thindielectric"], **spec.params}.get("specular_reflectance", 1.0)
+    if isinstance(v, (int, float)):
+        return (float(v),) * 3
+    if isinstance(v, tuple) and len(v) == 3:
+        return tuple(float(x) for x in v)
+    return None
 
 def shadow_tau(scene: Scene, blind: frozenset[int] = frozenset()) -> float:
     """The scene's threshold below which shadow rays track homogeneous media (decided when
@@ -191,6 +223,8 @@ class MediumTable:
         exterior = [0 if m.exterior is None else m.exterior + 1 for m in mats]
         transition = [m.is_medium_transition for m in mats]
         kind, eta, trans = [], [], []
+        # thin sheets' specular_reflectance (VolPathIntegrator.sheet_split; None: a texture)
+        tints = [_sheet_tint(m.bsdf) for m in mats] or [(0.0, 0.0, 0.0)]
         for m in mats:
             spec = m.bsdf
             k = spec.kind if spec is not None else ""
@@ -221,7 +255,19 @@ class MediumTable:
         self.null_kind = UInt32(np.array(kind, np.uint32))
         self.thin_eta = Float(np.array(eta, np.float32))
         self.null_trans = _vec(trans)
+        self.sheet_tints = all(t is not None for t in tints)  # (no texture to read)
+        self.sheet_tint = _vec([t if t is not None else (0.0, 0.0, 0.0) for t in tints])
         self.has_null = any(k != NULL_NONE for k in kind)
+        self.has_thin = NULL_THIN in kind
+        # one set of coefficients for every medium (no heterogeneous one): the kernels read
+        # them as literals, no gathers (and a gray extinction's channels are then one value)
+        homo = {(tuple(m.extinction), tuple(m.albedo), m.g if m.phase == "hg" else 0.0)
+                for m in media if m.phase in ("isotropic", "hg")}
+        self.uniform = None
+        if len(homo) == 1 and all(m.is_homogeneous and m.phase in ("isotropic", "hg") for m in media):
+            (st, al, g), = homo
+            self.uniform = (tuple(float(np.float32(x)) for x in st), tuple(float(np.float32(x)) for x in al),
+                            float(np.float32(g)))
         # every homogeneous extinction the same in R, G and B (a heterogeneous one is a single
         # channel): one channel's free flight samples all three, no spectral MIS
         self.gray = all(m.extinction[0] == m.extinction[1] == m.extinction[2]
@@ -231,12 +277,18 @@ class MediumTable:
         self.blind_set = blind
         self.has_blind = bool(blind)
         self.all_blind = self.count > 0 and len(blind) == self.count
+        # a ray in a medium may end its segment at an emitter (enclosure.media_see_emitters)
+        self.see_emitters = self.count > 0 and media_see_emitters(scene)
         if self.has_blind:
             self.blind = Bool(np.array([False] + [i in blind for i in range(self.count)], bool))
 
     def coefficients(self, medium: UInt32, active: Bool) -> tuple[Array3f, Array3f, Float]:
-        """``(sigma_t, albedo, g)`` of the lanes' media (zeros in vacuum)."""
+        """``(sigma_t, albedo, g)`` of the lanes' media (``sigma_t`` zero in vacuum; the
+        albedo and ``g`` there: zeros, or with :attr:`uniform` media its values)."""
         inside = active & (medium > 0)
+        if self.uniform is not None:
+            st, al, g = self.uniform
+            return dr.select(inside, Array3f(*st), 0.0), Array3f(*al), Float(g)
         i = dr.select(inside, medium - 1, 0)
         st = dr.gather(Array3f, self.sigma_t, i, inside)
         al = dr.gather(Array3f, self.albedo, i, inside)
@@ -275,6 +327,8 @@ class MediumTable:
         on = active & si.valid
         mat = dr.select(on, si.material, 0)
         kind = dr.gather(UInt32, self.null_kind, mat, on)
+        if not self.has_thin:  # (null boundaries pass everything, other surfaces nothing)
+            return dr.select(on & (kind == NULL_BOUNDARY), Array3f(1.0), Array3f(0.0))
         eta = dr.gather(Float, self.thin_eta, mat, on)
         t = dr.gather(Array3f, self.null_trans, mat, on)
         r = reflectance(dr.dot(si.ns, d), eta)
@@ -387,6 +441,9 @@ class Flight:
     g: Float  # the medium's Henyey-Greenstein asymmetry
     medium: bool = True
     surface: bool = True
+    #: with :attr:`VolPathIntegrator.counts_through`: the throughput times the transmittance
+    #: up to the surface beyond (in_medium lanes), what its emission is counted with
+    through: Array3f | None = None
 
 
 def _either(fl: Flight, mask: Bool, medium, surface):
@@ -432,6 +489,13 @@ class VolPathState:
 class VolPathIntegrator(PathIntegrator):
     """Mitsuba's ``volpath`` (see the module's docs). Its
     ``sample`` and ``sample_sequence`` are :class:`PathIntegrator`'s."""
+
+    #: count the emission at the end of a segment in a homogeneous medium by its
+    #: transmittance (:attr:`counts_through`); False: where the free flight got there (A/B)
+    count_through = True
+    #: count the emission mirrored by thin sheets seen from vacuum at the sheet
+    #: (:meth:`sheet_split`); False: the path's own reflection only (for A/B comparisons)
+    split_sheets = True
 
     def __init__(self, scene: DeviceScene, options: PathOptions, model: Scene):
         super().__init__(scene, options)
@@ -550,16 +614,21 @@ class VolPathIntegrator(PathIntegrator):
         :meth:`next_ray`."""
         active, beta = self.roulette(s, rng)
         draw = self.flight_draw(s, active, rng)
-        si = scene.intersect(s.o, s.d, active, reach(draw[2]))
+        si = scene.intersect(s.o, s.d, active, self.query_reach(draw[2]))
         fl = self.free_flight(s, si, active, beta, rng, draw)
         si = self.skip_emitters(scene, s, si, fl)
         L = s.L + self.emitted(scene, s, si, fl)
+        si = self.past_collision(si, fl)
         on_surface = fl.surf & si.valid
+        split = self.sheet_split(s, si, fl, on_surface)
+        if split is not None:
+            L = L + split[0]
         phase = self.phase(s, fl)
         q = self.nee_query(scene, s, si, fl, on_surface, phase, rng)
         if q is not None:  # one emitter, one shadow ray through the media
             L = L + q.resolve(self.shadow(q.o, q.d, q.tmax, q.medium, q.ok, rng))
-        return self.next_ray(scene, s, si, fl, on_surface, phase, L, rng)
+        return self.next_ray(scene, s, si, fl, on_surface, phase, L, rng,
+                             split=None if split is None else split[1])
 
     def roulette(self, s: VolPathState, rng: PCG32) -> tuple[Bool, Array3f]:
         """Russian roulette and the depth limit, at the top of a bounce as in Mitsuba's
@@ -598,6 +667,7 @@ class VolPathIntegrator(PathIntegrator):
         heterogeneous media, one more random number)."""
         opt, media = self.opt, self.media
         _, u_t, t = draw
+        beta_in = beta
         in_medium = active & (s.medium > 0)
         sigma_t, albedo, g = media.coefficients(s.medium, in_medium)
         t_surf = dr.select(si.valid, si.t, dr.inf)
@@ -617,11 +687,14 @@ class VolPathIntegrator(PathIntegrator):
             real, p_h, beta = self._delta_track(s.o, s.d, t_surf, u_t, in_medium, s.medium, beta, rng)
             p_med = dr.select(real, p_h, p_med)
             scatter = scatter | real
+        through = None
+        if self.counts_through:  # (the throughput before this segment's weights)
+            through = dr.select(in_medium, beta_in * _transmittance(sigma_t, t_surf), 0.0)
         depth = dr.select(scatter, s.depth + 1, s.depth)
         scatter_live = scatter & (depth < opt.max_depth) if opt.max_depth >= 0 else Bool(scatter)
         surf = active & ~scatter
         return Flight(beta=beta, depth=depth, scatter=scatter, scatter_live=scatter_live,
-                      surf=surf, p_med=p_med, in_medium=in_medium, g=g)
+                      surf=surf, p_med=p_med, in_medium=in_medium, g=g, through=through)
 
     @loops_once
     @dr.syntax
@@ -669,15 +742,97 @@ class VolPathIntegrator(PathIntegrator):
         (``fl.surf`` lanes), MIS-weighted against next-event estimation from the last real
         scattering vertex (null crossings do not count)."""
         nee = scene.has_emitters
-        hide = (fl.depth == 0) if self.opt.hide_emitters else Bool(False)
+        hide = (s.depth == 0) if self.opt.hide_emitters else Bool(False)  # (the segment's depth)
         seen = fl.surf & ~hide
+        weight = fl.beta
+        if fl.through is not None:  # in a medium: by its transmittance, whether the ray got there or not
+            seen = (seen & ~fl.in_medium) | (fl.in_medium & ~hide)
+            weight = dr.select(fl.in_medium, fl.through, fl.beta)
         si_ref = copy.copy(si)
         si_ref.t = dr.norm(si.p - s.ref_p)
         le, pdf_l = scene.eval_emitter(si_ref, s.d, seen, density=nee)
         w = Float(1.0)
         if nee:
             w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
-        return dr.select(seen, fl.beta * le * w, 0.0)
+        if self.splits_sheets:  # (counted at the sheet already: sheet_split)
+            w = dr.select(s.prev_pdf < 0.0, 0.0, w)
+        return dr.select(seen, weight * le * w, 0.0)
+
+    @property
+    def counts_through(self) -> bool:
+        """Whether a ray in a medium counts the emission of what lies at the end of its
+        segment by the transmittance up to it (read at trace time: :attr:`count_through`
+        on, homogeneous media only, and a medium in which a ray can reach an emitter:
+        :func:`~.enclosure.media_see_emitters`; elsewhere the term is always 0, a
+        medium bounded by null surfaces under a sky included). The closest hit then
+        looks the whole way (:meth:`query_reach`), and :meth:`emitted` adds, for every
+        lane in a medium, the throughput times ``exp(-sigma_t t)`` times the emission at
+        the hit or the sky (zero at an infinite distance), where the sampled free flight
+        added it at full weight on the lanes that got there: the same expectation, without
+        the variance of whether this ray got there. The lanes that scattered first go on
+        as before (:meth:`past_collision`)."""
+        return (self.count_through and self.media.see_emitters and not self.media.has_hetero
+                and not nothing_seen(self.scene))
+
+    def query_reach(self, t: Float) -> Float | None:
+        """How far the closest hit of a segment whose medium collision was sampled at
+        ``t`` looks: :func:`reach`, or the whole way (None) with :attr:`counts_through`."""
+        return None if self.counts_through else reach(t)
+
+    def past_collision(self, si, fl: Flight):
+        """``si`` as the rest of the bounce sees it: with :attr:`counts_through` (the hit
+        found past a sampled collision) no hit on the lanes that scattered."""
+        if fl.through is None:
+            return si
+        si = copy.copy(si)
+        si.valid = si.valid & ~fl.scatter
+        return si
+
+    @property
+    def splits_sheets(self) -> bool:
+        """Whether :meth:`sheet_split` is traced (read at trace time): :attr:`split_sheets`
+        on, a scene with ``thindielectric`` sheets of constant ``specular_reflectance``,
+        and something a ray can see (an emissive surface, a background or an emitter at
+        infinity)."""
+        return (self.split_sheets and self.media.has_thin and self.media.sheet_tints
+                and not nothing_seen(self.scene))
+
+    def sheet_split(self, s: VolPathState, si, fl: Flight, on_surface: Bool) -> tuple[Array3f, Bool] | None:
+        """The emission seen in the mirror direction of a ``thindielectric`` sheet hit from
+        vacuum, counted at the sheet: ``(term, split)``, ``term`` the throughput times the
+        sheet's reflectance ``R' = 2R / (1 + R)`` times its ``specular_reflectance`` times
+        what the mirrored ray reaches first (an emitter, the background or the sky: one
+        closest hit), for the lanes ``split``: a sheet hit on a ``fl.surf`` lane in vacuum
+        whose mirrored ray stays in vacuum and may still add emission (``depth + 1 <
+        max_depth``).
+
+        The path still picks reflection or transmission at random (the same numbers, the
+        same weights); where it reflects, the emission its next segment reaches is left
+        out (:meth:`next_ray` marks the lane with ``prev_pdf = -1``, :meth:`emitted` skips
+        it; a null crossing clears the mark), so the estimate keeps its expectation and
+        loses the variance of that choice for the reflected light. Where a camera sees a
+        medium through a sheet, the sky the sheet mirrors (a few percent of the rays, at
+        full weight) is most of a pixel's noise. (Smooth ``dielectric`` surfaces are not
+        split: on the corpus water spheres the extra ray cost more than the variance it
+        saved, docs/performance.md.) None where :attr:`splits_sheets` is off (nothing
+        traced)."""
+        if not (fl.surface and self.splits_sheets):
+            return None
+        media, opt, scene = self.media, self.opt, self.scene
+        wi = -s.d
+        cos = dr.dot(si.ns, wi)  # (the BSDF's shading frame: wi.z)
+        wr = si.ns * (2.0 * cos) - wi  # the mirror direction
+        on = on_surface & (s.medium == 0)
+        split = on & (media.null_kind_of(si, on) == NULL_THIN)
+        if opt.max_depth >= 0:
+            split = split & (fl.depth + 1 < opt.max_depth)
+        split = split & (media.after(si, wr, s.medium, split) == 0)
+        mat = dr.select(split, si.material, 0)
+        r = reflectance(cos, dr.gather(Float, media.thin_eta, mat, split))
+        tint = dr.gather(Array3f, media.sheet_tint, mat, split)
+        si_r = scene.intersect(scene.spawn(si, wr), wr, split)
+        le, _ = scene.eval_emitter(si_r, wr, split, density=False)
+        return dr.select(split, fl.beta * tint * r * le, 0.0), split
 
     def phase(self, s: VolPathState, fl: Flight):
         """``(pdf, lobes)``: the density ``wo -> pdf`` of the phase function of the ray's
@@ -748,10 +903,12 @@ class VolPathIntegrator(PathIntegrator):
         return VolShadowQuery(fl.beta * f * es.le, w / es.pdf, o, d_sh, dist * SHADOW_SHRINK, med, ok)
 
     def next_ray(self, scene: DeviceScene, s: VolPathState, si, fl: Flight, on_surface: Bool, phase,
-                 L: Array3f, rng: PCG32) -> VolPathState:
+                 L: Array3f, rng: PCG32, split: Bool | None = None) -> VolPathState:
         """The path's next state: the BSDF sampled at a surface (a null boundary or a thin
         sheet's transmission passed without a scattering event), the phase function at a
-        medium event (three random numbers)."""
+        medium event (three random numbers). ``split``: :meth:`sheet_split`'s lanes, whose
+        reflection gets ``prev_pdf = -1`` (its emission counted); a null crossing clears
+        the mark (what lies beyond it was not counted)."""
         media = self.media
         phase_pdf, lobes = phase
         u_lobe = rng.next_float32()
@@ -781,6 +938,9 @@ class VolPathIntegrator(PathIntegrator):
             medium = media.after(si, wo, s.medium, on_surface)
             ref_p = dr.select(real, si.p, s.ref_p)
             prev_pdf = dr.select(real, Float(bs.pdf), s.prev_pdf)
+            if split is not None:  # (reflected: back to the side the ray came from)
+                mirrored = split & (dr.dot(wo, si.ng) * dr.dot(s.d, si.ng) < 0.0)
+                prev_pdf = dr.select(mirrored, -1.0, dr.select(prev_pdf < 0.0, 0.0, prev_pdf))
             prev_delta = dr.select(real, Bool(bs.delta), s.prev_delta)
         live = None
         if fl.medium:

@@ -50,7 +50,7 @@ from ...options import PathOptions
 from ...scene.model import Scene
 from ..sampler import pack, unpack
 from ..scene import DeviceScene
-from .volpath import Flight, VolPathIntegrator, VolPathState, VolShadowQuery, reach
+from .volpath import Flight, VolPathIntegrator, VolPathState, VolShadowQuery
 from .wavefront import WavefrontIntegrator, WaveState, _take, _Timer, gather_state
 
 
@@ -110,7 +110,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         rng = self._rng(s)
         active, beta = integ.roulette(_vol_state(s, dr.full(Bool, True, n)), rng)
         draw = integ.flight_draw(_vol_state(s, active), active, rng)
-        hit = scene.intersect_preliminary(s.o, s.d, active, reach(draw[2]))
+        hit = scene.intersect_preliminary(s.o, s.d, active, integ.query_reach(draw[2]))
         rng_a, rng_b = pack(rng)
         timer.done("closest hit", hit, active, beta, rng_a, rng_b, *draw, lanes=n, rays=n)
         si = scene.interaction(s.o, s.d, hit)
@@ -122,6 +122,7 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
         fl = integ.free_flight(vs, si, active, beta, rng, draw)
         si = integ.skip_emitters(scene, vs, si, fl)
         dr.scatter_add(L, integ.emitted(scene, vs, si, fl), s.lane)
+        si = integ.past_collision(si, fl)
         on_surface = fl.surf & si.valid
         s = VolWaveState(**{**{f.name: getattr(s, f.name) for f in fields(s)},
                             **dict(zip(("rng_state", "rng_inc"), pack(rng)))})
@@ -158,9 +159,9 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
                 if f.name != "lane" and getattr(nxt, f.name) is not None:
                     dr.scatter(getattr(nxt, f.name), getattr(out, f.name), idx)
             dr.scatter(alive, live, idx)
-            if add is not None:  # (shadow rays traced in the queue's kernel)
-                dr.scatter_add(L, add, qs.lane)
-            elif found is not None:
+            for a in add:  # (the mirrored emission, sheet_split; shadow rays traced in the queue's kernel)
+                dr.scatter_add(L, a, qs.lane)
+            if found is not None and not self.inline_shadows:
                 if query is None:
                     query = VolShadowQuery(dr.zeros(Array3f, n), dr.zeros(Float, n), dr.zeros(Array3f, n),
                                            dr.zeros(Array3f, n), dr.zeros(Float, n), dr.zeros(UInt32, n),
@@ -178,21 +179,23 @@ class VolWavefrontIntegrator(WavefrontIntegrator):
 
     def _event(self, scene: DeviceScene, s: VolWaveState, si, fl: Flight):
         """Next-event estimation and the next ray of one queue's paths (as
-        VolPathIntegrator.bounce): ``(next state, live, shadow query or None, radiance
-        added here or None)``."""
+        VolPathIntegrator.bounce): ``(next state, live, shadow query or None, the radiance
+        terms added here, in order)``."""
         integ = self._fused
         rng = self._rng(s)
         m = dr.width(s.lane)
         vs = _vol_state(s, dr.full(Bool, True, m))
         on_surface = Bool(fl.surf) & si.valid if fl.surface else Bool(False)
+        split = integ.sheet_split(vs, si, fl, on_surface)
+        add = () if split is None else (split[0],)  # (added in this order: the megakernel's)
         phase = integ.phase(vs, fl)
         q = integ.nee_query(scene, vs, si, fl, on_surface, phase, rng)
-        add = None
         if q is not None and self.inline_shadows:
-            add = q.resolve(integ.shadow(q.o, q.d, q.tmax, q.medium, q.ok, rng))
+            add += (q.resolve(integ.shadow(q.o, q.d, q.tmax, q.medium, q.ok, rng)),)
         if q is not None and not self.inline_shadows:
             q.ok = q.ok & (dr.max(q.a) != 0.0)
-        nx = integ.next_ray(scene, vs, si, fl, on_surface, phase, None, rng)
+        nx = integ.next_ray(scene, vs, si, fl, on_surface, phase, None, rng,
+                            split=None if split is None else split[1])
         out = VolWaveState(lane=s.lane, o=nx.o, d=Array3f(nx.d), beta=nx.beta, eta=Float(nx.eta),
                            depth=UInt32(nx.depth), prev_pdf=Float(nx.prev_pdf), prev_delta=Bool(nx.prev_delta),
                            **dict(zip(("rng_state", "rng_inc"), pack(rng))), ref_p=Array3f(nx.ref_p),

@@ -309,6 +309,110 @@ def test_shadow_tracking_is_unbiased(tmp_path, bsdf, monkeypatch):
     assert np.all(np.abs(mean - expect) > 8 * np.maximum(se, 1e-12)), (mean, expect, se)
 
 
+def test_sheet_split_keeps_the_mean_and_cuts_the_variance(tmp_path, monkeypatch):
+    """:meth:`~drpt.render.integrators.volpath.VolPathIntegrator.sheet_split`: camera rays
+    at the center of a dark sphere (albedo 0, chord 2, extinction 5) behind
+    thindielectric sheets in a white sky: the sky the front sheet mirrors is most of what
+    they see. The sky the front sheet mirrors, counted at the
+    sheet, keeps the mean of 2^16 paths (|z| < 4 against the path's own reflection alone,
+    ``split_sheets`` off) and cuts the variance (below 0.2x). Negative control: counting
+    the sky at the sheet and again where the reflected path reaches it (no skip in
+    ``emitted``) is |z| > 8 off."""
+    import drjit as dr
+    from drjit.auto import PCG32, Array3f, Bool
+
+    from drpt.render.integrators.volpath import VolPathIntegrator
+
+    r = _renderer(tmp_path, albedo="0, 0, 0", sigma="5, 5, 5", bsdf="thindielectric")
+    integ = r.integrator
+    assert integ.splits_sheets
+    n = 1 << 16
+
+    def paths(split: bool):
+        integ.split_sheets = split
+        L = integ.sample(PCG32(n, 11), dr.full(Array3f, [0.0, 0.0, 5.0], n), dr.full(Array3f, [0.0, 0.0, -1.0], n),
+                         dr.full(Bool, True, n))
+        x = np.asarray(L.x).astype(np.float64)
+        assert np.isfinite(x).all()
+        return x.mean(), x.var(ddof=1)
+
+    (m_on, v_on), (m_off, v_off) = paths(True), paths(False)
+    z = (m_on - m_off) / math.sqrt((v_on + v_off) / n)
+    assert abs(z) < 4 and v_on < 0.2 * v_off, (m_on, m_off, z, v_on, v_off)
+
+    emitted = VolPathIntegrator.emitted
+
+    def counted_twice(self, *args):  # the reflected path's sky not skipped
+        self.split_sheets = False
+        try:
+            return emitted(self, *args)
+        finally:
+            self.split_sheets = True
+
+    monkeypatch.setattr(VolPathIntegrator, "emitted", counted_twice)
+    m_bad, v_bad = paths(True)
+    assert abs(m_bad - m_off) > 8 * math.sqrt((v_bad + v_off) / n), (m_bad, m_off)
+
+
+GLOW = """<scene version="3.0.0">
+    <integrator type="volpath"><integer name="max_depth" value="-1"/></integrator>
+    <sensor type="perspective"><transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>
+        </transform><film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
+    </sensor>
+    <medium id="m" type="homogeneous"><rgb name="albedo" value="0, 0, 0"/><rgb name="sigma_t" value="1, 1, 1"/>
+    </medium>
+    <shape type="sphere"><bsdf type="null"/><ref name="interior" id="m"/></shape>
+    <shape type="sphere"><float name="radius" value="0.3"/><bsdf type="diffuse"><rgb name="reflectance" value="0"/>
+        </bsdf><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+</scene>
+"""
+
+
+def test_emission_through_a_medium_is_counted_by_its_transmittance(tmp_path, monkeypatch):
+    """:attr:`~drpt.render.integrators.volpath.VolPathIntegrator.counts_through`: an
+    emissive sphere (radius 0.3, radiance 1) inside an absorbing medium (extinction 1,
+    albedo 0) bounded by a null unit sphere, camera rays through the center: the emission
+    counted by the transmittance ``exp(-0.7)`` on every path keeps the mean of 2^14 paths
+    (|z| < 4 against the free flight's own estimate, ``count_through`` off; both within
+    1e-4 or 4 standard errors of ``exp(-0.7)``) with almost no variance (below 1e-3 of the
+    free flight's). Negative control: the emission counted without the transmittance is
+    |z| > 8 off. Scenes where no ray in a medium can reach an emitter trace none of it
+    (``media_see_emitters``)."""
+    import drjit as dr
+    from drjit.auto import PCG32, Array3f, Bool
+
+    from drpt.options import RenderOptions, with_scene_settings
+    from drpt.render.integrators import volpath
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    path = tmp_path / "glow.xml"
+    path.write_text(GLOW)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        opts, scene = with_scene_settings(RenderOptions(progress=False, seed=1), load_scene(path))
+    integ = Renderer(scene, opts).integrator
+    assert integ.counts_through
+    assert not _renderer(tmp_path).integrator.counts_through  # (the furnace: a sky outside the null sphere)
+    n, expect = 1 << 14, math.exp(-0.7)
+
+    def paths(through: bool):
+        integ.count_through = through
+        L = integ.sample(PCG32(n, 5), dr.full(Array3f, [0.0, 0.0, 5.0], n), dr.full(Array3f, [0.0, 0.0, -1.0], n),
+                         dr.full(Bool, True, n))
+        x = np.asarray(L.x).astype(np.float64)
+        return x.mean(), x.var(ddof=1)
+
+    (m_on, v_on), (m_off, v_off) = paths(True), paths(False)
+    assert abs(m_on - m_off) < 4 * math.sqrt((v_on + v_off) / n), (m_on, m_off)
+    assert abs(m_on - expect) < 1e-4 + 4 * math.sqrt(v_on / n) and abs(m_off - expect) < 4 * math.sqrt(v_off / n)
+    assert v_on < 1e-3 * v_off, (v_on, v_off)
+
+    monkeypatch.setattr(volpath, "_transmittance", lambda sigma_t, dist: Array3f(1.0))
+    m_bad, v_bad = paths(True)
+    assert abs(m_bad - expect) > 8 * math.sqrt((v_bad + v_off) / n + 1e-12), m_bad
+
+
 @pytest.mark.parametrize("bsdf, tracked", [("thindielectric", True), ("null", False)])
 def test_shadow_tracking_threshold_is_chosen_per_scene(tmp_path, bsdf, tracked):
     """:func:`~drpt.render.integrators.volpath.shadow_tau`: a medium seen only through
