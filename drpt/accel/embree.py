@@ -4,7 +4,8 @@
 (:class:`~drpt.accel.protocol.Accelerator`: the same global primitive ids, ``Hit``
 records and ``0 < t < tmax`` rule). It hands the scene's triangles and spheres to
 Embree 3 (one triangle mesh, geometry id 0, and one set of sphere points, id 1, in the
-scene's order, robust mode, high build quality: Mitsuba 3's settings), and every
+scene's order, robust mode and high build quality; Mitsuba 3.9 builds with high quality
+but without robust mode unless a scene sets ``embree_use_robust_intersections``), and every
 ``intersect`` / ``occluded`` call adds a packet query of Embree to the kernel being
 traced, through Dr.Jit's ``jit_llvm_ray_trace`` (:mod:`drpt.accel.embree_lib`). The
 query is a call inside the kernel: it works in symbolic loops (the megakernel's path
