@@ -25,9 +25,17 @@ selection's (weighted) variance is ``sum_j M_j / p_j`` less a constant, smallest
 
 (an emitter's slots split as ``uniform`` splits them: by area), so that every emitter keeps
 a share of its uniform probability for the points the pilot does not see (deeper bounces,
-points in media). Where no pilot estimate carries light it is ``mixed``'s, and so it is
-for the integrators of :data:`LIGHT_TRACERS`, whose light subpaths pick as ``mixed`` and
-which never ask the selection: they run no pilot.
+points in media). ``M_j`` misses what the selection does to BSDF sampling: a lower ``p_j``
+raises the MIS weight of BSDF samples that reach ``j``, which is costly where the BSDF finds
+``j`` poorly (a thin sheet lit through by the sky), and the MIS weights move with ``p``.
+So each first hit also takes one BSDF sample, and :meth:`Measurement.second_moment`
+computes for any selection ``p`` the weighted second moment of the whole direct-light
+estimate (next-event estimation's, reweighted from the ``uniform`` draws, plus BSDF
+sampling's, every MIS weight recomputed for ``p``); the pilot's selection is the candidate
+with the least: the rule above, ``uniform`` or ``mixed`` (:attr:`PilotSelection.choice`).
+Where no pilot estimate carries light it is ``mixed``'s, and so it is for the integrators
+of :data:`LIGHT_TRACERS`, whose light subpaths pick as ``mixed`` and which never ask the
+selection: they run no pilot.
 """
 
 from __future__ import annotations
@@ -61,11 +69,61 @@ def units(families: list) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros(0, int)
 
 
-def second_moments(scene, camera, width: int, height: int, lanes: int = PILOT_LANES) -> np.ndarray:
-    """``M_j`` of each emitter (:func:`units`) of ``scene`` (a
-    :class:`~drpt.render.scene.DeviceScene`) seen through ``camera`` (a
-    :class:`~drpt.render.camera.RayCamera` of a ``width`` x ``height`` film). Binds the
-    ``uniform`` selection into the scene."""
+class Measurement:
+    """What the pilot's camera rays found at their first hits, lane by lane (numpy, float64):
+
+    * ``k``: the emitter (:func:`units`) next-event estimation picked (``uniform``; ``pmf``
+      the probability of its slot), ``nee``
+      its estimate without the MIS weight (the channels' mean of ``f L / e``, 0 where
+      occluded or invalid), ``e`` its density (times ``uniform``'s probability), ``b`` the
+      BSDF's density for its direction, ``delta`` whether the emitter is a delta light;
+    * ``j``: the emitter a BSDF sample reached (-1: none), ``bsdf`` the estimate ``f L / b``
+      without the MIS weight, ``e_b`` the emitter's density for it (times ``uniform``'s
+      probability), ``b_b`` the BSDF's density (0: a Dirac lobe, which takes no MIS weight);
+    * ``w``: each lane's weight, ``1 / (b^2 + 0.01)`` for the mean ``b`` of the estimates in
+      its film tile (the relative error's weighing);
+    * ``uniform``: each emitter's ``uniform`` probability.
+    """
+
+    def __init__(self, **arrays):
+        self.__dict__.update(arrays)
+
+    def moments(self) -> np.ndarray:
+        """``M_j``: the weighted second moment of next-event estimation's estimate given
+        emitter ``j``, MIS-weighted as under ``uniform`` (times ``j``'s probability)."""
+        n = len(self.uniform)
+        # the estimate given emitter j is v / P(j), drawn with probability P(j) = 1 / n
+        v = self.nee * _heuristic(self.e, self.b, self.delta) * self.pmf
+        return np.bincount(self.k, weights=self.w * (v * n) ** 2, minlength=n) / (len(self.k) / n)
+
+    def second_moment(self, p: np.ndarray) -> float:
+        """The weighted second moment of one vertex's direct-light estimate, next-event
+        estimation's and BSDF sampling's together, were the emitters chosen with the
+        probabilities ``p`` (per emitter, slots split as ``uniform`` splits them): the
+        lanes' draws from ``uniform`` reweighted, every MIS weight recomputed for ``p``."""
+        s = np.asarray(p, np.float64) / self.uniform  # each density's factor under p
+        sk = s[self.k]
+        x = self.nee * _heuristic(self.e * sk, self.b, self.delta)
+        nee = np.where(sk > 0.0, x * x / np.maximum(sk, 1e-300), np.where(x != 0.0, np.inf, 0.0))
+        hit = self.j >= 0
+        sj = np.where(hit, s[np.maximum(self.j, 0)], 0.0)
+        wb = np.where(self.b_b > 0.0, _heuristic(self.b_b, self.e_b * sj, False), 1.0)
+        y = np.where(hit, self.bsdf * wb, 0.0)
+        return float(np.mean(self.w * (nee + y * y)))
+
+
+def _heuristic(a, b, delta):
+    """The power heuristic's weight of the technique with density ``a`` against ``b`` (1 for
+    delta lights)."""
+    a2, b2 = a * a, b * b
+    w = np.where(a2 > 0.0, a2 / np.maximum(a2 + b2, 1e-300), 0.0)
+    return np.where(delta, 1.0, w)
+
+
+def measure(scene, camera, width: int, height: int, lanes: int = PILOT_LANES) -> Measurement:
+    """The pilot's :class:`Measurement` of ``scene`` (a :class:`~drpt.render.scene.DeviceScene`)
+    seen through ``camera`` (a :class:`~drpt.render.camera.RayCamera` of a ``width`` x
+    ``height`` film). Binds the ``uniform`` selection into the scene."""
     families = scene.emitter_selection.families
     uni = LightSelection(families, "uniform")
     scene.set_light_selection(uni)
@@ -76,32 +134,72 @@ def second_moments(scene, camera, width: int, height: int, lanes: int = PILOT_LA
     u_sel = rng.next_float32()
     u2 = Array2f(rng.next_float32(), rng.next_float32())
     k, pmf = uni.sample(u_sel, si.p, si.valid)
-    c = DirectLight(scene).emitter(si, u_sel, u2, si.valid, mis=True)
-    v = dr.select(si.valid, (c.x + c.y + c.z) / 3.0 * pmf, 0.0)
-    k, v, pmf = UInt32(k), Float(v), Float(pmf)
-    dr.eval(k, v, pmf, x, y)
-    k, v = k.numpy().astype(np.int64), v.numpy().astype(np.float64)
-    v = np.where(np.isfinite(v), v, 0.0)
-    # each lane's square over its film tile's brightness, as the relative error weighs it
+    es = scene.sample_emitter(si, u_sel, u2, si.valid)
+    _, pdf_b = scene.eval_bsdf(si, es.wo)
+    c = DirectLight(scene).emitter(si, u_sel, u2, si.valid, mis=False)  # f L / e, 0 where occluded
+    nee = dr.select(si.valid, (c.x + c.y + c.z) / 3.0, 0.0)
+    # one BSDF sample: what it reaches, and that emitter's density
+    wo, bs = scene.sample_bsdf(si, rng.next_float32(), Array2f(rng.next_float32(), rng.next_float32()))
+    ok = si.valid & bs.valid
+    si2 = scene.intersect(scene.spawn(si, wo), wo, ok)
+    le, e_b = scene.eval_emitter(si2, wo, ok)
+    f_b = bs.weight * le
+    slot = dr.full(UInt32, 0xFFFFFFFF, lanes)
+    for family, off in zip(uni.families, uni.offsets):
+        if family.delta:
+            continue
+        if family.infinite:
+            slot = dr.select(ok & ~si2.valid, UInt32(off), slot)
+        else:
+            mine = ok & si2.valid & (family.pdf_direction(si2, wo, ok & si2.valid) > 0.0)
+            slot = dr.select(mine, family.slot_of(si2.prim, mine) + off, slot)
+    bsdf = dr.select(ok, (f_b.x + f_b.y + f_b.z) / 3.0, 0.0)
+    b_b = dr.select(bs.delta, 0.0, bs.pdf)
+    delta = Bool(es.delta) if not isinstance(es.delta, bool) else dr.full(Bool, es.delta, lanes)
+    k, pmf, nee, e, pdf_b, slot, bsdf, e_b, b_b = (UInt32(k), Float(pmf), Float(nee), Float(es.pdf), Float(pdf_b),
+                                                   UInt32(slot), Float(bsdf), Float(e_b), Float(b_b))
+    dr.eval(k, pmf, nee, e, pdf_b, delta, slot, bsdf, e_b, b_b, x, y)
+    unit = units(families)
+    n_units = int(unit.max()) + 1 if len(unit) else 0
+    uni_p = np.bincount(unit, weights=uni.probabilities, minlength=n_units)
+
+    def finite(a):
+        a = a.numpy().astype(np.float64)
+        return np.where(np.isfinite(a), a, 0.0)
+
+    slot = slot.numpy().astype(np.int64)
+    j = np.where((slot >= 0) & (slot < len(unit)), unit[np.minimum(slot, len(unit) - 1)], -1)
+    m = Measurement(k=unit[k.numpy().astype(np.int64)], pmf=finite(pmf), nee=finite(nee), e=finite(e), b=finite(pdf_b),
+                    delta=delta.numpy().astype(bool), j=j, bsdf=finite(bsdf), e_b=finite(e_b),
+                    b_b=finite(b_b), uniform=uni_p)
+    # each lane's weight: 1 over its film tile's squared brightness (next-event estimates)
     tx, ty = min(width, TILES), min(height, TILES)
     tile = (np.minimum((x.numpy() * tx / width).astype(np.int64), tx - 1) * ty
             + np.minimum((y.numpy() * ty / height).astype(np.int64), ty - 1))
-    pm = pmf.numpy().astype(np.float64)
-    full = np.where(pm > 0, v / np.maximum(pm, 1e-30), 0.0)  # the lane's estimate of all emitters' light
+    full = m.nee * _heuristic(m.e, m.b, m.delta)  # the lane's estimate of all emitters' light
     n = np.bincount(tile, minlength=tx * ty)
     b = np.bincount(tile, weights=full, minlength=tx * ty) / np.maximum(n, 1)
-    w = 1.0 / (b[tile] ** 2 + 0.01)
-    unit = units(families)
-    n_units = int(unit.max()) + 1 if len(unit) else 0
-    # the estimate given emitter j is v / P(j), drawn with probability P(j) = 1 / n_units
-    return np.bincount(unit[k], weights=w * (v * n_units) ** 2, minlength=n_units) / (lanes / n_units)
+    m.w = 1.0 / (b[tile] ** 2 + 0.01)
+    return m
+
+
+def second_moments(scene, camera, width: int, height: int, lanes: int = PILOT_LANES) -> np.ndarray:
+    """``M_j`` of each emitter (:func:`units`) of ``scene`` seen through ``camera``
+    (:meth:`Measurement.moments` of :func:`measure`). Binds the ``uniform`` selection."""
+    return measure(scene, camera, width, height, lanes).moments()
 
 
 class PilotSelection(LightSelection):
-    """The static selection of the pilot's measurement (:func:`second_moments`)."""
+    """The static selection of the pilot's measurement: the ``sqrt(M_j)`` rule
+    (:func:`second_moments`), or with ``measurement`` (a :class:`Measurement`) the candidate
+    among it, ``uniform`` and ``mixed`` whose :meth:`Measurement.second_moment` is least."""
 
-    def __init__(self, families: list, moments: np.ndarray):
+    def __init__(self, families: list, moments: np.ndarray, measurement: Measurement | None = None):
         self.moments = moments
+        #: the candidate rules' measured second moments (:meth:`Measurement.second_moment`)
+        self.candidates: dict = {}
+        #: the candidate the selection is (``mixed`` where no estimate carried light)
+        self.choice = "mixed"
         uni = slot_weights(families, "uniform")
         uni = uni / uni.sum()
         root = np.sqrt(np.maximum(moments, 0.0))
@@ -111,12 +209,20 @@ class PilotSelection(LightSelection):
         unit = units(families)
         unit_uniform = np.bincount(unit, weights=uni)  # each emitter's uniform probability
         pilot = root[unit] / root.sum() * uni / unit_uniform[unit]  # split as uniform splits
-        super().__init__(families, "pilot", (1.0 - DEFENSIVE) * pilot + DEFENSIVE * uni)
+        weights = {"pilot": (1.0 - DEFENSIVE) * pilot + DEFENSIVE * uni}
+        if measurement is not None:  # the candidate whose measured second moment is least
+            weights.update(uniform=uni, mixed=slot_weights(families, "mixed"))
+            for name, w in weights.items():
+                w = w / w.sum()
+                self.candidates[name] = measurement.second_moment(np.bincount(unit, weights=w))
+        self.choice = min(self.candidates, key=self.candidates.get) if self.candidates else "pilot"
+        super().__init__(families, "pilot", weights[self.choice])
 
 
 def pilot_selection(scene, camera, width: int, height: int) -> LightSelection:
-    """Measure (:func:`second_moments`) and return the pilot's selection."""
+    """Measure (:func:`measure`) and return the pilot's selection."""
     families = scene.emitter_selection.families
     if scene.emitter_selection.count <= 1 or len(np.unique(units(families))) <= 1:
         return LightSelection(families, "mixed")
-    return PilotSelection(families, second_moments(scene, camera, width, height))
+    m = measure(scene, camera, width, height)
+    return PilotSelection(families, m.moments(), m)

@@ -101,3 +101,43 @@ def test_pilot_image_is_uniforms_in_expectation(pilot):
 def test_light_tracers_run_no_pilot(integrator):
     sel = DeviceScene(_scene(), RenderOptions(light_sampler="pilot", integrator=integrator)).emitter_selection
     assert not isinstance(sel, PilotSelection) and sel.rule == "mixed"
+
+
+def test_pilot_chooses_the_candidate_with_the_least_second_moment(pilot):
+    """On the floor, the pilot's own rule (the dim light 75%) has the least measured second
+    moment, ``uniform`` (50%) more and ``mixed`` (which gives the bright light that misses
+    the floor most of its samples) the most; the selection is the least one's."""
+    sel = pilot.emitter_selection
+    c = sel.candidates
+    assert set(c) == {"pilot", "uniform", "mixed"}
+    assert c["pilot"] < c["uniform"] < c["mixed"], c
+    assert sel.choice == "pilot"
+
+
+def _measurement(**over):
+    from drpt.render.lights.pilot import Measurement
+
+    # one lane: next-event estimation picked emitter 0, BSDF sampling reached emitter 1
+    base = dict(k=np.array([0]), pmf=np.array([0.5]), nee=np.array([2.0]), e=np.array([0.5]),
+                b=np.array([0.5]), delta=np.array([False]), j=np.array([1]), bsdf=np.array([1.0]),
+                e_b=np.array([0.25]), b_b=np.array([1.0]), w=np.array([1.0]), uniform=np.array([0.5, 0.5]))
+    return Measurement(**{**base, **over})
+
+
+def test_second_moment_recomputes_the_mis_weights_for_each_selection():
+    """By hand: under ``uniform`` the light sample's weight is 1/2 (equal densities) and
+    the BSDF sample's 1 / (1 + 1/16); with emitter 0 at 80% the light density doubles
+    (x1.6, weight 0.64 / 0.89) and the estimate is reweighted by 1 / 1.6, the BSDF sample's
+    emitter density falls to 0.1 (weight 1 / 1.01). Negative controls: weights left at
+    ``uniform``'s, a delta light (no MIS weight) and a Dirac BSDF lobe (no MIS weight) each
+    change the number."""
+    m = _measurement()
+    np.testing.assert_allclose(m.second_moment([0.5, 0.5]), 1.0 + (1 / (1 + 1 / 16)) ** 2, rtol=1e-12)
+    x = 2.0 * 0.64 / 0.89
+    want = x * x / 1.6 + (1 / 1.01) ** 2
+    np.testing.assert_allclose(m.second_moment([0.8, 0.2]), want, rtol=1e-12)
+    stale = (2.0 * 0.5 / 1.6) ** 2 * 1.6 + (1 / (1 + 1 / 16)) ** 2  # uniform's MIS weights kept
+    assert abs(m.second_moment([0.8, 0.2]) - stale) > 0.05
+    np.testing.assert_allclose(_measurement(delta=np.array([True])).second_moment([0.5, 0.5]),
+                               4.0 + (1 / (1 + 1 / 16)) ** 2, rtol=1e-12)
+    np.testing.assert_allclose(_measurement(b_b=np.array([0.0])).second_moment([0.5, 0.5]), 2.0, rtol=1e-12)
