@@ -31,8 +31,14 @@ raises the MIS weight of BSDF samples that reach ``j``, which is costly where th
 So each first hit also takes one BSDF sample, and :meth:`Measurement.second_moment`
 computes for any selection ``p`` the weighted second moment of the whole direct-light
 estimate (next-event estimation's, reweighted from the ``uniform`` draws, plus BSDF
-sampling's, every MIS weight recomputed for ``p``); the pilot's selection is the candidate
-with the least: the rule above, ``uniform`` or ``mixed`` (:attr:`PilotSelection.choice`).
+sampling's, every MIS weight recomputed for ``p``), weighed as above (the relative error)
+and with every lane alike (the absolute error, which the equal-time comparisons with Mitsuba
+measure: ``benchmarks/equal_time_vs_mitsuba.py``). The candidates (:data:`CANDIDATES`): the
+rule above, the same with ``M_j`` weighed absolutely, ``uniform`` and ``mixed``; the pilot's
+selection is the one whose worse ratio to the least second moment, relative or absolute, is
+least (:attr:`PilotSelection.choice`): where the two errors want different shares (a sphere
+lit by a point light: the absolute error is the highlight's, the relative error the dim
+side's) neither is given up for the other.
 Where no pilot estimate carries light it is ``mixed``'s, and so it is for the integrators
 of :data:`LIGHT_TRACERS`, whose light subpaths pick as ``mixed`` and which never ask the
 selection: they run no pilot.
@@ -54,6 +60,8 @@ PILOT_LANES = 1 << 16
 #: each emitter's share of its uniform probability that the pilot's measurement cannot take away
 DEFENSIVE = 0.5
 SEED = 0x5EED
+#: the selections the pilot chooses among (:class:`PilotSelection`)
+CANDIDATES = ("pilot", "pilot absolute", "uniform", "mixed")
 #: tiles of the film per axis at most, over which the pilot estimates the image's brightness
 TILES = 64
 
@@ -88,19 +96,22 @@ class Measurement:
     def __init__(self, **arrays):
         self.__dict__.update(arrays)
 
-    def moments(self) -> np.ndarray:
+    def moments(self, relative: bool = True) -> np.ndarray:
         """``M_j``: the weighted second moment of next-event estimation's estimate given
-        emitter ``j``, MIS-weighted as under ``uniform`` (times ``j``'s probability)."""
+        emitter ``j``, MIS-weighted as under ``uniform`` (times ``j``'s probability);
+        ``relative`` False: every lane weighs 1 (the absolute error's second moment)."""
         n = len(self.uniform)
+        w = self.w if relative else 1.0
         # the estimate given emitter j is v / P(j), drawn with probability P(j) = 1 / n
         v = self.nee * _heuristic(self.e, self.b, self.delta) * self.pmf
-        return np.bincount(self.k, weights=self.w * (v * n) ** 2, minlength=n) / (len(self.k) / n)
+        return np.bincount(self.k, weights=w * (v * n) ** 2, minlength=n) / (len(self.k) / n)
 
-    def second_moment(self, p: np.ndarray) -> float:
+    def second_moment(self, p: np.ndarray, relative: bool = True) -> float:
         """The weighted second moment of one vertex's direct-light estimate, next-event
         estimation's and BSDF sampling's together, were the emitters chosen with the
         probabilities ``p`` (per emitter, slots split as ``uniform`` splits them): the
-        lanes' draws from ``uniform`` reweighted, every MIS weight recomputed for ``p``."""
+        lanes' draws from ``uniform`` reweighted, every MIS weight recomputed for ``p``;
+        ``relative`` as in :meth:`moments`."""
         s = np.asarray(p, np.float64) / self.uniform  # each density's factor under p
         sk = s[self.k]
         x = self.nee * _heuristic(self.e * sk, self.b, self.delta)
@@ -109,7 +120,7 @@ class Measurement:
         sj = np.where(hit, s[np.maximum(self.j, 0)], 0.0)
         wb = np.where(self.b_b > 0.0, _heuristic(self.b_b, self.e_b * sj, False), 1.0)
         y = np.where(hit, self.bsdf * wb, 0.0)
-        return float(np.mean(self.w * (nee + y * y)))
+        return float(np.mean((self.w if relative else 1.0) * (nee + y * y)))
 
 
 def _heuristic(a, b, delta):
@@ -192,30 +203,44 @@ def second_moments(scene, camera, width: int, height: int, lanes: int = PILOT_LA
 class PilotSelection(LightSelection):
     """The static selection of the pilot's measurement: the ``sqrt(M_j)`` rule
     (:func:`second_moments`), or with ``measurement`` (a :class:`Measurement`) the candidate
-    among it, ``uniform`` and ``mixed`` whose :meth:`Measurement.second_moment` is least."""
+    (:data:`CANDIDATES`) whose second moments are nearest the least under both errors."""
 
     def __init__(self, families: list, moments: np.ndarray, measurement: Measurement | None = None):
         self.moments = moments
-        #: the candidate rules' measured second moments (:meth:`Measurement.second_moment`)
+        #: each candidate's measured second moments, ``(relative, absolute)``
+        #: (:meth:`Measurement.second_moment`)
         self.candidates: dict = {}
         #: the candidate the selection is (``mixed`` where no estimate carried light)
         self.choice = "mixed"
         uni = slot_weights(families, "uniform")
         uni = uni / uni.sum()
-        root = np.sqrt(np.maximum(moments, 0.0))
-        if not np.isfinite(root.sum()) or root.sum() <= 0.0:
-            super().__init__(families, "mixed")
-            return
         unit = units(families)
         unit_uniform = np.bincount(unit, weights=uni)  # each emitter's uniform probability
-        pilot = root[unit] / root.sum() * uni / unit_uniform[unit]  # split as uniform splits
-        weights = {"pilot": (1.0 - DEFENSIVE) * pilot + DEFENSIVE * uni}
-        if measurement is not None:  # the candidate whose measured second moment is least
-            weights.update(uniform=uni, mixed=slot_weights(families, "mixed"))
+
+        def rule(m):
+            root = np.sqrt(np.maximum(m, 0.0))
+            if not np.isfinite(root.sum()) or root.sum() <= 0.0:
+                return None
+            pilot = root[unit] / root.sum() * uni / unit_uniform[unit]  # split as uniform splits
+            return (1.0 - DEFENSIVE) * pilot + DEFENSIVE * uni
+
+        weights = {"pilot": rule(moments)}
+        if weights["pilot"] is None:
+            super().__init__(families, "mixed")
+            return
+        self.choice = "pilot"
+        if measurement is not None:
+            weights.update({"pilot absolute": rule(measurement.moments(relative=False)), "uniform": uni,
+                            "mixed": slot_weights(families, "mixed")})
+            weights = {k: w / w.sum() for k, w in weights.items() if w is not None}
             for name, w in weights.items():
-                w = w / w.sum()
-                self.candidates[name] = measurement.second_moment(np.bincount(unit, weights=w))
-        self.choice = min(self.candidates, key=self.candidates.get) if self.candidates else "pilot"
+                p = np.bincount(unit, weights=w)
+                self.candidates[name] = (measurement.second_moment(p), measurement.second_moment(p, relative=False))
+            best = [min(c[i] for c in self.candidates.values()) for i in (0, 1)]
+            # each candidate's worse ratio to the least, relative and absolute; the least of those
+            worse = {k: max(c[0] / max(best[0], 1e-300), c[1] / max(best[1], 1e-300))
+                     for k, c in self.candidates.items()}
+            self.choice = min(worse, key=worse.get)
         super().__init__(families, "pilot", weights[self.choice])
 
 
