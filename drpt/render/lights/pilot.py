@@ -12,7 +12,8 @@ power heuristic's weight against BSDF sampling as the path tracer's: where BSDF 
 finds a light well, a small sharp highlight, next-event estimation has little to do
 there), and the second moment ``M_j`` of the estimate given emitter ``j`` (the estimate times
 ``j``'s uniform probability), each square divided by ``b^2 + 0.01``, ``b`` the mean of the
-pilot's estimates in the lane's tile of the film (at most 64 x 64 tiles): the relative
+pilot's direct-light estimates (next-event estimation's and one BSDF sample's, below) in the
+lane's tile of the film (at most 64 x 64 tiles): the relative
 error the benchmarks measure (``benchmarks/light_sampler.py``), where a dark wall's noise
 counts as much as a bright highlight's (weighed by absolute squares, the pilot gave the
 large light of Veach's MIS scene 18% of the samples, its small bright spheres with their
@@ -88,8 +89,9 @@ class Measurement:
     * ``j``: the emitter a BSDF sample reached (-1: none), ``bsdf`` the estimate ``f L / b``
       without the MIS weight, ``e_b`` the emitter's density for it (times ``uniform``'s
       probability), ``b_b`` the BSDF's density (0: a Dirac lobe, which takes no MIS weight);
-    * ``w``: each lane's weight, ``1 / (b^2 + 0.01)`` for the mean ``b`` of the estimates in
-      its film tile (the relative error's weighing);
+    * ``w``: each lane's weight, ``1 / (b^2 + 0.01)`` for the mean ``b`` of the direct-light
+      estimates (both techniques', MIS-weighted as under ``uniform``) in its film tile (the
+      relative error's weighing);
     * ``uniform``: each emitter's ``uniform`` probability.
     """
 
@@ -183,11 +185,15 @@ def measure(scene, camera, width: int, height: int, lanes: int = PILOT_LANES) ->
     m = Measurement(k=unit[k.numpy().astype(np.int64)], pmf=finite(pmf), nee=finite(nee), e=finite(e), b=finite(pdf_b),
                     delta=delta.numpy().astype(bool), j=j, bsdf=finite(bsdf), e_b=finite(e_b),
                     b_b=finite(b_b), uniform=uni_p)
-    # each lane's weight: 1 over its film tile's squared brightness (next-event estimates)
+    # each lane's weight: 1 over its film tile's squared brightness
     tx, ty = min(width, TILES), min(height, TILES)
     tile = (np.minimum((x.numpy() * tx / width).astype(np.int64), tx - 1) * ty
             + np.minimum((y.numpy() * ty / height).astype(np.int64), ty - 1))
-    full = m.nee * _heuristic(m.e, m.b, m.delta)  # the lane's estimate of all emitters' light
+    # the lane's estimate of the direct light, both techniques' with uniform's MIS weights (next-event
+    # estimation's alone misses what BSDF sampling finds: a sharp reflection of a small light)
+    hit = m.j >= 0
+    wb = np.where(m.b_b > 0.0, _heuristic(m.b_b, m.e_b, False), 1.0)
+    full = m.nee * _heuristic(m.e, m.b, m.delta) + np.where(hit, m.bsdf * wb, 0.0)
     n = np.bincount(tile, minlength=tx * ty)
     b = np.bincount(tile, weights=full, minlength=tx * ty) / np.maximum(n, 1)
     m.w = 1.0 / (b[tile] ** 2 + 0.01)
