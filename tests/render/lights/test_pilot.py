@@ -10,6 +10,10 @@ reaches nothing the camera sees).
 * The selection draws each slot with the probability it reports (chi-square of 200,000
   draws, p > 1e-3; negative control: the same draws judged by ``uniform``'s probabilities
   fail, p < 1e-9) and ``pmf`` returns the same numbers.
+* It takes the candidate whose measured second moment of the direct-light estimate is
+  least (the floor: its own rule), and where the relative and the absolute error disagree,
+  the one nearest the least of both (two hand-made lanes: ``uniform``); the second moment
+  recomputes the MIS weights for each selection (a lane by hand, with negative controls).
 * It is deterministic (a fixed pilot seed): two builds give the same probabilities. The
   light tracers (``ptracer``, ``bdpt``) run no pilot: their selection is ``mixed``'s.
 * The image is ``uniform``'s in expectation: the mean difference of the floor's pixels at
@@ -101,3 +105,69 @@ def test_pilot_image_is_uniforms_in_expectation(pilot):
 def test_light_tracers_run_no_pilot(integrator):
     sel = DeviceScene(_scene(), RenderOptions(light_sampler="pilot", integrator=integrator)).emitter_selection
     assert not isinstance(sel, PilotSelection) and sel.rule == "mixed"
+
+
+def test_pilot_chooses_the_candidate_with_the_least_second_moment(pilot):
+    """On the floor, the pilot's own rule (the dim light 75%) has the least measured second
+    moment, relative and absolute, ``uniform`` (50%) more and ``mixed`` (which gives the
+    bright light that misses the floor most of its samples) the most; the selection is the
+    least one's."""
+    sel = pilot.emitter_selection
+    c = sel.candidates
+    assert set(c) == {"pilot", "pilot absolute", "uniform", "mixed"}
+    for i in (0, 1):
+        assert c["pilot"][i] < c["uniform"][i] < c["mixed"][i], c
+    assert sel.choice == "pilot"
+
+
+def _measurement(**over):
+    from drpt.render.lights.pilot import Measurement
+
+    # one lane: next-event estimation picked emitter 0, BSDF sampling reached emitter 1
+    base = dict(k=np.array([0]), pmf=np.array([0.5]), nee=np.array([2.0]), e=np.array([0.5]),
+                b=np.array([0.5]), delta=np.array([False]), j=np.array([1]), bsdf=np.array([1.0]),
+                e_b=np.array([0.25]), b_b=np.array([1.0]), w=np.array([1.0]), uniform=np.array([0.5, 0.5]))
+    return Measurement(**{**base, **over})
+
+
+def test_second_moment_recomputes_the_mis_weights_for_each_selection():
+    """By hand: under ``uniform`` the light sample's weight is 1/2 (equal densities) and
+    the BSDF sample's 1 / (1 + 1/16); with emitter 0 at 80% the light density doubles
+    (x1.6, weight 0.64 / 0.89) and the estimate is reweighted by 1 / 1.6, the BSDF sample's
+    emitter density falls to 0.1 (weight 1 / 1.01). Negative controls: weights left at
+    ``uniform``'s, a delta light (no MIS weight) and a Dirac BSDF lobe (no MIS weight) each
+    change the number."""
+    m = _measurement()
+    np.testing.assert_allclose(m.second_moment([0.5, 0.5]), 1.0 + (1 / (1 + 1 / 16)) ** 2, rtol=1e-12)
+    x = 2.0 * 0.64 / 0.89
+    want = x * x / 1.6 + (1 / 1.01) ** 2
+    np.testing.assert_allclose(m.second_moment([0.8, 0.2]), want, rtol=1e-12)
+    stale = (2.0 * 0.5 / 1.6) ** 2 * 1.6 + (1 / (1 + 1 / 16)) ** 2  # uniform's MIS weights kept
+    assert abs(m.second_moment([0.8, 0.2]) - stale) > 0.05
+    np.testing.assert_allclose(_measurement(delta=np.array([True])).second_moment([0.5, 0.5]),
+                               4.0 + (1 / (1 + 1 / 16)) ** 2, rtol=1e-12)
+    np.testing.assert_allclose(_measurement(b_b=np.array([0.0])).second_moment([0.5, 0.5]), 2.0, rtol=1e-12)
+
+
+def test_pilot_gives_up_neither_error_for_the_other(pilot):
+    """Two lanes: a dim film tile (weight 100) lit by emitter 0, a bright one (weight 1e-4)
+    by emitter 1 with 100x its estimate. The relative error's least second moment is the
+    ``sqrt(M)`` rule's (emitter 0 at 70%), the absolute error's that rule's weighed absolutely
+    (emitter 1 at 75%); each is 2.5-2.7x the other's least, ``uniform`` within 1.5x of both,
+    so the pilot takes ``uniform`` (taking the relative error's best alone would be the
+    negative control: ``pilot``)."""
+    from drpt.render.lights.pilot import PilotSelection
+
+    m = _measurement(k=np.array([0, 1]), pmf=np.array([0.5, 0.5]), nee=np.array([1.0, 100.0]),
+                     e=np.array([0.5, 0.5]), b=np.array([0.0, 0.0]), delta=np.array([False, False]),
+                     j=np.array([-1, -1]), bsdf=np.zeros(2), e_b=np.zeros(2), b_b=np.zeros(2),
+                     w=np.array([100.0, 1e-4]))
+    sel = PilotSelection(pilot.emitter_selection.families, m.moments(), m)
+    c = sel.candidates
+    assert min(c, key=lambda k: c[k][0]) == "pilot" and min(c, key=lambda k: c[k][1]) == "pilot absolute"
+    assert sel.choice == "uniform", c
+    np.testing.assert_allclose(_unit_probabilities_of(sel), [0.5, 0.5])
+
+
+def _unit_probabilities_of(sel):
+    return np.bincount(units(sel.families), weights=sel.probabilities)
