@@ -1,8 +1,9 @@
 """CPU seconds of a render with Embree's robust triangle test and without it (not a test).
 
 drpt builds its Embree scene with ``RTC_SCENE_FLAG_ROBUST`` (watertight: no ray slips between
-neighbouring triangles, ``embree_robust_leak.py``); Mitsuba 3.9 builds without it unless a
-scene sets ``embree_use_robust_intersections``. This renders one scene of
+neighbouring triangles, ``embree_robust_leak.py``) for its own format and where a Mitsuba XML
+sets ``embree_use_robust_intersections`` (:func:`drpt.scene.model.embree_robust`), as Mitsuba
+3.9 does. This renders one scene of
 ``equal_time_vs_mitsuba.py`` (its name or a word of it, the same size, spp and settings)
 with two renderers in one process, one built each way, taking turns for ``ROUNDS`` rounds
 (seed ``k`` in round ``k``), and prints the median CPU seconds of the process per render
@@ -25,22 +26,24 @@ from benchmarks.equal_time_vs_mitsuba import cases, setup
 
 
 def main(argv: list[str]) -> None:
-    from drpt.accel import embree_lib as lib
     from drpt.backend import ensure
+    from drpt.scene.model import RenderSettings
     from drpt.tools.converge import make_drpt
 
+    if not argv:
+        sys.exit("usage: embree_robust_ab.py SCENE [ROUNDS]")
     ensure()
     name, rounds = argv[0], int(argv[1]) if len(argv) > 1 else 6
-    case = next(c for c in cases([name], True, Path(tempfile.mkdtemp(prefix="drpt-robust-"))))
+    case = next(iter(cases([name], True, Path(tempfile.mkdtemp(prefix="drpt-robust-")))), None)
+    if case is None:
+        sys.exit(f"embree_robust_ab.py: no scene of equal_time_vs_mitsuba.py is named like {name!r}")
     scene, opts, _ = setup(case, 192, 1_000_000)
-    robust_flag = lib.SCENE_FLAG_ROBUST
+    if scene.settings is None:
+        scene.settings = RenderSettings()
     renders = {}
-    for label, flag in (("robust", robust_flag), ("plain", 0)):
-        lib.SCENE_FLAG_ROBUST = flag  # read when the accelerator is built
-        try:
-            _, renders[label] = make_drpt(scene, opts)
-        finally:
-            lib.SCENE_FLAG_ROBUST = robust_flag
+    for label, robust in (("robust", True), ("plain", False)):
+        scene.settings.embree_robust = robust  # read when the accelerator is built
+        _, renders[label] = make_drpt(scene, opts)
         renders[label](opts.spp, 999_999)  # compiles
     seconds: dict = {label: [] for label in renders}
     first = {}

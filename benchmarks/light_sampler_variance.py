@@ -32,10 +32,14 @@ def main(argv: list[str]) -> None:
     from drpt.render.renderer import Renderer
 
     ensure()
+    if not argv:
+        sys.exit("usage: light_sampler_variance.py SCENE [ROUNDS] [RULES]")
     name = argv[0]
     rounds = int(argv[1]) if len(argv) > 1 else 16
     rules = (argv[2] if len(argv) > 2 else "uniform,mixed,pilot").split(",")
-    case = next(c for c in cases([name], True, Path(tempfile.mkdtemp(prefix="drpt-lsv-"))))
+    case = next(iter(cases([name], True, Path(tempfile.mkdtemp(prefix="drpt-lsv-")))), None)
+    if case is None:
+        sys.exit(f"light_sampler_variance.py: no scene of equal_time_vs_mitsuba.py is named like {name!r}")
     scene, opts, _ = setup(case, 192, 1_000_000)
     images = {}
     for rule in rules:

@@ -61,10 +61,11 @@ class ShapeBoxes:
             tris = scene.triangles
             shape = tris.shape_index if tris.shape_index is not None else tris.shape
             shape = np.zeros(len(p), np.int64) if shape is None else np.asarray(shape)
-            for s in np.unique(shape):
-                q = p[shape == s].reshape(-1, 3)
-                lo.append(q.min(0))
-                hi.append(q.max(0))
+            tlo, thi = p.min(1), p.max(1)  # per triangle, then per shape: one sort, no loop
+            order = np.argsort(shape, kind="stable")
+            starts = np.flatnonzero(np.r_[True, np.diff(shape[order]) != 0])
+            lo += list(np.minimum.reduceat(tlo[order], starts))
+            hi += list(np.maximum.reduceat(thi[order], starts))
         if len(scene.spheres):
             c = np.asarray(scene.spheres.center, np.float64)
             r = np.asarray(scene.spheres.radius, np.float64)[:, None]

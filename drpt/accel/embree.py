@@ -25,9 +25,9 @@ or a BVH rule asked for).
 Robust mode: Embree's watertight triangle test and conservative box tests, on for drpt's
 own scene format; a Mitsuba XML scene follows its ``embree_use_robust_intersections``,
 off by default as in Mitsuba 3 (:func:`drpt.scene.model.embree_robust`). Off, rays aimed
-within rounding of a shared edge or vertex can slip between two triangles (``benchmarks/embree_robust_leak.py``
-aims rays there to count them), and the queries take about 15% less time
-(docs/performance.md, "Embree").
+within rounding of a shared edge or vertex can slip between two triangles
+(``benchmarks/embree_robust_leak.py`` aims rays there to count them), and the queries take
+less time (docs/performance.md, "Embree", measures both).
 
 Agreement with drpt's own tests (``tests/accel/test_embree.py``): the same hits up to
 ties between primitives at equal ``t`` and rounding of ``t, u, v`` (Embree's robust

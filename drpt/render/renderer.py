@@ -610,7 +610,7 @@ class Renderer:
         film = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter, squares=squares)
         camera = SplatFilm(self.opt.width, self.opt.height, self.opt.pixel_filter, squares=squares)
         bad = self.integrator.trace(rng, film, camera, Float(x) + u.x, Float(y) + u.y,
-                                    dr.full(Bool, True, n), strategies, True, photons)
+                                    dr.full(Bool, True, n), strategies, photons)
         with llvm_tuning.blocks_for(n):
             dr.eval(film.sum, film.sq, camera.sum, camera.sq, bad, strategies.sum if strategies else [])
         return film, camera, bad
@@ -621,8 +621,8 @@ class Renderer:
         stream of its own, estimates the image's mean pixel value, from which
         :meth:`~drpt.render.integrators.bdpt.BDPTIntegrator.calibrate` sets the roulette's
         threshold. The path tracer has bdpt's expectation, and its kernel costs a fraction of
-        bdpt's to trace and to run (a pilot of bdpt's kernel would cost 11-15% of a 64-spp bdpt
-        render of 64x64 pixels: docs/performance.md)."""
+        bdpt's to trace and to run (docs/performance.md measures a pilot of bdpt's own kernel
+        against it)."""
         W, H = self.opt.width, self.opt.height
         rows = max(1, min(H, BDPT_PILOT_LANES // W))
         pilot = self.derive(replace(self.opt, integrator="path", spp=1, bdpt_strategies=False,

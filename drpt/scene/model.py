@@ -417,7 +417,8 @@ class RenderSettings:
     aovs: tuple = ()
     aov_image: str | None = None
     #: Embree's robust triangle test (``RTC_SCENE_FLAG_ROBUST``, :mod:`drpt.accel.embree`): a
-    #: Mitsuba XML's ``embree_use_robust_intersections`` (Mitsuba's default: off)
+    #: Mitsuba XML's ``embree_use_robust_intersections`` (False when the file does not set it,
+    #: as Mitsuba reads it); None: drpt's own format, traced robust (:func:`embree_robust`)
     embree_robust: bool | None = None
     #: the ``-D`` values the file was read with (``compare`` gives Mitsuba the same)
     defines: dict = field(default_factory=dict)

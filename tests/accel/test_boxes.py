@@ -80,3 +80,34 @@ def test_boxes_per_shape_one_around_many_none_with_planes():
     assert few.reach(Array3f(-5.0, 3.0, 6.0), x).numpy().all()
     assert not few.reach(Array3f(-5.0, 3.0, 50.0), x).numpy().any()
     assert not few.reach(Array3f(-5.0, 3.0, 6.0), -x).numpy().any()
+
+
+def test_rays_from_inside_a_box_and_tangent_to_spheres_reach_it():
+    """A camera inside a shape's box (a room) reaches that box in every direction; rays that
+    graze a sphere (aimed at a point of its silhouette) hit it by brute force and reach its box.
+    Negative control: with that sphere's box shrunk inside its silhouette, grazing rays that
+    hit it are culled."""
+    sc, ico, quad = _scene()
+    boxes = ShapeBoxes.of(sc)
+    rng = np.random.default_rng(9)
+    d = rng.normal(size=(500, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    for center in (ico.reshape(-1, 3).mean(0), np.array([0.0, 0.0, 3.0])):  # in the icosphere, a sphere
+        O, D = rays(np.tile(center, (len(d), 1)), d)
+        assert boxes.reach(O, D).numpy().all()
+    # tangent rays: from far away toward points on the silhouette of the sphere at (0, 0, 3), r 0.5
+    o = np.tile([0.0, -30.0, 3.0], (400, 1))
+    phi = rng.random(400) * 2 * np.pi
+    rim = np.c_[0.5 * (1 - 1e-6) * np.cos(phi), np.zeros(400), 3.0 + 0.5 * (1 - 1e-6) * np.sin(phi)]
+    t = rim - o
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    hit = brute_hits(sc, o, t).valid.numpy()
+    assert hit.mean() > 0.9
+    O, T = rays(o, t)
+    assert np.all(boxes.reach(O, T).numpy()[hit])
+    # shrunk so that the sphere's rim lies outside its box: the grazing rays miss it
+    lo, hi = boxes.lo.astype(float), boxes.hi.astype(float)
+    lo[2, [0, 2]] += 0.1
+    hi[2, [0, 2]] -= 0.1
+    away = ShapeBoxes(lo, hi)
+    assert not np.all(away.reach(O, T).numpy()[hit])

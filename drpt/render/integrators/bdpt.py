@@ -903,7 +903,7 @@ class BDPTIntegrator:
 
     # ------------------------------------------------------------ the subpaths
     def trace(self, rng: PCG32, film: SplatFilm, camera_film: SplatFilm, px: Float, py: Float,
-              active: Bool, strategies: StrategyFilm | None = None, use_roulette: bool = True,
+              active: Bool, strategies: StrategyFilm | None = None,
               photons: PhotonGrid | None = None) -> UInt32:
         """One light subpath and one camera sample through image position ``(px, py)`` per
         lane: the ``t = 1`` strategies splatted into ``film``, the sum of the others into
@@ -920,19 +920,19 @@ class BDPTIntegrator:
         that every pass pays. The LLVM backend removes such loop-invariant phis itself, so
         the kernel computes the same values (the images are the same, to the bit)."""
         with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
-            return self._trace(rng, film, camera_film, px, py, active, strategies, use_roulette, photons)
+            return self._trace(rng, film, camera_film, px, py, active, strategies, photons)
 
     @dr.syntax
     def _trace(self, rng: PCG32, film: SplatFilm, camera_film: SplatFilm, px: Float, py: Float,
-               active: Bool, strategies: StrategyFilm | None, use_roulette: bool,
+               active: Bool, strategies: StrategyFilm | None,
                photons: PhotonGrid | None = None) -> UInt32:
         """:meth:`trace`'s body (traced once per loop with ``OptimizeLoops`` off)."""
         scene, opt, cam = self.scene, self.opt, self.camera
         n = dr.width(active)
         # the roulette's threshold is a kernel input, so that renders of other thresholds
-        # (and without roulette) trace one kernel; one entry per lane, as wide as the loops, which
-        # carry it unchanged (a width-1 loop variable makes Dr.Jit record the loop again)
-        threshold = dr.opaque(Float, self.threshold if use_roulette and self.threshold else 0.0, n)
+        # trace one kernel; one entry per lane, as wide as the loops, which carry it
+        # unchanged (a width-1 loop variable makes Dr.Jit record the loop again)
+        threshold = dr.opaque(Float, self.threshold if self.threshold else 0.0, n)
         widen(rng, n)  # (a low-discrepancy sampler's step is one value for all lanes)
         D = self.depth
         NL = D - 1

@@ -127,9 +127,8 @@ def coherent_shadows(scene: DeviceScene) -> bool:
     coherent queries (read at trace time): where no emitter at infinity but delta ones (a
     directional light) can be chosen. Such rays start at nearby points toward a light's few
     points (a point, spot or area light), or are parallel, and Embree's coherent traversal is
-    faster for them (``test_instancing_path.xml``: 7-8%); toward an environment map or a sky
-    their directions spread over the sphere, and it is slower (4-5% on the single-sphere
-    corpus scenes, whose light is a mix of both). The answer is the same."""
+    faster for them; toward an environment map or a sky their directions spread over the
+    sphere, and it is slower (docs/performance.md measures both). The answer is the same."""
     return not any(f.infinite and not f.delta for f in scene.emitter_selection.families)
 
 

@@ -256,7 +256,7 @@ def test_merging_in_chunks_and_resumed_gives_the_plain_image(glass, monkeypatch,
     with monkeypatch.context() as m:
         m.setattr(B.BDPTIntegrator, "photons", recording)
         plain = Renderer(glass, opts).render()
-    assert [p for p in seen if p != (0, 1)] == [(0, 2), (2, 2), (4, 2), (6, 2)]  # the pilot merges at (0, 1)
+    assert seen == [(0, 2), (2, 2), (4, 2), (6, 2)]  # (the pilot is the path tracer's: no photons)
     assert not np.array_equal(Renderer(glass, replace(opts, bdpt_merge=False)).render().image, plain.image)
     resumed = interrupted_then_resumed(glass, opts, tmp_path / "cut.exr", after=2).result
     assert np.array_equal(resumed.image, plain.image)

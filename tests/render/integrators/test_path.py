@@ -9,11 +9,14 @@ import numpy as np
 import pytest
 from drjit.auto import PCG32, Bool, Float, UInt32
 
+from drpt.accel import embree_lib
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.integrators import path as path_module
 from drpt.render.integrators.path import PathIntegrator, coherent_shadows, nothing_seen
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
+
+needs_embree = pytest.mark.skipif(embree_lib.reason() is not None, reason=f"{embree_lib.reason()}")
 
 W = H = 32
 
@@ -265,6 +268,7 @@ def _unoccluded(self, scene, s, L):
     return (add_emission(scene, self.opt, scene.interaction(s.o, s.d, hit), s, L, s.active),)
 
 
+@needs_embree
 @pytest.mark.parametrize("depth", [2, 3])
 def test_last_segment_finds_emitters_first_as_the_closest_hit_does(scenes_dir, tmp_path, monkeypatch, depth):
     """Where a few emissive triangles are all a ray can see (the Cornell box's light), the
@@ -373,6 +377,7 @@ SPHERE_LIT_XML = """<scene version="3.0.0">
 </scene>"""
 
 
+@needs_embree
 @pytest.mark.parametrize("depth", [2, 5])  # unrolled and the bounce loop
 def test_coherent_shadow_rays_change_no_pixel(tmp_path, monkeypatch, depth):
     """Next-event estimation's shadow rays at the camera rays' hits are coherent Embree queries
