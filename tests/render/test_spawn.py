@@ -271,7 +271,7 @@ def _scene_size_offset(monkeypatch, scene):
         mag = (dr.max(dr.abs(si.p)) + floor) * 2.0**-17
         return si.p + si.ng * dr.mulsign(mag, dr.dot(si.ng, d))
 
-    def emitter_old(self, si, u_sel, u2, active, mis):
+    def emitter_old(self, si, u_sel, u2, active, mis, coherent=False):  # (a traversal hint)
         ls = self.scene.sample_emitter(si, u_sel, u2, active)
         f, pdf_b = self.scene.eval_bsdf(si, ls.wo)
         ok = ls.valid & (dr.max(f) > 0.0)
