@@ -74,7 +74,7 @@ from ..scene.model import Camera, Scene
 from .aov import aov_values, index_arrays
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
-from .film import SplatFilm, gather_splats
+from .film import SplatFilm, gather_splats, lane_sums
 from .filter_sampling import sample_position
 from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
 from .integrators.path import PathIntegrator
@@ -474,7 +474,6 @@ class Renderer:
             # thread busy to the end (drpt.llvm_tuning.blocks_for)
             with llvm_tuning.blocks_for(n):
                 dr.eval(acc, acc2, bad, cross)
-            nbad = dr.sum(bad)
         else:
             o, d, weight = camera_ray(rng)
             L = self.integrator.sample(rng, o, d, Bool(True))
@@ -486,18 +485,15 @@ class Renderer:
             acc = (Array3f64 if wide else Array3f)(dr.select(bad, 0.0, L))
             acc2 = acc * acc
             cross = [type(acc)(acc.x * acc.y, acc.x * acc.z, acc.y * acc.z)] if self.opt.moment else []
-            nbad = dr.sum(UInt32(bad))
-        # a pixel's lanes summed (one lane per pixel: its sums, no reduction launched)
-        def pixel_sums(c):
-            return c if m == 1 else dr.block_sum(c, m)
-
-        sums = [pixel_sums(c) for c in (acc.x, acc.y, acc.z)]
-        # squares, then with RenderOptions.moment (a Mitsuba moment integrator) the products rg, rb, gb
-        sqsums = [pixel_sums(c) for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
-        dr.eval(sums, sqsums, nbad)
-        img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)
-        sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, len(sqsums))
-        return img, sq, int(nbad[0])
+            bad = UInt32(bad)
+        # a pixel's lanes summed, every channel in one kernel and one array (film.lane_sums):
+        # the sums, the squares, then with RenderOptions.moment (a Mitsuba moment
+        # integrator) the products rg, rb, gb
+        columns = [c for a in (acc, acc2, *cross) for c in (a.x, a.y, a.z)]
+        table, nbad = lane_sums(columns, bad, m, pixels)
+        dr.eval(table, nbad)
+        table = table.numpy().reshape(rows, W, len(columns))
+        return table[..., :3], table[..., 3:], int(nbad.numpy().sum(dtype=np.int64))
 
     @property
     def ld_sampling(self) -> bool:
