@@ -373,23 +373,24 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
 LANE_SUMS_UNROLLED = 32
 
 
-def lane_sums(columns: list, counts: UInt32, m: int, pixels: int) -> tuple:
-    """Each pixel's sums of a pass's lanes, all channels in one array: the box filter's film.
+def lane_sums(groups: list[list], counts: UInt32, m: int, pixels: int) -> tuple[list, UInt32]:
+    """Each pixel's sums of a pass's lanes, a group of channels to an array: the box filter's film.
 
-    ``columns`` are per-lane values of one type (``Float`` or ``Float64``: a sum per
-    channel), ``counts`` a per-lane ``UInt32`` (the dropped non-finite samples), ``m``
+    ``groups`` are lists of per-lane values of one type (``Float`` or ``Float64``), a sum
+    per channel; ``counts`` a per-lane ``UInt32`` (the dropped non-finite samples), ``m``
     lanes per pixel, pixel-major (lanes ``p m .. p m + m - 1`` are pixel ``p``'s).
-    Returns ``(table, counts)``: ``table[p C + c]`` the sum of column ``c`` over pixel
-    ``p``'s lanes (``C = len(columns)``, so the numpy view ``(pixels, C)`` is the
-    pass's image and squares side by side, read back in one copy), and the per-pixel
-    sums of ``counts``; both unevaluated. Up to :data:`LANE_SUMS_UNROLLED` lanes a pixel
-    adds its lanes in lane order (``((l_0 + l_1) + l_2) + ...``) in one kernel of
-    ``pixels`` lanes, which replaces a block reduction per channel (each its own launch
-    over the whole pass) and the host's stacking of the channels; the order is fixed, so
-    the sums are the same in every run, chunk, worker and resumed render."""
+    Returns ``(tables, counts)``: for each group of ``C`` channels an array whose element
+    ``p C + c`` is the sum of its channel ``c`` over pixel ``p``'s lanes (its numpy view
+    ``(pixels, C)`` is the group's image, read back in one copy), and the per-pixel sums
+    of ``counts``; all unevaluated. Up to :data:`LANE_SUMS_UNROLLED` lanes a pixel adds its
+    lanes in lane order (``((l_0 + l_1) + l_2) + ...``), every channel in one kernel of
+    ``pixels`` lanes, which replaces a block reduction per channel (each its own launch over
+    the whole pass) and the host's stacking of the channels; the order is fixed, so the
+    sums are the same in every run, chunk, worker and resumed render."""
+    columns = [c for g in groups for c in g]
     Value = type(columns[0])
     if m == 1:
-        sums, per_pixel = list(columns), counts
+        sums, per_pixel = columns, counts
     elif m <= LANE_SUMS_UNROLLED:
         first = dr.arange(UInt32, pixels) * m
         sums = [dr.gather(Value, c, first) for c in columns]
@@ -401,7 +402,11 @@ def lane_sums(columns: list, counts: UInt32, m: int, pixels: int) -> tuple:
     else:
         sums = [dr.block_sum(c, m) for c in columns]
         per_pixel = dr.block_sum(counts, m)
-    # interleaved by dr.ravel in the same kernel (a scatter per channel into one array
-    # would launch a kernel per channel: Dr.Jit evaluates a scatter's target that is dirty)
-    table = dr.ravel((ArrayXf64 if Value is Float64 else ArrayXf)(*sums))
-    return table, per_pixel
+    # each group interleaved by dr.ravel, in the same kernel (a scatter per channel into one
+    # array would launch a kernel per channel: Dr.Jit evaluates a dirty scatter target first)
+    ArrayX = ArrayXf64 if Value is Float64 else ArrayXf
+    tables, i = [], 0
+    for g in groups:
+        tables.append(dr.ravel(ArrayX(*sums[i:i + len(g)])))
+        i += len(g)
+    return tables, per_pixel

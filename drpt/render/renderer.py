@@ -486,14 +486,15 @@ class Renderer:
             acc2 = acc * acc
             cross = [type(acc)(acc.x * acc.y, acc.x * acc.z, acc.y * acc.z)] if self.opt.moment else []
             bad = UInt32(bad)
-        # a pixel's lanes summed, every channel in one kernel and one array (film.lane_sums):
-        # the sums, the squares, then with RenderOptions.moment (a Mitsuba moment
-        # integrator) the products rg, rb, gb
-        columns = [c for a in (acc, acc2, *cross) for c in (a.x, a.y, a.z)]
-        table, nbad = lane_sums(columns, bad, m, pixels)
-        dr.eval(table, nbad)
-        table = table.numpy().reshape(rows, W, len(columns))
-        return table[..., :3], table[..., 3:], int(nbad.numpy().sum(dtype=np.int64))
+        # a pixel's lanes summed, every channel in one kernel (film.lane_sums): the sums, and
+        # in an array of their own (contiguous for the merge's additions) the squares, then with
+        # RenderOptions.moment (a Mitsuba moment integrator) the products rg, rb, gb
+        squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
+        (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m, pixels)
+        dr.eval(sums, sqsums, nbad)
+        img = sums.numpy().reshape(rows, W, 3)
+        sq = sqsums.numpy().reshape(rows, W, len(squares))
+        return img, sq, int(nbad.numpy().sum(dtype=np.int64))
 
     @property
     def ld_sampling(self) -> bool:
