@@ -11,8 +11,9 @@ see :meth:`Renderer._trace_pass`), each lane traces its
 share of the ``k`` samples one path after another and sums them, so a SIMD
 packet no longer waits for its longest path at every bounce (its gain:
 docs/performance.md, "Execution model"). The Whitted integrator runs one sample per lane. Lanes are
-ordered pixel-major, so a pixel's lanes are adjacent and ``dr.block_sum``
-adds them (a pixel is the mean of its own samples). Each
+ordered pixel-major, so a pixel's lanes are adjacent and one kernel adds
+them in lane order, every channel at once (:func:`~drpt.render.film.lane_sums`;
+a pixel is the mean of its own samples). Each
 lane draws from its own PCG32 stream, selected by ``(seed, pass, lane)``
 (:func:`~drpt.render.sampler.pcg_streams`: state and increment hashed from them, so
 neighbouring lanes' streams are independent), so a render is deterministic for a
