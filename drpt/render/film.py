@@ -42,7 +42,7 @@ import functools
 import math
 
 import drjit as dr
-from drjit.auto import Array3f, Bool, Float, Float64, Int32, UInt32
+from drjit.auto import Array3f, ArrayXf, ArrayXf64, Bool, Float, Float64, Int32, UInt32
 
 from ..filters import PixelFilter
 from .loops import loops_once
@@ -366,3 +366,47 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
         return np.stack([c.numpy() for c in cs], axis=-1).reshape(y1 - y0, W, len(cs))
 
     return y0, stack(total[:3]), stack(total[3:6] + total[8:]), stack(total[6:8])
+
+
+#: the most lanes per pixel that :func:`lane_sums` adds up in one kernel (its gathers are
+#: unrolled, one per lane and channel); past it each channel is a ``dr.block_sum`` of its own
+LANE_SUMS_UNROLLED = 32
+
+
+def lane_sums(groups: list[list], counts: UInt32, m: int, pixels: int) -> tuple[list, UInt32]:
+    """Each pixel's sums of a pass's lanes, a group of channels to an array: the box filter's film.
+
+    ``groups`` are lists of per-lane values of one type (``Float`` or ``Float64``), a sum
+    per channel; ``counts`` a per-lane ``UInt32`` (the dropped non-finite samples), ``m``
+    lanes per pixel, pixel-major (lanes ``p m .. p m + m - 1`` are pixel ``p``'s).
+    Returns ``(tables, counts)``: for each group of ``C`` channels an array whose element
+    ``p C + c`` is the sum of its channel ``c`` over pixel ``p``'s lanes (its numpy view
+    ``(pixels, C)`` is the group's image, read back in one copy), and the per-pixel sums
+    of ``counts``; all unevaluated. Up to :data:`LANE_SUMS_UNROLLED` lanes a pixel adds its
+    lanes in lane order (``((l_0 + l_1) + l_2) + ...``), every channel in one kernel of
+    ``pixels`` lanes, which replaces a block reduction per channel (each its own launch over
+    the whole pass) and the host's stacking of the channels; the order is fixed, so the
+    sums are the same in every run, chunk, worker and resumed render."""
+    columns = [c for g in groups for c in g]
+    Value = type(columns[0])
+    if m == 1:
+        sums, per_pixel = columns, counts
+    elif m <= LANE_SUMS_UNROLLED:
+        first = dr.arange(UInt32, pixels) * m
+        sums = [dr.gather(Value, c, first) for c in columns]
+        per_pixel = dr.gather(UInt32, counts, first)
+        for j in range(1, m):
+            lane = first + j
+            sums = [s + dr.gather(Value, c, lane) for s, c in zip(sums, columns)]
+            per_pixel += dr.gather(UInt32, counts, lane)
+    else:
+        sums = [dr.block_sum(c, m) for c in columns]
+        per_pixel = dr.block_sum(counts, m)
+    # each group interleaved by dr.ravel, in the same kernel (a scatter per channel into one
+    # array would launch a kernel per channel: Dr.Jit evaluates a dirty scatter target first)
+    ArrayX = ArrayXf64 if Value is Float64 else ArrayXf
+    tables, i = [], 0
+    for g in groups:
+        tables.append(dr.ravel(ArrayX(*sums[i:i + len(g)])))
+        i += len(g)
+    return tables, per_pixel

@@ -11,8 +11,9 @@ see :meth:`Renderer._trace_pass`), each lane traces its
 share of the ``k`` samples one path after another and sums them, so a SIMD
 packet no longer waits for its longest path at every bounce (its gain:
 docs/performance.md, "Execution model"). The Whitted integrator runs one sample per lane. Lanes are
-ordered pixel-major, so a pixel's lanes are adjacent and ``dr.block_sum``
-adds them (a pixel is the mean of its own samples). Each
+ordered pixel-major, so a pixel's lanes are adjacent and one kernel adds
+them in lane order, every channel at once (:func:`~drpt.render.film.lane_sums`;
+a pixel is the mean of its own samples). Each
 lane draws from its own PCG32 stream, selected by ``(seed, pass, lane)``
 (:func:`~drpt.render.sampler.pcg_streams`: state and increment hashed from them, so
 neighbouring lanes' streams are independent), so a render is deterministic for a
@@ -74,7 +75,7 @@ from ..scene.model import Camera, Scene
 from .aov import aov_values, index_arrays
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
-from .film import SplatFilm, gather_splats
+from .film import SplatFilm, gather_splats, lane_sums
 from .filter_sampling import sample_position
 from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
 from .integrators.path import PathIntegrator
@@ -474,7 +475,6 @@ class Renderer:
             # thread busy to the end (drpt.llvm_tuning.blocks_for)
             with llvm_tuning.blocks_for(n):
                 dr.eval(acc, acc2, bad, cross)
-            nbad = dr.sum(bad)
         else:
             o, d, weight = camera_ray(rng)
             L = self.integrator.sample(rng, o, d, Bool(True))
@@ -486,18 +486,16 @@ class Renderer:
             acc = (Array3f64 if wide else Array3f)(dr.select(bad, 0.0, L))
             acc2 = acc * acc
             cross = [type(acc)(acc.x * acc.y, acc.x * acc.z, acc.y * acc.z)] if self.opt.moment else []
-            nbad = dr.sum(UInt32(bad))
-        # a pixel's lanes summed (one lane per pixel: its sums, no reduction launched)
-        def pixel_sums(c):
-            return c if m == 1 else dr.block_sum(c, m)
-
-        sums = [pixel_sums(c) for c in (acc.x, acc.y, acc.z)]
-        # squares, then with RenderOptions.moment (a Mitsuba moment integrator) the products rg, rb, gb
-        sqsums = [pixel_sums(c) for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
+            bad = UInt32(bad)
+        # a pixel's lanes summed, every channel in one kernel (film.lane_sums): the sums, and
+        # in an array of their own (contiguous for the merge's additions) the squares, then with
+        # RenderOptions.moment (a Mitsuba moment integrator) the products rg, rb, gb
+        squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
+        (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m, pixels)
         dr.eval(sums, sqsums, nbad)
-        img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)
-        sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, len(sqsums))
-        return img, sq, int(nbad[0])
+        img = sums.numpy().reshape(rows, W, 3)
+        sq = sqsums.numpy().reshape(rows, W, len(squares))
+        return img, sq, int(nbad.numpy().sum(dtype=np.int64))
 
     @property
     def ld_sampling(self) -> bool:

@@ -1,7 +1,9 @@
 """gather_splats' sums (drpt/render/film.py): float32 partial sums per source pixel added in
 float64 give the float64 sums to float32 rounding, radiance near the float32 maximum, whose
 float32 partial sums overflow, is gathered again in float64, and the per-source way gives the
-per-receiving-pixel way's sums bit for bit."""
+per-receiving-pixel way's sums bit for bit. lane_sums (the box film's per-pixel sums of a
+pass's lanes) adds each pixel's lanes in lane order, interleaves each group's channels, and
+counts per pixel."""
 
 import drjit as dr
 import numpy as np
@@ -95,3 +97,31 @@ def test_per_source_way_where_it_pays():
     big = film.SOURCE_PARTIALS_BYTES // row  # source pixels of one row's budget
     assert _source_groups(g, big // 2, 1, 16, True, Float) == [[-2, -1], [0, 1], [2]]
     assert _source_groups(g, big + 1, 1, 16, True, Float) is None
+
+
+@pytest.mark.parametrize("m", [1, 3, 9, film.LANE_SUMS_UNROLLED + 3])
+@pytest.mark.parametrize("wide", [False, True])
+def test_lane_sums_add_each_pixels_lanes_in_lane_order(m, wide):
+    pixels, C = 37, 5
+    rng = np.random.default_rng(m)
+    cols = rng.random((C, pixels * m)).astype(np.float64 if wide else np.float32) * 1e3
+    counts = rng.integers(0, 3, pixels * m).astype(np.uint32)
+    Value = Float64 if wide else Float
+    (a, b), per_pixel = film.lane_sums([[Value(c) for c in cols[:2]], [Value(c) for c in cols[2:]]],
+                                       UInt32(counts), m, pixels)
+    blocks = cols.reshape(C, pixels, m)
+    want = blocks[..., 0].copy()
+    for j in range(1, m):  # left to right, in the columns' precision
+        want = want + blocks[..., j]
+    got = np.concatenate([a.numpy().reshape(pixels, 2), b.numpy().reshape(pixels, 3)], axis=1).T
+    np.testing.assert_array_equal(per_pixel.numpy(), counts.reshape(pixels, m).sum(1))
+    if m <= film.LANE_SUMS_UNROLLED:
+        np.testing.assert_array_equal(got, want)  # bit for bit: the order is lane order
+    else:  # dr.block_sum's own order: the same sums to rounding
+        np.testing.assert_allclose(got, want, rtol=1e-6)
+    # negative control: another order (right to left) differs somewhere in float32
+    if m == 9 and not wide:
+        back = blocks[..., m - 1].copy()
+        for j in range(m - 2, -1, -1):
+            back = back + blocks[..., j]
+        assert not np.array_equal(got, back)
