@@ -491,6 +491,11 @@ class Renderer:
         # in an array of their own (contiguous for the merge's additions) the squares, then with
         # RenderOptions.moment (a Mitsuba moment integrator) the products rg, rb, gb
         squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
+        if m == 1:  # one lane per pixel: nothing to add, and no interleaved copy (peak memory)
+            dr.eval(acc, squares, bad)
+            img = np.stack([c.numpy() for c in (acc.x, acc.y, acc.z)], axis=-1).reshape(rows, W, 3)
+            sq = np.stack([c.numpy() for c in squares], axis=-1).reshape(rows, W, len(squares))
+            return img, sq, int(dr.sum(bad)[0])
         (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m, pixels)
         dr.eval(sums, sqsums, nbad)
         img = sums.numpy().reshape(rows, W, 3)
