@@ -810,3 +810,42 @@ def test_no_media_scene_has_parameters_drpt_calls_unread():
             warnings.simplefilter("always")
             load_scene(CORPUS / rel, defines={"spp": "4"})
         assert not [str(w.message) for w in caught], rel
+
+
+def test_emission_through_a_scattering_medium_keeps_the_mean(tmp_path, monkeypatch):
+    """As above with albedo 0.8 (extinction 1): paths that scatter reach the emitter by
+    next-event estimation and by phase sampling, whose hits past a sampled collision the
+    transmittance-weighted count must share by MIS. 2^15 paths with ``count_through`` on and
+    off agree (|z| < 4; seeds 5-9 read |z| <= 1.2), on with less than a tenth of off's variance
+    (0.02 measured). Negative control: the emission counted without the transmittance is
+    |z| > 8 off (193 measured)."""
+    import drjit as dr
+    from drjit.auto import PCG32, Array3f, Bool
+
+    from drpt.options import RenderOptions, with_scene_settings
+    from drpt.render.integrators import volpath
+    from drpt.render.renderer import Renderer
+    from drpt.scene import load_scene
+
+    path = tmp_path / "glow.xml"
+    path.write_text(GLOW.replace('name="albedo" value="0, 0, 0"', 'name="albedo" value="0.8, 0.8, 0.8"'))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        opts, scene = with_scene_settings(RenderOptions(progress=False, seed=1), load_scene(path))
+    integ = Renderer(scene, opts).integrator
+    assert integ.counts_through
+    n = 1 << 15
+
+    def paths(through: bool, seed: int):
+        integ.count_through = through
+        L = integ.sample(PCG32(n, seed), dr.full(Array3f, [0.0, 0.0, 5.0], n),
+                         dr.full(Array3f, [0.0, 0.0, -1.0], n), dr.full(Bool, True, n))
+        x = np.asarray(L.x).astype(np.float64)
+        return x.mean(), x.var(ddof=1)
+
+    (m_on, v_on), (m_off, v_off) = paths(True, 5), paths(False, 6)
+    assert abs(m_on - m_off) < 4 * math.sqrt((v_on + v_off) / n), (m_on, m_off)
+    assert v_on < 0.1 * v_off, (v_on, v_off)
+    monkeypatch.setattr(volpath, "_transmittance", lambda sigma_t, dist: Array3f(1.0))
+    m_bad, v_bad = paths(True, 5)
+    assert abs(m_bad - m_off) > 8 * math.sqrt((v_bad + v_off) / n), (m_bad, m_off)
