@@ -79,6 +79,12 @@ class ShapeBoxes:
     def __len__(self) -> int:
         return len(self.lo)
 
+    def hold(self, center, radius: float = 0.0) -> bool:
+        """Whether a box holds the cube of half-side ``radius`` around ``center``: rays
+        from there all start inside it and reach it, so culling them tests in vain."""
+        c = np.asarray(center, np.float64)
+        return bool(np.any(np.all((self.lo <= c - radius) & (c + radius <= self.hi), axis=1)))
+
     def reach(self, o: Array3f, d: Array3f) -> Bool:
         """Lanes whose ray ``o + t d`` (``t >= 0``) meets one of the boxes (conservatively:
         the module docstring)."""

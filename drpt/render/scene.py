@@ -64,7 +64,7 @@ from ..accel.inline import InlineList
 from ..accel.protocol import INVALID, Hit
 from ..errors import located
 from ..options import RenderOptions
-from ..scene.model import Scene, Skybox
+from ..scene.model import PerspectiveCamera, Scene, Skybox
 from .bsdf import BSDFSample
 from .camera import RayCamera
 from .instrument import Instrument
@@ -196,9 +196,14 @@ class DeviceScene:
                                  method=options.bvh_method, min_leaf=options.bvh_min_leaf,
                                  sah_threshold=options.sah_threshold)
         #: boxes around the shapes (:mod:`drpt.accel.boxes`) for the queries that cull the
-        #: rays missing them (``intersect_preliminary``'s ``cull``); None without planes' bounds
-        #: or where the primitives are compiled inline (their own tests cost as little)
+        #: rays missing them (``intersect_preliminary``'s ``cull``: camera rays); None without
+        #: planes' bounds, where the primitives are compiled inline (their own tests cost as
+        #: little), or where a box holds the camera (a room: every camera ray reaches it)
         self.boxes = None if isinstance(self.accel, InlineList) else ShapeBoxes.of(scene)
+        cam = scene.camera
+        if self.boxes is not None and isinstance(cam, PerspectiveCamera) and \
+                self.boxes.hold(cam.center, float(cam.aperture_radius)):
+            self.boxes = None
         self.is_empty = len(scene.triangles) + len(scene.spheres) + len(scene.planes) == 0
         if self.is_empty:
             self.materials, self.surfaces = NoMaterials(), NoSurfaces()

@@ -84,3 +84,24 @@ def test_camera_rays_culled_by_the_shape_boxes_are_the_same_image(tmp_path, monk
     np.testing.assert_array_equal(culled, image(False))
     sphere_only = image(True, lambda b: ShapeBoxes(b.lo[1:].astype(float), b.hi[1:].astype(float)))
     assert (sphere_only == 0).mean() > (culled == 0).mean() + 0.1
+
+
+@pytest.mark.skipif(embree_lib.reason() is not None, reason=f"{embree_lib.reason()}")
+def test_a_camera_inside_a_shape_box_traces_no_culling(tmp_path, monkeypatch):
+    """Where a shape's box holds the camera (inside a room; here inside the sphere) every
+    camera ray reaches that box, so the scene has no culling boxes and the kernel no
+    ``drpt_cull`` branch; a thin lens whose aperture leaves the box keeps them (the lens's
+    cube around the center must lie inside). The camera outside (the test above) keeps them."""
+    labels = []
+    if_stmt = dr.if_stmt
+    monkeypatch.setattr(dr, "if_stmt",
+                        lambda *a, label=None, **k: labels.append(label) or if_stmt(*a, label=label, **k))
+    inside = FLOATING_XML.format(depth=2).replace('origin="0, -4, 3"', 'origin="0, 0.1, 1"')
+    (tmp_path / "in.xml").write_text(inside)
+    r = Renderer(load_scene(tmp_path / "in.xml"), RenderOptions(width=16, height=8, spp=2, progress=False,
+                                                                accel="embree", path=PathOptions(max_depth=2)))
+    assert r.scene.boxes is None
+    r.render()
+    assert "drpt_cull" not in labels
+    boxes = ShapeBoxes.of(load_scene(tmp_path / "in.xml"))
+    assert boxes.hold((0.0, 0.1, 1.0), 0.1) and not boxes.hold((0.0, 0.1, 1.0), 1.0)
