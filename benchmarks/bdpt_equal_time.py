@@ -84,6 +84,16 @@ def seed_glass_cornell() -> str:
         f"Group {{ numObjects {count}", *body, "}", ""])
 
 
+def scene_files(folder: Path) -> dict[str, Path]:
+    """The scene files by ``--scenes`` name: the bundled Cornell box, and the caustic scene and
+    the glass Cornell box written into ``folder``."""
+    (folder / "caustic.txt").write_text(CAUSTIC)
+    (folder / "glass_cornell.txt").write_text(seed_glass_cornell())
+    repo = Path(__file__).resolve().parents[1]
+    return {"cornell": repo / "scenes" / "cornellbox" / "cornellbox.txt", "caustic": folder / "caustic.txt",
+            "glass": folder / "glass_cornell.txt"}
+
+
 def main() -> None:
     from drpt.metrics import rel_mse
     from drpt.options import PathOptions, RenderOptions
@@ -103,12 +113,7 @@ def main() -> None:
     p.add_argument("--reference", type=Path, default=None,
                    help="a folder that keeps the references (rendered there when missing)")
     a = p.parse_args()
-    repo = Path(__file__).resolve().parents[1]
-    tmp = Path(tempfile.mkdtemp())
-    (tmp / "caustic.txt").write_text(CAUSTIC)
-    (tmp / "glass_cornell.txt").write_text(seed_glass_cornell())
-    files = {"cornell": repo / "scenes" / "cornellbox" / "cornellbox.txt", "caustic": tmp / "caustic.txt",
-             "glass": tmp / "glass_cornell.txt"}
+    files = scene_files(Path(tempfile.mkdtemp()))
     for name in a.scenes.split(","):
         scene = load_scene(files[name])
         base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth),

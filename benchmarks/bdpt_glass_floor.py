@@ -76,9 +76,7 @@ def main() -> None:
     p.add_argument("--reference", type=Path, default=None)
     a = p.parse_args()
     a.sampler = "independent"
-    tmp = Path(tempfile.mkdtemp())
-    (tmp / "glass_cornell.txt").write_text(eq.seed_glass_cornell())
-    scene = load_scene(tmp / "glass_cornell.txt")
+    scene = load_scene(eq.scene_files(Path(tempfile.mkdtemp()))["glass"])
     base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth))
     ref, ref_err = eq.reference(scene, base, "glass", a)
     renderers = {}

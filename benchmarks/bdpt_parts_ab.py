@@ -72,12 +72,7 @@ def main() -> None:
     p.add_argument("--reference", type=Path, default=None)
     a = p.parse_args()
     a.sampler = "independent"
-    tmp = Path(tempfile.mkdtemp())
-    (tmp / "caustic.txt").write_text(eq.CAUSTIC)
-    (tmp / "glass_cornell.txt").write_text(eq.seed_glass_cornell())
-    repo = Path(__file__).resolve().parents[1]
-    files = {"cornell": repo / "scenes" / "cornellbox" / "cornellbox.txt", "caustic": tmp / "caustic.txt",
-             "glass": tmp / "glass_cornell.txt"}
+    files = eq.scene_files(Path(tempfile.mkdtemp()))
     patches = {"occluded": ("occluded_where", _masked_occluded), "roulette": ("light_survival", _old_survival)}
     for name in a.scenes.split(","):
         scene = load_scene(files[name])

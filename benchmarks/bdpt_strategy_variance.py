@@ -45,9 +45,7 @@ def main() -> None:
     a = p.parse_args()
     a.size, a.sampler = 64, "independent"
     renderer_module.STRATEGY_SEGMENTS = a.depth  # every strategy of the paths rendered
-    tmp = Path(tempfile.mkdtemp())
-    (tmp / "glass_cornell.txt").write_text(eq.seed_glass_cornell())
-    scene = load_scene(tmp / "glass_cornell.txt")
+    scene = load_scene(eq.scene_files(Path(tempfile.mkdtemp()))["glass"])
     base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth))
     ref, _ = eq.reference(scene, base, "glass", a)
     r0 = renderer_module.Renderer(scene, replace(base, integrator="bdpt", spp=1, seed=1, bdpt_strategies=True))
