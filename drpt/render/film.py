@@ -162,8 +162,9 @@ def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int,
     Returns ``(y0, sum, sumsq, weight)`` as :meth:`SplatFilm.arrays` (rows from ``y0``).
 
     Two ways compute these very sums, bit for bit: each receiving pixel's loop over its
-    source pixels' samples (:func:`_gather`: every sample read and weighted once per pixel it
-    reaches, ``(2R + 1)^2`` times), or, where a pass has :data:`SOURCE_MIN_SAMPLES` or more
+    source pixels' samples (:func:`_gather`: every sample read once per pixel it reaches,
+    ``(2R + 1)^2`` times, with its weights along each axis computed beforehand,
+    :func:`_axis_weights`), or, where a pass has :data:`SOURCE_MIN_SAMPLES` or more
     samples per pixel and the partial sums fit :data:`SOURCE_PARTIALS_BYTES`
     (:func:`_source_groups`), each source pixel's loop over its own samples, which weights
     each sample once for all the pixels it reaches and keeps one partial sum per receiving
@@ -309,13 +310,37 @@ def _source_partials(flt: PixelFilter, width: int, r0: int, rows: int, k: int, p
     return part
 
 
+def _axis_weights(flt: PixelFilter, width: int, r0: int, k: int, px: Float, py: Float, ok: Bool
+                  ) -> tuple[Float, Float]:
+    """Each sample's filter weights along each axis at the centers of the ``2R + 1`` columns
+    and rows it reaches, for :func:`_gather`: ``w(c_e - x)`` with ``c_e`` the center of column
+    ``sx + e`` (``e`` in ``-R .. R``, ``sx`` the sample's own column), 0 where the sample does
+    not count (not ``ok``: its weight ``w_x w_y`` is then 0), and ``w(c_e - y)`` along ``y``.
+    Two arrays, sample-major (element ``s (2R + 1) + e + R``), evaluated: each sample weighted
+    once per axis and offset, not for every receiving pixel, and without a gather of ``ok``
+    there (a gather of bytes, which the CPU has no instruction for)."""
+    R = _reach(flt)
+    n = dr.width(px)
+    lane = dr.arange(UInt32, n)
+    p = lane // dr.opaque(UInt32, k)
+    sx = Int32(p % width)
+    sy = Int32(p // width) + r0
+    # the receiving pixels' centers, as _source_partials computes them
+    wxs = dr.ravel(ArrayXf(*[dr.select(ok, filter_weight(flt, (Float(sx + e) + 0.5) - px), 0.0)
+                             for e in range(-R, R + 1)]))
+    wys = dr.ravel(ArrayXf(*[filter_weight(flt, (Float(sy + e) + 0.5) - py) for e in range(-R, R + 1)]))
+    dr.eval(wxs, wys)
+    return wxs, wys
+
+
 @loops_once
 @dr.syntax
 def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: int,
             px: Float, py: Float, L: Array3f, ok: Bool, moment: bool, Partial: type):
     """:func:`gather_splats` with partial sums (per source pixel) of type ``Partial``
     (``Float`` or ``Float64``): an outer loop over the source pixels, an inner one over
-    each one's samples, each recorded once (:func:`~drpt.render.loops.loops_once`)."""
+    each one's samples, each recorded once (:func:`~drpt.render.loops.loops_once`), which
+    reads each sample's radiance and its two weights for this pixel (:func:`_axis_weights`)."""
     import numpy as np
 
     W = width
@@ -325,32 +350,31 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
     out = dr.arange(UInt32, n)
     ox = Int32(out % W)
     oy = Int32(out // W) + y0
-    cx, cy = Float(ox) + 0.5, Float(oy) + 0.5
     side = 2 * R + 1
     kk = dr.opaque(UInt32, k)
     sources = dr.opaque(UInt32, side * side)
-    # a plain function, not the filter: the loop would take a dataclass for loop state
-    weight = functools.partial(filter_weight, flt)
     channels = 3 + 3 + 2 + (6 if moment else 0)  # sum, squares, weights, channel products
+    wxs, wys = _axis_weights(flt, width, r0, k, px, py, ok)
 
     total = [dr.zeros(Float64, n) for _ in range(channels)]
     src = dr.zeros(UInt32, n)
     # the samples and the counts are read, not changed, and of another width than the loops:
     # outside their state (as loop variables they would make Dr.Jit record each loop again)
-    while dr.hint(src < sources, exclude=[px, py, L, ok, kk, sources]):
+    while dr.hint(src < sources, exclude=[wxs, wys, L, kk, sources]):
         sx = ox + Int32(src % side) - R
         sy = oy + Int32(src // side) - R
         inside = (sx >= 0) & (sx < W) & (sy >= r0) & (sy < r0 + rows)
         first = dr.select(inside, UInt32((sy - r0) * W + sx) * kk, 0)
+        # this pixel's offset from the source pixel, plus R: the index of its weights
+        ex = UInt32(2 * R) - src % side
+        ey = UInt32(2 * R) - src // side
         part = [dr.zeros(Partial, n) for _ in range(channels)]
         j = dr.zeros(UInt32, n)
-        while dr.hint(inside & (j < kk), exclude=[px, py, L, ok, kk]):
+        while dr.hint(inside & (j < kk), exclude=[wxs, wys, L, kk]):
             lane = first + j
-            valid = dr.gather(Bool, ok, lane)
-            x = dr.gather(Float, px, lane, valid)
-            y = dr.gather(Float, py, lane, valid)
-            v = dr.gather(Array3f, L, lane, valid)
-            w = Partial(dr.select(valid, weight(cx - x) * weight(cy - y), 0.0))
+            # (a sample that does not count has weight 0, and finite radiance: its terms are 0)
+            w = Partial(dr.gather(Float, wxs, lane * side + ex) * dr.gather(Float, wys, lane * side + ey))
+            v = dr.gather(Array3f, L, lane)
             r_, g_, b_ = Partial(v.x), Partial(v.y), Partial(v.z)
             a, b, c = r_ * w, g_ * w, b_ * w
             terms = [a, b, c, a * a, b * b, c * c, w, w * w]
