@@ -271,7 +271,8 @@ def _source_partials(flt: PixelFilter, width: int, r0: int, rows: int, k: int, p
     ``(w L)^2``, ``w``, ``w^2`` and with ``moment`` ``w L_a L_b``; ``w`` the filter's weight at
     the receiving pixel's center), of type ``Partial``: a flat list, ``f``-major, then ``e``,
     then the channel. One loop over each pixel's samples (recorded once), which weights a
-    sample along each axis once for all the offsets."""
+    sample along each axis once for all the offsets, :func:`_source_step` samples an
+    iteration."""
     W = width
     R = _reach(flt)
     npix = rows * W
@@ -286,10 +287,35 @@ def _source_partials(flt: PixelFilter, width: int, r0: int, rows: int, k: int, p
     weight = functools.partial(filter_weight, flt)
     channels = _channels(moment)
     part = [dr.zeros(Partial, npix) for _ in range(len(fs) * len(cxs) * channels)]
+    step = _source_step(k)
     j = dr.zeros(UInt32, npix)
     # the samples and the count are read, not changed, and of another width than the loop
     while dr.hint(j < kk, exclude=[px, py, L, ok, kk]):
-        lane = first + j
+        part = _source_terms(part, first + j, step, cxs, cys, weight, px, py, L, ok, moment, Partial)
+        j += step
+    return part
+
+
+#: the samples per iteration of :func:`_source_partials`' loop: the first that divides ``k``
+#: (:func:`_source_step`)
+SOURCE_STEPS = (4, 3, 2)
+
+
+def _source_step(k: int) -> int:
+    """The samples of a pixel that each iteration of :func:`_source_partials`' loop adds, in
+    order: the first of :data:`SOURCE_STEPS` that divides ``k`` (every iteration then adds
+    whole samples of the pixel), else 1. An iteration costs, beyond its samples' terms, an
+    update of every partial sum (``(2R + 1)^2`` offsets times up to 14 channels: the loop
+    state), which a few samples per iteration share (docs/performance.md)."""
+    return next((u for u in SOURCE_STEPS if k % u == 0), 1)
+
+
+def _source_terms(part: list, first: UInt32, step: int, cxs: list, cys: list, weight, px: Float,
+                  py: Float, L: Array3f, ok: Bool, moment: bool, Partial: type) -> list:
+    """``part`` plus the terms of the ``step`` samples from lane ``first``, one after the
+    other (:func:`_source_partials`)."""
+    for u in range(step):
+        lane = first + u
         valid = dr.gather(Bool, ok, lane)
         x = dr.gather(Float, px, lane, valid)
         y = dr.gather(Float, py, lane, valid)
@@ -306,7 +332,6 @@ def _source_partials(flt: PixelFilter, width: int, r0: int, rows: int, k: int, p
                 if moment:
                     terms += [a * r_, b * g_, c * b_, a * g_, a * b_, b * b_]
         part = [part[i] + terms[i] for i in range(len(part))]
-        j += 1
     return part
 
 

@@ -1,9 +1,9 @@
 """gather_splats' sums (drpt/render/film.py): float32 partial sums per source pixel added in
 float64 give the float64 sums to float32 rounding, radiance near the float32 maximum, whose
 float32 partial sums overflow, is gathered again in float64, and the per-source way gives the
-per-receiving-pixel way's sums bit for bit. lane_sums (the box film's per-pixel sums of a
-pass's lanes) adds each pixel's lanes in lane order, interleaves each group's channels, and
-counts per pixel."""
+per-receiving-pixel way's sums bit for bit (with one sample or several an iteration of its
+loop). lane_sums (the box film's per-pixel sums of a pass's lanes) adds each pixel's lanes
+in lane order, interleaves each group's channels, and counts per pixel."""
 
 import drjit as dr
 import numpy as np
@@ -84,6 +84,31 @@ def test_per_source_sums_are_the_per_pixel_ones(flt, moment):
     bumped.x = dr.select(dr.arange(UInt32, dr.width(x)) == 7, L.x * (1.0 + 2.0**-22), L.x)
     off = _by_source(flt, W, H, r0, rows, K, x, y, bumped, ok, moment, Float, [list(range(-R, R + 1))])
     assert not np.array_equal(off[1], want[1])
+
+
+@pytest.mark.parametrize("k", [5, 6, 8])
+def test_per_source_sums_with_several_samples_an_iteration(k, monkeypatch):
+    """:func:`_source_partials` adds :func:`_source_step` samples an iteration (a divisor of
+    ``k``: 1, 3, 4 here), and its sums are :func:`_gather`'s bit for bit. Negative control: 4
+    samples an iteration where 4 does not divide ``k`` (the last iteration reads the next
+    pixel's samples) changes them."""
+    flt = PixelFilter("gaussian", 0.5)
+    n = W * H * k
+    rng = PCG32(n, initstate=5)
+    pix = dr.arange(UInt32, n) // k
+    x = Float(pix % W) + rng.next_float32()
+    y = Float(pix // W) + rng.next_float32()
+    L = Array3f(rng.next_float32(), rng.next_float32(), 1.0)
+    ok = rng.next_float32() < 0.9
+    assert film._source_step(k) == {5: 1, 6: 3, 8: 4}[k]
+    groups = [list(range(-2, 3))]
+    want = _gather(flt, W, H, 0, H, k, x, y, L, ok, True, Float)
+    got = _by_source(flt, W, H, 0, H, k, x, y, L, ok, True, Float, groups)
+    assert all(np.array_equal(a, b) for a, b in zip(got[1:], want[1:]))
+    if k % 4:
+        monkeypatch.setattr(film, "_source_step", lambda k: 4)
+        off = _by_source(flt, W, H, 0, H, k, x, y, L, ok, True, Float, groups)
+        assert not np.array_equal(off[1], want[1])
 
 
 def test_per_source_way_where_it_pays():
