@@ -854,6 +854,8 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
       splats, each path counting as a sample of ``W H`` times its splat."""
     spp = merged.spp
     H, W, _ = merged.sum.shape
+    if merged.weight is not None and consume and merged.weight[..., 0].min() > 0.0:
+        return _finish_weighted(merged, seconds, build_seconds)
     if merged.weight is not None:
         ws, ws2 = merged.weight[..., :1], merged.weight[..., 1:]
         ok = ws > 0.0
@@ -904,6 +906,31 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
     var /= spp
     return RenderResult(mean.astype(np.float32), var, seconds,
                         build_seconds, W * H * spp, merged.nonfinite, moment2)
+
+
+def _finish_weighted(merged: ChunkMerge, seconds: float, build_seconds: float) -> RenderResult:
+    """:func:`_finish_image` of splatted camera samples where every pixel has a weight, in the
+    merge's own arrays (``consume``): the same divisions and differences, value for value, as
+    the general case's ``np.where`` expressions take where the weight is positive, without
+    their image-sized temporaries (each a fresh allocation, paid in page faults)."""
+    spp = merged.spp
+    H, W, _ = merged.sum.shape
+    ws = np.ascontiguousarray(merged.weight[..., :1])
+    ws2 = np.ascontiguousarray(merged.weight[..., 1:])
+    mean = np.divide(merged.sum, ws, out=merged.sum)
+    _check_range(mean)
+    n_eff = ws * ws / ws2
+    sq = merged.sumsq
+    var = np.divide(sq[..., :3], ws2)
+    var -= mean * mean
+    np.maximum(var, 0.0, out=var)
+    n_eff -= 1.0
+    var /= np.maximum(n_eff, 1.0, out=n_eff)
+    moment2 = None
+    if sq.shape[-1] == 9:  # the weighted r^2 .. gb, as Mitsuba's film develops its m2_
+        moment2 = xyz_second_moment(np.divide(sq[..., 3:], ws, out=sq[..., 3:]))
+    return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, W * H * spp,
+                        merged.nonfinite, moment2)
 
 
 def stop_estimate(merged: ChunkMerge, opts: RenderOptions, seconds: float,
