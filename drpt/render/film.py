@@ -204,16 +204,23 @@ def _channels(moment: bool) -> int:
     return 3 + 3 + 2 + (6 if moment else 0)  # sum, squares, weights, channel products
 
 
+def _packet(moment: bool) -> int:
+    """The channels of a packed partial sum (:func:`_by_source`): :func:`_channels` padded to
+    a power of two, for Dr.Jit's packet gathers."""
+    return 16 if _channels(moment) > 8 else 8
+
+
 def _source_groups(flt: PixelFilter, width: int, rows: int, k: int, moment: bool,
                    Partial: type) -> list[list[int]] | None:
     """The receiving rows' offsets ``dy`` (source row minus receiving row, ``-R .. R``) in
-    groups that :func:`_by_source` traces one after another, each group's partial sums within
+    groups that :func:`_by_source` traces one after another, each group's partial sums (as
+    the loop leaves them and packed, which are both held while they are packed) within
     :data:`SOURCE_PARTIALS_BYTES`; None where the pass has fewer than
     :data:`SOURCE_MIN_SAMPLES` samples per pixel or one row of offsets does not fit."""
     R = _reach(flt)
     side = 2 * R + 1
     size = 8 if Partial is Float64 else 4
-    row_bytes = side * _channels(moment) * rows * width * size
+    row_bytes = side * (_channels(moment) + _packet(moment)) * rows * width * size
     per = SOURCE_PARTIALS_BYTES // max(row_bytes, 1)
     if k < SOURCE_MIN_SAMPLES or per < 1:
         return None
@@ -227,8 +234,9 @@ def _by_source(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k:
     receiving offsets (:func:`_source_groups`, in :func:`_gather`'s order of source pixels),
     one kernel sums each source pixel's samples into one partial sum per offset and channel
     (:func:`_source_partials`: the same float32 additions, in the same order, as
-    :func:`_gather`'s inner loop), and one adds them to the receiving pixels' float64 sums, in
-    :func:`_gather`'s order."""
+    :func:`_gather`'s inner loop), one packs each offset's channels into one array (a record
+    per source pixel, :func:`_packet` wide), and one adds them to the receiving pixels' float64
+    sums, in :func:`_gather`'s order."""
     import numpy as np
 
     W = width
@@ -243,16 +251,25 @@ def _by_source(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k:
     total = [dr.zeros(Float64, n) for _ in range(channels)]
     for dys in groups:
         part = _source_partials(flt, W, r0, rows, k, px, py, L, ok, moment, Partial, [-d for d in dys])
-        dr.eval(part)
+        # each offset's channels interleaved, padded to a power of two: the receiving pixels
+        # read a source pixel's channels with one packet gather (Dr.Jit's PacketOps: aligned
+        # loads and a transpose) instead of a gather per channel, each from an array of its own
+        size = _packet(moment)
+        ArrayX = ArrayXf64 if Partial is Float64 else ArrayXf
+        pad = [Partial(0.0)] * (size - channels)
+        packed = [dr.ravel(ArrayX(*part[o * channels:(o + 1) * channels], *pad))
+                  for o in range(len(dys) * side)]
+        dr.eval(packed)
+        del part
         for g, dy in enumerate(dys):
             sy = oy + dy
             for dx in range(-R, R + 1):
                 sx = ox + dx
                 inside = (sx >= 0) & (sx < W) & (sy >= r0) & (sy < r0 + rows)
                 src = UInt32((sy - r0) * W + sx)
-                base = (g * side + R - dx) * channels  # (the receiving offset is -dx, -dy)
-                total = [total[i] + Float64(dr.gather(Partial, part[base + i], src, inside))
-                         for i in range(channels)]
+                # (the receiving offset is -dx, -dy)
+                rec = dr.gather(ArrayX, packed[g * side + R - dx], src, inside, shape=(size, n))
+                total = [total[i] + Float64(rec[i]) for i in range(channels)]
         dr.eval(total)
 
     def stack(cs):

@@ -118,7 +118,7 @@ def test_per_source_way_where_it_pays():
     g = PixelFilter("gaussian", 0.5)
     assert _source_groups(g, 192, 192, film.SOURCE_MIN_SAMPLES - 1, True, Float) is None
     assert _source_groups(g, 192, 192, film.SOURCE_MIN_SAMPLES, True, Float) == [[-2, -1, 0, 1, 2]]
-    row = 5 * 14 * 4  # bytes of one row of offsets per source pixel (moment, float32)
+    row = 5 * (14 + 16) * 4  # bytes of one row of offsets per source pixel (moment, float32; packed)
     big = film.SOURCE_PARTIALS_BYTES // row  # source pixels of one row's budget
     assert _source_groups(g, big // 2, 1, 16, True, Float) == [[-2, -1], [0, 1], [2]]
     assert _source_groups(g, big + 1, 1, 16, True, Float) is None
