@@ -11,16 +11,21 @@ same load for both), from one renderer per variant whose kernels are compiled by
   rays for every packet (A);
 * ``roulette``: the light subpath's roulette relative to its emitted power (B,
   :func:`~drpt.render.integrators.bdpt.light_survival`) against the path tracer's rule on
-  ``max(beta)`` (A).
+  ``max(beta)`` (A);
+* ``reverse``: the MIS weights' reverse densities from the evaluation or the sample that
+  needs them, in one dispatch over the material kinds (B,
+  :func:`~drpt.render.integrators.bdpt.eval_both`, :func:`~drpt.render.integrators.bdpt.sample_both`)
+  against a second ``eval_bsdf`` with the directions swapped (A).
 
 Prints per part the CPU seconds (the process's, summed over the seeds; steadier than wall
 seconds on a loaded machine), the relMSE (summed, against the reference of
 ``bdpt_equal_time.py``, minus its estimated relMSE) and B / A of the seconds, of the error
-and of their product (the error at equal time: below 1, B is better). Images are the same
-for ``variance`` (checked) and equal in expectation for the others.
+and of their product (the error at equal time: below 1, B is better), and the median over the
+seeds of B / A of one seed's seconds (the two renders of a seed run one after the other). Images are the same
+for ``variance`` and ``reverse`` (checked) and equal in expectation for the others.
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/bdpt_parts_ab.py [--scenes cornell,glass]
-[--parts variance,occluded,roulette] [--size 64] [--depth 8] [--spp 64] [--ref-spp 2048]
+[--parts variance,occluded,roulette,reverse] [--size 64] [--depth 8] [--spp 64] [--ref-spp 2048]
 [--seeds 4] [--reference PATH]
 """
 
@@ -28,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import statistics
 import sys
 import tempfile
 import time
@@ -37,7 +43,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bdpt_equal_time as eq  # noqa: E402 (the sibling benchmark: its scenes and references)
 
-PARTS = ("variance", "occluded", "roulette")
+PARTS = ("variance", "occluded", "roulette", "reverse")
 
 
 def _old_survival(beta, power, eta):
@@ -50,6 +56,27 @@ def _old_survival(beta, power, eta):
 def _masked_occluded(scene, o, d, tmax, active):
     """Every packet traces the shadow ray, masked."""
     return scene.occluded(o, d, tmax, active)
+
+
+def _with_wi(si, wi):
+    """``si`` seen from direction ``wi``."""
+    import copy
+
+    out = copy.copy(si)
+    out.wi = wi
+    return out
+
+
+def _two_evaluations(scene, si, wo):
+    """``(f, pdf, pdf_rev)`` by two ``eval_bsdf``: the second with the directions swapped."""
+    f, pdf = scene.eval_bsdf(si, wo)
+    return f, pdf, scene.eval_bsdf(_with_wi(si, wo), si.wi)[1]
+
+
+def _sample_then_evaluate(scene, si, u_lobe, u_bsdf):
+    """``(wo, bs, pdf_rev)``: the sample, then ``eval_bsdf`` seen from it toward ``si.wi``."""
+    wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
+    return wo, bs, scene.eval_bsdf(_with_wi(si, wo), si.wi)[1]
 
 
 def main() -> None:
@@ -73,19 +100,20 @@ def main() -> None:
     a = p.parse_args()
     a.sampler = "independent"
     files = eq.scene_files(Path(tempfile.mkdtemp()))
-    patches = {"occluded": ("occluded_where", _masked_occluded), "roulette": ("light_survival", _old_survival)}
+    patches = {"occluded": [("occluded_where", _masked_occluded)], "roulette": [("light_survival", _old_survival)],
+               "reverse": [("eval_both", _two_evaluations), ("sample_both", _sample_then_evaluate)]}
     for name in a.scenes.split(","):
         scene = load_scene(files[name])
         base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth),
                              integrator="bdpt")
         ref_image, ref_err = eq.reference(scene, base, name, a)
         for part in a.parts.split(","):
-            new = getattr(B, patches[part][0]) if part in patches else None
+            new = [getattr(B, fn) for fn, _ in patches[part]] if part in patches else None
 
             def variant(which: str, part=part, new=new, base=base):
-                """Set the module's function (A: the old one) and the options of ``which``."""
-                if part in patches:
-                    setattr(B, patches[part][0], patches[part][1] if which == "A" else new)
+                """Set the module's functions (A: the old ones) and the options of ``which``."""
+                for (fn, old), current in zip(patches.get(part, []), new or []):
+                    setattr(B, fn, old if which == "A" else current)
                 return replace(base, variance=(which == "A")) if part == "variance" else base
 
             renderers = {}
@@ -95,24 +123,28 @@ def main() -> None:
                 r.render()  # compiles the kernels
                 renderers[which] = r
             totals = {w: [0.0, 0.0] for w in "AB"}
-            images = {}
+            images, ratios = {}, []
             for seed in range(2, a.seeds + 2):
+                seconds = {}
                 for which in "AB":
                     opt = variant(which)
                     r = renderers[which].derive(replace(opt, spp=a.spp, seed=seed))
                     c = time.process_time()
                     img = r.render()
-                    totals[which][0] += time.process_time() - c
+                    seconds[which] = time.process_time() - c
+                    totals[which][0] += seconds[which]
                     totals[which][1] += rel_mse(img.image, ref_image) - ref_err
                     images[which] = img.image
-                if part == "variance" and not np.array_equal(images["A"], images["B"]):
-                    print(f"{name} variance: the images of seed {seed} differ", flush=True)
-            if part in patches:
-                setattr(B, patches[part][0], new)
+                ratios.append(seconds["B"] / seconds["A"])
+                if part in ("variance", "reverse") and not np.array_equal(images["A"], images["B"]):
+                    print(f"{name} {part}: the images of seed {seed} differ", flush=True)
+            for (fn, _), current in zip(patches.get(part, []), new or []):
+                setattr(B, fn, current)
             (ca, ea), (cb, eb) = totals["A"], totals["B"]
             print(f"{name} {part}: A {ca:.2f} s CPU, relMSE {ea / a.seeds:.4g}; B {cb:.2f} s CPU, relMSE "
                   f"{eb / a.seeds:.4g}; B / A: seconds {cb / ca:.3f}, error {eb / ea:.3f}, error x seconds "
-                  f"{eb * cb / (ea * ca):.3f} ({a.seeds} seeds, {a.spp} spp)", flush=True)
+                  f"{eb * cb / (ea * ca):.3f} ({a.seeds} seeds, {a.spp} spp); B / A of each seed's seconds: median "
+                  f"{statistics.median(ratios):.3f}", flush=True)
             if not math.isfinite(eb / ea):
                 print(f"{name} {part}: no error to compare", flush=True)
 

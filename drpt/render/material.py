@@ -527,8 +527,57 @@ class MaterialTable:
                 f, pdf = case.run(evaluate, (f, pdf))
         return f, pdf
 
-    def sample(self, si: Interaction, u1: Float, u2: Array2f) -> tuple[Array3f, BSDFSample]:
-        """Sample a world direction; returns it and the local :class:`BSDFSample`."""
+    def eval_pdf_rev(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float, Float]:
+        """:meth:`eval_pdf` toward ``wo`` and the reverse density: the density of sampling
+        ``si.wi`` seen from ``wo`` (what ``eval_pdf`` of ``si`` with ``wi = wo`` toward
+        ``si.wi`` returns), in one dispatch over the kinds (bidirectional path tracing's MIS
+        weights ask for both at every connection). Each lobe's ``pdf`` runs twice in its
+        case's frame, with the directions swapped; where a two-sided frame would flip
+        between the two (``wi`` and ``wo`` on opposite sides of the shading normal) the
+        swapped pair is mirrored in ``z``, as :func:`_z_flipped` mirrors the frame (an
+        isotropic lobe's density is the same in any frame of the flipped normal).
+        Perturbed frames (normal and bump maps) depend on ``wi``: tables with them take
+        the two evaluations."""
+        if self._pkinds:
+            f, pdf = self.eval_pdf(si, wo)
+            rev_si = copy.copy(si)
+            rev_si.wi = wo
+            return f, pdf, self.eval_pdf(rev_si, si.wi)[1]
+        f, pdf, rev = Array3f(0.0), Float(0.0), Float(0.0)
+        # the lanes whose two-sided frame would flip for the reverse direction
+        across = (dr.dot(si.ns, si.wi) < 0.0) != (dr.dot(si.ns, wo) < 0.0)
+        for j in range(self.K):
+            row, w, present = self._slot(si, j)
+            for case in self._cases(si, j, row, present):
+                if case.bsdf.DELTA:
+                    continue  # nothing to evaluate
+                two = self._two[case.kind]
+                mirror = None if two is False else (across if two is True
+                                                    else across & dr.gather(Bool, two, row, case.mask))
+
+                def evaluate(f, pdf, rev, case=case, w=w, mirror=mirror):
+                    bsdf, mask, frame = case.bsdf, case.mask, case.frame()
+                    p = bsdf.params(case.rows, si, mask)
+                    wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
+                    fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
+                    if mirror is not None:
+                        wi_l = Array3f(wi_l.x, wi_l.y, dr.select(mirror, -wi_l.z, wi_l.z))
+                        wo_l = Array3f(wo_l.x, wo_l.y, dr.select(mirror, -wo_l.z, wo_l.z))
+                    rj = bsdf.pdf(p, wo_l, wi_l)
+                    if w is None:
+                        return dr.select(mask, fj, f), dr.select(mask, pj, pdf), dr.select(mask, rj, rev)
+                    return (dr.select(mask, dr.fma(fj, w, f), f), dr.select(mask, dr.fma(pj, w, pdf), pdf),
+                            dr.select(mask, dr.fma(rj, w, rev), rev))
+
+                f, pdf, rev = case.run(evaluate, (f, pdf, rev))
+        return f, pdf, rev
+
+    def sample(self, si: Interaction, u1: Float, u2: Array2f, rev: bool = False):
+        """Sample a world direction; returns it and the local :class:`BSDFSample`. With
+        ``rev`` (read at trace time) also the reverse density of a smooth sample: the
+        density of sampling ``si.wi`` seen from the sampled direction, as
+        :meth:`eval_pdf_rev` gives it, from the sampled lobe in its own case (0 after a Dirac
+        lobe; bidirectional path tracing's MIS weights read it)."""
         if self.K == 1:
             row, present = si.material, si.valid
         else:
@@ -548,21 +597,40 @@ class MaterialTable:
             present = si.valid & picked
         out = BSDFSample()
         wo = Array3f(0.0, 0.0, 1.0)
+        # the reverse density in the sampled lobe's case (tables with perturbed frames, which
+        # depend on wi, evaluate it after sampling)
+        rev_here = rev and not self._pkinds
+        pdf_rev = (Float(0.0),) if rev_here else ()
         for case in self._cases(si, None, row, present):
 
-            def draw(out, wo, case=case, u1=u1):
+            def draw(out, wo, *pdf_rev, case=case, u1=u1):
                 bsdf, mask, frame = case.bsdf, case.mask, case.frame()
                 p = bsdf.params(case.rows, si, mask)
-                bs = bsdf.sample(p, frame.to_local(si.wi), u1, u2)
+                wi_l = frame.to_local(si.wi)
+                bs = bsdf.sample(p, wi_l, u1, u2)
                 wo_j = frame.to_world(bs.wo)
                 if isinstance(frame, PerturbedFrame):
                     fac = frame.factor(wo_j)
                     ok = fac > 0.0
                     bs.weight, bs.pdf, bs.valid = bs.weight * fac, dr.select(ok, bs.pdf, 0.0), bs.valid & ok
-                return dr.select(mask, bs, out), dr.select(mask, wo_j, wo)
+                if pdf_rev and not bsdf.DELTA:
+                    # (the world direction back in the frame, as eval_pdf_rev reads it: the same bits)
+                    two, wo_l = self._two[case.kind], frame.to_local(wo_j)
+                    if two is not False:  # the swapped pair seen from the other side (eval_pdf_rev)
+                        mirror = (dr.dot(si.ns, si.wi) < 0.0) != (dr.dot(si.ns, wo_j) < 0.0)
+                        if two is not True:
+                            mirror &= dr.gather(Bool, two, row, mask)
+                        wi_l = Array3f(wi_l.x, wi_l.y, dr.select(mirror, -wi_l.z, wi_l.z))
+                        wo_l = Array3f(wo_l.x, wo_l.y, dr.select(mirror, -wo_l.z, wo_l.z))
+                    pdf_rev = (dr.select(mask & ~bs.delta, bsdf.pdf(p, wo_l, wi_l), pdf_rev[0]),)
+                return (dr.select(mask, bs, out), dr.select(mask, wo_j, wo)) + pdf_rev
 
-            out, wo = case.run(draw, (out, wo))
+            out, wo, *pdf_rev = case.run(draw, (out, wo, *pdf_rev))
         out.valid &= present
+        if rev and not rev_here:
+            rev_si = copy.copy(si)
+            rev_si.wi = wo
+            pdf_rev = [dr.select(out.delta, 0.0, self.eval_pdf(rev_si, si.wi)[1])]
         if self.K > 1 and not self.is_specular_only():
             smooth = out.valid & ~out.delta
             # A smooth sample weighs the whole mixture: f_mix / pdf_mix. Where the chosen
@@ -575,11 +643,19 @@ class MaterialTable:
                 single = smooth if blends is False else smooth & ~dr.gather(Bool, blends, si.material, smooth)
                 out.pdf = dr.select(single, out.pdf * chosen_w, out.pdf)
                 out.valid &= ~single | (out.pdf > 0.0)
+                if rev_here:
+                    pdf_rev = [dr.select(single, pdf_rev[0] * chosen_w, pdf_rev[0])]
             if blends is not False:
                 mixed = smooth if blends is True else smooth & dr.gather(Bool, blends, si.material, smooth)
-                f, pdf = self.eval_pdf(si, wo)
+                if rev_here:
+                    f, pdf, mixed_rev = self.eval_pdf_rev(si, wo)
+                    pdf_rev = [dr.select(mixed, mixed_rev, pdf_rev[0])]
+                else:
+                    f, pdf = self.eval_pdf(si, wo)
                 ok = mixed & (pdf > 0.0)
                 out.weight = dr.select(mixed, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0), out.weight)
                 out.pdf = dr.select(mixed, pdf, out.pdf)
                 out.valid &= ~mixed | ok
+        if rev:
+            return wo, out, pdf_rev[0]
         return wo, out

@@ -128,12 +128,16 @@ class NoMaterials:
         n = dr.width(si.valid)
         return dr.zeros(Array3f, n), dr.zeros(Float, n)
 
-    def sample(self, si: Interaction, u1: Float, u2: Array2f) -> tuple[Array3f, BSDFSample]:
+    def eval_pdf_rev(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float, Float]:
+        n = dr.width(si.valid)
+        return dr.zeros(Array3f, n), dr.zeros(Float, n), dr.zeros(Float, n)
+
+    def sample(self, si: Interaction, u1: Float, u2: Array2f, rev: bool = False):
         n = dr.width(si.valid)
         up = dr.full(Array3f, [0.0, 0.0, 1.0], n)
-        return up, BSDFSample(wo=Array3f(up), weight=dr.zeros(Array3f, n), pdf=dr.zeros(Float, n),
-                              valid=dr.zeros(Bool, n), delta=dr.zeros(Bool, n),
-                              eta=dr.full(Float, 1.0, n))
+        bs = BSDFSample(wo=Array3f(up), weight=dr.zeros(Array3f, n), pdf=dr.zeros(Float, n),
+                        valid=dr.zeros(Bool, n), delta=dr.zeros(Bool, n), eta=dr.full(Float, 1.0, n))
+        return (up, bs, dr.zeros(Float, n)) if rev else (up, bs)
 
     def is_delta(self, si: Interaction) -> Bool:
         return dr.zeros(Bool, dr.width(si.valid))
@@ -379,9 +383,20 @@ class DeviceScene:
         """``f * |cos|`` toward world ``wo`` and the density of sampling it."""
         return self.materials.eval_pdf(si, wo)
 
+    def eval_bsdf_rev(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float, Float]:
+        """:meth:`eval_bsdf` and the reverse density (of sampling ``si.wi`` seen from
+        ``wo``), in one evaluation (:meth:`~drpt.render.material.MaterialTable.eval_pdf_rev`)."""
+        return self.materials.eval_pdf_rev(si, wo)
+
     def sample_bsdf(self, si: Interaction, u1: Float, u2: Array2f):
         """A world direction and its :class:`~drpt.render.bsdf.BSDFSample`."""
         return self.materials.sample(si, u1, u2)
+
+    def sample_bsdf_rev(self, si: Interaction, u1: Float, u2: Array2f):
+        """:meth:`sample_bsdf` and the reverse density of the sampled direction (of ``si.wi``
+        seen from it; 0 after a Dirac lobe), in one dispatch
+        (:meth:`~drpt.render.material.MaterialTable.sample`'s ``rev``): ``(wo, bs, pdf_rev)``."""
+        return self.materials.sample(si, u1, u2, rev=True)
 
     def is_delta(self, si: Interaction) -> Bool:
         """Lanes whose material is a delta lobe (glass, mirror)."""

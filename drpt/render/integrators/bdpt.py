@@ -121,7 +121,9 @@ follows in O(1):
 
 A connection of light vertex ``y`` and camera vertex ``z`` then has weight ``1 /
 (1 + w_l + w_c)`` with ``w_l = m(p_z(y)) (dvcm_y + dvc_y m(p_rev,y))``, ``p_z(y)``
-the area density of ``y`` sampled from ``z``, and ``w_c`` likewise. Next-event
+the area density of ``y`` sampled from ``z``, and ``w_c`` likewise. The reverse densities
+(``p_rev``) come with the evaluation or the sample that needs them, in the same dispatch over
+the material kinds (:func:`eval_both`, :func:`sample_both`), not from a second one. Next-event
 estimation and emitter hits use the same quantities. Spheres' next-event
 estimation samples the cone they subtend; the weights use the uniform area
 density the light subpath starts with for every strategy (as pbrt does): still
@@ -156,7 +158,6 @@ estimates the two parts' variances apart (a camera part's is that of a mean of
 
 from __future__ import annotations
 
-import copy
 import math
 
 import drjit as dr
@@ -224,11 +225,19 @@ def mis(x: Float) -> Float:
     return x * x
 
 
-def with_wi(si: Interaction, wi: Array3f) -> Interaction:
-    """``si`` seen from direction ``wi`` (for a BSDF's reverse density)."""
-    out = copy.copy(si)
-    out.wi = wi
-    return out
+def eval_both(scene: DeviceScene, si: Interaction, wo: Array3f) -> tuple[Array3f, Float, Float]:
+    """``(f, pdf, pdf_rev)`` at ``si`` toward ``wo``: the BSDF value, its density of ``wo`` and
+    the reverse density (of ``si.wi`` seen from ``wo``), which the MIS weights of a
+    connection, a splat or next-event estimation read, in one evaluation
+    (:meth:`~drpt.render.scene.DeviceScene.eval_bsdf_rev`)."""
+    return scene.eval_bsdf_rev(si, wo)
+
+
+def sample_both(scene: DeviceScene, si: Interaction, u_lobe: Float, u_bsdf: Array2f):
+    """``(wo, bs, pdf_rev)``: a BSDF sample at ``si`` and its reverse density (of ``si.wi``
+    seen from ``wo``, which :func:`scatter_update` reads), in one dispatch
+    (:meth:`~drpt.render.scene.DeviceScene.sample_bsdf_rev`)."""
+    return scene.sample_bsdf_rev(si, u_lobe, u_bsdf)
 
 
 def scatter_update(dvcm: Float, dvc: Float, pdf: Float, pdf_rev: Float, cos_out: Float,
@@ -636,8 +645,7 @@ class BDPTIntegrator:
         scene, cam = self.scene, self.camera
         x, y, wc, _dist, importance, visible = cam.connect(si.p)
         ok = active & visible
-        f, _ = scene.eval_bsdf(si, wc)
-        _, rev = scene.eval_bsdf(with_wi(si, wc), si.wi)
+        f, _, rev = eval_both(scene, si, wc)
         corr, sides = correction(si, wc)
         pdf_cam = importance * dr.abs(dr.dot(si.ng, wc))
         w = self._weight(connection_weight(pdf_cam, dvcm, dvc, rev, Float(0.0), Float(0.0), Float(0.0),
@@ -709,8 +717,7 @@ class BDPTIntegrator:
         ok = active & (cos_front > 0.0) & (cos_l > 0.0) & (ls.pdf_area > 0.0)
         pdf_a = self.origin_pdf(face, active)
         pdf_w = pdf_a * dist2 / cos_l  # the density the weights use (uniform on a sphere)
-        f, fwd = scene.eval_bsdf(si, wo)
-        _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
+        f, fwd, rev = eval_both(scene, si, wo)
         emit = self.pick * pdf_a * cos_front / math.pi
         cos_c = dr.abs(dr.dot(si.ng, wo))
         w = self._weight(nee_weight(fwd, pdf_w, emit, cos_c, cos_l, dvcm, dvc, rev, self.k), 1, t)
@@ -729,8 +736,7 @@ class BDPTIntegrator:
         scene = self.scene
         total = dr.zeros(Array3f, dr.width(active))
         for light, ds in zip(self.deltas, scene.delta_emitters(si.p)):
-            f, _ = scene.eval_bsdf(si, ds.wo)
-            _, rev = scene.eval_bsdf(with_wi(si, ds.wo), si.wi)
+            f, _, rev = eval_both(scene, si, ds.wo)
             cos_c = dr.abs(dr.dot(si.ng, ds.wo))
             # the light's area density is 1 (a Dirac): as a solid angle dist^2, or 1 for a
             # directional light (infinitely far: no distance, no cosine)
@@ -751,8 +757,7 @@ class BDPTIntegrator:
         """``s = 1`` for the sky: a direction drawn by its density (as the path tracer's)."""
         scene = self.scene
         wo, radiance, pdf = scene.sample_environment(next_2d(rng), active)
-        f, fwd = scene.eval_bsdf(si, wo)
-        _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
+        f, fwd, rev = eval_both(scene, si, wo)
         emit = self.pick * pdf * self.disk_pdf
         w = self._weight(nee_weight(fwd, pdf, emit, dr.abs(dr.dot(si.ng, wo)), Float(1.0), dvcm, dvc, rev,
                                     self.k), 1, t)
@@ -785,10 +790,8 @@ class BDPTIntegrator:
         to = lv.p - si.p
         dist2 = dr.squared_norm(to)
         w = to * dr.rsqrt(dist2)
-        f_c, fwd_c = scene.eval_bsdf(si, w)
-        _, rev_c = scene.eval_bsdf(with_wi(si, w), si.wi)
-        f_l, fwd_l = scene.eval_bsdf(lv, -w)
-        _, rev_l = scene.eval_bsdf(with_wi(lv, -w), lv.wi)
+        f_c, fwd_c, rev_c = eval_both(scene, si, w)
+        f_l, fwd_l, rev_l = eval_both(scene, lv, -w)
         corr, sides = correction(lv, -w)
         inv_d2 = dr.rcp(dist2)
         pdf_l = fwd_c * dr.abs(dr.dot(lv.ng, w)) * inv_d2
@@ -968,8 +971,7 @@ class BDPTIntegrator:
 
                 u_lobe = rng.next_float32()
                 u_bsdf = next_2d(rng)
-                wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
-                _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
+                wo, bs, rev = sample_both(scene, si, u_lobe, u_bsdf)
                 corr, sides = correction(si, wo)
                 dvcm, dvc = scatter_update(dvcm, dvc, bs.pdf, rev, dr.abs(dr.dot(si.ng, wo)), bs.delta)
                 beta = beta * bs.weight * (corr * dr.square(bs.eta))
@@ -1067,8 +1069,7 @@ class BDPTIntegrator:
 
             u_lobe = rng.next_float32()
             u_bsdf = next_2d(rng)
-            wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
-            _, rev = scene.eval_bsdf(with_wi(si, wo), si.wi)
+            wo, bs, rev = sample_both(scene, si, u_lobe, u_bsdf)
             dvcm, dvc = scatter_update(dvcm, dvc, bs.pdf, rev, dr.abs(dr.dot(si.ng, wo)), bs.delta)
             if merge:
                 # a Dirac lobe sampled at the merged vertex (plastic's coating, a mask's
