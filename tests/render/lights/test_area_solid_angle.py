@@ -11,7 +11,7 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 from drpt.render.lights import area as area_mod
 from drpt.render.lights.area import AreaLights
 from drpt.render.surface import SurfaceData
-from drpt.scene.model import Material, PerspectiveCamera, Scene, Triangles
+from drpt.scene.model import Material, Medium, PerspectiveCamera, Scene, Triangles
 
 CAM = PerspectiveCamera((0, 0, 5), (0, 0, -1), (0, 1, 0), 40)
 #: a unit square light at z = 1 facing down (two triangles), and one small triangle far off
@@ -19,9 +19,9 @@ QUAD = [[(0, 0, 1), (0, 1, 1), (1, 1, 1)], [(0, 0, 1), (1, 1, 1), (1, 0, 1)],
         [(5, 5, 1), (5, 5.01, 1), (5.01, 5, 1)]]
 
 
-def _lights(mode, tris=QUAD):
+def _lights(mode, tris=QUAD, media=()):
     scene = Scene(path=None, camera=CAM, materials=[Material("e", emission=(1, 1, 1))],
-                  triangles=Triangles(np.array(tris, float), np.zeros(len(tris), np.int32)))
+                  triangles=Triangles(np.array(tris, float), np.zeros(len(tris), np.int32)), media=list(media))
     return AreaLights(scene, SurfaceData(scene), triangle_sampling=mode)
 
 
@@ -46,6 +46,7 @@ def _refs(rng, n):
 def test_the_modes_choose_the_technique():
     assert _lights("solid-angle").spherical and not _lights("area").spherical
     assert not _lights("auto").spherical  # (no media)
+    assert _lights("auto", media=[Medium("fog")]).spherical
 
 
 def test_mis_density_at_a_hit_is_the_sampled_density():
