@@ -1,12 +1,14 @@
 """Operation count of the largest traced kernels of one render: a timing-free
 check that a change leaves a scene's kernels as they were.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/kernel_ops.py SCENE [MODE] [ACCEL] [SAMPLER] [INTEGRATOR] [LIGHTS]
+    PYTHONPATH=. .venv/bin/python benchmarks/kernel_ops.py SCENE [MODE] [ACCEL] [SAMPLER] [INTEGRATOR] [LIGHTS] \
+        [TRIANGLES]
 
 ``MODE`` is the material mode (``--bsdf``, default ``auto``), ``ACCEL`` the
 accelerator (default ``auto``), ``SAMPLER`` the ``--sampler`` (default
 ``independent``), ``INTEGRATOR`` the ``--integrator`` (default ``path``), ``LIGHTS`` the
-``--light-sampler`` (default ``mixed``, the renderer's).
+``--light-sampler`` (default ``mixed``, the renderer's), ``TRIANGLES`` the ``--triangle-sampling``
+(default ``auto``, the renderer's).
 Renders 32x32 at 4 spp with Dr.Jit's kernel history on and prints the
 operation counts of the three largest JIT kernels (the fused path kernel is
 the largest). Run it from each checkout's root with
@@ -39,15 +41,16 @@ def main(argv: list[str]) -> int:
     sampler = argv[3] if len(argv) > 3 else "independent"
     integrator = argv[4] if len(argv) > 4 else "path"
     lights = argv[5] if len(argv) > 5 else RenderOptions.light_sampler
+    triangles = argv[6] if len(argv) > 6 else RenderOptions.triangle_sampling
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     r = Renderer(load_scene(scene_file), RenderOptions(width=32, height=32, spp=4, bsdf=mode, accel=accel,
                                                        sampler=sampler, integrator=integrator,
-                                                       light_sampler=lights,
+                                                       light_sampler=lights, triangle_sampling=triangles,
                                                        progress=False))
     dr.kernel_history_clear()
     r.render()
     ops = sorted(k.get("operation_count", 0) for k in dr.kernel_history() if k.get("type") == dr.KernelType.JIT)
-    print(scene_file, mode, accel, sampler, integrator, lights, ops[-3:])
+    print(scene_file, mode, accel, sampler, integrator, lights, triangles, ops[-3:])
     return 0
 
 

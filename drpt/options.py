@@ -44,6 +44,8 @@ LIGHT_TRACED = ("ptracer", "bdpt")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
 LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh", "pilot")  # drpt.render.lights.selection
+#: how next-event estimation samples an emissive triangle (drpt.render.lights.area.TRIANGLE_SAMPLING)
+TRIANGLE_SAMPLING = ("auto", "area", "solid-angle")
 #: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy samplers, and
 #: Mitsuba's stratified, multi-jittered and orthogonal-array samplers
 SAMPLERS = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "orthogonal")
@@ -87,6 +89,11 @@ class RenderOptions:
     #: how next-event estimation picks an area light: "power" (each emissive primitive by its
     #: power) or "uniform" (Mitsuba's: each emitter alike, then a point by area)
     light_sampler: str = "mixed"
+    #: how next-event estimation samples a point on an emissive triangle: "area" (uniform
+    #: on it, Mitsuba's), "solid-angle" (uniform in the solid angle it subtends, where that
+    #: is neither tiny nor near a hemisphere) or "auto" (solid-angle where some emissive
+    #: triangle is large in the scene), :func:`drpt.render.lights.area.triangle_sampling_rule`
+    triangle_sampling: str = "auto"
     #: what the camera passes' random numbers are drawn from (:mod:`drpt.render.sampler`):
     #: "independent" (a PCG32 stream per lane) or a low-discrepancy sampler's name
     sampler: str = "independent"
@@ -169,6 +176,7 @@ class RenderOptions:
                                      ("--mode", self.mode, MODES),
                                      ("--env-sampling", self.env_sampling, ENV_SAMPLING),
                                      ("--light-sampler", self.light_sampler, LIGHT_SAMPLERS),
+                                     ("--triangle-sampling", self.triangle_sampling, TRIANGLE_SAMPLING),
                                      ("--sampler", self.sampler, SAMPLERS)):
             if value not in allowed:
                 raise DrptError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")

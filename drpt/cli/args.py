@@ -36,6 +36,7 @@ from ..options import (
     MODES,
     SAMPLERS,
     TARGET_SPP,
+    TRIANGLE_SAMPLING,
     PathOptions,
     RenderOptions,
     parse_accel,
@@ -248,6 +249,15 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                  "by a light BVH: by their importance at the shading point; the "
                                  "others as mixed) "
                                  f"(default {base.light_sampler})")
+        parser.add_argument("--triangle-sampling", dest="triangle_sampling", choices=TRIANGLE_SAMPLING,
+                            default=base.triangle_sampling,
+                            help="how next-event estimation samples a point on an emissive "
+                                 "triangle: area (uniform on it, Mitsuba's), solid-angle (uniform "
+                                 "in the solid angle it subtends at the shading point, where that is "
+                                 "neither tiny nor near a hemisphere; light tracing and bdpt stay "
+                                 "on area) or auto (solid-angle where some emissive triangle's "
+                                 "longest edge is at least 5%% of the scene's diagonal) "
+                                 f"(default {base.triangle_sampling})")
     if want("filter"):
         parser.add_argument("--filter", dest="filter", metavar="box|tent|gaussian", action=_Given,
                             default=d["filter"],
@@ -409,6 +419,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          wavefront_tail=get("wavefront_tail", base.wavefront_tail),
                          env_sampling=get("env_sampling", base.env_sampling),
                          light_sampler=get("light_sampler", base.light_sampler),
+                         triangle_sampling=get("triangle_sampling", base.triangle_sampling),
                          sampler=get("sampler") or base.sampler,
                          jitter=base.jitter if get("jitter") is None else get("jitter") == "on",
                          strength=get("strength") or base.strength,

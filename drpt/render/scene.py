@@ -216,7 +216,8 @@ class DeviceScene:
             uv_aov = any(k == "uv" for _, k in getattr(options, "aovs", ()))
             self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None or uv_aov,
                                         tangents=self.materials.tangents)
-        self.area_lights = AreaLights(scene, self.surfaces, self.materials, sampler=options.light_sampler)
+        self.area_lights = AreaLights(scene, self.surfaces, self.materials, sampler=options.light_sampler,
+                                      triangle_sampling=options.triangle_sampling)
         #: the emissive surfaces alone, where they are few triangles
         #: (:func:`emissive_inline`), else None
         self.emissive = emissive_inline(scene)

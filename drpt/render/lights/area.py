@@ -28,6 +28,22 @@ sphere, ``pdf_A = P(k) / (4 pi radius^2)``. :meth:`AreaLights.pdf_sphere`
 is the same density for a point a ray hit (MIS). A scene without emissive
 spheres traces no sphere code.
 
+Next-event estimation (:meth:`AreaLights.sample_direction`) can instead sample a triangle
+by the solid angle it subtends (``--triangle-sampling``, :func:`triangle_sampling_rule`):
+a direction uniform in its spherical triangle seen from the shading point (Arvo's warp,
+:func:`drpt.render.warp.spherical_triangle_sample`), the point where it meets the
+triangle, solid-angle density ``P(k) / omega``. That density has no ``r^2 / cos``, which
+is unbounded at points near the light (in a medium: arbitrarily near). It is used where the
+solid angle ``omega`` lies in :data:`~drpt.render.warp.SPHERICAL_MIN` ..
+:data:`~drpt.render.warp.SPHERICAL_MAX` (:attr:`SphericalTriangle.sampled
+<drpt.render.warp.SphericalTriangle.sampled>`), area sampling elsewhere; the density of a
+BSDF-sampled ray that hits the triangle (:meth:`AreaLights.pdf_direction`, for MIS)
+applies the same rule from the ray's origin, so that the two techniques' densities agree
+(up to the float rounding of that origin, at the rule's bounds). Light tracing and bdpt
+(:meth:`AreaLights.sample`, :meth:`DeviceScene.pdf_area_emitter
+<drpt.render.scene.DeviceScene.pdf_area_emitter>`) weigh their paths by area densities
+and stay on area sampling.
+
 A textured emitter (Mitsuba's ``area`` with a bitmap ``radiance``) is weighed
 by its texture's mean luminance and gives the texture's radiance at the
 sampled point's uv (Mitsuba samples such an emitter by the texture instead:
@@ -58,7 +74,14 @@ from ...scene.model import Scene
 from ..spawn import origin as spawn_origin
 from ..spawn import sphere_error, triangle_point
 from ..surface import SurfaceData
-from ..warp import Frame, square_to_uniform_sphere, square_to_uniform_triangle
+from ..warp import (
+    Frame,
+    SphericalTriangle,
+    ray_triangle_barycentrics,
+    spherical_triangle_sample,
+    square_to_uniform_sphere,
+    square_to_uniform_triangle,
+)
 from . import EmitterSample
 from .light_bvh import area_light_bvh
 
@@ -105,7 +128,8 @@ class AreaLights:
     delta = False
     infinite = False
 
-    def __init__(self, scene: Scene, surfaces: SurfaceData, materials=None, sampler: str = "power"):
+    def __init__(self, scene: Scene, surfaces: SurfaceData, materials=None, sampler: str = "power",
+                 triangle_sampling: str = "area"):
         tris, sph = scene.triangles, scene.spheres
         emission = np.array([m.emission for m in scene.materials], float).reshape(-1, 3)
         self.surfaces = surfaces
@@ -117,6 +141,10 @@ class AreaLights:
         self.n_tri = len(tris)
         self.n_sph = len(sph)
         self.has_spheres = self.has_triangles = False
+        #: next-event estimation samples a triangle by its spherical triangle where its
+        #: solid angle allows (:attr:`drpt.render.warp.SphericalTriangle.sampled`); light
+        #: tracing and :meth:`sample` keep to area sampling
+        self.spherical = False
         if not (len(tris) + len(sph)) or not len(emission):
             return
         area = np.zeros(0)
@@ -153,6 +181,7 @@ class AreaLights:
         self.le = Array3f(*(Float(emission[mats[ids], c].astype(np.float32)) for c in range(3)))
         self.has_spheres = bool((ids >= self.n_tri).any())
         self.has_triangles = bool((ids < self.n_tri).any())
+        self.spherical = self.has_triangles and triangle_sampling_rule(triangle_sampling, scene)
         if self.has_spheres:
             # per sphere: its selection probability P(k) (its area density is P(k) / 4 pi r^2)
             self.sph_prob = Float(prob[self.n_tri:].astype(np.float32))
@@ -196,6 +225,8 @@ class AreaLights:
         self._slot = UInt32(slot)
         tri = full[:self.n_tri] / np.where(full[:self.n_tri] > 0, self._area[:self.n_tri], 1.0)
         self.nee_pdf_area = Float(tri.astype(np.float32)) if self.n_tri else Float(np.zeros(1, np.float32))
+        if self.spherical:  # each triangle's probability: the solid-angle density's numerator
+            self.nee_tri_prob = Float(full[:self.n_tri].astype(np.float32))
         if self.has_spheres:
             self.nee_sph_prob = Float(full[self.n_tri:].astype(np.float32))
 
@@ -213,19 +244,29 @@ class AreaLights:
         subtends), with the solid-angle density times the bound slot probability."""
         face = dr.gather(UInt32, self.ids, slot, active)
         le = dr.gather(Array3f, self.le, slot, active)
-        ls = self._point(face, u, le, active, ref if self.has_spheres else None,
-                         self.nee_pdf_area, getattr(self, "nee_sph_prob", None))
+        ls = self._point(face, u, le, active, ref if self.has_spheres or self.spherical else None,
+                         self.nee_pdf_area, getattr(self, "nee_sph_prob", None),
+                         getattr(self, "nee_tri_prob", None))
         return toward(ref, ls, active)
 
     def pdf_direction(self, si, d: Array3f, active: Bool) -> Float:
         """The density of :meth:`sample_direction` for the point ``si`` a ray of unit
         direction ``d`` hit at distance ``si.t`` (0 where it is not a slot's primitive)."""
-        return self._pdf_hit(si, d, active, self.nee_pdf_area, getattr(self, "nee_sph_prob", None))
+        return self._pdf_hit(si, d, active, self.nee_pdf_area, getattr(self, "nee_sph_prob", None),
+                             getattr(self, "nee_tri_prob", None))
 
-    def _pdf_hit(self, si, d: Array3f, active: Bool, table: Float, sph_prob) -> Float:
+    def _pdf_hit(self, si, d: Array3f, active: Bool, table: Float, sph_prob, tri_prob=None) -> Float:
         pdf_a = self.pdf_area(si.prim, active, table)
         sees_light = active & (pdf_a > 0.0)
         pdf = dr.select(sees_light, pdf_a * dr.square(si.t) / dr.abs(dr.dot(si.ng, d)), 0.0)
+        if tri_prob is not None:  # the spherical triangle seen from where the ray came from
+            s = self.surfaces
+            face = dr.select(sees_light, si.prim, 0)
+            st = SphericalTriangle(dr.gather(Array3f, s.p0, face, sees_light),
+                                   dr.gather(Array3f, s.e1, face, sees_light),
+                                   dr.gather(Array3f, s.e2, face, sees_light), si.p - d * si.t)
+            solid = sees_light & st.sampled
+            pdf = dr.select(solid, dr.gather(Float, tri_prob, face, solid) / st.omega, pdf)
         if self.has_spheres:
             ref = si.p - d * si.t  # where the ray came from
             is_sph, pdf_s = self.pdf_sphere(si.prim, si.p, ref, d, si.t, active & si.valid, sph_prob)
@@ -262,16 +303,21 @@ class AreaLights:
         return self._point(face, u, le, active, ref, self.pdf_area_table, getattr(self, "sph_prob", None))
 
     def _point(self, face: UInt32, u: Array2f, le: Array3f, active: Bool, ref, table: Float,
-               sph_prob) -> LightSample:
+               sph_prob, tri_prob=None) -> LightSample:
         """A point on primitive ``face`` with the density tables ``table`` (per triangle,
-        area density) and ``sph_prob`` (per sphere, its probability)."""
+        area density), ``sph_prob`` (per sphere, its probability) and ``tri_prob`` (per
+        triangle, its probability: sampled by the spherical triangle seen from ``ref``
+        where :attr:`SphericalTriangle.sampled <drpt.render.warp.SphericalTriangle.sampled>`;
+        None: by area)."""
         if not self.has_spheres:
-            p, n_front, ng, err, pdf, le = self._triangle_point(face, u, le, active, table)
-            return LightSample(p, n_front, ng, le, pdf, active, err)
+            p, n_front, ng, err, pdf, le, solid = self._triangle_point(face, u, le, active, table, ref, tri_prob)
+            return LightSample(p, n_front, ng, le, pdf, active, err, solid)
         is_sph = face >= self.n_tri
+        solid_tri = None
         if self.has_triangles:
             tri = active & ~is_sph
-            p, n_front, ng, err, pdf, le = self._triangle_point(dr.select(is_sph, 0, face), u, le, tri, table)
+            p, n_front, ng, err, pdf, le, solid_tri = self._triangle_point(dr.select(is_sph, 0, face), u, le,
+                                                                           tri, table, ref, tri_prob)
         else:
             p, n_front, ng, err, pdf = (Array3f(0.0), Array3f(0.0, 0.0, 1.0), Array3f(0.0, 0.0, 1.0),
                                         Float(0.0), Float(0.0))
@@ -284,14 +330,27 @@ class AreaLights:
         pdf = dr.select(is_sph, spdf, pdf)
         if solid is not None:
             solid = is_sph & solid
+        if solid_tri is not None:
+            solid = solid_tri if solid is None else solid | solid_tri
         return LightSample(p, n_front, ng, le, pdf, active, err, solid)
 
-    def _triangle_point(self, face: UInt32, u: Array2f, le: Array3f, active: Bool, table: Float):
+    def _triangle_point(self, face: UInt32, u: Array2f, le: Array3f, active: Bool, table: Float,
+                        ref: Array3f | None = None, tri_prob: Float | None = None):
+        """A point on triangle ``face``: ``(p, front normal, ng, p_error, density, le,
+        solid)``, ``solid`` the lanes whose density is in solid angle (None: none)."""
         s = self.surfaces
         p0 = dr.gather(Array3f, s.p0, face, active)
         e1 = dr.gather(Array3f, s.e1, face, active)
         e2 = dr.gather(Array3f, s.e2, face, active)
         b = square_to_uniform_triangle(u)
+        pdf = dr.gather(Float, table, face, active)
+        solid = None
+        if tri_prob is not None and ref is not None:
+            st = SphericalTriangle(p0, e1, e2, ref)
+            solid = active & st.sampled
+            w = spherical_triangle_sample(st, u)
+            b = dr.select(solid, ray_triangle_barycentrics(ref, w, p0, e1, e2), b)
+            pdf = dr.select(solid, dr.gather(Float, tri_prob, face, solid) / st.omega, pdf)
         p, ng, err = triangle_point(p0, e1, e2, b.x, b.y)
         n_front = ng
         if s.has_normals:
@@ -308,8 +367,7 @@ class AreaLights:
                       + dr.gather(Array2f, s.uv2, face, active) * b.y)
             material = dr.gather(UInt32, s.material, face, active)
             le = self.materials.textured_emission(material, uv, le, active)
-        pdf = dr.gather(Float, table, face, active)
-        return p, n_front, ng, err, pdf, le
+        return p, n_front, ng, err, pdf, le, solid
 
     def _sphere_point(self, j: UInt32, u: Array2f, active: Bool, ref: Array3f | None, sph_prob: Float):
         """A point on sphere ``j``: ``(p, outward normal, p_error, density, solid_angle)``."""
@@ -396,3 +454,21 @@ def cone_of(c: Array3f, r: Float, ref: Array3f):
 def cone_pdf(one_minus_cos: Float) -> Float:
     """Density of a direction uniform in a cone of ``1 - cos theta_max``."""
     return dr.select(one_minus_cos > 0.0, 1.0 / (2.0 * math.pi * dr.maximum(one_minus_cos, 1e-30)), 0.0)
+
+
+TRIANGLE_SAMPLING = ("auto", "area", "solid-angle")  # drpt.options.TRIANGLE_SAMPLING
+
+
+def triangle_sampling_rule(mode: str, scene: Scene) -> bool:
+    """Whether next-event estimation samples the emissive triangles by their spherical
+    triangles (``--triangle-sampling``): ``area`` never, ``solid-angle`` always (where the
+    solid angle allows, :attr:`~drpt.render.warp.SphericalTriangle.sampled`), ``auto`` in a
+    scene with participating media. There next-event estimation also starts at points in
+    the medium, which come arbitrarily near a light: the area density's ``r^2 / cos``
+    leaves such a point's estimate unbounded (a few bright fireflies near every light), the
+    solid angle's does not. Where only surfaces receive light, the spherical triangle's
+    extra work costs more time than it saves noise (docs/performance.md, "Emissive
+    triangles by solid angle")."""
+    if mode not in TRIANGLE_SAMPLING:
+        raise ValueError(f"triangle sampling {mode!r}: not one of {', '.join(TRIANGLE_SAMPLING)}")
+    return bool(scene.media) if mode == "auto" else mode == "solid-angle"
