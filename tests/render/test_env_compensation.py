@@ -72,8 +72,12 @@ def render(scene, spp: int, seed: int, **kw):
 
 
 def nee_environment(scene, **kw):
+    """The map next-event estimation samples (``DeviceScene.sky``); the light tracers' own
+    (``DeviceScene.environment``, :meth:`~drpt.render.scene.DeviceScene.sample_environment`)
+    is never compensated."""
     opts, scene = with_scene_settings(RenderOptions(progress=False), scene)
     r = Renderer(scene, replace(opts, **kw).validate())
+    assert r.scene.environment.env.offset == 0.0
     return r.scene.sky.env.env  # (through the map's rotation)
 
 
