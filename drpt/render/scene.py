@@ -72,6 +72,7 @@ from ..scene.model import PerspectiveCamera, Scene, Skybox
 from .bsdf import BSDFSample
 from .camera import RayCamera
 from .instrument import Instrument
+from .integrators.enclosure import media_bounded
 from .lights import EmitterSample
 from .lights.area import AreaLights, toward
 from .lights.delta import DeltaLights
@@ -177,19 +178,24 @@ class EmissiveList:
         return hit
 
 
-def env_compensated(sky: Skybox, options: RenderOptions) -> bool:
+def env_compensated(sky: Skybox, options: RenderOptions, scene: Scene | None = None) -> bool:
     """Whether next-event estimation samples ``sky`` with MIS compensation
     (:meth:`~drpt.render.lights.envmap.EnvironmentLight.compensated`): as its file says
     (``Skybox.mis_compensation``), else as ``options.env_compensation``; and only for the
     integrators that weigh that sample against BSDF and phase samples by MIS
-    (:data:`COMPENSATED_INTEGRATORS`). Compensation leaves directions below the map's
-    mean to those samples: Whitted's direct light (no MIS), and the light tracers (which
-    leave the sky by :meth:`DeviceScene.sample_environment`, the map's own luminance
-    density) keep the uncompensated density."""
+    (:data:`COMPENSATED_INTEGRATORS`), in a ``scene`` whose media (if any) all lie inside
+    closed shapes (:func:`~drpt.render.integrators.enclosure.media_bounded`). Compensation
+    leaves directions below the map's mean to those samples: Whitted's direct light (no
+    MIS), the light tracers (which leave the sky by :meth:`DeviceScene.sample_environment`,
+    the map's own luminance density) and volpath in a medium that reaches beyond the shapes
+    (where a sampled ray scatters before it reaches the sky, so next-event estimation alone
+    sees it, with its MIS weight: Mitsuba's convention) keep the uncompensated density."""
     wanted = getattr(sky, "mis_compensation", None)
     if wanted is None:
         wanted = options.env_compensation == "on"
-    return bool(wanted) and options.integrator in COMPENSATED_INTEGRATORS
+    if not (wanted and options.integrator in COMPENSATED_INTEGRATORS):
+        return False
+    return scene is None or not scene.media or media_bounded(scene)
 
 
 def emissive_inline(scene: Scene) -> EmissiveList | None:
@@ -258,7 +264,7 @@ class DeviceScene:
             self.warnings += self.environment.warnings
             if options.env_sampling == "uniform":
                 self.environment = UniformSphereSampling(self.environment)
-            elif env_compensated(sky, options):
+            elif env_compensated(sky, options, scene):
                 nee_environment = self.environment.compensated()
             if getattr(sky, "rotation", None) is not None:
                 self.environment = RotatedEnvironment(self.environment, sky.rotation)

@@ -10,7 +10,8 @@ complement (Whitted's direct light, next-event estimation alone, made to use the
 density) darkens the image where the sky below its mean lit it (its mean by 3%), and the same
 test reads |z| > 8 there (36.6 measured). The integrators
 that sample the sky on their own (whitted, ptracer, bdpt) keep the uncompensated density:
-their images are the same bit for bit with compensation on or off.
+their images are the same bit for bit with compensation on or off. So does volpath in a
+medium that reaches beyond the shapes (the sky has no MIS complement there).
 """
 
 from __future__ import annotations
@@ -96,6 +97,23 @@ def test_xml_and_option_decide(tmp_path):
     assert nee_environment(on, integrator="volpath").offset > 0.0
     for integrator in ("whitted", "ptracer", "bdpt"):
         assert nee_environment(on, integrator=integrator).offset == 0.0
+
+
+def test_not_in_a_medium_beyond_the_shapes(tmp_path):
+    """In a medium that reaches beyond every shape (here the camera's) a sampled ray scatters
+    before it reaches the sky, so the sky has no MIS complement there: volpath keeps the
+    uncompensated density. Inside a closed ``null`` sphere the medium is bounded: compensated."""
+    medium = ('<medium id="fog" type="homogeneous"><rgb name="sigma_t" value="0.05"/>'
+              '<rgb name="albedo" value="0.5"/></medium>')
+    camera = SCENE.replace("<sampler", '<ref name="medium" id="fog"/><sampler').replace(
+        "<emitter type=\"envmap\">", medium + "<emitter type=\"envmap\">")
+    (tmp_path / "fog.xml").write_text(camera.format(sky=SKY, comp=""))
+    assert nee_environment(load_scene(tmp_path / "fog.xml"), integrator="volpath").offset == 0.0
+    ball = ('<shape type="sphere"><float name="radius" value="2.5"/><bsdf type="null"/>'
+            '<ref name="interior" id="fog"/></shape>')
+    inside = SCENE.replace("<emitter type=\"envmap\">", medium + ball + "<emitter type=\"envmap\">")
+    (tmp_path / "ball.xml").write_text(inside.format(sky=SKY, comp=""))
+    assert nee_environment(load_scene(tmp_path / "ball.xml"), integrator="volpath").offset > 0.0
 
 
 @pytest.mark.slow
