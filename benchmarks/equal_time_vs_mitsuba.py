@@ -33,7 +33,7 @@ Output: a Markdown table (stdout), the skipped scenes, and with ``--json FILE`` 
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/equal_time_vs_mitsuba.py [--rounds 5]
 [--min-size 192] [--max-samples 1000000] [--only WORD,...] [--skip WORD,...] [--no-corpus]
-[--json FILE] [--light-sampler RULE]
+[--json FILE] [--light-sampler RULE] [--env-compensation on|off]
 """
 
 from __future__ import annotations
@@ -139,16 +139,19 @@ def setup(case: Case, min_size: int, max_samples: int):
     return scene, replace(opts, spp=spp), source
 
 
-def prepare(case: Case, min_size: int, max_samples: int, light_sampler: str | None = None):
+def prepare(case: Case, min_size: int, max_samples: int, light_sampler: str | None = None,
+            env_compensation: str | None = None):
     """``(ways, info)`` for :func:`~drpt.tools.converge.efficiency_rounds`: drpt's and Mitsuba's
     ``render(seed) -> image`` at the same size, spp and settings (:func:`setup`; drpt with
-    ``light_sampler`` where given, else its default). Raises DrptError where drpt refuses the
-    scene (or would not path trace it)."""
+    ``light_sampler`` and ``env_compensation`` where given, else its defaults). Raises DrptError
+    where drpt refuses the scene (or would not path trace it)."""
     from drpt.tools.converge import make_drpt, make_mitsuba
 
     scene, opts, source = setup(case, min_size, max_samples)
     if light_sampler:
         opts = replace(opts, light_sampler=light_sampler)
+    if env_compensation:
+        opts = replace(opts, env_compensation=env_compensation)
     spp = opts.spp
     _, drpt_render = make_drpt(scene, opts)
     mits_render, _ = make_mitsuba(scene, opts.width, opts.height, opts.path.max_depth,
@@ -186,6 +189,8 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--no-corpus", action="store_true")
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--light-sampler", default=None, help="drpt's --light-sampler (default: drpt's default)")
+    ap.add_argument("--env-compensation", default=None, choices=("on", "off"),
+                    help="drpt's --env-compensation (default: drpt's default)")
     a = ap.parse_args(argv)
     ensure()
     set_mitsuba_variant()
@@ -197,7 +202,7 @@ def main(argv=None) -> list[dict]:
                           [w for w in a.skip.split(",") if w]):
             t0 = time.perf_counter()
             try:
-                ways, info = prepare(case, a.min_size, a.max_samples, a.light_sampler)
+                ways, info = prepare(case, a.min_size, a.max_samples, a.light_sampler, a.env_compensation)
                 res = efficiency_rounds(ways, a.rounds)
             except DrptError as e:
                 skipped.append((case.name, str(e).splitlines()[0].replace(f"{CORPUS}/", "")))
@@ -230,7 +235,8 @@ def _write_json(a, rows: list[dict], skipped: list, load0: float) -> None:
 def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
     lines = [f"commit {getattr(a, 'commit', None) or _commit()}, {_cpu()}, {os.cpu_count()} cores; {a.rounds} rounds, "
              f"min size {a.min_size}, max samples {a.max_samples}; load average {load0:.1f} at the start"
-             + (f"; drpt's light sampler {a.light_sampler}" if getattr(a, "light_sampler", None) else ""),
+             + (f"; drpt's light sampler {a.light_sampler}" if getattr(a, "light_sampler", None) else "")
+             + (f"; drpt's env compensation {a.env_compensation}" if getattr(a, "env_compensation", None) else ""),
              "",
              "| scene | size | spp | drpt s | Mitsuba s | Mitsuba s / drpt s | variance drpt / Mitsuba "
              "| efficiency drpt / Mitsuba | target |",

@@ -1,7 +1,7 @@
 """Per-pixel variance at equal spp, drpt's path tracer against Mitsuba's (not a test).
 
     PYTHONPATH=. .venv/bin/python benchmarks/variance_vs_mitsuba.py SCENE [FILTER SIZE SPP ROUNDS [MAX_DEPTH]]
-        [--scale K] [--grid COLSxROWS] [--light-sampler NAME] [--bsdf MODE]
+        [--scale K] [--grid COLSxROWS] [--light-sampler NAME] [--bsdf MODE] [--env-compensation on|off]
 
 Renders ``SCENE`` (drpt's format: at ``SIZE`` (``N`` for N x N or ``WxH``) with ``--filter
 FILTER``, default gaussian 128; a Mitsuba XML file: its own film, filter and integrator) with ``SPP`` samples
@@ -31,7 +31,8 @@ its authored size (both renderers; ``equal_time_vs_mitsuba.py`` scales the corpu
 192 pixels); ``--grid COLSxROWS`` also prints the ratio, its jackknife error and the share of
 Mitsuba's variance in each cell of a ``COLS`` x ``ROWS`` grid over the image (the corpus's
 ``bsdf_spheres`` grid is ``5x3``: one BSDF a cell), to find the region that holds an excess;
-``--light-sampler NAME`` sets drpt's (default: drpt's default); ``--bsdf MODE`` how drpt
+``--light-sampler NAME`` sets drpt's (default: drpt's default), ``--env-compensation on|off``
+drpt's MIS compensation of the sky (default: drpt's default); ``--bsdf MODE`` how drpt
 and the exported scene read a drpt-format scene's MTL materials (``drpt render --bsdf``).
 """
 
@@ -68,7 +69,7 @@ def _options(argv: list[str]) -> tuple[list[str], dict]:
     pos, opts = [], {}
     it = iter(argv)
     for arg in it:
-        if arg in ("--scale", "--grid", "--light-sampler", "--bsdf"):
+        if arg in ("--scale", "--grid", "--light-sampler", "--bsdf", "--env-compensation"):
             opts[arg[2:]] = next(it)
         else:
             pos.append(arg)
@@ -132,6 +133,8 @@ def main(argv: list[str]) -> None:
                             path=PathOptions(max_depth=depth), bsdf=extra.get("bsdf", "auto"))
     if "light-sampler" in extra:
         opt = replace(opt, light_sampler=extra["light-sampler"])
+    if "env-compensation" in extra:
+        opt = replace(opt, env_compensation=extra["env-compensation"])
     renderer = Renderer(scene, opt)
     set_mitsuba_variant()
     integrator = None  # Mitsuba's, where the scaled film's file replaces it

@@ -43,6 +43,8 @@ INTEGRATORS = ("path", "whitted", "ptracer", "volpath", "bdpt")
 LIGHT_TRACED = ("ptracer", "bdpt")
 MODES = ("megakernel", "wavefront")  # how the path integrator runs (drpt.render.integrators)
 ENV_SAMPLING = ("luminance", "uniform")
+#: ``--env-compensation``: MIS compensation of the sky's next-event density (:attr:`RenderOptions.env_compensation`)
+ENV_COMPENSATION = ("on", "off")
 LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh", "pilot")  # drpt.render.lights.selection
 #: how next-event estimation samples an emissive triangle (drpt.render.lights.area.TRIANGLE_SAMPLING)
 TRIANGLE_SAMPLING = ("auto", "area", "solid-angle")
@@ -86,6 +88,11 @@ class RenderOptions:
     mode: str = "megakernel"  # path tracing as one fused kernel, or "wavefront" (a kernel per stage)
     wavefront_tail: int = 0  # wavefront: finish in one fused loop once at most this many paths live
     env_sampling: str = "luminance"  # or "uniform" (for comparison only)
+    #: the sky's next-event density with MIS compensation (``--env-compensation on|off``:
+    #: :meth:`drpt.render.lights.envmap.EnvironmentLight.compensated`) where the scene file
+    #: does not say (a Mitsuba ``envmap``'s ``mis_compensation`` wins); only the integrators
+    #: that combine it with BSDF and phase samples by MIS use it (path, volpath)
+    env_compensation: str = "on"
     #: how next-event estimation picks an area light: "power" (each emissive primitive by its
     #: power) or "uniform" (Mitsuba's: each emitter alike, then a point by area)
     light_sampler: str = "mixed"
@@ -175,6 +182,7 @@ class RenderOptions:
                                      ("--integrator", self.integrator, INTEGRATORS),
                                      ("--mode", self.mode, MODES),
                                      ("--env-sampling", self.env_sampling, ENV_SAMPLING),
+                                     ("--env-compensation", self.env_compensation, ENV_COMPENSATION),
                                      ("--light-sampler", self.light_sampler, LIGHT_SAMPLERS),
                                      ("--triangle-sampling", self.triangle_sampling, TRIANGLE_SAMPLING),
                                      ("--sampler", self.sampler, SAMPLERS)):

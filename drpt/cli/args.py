@@ -29,6 +29,7 @@ from ..errors import DrptError, note, warn
 from ..options import (
     BSDF_MODES,
     BVH_KINDS,
+    ENV_COMPENSATION,
     ENV_SAMPLING,
     GIVEN,
     INTEGRATORS,
@@ -240,6 +241,12 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
         parser.add_argument("--env-sampling", choices=ENV_SAMPLING, default=d["env_sampling"],
                             help="how sky directions are sampled: by luminance (default) or "
                                  "uniformly over the sphere (for comparison)")
+        parser.add_argument("--env-compensation", dest="env_compensation", choices=ENV_COMPENSATION,
+                            default=base.env_compensation,
+                            help="MIS compensation of the sky's next-event density in path and volpath "
+                                 "(sample only where the map is brighter than its mean; the BSDF "
+                                 "sample covers the rest) where the scene file does not say (a "
+                                 f"Mitsuba envmap's mis_compensation wins) (default {base.env_compensation})")
         parser.add_argument("--light-sampler", dest="light_sampler", choices=LIGHT_SAMPLERS,
                             default=base.light_sampler,
                             help="how next-event estimation picks one emitter per vertex (emissive "
@@ -418,6 +425,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          integrator=integrator, mode=get("mode", base.mode),
                          wavefront_tail=get("wavefront_tail", base.wavefront_tail),
                          env_sampling=get("env_sampling", base.env_sampling),
+                         env_compensation=get("env_compensation", base.env_compensation),
                          light_sampler=get("light_sampler", base.light_sampler),
                          triangle_sampling=get("triangle_sampling", base.triangle_sampling),
                          sampler=get("sampler") or base.sampler,

@@ -23,6 +23,10 @@ integrators' queries over wide Dr.Jit arrays:
   stay for light tracing: :meth:`sample_area_emitter` and :meth:`pdf_area_emitter`
   (the area family's own selection), :meth:`delta_emitters`,
   :meth:`sample_environment`, :meth:`eval_environment`, :meth:`eval_pdf_environment`.
+  The sky's next-event density may be MIS-compensated (:func:`env_compensated`: the
+  file's ``mis_compensation`` or ``RenderOptions.env_compensation``, path and volpath
+  only); the family-level queries keep the map's own luminance density, since light
+  tracing has no other technique to cover what compensation leaves out.
 
 Feature flags (plain Python bools, read while a kernel is traced) say what
 the scene has, so that kernels contain only the code it needs:
@@ -68,6 +72,7 @@ from ..scene.model import PerspectiveCamera, Scene, Skybox
 from .bsdf import BSDFSample
 from .camera import RayCamera
 from .instrument import Instrument
+from .integrators.enclosure import media_bounded
 from .lights import EmitterSample
 from .lights.area import AreaLights, toward
 from .lights.delta import DeltaLights
@@ -91,6 +96,11 @@ from .surface import Interaction, SurfaceData
 #: each family built joins the light selection after the area, delta and sky families
 #: (docs/architecture.md, "Adding an emitter")
 EMITTER_FAMILIES: list = []
+
+#: the integrators whose next-event estimation of the sky may be MIS-compensated
+#: (:func:`env_compensated`): every vertex that samples the sky also samples its BSDF or
+#: phase function, and weighs both by MIS
+COMPENSATED_INTEGRATORS = ("path", "volpath")
 
 #: the most emissive surfaces :meth:`DeviceScene.skip_area_emitters` passes along one ray
 MAX_EMITTER_SKIPS = 16
@@ -172,6 +182,26 @@ class EmissiveList:
         return hit
 
 
+def env_compensated(sky: Skybox, options: RenderOptions, scene: Scene | None = None) -> bool:
+    """Whether next-event estimation samples ``sky`` with MIS compensation
+    (:meth:`~drpt.render.lights.envmap.EnvironmentLight.compensated`): as its file says
+    (``Skybox.mis_compensation``), else as ``options.env_compensation``; and only for the
+    integrators that weigh that sample against BSDF and phase samples by MIS
+    (:data:`COMPENSATED_INTEGRATORS`), in a ``scene`` whose media (if any) all lie inside
+    closed shapes (:func:`~drpt.render.integrators.enclosure.media_bounded`). Compensation
+    leaves directions below the map's mean to those samples: Whitted's direct light (no
+    MIS), the light tracers (which leave the sky by :meth:`DeviceScene.sample_environment`,
+    the map's own luminance density) and volpath in a medium that reaches beyond the shapes
+    (where a sampled ray scatters before it reaches the sky, so next-event estimation alone
+    sees it, with its MIS weight: Mitsuba's convention) keep the uncompensated density."""
+    wanted = getattr(sky, "mis_compensation", None)
+    if wanted is None:
+        wanted = options.env_compensation == "on"
+    if not (wanted and options.integrator in COMPENSATED_INTEGRATORS):
+        return False
+    return scene is None or not scene.media or media_bounded(scene)
+
+
 def emissive_inline(scene: Scene) -> EmissiveList | None:
     """An :class:`EmissiveList` of ``scene``'s emissive triangles, or None where there are
     none, emissive spheres or planes, or more triangles than the backend compiles inline
@@ -225,7 +255,10 @@ class DeviceScene:
         self.warnings: list[str] = list(self.materials.notes)
         if self.is_empty:
             self.warnings.append(EMPTY_SCENE_WARNING)
-        self.environment = None  # the sky as loaded (possibly black)
+        #: the sky as loaded (possibly black), sampled by its luminance: its radiance, and the
+        #: density of the light tracers (:meth:`sample_environment`)
+        self.environment = None
+        nee_environment = None  # the sky's next-event sampling, where compensated
         skies = [light for light in scene.lights if isinstance(light, Skybox)]
         if skies:
             if len(skies) > 1:
@@ -236,8 +269,12 @@ class DeviceScene:
             self.warnings += self.environment.warnings
             if options.env_sampling == "uniform":
                 self.environment = UniformSphereSampling(self.environment)
+            elif env_compensated(sky, options, scene):
+                nee_environment = self.environment.compensated()
             if getattr(sky, "rotation", None) is not None:
                 self.environment = RotatedEnvironment(self.environment, sky.rotation)
+                if nee_environment is not None:
+                    nee_environment = RotatedEnvironment(nee_environment, sky.rotation)
             lo, hi = scene.bounds()
             msg = check_radius(lo, hi, skies[0].radius)
             if msg:
@@ -254,7 +291,7 @@ class DeviceScene:
         if self.has_environment:
             lo, hi = scene.bounds()
             radius = float(np.linalg.norm(hi - lo)) / 2.0 if np.all(np.isfinite(lo)) else 1.0
-            self.sky = SkyEmitter(self.environment, radius)
+            self.sky = SkyEmitter(nee_environment or self.environment, radius)
         families = [self.area_lights, self.delta_lights] + ([self.sky] if self.sky is not None else [])
         families += [f for f in (build(self, scene) for build in EMITTER_FAMILIES) if f is not None]
         rule = options.light_sampler

@@ -374,6 +374,9 @@ class Skybox:
     scale: float = 1.0  # radiance multiplier (Mitsuba envmap's scale)
     #: 3x3 rotation from the map's frame to world (Mitsuba envmap's to_world); None: identity
     rotation: np.ndarray | None = None
+    #: MIS compensation of its next-event density (Mitsuba envmap's ``mis_compensation``);
+    #: None: the file does not say (``RenderOptions.env_compensation`` decides)
+    mis_compensation: bool | None = None
     #: where the file defines it (None: not from a file)
     loc: Loc | None = field(default=None, compare=False)
 

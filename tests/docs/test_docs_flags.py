@@ -209,6 +209,7 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--no-corpus",  # (benchmarks/equal_time_vs_mitsuba.py)
                   "--scale", "--grid",  # (benchmarks/variance_vs_mitsuba.py)
                   "--all-textures",  # (benchmarks/kernel_ops.py)
+                  "--agree",  # (benchmarks/env_compensation.py)
                   "--scenes", "--seeds", "--repeat", "--reference", "--parts", "--depth"}  # (bdpt_*.py)
 
 

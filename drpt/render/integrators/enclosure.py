@@ -13,6 +13,8 @@ which that holds at every point, from the scene alone:
   closed mesh; or an analytic sphere), has outward geometric normals (a positive signed
   volume, so that its interior is the inside) and blocks shadow rays. Its lanes are then
   inside one of those shapes (the integrator's medium follows the boundaries a ray crosses).
+* :func:`media_bounded`: every medium lies inside closed shapes (which may pass shadow
+  rays): a ray that leaves every shape reaches the sky.
 * :func:`blind_media`: an enclosed medium is *blind* when every emitter lies outside the
   bounding box of each of its boundary shapes (area emitters by their geometry's box,
   which must not overlap; point, spot and projector lights by their position; the sky,
@@ -64,12 +66,13 @@ def closed_outward(positions: np.ndarray) -> bool:
     return volume > 0.0
 
 
-def _boundaries(scene: Scene, medium: int) -> list[Box] | None:
+def _boundaries(scene: Scene, medium: int, blocking: bool = True) -> list[Box] | None:
     """The bounding boxes of the shapes whose interior is ``medium``, or None where one of
-    them is open, inside-out or passes shadow rays (or the medium has no such shape)."""
+    them is open, inside-out or (``blocking``) passes shadow rays (or the medium has no such
+    shape)."""
     mats = scene.materials or []
     boundary = [k for k, m in enumerate(mats) if m.interior == medium]
-    if not boundary or any(not _blocks_shadow_rays(mats[k]) for k in boundary):
+    if not boundary or (blocking and any(not _blocks_shadow_rays(mats[k]) for k in boundary)):
         return None
     boxes: list[Box] = []
     if len(scene.planes) and np.isin(scene.planes.material, boundary).any():
@@ -105,6 +108,20 @@ def enclosed_media(scene: Scene) -> dict[int, list[Box]]:
         if boxes is not None:
             out[i] = boxes
     return out
+
+
+def media_bounded(scene: Scene) -> bool:
+    """Whether every medium lies inside closed shapes (host side, conservative): the camera
+    is in none, no shape has one as its exterior, and every shape that has one as its
+    interior is closed with outward normals (its boundary may pass shadow rays). A ray that
+    leaves every shape is then in vacuum and reaches the sky; in a medium beyond the shapes
+    it scatters first, and there only next-event estimation sees the sky (Mitsuba's
+    convention), which MIS compensation of the sky must not be used with
+    (:func:`drpt.render.scene.env_compensated`)."""
+    mats = scene.materials or []
+    if scene.camera_medium is not None or any(m.exterior is not None for m in mats):
+        return False
+    return all(_boundaries(scene, i, blocking=False) is not None for i in range(len(scene.media)))
 
 
 def _emitter_boxes(scene: Scene, lights: bool = True) -> list[Box]:

@@ -95,6 +95,20 @@ from ``d`` itself, so they agree bit for bit with :meth:`eval` and
 zero-weight cell reads pdf 0 and radiance 0; callers skip pdf-0 samples
 (about 1 in 10^6 samples on maps with black regions, none otherwise).
 
+MIS compensation
+----------------
+:meth:`EnvironmentLight.compensated` (Mitsuba's ``envmap`` ``mis_compensation``; Karlik et
+al. 2019, "MIS compensation: optimizing sampling techniques in multiple importance
+sampling") is the same map with the sampling scheme above run on the corner weights
+``max(luminance - offset, 0)`` instead of the luminance, ``offset`` the mean luminance of the
+texels (each texel alike, as Mitsuba), or no compensation where the map is nearly constant
+(minimum within 1% of the mean, Mitsuba's rule). Next-event estimation then draws where the
+map is brighter than its mean, and the BSDF or phase sample, combined by MIS, covers the
+rest: the compensated density is 0 in every cell whose four corners are at or below the
+mean, so it is unbiased only beside such a complement (``DeviceScene`` gives it to the
+next-event estimation of ``path`` and ``volpath`` alone, :func:`drpt.render.scene.env_compensated`).
+Its radiance, power (``luminance_integral``) and texel data are the map's.
+
 Input sanitising: NaN, +-Inf and negative channel values are set to 0 and
 the affected texels counted in :attr:`EnvironmentLight.warnings`. A gray
 image is replicated to RGB, an alpha channel is dropped. ``scale`` multiplies
@@ -103,6 +117,7 @@ the radiance (like Mitsuba's ``scale``), not the sampling density.
 
 from __future__ import annotations
 
+import copy
 import math
 from os import PathLike
 from pathlib import Path
@@ -115,7 +130,8 @@ from ...errors import DrptError
 from ...imageio import read_image
 from . import EmitterSample
 
-__all__ = ["EnvironmentLight", "SkyEmitter", "sanitize_image", "check_radius", "LUMINANCE"]
+__all__ = ["EnvironmentLight", "SkyEmitter", "sanitize_image", "check_radius", "compensation_offset",
+           "LUMINANCE"]
 
 #: Luminance weights of linear sRGB / Rec. 709 (Mitsuba's ``luminance()``).
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -186,7 +202,8 @@ def check_radius(scene_bounds_lo, scene_bounds_hi, radius) -> str | None:
 class EnvironmentLight:
     """Infinitely distant light from a lat-long RGB radiance map (see module docs)."""
 
-    def __init__(self, image, scale: float = 1.0, name: str = "environment map"):
+    def __init__(self, image, scale: float = 1.0, name: str = "environment map",
+                 compensation: bool = False):
         scale = float(scale)
         if not (math.isfinite(scale) and scale >= 0.0):
             raise DrptError(f"{name}: scale must be a finite number >= 0, got {scale}")
@@ -207,29 +224,10 @@ class EnvironmentLight:
         self._data = Float(img.ravel())
         self._half_texel = 0.5 / W
 
-        # -- sampling tables (host side: cell weights summed in float64, stored
-        # float32 relative to the brightest cell, so texels up to the float32
-        # maximum neither overflow nor vanish)
-        lum = img @ LUMINANCE  # float64
-        # mean luminance of each bilinear patch's 4 corners = its mean luminance
-        cell = lum + np.roll(lum, -1, axis=1)  # columns i, i+1
-        cell = cell[:-1] + cell[1:] if H > 1 else cell * 2.0  # rows j, j+1
-        del lum
-        peak = float(cell.max())
-        cell = (cell / peak if peak > 0.0 else cell).astype(np.float32)
         theta = np.arange(ny + 1) * (math.pi / ny)
         # 1 - cos(theta) and 1 + cos(theta), accurate near either pole
         one_minus_cos = 2.0 * np.sin(0.5 * theta) ** 2
         one_plus_cos = 2.0 * np.cos(0.5 * theta) ** 2
-        dcos = 2.0 * np.sin(0.5 * (theta[:-1] + theta[1:])) * math.sin(0.5 * math.pi / ny)
-        omega = (2.0 * math.pi / W) * dcos  # solid angle of a cell in band j
-        w = cell
-        w *= omega[:, None].astype(np.float32)
-        self.is_black = not (scale > 0.0 and np.any(w > 0.0))
-        #: the integral of the luminance over the sphere (W / m^2; a cell's mean is a quarter
-        #: of its corners' sum): the sky's power for the light selection (:class:`SkyEmitter`)
-        self.luminance_integral = float(scale * peak * w.sum(dtype=np.float64) / 4.0) if peak > 0.0 else 0.0
-
         north = 0.5 * (theta[:-1] + theta[1:]) <= 0.5 * math.pi
         t0 = np.where(north, one_minus_cos[:-1], one_plus_cos[:-1])
         dt = np.where(north, one_minus_cos[1:] - one_minus_cos[:-1],
@@ -237,6 +235,39 @@ class EnvironmentLight:
         self._t0 = Float(t0.astype(np.float32))
         self._dt = Float(dt.astype(np.float32))
         self._north = Bool(north)
+
+        lum = img @ LUMINANCE  # float64
+        #: the luminance that next-event estimation's density ignores (see
+        #: :meth:`compensated`); 0: the density follows the luminance itself
+        self.offset = 0.0
+        self._tables(lum)
+        if compensation:
+            self._compensate(lum)
+
+    def _tables(self, lum: np.ndarray) -> None:
+        """The sampling tables of the corner weights ``max(lum - offset, 0)`` (host side:
+        cell weights summed in float64, stored float32 relative to the brightest cell, so
+        texels up to the float32 maximum neither overflow nor vanish)."""
+        H, W, ny = self.height, self.width, self._ny
+        if self.offset > 0.0:
+            lum = np.maximum(lum - self.offset, 0.0)
+        # mean luminance of each bilinear patch's 4 corners = its mean luminance
+        cell = lum + np.roll(lum, -1, axis=1)  # columns i, i+1
+        cell = cell[:-1] + cell[1:] if H > 1 else cell * 2.0  # rows j, j+1
+        peak = float(cell.max())
+        cell = (cell / peak if peak > 0.0 else cell).astype(np.float32)
+        theta = np.arange(ny + 1) * (math.pi / ny)
+        dcos = 2.0 * np.sin(0.5 * (theta[:-1] + theta[1:])) * math.sin(0.5 * math.pi / ny)
+        omega = (2.0 * math.pi / W) * dcos  # solid angle of a cell in band j
+        w = cell
+        w *= omega[:, None].astype(np.float32)
+        if self.offset == 0.0:
+            self.is_black = not (self.scale > 0.0 and np.any(w > 0.0))
+            #: the integral of the luminance over the sphere (W / m^2; a cell's mean is a
+            #: quarter of its corners' sum): the sky's power for the light selection
+            #: (:class:`SkyEmitter`); a compensated copy keeps the map's own
+            self.luminance_integral = (float(self.scale * peak * w.sum(dtype=np.float64) / 4.0)
+                                       if peak > 0.0 else 0.0)
 
         if self.is_black:
             pdf = np.zeros((ny, W), np.float32)
@@ -252,6 +283,34 @@ class EnvironmentLight:
             self._cdf_rows = Float(cdf_rows[0])
             self._cdf_cols = Float(cdf_cols.ravel())
         self._pdf = Float(pdf.ravel())
+
+    def _compensate(self, lum: np.ndarray) -> None:
+        """Rebuild the tables for MIS compensation (see :meth:`compensated`), unless the
+        map is nearly constant."""
+        offset = compensation_offset(lum)
+        if offset > 0.0 and not self.is_black:
+            self.offset = offset
+            self._tables(lum)
+
+    def compensated(self) -> "EnvironmentLight":
+        """This map sampled with *MIS compensation* (Karlik et al. 2019, "MIS compensation:
+        optimizing sampling techniques in multiple importance sampling"; Mitsuba's
+        ``envmap`` ``mis_compensation``): the density follows ``max(luminance - offset,
+        0)`` instead of the luminance, ``offset`` the mean texel luminance
+        (:func:`compensation_offset`), so that next-event estimation spends its samples
+        on the bright parts and leaves the rest to the BSDF or phase sample that MIS
+        combines with it. The density is 0 where all four texels around a direction are
+        below the mean: **unbiased only where another technique covers those
+        directions**, never for a technique used alone (light tracing, bdpt's light
+        subpaths, Whitted's direct light). The radiance (``eval``) is the map's. Shares the
+        texel data; returns ``self`` for a nearly constant or black map (nothing to move).
+        """
+        if self.offset > 0.0 or self.is_black:
+            return self
+        lum = self._data.numpy().reshape(self.height, self.width, 3) @ LUMINANCE
+        out = copy.copy(self)
+        out._compensate(lum)
+        return out if out.offset > 0.0 else self
 
     @classmethod
     def from_file(cls, path: str | PathLike, scale: float = 1.0) -> "EnvironmentLight":
@@ -287,6 +346,13 @@ class EnvironmentLight:
         v00, v10, v01, v11 = corners
         return _bilerp(v00, v10, v01, v11, fx, fy) * self.scale
 
+    def _weight(self, c: Array3f) -> Float:
+        """A texel's sampling weight: its luminance, less :attr:`offset` (clamped at 0)
+        where the map is compensated (no code for it otherwise)."""
+        if self.offset > 0.0:
+            return dr.maximum(_luminance(c) - self.offset, 0.0)
+        return _luminance(c)
+
     def _band_fraction(self, d: Array3f, iy, active) -> Float:
         """``ft``: where ``cos theta`` of ``d`` lies in band ``iy``, in [0, 1]."""
         north = dr.gather(Bool, self._north, iy, active)
@@ -297,7 +363,7 @@ class EnvironmentLight:
 
     def _pdf_cell(self, corners, ix, iy, fx, ft, active) -> Float:
         """Cell density times the bilinear in-cell density ``q(fx, ft)``."""
-        c00, c10, c01, c11 = (_luminance(c) for c in corners)
+        c00, c10, c01, c11 = (self._weight(c) for c in corners)
         # each corner scaled first (exact): no overflow near the float32 maximum
         mean = (0.25 * c00 + 0.25 * c10) + (0.25 * c01 + 0.25 * c11)
         q = dr.select(mean > 0.0, _bilerp(c00, c10, c01, c11, fx, ft) / mean, 0.0)
@@ -355,7 +421,7 @@ class EnvironmentLight:
         # inside the cell: the bilinear density of the corner luminances,
         # ft (fraction of the band's cos(theta) range) from its linear
         # marginal, then fx from the linear conditional
-        c00, c10, c01, c11 = (_luminance(c) for c in self._corners(col, row, active))
+        c00, c10, c01, c11 = (self._weight(c) for c in self._corners(col, row, active))
         # halved sums (exact; _sample_linear is scale-free): no float32 overflow
         ft = _sample_linear(0.5 * c00 + 0.5 * c10, 0.5 * c01 + 0.5 * c11, sy)
         fx = _sample_linear(dr.lerp(c00, c01, ft), dr.lerp(c10, c11, ft), sx)
@@ -371,6 +437,17 @@ class EnvironmentLight:
         le, pdf = self.eval_pdf(d, active)
         le = dr.select(pdf > 0.0, le, 0.0)
         return d, le, pdf
+
+
+def compensation_offset(lum: np.ndarray) -> float:
+    """The luminance that MIS compensation subtracts from a map of texel luminances
+    ``lum`` (``(H, W)``): their mean (each texel alike, as Mitsuba's ``envmap``), or 0
+    (no compensation) where the map is nearly constant, its minimum within 1% of the
+    mean (Mitsuba's rule: the compensated density would be all but empty)."""
+    mean = float(np.mean(lum, dtype=np.float64))
+    if not (mean > 0.0) or mean - float(np.min(lum)) <= 0.01 * mean:
+        return 0.0
+    return mean
 
 
 def _luminance(c: Array3f) -> Float:

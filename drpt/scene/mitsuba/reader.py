@@ -55,6 +55,7 @@ _SILENT = {
                    "shading_samples"),
     "sensor": ("near_clip", "far_clip", "shutter_open", "shutter_close"),
     "shape": ("silhouette_sampling_weight",),
+    # (mis_compensation: read by envmap, which Mitsuba alone reads it for)
     "emitter": ("sampling_weight", "mis_compensation"),
 }
 
@@ -809,7 +810,8 @@ class Reader:
                 if not np.allclose(r, np.eye(3), atol=1e-12):
                     rot = r
             # Mitsuba's envmap is infinitely far; drpt's Skybox radius only feeds a warning
-            self.lights.append(Skybox(path, radius=1e30, scale=scale, rotation=rot, loc=node.loc))
+            self.lights.append(Skybox(path, radius=1e30, scale=scale, rotation=rot,
+                                      mis_compensation=node.bool("mis_compensation"), loc=node.loc))
         else:
             self.unsupported(node, f"emitter '{p}'")
             return

@@ -117,6 +117,21 @@ def test_a_medium_outside_some_shape_or_around_the_camera_is_not_blind(tmp_path)
     assert _blind(tmp_path, body=body) == set()
 
 
+def test_media_bounded_inside_closed_shapes_only(tmp_path):
+    """``media_bounded`` (MIS compensation of the sky is used only then): a medium inside a
+    closed sphere, blocking or not (``null``), is bounded; an open boundary, a medium that
+    is some shape's exterior or the camera's is not."""
+    from drpt.render.integrators.enclosure import media_bounded
+
+    assert media_bounded(_scene(tmp_path))
+    assert media_bounded(_scene(tmp_path, bsdf="null"))
+    assert not media_bounded(_scene(tmp_path, body=SCENE.replace('<shape type="sphere">', '<shape type="disk">')))
+    outer = ('<shape type="sphere"><float name="radius" value="0.2"/><point name="center" x="2" y="0" z="0"/>'
+             '<bsdf type="null"/><ref name="exterior" id="m"/></shape>')
+    assert not media_bounded(_scene(tmp_path, inner=outer))
+    assert not media_bounded(_scene(tmp_path, body=SCENE.replace("<sampler", '<ref name="medium" id="m"/><sampler')))
+
+
 def test_closed_outward_on_triangles():
     from drpt.render.integrators.enclosure import closed_outward
 

@@ -17,7 +17,7 @@ from drpt.export.mitsuba import look_at_matrix
 from drpt.export.mitsuba_envmap import to_mitsuba
 from drpt.imageio import write_image
 from drpt.render.camera import RayCamera
-from drpt.render.lights.envmap import LUMINANCE, EnvironmentLight, check_radius
+from drpt.render.lights.envmap import LUMINANCE, EnvironmentLight, check_radius, compensation_offset
 from drpt.scene import model
 from drpt.testing import mitsuba
 from drpt.testing import run_chi2 as chi2_on_sphere
@@ -472,3 +472,148 @@ def test_sky_warnings_name_the_skybox_line(tmp_path):
     warnings_ = DeviceScene(scene, RenderOptions(progress=False)).warnings
     assert f"{p.resolve()}:4: 2 Skybox lights: using the first" in warnings_, warnings_
     assert any(w.startswith(f"{p.resolve()}:3: skybox radius 1: geometry reaches") for w in warnings_), warnings_
+
+
+# ------------------------------------------------------------ MIS compensation
+# (EnvironmentLight.compensated: the density follows max(luminance - mean, 0); it is checked
+# against its own sampling, it is 0 exactly where the four texels around a direction are all
+# below the mean, and the compensated sample is unbiased only combined by MIS with a technique
+# that covers the rest; the negative control, the compensated sample alone, reads |z| > 20)
+COMPENSATED = ["gradient", "sun", "black_half", "tiny_2x2"]
+
+
+def test_offset_is_the_texel_mean_and_off_for_nearly_constant_maps():
+    lum = gradient_map() @ LUMINANCE
+    assert compensation_offset(lum) == pytest.approx(lum.mean(), rel=1e-12)
+    assert compensation_offset(np.full((4, 8), 2.0)) == 0.0
+    flat = np.full((4, 8), 1.0)
+    flat[0, 0] = 0.995  # minimum within 1% of the mean: Mitsuba's rule leaves it alone
+    assert compensation_offset(flat) == 0.0
+    flat[0, 0] = 0.5
+    assert compensation_offset(flat) > 0.0
+    assert compensation_offset(np.zeros((4, 8))) == 0.0
+    # a map with nothing to move is its own compensated copy
+    one = EnvironmentLight(MAPS["one_texel"]())
+    assert one.compensated() is one
+    black = EnvironmentLight(np.zeros((4, 8, 3), np.float32))
+    assert black.compensated() is black
+
+
+def test_compensated_copy_shares_the_radiance_and_the_power():
+    light = EnvironmentLight(sun_map(), scale=2.0)
+    comp = light.compensated()
+    assert comp is not light and comp.offset > 0.0 and light.offset == 0.0
+    assert comp._data is light._data
+    assert comp.luminance_integral == light.luminance_integral
+    # the constructor's flag builds the same tables
+    again = EnvironmentLight(sun_map(), scale=2.0, compensation=True)
+    assert again.offset == comp.offset
+    assert np.array_equal(np.array(again._pdf), np.array(comp._pdf))
+    d = to_a3(sphere_dirs(20_000, 31))
+    assert np.array_equal(np.array(comp.eval(d)), np.array(light.eval(d)))
+
+
+@pytest.mark.mitsuba
+@pytest.mark.parametrize("name", COMPENSATED)
+def test_chi2_compensated_sample_matches_pdf(name):
+    light = EnvironmentLight(MAPS[name]()).compensated()
+    assert light.offset > 0.0
+    ok, msg = run_chi2(lambda u: light.sample(u)[0], light.pdf)
+    assert ok, msg
+
+
+@pytest.mark.parametrize("name", COMPENSATED)
+def test_compensated_sample_returns_eval_and_pdf(name):
+    light = EnvironmentLight(MAPS[name]()).compensated()
+    d, le, pdf = light.sample(uniform(100_000, 32))
+    assert np.array_equal(np.array(le), np.array(light.eval(d)))
+    assert np.array_equal(np.array(pdf), np.array(light.pdf(d)))
+    p = np.array(pdf)
+    assert np.all(np.isfinite(p)) and np.count_nonzero(p <= 0) <= 2  # edge round-off only
+
+
+@pytest.mark.parametrize("name", ["gradient", "sun", "black_half"])  # (tiny_2x2: no cell all below)
+def test_density_zero_exactly_where_the_corners_are_below_the_mean(name):
+    """The density is positive where a corner of the bilinear cell around ``d`` is above the
+    mean, and 0 where all four are at or below it; the uncompensated density is positive
+    wherever the radiance is."""
+    img = MAPS[name]()
+    light = EnvironmentLight(img)
+    comp = light.compensated()
+    H, W = img.shape[:2]
+    ny = max(H - 1, 1)
+    d = sphere_dirs(100_000, 33).astype(np.float64)
+    u = np.arctan2(d[0], -d[2]) / (2 * np.pi)
+    x = u - 0.5 / W
+    x = (x - np.floor(x)) * W
+    y = np.arccos(np.clip(d[1], -1, 1)) / np.pi * ny
+    ix, iy = np.minimum(x.astype(int), W - 1), np.minimum(y.astype(int), ny - 1)
+    lum = img.astype(np.float64) @ LUMINANCE
+    r1 = np.minimum(iy + 1, H - 1)
+    corners = np.stack([lum[iy, ix], lum[iy, (ix + 1) % W], lum[r1, ix], lum[r1, (ix + 1) % W]])
+    above = (corners > comp.offset * (1 + 1e-6)).any(0)
+    below = (corners < comp.offset * (1 - 1e-6)).all(0)
+    # away from cell edges (where float32 lookups may pick the neighbour cell)
+    inner = (np.abs(x - np.round(x)) > 1e-3) & (np.abs(y - np.round(y)) > 1e-3)
+    p = np.array(comp.pdf(to_a3(d.astype(np.float32))))
+    assert np.all(p[inner & below] == 0.0)
+    assert np.all(p[inner & above] > 0.0)
+    assert (inner & below).any() and (inner & above).any()
+
+
+def _mis_estimate(light, n, seed, mis=True):
+    """One-sample-per-technique MIS estimate of the integral of the map's radiance over the
+    sphere, from the light's own sampling and uniform sphere sampling (the stand-in for a
+    BSDF sample), combined by the balance heuristic; ``mis`` False: the light's sample
+    alone (weight 1). Mean and standard error per channel."""
+    pu = 1.0 / (4.0 * math.pi)
+    d, le, pdf = light.sample(uniform(n, seed))
+    le, pl = np.array(le, np.float64), np.array(pdf, np.float64)
+    ok = pl > 0
+    w = pl / (pl + pu) if mis else np.ones_like(pl)
+    x = np.where(ok, le * w / np.where(ok, pl, 1.0), 0.0)
+    if mis:
+        r = np.random.default_rng(seed + 1)
+        z = 1.0 - 2.0 * r.random(n)
+        phi = 2.0 * math.pi * r.random(n)
+        s = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+        du = np.stack([s * np.cos(phi), z, s * np.sin(phi)]).astype(np.float32)
+        leu, pl_u = light.eval_pdf(to_a3(du))
+        leu, pl_u = np.array(leu, np.float64), np.array(pl_u, np.float64)
+        x = x + leu * (pu / (pl_u + pu)) / pu
+    return x.mean(-1), x.std(-1, ddof=1) / math.sqrt(n)
+
+
+@pytest.mark.parametrize("name", ["gradient", "sun", "black_half"])
+def test_compensated_sample_is_unbiased_with_its_mis_complement(name):
+    img = MAPS[name]()
+    light = EnvironmentLight(img, scale=1.5).compensated()
+    truth = 1.5 * analytic_integral(img)
+    mean, se = _mis_estimate(light, 400_000, 34)
+    z = (mean - truth) / np.maximum(se, 2e-6 * np.abs(truth))
+    assert np.all(np.abs(z) < Z_MAX), (mean, truth, z)
+
+
+@pytest.mark.parametrize("name", ["gradient", "sun"])
+def test_negative_control_compensated_sample_alone_is_biased(name):
+    """Without the complement the directions below the mean are never sampled: the estimate
+    misses their share (the gradient's darker half, the sun map's sky). (On ``black_half``
+    every cell with radiance has a corner above the mean, so there the sample alone happens
+    to cover the whole support.)"""
+    img = MAPS[name]()
+    light = EnvironmentLight(img, scale=1.5).compensated()
+    truth = 1.5 * analytic_integral(img)
+    mean, se = _mis_estimate(light, 400_000, 34, mis=False)
+    z = (mean - truth) / np.maximum(se, 2e-6 * np.abs(truth))
+    assert np.all(np.abs(z) > 20), z
+    # the uncompensated light alone is unbiased (the control's baseline)
+    mean, se = _mis_estimate(EnvironmentLight(img, scale=1.5), 400_000, 34, mis=False)
+    assert np.all(np.abs((mean - truth) / se) < Z_MAX)
+
+
+def test_black_half_keeps_zero_density_on_black_cells():
+    light = EnvironmentLight(black_half_map()).compensated()
+    d = sphere_dirs(50_000, 35)
+    le, p = np.array(light.eval(to_a3(d))), np.array(light.pdf(to_a3(d)))
+    assert np.all(np.isfinite(p)) and np.all(p >= 0)
+    assert np.all(p[le.max(0) == 0] == 0)

@@ -121,6 +121,19 @@ def test_envmap_scale_and_rotation():
     assert isinstance(sky, Skybox) and sky.path == XML / "sky.exr" and sky.scale == 1.5
     c, si = math.cos(math.radians(90)), math.sin(math.radians(90))
     assert np.allclose(sky.rotation, [[c, 0, si], [0, 1, 0], [-si, 0, c]])
+    assert sky.mis_compensation is None  # the file does not say: RenderOptions.env_compensation
+
+
+@pytest.mark.parametrize("value", ["true", "false"])
+def test_envmap_mis_compensation_is_read(tmp_path, value):
+    body = (f'<emitter type="envmap"><string name="filename" value="{XML / "sky.exr"}"/>'
+            f'<boolean name="mis_compensation" value="{value}"/></emitter>')
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        s = load_scene(_xml(tmp_path, body))
+    (sky,) = s.lights
+    assert sky.mis_compensation is (value == "true")
+    assert not [w for w in caught if "mis_compensation" in str(w.message)]
 
 
 def test_textured_specs_and_uvs():
