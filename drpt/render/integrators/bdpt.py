@@ -233,6 +233,18 @@ def eval_both(scene: DeviceScene, si: Interaction, wo: Array3f) -> tuple[Array3f
     return scene.eval_bsdf_rev(si, wo)
 
 
+def smooth_view(scene: DeviceScene) -> DeviceScene:
+    """The scene as bdpt's BSDF evaluations see it: they all run at vertices whose material
+    is not made only of Dirac lobes (the ``connectible`` ones: connections, splats,
+    next-event estimation, merging), where a Dirac lobe evaluates to 0, so a view of the
+    non-Dirac kinds (:meth:`~drpt.render.scene.DeviceScene.restricted`) gives the same values.
+    With one such kind and one component per material (glass or mirrors beside one smooth
+    kind) no lane gathers its kind nor branches on it; other scenes are returned as they are."""
+    kinds = getattr(scene.materials, "kinds", ())
+    smooth = [kind for kind in kinds if not scene.materials.lobes[kind].DELTA]
+    return scene.restricted(smooth) if smooth and len(smooth) < len(kinds) else scene
+
+
 def sample_both(scene: DeviceScene, si: Interaction, u_lobe: Float, u_bsdf: Array2f):
     """``(wo, bs, pdf_rev)``: a BSDF sample at ``si`` and its reverse density (of ``si.wi``
     seen from ``wo``, which :func:`scatter_update` reads), in one dispatch
@@ -517,6 +529,9 @@ class BDPTIntegrator:
         #: the MIS weights' factor for connections: ``m(CONNECTION_CHOICES)`` with
         #: :attr:`one_connection`, else 1 (see :data:`CONNECTION_CHOICES`)
         self.k = mis(CONNECTION_CHOICES) if self.one_connection else 1.0
+        #: the scene seen by the BSDF evaluations of connections, splats, next-event estimation
+        #: and merging (:func:`smooth_view`)
+        self.smooth = smooth_view(scene)
         #: whether paths camera S+ D S+ area light are estimated by merging caustic photons
         #: (:meth:`photons`) instead of the camera subpath hitting the light: ``merge`` in
         #: scenes with Dirac lobes, area lights and a non-Dirac surface, else False (nothing
@@ -645,7 +660,7 @@ class BDPTIntegrator:
         scene, cam = self.scene, self.camera
         x, y, wc, _dist, importance, visible = cam.connect(si.p)
         ok = active & visible
-        f, _, rev = eval_both(scene, si, wc)
+        f, _, rev = eval_both(self.smooth, si, wc)
         corr, sides = correction(si, wc)
         pdf_cam = importance * dr.abs(dr.dot(si.ng, wc))
         w = self._weight(connection_weight(pdf_cam, dvcm, dvc, rev, Float(0.0), Float(0.0), Float(0.0),
@@ -717,7 +732,7 @@ class BDPTIntegrator:
         ok = active & (cos_front > 0.0) & (cos_l > 0.0) & (ls.pdf_area > 0.0)
         pdf_a = self.origin_pdf(face, active)
         pdf_w = pdf_a * dist2 / cos_l  # the density the weights use (uniform on a sphere)
-        f, fwd, rev = eval_both(scene, si, wo)
+        f, fwd, rev = eval_both(self.smooth, si, wo)
         emit = self.pick * pdf_a * cos_front / math.pi
         cos_c = dr.abs(dr.dot(si.ng, wo))
         w = self._weight(nee_weight(fwd, pdf_w, emit, cos_c, cos_l, dvcm, dvc, rev, self.k), 1, t)
@@ -736,7 +751,7 @@ class BDPTIntegrator:
         scene = self.scene
         total = dr.zeros(Array3f, dr.width(active))
         for light, ds in zip(self.deltas, scene.delta_emitters(si.p)):
-            f, _, rev = eval_both(scene, si, ds.wo)
+            f, _, rev = eval_both(self.smooth, si, ds.wo)
             cos_c = dr.abs(dr.dot(si.ng, ds.wo))
             # the light's area density is 1 (a Dirac): as a solid angle dist^2, or 1 for a
             # directional light (infinitely far: no distance, no cosine)
@@ -757,7 +772,7 @@ class BDPTIntegrator:
         """``s = 1`` for the sky: a direction drawn by its density (as the path tracer's)."""
         scene = self.scene
         wo, radiance, pdf = scene.sample_environment(next_2d(rng), active)
-        f, fwd, rev = eval_both(scene, si, wo)
+        f, fwd, rev = eval_both(self.smooth, si, wo)
         emit = self.pick * pdf * self.disk_pdf
         w = self._weight(nee_weight(fwd, pdf, emit, dr.abs(dr.dot(si.ng, wo)), Float(1.0), dvcm, dvc, rev,
                                     self.k), 1, t)
@@ -790,8 +805,8 @@ class BDPTIntegrator:
         to = lv.p - si.p
         dist2 = dr.squared_norm(to)
         w = to * dr.rsqrt(dist2)
-        f_c, fwd_c, rev_c = eval_both(scene, si, w)
-        f_l, fwd_l, rev_l = eval_both(scene, lv, -w)
+        f_c, fwd_c, rev_c = eval_both(self.smooth, si, w)
+        f_l, fwd_l, rev_l = eval_both(self.smooth, lv, -w)
         corr, sides = correction(lv, -w)
         inv_d2 = dr.rcp(dist2)
         pdf_l = fwd_c * dr.abs(dr.dot(lv.ng, w)) * inv_d2
@@ -897,7 +912,7 @@ class BDPTIntegrator:
         def one(i: UInt32, _p: Array3f, keep: Bool) -> Array3f:
             wo = grid.read("wo", i, keep)
             ok = keep & (grid.read("depth", i, keep) <= room)
-            f, _ = scene.eval_bsdf(si, wo)
+            f, _ = self.smooth.eval_bsdf(si, wo)
             cos = dr.abs(dr.dot(si.ng, wo))
             value = f * grid.read("power", i, ok) * dr.select(cos > 0.0, dr.rcp(cos), 0.0)
             return dr.select(ok, value, 0.0)
