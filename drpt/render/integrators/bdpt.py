@@ -907,12 +907,12 @@ class BDPTIntegrator:
         paths fit in ``room`` segments: ``sum f(wi, wo_p) power_p / (pi r^2 N)``, ``f`` the
         BSDF without its cosine (the photons' density over the surface holds the geometric
         cosine), per ``active`` lane."""
-        scene = self.scene
+        scene = self.smooth
 
         def one(i: UInt32, _p: Array3f, keep: Bool) -> Array3f:
             wo = grid.read("wo", i, keep)
             ok = keep & (grid.read("depth", i, keep) <= room)
-            f, _ = self.smooth.eval_bsdf(si, wo)
+            f, _ = scene.eval_bsdf(si, wo)
             cos = dr.abs(dr.dot(si.ng, wo))
             value = f * grid.read("power", i, ok) * dr.select(cos > 0.0, dr.rcp(cos), 0.0)
             return dr.select(ok, value, 0.0)
