@@ -233,6 +233,14 @@ def eval_both(scene: DeviceScene, si: Interaction, wo: Array3f) -> tuple[Array3f
     return scene.eval_bsdf_rev(si, wo)
 
 
+def prepare_both(scene: DeviceScene, si: Interaction):
+    """:func:`eval_both` of ``si`` toward directions given later: the returned function of
+    ``wo`` computes the same values, and what does not depend on ``wo`` (the fields, the
+    shading frame) is traced once, here (:meth:`~drpt.render.scene.DeviceScene.prepare_bsdf_rev`):
+    the loop joining a camera vertex to each light vertex prepares it outside the loop."""
+    return scene.prepare_bsdf_rev(si)
+
+
 def smooth_view(scene: DeviceScene) -> DeviceScene:
     """The scene as bdpt's BSDF evaluations see it: they all run at vertices whose material
     is not made only of Dirac lobes (the ``connectible`` ones: connections, splats,
@@ -798,14 +806,15 @@ class BDPTIntegrator:
 
     def _connect(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float,
                  lv: Interaction, beta_l: Array3f, dvcm_l: Float, dvc_l: Float, active: Bool,
-                 s: UInt32, t: UInt32, u_rr: Float, threshold: Float) -> Array3f:
+                 s: UInt32, t: UInt32, u_rr: Float, threshold: Float, eval_c=None) -> Array3f:
         """``s >= 2, t >= 2``: camera vertex ``si`` joined to light vertex ``lv`` (after
-        :func:`roulette` with ``u_rr`` and ``threshold``)."""
+        :func:`roulette` with ``u_rr`` and ``threshold``); ``eval_c``: :func:`prepare_both`'s
+        function of ``si`` (None: :func:`eval_both`)."""
         scene = self.scene
         to = lv.p - si.p
         dist2 = dr.squared_norm(to)
         w = to * dr.rsqrt(dist2)
-        f_c, fwd_c, rev_c = eval_both(self.smooth, si, w)
+        f_c, fwd_c, rev_c = eval_both(self.smooth, si, w) if eval_c is None else eval_c(w)
         f_l, fwd_l, rev_l = eval_both(self.smooth, lv, -w)
         corr, sides = correction(lv, -w)
         inv_d2 = dr.rcp(dist2)
@@ -1072,11 +1081,13 @@ class BDPTIntegrator:
                 # si is read, not changed: outside the loop's state (its width-1 fields would
                 # make Dr.Jit record the loop again)
                 usable = dr.minimum(stored, room)
+                # the camera vertex's fields and frame, once for all its connections
+                eval_c = prepare_both(self.smooth, si)
                 while dr.hint(connectible & (i < usable), exclude=[si]):
                     lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
                     c = self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
                                       connectible & (depth_l + k < D), depth_l + 1, k + 1,
-                                      rng.next_float32(), threshold)
+                                      rng.next_float32(), threshold, eval_c)
                     L += c
                     if record:
                         strategies.put(depth_l + 1, k + 1, px, py, c, active)
