@@ -15,17 +15,23 @@ same load for both), from one renderer per variant whose kernels are compiled by
 * ``reverse``: the MIS weights' reverse densities from the evaluation or the sample that
   needs them, in one dispatch over the material kinds (B,
   :func:`~drpt.render.integrators.bdpt.eval_both`, :func:`~drpt.render.integrators.bdpt.sample_both`)
-  against a second ``eval_bsdf`` with the directions swapped (A).
+  against a second ``eval_bsdf`` with the directions swapped (A);
+* ``smooth``: the connections', splats', next-event estimation's and merging's BSDF
+  evaluations on a view of the non-Dirac material kinds (B,
+  :func:`~drpt.render.integrators.bdpt.smooth_view`) against the whole table (A);
+* ``prepare``: the camera vertex's fields and shading frame gathered and built once for
+  all its connections (B, :func:`~drpt.render.integrators.bdpt.prepare_both`) against once
+  per connection (A, :func:`~drpt.render.integrators.bdpt.eval_both`).
 
 Prints per part the CPU seconds (the process's, summed over the seeds; steadier than wall
 seconds on a loaded machine), the relMSE (summed, against the reference of
 ``bdpt_equal_time.py``, minus its estimated relMSE) and B / A of the seconds, of the error
 and of their product (the error at equal time: below 1, B is better), and the median over the
 seeds of B / A of one seed's seconds (the two renders of a seed run one after the other). Images are the same
-for ``variance`` and ``reverse`` (checked) and equal in expectation for the others.
+for ``variance``, ``reverse``, ``smooth`` and ``prepare`` (checked) and equal in expectation for the others.
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/bdpt_parts_ab.py [--scenes cornell,glass]
-[--parts variance,occluded,roulette,reverse] [--size 64] [--depth 8] [--spp 64] [--ref-spp 2048]
+[--parts variance,occluded,roulette,reverse,smooth,prepare] [--size 64] [--depth 8] [--spp 64] [--ref-spp 2048]
 [--seeds 4] [--reference PATH]
 """
 
@@ -43,7 +49,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bdpt_equal_time as eq  # noqa: E402 (the sibling benchmark: its scenes and references)
 
-PARTS = ("variance", "occluded", "roulette", "reverse")
+PARTS = ("variance", "occluded", "roulette", "reverse", "smooth", "prepare")
+SAME_IMAGES = ("variance", "reverse", "smooth", "prepare")  # the parts whose images are compared
 
 
 def _old_survival(beta, power, eta):
@@ -73,10 +80,27 @@ def _two_evaluations(scene, si, wo):
     return f, pdf, scene.eval_bsdf(_with_wi(si, wo), si.wi)[1]
 
 
+def _prepared_two_evaluations(scene, si):
+    """:func:`_two_evaluations` of ``si`` as a function of ``wo``."""
+    return lambda wo: _two_evaluations(scene, si, wo)
+
+
 def _sample_then_evaluate(scene, si, u_lobe, u_bsdf):
     """``(wo, bs, pdf_rev)``: the sample, then ``eval_bsdf`` seen from it toward ``si.wi``."""
     wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
     return wo, bs, scene.eval_bsdf(_with_wi(si, wo), si.wi)[1]
+
+
+def _per_connection(scene, si):
+    """The camera vertex evaluated whole at each connection."""
+    from drpt.render.integrators import bdpt
+
+    return lambda wo: bdpt.eval_both(scene, si, wo)
+
+
+def _whole_table(scene):
+    """bdpt's evaluations on the scene's whole material table."""
+    return scene
 
 
 def main() -> None:
@@ -101,7 +125,9 @@ def main() -> None:
     a.sampler = "independent"
     files = eq.scene_files(Path(tempfile.mkdtemp()))
     patches = {"occluded": [("occluded_where", _masked_occluded)], "roulette": [("light_survival", _old_survival)],
-               "reverse": [("eval_both", _two_evaluations), ("sample_both", _sample_then_evaluate)]}
+               "reverse": [("eval_both", _two_evaluations), ("sample_both", _sample_then_evaluate),
+                           ("prepare_both", _prepared_two_evaluations)],
+               "smooth": [("smooth_view", _whole_table)], "prepare": [("prepare_both", _per_connection)]}
     for name in a.scenes.split(","):
         scene = load_scene(files[name])
         base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth),
@@ -136,7 +162,7 @@ def main() -> None:
                     totals[which][1] += rel_mse(img.image, ref_image) - ref_err
                     images[which] = img.image
                 ratios.append(seconds["B"] / seconds["A"])
-                if part in ("variance", "reverse") and not np.array_equal(images["A"], images["B"]):
+                if part in SAME_IMAGES and not np.array_equal(images["A"], images["B"]):
                     print(f"{name} {part}: the images of seed {seed} differ", flush=True)
             for (fn, _), current in zip(patches.get(part, []), new or []):
                 setattr(B, fn, current)

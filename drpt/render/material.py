@@ -539,10 +539,7 @@ class MaterialTable:
         Perturbed frames (normal and bump maps) depend on ``wi``: tables with them take
         the two evaluations."""
         if self._pkinds:
-            f, pdf = self.eval_pdf(si, wo)
-            rev_si = copy.copy(si)
-            rev_si.wi = wo
-            return f, pdf, self.eval_pdf(rev_si, si.wi)[1]
+            return self._two_evaluations(si, wo)
         f, pdf, rev = Array3f(0.0), Float(0.0), Float(0.0)
         # the lanes whose two-sided frame would flip for the reverse direction
         across = (dr.dot(si.ns, si.wi) < 0.0) != (dr.dot(si.ns, wo) < 0.0)
@@ -556,21 +553,56 @@ class MaterialTable:
                                                     else across & dr.gather(Bool, two, row, case.mask))
 
                 def evaluate(f, pdf, rev, case=case, w=w, mirror=mirror):
-                    bsdf, mask, frame = case.bsdf, case.mask, case.frame()
-                    p = bsdf.params(case.rows, si, mask)
-                    wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
-                    fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
-                    if mirror is not None:
-                        wi_l = Array3f(wi_l.x, wi_l.y, dr.select(mirror, -wi_l.z, wi_l.z))
-                        wo_l = Array3f(wo_l.x, wo_l.y, dr.select(mirror, -wo_l.z, wo_l.z))
-                    rj = bsdf.pdf(p, wo_l, wi_l)
-                    if w is None:
-                        return dr.select(mask, fj, f), dr.select(mask, pj, pdf), dr.select(mask, rj, rev)
-                    return (dr.select(mask, dr.fma(fj, w, f), f), dr.select(mask, dr.fma(pj, w, pdf), pdf),
-                            dr.select(mask, dr.fma(rj, w, rev), rev))
+                    frame = case.frame()
+                    p = case.bsdf.params(case.rows, si, case.mask)
+                    return _merge_rev(case.mask, w, (f, pdf, rev),
+                                      _lobe_rev(case.bsdf, p, frame, frame.to_local(si.wi), wo, mirror))
 
                 f, pdf, rev = case.run(evaluate, (f, pdf, rev))
         return f, pdf, rev
+
+    def prepare_rev(self, si: Interaction) -> Callable[[Array3f], tuple[Array3f, Float, Float]]:
+        """:meth:`eval_pdf_rev` of ``si`` toward directions given later: what does not depend
+        on the direction (each case's fields, its shading frame and ``si.wi`` in it) is traced
+        now, once, for every lane of the case, and the returned function traces the rest per
+        call, branched per kind as :meth:`eval_pdf_rev` is; each call computes the values
+        :meth:`eval_pdf_rev` computes. For a vertex evaluated toward many directions in a loop
+        (bdpt's camera vertex joined to each light vertex): prepared outside the loop, the
+        loop's body no longer gathers the fields nor builds the frame."""
+        if self._pkinds:
+            return lambda wo: self._two_evaluations(si, wo)
+        prepared = []
+        for j in range(self.K):
+            row, w, present = self._slot(si, j)
+            for case in self._cases(si, j, row, present):
+                if case.bsdf.DELTA:
+                    continue  # nothing to evaluate
+                two = self._two[case.kind]
+                lanes = None if two is False else (True if two is True else dr.gather(Bool, two, row, case.mask))
+                frame = case.frame()
+                p = case.bsdf.params(case.rows, si, case.mask)
+                prepared.append((case, w, lanes, frame, p, frame.to_local(si.wi)))
+
+        def evaluate(wo: Array3f) -> tuple[Array3f, Float, Float]:
+            f, pdf, rev = Array3f(0.0), Float(0.0), Float(0.0)
+            across = (dr.dot(si.ns, si.wi) < 0.0) != (dr.dot(si.ns, wo) < 0.0)
+            for case, w, lanes, frame, p, wi_l in prepared:
+                mirror = None if lanes is None else (across if lanes is True else across & lanes)
+
+                def one(f, pdf, rev, case=case, w=w, mirror=mirror, frame=frame, p=p, wi_l=wi_l):
+                    return _merge_rev(case.mask, w, (f, pdf, rev), _lobe_rev(case.bsdf, p, frame, wi_l, wo, mirror))
+
+                f, pdf, rev = case.run(one, (f, pdf, rev))
+            return f, pdf, rev
+
+        return evaluate
+
+    def _two_evaluations(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float, Float]:
+        """:meth:`eval_pdf_rev` by two :meth:`eval_pdf` (tables with perturbed frames)."""
+        f, pdf = self.eval_pdf(si, wo)
+        rev_si = copy.copy(si)
+        rev_si.wi = wo
+        return f, pdf, self.eval_pdf(rev_si, si.wi)[1]
 
     def sample(self, si: Interaction, u1: Float, u2: Array2f, rev: bool = False):
         """Sample a world direction; returns it and the local :class:`BSDFSample`. With
@@ -659,3 +691,23 @@ class MaterialTable:
         if rev:
             return wo, out, pdf_rev[0]
         return wo, out
+
+
+def _lobe_rev(bsdf: BSDF, p, frame, wi_l: Array3f, wo: Array3f, mirror: Bool | None):
+    """One lobe's ``(f, pdf, pdf_rev)`` toward world ``wo`` in ``frame`` (``wi_l``: ``si.wi`` in
+    it), the swapped pair mirrored in ``z`` on the lanes ``mirror``
+    (:meth:`MaterialTable.eval_pdf_rev`)."""
+    wo_l = frame.to_local(wo)
+    fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
+    if mirror is not None:
+        wi_l = Array3f(wi_l.x, wi_l.y, dr.select(mirror, -wi_l.z, wi_l.z))
+        wo_l = Array3f(wo_l.x, wo_l.y, dr.select(mirror, -wo_l.z, wo_l.z))
+    return fj, pj, bsdf.pdf(p, wo_l, wi_l)
+
+
+def _merge_rev(mask: Bool, w: Float | None, state: tuple, lobe: tuple) -> tuple:
+    """``state`` (``f``, ``pdf``, ``pdf_rev``) with a lobe's values added on ``mask``, weighted
+    by its slot weight ``w`` (None: the material's one component, the values replace)."""
+    if w is None:
+        return tuple(dr.select(mask, v, old) for v, old in zip(lobe, state))
+    return tuple(dr.select(mask, dr.fma(v, w, old), old) for v, old in zip(lobe, state))

@@ -426,6 +426,11 @@ class DeviceScene:
         ``wo``), in one evaluation (:meth:`~drpt.render.material.MaterialTable.eval_pdf_rev`)."""
         return self.materials.eval_pdf_rev(si, wo)
 
+    def prepare_bsdf_rev(self, si: Interaction):
+        """:meth:`eval_bsdf_rev` of ``si`` as a function of ``wo``, what does not depend on
+        ``wo`` traced once (:meth:`~drpt.render.material.MaterialTable.prepare_rev`)."""
+        return self.materials.prepare_rev(si)
+
     def sample_bsdf(self, si: Interaction, u1: Float, u2: Array2f):
         """A world direction and its :class:`~drpt.render.bsdf.BSDFSample`."""
         return self.materials.sample(si, u1, u2)

@@ -233,6 +233,26 @@ def eval_both(scene: DeviceScene, si: Interaction, wo: Array3f) -> tuple[Array3f
     return scene.eval_bsdf_rev(si, wo)
 
 
+def prepare_both(scene: DeviceScene, si: Interaction):
+    """:func:`eval_both` of ``si`` toward directions given later: the returned function of
+    ``wo`` computes the same values, and what does not depend on ``wo`` (the fields, the
+    shading frame) is traced once, here (:meth:`~drpt.render.scene.DeviceScene.prepare_bsdf_rev`):
+    the loop joining a camera vertex to each light vertex prepares it outside the loop."""
+    return scene.prepare_bsdf_rev(si)
+
+
+def smooth_view(scene: DeviceScene) -> DeviceScene:
+    """The scene as bdpt's BSDF evaluations see it: they all run at vertices whose material
+    is not made only of Dirac lobes (the ``connectible`` ones: connections, splats,
+    next-event estimation, merging), where a Dirac lobe evaluates to 0, so a view of the
+    non-Dirac kinds (:meth:`~drpt.render.scene.DeviceScene.restricted`) gives the same values.
+    With one such kind and one component per material (glass or mirrors beside one smooth
+    kind) no lane gathers its kind nor branches on it; other scenes are returned as they are."""
+    kinds = getattr(scene.materials, "kinds", ())
+    smooth = [kind for kind in kinds if not scene.materials.lobes[kind].DELTA]
+    return scene.restricted(smooth) if smooth and len(smooth) < len(kinds) else scene
+
+
 def sample_both(scene: DeviceScene, si: Interaction, u_lobe: Float, u_bsdf: Array2f):
     """``(wo, bs, pdf_rev)``: a BSDF sample at ``si`` and its reverse density (of ``si.wi``
     seen from ``wo``, which :func:`scatter_update` reads), in one dispatch
@@ -517,6 +537,9 @@ class BDPTIntegrator:
         #: the MIS weights' factor for connections: ``m(CONNECTION_CHOICES)`` with
         #: :attr:`one_connection`, else 1 (see :data:`CONNECTION_CHOICES`)
         self.k = mis(CONNECTION_CHOICES) if self.one_connection else 1.0
+        #: the scene seen by the BSDF evaluations of connections, splats, next-event estimation
+        #: and merging (:func:`smooth_view`)
+        self.smooth = smooth_view(scene)
         #: whether paths camera S+ D S+ area light are estimated by merging caustic photons
         #: (:meth:`photons`) instead of the camera subpath hitting the light: ``merge`` in
         #: scenes with Dirac lobes, area lights and a non-Dirac surface, else False (nothing
@@ -645,7 +668,7 @@ class BDPTIntegrator:
         scene, cam = self.scene, self.camera
         x, y, wc, _dist, importance, visible = cam.connect(si.p)
         ok = active & visible
-        f, _, rev = eval_both(scene, si, wc)
+        f, _, rev = eval_both(self.smooth, si, wc)
         corr, sides = correction(si, wc)
         pdf_cam = importance * dr.abs(dr.dot(si.ng, wc))
         w = self._weight(connection_weight(pdf_cam, dvcm, dvc, rev, Float(0.0), Float(0.0), Float(0.0),
@@ -717,7 +740,7 @@ class BDPTIntegrator:
         ok = active & (cos_front > 0.0) & (cos_l > 0.0) & (ls.pdf_area > 0.0)
         pdf_a = self.origin_pdf(face, active)
         pdf_w = pdf_a * dist2 / cos_l  # the density the weights use (uniform on a sphere)
-        f, fwd, rev = eval_both(scene, si, wo)
+        f, fwd, rev = eval_both(self.smooth, si, wo)
         emit = self.pick * pdf_a * cos_front / math.pi
         cos_c = dr.abs(dr.dot(si.ng, wo))
         w = self._weight(nee_weight(fwd, pdf_w, emit, cos_c, cos_l, dvcm, dvc, rev, self.k), 1, t)
@@ -736,7 +759,7 @@ class BDPTIntegrator:
         scene = self.scene
         total = dr.zeros(Array3f, dr.width(active))
         for light, ds in zip(self.deltas, scene.delta_emitters(si.p)):
-            f, _, rev = eval_both(scene, si, ds.wo)
+            f, _, rev = eval_both(self.smooth, si, ds.wo)
             cos_c = dr.abs(dr.dot(si.ng, ds.wo))
             # the light's area density is 1 (a Dirac): as a solid angle dist^2, or 1 for a
             # directional light (infinitely far: no distance, no cosine)
@@ -757,7 +780,7 @@ class BDPTIntegrator:
         """``s = 1`` for the sky: a direction drawn by its density (as the path tracer's)."""
         scene = self.scene
         wo, radiance, pdf = scene.sample_environment(next_2d(rng), active)
-        f, fwd, rev = eval_both(scene, si, wo)
+        f, fwd, rev = eval_both(self.smooth, si, wo)
         emit = self.pick * pdf * self.disk_pdf
         w = self._weight(nee_weight(fwd, pdf, emit, dr.abs(dr.dot(si.ng, wo)), Float(1.0), dvcm, dvc, rev,
                                     self.k), 1, t)
@@ -783,15 +806,16 @@ class BDPTIntegrator:
 
     def _connect(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float,
                  lv: Interaction, beta_l: Array3f, dvcm_l: Float, dvc_l: Float, active: Bool,
-                 s: UInt32, t: UInt32, u_rr: Float, threshold: Float) -> Array3f:
+                 s: UInt32, t: UInt32, u_rr: Float, threshold: Float, eval_c=None) -> Array3f:
         """``s >= 2, t >= 2``: camera vertex ``si`` joined to light vertex ``lv`` (after
-        :func:`roulette` with ``u_rr`` and ``threshold``)."""
+        :func:`roulette` with ``u_rr`` and ``threshold``); ``eval_c``: :func:`prepare_both`'s
+        function of ``si`` (None: :func:`eval_both`)."""
         scene = self.scene
         to = lv.p - si.p
         dist2 = dr.squared_norm(to)
         w = to * dr.rsqrt(dist2)
-        f_c, fwd_c, rev_c = eval_both(scene, si, w)
-        f_l, fwd_l, rev_l = eval_both(scene, lv, -w)
+        f_c, fwd_c, rev_c = eval_both(self.smooth, si, w) if eval_c is None else eval_c(w)
+        f_l, fwd_l, rev_l = eval_both(self.smooth, lv, -w)
         corr, sides = correction(lv, -w)
         inv_d2 = dr.rcp(dist2)
         pdf_l = fwd_c * dr.abs(dr.dot(lv.ng, w)) * inv_d2
@@ -892,7 +916,7 @@ class BDPTIntegrator:
         paths fit in ``room`` segments: ``sum f(wi, wo_p) power_p / (pi r^2 N)``, ``f`` the
         BSDF without its cosine (the photons' density over the surface holds the geometric
         cosine), per ``active`` lane."""
-        scene = self.scene
+        scene = self.smooth
 
         def one(i: UInt32, _p: Array3f, keep: Bool) -> Array3f:
             wo = grid.read("wo", i, keep)
@@ -1057,11 +1081,13 @@ class BDPTIntegrator:
                 # si is read, not changed: outside the loop's state (its width-1 fields would
                 # make Dr.Jit record the loop again)
                 usable = dr.minimum(stored, room)
+                # the camera vertex's fields and frame, once for all its connections
+                eval_c = prepare_both(self.smooth, si)
                 while dr.hint(connectible & (i < usable), exclude=[si]):
                     lv, beta_l, dvcm_l, dvc_l, depth_l = lverts.read(i, connectible)
                     c = self._connect(si, beta, dvcm, dvc, lv, beta_l, dvcm_l, dvc_l,
                                       connectible & (depth_l + k < D), depth_l + 1, k + 1,
-                                      rng.next_float32(), threshold)
+                                      rng.next_float32(), threshold, eval_c)
                     L += c
                     if record:
                         strategies.put(depth_l + 1, k + 1, px, py, c, active)

@@ -836,3 +836,41 @@ def test_the_subpath_loops_are_traced_once_and_the_image_is_the_same(scenes, mon
     # the pass alone, each loop recorded twice (the specular scene's inner loop twice in each
     # recording of the camera loop)
     assert calls["_splat"] == 2 and calls["_connect"] in (2, 4), calls
+
+
+def test_the_smooth_view_gives_the_same_image(tmp_path):
+    """Connections, splats, next-event estimation and merging evaluate the BSDF on a view of
+    the non-Dirac kinds (:func:`~drpt.render.integrators.bdpt.smooth_view`): in a scene of
+    glass, a mirror and one smooth kind the view traces that kind alone (no lane reads its
+    kind), and the image is, bit for bit, the one of the whole table. Negative control: the
+    view is right only at vertices whose material is not made of Dirac lobes; sampling with it
+    too (the camera subpath then reflects diffusely off the glass and the mirror) changes the
+    image."""
+    text = POINT_SCENE % ("", 10, 2, 3, "MaterialIndex 5\n  Sphere { center 0.9 2.0 0.3 radius 0.15 }")
+    text = text.replace("specularColor 0.5 0.5 0.5 exponent 30", "")
+    path = tmp_path / "one_smooth_kind.txt"
+    path.write_text(text)
+    scene = load_scene(path)
+    opts = RenderOptions(width=16, height=16, spp=4, seed=3, integrator="bdpt", progress=False,
+                         path=PathOptions(max_depth=5))
+
+    def image():
+        return Renderer(scene, opts).render().image
+
+    with_view = image()
+    renderer = Renderer(scene, opts)
+    view = B.smooth_view(renderer.scene)
+    assert view is not renderer.scene and view.materials._only == ("diffuse",) and view.materials.K == 1
+    whole = pytest.MonkeyPatch()
+    whole.setattr(B, "smooth_view", lambda s: s)
+    try:
+        assert np.array_equal(image(), with_view)
+    finally:
+        whole.undo()
+    control = pytest.MonkeyPatch()
+    sample = B.sample_both
+    control.setattr(B, "sample_both", lambda s, *a: sample(B.smooth_view(s), *a))
+    try:
+        assert not np.array_equal(image(), with_view)
+    finally:
+        control.undo()
