@@ -4,7 +4,7 @@
 
     python -m drpt knobs SCENE [render flags] [--ref-spp M] [--ref-batches B]
                                [--knobs depth rr accel bsdf light sampler filter integrator adaptive
-                                        denoise]
+                                        env-compensation triangle-sampling denoise]
                                [--depths D ...] [--rr-depths K ...] [--rr-probs P ...]
                                [--repeats R] [--cache DIR | --no-cache] [--out DIR]
 
@@ -34,6 +34,17 @@ Russian roulette from depth 5 with the adaptive probability
            Gaussian filter);
 ``integrator`` light tracing (``ptracer``) and bidirectional path tracing (``bdpt``); a
            scene one cannot render lists its row as not rendered (``skipped``);
+``env-compensation`` the sky's next-event estimation with MIS compensation off
+           (``--env-compensation off``; ``on`` where the default row's is off): only in a
+           scene with an environment map whose file does not set ``mis_compensation``,
+           rendered by an integrator that compensates (``path``, ``volpath``) and whose
+           media (if any) lie inside closed shapes, :func:`drpt.render.scene.env_compensated`;
+           elsewhere the two settings render the same image and there is no row;
+``triangle-sampling`` emissive triangles sampled for next-event estimation by the
+           other of ``--triangle-sampling area`` and ``solid-angle`` than the one the
+           default row's setting takes (``auto`` takes ``solid-angle`` in scenes with media):
+           only in a scene with emissive triangles, rendered by an integrator other than
+           the light tracers (which sample by area whatever the flag);
 ``adaptive`` adaptive sampling (``render --adaptive``: the same budget of samples,
            allocated per pixel from two pilots' error estimates; needs ``--spp`` of at
            least 8, else the row is ``skipped``);
@@ -87,8 +98,12 @@ from ..denoise import available, denoise_result, require
 from ..errors import DrptError
 from ..options import PathOptions, RenderOptions
 from ..render.adaptive import check
+from ..render.lights.area import triangle_sampling_rule
+from ..render.lights.pilot import LIGHT_TRACERS
 from ..render.renderer import Renderer
+from ..render.scene import env_compensated
 from ..scene import load_scene
+from ..scene.model import Skybox
 from . import table as _table
 from .compare import _prepare_out, _write_json
 from .converge import noise_floor, write_csv
@@ -100,12 +115,13 @@ from .reference import (
 )
 
 KNOBS = ("depth", "rr", "accel", "bsdf", "light", "sampler", "filter", "integrator", "adaptive",
-         "denoise")
+         "env-compensation", "triangle-sampling", "denoise")
 #: the ``sampler`` knob's settings
 SAMPLER_KNOB = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "orthogonal")
 RR_OFF_DEPTH = 64
 
-__all__ = ["add_parser", "main", "Config", "configs", "knobs_study", "image_bias"]
+__all__ = ["add_parser", "main", "Config", "configs", "knobs_study", "image_bias", "env_compensation_knob",
+           "triangle_sampling_knob"]
 
 
 @dataclass
@@ -123,6 +139,8 @@ class Config:
     filter_sampling: bool = False
     adaptive: bool = False
     sampler: str | None = None  # None: the default row's (the options')
+    env_compensation: str | None = None  # None: the default row's (the options')
+    triangle_sampling: str | None = None  # None: the default row's (the options')
 
 
 def default_knobs() -> list[str]:
@@ -172,10 +190,43 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
+def env_compensation_knob(scene, options: RenderOptions) -> str | None:
+    """The default row's ``--env-compensation`` where the other setting renders ``scene``
+    differently (:func:`~drpt.render.scene.env_compensated` differs: an environment map
+    whose file leaves ``mis_compensation`` unset, a compensating integrator, media inside
+    closed shapes), else None (no ``env-compensation`` row)."""
+    from dataclasses import replace
+
+    for sky in (light for light in scene.lights if isinstance(light, Skybox)):
+        if env_compensated(sky, replace(options, env_compensation="on"), scene) != \
+                env_compensated(sky, replace(options, env_compensation="off"), scene):
+            return options.env_compensation
+    return None
+
+
+def triangle_sampling_knob(scene, options: RenderOptions) -> str | None:
+    """What next-event estimation of the default row does with emissive triangles,
+    ``area`` or ``solid-angle`` (``options.triangle_sampling`` with ``auto`` resolved,
+    :func:`~drpt.render.lights.area.triangle_sampling_rule`), or None where the flag does
+    not change the image: no emissive triangle, or a light tracer (``ptracer``, ``bdpt``:
+    always by area)."""
+    if options.integrator in LIGHT_TRACERS or not len(scene.triangles):
+        return None
+    emits = np.array([m.is_emissive or getattr(m, "emission_texture", None) is not None
+                      for m in scene.materials], bool)
+    if not emits.any() or not emits[np.asarray(scene.triangles.material, np.int64)].any():
+        return None
+    return "solid-angle" if triangle_sampling_rule(options.triangle_sampling, scene) else "area"
+
+
 def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
-            rr_probs=(0.5, 0.8), filtered: bool = False, sampler: str = "independent") -> list[Config]:
+            rr_probs=(0.5, 0.8), filtered: bool = False, sampler: str = "independent",
+            env_compensation: str | None = None, triangle_sampling: str | None = None) -> list[Config]:
     """The default row, then one row per knob setting (``filter`` only for a tent or
-    Gaussian filter, ``filtered``; ``sampler``: the default row's ``--sampler``)."""
+    Gaussian filter, ``filtered``; ``sampler``: the default row's ``--sampler``;
+    ``env_compensation`` and ``triangle_sampling``: the default row's settings
+    (:func:`env_compensation_knob`, :func:`triangle_sampling_knob`), None where the scene
+    has no such feature: no row)."""
     rows = [Config("default", "auto accel, unbounded depth, RR from depth 5 (adaptive)", bsdf)]
     if "depth" in knobs:
         rows += [Config("max depth", str(d), bsdf, max_depth=d) for d in depths]
@@ -204,6 +255,14 @@ def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10
     if "integrator" in knobs:
         rows.append(Config("integrator", "ptracer (light tracing)", bsdf, integrator="ptracer"))
         rows.append(Config("integrator", "bdpt (bidirectional)", bsdf, integrator="bdpt"))
+    if "env-compensation" in knobs and env_compensation is not None:
+        other = "off" if env_compensation == "on" else "on"
+        rows.append(Config("env compensation", f"{other} (--env-compensation {other})", bsdf,
+                           env_compensation=other))
+    if "triangle-sampling" in knobs and triangle_sampling is not None:
+        other = "area" if triangle_sampling == "solid-angle" else "solid-angle"
+        rows.append(Config("triangle sampling", f"{other} (--triangle-sampling {other})", bsdf,
+                           triangle_sampling=other))
     if "adaptive" in knobs:
         rows.append(Config("sampling", "adaptive (--adaptive)", bsdf, adaptive=True))
     if "denoise" in knobs:
@@ -279,7 +338,9 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
         return refs[mode]
 
     cfgs = configs(bsdf, knobs, depths, rr_depths, rr_probs,
-                   filtered=not options.pixel_filter.is_box, sampler=options.sampler)
+                   filtered=not options.pixel_filter.is_box, sampler=options.sampler,
+                   env_compensation=env_compensation_knob(scene, options),
+                   triangle_sampling=triangle_sampling_knob(scene, options))
     renderers = []
     skipped = []
     for c in list(cfgs):
@@ -292,6 +353,8 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
                        progress=False, denoise=c.denoise, integrator=c.integrator,
                        light_sampler=c.light_sampler, filter_sampling=c.filter_sampling,
                        sampler=c.sampler or options.sampler,
+                       env_compensation=c.env_compensation or options.env_compensation,
+                       triangle_sampling=c.triangle_sampling or options.triangle_sampling,
                        path=PathOptions(max_depth=c.max_depth, rr_depth=c.rr_depth,
                                         rr_prob=c.rr_prob))
         try:

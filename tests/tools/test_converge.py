@@ -682,3 +682,94 @@ def test_knobs_sampler_row_renders_with_its_sampler(tmp_path, monkeypatch, corne
     data = json.loads((out / "knobs.json").read_text())
     assert [r["setting"] for r in data["rows"]][1:] == others
     assert all(r["seconds"] > 0 and np.isfinite(r["excess_rel_mse"]) for r in data["rows"])
+
+
+def test_knobs_env_compensation_and_triangle_sampling_rows():
+    """Each of the two choices has one row, the setting the default row does not take, and
+    none where the scene lacks the feature (None)."""
+    from drpt.tools.knobs import configs
+
+    both = ("env-compensation", "triangle-sampling")
+    assert [r.knob for r in configs("auto", both)] == ["default"]
+    rows = configs("auto", both, env_compensation="on", triangle_sampling="area")
+    assert [(r.knob, r.env_compensation, r.triangle_sampling) for r in rows] == [
+        ("default", None, None), ("env compensation", "off", None),
+        ("triangle sampling", None, "solid-angle")]
+    rows = configs("auto", both, env_compensation="off", triangle_sampling="solid-angle")
+    assert [(r.env_compensation, r.triangle_sampling) for r in rows[1:]] == [("on", None), (None, "area")]
+
+
+def test_knobs_env_and_triangle_rows_only_where_the_scene_has_them(cornell, repo):
+    """An environment map the file leaves to the flag: a row for path tracing, none for light
+    tracing (which samples the map by luminance either way) or where the file sets
+    ``mis_compensation``; emissive triangles: a row (``auto`` is ``area`` without media),
+    none for light tracing or without emissive triangles."""
+    from dataclasses import replace
+
+    from drpt.options import RenderOptions
+    from drpt.scene import load_scene
+    from drpt.tools.knobs import env_compensation_knob, triangle_sampling_knob
+
+    env = load_scene(repo / "tests" / "data" / "xml" / "envmap.xml")
+    box = load_scene(cornell)
+    opts = RenderOptions()
+    assert env_compensation_knob(env, opts) == "on"
+    assert env_compensation_knob(env, replace(opts, env_compensation="off")) == "off"
+    assert env_compensation_knob(env, replace(opts, integrator="ptracer")) is None
+    sky = next(light for light in env.lights if hasattr(light, "mis_compensation"))
+    sky.mis_compensation = False  # the file decides: the flag changes nothing
+    assert env_compensation_knob(env, opts) is None
+    assert env_compensation_knob(box, opts) is None
+    assert triangle_sampling_knob(box, opts) == "area"
+    assert triangle_sampling_knob(box, replace(opts, triangle_sampling="solid-angle")) == "solid-angle"
+    assert triangle_sampling_knob(box, replace(opts, integrator="bdpt")) is None
+    assert triangle_sampling_knob(env, opts) is None  # lit by the sky alone
+
+
+@pytest.mark.slow
+@pytest.mark.mitsuba
+def test_knobs_env_and_triangle_rows_render_with_their_settings(tmp_path, monkeypatch, repo):
+    """The ``env-compensation`` and ``triangle-sampling`` rows reach the renderer with their
+    settings, and the table reports each with its error and time."""
+    pytest.importorskip("mitsuba")
+    from drpt.render.renderer import Renderer
+    from drpt.tools import knobs
+
+    seen = []
+    real = Renderer.__init__
+
+    def init(self, scene, options):
+        seen.append((options.env_compensation, options.triangle_sampling))
+        real(self, scene, options)
+    monkeypatch.setattr(Renderer, "__init__", init)
+    # the env map's scene with a small emissive rectangle: both features
+    xml = (repo / "tests" / "data" / "xml" / "envmap.xml").read_text().replace(
+        "</scene>", '<shape type="rectangle"><transform name="to_world"><scale value="0.3"/>'
+        '<translate y="1.5"/></transform><emitter type="area"><rgb name="radiance" value="4"/>'
+        "</emitter></shape></scene>")
+    scene = tmp_path / "env_tri.xml"
+    scene.write_text(xml)
+    for name in ("common_sensor.xml", "sky.exr"):
+        (tmp_path / name).symlink_to(repo / "tests" / "data" / "xml" / name)
+    out = tmp_path / "k"
+    assert _run(knobs, scene, "--size", "16", "12", "--spp", "4", "--ref-spp", "64",
+                "--knobs", "env-compensation", "triangle-sampling", "--repeats", "1",
+                "--out", str(out), "--quiet", "--cache", str(tmp_path / "cache")) == 0
+    assert seen == [("on", "auto"), ("off", "auto"), ("on", "solid-angle")]
+    data = json.loads((out / "knobs.json").read_text())
+    assert [r["knob"] for r in data["rows"]] == ["default", "env compensation", "triangle sampling"]
+    assert all(r["seconds"] > 0 and np.isfinite(r["excess_rel_mse"]) for r in data["rows"])
+
+
+def test_converge_takes_env_compensation_and_triangle_sampling():
+    """``converge`` takes the render flags: the two sampling choices reach its options."""
+    from drpt.cli.args import options_from_args
+
+    parser = argparse.ArgumentParser()
+    converge.add_parser(parser.add_subparsers())
+    args = parser.parse_args(["converge", "s.xml", "--env-compensation", "off",
+                              "--triangle-sampling", "solid-angle"])
+    opts = options_from_args(args, adaptive=False)
+    assert (opts.env_compensation, opts.triangle_sampling) == ("off", "solid-angle")
+    opts = options_from_args(parser.parse_args(["converge", "s.xml"]), adaptive=False)
+    assert (opts.env_compensation, opts.triangle_sampling) == ("on", "auto")
