@@ -37,8 +37,9 @@ Russian roulette from depth 5 with the adaptive probability
 ``env-compensation`` the sky's next-event estimation with MIS compensation off
            (``--env-compensation off``; ``on`` where the default row's is off): only in a
            scene with an environment map whose file does not set ``mis_compensation``,
+           not nearly constant, sampled by luminance (not ``--env-sampling uniform``),
            rendered by an integrator that compensates (``path``, ``volpath``) and whose
-           media (if any) lie inside closed shapes, :func:`drpt.render.scene.env_compensated`;
+           media (if any) lie inside closed shapes (:func:`env_compensation_knob`);
            elsewhere the two settings render the same image and there is no row;
 ``triangle-sampling`` emissive triangles sampled for next-event estimation by the
            other of ``--triangle-sampling area`` and ``solid-angle`` than the one the
@@ -99,6 +100,7 @@ from ..errors import DrptError
 from ..options import PathOptions, RenderOptions
 from ..render.adaptive import check
 from ..render.lights.area import triangle_sampling_rule
+from ..render.lights.envmap import EnvironmentLight
 from ..render.lights.pilot import LIGHT_TRACERS
 from ..render.renderer import Renderer
 from ..render.scene import env_compensated
@@ -192,15 +194,22 @@ def main(args: argparse.Namespace) -> int:
 
 def env_compensation_knob(scene, options: RenderOptions) -> str | None:
     """The default row's ``--env-compensation`` where the other setting renders ``scene``
-    differently (:func:`~drpt.render.scene.env_compensated` differs: an environment map
-    whose file leaves ``mis_compensation`` unset, a compensating integrator, media inside
-    closed shapes), else None (no ``env-compensation`` row)."""
+    differently, else None (no ``env-compensation`` row): where
+    :func:`~drpt.render.scene.env_compensated` differs (an environment map whose file
+    leaves ``mis_compensation`` unset, a compensating integrator, media inside closed
+    shapes), the sky is sampled by luminance (not ``--env-sampling uniform``) and the map
+    is not so nearly constant or black that compensation leaves it as it is
+    (:meth:`~drpt.render.lights.envmap.EnvironmentLight.compensated`; the map is read)."""
     from dataclasses import replace
 
+    if options.env_sampling == "uniform":
+        return None
     for sky in (light for light in scene.lights if isinstance(light, Skybox)):
         if env_compensated(sky, replace(options, env_compensation="on"), scene) != \
                 env_compensated(sky, replace(options, env_compensation="off"), scene):
-            return options.env_compensation
+            light = EnvironmentLight.from_file(sky.path, scale=sky.scale)
+            if light.compensated() is not light:
+                return options.env_compensation
     return None
 
 

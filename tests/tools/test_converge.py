@@ -716,6 +716,7 @@ def test_knobs_env_and_triangle_rows_only_where_the_scene_has_them(cornell, repo
     assert env_compensation_knob(env, opts) == "on"
     assert env_compensation_knob(env, replace(opts, env_compensation="off")) == "off"
     assert env_compensation_knob(env, replace(opts, integrator="ptracer")) is None
+    assert env_compensation_knob(env, replace(opts, env_sampling="uniform")) is None
     sky = next(light for light in env.lights if hasattr(light, "mis_compensation"))
     sky.mis_compensation = False  # the file decides: the flag changes nothing
     assert env_compensation_knob(env, opts) is None
@@ -724,6 +725,25 @@ def test_knobs_env_and_triangle_rows_only_where_the_scene_has_them(cornell, repo
     assert triangle_sampling_knob(box, replace(opts, triangle_sampling="solid-angle")) == "solid-angle"
     assert triangle_sampling_knob(box, replace(opts, integrator="bdpt")) is None
     assert triangle_sampling_knob(env, opts) is None  # lit by the sky alone
+
+
+def test_knobs_no_env_compensation_row_for_a_constant_map(tmp_path, repo):
+    """A constant map: compensation leaves it as it is (Mitsuba's rule), the row would be
+    the default's; the negative control, a map with a bright half, has its row."""
+    from drpt.imageio import write_image
+    from drpt.options import RenderOptions
+    from drpt.scene import load_scene
+    from drpt.tools.knobs import env_compensation_knob
+
+    sky = tmp_path / "sky.exr"
+    scene = load_scene(repo / "tests" / "data" / "xml" / "envmap.xml")
+    next(light for light in scene.lights if hasattr(light, "mis_compensation")).path = sky
+    write_image(sky, np.full((8, 16, 3), 0.7, np.float32))
+    assert env_compensation_knob(scene, RenderOptions()) is None
+    bright = np.full((8, 16, 3), 0.7, np.float32)
+    bright[:4] = 5.0
+    write_image(sky, bright)
+    assert env_compensation_knob(scene, RenderOptions()) == "on"
 
 
 @pytest.mark.slow
