@@ -262,8 +262,8 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                  "triangle: area (uniform on it, Mitsuba's), solid-angle (uniform "
                                  "in the solid angle it subtends at the shading point, where that is "
                                  "neither tiny nor near a hemisphere; light tracing and bdpt stay "
-                                 "on area) or auto (solid-angle where some emissive triangle's "
-                                 "longest edge is at least 5%% of the scene's diagonal) "
+                                 "on area) or auto (solid-angle in scenes with participating media, "
+                                 "area elsewhere) "
                                  f"(default {base.triangle_sampling})")
     if want("filter"):
         parser.add_argument("--filter", dest="filter", metavar="box|tent|gaussian", action=_Given,
