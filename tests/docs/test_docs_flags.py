@@ -210,7 +210,7 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--scale", "--grid",  # (benchmarks/variance_vs_mitsuba.py)
                   "--all-textures",  # (benchmarks/kernel_ops.py)
                   "--agree",  # (benchmarks/env_compensation.py)
-                  "--scenes", "--seeds", "--repeat", "--reference", "--parts", "--depth"}  # (bdpt_*.py)
+                  "--scenes", "--scene", "--seeds", "--repeat", "--reference", "--parts", "--depth"}  # (bdpt_*.py)
 
 
 def test_every_flag_the_docs_name_exists(parsers):
