@@ -14,6 +14,8 @@ it and answers the integrators' queries over wide arrays. A lane's material
 whole mixture's ``f / pdf`` and ``pdf`` (one-sample MIS over the components: lower
 variance than the chosen component's own ratio, same expectation); a Dirac sample
 keeps the component's own weight (its selection probability cancels).
+:meth:`MaterialTable.eval_pdf_sample` answers both at one vertex in one dispatch (each
+kind's fields and textures read once), the values of the two calls bit for bit.
 
 Model only what the scene requires: only the lobe kinds present are traced,
 only their fields are uploaded, a field is looked up in a texture only when some material
@@ -202,9 +204,20 @@ class MaterialTable:
             self._emissive = Bool(glows)
         # sidedness, per kind: True / False when uniform, else a per-row array
         self._two = {k: _flag(v) for k, v in lay.two_sided.items()}
-        # slots (only when some material has several components)
+        # slots (only when some material has several components); slots whose weights read
+        # the same textures (a mask's opacity and its pass-through's one minus it) share one
+        # array, so that their lookups are one (:meth:`_slot`)
+        uploaded: list[tuple[np.ndarray, UInt32]] = []
+
+        def texture_ids(a):
+            for b, ids in uploaded:
+                if np.array_equal(a, b):
+                    return ids
+            uploaded.append((a, UInt32(a)))
+            return uploaded[-1][1]
+
         self._slots = [_Slot(UInt32(sl.row), Float(sl.weight),
-                             None if sl.texture is None else UInt32(sl.texture), Bool(sl.complement),
+                             None if sl.texture is None else texture_ids(sl.texture), Bool(sl.complement),
                              sl.kinds, sl.partial, None if sl.texture is None else _among(sl.texture))
                        for sl in lay.slots]
         # per-row fields of the kinds present
@@ -243,6 +256,10 @@ class MaterialTable:
         self._all_delta = bool(delta.all())
         self._mat_delta = None if (self._all_delta or not delta.any()) else Bool(delta)
         self._any_delta = bool(delta.any())
+        # the kinds of the delta-only materials (what :meth:`specular` traces), and whether
+        # each of them is one component (then slot 0 holds its row, at weight 1)
+        self._delta_kinds = tuple(sorted({k for ks, d in zip(lay.material_kinds, delta) if d for k in ks}))
+        self._delta_single = all(len(cs) == 1 for cs, d in zip(lay.components, delta) if d)
         # materials blending two or more smooth components (blendbsdf of two lobes, ...):
         # only theirs need the whole mixture evaluated after sampling (see sample); a
         # mask's pass-through beside one smooth lobe does not
@@ -317,6 +334,17 @@ class MaterialTable:
         view = copy.copy(self)
         view._only = tuple(k for k in self.kinds if k in set(kinds))
         return view
+
+    def specular(self) -> MaterialTable:
+        """A :meth:`restricted` view of the kinds of the materials made only of Dirac lobes
+        (see :attr:`mixes_delta`): what sampling traces for those materials' lanes alone.
+        Where each of those materials is one component, the view samples slot 0's row
+        without choosing a slot."""
+        view = self.restricted(self._delta_kinds)
+        view._one_slot = self.K > 1 and self._delta_single
+        return view
+
+    _one_slot = False  # (a specular view: the lanes' materials are one component each)
 
     # ------------------------------------------------------------------ parameters
     def specs_of(self, kind: str) -> list[BSDFSpec]:
@@ -430,8 +458,10 @@ class MaterialTable:
         present = si.valid & (row != NONE) if s.partial else si.valid
         w = dr.gather(Float, s.weight, si.material, present)
         if s.texture is not None:
-            ids = dr.gather(UInt32, s.texture, si.material, present)
-            textured = present & (ids != NONE)
+            # looked up on every valid lane (w is 0 where the slot is absent): the same
+            # expression for every slot sharing the texture array, traced once
+            ids = dr.gather(UInt32, s.texture, si.material, si.valid)
+            textured = si.valid & (ids != NONE)
             t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True, si=si, among=s.among))
             comp = dr.gather(Bool, s.complement, si.material, present)
             w = dr.select(textured, w * dr.select(comp, 1.0 - t, t), w)
@@ -450,7 +480,8 @@ class MaterialTable:
         kinds = self.kinds if (j is None or self.K == 1) else self._slots[j].kinds
         if self._only is not None:
             kinds = [k for k in kinds if k in self._only]
-        if len(self.kinds) == 1 or (self._only is not None and len(self._only) == 1 and self.K == 1):
+        if len(self.kinds) == 1 or (self._only is not None and len(self._only) == 1
+                                    and (self.K == 1 or self._one_slot)):
             kind_of = None
         else:
             kind_of = dr.gather(UInt32, self.kind, row, present)
@@ -513,16 +544,8 @@ class MaterialTable:
                     continue  # nothing to evaluate
 
                 def evaluate(f, pdf, case=case, w=w):
-                    bsdf, mask, frame = case.bsdf, case.mask, case.frame()
-                    p = bsdf.params(case.rows, si, mask)
-                    wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
-                    fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
-                    if isinstance(frame, PerturbedFrame):
-                        fac = frame.factor(wo)
-                        fj, pj = fj * fac, dr.select(fac > 0.0, pj, 0.0)
-                    if w is None:
-                        return dr.select(mask, fj, f), dr.select(mask, pj, pdf)
-                    return dr.select(mask, dr.fma(fj, w, f), f), dr.select(mask, dr.fma(pj, w, pdf), pdf)
+                    p, frame = case.bsdf.params(case.rows, si, case.mask), case.frame()
+                    return _eval_case(case, p, frame, frame.to_local(si.wi), wo, w, f, pdf)
 
                 f, pdf = case.run(evaluate, (f, pdf))
         return f, pdf
@@ -530,40 +553,80 @@ class MaterialTable:
     def sample(self, si: Interaction, u1: Float, u2: Array2f) -> tuple[Array3f, BSDFSample]:
         """Sample a world direction; returns it and the local :class:`BSDFSample`."""
         if self.K == 1:
-            row, present = si.material, si.valid
+            row, present, chosen_w = si.material, si.valid, None
+        elif self._one_slot:
+            row, present, chosen_w = dr.gather(UInt32, self._slots[0].row, si.material, si.valid), si.valid, None
         else:
-            # pick a slot by its weight, reuse u1 rescaled within it
+            picked, chosen_w, u1 = self._pick(si, u1)
             row = UInt32(NONE)
-            lo, chosen_w = Float(0.0), Float(1.0)
-            picked = Bool(False)
-            for j in range(self.K):
-                rj, w, pres = self._slot(si, j)
-                take = pres & ~picked & ((u1 < lo + w) | Bool(j == self.K - 1)) & (w > 0.0)
-                row = dr.select(take, rj, row)
-                u_rest = dr.select(take, (u1 - lo) / dr.select(w > 0.0, w, 1.0), 0.0)
-                chosen_w = dr.select(take, w, chosen_w)
-                u1 = dr.select(take, dr.clip(u_rest, 0.0, 0.99999994), u1)
-                picked |= take
-                lo = lo + w
-            present = si.valid & picked
+            for j, take in enumerate(picked):
+                row = dr.select(take, self._slot(si, j)[0], row)
+            present = si.valid & _any(picked)
         out = BSDFSample()
         wo = Array3f(0.0, 0.0, 1.0)
         for case in self._cases(si, None, row, present):
 
             def draw(out, wo, case=case, u1=u1):
-                bsdf, mask, frame = case.bsdf, case.mask, case.frame()
-                p = bsdf.params(case.rows, si, mask)
-                bs = bsdf.sample(p, frame.to_local(si.wi), u1, u2)
-                wo_j = frame.to_world(bs.wo)
-                if isinstance(frame, PerturbedFrame):
-                    fac = frame.factor(wo_j)
-                    ok = fac > 0.0
-                    bs.weight, bs.pdf, bs.valid = bs.weight * fac, dr.select(ok, bs.pdf, 0.0), bs.valid & ok
-                return dr.select(mask, bs, out), dr.select(mask, wo_j, wo)
+                p, frame = case.bsdf.params(case.rows, si, case.mask), case.frame()
+                return _sample_case(case, p, frame, frame.to_local(si.wi), u1, u2, case.mask, out, wo)
 
             out, wo = case.run(draw, (out, wo))
+        return self._mixture(si, wo, out, present, chosen_w)
+
+    def eval_pdf_sample(self, si: Interaction, wo: Array3f, u1: Float,
+                        u2: Array2f) -> tuple[Array3f, Float, Array3f, BSDFSample]:
+        """:meth:`eval_pdf` toward ``wo`` and :meth:`sample` from ``(u1, u2)`` in one
+        dispatch: ``(f, pdf, wo_sampled, sample)``, the same values as the two calls.
+        Each kind's case reads its fields (texture lookups included), builds its frame
+        and maps ``wi`` once for both (Mitsuba's ``eval_pdf_sample``); with several slots,
+        slot ``j``'s cases also sample the lanes that picked slot ``j``."""
+        f, pdf = Array3f(0.0), Float(0.0)
+        out, wo_s = BSDFSample(), Array3f(0.0, 0.0, 1.0)
+        if self.K == 1:
+            picked, chosen_w, present = [None], None, si.valid
+        else:
+            picked, chosen_w, u1 = self._pick(si, u1)
+            present = si.valid & _any(picked)
+        for j in range(self.K):
+            row, w, pres = self._slot(si, j)
+            for case in self._cases(si, j, row, pres):
+                ev = not case.bsdf.DELTA  # (a Dirac lobe adds nothing to f and pdf)
+                drawn = case.mask if picked[j] is None else case.mask & picked[j]
+
+                def both(f, pdf, out, wo_s, case=case, w=w, ev=ev, drawn=drawn):
+                    p, frame = case.bsdf.params(case.rows, si, case.mask), case.frame()
+                    wi_l = frame.to_local(si.wi)
+                    if ev:
+                        f, pdf = _eval_case(case, p, frame, wi_l, wo, w, f, pdf)
+                    out, wo_s = _sample_case(case, p, frame, wi_l, u1, u2, drawn, out, wo_s)
+                    return f, pdf, out, wo_s
+
+                f, pdf, out, wo_s = case.run(both, (f, pdf, out, wo_s), case.mask if ev else drawn)
+        wo_s, out = self._mixture(si, wo_s, out, present, chosen_w)
+        return f, pdf, wo_s, out
+
+    def _pick(self, si: Interaction, u1: Float) -> tuple[list[Bool], Float, Float]:
+        """Slot choice for sampling (``K > 1``): per slot the lanes that picked it (by its
+        weight), the chosen slot's weight, and ``u1`` rescaled within it for the lobe."""
+        lo, chosen_w = Float(0.0), Float(1.0)
+        picked, any_ = [], Bool(False)
+        for j in range(self.K):
+            _, w, pres = self._slot(si, j)
+            take = pres & ~any_ & ((u1 < lo + w) | Bool(j == self.K - 1)) & (w > 0.0)
+            u_rest = dr.select(take, (u1 - lo) / dr.select(w > 0.0, w, 1.0), 0.0)
+            chosen_w = dr.select(take, w, chosen_w)
+            u1 = dr.select(take, dr.clip(u_rest, 0.0, 0.99999994), u1)
+            picked.append(take)
+            any_ |= take
+            lo = lo + w
+        return picked, chosen_w, u1
+
+    def _mixture(self, si: Interaction, wo: Array3f, out: BSDFSample, present: Bool,
+                 chosen_w: Float | None) -> tuple[Array3f, BSDFSample]:
+        """The sampled component's ``out`` made the mixture's (``K > 1``; ``present``: the
+        lanes with a component)."""
         out.valid &= present
-        if self.K > 1 and not self.is_specular_only():
+        if self.K > 1 and not self._one_slot and not self.is_specular_only():
             smooth = out.valid & ~out.delta
             # A smooth sample weighs the whole mixture: f_mix / pdf_mix. Where the chosen
             # component is its material's only smooth one (the others Dirac: a mask's
@@ -583,3 +646,39 @@ class MaterialTable:
                 out.pdf = dr.select(mixed, pdf, out.pdf)
                 out.valid &= ~mixed | ok
         return wo, out
+
+
+def _any(masks: list[Bool]) -> Bool:
+    out = masks[0]
+    for m in masks[1:]:
+        out = out | m
+    return out
+
+
+def _eval_case(case: _Case, p, frame: Frame, wi_l: Array3f, wo: Array3f, w: Float | None,
+               f: Array3f, pdf: Float) -> tuple[Array3f, Float]:
+    """``(f, pdf)`` with ``case``'s lobe toward world ``wo`` added on its lanes (weighted
+    by its slot's ``w``; ``None``: the one component), given its fields ``p``, its frame
+    and ``wi`` in it."""
+    bsdf, mask = case.bsdf, case.mask
+    wo_l = frame.to_local(wo)
+    fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
+    if isinstance(frame, PerturbedFrame):
+        fac = frame.factor(wo)
+        fj, pj = fj * fac, dr.select(fac > 0.0, pj, 0.0)
+    if w is None:
+        return dr.select(mask, fj, f), dr.select(mask, pj, pdf)
+    return dr.select(mask, dr.fma(fj, w, f), f), dr.select(mask, dr.fma(pj, w, pdf), pdf)
+
+
+def _sample_case(case: _Case, p, frame: Frame, wi_l: Array3f, u1: Float, u2: Array2f, mask: Bool,
+                 out: BSDFSample, wo: Array3f) -> tuple[BSDFSample, Array3f]:
+    """``(out, wo)`` with ``case``'s lobe sampled on the lanes ``mask`` (its world
+    direction in ``wo``), given its fields ``p``, its frame and ``wi`` in it."""
+    bs = case.bsdf.sample(p, wi_l, u1, u2)
+    wo_j = frame.to_world(bs.wo)
+    if isinstance(frame, PerturbedFrame):
+        fac = frame.factor(wo_j)
+        ok = fac > 0.0
+        bs.weight, bs.pdf, bs.valid = bs.weight * fac, dr.select(ok, bs.pdf, 0.0), bs.valid & ok
+    return dr.select(mask, bs, out), dr.select(mask, wo_j, wo)
