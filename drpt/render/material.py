@@ -220,6 +220,16 @@ class MaterialTable:
                              None if sl.texture is None else texture_ids(sl.texture), Bool(sl.complement),
                              sl.kinds, sl.partial, None if sl.texture is None else _among(sl.texture))
                        for sl in lay.slots]
+        # materials whose slots need reading (several components, or one whose weight is
+        # not exactly 1): only their lanes compute the slots (:meth:`_slots_at`); None
+        # where every material's do
+        self._multi = None
+        if lay.slots:
+            n_comp = np.array([len(cs) for cs in lay.components])
+            multi = (n_comp > 1) | (lay.slots[0].weight != 1.0)
+            if lay.slots[0].texture is not None:
+                multi |= lay.slots[0].texture != NONE
+            self._multi = None if multi.all() else Bool(multi)
         # per-row fields of the kinds present
         self._types = {name: f.type for name, f in lay.fields.items()}
         self._data: dict[str, object] = {}
@@ -537,8 +547,7 @@ class MaterialTable:
     def eval_pdf(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float]:
         """``f * |cos|`` and the sampling density (solid angle) for world ``wo``."""
         f, pdf = Array3f(0.0), Float(0.0)
-        for j in range(self.K):
-            row, w, present = self._slot(si, j)
+        for j, (row, w, present) in enumerate(self._slots_at(si)):
             for case in self._cases(si, j, row, present):
                 if case.bsdf.DELTA:
                     continue  # nothing to evaluate
@@ -557,10 +566,11 @@ class MaterialTable:
         elif self._one_slot:
             row, present, chosen_w = dr.gather(UInt32, self._slots[0].row, si.material, si.valid), si.valid, None
         else:
-            picked, chosen_w, u1 = self._pick(si, u1)
+            slots = self._slots_at(si)
+            picked, chosen_w, u1 = self._pick(slots, u1)
             row = UInt32(NONE)
-            for j, take in enumerate(picked):
-                row = dr.select(take, self._slot(si, j)[0], row)
+            for take, (rj, _, _) in zip(picked, slots):
+                row = dr.select(take, rj, row)
             present = si.valid & _any(picked)
         out = BSDFSample()
         wo = Array3f(0.0, 0.0, 1.0)
@@ -582,13 +592,13 @@ class MaterialTable:
         slot ``j``'s cases also sample the lanes that picked slot ``j``."""
         f, pdf = Array3f(0.0), Float(0.0)
         out, wo_s = BSDFSample(), Array3f(0.0, 0.0, 1.0)
+        slots = self._slots_at(si)
         if self.K == 1:
             picked, chosen_w, present = [None], None, si.valid
         else:
-            picked, chosen_w, u1 = self._pick(si, u1)
+            picked, chosen_w, u1 = self._pick(slots, u1)
             present = si.valid & _any(picked)
-        for j in range(self.K):
-            row, w, pres = self._slot(si, j)
+        for j, (row, w, pres) in enumerate(slots):
             for case in self._cases(si, j, row, pres):
                 ev = not case.bsdf.DELTA  # (a Dirac lobe adds nothing to f and pdf)
                 drawn = case.mask if picked[j] is None else case.mask & picked[j]
@@ -605,13 +615,36 @@ class MaterialTable:
         wo_s, out = self._mixture(si, wo_s, out, present, chosen_w)
         return f, pdf, wo_s, out
 
-    def _pick(self, si: Interaction, u1: Float) -> tuple[list[Bool], Float, Float]:
-        """Slot choice for sampling (``K > 1``): per slot the lanes that picked it (by its
-        weight), the chosen slot's weight, and ``u1`` rescaled within it for the lobe."""
+    def _slots_at(self, si: Interaction) -> list[tuple]:
+        """:meth:`_slot` of every slot: ``(rows, weight, present)`` each (``K == 1``: the
+        material's one row, no weight). Where some materials are one component at weight 1,
+        the slots are read in a symbolic ``if`` on the lanes of the others (label
+        ``drpt_slots``): the lanes of the one-component materials take slot 0's row at
+        weight 1 and no other slot, the values the slots hold for them, so a packet
+        without a lane on a mask or a blend skips the slots' gathers and their textured
+        weights' lookups."""
+        if self.K == 1 or self._multi is None:
+            return [self._slot(si, j) for j in range(self.K)]
+        multi = si.valid & dr.gather(Bool, self._multi, si.material, si.valid)
+
+        def several():
+            return tuple(v for j in range(self.K) for v in self._slot(si, j))
+
+        def one():
+            rest = (v for _ in range(1, self.K) for v in (UInt32(NONE), Float(0.0), Bool(False)))
+            return (dr.gather(UInt32, self._slots[0].row, si.material, si.valid), Float(1.0), Bool(si.valid),
+                    *rest)
+
+        vals = dr.if_stmt((), multi, several, one, label="drpt_slots")
+        return [tuple(vals[3 * j:3 * j + 3]) for j in range(self.K)]
+
+    def _pick(self, slots: list[tuple], u1: Float) -> tuple[list[Bool], Float, Float]:
+        """Slot choice for sampling (``K > 1``; ``slots``: :meth:`_slots_at`'s): per slot
+        the lanes that picked it (by its weight), the chosen slot's weight, and ``u1``
+        rescaled within it for the lobe."""
         lo, chosen_w = Float(0.0), Float(1.0)
         picked, any_ = [], Bool(False)
-        for j in range(self.K):
-            _, w, pres = self._slot(si, j)
+        for j, (_, w, pres) in enumerate(slots):
             take = pres & ~any_ & ((u1 < lo + w) | Bool(j == self.K - 1)) & (w > 0.0)
             u_rest = dr.select(take, (u1 - lo) / dr.select(w > 0.0, w, 1.0), 0.0)
             chosen_w = dr.select(take, w, chosen_w)

@@ -256,11 +256,32 @@ def test_eval_pdf_sample_is_eval_pdf_and_sample(dispatch, monkeypatch):
     # negative control: the sample drawn by every case of every slot, the last slot winning
     pick = MaterialTable._pick
 
-    def every_slot(self, si_, u1_):
-        picked, w, u = pick(self, si_, u1_)
-        return [Bool(si_.valid) for _ in picked], w, u
+    def every_slot(self, slots, u1_):
+        picked, w, u = pick(self, slots, u1_)
+        return [dr.full(Bool, True, dr.width(u1_)) for _ in picked], w, u
 
     monkeypatch.setattr(MaterialTable, "_pick", every_slot)
     bad = table.eval_pdf_sample(si, wo, u1, u2)[3]
     mask_lanes = np.array(si.material) == 0
     assert not np.array_equal(np.array(bad.wo)[:, mask_lanes], np.array(bs.wo)[:, mask_lanes])
+
+
+def test_slots_are_read_on_the_lanes_of_several_components_only():
+    """``MaterialTable._slots_at`` reads the slots in a symbolic ``if`` on the lanes whose
+    material has several components (the mask, the blend) and gives the one-component
+    materials' lanes slot 0's row at weight 1: every slot's rows, weights and presence are
+    :meth:`_slot`'s bit for bit. Negative control: with every material taken for one
+    component, the mask's and the blend's lanes differ."""
+    scene = _fused_scene()
+    table = MaterialTable(scene)
+    assert table._multi is not None  # some materials are one component: the branch is traced
+    si = _fused_lanes(2000, len(scene.materials), 5)[0]
+
+    def values(slots):
+        return [np.array(v) for s in slots for v in s]
+
+    direct = values([table._slot(si, j) for j in range(table.K)])
+    for a, b in zip(values(table._slots_at(si)), direct):
+        assert np.array_equal(a, b)
+    table._multi = Bool(np.zeros(len(scene.materials), bool))
+    assert any(not np.array_equal(a, b) for a, b in zip(values(table._slots_at(si)), direct))
