@@ -1,12 +1,14 @@
 """Render time of this checkout's drpt against another commit's, interleaved in one process (not a test).
 
     PYTHONPATH=. .venv/bin/python benchmarks/commit_ab.py COMMIT SCENE... [--rounds 30] [--scale 4] [--spp N]
+        [--size W H] [--bsdf MODE]
 
 ``COMMIT``'s ``drpt/`` (``git archive``) is unpacked into a temporary folder as the package
 ``drpt_ab`` and imported beside this checkout's ``drpt``; each ``SCENE`` (an XML file or a
 drpt scene) gets one :class:`~drpt.render.renderer.Renderer` from each package (its film
-scaled ``--scale`` times, an XML's ``spp`` define and the render's spp ``--spp``, default the
-scene's own), which renders once to compile, then ``--rounds`` rounds of one render each, the
+scaled ``--scale`` times, or ``--size``; an XML's ``spp`` define and the render's spp ``--spp``,
+default the scene's own; ``--bsdf``, the material mode of drpt's own format, e.g. ``cook-torrance``
+as the gallery renders the dining room), which renders once to compile, then ``--rounds`` rounds of one render each, the
 order alternating (AB, BA, ...) so that load from other processes falls on both. Round ``k``
 uses seed ``k`` for both; the script says whether every pair of images was bit-identical (a
 pure speed change must keep them so). It prints each side's median seconds (``Renderer.render``,
@@ -49,7 +51,8 @@ def unpack(commit: str, into: Path) -> str:
                           capture_output=True, text=True).stdout.strip()
 
 
-def renderer(pkg: str, path: Path, scale: int, spp: int | None):
+def renderer(pkg: str, path: Path, scale: int, spp: int | None, size: list[int] | None = None,
+             bsdf: str | None = None):
     """A renderer of ``path`` from package ``pkg`` (``drpt`` or ``drpt_ab``)."""
     opts = importlib.import_module(f"{pkg}.options")
     rend = importlib.import_module(f"{pkg}.render.renderer")
@@ -57,7 +60,13 @@ def renderer(pkg: str, path: Path, scale: int, spp: int | None):
     defines = {"spp": str(spp)} if (spp and path.suffix == ".xml") else None
     scene = sc.load_scene(path, defines=defines) if defines else sc.load_scene(path)
     opt, scene = opts.with_scene_settings(opts.RenderOptions(progress=False), scene)
-    if scale != 1:
+    if bsdf:
+        opt = replace(opt, bsdf=bsdf)
+    if size:
+        opt, scene = opts.with_scene_settings(
+            opts.RenderOptions(width=size[0], height=size[1], progress=False, bsdf=opt.bsdf),
+            scene, given=frozenset({"size"}))
+    elif scale != 1:
         opt, scene = opts.with_scene_settings(
             opts.RenderOptions(width=scale * opt.width, height=scale * opt.height, progress=False),
             scene, given=frozenset({"size"}))
@@ -73,6 +82,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--rounds", type=int, default=30)
     ap.add_argument("--scale", type=int, default=4)
     ap.add_argument("--spp", type=int, default=None)
+    ap.add_argument("--size", type=int, nargs=2, default=None)
+    ap.add_argument("--bsdf", default=None)
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         short = unpack(a.commit, Path(tmp))
@@ -82,7 +93,8 @@ def main(argv: list[str]) -> int:
         ensure()
         print(f"{short} (A) against this checkout (B), {a.rounds} rounds alternating, film x{a.scale}")
         for path in a.scenes:
-            rs = {"A": renderer("drpt_ab", path, a.scale, a.spp), "B": renderer("drpt", path, a.scale, a.spp)}
+            rs = {"A": renderer("drpt_ab", path, a.scale, a.spp, a.size, a.bsdf),
+                  "B": renderer("drpt", path, a.scale, a.spp, a.size, a.bsdf)}
             for r in rs.values():
                 r.render()
             ts: dict[str, list[float]] = {"A": [], "B": []}

@@ -14,6 +14,8 @@ it and answers the integrators' queries over wide arrays. A lane's material
 whole mixture's ``f / pdf`` and ``pdf`` (one-sample MIS over the components: lower
 variance than the chosen component's own ratio, same expectation); a Dirac sample
 keeps the component's own weight (its selection probability cancels).
+:meth:`MaterialTable.eval_pdf_sample` answers both at one vertex in one dispatch (each
+kind's fields and textures read once), the values of the two calls bit for bit.
 
 Model only what the scene requires: only the lobe kinds present are traced,
 only their fields are uploaded, a field is looked up in a texture only when some material
@@ -202,11 +204,32 @@ class MaterialTable:
             self._emissive = Bool(glows)
         # sidedness, per kind: True / False when uniform, else a per-row array
         self._two = {k: _flag(v) for k, v in lay.two_sided.items()}
-        # slots (only when some material has several components)
+        # slots (only when some material has several components); slots whose weights read
+        # the same textures (a mask's opacity and its pass-through's one minus it) share one
+        # array, so that their lookups are one (:meth:`_slot`)
+        uploaded: list[tuple[np.ndarray, UInt32]] = []
+
+        def texture_ids(a):
+            for b, ids in uploaded:
+                if np.array_equal(a, b):
+                    return ids
+            uploaded.append((a, UInt32(a)))
+            return uploaded[-1][1]
+
         self._slots = [_Slot(UInt32(sl.row), Float(sl.weight),
-                             None if sl.texture is None else UInt32(sl.texture), Bool(sl.complement),
+                             None if sl.texture is None else texture_ids(sl.texture), Bool(sl.complement),
                              sl.kinds, sl.partial, None if sl.texture is None else _among(sl.texture))
                        for sl in lay.slots]
+        # materials whose slots need reading (several components, or one whose weight is
+        # not exactly 1): only their lanes compute the slots (:meth:`_slots_at`); None
+        # where every material's do
+        self._multi = None
+        if lay.slots:
+            n_comp = np.array([len(cs) for cs in lay.components])
+            multi = (n_comp > 1) | (lay.slots[0].weight != 1.0)
+            if lay.slots[0].texture is not None:
+                multi |= lay.slots[0].texture != NONE
+            self._multi = None if multi.all() else Bool(multi)
         # per-row fields of the kinds present
         self._types = {name: f.type for name, f in lay.fields.items()}
         self._data: dict[str, object] = {}
@@ -243,6 +266,10 @@ class MaterialTable:
         self._all_delta = bool(delta.all())
         self._mat_delta = None if (self._all_delta or not delta.any()) else Bool(delta)
         self._any_delta = bool(delta.any())
+        # the kinds of the delta-only materials (what :meth:`specular` traces), and whether
+        # each of them is one component (then slot 0 holds its row, at weight 1)
+        self._delta_kinds = tuple(sorted({k for ks, d in zip(lay.material_kinds, delta) if d for k in ks}))
+        self._delta_single = all(len(cs) == 1 for cs, d in zip(lay.components, delta) if d)
         # materials blending two or more smooth components (blendbsdf of two lobes, ...):
         # only theirs need the whole mixture evaluated after sampling (see sample); a
         # mask's pass-through beside one smooth lobe does not
@@ -317,6 +344,17 @@ class MaterialTable:
         view = copy.copy(self)
         view._only = tuple(k for k in self.kinds if k in set(kinds))
         return view
+
+    def specular(self) -> MaterialTable:
+        """A :meth:`restricted` view of the kinds of the materials made only of Dirac lobes
+        (see :attr:`mixes_delta`): what sampling traces for those materials' lanes alone.
+        Where each of those materials is one component, the view samples slot 0's row
+        without choosing a slot."""
+        view = self.restricted(self._delta_kinds)
+        view._one_slot = self.K > 1 and self._delta_single
+        return view
+
+    _one_slot = False  # (a specular view: the lanes' materials are one component each)
 
     # ------------------------------------------------------------------ parameters
     def specs_of(self, kind: str) -> list[BSDFSpec]:
@@ -430,8 +468,10 @@ class MaterialTable:
         present = si.valid & (row != NONE) if s.partial else si.valid
         w = dr.gather(Float, s.weight, si.material, present)
         if s.texture is not None:
-            ids = dr.gather(UInt32, s.texture, si.material, present)
-            textured = present & (ids != NONE)
+            # looked up on every valid lane (w is 0 where the slot is absent): the same
+            # expression for every slot sharing the texture array, traced once
+            ids = dr.gather(UInt32, s.texture, si.material, si.valid)
+            textured = si.valid & (ids != NONE)
             t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True, si=si, among=s.among))
             comp = dr.gather(Bool, s.complement, si.material, present)
             w = dr.select(textured, w * dr.select(comp, 1.0 - t, t), w)
@@ -450,7 +490,8 @@ class MaterialTable:
         kinds = self.kinds if (j is None or self.K == 1) else self._slots[j].kinds
         if self._only is not None:
             kinds = [k for k in kinds if k in self._only]
-        if len(self.kinds) == 1 or (self._only is not None and len(self._only) == 1 and self.K == 1):
+        if len(self.kinds) == 1 or (self._only is not None and len(self._only) == 1
+                                    and (self.K == 1 or self._one_slot)):
             kind_of = None
         else:
             kind_of = dr.gather(UInt32, self.kind, row, present)
@@ -506,23 +547,14 @@ class MaterialTable:
     def eval_pdf(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float]:
         """``f * |cos|`` and the sampling density (solid angle) for world ``wo``."""
         f, pdf = Array3f(0.0), Float(0.0)
-        for j in range(self.K):
-            row, w, present = self._slot(si, j)
+        for j, (row, w, present) in enumerate(self._slots_at(si)):
             for case in self._cases(si, j, row, present):
                 if case.bsdf.DELTA:
                     continue  # nothing to evaluate
 
                 def evaluate(f, pdf, case=case, w=w):
-                    bsdf, mask, frame = case.bsdf, case.mask, case.frame()
-                    p = bsdf.params(case.rows, si, mask)
-                    wi_l, wo_l = frame.to_local(si.wi), frame.to_local(wo)
-                    fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
-                    if isinstance(frame, PerturbedFrame):
-                        fac = frame.factor(wo)
-                        fj, pj = fj * fac, dr.select(fac > 0.0, pj, 0.0)
-                    if w is None:
-                        return dr.select(mask, fj, f), dr.select(mask, pj, pdf)
-                    return dr.select(mask, dr.fma(fj, w, f), f), dr.select(mask, dr.fma(pj, w, pdf), pdf)
+                    p, frame = case.bsdf.params(case.rows, si, case.mask), case.frame()
+                    return _eval_case(case, p, frame, frame.to_local(si.wi), wo, w, f, pdf)
 
                 f, pdf = case.run(evaluate, (f, pdf))
         return f, pdf
@@ -611,22 +643,16 @@ class MaterialTable:
         :meth:`eval_pdf_rev` gives it, from the sampled lobe in its own case (0 after a Dirac
         lobe; bidirectional path tracing's MIS weights read it)."""
         if self.K == 1:
-            row, present = si.material, si.valid
+            row, present, chosen_w = si.material, si.valid, None
+        elif self._one_slot:
+            row, present, chosen_w = dr.gather(UInt32, self._slots[0].row, si.material, si.valid), si.valid, None
         else:
-            # pick a slot by its weight, reuse u1 rescaled within it
+            slots = self._slots_at(si)
+            picked, chosen_w, u1 = self._pick(slots, u1)
             row = UInt32(NONE)
-            lo, chosen_w = Float(0.0), Float(1.0)
-            picked = Bool(False)
-            for j in range(self.K):
-                rj, w, pres = self._slot(si, j)
-                take = pres & ~picked & ((u1 < lo + w) | Bool(j == self.K - 1)) & (w > 0.0)
+            for take, (rj, _, _) in zip(picked, slots):
                 row = dr.select(take, rj, row)
-                u_rest = dr.select(take, (u1 - lo) / dr.select(w > 0.0, w, 1.0), 0.0)
-                chosen_w = dr.select(take, w, chosen_w)
-                u1 = dr.select(take, dr.clip(u_rest, 0.0, 0.99999994), u1)
-                picked |= take
-                lo = lo + w
-            present = si.valid & picked
+            present = si.valid & _any(picked)
         out = BSDFSample()
         wo = Array3f(0.0, 0.0, 1.0)
         # the reverse density in the sampled lobe's case (tables with perturbed frames, which
@@ -636,34 +662,115 @@ class MaterialTable:
         for case in self._cases(si, None, row, present):
 
             def draw(out, wo, *pdf_rev, case=case, u1=u1):
-                bsdf, mask, frame = case.bsdf, case.mask, case.frame()
-                p = bsdf.params(case.rows, si, mask)
+                p, frame = case.bsdf.params(case.rows, si, case.mask), case.frame()
                 wi_l = frame.to_local(si.wi)
-                bs = bsdf.sample(p, wi_l, u1, u2)
-                wo_j = frame.to_world(bs.wo)
-                if isinstance(frame, PerturbedFrame):
-                    fac = frame.factor(wo_j)
-                    ok = fac > 0.0
-                    bs.weight, bs.pdf, bs.valid = bs.weight * fac, dr.select(ok, bs.pdf, 0.0), bs.valid & ok
-                if pdf_rev and not bsdf.DELTA:
-                    # (the world direction back in the frame, as eval_pdf_rev reads it: the same bits)
-                    two, wo_l = self._two[case.kind], frame.to_local(wo_j)
-                    if two is not False:  # the swapped pair seen from the other side (eval_pdf_rev)
-                        mirror = (dr.dot(si.ns, si.wi) < 0.0) != (dr.dot(si.ns, wo_j) < 0.0)
-                        if two is not True:
-                            mirror &= dr.gather(Bool, two, row, mask)
-                        wi_l = Array3f(wi_l.x, wi_l.y, dr.select(mirror, -wi_l.z, wi_l.z))
-                        wo_l = Array3f(wo_l.x, wo_l.y, dr.select(mirror, -wo_l.z, wo_l.z))
-                    pdf_rev = (dr.select(mask & ~bs.delta, bsdf.pdf(p, wo_l, wi_l), pdf_rev[0]),)
-                return (dr.select(mask, bs, out), dr.select(mask, wo_j, wo)) + pdf_rev
+                out, wo = _sample_case(case, p, frame, wi_l, u1, u2, case.mask, out, wo)
+                if pdf_rev and not case.bsdf.DELTA:
+                    pdf_rev = (self._sampled_rev(si, case, p, frame, wi_l, wo, out, row, pdf_rev[0]),)
+                return (out, wo) + pdf_rev
 
             out, wo, *pdf_rev = case.run(draw, (out, wo, *pdf_rev))
-        out.valid &= present
         if rev and not rev_here:
             rev_si = copy.copy(si)
             rev_si.wi = wo
-            pdf_rev = [dr.select(out.delta, 0.0, self.eval_pdf(rev_si, si.wi)[1])]
-        if self.K > 1 and not self.is_specular_only():
+            full_rev = dr.select(out.delta, 0.0, self.eval_pdf(rev_si, si.wi)[1])
+            return (*self._mixture(si, wo, out, present, chosen_w), full_rev)
+        return self._mixture(si, wo, out, present, chosen_w, *pdf_rev)
+
+    def _sampled_rev(self, si: Interaction, case: _Case, p, frame: Frame, wi_l: Array3f,
+                     wo: Array3f, out: BSDFSample, row: UInt32, pdf_rev: Float) -> Float:
+        """:meth:`sample`'s reverse density on ``case``'s lanes: its lobe's density of
+        sampling ``si.wi`` from the sampled ``wo``, the pair mirrored in ``z`` where a
+        two-sided frame would flip between them (as :meth:`eval_pdf_rev` reads it; the
+        world direction taken back into the frame gives the same bits), 0 after a Dirac
+        sample."""
+        two, wo_l = self._two[case.kind], frame.to_local(wo)
+        if two is not False:
+            mirror = (dr.dot(si.ns, si.wi) < 0.0) != (dr.dot(si.ns, wo) < 0.0)
+            if two is not True:
+                mirror &= dr.gather(Bool, two, row, case.mask)
+            wi_l = Array3f(wi_l.x, wi_l.y, dr.select(mirror, -wi_l.z, wi_l.z))
+            wo_l = Array3f(wo_l.x, wo_l.y, dr.select(mirror, -wo_l.z, wo_l.z))
+        return dr.select(case.mask & ~out.delta, case.bsdf.pdf(p, wo_l, wi_l), pdf_rev)
+
+    def eval_pdf_sample(self, si: Interaction, wo: Array3f, u1: Float,
+                        u2: Array2f) -> tuple[Array3f, Float, Array3f, BSDFSample]:
+        """:meth:`eval_pdf` toward ``wo`` and :meth:`sample` from ``(u1, u2)`` in one
+        dispatch: ``(f, pdf, wo_sampled, sample)``, the same values as the two calls.
+        Each kind's case reads its fields (texture lookups included), builds its frame
+        and maps ``wi`` once for both (Mitsuba's ``eval_pdf_sample``); with several slots,
+        slot ``j``'s cases also sample the lanes that picked slot ``j``."""
+        f, pdf = Array3f(0.0), Float(0.0)
+        out, wo_s = BSDFSample(), Array3f(0.0, 0.0, 1.0)
+        slots = self._slots_at(si)
+        if self.K == 1:
+            picked, chosen_w, present = [None], None, si.valid
+        else:
+            picked, chosen_w, u1 = self._pick(slots, u1)
+            present = si.valid & _any(picked)
+        for j, (row, w, pres) in enumerate(slots):
+            for case in self._cases(si, j, row, pres):
+                ev = not case.bsdf.DELTA  # (a Dirac lobe adds nothing to f and pdf)
+                drawn = case.mask if picked[j] is None else case.mask & picked[j]
+
+                def both(f, pdf, out, wo_s, case=case, w=w, ev=ev, drawn=drawn):
+                    p, frame = case.bsdf.params(case.rows, si, case.mask), case.frame()
+                    wi_l = frame.to_local(si.wi)
+                    if ev:
+                        f, pdf = _eval_case(case, p, frame, wi_l, wo, w, f, pdf)
+                    out, wo_s = _sample_case(case, p, frame, wi_l, u1, u2, drawn, out, wo_s)
+                    return f, pdf, out, wo_s
+
+                f, pdf, out, wo_s = case.run(both, (f, pdf, out, wo_s), case.mask if ev else drawn)
+        wo_s, out = self._mixture(si, wo_s, out, present, chosen_w)
+        return f, pdf, wo_s, out
+
+    def _slots_at(self, si: Interaction) -> list[tuple]:
+        """:meth:`_slot` of every slot: ``(rows, weight, present)`` each (``K == 1``: the
+        material's one row, no weight). Where some materials are one component at weight 1,
+        the slots are read in a symbolic ``if`` on the lanes of the others (label
+        ``drpt_slots``): the lanes of the one-component materials take slot 0's row at
+        weight 1 and no other slot, the values the slots hold for them, so a packet
+        without a lane on a mask or a blend skips the slots' gathers and their textured
+        weights' lookups."""
+        if self.K == 1 or self._multi is None:
+            return [self._slot(si, j) for j in range(self.K)]
+        multi = si.valid & dr.gather(Bool, self._multi, si.material, si.valid)
+
+        def several():
+            return tuple(v for j in range(self.K) for v in self._slot(si, j))
+
+        def one():
+            rest = (v for _ in range(1, self.K) for v in (UInt32(NONE), Float(0.0), Bool(False)))
+            return (dr.gather(UInt32, self._slots[0].row, si.material, si.valid), Float(1.0), Bool(si.valid),
+                    *rest)
+
+        vals = dr.if_stmt((), multi, several, one, label="drpt_slots")
+        return [tuple(vals[3 * j:3 * j + 3]) for j in range(self.K)]
+
+    def _pick(self, slots: list[tuple], u1: Float) -> tuple[list[Bool], Float, Float]:
+        """Slot choice for sampling (``K > 1``; ``slots``: :meth:`_slots_at`'s): per slot
+        the lanes that picked it (by its weight), the chosen slot's weight, and ``u1``
+        rescaled within it for the lobe."""
+        lo, chosen_w = Float(0.0), Float(1.0)
+        picked, any_ = [], Bool(False)
+        for j, (_, w, pres) in enumerate(slots):
+            take = pres & ~any_ & ((u1 < lo + w) | Bool(j == self.K - 1)) & (w > 0.0)
+            u_rest = dr.select(take, (u1 - lo) / dr.select(w > 0.0, w, 1.0), 0.0)
+            chosen_w = dr.select(take, w, chosen_w)
+            u1 = dr.select(take, dr.clip(u_rest, 0.0, 0.99999994), u1)
+            picked.append(take)
+            any_ |= take
+            lo = lo + w
+        return picked, chosen_w, u1
+
+    def _mixture(self, si: Interaction, wo: Array3f, out: BSDFSample, present: Bool,
+                 chosen_w: Float | None, *pdf_rev: Float) -> tuple:
+        """The sampled component's ``out`` made the mixture's (``K > 1``; ``present``: the
+        lanes with a component): ``(wo, out)``; given the component's reverse density
+        (:meth:`sample`'s ``rev``), the mixture's too: ``(wo, out, pdf_rev)``."""
+        out.valid &= present
+        if self.K > 1 and not self._one_slot and not self.is_specular_only():
             smooth = out.valid & ~out.delta
             # A smooth sample weighs the whole mixture: f_mix / pdf_mix. Where the chosen
             # component is its material's only smooth one (the others Dirac: a mask's
@@ -675,22 +782,20 @@ class MaterialTable:
                 single = smooth if blends is False else smooth & ~dr.gather(Bool, blends, si.material, smooth)
                 out.pdf = dr.select(single, out.pdf * chosen_w, out.pdf)
                 out.valid &= ~single | (out.pdf > 0.0)
-                if rev_here:
-                    pdf_rev = [dr.select(single, pdf_rev[0] * chosen_w, pdf_rev[0])]
+                if pdf_rev:
+                    pdf_rev = (dr.select(single, pdf_rev[0] * chosen_w, pdf_rev[0]),)
             if blends is not False:
                 mixed = smooth if blends is True else smooth & dr.gather(Bool, blends, si.material, smooth)
-                if rev_here:
+                if pdf_rev:
                     f, pdf, mixed_rev = self.eval_pdf_rev(si, wo)
-                    pdf_rev = [dr.select(mixed, mixed_rev, pdf_rev[0])]
+                    pdf_rev = (dr.select(mixed, mixed_rev, pdf_rev[0]),)
                 else:
                     f, pdf = self.eval_pdf(si, wo)
                 ok = mixed & (pdf > 0.0)
                 out.weight = dr.select(mixed, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0), out.weight)
                 out.pdf = dr.select(mixed, pdf, out.pdf)
                 out.valid &= ~mixed | ok
-        if rev:
-            return wo, out, pdf_rev[0]
-        return wo, out
+        return (wo, out, *pdf_rev)
 
 
 def _lobe_rev(bsdf: BSDF, p, frame, wi_l: Array3f, wo: Array3f, mirror: Bool | None):
@@ -711,3 +816,39 @@ def _merge_rev(mask: Bool, w: Float | None, state: tuple, lobe: tuple) -> tuple:
     if w is None:
         return tuple(dr.select(mask, v, old) for v, old in zip(lobe, state))
     return tuple(dr.select(mask, dr.fma(v, w, old), old) for v, old in zip(lobe, state))
+
+
+def _any(masks: list[Bool]) -> Bool:
+    out = masks[0]
+    for m in masks[1:]:
+        out = out | m
+    return out
+
+
+def _eval_case(case: _Case, p, frame: Frame, wi_l: Array3f, wo: Array3f, w: Float | None,
+               f: Array3f, pdf: Float) -> tuple[Array3f, Float]:
+    """``(f, pdf)`` with ``case``'s lobe toward world ``wo`` added on its lanes (weighted
+    by its slot's ``w``; ``None``: the one component), given its fields ``p``, its frame
+    and ``wi`` in it."""
+    bsdf, mask = case.bsdf, case.mask
+    wo_l = frame.to_local(wo)
+    fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
+    if isinstance(frame, PerturbedFrame):
+        fac = frame.factor(wo)
+        fj, pj = fj * fac, dr.select(fac > 0.0, pj, 0.0)
+    if w is None:
+        return dr.select(mask, fj, f), dr.select(mask, pj, pdf)
+    return dr.select(mask, dr.fma(fj, w, f), f), dr.select(mask, dr.fma(pj, w, pdf), pdf)
+
+
+def _sample_case(case: _Case, p, frame: Frame, wi_l: Array3f, u1: Float, u2: Array2f, mask: Bool,
+                 out: BSDFSample, wo: Array3f) -> tuple[BSDFSample, Array3f]:
+    """``(out, wo)`` with ``case``'s lobe sampled on the lanes ``mask`` (its world
+    direction in ``wo``), given its fields ``p``, its frame and ``wi`` in it."""
+    bs = case.bsdf.sample(p, wi_l, u1, u2)
+    wo_j = frame.to_world(bs.wo)
+    if isinstance(frame, PerturbedFrame):
+        fac = frame.factor(wo_j)
+        ok = fac > 0.0
+        bs.weight, bs.pdf, bs.valid = bs.weight * fac, dr.select(ok, bs.pdf, 0.0), bs.valid & ok
+    return dr.select(mask, bs, out), dr.select(mask, wo_j, wo)

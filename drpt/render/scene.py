@@ -142,6 +142,9 @@ class NoMaterials:
         n = dr.width(si.valid)
         return dr.zeros(Array3f, n), dr.zeros(Float, n), dr.zeros(Float, n)
 
+    def eval_pdf_sample(self, si: Interaction, wo: Array3f, u1: Float, u2: Array2f):
+        return (*self.eval_pdf(si, wo), *self.sample(si, u1, u2))
+
     def sample(self, si: Interaction, u1: Float, u2: Array2f, rev: bool = False):
         n = dr.width(si.valid)
         up = dr.full(Array3f, [0.0, 0.0, 1.0], n)
@@ -440,6 +443,11 @@ class DeviceScene:
         seen from it; 0 after a Dirac lobe), in one dispatch
         (:meth:`~drpt.render.material.MaterialTable.sample`'s ``rev``): ``(wo, bs, pdf_rev)``."""
         return self.materials.sample(si, u1, u2, rev=True)
+
+    def eval_sample_bsdf(self, si: Interaction, wo: Array3f, u1: Float, u2: Array2f):
+        """:meth:`eval_bsdf` toward ``wo`` and :meth:`sample_bsdf` from ``(u1, u2)`` in one
+        material dispatch: ``(f, pdf, wo_sampled, sample)``."""
+        return self.materials.eval_pdf_sample(si, wo, u1, u2)
 
     def is_delta(self, si: Interaction) -> Bool:
         """Lanes whose material is a delta lobe (glass, mirror)."""

@@ -289,3 +289,91 @@ def test_sample_rev_is_the_swapped_density_of_the_sample():
         assert np.array_equal(rev[smooth], rev_e[smooth])
         assert np.all(rev[np.array(bs.delta)] == 0.0)
         assert not np.allclose(np.array(bs.pdf)[smooth], rev_e[smooth], rtol=1e-3)  # negative control
+# ------------------------------------------------------------------ one dispatch for eval and sample
+def _fused_scene():
+    from drpt.materials.spec import Checkerboard
+
+    board = Checkerboard(color0=(0.9, 0.9, 0.9), color1=(0.2, 0.2, 0.2), to_uv=(4, 0, 0, 0, 4, 0, 0, 0, 1))
+    return scene_with(*(complete(s) for s in (
+        BSDFSpec("mask", {"opacity": board}, [two(diffuse((0.3, 0.6, 0.9)))]),  # textured slot weights
+        CASES["blend"](),  # two smooth components
+        _rough(0.3),
+        BSDFSpec("conductor", {"specular_reflectance": (0.9, 0.8, 0.6)}),  # Dirac only
+        two(BSDFSpec("roughplastic", {"alpha": 0.15, "diffuse_reflectance": (0.3, 0.17, 0.08)})),
+        diffuse())))
+
+
+def _fused_lanes(n: int, materials: int, seed: int):
+    rng = np.random.default_rng(seed)
+    wi, wo = sphere_dirs(n, seed), sphere_dirs(n, seed + 1)
+    u = rng.random((5, n)).astype(np.float32)
+    z = Array3f(dr.full(Float, 0.0, n), dr.full(Float, 0.0, n), dr.full(Float, 1.0, n))
+    si = Interaction(dr.full(Bool, True, n), dr.full(Float, 1.0, n), dr.zeros(Array3f, n), z, z,
+                     dr.zeros(UInt32, n), UInt32(rng.integers(0, materials, n).astype(np.uint32)),
+                     to_mitsuba_vec3_drpt(wi), Array2f(u[3], u[4]))
+    return si, to_mitsuba_vec3_drpt(wo), Float(u[0]), Array2f(u[1], u[2])
+
+
+@pytest.mark.parametrize("dispatch", ["kinds", "masked"])
+def test_eval_pdf_sample_is_eval_pdf_and_sample(dispatch, monkeypatch):
+    """:meth:`MaterialTable.eval_pdf_sample` (the path tracer's one dispatch per vertex)
+    returns exactly :meth:`~MaterialTable.eval_pdf` and :meth:`~MaterialTable.sample`,
+    bit for bit, on a table of six kinds, a textured mask and a blend of two smooth lobes
+    (slots sampled by the lanes that picked them), each dispatch; its
+    :meth:`~MaterialTable.specular` view samples the delta-only material's lanes as the
+    table does. Negative controls: the view's samples differ on the other lanes; the
+    fused dispatch with every slot's cases sampling all their lanes (not only those that
+    picked the slot) differs from ``sample`` on the mask's lanes."""
+    monkeypatch.setattr(MaterialTable, "dispatch", dispatch)
+    scene = _fused_scene()
+    table = MaterialTable(scene)
+    assert table.K == 2 and len(table.kinds) == 6
+    si, wo, u1, u2 = _fused_lanes(4000, len(scene.materials), 3)
+
+    sep = (*table.eval_pdf(si, wo), *table.sample(si, u1, u2))
+    fused = table.eval_pdf_sample(si, wo, u1, u2)
+    pairs = [(sep[0], fused[0]), (sep[1], fused[1]), (sep[2], fused[2])]
+    pairs += [(getattr(sep[3], k), getattr(fused[3], k)) for k in ("wo", "weight", "pdf", "valid", "delta", "eta")]
+    for a, b in pairs:
+        assert np.array_equal(np.array(a), np.array(b))
+    bs = sep[3]
+    assert np.array(bs.valid).mean() > 0.3 and np.array(bs.delta).any() and np.array(sep[1]).max() > 0.0
+    # the specular view (the delta-only materials' lanes: the conductor's) samples as the table
+    # does there; elsewhere it does not (it traces only the conductor)
+    conductor = np.array(si.material) == 3
+    spec_wo = np.array(table.specular().sample(si, u1, u2)[1].wo)
+    assert np.array_equal(spec_wo[:, conductor], np.array(bs.wo)[:, conductor])
+    assert not np.array_equal(spec_wo[:, ~conductor], np.array(bs.wo)[:, ~conductor])
+
+    # negative control: the sample drawn by every case of every slot, the last slot winning
+    pick = MaterialTable._pick
+
+    def every_slot(self, slots, u1_):
+        picked, w, u = pick(self, slots, u1_)
+        return [dr.full(Bool, True, dr.width(u1_)) for _ in picked], w, u
+
+    monkeypatch.setattr(MaterialTable, "_pick", every_slot)
+    bad = table.eval_pdf_sample(si, wo, u1, u2)[3]
+    mask_lanes = np.array(si.material) == 0
+    assert not np.array_equal(np.array(bad.wo)[:, mask_lanes], np.array(bs.wo)[:, mask_lanes])
+
+
+def test_slots_are_read_on_the_lanes_of_several_components_only():
+    """``MaterialTable._slots_at`` reads the slots in a symbolic ``if`` on the lanes whose
+    material has several components (the mask, the blend) and gives the one-component
+    materials' lanes slot 0's row at weight 1: every slot's rows, weights and presence are
+    :meth:`_slot`'s bit for bit. Negative control: with every material taken for one
+    component, the mask's and the blend's lanes differ."""
+    scene = _fused_scene()
+    table = MaterialTable(scene)
+    assert table._multi is not None  # some materials are one component: the branch is traced
+    si = _fused_lanes(2000, len(scene.materials), 5)[0]
+
+    def values(slots):
+        return [np.array(v) for s in slots for v in s]
+
+    direct = values([table._slot(si, j) for j in range(table.K)])
+    for a, b in zip(values(table._slots_at(si)), direct):
+        assert np.array_equal(a, b)
+    table._multi = Bool(np.zeros(len(scene.materials), bool))
+    assert any(not np.array_equal(a, b) for a, b in zip(values(table._slots_at(si)), direct))

@@ -70,11 +70,25 @@ class DirectLight:
                       coherent: Bool | bool = False) -> ShadowQuery:
         """The estimate at ``si`` waiting for its shadow ray (:class:`ShadowQuery`), whose
         query is coherent on the lanes ``coherent`` (e.g. the hits of camera rays)."""
-        scene = self.scene
-        es = scene.sample_emitter(si, u_sel, u2, active)
-        f, pdf_b = scene.eval_bsdf(si, es.wo)
+        es = self.scene.sample_emitter(si, u_sel, u2, active)
+        f, pdf_b = self.scene.eval_bsdf(si, es.wo)
+        return self._query(si, es, f, pdf_b, mis, coherent)
+
+    def emitter_query_sample(self, si, u_sel: Float, u2: Array2f, u_lobe: Float, u_bsdf: Array2f,
+                             active: Bool, mis: bool, coherent: Bool | bool = False):
+        """:meth:`emitter_query` and the BSDF sample from ``(u_lobe, u_bsdf)`` at ``si``,
+        the BSDF evaluated and sampled in one material dispatch
+        (:meth:`~drpt.render.scene.DeviceScene.eval_sample_bsdf`): ``(query, wo, bs)``,
+        the same values as the two separate calls."""
+        es = self.scene.sample_emitter(si, u_sel, u2, active)
+        f, pdf_b, wo, bs = self.scene.eval_sample_bsdf(si, es.wo, u_lobe, u_bsdf)
+        return self._query(si, es, f, pdf_b, mis, coherent), wo, bs
+
+    def _query(self, si, es, f: Array3f, pdf_b: Float, mis: bool, coherent: Bool | bool) -> ShadowQuery:
+        """The :class:`ShadowQuery` of emitter sample ``es`` at ``si`` given the BSDF's
+        ``f * |cos|`` and density toward it."""
         ok = es.valid & (dr.max(f) > 0.0)
-        so = scene.spawn(si, es.wo)
+        so = self.scene.spawn(si, es.wo)
         d, dist = shadow_segment(so, es)
         w = power_heuristic(es.pdf, pdf_b) if mis and es.delta is not True else Float(1.0)
         if mis and isinstance(es.delta, Bool):  # (a scene with delta lights and others)

@@ -73,6 +73,7 @@ import drjit as dr
 from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32
 
 from ...options import PathOptions
+from ..bsdf import BSDFSample
 from ..loops import loops_once, widen
 from ..sampler import light_sample, next_2d, next_path, skip_draws
 from ..scene import DeviceScene
@@ -408,11 +409,14 @@ class PathIntegrator:
             u_sel, u_light, u_path = drawn if start is None else draw(start)
             hit_si = scene.interaction(s.o, s.d, hit) if lazy else si
             # ---- next-event estimation: one emitter, one shadow ray
+            # (with it, the BSDF's sample: drawn in the same material dispatch as its value)
+            sampled = None
             if nee:
                 coherent_shadow = (s.depth == 0) if coherent_shadows(scene) else False
-                L = self._nee(scene, hit_si, s.beta, L, u_sel, u_light, active, coherent_shadow)
+                L, *sampled = self._nee(scene, hit_si, s.beta, L, u_sel, u_light, u_path, active,
+                                        coherent_shadow)
             # ---- BSDF sampling and Russian roulette: continue the path
-            wo, bs, beta, eta, depth, live = continue_path(scene, opt, hit_si, s, None, u_path)
+            wo, bs, beta, eta, depth, live = continue_path(scene, opt, hit_si, s, None, u_path, sampled)
             return (scene.spawn(hit_si, wo), Array3f(wo), L, beta, eta, depth, Float(bs.pdf),
                     Bool(bs.delta), active & live)
 
@@ -430,22 +434,45 @@ class PathIntegrator:
 
 
     def _nee(self, scene: DeviceScene, si, beta: Array3f, L: Array3f, u_sel: Float, u_light,
-             active: Bool, coherent: Bool | bool = False) -> Array3f:
-        """``L`` plus next-event estimation's MIS-weighted direct light at ``si`` (the random
-        numbers already drawn), its shadow ray a coherent query on the lanes ``coherent``
-        (the vertices that camera rays hit). In a scene with both delta-only and smooth materials it runs
-        in a symbolic ``if`` on the lanes whose material is not delta-only (label
-        ``drpt_nee``): a packet whose lanes are all on mirrors or glass, where the estimate
-        is zero, skips the emitter sample, the BSDF evaluation and the shadow ray."""
+             u_path: tuple, active: Bool, coherent: Bool | bool = False) -> tuple:
+        """``(L, wo, bs)``: ``L`` plus next-event estimation's MIS-weighted direct light at
+        ``si`` (the random numbers already drawn), its shadow ray a coherent query on the
+        lanes ``coherent`` (the vertices that camera rays hit), and the BSDF sample that
+        continues the path (``u_path``'s lobe and direction numbers,
+        :func:`draw_continue`), drawn in the same material dispatch as the BSDF's value
+        toward the emitter (:meth:`DirectLight.emitter_query_sample`): each lobe kind
+        reads its fields and textures once per vertex. In a scene with both delta-only
+        and smooth materials the estimate runs in a symbolic ``if`` on the lanes whose
+        material is not delta-only (label ``drpt_nee``): a packet whose lanes are all on
+        mirrors or glass, where the estimate is zero, skips the emitter sample, the BSDF
+        evaluation and the shadow ray, and samples only the delta-only materials' kinds
+        (:meth:`~drpt.render.material.MaterialTable.specular`) in a symbolic ``if`` of its
+        own (label ``drpt_specular``) on the active lanes of those materials."""
         mats = scene.materials
-        if not getattr(mats, "mixes_delta", False):  # (the empty scene's stand-in has none)
-            return L + beta * self.direct.emitter(si, u_sel, u_light, active, mis=True, coherent=coherent)
-        lanes = active & ~mats.is_delta(si)
+        u_lobe, u_bsdf = u_path[0], u_path[1]
+        mixed = getattr(mats, "mixes_delta", False)  # (the empty scene's stand-in has none)
+        lanes = active & ~mats.is_delta(si) if mixed else active
 
         def estimate(L):
-            return (L + beta * self.direct.emitter(si, u_sel, u_light, lanes, mis=True, coherent=coherent),)
+            q, wo, bs = self.direct.emitter_query_sample(si, u_sel, u_light, u_lobe, u_bsdf, lanes,
+                                                         mis=True, coherent=coherent)
+            return L + beta * q.resolve(scene), wo, bs
 
-        return dr.if_stmt((L,), lanes, estimate, lambda L: (L,), label="drpt_nee")[0]
+        if not mixed:
+            return estimate(L)
+
+        def specular(L):
+            # the active lanes on delta-only materials (the others' paths end here): a
+            # packet without one, e.g. of paths that escaped or ended, skips the sampling
+            def draw():
+                return mats.specular().sample(si, u_lobe, u_bsdf)
+
+            def none():
+                return Array3f(0.0, 0.0, 1.0), BSDFSample()
+
+            return (L, *dr.if_stmt((), active & mats.is_delta(si), draw, none, label="drpt_specular"))
+
+        return dr.if_stmt((L,), lanes, estimate, specular, label="drpt_nee")
 
 
 def skip_hidden_emitters(scene: DeviceScene, opt: PathOptions, si, s, active: Bool | None):
@@ -486,16 +513,18 @@ def draw_continue(rng) -> tuple:
     return u_lobe, u_bsdf, rng.next_float32()
 
 
-def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32 | None, u: tuple | None = None):
+def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32 | None, u: tuple | None = None,
+                  sampled: tuple | None = None):
     """Sample the BSDF at ``si`` and play Russian roulette for path state ``s``
     (three random numbers: lobe, direction, roulette; drawn from ``rng``, or ``u``
-    as :func:`draw_continue` drew them). Returns ``(wo, bs, beta,
+    as :func:`draw_continue` drew them; ``sampled``: the BSDF's ``(wo, bs)`` already drawn
+    from ``u``'s lobe and direction numbers). Returns ``(wo, bs, beta,
     eta, depth, live)``: the new direction and sample, the throughput (divided
     by the survival probability where roulette played), the product of relative
     IORs, the depth, and the lanes whose path goes on. Shared by the megakernel
     and the wavefront integrator."""
     u_lobe, u_bsdf, u_rr = draw_continue(rng) if u is None else u
-    wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf)
+    wo, bs = scene.sample_bsdf(si, u_lobe, u_bsdf) if sampled is None else sampled
     beta = s.beta * bs.weight
     eta = s.eta * bs.eta
     depth = s.depth + 1

@@ -213,7 +213,9 @@ def test_nee_branch_on_smooth_lanes_is_the_masked_estimate(tmp_path, monkeypatch
     """In a scene with delta-only and smooth materials next-event estimation runs in a
     symbolic ``if`` on the lanes off delta-only materials (``drpt_nee``): the same random
     numbers and the same image, bit for bit, as every lane estimating masked (zero on a
-    mirror). A scene without delta materials (the control) traces no such branch."""
+    mirror) and the BSDF sampled in a dispatch of its own (the branch samples the mirror's
+    lanes in its other arm, the others in the estimate's BSDF dispatch). A scene without
+    delta materials (the control) traces no such branch."""
     (tmp_path / "s.xml").write_text(MIXED_XML.format(depth=depth, left=left))
     scene = load_scene(tmp_path / "s.xml")
     labels = _record_if_labels(monkeypatch)
@@ -224,8 +226,11 @@ def test_nee_branch_on_smooth_lanes_is_the_masked_estimate(tmp_path, monkeypatch
 
     branch = image()
     assert ("drpt_nee" in labels) == branched
-    monkeypatch.setattr(PathIntegrator, "_nee", lambda self, scene, si, beta, L, u_sel, u_light, active, *_:
-                        L + beta * self.direct.emitter(si, u_sel, u_light, active, mis=True))
+    def masked(self, scene, si, beta, L, u_sel, u_light, u_path, active, *_):
+        L = L + beta * self.direct.emitter(si, u_sel, u_light, active, mis=True)
+        return (L, *scene.sample_bsdf(si, u_path[0], u_path[1]))
+
+    monkeypatch.setattr(PathIntegrator, "_nee", masked)
     masked = image()
     assert masked.max() > 0.0
     np.testing.assert_array_equal(branch, masked)
