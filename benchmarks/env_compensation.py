@@ -39,22 +39,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import equal_time_vs_mitsuba as eq  # noqa: E402 (the sibling benchmark: its scenes and settings)
-
-
-def _ratio(a: np.ndarray, b: np.ndarray) -> float:
-    return float(a.var(0, ddof=1).mean() / b.var(0, ddof=1).mean())
-
-
-def _jackknife(a: np.ndarray, b: np.ndarray) -> float:
-    """The leave-one-round-out standard error of ``_ratio`` (the rounds are paired by seed)."""
-    n = a.shape[0]
-    keep = np.ones(n, bool)
-    jack = []
-    for k in range(n):
-        keep[k] = False
-        jack.append(_ratio(a[keep], b[keep]))
-        keep[k] = True
-    return float(np.sqrt((n - 1) / n * np.sum((np.array(jack) - np.mean(jack)) ** 2)))
+from variance_vs_mitsuba import _jackknife, _ratio  # noqa: E402 (the variance ratio and its error, paired by seed)
 
 
 def measure(scene, opts, rounds: int) -> dict:
@@ -73,7 +58,8 @@ def measure(scene, opts, rounds: int) -> dict:
     images = {c: [] for c in renderers}
     times = {c: [] for c in renderers}
     for k in range(rounds):
-        for c, r in renderers.items():
+        for c in ("off", "on") if k % 2 == 0 else ("on", "off"):  # in turns: load falls on both alike
+            r = renderers[c]
             t = time.perf_counter()
             images[c].append(r.derive(replace(r.opt, seed=k)).render().image.astype(np.float64))
             times[c].append(time.perf_counter() - t)

@@ -45,7 +45,7 @@ def options_of(base, variant: str):
 
 
 def main(argv=None) -> dict[str, tuple[float, float]]:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
     ap.add_argument("file")
     ap.add_argument("variants", nargs="+")
     ap.add_argument("--rounds", type=int, default=6)

@@ -46,7 +46,7 @@ ENV_SAMPLING = ("luminance", "uniform")
 #: ``--env-compensation``: MIS compensation of the sky's next-event density (:attr:`RenderOptions.env_compensation`)
 ENV_COMPENSATION = ("on", "off")
 LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh", "pilot")  # drpt.render.lights.selection
-#: how next-event estimation samples an emissive triangle (drpt.render.lights.area.TRIANGLE_SAMPLING)
+#: how next-event estimation samples an emissive triangle (drpt.render.lights.area.triangle_sampling_rule)
 TRIANGLE_SAMPLING = ("auto", "area", "solid-angle")
 #: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy samplers, and
 #: Mitsuba's stratified, multi-jittered and orthogonal-array samplers
@@ -98,8 +98,8 @@ class RenderOptions:
     light_sampler: str = "mixed"
     #: how next-event estimation samples a point on an emissive triangle: "area" (uniform
     #: on it, Mitsuba's), "solid-angle" (uniform in the solid angle it subtends, where that
-    #: is neither tiny nor near a hemisphere) or "auto" (solid-angle where some emissive
-    #: triangle is large in the scene), :func:`drpt.render.lights.area.triangle_sampling_rule`
+    #: is neither tiny nor near a hemisphere) or "auto" (solid-angle where volpath renders a
+    #: scene with participating media), :func:`drpt.render.lights.area.triangle_sampling_rule`
     triangle_sampling: str = "auto"
     #: what the camera passes' random numbers are drawn from (:mod:`drpt.render.sampler`):
     #: "independent" (a PCG32 stream per lane) or a low-discrepancy sampler's name

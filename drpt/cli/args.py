@@ -262,7 +262,7 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                  "triangle: area (uniform on it, Mitsuba's), solid-angle (uniform "
                                  "in the solid angle it subtends at the shading point, where that is "
                                  "neither tiny nor near a hemisphere; light tracing and bdpt stay "
-                                 "on area) or auto (solid-angle in scenes with participating media, "
+                                 "on area) or auto (solid-angle where volpath renders a scene with media, "
                                  "area elsewhere) "
                                  f"(default {base.triangle_sampling})")
     if want("filter"):

@@ -250,7 +250,8 @@ class DeviceScene:
             self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None or uv_aov,
                                         tangents=self.materials.tangents)
         self.area_lights = AreaLights(scene, self.surfaces, self.materials, sampler=options.light_sampler,
-                                      triangle_sampling=options.triangle_sampling)
+                                      triangle_sampling=options.triangle_sampling,
+                                      integrator=options.integrator)
         #: the emissive surfaces alone, where they are few triangles
         #: (:func:`emissive_inline`), else None
         self.emissive = emissive_inline(scene)

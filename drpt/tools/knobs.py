@@ -43,7 +43,7 @@ Russian roulette from depth 5 with the adaptive probability
            elsewhere the two settings render the same image and there is no row;
 ``triangle-sampling`` emissive triangles sampled for next-event estimation by the
            other of ``--triangle-sampling area`` and ``solid-angle`` than the one the
-           default row's setting takes (``auto`` takes ``solid-angle`` in scenes with media):
+           default row's setting takes (``auto`` takes ``solid-angle`` where volpath renders a scene with media):
            only in a scene with emissive triangles, rendered by an integrator other than
            the light tracers (which sample by area whatever the flag);
 ``adaptive`` adaptive sampling (``render --adaptive``: the same budget of samples,
@@ -97,11 +97,10 @@ from .. import metrics
 from ..cli.args import add_render_flags, options_from_args
 from ..denoise import available, denoise_result, require
 from ..errors import DrptError
-from ..options import PathOptions, RenderOptions
+from ..options import LIGHT_TRACED, PathOptions, RenderOptions
 from ..render.adaptive import check
 from ..render.lights.area import triangle_sampling_rule
 from ..render.lights.envmap import EnvironmentLight
-from ..render.lights.pilot import LIGHT_TRACERS
 from ..render.renderer import Renderer
 from ..render.scene import env_compensated
 from ..scene import load_scene
@@ -219,13 +218,13 @@ def triangle_sampling_knob(scene, options: RenderOptions) -> str | None:
     :func:`~drpt.render.lights.area.triangle_sampling_rule`), or None where the flag does
     not change the image: no emissive triangle, or a light tracer (``ptracer``, ``bdpt``:
     always by area)."""
-    if options.integrator in LIGHT_TRACERS or not len(scene.triangles):
+    if options.integrator in LIGHT_TRACED or not len(scene.triangles):
         return None
     emits = np.array([m.is_emissive or getattr(m, "emission_texture", None) is not None
                       for m in scene.materials], bool)
     if not emits.any() or not emits[np.asarray(scene.triangles.material, np.int64)].any():
         return None
-    return "solid-angle" if triangle_sampling_rule(options.triangle_sampling, scene) else "area"
+    return "solid-angle" if triangle_sampling_rule(options.triangle_sampling, scene, options.integrator) else "area"
 
 
 def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),

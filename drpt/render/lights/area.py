@@ -70,6 +70,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
+from ...options import TRIANGLE_SAMPLING
 from ...scene.model import Scene
 from ..spawn import origin as spawn_origin
 from ..spawn import sphere_error, triangle_point
@@ -129,7 +130,7 @@ class AreaLights:
     infinite = False
 
     def __init__(self, scene: Scene, surfaces: SurfaceData, materials=None, sampler: str = "power",
-                 triangle_sampling: str = "area"):
+                 triangle_sampling: str = "area", integrator: str = "path"):
         tris, sph = scene.triangles, scene.spheres
         emission = np.array([m.emission for m in scene.materials], float).reshape(-1, 3)
         self.surfaces = surfaces
@@ -181,7 +182,7 @@ class AreaLights:
         self.le = Array3f(*(Float(emission[mats[ids], c].astype(np.float32)) for c in range(3)))
         self.has_spheres = bool((ids >= self.n_tri).any())
         self.has_triangles = bool((ids < self.n_tri).any())
-        self.spherical = self.has_triangles and triangle_sampling_rule(triangle_sampling, scene)
+        self.spherical = self.has_triangles and triangle_sampling_rule(triangle_sampling, scene, integrator)
         if self.has_spheres:
             # per sphere: its selection probability P(k) (its area density is P(k) / 4 pi r^2)
             self.sph_prob = Float(prob[self.n_tri:].astype(np.float32))
@@ -456,14 +457,12 @@ def cone_pdf(one_minus_cos: Float) -> Float:
     return dr.select(one_minus_cos > 0.0, 1.0 / (2.0 * math.pi * dr.maximum(one_minus_cos, 1e-30)), 0.0)
 
 
-TRIANGLE_SAMPLING = ("auto", "area", "solid-angle")  # drpt.options.TRIANGLE_SAMPLING
-
-
-def triangle_sampling_rule(mode: str, scene: Scene) -> bool:
+def triangle_sampling_rule(mode: str, scene: Scene, integrator: str) -> bool:
     """Whether next-event estimation samples the emissive triangles by their spherical
     triangles (``--triangle-sampling``): ``area`` never, ``solid-angle`` always (where the
-    solid angle allows, :attr:`~drpt.render.warp.SphericalTriangle.sampled`), ``auto`` in a
-    scene with participating media. There next-event estimation also starts at points in
+    solid angle allows, :attr:`~drpt.render.warp.SphericalTriangle.sampled`), ``auto`` where
+    ``volpath`` renders a scene with participating media (``path`` and ``whitted`` pass
+    through its media, so nothing changes there). In a medium next-event estimation starts at points in
     the medium, which come arbitrarily near a light: the area density's ``r^2 / cos``
     leaves such a point's estimate unbounded (a few bright fireflies near every light), the
     solid angle's does not. Where only surfaces receive light, the spherical triangle's
@@ -471,4 +470,6 @@ def triangle_sampling_rule(mode: str, scene: Scene) -> bool:
     triangles by solid angle")."""
     if mode not in TRIANGLE_SAMPLING:
         raise ValueError(f"triangle sampling {mode!r}: not one of {', '.join(TRIANGLE_SAMPLING)}")
-    return bool(scene.media) if mode == "auto" else mode == "solid-angle"
+    if mode == "auto":
+        return bool(scene.media) and integrator == "volpath"
+    return mode == "solid-angle"

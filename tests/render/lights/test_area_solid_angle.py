@@ -19,10 +19,10 @@ QUAD = [[(0, 0, 1), (0, 1, 1), (1, 1, 1)], [(0, 0, 1), (1, 1, 1), (1, 0, 1)],
         [(5, 5, 1), (5, 5.01, 1), (5.01, 5, 1)]]
 
 
-def _lights(mode, tris=QUAD, media=()):
+def _lights(mode, tris=QUAD, media=(), integrator="volpath"):
     scene = Scene(path=None, camera=CAM, materials=[Material("e", emission=(1, 1, 1))],
                   triangles=Triangles(np.array(tris, float), np.zeros(len(tris), np.int32)), media=list(media))
-    return AreaLights(scene, SurfaceData(scene), triangle_sampling=mode)
+    return AreaLights(scene, SurfaceData(scene), triangle_sampling=mode, integrator=integrator)
 
 
 def _hit(lights, ref: Array3f, wo: Array3f, face: UInt32):
@@ -47,6 +47,8 @@ def test_the_modes_choose_the_technique():
     assert _lights("solid-angle").spherical and not _lights("area").spherical
     assert not _lights("auto").spherical  # (no media)
     assert _lights("auto", media=[Medium("fog")]).spherical
+    # path tracing passes through the media: auto keeps area there (negative control of the line above)
+    assert not _lights("auto", media=[Medium("fog")], integrator="path").spherical
 
 
 def test_mis_density_at_a_hit_is_the_sampled_density():
