@@ -71,7 +71,9 @@ def test_chi2_harness_rejects_a_wrong_pdf():
 SPHERICAL = {
     "near": (((-1.0, -1.0, 1.0), (2.0, -0.5, 0.8), (0.0, 2.0, 1.2)), (0.1, 0.2, 0.0)),  # 1.7 sr
     "grazing": (((-1.0, 0.5, 0.5), (1.5, 0.5, 0.3), (0.0, 0.5, 3.0)), (0.0, 0.0, 0.0)),  # 0.8 sr
-    "wide": (((-3.0, -3.0, 0.3), (3.0, -3.0, 0.3), (0.0, 4.0, 0.3)), (0.0, 0.0, 0.0)),  # 4.8 sr
+    "wide": (((-3.0, -3.0, 0.3), (3.0, -3.0, 0.3), (0.0, 4.0, 0.3)), (0.0, 0.0, 0.0)),  # 5.4 sr
+    # the same triangle 0.065 above ref: 6.1 sr, near the hemisphere and under SPHERICAL_MAX
+    "hemisphere": (((-3.0, -3.0, 0.065), (3.0, -3.0, 0.065), (0.0, 4.0, 0.065)), (0.0, 0.0, 0.0)),
     "small": (((0.0, 0.0, 10.0), (0.3, 0.0, 10.0), (0.0, 0.3, 10.0)), (0.0, 0.0, 0.0)),  # 4.5e-4 sr
 }
 
@@ -103,7 +105,7 @@ def _inside(p0, e1, e2, o, w):
 
 @pytest.mark.parametrize("case", list(SPHERICAL))
 def test_spherical_triangle_solid_angle(case):
-    """The float32 solid angle is float64's to 1e-4 relative, from 4.5e-4 sr to 4.8 sr."""
+    """The float32 solid angle is float64's to 1e-4 relative, from 4.5e-4 sr to 6.1 sr."""
     corners, ref = SPHERICAL[case]
     t = warp.SphericalTriangle(*_spherical(corners, ref))
     assert float(t.omega[0]) == pytest.approx(_solid_angle64(corners, np.array(ref)), rel=1e-4)
@@ -111,7 +113,7 @@ def test_spherical_triangle_solid_angle(case):
 
 
 @pytest.mark.mitsuba
-@pytest.mark.parametrize("case", ["near", "grazing", "wide"])  # ("small" is finer than the bins)
+@pytest.mark.parametrize("case", ["near", "grazing", "wide", "hemisphere"])  # ("small" is finer than the bins)
 def test_spherical_triangle_chi2(case):
     """:func:`warp.spherical_triangle_sample` against the density ``1 / omega`` inside the
     spherical triangle, 0 outside (the bins at its edges integrated at 32 x 32 points). The
@@ -136,10 +138,11 @@ def test_spherical_triangle_chi2(case):
 
 
 @pytest.mark.mitsuba
-def test_area_sample_fails_the_solid_angle_chi2():
-    """Negative control: directions toward points uniform on the near triangle (area
-    sampling) against the density ``1 / omega`` fail the same test."""
-    corners, ref = SPHERICAL["near"]
+@pytest.mark.parametrize("case", ["near", "hemisphere"])
+def test_area_sample_fails_the_solid_angle_chi2(case):
+    """Negative control: directions toward points uniform on the triangle (area sampling)
+    against the density ``1 / omega`` fail the same test, near the hemisphere too."""
+    corners, ref = SPHERICAL[case]
 
     def sample(u):
         p0, e1, e2, o = _spherical(corners, ref, dr.width(u))
@@ -154,20 +157,48 @@ def test_area_sample_fails_the_solid_angle_chi2():
     assert not ok
 
 
+#: float32's unit roundoff
+EPS32 = float(np.finfo(np.float32).eps) / 2
+
+
 def test_spherical_triangle_sample_meets_the_triangle():
-    """Every sampled direction meets the triangle where its barycentrics say (to 1e-4 of the
-    edge), from the four cases' reference points."""
+    """Every sampled direction meets the triangle where its barycentrics say, from the five
+    cases' reference points. The point ``p0 + e1 b1 + e2 b2 - ref`` is float32 arithmetic on
+    coordinates as large as the farthest corner's distance ``R`` from ``ref``, so its
+    component across the direction is rounding of that size, not a fraction of the edge or
+    of the point's own distance: at most 4.8 ``EPS32 R`` measured with these 20000 samples a
+    case, 6.4 with 200000 (both in "hemisphere"). The bound, 64 ``EPS32 R`` (3.8e-6 R), is
+    ten times that. Negative control: a warp off by 1e-3 in ``u`` reads 600 ``EPS32 R`` and
+    more in every case (:func:`test_meets_the_triangle_rejects_a_shifted_warp`)."""
+    for across in _across(warp.spherical_triangle_sample):
+        assert across < 64.0, across
+
+
+def _across(sampler, n=20_000):
+    """Per case, the largest component across the sampled direction of the point its
+    barycentrics name, in units of ``EPS32`` times the farthest corner's distance; and the
+    barycentrics' range checked."""
     rng = np.random.default_rng(3)
-    n = 20_000
+    out = []
     for corners, ref in SPHERICAL.values():
         p0, e1, e2, o = _spherical(corners, ref, n)
         u = Array2f(rng.random((2, n)).astype(np.float32))
-        w = warp.spherical_triangle_sample(warp.SphericalTriangle(p0, e1, e2, o), u)
+        w = sampler(warp.SphericalTriangle(p0, e1, e2, o), u)
         b = warp.ray_triangle_barycentrics(o, w, p0, e1, e2)
         p = np.array(p0 + e1 * b.x + e2 * b.y - o)
         w = np.array(w)
-        # the point lies along w: its component across w is small against the edge
         across = p - w * (p * w).sum(0)
-        assert np.abs(across).max() < 1e-4 * np.linalg.norm(np.array(corners[1]) - corners[0]) * 30
+        far = max(np.linalg.norm(np.array(c) - ref) for c in corners)
+        out.append(np.abs(across).max() / (EPS32 * far))
         assert (np.array(b.x) >= 0).all() and (np.array(b.y) >= 0).all()
         assert (np.array(b.x + b.y) <= 1 + 1e-6).all()
+    return out
+
+
+def test_meets_the_triangle_rejects_a_shifted_warp():
+    """Negative control of the bound above: a warp off by 1e-3 in ``u`` sends directions
+    past the triangle's edges, where the clamped barycentrics name a point off the ray."""
+    def shifted(t, u):
+        return warp.spherical_triangle_sample(t, Array2f(u.x * 1.001 + 1e-3, u.y * 1.001 + 1e-3))
+
+    assert min(_across(shifted)) > 64.0
