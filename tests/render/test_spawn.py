@@ -42,7 +42,7 @@ from drpt.accel.protocol import INVALID, Hit
 from drpt.geometry import intersect_plane, intersect_sphere, intersect_triangle_watertight
 from drpt.options import RenderOptions
 from drpt.render import spawn
-from drpt.render.integrators.common import SHADOW_SHRINK, DirectLight, power_heuristic
+from drpt.render.integrators.common import SHADOW_SHRINK, DirectLight, ShadowQuery, power_heuristic
 from drpt.render.renderer import Renderer
 from drpt.render.scene import DeviceScene
 from drpt.render.surface import SurfaceData
@@ -271,17 +271,16 @@ def _scene_size_offset(monkeypatch, scene):
         mag = (dr.max(dr.abs(si.p)) + floor) * 2.0**-17
         return si.p + si.ng * dr.mulsign(mag, dr.dot(si.ng, d))
 
-    def emitter_old(self, si, u_sel, u2, active, mis, coherent=False):  # (a traversal hint)
-        ls = self.scene.sample_emitter(si, u_sel, u2, active)
-        f, pdf_b = self.scene.eval_bsdf(si, ls.wo)
-        ok = ls.valid & (dr.max(f) > 0.0)
-        so = self.scene.spawn(si, ls.wo)
-        ok &= ~self.scene.occluded(so, ls.wo, dr.norm(ls.p - so) * SHADOW_SHRINK, ok)
-        w = power_heuristic(ls.pdf, pdf_b) if mis else Float(1.0)
-        return dr.select(ok, f * ls.le * (w / ls.pdf), 0.0)
+    def query_old(self, si, es, f, pdf_b, mis, coherent):
+        # every next-event estimate's shadow query (DirectLight.emitter, emitter_query and
+        # emitter_query_sample all build theirs here), along the unmoved point's direction
+        ok = es.valid & (dr.max(f) > 0.0)
+        so = self.scene.spawn(si, es.wo)
+        w = power_heuristic(es.pdf, pdf_b) if mis else Float(1.0)
+        return ShadowQuery(f * es.le * (w / es.pdf), so, es.wo, dr.norm(es.p - so) * SHADOW_SHRINK, ok, coherent)
 
     monkeypatch.setattr(DeviceScene, "spawn", spawn_old)
-    monkeypatch.setattr(DirectLight, "emitter", emitter_old)
+    monkeypatch.setattr(DirectLight, "_query", query_old)
 
 
 def _moved(scene, scale=1.0, shift=0.0, quantize=False):
