@@ -575,23 +575,30 @@ class MaterialTable:
         f, pdf, rev = Array3f(0.0), Float(0.0), Float(0.0)
         # the lanes whose two-sided frame would flip for the reverse direction
         across = (dr.dot(si.ns, si.wi) < 0.0) != (dr.dot(si.ns, wo) < 0.0)
+        for case, w, lanes in self._smooth_cases(si):
+            mirror = None if lanes is None else (across if lanes is True else across & lanes)
+
+            def evaluate(f, pdf, rev, case=case, w=w, mirror=mirror):
+                frame = case.frame()
+                p = case.bsdf.params(case.rows, si, case.mask)
+                return _merge_rev(case.mask, w, (f, pdf, rev),
+                                  _lobe_rev(case.bsdf, p, frame, frame.to_local(si.wi), wo, mirror))
+
+            f, pdf, rev = case.run(evaluate, (f, pdf, rev))
+        return f, pdf, rev
+
+    def _smooth_cases(self, si: Interaction):
+        """Each non-Dirac case of each slot at ``si`` with its slot's weight and the lanes
+        whose two-sided frame may mirror (None: a one-sided kind; True: every lane):
+        ``(case, w, lanes)``, for :meth:`eval_pdf_rev` and :meth:`prepare_rev`."""
         for j in range(self.K):
             row, w, present = self._slot(si, j)
             for case in self._cases(si, j, row, present):
                 if case.bsdf.DELTA:
                     continue  # nothing to evaluate
                 two = self._two[case.kind]
-                mirror = None if two is False else (across if two is True
-                                                    else across & dr.gather(Bool, two, row, case.mask))
-
-                def evaluate(f, pdf, rev, case=case, w=w, mirror=mirror):
-                    frame = case.frame()
-                    p = case.bsdf.params(case.rows, si, case.mask)
-                    return _merge_rev(case.mask, w, (f, pdf, rev),
-                                      _lobe_rev(case.bsdf, p, frame, frame.to_local(si.wi), wo, mirror))
-
-                f, pdf, rev = case.run(evaluate, (f, pdf, rev))
-        return f, pdf, rev
+                yield case, w, (None if two is False else
+                                (True if two is True else dr.gather(Bool, two, row, case.mask)))
 
     def prepare_rev(self, si: Interaction) -> Callable[[Array3f], tuple[Array3f, Float, Float]]:
         """:meth:`eval_pdf_rev` of ``si`` toward directions given later: what does not depend
@@ -604,16 +611,10 @@ class MaterialTable:
         if self._pkinds:
             return lambda wo: self._two_evaluations(si, wo)
         prepared = []
-        for j in range(self.K):
-            row, w, present = self._slot(si, j)
-            for case in self._cases(si, j, row, present):
-                if case.bsdf.DELTA:
-                    continue  # nothing to evaluate
-                two = self._two[case.kind]
-                lanes = None if two is False else (True if two is True else dr.gather(Bool, two, row, case.mask))
-                frame = case.frame()
-                p = case.bsdf.params(case.rows, si, case.mask)
-                prepared.append((case, w, lanes, frame, p, frame.to_local(si.wi)))
+        for case, w, lanes in self._smooth_cases(si):
+            frame = case.frame()
+            p = case.bsdf.params(case.rows, si, case.mask)
+            prepared.append((case, w, lanes, frame, p, frame.to_local(si.wi)))
 
         def evaluate(wo: Array3f) -> tuple[Array3f, Float, Float]:
             f, pdf, rev = Array3f(0.0), Float(0.0), Float(0.0)
