@@ -854,21 +854,8 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
       splats, each path counting as a sample of ``W H`` times its splat."""
     spp = merged.spp
     H, W, _ = merged.sum.shape
-    if merged.weight is not None and consume and merged.weight[..., 0].min() > 0.0:
-        return _finish_weighted(merged, seconds, build_seconds)
     if merged.weight is not None:
-        ws, ws2 = merged.weight[..., :1], merged.weight[..., 1:]
-        ok = ws > 0.0
-        mean = np.where(ok, merged.sum / np.where(ok, ws, 1.0), 0.0)
-        second = np.where(ok, merged.sumsq[..., :3] / np.where(ok, ws2, 1.0), 0.0)
-        n_eff = np.where(ok, ws * ws / np.where(ok, ws2, 1.0), 1.0)
-        var = np.maximum(second - mean * mean, 0.0) / np.maximum(n_eff - 1.0, 1.0)
-        _check_range(mean)
-        moment2 = None
-        if merged.sumsq.shape[-1] == 9:  # the weighted r^2 .. gb, as Mitsuba's film develops its m2_
-            moment2 = xyz_second_moment(np.where(ok, merged.sumsq[..., 3:] / np.where(ok, ws, 1.0), 0.0))
-        return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, W * H * spp,
-                            merged.nonfinite, moment2)
+        return _finish_weighted(merged, seconds, build_seconds, consume)
     if consume and not light_tracing:
         mean = merged.sum
         mean /= spp  # the same division as merged.sum / spp, in the merge's array
@@ -908,27 +895,41 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
                         build_seconds, W * H * spp, merged.nonfinite, moment2)
 
 
-def _finish_weighted(merged: ChunkMerge, seconds: float, build_seconds: float) -> RenderResult:
-    """:func:`_finish_image` of splatted camera samples where every pixel has a weight, in the
-    merge's own arrays (``consume``): the same divisions and differences, value for value, as
-    the general case's ``np.where`` expressions take where the weight is positive, without
-    their image-sized temporaries (each a fresh allocation, paid in page faults)."""
+def _finish_weighted(merged: ChunkMerge, seconds: float, build_seconds: float,
+                     consume: bool) -> RenderResult:
+    """:func:`_finish_image` of splatted camera samples (``merged.weight``): with
+    ``consume``, in the merge's own arrays, without image-sized temporaries (each a fresh
+    allocation, paid in page faults). A pixel without weight (no sample reached it) divides
+    by 1 and reads 0: image, variance and moments."""
     spp = merged.spp
     H, W, _ = merged.sum.shape
-    ws = np.ascontiguousarray(merged.weight[..., :1])
-    ws2 = np.ascontiguousarray(merged.weight[..., 1:])
-    mean = np.divide(merged.sum, ws, out=merged.sum)
+    ok = merged.weight[..., :1] > 0.0
+    every = bool(ok.all())
+    if every:
+        ws = np.ascontiguousarray(merged.weight[..., :1])
+        ws2 = np.ascontiguousarray(merged.weight[..., 1:])
+    else:
+        ws, ws2 = np.where(ok, merged.weight[..., :1], 1.0), np.where(ok, merged.weight[..., 1:], 1.0)
+    none = None if every else np.broadcast_to(~ok, merged.sum.shape)
+    mean = np.divide(merged.sum, ws, out=merged.sum if consume else None)
+    if none is not None:
+        mean[none] = 0.0
     _check_range(mean)
-    n_eff = ws * ws / ws2
+    n_eff = ws * ws / ws2  # (1 where no weight)
     sq = merged.sumsq
     var = np.divide(sq[..., :3], ws2)
+    if none is not None:
+        var[none] = 0.0
     var -= mean * mean
     np.maximum(var, 0.0, out=var)
     n_eff -= 1.0
     var /= np.maximum(n_eff, 1.0, out=n_eff)
     moment2 = None
     if sq.shape[-1] == 9:  # the weighted r^2 .. gb, as Mitsuba's film develops its m2_
-        moment2 = xyz_second_moment(np.divide(sq[..., 3:], ws, out=sq[..., 3:]))
+        second = np.divide(sq[..., 3:], ws, out=sq[..., 3:] if consume else None)
+        if none is not None:
+            second[np.broadcast_to(~ok, second.shape)] = 0.0
+        moment2 = xyz_second_moment(second)
     return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, W * H * spp,
                         merged.nonfinite, moment2)
 
