@@ -581,7 +581,7 @@ class MaterialTable:
             def evaluate(f, pdf, rev, case=case, w=w, mirror=mirror):
                 frame = case.frame()
                 p = case.bsdf.params(case.rows, si, case.mask)
-                return _merge_rev(case.mask, w, (f, pdf, rev),
+                return _merge(case.mask, w, (f, pdf, rev),
                                   _lobe_rev(case.bsdf, p, frame, frame.to_local(si.wi), wo, mirror))
 
             f, pdf, rev = case.run(evaluate, (f, pdf, rev))
@@ -596,9 +596,13 @@ class MaterialTable:
             for case in self._cases(si, j, row, present):
                 if case.bsdf.DELTA:
                     continue  # nothing to evaluate
-                two = self._two[case.kind]
-                yield case, w, (None if two is False else
-                                (True if two is True else dr.gather(Bool, two, row, case.mask)))
+                yield case, w, self._mirror_lanes(case, row)
+
+    def _mirror_lanes(self, case: _Case, row: UInt32):
+        """The lanes of ``case`` whose two-sided frame may mirror between two directions:
+        None for a one-sided kind, True where the kind is two-sided on every row."""
+        two = self._two[case.kind]
+        return None if two is False else (True if two is True else dr.gather(Bool, two, row, case.mask))
 
     def prepare_rev(self, si: Interaction) -> Callable[[Array3f], tuple[Array3f, Float, Float]]:
         """:meth:`eval_pdf_rev` of ``si`` toward directions given later: what does not depend
@@ -623,7 +627,7 @@ class MaterialTable:
                 mirror = None if lanes is None else (across if lanes is True else across & lanes)
 
                 def one(f, pdf, rev, case=case, w=w, mirror=mirror, frame=frame, p=p, wi_l=wi_l):
-                    return _merge_rev(case.mask, w, (f, pdf, rev), _lobe_rev(case.bsdf, p, frame, wi_l, wo, mirror))
+                    return _merge(case.mask, w, (f, pdf, rev), _lobe_rev(case.bsdf, p, frame, wi_l, wo, mirror))
 
                 f, pdf, rev = case.run(one, (f, pdf, rev))
             return f, pdf, rev
@@ -632,10 +636,14 @@ class MaterialTable:
 
     def _two_evaluations(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float, Float]:
         """:meth:`eval_pdf_rev` by two :meth:`eval_pdf` (tables with perturbed frames)."""
-        f, pdf = self.eval_pdf(si, wo)
+        return (*self.eval_pdf(si, wo), self._pdf_seen_from(si, wo))
+
+    def _pdf_seen_from(self, si: Interaction, wo: Array3f) -> Float:
+        """The density of sampling ``si.wi`` at ``si`` seen from ``wo``, by a second
+        :meth:`eval_pdf` (tables with perturbed frames, which depend on ``wi``)."""
         rev_si = copy.copy(si)
         rev_si.wi = wo
-        return f, pdf, self.eval_pdf(rev_si, si.wi)[1]
+        return self.eval_pdf(rev_si, si.wi)[1]
 
     def sample(self, si: Interaction, u1: Float, u2: Array2f, rev: bool = False):
         """Sample a world direction; returns it and the local :class:`BSDFSample`. With
@@ -672,9 +680,7 @@ class MaterialTable:
 
             out, wo, *pdf_rev = case.run(draw, (out, wo, *pdf_rev))
         if rev and not rev_here:
-            rev_si = copy.copy(si)
-            rev_si.wi = wo
-            full_rev = dr.select(out.delta, 0.0, self.eval_pdf(rev_si, si.wi)[1])
+            full_rev = dr.select(out.delta, 0.0, self._pdf_seen_from(si, wo))
             return (*self._mixture(si, wo, out, present, chosen_w), full_rev)
         return self._mixture(si, wo, out, present, chosen_w, *pdf_rev)
 
@@ -685,13 +691,10 @@ class MaterialTable:
         two-sided frame would flip between them (as :meth:`eval_pdf_rev` reads it; the
         world direction taken back into the frame gives the same bits), 0 after a Dirac
         sample."""
-        two, wo_l = self._two[case.kind], frame.to_local(wo)
-        if two is not False:
-            mirror = (dr.dot(si.ns, si.wi) < 0.0) != (dr.dot(si.ns, wo) < 0.0)
-            if two is not True:
-                mirror &= dr.gather(Bool, two, row, case.mask)
-            wi_l = Array3f(wi_l.x, wi_l.y, dr.select(mirror, -wi_l.z, wi_l.z))
-            wo_l = Array3f(wo_l.x, wo_l.y, dr.select(mirror, -wo_l.z, wo_l.z))
+        lanes = self._mirror_lanes(case, row)
+        across = (dr.dot(si.ns, si.wi) < 0.0) != (dr.dot(si.ns, wo) < 0.0)
+        mirror = None if lanes is None else (across if lanes is True else across & lanes)
+        wi_l, wo_l = _mirrored(mirror, wi_l, frame.to_local(wo))
         return dr.select(case.mask & ~out.delta, case.bsdf.pdf(p, wo_l, wi_l), pdf_rev)
 
     def eval_pdf_sample(self, si: Interaction, wo: Array3f, u1: Float,
@@ -805,15 +808,21 @@ def _lobe_rev(bsdf: BSDF, p, frame, wi_l: Array3f, wo: Array3f, mirror: Bool | N
     (:meth:`MaterialTable.eval_pdf_rev`)."""
     wo_l = frame.to_local(wo)
     fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
-    if mirror is not None:
-        wi_l = Array3f(wi_l.x, wi_l.y, dr.select(mirror, -wi_l.z, wi_l.z))
-        wo_l = Array3f(wo_l.x, wo_l.y, dr.select(mirror, -wo_l.z, wo_l.z))
+    wi_l, wo_l = _mirrored(mirror, wi_l, wo_l)
     return fj, pj, bsdf.pdf(p, wo_l, wi_l)
 
 
-def _merge_rev(mask: Bool, w: Float | None, state: tuple, lobe: tuple) -> tuple:
-    """``state`` (``f``, ``pdf``, ``pdf_rev``) with a lobe's values added on ``mask``, weighted
-    by its slot weight ``w`` (None: the material's one component, the values replace)."""
+def _mirrored(mirror: Bool | None, wi_l: Array3f, wo_l: Array3f) -> tuple[Array3f, Array3f]:
+    """The local pair mirrored in ``z`` on the lanes ``mirror`` (None: as it is)."""
+    if mirror is None:
+        return wi_l, wo_l
+    return (Array3f(wi_l.x, wi_l.y, dr.select(mirror, -wi_l.z, wi_l.z)),
+            Array3f(wo_l.x, wo_l.y, dr.select(mirror, -wo_l.z, wo_l.z)))
+
+
+def _merge(mask: Bool, w: Float | None, state: tuple, lobe: tuple) -> tuple:
+    """``state`` (``f``, ``pdf``[, ``pdf_rev``]) with a lobe's values added on ``mask``,
+    weighted by its slot weight ``w`` (None: the material's one component, the values replace)."""
     if w is None:
         return tuple(dr.select(mask, v, old) for v, old in zip(lobe, state))
     return tuple(dr.select(mask, dr.fma(v, w, old), old) for v, old in zip(lobe, state))
@@ -837,9 +846,7 @@ def _eval_case(case: _Case, p, frame: Frame, wi_l: Array3f, wo: Array3f, w: Floa
     if isinstance(frame, PerturbedFrame):
         fac = frame.factor(wo)
         fj, pj = fj * fac, dr.select(fac > 0.0, pj, 0.0)
-    if w is None:
-        return dr.select(mask, fj, f), dr.select(mask, pj, pdf)
-    return dr.select(mask, dr.fma(fj, w, f), f), dr.select(mask, dr.fma(pj, w, pdf), pdf)
+    return _merge(mask, w, (f, pdf), (fj, pj))
 
 
 def _sample_case(case: _Case, p, frame: Frame, wi_l: Array3f, u1: Float, u2: Array2f, mask: Bool,
