@@ -260,16 +260,16 @@ class AreaLights:
         pdf_a = self.pdf_area(si.prim, active, table)
         sees_light = active & (pdf_a > 0.0)
         pdf = dr.select(sees_light, pdf_a * dr.square(si.t) / dr.abs(dr.dot(si.ng, d)), 0.0)
-        if tri_prob is not None:  # the spherical triangle seen from where the ray came from
+        ref = si.p - d * si.t  # where the ray came from
+        if tri_prob is not None:  # the spherical triangle seen from there
             s = self.surfaces
             face = dr.select(sees_light, si.prim, 0)
             st = SphericalTriangle(dr.gather(Array3f, s.p0, face, sees_light),
                                    dr.gather(Array3f, s.e1, face, sees_light),
-                                   dr.gather(Array3f, s.e2, face, sees_light), si.p - d * si.t)
+                                   dr.gather(Array3f, s.e2, face, sees_light), ref)
             solid = sees_light & st.sampled
             pdf = dr.select(solid, dr.gather(Float, tri_prob, face, solid) / st.omega, pdf)
         if self.has_spheres:
-            ref = si.p - d * si.t  # where the ray came from
             is_sph, pdf_s = self.pdf_sphere(si.prim, si.p, ref, d, si.t, active & si.valid, sph_prob)
             pdf = dr.select(is_sph, pdf_s, pdf)
         return pdf
