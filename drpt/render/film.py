@@ -204,6 +204,17 @@ def _channels(moment: bool) -> int:
     return 3 + 3 + 2 + (6 if moment else 0)  # sum, squares, weights, channel products
 
 
+def _terms(w, r, g, b, moment: bool) -> list:
+    """One sample's terms of weight ``w`` and radiance ``(r, g, b)``, in the order of
+    :func:`_channels`: ``w L``, ``(w L)^2``, ``w``, ``w^2`` and with ``moment`` ``w L_a L_b``
+    (rr, gg, bb, rg, rb, gb; both ways of :func:`gather_splats` add these very terms)."""
+    wr, wg, wb = r * w, g * w, b * w
+    terms = [wr, wg, wb, wr * wr, wg * wg, wb * wb, w, w * w]
+    if moment:
+        terms += [wr * r, wg * g, wb * b, wr * g, wr * b, wg * b]
+    return terms
+
+
 def _packet(moment: bool) -> int:
     """The channels of a packed partial sum (:func:`_by_source`): :func:`_channels` padded to
     a power of two, for Dr.Jit's packet gathers."""
@@ -343,11 +354,7 @@ def _source_terms(part: list, first: UInt32, step: int, cxs: list, cys: list, we
         terms = []
         for wf in wy:
             for we in wx:
-                w = Partial(dr.select(valid, we * wf, 0.0))
-                a, b, c = r_ * w, g_ * w, b_ * w
-                terms += [a, b, c, a * a, b * b, c * c, w, w * w]
-                if moment:
-                    terms += [a * r_, b * g_, c * b_, a * g_, a * b_, b * b_]
+                terms += _terms(Partial(dr.select(valid, we * wf, 0.0)), r_, g_, b_, moment)
         part = [part[i] + terms[i] for i in range(len(part))]
     return part
 
@@ -395,7 +402,7 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
     side = 2 * R + 1
     kk = dr.opaque(UInt32, k)
     sources = dr.opaque(UInt32, side * side)
-    channels = 3 + 3 + 2 + (6 if moment else 0)  # sum, squares, weights, channel products
+    channels = _channels(moment)
     wxs, wys = _axis_weights(flt, width, r0, k, px, py, ok)
 
     total = [dr.zeros(Float64, n) for _ in range(channels)]
@@ -417,11 +424,7 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
             # (a sample that does not count has weight 0, and finite radiance: its terms are 0)
             w = Partial(dr.gather(Float, wxs, lane * side + ex) * dr.gather(Float, wys, lane * side + ey))
             v = dr.gather(Array3f, L, lane)
-            r_, g_, b_ = Partial(v.x), Partial(v.y), Partial(v.z)
-            a, b, c = r_ * w, g_ * w, b_ * w
-            terms = [a, b, c, a * a, b * b, c * c, w, w * w]
-            if moment:
-                terms += [a * r_, b * g_, c * b_, a * g_, a * b_, b * b_]
+            terms = _terms(w, Partial(v.x), Partial(v.y), Partial(v.z), moment)
             part = [part[i] + terms[i] for i in range(channels)]
             j += 1
         total = [total[i] + Float64(part[i]) for i in range(channels)]
