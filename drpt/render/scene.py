@@ -205,13 +205,18 @@ def env_compensated(sky: Skybox, options: RenderOptions, scene: Scene | None = N
     return scene is None or not scene.media or media_bounded(scene)
 
 
+def emitting(scene: Scene) -> np.ndarray:
+    """Per material of ``scene``, whether it emits (a radiance above 0 or a textured one)."""
+    return np.array([m.is_emissive or getattr(m, "emission_texture", None) is not None
+                     for m in scene.materials], bool)
+
+
 def emissive_inline(scene: Scene) -> EmissiveList | None:
     """An :class:`EmissiveList` of ``scene``'s emissive triangles, or None where there are
     none, emissive spheres or planes, or more triangles than the backend compiles inline
     (:func:`drpt.backend.policy`'s ``inline_max_prims``, the rule of ``--accel auto``: a
     list that short costs a ray less than a traversal; read when the scene is built)."""
-    emits = np.array([m.is_emissive or getattr(m, "emission_texture", None) is not None
-                      for m in scene.materials], bool)
+    emits = emitting(scene)
     if not len(emits) or not emits.any():
         return None
     if any(len(g) and emits[np.asarray(g.material, np.int64)].any() for g in (scene.spheres, scene.planes)):

@@ -88,7 +88,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -102,7 +102,7 @@ from ..render.adaptive import check
 from ..render.lights.area import triangle_sampling_rule
 from ..render.lights.envmap import EnvironmentLight
 from ..render.renderer import Renderer
-from ..render.scene import env_compensated
+from ..render.scene import emitting, env_compensated
 from ..scene import load_scene
 from ..scene.model import Skybox
 from . import table as _table
@@ -199,8 +199,6 @@ def env_compensation_knob(scene, options: RenderOptions) -> str | None:
     shapes), the sky is sampled by luminance (not ``--env-sampling uniform``) and the map
     is not so nearly constant or black that compensation leaves it as it is
     (:meth:`~drpt.render.lights.envmap.EnvironmentLight.compensated`; the map is read)."""
-    from dataclasses import replace
-
     if options.env_sampling == "uniform":
         return None
     for sky in (light for light in scene.lights if isinstance(light, Skybox)):
@@ -220,8 +218,7 @@ def triangle_sampling_knob(scene, options: RenderOptions) -> str | None:
     always by area)."""
     if options.integrator in LIGHT_TRACED or not len(scene.triangles):
         return None
-    emits = np.array([m.is_emissive or getattr(m, "emission_texture", None) is not None
-                      for m in scene.materials], bool)
+    emits = emitting(scene)
     if not emits.any() or not emits[np.asarray(scene.triangles.material, np.int64)].any():
         return None
     return "solid-angle" if triangle_sampling_rule(options.triangle_sampling, scene, options.integrator) else "area"
@@ -309,8 +306,6 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
     :class:`~drpt.options.RenderOptions`: size, spp, seed and material mode of
     the default row; each row changes its knob); write the outputs; return
     the report."""
-    from dataclasses import replace
-
     options.validate()
     width, height, spp, seed, bsdf = (options.width, options.height, options.spp,
                                       options.seed, options.bsdf)
