@@ -260,7 +260,9 @@ class MaterialTable:
         # Textures: one set for every textured field and weight.
         self.textures = None
         if lay.textures:
-            self.textures = TextureSet(lay.textures, scene.triangles)
+            bumps = lay.perturb is not None and lay.perturb.has_bump
+            self.textures = TextureSet(lay.textures, scene.triangles,
+                                       gradients=self._p_among_bump if bumps else ())
         # materials made only of Dirac lobes (glass, mirrors): Whitted follows them
         delta = lay.material_delta
         self._all_delta = bool(delta.all())

@@ -44,7 +44,7 @@ from os import PathLike
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array2f, Array3f, Bool, TensorXf, Texture2f, UInt32
+from drjit.auto import Array2f, Array3f, Bool, Float, TensorXf, Texture2f, UInt32
 
 from ..errors import DrptError
 from ..imageio import read_image
@@ -73,10 +73,13 @@ def load_rgb(path: str | PathLike, raw: bool = False) -> np.ndarray:
 class TextureSet:
     """The scene's textures, indexed by position in ``paths``."""
 
-    def __init__(self, paths, triangles=None):
+    def __init__(self, paths, triangles=None, gradients: tuple[int, ...] = ()):
         self.paths = list(paths)
         self.textures: list = []
         self.shapes: list[tuple[int, int]] = []
+        #: per id in ``gradients`` (the bump maps' textures) that is a bilinear image: its
+        #: luminance as a one-channel texture, which :meth:`gradient` reads
+        self.luminance: dict[int, Texture2f] = {}
         for p in self.paths:
             if isinstance(p, MeshAttribute):  # the shapes' own values
                 self.textures.append(_Attribute(p, triangles))
@@ -94,6 +97,10 @@ class TextureSet:
             self.shapes.append(img.shape[:2])
             self.textures.append(Texture2f(TensorXf(img), filter_mode=dr.FilterMode.Linear,
                                            wrap_mode=dr.WrapMode.Repeat))
+        for k in gradients:
+            image = getattr(self.textures[k], "tex", self.textures[k])
+            if hasattr(image, "eval_fetch") and image.filter_mode() == dr.FilterMode.Linear:
+                self.luminance[k] = _luminance_texture(image)
 
     def __len__(self) -> int:
         return len(self.textures)
@@ -148,7 +155,10 @@ class TextureSet:
             m = active & (tex_id == k)
             a = getattr(tex, "m", None) or (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)  # a to_uv, row-major
             p = Array2f(pos.x * a[0] + pos.y * a[1] + a[2], pos.x * a[3] + pos.y * a[4] + a[5])
-            f00, f10, f01, f11 = (_lum(Array3f(*c)) for c in image.eval_fetch(p, m))
+            if k in self.luminance:  # the texels' luminances, a quarter of the RGB texture's bytes
+                f00, f10, f01, f11 = (c[0] for c in self.luminance[k].eval_fetch(p, m))
+            else:
+                f00, f10, f01, f11 = (_lum(Array3f(*c)) for c in image.eval_fetch(p, m))
             px = dr.fma(p.x, w, -0.5)
             py = dr.fma(p.y, h, -0.5)
             w1x, w1y = px - dr.floor(px), py - dr.floor(py)
@@ -164,6 +174,21 @@ class TextureSet:
 
 def _lum(c: Array3f):
     return 0.212671 * c.x + 0.715160 * c.y + 0.072169 * c.z
+
+
+def _luminance_texture(image: Texture2f) -> Texture2f:
+    """A one-channel texture of ``image``'s texel luminances (:func:`_lum`, computed by the
+    device's float32 arithmetic, so each is bit for bit what a kernel computes from the RGB
+    texel), with ``image``'s filter and wrap modes."""
+    t = image.tensor()
+    h, w = t.shape[0], t.shape[1]
+    flat = t.array
+    n = h * w
+    idx = dr.arange(UInt32, n) * t.shape[2]
+    c = Array3f(dr.gather(Float, flat, idx), dr.gather(Float, flat, idx + 1), dr.gather(Float, flat, idx + 2))
+    lum = _lum(c)
+    dr.eval(lum)
+    return Texture2f(TensorXf(lum, (h, w, 1)), filter_mode=image.filter_mode(), wrap_mode=image.wrap_mode())
 
 
 def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool, si=None) -> Array3f:

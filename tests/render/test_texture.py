@@ -245,6 +245,42 @@ def test_gradient_among_gives_the_full_gradients_on_its_ids_and_traces_only_them
     assert ops((0, 1, 2)) == ops(None)
 
 
+@pytest.mark.parametrize("wrap", ["repeat", "mirror", "clamp"])
+def test_gradient_from_the_luminance_texture_is_the_rgb_ones_to_the_bit(exr, png, wrap):
+    """A bump map's texture kept as its texels' luminances (``gradients``: one channel, a
+    quarter of the RGB texture's bytes) gives the gradients of the RGB texture bit for bit,
+    plain and with Mitsuba's ``bitmap`` options (wrap modes, ``to_uv``), inside and across the
+    borders (negative control: the luminance texture of other weights, the channels' mean,
+    differs)."""
+    (pe, _), (pp, _) = exr, png
+    from drpt.materials.spec import Texture
+
+    paths = [pe, Texture(pp, 0.5, wrap_mode=wrap, raw=True, to_uv=(1.5, 0.2, 0.1, -0.3, 2.0, 0.4, 0, 0, 1))]
+    rng = np.random.default_rng(1)
+    n = 4096
+    uv = Array2f(Float(rng.uniform(-1.2, 2.2, n).astype(np.float32)),
+                 Float(rng.uniform(-1.2, 2.2, n).astype(np.float32)))
+    ids = UInt32(rng.integers(0, 2, n).astype(np.uint32))
+    rgb = TextureSet(paths)
+    lum = TextureSet(paths, gradients=(0, 1))
+    assert set(lum.luminance) == {0, 1} and not rgb.luminance
+    assert lum.luminance[1].wrap_mode() == rgb.textures[1].tex.wrap_mode()
+    want = np.array(rgb.gradient(ids, uv, True))
+    got = np.array(lum.gradient(ids, uv, True))
+    assert np.abs(want).sum() > 0.0
+    np.testing.assert_array_equal(got, want)
+
+    import drpt.render.texture as texture
+
+    mean = texture._lum
+    try:
+        texture._lum = lambda c: (c.x + c.y + c.z) * (1.0 / 3.0)
+        control = TextureSet(paths, gradients=(0, 1))
+    finally:
+        texture._lum = mean
+    assert not np.array_equal(np.array(control.gradient(ids, uv, True)), want)
+
+
 def test_empty_set_traces_nothing():
     ts = TextureSet([])
     assert len(ts) == 0

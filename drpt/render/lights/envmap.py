@@ -124,7 +124,7 @@ from pathlib import Path
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import Array2f, Array3f, Array4f, Bool, Float, UInt32
 
 from ...errors import DrptError
 from ...imageio import read_image
@@ -219,9 +219,10 @@ class EnvironmentLight:
         ny = max(H - 1, 1)  # latitude bands (bilinear patch rows)
         self._ny = ny
 
-        # Texel data; the lookup wraps column W to column 0 (Mitsuba stores
-        # that extra column) and a single row serves as its own neighbor.
-        self._data = Float(img.ravel())
+        # Texel data, each texel (r, g, b, luminance): one packet gather reads a corner's
+        # radiance and its sampling weight. The lookup wraps column W to column 0 (Mitsuba
+        # stores that extra column) and a single row serves as its own neighbor.
+        self._data = _texels(img)
         self._half_texel = 0.5 / W
 
         theta = np.arange(ny + 1) * (math.pi / ny)
@@ -307,7 +308,7 @@ class EnvironmentLight:
         """
         if self.offset > 0.0 or self.is_black:
             return self
-        lum = self._data.numpy().reshape(self.height, self.width, 3) @ LUMINANCE
+        lum = self._data.numpy().reshape(self.height, self.width, 4)[:, :, :3] @ LUMINANCE
         out = copy.copy(self)
         out._compensate(lum)
         return out if out.offset > 0.0 else self
@@ -331,27 +332,27 @@ class EnvironmentLight:
         return ix, iy, x - Float(ix), y - Float(iy)
 
     def _corners(self, ix, iy, active):
-        """The 4 texels of cell (ix, iy): ``v00, v10`` on row iy (columns
-        ix, ix+1), ``v01, v11`` on the row below."""
+        """The 4 texels of cell (ix, iy), each ``(r, g, b, luminance)``: ``v00, v10``
+        on row iy (columns ix, ix+1), ``v01, v11`` on the row below."""
         W = self.width
         ix1 = dr.select(ix + 1 < W, ix + 1, 0)  # periodic in u
         r0 = iy * W
         r1 = dr.minimum(iy + 1, self.height - 1) * W
-        return (dr.gather(Array3f, self._data, r0 + ix, active),
-                dr.gather(Array3f, self._data, r0 + ix1, active),
-                dr.gather(Array3f, self._data, r1 + ix, active),
-                dr.gather(Array3f, self._data, r1 + ix1, active))
+        return (dr.gather(Array4f, self._data, r0 + ix, active),
+                dr.gather(Array4f, self._data, r0 + ix1, active),
+                dr.gather(Array4f, self._data, r1 + ix, active),
+                dr.gather(Array4f, self._data, r1 + ix1, active))
 
     def _eval_cell(self, corners, fx, fy) -> Array3f:
-        v00, v10, v01, v11 = corners
+        v00, v10, v01, v11 = (Array3f(c.x, c.y, c.z) for c in corners)
         return _bilerp(v00, v10, v01, v11, fx, fy) * self.scale
 
-    def _weight(self, c: Array3f) -> Float:
-        """A texel's sampling weight: its luminance, less :attr:`offset` (clamped at 0)
-        where the map is compensated (no code for it otherwise)."""
+    def _weight(self, c: Array4f) -> Float:
+        """A texel's sampling weight: its luminance (stored with it), less :attr:`offset`
+        (clamped at 0) where the map is compensated (no code for it otherwise)."""
         if self.offset > 0.0:
-            return dr.maximum(_luminance(c) - self.offset, 0.0)
-        return _luminance(c)
+            return dr.maximum(c.w - self.offset, 0.0)
+        return c.w
 
     def _band_fraction(self, d: Array3f, iy, active) -> Float:
         """``ft``: where ``cos theta`` of ``d`` lies in band ``iy``, in [0, 1]."""
@@ -448,6 +449,17 @@ def compensation_offset(lum: np.ndarray) -> float:
     if not (mean > 0.0) or mean - float(np.min(lum)) <= 0.01 * mean:
         return 0.0
     return mean
+
+
+def _texels(img: np.ndarray) -> Float:
+    """The ``(H, W, 3)`` texels as one flat array of ``(r, g, b, luminance)`` per texel, the
+    luminance computed by the device's float32 arithmetic of :func:`_luminance`, so that it
+    is bit for bit what a kernel computing it from the texel would get."""
+    rgb = img.reshape(-1, 3)
+    c = Array3f(rgb[:, 0].copy(), rgb[:, 1].copy(), rgb[:, 2].copy())
+    out = dr.ravel(Array4f(c.x, c.y, c.z, _luminance(c)))
+    dr.eval(out)
+    return out
 
 
 def _luminance(c: Array3f) -> Float:

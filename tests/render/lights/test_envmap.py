@@ -617,3 +617,23 @@ def test_black_half_keeps_zero_density_on_black_cells():
     le, p = np.array(light.eval(to_a3(d))), np.array(light.pdf(to_a3(d)))
     assert np.all(np.isfinite(p)) and np.all(p >= 0)
     assert np.all(p[le.max(0) == 0] == 0)
+
+
+def test_stored_luminance_is_the_kernels_to_the_bit():
+    """Each texel is stored as ``(r, g, b, luminance)`` (one packet gather reads a corner's
+    radiance and its sampling weight); the stored luminance is bit for bit what a kernel
+    computes from the texel's RGB (negative control: numpy's float64 luminance rounded to
+    float32 differs on some texels)."""
+    from drpt.render.lights import envmap
+
+    rng = np.random.default_rng(5)
+    img = (rng.lognormal(0.0, 2.0, (33, 64, 3))).astype(np.float32)
+    light = EnvironmentLight(img)
+    stored = light._data.numpy().reshape(33, 64, 4)
+    np.testing.assert_array_equal(stored[..., :3], img)
+    rgb = img.reshape(-1, 3)
+    c = Array3f(Float(rgb[:, 0].copy()) + 0.0 * dr.arange(Float, len(rgb)), Float(rgb[:, 1].copy()),
+                Float(rgb[:, 2].copy()))
+    kernel = np.array(envmap._luminance(c)).reshape(33, 64)
+    np.testing.assert_array_equal(stored[..., 3], kernel)
+    assert not np.array_equal((img.astype(np.float64) @ LUMINANCE).astype(np.float32), kernel)
