@@ -266,3 +266,36 @@ def test_integrators_without_mis_complement_ignore_compensation(tmp_path, integr
     a = render(scene, 4, 1, integrator=integrator, env_compensation="on")
     b = render(load(tmp_path), 4, 1, integrator=integrator, env_compensation="off")
     np.testing.assert_array_equal(a.image, b.image)
+
+
+def _sky_z(tmp_path) -> float:
+    """The largest |block z| between the sky scene rendered with the map's importance
+    sampling (its alias tables, :func:`drpt.render.lights.envmap.alias_tables`; compensation
+    off) and with uniform sphere sampling (no tables), :data:`SPP`, seeds 3 and 4."""
+    scene = load(tmp_path)
+    tables = render(scene, SPP, 3, env_compensation="off")
+    sphere = render(scene, SPP, 4, env_compensation="off", env_sampling="uniform")
+    return float(np.abs(block_z(tables.image, tables.variance, sphere.image, sphere.variance, block=4)).max())
+
+
+def test_sky_sampled_by_its_tables_agrees_with_uniform_sphere_sampling(tmp_path, monkeypatch):
+    """Next-event estimation of the sky by its alias tables is unbiased: the image agrees with
+    the one whose sky is sampled uniformly over the sphere (|block z| < :data:`ZMAX`; 2.6
+    measured). Negative control: a pick that ignores the alias (each cell kept with its
+    threshold alone, the table's density unchanged) samples other cells than the density
+    says, and the image disagrees (|z| 42.8 measured)."""
+    from drjit.auto import UInt32
+
+    from drpt.render.lights import envmap
+
+    z = _sky_z(tmp_path)
+    assert z < ZMAX, z
+
+    def no_alias(q, alias, base, n, u):
+        x = u * n
+        i = envmap.dr.minimum(UInt32(x), n - 1)
+        return i, x - envmap.Float(i)
+
+    monkeypatch.setattr(envmap, "_pick", no_alias)
+    z_control = _sky_z(tmp_path)
+    assert z_control > 2 * ZMAX, z_control

@@ -50,9 +50,11 @@ The sampling grid is the grid of *bilinear patches*: cell ``(j, i)``
 ``[i, i+1)`` and ``y`` in ``[j, j+1)``, where ``eval`` blends the four texels
 at its corners. A cell is picked with probability proportional to
 ``mean luminance of its 4 corners * Omega_j`` (``Omega_j = (2 pi / W)
-(cos theta_j - cos theta_{j+1})``, the cell's solid angle; rows from a
-marginal CDF, columns from that row's conditional CDF, float32 CDFs,
-``dr.binary_search``). Inside the cell the position ``(fx, ft)`` is drawn
+(cos theta_j - cos theta_{j+1})``, the cell's solid angle; the row from a
+marginal alias table, the column from that row's conditional alias table:
+:func:`alias_tables`, Walker's method, one uniform cell pick and one threshold
+test each, where a CDF's binary search made ``log2`` dependent lookups).
+Inside the cell the position ``(fx, ft)`` is drawn
 from the *bilinear* density of the corner luminances ``c00, c10, c01, c11``::
 
     q(fx, ft) = bilerp(c, fx, ft) / mean(c)        (integrates to 1 on [0,1]^2)
@@ -76,15 +78,18 @@ Because ``cos theta`` rather than ``theta`` is parameterised, there is no
 and near the poles and needs no clamp. The weight is positive wherever
 ``eval`` can be, except on cell edges (measure zero).
 
-``P(row)`` and ``P(col | row)`` are the differences of the *stored float32*
-CDF values, so ``pdf`` is the density the sampler realises (to float32
-rounding of the table), whatever the rounding of the sums. To keep every
-positive cell representable in float32, a positive cell weight is raised to
-at least ``1e-6`` of its row total (and a positive row to ``1e-6`` of the
-total) -- this only moves a negligible amount of probability toward nearly
-black cells. Cell luminances are summed in float64 and normalised by the
-brightest cell before they are stored in float32, so texels up to the
-float32 maximum keep their weight; texels more than ~1e-40 times dimmer
+``P(row)`` and ``P(col | row)`` are the probabilities the *stored float32*
+alias thresholds realise (computed exactly from them), so ``pdf`` is the
+density the sampler realises, whatever the rounding of the weights. A uniform
+number picks a cell ``i = floor(u N)`` and its fraction ``f = u N - i`` is
+tested against the threshold; ``f`` rescaled to the kept or the alias part of
+``[0, 1)`` is the uniform number used inside the cell. So that every positive
+cell's threshold stays well above the resolution of ``f``, a positive cell
+weight is raised to at least ``1e-6`` of its row total (and a positive row to
+``1e-6`` of the total) -- this only moves a negligible amount of probability
+toward nearly black cells. Cell luminances are summed in float64 and
+normalised by the brightest cell before they are stored in float32, so texels
+up to the float32 maximum keep their weight; texels more than ~1e-40 times dimmer
 than the brightest may underflow to a zero weight (irrelevant for real
 maps). The kernels scale corner luminances before adding them, for the
 same reason.
@@ -137,7 +142,8 @@ __all__ = ["EnvironmentLight", "SkyEmitter", "sanitize_image", "check_radius", "
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 #: Minimum weight of a positive cell relative to its row (and of a positive
-#: row relative to the total), so that float32 CDFs never lose it.
+#: row relative to the total), so that its alias threshold is never below what a
+#: float32 uniform number resolves.
 CDF_FLOOR = 1e-6
 
 _ONE_MINUS_EPS = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
@@ -272,17 +278,15 @@ class EnvironmentLight:
 
         if self.is_black:
             pdf = np.zeros((ny, W), np.float32)
-            self._cdf_rows = Float(np.zeros(ny, np.float32))
-            self._cdf_cols = Float(np.zeros(ny * W, np.float32))
+            self._rows = (Float(np.ones(ny, np.float32)), UInt32(np.arange(ny, dtype=np.uint32)))
+            self._cols = (Float(np.ones(ny * W, np.float32)), UInt32(np.tile(np.arange(W, dtype=np.uint32), ny)))
         else:
-            row_sum = w.sum(axis=1, dtype=np.float64)
-            cdf_cols, p_cols = _float32_cdf(w, row_sum[:, None])
-            cdf_rows, p_rows = _float32_cdf(row_sum[None, :].astype(np.float32),
-                                            row_sum.sum())
-            pdf = p_cols
-            pdf *= (p_rows[0] / omega).astype(np.float32)[:, None]
-            self._cdf_rows = Float(cdf_rows[0])
-            self._cdf_cols = Float(cdf_cols.ravel())
+            w = _floored(w.astype(np.float64))
+            q_cols, a_cols, p_cols = alias_tables(w)
+            q_rows, a_rows, p_rows = alias_tables(_floored(w.sum(axis=1)[None, :]))
+            pdf = (p_cols * (p_rows[0] / omega)[:, None]).astype(np.float32)
+            self._rows = (Float(q_rows[0]), UInt32(a_rows[0]))
+            self._cols = (Float(q_cols.ravel()), UInt32(a_cols.ravel()))
         self._pdf = Float(pdf.ravel())
 
     def _compensate(self, lum: np.ndarray) -> None:
@@ -403,21 +407,9 @@ class EnvironmentLight:
             z = dr.zeros(Float, dr.width(u))
             return Array3f(z, z + 1.0, z), Array3f(z, z, z), z
         ny, W = self._ny, self.width
-        # row from the marginal CDF, column from that row's conditional CDF
-        cr = self._cdf_rows
-        row = dr.binary_search(0, ny - 1, lambda i: dr.gather(Float, cr, i) <= u.y)
-        row = dr.minimum(row, ny - 1)
-        hi = dr.gather(Float, cr, row)
-        lo = dr.select(row > 0, dr.gather(Float, cr, dr.maximum(row, 1) - 1), 0.0)
-        sy = dr.clip((u.y - lo) / (hi - lo), 0.0, _ONE_MINUS_EPS)
-
-        cc = self._cdf_cols
-        base = row * W
-        col = dr.binary_search(0, W - 1, lambda i: dr.gather(Float, cc, base + i) <= u.x)
-        col = dr.minimum(col, W - 1)
-        hi = dr.gather(Float, cc, base + col)
-        lo = dr.select(col > 0, dr.gather(Float, cc, base + dr.maximum(col, 1) - 1), 0.0)
-        sx = dr.clip((u.x - lo) / (hi - lo), 0.0, _ONE_MINUS_EPS)
+        # row from the marginal alias table, column from that row's conditional one
+        row, sy = _pick(*self._rows, 0, ny, u.y)
+        col, sx = _pick(*self._cols, row * W, W, u.x)
 
         # inside the cell: the bilinear density of the corner luminances,
         # ft (fraction of the band's cos(theta) range) from its linear
@@ -486,24 +478,72 @@ def _sample_linear(a: Float, b: Float, u: Float) -> Float:
     return dr.minimum(x, _ONE_MINUS_EPS)
 
 
-def _float32_cdf(w: np.ndarray, total) -> tuple[np.ndarray, np.ndarray]:
-    """Row-wise float32 CDFs of non-negative float32 weights ``w`` (rows with
-    zero total give zeros; ``w`` is overwritten), and the probabilities the
-    stored CDFs realise (their float32 differences).
+def _floored(w: np.ndarray) -> np.ndarray:
+    """``w`` (rows of non-negative float64 weights) with each positive weight raised to
+    ``CDF_FLOOR`` times its row's total (a copy), so that no positive cell's alias threshold
+    is too small for the uniform input's resolution to reach."""
+    floor = CDF_FLOOR * w.sum(axis=1, keepdims=True)
+    return np.where(w > 0.0, np.maximum(w, floor), 0.0)
 
-    Positive weights are raised to ``CDF_FLOOR * total`` so each keeps a
-    positive float32 increment (at least ~8 ulps of the running sum). The
-    CDF is the running sum divided by its own last entry, so from a row's
-    last positive weight on it is exactly 1.
-    """
-    floor = (CDF_FLOOR * np.asarray(total, np.float64)).astype(np.float32)
-    np.maximum(w, np.where(w > 0.0, floor, np.float32(0.0)), out=w)
-    cdf = np.cumsum(w, axis=1, out=w)
-    s = cdf[:, -1:].copy()
-    s[s == 0.0] = 1.0  # empty rows stay all zero
-    cdf /= s
-    p = np.diff(cdf, axis=1, prepend=np.float32(0.0))
-    return cdf, p
+
+def alias_tables(w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Walker's alias tables of the rows of ``w`` (``(R, N)``, non-negative): ``(q, alias,
+    prob)``. Cell ``i`` of a row, picked uniformly, is kept where a uniform ``f`` in [0, 1)
+    is below its float32 threshold ``q[i]`` and is replaced by ``alias[i]`` (uint32)
+    otherwise; ``prob`` (float64) is what these float32 tables realise,
+    ``(q[i] + sum over j with alias[j] == i of (1 - q[j])) / N``, proportional to the row
+    to float32 rounding of the thresholds. A cell of zero weight is never picked
+    (``prob`` 0); a row of zero total gives ``prob`` 0 everywhere.
+
+    Built by Vose's pairing in lockstep over the rows, each row sorted once: the smallest
+    remaining cell is filled up by the largest, which becomes a small one itself when its
+    excess runs out (N - 1 steps, each settling one cell of every row)."""
+    w = np.asarray(w, np.float64)
+    R, N = w.shape
+    total = w.sum(axis=1)
+    empty = ~(total > 0.0)
+    scaled = np.where(empty[:, None], 1.0, w * (N / np.where(empty, 1.0, total))[:, None])
+    order = np.argsort(scaled, axis=1, kind="stable")
+    v = np.take_along_axis(scaled, order, axis=1).ravel()  # each row ascending
+    q = np.ones(R * N)
+    alias = np.tile(np.arange(N, dtype=np.int64), R)
+    base = np.arange(R, dtype=np.int64) * N
+    i, j = base.copy(), base + (N - 1)  # the smallest and the largest cell left, per row
+    for _ in range(N - 1):
+        big = v[j] >= 1.0
+        small = np.where(big, i, j)  # j itself once its excess has run out
+        large = np.where(big, j, j - 1)
+        vs = v[small]
+        q[small] = vs
+        alias[small] = large - base
+        v[large] -= 1.0 - vs
+        i += big
+        j -= ~big
+    q = np.clip(q, 0.0, 1.0).reshape(R, N)
+    # from sorted positions back to cells
+    qc = np.empty((R, N), np.float32)
+    ac = np.empty((R, N), np.int64)
+    np.put_along_axis(qc, order, q.astype(np.float32), axis=1)
+    np.put_along_axis(ac, order, np.take_along_axis(order, alias.reshape(R, N), axis=1), axis=1)
+    qd = qc.astype(np.float64)
+    prob = qd.copy()
+    np.add.at(prob.reshape(-1), (ac + base[:, None]).ravel(), (1.0 - qd).ravel())
+    prob /= N
+    prob[empty] = 0.0
+    return qc, ac.astype(np.uint32), prob
+
+
+def _pick(q: Float, alias: UInt32, base, n: int, u: Float) -> tuple[UInt32, Float]:
+    """A cell of the alias table at ``base`` (``n`` cells; :func:`alias_tables`) from uniform
+    ``u``, and ``u`` remapped to a uniform number in [0, 1) for use inside the cell."""
+    x = u * n
+    i = dr.minimum(UInt32(x), n - 1)
+    f = x - Float(i)
+    qi = dr.gather(Float, q, base + i)
+    keep = f < qi
+    cell = dr.select(keep, i, dr.gather(UInt32, alias, base + i))
+    s = dr.select(keep, f / qi, (f - qi) / (1.0 - qi))
+    return cell, dr.clip(s, 0.0, _ONE_MINUS_EPS)
 
 
 class UniformSphereSampling:

@@ -637,3 +637,64 @@ def test_stored_luminance_is_the_kernels_to_the_bit():
     kernel = np.array(envmap._luminance(c)).reshape(33, 64)
     np.testing.assert_array_equal(stored[..., 3], kernel)
     assert not np.array_equal((img.astype(np.float64) @ LUMINANCE).astype(np.float32), kernel)
+
+
+def test_alias_tables_realise_their_probabilities():
+    """:func:`alias_tables`: the probabilities it reports are those of its float32 tables and
+    are each row's weights to float32 rounding (zero cells and empty rows: 0); picking with
+    :func:`_pick` from 2^22 uniforms finds every cell at its probability (|z| < 5 per cell)
+    and the remapped number uniform inside each picked cell (its mean and second moment per
+    cell, |z| < 5). Negative controls: a pick that ignores the alias
+    (each cell kept with its threshold only) misses cells (|z| > 50), and a remap that does
+    not rescale on the alias branch leaves the remapped numbers non-uniform (|z| > 50)."""
+    from drjit.auto import UInt32
+
+    from drpt.render.lights import envmap
+
+    rng = np.random.default_rng(9)
+    w = rng.lognormal(0.0, 2.0, (3, 40))
+    w[1, 5:30] = 0.0
+    w[2] = 0.0
+    q, alias, prob = envmap.alias_tables(w)
+    assert q.dtype == np.float32 and alias.dtype == np.uint32
+    np.testing.assert_allclose(prob[:2], w[:2] / w[:2].sum(axis=1, keepdims=True), rtol=1e-5, atol=1e-12)
+    assert np.all(prob[1, 5:30] == 0.0) and np.all(prob[2] == 0.0)
+    realised = q.astype(np.float64)
+    for r in range(3):
+        np.add.at(realised[r], alias[r].astype(np.int64), 1.0 - q[r].astype(np.float64))
+    np.testing.assert_array_equal(np.where(prob > 0, realised / 40, 0.0), prob)
+
+    n = 1 << 22
+    u = Float(rng.random(n, dtype=np.float32))
+    tq, ta = Float(q[0]), UInt32(alias[0])
+
+    def stats(pick):
+        cell, s = pick(tq, ta, 0, 40, u)
+        cell, s = np.array(cell), np.array(s, np.float64)
+        counts = np.bincount(cell, minlength=40)
+        p = prob[0]
+        z_cells = (counts - n * p) / np.sqrt(n * p * (1 - p))
+        # uniform in [0, 1) inside each cell: mean 1/2 (variance 1/12), second moment 1/3
+        # (variance 4/45)
+        seen = np.maximum(counts, 1)
+        z_mean = (np.bincount(cell, s, 40) / seen - 0.5) / np.sqrt(1 / 12 / seen)
+        z_m2 = (np.bincount(cell, s * s, 40) / seen - 1 / 3) / np.sqrt(4 / 45 / seen)
+        return np.abs(z_cells).max(), max(np.abs(z_mean).max(), np.abs(z_m2).max())
+
+    zc, zs = stats(envmap._pick)
+    assert zc < Z_MAX and zs < Z_MAX, (zc, zs)
+
+    def no_alias(q_, a_, base, m, u_):
+        x = u_ * m
+        i = dr.minimum(UInt32(x), m - 1)
+        f = x - Float(i)
+        return i, f
+
+    def no_rescale(q_, a_, base, m, u_):
+        cell, _ = envmap._pick(q_, a_, base, m, u_)
+        x = u_ * m
+        return cell, x - dr.floor(x)
+
+    assert stats(no_alias)[0] > 50.0
+    zs_control = stats(no_rescale)[1]
+    assert zs_control > 50.0, zs_control
