@@ -36,6 +36,14 @@ traced kernel contains one bilinear lookup per such texture (code size and a
 few masked instructions grow linearly with their number; memory traffic only
 occurs on active lanes). One texture needs no mask beyond ``active``. An
 empty set traces nothing and returns 0.
+
+Bump maps read only the luminance of the four texels around a point
+(:meth:`TextureSet.gradient`); the ids given as ``gradients`` (the bump maps'
+textures) are also kept as one-channel textures of their texels' luminances,
+computed on the device by the kernel's own float32 expression, so the gradients
+are the same to the bit while each fetch reads a quarter of the bytes (Dr.Jit
+keeps an RGB texture as four channels), which matters where the map is
+minified and nearly every fetch misses the caches.
 """
 
 from __future__ import annotations
