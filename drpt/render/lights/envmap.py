@@ -526,8 +526,7 @@ def alias_tables(w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     np.put_along_axis(qc, order, q.astype(np.float32), axis=1)
     np.put_along_axis(ac, order, np.take_along_axis(order, alias.reshape(R, N), axis=1), axis=1)
     qd = qc.astype(np.float64)
-    prob = qd.copy()
-    np.add.at(prob.reshape(-1), (ac + base[:, None]).ravel(), (1.0 - qd).ravel())
+    prob = qd + np.bincount((ac + base[:, None]).ravel(), (1.0 - qd).ravel(), R * N).reshape(R, N)
     prob /= N
     prob[empty] = 0.0
     return qc, ac.astype(np.uint32), prob
