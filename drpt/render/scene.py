@@ -515,12 +515,18 @@ class DeviceScene:
         return self.eval_emitter(si, d, active, radiance=False)[1]
 
     def eval_emitter(self, si: Interaction, d: Array3f, active: Bool | None, radiance: bool = True,
-                     density: bool = True) -> tuple[Array3f | None, Float | None]:
+                     density: bool = True, ref: Array3f | None = None) -> tuple[Array3f | None, Float | None]:
         """What a ray of unit direction ``d`` sees at ``si`` (``active`` lanes; ``None``:
         every lane): the radiance an emitter sends back along it (surface emission where it
         hit, the background or the infinite emitters where it escaped; zero elsewhere) and
         :meth:`pdf_emitter`, with one lookup of each infinite emitter. ``radiance`` or
-        ``density`` False: ``None`` in its place (and none of its code traced).
+        ``density`` False: ``None`` in its place (and none of its code traced). ``ref``: the
+        point the density is seen from, the path's previous vertex, which next-event
+        estimation sampled from (None: where the ray started, ``si.p - d * si.t``, which is
+        that vertex moved off its surface by :mod:`~drpt.render.spawn`'s offset); it matters
+        where the density depends on the point (emissive triangles by solid angle, spheres'
+        cones, a light BVH's selection), and MIS weighs the two techniques right only with
+        the point next-event estimation used.
 
         The lookups run in a symbolic ``if`` on the lanes that hit an emissive surface or
         escaped (the others see nothing: zero radiance, zero density), so that a SIMD packet
@@ -533,20 +539,21 @@ class DeviceScene:
         def nothing(*_):
             return (dr.zeros(Array3f, n),) * radiance + (dr.zeros(Float, n),) * density
 
-        def lookup(si, d, hit, escaped):
-            le, pdf = self._eval_emitter(si, d, hit, escaped, radiance, density)
+        def lookup(si, d, hit, escaped, *ref):
+            le, pdf = self._eval_emitter(si, d, hit, escaped, radiance, density, *ref)
             return tuple(v for v in (le, pdf) if v is not None)
 
+        refs = () if ref is None or not density else (ref,)
         emits = getattr(self.materials, "has_emission", True)
         sky = self.has_background or any(f.infinite and not f.delta for f in self.emitter_selection.families)
         if not (emits or sky):
             out = list(nothing())
         elif not self._costly_emitter_lookups():  # (the branch would cost more than it skips)
-            out = list(lookup(si, d, hit, escaped))
+            out = list(lookup(si, d, hit, escaped, *refs))
         else:
             sees = self.materials.is_emissive(si, hit) if emits else Bool(False)
             sees = sees | escaped if sky else sees
-            out = list(dr.if_stmt((si, d, hit, escaped), sees, lookup, nothing, label="drpt_eval_emitter"))
+            out = list(dr.if_stmt((si, d, hit, escaped, *refs), sees, lookup, nothing, label="drpt_eval_emitter"))
         return (out.pop(0) if radiance else None), (out.pop(0) if density else None)
 
     def _costly_emitter_lookups(self) -> bool:
@@ -562,7 +569,7 @@ class DeviceScene:
                 or not sel.static)
 
     def _eval_emitter(self, si: Interaction, d: Array3f, hit: Bool, escaped: Bool, radiance: bool,
-                      density: bool) -> tuple[Array3f | None, Float | None]:
+                      density: bool, ref: Array3f | None = None) -> tuple[Array3f | None, Float | None]:
         """:meth:`eval_emitter`'s lookups for the lanes ``hit`` (a surface) and ``escaped``."""
         sel = self.emitter_selection
         le = None
@@ -579,11 +586,12 @@ class DeviceScene:
                 continue
             if not family.infinite:  # a surface: its radiance is its material's emission
                 if density:
-                    pdf_f = family.pdf_direction(si, d, hit)
+                    pdf_f = family.pdf_direction(si, d, hit, ref)
                     if not sel.static:
                         mine = hit & (pdf_f > 0.0)  # where the ray came from:
+                        src = si.p - d * si.t if ref is None else ref
                         pdf_f = dr.select(mine, pdf_f * sel.pmf(family.slot_of(si.prim, mine) + off,
-                                                                si.p - d * si.t, mine), 0.0)
+                                                                src, mine), 0.0)
                     pdf = pdf_f if pdf_zero else pdf + pdf_f
                     pdf_zero = False
                 continue
@@ -591,7 +599,7 @@ class DeviceScene:
             le_f, pdf_f = family.eval_direction(d, escaped, density=density)
             if density:
                 if not sel.static:
-                    pdf_f = pdf_f * sel.pmf(UInt32(off), si.p - d * si.t, escaped)
+                    pdf_f = pdf_f * sel.pmf(UInt32(off), si.p - d * si.t if ref is None else ref, escaped)
                 pdf = dr.select(escaped, pdf_f if pdf_escaped_zero else pdf + pdf_f, pdf)
                 pdf_escaped_zero = False
             if radiance:

@@ -748,9 +748,8 @@ class VolPathIntegrator(PathIntegrator):
         if fl.through is not None:  # in a medium: by its transmittance, whether the ray got there or not
             seen = (seen & ~fl.in_medium) | (fl.in_medium & ~hide)
             weight = dr.select(fl.in_medium, fl.through, fl.beta)
-        si_ref = copy.copy(si)
-        si_ref.t = dr.norm(si.p - s.ref_p)
-        le, pdf_l = scene.eval_emitter(si_ref, s.d, seen, density=nee)
+        # (the density seen from that vertex, the point next-event estimation sampled from)
+        le, pdf_l = scene.eval_emitter(si, s.d, seen, density=nee, ref=s.ref_p)
         w = Float(1.0)
         if nee:
             w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))

@@ -99,11 +99,11 @@ class Emitter(Protocol):
         the family): its solid-angle density times the bound probability."""
         ...
 
-    def pdf_direction(self, si, d: Array3f, active: Bool) -> Float:
+    def pdf_direction(self, si, d: Array3f, active: Bool, ref: Array3f | None = None) -> Float:
         """The density :meth:`sample_direction` has for what a ray of unit direction
-        ``d`` reached: the interaction ``si`` (``si.t`` from the reference point) or, for
-        an infinite family, the direction of a ray that escaped. 0 where the ray reached
-        none of the family's slots."""
+        ``d`` reached: the interaction ``si`` seen from ``ref`` (None: from where the ray
+        started, ``si.t`` back along it) or, for an infinite family, the direction of a
+        ray that escaped. 0 where the ray reached none of the family's slots."""
         ...
 
     # surface families:

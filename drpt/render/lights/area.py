@@ -250,17 +250,21 @@ class AreaLights:
                          getattr(self, "nee_tri_prob", None))
         return toward(ref, ls, active)
 
-    def pdf_direction(self, si, d: Array3f, active: Bool) -> Float:
+    def pdf_direction(self, si, d: Array3f, active: Bool, ref: Array3f | None = None) -> Float:
         """The density of :meth:`sample_direction` for the point ``si`` a ray of unit
-        direction ``d`` hit at distance ``si.t`` (0 where it is not a slot's primitive)."""
+        direction ``d`` hit at distance ``si.t`` (0 where it is not a slot's primitive),
+        seen from ``ref`` (None: where the ray started, ``si.p - d * si.t``)."""
         return self._pdf_hit(si, d, active, self.nee_pdf_area, getattr(self, "nee_sph_prob", None),
-                             getattr(self, "nee_tri_prob", None))
+                             getattr(self, "nee_tri_prob", None), ref)
 
-    def _pdf_hit(self, si, d: Array3f, active: Bool, table: Float, sph_prob, tri_prob=None) -> Float:
+    def _pdf_hit(self, si, d: Array3f, active: Bool, table: Float, sph_prob, tri_prob=None,
+                 ref: Array3f | None = None) -> Float:
         pdf_a = self.pdf_area(si.prim, active, table)
         sees_light = active & (pdf_a > 0.0)
-        pdf = dr.select(sees_light, pdf_a * dr.square(si.t) / dr.abs(dr.dot(si.ng, d)), 0.0)
-        ref = si.p - d * si.t  # where the ray came from
+        dist = si.t if ref is None else dr.norm(si.p - ref)
+        pdf = dr.select(sees_light, pdf_a * dr.square(dist) / dr.abs(dr.dot(si.ng, d)), 0.0)
+        if ref is None:
+            ref = si.p - d * si.t  # where the ray came from
         if tri_prob is not None:  # the spherical triangle seen from there
             s = self.surfaces
             face = dr.select(sees_light, si.prim, 0)
@@ -270,7 +274,7 @@ class AreaLights:
             solid = sees_light & st.sampled
             pdf = dr.select(solid, dr.gather(Float, tri_prob, face, solid) / st.omega, pdf)
         if self.has_spheres:
-            is_sph, pdf_s = self.pdf_sphere(si.prim, si.p, ref, d, si.t, active & si.valid, sph_prob)
+            is_sph, pdf_s = self.pdf_sphere(si.prim, si.p, ref, d, dist, active & si.valid, sph_prob)
             pdf = dr.select(is_sph, pdf_s, pdf)
         return pdf
 

@@ -130,7 +130,7 @@ class DeltaLights:
                                   for f in ("wo", "p", "le", "pdf", "valid", "dist")), True)
         return out
 
-    def pdf_direction(self, si, d: Array3f, active: Bool) -> Float:
+    def pdf_direction(self, si, d: Array3f, active: Bool, ref: Array3f | None = None) -> Float:
         """0: a ray never hits a delta light."""
         return dr.zeros(Float, dr.width(d))
 

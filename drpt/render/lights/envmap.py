@@ -660,6 +660,6 @@ class SkyEmitter:
         le, pdf = self.env.eval_pdf(d, active)
         return le, (pdf * self.prob if self.prob != 1.0 else pdf)
 
-    def pdf_direction(self, si, d: Array3f, active: Bool) -> Float:
+    def pdf_direction(self, si, d: Array3f, active: Bool, ref: Array3f | None = None) -> Float:
         """The density of the direction ``d`` of a ray that escaped (0 where ``si`` is a hit)."""
         return self.eval_direction(d, active & ~si.valid)[1]
