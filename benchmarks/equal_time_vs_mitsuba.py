@@ -33,7 +33,11 @@ Output: a Markdown table (stdout), the skipped scenes, and with ``--json FILE`` 
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/equal_time_vs_mitsuba.py [--rounds 5]
 [--min-size 192] [--max-samples 1000000] [--only WORD,...] [--skip WORD,...] [--no-corpus]
-[--json FILE] [--light-sampler RULE] [--env-compensation on|off]
+[--json FILE] [--light-sampler RULE] [--env-compensation on|off] [--sampler NAME]
+
+``--sampler`` sets drpt's sampler on the bundled scenes only (drpt's own format names none;
+an XML file's sampler is the file's, in both renderers); Mitsuba renders them with its
+``independent`` sampler as before.
 """
 
 from __future__ import annotations
@@ -140,10 +144,11 @@ def setup(case: Case, min_size: int, max_samples: int):
 
 
 def prepare(case: Case, min_size: int, max_samples: int, light_sampler: str | None = None,
-            env_compensation: str | None = None):
+            env_compensation: str | None = None, sampler: str | None = None):
     """``(ways, info)`` for :func:`~drpt.tools.converge.efficiency_rounds`: drpt's and Mitsuba's
     ``render(seed) -> image`` at the same size, spp and settings (:func:`setup`; drpt with
-    ``light_sampler`` and ``env_compensation`` where given, else its defaults). Raises DrptError
+    ``light_sampler`` and ``env_compensation`` where given, else its defaults; ``sampler`` on a
+    bundled scene only). Raises DrptError
     where drpt refuses the scene (or would not path trace it)."""
     from drpt.tools.converge import make_drpt, make_mitsuba
 
@@ -152,6 +157,8 @@ def prepare(case: Case, min_size: int, max_samples: int, light_sampler: str | No
         opts = replace(opts, light_sampler=light_sampler)
     if env_compensation:
         opts = replace(opts, env_compensation=env_compensation)
+    if sampler and case.bundled is not None:
+        opts = replace(opts, sampler=sampler).validate()
     spp = opts.spp
     _, drpt_render = make_drpt(scene, opts)
     mits_render, _ = make_mitsuba(scene, opts.width, opts.height, opts.path.max_depth,
@@ -191,6 +198,8 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--light-sampler", default=None, help="drpt's --light-sampler (default: drpt's default)")
     ap.add_argument("--env-compensation", default=None, choices=("on", "off"),
                     help="drpt's --env-compensation (default: drpt's default)")
+    ap.add_argument("--sampler", default=None,
+                    help="drpt's --sampler on the bundled scenes (default: drpt's default)")
     a = ap.parse_args(argv)
     ensure()
     set_mitsuba_variant()
@@ -202,7 +211,8 @@ def main(argv=None) -> list[dict]:
                           [w for w in a.skip.split(",") if w]):
             t0 = time.perf_counter()
             try:
-                ways, info = prepare(case, a.min_size, a.max_samples, a.light_sampler, a.env_compensation)
+                ways, info = prepare(case, a.min_size, a.max_samples, a.light_sampler, a.env_compensation,
+                                     a.sampler)
                 res = efficiency_rounds(ways, a.rounds)
             except DrptError as e:
                 skipped.append((case.name, str(e).splitlines()[0].replace(f"{CORPUS}/", "")))
@@ -236,7 +246,8 @@ def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
     lines = [f"commit {getattr(a, 'commit', None) or _commit()}, {_cpu()}, {os.cpu_count()} cores; {a.rounds} rounds, "
              f"min size {a.min_size}, max samples {a.max_samples}; load average {load0:.1f} at the start"
              + (f"; drpt's light sampler {a.light_sampler}" if getattr(a, "light_sampler", None) else "")
-             + (f"; drpt's env compensation {a.env_compensation}" if getattr(a, "env_compensation", None) else ""),
+             + (f"; drpt's env compensation {a.env_compensation}" if getattr(a, "env_compensation", None) else "")
+             + (f"; drpt's sampler {a.sampler} (bundled scenes)" if getattr(a, "sampler", None) else ""),
              "",
              "| scene | size | spp | drpt s | Mitsuba s | Mitsuba s / drpt s | variance drpt / Mitsuba "
              "| efficiency drpt / Mitsuba | target |",

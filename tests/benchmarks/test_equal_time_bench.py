@@ -50,3 +50,18 @@ def test_runs_on_one_scene(capsys):
     assert (r["width"], r["height"], r["spp"]) == (64, 48, 6) and r["target"] == 1.5
     assert r["efficiency_ratio"] > 0 and r["drpt_variance"] > 0
     assert "| veach_mis.xml | 64x48 | 6 |" in capsys.readouterr().out
+
+
+def test_sampler_applies_to_the_bundled_scenes_only(monkeypatch, tmp_path):
+    """``--sampler`` reaches drpt's options on a bundled scene and leaves an XML file's own
+    sampler alone (Mitsuba's renders are not built: make_mitsuba is replaced)."""
+    from drpt.tools import converge
+
+    seen = []
+    monkeypatch.setattr(converge, "make_drpt", lambda scene, opts: (seen.append(opts.sampler), None))
+    monkeypatch.setattr(converge, "make_mitsuba", lambda *a, **k: (None, 0.0))
+    cases = {c.name: c for c in bench.cases(["cornellbox", "veach"], False, tmp_path, ["_ct", "media"])}
+    bench.prepare(cases["cornellbox"], 32, 20_000, sampler="ldsampler")
+    bench.prepare(cases["cornellbox"], 32, 20_000)
+    bench.prepare(cases["veach_mis.xml"], 32, 20_000, sampler="ldsampler")
+    assert seen == ["ldsampler", "independent", "independent"]
