@@ -3,19 +3,26 @@
 
 Inline evaluates the very tests of BruteForce, in the same order, on the same
 float32 data (as constants instead of gathers), so the hits must agree *bit
-for bit*: t, primitive, u and v."""
+for bit*: t, primitive, u and v; the random soups here have no separate
+parallelograms, which inline tests as one (tests/geometry/test_parallelogram.py and
+the Veach render below)."""
 
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.auto import Float
+from drjit.auto import Array3f, Float
 
+import drpt.accel.inline as inline
 from drpt.accel import InlineList, build_accel, embree_lib, resolve_kind
 from drpt.backend import policy
+from drpt.options import RenderOptions, with_scene_settings
+from drpt.render.renderer import Renderer
+from drpt.scene import load_scene
 from support.accel import closed_mesh_rays, make_scene, rays, soup
 
 MAX_PRIMS = policy().inline_max_prims
@@ -144,3 +151,42 @@ def test_help_texts_state_the_limit(command, capsys):
         build_parser().parse_args([command, "--help"])
     text = " ".join(capsys.readouterr().out.split())  # argparse wraps lines anywhere
     assert f"{MAX_PRIMS} primitives" in text
+
+
+def _render_veach(monkeypatch, parallelograms: bool, shift: float = 0.0) -> np.ndarray:
+    """Veach's MIS scene (seven rectangles, four spheres) at 48x36, 4 spp, seed 1, its
+    rectangles tested as parallelograms or as triangles; ``shift`` moves every
+    parallelogram test's rays by that much along x (the negative control)."""
+    monkeypatch.setattr(InlineList, "parallelograms", parallelograms)
+    if shift:
+        test = inline.intersect_parallelogram
+        monkeypatch.setattr(inline, "intersect_parallelogram",
+                            lambda o, d, q, b: test(o + Array3f(shift, 0.0, 0.0), d, q, b))
+    xml = Path(__file__).resolve().parents[1] / "data" / "xml" / "veach_mis.xml"
+    opts, scene = with_scene_settings(RenderOptions(progress=False, width=48, height=36, spp=4, seed=1),
+                                      load_scene(xml), given={"size", "spp", "seed"})
+    r = Renderer(scene, opts)
+    assert isinstance(r.scene.accel, InlineList) and len(r.scene.accel.quads) == (7 if parallelograms else 0)
+    return r.render().image
+
+
+def test_parallelograms_render_the_triangles_image(monkeypatch):
+    """The same random numbers give the same image within float rounding with the
+    rectangles tested as parallelograms: the hit points differ by rounding, so most
+    pixels are equal or within 1e-4 (a path that grazes an edge may go another way).
+    Negative control: the parallelograms' rays moved by 1e-3 along x (a shifted
+    rectangle) differ beyond that."""
+    tri = _render_veach(monkeypatch, False)
+    monkeypatch.undo()
+    quad = _render_veach(monkeypatch, True)
+    monkeypatch.undo()
+    moved = _render_veach(monkeypatch, True, shift=1e-3)
+
+    def close(img):
+        rel = np.abs(img - tri) / np.maximum(np.abs(tri), 1e-3)
+        return (rel.max(-1) < 1e-4).mean(), abs(img.mean() / tri.mean() - 1.0)
+
+    share, bias = close(quad)
+    assert share > 0.97 and bias < 1e-4, (share, bias)
+    share, bias = close(moved)
+    assert share < 0.9, (share, bias)
