@@ -41,8 +41,8 @@ PARALLEL_TOLERANCE = 1e-6
 
 @dataclass(frozen=True)
 class Parallelogram:
-    """The constants of one pair of triangles ``first`` and ``first + 1`` (float64, to be
-    rounded to float32 where they enter a kernel).
+    """The constants of one pair of triangles ``first`` and ``first + 1``, computed in float64
+    and rounded to float32 (Python floats holding float32 values: the kernel's literals).
 
     ``corner``: ``c``; ``n``: ``e1 x e2``; ``g1, g2``: the dual vectors; ``bary_a``,
     ``bary_b``: ``(2, 3)`` matrices taking ``(a, b, 1)`` to triangle ``A``'s and ``B``'s
@@ -84,9 +84,14 @@ def _pair(a: np.ndarray, b: np.ndarray, first: int) -> Parallelogram | None:
     if np.abs(ca + e1 + e2 - cb).max() > PARALLEL_TOLERANCE * max(extent, 1e-30):
         return None
     g1, g2 = np.cross(e2, n) / n2, np.cross(n, e1) / n2
-    return Parallelogram(first, tuple(ca), tuple(n), tuple(g1), tuple(g2),
-                         tuple(map(tuple, _bary_map(a, ca, g1, g2))),
-                         tuple(map(tuple, _bary_map(b, ca, g1, g2))))
+    return Parallelogram(first, _f32(ca), _f32(n), _f32(g1), _f32(g2),
+                         tuple(map(_f32, _bary_map(a, ca, g1, g2))),
+                         tuple(map(_f32, _bary_map(b, ca, g1, g2))))
+
+
+def _f32(v) -> tuple:
+    """``v`` rounded to float32, as a tuple of Python floats."""
+    return tuple(np.asarray(v, np.float32).astype(np.float64).tolist())
 
 
 def parallelogram_pairs(positions: np.ndarray) -> list[Parallelogram]:
@@ -121,7 +126,7 @@ def intersect_parallelogram(o: Array3f, d: Array3f, q: Parallelogram, tmax: Floa
     literals): ``(t, u, v, hit, in_b)``, ``0 < t < tmax``, ``u, v`` the barycentrics of
     the triangle hit (``first``, or ``first + 1`` where ``in_b``); ``t = inf`` and
     ``u = v = 0`` where ``hit`` is false. Two-sided; a ray in the plane misses."""
-    c, n, g1, g2 = (Array3f(*(float(np.float32(x)) for x in v)) for v in (q.corner, q.n, q.g1, q.g2))
+    c, n, g1, g2 = (Array3f(*v) for v in (q.corner, q.n, q.g1, q.g2))
     w = o - c
     den = dr.dot(n, d)
     ok = den != 0
@@ -132,9 +137,7 @@ def intersect_parallelogram(o: Array3f, d: Array3f, q: Parallelogram, tmax: Floa
     in_b = a + b > 1
 
     def bary(m):
-        return tuple(dr.fma(Float(float(np.float32(r[0]))), a,
-                            dr.fma(Float(float(np.float32(r[1]))), b, Float(float(np.float32(r[2])))))
-                     for r in m)
+        return tuple(dr.fma(Float(r[0]), a, dr.fma(Float(r[1]), b, Float(r[2]))) for r in m)
 
     (ua, va), (ub, vb) = bary(q.bary_a), bary(q.bary_b)
     u = dr.select(in_b, ub, ua)
