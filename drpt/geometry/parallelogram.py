@@ -14,10 +14,13 @@ quarter of the work of two watertight triangle tests
 (:func:`drpt.geometry.triangle.watertight_permuted`).
 
 It is not watertight across the parallelogram's outer edges: a neighbour sharing one
-would have to be tested the same way, bit for bit. :func:`parallelogram_pairs` therefore
-pairs only triangles that share none of those edges with any other triangle (separate
-rectangles, as Mitsuba's scenes and Veach's MIS scene have), and only consecutive
-triangles (how a rectangle or a quad face is triangulated).
+would have to be tested the same way, bit for bit. Nor does it order ties as the watertight
+tests do where another surface lies in its plane (a box standing on a floor: whether a ray
+meets the floor or the box's bottom first is then float rounding). :func:`parallelogram_pairs`
+therefore pairs only triangles that share none of those edges with any other triangle and
+whose plane no other triangle's vertex touches (separate rectangles, as Mitsuba's scenes and
+Veach's MIS scene have), and only consecutive triangles (how a rectangle or a quad face is
+triangulated).
 
 Host side (numpy, float64 from the float32 vertices, constants rounded to float32 at
 the end): :func:`parallelogram_pairs` finds the pairs and their constants
@@ -37,6 +40,9 @@ _INF = float("inf")
 #: how far (relative to the pair's extent) the fourth point may lie from ``c + e1 + e2``:
 #: float32 rounding of a transformed rectangle's corners, nothing more
 PARALLEL_TOLERANCE = 1e-6
+#: how near (relative to the coordinates' size) another triangle's vertex may come to a pair's
+#: plane before the pair is left as two triangles (:func:`parallelogram_pairs`)
+PLANE_TOLERANCE = 1e-5
 
 
 @dataclass(frozen=True)
@@ -96,8 +102,9 @@ def _f32(v) -> tuple:
 
 def parallelogram_pairs(positions: np.ndarray) -> list[Parallelogram]:
     """The pairs of consecutive triangles (``(F, 3, 3)`` positions, rounded to float32 as
-    the accelerators hold them) that form a parallelogram and share none of its four
-    outer edges with another triangle, in order; a triangle is in one pair at most."""
+    the accelerators hold them) that form a parallelogram, share none of its four outer
+    edges with another triangle and whose plane no other triangle touches, in order; a
+    triangle is in one pair at most."""
     p = np.asarray(positions, np.float32).astype(np.float64).reshape(-1, 3, 3)
     keys = [tuple(map(tuple, t)) for t in p]
     edges: dict = {}
@@ -109,7 +116,7 @@ def parallelogram_pairs(positions: np.ndarray) -> list[Parallelogram]:
     i = 0
     while i + 1 < len(p):
         q = _pair(p[i], p[i + 1], i)
-        if q is not None:
+        if q is not None and not _touched(p, i, q):
             outer = [frozenset((t[j], t[(j + 1) % 3])) for t in keys[i:i + 2] for j in range(3)]
             diagonal = [e for e in outer if outer.count(e) == 2]
             if all(edges[e] == 1 for e in outer if e not in diagonal) and all(edges[e] == 2 for e in diagonal):
@@ -118,6 +125,21 @@ def parallelogram_pairs(positions: np.ndarray) -> list[Parallelogram]:
                 continue
         i += 1
     return out
+
+
+def _touched(p: np.ndarray, i: int, q: Parallelogram) -> bool:
+    """Whether a vertex of a triangle other than ``i`` and ``i + 1`` lies in the pair's plane
+    (within :data:`PLANE_TOLERANCE` of the coordinates' size): a box standing on a floor, a
+    face lying on it. Where two surfaces meet or overlap in a plane, which one a ray hits first
+    is decided by float rounding, and the watertight tests decide it alike for both (the
+    order of the tests at equal distances); the pair stays two triangles there."""
+    others = np.delete(p, [i, i + 1], axis=0).reshape(-1, 3)
+    if not len(others):
+        return False
+    n = np.asarray(q.n) / np.linalg.norm(q.n)
+    dist = np.abs((others - np.asarray(q.corner)) @ n)
+    size = np.maximum(np.abs(others).max(axis=1), np.abs(p[i:i + 2]).max())
+    return bool((dist <= PLANE_TOLERANCE * size).any())
 
 
 def intersect_parallelogram(o: Array3f, d: Array3f, q: Parallelogram, tmax: Float
