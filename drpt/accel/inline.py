@@ -12,8 +12,9 @@ The tests are the accelerators' own (the watertight triangle test of
 :mod:`drpt.geometry.triangle` on the same float32 vertices, the sphere and plane
 tests), evaluated in the same order as :class:`~drpt.accel.brute.BruteForce`, so the
 two agree bit for bit, with one exception: two consecutive triangles that form a
-parallelogram sharing no outer edge with another triangle (a separate rectangle, as
-Mitsuba's ``rectangle`` shapes are) are tested as one parallelogram
+parallelogram sharing no outer edge with another triangle, whose plane no other triangle
+touches (a separate rectangle, as Mitsuba's ``rectangle`` shapes are) are tested as one
+parallelogram
 (:mod:`drpt.geometry.parallelogram`, :attr:`InlineList.parallelograms`), a quarter
 of the work; their hits (``t``, the triangle, its barycentrics) are brute force's
 within float rounding. The plates, floor, wall and lights of Veach's MIS scene are
