@@ -8,10 +8,17 @@ at Python time, with that primitive's float32 data as literal constants: the
 kernel has no loop, no gather and no memory reads for the geometry, and the
 16 lanes of a packet run the same straight-line code.
 
-It is exact: the tests are the accelerators' own (the watertight triangle
-test of :mod:`drpt.geometry.triangle` on the same float32 vertices, the
-sphere and plane tests), evaluated in the same order as
-:class:`~drpt.accel.brute.BruteForce`, so the two agree bit for bit.
+The tests are the accelerators' own (the watertight triangle test of
+:mod:`drpt.geometry.triangle` on the same float32 vertices, the sphere and plane
+tests), evaluated in the same order as :class:`~drpt.accel.brute.BruteForce`, so the
+two agree bit for bit, with one exception: two consecutive triangles that form a
+parallelogram sharing no outer edge with another triangle, whose plane no other triangle
+touches (a separate rectangle, as Mitsuba's ``rectangle`` shapes are) are tested as one
+parallelogram
+(:mod:`drpt.geometry.parallelogram`, :attr:`InlineList.parallelograms`), a quarter
+of the work; their hits (``t``, the triangle, its barycentrics) are brute force's
+within float rounding. The plates, floor, wall and lights of Veach's MIS scene are
+such rectangles; of the Cornell box, only its ceiling light.
 
 The code grows with the scene (about 80 vector instructions per triangle),
 hence a limit: :func:`~drpt.accel.build_accel` picks this accelerator by
@@ -30,6 +37,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array3f, Bool, Float, UInt32
 
+from ..geometry.parallelogram import intersect_parallelogram, parallelogram_pairs
 from ..geometry.plane import intersect_plane
 from ..geometry.sphere import intersect_sphere
 from ..geometry.triangle import RayPrep, watertight_permuted
@@ -39,13 +47,23 @@ from .protocol import INVALID, AccelParams, Hit
 class InlineList:
     """Brute force's queries with the scene's primitives as constants.
 
-    Attributes: ``build_seconds``, ``nbytes`` (0: no device data), ``stats``.
+    Attributes: ``build_seconds``, ``nbytes`` (0: no device data), ``stats``, ``quads``.
     """
+
+    #: test two triangles that form a separate parallelogram (a rectangle) as one
+    #: (:mod:`drpt.geometry.parallelogram`); False: every triangle by the watertight test,
+    #: bit for bit brute force's hits (A/B measurements, tests)
+    parallelograms = True
 
     def __init__(self, scene):
         t0 = time.perf_counter()
         self.F, self.S, self.P = len(scene.triangles), len(scene.spheres), len(scene.planes)
         self.tris = _f32(np.asarray(scene.triangles.positions).reshape(-1, 3, 3)) if self.F else []
+        #: the pairs of triangles tested as one parallelogram, by their first triangle
+        #: (:func:`~drpt.geometry.parallelogram.parallelogram_pairs`; none without
+        #: :attr:`parallelograms`)
+        self.quads = ({q.first: q for q in parallelogram_pairs(scene.triangles.positions)}
+                      if self.F and self.parallelograms else {})
         self.spheres = (list(zip(_f32(scene.spheres.center), _f32(scene.spheres.radius)))
                         if self.S else [])
         self.planes = (list(zip(_f32(scene.planes.normal), _f32(scene.planes.offset)))
@@ -73,39 +91,49 @@ class InlineList:
         distance, so the tests do not wait on each other)."""
         bound = dr.select(Bool(active), Float(tmax), 0.0)
         hit = Bool(False)
-        for _, test in self._tests(o, d):
+        for test in self._tests(o, d):
             hit |= test(bound)[3]
         return hit
 
     def _trace(self, o, d, tmax, active):
         bt = dr.select(Bool(active), Float(tmax), 0.0)
         bj, bu, bv = UInt32(INVALID), Float(0), Float(0)
-        for j, test in self._tests(o, d):
-            t, u, v, h = test(bt)
+        for test in self._tests(o, d):
+            t, u, v, h, j = test(bt)
             bt, bj = dr.select(h, t, bt), dr.select(h, j, bj)
             bu, bv = dr.select(h, u, bu), dr.select(h, v, bv)
         return bt, bj, bu, bv
 
     def _tests(self, o, d):
-        """Each primitive's test, in brute force's order: ``(index, test)`` with
-        ``test(tmax) -> (t, u, v, hit)`` (``u = v = 0`` off triangles)."""
+        """Each primitive's test, in brute force's order, ``test(tmax) -> (t, u, v, hit,
+        index)`` (``u = v = 0`` off triangles; ``index`` a constant, or per lane for a
+        parallelogram's two triangles, tested where the first one is)."""
         o, d = Array3f(o), Array3f(d)
         N = self.F + self.S
         for k, (n, off) in enumerate(self.planes):
-            yield N + k, lambda b, n=n, off=off: _no_uv(*intersect_plane(o, d, Array3f(*n), Float(off), b))
+            yield lambda b, n=n, off=off, j=N + k: _no_uv(*intersect_plane(o, d, Array3f(*n), Float(off), b), j)
         if self.tris:
             r = RayPrep(o, d)
             # kx, ky follow kz (x->y->z->x), so two masks on kz pick every component
             m0, m1 = r.kz == 0, r.kz == 1
             for i, (p0, p1, p2) in enumerate(self.tris):
-                g = [_pick(m0, m1, p, shift) for p in (p0, p1, p2) for shift in (1, 2, 0)]
-                yield i, lambda b, g=g: watertight_permuted(r, *g, b)
+                q = self.quads.get(i)
+                if q is not None:
+                    yield lambda b, q=q, i=i: _one_of_two(*intersect_parallelogram(o, d, q, b), i)
+                elif i - 1 not in self.quads:
+                    g = [_pick(m0, m1, p, shift) for p in (p0, p1, p2) for shift in (1, 2, 0)]
+                    yield lambda b, g=g, i=i: (*watertight_permuted(r, *g, b), i)
         for i, (c, rad) in enumerate(self.spheres):
-            yield self.F + i, lambda b, c=c, rad=rad: _no_uv(*intersect_sphere(o, d, Array3f(*c), Float(rad), b))
+            yield lambda b, c=c, rad=rad, j=self.F + i: _no_uv(*intersect_sphere(o, d, Array3f(*c), Float(rad), b), j)
 
 
-def _no_uv(t: Float, hit: Bool) -> tuple[Float, Float, Float, Bool]:
-    return t, Float(0), Float(0), hit
+def _no_uv(t: Float, hit: Bool, j: int) -> tuple[Float, Float, Float, Bool, int]:
+    return t, Float(0), Float(0), hit, j
+
+
+def _one_of_two(t: Float, u: Float, v: Float, hit: Bool, in_b: Bool, first: int) -> tuple:
+    """A parallelogram's hit with its triangle's index, ``first`` or ``first + 1``."""
+    return t, u, v, hit, dr.select(in_b, UInt32(first + 1), UInt32(first))
 
 
 def _f32(a) -> list:

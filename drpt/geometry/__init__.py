@@ -11,16 +11,21 @@ units of the (not necessarily normalized) ray direction.
   per-ray constants.
 * :func:`intersect_sphere` -- Ray Tracing Gems precision-improved quadratic.
 * :func:`intersect_plane` -- two-sided infinite plane.
+* :func:`intersect_parallelogram` -- two triangles forming a parallelogram as one
+  (a plane and a range check); :func:`parallelogram_pairs` finds them.
 """
 
+from .parallelogram import intersect_parallelogram, parallelogram_pairs
 from .plane import intersect_plane
 from .sphere import intersect_sphere
 from .triangle import RayPrep, intersect_triangle, intersect_triangle_watertight
 
 __all__ = [
     "RayPrep",
+    "intersect_parallelogram",
     "intersect_plane",
     "intersect_sphere",
     "intersect_triangle",
     "intersect_triangle_watertight",
+    "parallelogram_pairs",
 ]

@@ -72,21 +72,48 @@ def fresnel_conductor(cos_i, eta, k):
     return dr.maximum(0.5 * (r_s + r_p), 0.0)
 
 
+def unit_fresnel(specs) -> bool:
+    """Whether every spec (of a ``conductor`` or ``roughconductor`` kind) has ``eta = 0``,
+    ``k = 1`` in every channel (``material="none"``, Mitsuba's default): there
+    :func:`fresnel_conductor` is exactly 1 at every angle, so a lobe may skip it (a
+    trace-time choice; the same floats). With ``eta = 0``: ``t = -(1 + s2) < 0``,
+    ``A = sqrt(fl(t^2)) = |t|`` exactly (the correctly rounded root of a correctly rounded
+    square), so ``a = 0``, ``t2 = t4 = 0`` and ``R_s = t1 / t1 = 1``, ``R_p = R_s t3 / t3 = 1``
+    (``t1, t3 > 0``)."""
+    for s in specs:
+        eta, k = conductors.resolve(s.params)
+        if any(x != 0.0 for x in eta) or any(x != 1.0 for x in k):
+            return False
+    return bool(specs)
+
+
 class ConductorParams:
     """Per-lane ``r`` (specular_reflectance), ``eta``, ``k`` (Array3f each)."""
 
     DRJIT_STRUCT = {"r": Array3f, "eta": Array3f, "k": Array3f}
 
-    def __init__(self, r=None, eta=None, k=None):
+    def __init__(self, r=None, eta=None, k=None, unit: bool = False):
         self.r = r if r is not None else Array3f(1.0)
         self.eta = eta if eta is not None else Array3f(0.0)
         self.k = k if k is not None else Array3f(1.0)
+        #: every conductor of the kind has F = 1 (:func:`unit_fresnel`, decided at trace
+        #: time; a copy Dr.Jit makes of the struct has False: F computed, the same value)
+        self.unit = unit
 
 
 def params(table, si, active) -> ConductorParams:
     """The lanes' parameters, gathered from the material table."""
     return ConductorParams(table.value("specular_reflectance", si, active),
-                           table.value("cond_eta", si, active), table.value("cond_k", si, active))
+                           table.value("cond_eta", si, active), table.value("cond_k", si, active),
+                           unit_fresnel(table.specs_of("conductor")))
+
+
+def reflectance(p, cos_i) -> Array3f:
+    """``F_c(cos_i) * specular_reflectance`` of parameters ``p`` (with ``r``, ``eta``, ``k``,
+    ``unit``): ``r`` itself where every conductor has F = 1 (``p.unit``)."""
+    if getattr(p, "unit", False):
+        return Array3f(p.r)
+    return fresnel_conductor(cos_i, p.eta, p.k) * p.r
 
 
 def eval(p: ConductorParams, wi: Array3f, wo: Array3f) -> Array3f:
@@ -101,6 +128,6 @@ def sample(p: ConductorParams, wi: Array3f, u1: Float, u2: Array2f) -> BSDFSampl
     n = dr.width(wi)
     valid = Bool(wi.z > 0.0)
     cos_i = dr.clip(wi.z, 0.0, 1.0)
-    f = fresnel_conductor(cos_i, p.eta, p.k) * p.r
+    f = reflectance(p, cos_i)
     return BSDFSample(Array3f(-wi.x, -wi.y, wi.z), dr.select(valid, f, 0.0), dr.zeros(Float, n), valid,
                       dr.full(Bool, True, n), dr.full(Float, 1.0, n))

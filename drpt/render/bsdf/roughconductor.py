@@ -60,7 +60,7 @@ from drjit.auto import Array2f, Array3f, Bool, Float
 
 from ...materials import conductors
 from . import BSDFSample
-from .conductor import fresnel_conductor
+from .conductor import reflectance, unit_fresnel
 from .microfacet import Distribution, reflect
 
 FIELDS = {"specular_reflectance": "rgb", "cond_eta": "rgb", "cond_k": "rgb",
@@ -99,7 +99,8 @@ class RoughConductorParams:
 
     DRJIT_STRUCT = {"r": Array3f, "eta": Array3f, "k": Array3f, "alpha_u": Float}
 
-    def __init__(self, r=None, eta=None, k=None, alpha_u=None, alpha_v=None, beckmann=True, visible=True):
+    def __init__(self, r=None, eta=None, k=None, alpha_u=None, alpha_v=None, beckmann=True, visible=True,
+                 unit: bool = False):
         self.r = r if r is not None else Array3f(1.0)
         self.eta = eta if eta is not None else Array3f(0.0)
         self.k = k if k is not None else Array3f(1.0)
@@ -107,6 +108,7 @@ class RoughConductorParams:
         self.alpha_v = alpha_v
         self.beckmann = beckmann
         self.visible = visible
+        self.unit = unit  # F = 1 for every roughconductor (conductor.unit_fresnel)
 
     def distribution(self, visible: bool) -> Distribution:
         return Distribution(self.beckmann, self.alpha_u, self.alpha_v, sample_visible=visible)
@@ -131,11 +133,11 @@ def params(table, si, active) -> RoughConductorParams:
     av = None if iso else table.value("alpha_v", si, active)
     return RoughConductorParams(table.value("specular_reflectance", si, active),
                                 table.value("cond_eta", si, active), table.value("cond_k", si, active),
-                                au, av, beck, vis)
+                                au, av, beck, vis, unit_fresnel(specs))
 
 
 def _fresnel(p, cos):
-    return fresnel_conductor(dr.clip(cos, 0.0, 1.0), p.eta, p.k) * p.r
+    return reflectance(p, dr.clip(cos, 0.0, 1.0))
 
 
 def eval(p: RoughConductorParams, wi: Array3f, wo: Array3f) -> Array3f:

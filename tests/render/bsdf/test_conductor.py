@@ -539,3 +539,41 @@ def test_params_per_lane_equals_single(subset):
     crec = cd.params(ct, si2, dr.full(dr.auto.Bool, True, 2))
     w = np.array(cd.sample(crec, _dirs(0.0, 2), Float(0.5), Array2f(0.5, 0.5)).weight)
     assert np.allclose(w[:, 1], 0.5) and w[0, 0] > w[2, 0]
+
+
+def test_unit_fresnel_is_an_exact_one():
+    """``material="none"`` (eta 0, k 1): fresnel_conductor is exactly 1 at every float32
+    cosine, so the lobes skip it (conductor.unit_fresnel, a trace-time choice) and their
+    values are the same floats. Negative control: a named metal's or another eta's
+    reflectance is not 1, and unit_fresnel says so."""
+    cos = np.concatenate([[0.0, 1.0, 1e-6, 1e-30, 0.5, np.nextafter(np.float32(1), np.float32(0))],
+                          np.random.default_rng(31).random(100000)]).astype(np.float32)
+    one = np.array(cd.fresnel_conductor(Float(cos), Array3f(0.0), Array3f(1.0)))
+    assert np.array_equal(one, np.ones_like(one))
+    none = [SimpleNamespace(params=_spec("roughconductor", alpha=a)) for a in (0.005, 0.2)]
+    assert cd.unit_fresnel(none) and cd.unit_fresnel([SimpleNamespace(params=_spec("conductor", eta=0.0))])
+    for other in (dict(material="Au"), dict(eta=0.5), dict(eta=1.5, k=0.5)):
+        spec = SimpleNamespace(params=_spec("roughconductor", **other))
+        assert not cd.unit_fresnel(none + [spec])
+        eta, k = conductors.resolve(spec.params)
+        f = np.array(cd.fresnel_conductor(Float(cos[:1000]), Array3f(*eta), Array3f(*k)))
+        assert not np.array_equal(f, np.ones_like(f))
+    assert not cd.unit_fresnel([])
+    # the lobes' values with and without the skip, bit for bit
+    n = 4000
+    table = _Table("roughconductor", [dict(alpha=0.05), dict(alpha=0.3, distribution="ggx")])
+    si = SimpleNamespace(material=UInt32((np.arange(n) % 2).astype(np.uint32)))
+    rec = rc.params(table, si, dr.full(dr.auto.Bool, True, n))
+    assert rec.unit
+    wi, wo = _pairs(n, 0.2, seed=32)
+    u = np.random.default_rng(33).random((2, n))
+    dwi, dwo, du = to_drpt(wi, Array3f), to_drpt(wo, Array3f), to_drpt(u, Array2f)
+    skip = [np.array(rc.eval(rec, dwi, dwo)), np.array(rc.sample(rec, dwi, Float(0.5), du).weight)]
+    rec.unit = False
+    full = [np.array(rc.eval(rec, dwi, dwo)), np.array(rc.sample(rec, dwi, Float(0.5), du).weight)]
+    assert all(np.array_equal(a, b) for a, b in zip(skip, full)) and skip[0].max() > 0
+    ct = _Table("conductor", [dict(specular_reflectance=(0.5, 0.25, 1.0))])
+    crec = cd.params(ct, SimpleNamespace(material=UInt32(np.zeros(3, np.uint32))), dr.full(dr.auto.Bool, True, 3))
+    assert crec.unit
+    assert np.array_equal(np.array(cd.sample(crec, _dirs(30.0, 3), Float(0.5), Array2f(0.5, 0.5)).weight)[:, 0],
+                          np.float32([0.5, 0.25, 1.0]))
