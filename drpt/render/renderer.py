@@ -84,6 +84,7 @@ from .integrators.volpath import VolPathIntegrator
 from .integrators.volwavefront import VolWavefrontIntegrator
 from .integrators.wavefront import WavefrontIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
+from .lanes import divmod_opaque
 from .lights.rays import EmitterRays
 from .sampler import STRATA, LDSampler, ZSobolSampler, next_2d, pcg_streams, strata_sampler, uses_ld
 from .scene import DeviceScene
@@ -456,17 +457,17 @@ class Renderer:
             m = max(m, -(-k // STRAIGHT_PATHS_PER_LANE))
         n = pixels * m
         lane = dr.arange(UInt32, n)
-        mm, kk = dr.opaque(UInt32, m), dr.opaque(UInt32, k)
-        pixel = lane // mm
+        # (the lane's pixel and its place among the pixel's m lanes without an opaque integer
+        # division, drpt.render.lanes; the pass's k // m and k % m are the host's)
+        pixel, j = divmod_opaque(lane, m)
         x = pixel % W
         y = pixel // W + dr.opaque(UInt32, r0)
         # with path regeneration lane j of a pixel's m traces its samples j, j + m, ...
-        rng = self._sampler(pass_index, n, x, y, lane % mm, mm if sequential else 1)
+        rng = self._sampler(pass_index, n, x, y, j, dr.opaque(UInt32, m) if sequential else 1)
 
         camera_ray = self._camera_ray(x, y)
         if sequential:
-            j = lane % mm
-            count = kk // mm + dr.select(j < kk % mm, 1, 0)
+            count = dr.opaque(UInt32, k // m) + dr.select(j < dr.opaque(UInt32, k % m), 1, 0)
             extra = {"moment": True} if self.opt.moment else {}
             acc, acc2, bad, *cross = self.integrator.sample_sequence(rng, camera_ray, count, wide=wide,
                                                                      **extra)
