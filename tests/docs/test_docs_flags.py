@@ -210,6 +210,7 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--scale", "--grid",  # (benchmarks/variance_vs_mitsuba.py)
                   "--all-textures",  # (benchmarks/kernel_ops.py)
                   "--agree",  # (benchmarks/env_compensation.py)
+                  "--mitsuba", "--dump",  # (benchmarks/render_loop.py)
                   "--scenes", "--scene", "--seeds", "--repeat", "--reference", "--parts", "--depth"}  # (bdpt_*.py)
 
 
