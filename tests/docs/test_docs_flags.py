@@ -211,6 +211,7 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--all-textures",  # (benchmarks/kernel_ops.py)
                   "--agree",  # (benchmarks/env_compensation.py)
                   "--npz",  # (benchmarks/estimator_variants.py)
+                  "--mitsuba", "--dump",  # (benchmarks/render_loop.py)
                   "--scenes", "--scene", "--seeds", "--repeat", "--reference", "--parts", "--depth"}  # (bdpt_*.py)
 
 

@@ -150,3 +150,40 @@ def test_lane_sums_add_each_pixels_lanes_in_lane_order(m, wide):
         for j in range(m - 2, -1, -1):
             back = back + blocks[..., j]
         assert not np.array_equal(got, back)
+
+
+@pytest.mark.parametrize("m", [2, 4, 8, 16])
+@pytest.mark.parametrize("wide", [False, True])
+def test_packet_sums_are_lane_sums_to_rounding_and_repeat_bit_for_bit(m, wide):
+    """packet_sums (the kernel's own per-pixel sums, packets of whole pixels): each pixel's
+    sum of its lanes to float rounding, the counts exactly, the same bits when run again.
+    An odd pixel count leaves the last packet part empty. Negative control: lanes read one
+    lane off (a pixel's lanes in two packets and in two pixels) give other sums."""
+    from drpt import llvm_tuning
+
+    width = llvm_tuning.packet_width()
+    if width is None or width % m:
+        pytest.skip("no LLVM packets that hold whole pixels of m lanes")
+    pixels, C = 37, 5
+    rng = np.random.default_rng(m)
+    cols = rng.random((C, pixels * m)).astype(np.float64 if wide else np.float32) * 1e3
+    counts = rng.integers(0, 3, pixels * m).astype(np.uint32)
+    Value = Float64 if wide else Float
+
+    def sums(pixel):
+        (a, b), per_pixel = film.packet_sums([[Value(c) for c in cols[:2]], [Value(c) for c in cols[2:]]],
+                                             UInt32(counts), pixel, pixels)
+        dr.eval(a, b, per_pixel)
+        got = np.concatenate([a.numpy().reshape(pixels, 2), b.numpy().reshape(pixels, 3)], axis=1).T
+        return got, per_pixel.numpy()
+
+    lane = dr.arange(UInt32, pixels * m)
+    got, per_pixel = sums(lane // m)
+    want = cols.reshape(C, pixels, m).sum(axis=2, dtype=np.float64)
+    np.testing.assert_allclose(got, want, rtol=1e-12 if wide else 1e-6)
+    np.testing.assert_array_equal(per_pixel, counts.reshape(pixels, m).sum(1))
+    again, again_counts = sums(lane // m)
+    assert np.array_equal(got, again) and np.array_equal(per_pixel, again_counts)
+    off = sums(dr.minimum(lane + 1, pixels * m - 1) // m)[0]
+    assert not np.allclose(off, want, rtol=1e-6)
+

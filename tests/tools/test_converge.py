@@ -562,9 +562,10 @@ def test_knobs_cli_smoke(tmp_path, capsys, cornell):
     from drpt.tools import knobs
 
     out = tmp_path / "kn"
-    # (32 spp, a 256-spp reference: the bias's standard error, its channels taken as
-    # correlated, is ~6% here, so direct light only, -30%, is beyond 3 of them)
-    assert _run(knobs, cornell, "--size", "16", "16", "--spp", "32", "--ref-spp", "256",
+    # (128 spp, a 1024-spp reference: direct light only reads -0.19 here whatever the lanes'
+    # random streams; at 32 spp against 256 its one-seed estimate moved between -0.21 and
+    # -0.12 with the streams alone, not significant at the lower end)
+    assert _run(knobs, cornell, "--size", "16", "16", "--spp", "128", "--ref-spp", "1024",
                 "--knobs", "depth", "accel", "--depths", "2", "--repeats", "1",
                 "--cache", tmp_path / "cache", "--out", out, "-q") == 0
     text = capsys.readouterr().out
@@ -577,7 +578,7 @@ def test_knobs_cli_smoke(tmp_path, capsys, cornell):
     assert all(float(r["seconds"]) > 0 and float(r["samples_per_second"]) > 0 for r in rows)
     # direct light only loses a lot of light: a clear, significant negative bias
     depth2 = rows[1]
-    assert float(depth2["mean_bias"]) < -0.15 and depth2["biased"] == "True"
+    assert float(depth2["mean_bias"]) < -0.1 and depth2["biased"] == "True"
     data = json.loads((out / "knobs.json").read_text())
     assert set(data["references"]) == {"auto"}
     assert (out / "knobs.md").read_text().startswith("# Quality knobs")
