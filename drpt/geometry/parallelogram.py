@@ -37,9 +37,13 @@ import numpy as np
 from drjit.auto import Array3f, Bool, Float
 
 _INF = float("inf")
-#: how far (relative to the pair's extent) the fourth point may lie from ``c + e1 + e2``:
-#: float32 rounding of a transformed rectangle's corners, nothing more
+#: how far (relative to the pair's longest edge) the fourth point may lie from ``c + e1 + e2``,
+#: besides :data:`ROUNDING_TOLERANCE`: a parallelogram, not a trapezoid
 PARALLEL_TOLERANCE = 1e-6
+#: how far (relative to the largest coordinate of the pair) the fourth point may lie from
+#: ``c + e1 + e2`` besides :data:`PARALLEL_TOLERANCE`: float32 rounding of the four corners
+#: (half a float32 ulp each), as a transformed rectangle's corners have
+ROUNDING_TOLERANCE = 4 * 2.0**-24
 #: how near (relative to the coordinates' size) another triangle's vertex may come to a pair's
 #: plane before the pair is left as two triangles (:func:`parallelogram_pairs`)
 PLANE_TOLERANCE = 1e-5
@@ -87,12 +91,19 @@ def _pair(a: np.ndarray, b: np.ndarray, first: int) -> Parallelogram | None:
     extent = float(np.abs(np.stack([a, b])).max())
     if n2 <= 0.0 or not np.all(np.isfinite(n)):
         return None
-    if np.abs(ca + e1 + e2 - cb).max() > PARALLEL_TOLERANCE * max(extent, 1e-30):
+    off = np.abs(ca + e1 + e2 - cb).max()
+    if off > PARALLEL_TOLERANCE * _edge_scale(e1, e2, extent) + ROUNDING_TOLERANCE * extent:
         return None
     g1, g2 = np.cross(e2, n) / n2, np.cross(n, e1) / n2
     return Parallelogram(first, _f32(ca), _f32(n), _f32(g1), _f32(g2),
                          tuple(map(_f32, _bary_map(a, ca, g1, g2))),
                          tuple(map(_f32, _bary_map(b, ca, g1, g2))))
+
+
+def _edge_scale(e1: np.ndarray, e2: np.ndarray, extent: float) -> float:
+    """The length :data:`PARALLEL_TOLERANCE` is relative to: the pair's longer edge (not
+    ``extent``, its largest coordinate: far from the origin that would admit trapezoids)."""
+    return max(float(np.linalg.norm(e1)), float(np.linalg.norm(e2)))
 
 
 def _f32(v) -> tuple:

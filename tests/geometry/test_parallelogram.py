@@ -8,6 +8,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array3f, Bool, Float
 
+import drpt.geometry.parallelogram as pg
 from drpt.accel import InlineList
 from drpt.geometry.parallelogram import parallelogram_pairs
 from drpt.render.spawn import origin, triangle_point
@@ -136,3 +137,30 @@ def test_rays_leaving_a_rectangle_do_not_hit_it_again():
             assert not again.any(), f"{again.sum()} rays hit the rectangle they leave"
         else:
             assert again.any()
+
+
+def test_trapezoid_far_from_the_origin_is_not_paired(monkeypatch):
+    """The tolerance that decides "parallelogram" scales with the pair's own edges (plus the
+    float32 rounding of its corners), not with its distance from the origin: a 0.02-wide
+    trapezoid at 1000 whose fourth corner lies 5e-4 (2.5% of a side) off ``c + e1 + e2`` is
+    two triangles, as it is at the origin; a true rectangle there (its corners rounded to
+    float32) is still paired. Negative control: the old rule (tolerance relative to the
+    largest coordinate) pairs the trapezoid."""
+    quad = np.float64([[0, 0, 0], [0.02, 0, 0], [0.02, 0.02, 0], [0, 0.02, 0]])
+    trap = quad.copy()
+    trap[2, 0] += 5e-4
+    at = [1000.0, 1000.0, 1000.0]
+
+    def pairs(corners):
+        return [q.first for q in parallelogram_pairs(np.stack([corners[list(f)] for f in FACES]))]
+
+    assert pairs(trap) == [] and pairs(trap + at) == []
+    assert pairs(quad) == [0] and pairs(quad + at) == [0]
+    rng = np.random.default_rng(4)
+    for _ in range(20):  # rotated rectangles far off, their corners rounded to float32
+        m, _r = np.linalg.qr(rng.normal(size=(3, 3)))
+        c = (quad * rng.uniform(0.5, 50)) @ m.T + rng.uniform(-2000, 2000, 3)
+        assert pairs(c) == [0]
+    monkeypatch.setattr(pg, "ROUNDING_TOLERANCE", 0.0)
+    monkeypatch.setattr(pg, "_edge_scale", lambda e1, e2, extent: extent)
+    assert pairs(trap + at) == [0]
