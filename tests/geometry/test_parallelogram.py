@@ -164,3 +164,22 @@ def test_trapezoid_far_from_the_origin_is_not_paired(monkeypatch):
     monkeypatch.setattr(pg, "ROUNDING_TOLERANCE", 0.0)
     monkeypatch.setattr(pg, "_edge_scale", lambda e1, e2, extent: extent)
     assert pairs(trap + at) == [0]
+
+
+def test_a_rectangle_in_a_plane_primitive_is_not_paired():
+    """A rectangle lying in one of the scene's infinite planes (which the accelerators test
+    before any triangle) stays two triangles, as beside a coplanar triangle: ties between the
+    two are float rounding, and the watertight tests order them alike. Negative control: the
+    plane moved off the rectangle by 1e-3, or no planes given, pairs it."""
+    rect = np.stack([CORNERS[list(f)] for f in FACES]) * 3 + [5.0, 1.0, 2.0]
+    floor = ([[0.0, 0.0, 2.0]], [4.0])  # 2 z = 4: the rectangle's plane z = 2
+    assert parallelogram_pairs(rect, planes=floor) == []
+    assert [q.first for q in parallelogram_pairs(rect, planes=([[0.0, 0.0, 2.0]], [4.002]))] == [0]
+    assert [q.first for q in parallelogram_pairs(rect)] == [0]
+    assert len(InlineList(make_scene(rect, planes=floor)).quads) == 0
+    assert len(InlineList(make_scene(rect, planes=([[0.0, 0.0, 2.0]], [4.002]))).quads) == 1
+    # the other triangles given apart (a list that is part of a scene): a vertex in the
+    # pair's plane leaves it unpaired, one 1e-3 off does not
+    standing = np.float64([[[5, 1, 2], [6, 1, 3], [5, 2, 3]]])
+    assert parallelogram_pairs(rect, others=standing) == []
+    assert [q.first for q in parallelogram_pairs(rect, others=standing + [0, 0, 1e-3])] == [0]
