@@ -9,9 +9,9 @@ with ``g1, g2`` the dual vectors of ``e1, e2`` in the plane (``dot(e_i, g_j) = [
 ``dot(n, g_j) = 0``). The diagonal ``a + b = 1`` splits it into the two triangles; the
 test returns the triangle the point lies in (``A`` on the diagonal) and that triangle's
 barycentrics, affine in ``(a, b)``: the hit record a triangle test gives, within float
-rounding. This is Mitsuba's own rectangle test (a plane and a range check), about a
-quarter of the work of two watertight triangle tests
-(:func:`drpt.geometry.triangle.watertight_permuted`).
+rounding. This is Mitsuba's own rectangle test (a plane and a range check), a fraction of the
+work of two watertight triangle tests (:func:`drpt.geometry.triangle.watertight_permuted`;
+the operation counts are in docs/performance.md).
 
 It is not watertight across the parallelogram's outer edges: a neighbour sharing one
 would have to be tested the same way, bit for bit. Nor does it order ties as the watertight

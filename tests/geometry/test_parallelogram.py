@@ -12,7 +12,7 @@ import drpt.geometry.parallelogram as pg
 from drpt.accel import InlineList
 from drpt.geometry.parallelogram import parallelogram_pairs
 from drpt.render.spawn import origin, triangle_point
-from support.accel import make_scene, rays
+from support.accel import hits, make_scene, rays
 
 #: Mitsuba's rectangle mesh: corners (-1,-1), (1,-1), (1,1), (-1,1), faces (0,1,2), (2,3,0)
 CORNERS = np.float64([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
@@ -27,15 +27,6 @@ def rectangles(rng, count: int, gap: float = 4.0) -> np.ndarray:
         c = CORNERS @ m.T + [gap * k, rng.normal(), rng.normal()]
         out += [c[list(f)] for f in FACES]
     return np.asarray(out)
-
-
-def hits(accel, o, d, tmax=np.inf):
-    O, D = rays(o, d)
-    T = Float(np.broadcast_to(np.float32(tmax), (len(o),)).copy())
-    h = accel.intersect(O, D, T)
-    occ = accel.occluded(O, D, T)
-    dr.eval(h, occ)
-    return [x.numpy() for x in (h.t, h.prim, h.u, h.v, h.valid, occ)]
 
 
 def both(scene, o, d, tmax=np.inf, monkeypatch=None):

@@ -52,8 +52,8 @@ at its corners. A cell is picked with probability proportional to
 ``mean luminance of its 4 corners * Omega_j`` (``Omega_j = (2 pi / W)
 (cos theta_j - cos theta_{j+1})``, the cell's solid angle; the row from a
 marginal alias table, the column from that row's conditional alias table:
-:func:`alias_tables`, Walker's method, one uniform cell pick and one threshold
-test each, where a CDF's binary search made ``log2`` dependent lookups).
+:func:`alias_tables`, Walker's method: one uniform cell pick and one threshold
+test each, two independent lookups, no search).
 Inside the cell the position ``(fx, ft)`` is drawn
 from the *bilinear* density of the corner luminances ``c00, c10, c01, c11``::
 
@@ -80,7 +80,9 @@ and near the poles and needs no clamp. The weight is positive wherever
 
 ``P(row)`` and ``P(col | row)`` are the probabilities the *stored float32*
 alias thresholds realise (computed exactly from them), so ``pdf`` is the
-density the sampler realises, whatever the rounding of the weights. A uniform
+density the sampler realises, whatever the rounding of the weights, to the
+resolution of the float32 fraction ``f`` below: each cell's probability to
+about ``2^-23`` (absolute). A uniform
 number picks a cell ``i = floor(u N)`` and its fraction ``f = u N - i`` is
 tested against the threshold; ``f`` rescaled to the kept or the alias part of
 ``[0, 1)`` is the uniform number used inside the cell. So that every positive
@@ -144,7 +146,7 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 #: Minimum weight of a positive cell relative to its row (and of a positive
 #: row relative to the total), so that its alias threshold is never below what a
 #: float32 uniform number resolves.
-CDF_FLOOR = 1e-6
+WEIGHT_FLOOR = 1e-6
 
 _ONE_MINUS_EPS = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
 
@@ -480,9 +482,9 @@ def _sample_linear(a: Float, b: Float, u: Float) -> Float:
 
 def _floored(w: np.ndarray) -> np.ndarray:
     """``w`` (rows of non-negative float64 weights) with each positive weight raised to
-    ``CDF_FLOOR`` times its row's total (a copy), so that no positive cell's alias threshold
+    ``WEIGHT_FLOOR`` times its row's total (a copy), so that no positive cell's alias threshold
     is too small for the uniform input's resolution to reach."""
-    floor = CDF_FLOOR * w.sum(axis=1, keepdims=True)
+    floor = WEIGHT_FLOOR * w.sum(axis=1, keepdims=True)
     return np.where(w > 0.0, np.maximum(w, floor), 0.0)
 
 
@@ -504,8 +506,9 @@ def alias_tables(w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     the first small ``i*`` with ``D_{i*} > E_j`` and is then a small itself, with threshold
     ``1 - (D_{i*} - E_j)``, filled by large ``j + 1``; a large that never runs out, and the
     last one, keeps threshold 1. One ``searchsorted`` over the flattened rows (each row's
-    sums offset by its own key range) answers each question for every row of a block of
-    rows (:data:`_BLOCK_CELLS`; large temporaries cost more than the arithmetic)."""
+    sums offset by its own key range) finds every large's ``i*``; the large of small ``i``
+    is then the number of larges with ``i* < i``, a count. Built a block of rows at a time
+    (:data:`_BLOCK_CELLS`: large temporaries cost more than the arithmetic)."""
     w = np.asarray(w, np.float64)
     R, N = w.shape
     step = max(1, _BLOCK_CELLS // max(N, 1))
