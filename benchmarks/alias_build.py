@@ -19,6 +19,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -28,11 +29,12 @@ from drpt.render.lights import envmap as new
 def load_old(rev: str):
     src = subprocess.run(["git", "show", f"{rev}:drpt/render/lights/envmap.py"], check=True,
                          capture_output=True, text=True).stdout
-    with tempfile.NamedTemporaryFile("w", suffix=".py", delete=False) as f:
-        f.write(src)
-    spec = importlib.util.spec_from_file_location("drpt.render.lights._old_envmap", f.name)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "old_envmap.py"
+        path.write_text(src)
+        spec = importlib.util.spec_from_file_location("drpt.render.lights._old_envmap", path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
     return mod
 
 
