@@ -12,11 +12,11 @@ The tests are the accelerators' own (the watertight triangle test of
 :mod:`drpt.geometry.triangle` on the same float32 vertices, the sphere and plane
 tests), evaluated in the same order as :class:`~drpt.accel.brute.BruteForce`, so the
 two agree bit for bit, with one exception: two consecutive triangles that form a
-parallelogram sharing no outer edge with another triangle, whose plane no other triangle
+parallelogram sharing no outer edge with another triangle, whose plane no other surface
 touches (a separate rectangle, as Mitsuba's ``rectangle`` shapes are) are tested as one
 parallelogram
-(:mod:`drpt.geometry.parallelogram`, :attr:`InlineList.parallelograms`), a quarter
-of the work; their hits (``t``, the triangle, its barycentrics) are brute force's
+(:mod:`drpt.geometry.parallelogram`, :attr:`InlineList.parallelograms`), a fraction
+of the work (docs/performance.md); their hits (``t``, the triangle, its barycentrics) are brute force's
 within float rounding. The plates, floor, wall and lights of Veach's MIS scene are
 such rectangles; of the Cornell box, only its ceiling light.
 
@@ -62,7 +62,8 @@ class InlineList:
         #: the pairs of triangles tested as one parallelogram, by their first triangle
         #: (:func:`~drpt.geometry.parallelogram.parallelogram_pairs`; none without
         #: :attr:`parallelograms`)
-        self.quads = ({q.first: q for q in parallelogram_pairs(scene.triangles.positions)}
+        self.quads = ({q.first: q for q in parallelogram_pairs(scene.triangles.positions,
+                                                               *_surroundings(scene))}
                       if self.F and self.parallelograms else {})
         self.spheres = (list(zip(_f32(scene.spheres.center), _f32(scene.spheres.radius)))
                         if self.S else [])
@@ -134,6 +135,18 @@ def _no_uv(t: Float, hit: Bool, j: int) -> tuple[Float, Float, Float, Bool, int]
 def _one_of_two(t: Float, u: Float, v: Float, hit: Bool, in_b: Bool, first: int) -> tuple:
     """A parallelogram's hit with its triangle's index, ``first`` or ``first + 1``."""
     return t, u, v, hit, dr.select(in_b, UInt32(first + 1), UInt32(first))
+
+
+def _surroundings(scene) -> tuple:
+    """``(others, planes)`` for :func:`~drpt.geometry.parallelogram.parallelogram_pairs`: the
+    surfaces besides ``scene``'s triangles that a pair's plane must not touch: ``scene``'s
+    planes, and where ``scene`` is part of a larger scene (the emissive list,
+    :class:`drpt.render.scene.EmissiveList`) its ``surroundings``, ``(triangles (M, 3, 3),
+    planes or None)``, the rest of that scene."""
+    others, planes = getattr(scene, "surroundings", (None, None))
+    if len(scene.planes):
+        planes = (scene.planes.normal, scene.planes.offset)
+    return others, planes
 
 
 def _f32(a) -> list:

@@ -9,16 +9,17 @@ with ``g1, g2`` the dual vectors of ``e1, e2`` in the plane (``dot(e_i, g_j) = [
 ``dot(n, g_j) = 0``). The diagonal ``a + b = 1`` splits it into the two triangles; the
 test returns the triangle the point lies in (``A`` on the diagonal) and that triangle's
 barycentrics, affine in ``(a, b)``: the hit record a triangle test gives, within float
-rounding. This is Mitsuba's own rectangle test (a plane and a range check), about a
-quarter of the work of two watertight triangle tests
-(:func:`drpt.geometry.triangle.watertight_permuted`).
+rounding. This is Mitsuba's own rectangle test (a plane and a range check), a fraction of the
+work of two watertight triangle tests (:func:`drpt.geometry.triangle.watertight_permuted`;
+the operation counts are in docs/performance.md).
 
 It is not watertight across the parallelogram's outer edges: a neighbour sharing one
 would have to be tested the same way, bit for bit. Nor does it order ties as the watertight
 tests do where another surface lies in its plane (a box standing on a floor: whether a ray
 meets the floor or the box's bottom first is then float rounding). :func:`parallelogram_pairs`
 therefore pairs only triangles that share none of those edges with any other triangle and
-whose plane no other triangle's vertex touches (separate rectangles, as Mitsuba's scenes and
+whose plane no other triangle's vertex touches, lying in no infinite plane primitive either
+(separate rectangles, as Mitsuba's scenes and
 Veach's MIS scene have), and only consecutive triangles (how a rectangle or a quad face is
 triangulated).
 
@@ -37,9 +38,13 @@ import numpy as np
 from drjit.auto import Array3f, Bool, Float
 
 _INF = float("inf")
-#: how far (relative to the pair's extent) the fourth point may lie from ``c + e1 + e2``:
-#: float32 rounding of a transformed rectangle's corners, nothing more
+#: how far (relative to the pair's longest edge) the fourth point may lie from ``c + e1 + e2``,
+#: besides :data:`ROUNDING_TOLERANCE`: a parallelogram, not a trapezoid
 PARALLEL_TOLERANCE = 1e-6
+#: how far (relative to the largest coordinate of the pair) the fourth point may lie from
+#: ``c + e1 + e2`` besides :data:`PARALLEL_TOLERANCE`: float32 rounding of the four corners
+#: (half a float32 ulp each), as a transformed rectangle's corners have
+ROUNDING_TOLERANCE = 4 * 2.0**-24
 #: how near (relative to the coordinates' size) another triangle's vertex may come to a pair's
 #: plane before the pair is left as two triangles (:func:`parallelogram_pairs`)
 PLANE_TOLERANCE = 1e-5
@@ -87,7 +92,8 @@ def _pair(a: np.ndarray, b: np.ndarray, first: int) -> Parallelogram | None:
     extent = float(np.abs(np.stack([a, b])).max())
     if n2 <= 0.0 or not np.all(np.isfinite(n)):
         return None
-    if np.abs(ca + e1 + e2 - cb).max() > PARALLEL_TOLERANCE * max(extent, 1e-30):
+    off = np.abs(ca + e1 + e2 - cb).max()
+    if off > PARALLEL_TOLERANCE * _edge_scale(e1, e2, extent) + ROUNDING_TOLERANCE * extent:
         return None
     g1, g2 = np.cross(e2, n) / n2, np.cross(n, e1) / n2
     return Parallelogram(first, _f32(ca), _f32(n), _f32(g1), _f32(g2),
@@ -95,17 +101,32 @@ def _pair(a: np.ndarray, b: np.ndarray, first: int) -> Parallelogram | None:
                          tuple(map(_f32, _bary_map(b, ca, g1, g2))))
 
 
+def _edge_scale(e1: np.ndarray, e2: np.ndarray, extent: float) -> float:
+    """The length :data:`PARALLEL_TOLERANCE` is relative to: the pair's longer edge (not
+    ``extent``, its largest coordinate: far from the origin that would admit trapezoids)."""
+    return max(float(np.linalg.norm(e1)), float(np.linalg.norm(e2)))
+
+
 def _f32(v) -> tuple:
     """``v`` rounded to float32, as a tuple of Python floats."""
     return tuple(np.asarray(v, np.float32).astype(np.float64).tolist())
 
 
-def parallelogram_pairs(positions: np.ndarray) -> list[Parallelogram]:
+def parallelogram_pairs(positions: np.ndarray, others: np.ndarray | None = None,
+                        planes: tuple | None = None) -> list[Parallelogram]:
     """The pairs of consecutive triangles (``(F, 3, 3)`` positions, rounded to float32 as
     the accelerators hold them) that form a parallelogram, share none of its four outer
-    edges with another triangle and whose plane no other triangle touches, in order; a
-    triangle is in one pair at most."""
+    edges with another triangle and whose plane no other surface touches, in order; a
+    triangle is in one pair at most.
+
+    The other surfaces are the other triangles of ``positions``, the triangles ``others``
+    (``(M, 3, 3)``: a scene's triangles that are not in the list, where the list is part of
+    a scene, as the emissive list is) and the infinite ``planes`` (``(normals (P, 3),
+    offsets (P,))``, ``dot(n, x) == offset``), which the accelerators test before any
+    triangle."""
     p = np.asarray(positions, np.float32).astype(np.float64).reshape(-1, 3, 3)
+    extra = (np.zeros((0, 3)) if others is None
+             else np.asarray(others, np.float32).astype(np.float64).reshape(-1, 3))
     keys = [tuple(map(tuple, t)) for t in p]
     edges: dict = {}
     for t in keys:
@@ -116,7 +137,7 @@ def parallelogram_pairs(positions: np.ndarray) -> list[Parallelogram]:
     i = 0
     while i + 1 < len(p):
         q = _pair(p[i], p[i + 1], i)
-        if q is not None and not _touched(p, i, q):
+        if q is not None and not _touched(p, i, q, extra) and not _on_plane(p[i:i + 2], planes):
             outer = [frozenset((t[j], t[(j + 1) % 3])) for t in keys[i:i + 2] for j in range(3)]
             diagonal = [e for e in outer if outer.count(e) == 2]
             if all(edges[e] == 1 for e in outer if e not in diagonal) and all(edges[e] == 2 for e in diagonal):
@@ -127,18 +148,35 @@ def parallelogram_pairs(positions: np.ndarray) -> list[Parallelogram]:
     return out
 
 
-def _touched(p: np.ndarray, i: int, q: Parallelogram) -> bool:
-    """Whether a vertex of a triangle other than ``i`` and ``i + 1`` lies in the pair's plane
-    (within :data:`PLANE_TOLERANCE` of the coordinates' size): a box standing on a floor, a
-    face lying on it. Where two surfaces meet or overlap in a plane, which one a ray hits first
-    is decided by float rounding, and the watertight tests decide it alike for both (the
-    order of the tests at equal distances); the pair stays two triangles there."""
-    others = np.delete(p, [i, i + 1], axis=0).reshape(-1, 3)
+def _touched(p: np.ndarray, i: int, q: Parallelogram, extra: np.ndarray) -> bool:
+    """Whether a vertex of a triangle other than ``i`` and ``i + 1`` (or one of the points
+    ``extra``) lies in the pair's plane (within :data:`PLANE_TOLERANCE` of the coordinates'
+    size): a box standing on a floor, a face lying on it. Where two surfaces meet or overlap
+    in a plane, which one a ray hits first is decided by float rounding, and the watertight
+    tests decide it alike for both (the order of the tests at equal distances); the pair
+    stays two triangles there."""
+    others = np.concatenate([np.delete(p, [i, i + 1], axis=0).reshape(-1, 3), extra])
     if not len(others):
         return False
     n = np.asarray(q.n) / np.linalg.norm(q.n)
     dist = np.abs((others - np.asarray(q.corner)) @ n)
     size = np.maximum(np.abs(others).max(axis=1), np.abs(p[i:i + 2]).max())
+    return bool((dist <= PLANE_TOLERANCE * size).any())
+
+
+def _on_plane(pair: np.ndarray, planes: tuple | None) -> bool:
+    """Whether a corner of the pair (``(2, 3, 3)``) lies in one of the infinite ``planes``
+    (within :data:`PLANE_TOLERANCE` of the coordinates' size): a rectangle lying on a plane
+    floor, or standing on it. Ties between the two are float rounding, as in :func:`_touched`."""
+    if planes is None or not len(planes[1]):
+        return False
+    normals = np.asarray(planes[0], np.float32).astype(np.float64).reshape(-1, 3)
+    offsets = np.asarray(planes[1], np.float32).astype(np.float64).reshape(-1)
+    length = np.linalg.norm(normals, axis=1)
+    ok = length > 0
+    pts = pair.reshape(-1, 3)
+    dist = np.abs(pts @ normals[ok].T - offsets[ok]) / length[ok]  # (6, P)
+    size = np.maximum(np.abs(pts).max(axis=1, keepdims=True), np.abs(offsets[ok]) / length[ok])
     return bool((dist <= PLANE_TOLERANCE * size).any())
 
 

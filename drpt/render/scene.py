@@ -167,14 +167,19 @@ class EmissiveList:
     with its vertices as constants): :meth:`intersect` finds the nearest emissive surface
     along a ray without traversing the scene, and returns it with its global primitive id."""
 
-    def __init__(self, ids: np.ndarray, positions: np.ndarray):
+    def __init__(self, ids: np.ndarray, positions: np.ndarray, surroundings: tuple = (None, None)):
+        """``ids``, ``positions``: the emissive triangles; ``surroundings``: the rest of the
+        scene, ``(triangles (M, 3, 3), planes (normals, offsets) or None)``, which the
+        list's parallelograms must not touch (as in the scene's own accelerator:
+        :func:`~drpt.geometry.parallelogram.parallelogram_pairs`)."""
         class _Prims(list):  # the part of a Scene InlineList reads
             positions = None
 
         tris = _Prims(range(len(ids)))
         tris.positions = positions
         self.count = len(ids)
-        self._list = InlineList(type("EmissiveScene", (), {"triangles": tris, "spheres": [], "planes": []}))
+        self._list = InlineList(type("EmissiveScene", (), {"triangles": tris, "spheres": [], "planes": [],
+                                                          "surroundings": surroundings}))
         self._ids = UInt32(np.asarray(ids, np.uint32))
 
     def intersect(self, o: Array3f, d: Array3f, active: Bool):
@@ -227,7 +232,11 @@ def emissive_inline(scene: Scene) -> EmissiveList | None:
     ids = np.nonzero(emits[np.asarray(tris.material, np.int64)])[0]
     if not 0 < len(ids) <= backend.policy().inline_max_prims:
         return None
-    return EmissiveList(ids, np.asarray(tris.positions)[ids])
+    positions = np.asarray(tris.positions)
+    rest = np.ones(len(positions), bool)
+    rest[ids] = False
+    planes = (scene.planes.normal, scene.planes.offset) if len(scene.planes) else None
+    return EmissiveList(ids, positions[ids], (positions[rest], planes))
 
 
 class DeviceScene:

@@ -23,20 +23,11 @@ from drpt.backend import policy
 from drpt.options import PathOptions, RenderOptions, with_scene_settings
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-from support.accel import closed_mesh_rays, make_scene, rays, soup
+from support.accel import closed_mesh_rays, hits, make_scene, rays, soup
 
 MAX_PRIMS = policy().inline_max_prims
 
 INF = float("inf")
-
-
-def hits(accel, o, d, tmax=INF):
-    O, D = rays(o, d)
-    T = Float(np.broadcast_to(np.float32(tmax), (len(o),)).copy())
-    h = accel.intersect(O, D, T)
-    occ = accel.occluded(O, D, T)
-    dr.eval(h, occ)
-    return [x.numpy() for x in (h.t, h.prim, h.u, h.v, h.valid, occ)]
 
 
 def assert_same_as_brute(scene, o, d, tmax=INF):
@@ -183,6 +174,7 @@ def _render_rectangles(monkeypatch, name: str, parallelograms: bool, shift: bool
     return r.render().image
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(RECTANGLE_SCENES))
 def test_parallelograms_render_the_triangles_image(monkeypatch, name):
     """The same random numbers give the same image within float rounding with the

@@ -8,10 +8,11 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array3f, Bool, Float
 
+import drpt.geometry.parallelogram as pg
 from drpt.accel import InlineList
 from drpt.geometry.parallelogram import parallelogram_pairs
 from drpt.render.spawn import origin, triangle_point
-from support.accel import make_scene, rays
+from support.accel import hits, make_scene, rays
 
 #: Mitsuba's rectangle mesh: corners (-1,-1), (1,-1), (1,1), (-1,1), faces (0,1,2), (2,3,0)
 CORNERS = np.float64([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
@@ -26,15 +27,6 @@ def rectangles(rng, count: int, gap: float = 4.0) -> np.ndarray:
         c = CORNERS @ m.T + [gap * k, rng.normal(), rng.normal()]
         out += [c[list(f)] for f in FACES]
     return np.asarray(out)
-
-
-def hits(accel, o, d, tmax=np.inf):
-    O, D = rays(o, d)
-    T = Float(np.broadcast_to(np.float32(tmax), (len(o),)).copy())
-    h = accel.intersect(O, D, T)
-    occ = accel.occluded(O, D, T)
-    dr.eval(h, occ)
-    return [x.numpy() for x in (h.t, h.prim, h.u, h.v, h.valid, occ)]
 
 
 def both(scene, o, d, tmax=np.inf, monkeypatch=None):
@@ -136,3 +128,49 @@ def test_rays_leaving_a_rectangle_do_not_hit_it_again():
             assert not again.any(), f"{again.sum()} rays hit the rectangle they leave"
         else:
             assert again.any()
+
+
+def test_trapezoid_far_from_the_origin_is_not_paired(monkeypatch):
+    """The tolerance that decides "parallelogram" scales with the pair's own edges (plus the
+    float32 rounding of its corners), not with its distance from the origin: a 0.02-wide
+    trapezoid at 1000 whose fourth corner lies 5e-4 (2.5% of a side) off ``c + e1 + e2`` is
+    two triangles, as it is at the origin; a true rectangle there (its corners rounded to
+    float32) is still paired. Negative control: the old rule (tolerance relative to the
+    largest coordinate) pairs the trapezoid."""
+    quad = np.float64([[0, 0, 0], [0.02, 0, 0], [0.02, 0.02, 0], [0, 0.02, 0]])
+    trap = quad.copy()
+    trap[2, 0] += 5e-4
+    at = [1000.0, 1000.0, 1000.0]
+
+    def pairs(corners):
+        return [q.first for q in parallelogram_pairs(np.stack([corners[list(f)] for f in FACES]))]
+
+    assert pairs(trap) == [] and pairs(trap + at) == []
+    assert pairs(quad) == [0] and pairs(quad + at) == [0]
+    rng = np.random.default_rng(4)
+    for _ in range(20):  # rotated rectangles far off, their corners rounded to float32
+        m, _r = np.linalg.qr(rng.normal(size=(3, 3)))
+        c = (quad * rng.uniform(0.5, 50)) @ m.T + rng.uniform(-2000, 2000, 3)
+        assert pairs(c) == [0]
+    monkeypatch.setattr(pg, "ROUNDING_TOLERANCE", 0.0)
+    monkeypatch.setattr(pg, "_edge_scale", lambda e1, e2, extent: extent)
+    assert pairs(trap + at) == [0]
+
+
+def test_a_rectangle_in_a_plane_primitive_is_not_paired():
+    """A rectangle lying in one of the scene's infinite planes (which the accelerators test
+    before any triangle) stays two triangles, as beside a coplanar triangle: ties between the
+    two are float rounding, and the watertight tests order them alike. Negative control: the
+    plane moved off the rectangle by 1e-3, or no planes given, pairs it."""
+    rect = np.stack([CORNERS[list(f)] for f in FACES]) * 3 + [5.0, 1.0, 2.0]
+    floor = ([[0.0, 0.0, 2.0]], [4.0])  # 2 z = 4: the rectangle's plane z = 2
+    assert parallelogram_pairs(rect, planes=floor) == []
+    assert [q.first for q in parallelogram_pairs(rect, planes=([[0.0, 0.0, 2.0]], [4.002]))] == [0]
+    assert [q.first for q in parallelogram_pairs(rect)] == [0]
+    assert len(InlineList(make_scene(rect, planes=floor)).quads) == 0
+    assert len(InlineList(make_scene(rect, planes=([[0.0, 0.0, 2.0]], [4.002]))).quads) == 1
+    # the other triangles given apart (a list that is part of a scene): a vertex in the
+    # pair's plane leaves it unpaired, one 1e-3 off does not
+    standing = np.float64([[[5, 1, 2], [6, 1, 3], [5, 2, 3]]])
+    assert parallelogram_pairs(rect, others=standing) == []
+    assert [q.first for q in parallelogram_pairs(rect, others=standing + [0, 0, 1e-3])] == [0]

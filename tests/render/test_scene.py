@@ -16,11 +16,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from drpt.accel import InlineList
 from drpt.options import RenderOptions
-from drpt.render.scene import DeviceScene
+from drpt.render.scene import DeviceScene, EmissiveList, emissive_inline
 from drpt.scene import load_scene
+from drpt.scene import model as M
 
 FLAGS = ("has_area_lights", "has_delta_lights", "has_environment", "has_background", "has_ambient")
 
@@ -140,3 +143,37 @@ def test_eval_emitter_branches_only_where_the_lookups_cost_more():
     veach = DeviceScene(load_scene(root / "tests" / "data" / "xml" / "veach_mis.xml"), opts)
     assert not cornell._costly_emitter_lookups()
     assert veach._costly_emitter_lookups()
+
+
+def _ceiling_with_light(gap: float):
+    """A ceiling (z = 2, eight triangles around a hole) with a light rectangle in the hole,
+    ``gap`` below the ceiling's plane, sharing no edge with it."""
+    def rect(x0, y0, x1, y1, z):
+        c = np.float64([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]])
+        return [c[[0, 1, 2]], c[[2, 3, 0]]]
+
+    ceiling = (rect(-2, -2, 2, -1, 2) + rect(-2, 1, 2, 2, 2) + rect(-2, -1, -1, 1, 2)
+               + rect(1, -1, 2, 1, 2))
+    light = rect(-0.5, -0.5, 0.5, 0.5, 2 - gap)
+    tris = np.stack(ceiling + light)
+    mats = np.int32([0] * len(ceiling) + [1] * len(light))
+    cam = M.PerspectiveCamera((0, 0, 0), (0, 0, 1), (0, 1, 0), 40.0)
+    return M.Scene(path=None, camera=cam, triangles=M.Triangles(tris, mats),
+                   materials=[M.Material("wall"), M.Material("light", emission=(1.0, 1.0, 1.0))])
+
+
+def test_emissive_list_leaves_a_light_set_into_a_coplanar_ceiling_unpaired():
+    """The emissive list (an inline accelerator of the emissive triangles alone) tests a
+    light rectangle as one parallelogram only where, as in the scene's own accelerator, no
+    other surface of the scene touches its plane: a light set flush into a ceiling stays two
+    triangles in both. Negative control: lowered 1e-3 below the ceiling, it is paired in
+    both; and the list built without the rest of the scene pairs the flush one."""
+    for gap, pairs in ((0.0, 0), (1e-3, 1)):
+        scene = _ceiling_with_light(gap)
+        em = emissive_inline(scene)
+        assert em is not None and em.count == 2
+        assert len(em._list.quads) == pairs
+        assert sum(q.first >= 8 for q in InlineList(scene).quads.values()) == pairs
+    flush = _ceiling_with_light(0.0)
+    alone = EmissiveList(em._ids.numpy(), flush.triangles.positions[8:])
+    assert len(alone._list.quads) == 1

@@ -72,6 +72,17 @@ def rays(o, d):
     return Array3f(*o.T), Array3f(*d.T)
 
 
+def hits(accel, o, d, tmax=INF):
+    """``accel``'s closest hits and occlusion for the rays ``(o, d)`` (numpy) up to ``tmax``
+    (a scalar or per ray), as numpy arrays ``(t, prim, u, v, valid, occluded)``."""
+    O, D = rays(o, d)
+    T = Float(np.broadcast_to(np.float32(tmax), (len(o),)).copy())
+    h = accel.intersect(O, D, T)
+    occ = accel.occluded(O, D, T)
+    dr.eval(h, occ)
+    return [x.numpy() for x in (h.t, h.prim, h.u, h.v, h.valid, occ)]
+
+
 def mixed_scene_and_rays(seed=8, n_tris=600, n_sph=20, n_rays=3000):
     """A soup of triangles, spheres and the plane z = -0.5, and random rays
     ``(o, d)`` through it (numpy), all from one generator of ``seed``."""

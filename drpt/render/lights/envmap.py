@@ -52,8 +52,8 @@ at its corners. A cell is picked with probability proportional to
 ``mean luminance of its 4 corners * Omega_j`` (``Omega_j = (2 pi / W)
 (cos theta_j - cos theta_{j+1})``, the cell's solid angle; the row from a
 marginal alias table, the column from that row's conditional alias table:
-:func:`alias_tables`, Walker's method, one uniform cell pick and one threshold
-test each, where a CDF's binary search made ``log2`` dependent lookups).
+:func:`alias_tables`, Walker's method: one uniform cell pick and one threshold
+test each, two independent lookups, no search).
 Inside the cell the position ``(fx, ft)`` is drawn
 from the *bilinear* density of the corner luminances ``c00, c10, c01, c11``::
 
@@ -80,7 +80,9 @@ and near the poles and needs no clamp. The weight is positive wherever
 
 ``P(row)`` and ``P(col | row)`` are the probabilities the *stored float32*
 alias thresholds realise (computed exactly from them), so ``pdf`` is the
-density the sampler realises, whatever the rounding of the weights. A uniform
+density the sampler realises, whatever the rounding of the weights, to the
+resolution of the float32 fraction ``f`` below: each cell's probability to
+about ``2^-23`` (absolute). A uniform
 number picks a cell ``i = floor(u N)`` and its fraction ``f = u N - i`` is
 tested against the threshold; ``f`` rescaled to the kept or the alias part of
 ``[0, 1)`` is the uniform number used inside the cell. So that every positive
@@ -144,7 +146,7 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 #: Minimum weight of a positive cell relative to its row (and of a positive
 #: row relative to the total), so that its alias threshold is never below what a
 #: float32 uniform number resolves.
-CDF_FLOOR = 1e-6
+WEIGHT_FLOOR = 1e-6
 
 _ONE_MINUS_EPS = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
 
@@ -480,9 +482,9 @@ def _sample_linear(a: Float, b: Float, u: Float) -> Float:
 
 def _floored(w: np.ndarray) -> np.ndarray:
     """``w`` (rows of non-negative float64 weights) with each positive weight raised to
-    ``CDF_FLOOR`` times its row's total (a copy), so that no positive cell's alias threshold
+    ``WEIGHT_FLOOR`` times its row's total (a copy), so that no positive cell's alias threshold
     is too small for the uniform input's resolution to reach."""
-    floor = CDF_FLOOR * w.sum(axis=1, keepdims=True)
+    floor = WEIGHT_FLOOR * w.sum(axis=1, keepdims=True)
     return np.where(w > 0.0, np.maximum(w, floor), 0.0)
 
 
@@ -495,36 +497,78 @@ def alias_tables(w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     to float32 rounding of the thresholds. A cell of zero weight is never picked
     (``prob`` 0); a row of zero total gives ``prob`` 0 everywhere.
 
-    Built by Vose's pairing in lockstep over the rows, each row sorted once: the smallest
-    remaining cell is filled up by the largest, which becomes a small one itself when its
-    excess runs out (N - 1 steps, each settling one cell of every row)."""
+    Built by Vose's pairing, all rows at once without a loop over the cells. Each row sorted
+    ascending: the smalls (``v < 1``, ``v`` the cell's weight times ``N / total``) in that
+    order, the larges in the order they are used, largest first (the largest cell is a large
+    even where rounding puts it below 1). With ``D_i`` the deficit ``sum (1 - v)`` of smalls
+    ``0..i`` and ``E_j`` the excess ``sum (v - 1)`` of larges ``0..j``, small ``i`` is filled
+    by the first large ``j`` with ``E_j >= D_{i-1}`` (``D_{-1} = 0``); large ``j`` runs out at
+    the first small ``i*`` with ``D_{i*} > E_j`` and is then a small itself, with threshold
+    ``1 - (D_{i*} - E_j)``, filled by large ``j + 1``; a large that never runs out, and the
+    last one, keeps threshold 1. One ``searchsorted`` over the flattened rows (each row's
+    sums offset by its own key range) finds every large's ``i*``; the large of small ``i``
+    is then the number of larges with ``i* < i``, a count. Built a block of rows at a time
+    (:data:`_BLOCK_CELLS`: large temporaries cost more than the arithmetic)."""
     w = np.asarray(w, np.float64)
+    R, N = w.shape
+    step = max(1, _BLOCK_CELLS // max(N, 1))
+    parts = [_alias_rows(w[r:r + step]) for r in range(0, R, step)] or [_alias_rows(w)]
+    return tuple(np.concatenate(x) for x in zip(*parts))
+
+
+#: cells per block of rows :func:`alias_tables` builds at once: its float64 temporaries
+#: (4 MiB each) stay in the cache and in the allocator's reused memory
+_BLOCK_CELLS = 1 << 19
+
+
+def _alias_rows(w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`alias_tables` of a block of rows ``w`` (float64)."""
     R, N = w.shape
     total = w.sum(axis=1)
     empty = ~(total > 0.0)
     scaled = np.where(empty[:, None], 1.0, w * (N / np.where(empty, 1.0, total))[:, None])
     order = np.argsort(scaled, axis=1, kind="stable")
-    v = np.take_along_axis(scaled, order, axis=1).ravel()  # each row ascending
-    q = np.ones(R * N)
-    alias = np.tile(np.arange(N, dtype=np.int64), R)
-    base = np.arange(R, dtype=np.int64) * N
-    i, j = base.copy(), base + (N - 1)  # the smallest and the largest cell left, per row
-    for _ in range(N - 1):
-        big = v[j] >= 1.0
-        small = np.where(big, i, j)  # j itself once its excess has run out
-        large = np.where(big, j, j - 1)
-        vs = v[small]
-        q[small] = vs
-        alias[small] = large - base
-        v[large] -= 1.0 - vs
-        i += big
-        j -= ~big
-    q = np.clip(q, 0.0, 1.0).reshape(R, N)
+    v = np.take_along_axis(scaled, order, axis=1)  # each row ascending
+    n_small = np.minimum((v < 1.0).sum(axis=1), N - 1)  # smalls: sorted positions 0..n_small-1
+    n_large = N - n_small
+    key = (np.arange(R, dtype=np.float64) * (2 * N + 2))[:, None]  # the sums lie in [0, N]
+    cols = np.arange(N)
+    small = cols < n_small[:, None]
+    # D: the smalls' cumulative deficit (flat beyond them), keyed by row
+    deficit = np.where(small, 1.0 - v, 0.0)
+    D = np.cumsum(deficit, axis=1)
+    # E: the larges' cumulative excess in usage order (usage index k: sorted position
+    # N - 1 - k; flat beyond them), keyed by row
+    E = v[:, ::-1] - 1.0
+    E[~small[:, ::-1]] = np.maximum(E[~small[:, ::-1]], 0.0)
+    E[small[:, ::-1]] = 0.0
+    np.cumsum(E, axis=1, out=E)
+    Df, Ef = (D + key).ravel(), (E + key).ravel()  # keyed: one search serves every row
+    q = v.copy()  # the smalls' thresholds; the larges' are set below
+    alias = np.empty((R, N), np.int64)
+    # large k: runs out at the first small i* with D_{i*} > E_k (never: threshold 1), then a
+    # small itself with threshold 1 - (D_{i*} - E_k), filled by large k + 1; the last keeps 1
+    rows, k = np.nonzero(~small[:, ::-1])
+    i = np.searchsorted(Df, Ef[rows * N + k], side="right") - rows * N
+    i = np.minimum(i, n_small[rows])  # n_small: never
+    out = (k < n_large[rows] - 1) & (i < n_small[rows])
+    d_star = D[rows, np.minimum(i, N - 1)]
+    pos = N - 1 - k
+    q[rows, pos] = np.where(out, 1.0 - (d_star - E[rows, k]), 1.0)
+    alias[rows, pos] = np.where(out, pos - 1, pos)
+    # small i: filled by the first large k with E_k >= D_{i-1}, that is the first whose i* is
+    # at least i: the number of larges with i* < i (i* rises with k)
+    ran_out = np.bincount(rows * (N + 1) + i, minlength=R * (N + 1)).reshape(R, N + 1)[:, :N]
+    k = np.cumsum(ran_out, axis=1) - ran_out
+    np.minimum(k, n_large[:, None] - 1, out=k)
+    alias[small] = (N - 1 - k)[small]
+    q = np.clip(q, 0.0, 1.0)
     # from sorted positions back to cells
     qc = np.empty((R, N), np.float32)
     ac = np.empty((R, N), np.int64)
+    base = np.arange(R, dtype=np.int64) * N
     np.put_along_axis(qc, order, q.astype(np.float32), axis=1)
-    np.put_along_axis(ac, order, np.take_along_axis(order, alias.reshape(R, N), axis=1), axis=1)
+    np.put_along_axis(ac, order, np.take_along_axis(order, alias, axis=1), axis=1)
     qd = qc.astype(np.float64)
     prob = qd + np.bincount((ac + base[:, None]).ravel(), (1.0 - qd).ravel(), R * N).reshape(R, N)
     prob /= N

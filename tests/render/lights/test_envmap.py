@@ -698,3 +698,80 @@ def test_alias_tables_realise_their_probabilities():
     assert stats(no_alias)[0] > 50.0
     zs_control = stats(no_rescale)[1]
     assert zs_control > 50.0, zs_control
+
+
+def _vose_sequential(row: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A plain reference of Vose's pairing on one row (float64 thresholds, aliases): the
+    smalls in ascending order, each filled by the current large, the larges used largest
+    first; a large whose excess runs out becomes a small at once, filled by the next large.
+    Thresholds of 1 alias themselves."""
+    N = len(row)
+    total = row.sum()
+    v = np.ones(N) if not total > 0 else row * (N / total)
+    order = np.argsort(v, kind="stable")
+    large = list(order[v[order] >= 1.0][::-1]) or [order[-1]]
+    if order[-1] not in large:  # the largest cell is a large even below 1 by rounding
+        large.insert(0, order[-1])
+    smalls = [c for c in order if c not in large]
+    q, alias, left = np.ones(N), np.arange(N), v.copy()
+    j = 0
+    for c in smalls:
+        while j < len(large) - 1 and left[large[j]] < 1.0:  # ran out: a small, filled by the next
+            q[large[j]], alias[large[j]] = left[large[j]], large[j + 1]
+            left[large[j + 1]] -= 1.0 - left[large[j]]
+            j += 1
+        q[c], alias[c] = v[c], large[j]
+        left[large[j]] -= 1.0 - v[c]
+    while j < len(large) - 1 and left[large[j]] < 1.0:
+        q[large[j]], alias[large[j]] = left[large[j]], large[j + 1]
+        left[large[j + 1]] -= 1.0 - left[large[j]]
+        j += 1
+    return np.clip(q, 0.0, 1.0), alias
+
+
+@pytest.mark.parametrize("shape", [(6, 9), (1, 13), (7, 1), (40, 50)])
+def test_alias_tables_pair_as_vose_does(shape):
+    """:func:`alias_tables` (vectorised over the rows and cells) against a sequential Vose
+    pairing, row by row, on random rows with zero cells, a zero row, a 1xN and an Nx1
+    table: the same thresholds (to float32 rounding of float64 sums taken in another
+    order) and, wherever a threshold is below 1, the same alias. Negative control: the
+    reference with its larges used smallest first pairs differently (the comparison can
+    fail)."""
+    from drpt.render.lights import envmap
+
+    rng = np.random.default_rng(sum(shape))
+    w = rng.lognormal(0.0, 1.5, shape)
+    w[rng.random(shape) < 0.3] = 0.0
+    if shape[0] > 1:
+        w[1] = 0.0
+    q, alias, prob = envmap.alias_tables(w)
+    differs = False
+    for r in range(shape[0]):
+        qr, ar = _vose_sequential(w[r])
+        np.testing.assert_allclose(q[r], qr, rtol=0, atol=1e-6)
+        used = q[r] < 1.0
+        np.testing.assert_array_equal(alias[r][used], ar[used])
+        if shape[1] > 3 and w[r].any():
+            qs, as_ = _vose_sequential_smallest_first(w[r])
+            differs |= not (np.allclose(qs, qr, atol=1e-6) and np.array_equal(as_[qs < 1], ar[qr < 1]))
+    assert differs or shape[1] <= 3
+
+
+def _vose_sequential_smallest_first(row: np.ndarray):
+    """The negative control's reference: as :func:`_vose_sequential` with its larges taken
+    in ascending order (another valid table, another pairing)."""
+    N = len(row)
+    v = row * (N / row.sum())
+    order = np.argsort(v, kind="stable")
+    large = list(order[v[order] >= 1.0])
+    smalls = [c for c in order if c not in large]
+    q, alias, left = np.ones(N), np.arange(N), v.copy()
+    j = 0
+    for c in smalls:
+        while j < len(large) - 1 and left[large[j]] < 1.0:
+            q[large[j]], alias[large[j]] = left[large[j]], large[j + 1]
+            left[large[j + 1]] -= 1.0 - left[large[j]]
+            j += 1
+        q[c], alias[c] = v[c], large[j]
+        left[large[j]] -= 1.0 - v[c]
+    return np.clip(q, 0.0, 1.0), alias
