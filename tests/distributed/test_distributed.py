@@ -308,6 +308,53 @@ def test_resume_refuses_a_checkpoint_of_other_options(tmp_path, capsys, repo, co
     assert rc == 2 and "no checkpoint" in capsys.readouterr().err
 
 
+def _cut_after_two_chunks(monkeypatch):
+    """Make the CLI's render stop (as by Ctrl-C) after its second chunk, keeping a checkpoint."""
+    import drpt.cli.commands as commands
+    from drpt.distributed.job import run
+
+    def cut(*a, **kw):
+        def on_chunk(merged, result, engine):
+            if merged.next >= 2:
+                raise KeyboardInterrupt
+        return run(*a, **kw, on_chunk=on_chunk)
+
+    monkeypatch.setattr(commands, "run", cut)
+
+
+def test_resume_of_a_checkpoint_without_a_sampler_keeps_independent(tmp_path, monkeypatch, capsys, cornell):
+    """A checkpoint whose options name no sampler (written when every render drew
+    independent samples) resumes, with ``--sampler`` left at ``auto``, as ``independent``:
+    the image is the uninterrupted ``--sampler independent`` render's bit for bit, and the
+    summary line names the sampler. Negative control: without the checkpoint's sampler
+    ``auto`` resolves to ``ldsampler`` and the resume is refused."""
+    import drpt.cli.commands as commands
+    from drpt.cli import main
+    from drpt.imageio import read_image
+
+    whole = _render(cornell, tmp_path, "whole", "--sampler", "independent", spp=8)
+    out = tmp_path / "cut.exr"
+    args = ["render", str(cornell), *FLAGS, "--spp", "8", "--chunk-spp", "1", "-o", str(out)]
+    with monkeypatch.context() as m:
+        _cut_after_two_chunks(m)
+        assert main([*args, "--sampler", "independent"]) == 130
+    npz = Path(str(out) + ".drpt-checkpoint.npz")
+    with np.load(npz) as z:  # the checkpoint as an older drpt wrote it: no sampler in its options
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["meta"]))
+    assert meta["options"].pop("sampler") == "independent"
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez(npz, **arrays)
+    capsys.readouterr()
+    with monkeypatch.context() as m:  # negative control: auto without the checkpoint's sampler
+        m.setattr(commands.checkpoint, "recorded_sampler", lambda output: None)
+        assert main([*args, "--resume"]) == 2
+        assert "other options (sampler differ)" in capsys.readouterr().err
+    assert main([*args, "--resume"]) == 0
+    assert ", independent, " in capsys.readouterr().out
+    assert np.array_equal(read_image(out), whole)
+
+
 @pytest.mark.parametrize("flags,message", [(["--workers", "0"], "--workers must be between 1 and"),
                                            (["--workers", "2", "--cluster", "tcp://127.0.0.1:9"], "not both"),
                                            (["--chunk-spp", "0"], "--chunk-spp must be between"),

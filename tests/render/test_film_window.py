@@ -132,11 +132,14 @@ def test_cropped_scene_renders_like_mitsuba():
     assert np.abs(z).max() > 6.0
 
 
-def test_kernel_op_count_unchanged_without_a_window():
+@pytest.mark.parametrize("sampler, count", [("independent", 4587), ("auto", 4824)])
+def test_kernel_op_count_unchanged_without_a_window(sampler, count):
     """A camera without a window traces the same kernel as without window support (the
-    Cornell box path kernel: 4587 operations, the count of the kernel with one next-event
-    sample per vertex through ``DeviceScene.sample_emitter`` and hashed PCG32 streams; a change to that kernel updates
-    the count here)."""
+    Cornell box path kernel with ``--sampler independent``: 4587 operations, the count of
+    the kernel with one next-event sample per vertex through ``DeviceScene.sample_emitter``
+    and hashed PCG32 streams; with the default ``auto``, which is ``ldsampler`` for the path
+    integrator: 4824, the same kernel drawing from Owen-scrambled Sobol sequences; a change to
+    either kernel updates its count here)."""
     import drjit as dr
 
     from drpt.options import RenderOptions
@@ -146,11 +149,12 @@ def test_kernel_op_count_unchanged_without_a_window():
     s = load_scene(cornell)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
-        r = Renderer(s, RenderOptions(width=32, height=32, spp=4, bsdf="phong", progress=False))
+        r = Renderer(s, RenderOptions(width=32, height=32, spp=4, bsdf="phong", sampler=sampler,
+                                      progress=False))
         dr.kernel_history_clear()
         r.render()
         h = dr.kernel_history()
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     ops = sorted(k.get("operation_count", 0) for k in h if k.get("type") == dr.KernelType.JIT)
-    assert ops[-1] == 4587, ops[-3:]
+    assert ops[-1] == count, ops[-3:]
