@@ -131,9 +131,10 @@ def test_plain_render_does_not_import_dask(tmp_path, repo, cornell):
 @pytest.mark.slow
 def test_workers_give_the_plain_image_bit_for_bit(tmp_path, cornell):
     pytest.importorskip("distributed")
-    plain = _render(cornell, tmp_path, "plain")
-    assert np.array_equal(plain, _render(cornell, tmp_path, "w1", "--workers", "1"))
-    assert np.array_equal(plain, _render(cornell, tmp_path, "w2", "--workers", "2"))
+    indep = ("--sampler", "independent")  # the default's (ldsampler's) image: the test below
+    plain = _render(cornell, tmp_path, "plain", *indep)
+    assert np.array_equal(plain, _render(cornell, tmp_path, "w1", "--workers", "1", *indep))
+    assert np.array_equal(plain, _render(cornell, tmp_path, "w2", "--workers", "2", *indep))
     assert not list(tmp_path.glob("*.drpt-checkpoint*"))
 
 
@@ -142,7 +143,7 @@ def test_workers_give_the_plain_image_with_the_ldsampler(tmp_path, cornell):
     pytest.importorskip("distributed")
     plain = _render(cornell, tmp_path, "plain", "--sampler", "ldsampler")
     assert np.array_equal(plain, _render(cornell, tmp_path, "w2", "--workers", "2", "--sampler", "ldsampler"))
-    assert not np.array_equal(plain, _render(cornell, tmp_path, "indep"))
+    assert not np.array_equal(plain, _render(cornell, tmp_path, "indep", "--sampler", "independent"))
 
 
 @pytest.mark.slow
