@@ -5,7 +5,8 @@
 Renders ``SCENE`` at ``SIZE`` x ``SIZE`` with ``SPP`` samples per pixel and ``SEEDS`` seeds
 (and the ``--filter`` ``FILTER``, default the scene's) with each ``--sampler``
 (independent, ldsampler, zsobol, stratified, multijitter, orthogonal, or the comma-separated
-list ``DRPT_SAMPLERS``, independent first; ``DRPT_BSDF`` sets ``--bsdf``), interleaved in one
+list ``DRPT_SAMPLERS``, independent first; ``DRPT_BSDF`` sets ``--bsdf``, ``DRPT_INTEGRATOR``
+``--integrator``), interleaved in one
 process, and prints per
 sampler the mean over pixels of the variance of a pixel's value across seeds (a
 low-discrepancy sampler's samples are not independent, so the variance comes from
@@ -40,7 +41,8 @@ def main(argv: list[str]) -> int:
     base = RenderOptions(width=size, height=size, spp=spp, progress=False,
                          bsdf=os.environ.get("DRPT_BSDF", "auto"))
     base, scene = with_scene_settings(base, scene)
-    base = replace(base, width=size, height=size, spp=spp).validate()
+    base = replace(base, width=size, height=size, spp=spp,
+                   integrator=os.environ.get("DRPT_INTEGRATOR", base.integrator)).validate()
     if len(argv) > 4:
         base = replace(base, filter=argv[4]).validate()
     renderers = {s: Renderer(scene, replace(base, sampler=s)) for s in SAMPLERS}

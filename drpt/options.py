@@ -51,6 +51,10 @@ TRIANGLE_SAMPLING = ("auto", "area", "solid-angle")
 #: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy samplers, and
 #: Mitsuba's stratified, multi-jittered and orthogonal-array samplers
 SAMPLERS = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "orthogonal")
+#: ``--sampler`` values: a sampler of :data:`SAMPLERS`, or ``auto`` (:func:`resolve_sampler`)
+SAMPLER_CHOICES = ("auto", *SAMPLERS)
+#: the integrators whose ``auto`` sampler is ``ldsampler`` (:func:`resolve_sampler`)
+AUTO_LD_INTEGRATORS = ("path", "volpath", "whitted")
 BVH_KINDS = ("bvh", "bvh2", "bvh4")
 GRID_MAX_RESOLUTION = 256
 
@@ -102,8 +106,9 @@ class RenderOptions:
     #: scene with participating media), :func:`drpt.render.lights.area.triangle_sampling_rule`
     triangle_sampling: str = "auto"
     #: what the camera passes' random numbers are drawn from (:mod:`drpt.render.sampler`):
-    #: "independent" (a PCG32 stream per lane) or a low-discrepancy sampler's name
-    sampler: str = "independent"
+    #: "independent" (a PCG32 stream per lane), a low-discrepancy sampler's name, or "auto"
+    #: (the scene file's where it names one, else :func:`resolve_sampler`'s choice)
+    sampler: str = "auto"
     #: stratified, multijitter, orthogonal: a random offset inside each stratum (Mitsuba's
     #: ``jitter``), or its middle (``--jitter off``)
     jitter: bool = True
@@ -185,7 +190,7 @@ class RenderOptions:
                                      ("--env-compensation", self.env_compensation, ENV_COMPENSATION),
                                      ("--light-sampler", self.light_sampler, LIGHT_SAMPLERS),
                                      ("--triangle-sampling", self.triangle_sampling, TRIANGLE_SAMPLING),
-                                     ("--sampler", self.sampler, SAMPLERS)):
+                                     ("--sampler", self.sampler, SAMPLER_CHOICES)):
             if value not in allowed:
                 raise DrptError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
         if self.strength < 2:
@@ -360,3 +365,32 @@ def with_scene_settings(opts: RenderOptions, scene,
         camera = replace(scene.camera, fov=vertical_fov(fov[0], fov[1], opts.width / opts.height))
         scene = replace(scene, camera=camera)
     return opts.validate(), scene
+
+
+# ------------------------------------------------------------------ the sampler
+def resolve_sampler(opts: RenderOptions, recorded: str | None = None) -> RenderOptions:
+    """``opts`` with ``sampler="auto"`` replaced by the sampler it means; any other
+    ``sampler`` (named by ``--sampler`` or by the scene file, which
+    :func:`with_scene_settings` merged in before) comes back as it is.
+
+    ``auto`` is ``recorded`` where that is given: the sampler of the checkpoint a
+    ``--resume`` continues (``"independent"`` for a checkpoint that records none), so that a
+    resumed render draws the samples its checkpoint's did. Otherwise it is ``ldsampler``
+    for the camera-sampled integrators of :data:`AUTO_LD_INTEGRATORS` (path, volpath,
+    whitted; megakernel and wavefront alike), whose per-pixel variance it lowers at equal
+    time on every scene measured (``docs/performance.md``, "Samplers"), and ``independent``
+    for the rest: light tracing (``ptracer``, ``bdpt``: ``ldsampler`` stratifies where
+    light paths start, not where they land in the image) and ``--adaptive`` sampling,
+    which draws independent samples. The renderer calls this on the options it is given,
+    so every way of rendering (in process, in chunks, on workers, resumed, the preview)
+    resolves ``auto`` alike; it depends on nothing but ``integrator``, ``adaptive`` and
+    ``recorded``."""
+    if opts.sampler != "auto":
+        return opts
+    if recorded is not None:
+        name = recorded
+    elif opts.integrator in AUTO_LD_INTEGRATORS and not opts.adaptive:
+        name = "ldsampler"
+    else:
+        name = "independent"
+    return replace(opts, sampler=name)

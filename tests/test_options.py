@@ -6,13 +6,14 @@ import argparse
 import pytest
 
 from drpt.backend import policy
-from drpt.cli.args import FLAGS, add_render_flags, options_from_args
+from drpt.cli.args import FLAGS, add_render_flags, given_settings, options_from_args
 from drpt.errors import DrptError
 from drpt.options import (
     PathOptions,
     RenderOptions,
     parse_accel,
     parse_accel_list,
+    resolve_sampler,
     with_scene_settings,
 )
 
@@ -155,3 +156,50 @@ def test_scene_settings_return_a_new_camera_and_change_nothing():
     assert out.camera.fov == pytest.approx(vertical_fov(40.0, "x", 1.0))
     assert out.camera.fov != pytest.approx(vertical_fov(40.0, "x", 32 / 24))  # the film's aspect: not it
     assert out.materials is scene.materials  # a shallow copy: the rest is shared
+
+
+@pytest.mark.parametrize("integrator, mode, adaptive, expected", [
+    ("path", "megakernel", False, "ldsampler"),
+    ("path", "wavefront", False, "ldsampler"),
+    ("volpath", "megakernel", False, "ldsampler"),
+    ("volpath", "wavefront", False, "ldsampler"),
+    ("whitted", "megakernel", False, "ldsampler"),
+    ("ptracer", "megakernel", False, "independent"),
+    ("bdpt", "megakernel", False, "independent"),
+    ("path", "megakernel", True, "independent"),  # --adaptive draws independent samples
+    ("volpath", "megakernel", True, "independent"),
+])
+def test_auto_sampler_resolves_by_integrator(integrator, mode, adaptive, expected):
+    assert RenderOptions().sampler == "auto"
+    opts = RenderOptions(integrator=integrator, mode=mode, adaptive=adaptive).validate()
+    out = resolve_sampler(opts)
+    assert out.sampler == expected
+    assert resolve_sampler(out) == out  # resolving again changes nothing
+    assert opts.sampler == "auto"  # a new object: the argument is unchanged
+    # a checkpoint's sampler wins over the rule (a resumed render draws what it drew)
+    other = "independent" if expected == "ldsampler" else "ldsampler"
+    assert resolve_sampler(opts, recorded=other).sampler == other
+
+
+@pytest.mark.parametrize("name", ["independent", "ldsampler", "zsobol", "stratified"])
+def test_named_samplers_are_kept(name):
+    for integrator in ("path", "ptracer"):
+        opts = RenderOptions(integrator=integrator, sampler=name)
+        assert resolve_sampler(opts) is opts
+        assert resolve_sampler(opts, recorded="ldsampler") is opts
+
+
+def test_scene_files_sampler_wins_over_auto():
+    """A Mitsuba XML's ``<sampler>`` is the render's unless ``--sampler`` names another;
+    ``--sampler auto`` on the command line means the file's too."""
+    scene = _xml_scene(sampler="independent")
+    opts, _ = with_scene_settings(RenderOptions(), scene)
+    assert resolve_sampler(opts).sampler == "independent"
+    for argv, expected in ((["--sampler", "auto"], "independent"), ([], "independent"),
+                           (["--sampler", "zsobol"], "zsobol")):
+        args = _args(argv)
+        opts, _ = with_scene_settings(options_from_args(args), scene, given_settings(args))
+        assert resolve_sampler(opts).sampler == expected, argv
+    # a file that names none: auto is the rule's
+    opts, _ = with_scene_settings(RenderOptions(), _xml_scene())
+    assert resolve_sampler(opts).sampler == "ldsampler"

@@ -35,7 +35,7 @@ from ..options import (
     INTEGRATORS,
     LIGHT_SAMPLERS,
     MODES,
-    SAMPLERS,
+    SAMPLER_CHOICES,
     TARGET_SPP,
     TRIANGLE_SAMPLING,
     PathOptions,
@@ -88,6 +88,8 @@ def given_settings(args: argparse.Namespace) -> frozenset[str]:
         given.add("rr_depth")
     if getattr(args, "monte_carlo", False):
         given.add("integrator")
+    if getattr(args, "sampler", None) == "auto":  # the scene file's where it names one
+        given.discard("sampler")
     return frozenset(given & set(GIVEN))
 
 
@@ -159,15 +161,18 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
     if want("seed"):
         parser.add_argument("--seed", type=int, default=d["seed"], action=_Given,
                             help=f"random seed (default {d['seed']})")
-        parser.add_argument("--sampler", choices=SAMPLERS, default=None, action=_Given,
-                            help="sample generator: independent (a random stream per sample) or "
+        parser.add_argument("--sampler", choices=SAMPLER_CHOICES, default=None, action=_Given,
+                            help="sample generator: auto (the scene file's where it names one, "
+                                 "else ldsampler for the path, volpath and whitted integrators "
+                                 "and independent for ptracer, bdpt and --adaptive), "
+                                 "independent (a random stream per sample) or "
                                  "ldsampler (a padded Owen-scrambled Sobol (0,2)-sequence per "
                                  "pixel: less noise per sample), zsobol (one such sequence over the "
                                  "image in Morton order: its error as blue noise), Mitsuba's "
                                  "stratified (a square grid of strata), multijitter (Kensler's "
                                  "correlated multi-jittered grid) and orthogonal (a multi-jittered "
                                  "orthogonal array over a prime) "
-                                 f"(default {base.sampler}, or the scene file's)")
+                                 f"(default {base.sampler})")
         parser.add_argument("--jitter", choices=("on", "off"), default=None, action=_Given,
                             help="stratified, multijitter, orthogonal: a random offset inside each "
                                  "stratum (on, the default, or the scene file's) or its middle")

@@ -22,7 +22,7 @@ from ..export.mitsuba import write_xml
 from ..imageio import WRITE_EXTENSIONS, write_image
 from ..memory import bytes_per_pixel
 from ..memory import check as check_memory
-from ..options import with_scene_settings
+from ..options import resolve_sampler, with_scene_settings
 from ..render.renderer import SRGB_TO_XYZ, Renderer
 from ..scene import load_scene
 from .args import (
@@ -135,6 +135,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     scene = load_scene(scene_path)
     opts, scene = with_scene_settings(opts, scene, given_settings(args))
     opts = _aov_options(opts, args, output)
+    # --sampler auto: a resumed render's is its checkpoint's
+    opts = resolve_sampler(opts, checkpoint.recorded_sampler(output) if args.resume else None)
     if args.bdpt_merge is not None:
         if opts.integrator != "bdpt":
             raise DrptError(f"--bdpt-merge needs --integrator bdpt, not {opts.integrator}")
@@ -190,7 +192,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if opts.target_error is not None or opts.time_limit is not None:
         reason = f"{job.stopped} reached" if job.stopped else f"all {opts.spp} spp"
         stop = f", estimated relMSE {result.estimated_rel_mse:.3g} ({reason})"
-    print(f"{output}: {opts.width}x{opts.height}, {spp}, {result.seconds:.2f} s ({extra}), "
+    print(f"{output}: {opts.width}x{opts.height}, {spp}, {opts.sampler}, {result.seconds:.2f} s ({extra}), "
           f"{result.samples_per_second / 1e6:.3g} Msamples/s{stop}")
     if opts.progress and (args.workers is not None or args.cluster is not None):
         print_workers(job)

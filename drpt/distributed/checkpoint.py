@@ -27,11 +27,14 @@ import numpy as np
 
 from .. import backend
 from ..errors import DrptError
-from ..options import LIGHT_TRACED
+from ..options import LIGHT_TRACED, SAMPLERS
 from ..scene.model import Skybox
 
 SUFFIX = ".drpt-checkpoint"
 VERSION = 2  # 2: the description holds the sums' digest
+#: the sampler of a checkpoint whose options name none (rendered when every render drew
+#: independent samples)
+OLD_SAMPLER = "independent"
 
 
 def scene_hash(scene) -> str:
@@ -203,6 +206,20 @@ _FIELDS = {"version": int, "scene_hash": str, "options": dict, "chunks": int, "n
            "spp": int, "nonfinite": int, "digest": str}
 
 
+def recorded_sampler(output: Path) -> str | None:
+    """The sampler the checkpoint of ``output`` was rendered with (``--resume``'s
+    :func:`~drpt.options.resolve_sampler` resolves ``--sampler auto`` to it):
+    :data:`OLD_SAMPLER` where its options name none, ``None`` where there is no
+    readable checkpoint (:func:`load` then says why)."""
+    try:
+        with np.load(paths(output)[0], allow_pickle=False) as z:
+            options = json.loads(str(z["meta"]))["options"]
+        sampler = options.get("sampler", OLD_SAMPLER)
+    except Exception:  # noqa: BLE001 - load() refuses a damaged checkpoint with its reason
+        return None
+    return sampler if sampler in SAMPLERS else None
+
+
 def load(output: Path, scene_hash: str, options: dict, chunks) -> Checkpoint:
     """The checkpoint of ``output``, checked against this render (``chunks``:
     its :class:`~drpt.render.chunks.ChunkPlan`): a missing, unreadable,
@@ -237,6 +254,7 @@ def load(output: Path, scene_hash: str, options: dict, chunks) -> Checkpoint:
     for k, t in _FIELDS.items():
         if not isinstance(d.get(k), t) or isinstance(d.get(k), bool):
             raise refuse(f"damaged checkpoint ('{k}' is {d.get(k)!r}, not {t.__name__})")
+    d["options"].setdefault("sampler", OLD_SAMPLER)
     if d["scene_hash"] != scene_hash:
         raise refuse(f"a checkpoint of another scene (its content changed): {meta.name}")
     if d["options"] != json.loads(json.dumps(options)):

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import note
-from ..options import LIGHT_TRACED
+from ..options import LIGHT_TRACED, resolve_sampler
 from ..render.chunks import ChunkMerge, ChunkResult, plan_chunks
 from ..render.renderer import Renderer, finish, stop_estimate, stops
 from . import checkpoint
@@ -119,6 +119,9 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
     workers)."""
     from tqdm import tqdm
 
+    # --sampler auto: the sampler it means (a resumed render's is its checkpoint's), so that
+    # the checkpoint records the sampler its sums were drawn with
+    opts = resolve_sampler(opts, checkpoint.recorded_sampler(output) if resume else None)
     W, H, spp = opts.width, opts.height, opts.spp
     light_tracing = opts.integrator in LIGHT_TRACED
     chunks = plan_chunks(W, H, spp, opts.lanes, opts.chunk_spp)

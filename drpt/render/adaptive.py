@@ -82,7 +82,7 @@ def check(opts) -> None:
     if not (opts.pixel_filter.is_box or opts.filter_sampling):
         raise DrptError("--adaptive needs the box filter or --filter-sampling (a splatted sample "
                         "counts in several pixels)")
-    if opts.sampler != "independent":
+    if opts.sampler not in ("independent", "auto"):  # auto: independent (resolve_sampler)
         raise DrptError("--adaptive draws independent samples: --sampler must be independent")
     if opts.target_error is not None or opts.time_limit is not None:
         raise DrptError("--adaptive allocates a fixed --spp budget: it cannot stop at "

@@ -71,7 +71,7 @@ from ..aovs import INDEX_KINDS, channel_count, traced
 from ..backend import policy
 from ..errors import DrptError
 from ..metrics import estimated_rel_mse
-from ..options import RenderOptions
+from ..options import RenderOptions, resolve_sampler
 from ..scene.model import Camera, Scene
 from .aov import aov_values, index_arrays
 from .camera import RayCamera
@@ -242,6 +242,7 @@ MEDIA_IGNORED = ("the scene's participating media are ignored by this integrator
 
 class Renderer:
     def __init__(self, scene: Scene, options: RenderOptions):
+        options = resolve_sampler(options)  # --sampler auto: the sampler it means
         self.opt = options
         t0 = time.perf_counter()
         self.scene = DeviceScene(scene, options)
@@ -332,7 +333,7 @@ class Renderer:
         sampling, light sampler) stay this renderer's. Renders equal those of a new
         :class:`Renderer` of the scene with these options and camera."""
         new = copy.copy(self)
-        new.opt = options.validate()
+        new.opt = options = resolve_sampler(options.validate())
         new.camera_model = self.camera_model if camera is None else camera
         new.camera = RayCamera(new.camera_model, options.width, options.height)
         new.integrator = new._make_integrator()

@@ -97,7 +97,7 @@ from .. import metrics
 from ..cli.args import add_render_flags, options_from_args
 from ..denoise import available, denoise_result, require
 from ..errors import DrptError
-from ..options import LIGHT_TRACED, PathOptions, RenderOptions
+from ..options import LIGHT_TRACED, PathOptions, RenderOptions, resolve_sampler
 from ..render.adaptive import check
 from ..render.lights.area import triangle_sampling_rule
 from ..render.lights.envmap import EnvironmentLight
@@ -341,7 +341,7 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
         return refs[mode]
 
     cfgs = configs(bsdf, knobs, depths, rr_depths, rr_probs,
-                   filtered=not options.pixel_filter.is_box, sampler=options.sampler,
+                   filtered=not options.pixel_filter.is_box, sampler=resolve_sampler(options).sampler,
                    env_compensation=env_compensation_knob(scene, options),
                    triangle_sampling=triangle_sampling_knob(scene, options))
     renderers = []

@@ -64,4 +64,4 @@ def test_sampler_applies_to_the_bundled_scenes_only(monkeypatch, tmp_path):
     bench.prepare(cases["cornellbox"], 32, 20_000, sampler="ldsampler")
     bench.prepare(cases["cornellbox"], 32, 20_000)
     bench.prepare(cases["veach_mis.xml"], 32, 20_000, sampler="ldsampler")
-    assert seen == ["ldsampler", "independent", "independent"]
+    assert seen == ["ldsampler", "auto", "independent"]  # auto: drpt's default (the renderer resolves it)

@@ -131,9 +131,10 @@ def test_plain_render_does_not_import_dask(tmp_path, repo, cornell):
 @pytest.mark.slow
 def test_workers_give_the_plain_image_bit_for_bit(tmp_path, cornell):
     pytest.importorskip("distributed")
-    plain = _render(cornell, tmp_path, "plain")
-    assert np.array_equal(plain, _render(cornell, tmp_path, "w1", "--workers", "1"))
-    assert np.array_equal(plain, _render(cornell, tmp_path, "w2", "--workers", "2"))
+    indep = ("--sampler", "independent")  # the default's (ldsampler's) image: the test below
+    plain = _render(cornell, tmp_path, "plain", *indep)
+    assert np.array_equal(plain, _render(cornell, tmp_path, "w1", "--workers", "1", *indep))
+    assert np.array_equal(plain, _render(cornell, tmp_path, "w2", "--workers", "2", *indep))
     assert not list(tmp_path.glob("*.drpt-checkpoint*"))
 
 
@@ -142,7 +143,7 @@ def test_workers_give_the_plain_image_with_the_ldsampler(tmp_path, cornell):
     pytest.importorskip("distributed")
     plain = _render(cornell, tmp_path, "plain", "--sampler", "ldsampler")
     assert np.array_equal(plain, _render(cornell, tmp_path, "w2", "--workers", "2", "--sampler", "ldsampler"))
-    assert not np.array_equal(plain, _render(cornell, tmp_path, "indep"))
+    assert not np.array_equal(plain, _render(cornell, tmp_path, "indep", "--sampler", "independent"))
 
 
 @pytest.mark.slow
@@ -306,6 +307,53 @@ def test_resume_refuses_a_checkpoint_of_other_options(tmp_path, capsys, repo, co
     assert rc == 2 and len(err) == 1 and "other options (path.hide_emitters differ)" in err[0], err
     rc = main(["render", str(cornell), *FLAGS, "--spp", "8", "--resume", "-o", str(tmp_path / "none.exr")])
     assert rc == 2 and "no checkpoint" in capsys.readouterr().err
+
+
+def _cut_after_two_chunks(monkeypatch):
+    """Make the CLI's render stop (as by Ctrl-C) after its second chunk, keeping a checkpoint."""
+    import drpt.cli.commands as commands
+    from drpt.distributed.job import run
+
+    def cut(*a, **kw):
+        def on_chunk(merged, result, engine):
+            if merged.next >= 2:
+                raise KeyboardInterrupt
+        return run(*a, **kw, on_chunk=on_chunk)
+
+    monkeypatch.setattr(commands, "run", cut)
+
+
+def test_resume_of_a_checkpoint_without_a_sampler_keeps_independent(tmp_path, monkeypatch, capsys, cornell):
+    """A checkpoint whose options name no sampler (written when every render drew
+    independent samples) resumes, with ``--sampler`` left at ``auto``, as ``independent``:
+    the image is the uninterrupted ``--sampler independent`` render's bit for bit, and the
+    summary line names the sampler. Negative control: without the checkpoint's sampler
+    ``auto`` resolves to ``ldsampler`` and the resume is refused."""
+    import drpt.cli.commands as commands
+    from drpt.cli import main
+    from drpt.imageio import read_image
+
+    whole = _render(cornell, tmp_path, "whole", "--sampler", "independent", spp=8)
+    out = tmp_path / "cut.exr"
+    args = ["render", str(cornell), *FLAGS, "--spp", "8", "--chunk-spp", "1", "-o", str(out)]
+    with monkeypatch.context() as m:
+        _cut_after_two_chunks(m)
+        assert main([*args, "--sampler", "independent"]) == 130
+    npz = Path(str(out) + ".drpt-checkpoint.npz")
+    with np.load(npz) as z:  # the checkpoint as an older drpt wrote it: no sampler in its options
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["meta"]))
+    assert meta["options"].pop("sampler") == "independent"
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez(npz, **arrays)
+    capsys.readouterr()
+    with monkeypatch.context() as m:  # negative control: auto without the checkpoint's sampler
+        m.setattr(commands.checkpoint, "recorded_sampler", lambda output: None)
+        assert main([*args, "--resume"]) == 2
+        assert "other options (sampler differ)" in capsys.readouterr().err
+    assert main([*args, "--resume"]) == 0
+    assert ", independent, " in capsys.readouterr().out
+    assert np.array_equal(read_image(out), whole)
 
 
 @pytest.mark.parametrize("flags,message", [(["--workers", "0"], "--workers must be between 1 and"),

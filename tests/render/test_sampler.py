@@ -411,7 +411,8 @@ def test_the_renderers_camera_streams_are_pcg_streams(cornell):
     from drpt.render.renderer import Renderer, _mix_seed
     from drpt.scene import load_scene
 
-    r = Renderer(load_scene(cornell), RenderOptions(width=16, height=16, spp=4, seed=3, progress=False))
+    r = Renderer(load_scene(cornell), RenderOptions(width=16, height=16, spp=4, seed=3, sampler="independent",
+                                                    progress=False))
     n, lane, x, y = r._pass_lanes(4, 0, 16)
     got = r._sampler(2, n, x, y, lane % 4, 1)
     want = pcg_streams(n, _mix_seed(3, 2))

@@ -248,7 +248,10 @@ def _median_slope(scene, name, seed, spp_of=lambda n: n, depth=None, scale=1.0):
 
     _, W, H, ref_spp, ref_depth, mode = REFERENCES[name]
     f, ref, weight = _downsampled_reference(name)
+    # independent samples: the error is the per-pixel variance estimate (a low-discrepancy
+    # sampler's is below it)
     r = Renderer(scene, RenderOptions(width=W // f, height=H // f, spp=1, bsdf=mode, progress=False,
+                                      sampler="independent",
                                       path=PathOptions(max_depth=ref_depth if depth is None else depth)))
     med = []
     for i, n in enumerate(SLOPE_LEVELS):
@@ -291,6 +294,7 @@ def test_error_is_unbiased_against_each_reference(name, reference_scene):
 
     r = Renderer(reference_scene(scene_file),
                  RenderOptions(width=w, height=h, spp=1, bsdf=mode, progress=False,
+                               sampler="independent",  # the error the variance estimate predicts
                                path=PathOptions(max_depth=depth),
                                integrator="volpath" if reference_scene(scene_file).media else "path"))
     results = {}
@@ -408,6 +412,7 @@ def test_heavy_tailed_reference_is_reached_at_high_spp(name, reference_scene):
     h, w = ref.shape[:2]
     r = Renderer(reference_scene(scene_file),
                  RenderOptions(width=w, height=h, spp=HEAVY_SPP, bsdf=mode, seed=HEAVY_SEED, progress=False,
+                               sampler="independent",  # the statistic's variance is independent samples'
                                path=PathOptions(max_depth=depth))).render()
     assert r.nonfinite == 0
     img, var = r.image.astype(np.float64), r.variance.astype(np.float64)
@@ -459,6 +464,7 @@ def test_heavy_tailed_statistic_catches_a_biased_sharp_lobe(name, reference_scen
     h, w = ref.shape[:2]
     r = Renderer(reference_scene(scene_file),
                  RenderOptions(width=w, height=h, spp=HEAVY_SPP, bsdf=mode, seed=HEAVY_SEED, progress=False,
+                               sampler="independent",  # the statistic's variance is independent samples'
                                path=PathOptions(max_depth=depth))).render()
     z = heavy_tailed_z(r.image.astype(np.float64), r.variance.astype(np.float64), HEAVY_SPP, ref, var_ref, n_ref)
     print(f"{name}, sharp lobes x 0.9: region z max {np.abs(z).max():.2f}, whole image z {np.round(z[-3:], 2)}")
@@ -678,8 +684,8 @@ def test_knobs_sampler_row_renders_with_its_sampler(tmp_path, monkeypatch, corne
     assert _run(knobs, cornell, "--size", "16", "16", "--spp", "16", "--ref-spp", "256",
                 "--knobs", "sampler", "--repeats", "1", "--out", str(out), "--quiet",
                 "--cache", str(tmp_path / "cache")) == 0
-    others = ["ldsampler", "zsobol", "stratified", "multijitter", "orthogonal"]
-    assert seen == ["independent", *others]
+    others = ["independent", "zsobol", "stratified", "multijitter", "orthogonal"]
+    assert seen == ["auto", *others]  # the default row's auto is ldsampler (the renderer resolves it)
     data = json.loads((out / "knobs.json").read_text())
     assert [r["setting"] for r in data["rows"]][1:] == others
     assert all(r["seconds"] > 0 and np.isfinite(r["excess_rel_mse"]) for r in data["rows"])

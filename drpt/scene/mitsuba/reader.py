@@ -286,6 +286,7 @@ class Reader:
         if sampler is not None:
             if sampler.plugin not in SAMPLERS:
                 self.unsupported(sampler, f"sampler '{sampler.plugin}'", fallback="independent samples")
+                self.settings.sampler = "independent"
             else:
                 self.settings.sampler = sampler.plugin
             if sampler.has("seed"):
