@@ -134,9 +134,11 @@ def test_cropped_scene_renders_like_mitsuba():
 
 def test_kernel_op_count_unchanged_without_a_window():
     """A camera without a window traces the same kernel as without window support (the
-    Cornell box path kernel: 4587 operations, the count of the kernel with one next-event
-    sample per vertex through ``DeviceScene.sample_emitter`` and hashed PCG32 streams; a change to that kernel updates
-    the count here)."""
+    Cornell box path kernel: 4603 operations, the count of the kernel with one next-event
+    sample per vertex through ``DeviceScene.sample_emitter`` and hashed PCG32 streams, whose loop
+    state carries the path's last vertex for the MIS density of the emitter a BSDF-sampled ray
+    hits (``PathState.ref_p``: the area density's distance seen from the point next-event
+    estimation sampled from); a change to that kernel updates the count here)."""
     import drjit as dr
 
     from drpt.options import RenderOptions
@@ -153,4 +155,4 @@ def test_kernel_op_count_unchanged_without_a_window():
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     ops = sorted(k.get("operation_count", 0) for k in h if k.get("type") == dr.KernelType.JIT)
-    assert ops[-1] == 4587, ops[-3:]
+    assert ops[-1] == 4603, ops[-3:]
