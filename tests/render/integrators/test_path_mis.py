@@ -19,6 +19,8 @@ with a small light 0.01 above it, facing down (as tests/render/integrators/test_
 * ``bounce`` (branched or not) and the wavefront's shading stage carry the hit point exactly
   as the next state's vertex, the next ray's origin being its spawned point.
 * where the density does not depend on the point (a point light, the sky) nothing is carried.
+* rendered, a floor lit by a small light at ``z = 4096`` gives the image of the same scene at
+  ``z = 0`` (paired seeds, a t-test); without the vertex it is measurably brighter.
 """
 
 from __future__ import annotations
@@ -156,3 +158,62 @@ def test_nothing_is_carried_where_the_density_does_not_depend_on_the_point():
     assert integ.bounce(scene, s, PCG32(N, 7)).ref_p is None
     wf = WavefrontIntegrator(scene, PathOptions(max_depth=3))
     assert wf._start_state(Array3f(0, 0, Z), Array3f(0, 0, -1), N, *pack(PCG32(N, 7))).ref_p is None
+
+
+# ---- render level: the scene far from the origin renders like the same scene at it
+
+FAR = 4096.0  # a power of two: the scene's coordinates (multiples of 1/64) stay exact there
+SEEDS = 8
+#: the largest |t| of the paired relative differences (far / origin - 1, one per seed) over
+#: their standard error: t(7) exceeds it with probability 0.2% (the seeds are fixed)
+T_MAX = 5.0
+
+
+def _floor_scene(z: float) -> Scene:
+    """A floor at height ``z`` lit by a small triangle 1/64 above it (facing down), seen from
+    1 above through an 8-degree lens: every coordinate a multiple of 1/64, exact in float32 at
+    ``z = 0`` and at :data:`FAR` alike, so the two are one scene translated."""
+    h = 1 / 64
+    floor = [[(-1, -1, z), (1, -1, z), (1, 1, z)], [(-1, -1, z), (1, 1, z), (-1, 1, z)]]
+    tri = [[(0, 0, z + h), (0, 2 * h, z + h), (2 * h, 0, z + h)]]
+    tris = Triangles(np.array(floor + tri, float), np.array([0, 0, 1], np.int32))
+    mats = [Material("floor"), Material("light", emission=(1, 1, 1))]
+    cam = PerspectiveCamera((h, h, z + 1), (0, 0, -1), (0, 1, 0), 8)
+    return Scene(path=None, camera=cam, materials=mats, triangles=tris)
+
+
+def _means(z: float, triangles: str) -> np.ndarray:
+    from drpt.render.renderer import Renderer
+
+    out = []
+    for seed in range(SEEDS):
+        opts = RenderOptions(width=64, height=64, spp=16, seed=seed, progress=False, triangle_sampling=triangles,
+                             path=PathOptions(max_depth=2))
+        out.append(float(Renderer(_floor_scene(z), opts).render().image.mean()))
+    return np.array(out)
+
+
+def _t(far: np.ndarray, near: np.ndarray) -> float:
+    d = far / near - 1
+    return float(d.mean() / (d.std(ddof=1) / np.sqrt(len(d))))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("triangles", ["area", "solid-angle"])
+def test_a_far_scene_renders_like_the_scene_at_the_origin(monkeypatch, triangles):
+    """Direct light (``max_depth`` 2, the unrolled path) of :func:`_floor_scene` at ``z = 4096``
+    (spawn offsets about 7e-4, 5% of the light's height) against ``z = 0`` (offsets about 1e-6),
+    the same seeds: the mean's paired relative difference is within :data:`T_MAX` standard
+    errors (measured |t| below 0.2). Negative control: the far scene with the density seen from
+    the spawned origin (no vertex carried, the path tracer's former estimate) is brighter, the
+    BSDF sample's MIS weight too large (measured +0.68% with area sampling, +0.14% with solid
+    angle, t about 17)."""
+    import drpt.render.integrators.path as path
+
+    near = _means(0.0, triangles)
+    assert near.mean() > 0.005
+    t = _t(_means(FAR, triangles), near)
+    assert abs(t) < T_MAX, t
+    monkeypatch.setattr(path, "sees_from_vertex", lambda scene: False)
+    t_control = _t(_means(FAR, triangles), near)
+    assert t_control > T_MAX, t_control
