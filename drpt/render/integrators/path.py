@@ -7,7 +7,9 @@ sky) and a direction toward it (next-event estimation, one shadow ray:
 the next BSDF-sampled ray happens to hit
 (:meth:`~drpt.render.scene.DeviceScene.eval_emitter`). Both estimates are
 weighted by the power heuristic, so glossy and diffuse surfaces, small and large
-lights are all handled without fireflies from the "wrong" strategy.
+lights are all handled without fireflies from the "wrong" strategy. Both densities
+are seen from the vertex itself (:attr:`PathState.ref_p`, :func:`sees_from_vertex`),
+not from the next ray's origin, which :mod:`~drpt.render.spawn` moved off the surface.
 
 Depth follows Mitsuba's ``path`` integrator: ``max_depth = 1`` shows only
 directly visible emitters, ``2`` adds direct lighting, ``-1`` is unbounded
