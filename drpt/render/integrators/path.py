@@ -7,7 +7,9 @@ sky) and a direction toward it (next-event estimation, one shadow ray:
 the next BSDF-sampled ray happens to hit
 (:meth:`~drpt.render.scene.DeviceScene.eval_emitter`). Both estimates are
 weighted by the power heuristic, so glossy and diffuse surfaces, small and large
-lights are all handled without fireflies from the "wrong" strategy.
+lights are all handled without fireflies from the "wrong" strategy. Both densities
+are seen from the vertex itself (:attr:`PathState.ref_p`, :func:`sees_from_vertex`),
+not from the next ray's origin, which :mod:`~drpt.render.spawn` moved off the surface.
 
 Depth follows Mitsuba's ``path`` integrator: ``max_depth = 1`` shows only
 directly visible emitters, ``2`` adds direct lighting, ``-1`` is unbounded
@@ -99,6 +101,10 @@ class PathState:
     prev_pdf: Float  # BSDF density of the direction d (MIS of the emitter it hits)
     prev_delta: Bool  # d came from a delta lobe (or the camera): no MIS
     active: Bool
+    #: the path's last vertex, where ``d`` left from and next-event estimation sampled from:
+    #: the point the density of the emitter ``d`` hits is seen from (MIS); ``None`` where
+    #: that density does not depend on the point (:func:`sees_from_vertex`)
+    ref_p: Array3f | None = None
 
 
 def bank(sums: tuple, dropped: UInt32, L: Array3f, Sum: type) -> tuple[tuple, UInt32]:
@@ -121,6 +127,22 @@ def nothing_seen(scene: DeviceScene) -> bool:
     emits = getattr(scene.materials, "has_emission", True)
     infinite = any(f.infinite and not f.delta for f in scene.emitter_selection.families)
     return not (emits or scene.has_background or infinite)
+
+
+def sees_from_vertex(scene: DeviceScene) -> bool:
+    """Whether the density MIS weighs an emitter hit with depends on the point it is seen
+    from (read at trace time): next-event estimation with emissive surfaces (an area
+    density's distance, a triangle's solid angle, a sphere's cone) or a light selection
+    that varies in space (:attr:`~drpt.render.lights.LightSelection.static` False). The
+    path state then carries its last vertex (:attr:`PathState.ref_p`), the point next-event
+    estimation sampled from: the next ray starts at that point moved off its surface
+    (:mod:`~drpt.render.spawn`), and a density seen from there would weigh the two
+    techniques by different points (far from the origin, where the offset is a sizable
+    fraction of a light's distance, their weights no longer sum to 1). Elsewhere (only
+    delta lights, the sky) nothing is carried."""
+    if not (scene.has_emitters and scene.has_smooth_bsdfs):
+        return False
+    return getattr(scene.materials, "has_emission", True) or not scene.emitter_selection.static
 
 
 def coherent_shadows(scene: DeviceScene) -> bool:
@@ -364,7 +386,7 @@ class PathIntegrator:
         return PathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=beta,
                          eta=dr.full(Float, 1.0, w), depth=dr.zeros(UInt32, w),
                          prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
-                         active=Bool(active))
+                         active=Bool(active), ref_p=Array3f(o) if sees_from_vertex(self.scene) else None)
 
     def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32, branch: bool = False,
                camera: bool = False) -> PathState:
@@ -418,19 +440,20 @@ class PathIntegrator:
             # ---- BSDF sampling and Russian roulette: continue the path
             wo, bs, beta, eta, depth, live = continue_path(scene, opt, hit_si, s, None, u_path, sampled)
             return (scene.spawn(hit_si, wo), Array3f(wo), L, beta, eta, depth, Float(bs.pdf),
-                    Bool(bs.delta), active & live)
+                    Bool(bs.delta), active & live) + ((Array3f(hit_si.p),) if carry else ())
 
+        carry = s.ref_p is not None  # (the vertex the next hit's density is seen from)
         if branch:
             def skip(L):
                 return (Array3f(s.o), Array3f(s.d), L, Array3f(s.beta), Float(s.eta), s.depth + 1,
-                        Float(s.prev_pdf), Bool(s.prev_delta), Bool(False))
+                        Float(s.prev_pdf), Bool(s.prev_delta), Bool(False)) + ((Array3f(s.ref_p),) if carry else ())
 
             out = dr.if_stmt((L,), active, shade, skip, label="drpt_vertex")
         else:
             out = shade(L)
-        o, d, L, beta, eta, depth, prev_pdf, prev_delta, active = out
+        o, d, L, beta, eta, depth, prev_pdf, prev_delta, active, *ref_p = out
         return PathState(o=o, d=d, L=L, beta=beta, eta=eta, depth=depth, prev_pdf=prev_pdf,
-                         prev_delta=prev_delta, active=active)
+                         prev_delta=prev_delta, active=active, ref_p=ref_p[0] if carry else None)
 
 
     def _nee(self, scene: DeviceScene, si, beta: Array3f, L: Array3f, u_sel: Float, u_light,
@@ -498,7 +521,8 @@ def add_emission(scene: DeviceScene, opt: PathOptions, si, s, L: Array3f, active
     seen = None if active is None else Bool(active)  # (None: every lane)
     if opt.hide_emitters:  # Mitsuba's hide_emitters: the camera sees no emitter or sky
         seen = s.depth > 0 if seen is None else seen & (s.depth > 0)
-    le, pdf_l = scene.eval_emitter(si, s.d, seen, density=nee)  # (zero where not seen)
+    # (zero where not seen; the density seen from the path's last vertex, where it carries one)
+    le, pdf_l = scene.eval_emitter(si, s.d, seen, density=nee, ref=getattr(s, "ref_p", None))
     if not nee:
         return L + s.beta * le
     # MIS against next-event estimation (none after a delta lobe or the camera)

@@ -56,9 +56,9 @@ from .wavefront import WavefrontIntegrator, WaveState, _take, _Timer, gather_sta
 
 @dataclass
 class VolWaveState(WaveState):
-    """The wavefront's buffers plus volpath's state."""
+    """The wavefront's buffers plus volpath's state (``ref_p``: the last real scattering
+    event, always carried)."""
 
-    ref_p: Array3f  # the last real scattering event
     medium: UInt32  # 1-based medium id of the ray, 0 in vacuum
 
 

@@ -87,7 +87,7 @@ from ..sampler import light_sample, next_2d, pack, unpack
 from ..scene import DeviceScene
 from ..surface import Interaction
 from .common import DirectLight, ShadowQuery
-from .path import PathIntegrator, PathState, add_emission, continue_path, skip_hidden_emitters
+from .path import PathIntegrator, PathState, add_emission, continue_path, sees_from_vertex, skip_hidden_emitters
 
 MORTON_BITS = 6  # per axis
 KEY_BITS = 3 + 3 * MORTON_BITS
@@ -112,6 +112,9 @@ class WaveState:
     prev_delta: Bool
     rng_state: UInt64
     rng_inc: UInt64
+    #: the path's last vertex (:attr:`~drpt.render.integrators.path.PathState.ref_p`; None where
+    #: nothing reads it: :func:`~drpt.render.integrators.path.sees_from_vertex`)
+    ref_p: Array3f | None
 
 
 def _arrays(obj) -> list:
@@ -313,7 +316,8 @@ class WavefrontIntegrator:
                          depth=dr.zeros(UInt32, n), prev_pdf=dr.full(Float, 1.0, n),
                          prev_delta=dr.full(Bool, True, n),
                          rng_state=UInt64(rng_a) + dr.zeros(UInt64, n),
-                         rng_inc=UInt64(rng_b) + dr.zeros(UInt64, n))
+                         rng_inc=UInt64(rng_b) + dr.zeros(UInt64, n),
+                         ref_p=Array3f(o) + dr.zeros(Array3f, n) if sees_from_vertex(self.scene) else None)
 
     # ------------------------------------------------------------------ stages
     def _finish(self, s: WaveState, L: Array3f, timer: _Timer) -> None:
@@ -327,7 +331,8 @@ class WavefrontIntegrator:
     def _loop_state(self, s: WaveState, m: int) -> PathState:
         """The ``m`` paths of ``s`` as the fused loop's state."""
         return PathState(o=s.o, d=s.d, L=dr.zeros(Array3f, m), beta=s.beta, eta=s.eta, depth=s.depth,
-                         prev_pdf=s.prev_pdf, prev_delta=s.prev_delta, active=dr.full(Bool, True, m))
+                         prev_pdf=s.prev_pdf, prev_delta=s.prev_delta, active=dr.full(Bool, True, m),
+                         ref_p=s.ref_p)
 
     def _compact(self, s: WaveState, alive: Bool, timer: _Timer) -> tuple[WaveState, int]:
         idx = dr.compress(alive)
@@ -371,7 +376,8 @@ class WavefrontIntegrator:
         nxt = WaveState(lane=UInt32(s.lane), o=dr.zeros(Array3f, n), d=dr.zeros(Array3f, n),
                         beta=dr.zeros(Array3f, n), eta=dr.zeros(Float, n), depth=dr.zeros(UInt32, n),
                         prev_pdf=dr.zeros(Float, n), prev_delta=dr.zeros(Bool, n),
-                        rng_state=dr.zeros(UInt64, n), rng_inc=dr.zeros(UInt64, n))
+                        rng_state=dr.zeros(UInt64, n), rng_inc=dr.zeros(UInt64, n),
+                        ref_p=None if s.ref_p is None else dr.zeros(Array3f, n))
         alive = dr.zeros(Bool, n)
         if nq == 0:
             return nxt, alive
@@ -390,7 +396,7 @@ class WavefrontIntegrator:
             qsi = dr.gather(type(si), si, idx)
             out, found, live = self._shade(queue, qs, qsi)
             for f in fields(nxt):
-                if f.name != "lane":
+                if f.name != "lane" and getattr(nxt, f.name) is not None:
                     dr.scatter(getattr(nxt, f.name), getattr(out, f.name), idx)
             dr.scatter(alive, live, idx)
             for slot, q in enumerate(found):
@@ -448,7 +454,8 @@ class WavefrontIntegrator:
         wo, bs, beta, eta, depth, live = continue_path(scene, opt, si, s, rng)
         out = WaveState(lane=s.lane, o=scene.spawn(si, wo), d=Array3f(wo), beta=beta, eta=eta,
                         depth=depth, prev_pdf=Float(bs.pdf), prev_delta=Bool(bs.delta),
-                        **dict(zip(("rng_state", "rng_inc"), pack(rng))))
+                        **dict(zip(("rng_state", "rng_inc"), pack(rng))),
+                        ref_p=None if s.ref_p is None else Array3f(si.p))
         return out, found, live
 
     def _shadow(self, queries: list[ShadowQuery], lanes: UInt32, L: Array3f, timer: _Timer) -> None:

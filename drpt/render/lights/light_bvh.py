@@ -49,8 +49,9 @@ probability of one more; the ``mixed`` rule keeps what ``mixed`` and ``bvh`` ren
 alike where the BVH does not enter (delta lights, the sky) and lets a bright sky
 or sun take more than that share. No surface normal enters the importance:
 :meth:`~drpt.render.scene.DeviceScene.pdf_emitter` evaluates the probability at the
-point a BSDF-sampled ray left from (``si.p - d * si.t``, or the previous vertex where the
-integrator passes it: volpath), and the path state carries no normal there.
+path's previous vertex, where next-event estimation sampled from (path, wavefront, volpath
+pass it; without it, the point the ray left from, ``si.p - d * si.t``), and the path state
+carries no normal there.
 """
 
 from __future__ import annotations

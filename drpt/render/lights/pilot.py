@@ -155,7 +155,7 @@ def measure(scene, camera, width: int, height: int, lanes: int = PILOT_LANES) ->
     wo, bs = scene.sample_bsdf(si, rng.next_float32(), Array2f(rng.next_float32(), rng.next_float32()))
     ok = si.valid & bs.valid
     si2 = scene.intersect(scene.spawn(si, wo), wo, ok)
-    le, e_b = scene.eval_emitter(si2, wo, ok)
+    le, e_b = scene.eval_emitter(si2, wo, ok, ref=si.p)  # (seen from the vertex, as next-event estimation)
     f_b = bs.weight * le
     slot = dr.full(UInt32, 0xFFFFFFFF, lanes)
     for family, off in zip(uni.families, uni.offsets):
