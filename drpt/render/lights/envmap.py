@@ -497,23 +497,28 @@ def alias_tables(w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     to float32 rounding of the thresholds. A cell of zero weight is never picked
     (``prob`` 0); a row of zero total gives ``prob`` 0 everywhere.
 
-    Built by Vose's pairing, all rows at once without a loop over the cells. Each row sorted
-    ascending: the smalls (``v < 1``, ``v`` the cell's weight times ``N / total``) in that
-    order, the larges in the order they are used, largest first (the largest cell is a large
-    even where rounding puts it below 1). With ``D_i`` the deficit ``sum (1 - v)`` of smalls
-    ``0..i`` and ``E_j`` the excess ``sum (v - 1)`` of larges ``0..j``, small ``i`` is filled
-    by the first large ``j`` with ``E_j >= D_{i-1}`` (``D_{-1} = 0``); large ``j`` runs out at
-    the first small ``i*`` with ``D_{i*} > E_j`` and is then a small itself, with threshold
-    ``1 - (D_{i*} - E_j)``, filled by large ``j + 1``; a large that never runs out, and the
-    last one, keeps threshold 1. One ``searchsorted`` over the flattened rows (each row's
-    sums offset by its own key range) finds every large's ``i*``; the large of small ``i``
-    is then the number of larges with ``i* < i``, a count. Built a block of rows at a time
-    (:data:`_BLOCK_CELLS`: large temporaries cost more than the arithmetic)."""
+    Built by Vose's pairing, all rows at once, with no sort and no loop over the cells (any
+    order of the smalls and of the larges gives a valid table). With ``v`` the cell's weight
+    times ``N / total``, the smalls (``v < 1``) and the larges (the rest; a row whose cells
+    all round below 1 keeps its largest cell as a large) are each taken in cell order. With
+    ``D_i`` the deficit ``sum (1 - v)`` of the row's smalls ``0..i`` and ``E_j`` the excess
+    ``sum (v - 1)`` of its larges ``0..j`` (each one flattened cumulative sum less the sum
+    before the row), small ``i`` is filled by the first large ``j`` with ``E_j >= D_{i-1}``
+    (``D_{-1} = 0``); large ``j`` runs out at the first small ``i*`` with ``D_{i*} > E_j``
+    and is then a small itself, with threshold ``1 - (D_{i*} - E_j)``, filled by large
+    ``j + 1``; a large that never runs out, and the row's last one, keeps threshold 1 (its
+    own alias). One ``searchsorted`` over the flattened smalls (each row's sums offset by its
+    own key range) finds every large's ``i*``; the large of small ``i`` is then the number
+    of the row's larges with ``i* < i``, a count. Built a block of rows at a time
+    (:data:`_BLOCK_CELLS`: large temporaries cost more than the arithmetic), written into
+    the outputs."""
     w = np.asarray(w, np.float64)
     R, N = w.shape
+    q, alias, prob = np.empty((R, N), np.float32), np.empty((R, N), np.uint32), np.empty((R, N))
     step = max(1, _BLOCK_CELLS // max(N, 1))
-    parts = [_alias_rows(w[r:r + step]) for r in range(0, R, step)] or [_alias_rows(w)]
-    return tuple(np.concatenate(x) for x in zip(*parts))
+    for r in range(0, R, step):
+        _alias_rows(w[r:r + step], q[r:r + step], alias[r:r + step], prob[r:r + step])
+    return q, alias, prob
 
 
 #: cells per block of rows :func:`alias_tables` builds at once: its float64 temporaries
@@ -521,59 +526,66 @@ def alias_tables(w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 _BLOCK_CELLS = 1 << 19
 
 
-def _alias_rows(w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`alias_tables` of a block of rows ``w`` (float64)."""
+def _alias_rows(w: np.ndarray, q_out: np.ndarray, alias_out: np.ndarray, prob_out: np.ndarray) -> None:
+    """:func:`alias_tables` of a block of rows ``w`` (float64), written to ``q_out``,
+    ``alias_out`` and ``prob_out`` (views of its outputs)."""
     R, N = w.shape
     total = w.sum(axis=1)
     empty = ~(total > 0.0)
-    scaled = np.where(empty[:, None], 1.0, w * (N / np.where(empty, 1.0, total))[:, None])
-    order = np.argsort(scaled, axis=1, kind="stable")
-    v = np.take_along_axis(scaled, order, axis=1)  # each row ascending
-    n_small = np.minimum((v < 1.0).sum(axis=1), N - 1)  # smalls: sorted positions 0..n_small-1
-    n_large = N - n_small
-    key = (np.arange(R, dtype=np.float64) * (2 * N + 2))[:, None]  # the sums lie in [0, N]
-    cols = np.arange(N)
-    small = cols < n_small[:, None]
-    # D: the smalls' cumulative deficit (flat beyond them), keyed by row
-    deficit = np.where(small, 1.0 - v, 0.0)
-    D = np.cumsum(deficit, axis=1)
-    # E: the larges' cumulative excess in usage order (usage index k: sorted position
-    # N - 1 - k; flat beyond them), keyed by row
-    E = v[:, ::-1] - 1.0
-    E[~small[:, ::-1]] = np.maximum(E[~small[:, ::-1]], 0.0)
-    E[small[:, ::-1]] = 0.0
-    np.cumsum(E, axis=1, out=E)
-    Df, Ef = (D + key).ravel(), (E + key).ravel()  # keyed: one search serves every row
-    q = v.copy()  # the smalls' thresholds; the larges' are set below
-    alias = np.empty((R, N), np.int64)
-    # large k: runs out at the first small i* with D_{i*} > E_k (never: threshold 1), then a
-    # small itself with threshold 1 - (D_{i*} - E_k), filled by large k + 1; the last keeps 1
-    rows, k = np.nonzero(~small[:, ::-1])
-    i = np.searchsorted(Df, Ef[rows * N + k], side="right") - rows * N
-    i = np.minimum(i, n_small[rows])  # n_small: never
-    out = (k < n_large[rows] - 1) & (i < n_small[rows])
-    d_star = D[rows, np.minimum(i, N - 1)]
-    pos = N - 1 - k
-    q[rows, pos] = np.where(out, 1.0 - (d_star - E[rows, k]), 1.0)
-    alias[rows, pos] = np.where(out, pos - 1, pos)
-    # small i: filled by the first large k with E_k >= D_{i-1}, that is the first whose i* is
-    # at least i: the number of larges with i* < i (i* rises with k)
-    ran_out = np.bincount(rows * (N + 1) + i, minlength=R * (N + 1)).reshape(R, N + 1)[:, :N]
-    k = np.cumsum(ran_out, axis=1) - ran_out
-    np.minimum(k, n_large[:, None] - 1, out=k)
-    alias[small] = (N - 1 - k)[small]
-    q = np.clip(q, 0.0, 1.0)
-    # from sorted positions back to cells
-    qc = np.empty((R, N), np.float32)
-    ac = np.empty((R, N), np.int64)
-    base = np.arange(R, dtype=np.int64) * N
-    np.put_along_axis(qc, order, q.astype(np.float32), axis=1)
-    np.put_along_axis(ac, order, np.take_along_axis(order, alias, axis=1), axis=1)
-    qd = qc.astype(np.float64)
-    prob = qd + np.bincount((ac + base[:, None]).ravel(), (1.0 - qd).ravel(), R * N).reshape(R, N)
+    v = w * (N / np.where(empty, 1.0, total))[:, None]
+    v[empty] = 1.0  # every cell a large of its own: thresholds 1 (prob set to 0 below)
+    small = v < 1.0
+    # a row whose cells all round below 1 keeps its largest cell as a large
+    ns = small.sum(axis=1)
+    forced = np.flatnonzero(ns == N)
+    forced = forced * N + np.argmax(v[forced], axis=1)
+    small.ravel()[forced] = False
+    ns[ns == N] -= 1
+    nl = N - ns
+    v, small = v.ravel(), small.ravel()
+    si = np.flatnonzero(small)  # row-major: grouped by row, any order inside a row
+    li = np.flatnonzero(~small)
+    rows = np.arange(R)
+    rs, rl = np.repeat(rows, ns), np.repeat(rows, nl)
+    cs, cl = np.cumsum(ns) - ns, np.cumsum(nl) - nl  # each row's first small, first large
+    # D: the smalls' cumulative deficit within their row, E: the larges' cumulative excess
+    D = np.cumsum(1.0 - v[si])
+    E = np.cumsum(np.maximum(v[li] - 1.0, 0.0))
+    for S, c, n in ((D, cs, ns), (E, cl, nl)):  # less the sum before the row's first entry
+        if S.size:
+            S -= np.repeat(np.where(c > 0, S[np.maximum(c - 1, 0)], 0.0), n)
+    key = np.arange(R, dtype=np.float64) * (2 * N + 2)  # the sums lie in [0, N]
+    # large k of a row: runs out at the first small i* with D_{i*} > E_k (never: i* = its
+    # row's count of smalls), then a small itself with threshold 1 - (D_{i*} - E_k),
+    # filled by the row's next large; the last keeps 1
+    i = np.searchsorted(D + key[rs], E + key[rl], side="right") - cs[rl]
+    k = np.arange(li.size) - cl[rl]
+    out = (k < nl[rl] - 1) & (i < ns[rl])
+    g = np.flatnonzero(out)
+    q = np.minimum(v, 1.0)  # the smalls' thresholds, 1 for the larges unless they run out
+    q[forced] = 1.0
+    alias = np.arange(R * N)  # a threshold of 1 aliases its own cell
+    q[li[g]] = 1.0 - (D[cs[rl[g]] + i[g]] - E[g])
+    alias[li[g]] = li[g + 1]
+    # small i: filled by the first large k with E_k >= D_{i-1}, that is the first whose i*
+    # is at least i: the number of the row's larges with i* < i (i* rises with k)
+    pos = cs[rl] + rl + i  # keyed so that each row has its own range, ns + 1 long
+    ran_out = np.bincount(pos, minlength=si.size + R)
+    before = np.cumsum(ran_out) - ran_out
+    ks = before[np.arange(si.size) + rs] - cl[rs]  # small g of row r: position cs[r] + r + i = g + r
+    np.minimum(ks, nl[rs] - 1, out=ks)
+    alias[si] = li[cl[rs] + ks]
+    np.clip(q, 0.0, 1.0, out=q)
+    qc = q_out.reshape(-1)
+    qc[:] = q
+    q[:] = qc  # the stored float32 thresholds, in float64
+    prob = prob_out.reshape(-1)
+    prob[:] = np.bincount(alias, 1.0 - q, R * N)
+    prob += q
     prob /= N
-    prob[empty] = 0.0
-    return qc, ac.astype(np.uint32), prob
+    prob_out[empty] = 0.0
+    alias -= np.repeat(np.arange(R, dtype=np.int64) * N, N)
+    alias_out.reshape(-1)[:] = alias
 
 
 def _pick(q: Float, alias: UInt32, base, n: int, u: Float) -> tuple[UInt32, Float]:
