@@ -224,7 +224,7 @@ def checkpoint_render(tmp_path_factory):
 
     from drpt.distributed import checkpoint
     from drpt.distributed.job import run
-    from drpt.options import RenderOptions
+    from drpt.options import RenderOptions, resolve_sampler
     from drpt.render.chunks import plan_chunks
 
     root = tmp_path_factory.mktemp("fuzz_checkpoint")
@@ -240,7 +240,7 @@ def checkpoint_render(tmp_path_factory):
         run(scene, opts, out, on_chunk=stop)
     npz, _ = checkpoint.paths(out)
     chunks = plan_chunks(16, 16, 4, opts.max_lanes, 1)
-    args = (checkpoint.scene_hash(scene), checkpoint.options_key(opts), chunks)
+    args = (checkpoint.scene_hash(scene), checkpoint.options_key(resolve_sampler(opts)), chunks)
     assert checkpoint.load(out, *args).next == 2  # the intact one is accepted
     return npz.read_bytes(), args
 
@@ -347,7 +347,7 @@ def test_intact_checkpoints_are_accepted(tmp_path, seed, lanes):
     from drpt.backend import policy
     from drpt.distributed import checkpoint
     from drpt.distributed.job import run
-    from drpt.options import RenderOptions
+    from drpt.options import RenderOptions, resolve_sampler
     from drpt.render.chunks import plan_chunks
 
     scene = load_scene(fz.SCENES / "cornellbox" / "cornellbox.txt")
@@ -362,5 +362,5 @@ def test_intact_checkpoints_are_accepted(tmp_path, seed, lanes):
     with contextlib.suppress(KeyboardInterrupt):
         run(scene, opts, out, on_chunk=stop)
     chunks = plan_chunks(16, 16, 4, lanes or policy().max_lanes, 1)
-    cp = checkpoint.load(out, checkpoint.scene_hash(scene), checkpoint.options_key(opts), chunks)
+    cp = checkpoint.load(out, checkpoint.scene_hash(scene), checkpoint.options_key(resolve_sampler(opts)), chunks)
     assert cp.next == 2
