@@ -75,8 +75,7 @@ class Clock:
                 dr.sync_thread()
                 t["done"] = clock()
 
-        R.llvm_tuning = type("Tuning", (), {"blocks_for": staticmethod(stamped),
-                                            "packet_width": staticmethod(R.llvm_tuning.packet_width)})
+        R.llvm_tuning = type("Tuning", (), {"blocks_for": staticmethod(stamped)})
         trace_pass = R.Renderer._trace_pass
 
         def timed_pass(*a, **kw):

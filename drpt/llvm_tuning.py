@@ -95,16 +95,6 @@ def core() -> ctypes.CDLL | None:
     return lib
 
 
-def packet_width() -> int | None:
-    """The lanes a kernel of the LLVM backend runs as one SIMD packet (16 with AVX-512, 8 with
-    AVX2); its packets start at multiples of it (blocks are multiples too: :func:`block_size_for`).
-    ``None`` off the LLVM backend."""
-    lib = core()
-    if lib is None or not _llvm_ready():
-        return None
-    return int(lib.vector_width())
-
-
 def current() -> Settings | None:
     """The LLVM backend's settings now (``None``: not available)."""
     lib = core()

@@ -126,17 +126,3 @@ def test_renderer_launches_its_path_kernel_in_sized_blocks(monkeypatch):
     opts = RenderOptions(width=16, height=8, spp=2, bsdf="phong", progress=False).validate()
     Renderer(scene, opts).render()
     assert seen and all(n % (16 * 8) == 0 for n in seen)  # whole pixels' lanes, every pass
-
-
-def test_packet_width_and_blocks_of_whole_packets():
-    """packet_width is the LLVM backend's vector width, a power of two, and every block size
-    is a multiple of it, so packets start at multiples of it (film.packet_sums relies on it:
-    a pixel's lanes never straddle two packets). Control: a width of 24 lanes is not."""
-    width = llvm_tuning.packet_width()
-    if width is None:
-        pytest.skip("no LLVM backend")
-    assert width == llvm_tuning.core().vector_width() and width >= 4 and width & (width - 1) == 0
-    sizes = {llvm_tuning.block_size_for(n, t, width) for n in (1, 15, 16, 1000, 65536, 331776, 1 << 21)
-             for t in (1, 2, 16, 64)}
-    assert all(b % width == 0 for b in sizes)
-    assert any(b % 24 for b in sizes)

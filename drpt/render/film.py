@@ -442,31 +442,6 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
 LANE_SUMS_UNROLLED = 32
 
 
-def packet_sums(groups: list[list], counts: UInt32, pixel: UInt32, pixels: int) -> tuple[list, UInt32]:
-    """:func:`lane_sums`' tables and counts, added up inside the kernel that makes the lanes'
-    values: a ``dr.scatter_reduce`` per channel with ``ReduceMode.Local``, which adds the lanes
-    of a SIMD packet that share a pixel (``pixel``: each lane's, pixel-major) and then adds
-    their sum to the pixel's with one atomic addition. The caller guarantees that no pixel's
-    lanes straddle two packets (the LLVM backend, lanes per pixel dividing its packet width:
-    ``llvm_tuning.packet_width``); each pixel then receives one addition onto zero, and its
-    sum is the packet's reduction, the same in every run, chunk, worker and resumed render
-    (though not bit for bit :func:`lane_sums`' lane-order sum). Without the per-lane arrays
-    and the gathers that read them back, the pass writes only its pixels' sums. Returns the
-    tables (unevaluated: evaluating them runs the whole kernel once) and the per-pixel counts."""
-    Value = type(groups[0][0])
-    tables = []
-    for g in groups:
-        C = len(g)
-        table = dr.zeros(Value, pixels * C)
-        first = pixel * C
-        for c, v in enumerate(g):
-            dr.scatter_reduce(dr.ReduceOp.Add, table, v, first + c, mode=dr.ReduceMode.Local)
-        tables.append(table)
-    per_pixel = dr.zeros(UInt32, pixels)
-    dr.scatter_reduce(dr.ReduceOp.Add, per_pixel, counts, pixel, mode=dr.ReduceMode.Local)
-    return tables, per_pixel
-
-
 def lane_sums(groups: list[list], counts: UInt32, m: int, pixels: int) -> tuple[list, UInt32]:
     """Each pixel's sums of a pass's lanes, a group of channels to an array: the box filter's film.
 

@@ -6,15 +6,14 @@ bounded at any image size and sample count: a pass covers a band of rows with
 tracer runs them with *path regeneration*
 (:meth:`~drpt.render.integrators.path.PathIntegrator.sample_sequence`): each
 pixel gets ``m`` Dr.Jit lanes (from ``drpt.backend.policy().min_lanes``; short
-unrolled paths at least ``ceil(k / 3)``, :data:`STRAIGHT_PATHS_PER_LANE`, on the CPU a power
-of two up to the packet width; see :meth:`Renderer._trace_pass`), each lane traces its
+unrolled paths at least ``ceil(k / 3)``, :data:`STRAIGHT_PATHS_PER_LANE`;
+see :meth:`Renderer._trace_pass`), each lane traces its
 share of the ``k`` samples one path after another and sums them, so a SIMD
 packet no longer waits for its longest path at every bounce (its gain:
 docs/performance.md, "Execution model"). The Whitted integrator runs one sample per lane. Lanes are
 ordered pixel-major, so a pixel's lanes are adjacent and one kernel adds
 them in lane order, every channel at once (:func:`~drpt.render.film.lane_sums`;
-a pixel is the mean of its own samples); where a SIMD packet holds whole pixels (the unrolled
-paths on the CPU) the path kernel adds them itself (:func:`~drpt.render.film.packet_sums`). Each
+a pixel is the mean of its own samples). Each
 lane draws from its own PCG32 stream, selected by ``(seed, pass, lane)``
 (:func:`~drpt.render.sampler.pcg_streams`: state and increment hashed from them, so
 neighbouring lanes' streams are independent), so a render is deterministic for a
@@ -76,7 +75,7 @@ from ..scene.model import Camera, Scene
 from .aov import aov_values, index_arrays
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
-from .film import SplatFilm, gather_splats, lane_sums, packet_sums
+from .film import SplatFilm, gather_splats, lane_sums
 from .filter_sampling import sample_position
 from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
 from .integrators.path import PathIntegrator
@@ -451,20 +450,12 @@ class Renderer:
         # paths share their hits and misses: m = ceil(k / STRAIGHT_PATHS_PER_LANE) lanes
         # keep a 16-lane packet on one or two pixels' paths (whole packets skip what their
         # escaped paths need not trace) at few lanes' overhead (docs/performance.md).
-        # On the CPU those m are a power of two up to the packet width (rounded down): no
-        # pixel's lanes straddle two packets, so the path kernel adds them up itself
-        # (packed: film.packet_sums, below).
         min_lanes = policy().min_lanes
         m = min(k, -(-min_lanes // pixels)) if sequential else k
-        packed = False
         if sequential and getattr(self.integrator, "pixel_coherent", False):
             m = k
         elif sequential and getattr(self.integrator, "straight", False):
             m = max(m, -(-k // STRAIGHT_PATHS_PER_LANE))
-            width = llvm_tuning.packet_width()
-            if width:
-                m = min(1 << (m.bit_length() - 1), width)
-                packed = m > 1
         n = pixels * m
         lane = dr.arange(UInt32, n)
         # (the lane's pixel and its place among the pixel's m lanes without an opaque integer
@@ -483,11 +474,9 @@ class Renderer:
                                                                      **extra)
             # evaluate the path loop once (the reductions below would each
             # re-run it), in blocks that keep every
-            # thread busy to the end (drpt.llvm_tuning.blocks_for); with packed sums the
-            # loop and the sums are one kernel (below)
-            if not packed:
-                with llvm_tuning.blocks_for(n):
-                    dr.eval(acc, acc2, bad, cross)
+            # thread busy to the end (drpt.llvm_tuning.blocks_for)
+            with llvm_tuning.blocks_for(n):
+                dr.eval(acc, acc2, bad, cross)
         else:
             o, d, weight = camera_ray(rng)
             L = self.integrator.sample(rng, o, d, Bool(True))
@@ -509,13 +498,8 @@ class Renderer:
             img = np.stack([c.numpy() for c in (acc.x, acc.y, acc.z)], axis=-1).reshape(rows, W, 3)
             sq = np.stack([c.numpy() for c in squares], axis=-1).reshape(rows, W, len(squares))
             return img, sq, int(dr.sum(bad)[0])
-        if packed:  # the path kernel adds a pixel's lanes up (film.packet_sums)
-            (sums, sqsums), nbad = packet_sums([[acc.x, acc.y, acc.z], squares], bad, pixel, pixels)
-            with llvm_tuning.blocks_for(n):
-                dr.eval(sums, sqsums, nbad)
-        else:
-            (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m, pixels)
-            dr.eval(sums, sqsums, nbad)
+        (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m, pixels)
+        dr.eval(sums, sqsums, nbad)
         img = sums.numpy().reshape(rows, W, 3)
         sq = sqsums.numpy().reshape(rows, W, len(squares))
         return img, sq, int(nbad.numpy().sum(dtype=np.int64))

@@ -174,7 +174,8 @@ def test_rr_prob_help_and_docs_give_the_code_s_rule(parsers):
 @pytest.mark.slow
 def test_wavefront_is_the_megakernel_s_image_exactly_as_far_as_the_docs_say():
     """README, cli.md and architecture.md say: the same image (up to float rounding)
-    while spp <= ceil(min_lanes / pixels), another one beyond (path regeneration)."""
+    while spp <= ceil(min_lanes / pixels), with the independent sampler another one beyond
+    (path regeneration: a stream per lane)."""
     import math
 
     import numpy as np
@@ -192,8 +193,8 @@ def test_wavefront_is_the_megakernel_s_image_exactly_as_far_as_the_docs_say():
     edge = math.ceil(n / (w * h))
 
     def image(spp, mode):
-        return Renderer(scene, RenderOptions(width=w, height=h, spp=spp, mode=mode,
-                                             progress=False)).render().image
+        return Renderer(scene, RenderOptions(width=w, height=h, spp=spp, mode=mode, progress=False,
+                                             sampler="independent")).render().image
 
     a, b = image(edge, "megakernel"), image(edge, "wavefront")
     np.testing.assert_allclose(b, a, rtol=1e-5, atol=1e-7)

@@ -213,13 +213,12 @@ SKY_XML = """<scene version="3.0.0">
 def test_unrolled_paths_trace_a_few_paths_per_lane(tmp_path, monkeypatch, depth, spp):
     """Short paths traced unrolled (``PathIntegrator.straight``) get ``ceil(spp / 3)`` lanes per
     pixel (:data:`~drpt.render.renderer.STRAIGHT_PATHS_PER_LANE`), whatever ``min_lanes`` asks,
-    on the CPU rounded down to a power of two up to the packet width (packets of whole pixels,
-    whose kernel adds a pixel's lanes up: ``film.packet_sums``), and every pixel still sums
-    exactly ``spp`` samples (a constant sky, nothing in view: 0.5 and zero variance only then).
-    Negative control: the bounce loop (depth 8) keeps ``min_lanes``' one lane per pixel."""
+    and every pixel still sums exactly ``spp`` samples (a constant sky, nothing in view: 0.5 and
+    zero variance only then). Negative control: the bounce loop (depth 8) keeps ``min_lanes``'
+    one lane per pixel."""
     import dataclasses
 
-    from drpt import backend, llvm_tuning
+    from drpt import backend
     from drpt.options import PathOptions
     from drpt.render import renderer
     from drpt.scene import load_scene
@@ -233,9 +232,6 @@ def test_unrolled_paths_trace_a_few_paths_per_lane(tmp_path, monkeypatch, depth,
     assert rend.integrator.straight == (depth <= 3)
     r = rend.render()
     per_pixel = -(-spp // renderer.STRAIGHT_PATHS_PER_LANE) if depth <= 3 else 1
-    width = llvm_tuning.packet_width()
-    if width and depth <= 3:
-        per_pixel = min(1 << (per_pixel.bit_length() - 1), width)
     assert widths == [7 * 5 * per_pixel]
     assert r.samples == 7 * 5 * spp
     assert np.array_equal(r.image, np.full((5, 7, 3), 0.5, np.float32))
