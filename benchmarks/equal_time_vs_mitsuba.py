@@ -36,8 +36,9 @@ Run: PYTHONPATH=. .venv/bin/python benchmarks/equal_time_vs_mitsuba.py [--rounds
 [--json FILE] [--light-sampler RULE] [--env-compensation on|off] [--sampler NAME]
 
 ``--sampler`` sets drpt's sampler on the bundled scenes only (drpt's own format names none;
-an XML file's sampler is the file's, in both renderers); Mitsuba renders them with its
-``independent`` sampler as before.
+an XML file's sampler is the file's, in both renderers). A bundled scene's export names the
+sampler drpt draws with (by default ``auto``'s choice, ``ldsampler`` for the path tracers), so
+Mitsuba renders it with its plugin of that name: both renderers with the same settings.
 """
 
 from __future__ import annotations
@@ -150,6 +151,7 @@ def prepare(case: Case, min_size: int, max_samples: int, light_sampler: str | No
     ``light_sampler`` and ``env_compensation`` where given, else its defaults; ``sampler`` on a
     bundled scene only). Raises DrptError
     where drpt refuses the scene (or would not path trace it)."""
+    from drpt.options import resolve_sampler
     from drpt.tools.converge import make_drpt, make_mitsuba
 
     scene, opts, source = setup(case, min_size, max_samples)
@@ -161,8 +163,10 @@ def prepare(case: Case, min_size: int, max_samples: int, light_sampler: str | No
         opts = replace(opts, sampler=sampler).validate()
     spp = opts.spp
     _, drpt_render = make_drpt(scene, opts)
+    # a bundled scene's export names the sampler drpt draws with (Mitsuba's plugin of that name)
     mits_render, _ = make_mitsuba(scene, opts.width, opts.height, opts.path.max_depth,
-                                  opts.path.rr_depth, 0, opts.bsdf, opts.filter, source)
+                                  opts.path.rr_depth, 0, opts.bsdf, opts.filter, source,
+                                  sampler=resolve_sampler(opts).sampler)
     ways = {"drpt": lambda seed: drpt_render(spp, seed).image,
             "mitsuba": lambda seed: mits_render(spp, seed)[0]}
     return ways, {"width": opts.width, "height": opts.height, "spp": spp, "integrator": opts.integrator}

@@ -323,6 +323,7 @@ def cmd_export(args: argparse.Namespace) -> int:
              "scene has no shapes, only its background or sky")
     write_xml(scene, Path(args.output), width=opts.width, height=opts.height, spp=opts.spp,
               max_depth=opts.path.max_depth, rr_depth=opts.path.rr_depth, bsdf=opts.bsdf,
-              rfilter=opts.filter, hide_emitters=opts.path.hide_emitters)
+              rfilter=opts.filter, hide_emitters=opts.path.hide_emitters,
+              sampler=resolve_sampler(opts).sampler)
     print(f"{args.output}: Mitsuba 3 scene written")
     return 0

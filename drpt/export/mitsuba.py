@@ -175,10 +175,13 @@ class _MeshData:
         return pos, faces, nrm, uv
 
 
+#: drpt's samplers that Mitsuba 3 has a plugin of the same name and meaning for
+MITSUBA_SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
+
 _TAGS = {
     "perspective": "sensor", "orthographic": "sensor", "thinlens": "sensor",
     "hdrfilm": "film", "box": "rfilter", "tent": "rfilter", "gaussian": "rfilter",
-    "independent": "sampler",
+    **{name: "sampler" for name in MITSUBA_SAMPLERS},
     "path": "integrator", "volpath": "integrator",
     "homogeneous": "medium", "hg": "phase", "isotropic": "phase", "blendphase": "phase",
     "twosided": "bsdf", "diffuse": "bsdf", "drpt_phong": "bsdf", "principled": "bsdf",
@@ -253,9 +256,16 @@ def _f3(v) -> tuple[float, float, float]:
 
 
 # ------------------------------------------------------ the description
+def mitsuba_sampler(name: str) -> str:
+    """The Mitsuba sampler plugin an export names for drpt's resolved sampler ``name``
+    (``RenderOptions.sampler`` after :func:`drpt.options.resolve_sampler`): the plugin of
+    the same name, ``independent`` for one Mitsuba lacks (``zsobol``)."""
+    return name if name in MITSUBA_SAMPLERS else "independent"
+
+
 def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
               rr_depth: int, seed: int, bsdf: str = "auto", rfilter: str = "box",
-              hide_emitters: bool = False) -> dict:
+              hide_emitters: bool = False, sampler: str = "independent") -> dict:
     pixel_filter = parse_filter(rfilter)
     media = [_medium(m) for m in (getattr(scene, "media", None) or [])]
     if int(width) <= 0 or int(height) <= 0:
@@ -331,7 +341,7 @@ def _describe(scene: Scene, width: int, height: int, spp: int, max_depth: int,
         "component_format": "float32",
         "rfilter": pixel_filter.to_mitsuba(),  # sample_border: Mitsuba's default, false
     }
-    sensor["sampler"] = {"type": "independent", "sample_count": int(spp), "seed": int(seed)}
+    sensor["sampler"] = {"type": mitsuba_sampler(sampler), "sample_count": int(spp), "seed": int(seed)}
     if media and getattr(scene, "camera_medium", None) is not None:
         sensor["medium"] = media[scene.camera_medium]
     out["sensor"] = sensor
@@ -542,7 +552,8 @@ def _bsdf(spec: BSDFSpec) -> dict:
 # ---------------------------------------------------------------- dict
 def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
                     max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
-                    bsdf: str = "auto", rfilter: str = "box", hide_emitters: bool = False) -> dict:
+                    bsdf: str = "auto", rfilter: str = "box", hide_emitters: bool = False,
+                    sampler: str = "independent") -> dict:
     """The scene as a dict for ``mi.load_dict`` (a Mitsuba variant must be set).
 
     Triangle meshes are in-memory ``mi.Mesh`` objects (one per material),
@@ -552,7 +563,8 @@ def to_mitsuba_dict(scene: Scene, width: int, height: int, spp: int,
 
     if mi.variant() is None:
         raise DrptError("Mitsuba has no variant set; call mi.set_variant('llvm_ad_rgb') first")
-    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter, hide_emitters)
+    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter, hide_emitters,
+                     sampler)
     register()  # drpt_phong, in case a material needs it
     # Shapes and top-level emitters are instantiated here, in document order.
     # load_dict would otherwise put the ready-made mi.Mesh objects before
@@ -615,7 +627,8 @@ def _build_mesh(md: _MeshData, mi):
 # ----------------------------------------------------------------- XML
 def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: int,
               spp: int, max_depth: int = -1, rr_depth: int = 5, seed: int = 0,
-              bsdf: str = "auto", rfilter: str = "box", hide_emitters: bool = False) -> Path:
+              bsdf: str = "auto", rfilter: str = "box", hide_emitters: bool = False,
+              sampler: str = "independent") -> Path:
     """Write the scene as Mitsuba 3 XML plus PLY meshes; return the XML path.
 
     Phong materials use the ``drpt_phong`` plugin, which Mitsuba knows only
@@ -627,7 +640,8 @@ def write_xml(scene: Scene, out_xml_path: str | PathLike, width: int, height: in
     ``u v`` when the scene has them). The file loads with ``mi.load_file``.
     """
     xml_path = Path(out_xml_path)
-    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter, hide_emitters)
+    desc = _describe(scene, width, height, spp, max_depth, rr_depth, seed, bsdf, rfilter, hide_emitters,
+                     sampler)
     mesh_dir = xml_path.parent / f"{xml_path.stem}_meshes"
     try:
         xml_path.parent.mkdir(parents=True, exist_ok=True)

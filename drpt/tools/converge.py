@@ -317,10 +317,11 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
 
 # ------------------------------------------------------------ rendering
 def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter="box", source=None,
-                 hide_emitters=False):
+                 hide_emitters=False, sampler="independent"):
     """A loaded Mitsuba scene and a ``render(spp, seed) -> (image, seconds)``: drpt's
-    export of ``scene``, or with ``source`` (a :class:`~drpt.tools.xmlref.MitsubaXML`)
-    that XML file as Mitsuba reads it."""
+    export of ``scene`` (with Mitsuba's plugin for drpt's resolved ``sampler``:
+    :func:`drpt.export.mitsuba.mitsuba_sampler`), or with ``source`` (a
+    :class:`~drpt.tools.xmlref.MitsubaXML`) that XML file as Mitsuba reads it."""
     import mitsuba as mi
 
     t0 = time.perf_counter()
@@ -330,7 +331,7 @@ def make_mitsuba(scene, width, height, max_depth, rr_depth, seed, bsdf, rfilter=
     else:
         ms = mi.load_dict(to_mitsuba_dict(scene, width, height, 1, max_depth=max_depth,
                                           rr_depth=rr_depth, seed=seed, bsdf=bsdf, rfilter=rfilter,
-                                          hide_emitters=hide_emitters))
+                                          hide_emitters=hide_emitters, sampler=sampler))
     load_seconds = time.perf_counter() - t0
 
     def render(spp: int, s: int):

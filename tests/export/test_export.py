@@ -335,6 +335,21 @@ def test_dict_loads_with_expected_settings(tmp_path):
     assert all(m.has_vertex_normals() and m.has_vertex_texcoords() for m in meshes)
 
 
+@pytest.mark.parametrize("drpt_sampler, plugin", [("ldsampler", "ldsampler"), ("multijitter", "multijitter"),
+                                                  ("zsobol", "independent")])
+def test_export_names_the_sampler_drpt_draws_with(tmp_path, drpt_sampler, plugin):
+    """The export names Mitsuba's plugin of drpt's resolved sampler (``independent`` for one
+    Mitsuba lacks), in the dict and in the XML, and Mitsuba loads it as that plugin."""
+    scene = _mixed_scene(tmp_path)
+    d = to_mitsuba_dict(scene, W, H, 8, seed=5, sampler=drpt_sampler)
+    assert d["sensor"]["sampler"] == {"type": plugin, "sample_count": 8, "seed": 5}
+    names = {"ldsampler": "LowDiscrepancySampler", "multijitter": "MultijitterSampler",
+             "independent": "IndependentSampler"}
+    assert mi.load_dict(d).sensors()[0].sampler().class_name() == names[plugin]
+    xml = write_xml(scene, tmp_path / "s.xml", W, H, 8, sampler=drpt_sampler)
+    assert f'<sampler type="{plugin}">' in xml.read_text()
+
+
 def test_xml_renders_same_as_dict(tmp_path):
     scene = _mixed_scene(tmp_path)
     a = render(to_mitsuba_dict(scene, W, H, 16, seed=3))
