@@ -597,6 +597,20 @@ def test_knobs_has_an_adaptive_row():
     assert [(r.knob, r.adaptive) for r in rows] == [("default", False), ("sampling", True)]
 
 
+def test_knobs_rows_that_switch_to_independent_samples_say_so():
+    """Light tracing and adaptive sampling draw independent samples: under a default row on
+    another sampler (``auto``'s ldsampler) their rows name that part of their change; under an
+    independent default row they do not."""
+    from drpt.tools.knobs import configs
+
+    def switched(sampler):
+        rows = configs("phong", knobs=("integrator", "adaptive"), sampler=sampler)
+        return [r.setting.endswith("independent samples)") for r in rows[1:]]
+
+    assert switched("ldsampler") == [True, True, True]
+    assert switched("independent") == [False, False, False]
+
+
 def test_knobs_configs_and_bias():
     from drpt.tools.knobs import configs, image_bias
 
