@@ -28,7 +28,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import PCG32, Array3f, Bool, Float, UInt32
 
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.integrators.path import PathIntegrator, PathState, add_emission, sees_from_vertex
@@ -36,6 +36,7 @@ from drpt.render.integrators.wavefront import WavefrontIntegrator
 from drpt.render.sampler import pack
 from drpt.render.scene import DeviceScene
 from drpt.scene.model import Material, PerspectiveCamera, PointLight, Scene, Triangles
+from support.mis import floor_vertices
 
 Z = 1000.0  # the floor's height: large coordinates, a large spawn offset
 H = 0.01  # the light's height above the floor
@@ -61,20 +62,7 @@ def _model(light: bool = True) -> Scene:
 def _vertices(scene: DeviceScene):
     """Floor points 0.005-0.05 beside the light (rays straight down onto the floor), and a
     next-event sample of the light from each, whose ray from the spawned origin hits it."""
-    rng = np.random.default_rng(3)
-    r = rng.uniform(0.005, 0.05, N)
-    a = rng.uniform(0, 2 * np.pi, N)
-    x, y = 0.01 + r * np.cos(a), 0.01 + r * np.sin(a)
-    o = Array3f(Float(x.astype(np.float32)), Float(y.astype(np.float32)), Float(np.full(N, Z + 0.5, np.float32)))
-    d = Array3f(0.0, 0.0, -1.0)
-    si = scene.intersect(o, d, Bool(True))
-    on_floor = si.valid & (si.material == 0)
-    u = Array2f(Float(rng.random(N).astype(np.float32)), Float(rng.random(N).astype(np.float32)))
-    es = scene.sample_emitter(si, Float(rng.random(N).astype(np.float32)), u, on_floor)
-    ok = on_floor & es.valid
-    hit = scene.intersect(scene.spawn(si, es.wo), es.wo, ok)
-    ok = ok & hit.valid & (hit.material == 1)
-    return o, d, si, es, hit, ok
+    return floor_vertices(scene, N, Z)
 
 
 def _state(scene, si, es, ok, prev_pdf, ref_p) -> PathState:

@@ -22,13 +22,14 @@ from __future__ import annotations
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import Array3f, Bool, Float, UInt32
 
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.integrators.common import power_heuristic
 from drpt.render.integrators.volpath import Flight, VolPathIntegrator, VolPathState
 from drpt.render.scene import DeviceScene
 from drpt.scene.model import Material, Medium, PerspectiveCamera, Scene, Triangles
+from support.mis import floor_vertices
 
 Z = 1000.0  # the floor's height: large coordinates, a large spawn offset
 H = 0.01  # the light's height above the floor
@@ -48,19 +49,7 @@ def _model() -> Scene:
 def _vertices(scene: DeviceScene):
     """Floor points 0.005-0.05 beside the light (rays straight down onto the floor), and a
     next-event sample of the light from each."""
-    rng = np.random.default_rng(3)
-    r = rng.uniform(0.005, 0.05, N)
-    a = rng.uniform(0, 2 * np.pi, N)
-    x, y = 0.01 + r * np.cos(a), 0.01 + r * np.sin(a)
-    o = Array3f(Float(x.astype(np.float32)), Float(y.astype(np.float32)), Float(np.full(N, Z + 0.5, np.float32)))
-    si = scene.intersect(o, Array3f(0.0, 0.0, -1.0), Bool(True))
-    on_floor = si.valid & (si.material == 0)
-    u = Array2f(Float(rng.random(N).astype(np.float32)), Float(rng.random(N).astype(np.float32)))
-    es = scene.sample_emitter(si, Float(rng.random(N).astype(np.float32)), u, on_floor)
-    ok = on_floor & es.valid
-    hit = scene.intersect(scene.spawn(si, es.wo), es.wo, ok)
-    ok = ok & hit.valid & (hit.material == 1)
-    return si, es, hit, ok
+    return floor_vertices(scene, N, Z)[2:]
 
 
 def test_the_density_at_a_hit_is_seen_from_the_vertex():
