@@ -270,6 +270,17 @@ def scatter_update(dvcm: Float, dvc: Float, pdf: Float, pdf_rev: Float, cos_out:
     return dvcm_new, dvc_new
 
 
+def segment_length2(si: Interaction, ref: Array3f) -> Float:
+    """The squared length of a subpath's segment from its previous vertex ``ref`` (the true
+    point: the emitter's sampled point, the camera's position, the last hit) to the hit
+    ``si``. Not ``si.t``: the ray left from ``ref`` moved off its surface (the spawn offset,
+    which grows with the coordinates' magnitude), while connections and next-event
+    estimation measure their densities between the true vertices; converting the subpaths'
+    densities to area measure by another length would make the MIS weights of the
+    strategies not sum to 1."""
+    return dr.squared_norm(si.p - ref)
+
+
 def hit_update(dvcm: Float, dvc: Float, dist2: Float, cos_in: Float) -> tuple[Float, Float]:
     """The MIS quantities at a hit at squared distance ``dist2``, incoming geometric
     cosine ``cos_in``."""
@@ -590,15 +601,17 @@ class BDPTIntegrator:
 
     # ------------------------------------------------------------ light subpath start
     def _emit(self, rng: PCG32, active: Bool, area_only: bool = False):
-        """The light subpath's first ray: ``(o, d, beta, dvcm, dvc, infinite, valid)``
-        (``infinite``: it leaves the directional light, the sky or the background); with
-        ``area_only`` the lanes that chose another kind of source are not ``valid``."""
+        """The light subpath's first ray: ``(o, d, p, beta, dvcm, dvc, infinite, valid)``
+        (``p``: the emitter's sampled point, the vertex ``o`` was spawned from; ``infinite``:
+        it leaves the directional light, the sky or the background); with ``area_only`` the
+        lanes that chose another kind of source are not ``valid``."""
         rays, n = self.rays, dr.width(active)
         u_sel = rng.next_float32()
         u_pos = next_2d(rng)
         u_dir = next_2d(rng)
         k, u_reuse = rays._select(u_sel)
         o = dr.zeros(Array3f, n)
+        p = dr.zeros(Array3f, n)
         d = dr.full(Array3f, [0.0, 0.0, 1.0], n)
         beta = dr.zeros(Array3f, n)
         dvcm = dr.zeros(Float, n)
@@ -613,6 +626,7 @@ class BDPTIntegrator:
                 local = square_to_cosine_hemisphere(u_dir)
                 di = Frame(ls.n).to_world(local)
                 oi = spawn_origin(ls.p, ls.ng, ls.p_error, di)
+                pi = ls.p
                 emit = self.pick * ls.pdf_area * local.z / math.pi
                 ok = mine & (emit > 0.0)
                 inv = dr.select(ok, dr.rcp(emit), 0.0)
@@ -629,6 +643,7 @@ class BDPTIntegrator:
                     le, pdf = Array3f(*map(float, self.scene.background)), Float(INV_FOUR_PI)
                 di = -w_sky
                 oi = rays._disk_origin(di, u_pos)
+                pi = oi  # (not read: the first segment from infinity has no length)
                 emit = self.pick * pdf * self.disk_pdf
                 ok = mine & (emit > 0.0)
                 inv = dr.select(ok, dr.rcp(emit), 0.0)
@@ -638,6 +653,7 @@ class BDPTIntegrator:
                 infinite |= mine
             else:
                 oi, di, w = rays._source_ray(kind, light, u_reuse, u_pos, u_dir, mine)
+                pi = oi
                 emit = self._delta_emit(light)
                 bi = w * float(rays.count)
                 vcm = Float(self.k * mis(1.0 / emit))
@@ -645,12 +661,13 @@ class BDPTIntegrator:
                 if kind == "directional":
                     infinite |= mine
             o = dr.select(mine, oi, o)
+            p = dr.select(mine, pi, p)
             d = dr.select(mine, di, d)
             beta = dr.select(mine, bi, beta)
             dvcm = dr.select(mine, vcm, dvcm)
             dvc = dr.select(mine, vc, dvc)
         valid = active & (dr.max(beta) > 0.0)
-        return o, d, beta, dvcm, dvc, infinite, valid
+        return o, d, p, beta, dvcm, dvc, infinite, valid
 
     # ------------------------------------------------------------ strategies
     def _weight(self, w: Float, s, t) -> Float:
@@ -864,7 +881,7 @@ class BDPTIntegrator:
         scene = self.scene
         n = dr.width(active)
         widen(rng, n)
-        o, d, beta, _dvcm, _dvc, _inf, live = self._emit(rng, Bool(active), area_only=True)
+        o, d, _p, beta, _dvcm, _dvc, _inf, live = self._emit(rng, Bool(active), area_only=True)
         depth = dr.full(UInt32, 1, n)
         after_dirac = dr.zeros(Bool, n)
         p = dr.zeros(Array3f, n)
@@ -971,7 +988,8 @@ class BDPTIntegrator:
             scene.instrument.paths(n, (HIT_LIGHT, HIT_CAMERA, SHADOW_CAMERA, SHADOW_NEE, SHADOW_CONNECT, SPLAT))
         if NL > 0 and self.rays.count > 0 and scene.has_smooth_bsdfs:
             lverts = LightVertices(NL, getattr(scene.materials, "tangents", False))
-            o, d, beta, dvcm, dvc, infinite, live = self._emit(rng, Bool(active))
+            # ref: the subpath's previous vertex, which the ray o, d was spawned from
+            o, d, ref, beta, dvcm, dvc, infinite, live = self._emit(rng, Bool(active))
             power = dr.max(beta)  # the subpath's emitted power: its roulette's unit
             eta = dr.full(Float, 1.0, n)
             depth = dr.full(UInt32, 1, n)
@@ -983,7 +1001,7 @@ class BDPTIntegrator:
                 dropped += dr.select(live & ~finite, 1, 0)
                 live &= finite
                 # the first segment from an infinite emitter has no length to convert
-                dist2 = dr.select(infinite, 1.0, dr.square(si.t))
+                dist2 = dr.select(infinite, 1.0, segment_length2(si, ref))
                 infinite = dr.zeros(Bool, n)
                 dvcm, dvc = hit_update(dvcm, dvc, dist2, dr.abs(dr.dot(si.ng, d)))
                 connectible = live & ~scene.is_delta(si)
@@ -1010,12 +1028,14 @@ class BDPTIntegrator:
                 beta = dr.select(use_rr, beta / q, beta)
                 o = scene.spawn(si, wo)
                 d = Array3f(wo)
+                ref = Array3f(si.p)
 
         # ---- the camera subpath
         if isinstance(rng, LDSampler):
             # its dimensions from a fixed one on, whatever the light subpath's length
             rng.dim = dr.full(UInt32, CAMERA_DIMENSION, n)
         o, d = cam.ray(px, py)
+        ref = dr.zeros(Array3f, n) + o  # the camera's position (as wide as the loop)
         cos_cam = dr.dot(d, cam.f)
         area = 4.0 * dr.sqrt(dr.squared_norm(cam.r) * dr.squared_norm(cam.u))
         dvcm = self.k * mis(area * cos_cam * cos_cam * cos_cam)
@@ -1042,7 +1062,7 @@ class BDPTIntegrator:
                 if record:
                     strategies.put(0, k + 1, px, py, c, active)
             live &= si.valid
-            dvcm, dvc = hit_update(dvcm, dvc, dr.square(si.t), dr.abs(dr.dot(si.ng, d)))
+            dvcm, dvc = hit_update(dvcm, dvc, segment_length2(si, ref), dr.abs(dr.dot(si.ng, d)))
             if scene.has_area_lights:
                 c = self._emission(si, d, beta, dvcm, dvc, k + 1, live & ~(phase == 2) if merge else live)
                 L += c
@@ -1114,6 +1134,7 @@ class BDPTIntegrator:
             beta = dr.select(use_rr, beta / q, beta)
             o = scene.spawn(si, wo)
             d = Array3f(wo)
+            ref = Array3f(si.p)
         finite = dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z)
         dropped += dr.select(active & ~finite, 1, 0)
         camera_film.put(px, py, L, active & finite)
