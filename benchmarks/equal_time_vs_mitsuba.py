@@ -38,7 +38,8 @@ Run: PYTHONPATH=. .venv/bin/python benchmarks/equal_time_vs_mitsuba.py [--rounds
 ``--sampler`` sets drpt's sampler on the bundled scenes only (drpt's own format names none;
 an XML file's sampler is the file's, in both renderers). A bundled scene's export names the
 sampler drpt draws with (by default ``auto``'s choice, ``ldsampler`` for the path tracers), so
-Mitsuba renders it with its plugin of that name: both renderers with the same settings.
+Mitsuba renders it with its plugin of that name: both renderers with the same settings (with
+``ldsampler`` at the power of 4 nearest the scene's spp, as Mitsuba's plugin takes no other).
 """
 
 from __future__ import annotations
@@ -161,6 +162,10 @@ def prepare(case: Case, min_size: int, max_samples: int, light_sampler: str | No
         opts = replace(opts, env_compensation=env_compensation)
     if sampler and case.bundled is not None:
         opts = replace(opts, sampler=sampler).validate()
+    if case.bundled is not None and resolve_sampler(opts).sampler == "ldsampler":
+        # Mitsuba's ldsampler takes a power of 4 (it rounds any other count up): both renderers
+        # draw the same count, the nearest power of 4
+        opts = replace(opts, spp=4 ** max(1, round(math.log(opts.spp, 4))))
     spp = opts.spp
     _, drpt_render = make_drpt(scene, opts)
     # a bundled scene's export names the sampler drpt draws with (Mitsuba's plugin of that name)
@@ -261,10 +266,15 @@ def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
         lines.append(f"| {r['scene']} | {r['width']}x{r['height']} | {r['spp']} | {r['drpt_seconds']:.3f} "
                      f"| {r['mitsuba_seconds']:.3f} | {r['time_ratio']:.2f} | {r['variance_ratio']:.2f} "
                      f"| {r['efficiency_ratio']:.2f} | {r['target']:g}x {ok} |")
-    if rows:
-        g = math.exp(sum(math.log(r["efficiency_ratio"]) for r in rows) / len(rows))
+    # (a renderer whose image has non-finite pixels has no variance to compare: such a row is
+    # listed, counted as short of its target and left out of the mean)
+    measured = [r for r in rows if math.isfinite(r["variance_ratio"]) and r["efficiency_ratio"] > 0]
+    if measured:
+        g = math.exp(sum(math.log(r["efficiency_ratio"]) for r in measured) / len(measured))
         lines.append(f"\n{sum(r['efficiency_ratio'] >= r['target'] for r in rows)} of {len(rows)} scenes "
-                     f"meet their target; geometric mean of the efficiency ratios {g:.2f}")
+                     f"meet their target; geometric mean of the efficiency ratios {g:.2f}"
+                     + (f" (over {len(measured)}: the others' variance is not finite)"
+                        if len(measured) < len(rows) else ""))
     if skipped:
         lines.append("\nNot measured:")
         lines += [f"* {name}: {why}" for name, why in skipped]
