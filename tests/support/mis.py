@@ -1,12 +1,30 @@
-"""Vertices for the MIS tests at an emitter hit (``tests/render/integrators/test_path_mis.py``,
-``test_volpath_mis.py``): points on a floor at height ``z`` beside a small light above it, a
-next-event sample of the light from each, and the hit of the sampled direction's ray from
-the spawned origin."""
+"""Scenes and vertices for the MIS tests at an emitter hit (``tests/render/integrators/
+test_path_mis.py``, ``test_volpath_mis.py``, ``test_bdpt_mis.py``): points on a floor at height
+``z`` beside a small light above it, a next-event sample of the light from each, and the hit
+of the sampled direction's ray from the spawned origin; a floor and light that are exactly one
+scene translated between ``z = 0`` and :data:`FAR`."""
 
 from __future__ import annotations
 
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float
+
+from drpt.scene.model import Material, PerspectiveCamera, Scene, Triangles
+
+FAR = 4096.0  # a power of two: the scene's coordinates (multiples of 1/64) stay exact there
+
+
+def floor_scene(z: float) -> Scene:
+    """A floor at height ``z`` lit by a small triangle 1/64 above it (facing down), seen from
+    1 above through an 8-degree lens: every coordinate a multiple of 1/64, exact in float32 at
+    ``z = 0`` and at :data:`FAR` alike, so the two are one scene translated."""
+    h = 1 / 64
+    floor = [[(-1, -1, z), (1, -1, z), (1, 1, z)], [(-1, -1, z), (1, 1, z), (-1, 1, z)]]
+    tri = [[(0, 0, z + h), (0, 2 * h, z + h), (2 * h, 0, z + h)]]
+    tris = Triangles(np.array(floor + tri, float), np.array([0, 0, 1], np.int32))
+    mats = [Material("floor"), Material("light", emission=(1, 1, 1))]
+    cam = PerspectiveCamera((h, h, z + 1), (0, 0, -1), (0, 1, 0), 8)
+    return Scene(path=None, camera=cam, materials=mats, triangles=tris)
 
 
 def floor_vertices(scene, n: int, z: float):

@@ -22,29 +22,14 @@ import drpt.render.integrators.bdpt as bdpt
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.render.scene import DeviceScene
-from drpt.scene.model import Material, PerspectiveCamera, Scene, Triangles
-
-FAR = 4096.0  # a power of two: the scene's coordinates (multiples of 1/64) stay exact there
-
-
-def _floor_scene(z: float) -> Scene:
-    """A floor at height ``z`` lit by a small triangle 1/64 above it (facing down), seen from
-    1 above through an 8-degree lens: every coordinate a multiple of 1/64, exact in float32 at
-    ``z = 0`` and at :data:`FAR` alike, so the two are one scene translated."""
-    h = 1 / 64
-    floor = [[(-1, -1, z), (1, -1, z), (1, 1, z)], [(-1, -1, z), (1, 1, z), (-1, 1, z)]]
-    tri = [[(0, 0, z + h), (0, 2 * h, z + h), (2 * h, 0, z + h)]]
-    tris = Triangles(np.array(floor + tri, float), np.array([0, 0, 1], np.int32))
-    mats = [Material("floor"), Material("light", emission=(1, 1, 1))]
-    cam = PerspectiveCamera((h, h, z + 1), (0, 0, -1), (0, 1, 0), 8)
-    return Scene(path=None, camera=cam, materials=mats, triangles=tris)
+from support.mis import FAR, floor_scene
 
 
 def test_the_segment_length_is_measured_from_the_vertex():
     """From a floor point of the far scene, a ray spawned toward the light: ``segment_length2``
     is the squared distance from the floor point itself (relative 1e-5), which ``si.t``, from
     the spawned origin, is not (control: more than 1e-3 off)."""
-    scene = DeviceScene(_floor_scene(FAR), RenderOptions(width=4, height=4, spp=1))
+    scene = DeviceScene(floor_scene(FAR), RenderOptions(width=4, height=4, spp=1))
     n = 64
     x = dr.linspace(dr.auto.Float, 0.035, 0.08, n)  # beside the light (x + y > 1/32)
     ref = Array3f(x, 0.01, FAR)
@@ -73,9 +58,9 @@ def test_both_subpath_loops_measure_their_segments_from_the_vertex(monkeypatch):
     opts = RenderOptions(width=16, height=16, spp=4, seed=1, progress=False, integrator="bdpt",
                          sampler="independent", path=PathOptions(max_depth=3))
     monkeypatch.setattr(bdpt, "segment_length2", counted)
-    image = Renderer(_floor_scene(FAR), opts).render().image
+    image = Renderer(floor_scene(FAR), opts).render().image
     assert len(calls) == 2, len(calls)
     assert image.mean() > 0.0
     monkeypatch.setattr(bdpt, "segment_length2", lambda si, ref: dr.square(si.t))
-    control = Renderer(_floor_scene(FAR), opts).render().image
+    control = Renderer(floor_scene(FAR), opts).render().image
     assert not np.array_equal(image, control)

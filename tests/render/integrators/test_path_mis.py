@@ -36,7 +36,7 @@ from drpt.render.integrators.wavefront import WavefrontIntegrator
 from drpt.render.sampler import pack
 from drpt.render.scene import DeviceScene
 from drpt.scene.model import Material, PerspectiveCamera, PointLight, Scene, Triangles
-from support.mis import floor_vertices
+from support.mis import FAR, floor_scene, floor_vertices
 
 Z = 1000.0  # the floor's height: large coordinates, a large spawn offset
 H = 0.01  # the light's height above the floor
@@ -150,24 +150,10 @@ def test_nothing_is_carried_where_the_density_does_not_depend_on_the_point():
 
 # ---- render level: the scene far from the origin renders like the same scene at it
 
-FAR = 4096.0  # a power of two: the scene's coordinates (multiples of 1/64) stay exact there
 SEEDS = 8
 #: the largest |t| of the paired relative differences (far / origin - 1, one per seed) over
 #: their standard error: t(7) exceeds it with probability 0.2% (the seeds are fixed)
 T_MAX = 5.0
-
-
-def _floor_scene(z: float) -> Scene:
-    """A floor at height ``z`` lit by a small triangle 1/64 above it (facing down), seen from
-    1 above through an 8-degree lens: every coordinate a multiple of 1/64, exact in float32 at
-    ``z = 0`` and at :data:`FAR` alike, so the two are one scene translated."""
-    h = 1 / 64
-    floor = [[(-1, -1, z), (1, -1, z), (1, 1, z)], [(-1, -1, z), (1, 1, z), (-1, 1, z)]]
-    tri = [[(0, 0, z + h), (0, 2 * h, z + h), (2 * h, 0, z + h)]]
-    tris = Triangles(np.array(floor + tri, float), np.array([0, 0, 1], np.int32))
-    mats = [Material("floor"), Material("light", emission=(1, 1, 1))]
-    cam = PerspectiveCamera((h, h, z + 1), (0, 0, -1), (0, 1, 0), 8)
-    return Scene(path=None, camera=cam, materials=mats, triangles=tris)
 
 
 def _means(z: float, triangles: str) -> np.ndarray:
@@ -177,7 +163,7 @@ def _means(z: float, triangles: str) -> np.ndarray:
     for seed in range(SEEDS):
         opts = RenderOptions(width=64, height=64, spp=16, seed=seed, progress=False, triangle_sampling=triangles,
                              path=PathOptions(max_depth=2))
-        out.append(float(Renderer(_floor_scene(z), opts).render().image.mean()))
+        out.append(float(Renderer(floor_scene(z), opts).render().image.mean()))
     return np.array(out)
 
 
