@@ -155,13 +155,16 @@ def _touched(p: np.ndarray, i: int, q: Parallelogram, extra: np.ndarray) -> bool
     in a plane, which one a ray hits first is decided by float rounding, and the watertight
     tests decide it alike for both (the order of the tests at equal distances); the pair
     stays two triangles there."""
-    others = np.concatenate([np.delete(p, [i, i + 1], axis=0).reshape(-1, 3), extra])
-    if not len(others):
-        return False
     n = np.asarray(q.n) / np.linalg.norm(q.n)
-    dist = np.abs((others - np.asarray(q.corner)) @ n)
-    size = np.maximum(np.abs(others).max(axis=1), np.abs(p[i:i + 2]).max())
-    return bool((dist <= PLANE_TOLERANCE * size).any())
+    corner, pair = np.asarray(q.corner), np.abs(p[i:i + 2]).max()
+    # (the list's other vertices, then ``extra``: not joined, which would copy a whole
+    # scene's vertices for every candidate pair of the emissive list)
+    for pts in (np.delete(p, [i, i + 1], axis=0).reshape(-1, 3), extra):
+        if len(pts):
+            dist = np.abs((pts - corner) @ n)
+            if (dist <= PLANE_TOLERANCE * np.maximum(np.abs(pts).max(axis=1), pair)).any():
+                return True
+    return False
 
 
 def _on_plane(pair: np.ndarray, planes: tuple | None) -> bool:
