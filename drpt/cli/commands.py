@@ -136,7 +136,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     opts, scene = with_scene_settings(opts, scene, given_settings(args))
     opts = _aov_options(opts, args, output)
     # --sampler auto: a resumed render's is its checkpoint's
-    opts = resolve_sampler(opts, checkpoint.recorded_sampler(output) if args.resume else None)
+    opts = resolve_sampler(opts, checkpoint.recorded_sampler(output)
+                           if args.resume and opts.sampler == "auto" else None)
     if args.bdpt_merge is not None:
         if opts.integrator != "bdpt":
             raise DrptError(f"--bdpt-merge needs --integrator bdpt, not {opts.integrator}")

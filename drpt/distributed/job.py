@@ -121,7 +121,8 @@ def run(scene, opts, output: Path, *, workers: int | None = None, cluster: str |
 
     # --sampler auto: the sampler it means (a resumed render's is its checkpoint's), so that
     # the checkpoint records the sampler its sums were drawn with
-    opts = resolve_sampler(opts, checkpoint.recorded_sampler(output) if resume else None)
+    # (the checkpoint is read for it only where auto is left to resolve: cmd_render resolves first)
+    opts = resolve_sampler(opts, checkpoint.recorded_sampler(output) if resume and opts.sampler == "auto" else None)
     W, H, spp = opts.width, opts.height, opts.spp
     light_tracing = opts.integrator in LIGHT_TRACED
     chunks = plan_chunks(W, H, spp, opts.lanes, opts.chunk_spp)
