@@ -120,16 +120,23 @@ class LDSampler:
     Per lane: ``key`` (a hash of the seed and the lane's pixel), ``index`` (the
     sample's index among its pixel's samples), ``step`` (what
     :meth:`advance` adds to it: the pixel's lanes) and ``dim`` (the next
-    dimension). A Dr.Jit struct, so it is loop state as PCG32 is."""
+    dimension). A Dr.Jit struct, so it is loop state as PCG32 is. Every field is as wide
+    as the widest of ``key`` and ``index`` (a ``step`` or ``key`` given as one value for
+    all lanes is broadcast, the same values): as the state of a symbolic loop, a field
+    of another width than the loop's makes Dr.Jit record the loop's body again
+    (:mod:`drpt.render.loops`)."""
 
     DRJIT_STRUCT = {"key": UInt32, "index": UInt32, "step": UInt32, "dim": UInt32}
 
     def __init__(self, key: UInt32 | None = None, index: UInt32 | None = None,
                  step: UInt32 | None = None):
-        self.key = UInt32(0) if key is None else UInt32(key)
-        self.index = UInt32(0) if index is None else UInt32(index)
-        self.step = UInt32(1) if step is None else UInt32(step)
-        self.dim = dr.zeros(UInt32, dr.width(self.index))
+        key = UInt32(0) if key is None else UInt32(key)
+        index = UInt32(0) if index is None else UInt32(index)
+        step = UInt32(1) if step is None else UInt32(step)
+        n = max(dr.width(key), dr.width(index))
+        self.key, self.index, self.step = (v + dr.zeros(UInt32, n) if dr.width(v) != n else v
+                                           for v in (key, index, step))
+        self.dim = dr.zeros(UInt32, n)
 
     @classmethod
     def for_pixels(cls, seed: int, pixel: UInt32, index: UInt32, step: UInt32 | int = 1) -> LDSampler:
@@ -314,7 +321,7 @@ class ZSobolSampler(LDSampler):
 
     def __init__(self, key=None, index=None, step=None):
         super().__init__(key, index, step)
-        self.seed = UInt32(0)
+        self.seed = dr.zeros(UInt32, dr.width(self.index))
 
     def _sample_index(self) -> UInt32:
         """The sequence index of the current sample and dimension (pbrt's GetSampleIndex)."""

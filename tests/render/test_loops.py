@@ -1,6 +1,7 @@
 """drpt.render.loops: each integrator's symbolic loops, and the film's, are recorded once per
 trace (``loops_once``), and the image is, bit for bit, the one of the loops recorded with
-Dr.Jit's ``OptimizeLoops`` on. (bdpt's subpath loops: ``test_bdpt.py``'s
+Dr.Jit's ``OptimizeLoops`` on. Every integrator, mode, sampler and pixel filter (``MATRIX``)
+records each loop once per call. (bdpt's subpath loops: ``test_bdpt.py``'s
 ``test_the_subpath_loops_are_traced_once_and_the_image_is_the_same``.)
 """
 
@@ -11,10 +12,12 @@ import struct
 import drjit as dr
 import numpy as np
 import pytest
+from drjit.auto import UInt32
 
-from drpt.options import PathOptions, RenderOptions
+from drpt.options import SAMPLERS, PathOptions, RenderOptions
 from drpt.render.loops import decorated
 from drpt.render.renderer import Renderer
+from drpt.render.sampler import LDSampler
 from drpt.scene import load_scene
 from support import REPO, SCENES
 from support.loops import recordings
@@ -68,9 +71,8 @@ CASES = {
     "path loop": ("cornellbox/cornellbox.txt", {}),
     "path loop, ldsampler": ("cornellbox/cornellbox.txt", {"sampler": "ldsampler"}),
     "path unrolled": ("cornellbox/cornellbox.txt", {"path": PathOptions(max_depth=3)}),
-    # (independent: with ldsampler these two record their loop twice, see docs/performance.md)
-    "path splatted": ("cornellbox/cornellbox.txt", {"filter": "gaussian", "sampler": "independent"}),
-    "whitted": ("cornellbox/cornellbox.txt", {"integrator": "whitted", "sampler": "independent"}),
+    "path splatted": ("cornellbox/cornellbox.txt", {"filter": "gaussian"}),
+    "whitted": ("cornellbox/cornellbox.txt", {"integrator": "whitted"}),
     "AOV guides past glass": (REPO / "tests" / "data" / "xml" / "bsdfs.xml",
                               {"aovs": (("albedo", "guide_albedo"),), "path": PathOptions(max_depth=3)}),
     "wavefront's fused tail": ("cornellbox/cornellbox.txt", {"mode": "wavefront", "wavefront_tail": 64}),
@@ -136,3 +138,79 @@ def test_decorated_lists_every_loops_once_function():
     assert (PathIntegrator, "sample_sequence") in found and len(found) == len(set(found)) >= 8, found
     assert all(hasattr(owner.__dict__[name], "__wrapped__") for owner, name in found)
     assert (BDPTIntegrator, "_trace") not in found
+
+
+#: (integrator, mode, AOVs) of :data:`MATRIX`: every integrator, the path and volpath
+#: integrators' wavefront mode too, and the AOV kernel beside the path tracer's
+VARIANTS = (("path", "megakernel", False), ("path", "wavefront", False), ("path", "megakernel", True),
+            ("whitted", "megakernel", False), ("volpath", "megakernel", False),
+            ("volpath", "wavefront", False), ("ptracer", "megakernel", False), ("bdpt", "megakernel", False))
+#: every (integrator, mode, AOVs, sampler, filter): box (one sample, one pixel) and gaussian
+#: (splatted into the film, :mod:`drpt.render.film`)
+MATRIX = [(*v, sampler, flt) for v in VARIANTS for sampler in SAMPLERS for flt in ("box", "gaussian")]
+
+
+def _render_counted(integrator, mode, aovs, sampler, flt):
+    """The recordings of one 8x8, 4-spp render of the Cornell box (volpath: the one with
+    media) with these settings (:func:`support.loops.recordings`)."""
+    scene = "cornellbox_media/cornellbox_media.txt" if integrator == "volpath" else "cornellbox/cornellbox.txt"
+    opts = RenderOptions(width=8, height=8, spp=4, seed=3, progress=False, path=PathOptions(max_depth=6),
+                         integrator=integrator, mode=mode, sampler=sampler, filter=flt,
+                         aovs=(("albedo", "guide_albedo"),) if aovs else (),
+                         wavefront_tail=64)  # (the wavefront's last bounces: a fused loop)
+    renderer = Renderer(load_scene(SCENES / scene), opts)
+    with recordings() as counts:
+        renderer.render()
+    return counts
+
+
+@pytest.mark.parametrize("integrator, mode, aovs, sampler, flt", MATRIX,
+                         ids=["-".join(map(str, c)) for c in MATRIX])
+def test_every_integrator_sampler_and_filter_records_each_loop_once_per_call(integrator, mode, aovs,
+                                                                           sampler, flt):
+    """Each ``while_loop`` call of the render records its body once: every loop (the
+    integrator's, the film's, the accelerator's, nested ones) has as many recordings as
+    calls (a loop traced twice, such as the film's for the image and for the AOVs, is
+    called twice). Negative control: the next test, with a sampler whose ``step`` is one
+    value for all lanes, as it was."""
+    counts = _render_counted(integrator, mode, aovs, sampler, flt)
+    assert counts and not counts.again(), (dict(counts), dict(counts.calls))
+
+
+def _narrow(self, key=None, index=None, step=None):
+    """``LDSampler.__init__`` that keeps a ``step`` (and ``key``) given as one value as it
+    is: one entry for all lanes."""
+    self.key = UInt32(0) if key is None else UInt32(key)
+    self.index = UInt32(0) if index is None else UInt32(index)
+    self.step = UInt32(1) if step is None else UInt32(step)
+    self.dim = dr.zeros(UInt32, dr.width(self.index))
+
+
+@pytest.mark.parametrize("integrator, mode, sampler, flt, loop", [
+    ("whitted", "megakernel", "ldsampler", "box", "whitted.py"),
+    ("path", "megakernel", "stratified", "gaussian", "path.py"),
+    ("volpath", "wavefront", "zsobol", "box", "volpath.py"),
+])
+def test_a_width_1_sampler_step_makes_the_loops_record_twice(integrator, mode, sampler, flt, loop,
+                                                             monkeypatch):
+    """Negative control of the test above: with the sampler's ``step`` one value for all
+    lanes (a loop variable of another width than the loop's, which the body reads and does
+    not change), Dr.Jit records the loop holding the sampler again, and the counter sees
+    it: Whitted's loop, the splatted path loop, volpath's shadow loop in the wavefront's
+    kernels (zsobol's packed state has no step)."""
+    monkeypatch.setattr(LDSampler, "__init__", _narrow)
+    again = _render_counted(integrator, mode, False, sampler, flt).again()
+    assert any(k.startswith(loop) and v[0] >= 2 * v[1] for k, v in again.items()), again
+
+
+def test_a_sampler_given_one_step_for_all_lanes_holds_one_per_lane():
+    """``LDSampler`` (and its subclasses) broadcast a ``step`` or ``key`` of one value to
+    the lanes' width, the same values; each field as wide as the loop that carries it."""
+    from drpt.render.sampler import ZSobolSampler, strata_sampler
+
+    index = dr.arange(UInt32, 8)
+    for kind in (LDSampler, strata_sampler("orthogonal", 4), ZSobolSampler.for_image(4, 4, 4)):
+        rng = kind(UInt32(5), index, UInt32(3))
+        assert all(dr.width(getattr(rng, name)) == 8 for name in kind.DRJIT_STRUCT), kind
+        assert list(rng.step.numpy()) == [3] * 8 and list(rng.key.numpy()) == [5] * 8
+        assert list(rng.index.numpy()) == list(range(8))

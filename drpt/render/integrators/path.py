@@ -76,7 +76,7 @@ from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32
 
 from ...options import PathOptions
 from ..bsdf import BSDFSample
-from ..loops import loops_once, widen
+from ..loops import loops_once
 from ..sampler import light_sample, next_2d, next_path, skip_draws
 from ..scene import DeviceScene
 from .common import DirectLight, power_heuristic
@@ -331,7 +331,6 @@ class PathIntegrator:
         """:meth:`sample_sequence` by the bounce loop."""
         scene = self.scene
         n = dr.width(left)
-        widen(rng, n)  # (a low-discrepancy sampler's step is one value for all lanes)
         o, d, *weight = camera_ray(rng)
         state = self._start(o, d, left > 0, *weight)
         Sum = Array3f64 if wide else Array3f
@@ -362,7 +361,6 @@ class PathIntegrator:
         a loop over a lane's paths, one whole path per iteration. ``bounces`` counts
         ``max_depth`` per path."""
         n = dr.width(left)
-        widen(rng, n)  # (a low-discrepancy sampler's step is one value for all lanes)
         Sum = Array3f64 if wide else Array3f
         sums = (dr.zeros(Sum, n), dr.zeros(Sum, n)) + ((dr.zeros(Sum, n),) if moment else ())
         dropped = dr.zeros(UInt32, n)
