@@ -6,13 +6,16 @@ file's own settings, the film scaled to at least 192 pixels, at most 1e6 samples
 each render into phases, with a ``dr.sync_thread()`` inserted after the path kernel's launch so
 that the kernel's execution is a phase of its own:
 
-* ``trace``: the Python tracing of the integrator (the outermost ``loops_once`` method:
-  :mod:`drpt.render.loops`);
+* ``trace``: the Python tracing of the symbolic loops: the outermost calls of every
+  ``loops_once`` function (:mod:`drpt.render.loops`: the integrator's, the splatting film's
+  gather, ray queries outside them), wherever in the render they fall (each phase below is
+  given without them);
 * ``setup``: the rest before the launch (the pass's lanes, the sampler, the camera rays);
 * ``launch``: ``dr.eval`` of the kernel (code generation, the kernel cache's look-up, the
   launch);
 * ``kernel``: its execution, to the ``dr.sync_thread()``;
-* ``readback``: the pixel sums to numpy (``Renderer._trace_pass`` after the kernel);
+* ``readback``: the pixel sums to numpy (``Renderer._trace_pass`` after the kernel; with a
+  tent or gaussian filter ``Renderer._trace_splat_pass``'s film gather, its kernel too);
 * ``finish``: the image, its variance and moments from the merged sums
   (:func:`drpt.render.renderer.finish`);
 * ``rest``: the render less all of the above (the plan, the chunk merge, the checks).
@@ -22,7 +25,11 @@ other processes does not inflate) and as wall time, medians over the rounds. The
 also works inside the kernel, so the ``kernel`` CPU column is not the kernel's cost.
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/render_overhead.py [--rounds 15]
-[--only WORD,...] (default scenes: directional, mesh_attributes, texturedprincipledthin)
+[--only WORD,...] [--integrator NAME] [--sampler NAME] [--filter NAME] (default scenes:
+directional, mesh_attributes, texturedprincipledthin; ``--only`` keeps the scenes whose name
+contains a word, and a word that is a scene's whole name, such as ``cornellbox``, that scene
+alone; the three flags replace the scene's own settings). To compare two checkouts, run this
+script with the other's root first on ``PYTHONPATH`` (the first line names the drpt imported).
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ import statistics
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -51,11 +59,14 @@ class Clock:
         import drjit as dr
 
         import drpt.render.renderer as R
-        from drpt.render.integrators.path import PathIntegrator
+        from drpt.render.loops import decorated
 
         #: the clock of the next render: ``time.thread_time`` or ``time.perf_counter``
         self.clock = time.thread_time
         self.t: dict[str, float] = {}
+        #: ``(start, end)`` of each outermost ``loops_once`` call of the render
+        self.traced: list[tuple[float, float]] = []
+        self.depth = 0
 
         def clock():
             return self.clock()
@@ -76,37 +87,59 @@ class Clock:
                 t["done"] = clock()
 
         R.llvm_tuning = type("Tuning", (), {"blocks_for": staticmethod(stamped)})
-        trace_pass = R.Renderer._trace_pass
 
-        def timed_pass(*a, **kw):
-            out = trace_pass(*a, **kw)
-            t.setdefault("read", clock())
-            return out
-
-        R.Renderer._trace_pass = timed_pass
-
-        def timed(key, fn):  # ``fn`` with its last call's duration kept as ``t[key]``
+        def read_stamped(fn):  # a pass's kernel and readback (the splatting film's gather too)
             def call(*a, **kw):
-                t0 = clock()
                 out = fn(*a, **kw)
-                t[key] = clock() - t0
+                t.setdefault("read", clock())
                 return out
             return call
 
-        R.finish = timed("finish", R.finish)
-        PathIntegrator.sample_sequence = timed("trace", PathIntegrator.__dict__["sample_sequence"])
+        R.Renderer._trace_pass = read_stamped(R.Renderer._trace_pass)
+        R.Renderer._trace_splat_pass = read_stamped(R.Renderer._trace_splat_pass)
+        finish = R.finish
+
+        def timed_finish(*a, **kw):
+            t["finish0"] = clock()
+            out = finish(*a, **kw)
+            t["finish1"] = clock()
+            return out
+
+        R.finish = timed_finish
+        for owner, name in decorated():  # every integrator's, the film's, the ray queries'
+            setattr(owner, name, self._timed(owner.__dict__[name]))
+
+    def _timed(self, fn):
+        """``fn`` with its outermost calls' intervals kept in :attr:`traced`."""
+        def call(*a, **kw):
+            self.depth += 1
+            t0 = self.clock() if self.depth == 1 else 0.0
+            try:
+                return fn(*a, **kw)
+            finally:
+                self.depth -= 1
+                if self.depth == 0:
+                    self.traced.append((t0, self.clock()))
+        return call
 
     def render(self, render, spp: int, seed: int) -> dict[str, float]:
         t = self.t
         t.clear()
+        self.traced.clear()
         t0 = self.clock()
         render(spp, seed)
-        total = self.clock() - t0
-        out = {"trace": t["trace"], "setup": t["enter"] - t0 - t["trace"],
-               "launch": t["launched"] - t["enter"], "kernel": t["done"] - t["launched"],
-               "readback": t["read"] - t["done"], "finish": t["finish"]}
-        out["rest"] = total - sum(out.values())
-        out["total"] = total
+        end = self.clock()
+        spans = {"setup": (t0, t["enter"]), "launch": (t["enter"], t["launched"]),
+                 "kernel": (t["launched"], t["done"]), "readback": (t["done"], t["read"]),
+                 "finish": (t["finish0"], t["finish1"])}
+
+        def traced_in(a, b):  # the tracing inside [a, b)
+            return sum(max(0.0, min(b, e) - max(a, s)) for s, e in self.traced)
+
+        out = {"trace": sum(e - s for s, e in self.traced)}
+        out |= {p: b - a - traced_in(a, b) for p, (a, b) in spans.items()}
+        out["rest"] = end - t0 - sum(out.values())
+        out["total"] = end - t0
         return out
 
 
@@ -116,15 +149,27 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=15)
     ap.add_argument("--only", default=DEFAULT)
+    for flag in ("--integrator", "--sampler", "--filter"):
+        ap.add_argument(flag, help="instead of the scene's own (default: the scene's)")
     a = ap.parse_args(argv)
     only = [w for w in a.only.split(",") if w]
+    given = {k: v for k, v in (("integrator", a.integrator), ("sampler", a.sampler), ("filter", a.filter)) if v}
     timer = Clock()
-    print(f"commit {_commit()}, {_cpu()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; "
-          f"{a.rounds} renders each; ms, main-thread CPU (wall)")
+    import drpt
+
+    print(f"commit {_commit()}, drpt {Path(drpt.__file__).parent.parent}, {_cpu()}, {os.cpu_count()} cores, "
+          f"load {os.getloadavg()[0]:.1f}; {a.rounds} renders each; ms, main-thread CPU (wall); {given or ''}")
     print("\n| scene | " + " | ".join(PHASES) + " | total |\n|---|" + "---|" * (len(PHASES) + 1))
     with tempfile.TemporaryDirectory() as tmp:
-        for case in cases(only, True, Path(tmp)):
+        found = cases(only, True, Path(tmp))
+        names = {c.name for c in found}
+        exact = [w for w in only if w in names]  # a word that names a case picks that case alone
+        for case in found:
+            if any(w in case.name and w != case.name and w in exact for w in only):
+                continue
             scene, opts, _ = setup(case, 192, 1_000_000)
+            if given:
+                opts = replace(opts, **given).validate()
             _, render = make_drpt(scene, opts)
             render(opts.spp, 0)
             rows = {"cpu": [], "wall": []}
