@@ -275,7 +275,7 @@ def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
     for r in rows:
         ok = "yes" if r["efficiency_ratio"] >= r["target"] else "**no**"
         lines.append(f"| {r['scene']} | {r['width']}x{r['height']} | {r['spp']} | {r['drpt_seconds']:.3f} "
-                     f"| {r['mitsuba_seconds']:.3f} | {r['time_ratio']:.2f} | {r['variance_ratio']:.2f} "
+                     f"| {r['mitsuba_seconds']:.3f} | {r['time_ratio']:.2f} | {r['variance_ratio']:.2f}"
                      f"{_error(r)} | {r['efficiency_ratio']:.2f} | {r['target']:g}x {ok} |")
     # (a renderer whose image has non-finite pixels has no variance to compare: such a row is
     # listed, counted as short of its target and left out of the mean)
