@@ -26,6 +26,10 @@ seed ``k`` (:func:`drpt.tools.converge.efficiency_rounds`); seconds are the medi
 of a render (drpt: ``Renderer.render``; Mitsuba: ``mi.render`` and the copy to numpy, with
 Dr.Jit's own LLVM settings), the variance is across the rounds' images. The ratio
 drpt/Mitsuba is what to read: the rounds interleave, so load from other processes slows both.
+The variance ratio comes with its jackknife error over the rounds (``+- E``,
+:func:`drpt.tools.converge.variance_ratio_error`): the seeds are fixed, so a row whose
+variance sits in a few pixels (a sub-pixel highlight) reads the same draw of that tail in
+every run, and the error says how far the draw may be from the expectation.
 The target is issue 27's: 2x on the bundled and corpus scenes, 1.5x on Veach's and the room.
 
 Output: a Markdown table (stdout), the skipped scenes, and with ``--json FILE`` the numbers
@@ -194,7 +198,7 @@ def _commit() -> str:
 def main(argv=None) -> list[dict]:
     from drpt.backend import ensure, set_mitsuba_variant
     from drpt.errors import DrptError
-    from drpt.tools.converge import efficiency_rounds
+    from drpt.tools.converge import efficiency_rounds, variance_ratio_error
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=5)
@@ -233,6 +237,7 @@ def main(argv=None) -> list[dict]:
                    "drpt_variance": d["variance"], "mitsuba_variance": m["variance"],
                    "time_ratio": m["seconds"] / d["seconds"],
                    "variance_ratio": d["variance"] / m["variance"] if m["variance"] > 0 else float("nan"),
+                   "variance_ratio_error": variance_ratio_error(d, m),
                    "efficiency_ratio": d["efficiency"] / m["efficiency"], "load": os.getloadavg()[0]}
             rows.append(row)
             print(f"{case.name}: efficiency x{row['efficiency_ratio']:.2f} ({time.perf_counter() - t0:.0f} s, "
@@ -251,6 +256,12 @@ def _write_json(a, rows: list[dict], skipped: list, load0: float) -> None:
                                   "skipped": skipped}, indent=1))
 
 
+def _error(row: dict) -> str:
+    """`` +- E``: the variance ratio's jackknife error over the rounds (none below 3 rounds)."""
+    e = row.get("variance_ratio_error", float("nan"))
+    return f" +- {e:.2f}" if math.isfinite(e) else ""
+
+
 def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
     lines = [f"commit {getattr(a, 'commit', None) or _commit()}, {_cpu()}, {os.cpu_count()} cores; {a.rounds} rounds, "
              f"min size {a.min_size}, max samples {a.max_samples}; load average {load0:.1f} at the start"
@@ -264,8 +275,8 @@ def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
     for r in rows:
         ok = "yes" if r["efficiency_ratio"] >= r["target"] else "**no**"
         lines.append(f"| {r['scene']} | {r['width']}x{r['height']} | {r['spp']} | {r['drpt_seconds']:.3f} "
-                     f"| {r['mitsuba_seconds']:.3f} | {r['time_ratio']:.2f} | {r['variance_ratio']:.2f} "
-                     f"| {r['efficiency_ratio']:.2f} | {r['target']:g}x {ok} |")
+                     f"| {r['mitsuba_seconds']:.3f} | {r['time_ratio']:.2f} | {r['variance_ratio']:.2f}"
+                     f"{_error(r)} | {r['efficiency_ratio']:.2f} | {r['target']:g}x {ok} |")
     # (a renderer whose image has non-finite pixels has no variance to compare: such a row is
     # listed, counted as short of its target and left out of the mean)
     measured = [r for r in rows if math.isfinite(r["variance_ratio"]) and r["efficiency_ratio"] > 0]

@@ -2,12 +2,14 @@
 (not a test; Linux, ``perf``).
 
     PYTHONPATH=. .venv/bin/python benchmarks/jit_hotspots.py render FILE [--seconds 14] [--out DIR]
+        [--renderer drpt|mitsuba]
     perf record -F 999 -p PID -o DIR/perf.data -- sleep 8      # once DIR/ready holds PID
     PYTHONPATH=. .venv/bin/python benchmarks/jit_hotspots.py report DIR [--top 20]
 
 ``render`` renders the corpus file ``FILE`` (a path under
 ``../shared/corpus/mitsuba-data/tests/scenes``) as ``benchmarks/equal_time_vs_mitsuba.py``
-renders it (its settings, the film scaled to 192 pixels), twice to compile, then copies every
+renders it (its settings, the film scaled to 192 pixels; ``--renderer mitsuba``: Mitsuba's
+render of the file instead of drpt's), twice to compile, then copies every
 anonymous executable mapping of the process (the LLVM backend's kernels) to ``DIR/code_ADDR.bin``,
 writes its process id to ``DIR/ready`` and renders in a loop for ``--seconds``: attach ``perf``
 then, so that loading and compiling are not in the samples. ``report`` reads
@@ -33,12 +35,16 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
-def render(file: str, seconds: float, out: Path) -> None:
+def render(file: str, seconds: float, out: Path, renderer: str = "drpt") -> None:
     import equal_time_vs_mitsuba as eq
 
+    from drpt.backend import ensure, set_mitsuba_variant
+
+    ensure()
+    set_mitsuba_variant()  # the variant the equal-time benchmark renders Mitsuba with
     out.mkdir(parents=True, exist_ok=True)
     ways, info = eq.prepare(eq.Case(file, 2.0, eq.CORPUS / file), 192, 1_000_000)
-    f = ways["drpt"]
+    f = ways[renderer]
     f(0)
     f(1)
     for line in open("/proc/self/maps"):
@@ -53,7 +59,7 @@ def render(file: str, seconds: float, out: Path) -> None:
     while time.perf_counter() - t < seconds:
         f(n)
         n += 1
-    print(f"{file}: {info['width']}x{info['height']}, {info['spp']} spp, "
+    print(f"{file} ({renderer}): {info['width']}x{info['height']}, {info['spp']} spp, "
           f"{(time.perf_counter() - t) / n:.3f} s per render ({n} renders)")
 
 
@@ -102,12 +108,13 @@ def main(argv=None) -> None:
     r.add_argument("file")
     r.add_argument("--seconds", type=float, default=14.0)
     r.add_argument("--out", type=Path, default=Path("/tmp/jit_hotspots"))
+    r.add_argument("--renderer", choices=("drpt", "mitsuba"), default="drpt")
     p = sub.add_parser("report")
     p.add_argument("out", type=Path)
     p.add_argument("--top", type=int, default=20)
     a = ap.parse_args(argv)
     if a.cmd == "render":
-        render(a.file, a.seconds, a.out)
+        render(a.file, a.seconds, a.out, a.renderer)
     else:
         report(a.out, a.top)
 

@@ -30,7 +30,9 @@ Options (anywhere on the line): ``--scale K`` renders a Mitsuba XML file's film 
 its authored size (both renderers; ``equal_time_vs_mitsuba.py`` scales the corpus films to
 192 pixels); ``--grid COLSxROWS`` also prints the ratio, its jackknife error and the share of
 Mitsuba's variance in each cell of a ``COLS`` x ``ROWS`` grid over the image (the corpus's
-``bsdf_spheres`` grid is ``5x3``: one BSDF a cell), to find the region that holds an excess;
+``bsdf_spheres`` grid is ``5x3``: one BSDF a cell), to find the region that holds an excess,
+with the ratio of the cell's mean images and the z of their difference (the rounds' cell
+sums; a cell without noise is listed only where that z exceeds 4);
 ``--light-sampler NAME`` sets drpt's (default: drpt's default), ``--env-compensation on|off``
 drpt's MIS compensation of the sky (default: drpt's default); ``--bsdf MODE`` how drpt
 and the exported scene read a drpt-format scene's MTL materials (``drpt render --bsdf``).
@@ -87,17 +89,29 @@ def _grid(a: np.ndarray, b: np.ndarray, spec: str) -> None:
     height, width = a.shape[1:3]
     total = b.var(0, ddof=1).sum()
     print(f"  per cell of a {cols}x{rows} grid (row, column from the top left): ratio +- error, "
-          "share of Mitsuba's variance, mean image ratio")
+          "share of Mitsuba's variance, mean image ratio and its z")
     for r in range(rows):
         for c in range(cols):
             cell = np.zeros((height, width), bool)
             cell[r * height // rows:(r + 1) * height // rows, c * width // cols:(c + 1) * width // cols] = True
             ac, bc = a[:, cell], b[:, cell]
             vb = bc.var(0, ddof=1)
+            z = _mean_z(ac, bc)
             if vb.sum() <= 1e-4 * total:
-                continue  # a cell without noise: no ratio to read
+                if abs(z) > 4.0:  # a cell without noise whose mean differs: no ratio to read
+                    print(f"    ({r}, {c}): -, {vb.sum() / total:.1%}, mean {ac.mean() / bc.mean():.4f} "
+                          f"z {z:+.1f}")
+                continue
             print(f"    ({r}, {c}): {_ratio(ac, bc):.3f} +- {_jackknife(ac, bc):.3f}, "
-                  f"{vb.sum() / total:.1%}, mean {ac.mean() / bc.mean():.4f}")
+                  f"{vb.sum() / total:.1%}, mean {ac.mean() / bc.mean():.4f} z {z:+.1f}")
+
+
+def _mean_z(a: np.ndarray, b: np.ndarray) -> float:
+    """The z of the difference of two means over rounds (``a``, ``b``: rounds first): the
+    rounds' sums of each, independent across rounds and renderers."""
+    sa, sb = a.reshape(len(a), -1).sum(1), b.reshape(len(b), -1).sum(1)
+    se = np.sqrt(sa.var(ddof=1) / len(sa) + sb.var(ddof=1) / len(sb))
+    return float((sa.mean() - sb.mean()) / se) if se > 0 else 0.0
 
 
 def main(argv: list[str]) -> None:

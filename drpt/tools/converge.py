@@ -292,7 +292,9 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
     so that load from other processes falls on all of them alike. Returns name ->
     ``{"seconds": median wall seconds of a render, "variance": per-pixel variance across
     the rounds' images (ddof 1) averaged over pixels and channels, "efficiency":
-    1 / (seconds * variance)}``: the inverse of the variance a render reaches per second.
+    1 / (seconds * variance), "loo_variances": the variance with each round left out in
+    turn (round order; empty below 3 rounds)}``: the inverse of the variance a render
+    reaches per second. :func:`variance_ratio_error` reads the last.
     """
     if rounds < 2:
         raise DrptError(f"efficiency needs at least 2 rounds, got {rounds}")
@@ -309,10 +311,38 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
     out = {}
     for name in ways:
         sec = float(np.median(times[name]))
-        var = float(np.stack(images[name]).var(0, ddof=1).mean())
+        stack = np.stack(images[name])
+        var = float(stack.var(0, ddof=1).mean())
         out[name] = {"seconds": sec, "variance": var,
-                     "efficiency": 1.0 / (sec * var) if sec * var > 0 else float("inf")}
+                     "efficiency": 1.0 / (sec * var) if sec * var > 0 else float("inf"),
+                     "loo_variances": _loo_variances(stack)}
     return out
+
+
+def _loo_variances(stack: np.ndarray) -> list[float]:
+    """Per round ``k`` of ``stack`` (rounds first): the per-pixel variance (ddof 1) of the
+    other rounds, averaged over pixels and channels; empty below 3 rounds."""
+    n = len(stack) - 1
+    if n < 2:
+        return []
+    s1, s2 = stack.sum(0), np.square(stack).sum(0)
+    out = []
+    for x in stack:
+        m = (s1 - x) / n
+        out.append(float(np.mean((s2 - x * x - n * m * m) / (n - 1))))
+    return out
+
+
+def variance_ratio_error(a: dict, b: dict) -> float:
+    """The jackknife standard error, over the rounds, of ``a["variance"] / b["variance"]``
+    (two ways of one :func:`efficiency_rounds` call: the same rounds); NaN below 3 rounds.
+    Where a few pixels hold most of the variance (a sub-pixel highlight, a caustic) a ratio
+    read from a few rounds can be far from its expectation, and this error says how far."""
+    la, lb = np.asarray(a["loo_variances"]), np.asarray(b["loo_variances"])
+    if len(la) < 3 or len(la) != len(lb) or not np.all(lb > 0):
+        return float("nan")
+    r = la / lb
+    return float(np.sqrt((len(r) - 1) / len(r) * np.sum((r - r.mean()) ** 2)))
 
 
 # ------------------------------------------------------------ rendering

@@ -210,6 +210,7 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--no-corpus",  # (benchmarks/equal_time_vs_mitsuba.py)
                   "--scale", "--grid",  # (benchmarks/variance_vs_mitsuba.py)
                   "--all-textures",  # (benchmarks/kernel_ops.py)
+                  "--seconds", "--renderer",  # (benchmarks/jit_hotspots.py)
                   "--agree",  # (benchmarks/env_compensation.py)
                   "--npz",  # (benchmarks/estimator_variants.py)
                   "--mitsuba", "--dump",  # (benchmarks/render_loop.py)

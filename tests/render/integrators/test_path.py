@@ -422,3 +422,48 @@ def test_coherent_shadow_rays_change_no_pixel(tmp_path, monkeypatch, depth):
     assert seen and all(c is False for c in seen)
     assert plain.max() > 0.0
     np.testing.assert_array_equal(hinted, plain)
+
+
+MASK_XML = """<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+  <sensor type="perspective">
+    <float name="fov" value="30"/>
+    <transform name="to_world"><lookat origin="0, 0, 6" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
+      <rfilter type="box"/></film>
+  </sensor>
+  <emitter type="point"><point name="position" x="1" y="1" z="3"/><rgb name="intensity" value="10"/></emitter>
+  <shape type="rectangle">
+    <bsdf type="mask"><float name="opacity" value="{opacity}"/>
+      <bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.5, 0.7"/></bsdf></bsdf>
+  </shape>
+</scene>"""
+
+
+def test_mask_direct_light_is_linear_in_opacity(tmp_path):
+    """A mask of opacity ``a`` over a diffuse quad, lit by a point light with nothing behind
+    it (max_depth 2, no sky): the image is ``a`` times the opaque quad's, the mask's
+    ``eval`` being ``a f`` whatever slot the vertex then samples (the pass-through or the
+    diffuse lobe). Mitsuba's ``path`` keeps a path's radiance only once one of its vertices
+    has sampled a non-null lobe or hit an emitter (``valid_ray``; where the scene has no
+    environment), which drops the direct light of the vertices that sampled the
+    pass-through: ``a^2`` times the opaque image (docs/performance.md, "Masks: Mitsuba's
+    `valid_ray`"). With one seed both renders trace the same camera rays and the direct
+    light of a point light is deterministic, so the ratio is ``a`` to rounding; the bound
+    is 2%. Negative control: the quad rendered at opacity ``a^2`` (the image Mitsuba's rule
+    gives at ``a``) fails the same check."""
+    def total(opacity):
+        (tmp_path / "m.xml").write_text(MASK_XML.format(opacity=opacity))
+        r = Renderer(load_scene(tmp_path / "m.xml"),
+                     RenderOptions(width=16, height=16, spp=16, seed=3, progress=False,
+                                   path=PathOptions(max_depth=2)))
+        return float(r.render().image.sum())
+
+    opaque, a = total(1.0), 0.4
+    assert opaque > 0.0
+
+    def linear(ratio):
+        return abs(ratio - a) < 0.02 * a
+
+    assert linear(total(a) / opaque)
+    assert not linear(total(a * a) / opaque)  # the negative control: Mitsuba's a^2
