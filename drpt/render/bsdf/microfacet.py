@@ -97,7 +97,9 @@ class Distribution:
     a by-product of the first), which leaves the sampled CDF within 3e-7 of
     ``u`` (the float32 floor) where Newton's leave up to 3e-6 (``cos theta'``
     0.8-0.95, ``u`` near 1, where the CDF flattens), and evaluates ``erf``,
-    ``erfinv``, ``exp`` and ``log`` by :mod:`drpt.render.erf32`. With the
+    ``erfinv``, ``exp`` and ``log`` by :mod:`drpt.render.erf32` (the last
+    ``erfinv``, after the third step, by Taylor's second order from the
+    second's). With the
     same ``u`` GGX's normal is Mitsuba's (to float rounding) except where
     ``wi'`` is within ~1e-3 rad of the normal: there Mitsuba's azimuth of
     ``wi'`` (from ``sin^2 theta = 1 - cos^2 theta`` in float32) is inexact,
@@ -217,13 +219,17 @@ class Distribution:
             # g' = 1 - slope tan_i, g'' = -tan_i (sqrt(pi) / 2) e^(slope^2); x -= 2 g g' / (2 g'^2 - g g''),
             # numerator and denominator times e^(-slope^2) (finite for |slope| < 9); the denominator
             # kept >= g'^2 e (a step at most twice Newton's, never through a pole)
-            slope = erf32.erfinv(dr.clip(x, -_ERF_MAX, _ERF_MAX))
+            xc = dr.clip(x, -_ERF_MAX, _ERF_MAX)
+            slope = erf32.erfinv(xc)
             e = erf32.exp(-dr.square(slope))
             g = 1.0 + x + isp * tan_i * e - ux
             g1 = 1.0 - slope * tan_i
             g1e = dr.square(g1) * e
             x = x - 2.0 * g * g1 * e / dr.maximum(2.0 * g1e + (0.5 * dr.sqrt(dr.pi)) * tan_i * g, g1e)
-        sx = erf32.erfinv(dr.clip(x, -_ERF_MAX, _ERF_MAX))
+        # erfinv at the last step's x from the one before it by Taylor's second order (the step
+        # is at the CDF's 1e-5 by then): erfinv' = k = (sqrt(pi) / 2) e^(slope^2), erfinv'' = 2 slope k^2
+        kd = (0.5 * dr.sqrt(dr.pi)) / e * (dr.clip(x, -_ERF_MAX, _ERF_MAX) - xc)
+        sx = slope + kd + slope * dr.square(kd)
         sy = erf32.erfinv(2.0 * uy - 1.0)
         return Array3f(-sx, sy, 1.0)  # (y negated, see sample_visible_normal)
 
