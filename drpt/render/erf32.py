@@ -1,7 +1,9 @@
 """Single-precision ``exp``, ``log``, ``erf`` and ``erfinv`` for kernels whose
-arguments are known to be in range, faster than Dr.Jit's general versions, which
-handle infinities, NaNs, denormals and both signs at every call (their CPU time
-and operation counts: ``docs/performance.md``, "Beckmann's sampler"). Pure
+arguments are known to be in range. ``log``, ``erf`` and ``erfinv`` are faster than
+Dr.Jit's general versions, which handle infinities, NaNs, denormals and both signs
+at every call; ``exp`` is as fast as Dr.Jit's (the building block of ``erf``, and
+exactly 0 where it underflows). Their CPU time and operation counts:
+``docs/performance.md``, "Beckmann's sampler". Pure
 Dr.Jit, usable in symbolic loops. Their user: Beckmann's visible-normal sampler
 (:meth:`drpt.render.bsdf.microfacet.Distribution._slopes11_beckmann`).
 
