@@ -39,7 +39,7 @@ def reflect(wi: Array3f, m: Array3f) -> Array3f:
 #: |erf(x)| bound of the Beckmann slope sampler (``erfinv(+-1)`` is infinite).
 _ERF_MAX = 1.0 - 1.2e-7
 #: Halley steps of the Beckmann slope sampler (after Jakob's initial guess, the
-#: sampled CDF within 3e-7 of ``u`` with three, 7e-6 with two: tests/render/bsdf/test_microfacet.py).
+#: sampled CDF within 3e-7 of ``u`` with three, 3e-5 with two: tests/render/bsdf/test_microfacet.py).
 _HALLEY_STEPS = 3
 
 
