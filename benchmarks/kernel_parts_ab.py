@@ -16,7 +16,7 @@ share). The parts (class attributes patched while the variant traces its kernel)
 * ``shadows``: the inline accelerator's shadow test answers False (what the shadow rays cost);
 * ``closest``: the inline accelerator's closest-hit query runs twice (what one more costs),
   the second on a direction multiplied by an opaque 1 so that Dr.Jit cannot share the two;
-* ``beckmann``: Beckmann's visible-normal routine replaced by GGX's (what its Newton steps on
+* ``beckmann``: Beckmann's visible-normal routine replaced by GGX's (what its Halley steps on
   ``erf``/``erfinv`` cost);
 * ``spheres``: the inline accelerator leaves the spheres out (closest hit and shadow test).
 """
