@@ -14,8 +14,10 @@ that the kernel's execution is a phase of its own:
 * ``launch``: ``dr.eval`` of the kernel (code generation, the kernel cache's look-up, the
   launch);
 * ``kernel``: its execution, to the ``dr.sync_thread()``;
-* ``readback``: the pixel sums to numpy (``Renderer._trace_pass`` after the kernel; with a
-  tent or gaussian filter ``Renderer._trace_splat_pass``'s film gather, its kernel too);
+* ``readback``: the pixel sums to numpy (``Renderer._trace_pass`` after the kernel: where a
+  pixel has several lanes, mostly the kernel that adds them, :func:`drpt.render.film.lane_sums`,
+  whose tracing and launch a render overlaps with the path kernel; with a tent or gaussian
+  filter ``Renderer._trace_splat_pass``'s film gather, its kernel too);
 * ``finish``: the image, its variance and moments from the merged sums
   (:func:`drpt.render.renderer.finish`);
 * ``rest``: the render less all of the above (the plan, the chunk merge, the checks).

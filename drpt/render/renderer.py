@@ -372,8 +372,7 @@ class Renderer:
             sums = self._trace_splat_pass(pass_index, k, r0, rows)
         else:
             img, sq, nbad = self._trace_pass(pass_index, k, r0, rows, wide=False)
-            # (a sum of finite float32 values is finite in float64: no temporary per element)
-            if not (np.isfinite(img.sum(dtype=np.float64)) and np.isfinite(sq.sum(dtype=np.float64))):
+            if not all_finite(img, sq):
                 img, sq, nbad = self._trace_pass(pass_index, k, r0, rows, wide=True)
             sums = PassSums(r0, img, sq, nbad)
         if self.aov_kinds:
@@ -885,10 +884,12 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
     # (consume: the squares' means in the merge's own array, the same division as sumsq / spp)
     second = np.divide(merged.sumsq, spp, out=merged.sumsq if consume else None)
     moment2 = xyz_second_moment(second) if second.shape[-1] == 6 else None
-    var = second if second.shape[-1] == 3 else second[..., :3].copy()
+    # (with the channel products after the squares, var is a fresh array: each channel's
+    # difference written into it, with no copy of the squares first)
+    var = second if second.shape[-1] == 3 else np.empty(mean.shape)
     square = np.empty(mean.shape[:-1])  # one channel's temporary, for each channel in turn
     for c in range(3):
-        var[..., c] -= np.square(mean[..., c], out=square)
+        np.subtract(second[..., c], np.square(mean[..., c], out=square), out=var[..., c])
     np.maximum(var, 0.0, out=var)
     var *= spp
     var /= max(spp - 1, 1)
@@ -958,6 +959,15 @@ def stops(estimate: float | None, merged: ChunkMerge, opts: RenderOptions, secon
     if opts.target_error is not None and estimate is not None and estimate <= opts.target_error:
         return True
     return opts.time_limit is not None and seconds >= opts.time_limit
+
+
+def all_finite(*arrays: np.ndarray) -> bool:
+    """Whether every value of the arrays is finite: a pass's float32 sums did not overflow
+    (:meth:`Renderer.render_pass`). Each array's largest and smallest value (a NaN propagates
+    through both): vectorized passes in the arrays' own precision, no temporary per element,
+    no float64 conversion, and no false alarm where the finite values' sum would pass the
+    float32 maximum."""
+    return all(np.isfinite(a.max()) and np.isfinite(a.min()) for a in arrays)
 
 
 def _check_range(mean: np.ndarray) -> None:

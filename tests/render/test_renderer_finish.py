@@ -1,6 +1,8 @@
 """finish (drpt/render/renderer.py) of splatted camera samples: the render's own call
 (``consume``, in the merge's arrays) gives the image, variance and second moments of
-``consume=False`` bit for bit."""
+``consume=False`` bit for bit; of a box film's samples (with the moment integrator's
+products too), both are the definition written out, bit for bit. all_finite, the check
+of a pass's float32 sums for overflow."""
 
 import copy
 
@@ -67,3 +69,56 @@ def test_consuming_finish_is_the_general_one(channels, zero_weight):
         mean = m.sum / ws
         other = np.maximum(m.sumsq[..., :3] * (1.0 / ws2) - mean * mean, 0.0) / np.maximum(ws * ws / ws2 - 1.0, 1.0)
         assert not np.array_equal(other, want.variance)
+
+
+def _plain(channels: int) -> ChunkMerge:
+    rng = np.random.default_rng(channels)
+    m = ChunkMerge(plan_chunks(W, H, 27, 1 << 20, None))
+    m.next = m.chunks.count
+    m.sum = rng.random((H, W, 3)) * 27.0
+    m.sumsq = rng.random((H, W, channels)) * 27.0
+    m.sumsq[::3, ::2, :3] *= 0.01  # a negative variance estimate, clamped to 0
+    if channels == 6:
+        m.sumsq[..., 3:] -= 13.0  # channel products of either sign
+    return m
+
+
+@pytest.mark.parametrize("channels", [3, 6])
+def test_finish_of_a_pixels_own_samples_is_its_definition(channels):
+    """A box film's merge (each pixel the mean of its own spp samples; with 6 channels the
+    moment integrator's products after the squares): the image, variance and second moments
+    of ``consume`` and of ``consume=False`` are, bit for bit, the definition written in the
+    operations' order (``max(sumsq / spp - mean^2, 0) * spp / max(spp - 1, 1) / spp``).
+    Negative control: the variance as ``(sumsq / spp - mean^2) / (spp - 1)``, the same in exact
+    arithmetic, differs in its bits."""
+    m = _plain(channels)
+    spp = m.spp
+    mean = m.sum / spp
+    second = m.sumsq / spp
+    var = np.maximum(second[..., :3] - mean * mean, 0.0) * spp / max(spp - 1, 1) / spp
+    for consume in (False, True):
+        got = finish(copy.deepcopy(m), 1.0, 0.0, consume=consume)
+        assert np.array_equal(got.image, mean.astype(np.float32))
+        assert np.array_equal(got.variance, var) and got.variance.flags.c_contiguous
+        assert (got.moment2 is None) == (channels == 3)
+        if channels == 6:
+            assert np.array_equal(got.moment2, xyz_second_moment(second))
+    other = np.maximum(second[..., :3] - mean * mean, 0.0) / (spp - 1)
+    assert not np.array_equal(other, got.variance)
+
+
+def test_all_finite_sees_every_overflow_and_no_finite_sum():
+    """``all_finite`` (the check that traces a pass again with float64 sums) is false for a
+    float32 sum that overflowed to +inf, a negative one at -inf and a NaN, and true for finite
+    values near the float32 maximum whose float32 sum overflows. Negative control: the
+    float32 sum of those values is not finite, so summing in float32 would retrace that pass."""
+    from drpt.render.renderer import all_finite
+
+    near = np.full((4, 5, 3), 3e38, np.float32)
+    assert all_finite(near, near[..., :1])
+    for bad in (np.inf, -np.inf, np.nan):
+        a = near.copy()
+        a[2, 3, 1] = bad
+        assert not all_finite(near, a) and not all_finite(a)
+    with np.errstate(over="ignore"):
+        assert not np.isfinite(near.sum(dtype=np.float32))
