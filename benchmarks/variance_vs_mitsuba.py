@@ -2,6 +2,7 @@
 
     PYTHONPATH=. .venv/bin/python benchmarks/variance_vs_mitsuba.py SCENE [FILTER SIZE SPP ROUNDS [MAX_DEPTH]]
         [--scale K] [--grid COLSxROWS] [--light-sampler NAME] [--bsdf MODE] [--env-compensation on|off]
+        [--sampler NAME]
 
 Renders ``SCENE`` (drpt's format: at ``SIZE`` (``N`` for N x N or ``WxH``) with ``--filter
 FILTER``, default gaussian 128; a Mitsuba XML file: its own film, filter and integrator) with ``SPP`` samples
@@ -35,7 +36,11 @@ with the ratio of the cell's mean images and the z of their difference (the roun
 sums; a cell without noise is listed only where that z exceeds 4);
 ``--light-sampler NAME`` sets drpt's (default: drpt's default), ``--env-compensation on|off``
 drpt's MIS compensation of the sky (default: drpt's default); ``--bsdf MODE`` how drpt
-and the exported scene read a drpt-format scene's MTL materials (``drpt render --bsdf``).
+and the exported scene read a drpt-format scene's MTL materials (``drpt render --bsdf``);
+``--sampler NAME`` drpt's ``--sampler`` on a drpt-format scene (default ``auto``, drpt's
+default), whose export names the sampler drpt draws with, as ``equal_time_vs_mitsuba.py``'s
+does: both renderers draw from the same kind of sampler (Mitsuba's ``ldsampler`` takes a
+power of 4 samples per pixel and rounds any other count up, so give it one).
 """
 
 from __future__ import annotations
@@ -71,7 +76,7 @@ def _options(argv: list[str]) -> tuple[list[str], dict]:
     pos, opts = [], {}
     it = iter(argv)
     for arg in it:
-        if arg in ("--scale", "--grid", "--light-sampler", "--bsdf", "--env-compensation"):
+        if arg in ("--scale", "--grid", "--light-sampler", "--bsdf", "--env-compensation", "--sampler"):
             opts[arg[2:]] = next(it)
         else:
             pos.append(arg)
@@ -120,7 +125,7 @@ def main(argv: list[str]) -> None:
     from drpt import llvm_tuning
     from drpt.backend import ensure, set_mitsuba_variant
     from drpt.export.mitsuba import to_mitsuba_dict
-    from drpt.options import PathOptions, RenderOptions, with_scene_settings
+    from drpt.options import PathOptions, RenderOptions, resolve_sampler, with_scene_settings
     from drpt.render.renderer import Renderer
     from drpt.scene import load_scene
 
@@ -144,7 +149,8 @@ def main(argv: list[str]) -> None:
     else:
         scene = load_scene(path)
         opt = RenderOptions(width=width, height=height, spp=spp, filter=flt, progress=False,
-                            path=PathOptions(max_depth=depth), bsdf=extra.get("bsdf", "auto"))
+                            path=PathOptions(max_depth=depth), bsdf=extra.get("bsdf", "auto"),
+                            sampler=extra.get("sampler", "auto")).validate()
     if "light-sampler" in extra:
         opt = replace(opt, light_sampler=extra["light-sampler"])
     if "env-compensation" in extra:
@@ -160,7 +166,8 @@ def main(argv: list[str]) -> None:
             ms = mi.load_file(str(path), spp=str(spp))
         else:
             ms = mi.load_dict(to_mitsuba_dict(scene, opt.width, opt.height, spp, max_depth=depth,
-                                              rfilter=opt.filter, bsdf=opt.bsdf))
+                                              rfilter=opt.filter, bsdf=opt.bsdf,
+                                              sampler=resolve_sampler(opt).sampler))
     ours, theirs = [], []
     for k in range(rounds):
         ours.append(renderer.derive(replace(renderer.opt, seed=k)).render().image.astype(np.float64))

@@ -6,14 +6,25 @@ scene's original primitive order and in the accel's global id space
 :meth:`SurfaceData.interaction` turns an accel ``Hit`` into a
 :class:`Interaction` (a :class:`TangentInteraction` where materials need
 tangents). Only the primitive kinds the scene has are traced.
+
+A triangle's attributes are one record of ``tri_data``, a multiple of 8 floats: ``p0``,
+``e1``, ``e2``, then the three vertex normals, the three uvs and ``dp/du``, ``dp/dv``
+where the scene has them, zero-padded. :meth:`SurfaceData.tri_fields` reads a record's
+leading floats with Dr.Jit's packet gathers (8 floats per aligned load and a transpose,
+``JitFlag.PacketOps``), where one array per field took a gather per float (up to 30,
+with 64-bit indices, one lane at a time); :meth:`SurfaceData.triangle` is the reader for
+the emitters (:mod:`~drpt.render.lights.area`). The array must be aligned
+(:func:`~drpt.accel.device.device_array`): Dr.Jit reads an unaligned one by single
+gathers.
 """
 
 from __future__ import annotations
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
+from drjit.auto import Array2f, Array3f, ArrayXf, Bool, Float, UInt32
 
+from ..accel.device import device_array
 from ..scene.model import Scene
 from .spawn import plane_error, plane_project, sphere_error, triangle_point
 
@@ -119,6 +130,17 @@ def coordinate_system(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return s, t
 
 
+class TriangleRecord:
+    """A triangle's data read by :meth:`SurfaceData.triangle`: corner ``p0`` and edges
+    ``e1 = p1 - p0``, ``e2 = p2 - p0``; the vertex normals ``n`` and uvs ``uv`` (three
+    each) where read, else None."""
+
+    def __init__(self, p0: Array3f, e1: Array3f, e2: Array3f):
+        self.p0, self.e1, self.e2 = p0, e1, e2
+        self.n: tuple[Array3f, Array3f, Array3f] | None = None
+        self.uv: tuple[Array2f, Array2f, Array2f] | None = None
+
+
 class SurfaceData:
     """``tangents``: 0, or 1 to give interactions Mitsuba's ``dp/du`` (anisotropic
     BSDFs and normal maps orient their frame by it), 2 to give ``dp/dv`` too (bump maps)."""
@@ -131,23 +153,23 @@ class SurfaceData:
             # Edges of the float32 vertices the accelerators test, so that
             # p0 + u e1 + v e2 is rounded from a point of that triangle.
             p = np.asarray(tris.positions, np.float32).astype(np.float64)
-            self.p0 = _vec(p[:, 0])
-            self.e1 = _vec(p[:, 1] - p[:, 0])
-            self.e2 = _vec(p[:, 2] - p[:, 0])
+            cols = [p[:, 0], p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]]
             self.has_normals = tris.normals is not None
             self.has_uv = with_uv and tris.uvs is not None
-            if self.has_uv:
-                uv = np.asarray(tris.uvs, np.float32)
-                self.uv0, self.uv1, self.uv2 = (
-                    Array2f(np.ascontiguousarray(uv[:, k, 0]), np.ascontiguousarray(uv[:, k, 1]))
-                    for k in range(3))
             if self.has_normals:
-                self.n0, self.n1, self.n2 = (_vec(tris.normals[:, k]) for k in range(3))
+                cols += [tris.normals[:, k] for k in range(3)]
+            if self.has_uv:
+                cols += [tris.uvs[:, k] for k in range(3)]
             if tangents:
                 dp_du, dp_dv = triangle_tangents(tris.positions, tris.uvs)
-                self.dp_du = _vec(dp_du)
-                if tangents > 1:
-                    self.dp_dv = _vec(dp_dv)
+                cols += [dp_du] + ([dp_dv] if tangents > 1 else [])
+            flat = np.concatenate([np.asarray(c, np.float32).reshape(self.n_tri, -1) for c in cols], 1)
+            self.tri_floats = flat.shape[1]
+            self.tri_rows = -(-self.tri_floats // 8)
+            rec = np.zeros((self.n_tri, 8 * self.tri_rows), np.float32)
+            rec[:, :self.tri_floats] = flat
+            # aligned: Dr.Jit reads an unaligned array by one gather per float, not by packets
+            self.tri_data = device_array(Float, rec)
         if self.n_sph:
             self.sph_c = _vec(sph.center)
             self.sph_r = Float(sph.radius.astype(np.float32))
@@ -160,6 +182,38 @@ class SurfaceData:
             self.pl_o = Float(np.asarray(pl.offset, np.float32))
         mats = np.concatenate([tris.material, sph.material, pl.material]).astype(np.uint32)
         self.material = UInt32(mats)
+
+    def tri_fields(self, i: UInt32, active: Bool, count: int) -> list[Float]:
+        """The first ``count`` floats of triangle ``i``'s record, read as packets of 8 (a
+        32-byte load per lane and packet, where a gather per float reads one lane at a time)."""
+        out: list[Float] = []
+        base = i * self.tri_rows
+        for r in range(-(-count // 8)):
+            row = dr.gather(ArrayXf, self.tri_data, base + r if r else base, active, shape=(8, dr.width(i)))
+            out += [row[k] for k in range(8)]
+        return out[:count]
+
+    def triangle(self, i: UInt32, active: Bool, normals: bool = False, uv: bool = False) -> TriangleRecord:
+        """Triangle ``i``'s data for the ``active`` lanes: always ``p0, e1, e2``; its three
+        vertex normals with ``normals`` (None where the mesh has none) and its three uvs
+        with ``uv`` (None where the interactions carry none). Only the record's leading
+        floats that these need are read."""
+        n_off = 9
+        uv_off = n_off + 9 * self.has_normals
+        t_off = uv_off + 6 * self.has_uv
+        count = 9
+        if normals and self.has_normals:
+            count = uv_off
+        if uv and self.has_uv:
+            count = t_off
+        f = self.tri_fields(i, active, count)
+        v3 = [Array3f(*f[k:k + 3]) for k in range(0, min(count, uv_off), 3)]
+        rec = TriangleRecord(*v3[:3])
+        if count > n_off and self.has_normals:
+            rec.n = tuple(v3[3:6])
+        if count > uv_off:
+            rec.uv = tuple(Array2f(*f[k:k + 2]) for k in range(uv_off, t_off, 2))
+        return rec
 
     # ------------------------------------------------------------------
     def interaction(self, o: Array3f, d: Array3f, hit) -> Interaction:
@@ -176,9 +230,10 @@ class SurfaceData:
         if self.n_tri:
             is_tri = valid & (prim < self.n_tri)
             i = dr.select(is_tri, prim, 0)
-            e1 = dr.gather(Array3f, self.e1, i, is_tri)
-            e2 = dr.gather(Array3f, self.e2, i, is_tri)
-            p0 = dr.gather(Array3f, self.p0, i, is_tri)
+            f = self.tri_fields(i, is_tri, self.tri_floats)
+            vec = [Array3f(*f[k:k + 3]) for k in range(0, 9 + 9 * self.has_normals, 3)]
+            p0, e1, e2 = vec[:3]
+            k = len(vec) * 3
             u, v = hit.u, hit.v
             # Barycentric position is more accurate than o + t*d.
             pt, n, e = triangle_point(p0, e1, e2, u, v)
@@ -186,22 +241,20 @@ class SurfaceData:
             ng = dr.select(is_tri, n, ng)
             err = dr.select(is_tri, e, err)
             if self.has_normals:
-                sn = (dr.gather(Array3f, self.n0, i, is_tri) * (1.0 - u - v)
-                      + dr.gather(Array3f, self.n1, i, is_tri) * u
-                      + dr.gather(Array3f, self.n2, i, is_tri) * v)
+                sn = vec[3] * (1.0 - u - v) + vec[4] * u + vec[5] * v
                 len2 = dr.squared_norm(sn)
                 sn = dr.select(len2 > 1e-20, sn * dr.rsqrt(len2), n)
                 ns = dr.select(is_tri, sn, ns)
             else:
                 ns = dr.select(is_tri, n, ns)
-            if self.tangents:
-                dp_du = dr.select(is_tri, dr.gather(Array3f, self.dp_du, i, is_tri), dp_du)
-                if self.tangents > 1:
-                    dp_dv = dr.select(is_tri, dr.gather(Array3f, self.dp_dv, i, is_tri), dp_dv)
             if self.has_uv:
-                uv = (dr.gather(Array2f, self.uv0, i, is_tri) * (1.0 - u - v)
-                      + dr.gather(Array2f, self.uv1, i, is_tri) * u
-                      + dr.gather(Array2f, self.uv2, i, is_tri) * v)
+                uvs = [Array2f(*f[k + j:k + j + 2]) for j in (0, 2, 4)]
+                uv = uvs[0] * (1.0 - u - v) + uvs[1] * u + uvs[2] * v
+                k += 6
+            if self.tangents:
+                dp_du = dr.select(is_tri, Array3f(*f[k:k + 3]), dp_du)
+                if self.tangents > 1:
+                    dp_dv = dr.select(is_tri, Array3f(*f[k + 3:k + 6]), dp_dv)
         if self.n_sph:
             is_sph = valid & (prim >= self.n_tri) & (prim < self.n_tri + self.n_sph)
             j = dr.select(is_sph, prim - self.n_tri, 0)

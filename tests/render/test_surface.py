@@ -6,16 +6,22 @@ A gather of an interaction equals numpy's indexing of every field, broadcast fie
 :class:`TangentInteraction` keeps its ``dp_du``, ``dp_dv`` through gathers, selects and
 loops while a plain :class:`Interaction` has none (``None``: no tangent code). The
 surface data returns the one its materials need. Negative control: a field left out of
-``DRJIT_STRUCT`` (a plain attribute) is not carried by a gather.
+``DRJIT_STRUCT`` (a plain attribute) is not carried by a gather. The triangles' packed
+records give back each triangle's data, and interactions interpolate it (negative control:
+the records read with a wrong stride).
 """
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import drjit as dr
 import numpy as np
+import pytest
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
-from drpt.render.surface import Interaction, TangentInteraction
+from drpt.render.surface import Interaction, SurfaceData, TangentInteraction, triangle_tangents
+from drpt.scene.model import Material, PerspectiveCamera, Scene, Triangles
 
 N = 7
 
@@ -111,3 +117,62 @@ def test_surface_data_returns_the_interaction_its_materials_need(cornell):
     for tangents in (1, 2):  # as for anisotropic materials, then bump maps
         si = SurfaceData(model, tangents=tangents).interaction(o, d, hit)
         assert type(si) is TangentInteraction and dr.width(si.dp_du) == 2
+
+
+def _mesh(rng, faces, normals=True, uvs=True):
+    """A scene of ``faces`` random triangles, with per-corner normals and uvs where asked."""
+    n = rng.normal(size=(faces, 3, 3))
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    tris = Triangles(rng.uniform(-3, 3, (faces, 3, 3)), rng.integers(0, 2, faces).astype(np.int32),
+                     normals=n if normals else None, uvs=rng.random((faces, 3, 2)) if uvs else None)
+    cam = PerspectiveCamera((0, 0, 5), (0, 0, -1), (0, 1, 0), 40)
+    return Scene(path=None, camera=cam, materials=[Material("a"), Material("b")], triangles=tris)
+
+
+@pytest.mark.parametrize("normals, uvs, tangents", [(True, True, 2), (True, False, 0), (False, True, 1),
+                                                    (False, False, 0)])
+def test_triangle_records_hold_each_triangles_data(normals, uvs, tangents):
+    """The packed records (``SurfaceData.tri_data``, read by packet gathers) give back every
+    triangle's corner, edges (from the float32 corners), vertex normals, uvs and tangents,
+    for masked lanes zeros; an interaction at a hit interpolates them. Negative control: the
+    records read with a stride one row short give other values."""
+    rng = np.random.default_rng(11)
+    model = _mesh(rng, 37, normals, uvs)
+    surf = SurfaceData(model, with_uv=True, tangents=tangents)
+    assert surf.tri_rows * 8 >= surf.tri_floats and surf.tri_floats % 3 in (0, 2)
+    idx = rng.integers(0, 37, 64).astype(np.uint32)
+    active = rng.random(64) < 0.8
+    rec = surf.triangle(UInt32(idx), Bool(active), normals=True, uv=True)
+    p = np.asarray(model.triangles.positions, np.float32).astype(np.float64)
+    want = {"p0": p[:, 0], "e1": p[:, 1] - p[:, 0], "e2": p[:, 2] - p[:, 0]}
+    for name, w in want.items():
+        got = _np(getattr(rec, name)).T
+        assert np.array_equal(got[active], w[idx[active]].astype(np.float32))
+        assert not got[~active].any()
+    assert (rec.n is not None) == normals and (rec.uv is not None) == uvs
+    if normals:
+        for k in range(3):
+            assert np.array_equal(_np(rec.n[k]).T[active],
+                                  model.triangles.normals[idx[active], k].astype(np.float32))
+    if uvs:
+        for k in range(3):
+            assert np.array_equal(_np(rec.uv[k]).T[active], model.triangles.uvs[idx[active], k].astype(np.float32))
+    # an interaction at barycentrics (u, v) of a triangle interpolates the same data
+    u, v = rng.random(64, dtype=np.float32) * 0.5, rng.random(64, dtype=np.float32) * 0.5
+    hit = SimpleNamespace(valid=Bool(active), prim=UInt32(idx), t=Float(np.ones(64, np.float32)),
+                          u=Float(u), v=Float(v))
+    si = surf.interaction(dr.zeros(Array3f, 64), dr.full(Array3f, [0.0, 0.0, 1.0], 64), hit)
+    if uvs:
+        t = model.triangles.uvs[idx].astype(np.float32)
+        uv = t[:, 0] * (1 - u - v)[:, None] + t[:, 1] * u[:, None] + t[:, 2] * v[:, None]
+        assert np.allclose(_np(si.uv).T[active], uv[active], atol=1e-6)
+    if tangents:
+        dp_du, dp_dv = triangle_tangents(model.triangles.positions, model.triangles.uvs)
+        assert np.array_equal(_np(si.dp_du).T[active], dp_du[idx[active]].astype(np.float32))
+        if tangents > 1:
+            assert np.array_equal(_np(si.dp_dv).T[active], dp_dv[idx[active]].astype(np.float32))
+    # negative control: a stride one row short reads other triangles' floats
+    if surf.tri_rows > 1:
+        surf.tri_rows -= 1
+        wrong = surf.triangle(UInt32(idx), Bool(active))
+        assert not np.array_equal(_np(wrong.e2).T[active], want["e2"][idx[active]].astype(np.float32))

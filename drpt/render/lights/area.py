@@ -268,9 +268,8 @@ class AreaLights:
         if tri_prob is not None:  # the spherical triangle seen from there
             s = self.surfaces
             face = dr.select(sees_light, si.prim, 0)
-            st = SphericalTriangle(dr.gather(Array3f, s.p0, face, sees_light),
-                                   dr.gather(Array3f, s.e1, face, sees_light),
-                                   dr.gather(Array3f, s.e2, face, sees_light), ref)
+            tri = s.triangle(face, sees_light)
+            st = SphericalTriangle(tri.p0, tri.e1, tri.e2, ref)
             solid = sees_light & st.sampled
             pdf = dr.select(solid, dr.gather(Float, tri_prob, face, solid) / st.omega, pdf)
         if self.has_spheres:
@@ -344,9 +343,8 @@ class AreaLights:
         """A point on triangle ``face``: ``(p, front normal, ng, p_error, density, le,
         solid)``, ``solid`` the lanes whose density is in solid angle (None: none)."""
         s = self.surfaces
-        p0 = dr.gather(Array3f, s.p0, face, active)
-        e1 = dr.gather(Array3f, s.e1, face, active)
-        e2 = dr.gather(Array3f, s.e2, face, active)
+        tri = s.triangle(face, active, normals=True, uv=self.materials is not None)
+        p0, e1, e2 = tri.p0, tri.e1, tri.e2
         b = square_to_uniform_triangle(u)
         pdf = dr.gather(Float, table, face, active)
         solid = None
@@ -358,18 +356,14 @@ class AreaLights:
             pdf = dr.select(solid, dr.gather(Float, tri_prob, face, solid) / st.omega, pdf)
         p, ng, err = triangle_point(p0, e1, e2, b.x, b.y)
         n_front = ng
-        if s.has_normals:
-            sn = (dr.gather(Array3f, s.n0, face, active) * (1.0 - b.x - b.y)
-                  + dr.gather(Array3f, s.n1, face, active) * b.x
-                  + dr.gather(Array3f, s.n2, face, active) * b.y)
+        if tri.n is not None:
+            sn = tri.n[0] * (1.0 - b.x - b.y) + tri.n[1] * b.x + tri.n[2] * b.y
             len2 = dr.squared_norm(sn)
             n_front = dr.select(len2 > 1e-20, sn * dr.rsqrt(len2), ng)
         if self.materials is not None:
             uv = Array2f(0.0, 0.0)
-            if s.has_uv:
-                uv = (dr.gather(Array2f, s.uv0, face, active) * (1.0 - b.x - b.y)
-                      + dr.gather(Array2f, s.uv1, face, active) * b.x
-                      + dr.gather(Array2f, s.uv2, face, active) * b.y)
+            if tri.uv is not None:
+                uv = tri.uv[0] * (1.0 - b.x - b.y) + tri.uv[1] * b.x + tri.uv[2] * b.y
             material = dr.gather(UInt32, s.material, face, active)
             le = self.materials.textured_emission(material, uv, le, active)
         return p, n_front, ng, err, pdf, le, solid

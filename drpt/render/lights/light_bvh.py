@@ -62,6 +62,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array3f, Array4f, Bool, Float, UInt32
 
+from ...accel.device import device_array
 from .selection import LightSelection
 
 ONE_MINUS_EPS = 0.99999994
@@ -186,7 +187,8 @@ class LightBVH:
         rec[:, 8] = N_ce
         rec[:, 9] = N_phi / max(N_phi[0], 1e-300)
         rec[:, 10] = np.sqrt(np.maximum(1.0 - N_co * N_co, 0.0))
-        self._rec = Float(np.ascontiguousarray(rec.ravel(), np.float32))
+        # aligned: Dr.Jit reads an unaligned array's Array4f gathers one float at a time
+        self._rec = device_array(Float, rec.astype(np.float32))
         item = np.zeros(n_leaf, np.uint32)
         item[slot] = np.arange(m, dtype=np.uint32)
         self._item = UInt32(item)

@@ -27,9 +27,9 @@ def _lights(mode, tris=QUAD, media=(), integrator="volpath"):
 
 def _hit(lights, ref: Array3f, wo: Array3f, face: UInt32):
     """The interaction where the ray ``ref + t wo`` meets triangle ``face``'s plane."""
-    s = lights.surfaces
-    p0 = dr.gather(Array3f, s.p0, face)
-    ng = dr.normalize(dr.cross(dr.gather(Array3f, s.e1, face), dr.gather(Array3f, s.e2, face)))
+    tri = lights.surfaces.triangle(face, Bool(True))
+    p0 = tri.p0
+    ng = dr.normalize(dr.cross(tri.e1, tri.e2))
     t = dr.dot(p0 - ref, ng) / dr.dot(wo, ng)
     return SimpleNamespace(prim=face, t=t, ng=ng, p=ref + wo * t, valid=Bool(True) | (t > 0))
 
@@ -115,8 +115,8 @@ def _chi2_functions(ref, sample_mode="solid-angle", pdf_mode="solid-angle"):
     def pdf(w):
         n = dr.width(w)
         si = _hit(density, refv + Array3f(dr.zeros(Float, n)), w, dr.zeros(UInt32, n))
-        s = density.surfaces
-        p0, e1, e2 = (dr.gather(Array3f, a, dr.zeros(UInt32, n)) for a in (s.p0, s.e1, s.e2))
+        tri = density.surfaces.triangle(dr.zeros(UInt32, n), dr.full(Bool, True, n))
+        p0, e1, e2 = tri.p0, tri.e1, tri.e2
         q = si.p - p0  # barycentrics of the hit: inside the triangle, in front of ref
         e11, e12, e22 = dr.dot(e1, e1), dr.dot(e1, e2), dr.dot(e2, e2)
         q1, q2 = dr.dot(q, e1), dr.dot(q, e2)
