@@ -32,12 +32,13 @@ from pathlib import Path
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.auto import Bool, Float
+from drjit.auto import Bool, Float, UInt32
 
 from drpt.errors import DrptError
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.integrators import bdpt as B
 from drpt.render.renderer import Renderer
+from drpt.render.sampler import LDSampler
 from drpt.scene import load_scene
 
 REPO = Path(__file__).resolve().parents[3]
@@ -874,3 +875,73 @@ def test_the_smooth_view_gives_the_same_image(tmp_path):
         assert not np.array_equal(image(), with_view)
     finally:
         control.undo()
+
+
+#: the dimensions a lane may draw in the dimension test below (its light subpath's take fewer
+#: than CAMERA_DIMENSION, its camera subpath's from there on)
+_DIMS = 512
+
+
+class _CountingSampler(LDSampler):
+    """:class:`~drpt.render.sampler.LDSampler` that counts, per lane and dimension, the draws
+    in :attr:`counts` (a flat buffer of ``lanes x _DIMS``, set by the test): a draw is a
+    scatter-add, so it counts inside Dr.Jit's symbolic loops and ``if``s too."""
+
+    DRJIT_STRUCT = {**LDSampler.DRJIT_STRUCT, "lane": UInt32}
+    counts = None
+
+    def __init__(self, key=None, index=None, step=None):
+        super().__init__(key, index, step)
+        self.lane = dr.arange(UInt32, dr.width(self.index))
+
+    def _count(self, k: int) -> None:
+        for j in range(k):
+            dr.scatter_reduce(dr.ReduceOp.Add, type(self).counts, UInt32(1),
+                              self.lane * _DIMS + dr.minimum(self.dim + j, _DIMS - 1))
+
+    def next_float32(self):
+        self._count(1)
+        return super().next_float32()
+
+    def next_2d(self):
+        self._count(2)
+        return super().next_2d()
+
+
+@pytest.mark.parametrize("name,control", [("cornell", False), ("specular", False), ("cornell", True),
+                                          ("specular", True)])
+def test_no_decision_shares_a_low_discrepancy_dimension(scenes, monkeypatch, name, control):
+    """With ``--sampler ldsampler`` every random decision of a bdpt sample (the pixel position,
+    the light subpath's source, point, direction, splat roulette, lobe, direction and Russian
+    roulette per vertex; the camera subpath's next-event estimation, connection choice and
+    roulette, or each light vertex's connection roulette where every pair is joined, lobe,
+    direction and Russian roulette per vertex) draws a dimension of its own: no lane draws one
+    dimension twice (counted per lane and dimension, depth 8 in the Cornell box, whose camera
+    vertices join one light vertex each, and in the specular scene, whose join every one in a
+    loop; caustic merging off, its photons draw from a sampler of their own). Negative
+    control: the camera subpath starting at the light subpath's first dimension
+    (``CAMERA_DIMENSION = 2``) reuses dimensions."""
+    from drpt.render import renderer as R
+
+    cam = B.CAMERA_DIMENSION
+    if control:
+        monkeypatch.setattr(B, "CAMERA_DIMENSION", 2)
+    monkeypatch.setattr(R, "LDSampler", _CountingSampler)
+    opts = RenderOptions(width=16, height=16, spp=4, seed=3, integrator="bdpt", sampler="ldsampler",
+                         progress=False, path=PathOptions(max_depth=8), bdpt_merge=False)
+    r = Renderer(scenes[name], opts)
+    lanes = 16 * 16 * 4  # one pass
+    _CountingSampler.counts = dr.zeros(UInt32, lanes * _DIMS)
+    r.render()  # (with the path-traced pilot, which draws from the same class)
+    _CountingSampler.counts = counts = dr.zeros(UInt32, lanes * _DIMS)
+    r.render()
+    c = counts.numpy().reshape(lanes, _DIMS)
+    assert c[:, 0:2].min() == 1  # the pixel position
+    if not control:
+        assert c[:, 2:cam].sum(1).min() >= 5  # every light subpath's source, point, direction
+        assert c[:, cam:].sum() > lanes  # the camera subpaths' draws
+    assert c[:, _DIMS - 1].max() == 0  # none beyond the counted dimensions
+    if control:
+        assert c.max() > 1, c.max()
+    else:
+        assert c.max() == 1, np.argwhere(c > 1)[:5]
