@@ -768,15 +768,22 @@ def test_pilot_sets_a_power_of_two_threshold_near_the_mean(scenes):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sampler,control", [("ldsampler", False), ("zsobol", False), ("ldsampler", True)])
-def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, monkeypatch, sampler, control):
-    """bdpt draws from the scene's sampler: the Cornell box with ``ldsampler`` and ``zsobol``
-    agrees with the path tracer (independent samples; the test above's thresholds; drpt's
+@pytest.mark.parametrize("name,sampler,control", [("cornell", "ldsampler", None), ("cornell", "zsobol", None),
+                                                  ("specular", "ldsampler", None),
+                                                  ("cornell", "ldsampler", "diagonal"),
+                                                  ("cornell", "ldsampler", "reused")])
+def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, monkeypatch, name, sampler, control):
+    """bdpt draws from the scene's sampler: the Cornell box with ``ldsampler`` and ``zsobol``,
+    and the specular scene (every light vertex joined, in a loop) with ``ldsampler``,
+    agree with the path tracer (independent samples; the test above's thresholds; drpt's
     variance estimate treats the samples as independent, which overestimates an ``ldsampler``
-    image's error, so the test is conservative), with no warning. Negative control: the
-    sequence's 2-D points put on the diagonal (both coordinates the first one's) for the
-    integrator's draws fails (|z| > 6)."""
-    if control:
+    image's error, so the test is conservative), with no warning. Negative controls fail
+    (|z| > 6): the sequence's 2-D points put on the diagonal (both coordinates the first
+    one's) for the integrator's draws, and every camera vertex drawing from the same
+    dimensions (``CAMERA_STRIDE = 0``: a dimension reused at each bounce)."""
+    if control == "reused":
+        monkeypatch.setattr(B, "CAMERA_STRIDE", 0)
+    elif control:
         from drpt.render.sampler import next_2d
 
         def diagonal(rng):
@@ -784,12 +791,12 @@ def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, mo
             return B.Array2f(u.x, u.x)
 
         monkeypatch.setattr(B, "next_2d", diagonal)
-    depth, spp, _ = CASES["cornell"]
+    depth, spp, _ = CASES[name]
     opts = RenderOptions(width=32, height=32, spp=spp, seed=1, integrator="bdpt", sampler=sampler,
                          progress=False, path=PathOptions(max_depth=depth), variance=True)
-    r = Renderer(scenes["cornell"], opts)
+    r = Renderer(scenes[name], opts)
     assert not any("sampler" in w for w in r.warnings), r.warnings
-    zb, zm = _agree(r.render(), _reference(scenes, references, "cornell"))
+    zb, zm = _agree(r.render(), _reference(scenes, references, name))
     if control:
         assert zb > 6.0, zb
     else:
