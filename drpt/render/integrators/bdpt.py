@@ -64,8 +64,10 @@ shadow ray of a ``t = 1`` splat: the camera sees what lies behind an area light,
 
 The light subpath starts as light tracing's: a source chosen uniformly among
 the scene's emitters (:class:`~drpt.render.lights.rays.EmitterRays`), a point
-and a direction on it; it carries importance (refraction's ``eta^2`` undone,
-Veach's shading-normal correction). Its surface vertices that are not pure
+and a direction on it (with a low-discrepancy sampler the source and an area light's
+primitive are picked with the point's pair, so the points stay stratified over all of
+them); it carries importance (refraction's ``eta^2`` undone, Veach's shading-normal
+correction). Its surface vertices that are not pure
 Dirac (mirror, smooth glass) are stored in per-lane local arrays
 (``dr.alloc_local``, one per field) of ``max_depth - 1`` entries; the camera
 subpath then runs as a Dr.Jit loop, and each of its non-Dirac vertices is
