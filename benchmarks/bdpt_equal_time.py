@@ -11,7 +11,8 @@ seconds, steadier on a loaded machine), the relMSE against the reference (minus 
 reference's own estimated relMSE) and relMSE x seconds (lower is better: the relMSE at
 equal time, up to a constant), then bdpt's relMSE x seconds over path's (by wall and by
 CPU seconds). ``--sampler`` sets both integrators' sampler (the reference's stays
-``independent``).
+``independent``); ``--path-sampler`` and ``--bdpt-sampler`` set one integrator's (``auto``:
+what a user gets, :func:`drpt.options.resolve_sampler`).
 
 ``--seeds N`` renders each integrator with seeds ``2 .. N + 1``, path and bdpt in turns
 (ABAB: both see the same load), and sums the relMSE and the seconds over the seeds (one
@@ -23,7 +24,7 @@ the same images.
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/bdpt_equal_time.py [--size 64] [--depth 8]
 [--path-spp 256] [--bdpt-spp 64] [--ref-spp 2048] [--scenes cornell,caustic,glass] [--repeat 3]
-[--sampler independent] [--seeds 1] [--reference PATH]
+[--sampler independent] [--path-sampler S] [--bdpt-sampler S] [--seeds 1] [--reference PATH]
 """
 
 from __future__ import annotations
@@ -109,6 +110,8 @@ def main() -> None:
     p.add_argument("--scenes", default="cornell,caustic,glass")
     p.add_argument("--repeat", type=int, default=3, help="timed renders; the fastest counts")
     p.add_argument("--sampler", default="independent", help="both integrators' --sampler")
+    p.add_argument("--path-sampler", default=None, help="the path tracer's --sampler (default: --sampler)")
+    p.add_argument("--bdpt-sampler", default=None, help="bdpt's --sampler (default: --sampler)")
     p.add_argument("--seeds", type=int, default=1, help="renders of seeds 2 .. N + 1 each, in turns")
     p.add_argument("--reference", type=Path, default=None,
                    help="a folder that keeps the references (rendered there when missing)")
@@ -120,8 +123,9 @@ def main() -> None:
                              sampler=a.sampler)
         ref_image, ref_err = reference(scene, base, name, a)
         renderers = {}
+        samplers = {"path": a.path_sampler or a.sampler, "bdpt": a.bdpt_sampler or a.sampler}
         for integrator, spp in (("path", a.path_spp), ("bdpt", a.bdpt_spp)):
-            r = Renderer(scene, replace(base, integrator=integrator, spp=1, seed=1))
+            r = Renderer(scene, replace(base, integrator=integrator, spp=1, seed=1, sampler=samplers[integrator]))
             r.render()  # compiles the kernels
             renderers[integrator] = r.derive(replace(r.opt, spp=spp))
         totals = {k: [0.0, 0.0, 0.0] for k in renderers}  # relMSE, seconds, CPU seconds
@@ -137,8 +141,8 @@ def main() -> None:
                 err = rel_mse(img.image, ref_image) - ref_err
                 for i, v in enumerate((err, seconds, cpu)):
                     totals[integrator][i] += v
-                print(f"{name} {integrator} seed {seed}: {r.opt.spp} spp, {seconds:.2f} s ({cpu:.2f} s CPU), "
-                      f"relMSE {err:.4g}, relMSE x s {err * seconds:.4g}", flush=True)
+                print(f"{name} {integrator} seed {seed}: {r.opt.spp} spp, {r.opt.sampler}, {seconds:.2f} s "
+                      f"({cpu:.2f} s CPU), relMSE {err:.4g}, relMSE x s {err * seconds:.4g}", flush=True)
         rows = {}
         for integrator, (err, seconds, cpu) in totals.items():
             rows[integrator] = (err * seconds, err * cpu)

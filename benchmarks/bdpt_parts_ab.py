@@ -21,17 +21,20 @@ same load for both), from one renderer per variant whose kernels are compiled by
   :func:`~drpt.render.integrators.bdpt.smooth_view`) against the whole table (A);
 * ``prepare``: the camera vertex's fields and shading frame gathered and built once for
   all its connections (B, :func:`~drpt.render.integrators.bdpt.prepare_both`) against once
-  per connection (A, :func:`~drpt.render.integrators.bdpt.eval_both`).
+  per connection (A, :func:`~drpt.render.integrators.bdpt.eval_both`);
+* ``sampler``: ``--sampler ldsampler`` (B) against ``independent`` (A).
 
 Prints per part the CPU seconds (the process's, summed over the seeds; steadier than wall
 seconds on a loaded machine), the relMSE (summed, against the reference of
 ``bdpt_equal_time.py``, minus its estimated relMSE) and B / A of the seconds, of the error
 and of their product (the error at equal time: below 1, B is better), and the median over the
-seeds of B / A of one seed's seconds (the two renders of a seed run one after the other). Images are the same
+seeds of B / A of one seed's seconds (the two renders of a seed run one after the other) and of
+its error (where a rare firefly decides a seed's error, as on the caustic scene, the sums are a
+lottery and the median is the typical seed). Images are the same
 for ``variance``, ``reverse``, ``smooth`` and ``prepare`` (checked) and equal in expectation for the others.
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/bdpt_parts_ab.py [--scenes cornell,glass]
-[--parts variance,occluded,roulette,reverse,smooth,prepare] [--size 64] [--depth 8] [--spp 64] [--ref-spp 2048]
+[--parts variance,occluded,roulette,reverse,smooth,prepare,sampler] [--size 64] [--depth 8] [--spp 64] [--ref-spp 2048]
 [--seeds 4] [--reference PATH]
 """
 
@@ -49,7 +52,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bdpt_equal_time as eq  # noqa: E402 (the sibling benchmark: its scenes and references)
 
-PARTS = ("variance", "occluded", "roulette", "reverse", "smooth", "prepare")
+PARTS = ("variance", "occluded", "roulette", "reverse", "smooth", "prepare", "sampler")
 SAME_IMAGES = ("variance", "reverse", "smooth", "prepare")  # the parts whose images are compared
 
 
@@ -140,6 +143,8 @@ def main() -> None:
                 """Set the module's functions (A: the old ones) and the options of ``which``."""
                 for (fn, old), current in zip(patches.get(part, []), new or []):
                     setattr(B, fn, old if which == "A" else current)
+                if part == "sampler":
+                    return replace(base, sampler="independent" if which == "A" else "ldsampler")
                 return replace(base, variance=(which == "A")) if part == "variance" else base
 
             renderers = {}
@@ -149,9 +154,9 @@ def main() -> None:
                 r.render()  # compiles the kernels
                 renderers[which] = r
             totals = {w: [0.0, 0.0] for w in "AB"}
-            images, ratios = {}, []
+            images, ratios, err_ratios = {}, [], []
             for seed in range(2, a.seeds + 2):
-                seconds = {}
+                seconds, errors = {}, {}
                 for which in "AB":
                     opt = variant(which)
                     r = renderers[which].derive(replace(opt, spp=a.spp, seed=seed))
@@ -159,9 +164,11 @@ def main() -> None:
                     img = r.render()
                     seconds[which] = time.process_time() - c
                     totals[which][0] += seconds[which]
-                    totals[which][1] += rel_mse(img.image, ref_image) - ref_err
+                    errors[which] = rel_mse(img.image, ref_image) - ref_err
+                    totals[which][1] += errors[which]
                     images[which] = img.image
                 ratios.append(seconds["B"] / seconds["A"])
+                err_ratios.append(errors["B"] / errors["A"])
                 if part in SAME_IMAGES and not np.array_equal(images["A"], images["B"]):
                     print(f"{name} {part}: the images of seed {seed} differ", flush=True)
             for (fn, _), current in zip(patches.get(part, []), new or []):
@@ -170,7 +177,8 @@ def main() -> None:
             print(f"{name} {part}: A {ca:.2f} s CPU, relMSE {ea / a.seeds:.4g}; B {cb:.2f} s CPU, relMSE "
                   f"{eb / a.seeds:.4g}; B / A: seconds {cb / ca:.3f}, error {eb / ea:.3f}, error x seconds "
                   f"{eb * cb / (ea * ca):.3f} ({a.seeds} seeds, {a.spp} spp); B / A of each seed's seconds: median "
-                  f"{statistics.median(ratios):.3f}", flush=True)
+                  f"{statistics.median(ratios):.3f}, of each seed's error: median {statistics.median(err_ratios):.3f}",
+                  flush=True)
             if not math.isfinite(eb / ea):
                 print(f"{name} {part}: no error to compare", flush=True)
 

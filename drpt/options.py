@@ -54,7 +54,7 @@ SAMPLERS = ("independent", "ldsampler", "zsobol", "stratified", "multijitter", "
 #: ``--sampler`` values: a sampler of :data:`SAMPLERS`, or ``auto`` (:func:`resolve_sampler`)
 SAMPLER_CHOICES = ("auto", *SAMPLERS)
 #: the integrators whose ``auto`` sampler is ``ldsampler`` (:func:`resolve_sampler`)
-AUTO_LD_INTEGRATORS = ("path", "volpath", "whitted")
+AUTO_LD_INTEGRATORS = ("path", "volpath", "whitted", "bdpt")
 BVH_KINDS = ("bvh", "bvh2", "bvh4")
 GRID_MAX_RESOLUTION = 256
 
@@ -376,10 +376,11 @@ def resolve_sampler(opts: RenderOptions, recorded: str | None = None) -> RenderO
     ``auto`` is ``recorded`` where that is given: the sampler of the checkpoint a
     ``--resume`` continues (``"independent"`` for a checkpoint that records none), so that a
     resumed render draws the samples its checkpoint's did. Otherwise it is ``ldsampler``
-    for the camera-sampled integrators of :data:`AUTO_LD_INTEGRATORS` (path, volpath,
-    whitted; megakernel and wavefront alike), whose per-pixel variance it lowers at equal
-    time on every scene measured (``docs/performance.md``, "Samplers"), and ``independent``
-    for the rest: light tracing (``ptracer``, ``bdpt``: ``ldsampler`` stratifies where
+    for the integrators of :data:`AUTO_LD_INTEGRATORS` (path, volpath, whitted, megakernel
+    and wavefront alike, and bdpt, whose camera samples and their light subpaths draw from
+    their pixel's sequence), which it makes faster to converge on every scene measured
+    (``docs/performance.md``, "Samplers", and for bdpt "bdpt's samplers"), and
+    ``independent`` for the rest: light tracing (``ptracer``: ``ldsampler`` stratifies where
     light paths start, not where they land in the image) and ``--adaptive`` sampling,
     which draws independent samples. The renderer calls this on the options it is given,
     so every way of rendering (in process, in chunks, on workers, resumed, the preview)

@@ -165,7 +165,7 @@ def test_scene_settings_return_a_new_camera_and_change_nothing():
     ("volpath", "wavefront", False, "ldsampler"),
     ("whitted", "megakernel", False, "ldsampler"),
     ("ptracer", "megakernel", False, "independent"),
-    ("bdpt", "megakernel", False, "independent"),
+    ("bdpt", "megakernel", False, "ldsampler"),
     ("path", "megakernel", True, "independent"),  # --adaptive draws independent samples
     ("volpath", "megakernel", True, "independent"),
 ])

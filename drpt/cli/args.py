@@ -163,8 +163,8 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                             help=f"random seed (default {d['seed']})")
         parser.add_argument("--sampler", choices=SAMPLER_CHOICES, default=None, action=_Given,
                             help="sample generator: auto (the scene file's where it names one, "
-                                 "else ldsampler for the path, volpath and whitted integrators "
-                                 "and independent for ptracer, bdpt and --adaptive), "
+                                 "else ldsampler for the path, volpath, whitted and bdpt integrators "
+                                 "and independent for ptracer and --adaptive), "
                                  "independent (a random stream per sample) or "
                                  "ldsampler (a padded Owen-scrambled Sobol (0,2)-sequence per "
                                  "pixel: less noise per sample), zsobol (one such sequence over the "

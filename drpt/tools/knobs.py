@@ -233,7 +233,7 @@ def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10
     (:func:`env_compensation_knob`, :func:`triangle_sampling_knob`), None where the scene
     has no such feature: no row)."""
     rows = [Config("default", "auto accel, unbounded depth, RR from depth 5 (adaptive)", bsdf)]
-    # light tracing and adaptive sampling draw independent samples (drpt.options.resolve_sampler):
+    # light tracing (ptracer) and adaptive sampling draw independent samples (drpt.options.resolve_sampler):
     # where the default row's sampler is another, their rows say so, as that is part of their change
     indep = "" if sampler == "independent" else "; independent samples"
     if "depth" in knobs:
@@ -262,7 +262,7 @@ def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10
                            filter_sampling=True))
     if "integrator" in knobs:
         rows.append(Config("integrator", f"ptracer (light tracing{indep})", bsdf, integrator="ptracer"))
-        rows.append(Config("integrator", f"bdpt (bidirectional{indep})", bsdf, integrator="bdpt"))
+        rows.append(Config("integrator", "bdpt (bidirectional)", bsdf, integrator="bdpt"))
     if "env-compensation" in knobs and env_compensation is not None:
         other = "off" if env_compensation == "on" else "on"
         rows.append(Config("env compensation", f"{other} (--env-compensation {other})", bsdf,

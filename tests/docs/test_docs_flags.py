@@ -214,7 +214,8 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--agree",  # (benchmarks/env_compensation.py)
                   "--npz",  # (benchmarks/estimator_variants.py)
                   "--mitsuba", "--dump",  # (benchmarks/render_loop.py)
-                  "--scenes", "--scene", "--seeds", "--repeat", "--reference", "--parts", "--depth"}  # (bdpt_*.py)
+                  "--scenes", "--scene", "--seeds", "--repeat", "--reference", "--parts", "--depth",
+                  "--path-sampler", "--bdpt-sampler"}  # (bdpt_*.py)
 
 
 def test_every_flag_the_docs_name_exists(parsers):

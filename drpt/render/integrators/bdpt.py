@@ -64,8 +64,10 @@ shadow ray of a ``t = 1`` splat: the camera sees what lies behind an area light,
 
 The light subpath starts as light tracing's: a source chosen uniformly among
 the scene's emitters (:class:`~drpt.render.lights.rays.EmitterRays`), a point
-and a direction on it; it carries importance (refraction's ``eta^2`` undone,
-Veach's shading-normal correction). Its surface vertices that are not pure
+and a direction on it (with a low-discrepancy sampler the source and an area light's
+primitive are picked with the point's pair, so the points stay stratified over all of
+them); it carries importance (refraction's ``eta^2`` undone, Veach's shading-normal
+correction). Its surface vertices that are not pure
 Dirac (mirror, smooth glass) are stored in per-lane local arrays
 (``dr.alloc_local``, one per field) of ``max_depth - 1`` entries; the camera
 subpath then runs as a Dr.Jit loop, and each of its non-Dirac vertices is
@@ -199,9 +201,19 @@ CONNECTION_CHOICES = 2.0
 ROULETTE_FRACTION = 0.1
 
 #: with a low-discrepancy sampler (``--sampler ldsampler``...), the camera subpath's first
-#: dimension (the light subpath's take fewer: at most 5 + 5 per vertex); the pixel
+#: dimension (the light subpath's take fewer: 5 at its emitter and 5 per vertex); the pixel
 #: position takes 0 and 1
 CAMERA_DIMENSION = 128
+
+#: with a low-discrepancy sampler, the dimensions of each camera vertex: vertex ``k`` draws
+#: from ``CAMERA_DIMENSION + (k - 1) * CAMERA_STRIDE`` on (next-event estimation, then the
+#: connections: at most 5 + MAX_DEPTH - 1), its BSDF sample and roulette from the last
+#: :data:`CAMERA_TAIL` of them, so that every sample of a pixel draws a bounce's decisions
+#: from the same dimensions, however many light vertices its connections read
+CAMERA_STRIDE = 32
+
+#: the dimensions of a camera vertex's BSDF lobe, direction and Russian roulette
+CAMERA_TAIL = 4
 
 SUPPORTED_SOURCES = ("area", "point", "spot", "directional", "sky", "background")
 
@@ -609,7 +621,15 @@ class BDPTIntegrator:
         u_sel = rng.next_float32()
         u_pos = next_2d(rng)
         u_dir = next_2d(rng)
-        k, u_reuse = rays._select(u_sel)
+        ld = isinstance(rng, LDSampler)
+        if ld:
+            # the source (and an area light's primitive) from the stratified point's first
+            # value, rescaled (sample reuse): the origins stay stratified over all the
+            # emitters' surfaces; u_sel is left to the other kinds' own choices
+            k, x = rays._select(u_pos.x)
+            u_reuse, u_pos = u_sel, Array2f(x, u_pos.y)
+        else:
+            k, u_reuse = rays._select(u_sel)
         o = dr.zeros(Array3f, n)
         p = dr.zeros(Array3f, n)
         d = dr.full(Array3f, [0.0, 0.0, 1.0], n)
@@ -622,7 +642,8 @@ class BDPTIntegrator:
                 continue
             mine = active & (k == i)
             if kind == "area":
-                ls = self.scene.area_lights.sample(u_reuse, u_pos, mine)
+                u_area, u_point = self.scene.area_lights.reuse(u_pos, mine) if ld else (u_reuse, u_pos)
+                ls = self.scene.area_lights.sample(u_area, u_point, mine)
                 local = square_to_cosine_hemisphere(u_dir)
                 di = Frame(ls.n).to_world(local)
                 oi = spawn_origin(ls.p, ls.ng, ls.p_error, di)
@@ -742,8 +763,11 @@ class BDPTIntegrator:
         """``s = 1`` for the area lights: a point drawn as the path tracer draws it."""
         scene = self.scene
         lights = scene.area_lights
-        u_sel = rng.next_float32()
-        u = next_2d(rng)
+        if isinstance(rng, LDSampler):  # the primitive from the point's pair (sample reuse)
+            u_sel, u = lights.reuse(next_2d(rng), active)
+        else:
+            u_sel = rng.next_float32()
+            u = next_2d(rng)
         ls = lights.sample(u_sel, u, active, ref=si.p if lights.has_spheres else None)
         _, face = lights._select(u_sel, active)
         to = ls.p - si.p
@@ -1031,9 +1055,6 @@ class BDPTIntegrator:
                 ref = Array3f(si.p)
 
         # ---- the camera subpath
-        if isinstance(rng, LDSampler):
-            # its dimensions from a fixed one on, whatever the light subpath's length
-            rng.dim = dr.full(UInt32, CAMERA_DIMENSION, n)
         o, d = cam.ray(px, py)
         ref = dr.zeros(Array3f, n) + o  # the camera's position (as wide as the loop)
         cos_cam = dr.dot(d, cam.f)
@@ -1053,7 +1074,10 @@ class BDPTIntegrator:
         # material (scene.is_delta), as the photons' vertices are
         phase = dr.zeros(UInt32, n)
 
+        ld = isinstance(rng, LDSampler)
         while live:
+            if ld:  # vertex k's dimensions (CAMERA_STRIDE)
+                rng.dim = CAMERA_DIMENSION + (k - 1) * CAMERA_STRIDE
             count(scene, HIT_CAMERA, live)
             si = self._camera_hit(o, d, scene.intersect(o, d, live), k, live)
             if self.has_sky or self.has_background:
@@ -1113,6 +1137,8 @@ class BDPTIntegrator:
                         strategies.put(depth_l + 1, k + 1, px, py, c, active)
                     i += 1
 
+            if ld:  # the same dimensions whatever the connections drew
+                rng.dim = CAMERA_DIMENSION + k * CAMERA_STRIDE - CAMERA_TAIL
             u_lobe = rng.next_float32()
             u_bsdf = next_2d(rng)
             wo, bs, rev = sample_both(scene, si, u_lobe, u_bsdf)

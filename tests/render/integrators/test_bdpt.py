@@ -21,6 +21,10 @@ estimation, must fail the same test (|z| > 6).
 Each strategy alone (weight 1 for it, 0 for the others) against the path tracer's image of
 the paths of that many bounces (Cornell box, 1 and 2 bounces, six strategies), with a
 strategy of the wrong length as the negative control.
+
+These render independent samples (``--sampler independent``; the thresholds were set for
+them); bdpt's default, ``ldsampler``, and ``zsobol`` have z-tests and a dimension test of
+their own.
 """
 
 from __future__ import annotations
@@ -32,12 +36,13 @@ from pathlib import Path
 import drjit as dr
 import numpy as np
 import pytest
-from drjit.auto import Bool, Float
+from drjit.auto import Bool, Float, UInt32
 
 from drpt.errors import DrptError
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.integrators import bdpt as B
 from drpt.render.renderer import Renderer
+from drpt.render.sampler import LDSampler
 from drpt.scene import load_scene
 
 REPO = Path(__file__).resolve().parents[3]
@@ -236,8 +241,11 @@ def _spot_scene(point):
 
 
 def _render(scene, integrator, spp, depth, seed=1, size=32):
+    """A renderer of independent samples: the z-tests' thresholds hold for drpt's variance
+    estimate of independent samples (the low-discrepancy samplers, bdpt's default, have
+    tests of their own below)."""
     opts = RenderOptions(width=size, height=size, spp=spp, seed=seed, integrator=integrator,
-                         progress=False, path=PathOptions(max_depth=depth), variance=True)
+                         progress=False, path=PathOptions(max_depth=depth), variance=True, sampler="independent")
     return Renderer(scene, opts)
 
 
@@ -374,12 +382,17 @@ def _cli_render(tmp_path, name, *flags, spp=16):
 @pytest.mark.slow
 def test_workers_give_the_plain_image(tmp_path):
     """As light tracing's: the float32 image of a chunk layout is the same in one process
-    and on Dask workers (the splats' float64 sums differ at most in their last bits);
-    another layout draws other random numbers (negative control)."""
+    and on Dask workers (the splats' float64 sums differ at most in their last bits), with
+    the default sampler (``ldsampler``) and with ``independent``; with ``independent``
+    another layout draws other random numbers (negative control: a comparison that can
+    fail; ``ldsampler``'s numbers follow the sample, not the layout)."""
     plain = _cli_render(tmp_path, "plain", "--chunk-spp", "4")
-    assert not np.array_equal(plain, _cli_render(tmp_path, "chunks", "--chunk-spp", "1"))
+    indep = _cli_render(tmp_path, "indep", "--chunk-spp", "4", "--sampler", "independent")
+    assert not np.array_equal(indep, _cli_render(tmp_path, "chunks", "--chunk-spp", "1", "--sampler", "independent"))
     pytest.importorskip("distributed")
     assert np.array_equal(plain, _cli_render(tmp_path, "w2", "--chunk-spp", "4", "--workers", "2"))
+    assert np.array_equal(indep, _cli_render(tmp_path, "w2i", "--chunk-spp", "4", "--workers", "2",
+                                             "--sampler", "independent"))
 
 
 @pytest.mark.slow
@@ -767,15 +780,22 @@ def test_pilot_sets_a_power_of_two_threshold_near_the_mean(scenes):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sampler,control", [("ldsampler", False), ("zsobol", False), ("ldsampler", True)])
-def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, monkeypatch, sampler, control):
-    """bdpt draws from the scene's sampler: the Cornell box with ``ldsampler`` and ``zsobol``
-    agrees with the path tracer (independent samples; the test above's thresholds; drpt's
+@pytest.mark.parametrize("name,sampler,control", [("cornell", "ldsampler", None), ("cornell", "zsobol", None),
+                                                  ("specular", "ldsampler", None),
+                                                  ("cornell", "ldsampler", "diagonal"),
+                                                  ("cornell", "ldsampler", "reused")])
+def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, monkeypatch, name, sampler, control):
+    """bdpt draws from the scene's sampler: the Cornell box with ``ldsampler`` and ``zsobol``,
+    and the specular scene (every light vertex joined, in a loop) with ``ldsampler``,
+    agree with the path tracer (independent samples; the test above's thresholds; drpt's
     variance estimate treats the samples as independent, which overestimates an ``ldsampler``
-    image's error, so the test is conservative), with no warning. Negative control: the
-    sequence's 2-D points put on the diagonal (both coordinates the first one's) for the
-    integrator's draws fails (|z| > 6)."""
-    if control:
+    image's error, so the test is conservative), with no warning. Negative controls fail
+    (|z| > 6): the sequence's 2-D points put on the diagonal (both coordinates the first
+    one's) for the integrator's draws, and every camera vertex drawing from the same
+    dimensions (``CAMERA_STRIDE = 0``: a dimension reused at each bounce)."""
+    if control == "reused":
+        monkeypatch.setattr(B, "CAMERA_STRIDE", 0)
+    elif control:
         from drpt.render.sampler import next_2d
 
         def diagonal(rng):
@@ -783,12 +803,12 @@ def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, mo
             return B.Array2f(u.x, u.x)
 
         monkeypatch.setattr(B, "next_2d", diagonal)
-    depth, spp, _ = CASES["cornell"]
+    depth, spp, _ = CASES[name]
     opts = RenderOptions(width=32, height=32, spp=spp, seed=1, integrator="bdpt", sampler=sampler,
                          progress=False, path=PathOptions(max_depth=depth), variance=True)
-    r = Renderer(scenes["cornell"], opts)
+    r = Renderer(scenes[name], opts)
     assert not any("sampler" in w for w in r.warnings), r.warnings
-    zb, zm = _agree(r.render(), _reference(scenes, references, "cornell"))
+    zb, zm = _agree(r.render(), _reference(scenes, references, name))
     if control:
         assert zb > 6.0, zb
     else:
@@ -874,3 +894,73 @@ def test_the_smooth_view_gives_the_same_image(tmp_path):
         assert not np.array_equal(image(), with_view)
     finally:
         control.undo()
+
+
+#: the dimensions a lane may draw in the dimension test below (its light subpath's take fewer
+#: than CAMERA_DIMENSION, its camera subpath's from there on)
+_DIMS = 512
+
+
+class _CountingSampler(LDSampler):
+    """:class:`~drpt.render.sampler.LDSampler` that counts, per lane and dimension, the draws
+    in :attr:`counts` (a flat buffer of ``lanes x _DIMS``, set by the test): a draw is a
+    scatter-add, so it counts inside Dr.Jit's symbolic loops and ``if``s too."""
+
+    DRJIT_STRUCT = {**LDSampler.DRJIT_STRUCT, "lane": UInt32}
+    counts = None
+
+    def __init__(self, key=None, index=None, step=None):
+        super().__init__(key, index, step)
+        self.lane = dr.arange(UInt32, dr.width(self.index))
+
+    def _count(self, k: int) -> None:
+        for j in range(k):
+            dr.scatter_reduce(dr.ReduceOp.Add, type(self).counts, UInt32(1),
+                              self.lane * _DIMS + dr.minimum(self.dim + j, _DIMS - 1))
+
+    def next_float32(self):
+        self._count(1)
+        return super().next_float32()
+
+    def next_2d(self):
+        self._count(2)
+        return super().next_2d()
+
+
+@pytest.mark.parametrize("name,control", [("cornell", False), ("specular", False), ("cornell", True),
+                                          ("specular", True)])
+def test_no_decision_shares_a_low_discrepancy_dimension(scenes, monkeypatch, name, control):
+    """With ``--sampler ldsampler`` every random decision of a bdpt sample (the pixel position,
+    the light subpath's source, point, direction, splat roulette, lobe, direction and Russian
+    roulette per vertex; the camera subpath's next-event estimation, connection choice and
+    roulette, or each light vertex's connection roulette where every pair is joined, lobe,
+    direction and Russian roulette per vertex) draws a dimension of its own: no lane draws one
+    dimension twice (counted per lane and dimension, depth 8 in the Cornell box, whose camera
+    vertices join one light vertex each, and in the specular scene, whose join every one in a
+    loop; caustic merging off, its photons draw from a sampler of their own). Negative
+    control: the camera subpath starting at the light subpath's first dimension
+    (``CAMERA_DIMENSION = 2``) reuses dimensions."""
+    from drpt.render import renderer as R
+
+    cam = B.CAMERA_DIMENSION
+    if control:
+        monkeypatch.setattr(B, "CAMERA_DIMENSION", 2)
+    monkeypatch.setattr(R, "LDSampler", _CountingSampler)
+    opts = RenderOptions(width=16, height=16, spp=4, seed=3, integrator="bdpt", sampler="ldsampler",
+                         progress=False, path=PathOptions(max_depth=8), bdpt_merge=False)
+    r = Renderer(scenes[name], opts)
+    lanes = 16 * 16 * 4  # one pass
+    _CountingSampler.counts = dr.zeros(UInt32, lanes * _DIMS)
+    r.render()  # (with the path-traced pilot, which draws from the same class)
+    _CountingSampler.counts = counts = dr.zeros(UInt32, lanes * _DIMS)
+    r.render()
+    c = counts.numpy().reshape(lanes, _DIMS)
+    assert c[:, 0:2].min() == 1  # the pixel position
+    if not control:
+        assert c[:, 2:cam].sum(1).min() >= 5  # every light subpath's source, point, direction
+        assert c[:, cam:].sum() > lanes  # the camera subpaths' draws
+    assert c[:, _DIMS - 1].max() == 0  # none beyond the counted dimensions
+    if control:
+        assert c.max() > 1, c.max()
+    else:
+        assert c.max() == 1, np.argwhere(c > 1)[:5]
