@@ -27,6 +27,8 @@ of a render (drpt: ``Renderer.render``; Mitsuba: ``mi.render`` and the copy to n
 Dr.Jit's own LLVM settings), the variance is across the rounds' images. The ratio
 drpt/Mitsuba is what to read: the rounds interleave, so load from other processes slows both.
 The target is issue 27's: 2x on the bundled and corpus scenes, 1.5x on Veach's and the room.
+A pixel that is NaN or infinite in any round of either renderer is left out of both renderers'
+variance (the two are scored on the same pixels), and the table lists how many each lost.
 
 Output: a Markdown table (stdout), the skipped scenes, and with ``--json FILE`` the numbers
 (rewritten after every scene).
@@ -233,7 +235,9 @@ def main(argv=None) -> list[dict]:
                    "drpt_variance": d["variance"], "mitsuba_variance": m["variance"],
                    "time_ratio": m["seconds"] / d["seconds"],
                    "variance_ratio": d["variance"] / m["variance"] if m["variance"] > 0 else float("nan"),
-                   "efficiency_ratio": d["efficiency"] / m["efficiency"], "load": os.getloadavg()[0]}
+                   "efficiency_ratio": d["efficiency"] / m["efficiency"],
+                   "drpt_nonfinite_pixels": d["nonfinite_pixels"],
+                   "mitsuba_nonfinite_pixels": m["nonfinite_pixels"], "load": os.getloadavg()[0]}
             rows.append(row)
             print(f"{case.name}: efficiency x{row['efficiency_ratio']:.2f} ({time.perf_counter() - t0:.0f} s, "
                   f"load {row['load']:.1f})", file=sys.stderr, flush=True)
@@ -266,8 +270,9 @@ def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
         lines.append(f"| {r['scene']} | {r['width']}x{r['height']} | {r['spp']} | {r['drpt_seconds']:.3f} "
                      f"| {r['mitsuba_seconds']:.3f} | {r['time_ratio']:.2f} | {r['variance_ratio']:.2f} "
                      f"| {r['efficiency_ratio']:.2f} | {r['target']:g}x {ok} |")
-    # (a renderer whose image has non-finite pixels has no variance to compare: such a row is
-    # listed, counted as short of its target and left out of the mean)
+    # (a pixel that is NaN or infinite in some round of either renderer is left out of both
+    # renderers' variance, and listed below; a row with no pixel left has no variance to
+    # compare: it is listed, counted as short of its target and left out of the mean)
     measured = [r for r in rows if math.isfinite(r["variance_ratio"]) and r["efficiency_ratio"] > 0]
     if measured:
         g = math.exp(sum(math.log(r["efficiency_ratio"]) for r in measured) / len(measured))
@@ -275,6 +280,11 @@ def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
                      f"meet their target; geometric mean of the efficiency ratios {g:.2f}"
                      + (f" (over {len(measured)}: the others' variance is not finite)"
                         if len(measured) < len(rows) else ""))
+    lost = [r for r in rows if r.get("drpt_nonfinite_pixels") or r.get("mitsuba_nonfinite_pixels")]
+    if lost:
+        lines.append("\nPixels not finite in some round (left out of both renderers' variance):")
+        lines += [f"* {r['scene']}: drpt {r.get('drpt_nonfinite_pixels', 0)}, Mitsuba "
+                  f"{r.get('mitsuba_nonfinite_pixels', 0)} of {r['width'] * r['height']}" for r in lost]
     if skipped:
         lines.append("\nNot measured:")
         lines += [f"* {name}: {why}" for name, why in skipped]

@@ -292,7 +292,11 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
     so that load from other processes falls on all of them alike. Returns name ->
     ``{"seconds": median wall seconds of a render, "variance": per-pixel variance across
     the rounds' images (ddof 1) averaged over pixels and channels, "efficiency":
-    1 / (seconds * variance)}``: the inverse of the variance a render reaches per second.
+    1 / (seconds * variance), "nonfinite_pixels": the pixels with a NaN or infinite value
+    in at least one of this way's rounds}``: the efficiency is the inverse of the variance
+    a render reaches per second. A pixel that is not finite in some round of any way is
+    left out of every way's variance (all ways are scored on the same pixels; the count
+    says how many each way lost); with no such pixel every pixel counts.
     """
     if rounds < 2:
         raise DrptError(f"efficiency needs at least 2 rounds, got {rounds}")
@@ -306,12 +310,19 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
             img = np.asarray(render(k), np.float64)
             times[name].append(time.perf_counter() - t)
             images[name].append(img)
+    stacks = {name: np.stack(images[name]) for name in ways}
+    # per way and pixel: finite in every round (an image's channels, if any, flattened)
+    finite = {name: np.isfinite(st.reshape(st.shape[0], st.shape[1], st.shape[2], -1)).all(axis=(0, 3))
+              for name, st in stacks.items()}
+    scored = np.logical_and.reduce(list(finite.values()))
     out = {}
-    for name in ways:
+    for name, st in stacks.items():
         sec = float(np.median(times[name]))
-        var = float(np.stack(images[name]).var(0, ddof=1).mean())
+        var = float(st[:, scored].var(0, ddof=1).mean()) if scored.any() else float("nan")
         out[name] = {"seconds": sec, "variance": var,
-                     "efficiency": 1.0 / (sec * var) if sec * var > 0 else float("inf")}
+                     "efficiency": (1.0 / (sec * var) if sec * var > 0 else
+                                    float("inf") if var == 0 else float("nan")),
+                     "nonfinite_pixels": int((~finite[name]).sum())}
     return out
 
 

@@ -65,3 +65,21 @@ def test_sampler_applies_to_the_bundled_scenes_only(monkeypatch, tmp_path):
     bench.prepare(cases["cornellbox"], 32, 20_000)
     bench.prepare(cases["veach_mis.xml"], 32, 20_000, sampler="ldsampler")
     assert seen == ["ldsampler", "auto", "independent"]  # auto: drpt's default (the renderer resolves it)
+
+
+def test_the_table_lists_the_pixels_left_out():
+    """A row whose Mitsuba image lost pixels to NaN is measured on the rest: it has its
+    efficiency, counts in the mean, and the pixels each renderer lost are listed under the
+    table. Negative control: a row without lost pixels adds no such list."""
+    from types import SimpleNamespace
+
+    a = SimpleNamespace(rounds=8, min_size=192, max_samples=1_000_000, commit="abc")
+    row = {"scene": "diningroom", "target": 2.0, "width": 192, "height": 192, "spp": 16,
+           "drpt_seconds": 0.5, "mitsuba_seconds": 0.7, "time_ratio": 1.4, "variance_ratio": 0.9,
+           "efficiency_ratio": 1.4 / 0.9, "drpt_nonfinite_pixels": 0, "mitsuba_nonfinite_pixels": 1}
+    text = bench.format_table([row], [], a, 0.5)
+    assert "| diningroom | 192x192 | 16 | 0.500 | 0.700 | 1.40 | 0.90 | 1.56 | 2x **no** |" in text
+    assert "geometric mean of the efficiency ratios 1.56" in text and "(over" not in text
+    assert "* diningroom: drpt 0, Mitsuba 1 of 36864" in text
+    clean = bench.format_table([{**row, "mitsuba_nonfinite_pixels": 0}], [], a, 0.5)
+    assert "not finite" not in clean and "Mitsuba 1 of" not in clean
