@@ -292,11 +292,12 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
     so that load from other processes falls on all of them alike. Returns name ->
     ``{"seconds": median wall seconds of a render, "variance": per-pixel variance across
     the rounds' images (ddof 1) averaged over pixels and channels, "efficiency":
-    1 / (seconds * variance), "nonfinite_pixels": the pixels with a NaN or infinite value
-    in at least one of this way's rounds}``: the efficiency is the inverse of the variance
-    a render reaches per second. A pixel that is not finite in some round of any way is
-    left out of every way's variance (all ways are scored on the same pixels; the count
-    says how many each way lost); with no such pixel every pixel counts.
+    1 / (seconds * variance), "mean": the mean of the rounds' images, "nonfinite_pixels":
+    the pixels with a NaN or infinite value in at least one of this way's rounds}``: the
+    efficiency is the inverse of the variance a render reaches per second. A pixel that is
+    not finite in some round of any way is left out of every way's variance and mean (all
+    ways are scored on the same pixels; the count says how many each way lost); with no
+    such pixel every pixel counts.
     """
     if rounds < 2:
         raise DrptError(f"efficiency needs at least 2 rounds, got {rounds}")
@@ -322,6 +323,7 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
         out[name] = {"seconds": sec, "variance": var,
                      "efficiency": (1.0 / (sec * var) if sec * var > 0 else
                                     float("inf") if var == 0 else float("nan")),
+                     "mean": float(st[:, scored].mean()) if scored.any() else float("nan"),
                      "nonfinite_pixels": int((~finite[name]).sum())}
     return out
 

@@ -189,6 +189,7 @@ def test_efficiency_rounds_scores_every_way_on_the_pixels_finite_in_all(monkeypa
         want = np.stack(images[name])[:, keep].var(0, ddof=1).mean()
         assert res[name]["variance"] == pytest.approx(want, rel=1e-12)
         assert math.isfinite(res[name]["efficiency"])
+        assert res[name]["mean"] == pytest.approx(np.stack(images[name])[:, keep].mean(), rel=1e-12)
     assert res["a"]["nonfinite_pixels"] == 0 and res["b"]["nonfinite_pixels"] == 2
     assert 3.0 < res["b"]["variance"] / res["a"]["variance"] < 5.5
     # control: over every pixel, the NaN round makes the variance NaN
