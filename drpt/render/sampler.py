@@ -17,8 +17,13 @@ seeds are decorrelated and every draw is uniform in its own right; the
 shuffle is a nested uniform scramble of the index's bits (each bit flipped by
 a hash of the bits above it), which maps every aligned block of ``2^m``
 indices onto an aligned block, so any ``2^m`` consecutive sample indices of
-a pixel (from a multiple of ``2^m``) keep the stratification. Mitsuba's ``ldsampler`` and pbrt-v4's
-``PaddedSobolSampler`` are built the same way. ``zsobol``
+a pixel (from a multiple of ``2^m``) keep the stratification. pbrt-v4's
+``PaddedSobolSampler`` is built the same way. Mitsuba's ``ldsampler`` shuffles the
+indices per dimension too, but scrambles the values with one seed per pixel for every
+dimension, so all of a pixel's 1-D draws take the same ``2^m`` values: where the largest is
+below 0.95, its path tracer's Russian roulette (survival at most 0.95) never ends a path
+that keeps its throughput, such as one trapped by total internal reflection in a glass box
+(docs/performance.md, the dining room's NaN pixels). ``zsobol``
 (:class:`ZSobolSampler`, pbrt-v4's ``ZSobolSampler``) draws from one such
 sequence over the whole image in Morton order instead, which spreads the
 remaining error as blue noise.

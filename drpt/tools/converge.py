@@ -293,8 +293,13 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
     ``{"seconds": median wall seconds of a render, "variance": per-pixel variance across
     the rounds' images (ddof 1) averaged over pixels and channels, "efficiency":
     1 / (seconds * variance), "loo_variances": the variance with each round left out in
-    turn (round order; empty below 3 rounds)}``: the inverse of the variance a render
-    reaches per second. :func:`variance_ratio_error` reads the last.
+    turn (round order; empty below 3 rounds), "mean": the mean of the rounds' images,
+    "nonfinite_pixels": the pixels with a NaN or infinite value in at least one of this
+    way's rounds}``: the efficiency is the inverse of the variance a render reaches per
+    second; :func:`variance_ratio_error` reads ``loo_variances``. A pixel that is not finite
+    in some round of any way is left out of every way's variance, leave-one-out variances
+    and mean (all ways are scored on the same pixels; the count says how many each way
+    lost); with no such pixel every pixel counts.
     """
     if rounds < 2:
         raise DrptError(f"efficiency needs at least 2 rounds, got {rounds}")
@@ -308,14 +313,21 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
             img = np.asarray(render(k), np.float64)
             times[name].append(time.perf_counter() - t)
             images[name].append(img)
+    stacks = {name: np.stack(images[name]) for name in ways}
+    # per way and pixel: finite in every round (an image's channels, if any, flattened)
+    finite = {name: np.isfinite(st.reshape(st.shape[0], st.shape[1], st.shape[2], -1)).all(axis=(0, 3))
+              for name, st in stacks.items()}
+    scored = np.logical_and.reduce(list(finite.values()))
     out = {}
-    for name in ways:
+    for name, st in stacks.items():
         sec = float(np.median(times[name]))
-        stack = np.stack(images[name])
-        var = float(stack.var(0, ddof=1).mean())
+        var = float(st[:, scored].var(0, ddof=1).mean()) if scored.any() else float("nan")
         out[name] = {"seconds": sec, "variance": var,
-                     "efficiency": 1.0 / (sec * var) if sec * var > 0 else float("inf"),
-                     "loo_variances": _loo_variances(stack)}
+                     "efficiency": (1.0 / (sec * var) if sec * var > 0 else
+                                    float("inf") if var == 0 else float("nan")),
+                     "loo_variances": _loo_variances(st[:, scored]) if scored.any() else [],
+                     "mean": float(st[:, scored].mean()) if scored.any() else float("nan"),
+                     "nonfinite_pixels": int((~finite[name]).sum())}
     return out
 
 

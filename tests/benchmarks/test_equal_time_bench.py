@@ -65,3 +65,43 @@ def test_sampler_applies_to_the_bundled_scenes_only(monkeypatch, tmp_path):
     bench.prepare(cases["cornellbox"], 32, 20_000)
     bench.prepare(cases["veach_mis.xml"], 32, 20_000, sampler="ldsampler")
     assert seen == ["ldsampler", "auto", "independent"]  # auto: drpt's default (the renderer resolves it)
+
+
+def test_the_table_lists_the_pixels_left_out():
+    """A row whose Mitsuba image lost pixels to NaN is measured on the rest: it has its
+    efficiency, counts in the mean, and the pixels each renderer lost are listed under the
+    table. Negative control: a row without lost pixels adds no such list."""
+    from types import SimpleNamespace
+
+    a = SimpleNamespace(rounds=8, min_size=192, max_samples=1_000_000, commit="abc")
+    row = {"scene": "diningroom", "target": 2.0, "width": 192, "height": 192, "spp": 16,
+           "drpt_seconds": 0.5, "mitsuba_seconds": 0.7, "time_ratio": 1.4, "variance_ratio": 0.9,
+           "efficiency_ratio": 1.4 / 0.9, "drpt_nonfinite_pixels": 0, "mitsuba_nonfinite_pixels": 1}
+    text = bench.format_table([row], [], a, 0.5)
+    assert "| diningroom | 192x192 | 16 | 0.500 | 0.700 | 1.40 | 0.90 | 1.56 | 2x **no** |" in text
+    assert "geometric mean of the efficiency ratios 1.56" in text and "(over" not in text
+    assert "* diningroom: drpt 0, Mitsuba 1 of 36864" in text
+    clean = bench.format_table([{**row, "mitsuba_nonfinite_pixels": 0}], [], a, 0.5)
+    assert "not finite" not in clean and "Mitsuba 1 of" not in clean
+
+
+def test_a_row_whose_mean_images_differ_has_no_efficiency():
+    """Renderers whose mean images differ by more than 2x (Mitsuba's ldsampler in the dining
+    room: fireflies of 1e20-1e33) estimate different images: the row reads n/a, is short of
+    its target and out of the geometric mean; 10% apart is listed under the table. Negative
+    control: the same row with equal means keeps its efficiency."""
+    from types import SimpleNamespace
+
+    a = SimpleNamespace(rounds=8, min_size=192, max_samples=1_000_000, commit="abc")
+    base = {"target": 2.0, "width": 192, "height": 192, "spp": 16, "drpt_seconds": 0.5,
+            "mitsuba_seconds": 0.7, "time_ratio": 1.4}
+    bad = {**base, "scene": "diningroom", "variance_ratio": 1e-60, "efficiency_ratio": 1.4e60,
+           "mean_ratio": 3e17}
+    near = {**base, "scene": "other", "variance_ratio": 0.5, "efficiency_ratio": 2.8, "mean_ratio": 1.2}
+    text = bench.format_table([bad, near], [], a, 0.5)
+    assert "| diningroom | 192x192 | 16 | 0.500 | 0.700 | 1.40 | n/a (Mitsuba's mean image 3e+17x drpt's) " \
+           "| n/a (Mitsuba's mean image 3e+17x drpt's) | 2x **no** |" in text
+    assert "1 of 2 scenes meet their target; geometric mean of the efficiency ratios 2.80 (over 1" in text
+    assert "* diningroom: 3e+17" in text and "* other: 1.2" in text
+    same = bench.format_table([{**bad, "mean_ratio": 1.0}], [], a, 0.5)
+    assert "n/a" not in same and "| 1400000000000000" in same and "apart" not in same

@@ -207,7 +207,7 @@ def test_wavefront_is_the_megakernel_s_image_exactly_as_far_as_the_docs_say():
 OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "--sizee", "--sp",
                   "--threshold", "--oracle",  # (benchmarks/adaptive_vs_uniform.py)
                   "--only", "--skip", "--min-size", "--max-samples", "--rounds",
-                  "--no-corpus",  # (benchmarks/equal_time_vs_mitsuba.py)
+                  "--no-corpus", "--mitsuba-sampler",  # (benchmarks/equal_time_vs_mitsuba.py)
                   "--scale", "--grid",  # (benchmarks/variance_vs_mitsuba.py)
                   "--all-textures",  # (benchmarks/kernel_ops.py)
                   "--seconds", "--renderer",  # (benchmarks/jit_hotspots.py)

@@ -162,6 +162,43 @@ def test_efficiency_rounds_on_known_noise_and_time(monkeypatch):
         converge.efficiency_rounds({"a": way(1.0, 1.0)}, 1)
 
 
+
+def test_efficiency_rounds_scores_every_way_on_the_pixels_finite_in_all(monkeypatch):
+    """A way whose image has a NaN pixel in one round (as Mitsuba's ldsampler image of the
+    dining room has) and an infinite one in another: both ways' variances are taken over the
+    other pixels, the same for both, and equal the variances computed there by hand; each way
+    counts its own non-finite pixels. Negative control: the variance over all pixels, as
+    before, is NaN for the way with the NaN pixel."""
+    clock = iter(range(10_000))  # each render takes 1 "second"
+    monkeypatch.setattr(converge.time, "perf_counter", lambda: float(next(clock)))
+
+    def way(sd, bad):
+        def render(seed):
+            img = np.random.default_rng(seed * 2 + (sd > 1)).normal(5.0, sd, (16, 16, 3))
+            if seed in bad:
+                img[bad[seed][0]] = bad[seed][1]
+            return img
+        return render
+
+    bad = {2: ((3, 4, 1), float("nan")), 4: ((0, 0, 2), float("inf"))}
+    images = {"a": [way(1.0, {})(k) for k in range(6)], "b": [way(2.0, bad)(k) for k in range(6)]}
+    res = converge.efficiency_rounds({"a": way(1.0, {}), "b": way(2.0, bad)}, 6, warm_seed=99)
+    keep = np.ones((16, 16), bool)
+    keep[3, 4] = keep[0, 0] = False
+    for name in ("a", "b"):
+        want = np.stack(images[name])[:, keep].var(0, ddof=1).mean()
+        assert res[name]["variance"] == pytest.approx(want, rel=1e-12)
+        assert math.isfinite(res[name]["efficiency"])
+        assert res[name]["mean"] == pytest.approx(np.stack(images[name])[:, keep].mean(), rel=1e-12)
+    assert res["a"]["nonfinite_pixels"] == 0 and res["b"]["nonfinite_pixels"] == 2
+    assert 3.0 < res["b"]["variance"] / res["a"]["variance"] < 5.5
+    # control: over every pixel, the NaN round makes the variance NaN
+    assert math.isnan(np.stack(images["b"]).var(0, ddof=1).mean())
+    # every round finite: every pixel counts, as before
+    res = converge.efficiency_rounds({"a": way(1.0, {})}, 6, warm_seed=99)
+    assert res["a"]["variance"] == np.stack(images["a"]).var(0, ddof=1).mean()
+    assert res["a"]["nonfinite_pixels"] == 0
+
 def test_adaptive_ratio_against_uniform_drpt():
     from drpt.tools.converge import adaptive_ratio
 
