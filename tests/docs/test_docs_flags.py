@@ -212,6 +212,7 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--all-textures",  # (benchmarks/kernel_ops.py)
                   "--seconds", "--renderer",  # (benchmarks/jit_hotspots.py)
                   "--agree",  # (benchmarks/env_compensation.py)
+                  "--sort",  # (perf report, quoted in performance.md)
                   "--npz",  # (benchmarks/estimator_variants.py)
                   "--mitsuba", "--dump",  # (benchmarks/render_loop.py)
                   "--scenes", "--scene", "--seeds", "--repeat", "--reference", "--parts", "--depth",
