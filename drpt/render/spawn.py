@@ -114,3 +114,26 @@ def plane_project(p: Array3f, n: Array3f, offset: Float) -> Array3f:
 def origin(p: Array3f, ng: Array3f, err: Float, d: Array3f) -> Array3f:
     """``p`` moved by ``err`` along ``ng`` to the side of direction ``d``."""
     return p + ng * dr.mulsign(err, dr.dot(ng, d))
+
+
+def plane_shift(delta: Array3f, d: Array3f, n: Array3f) -> tuple[Float, Array3f]:
+    """A ray ``(o, d)`` meets a plane of normal ``n`` (any length) at ``o + t d``; the ray
+    moved by ``delta``, ``(o + delta, d)``, meets it at ``t + dt``, at the point moved by
+    ``shift = delta + d dt`` (in the plane): ``(dt, shift)``, not finite where ``d`` is
+    parallel to the plane."""
+    dt = -dr.dot(delta, n) / dr.dot(d, n)
+    return dt, delta + d * dt
+
+
+def triangle_shift(e1: Array3f, e2: Array3f, delta: Array3f, d: Array3f
+                   ) -> tuple[Float, Float, Float]:
+    """:func:`plane_shift` on the triangle of edges ``e1, e2``: ``(dt, du, dv)``, the change
+    of the hit's distance and of its barycentrics ``(u, v)`` (``p0 + u e1 + v e2``). The
+    shift is small against the coordinates (it is computed alone, not from the moved point),
+    so ``u + du`` is as accurate as ``u``."""
+    c = dr.cross(e1, e2)
+    m = dr.maximum(dr.maximum(dr.abs(c.x), dr.abs(c.y)), dr.abs(c.z))
+    c = c * dr.rcp(m)  # (|c|^2 overflows past edges of 4e9: triangle_point)
+    dt, s = plane_shift(delta, d, c)
+    inv = dr.rcp(dr.squared_norm(c) * m)
+    return dt, dr.dot(dr.cross(s, e2), c) * inv, dr.dot(dr.cross(e1, s), c) * inv
