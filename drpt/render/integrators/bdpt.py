@@ -995,7 +995,7 @@ class BDPTIntegrator:
             depth = dr.full(UInt32, 1, n)
             while live:
                 count(scene, HIT_LIGHT, live)
-                si = scene.intersect(o, d, live)
+                si = scene.intersect_from(o, ref, d, live)
                 live &= si.valid
                 finite = dr.isfinite(beta.x) & dr.isfinite(beta.y) & dr.isfinite(beta.z)
                 dropped += dr.select(live & ~finite, 1, 0)

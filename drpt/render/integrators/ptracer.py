@@ -151,7 +151,8 @@ class ParticleTracer:
         u_pos = next_2d(rng)
         u_dir = next_2d(rng)
         ray = self.rays.sample_ray(u_sel, u_pos, u_dir, Bool(active))
-        o, d, beta = Array3f(ray.o), Array3f(ray.d), Array3f(ray.weight)
+        # ref: the vertex the ray o, d was spawned from (scene.intersect_from)
+        o, d, ref, beta = Array3f(ray.o), Array3f(ray.d), Array3f(ray.p), Array3f(ray.weight)
         eta = dr.full(Float, 1.0, dr.width(active))
         depth = dr.full(UInt32, 1, dr.width(active))
         live = Bool(ray.valid)
@@ -160,7 +161,7 @@ class ParticleTracer:
         dropped = dr.zeros(UInt32, dr.width(active))
         while live:
             count(scene, HIT_LIGHT, live)
-            si = scene.intersect(o, d, live)
+            si = scene.intersect_from(o, ref, d, live)
             live &= si.valid
             finite = dr.isfinite(beta.x) & dr.isfinite(beta.y) & dr.isfinite(beta.z)
             dropped += dr.select(live & ~finite, 1, 0)
@@ -184,4 +185,5 @@ class ParticleTracer:
             beta = dr.select(use_rr, beta / q, beta)
             o = scene.spawn(si, wo)
             d = Array3f(wo)
+            ref = Array3f(si.p)
         return dropped
