@@ -881,7 +881,8 @@ class BDPTIntegrator:
         scene = self.scene
         n = dr.width(active)
         widen(rng, n)
-        o, d, _p, beta, _dvcm, _dvc, _inf, live = self._emit(rng, Bool(active), area_only=True)
+        # ref: the vertex the ray o, d was spawned from (scene.intersect_from, as the light subpaths)
+        o, d, ref, beta, _dvcm, _dvc, _inf, live = self._emit(rng, Bool(active), area_only=True)
         depth = dr.full(UInt32, 1, n)
         after_dirac = dr.zeros(Bool, n)
         p = dr.zeros(Array3f, n)
@@ -890,7 +891,7 @@ class BDPTIntegrator:
         depth_p = dr.zeros(UInt32, n)
         valid = dr.zeros(Bool, n)
         while live:
-            si = scene.intersect(o, d, live)
+            si = scene.intersect_from(o, ref, d, live)
             live &= si.valid & dr.isfinite(dr.max(beta))
             delta = scene.is_delta(si)
             store = live & ~delta & after_dirac
@@ -910,6 +911,7 @@ class BDPTIntegrator:
             depth += 1
             o = scene.spawn(si, wo)
             d = Array3f(wo)
+            ref = Array3f(si.p)
         return p, wo_p, power, depth_p, valid
 
     @staticmethod
