@@ -49,6 +49,14 @@ light the same way (toward the shading point), and
 :data:`drpt.render.integrators.common.SHADOW_SHRINK` stops them a relative
 ``2**-12`` short of it.
 
+A ray from the moved origin meets the scene as a ray from a moved surface would: far from
+the origin (two float32 spacings at 4096) a sizable fraction of a nearby light's distance.
+Where that matters with nothing to weigh it against (light subpaths),
+:meth:`drpt.render.scene.DeviceScene.intersect_from` takes the hit as the parallel ray from
+the point itself meets the same primitive (:func:`plane_shift`, :func:`triangle_shift`), and
+the connections to the camera are traced from the camera
+(:func:`drpt.render.integrators.ptracer.camera_segment`).
+
 Limits: the offset is along the normal only. Far from the origin, where the
 float32 spacing is a sizable fraction of the geometry (0.0625 at 1e6), a hit
 within half a spacing of an edge rounds onto the adjacent face's plane, and a

@@ -18,6 +18,11 @@ from ..accel.protocol import Hit
 from ..scene.model import Scene
 from .spawn import plane_error, plane_project, plane_shift, sphere_error, triangle_point, triangle_shift
 
+#: a triangle's hit is moved along its plane to a point whose barycentrics are at most this
+#: far outside it (:meth:`SurfaceData.seen_from`): past an edge, the plane of a coplanar
+#: neighbour and, to first order, of a curved mesh's
+TRIANGLE_REACH = 1.0
+
 #: a sphere's hit is moved along its tangent plane (:meth:`SurfaceData.seen_from`) by at most
 #: this fraction of the radius: the moved point is then off the sphere by ``|move|^2 / (2 r)``,
 #: at most half this fraction of the move (the interaction projects it back)
@@ -175,11 +180,14 @@ class SurfaceData:
         :meth:`interaction`, ``origin`` ``p`` and the hit's ``t`` from ``p`` (on a triangle its
         barycentrics moved with the point, :func:`~drpt.render.spawn.triangle_shift`). Exact
         on triangles and planes, to first order on spheres (along the tangent plane, then
-        projected back). A lane keeps ``o`` and its hit where the moved point leaves its
-        triangle (the ray from ``p`` meets a neighbour first), where the move is more than
-        :data:`SPHERE_SHIFT` of its sphere's radius, or where the ray is parallel to the
-        surface; the miss lanes too. The primitive is the hit's: a neighbour nearer ``p``
-        than the spawn offset is not looked for."""
+        projected back). A point moved past its triangle's edge stays on that triangle's plane
+        (within :data:`TRIANGLE_REACH`): exact where the neighbour is coplanar (a floor of two
+        triangles), to first order on a curved mesh; at a silhouette, where the ray from ``p``
+        would pass beside the mesh, the hit stays one it should not have, as the ray from
+        ``o``'s did. A lane keeps ``o`` and its hit where the move is more than
+        :data:`SPHERE_SHIFT` of its sphere's radius or the ray is parallel to the surface;
+        the miss lanes too. The primitive is the hit's: a neighbour nearer ``p`` than the
+        spawn offset is not looked for."""
         valid = Bool(hit.valid)
         prim = dr.select(valid, hit.prim, 0)
         delta = p - o  # (exact where p and o are close: no rounding of the coordinates' size)
@@ -192,7 +200,10 @@ class SurfaceData:
             e2 = dr.gather(Array3f, self.e2, i, is_tri)
             dt, du, dv = triangle_shift(e1, e2, delta, d)
             um, vm = u + du, v + dv
-            ok = is_tri & dr.isfinite(dt) & (um >= 0.0) & (vm >= 0.0) & (um + vm <= 1.0)
+            # (a moved point past an edge stays on this triangle's plane: a coplanar
+            # neighbour's point, and a curved mesh's to first order)
+            near = dr.minimum(dr.minimum(um, vm), 1.0 - um - vm) > -TRIANGLE_REACH
+            ok = is_tri & dr.isfinite(dt) & near
             t = dr.select(ok, t + dt, t)
             u = dr.select(ok, um, u)
             v = dr.select(ok, vm, v)

@@ -177,7 +177,7 @@ from ..spawn import origin as spawn_origin
 from ..surface import Interaction, TangentInteraction
 from ..warp import Frame, square_to_cosine_hemisphere, square_to_uniform_sphere
 from .common import SHADOW_SHRINK
-from .ptracer import correction, refuse_unsupported
+from .ptracer import camera_segment, correction, refuse_unsupported
 
 #: the longest path BDPT traces (segments); its light vertices are stored per lane
 MAX_DEPTH = 16
@@ -683,7 +683,7 @@ class BDPTIntegrator:
         """``t = 1``: light vertex ``si`` joined to the camera, splatted into ``film`` (after
         :func:`roulette` with ``u_rr`` and ``threshold``)."""
         scene, cam = self.scene, self.camera
-        x, y, wc, _dist, importance, visible = cam.connect(si.p)
+        x, y, wc, dist, importance, visible = cam.connect(si.p)
         ok = active & visible
         f, _, rev = eval_both(self.smooth, si, wc)
         corr, sides = correction(si, wc)
@@ -693,18 +693,17 @@ class BDPTIntegrator:
         value = beta * f * (corr * importance * w)
         ok &= sides & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         value, ok = roulette(value, ok, u_rr, threshold)
-        so = scene.spawn(si, wc)
-        to = cam.center - so
-        dist = dr.norm(to)
+        o, d, tmax = camera_segment(cam.center, si.p, si.ng, si.p_error, wc, dist)
         count(scene, SHADOW_CAMERA, ok)
-        ok &= ~self._camera_occluded(so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        ok &= ~self._camera_occluded(o, d, tmax, ok & (tmax > 0.0))
         count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
         if strategies is not None:
             strategies.put(depth + 1, 1, x, y, value, ok)
 
     def _camera_occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool) -> Bool:
-        """Whether the segment of ray ``(o, d)`` up to ``tmax`` toward the camera is blocked. With
+        """Whether the segment of ray ``(o, d)`` up to ``tmax`` from the camera
+        (:func:`~drpt.render.integrators.ptracer.camera_segment`) is blocked. With
         ``hide_emitters`` in a scene with emissive surfaces, camera rays pass through area
         emitters (:meth:`_camera_hit`), so only what is not emissive blocks this segment."""
         scene = self.scene
