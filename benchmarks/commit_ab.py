@@ -1,14 +1,15 @@
 """Render time of this checkout's drpt against another commit's, interleaved in one process (not a test).
 
     PYTHONPATH=. .venv/bin/python benchmarks/commit_ab.py COMMIT SCENE... [--rounds 30] [--scale 4] [--spp N]
-        [--size W H] [--bsdf MODE]
+        [--size W H] [--bsdf MODE] [--integrator NAME]
 
 ``COMMIT``'s ``drpt/`` (``git archive``) is unpacked into a temporary folder as the package
 ``drpt_ab`` and imported beside this checkout's ``drpt``; each ``SCENE`` (an XML file or a
 drpt scene) gets one :class:`~drpt.render.renderer.Renderer` from each package (its film
 scaled ``--scale`` times, or ``--size``; an XML's ``spp`` define and the render's spp ``--spp``,
 default the scene's own; ``--bsdf``, the material mode of drpt's own format, e.g. ``cook-torrance``
-as the gallery renders the dining room), which renders once to compile, then ``--rounds`` rounds of one render each, the
+as the gallery renders the dining room; ``--integrator``, e.g. ``ptracer``), which renders once to
+compile, then ``--rounds`` rounds of one render each, the
 order alternating (AB, BA, ...) so that load from other processes falls on both. Round ``k``
 uses seed ``k`` for both; the script says whether every pair of images was bit-identical (a
 pure speed change must keep them so). It prints each side's median seconds (``Renderer.render``,
@@ -52,7 +53,7 @@ def unpack(commit: str, into: Path) -> str:
 
 
 def renderer(pkg: str, path: Path, scale: int, spp: int | None, size: list[int] | None = None,
-             bsdf: str | None = None):
+             bsdf: str | None = None, integrator: str | None = None):
     """A renderer of ``path`` from package ``pkg`` (``drpt`` or ``drpt_ab``)."""
     opts = importlib.import_module(f"{pkg}.options")
     rend = importlib.import_module(f"{pkg}.render.renderer")
@@ -72,6 +73,8 @@ def renderer(pkg: str, path: Path, scale: int, spp: int | None, size: list[int] 
             scene, given=frozenset({"size"}))
     if spp:
         opt = replace(opt, spp=spp)
+    if integrator:
+        opt = replace(opt, integrator=integrator)
     return rend.Renderer(scene, opt)
 
 
@@ -84,6 +87,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--spp", type=int, default=None)
     ap.add_argument("--size", type=int, nargs=2, default=None)
     ap.add_argument("--bsdf", default=None)
+    ap.add_argument("--integrator", default=None)
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         short = unpack(a.commit, Path(tmp))
@@ -93,8 +97,8 @@ def main(argv: list[str]) -> int:
         ensure()
         print(f"{short} (A) against this checkout (B), {a.rounds} rounds alternating, film x{a.scale}")
         for path in a.scenes:
-            rs = {"A": renderer("drpt_ab", path, a.scale, a.spp, a.size, a.bsdf),
-                  "B": renderer("drpt", path, a.scale, a.spp, a.size, a.bsdf)}
+            rs = {"A": renderer("drpt_ab", path, a.scale, a.spp, a.size, a.bsdf, a.integrator),
+                  "B": renderer("drpt", path, a.scale, a.spp, a.size, a.bsdf, a.integrator)}
             for r in rs.values():
                 r.render()
             ts: dict[str, list[float]] = {"A": [], "B": []}

@@ -365,6 +365,18 @@ class DeviceScene:
         the lanes of camera rays (a traversal hint, :meth:`drpt.accel.protocol.Accelerator.intersect`)."""
         return self.interaction(o, d, self.intersect_preliminary(o, d, active, tmax, coherent=coherent))
 
+    def intersect_from(self, o: Array3f, p: Array3f, d: Array3f, active: Bool) -> Interaction:
+        """The closest hit of the ray leaving the surface point ``p`` along ``d``, traced from
+        ``o``, ``p`` moved off its surface (:meth:`spawn`), and then taken as the parallel ray
+        from ``p`` itself meets the primitive it hit
+        (:meth:`SurfaceData.seen_from <drpt.render.surface.SurfaceData.seen_from>`): the hit
+        does not move with the spawn offset, which grows with the coordinates' magnitude
+        (far from the origin a sizable fraction of a nearby light's distance). ``si.t`` is
+        measured from ``p``. Where ``o`` is ``p`` (a delta light, the camera), the hit of
+        :meth:`intersect`."""
+        origin, hit = self.surfaces.seen_from(o, d, self.intersect_preliminary(o, d, active), p)
+        return self.interaction(origin, d, hit)
+
     @loops_once
     def intersect_preliminary(self, o: Array3f, d: Array3f, active: Bool, tmax: Float | None = None,
                               coherent: Bool | bool = False, cull: bool = False):

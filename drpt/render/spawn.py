@@ -49,6 +49,14 @@ light the same way (toward the shading point), and
 :data:`drpt.render.integrators.common.SHADOW_SHRINK` stops them a relative
 ``2**-12`` short of it.
 
+A ray from the moved origin meets the scene as a ray from a moved surface would: far from
+the origin (two float32 spacings at 4096) a sizable fraction of a nearby light's distance.
+Where that matters with nothing to weigh it against (light subpaths),
+:meth:`drpt.render.scene.DeviceScene.intersect_from` takes the hit as the parallel ray from
+the point itself meets the same primitive (:func:`plane_shift`, :func:`triangle_shift`), and
+the connections to the camera are traced from the camera
+(:func:`drpt.render.integrators.ptracer.camera_segment`).
+
 Limits: the offset is along the normal only. Far from the origin, where the
 float32 spacing is a sizable fraction of the geometry (0.0625 at 1e6), a hit
 within half a spacing of an edge rounds onto the adjacent face's plane, and a
@@ -114,3 +122,26 @@ def plane_project(p: Array3f, n: Array3f, offset: Float) -> Array3f:
 def origin(p: Array3f, ng: Array3f, err: Float, d: Array3f) -> Array3f:
     """``p`` moved by ``err`` along ``ng`` to the side of direction ``d``."""
     return p + ng * dr.mulsign(err, dr.dot(ng, d))
+
+
+def plane_shift(delta: Array3f, d: Array3f, n: Array3f) -> tuple[Float, Array3f]:
+    """A ray ``(o, d)`` meets a plane of normal ``n`` (any length) at ``o + t d``; the ray
+    moved by ``delta``, ``(o + delta, d)``, meets it at ``t + dt``, at the point moved by
+    ``shift = delta + d dt`` (in the plane): ``(dt, shift)``, not finite where ``d`` is
+    parallel to the plane."""
+    dt = -dr.dot(delta, n) / dr.dot(d, n)
+    return dt, delta + d * dt
+
+
+def triangle_shift(e1: Array3f, e2: Array3f, delta: Array3f, d: Array3f
+                   ) -> tuple[Float, Float, Float]:
+    """:func:`plane_shift` on the triangle of edges ``e1, e2``: ``(dt, du, dv)``, the change
+    of the hit's distance and of its barycentrics ``(u, v)`` (``p0 + u e1 + v e2``). The
+    shift is small against the coordinates (it is computed alone, not from the moved point),
+    so ``u + du`` is as accurate as ``u``."""
+    c = dr.cross(e1, e2)
+    m = dr.maximum(dr.maximum(dr.abs(c.x), dr.abs(c.y)), dr.abs(c.z))
+    c = c * dr.rcp(m)  # (|c|^2 overflows past edges of 4e9: triangle_point)
+    dt, s = plane_shift(delta, d, c)
+    inv = dr.rcp(dr.squared_norm(c) * m)
+    return dt, dr.dot(dr.cross(s, e2), c) * inv, dr.dot(dr.cross(e1, s), c) * inv

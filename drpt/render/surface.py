@@ -25,8 +25,19 @@ import numpy as np
 from drjit.auto import Array2f, Array3f, ArrayXf, Bool, Float, UInt32
 
 from ..accel.device import device_array
+from ..accel.protocol import Hit
 from ..scene.model import Scene
-from .spawn import plane_error, plane_project, sphere_error, triangle_point
+from .spawn import plane_error, plane_project, plane_shift, sphere_error, triangle_point, triangle_shift
+
+#: a triangle's hit is moved along its plane to a point whose barycentrics are at most this
+#: far outside it (:meth:`SurfaceData.seen_from`): past an edge, the plane of a coplanar
+#: neighbour and, to first order, of a curved mesh's
+TRIANGLE_REACH = 1.0
+
+#: a sphere's hit is moved along its tangent plane (:meth:`SurfaceData.seen_from`) by at most
+#: this fraction of the radius: the moved point is then off the sphere by ``|move|^2 / (2 r)``,
+#: at most half this fraction of the move (the interaction projects it back)
+SPHERE_SHIFT = 1e-2
 
 
 def _vec(a: np.ndarray) -> Array3f:
@@ -216,6 +227,59 @@ class SurfaceData:
         return rec
 
     # ------------------------------------------------------------------
+    def seen_from(self, o: Array3f, d: Array3f, hit, p: Array3f):
+        """``hit``, the closest hit of the ray ``(o, d)`` spawned from the surface point ``p``
+        (``o``: ``p`` moved off its surface, :func:`drpt.render.spawn.origin`), as the
+        parallel ray from ``p`` itself meets the same primitive: ``(origin, hit)`` for
+        :meth:`interaction`, ``origin`` ``p`` and the hit's ``t`` from ``p`` (on a triangle its
+        barycentrics moved with the point, :func:`~drpt.render.spawn.triangle_shift`). Exact
+        on triangles and planes, to first order on spheres (along the tangent plane, then
+        projected back). A point moved past its triangle's edge stays on that triangle's plane
+        (within :data:`TRIANGLE_REACH`): exact where the neighbour is coplanar (a floor of two
+        triangles), to first order on a curved mesh; at a silhouette, where the ray from ``p``
+        would pass beside the mesh, the hit stays one it should not have, as the ray from
+        ``o``'s did. A lane keeps ``o`` and its hit where the move is more than
+        :data:`SPHERE_SHIFT` of its sphere's radius or the ray is parallel to the surface;
+        the miss lanes too. The primitive is the hit's: a neighbour nearer ``p`` than the
+        spawn offset is not looked for."""
+        valid = Bool(hit.valid)
+        prim = dr.select(valid, hit.prim, 0)
+        delta = p - o  # (exact where p and o are close: no rounding of the coordinates' size)
+        t, u, v = Float(hit.t), Float(hit.u), Float(hit.v)
+        moved = Bool(False)
+        if self.n_tri:
+            is_tri = valid & (prim < self.n_tri)
+            i = dr.select(is_tri, prim, 0)
+            rec = self.triangle(i, is_tri)
+            dt, du, dv = triangle_shift(rec.e1, rec.e2, delta, d)
+            um, vm = u + du, v + dv
+            # (a moved point past an edge stays on this triangle's plane: a coplanar
+            # neighbour's point, and a curved mesh's to first order)
+            near = dr.minimum(dr.minimum(um, vm), 1.0 - um - vm) > -TRIANGLE_REACH
+            ok = is_tri & dr.isfinite(dt) & near
+            t = dr.select(ok, t + dt, t)
+            u = dr.select(ok, um, u)
+            v = dr.select(ok, vm, v)
+            moved |= ok
+        if self.n_sph:
+            is_sph = valid & (prim >= self.n_tri) & (prim < self.n_tri + self.n_sph)
+            j = dr.select(is_sph, prim - self.n_tri, 0)
+            c = dr.gather(Array3f, self.sph_c, j, is_sph)
+            r = dr.gather(Float, self.sph_r, j, is_sph)
+            dt, shift = plane_shift(delta, d, o + d * hit.t - c)
+            ok = is_sph & dr.isfinite(dt) & (dr.squared_norm(shift) <= dr.square(r * SPHERE_SHIFT))
+            t = dr.select(ok, t + dt, t)
+            moved |= ok
+        if self.n_pl:
+            first = self.n_tri + self.n_sph
+            is_pl = valid & (prim >= first)
+            k = dr.select(is_pl, prim - first, 0)
+            dt, _ = plane_shift(delta, d, dr.gather(Array3f, self.pl_n, k, is_pl))
+            ok = is_pl & dr.isfinite(dt)
+            t = dr.select(ok, t + dt, t)
+            moved |= ok
+        return dr.select(moved, p, o), Hit(t, hit.prim, u, v, hit.valid)
+
     def interaction(self, o: Array3f, d: Array3f, hit) -> Interaction:
         valid = Bool(hit.valid)
         prim = dr.select(valid, hit.prim, 0)

@@ -216,7 +216,8 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--npz",  # (benchmarks/estimator_variants.py)
                   "--mitsuba", "--dump",  # (benchmarks/render_loop.py)
                   "--scenes", "--scene", "--seeds", "--repeat", "--reference", "--parts", "--depth",
-                  "--path-sampler", "--bdpt-sampler"}  # (bdpt_*.py)
+                  "--path-sampler", "--bdpt-sampler",  # (bdpt_*.py)
+                  "--spawned-hits", "--spawned-camera", "--no-visibility"}  # (benchmarks/far_light_paths.py)
 
 
 def test_every_flag_the_docs_name_exists(parsers):

@@ -179,7 +179,7 @@ from ..spawn import origin as spawn_origin
 from ..surface import Interaction, TangentInteraction
 from ..warp import Frame, square_to_cosine_hemisphere, square_to_uniform_sphere
 from .common import SHADOW_SHRINK
-from .ptracer import correction, refuse_unsupported
+from .ptracer import camera_segment, correction, refuse_unsupported
 
 #: the longest path BDPT traces (segments); its light vertices are stored per lane
 MAX_DEPTH = 16
@@ -704,7 +704,7 @@ class BDPTIntegrator:
         """``t = 1``: light vertex ``si`` joined to the camera, splatted into ``film`` (after
         :func:`roulette` with ``u_rr`` and ``threshold``)."""
         scene, cam = self.scene, self.camera
-        x, y, wc, _dist, importance, visible = cam.connect(si.p)
+        x, y, wc, dist, importance, visible = cam.connect(si.p)
         ok = active & visible
         f, _, rev = eval_both(self.smooth, si, wc)
         corr, sides = correction(si, wc)
@@ -714,18 +714,17 @@ class BDPTIntegrator:
         value = beta * f * (corr * importance * w)
         ok &= sides & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         value, ok = roulette(value, ok, u_rr, threshold)
-        so = scene.spawn(si, wc)
-        to = cam.center - so
-        dist = dr.norm(to)
+        o, d, tmax = camera_segment(cam.center, si.p, si.ng, si.p_error, wc, dist)
         count(scene, SHADOW_CAMERA, ok)
-        ok &= ~self._camera_occluded(so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        ok &= ~self._camera_occluded(o, d, tmax, ok & (tmax > 0.0))
         count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
         if strategies is not None:
             strategies.put(depth + 1, 1, x, y, value, ok)
 
     def _camera_occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool) -> Bool:
-        """Whether the segment of ray ``(o, d)`` up to ``tmax`` toward the camera is blocked. With
+        """Whether the segment of ray ``(o, d)`` up to ``tmax`` from the camera
+        (:func:`~drpt.render.integrators.ptracer.camera_segment`) is blocked. With
         ``hide_emitters`` in a scene with emissive surfaces, camera rays pass through area
         emitters (:meth:`_camera_hit`), so only what is not emissive blocks this segment."""
         scene = self.scene
@@ -905,7 +904,8 @@ class BDPTIntegrator:
         scene = self.scene
         n = dr.width(active)
         widen(rng, n)
-        o, d, _p, beta, _dvcm, _dvc, _inf, live = self._emit(rng, Bool(active), area_only=True)
+        # ref: the vertex the ray o, d was spawned from (scene.intersect_from, as the light subpaths)
+        o, d, ref, beta, _dvcm, _dvc, _inf, live = self._emit(rng, Bool(active), area_only=True)
         depth = dr.full(UInt32, 1, n)
         after_dirac = dr.zeros(Bool, n)
         p = dr.zeros(Array3f, n)
@@ -914,7 +914,7 @@ class BDPTIntegrator:
         depth_p = dr.zeros(UInt32, n)
         valid = dr.zeros(Bool, n)
         while live:
-            si = scene.intersect(o, d, live)
+            si = scene.intersect_from(o, ref, d, live)
             live &= si.valid & dr.isfinite(dr.max(beta))
             delta = scene.is_delta(si)
             store = live & ~delta & after_dirac
@@ -934,6 +934,7 @@ class BDPTIntegrator:
             depth += 1
             o = scene.spawn(si, wo)
             d = Array3f(wo)
+            ref = Array3f(si.p)
         return p, wo_p, power, depth_p, valid
 
     @staticmethod
@@ -1019,7 +1020,7 @@ class BDPTIntegrator:
             depth = dr.full(UInt32, 1, n)
             while live:
                 count(scene, HIT_LIGHT, live)
-                si = scene.intersect(o, d, live)
+                si = scene.intersect_from(o, ref, d, live)
                 live &= si.valid
                 finite = dr.isfinite(beta.x) & dr.isfinite(beta.y) & dr.isfinite(beta.z)
                 dropped += dr.select(live & ~finite, 1, 0)

@@ -54,8 +54,6 @@ from ..lights.rays import EmitterRays
 from ..loops import loops_once, widen
 from ..sampler import next_2d
 from ..scene import DeviceScene
-from ..spawn import origin as spawn_origin
-from .common import SHADOW_SHRINK
 
 #: lobes whose evaluation in importance mode would differ from radiance mode
 NONSYMMETRIC_LOBES = ("roughdielectric", "principled")
@@ -73,6 +71,27 @@ def refuse_unsupported(scene, camera, what: str) -> None:
     if bad:
         raise DrptError(f"{what} does not support {', '.join(bad)} materials "
                         "(their transmission is not symmetric)")
+
+
+#: a connection's shadow ray, traced from the camera toward a surface point, stops short of
+#: that point's surface by this fraction of its length (over the cosine there), as well as by
+#: twice the point's error bound (:func:`camera_segment`)
+CAMERA_STOP = 2.0**-18
+
+
+def camera_segment(center: Array3f, p: Array3f, ng: Array3f, err: Float, wc: Array3f, dist: Float
+                   ) -> tuple[Array3f, Array3f, Float]:
+    """The shadow ray of the connection of surface point ``p`` (unit geometric normal ``ng``,
+    error bound ``err``: :mod:`drpt.render.spawn`) to the camera's ``center`` (``wc`` the unit
+    direction from ``p`` to it, ``dist`` the distance): ``(o, d, tmax)``, traced from the
+    center toward ``p``, so that its line passes through ``p`` itself (a ray from ``p`` moved
+    off its surface passes beside ``p`` by the offset, which far from the origin moves the
+    edges of what it passes), up to ``(2 err + dist CAMERA_STOP) / |cos|`` short of ``p``:
+    past ``p``'s own surface, which lies within ``err`` of ``p`` along ``ng`` and which the
+    intersection from the center finds within a rounding of the distance. A segment too
+    grazing for that (``tmax <= 0``) has nothing to test."""
+    stop = (2.0 * err + dist * CAMERA_STOP) / dr.abs(dr.dot(ng, wc))
+    return center + dr.zeros(Array3f, dr.width(p)), -wc, dist - stop
 
 
 def correction(si, w: Array3f) -> tuple[Float, Bool]:
@@ -99,17 +118,15 @@ class ParticleTracer:
     def _connect(self, si, beta: Array3f, film: SplatFilm, active: Bool) -> None:
         """Splat vertex ``si`` (throughput ``beta``) into the film through the camera."""
         scene, cam = self.scene, self.camera
-        x, y, wc, _dist, importance, visible = cam.connect(si.p)
+        x, y, wc, dist, importance, visible = cam.connect(si.p)
         ok = active & visible
         f, _ = scene.eval_bsdf(si, wc)
         corr, sides = correction(si, wc)
         value = beta * f * (corr * importance)
         ok &= sides & (dr.max(value) > 0.0)
-        so = scene.spawn(si, wc)
-        to = cam.center - so
-        dist = dr.norm(to)
+        o, d, tmax = camera_segment(cam.center, si.p, si.ng, si.p_error, wc, dist)
         count(scene, SHADOW_CAMERA, ok)
-        ok &= ~scene.occluded(so, to / dr.maximum(dist, 1e-30), dist * SHADOW_SHRINK, ok)
+        ok &= ~scene.occluded(o, d, tmax, ok & (tmax > 0.0))
         count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
 
@@ -124,13 +141,12 @@ class ParticleTracer:
         at_inf = vp.at_infinity
         value = vp.le * dr.select(at_inf, importance, importance * cos_l)
         ok = vp.valid & visible & (at_inf | (cos_l > 0.0))
-        so = dr.select(at_inf, Array3f(cam.center), spawn_origin(vp.p, vp.ng, vp.p_error, wc))
-        to = cam.center - so
-        d_len = dr.norm(to)
-        d_sh = dr.select(at_inf, -wc, to / dr.maximum(d_len, 1e-30))
-        tmax = dr.select(at_inf, dr.inf, d_len * SHADOW_SHRINK)
+        so, d_sh, tmax = camera_segment(cam.center, vp.p, vp.ng, vp.p_error, wc, dist)
+        so = dr.select(at_inf, Array3f(cam.center), so)
+        d_sh = dr.select(at_inf, -wc, d_sh)
+        tmax = dr.select(at_inf, dr.inf, tmax)
         count(scene, SHADOW_EMITTER, ok)
-        ok &= ~scene.occluded(so, d_sh, tmax, ok)
+        ok &= ~scene.occluded(so, d_sh, tmax, ok & (tmax > 0.0))
         count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
 
@@ -151,7 +167,8 @@ class ParticleTracer:
         u_pos = next_2d(rng)
         u_dir = next_2d(rng)
         ray = self.rays.sample_ray(u_sel, u_pos, u_dir, Bool(active))
-        o, d, beta = Array3f(ray.o), Array3f(ray.d), Array3f(ray.weight)
+        # ref: the vertex the ray o, d was spawned from (scene.intersect_from)
+        o, d, ref, beta = Array3f(ray.o), Array3f(ray.d), Array3f(ray.p), Array3f(ray.weight)
         eta = dr.full(Float, 1.0, dr.width(active))
         depth = dr.full(UInt32, 1, dr.width(active))
         live = Bool(ray.valid)
@@ -160,7 +177,7 @@ class ParticleTracer:
         dropped = dr.zeros(UInt32, dr.width(active))
         while live:
             count(scene, HIT_LIGHT, live)
-            si = scene.intersect(o, d, live)
+            si = scene.intersect_from(o, ref, d, live)
             live &= si.valid
             finite = dr.isfinite(beta.x) & dr.isfinite(beta.y) & dr.isfinite(beta.z)
             dropped += dr.select(live & ~finite, 1, 0)
@@ -184,4 +201,5 @@ class ParticleTracer:
             beta = dr.select(use_rr, beta / q, beta)
             o = scene.spawn(si, wo)
             d = Array3f(wo)
+            ref = Array3f(si.p)
         return dropped

@@ -67,14 +67,18 @@ def _to_world(frame, v: Array3f) -> Array3f:
 
 
 class LightRay:
-    """A ray leaving an emitter: origin ``o`` (already moved off a surface), unit
-    direction ``d`` and ``weight`` (power over density, times the source count)."""
+    """A ray leaving an emitter: origin ``o`` (on an area emitter: its point ``p`` moved off
+    the surface, :func:`drpt.render.spawn.origin`; elsewhere ``p`` itself), unit direction
+    ``d`` and ``weight`` (power over density, times the source count). Its hit is
+    :meth:`DeviceScene.intersect_from(o, p, d) <drpt.render.scene.DeviceScene.intersect_from>`,
+    as seen from ``p``."""
 
-    def __init__(self, o, d, weight, valid):
+    def __init__(self, o, d, weight, valid, p=None):
         self.o: Array3f = o
         self.d: Array3f = d
         self.weight: Array3f = weight
         self.valid: Bool = valid
+        self.p: Array3f = o if p is None else p
 
 
 class VisiblePoint:
@@ -146,26 +150,37 @@ class EmitterRays:
                             dr.zeros(Array3f, n), dr.zeros(Bool, n))
         k, u_reuse = self._select(u_sel)
         o = dr.zeros(Array3f, n)
+        p = dr.zeros(Array3f, n)
         d = dr.full(Array3f, [0.0, 0.0, 1.0], n)
         weight = dr.zeros(Array3f, n)
         for i, (kind, light) in enumerate(self.sources):
             mine = active & (k == i)
-            oi, di, wi = self._source_ray(kind, light, u_reuse, u_pos, u_dir, mine)
+            if kind == "area":
+                oi, di, wi, pi = self._area_ray(u_reuse, u_pos, u_dir, mine)
+            else:
+                oi, di, wi = self._source_ray(kind, light, u_reuse, u_pos, u_dir, mine)
+                pi = oi
             o = dr.select(mine, oi, o)
+            p = dr.select(mine, pi, p)
             d = dr.select(mine, di, d)
             weight = dr.select(mine, wi, weight)
         weight = weight * float(self.count)
         valid = active & (dr.max(weight) > 0.0)
-        return LightRay(o, d, weight, valid)
+        return LightRay(o, d, weight, valid, p)
+
+    def _area_ray(self, u_sel, u_pos, u_dir, active):
+        """An emissive triangle's or sphere's ray: ``(o, d, weight, p)``, ``p`` the point
+        on the emitter and ``o`` it moved off the surface."""
+        ls = self.scene.area_lights.sample(u_sel, u_pos, active)
+        local = square_to_cosine_hemisphere(u_dir)
+        d = Frame(ls.n).to_world(local)
+        o = spawn_origin(ls.p, ls.ng, ls.p_error, d)
+        w = dr.select(ls.pdf_area > 0.0, ls.le * (dr.pi / ls.pdf_area), 0.0)
+        return o, d, w, ls.p
 
     def _source_ray(self, kind, light, u_sel, u_pos, u_dir, active):
-        if kind == "area":
-            ls = self.scene.area_lights.sample(u_sel, u_pos, active)
-            local = square_to_cosine_hemisphere(u_dir)
-            d = Frame(ls.n).to_world(local)
-            o = spawn_origin(ls.p, ls.ng, ls.p_error, d)
-            w = dr.select(ls.pdf_area > 0.0, ls.le * (dr.pi / ls.pdf_area), 0.0)
-            return o, d, w
+        """The ray of a source other than the area emitters (which :meth:`_area_ray` draws):
+        ``(o, d, weight)``."""
         if kind in ("point", "spot"):
             o = Array3f(*map(float, light.position))
             color = Array3f(*map(float, light.color))

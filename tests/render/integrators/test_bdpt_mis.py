@@ -6,10 +6,12 @@ grows with the coordinates' magnitude).
 
 * :func:`segment_length2` is the squared distance from the vertex, not ``si.t``.
 
-No render-level test: the far scene of tests/render/integrators/test_path_mis.py renders darker
-with bdpt than at the origin whichever length is used, since its light subpaths leave the
-light from the spawned origin (light tracing alone, ``ptracer``, is as far off), which hides
-this correction's effect (docs/performance.md, "bdpt's segment lengths").
+No render-level test at ``max_depth`` 2: there the two lengths agree by construction (the light
+subpaths' hits are measured from their vertex, :meth:`DeviceScene.intersect_from
+<drpt.render.scene.DeviceScene.intersect_from>`, and the camera's first segment starts at the
+camera); the far scene renders like the scene at the origin
+(tests/render/integrators/test_far_light_paths.py; docs/performance.md, "bdpt's segment
+lengths").
 """
 
 from __future__ import annotations
