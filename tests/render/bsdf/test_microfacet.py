@@ -212,6 +212,14 @@ def test_extremes_finite():
     d = mf.Distribution(True, 1e-4)
     v = Array3f(Float(np.sqrt(1 - 1e-12)), Float(0.0), Float(1e-6))
     assert np.isfinite(np.array(d.G1(v, Array3f(0.0, 0.0, 1.0)))).all()
+    # Beckmann's visible normals down to cos 1e-30 (the slope sampler clamps cos at 1e-12;
+    # without the clamp most normals are NaN below cos ~1e-23)
+    for cos in (1e-12, 1e-25, 1e-30):
+        wi = Array3f(Float(np.full(n, 1.0, np.float32)), Float(np.zeros(n, np.float32)),
+                     Float(np.full(n, cos, np.float32)))
+        for alpha in (1.0, 2.0):
+            m = mf.Distribution(True, alpha).sample_visible_normal(wi, to_drpt(u, Array2f))
+            assert np.isfinite(np.array(m)).all(), (cos, alpha)
 
 
 def test_alpha_min_is_the_lower_clamp():
