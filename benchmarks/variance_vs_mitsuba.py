@@ -113,10 +113,14 @@ def _grid(a: np.ndarray, b: np.ndarray, spec: str) -> None:
 
 def _mean_z(a: np.ndarray, b: np.ndarray) -> float:
     """The z of the difference of two means over rounds (``a``, ``b``: rounds first): the
-    rounds' sums of each, independent across rounds and renderers."""
+    rounds' sums of each, independent across rounds and renderers. Without noise (``se``
+    0) it is +-inf where the means differ, 0 where they are equal."""
     sa, sb = a.reshape(len(a), -1).sum(1), b.reshape(len(b), -1).sum(1)
     se = np.sqrt(sa.var(ddof=1) / len(sa) + sb.var(ddof=1) / len(sb))
-    return float((sa.mean() - sb.mean()) / se) if se > 0 else 0.0
+    d = sa.mean() - sb.mean()
+    if se > 0:
+        return float(d / se)
+    return float(np.sign(d) * np.inf) if d != 0 else 0.0
 
 
 def main(argv: list[str]) -> None:

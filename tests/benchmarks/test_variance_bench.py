@@ -46,3 +46,14 @@ def test_grid_names_the_noisy_cell(capsys):
     assert len(ratios) == 10
     assert ratios["(0, 2)"] > 6 and ratios["(1, 2)"] > 6  # 9x the variance
     assert all(0.5 < v < 2.0 for k, v in ratios.items() if not k.endswith("2)"))
+
+
+def test_mean_z_of_noise_free_cells():
+    """A noise-free pair of cells: z is +-inf where the means differ (the grid lists the
+    cell), 0 where they are equal; with noise it is the finite ratio."""
+    ones = np.ones((4, 2, 2, 3))
+    assert bench._mean_z(ones * 1.5, ones) == np.inf
+    assert bench._mean_z(ones, ones * 1.5) == -np.inf
+    assert bench._mean_z(ones, ones) == 0.0
+    rng = np.random.default_rng(5)
+    assert np.isfinite(bench._mean_z(rng.normal(size=(8, 2, 2, 3)), ones))
