@@ -126,7 +126,7 @@ class LDSampler:
     sample's index among its pixel's samples), ``step`` (what
     :meth:`advance` adds to it: the pixel's lanes) and ``dim`` (the next
     dimension). A Dr.Jit struct, so it is loop state as PCG32 is. Every field is as wide
-    as the widest of ``key`` and ``index`` (a ``step`` or ``key`` given as one value for
+    as the widest of ``key``, ``index`` and ``step`` (a field given as one value for
     all lanes is broadcast, the same values): as the state of a symbolic loop, a field
     of another width than the loop's makes Dr.Jit record the loop's body again
     (:mod:`drpt.render.loops`)."""
@@ -138,7 +138,7 @@ class LDSampler:
         key = UInt32(0) if key is None else UInt32(key)
         index = UInt32(0) if index is None else UInt32(index)
         step = UInt32(1) if step is None else UInt32(step)
-        n = max(dr.width(key), dr.width(index))
+        n = max(dr.width(key), dr.width(index), dr.width(step))
         self.key, self.index, self.step = (v + dr.zeros(UInt32, n) if dr.width(v) != n else v
                                            for v in (key, index, step))
         self.dim = dr.zeros(UInt32, n)

@@ -446,3 +446,13 @@ def test_skip_draws_jumps_a_pcg32_past_its_draws():
     assert not np.array_equal(short.state.numpy(), ref.state.numpy())
     ld = LDSampler.for_pixels(1, dr.arange(UInt32, 4), dr.zeros(UInt32, 4))
     assert skip_draws(ld, 7) is None
+
+
+def test_ldsampler_fields_take_the_widest_fields_width():
+    """A wide ``step`` with one ``key`` and ``index`` for all lanes widens them (and ``dim``)
+    to its width, the values broadcast; so does a wide ``key`` a width-1 ``step``."""
+    s = LDSampler(UInt32(7), UInt32(3), dr.arange(UInt32, 5) + 1)
+    assert [dr.width(v) for v in (s.key, s.index, s.step, s.dim)] == [5] * 4
+    assert list(s.key) == [7] * 5 and list(s.index) == [3] * 5 and list(s.step) == [1, 2, 3, 4, 5]
+    s = LDSampler(dr.arange(UInt32, 4), UInt32(0), UInt32(2))
+    assert [dr.width(v) for v in (s.key, s.index, s.step, s.dim)] == [4] * 4 and list(s.step) == [2] * 4
