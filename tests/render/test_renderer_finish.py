@@ -9,6 +9,7 @@ import copy
 import numpy as np
 import pytest
 
+from drpt.render import renderer
 from drpt.render.chunks import ChunkMerge, plan_chunks
 from drpt.render.renderer import finish, xyz_second_moment
 
@@ -107,18 +108,27 @@ def test_finish_of_a_pixels_own_samples_is_its_definition(channels):
     assert not np.array_equal(other, got.variance)
 
 
-def test_all_finite_sees_every_overflow_and_no_finite_sum():
-    """``all_finite`` (the check that traces a pass again with float64 sums) is false for a
-    float32 sum that overflowed to +inf, a negative one at -inf and a NaN, and true for finite
-    values near the float32 maximum whose float32 sum overflows. Negative control: the
-    float32 sum of those values is not finite, so summing in float32 would retrace that pass."""
-    from drpt.render.renderer import all_finite
-
+def _check_all_finite(f) -> None:
+    """``f`` is false for a float32 sum that overflowed to +inf, a negative one at -inf and a
+    NaN, and true for finite values near the float32 maximum whose float32 sum overflows."""
     near = np.full((4, 5, 3), 3e38, np.float32)
-    assert all_finite(near, near[..., :1])
+    assert f(near, near[..., :1])
     for bad in (np.inf, -np.inf, np.nan):
         a = near.copy()
         a[2, 3, 1] = bad
-        assert not all_finite(near, a) and not all_finite(a)
-    with np.errstate(over="ignore"):
-        assert not np.isfinite(near.sum(dtype=np.float32))
+        assert not f(near, a) and not f(a)
+
+
+def test_all_finite_sees_every_overflow_and_no_finite_sum():
+    """``all_finite`` (the check that traces a pass again with float64 sums) passes
+    :func:`_check_all_finite`. Negative control: a check by the float32 sum
+    (``isfinite(a.sum(dtype=float32))``), which takes finite values near the float32 maximum
+    for an overflow, fails it."""
+    _check_all_finite(renderer.all_finite)
+
+    def by_float32_sum(*arrays):
+        with np.errstate(over="ignore"):
+            return all(np.isfinite(a.sum(dtype=np.float32)) for a in arrays)
+
+    with pytest.raises(AssertionError):
+        _check_all_finite(by_float32_sum)
