@@ -1,8 +1,7 @@
 """Single-precision ``exp``, ``log``, ``erf`` and ``erfinv`` for kernels whose
-arguments are known to be in range. ``log``, ``erf`` and ``erfinv`` are faster than
-Dr.Jit's general versions, which handle infinities, NaNs, denormals and both signs
-at every call; ``exp`` is as fast as Dr.Jit's (the building block of ``erf``, and
-exactly 0 where it underflows). Their CPU time and operation counts:
+arguments are known to be in range: unlike Dr.Jit's general versions they do not
+handle infinities, NaNs, denormals and both signs at every call (``exp``, the building
+block of ``erf``, is exactly 0 where it underflows). Their CPU time and operation counts:
 ``docs/performance.md``, "Beckmann's sampler". Pure
 Dr.Jit, usable in symbolic loops. Their user: Beckmann's visible-normal sampler
 (:meth:`drpt.render.bsdf.microfacet.Distribution._slopes11_beckmann`).

@@ -38,8 +38,8 @@ def reflect(wi: Array3f, m: Array3f) -> Array3f:
 
 #: |erf(x)| bound of the Beckmann slope sampler (``erfinv(+-1)`` is infinite).
 _ERF_MAX = 1.0 - 1.2e-7
-#: Halley steps of the Beckmann slope sampler (after Jakob's initial guess, the
-#: sampled CDF within 3e-7 of ``u`` with three, 3e-5 with two: tests/render/bsdf/test_microfacet.py).
+#: Halley steps of the Beckmann slope sampler after Jakob's initial guess (three keep the
+#: sampled CDF within 5e-7 of ``u``, two do not: tests/render/bsdf/test_microfacet.py).
 _HALLEY_STEPS = 3
 
 
@@ -94,9 +94,11 @@ class Distribution:
     from Jakob's initial guess, the second slope ``erfinv(2 u.y - 1)``, ``u``
     clamped to ``[1e-6, 1 - 1e-6]`` as Mitsuba; drpt takes three *Halley*
     steps where Mitsuba takes three Newton steps (the second derivative is
-    a by-product of the first), which leaves the sampled CDF within 3e-7 of
-    ``u`` (the float32 floor) where Newton's leave up to 3e-6 (``cos theta'``
-    0.8-0.95, ``u`` near 1, where the CDF flattens), and evaluates ``erf``,
+    a by-product of the first), which keeps the sampled CDF within 5e-7 of
+    ``u`` (near the float32 floor; asserted by tests/render/bsdf/test_microfacet.py)
+    where Newton's converge slowly (``cos theta'`` 0.8-0.95, ``u`` near 1, where the
+    CDF flattens; the errors measured: docs/performance.md, "Beckmann's sampler"),
+    and evaluates ``erf``,
     ``erfinv``, ``exp`` and ``log`` by :mod:`drpt.render.erf32` (the last
     ``erfinv``, after the third step, by Taylor's second order from the
     second's). With the

@@ -349,14 +349,15 @@ def _beckmann_slope_cdf_error():
 
 
 def test_beckmann_slope_inversion_error():
-    """The sampled slopes' exact CDF is within 5e-7 of ``u`` everywhere (the float32
-    floor: 2.6e-7 measured; Mitsuba's three Newton steps leave 3.1e-6 on this grid)."""
+    """The sampled slopes' exact CDF is within 5e-7 of ``u`` everywhere (near the float32
+    floor; the errors of drpt's and Mitsuba's steps on this grid: docs/performance.md,
+    "Beckmann's sampler")."""
     ex, ey = _beckmann_slope_cdf_error()
     assert ex < 5e-7 and ey < 5e-7, (ex, ey)
 
 
 def test_beckmann_slope_inversion_negative_control(monkeypatch):
-    """Two Halley steps instead of three: the bound is broken (2.8e-5 measured)."""
+    """Two Halley steps instead of three: the bound is broken."""
     monkeypatch.setattr(mf, "_HALLEY_STEPS", 2)
     ex, _ = _beckmann_slope_cdf_error()
     assert ex > 5e-7, ex
