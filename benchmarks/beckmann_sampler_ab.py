@@ -3,7 +3,7 @@ three Halley steps, :mod:`drpt.render.erf32`) against Mitsuba 3's routine with D
 ``erf``/``erfinv``/``exp``/``log`` (three Newton steps, written out below as
 ``include/mitsuba/render/microfacet.h`` has it), in turns in one process (not a test).
 
-    PYTHONPATH=. .venv/bin/python benchmarks/beckmann_sampler_ab.py [--rounds 20] [--samples 2097152]
+    PYTHONPATH=.:tests .venv/bin/python benchmarks/beckmann_sampler_ab.py [--rounds 20] [--samples 2097152]
 
 Prints each side's kernel operation count, the median process CPU seconds of one kernel
 over ``--samples`` random ``(cos theta, u)`` (both slopes), the median per-round ratio
@@ -19,9 +19,9 @@ import time
 import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Float
-from scipy.special import erf as erf64
 
 from drpt.render.bsdf import microfacet as mf
+from support.beckmann import slope_cdf_error
 
 _ERF_MAX = mf._ERF_MAX
 
@@ -58,19 +58,8 @@ def ops(f, cos_i, u) -> int:
 
 
 def cdf_error(f) -> float:
-    ci = np.concatenate([np.linspace(1e-3, 1.0, 300), 1.0 - np.logspace(-7, -1, 30)]).astype(np.float32)
-    u = np.concatenate([np.linspace(0.0, 1.0, 3001), np.logspace(-6, -2, 100),
-                        1.0 - np.logspace(-6, -2, 100)]).astype(np.float32)
-    c, uu = (a.ravel() for a in np.meshgrid(ci, u, indexing="ij"))
-    sx = np.array(f(Float(c), Array2f(Float(uu), Float(uu)))[0], np.float64)
-    c64 = c.astype(np.float64)
-    isp = 1.0 / np.sqrt(np.pi)
-    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        tan = np.sqrt(1.0 - c64 * c64) / c64
-        cot = 1.0 / tan
-        cdf = (1.0 + erf64(sx) + isp * tan * np.exp(-sx * sx)) / (1.0 + erf64(cot) + isp * tan * np.exp(-cot * cot))
-    cdf = np.where(c64 == 1.0, 0.5 * (1.0 + erf64(sx)), cdf)
-    return float(np.max(np.abs(cdf - np.clip(uu.astype(np.float64), np.float32(1e-6), np.float32(1.0 - 1e-6)))))
+    """The first slope's CDF error over :func:`support.beckmann.grid`."""
+    return slope_cdf_error(f)[0]
 
 
 def main() -> None:

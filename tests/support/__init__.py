@@ -20,6 +20,8 @@ run on their own BSDFs and images are in :mod:`drpt.testing`, not here.
   checkpoint;
 * :mod:`support.ports`: ports of this machine held in use;
 * :mod:`support.loops`: how often Dr.Jit records each symbolic loop while a render is traced.
+* :mod:`support.beckmann`: the exact CDF of Beckmann's visible slopes, against which a slope
+  sampler's inversion error is measured (also by ``benchmarks/beckmann_sampler_ab.py``).
 """
 
 from __future__ import annotations

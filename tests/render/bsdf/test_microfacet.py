@@ -25,6 +25,7 @@ from drjit.auto import Array2f, Array3f, Float
 from drpt.render.bsdf import microfacet as mf
 from drpt.render.warp import concentric_polar, polar_to_disk
 from drpt.testing import mitsuba, spherical_chi2, to_drpt, to_mitsuba_float, to_mitsuba_vec3
+from support.beckmann import slope_cdf_error
 
 # (beckmann, alpha_u, alpha_v or None for isotropic)
 CASES = [(True, 0.1, None), (False, 0.1, None), (True, 0.5, None), (False, 0.5, None),
@@ -323,29 +324,12 @@ def test_chi2_negative_control(beck):
 
 # ---------------------------------------------------------------- Beckmann slope inversion
 def _beckmann_slope_cdf_error():
-    """Max over a dense grid of (cos theta_i, u) of |CDF(slope sampled for u) - u|, the
-    exact CDF of the alpha = 1 visible slopes in float64 (both slopes: x by the Halley
+    """:func:`support.beckmann.slope_cdf_error` of drpt's sampler (x by the Halley
     inversion, y by ``erfinv(2 u - 1)``)."""
-    special = pytest.importorskip("scipy.special")
-    ci = np.concatenate([np.linspace(1e-3, 1.0, 300), 1.0 - np.logspace(-7, -1, 30)]).astype(np.float32)
-    u = np.concatenate([np.linspace(0.0, 1.0, 3001), np.logspace(-6, -2, 100),
-                        1.0 - np.logspace(-6, -2, 100)]).astype(np.float32)
-    c, uu = (a.ravel() for a in np.meshgrid(ci, u, indexing="ij"))
-    n = mf.Distribution(True, 1.0)._slopes11_beckmann(Float(c), Array2f(Float(uu), Float(uu[::-1].copy())))
-    sx, sy = -np.array(n.x, np.float64), np.array(n.y, np.float64)
-    assert np.isfinite(sx).all() and np.isfinite(sy).all()
-    c64 = c.astype(np.float64)
-    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        tan = np.sqrt(1.0 - c64 * c64) / c64
-        cot = 1.0 / tan
-        isp = 1.0 / np.sqrt(np.pi)
-        norm = 1.0 + special.erf(cot) + isp * tan * np.exp(-cot * cot)
-        cdf_x = (1.0 + special.erf(sx) + isp * tan * np.exp(-sx * sx)) / norm
-    cdf_x = np.where(c64 == 1.0, 0.5 * (1.0 + special.erf(sx)), cdf_x)  # tan = 0
-    cdf_y = 0.5 * (1.0 + special.erf(sy))
-    ux = np.clip(uu.astype(np.float64), np.float32(1e-6), np.float32(1.0 - 1e-6))
-    uy = np.clip(uu[::-1].astype(np.float64), np.float32(1e-6), np.float32(1.0 - 1e-6))
-    return np.max(np.abs(cdf_x - ux)), np.max(np.abs(cdf_y - uy))
+    def slopes(cos, u):
+        n = mf.Distribution(True, 1.0)._slopes11_beckmann(cos, u)
+        return -n.x, n.y
+    return slope_cdf_error(slopes)
 
 
 def test_beckmann_slope_inversion_error():
