@@ -13,13 +13,13 @@ again; a width-1 variable that the body assigns a wide value (a sum started at 0
 The integrators, the film, the AOV kernel and the device scene's ray queries (the
 accelerators' traversal loops, also where no integrator loop holds them: the wavefront's
 per-bounce kernels) trace their loops under :func:`loops_once` (the flag off), with their
-loop state as wide as the loop (:func:`widen`; a sampler's fields are:
-:class:`~drpt.render.sampler.LDSampler` broadcasts a step or key given as one value for all
-lanes) and read-only values of other widths out of it (``dr.hint(cond, exclude=[...])``), so
-each body is recorded once (nested loops once per recording of the loop that holds them);
-:func:`decorated` lists those functions. The LLVM backend removes the loop-invariant phis
-itself: the kernel computes the same values, and the images are the same bit for bit
-(``tests/render/test_loops.py``).
+loop state as wide as the loop (``dr.zeros(T, n)``, ``dr.opaque(T, v, n)``; a sampler's
+fields are: :class:`~drpt.render.sampler.LDSampler` broadcasts a key, index or step given as
+one value for all lanes) and read-only values of other widths out of it
+(``dr.hint(cond, exclude=[...])``), so each body is recorded once (nested loops once per
+recording of the loop that holds them); :func:`decorated` lists those functions. The LLVM
+backend removes the loop-invariant phis itself: the kernel computes the same values, and the
+images are the same bit for bit (``tests/render/test_loops.py``).
 """
 
 from __future__ import annotations
@@ -59,14 +59,3 @@ def decorated() -> list[tuple[object, str]]:
         out += [(owner, name) for owner in owners for name, value in vars(owner).items()
                 if any(value is f for f in DECORATED)]
     return out
-
-
-def widen(state, n: int) -> None:
-    """Give the fields of ``state`` (a Dr.Jit struct) that hold one value for all lanes ``n``
-    entries, in place (the same values): as loop state, a field of another width than the
-    loop's makes Dr.Jit record the loop's body again. (drpt's samplers are made with every
-    field as wide as their lanes, :class:`~drpt.render.sampler.LDSampler`: nothing to do.)"""
-    for name in getattr(type(state), "DRJIT_STRUCT", {}):
-        value = getattr(state, name)
-        if dr.width(value) == 1 and n > 1:
-            setattr(state, name, value + dr.zeros(type(value), n))

@@ -171,7 +171,7 @@ from ..camera import RayCamera
 from ..film import SplatFilm
 from ..instrument import HIT_CAMERA, HIT_LIGHT, SHADOW_CAMERA, SHADOW_CONNECT, SHADOW_NEE, SPLAT, count
 from ..lights.rays import INV_FOUR_PI, EmitterRays
-from ..loops import loops_once, widen
+from ..loops import loops_once
 from ..photons import PhotonGrid
 from ..sampler import LDSampler, next_2d
 from ..scene import DeviceScene
@@ -903,7 +903,6 @@ class BDPTIntegrator:
         not kept."""
         scene = self.scene
         n = dr.width(active)
-        widen(rng, n)
         # ref: the vertex the ray o, d was spawned from (scene.intersect_from, as the light subpaths)
         o, d, ref, beta, _dvcm, _dvc, _inf, live = self._emit(rng, Bool(active), area_only=True)
         depth = dr.full(UInt32, 1, n)
@@ -1002,7 +1001,6 @@ class BDPTIntegrator:
         # trace one kernel; one entry per lane, as wide as the loops, which carry it
         # unchanged (a width-1 loop variable makes Dr.Jit record the loop again)
         threshold = dr.opaque(Float, self.threshold if self.threshold else 0.0, n)
-        widen(rng, n)  # (every field as wide as the loops)
         D = self.depth
         NL = D - 1
         has_deltas = len(self.deltas) > 0 and scene.has_smooth_bsdfs

@@ -51,7 +51,7 @@ from ..camera import RayCamera
 from ..film import SplatFilm
 from ..instrument import HIT_LIGHT, SHADOW_CAMERA, SHADOW_EMITTER, SPLAT, count
 from ..lights.rays import EmitterRays
-from ..loops import loops_once, widen
+from ..loops import loops_once
 from ..sampler import next_2d
 from ..scene import DeviceScene
 
@@ -157,7 +157,6 @@ class ParticleTracer:
         non-finite contributions dropped (per lane). The path loop is recorded once
         (:func:`~drpt.render.loops.loops_once`)."""
         scene, opt = self.scene, self.opt
-        widen(rng, dr.width(active))  # (every field as wide as the loop)
         max_depth = opt.max_depth
         if scene.instrument is not None:
             scene.instrument.paths(dr.width(active), (HIT_LIGHT, SHADOW_EMITTER, SHADOW_CAMERA, SPLAT))
