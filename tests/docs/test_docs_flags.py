@@ -217,7 +217,8 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--mitsuba", "--dump",  # (benchmarks/render_loop.py)
                   "--scenes", "--scene", "--seeds", "--repeat", "--reference", "--parts", "--depth",
                   "--path-sampler", "--bdpt-sampler",  # (bdpt_*.py)
-                  "--spawned-hits", "--spawned-camera", "--no-visibility"}  # (benchmarks/far_light_paths.py)
+                  "--spawned-hits", "--spawned-camera", "--no-visibility",  # (benchmarks/far_light_paths.py)
+                  "--opacity", "--filter-type", "--raw"}  # (benchmarks/mask_opacity_vs_mitsuba.py)
 
 
 def test_every_flag_the_docs_name_exists(parsers):
