@@ -208,7 +208,7 @@ class Distribution:
     def _slopes11_beckmann(self, cos_i: Float, u: Array2f) -> Array3f:
         """Visible normal of the alpha = 1 Beckmann for ``wi = (sin_i, 0, cos_i)`` (Jakob 2014),
         with :mod:`drpt.render.erf32`'s ``erf``, ``erfinv``, ``exp`` and ``log``. ``cos_i`` is
-        clamped to ``>= 1e-12`` (below it the Halley step's products overflow float32; the
+        clamped to ``>= 1e-12`` (below about 1e-23 the Halley step's products overflow float32; the
         slope distribution's change from ``cos_i`` to 0 is of the order of ``cos_i``)."""
         cos_i = dr.maximum(cos_i, 1e-12)
         tan_i = dr.safe_sqrt(1.0 - dr.square(cos_i)) / cos_i
