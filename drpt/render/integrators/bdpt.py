@@ -715,8 +715,9 @@ class BDPTIntegrator:
         ok &= sides & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         value, ok = roulette(value, ok, u_rr, threshold)
         o, d, tmax = camera_segment(cam.center, si.p, si.ng, si.p_error, wc, dist)
+        ok &= tmax > 0.0
         count(scene, SHADOW_CAMERA, ok)
-        ok &= ~self._camera_occluded(o, d, tmax, ok & (tmax > 0.0))
+        ok &= ~self._camera_occluded(o, d, tmax, ok)
         count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
         if strategies is not None:

@@ -89,7 +89,8 @@ def camera_segment(center: Array3f, p: Array3f, ng: Array3f, err: Float, wc: Arr
     edges of what it passes), up to ``(2 err + dist CAMERA_STOP) / |cos|`` short of ``p``:
     past ``p``'s own surface, which lies within ``err`` of ``p`` along ``ng`` and which the
     intersection from the center finds within a rounding of the distance. A segment too
-    grazing for that (``tmax <= 0``) has nothing to test."""
+    grazing for that (``tmax <= 0``) cannot be tested, so its caller drops the connection
+    (counting it as visible would splat it through whatever lies between)."""
     stop = (2.0 * err + dist * CAMERA_STOP) / dr.abs(dr.dot(ng, wc))
     return center + dr.zeros(Array3f, dr.width(p)), -wc, dist - stop
 
@@ -125,8 +126,9 @@ class ParticleTracer:
         value = beta * f * (corr * importance)
         ok &= sides & (dr.max(value) > 0.0)
         o, d, tmax = camera_segment(cam.center, si.p, si.ng, si.p_error, wc, dist)
+        ok &= tmax > 0.0
         count(scene, SHADOW_CAMERA, ok)
-        ok &= ~scene.occluded(o, d, tmax, ok & (tmax > 0.0))
+        ok &= ~scene.occluded(o, d, tmax, ok)
         count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
 
@@ -145,8 +147,9 @@ class ParticleTracer:
         so = dr.select(at_inf, Array3f(cam.center), so)
         d_sh = dr.select(at_inf, -wc, d_sh)
         tmax = dr.select(at_inf, dr.inf, tmax)
+        ok &= tmax > 0.0
         count(scene, SHADOW_EMITTER, ok)
-        ok &= ~scene.occluded(so, d_sh, tmax, ok & (tmax > 0.0))
+        ok &= ~scene.occluded(so, d_sh, tmax, ok)
         count(scene, SPLAT, ok)
         film.put(x, y, value, ok)
 
