@@ -215,6 +215,12 @@ CAMERA_STRIDE = 32
 #: the dimensions of a camera vertex's BSDF lobe, direction and Russian roulette
 CAMERA_TAIL = 4
 
+# the worst case fits: the light subpath (its emitter and at most MAX_DEPTH - 1 vertices, 5
+# dimensions each, after the pixel's 2) ends before the camera subpath's first dimension,
+# and a camera vertex's next-event estimation and connections end before its tail
+assert 2 + 5 * MAX_DEPTH <= CAMERA_DIMENSION
+assert 5 + MAX_DEPTH - 1 <= CAMERA_STRIDE - CAMERA_TAIL
+
 SUPPORTED_SOURCES = ("area", "point", "spot", "directional", "sky", "background")
 
 #: caustic merging's radius at the first sample per pixel, as a fraction of the scene's bounding

@@ -927,8 +927,10 @@ class _CountingSampler(LDSampler):
         return super().next_2d()
 
 
-@pytest.mark.parametrize("name,control", [("cornell", False), ("specular", False), ("cornell", True),
-                                          ("specular", True)])
+@pytest.mark.parametrize("name,control", [("cornell", False),
+                                          pytest.param("specular", False, marks=pytest.mark.slow),
+                                          ("cornell", True),
+                                          pytest.param("specular", True, marks=pytest.mark.slow)])
 def test_no_decision_shares_a_low_discrepancy_dimension(scenes, monkeypatch, name, control):
     """With ``--sampler ldsampler`` every random decision of a bdpt sample (the pixel position,
     the light subpath's source, point, direction, splat roulette, lobe, direction and Russian
