@@ -314,9 +314,7 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
             times[name].append(time.perf_counter() - t)
             images[name].append(img)
     stacks = {name: np.stack(images[name]) for name in ways}
-    # per way and pixel: finite in every round (an image's channels, if any, flattened)
-    finite = {name: np.isfinite(st.reshape(st.shape[0], st.shape[1], st.shape[2], -1)).all(axis=(0, 3))
-              for name, st in stacks.items()}
+    finite = {name: finite_in_every_round(st) for name, st in stacks.items()}
     scored = np.logical_and.reduce(list(finite.values()))
     out = {}
     for name, st in stacks.items():
@@ -329,6 +327,13 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
                      "mean": float(st[:, scored].mean()) if scored.any() else float("nan"),
                      "nonfinite_pixels": int((~finite[name]).sum())}
     return out
+
+
+def finite_in_every_round(stack: np.ndarray) -> np.ndarray:
+    """Per pixel of ``stack`` (rounds first, then ``(H, W)`` and any channels): whether it is
+    finite in every round and channel, an ``(H, W)`` mask. The pixels to score a set of
+    renderers on are those finite in all of theirs (``np.logical_and`` of their masks)."""
+    return np.isfinite(stack.reshape(stack.shape[0], stack.shape[1], stack.shape[2], -1)).all(axis=(0, 3))
 
 
 def _loo_variances(stack: np.ndarray) -> list[float]:

@@ -162,13 +162,13 @@ def test_efficiency_rounds_on_known_noise_and_time(monkeypatch):
         converge.efficiency_rounds({"a": way(1.0, 1.0)}, 1)
 
 
-
 def test_efficiency_rounds_scores_every_way_on_the_pixels_finite_in_all(monkeypatch):
     """A way whose image has a NaN pixel in one round (as Mitsuba's ldsampler image of the
     dining room has) and an infinite one in another: both ways' variances are taken over the
     other pixels, the same for both, and equal the variances computed there by hand; each way
-    counts its own non-finite pixels. Negative control: the variance over all pixels, as
-    before, is NaN for the way with the NaN pixel."""
+    counts its own non-finite pixels. Negative control: with the mask of finite pixels
+    replaced by one that keeps every pixel, the variance of the way with the NaN pixel comes
+    out NaN."""
     clock = iter(range(10_000))  # each render takes 1 "second"
     monkeypatch.setattr(converge.time, "perf_counter", lambda: float(next(clock)))
 
@@ -192,12 +192,16 @@ def test_efficiency_rounds_scores_every_way_on_the_pixels_finite_in_all(monkeypa
         assert res[name]["mean"] == pytest.approx(np.stack(images[name])[:, keep].mean(), rel=1e-12)
     assert res["a"]["nonfinite_pixels"] == 0 and res["b"]["nonfinite_pixels"] == 2
     assert 3.0 < res["b"]["variance"] / res["a"]["variance"] < 5.5
-    # control: over every pixel, the NaN round makes the variance NaN
-    assert math.isnan(np.stack(images["b"]).var(0, ddof=1).mean())
-    # every round finite: every pixel counts, as before
+    # every round finite: every pixel counts
     res = converge.efficiency_rounds({"a": way(1.0, {})}, 6, warm_seed=99)
     assert res["a"]["variance"] == np.stack(images["a"]).var(0, ddof=1).mean()
     assert res["a"]["nonfinite_pixels"] == 0
+    # control: a mask keeping every pixel lets the NaN round make the variance NaN
+    with monkeypatch.context() as m:
+        m.setattr(converge, "finite_in_every_round", lambda st: np.ones(st.shape[1:3], bool))
+        res = converge.efficiency_rounds({"a": way(1.0, {}), "b": way(2.0, bad)}, 6, warm_seed=99)
+    assert math.isnan(res["b"]["variance"]) and math.isfinite(res["a"]["variance"])
+
 
 def test_adaptive_ratio_against_uniform_drpt():
     from drpt.tools.converge import adaptive_ratio
