@@ -298,6 +298,14 @@ def _measured(row: dict) -> bool:
             and _same_image(row, 2.0))
 
 
+def _why_not_measured(rows: list[dict]) -> str:
+    """Why the rows that are not :func:`_measured` are left out of the mean, by cause."""
+    out = [r for r in rows if not _measured(r)]
+    apart = sum(math.isfinite(r.get("mean_ratio", 1.0)) and not _same_image(r, 2.0) for r in out)
+    parts = [f"{len(out) - apart} without a finite variance"] if len(out) > apart else []
+    return ", ".join(parts + ([f"{apart} with mean images more than 2x apart"] if apart else []))
+
+
 def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
     lines = [f"commit {getattr(a, 'commit', None) or _commit()}, {_cpu()}, {os.cpu_count()} cores; {a.rounds} rounds, "
              f"min size {a.min_size}, max samples {a.max_samples}; load average {load0:.1f} at the start"
@@ -313,7 +321,9 @@ def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
     for r in rows:
         ok = "yes" if _measured(r) and r["efficiency_ratio"] >= r["target"] else "**no**"
         var, eff = f"{r['variance_ratio']:.2f}{_error(r)}", f"{r['efficiency_ratio']:.2f}"
-        if not _same_image(r, 2.0):
+        if not math.isfinite(r.get("mean_ratio", 1.0)):
+            var = eff = "n/a (no pixel finite in every round of both)"
+        elif not _same_image(r, 2.0):
             var = eff = f"n/a (Mitsuba's mean image {r['mean_ratio']:.3g}x drpt's)"
         lines.append(f"| {r['scene']} | {r['width']}x{r['height']} | {r['spp']} | {r['drpt_seconds']:.3f} "
                      f"| {r['mitsuba_seconds']:.3f} | {r['time_ratio']:.2f} | {var} "
@@ -327,7 +337,7 @@ def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
         g = math.exp(sum(math.log(r["efficiency_ratio"]) for r in measured) / len(measured))
         lines.append(f"\n{sum(r['efficiency_ratio'] >= r['target'] for r in measured)} of {len(rows)} scenes "
                      f"meet their target; geometric mean of the efficiency ratios {g:.2f}"
-                     + (f" (over {len(measured)}: the others' variance is not finite)"
+                     + (f" (over {len(measured)}: {_why_not_measured(rows)})"
                         if len(measured) < len(rows) else ""))
     apart = [r for r in rows if not _same_image(r, 1.1)]
     if apart:

@@ -101,7 +101,13 @@ def test_a_row_whose_mean_images_differ_has_no_efficiency():
     text = bench.format_table([bad, near], [], a, 0.5)
     assert "| diningroom | 192x192 | 16 | 0.500 | 0.700 | 1.40 | n/a (Mitsuba's mean image 3e+17x drpt's) " \
            "| n/a (Mitsuba's mean image 3e+17x drpt's) | 2x **no** |" in text
-    assert "1 of 2 scenes meet their target; geometric mean of the efficiency ratios 2.80 (over 1" in text
+    assert "1 of 2 scenes meet their target; geometric mean of the efficiency ratios 2.80 (over 1: " \
+           "1 with mean images more than 2x apart)" in text
     assert "* diningroom: 3e+17" in text and "* other: 1.2" in text
     same = bench.format_table([{**bad, "mean_ratio": 1.0}], [], a, 0.5)
     assert "n/a" not in same and "| 1400000000000000" in same and "apart" not in same
+    # a row with no pixel finite in every round of both has no mean ratio either
+    empty = bench.format_table([{**bad, "mean_ratio": float("nan"), "variance_ratio": float("nan")}, near],
+                               [], a, 0.5)
+    assert "n/a (no pixel finite in every round of both)" in empty and "nanx" not in empty
+    assert "(over 1: 1 without a finite variance)" in empty
