@@ -8,9 +8,9 @@ Renders :func:`support.mis.floor_scene` (a floor lit by a small light 1/64 above
 ``max_depth`` 2, independent sampler; default 8 seeds, ``ptracer,bdpt,path``) and prints, per
 integrator, the mean of the paired relative differences far / origin - 1 and its t (mean over
 standard error). ``--spawned-hits``: light subpaths take the hits of their rays from the
-spawned origins (``DeviceScene.intersect`` in ``intersect_from``'s place, the estimate before
-``intersect_from``); ``--spawned-camera``: connections to the camera traced from the vertex
-moved off its surface to the camera (``camera_segment``'s former segment);
+spawned origins (``DeviceScene.intersect`` in ``intersect_from``'s place);
+``--spawned-camera``: connections to the camera traced from the vertex moved off its surface
+to the camera (:func:`support.mis.spawned_segment` in ``camera_segment``'s place);
 ``--no-visibility``: no shadow ray is blocked (a diagnostic: what remains without the
 visibility tests). Load-free: the numbers depend on the seeds only.
 """
@@ -25,29 +25,8 @@ from drjit.auto import Bool
 
 import drpt.render.integrators.bdpt as bdpt
 import drpt.render.integrators.ptracer as ptracer
-from drpt.options import PathOptions, RenderOptions
-from drpt.render.integrators.common import SHADOW_SHRINK
-from drpt.render.renderer import Renderer
 from drpt.render.scene import DeviceScene
-from drpt.render.spawn import origin
-from support.mis import FAR, floor_scene
-
-
-def means(z: float, integrator: str, seeds: int) -> np.ndarray:
-    out = []
-    for seed in range(seeds):
-        opts = RenderOptions(width=32, height=32, spp=16, seed=seed, progress=False, integrator=integrator,
-                             sampler="independent", path=PathOptions(max_depth=2))
-        out.append(float(Renderer(floor_scene(z), opts).render().image.mean()))
-    return np.array(out)
-
-
-def spawned_segment(center, p, ng, err, wc, dist):
-    """A connection's shadow ray from ``p`` moved off its surface to the camera's center."""
-    o = origin(p, ng, err, wc)
-    to = center - o
-    n = dr.norm(to)
-    return o, to / n, n * SHADOW_SHRINK
+from support.mis import FAR, floor_means, spawned_segment
 
 
 def main() -> None:
@@ -65,7 +44,7 @@ def main() -> None:
     if args.no_visibility:
         DeviceScene.occluded = lambda self, o, d, tmax, active, coherent=False: dr.zeros(Bool, dr.width(active))
     for integrator in args.integrators.split(","):
-        d = means(FAR, integrator, args.seeds) / means(0.0, integrator, args.seeds) - 1
+        d = floor_means(FAR, integrator, args.seeds) / floor_means(0.0, integrator, args.seeds) - 1
         t = d.mean() / (d.std(ddof=1) / np.sqrt(len(d)))
         print(f"{integrator:8s} far / origin - 1: {100 * d.mean():+.3f}%  t {t:+.1f}  ({args.seeds} seeds)", flush=True)
 

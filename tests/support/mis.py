@@ -2,13 +2,20 @@
 test_path_mis.py``, ``test_volpath_mis.py``, ``test_bdpt_mis.py``): points on a floor at height
 ``z`` beside a small light above it, a next-event sample of the light from each, and the hit
 of the sampled direction's ray from the spawned origin; a floor and light that are exactly one
-scene translated between ``z = 0`` and :data:`FAR`."""
+scene translated between ``z = 0`` and :data:`FAR`, its image means per seed
+(:func:`floor_means`) and a camera connection traced from the spawned origin
+(:func:`spawned_segment`), for the far-light-path test and benchmark."""
 
 from __future__ import annotations
 
+import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float
 
+from drpt.options import PathOptions, RenderOptions
+from drpt.render.integrators.common import SHADOW_SHRINK
+from drpt.render.renderer import Renderer
+from drpt.render.spawn import origin
 from drpt.scene.model import Material, PerspectiveCamera, Scene, Triangles
 
 FAR = 4096.0  # a power of two: the scene's coordinates (multiples of 1/64) stay exact there
@@ -46,3 +53,24 @@ def floor_vertices(scene, n: int, z: float):
     hit = scene.intersect(scene.spawn(si, es.wo), es.wo, ok)
     ok = ok & hit.valid & (hit.material == 1)
     return o, d, si, es, hit, ok
+
+
+def floor_means(z: float, integrator: str, seeds: int) -> np.ndarray:
+    """The mean of :func:`floor_scene` at height ``z`` rendered by ``integrator`` with seeds
+    ``0..seeds-1`` (32x32, 16 spp, ``max_depth`` 2, independent sampler), one per seed."""
+    out = []
+    for seed in range(seeds):
+        opts = RenderOptions(width=32, height=32, spp=16, seed=seed, progress=False, integrator=integrator,
+                             sampler="independent", path=PathOptions(max_depth=2))
+        out.append(float(Renderer(floor_scene(z), opts).render().image.mean()))
+    return np.array(out)
+
+
+def spawned_segment(center, p, ng, err, wc, dist):
+    """A camera connection's shadow ray from ``p`` moved off its surface to the camera's
+    center (``camera_segment``'s signature): the negative control of camera connections
+    traced from the camera."""
+    o = origin(p, ng, err, wc)
+    to = center - o
+    n = dr.norm(to)
+    return o, to / n, n * SHADOW_SHRINK

@@ -18,24 +18,19 @@ errors of 0 (t(7) exceeds 5 with probability 0.2%; measured t -1.0 and -1.6) and
 99.5%; measured means -0.001% and -0.002%). Negative control: the hits of the rays from the
 spawned origins (``intersect`` in ``intersect_from``'s place) are darker by more than
 :data:`MARGIN` at ``t < -5`` (measured -2.15% and -1.35%, t -33 and -19); the camera
-connections' shadow rays from the spawned origins (:func:`spawned_segment`) are brighter at
+connections' shadow rays from the spawned origins (:func:`support.mis.spawned_segment`) are brighter at
 ``t > 5`` (measured +0.054% and +0.055%, t 7.0 both).
 """
 
 from __future__ import annotations
 
-import drjit as dr
 import numpy as np
 import pytest
 
 import drpt.render.integrators.bdpt as bdpt
 import drpt.render.integrators.ptracer as ptracer
-from drpt.options import PathOptions, RenderOptions
-from drpt.render.integrators.common import SHADOW_SHRINK
-from drpt.render.renderer import Renderer
 from drpt.render.scene import DeviceScene
-from drpt.render.spawn import origin
-from support.mis import FAR, floor_scene
+from support.mis import FAR, floor_means, spawned_segment
 
 SEEDS = 8
 #: the largest |t| of the mean relative difference (as tests/render/integrators/test_path_mis.py's)
@@ -46,28 +41,11 @@ MARGIN = 0.0005
 T_SPARE = 3.5
 
 
-def spawned_segment(center, p, ng, err, wc, dist):
-    """The control's camera connection: from ``p`` moved off its surface to the camera."""
-    o = origin(p, ng, err, wc)
-    to = center - o
-    n = dr.norm(to)
-    return o, to / n, n * SHADOW_SHRINK
-
-
-def _means(z: float, integrator: str) -> np.ndarray:
-    out = []
-    for seed in range(SEEDS):
-        opts = RenderOptions(width=32, height=32, spp=16, seed=seed, progress=False, integrator=integrator,
-                             sampler="independent", path=PathOptions(max_depth=2))
-        out.append(float(Renderer(floor_scene(z), opts).render().image.mean()))
-    return np.array(out)
-
-
 def _difference(integrator: str) -> tuple[float, float]:
     """The mean of far / origin - 1 over the seeds, and its standard error."""
-    near = _means(0.0, integrator)
+    near = floor_means(0.0, integrator, SEEDS)
     assert near.mean() > 0.005
-    d = _means(FAR, integrator) / near - 1
+    d = floor_means(FAR, integrator, SEEDS) / near - 1
     return float(d.mean()), float(d.std(ddof=1) / np.sqrt(len(d)))
 
 
