@@ -11,8 +11,8 @@ A triangle's attributes are one record of ``tri_data``, a multiple of 8 floats: 
 ``e1``, ``e2``, then the three vertex normals, the three uvs and ``dp/du``, ``dp/dv``
 where the scene has them, zero-padded. :meth:`SurfaceData.tri_fields` reads a record's
 leading floats with Dr.Jit's packet gathers (8 floats per aligned load and a transpose,
-``JitFlag.PacketOps``), where one array per field took a gather per float (up to 30,
-with 64-bit indices, one lane at a time); :meth:`SurfaceData.triangle` is the reader for
+``JitFlag.PacketOps``) rather than one gather per float; :meth:`SurfaceData.triangle` is
+the reader for
 the emitters (:mod:`~drpt.render.lights.area`). The array must be aligned
 (:func:`~drpt.accel.device.device_array`): Dr.Jit reads an unaligned one by single
 gathers.

@@ -144,8 +144,7 @@ def test_kernel_op_count_unchanged_without_a_window(sampler, count):
     vector division), and a loop state that carries the path's last vertex for the MIS
     density of the emitter a BSDF-sampled ray hits (``PathState.ref_p``: the area density's
     distance seen from the point next-event estimation sampled from), a hit's triangle
-    read from its packed record by two packet gathers (``SurfaceData.tri_fields``: one
-    operation more than nine gathers, bit-identical images, the same time); with the default
+    read from its packed record by two packet gathers (``SurfaceData.tri_fields``); with the default
     ``auto``, which is ``ldsampler`` for the path integrator: 4653, the same kernel drawing
     from Owen-scrambled Sobol sequences; a change to either kernel updates its count here)."""
     import drjit as dr
