@@ -2,7 +2,7 @@
 
     PYTHONPATH=. .venv/bin/python benchmarks/variance_vs_mitsuba.py SCENE [FILTER SIZE SPP ROUNDS [MAX_DEPTH]]
         [--scale K] [--grid COLSxROWS] [--light-sampler NAME] [--bsdf MODE] [--env-compensation on|off]
-        [--sampler NAME]
+        [--sampler NAME] [--mitsuba-sampler NAME]
 
 Renders ``SCENE`` (drpt's format: at ``SIZE`` (``N`` for N x N or ``WxH``) with ``--filter
 FILTER``, default gaussian 128; a Mitsuba XML file: its own film, filter and integrator) with ``SPP`` samples
@@ -40,7 +40,13 @@ and the exported scene read a drpt-format scene's MTL materials (``drpt render -
 ``--sampler NAME`` drpt's ``--sampler`` on a drpt-format scene (default ``auto``, drpt's
 default), whose export names the sampler drpt draws with, as ``equal_time_vs_mitsuba.py``'s
 does: both renderers draw from the same kind of sampler (Mitsuba's ``ldsampler`` takes a
-power of 4 samples per pixel and rounds any other count up, so give it one).
+power of 4 samples per pixel and rounds any other count up, so give it one);
+``--mitsuba-sampler NAME`` names another Mitsuba plugin for the export of a drpt-format scene
+(drpt keeps its ``--sampler``), as ``equal_time_vs_mitsuba.py``'s does.
+
+Every statistic is taken over the pixels finite in every round of both renderers
+(:func:`drpt.tools.converge.finite_in_every_round`, as ``efficiency_rounds`` scores); the
+count of the others is printed where there are any.
 """
 
 from __future__ import annotations
@@ -50,6 +56,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
+from drpt.tools.converge import finite_in_every_round
 
 
 def _ratio(a: np.ndarray, b: np.ndarray, mask=None) -> float:
@@ -76,7 +84,8 @@ def _options(argv: list[str]) -> tuple[list[str], dict]:
     pos, opts = [], {}
     it = iter(argv)
     for arg in it:
-        if arg in ("--scale", "--grid", "--light-sampler", "--bsdf", "--env-compensation", "--sampler"):
+        if arg in ("--scale", "--grid", "--light-sampler", "--bsdf", "--env-compensation", "--sampler",
+                   "--mitsuba-sampler"):
             opts[arg[2:]] = next(it)
         else:
             pos.append(arg)
@@ -89,16 +98,25 @@ def _size(text: str) -> tuple[int, int]:
     return int(size[0]), int(size[-1])
 
 
-def _grid(a: np.ndarray, b: np.ndarray, spec: str) -> None:
+def _scored(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The ``(H, W)`` mask of the pixels finite in every round of both ``a`` and ``b``."""
+    return finite_in_every_round(a) & finite_in_every_round(b)
+
+
+def _grid(a: np.ndarray, b: np.ndarray, spec: str, mask=None) -> None:
     cols, rows = (int(x) for x in spec.lower().split("x"))
     height, width = a.shape[1:3]
-    total = b.var(0, ddof=1).sum()
+    mask = np.ones((height, width), bool) if mask is None else mask
+    total = b[:, mask].var(0, ddof=1).sum()
     print(f"  per cell of a {cols}x{rows} grid (row, column from the top left): ratio +- error, "
           "share of Mitsuba's variance, mean image ratio and its z")
     for r in range(rows):
         for c in range(cols):
             cell = np.zeros((height, width), bool)
             cell[r * height // rows:(r + 1) * height // rows, c * width // cols:(c + 1) * width // cols] = True
+            cell &= mask
+            if not cell.any():
+                continue
             ac, bc = a[:, cell], b[:, cell]
             vb = bc.var(0, ddof=1)
             z = _mean_z(ac, bc)
@@ -171,7 +189,7 @@ def main(argv: list[str]) -> None:
         else:
             ms = mi.load_dict(to_mitsuba_dict(scene, opt.width, opt.height, spp, max_depth=depth,
                                               rfilter=opt.filter, bsdf=opt.bsdf,
-                                              sampler=resolve_sampler(opt).sampler))
+                                              sampler=extra.get("mitsuba-sampler") or resolve_sampler(opt).sampler))
     ours, theirs = [], []
     for k in range(rounds):
         ours.append(renderer.derive(replace(renderer.opt, seed=k)).render().image.astype(np.float64))
@@ -179,18 +197,25 @@ def main(argv: list[str]) -> None:
             theirs.append(np.asarray(mi.render(ms, spp=spp, seed=k, integrator=integrator),
                                      np.float64)[..., :3])
     a, b = np.stack(ours), np.stack(theirs)
-    ratio = _ratio(a, b)
-    err = _jackknife(a, b)
-    both = (a.var(0, ddof=1) + b.var(0, ddof=1)).sum(-1)
-    top = both >= np.quantile(both, 0.99)
-    share = float(both[top].sum() / both.sum())
+    scored = _scored(a, b)
     print(f"{path.name}: {opt.width}x{opt.height}, {spp} spp, filter {opt.filter}, {rounds} rounds"
-          + (f", max_depth {depth}" if depth >= 0 and not xml else ""))
+          + (f", max_depth {depth}" if depth >= 0 and not xml else "")
+          + (f", Mitsuba's sampler {extra['mitsuba-sampler']}" if "mitsuba-sampler" in extra else ""))
+    if not scored.all():
+        print(f"  pixels not finite in some round (left out): drpt {int((~finite_in_every_round(a)).sum())}, "
+              f"Mitsuba {int((~finite_in_every_round(b)).sum())} of {scored.size}")
+    if not scored.any():
+        return
+    ratio = _ratio(a, b, scored)
+    err = _jackknife(a, b, scored)
+    both = (a.var(0, ddof=1) + b.var(0, ddof=1)).sum(-1)
+    top = scored & (both >= np.quantile(both[scored], 0.99))
+    share = float(both[top].sum() / both[scored].sum())
     print(f"  variance drpt / Mitsuba {ratio:.3f} +- {err:.3f}; the top 1% of pixels hold "
-          f"{share:.0%} of the variance, outside them {_ratio(a, b, ~top):.3f}; "
-          f"mean image drpt / Mitsuba {a.mean() / b.mean():.4f}")
+          f"{share:.0%} of the variance, outside them {_ratio(a, b, scored & ~top):.3f}; "
+          f"mean image drpt / Mitsuba {a[:, scored].mean() / b[:, scored].mean():.4f}")
     if "grid" in extra:
-        _grid(a, b, extra["grid"])
+        _grid(a, b, extra["grid"], scored)
 
 
 if __name__ == "__main__":

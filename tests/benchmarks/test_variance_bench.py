@@ -18,8 +18,8 @@ def test_options_anywhere_on_the_line():
     pos, opts = bench._options(["s.xml", "--grid", "5x3", "box", "0", "--scale", "4", "27"])
     assert pos == ["s.xml", "box", "0", "27"]
     assert opts == {"grid": "5x3", "scale": "4"}
-    pos, opts = bench._options(["s.txt", "--bsdf", "phong", "box", "160x120"])
-    assert pos == ["s.txt", "box", "160x120"] and opts == {"bsdf": "phong"}
+    pos, opts = bench._options(["s.txt", "--bsdf", "phong", "box", "160x120", "--mitsuba-sampler", "independent"])
+    assert pos == ["s.txt", "box", "160x120"] and opts == {"bsdf": "phong", "mitsuba-sampler": "independent"}
     assert bench._size("160x120") == (160, 120) and bench._size("96") == (96, 96)
 
 
@@ -57,3 +57,21 @@ def test_mean_z_of_noise_free_cells():
     assert bench._mean_z(ones, ones) == 0.0
     rng = np.random.default_rng(5)
     assert np.isfinite(bench._mean_z(rng.normal(size=(8, 2, 2, 3)), ones))
+
+
+def test_pixels_not_finite_in_a_round_are_left_out_of_both():
+    """A NaN pixel in one of Mitsuba's rounds and an infinite one in one of drpt's: the mask
+    keeps the pixels finite in every round of both, and the ratio and grid over it are
+    finite and equal to those computed by hand on the other pixels. Negative control: the
+    ratio over every pixel is NaN."""
+    rng = np.random.default_rng(6)
+    a, b = _rounds(rng, 1.0), _rounds(rng, 1.0)
+    b[3, 1, 2, 0] = np.nan
+    a[5, 7, 9, 2] = np.inf
+    mask = bench._scored(a, b)
+    assert (~mask).sum() == 2 and not mask[1, 2] and not mask[7, 9]
+    keep = np.ones((8, 10), bool)
+    keep[1, 2] = keep[7, 9] = False
+    want = a[:, keep].var(0, ddof=1).mean() / b[:, keep].var(0, ddof=1).mean()
+    assert bench._ratio(a, b, mask) == want and np.isfinite(bench._jackknife(a, b, mask))
+    assert np.isnan(bench._ratio(a, b))  # control: every pixel
