@@ -31,8 +31,10 @@ from .spawn import plane_error, plane_project, plane_shift, sphere_error, triang
 
 #: a triangle's hit is moved along its plane to a point whose barycentrics are at most this
 #: far outside it (:meth:`SurfaceData.seen_from`): past an edge, the plane of a coplanar
-#: neighbour and, to first order, of a curved mesh's
-TRIANGLE_REACH = 1.0
+#: neighbour and, to first order, of a curved mesh's. A move past the diagonal of a floor far
+#: from the origin is about 1e-3; a larger reach would let a ray grazing a wall move its hit
+#: well past the wall's foot, off any surface (beyond it the lane keeps its spawned ray's hit)
+TRIANGLE_REACH = 0.05
 
 #: a sphere's hit is moved along its tangent plane (:meth:`SurfaceData.seen_from`) by at most
 #: this fraction of the radius: the moved point is then off the sphere by ``|move|^2 / (2 r)``,

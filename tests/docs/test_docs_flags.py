@@ -210,6 +210,7 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--no-corpus", "--mitsuba-sampler",  # (benchmarks/equal_time_vs_mitsuba.py)
                   "--scale", "--grid",  # (benchmarks/variance_vs_mitsuba.py)
                   "--all-textures",  # (benchmarks/kernel_ops.py)
+                  "--integrators",  # (benchmarks/far_light_paths.py)
                   "--seconds", "--renderer",  # (benchmarks/jit_hotspots.py)
                   "--agree",  # (benchmarks/env_compensation.py)
                   "--sort",  # (perf report, quoted in performance.md)

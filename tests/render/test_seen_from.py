@@ -19,11 +19,14 @@ from __future__ import annotations
 
 import drjit as dr
 import numpy as np
+import pytest
 from drjit.auto import Array3f, Bool, Float
 
 from drpt.options import RenderOptions
+from drpt.render import surface
 from drpt.render.scene import DeviceScene
 from drpt.scene.model import Material, PerspectiveCamera, Planes, Scene, Spheres, Triangles
+from support.mis import FAR
 
 N = 4096
 MOVE = 1e-4
@@ -118,3 +121,50 @@ def test_a_ray_from_the_vertex_itself_is_intersect():
     for name in ("valid", "t", "p", "ng", "prim"):
         assert np.array_equal(np.array(getattr(a, name)), np.array(getattr(b, name))), name
     assert dr.all(a.valid == b.valid)
+
+
+CORNER_FLOOR = [[(-1, -1, 0), (1, -1, 0), (1, 1, 0)], [(-1, -1, 0), (1, 1, 0), (-1, 1, 0)]]
+CORNER_WALL = [[(-0.7, -1, 0), (-0.7, 1, 0), (-0.7, 1, 1)], [(-0.7, -1, 0), (-0.7, 1, 1), (-0.7, -1, 1)]]
+
+
+def _corner_min_barycentric(reach: float) -> np.ndarray:
+    """Rays spawned (``MOVE`` 1e-3, the offset at ``z = FAR``) near a box corner at ``FAR``: a
+    wall of two triangles at ``x = -0.7`` standing on a floor of two, rays grazing the wall
+    toward its foot. Per valid hit of ``intersect_from`` (``TRIANGLE_REACH = reach``): the
+    smallest float64 barycentric of its point on its own triangle."""
+    tri = np.array(CORNER_FLOOR + CORNER_WALL, float) + (0.0, 0.0, FAR)
+    model = Scene(path=None, camera=PerspectiveCamera((0, 0, FAR + 3), (0, 0, FAR), (0, 1, 0), 40),
+                  materials=[Material("m")], triangles=Triangles(tri, np.zeros(4, np.int32)))
+    rng = np.random.default_rng(7)
+    p = np.column_stack([rng.uniform(-0.699, -0.69, N), rng.uniform(-0.5, 0.5, N),
+                         FAR + rng.uniform(0.05, 0.5, N)])
+    d = np.column_stack([-rng.uniform(0.005, 0.05, N), rng.uniform(-0.3, 0.3, N), -np.ones(N)])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    delta = rng.normal(size=(N, 3))
+    delta *= 1e-3 / np.linalg.norm(delta, axis=1, keepdims=True)
+    p, d = p.astype(np.float32), d.astype(np.float32)
+    o = (p - delta).astype(np.float32)
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(surface, "TRIANGLE_REACH", reach)
+        si = DeviceScene(model, RenderOptions(width=4, height=4, spp=1)).intersect_from(
+            _a3(o), _a3(p), _a3(d), Bool(True))
+        valid, prim = np.array(si.valid), np.array(si.prim)
+        x = np.array(si.p, np.float64).T[valid]
+    t = tri[prim[valid]]
+    e1, e2, r = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0], x - t[:, 0]
+    # barycentrics of the point's projection on its triangle's plane (least squares)
+    g = np.stack([np.stack([np.sum(e1 * e1, 1), np.sum(e1 * e2, 1)], 1),
+                  np.stack([np.sum(e1 * e2, 1), np.sum(e2 * e2, 1)], 1)], 1)
+    uv = np.linalg.solve(g, np.stack([np.sum(r * e1, 1), np.sum(r * e2, 1)], 1)[..., None])[..., 0]
+    assert np.sum(prim[valid] >= 2) > N // 4  # the wall is hit often
+    return np.minimum(np.minimum(uv[:, 0], uv[:, 1]), 1.0 - uv[:, 0] - uv[:, 1])
+
+
+def test_a_hit_moved_toward_a_non_coplanar_neighbour_stays_within_the_reach():
+    """Far from the origin (``FAR``, where the spawn offset is 1e-3) a ray grazing a box's wall
+    toward its foot is moved along the wall's plane by the offset over the cosine: the moved
+    point stays within :data:`~drpt.render.surface.TRIANGLE_REACH` (in barycentrics, plus
+    float32 rounding at 4096: 1e-3) of its triangle, not below the floor. Negative control: a
+    reach of 1.0 lets some hit move more than 0.1 past the wall's foot."""
+    assert _corner_min_barycentric(surface.TRIANGLE_REACH).min() >= -surface.TRIANGLE_REACH - 1e-3
+    assert _corner_min_barycentric(1.0).min() < -0.1
