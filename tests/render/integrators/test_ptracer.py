@@ -18,11 +18,14 @@ import numpy as np
 import pytest
 from drjit.auto import Array3f, Bool, Float
 
+import drpt.render.integrators.bdpt as bdpt
+import drpt.render.integrators.ptracer as ptracer
 from drpt.errors import DrptError
 from drpt.filters import PixelFilter
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.film import SplatFilm
 from drpt.render.renderer import Renderer
+from drpt.render.scene import DeviceScene
 from drpt.scene import load_scene
 
 REPO = Path(__file__).resolve().parents[3]
@@ -266,3 +269,34 @@ Group { numObjects 1
     with pytest.raises(SceneError, match="physical point lights") as e:
         _render(load_scene(p), "ptracer", 4)
     assert e.value.loc == Loc(p.resolve(), 3)
+
+
+@pytest.mark.parametrize("integrator", ["ptracer", "bdpt"])
+def test_a_camera_segment_too_grazing_to_test_adds_nothing(cornell, monkeypatch, integrator):
+    """A camera connection whose shadow segment is empty (``camera_segment``'s ``tmax <= 0``:
+    too grazing to test) is dropped, not splatted untested: with every segment empty, the
+    Cornell box renders as with every camera connection occluded (light tracing: black; bdpt:
+    bit-identical). Negative control: with the segments' ``tmax`` kept, the images differ
+    (the splats are there to drop)."""
+    module = ptracer if integrator == "ptracer" else bdpt
+    segment = module.camera_segment
+
+    def render():
+        opts = RenderOptions(width=16, height=16, spp=4, seed=1, progress=False, integrator=integrator,
+                             sampler="independent")
+        return Renderer(cornell, opts).render().image
+
+    plain = render()
+    with monkeypatch.context() as m:
+        m.setattr(module, "camera_segment", lambda *a: (*segment(*a)[:2], Float(-1.0)))
+        empty = render()
+    with monkeypatch.context() as m:
+        if integrator == "ptracer":
+            m.setattr(DeviceScene, "occluded", lambda self, o, d, tmax, active, coherent=False: Bool(active))
+        else:
+            m.setattr(bdpt.BDPTIntegrator, "_camera_occluded", lambda self, o, d, tmax, active: Bool(active))
+        hidden = render()
+    assert np.array_equal(empty, hidden)
+    if integrator == "ptracer":
+        assert not np.any(empty)
+    assert not np.array_equal(plain, hidden)  # control
