@@ -12,8 +12,8 @@ A triangle's attributes are one record of ``tri_data``, a multiple of 8 floats: 
 where the scene has them, zero-padded. :meth:`SurfaceData.tri_fields` reads a record's
 leading floats with Dr.Jit's packet gathers (8 floats per aligned load and a transpose,
 ``JitFlag.PacketOps``) rather than one gather per float; :meth:`SurfaceData.triangle` is
-the reader for
-the emitters (:mod:`~drpt.render.lights.area`). The array must be aligned
+the one reader of the layout (the interactions, the emitters of
+:mod:`~drpt.render.lights.area`, :meth:`SurfaceData.seen_from`). The array must be aligned
 (:func:`~drpt.accel.device.device_array`): Dr.Jit reads an unaligned one by single
 gathers.
 """
@@ -146,12 +146,14 @@ def coordinate_system(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class TriangleRecord:
     """A triangle's data read by :meth:`SurfaceData.triangle`: corner ``p0`` and edges
     ``e1 = p1 - p0``, ``e2 = p2 - p0``; the vertex normals ``n`` and uvs ``uv`` (three
-    each) where read, else None."""
+    each) and the tangents ``dp_du``, ``dp_dv`` where read, else None."""
 
     def __init__(self, p0: Array3f, e1: Array3f, e2: Array3f):
         self.p0, self.e1, self.e2 = p0, e1, e2
         self.n: tuple[Array3f, Array3f, Array3f] | None = None
         self.uv: tuple[Array2f, Array2f, Array2f] | None = None
+        self.dp_du: Array3f | None = None
+        self.dp_dv: Array3f | None = None
 
 
 class SurfaceData:
@@ -206,26 +208,34 @@ class SurfaceData:
             out += [row[k] for k in range(8)]
         return out[:count]
 
-    def triangle(self, i: UInt32, active: Bool, normals: bool = False, uv: bool = False) -> TriangleRecord:
+    def triangle(self, i: UInt32, active: Bool, normals: bool = False, uv: bool = False,
+                 tangents: int = 0) -> TriangleRecord:
         """Triangle ``i``'s data for the ``active`` lanes: always ``p0, e1, e2``; its three
-        vertex normals with ``normals`` (None where the mesh has none) and its three uvs
-        with ``uv`` (None where the interactions carry none). Only the record's leading
-        floats that these need are read."""
+        vertex normals with ``normals`` (None where the mesh has none), its three uvs with
+        ``uv`` (None where the interactions carry none), ``dp/du`` with ``tangents`` >= 1 and
+        ``dp/dv`` too with 2 (None beyond the tangents the record holds). Only the record's
+        leading floats that these need are read."""
         n_off = 9
         uv_off = n_off + 9 * self.has_normals
         t_off = uv_off + 6 * self.has_uv
+        tangents = min(tangents, self.tangents)
         count = 9
         if normals and self.has_normals:
             count = uv_off
         if uv and self.has_uv:
             count = t_off
+        if tangents:
+            count = t_off + 3 * tangents
         f = self.tri_fields(i, active, count)
-        v3 = [Array3f(*f[k:k + 3]) for k in range(0, min(count, uv_off), 3)]
-        rec = TriangleRecord(*v3[:3])
-        if count > n_off and self.has_normals:
-            rec.n = tuple(v3[3:6])
-        if count > uv_off:
+        rec = TriangleRecord(*(Array3f(*f[k:k + 3]) for k in (0, 3, 6)))
+        if normals and self.has_normals:
+            rec.n = tuple(Array3f(*f[k:k + 3]) for k in range(n_off, uv_off, 3))
+        if uv and self.has_uv:
             rec.uv = tuple(Array2f(*f[k:k + 2]) for k in range(uv_off, t_off, 2))
+        if tangents:
+            rec.dp_du = Array3f(*f[t_off:t_off + 3])
+        if tangents > 1:
+            rec.dp_dv = Array3f(*f[t_off + 3:t_off + 6])
         return rec
 
     # ------------------------------------------------------------------
@@ -296,31 +306,27 @@ class SurfaceData:
         if self.n_tri:
             is_tri = valid & (prim < self.n_tri)
             i = dr.select(is_tri, prim, 0)
-            f = self.tri_fields(i, is_tri, self.tri_floats)
-            vec = [Array3f(*f[k:k + 3]) for k in range(0, 9 + 9 * self.has_normals, 3)]
-            p0, e1, e2 = vec[:3]
-            k = len(vec) * 3
+            tri = self.triangle(i, is_tri, normals=True, uv=True, tangents=self.tangents)
+            p0, e1, e2 = tri.p0, tri.e1, tri.e2
             u, v = hit.u, hit.v
             # Barycentric position is more accurate than o + t*d.
             pt, n, e = triangle_point(p0, e1, e2, u, v)
             p = dr.select(is_tri, pt, p)
             ng = dr.select(is_tri, n, ng)
             err = dr.select(is_tri, e, err)
-            if self.has_normals:
-                sn = vec[3] * (1.0 - u - v) + vec[4] * u + vec[5] * v
+            if tri.n is not None:
+                sn = tri.n[0] * (1.0 - u - v) + tri.n[1] * u + tri.n[2] * v
                 len2 = dr.squared_norm(sn)
                 sn = dr.select(len2 > 1e-20, sn * dr.rsqrt(len2), n)
                 ns = dr.select(is_tri, sn, ns)
             else:
                 ns = dr.select(is_tri, n, ns)
-            if self.has_uv:
-                uvs = [Array2f(*f[k + j:k + j + 2]) for j in (0, 2, 4)]
-                uv = uvs[0] * (1.0 - u - v) + uvs[1] * u + uvs[2] * v
-                k += 6
-            if self.tangents:
-                dp_du = dr.select(is_tri, Array3f(*f[k:k + 3]), dp_du)
-                if self.tangents > 1:
-                    dp_dv = dr.select(is_tri, Array3f(*f[k + 3:k + 6]), dp_dv)
+            if tri.uv is not None:
+                uv = tri.uv[0] * (1.0 - u - v) + tri.uv[1] * u + tri.uv[2] * v
+            if tri.dp_du is not None:
+                dp_du = dr.select(is_tri, tri.dp_du, dp_du)
+            if tri.dp_dv is not None:
+                dp_dv = dr.select(is_tri, tri.dp_dv, dp_dv)
         if self.n_sph:
             is_sph = valid & (prim >= self.n_tri) & (prim < self.n_tri + self.n_sph)
             j = dr.select(is_sph, prim - self.n_tri, 0)
