@@ -16,6 +16,7 @@ from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
 from ..aovs import GUIDES
 from ..errors import DrptError
 from .loops import loops_once
+from .tables import gather
 
 #: the most delta bounces a guide ray follows before it takes the surface it is on
 MAX_DELTA = 8
@@ -123,7 +124,7 @@ def _uv(scene, si, prelim) -> Array2f:
         uv = Array2f(0.0)
     if n_sph:
         is_sph = si.valid & (si.prim >= n_tri) & (si.prim < n_tri + n_sph)
-        c = dr.gather(Array3f, surf.sph_c, dr.select(is_sph, si.prim - n_tri, 0), is_sph)
+        c = gather(Array3f, surf.sph_c, dr.select(is_sph, si.prim - n_tri, 0), is_sph)
         v = dr.normalize(si.p - c)
         phi = dr.atan2(v.y, v.x)
         phi = dr.select(phi < 0.0, phi + 2.0 * dr.pi, phi)

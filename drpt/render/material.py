@@ -58,7 +58,8 @@ from ..scene.model import Scene
 from . import perturb
 from .bsdf import BSDF, BSDFSample, lobe
 from .perturb import PerturbedFrame
-from .surface import Interaction, _vec
+from .surface import Interaction
+from .tables import Table, gather
 from .texture import TextureSet
 from .warp import Frame
 
@@ -93,7 +94,7 @@ def _among(ids) -> tuple[int, ...]:
 
 def _flag(v):
     """A layout flag on the device: a Python bool stays one (decided at trace time)."""
-    return v if isinstance(v, bool) else Bool(v)
+    return v if isinstance(v, bool) else Table(Bool, v)
 
 
 @dataclass
@@ -149,10 +150,10 @@ class Rows:
         the texture's luminance, as Mitsuba's ``bitmap`` does for a scalar parameter)."""
         t = self.table._types[name]
         cls = Array3f if t == "rgb" else Float
-        v = dr.gather(cls, self.table._data[name], self.row, active)
+        v = gather(cls, self.table._data[name], self.row, active)
         tid = self.table._tex.get(name)
         if tid is not None:
-            ids = dr.gather(UInt32, tid, self.row, active)
+            ids = gather(UInt32, tid, self.row, active)
             textured = active & (ids != NONE)
             looked = self.table.textures.lookup(ids, si.uv, textured, scalar=cls is not Array3f, si=si,
                                                 among=self.table._tex_among[name])
@@ -167,8 +168,8 @@ class Rows:
         i0 = dr.minimum(UInt32(pos), n - 2)
         frac = pos - Float(i0)
         base = self.row * n + i0
-        a = dr.gather(Float, self.table._data[name], base, active)
-        b = dr.gather(Float, self.table._data[name], base + 1, active)
+        a = gather(Float, self.table._data[name], base, active)
+        b = gather(Float, self.table._data[name], base + 1, active)
         return dr.fma(frac, b - a, a)
 
     def specs_of(self, kind: str) -> list[BSDFSpec]:
@@ -192,8 +193,10 @@ class MaterialTable:
         # depends on the tangent's direction; a scene without one traces no tangent code
         self.tangents = lay.tangents
         self.lobes = {k: lobe(k) for k in self.kinds}
-        self.kind = UInt32(lay.kind)
-        self.emission = _vec(lay.emission)
+        # (small per-material and per-row tables: read as literals where they are few,
+        # drpt.render.tables)
+        self.kind = Table(UInt32, lay.kind)
+        self.emission = Table(Array3f, lay.emission)
         self.has_emission = lay.has_emission
         # per material: whether it emits (Mitsuba's shape with an area emitter), for
         # hide_emitters' skipping of area emitters along camera rays
@@ -201,7 +204,7 @@ class MaterialTable:
             glows = lay.emission.max(axis=1) > 0.0
             if lay.emission_texture is not None:
                 glows = glows | (lay.emission_texture != NONE)
-            self._emissive = Bool(glows)
+            self._emissive = Table(Bool, glows)
         # sidedness, per kind: True / False when uniform, else a per-row array
         self._two = {k: _flag(v) for k, v in lay.two_sided.items()}
         # slots (only when some material has several components); slots whose weights read
@@ -216,8 +219,8 @@ class MaterialTable:
             uploaded.append((a, UInt32(a)))
             return uploaded[-1][1]
 
-        self._slots = [_Slot(UInt32(sl.row), Float(sl.weight),
-                             None if sl.texture is None else texture_ids(sl.texture), Bool(sl.complement),
+        self._slots = [_Slot(Table(UInt32, sl.row), Table(Float, sl.weight),
+                             None if sl.texture is None else texture_ids(sl.texture), Table(Bool, sl.complement),
                              sl.kinds, sl.partial, None if sl.texture is None else _among(sl.texture))
                        for sl in lay.slots]
         # materials whose slots need reading (several components, or one whose weight is
@@ -229,14 +232,14 @@ class MaterialTable:
             multi = (n_comp > 1) | (lay.slots[0].weight != 1.0)
             if lay.slots[0].texture is not None:
                 multi |= lay.slots[0].texture != NONE
-            self._multi = None if multi.all() else Bool(multi)
+            self._multi = None if multi.all() else Table(Bool, multi)
         # per-row fields of the kinds present
         self._types = {name: f.type for name, f in lay.fields.items()}
         self._data: dict[str, object] = {}
         self._tex: dict[str, UInt32] = {}
         self._tex_among: dict[str, tuple[int, ...]] = {}  # per textured field, the ids it references
         for name, f in lay.fields.items():
-            self._data[name] = _vec(f.values) if f.type == "rgb" else Float(f.values)
+            self._data[name] = Table(Array3f if f.type == "rgb" else Float, f.values)
             if f.texture is not None:
                 self._tex[name] = UInt32(f.texture)
                 self._tex_among[name] = _among(f.texture)
@@ -248,14 +251,14 @@ class MaterialTable:
         if lay.perturb is not None:
             pt = lay.perturb
             self._has_normal, self._has_bump = pt.has_normal, pt.has_bump
-            self._p_code, self._p_tex = UInt32(pt.code), UInt32(pt.texture)
+            self._p_code, self._p_tex = Table(UInt32, pt.code), Table(UInt32, pt.texture)
             # per kind, the texture ids its rows reference (each kind traces only its own)
             codes, texs = np.asarray(pt.code), np.asarray(pt.texture)
             self._p_among_normal = _among(texs[codes == 1])
             self._p_among_bump = _among(texs[codes == 2])
-            self._p_const = None if pt.constant is None else _vec(pt.constant)
+            self._p_const = None if pt.constant is None else Table(Array3f, pt.constant)
             if pt.scale is not None:
-                self._p_scale = Float(pt.scale)
+                self._p_scale = Table(Float, pt.scale)
             self._p_flip, self._p_shadow, self._p_inner = _flag(pt.flip), _flag(pt.shadow), _flag(pt.inner)
         # Textures: one set for every textured field and weight.
         self.textures = None
@@ -266,7 +269,7 @@ class MaterialTable:
         # materials made only of Dirac lobes (glass, mirrors): Whitted follows them
         delta = lay.material_delta
         self._all_delta = bool(delta.all())
-        self._mat_delta = None if (self._all_delta or not delta.any()) else Bool(delta)
+        self._mat_delta = None if (self._all_delta or not delta.any()) else Table(Bool, delta)
         self._any_delta = bool(delta.any())
         # the kinds of the delta-only materials (what :meth:`specular` traces), and whether
         # each of them is one component (then slot 0 holds its row, at weight 1)
@@ -277,7 +280,7 @@ class MaterialTable:
         # mask's pass-through beside one smooth lobe does not
         blends = np.array([sum(not self.lobes[c.leaf.kind].DELTA for c in cs) > 1
                            for cs in lay.components], bool)
-        self._blends_smooth = True if blends.all() else Bool(blends) if blends.any() else False
+        self._blends_smooth = True if blends.all() else Table(Bool, blends) if blends.any() else False
 
     _only: tuple[str, ...] | None = None  # a restricted view's kinds (see restricted)
 
@@ -296,12 +299,12 @@ class MaterialTable:
         """The frame the lanes' perturbed components see (:mod:`drpt.render.perturb`);
         ``outer``: the interaction's frame as the component sees it (mirrored inside
         ``twosided`` from behind), ``sh_frame``: the interaction's own."""
-        code = dr.gather(UInt32, self._p_code, row, mask)
-        tid = dr.gather(UInt32, self._p_tex, row, mask)
+        code = gather(UInt32, self._p_code, row, mask)
+        tid = gather(UInt32, self._p_tex, row, mask)
         wi_l = outer.to_local(si.wi)
 
         def rowflag(v):
-            return v if isinstance(v, bool) else dr.gather(Bool, v, row, mask)
+            return v if isinstance(v, bool) else gather(Bool, v, row, mask)
 
         flip = rowflag(self._p_flip)
         n, s = Array3f(0.0, 0.0, 1.0), Array3f(1.0, 0.0, 0.0)
@@ -310,7 +313,7 @@ class MaterialTable:
             if self._p_const is None:
                 rgb = self.textures.lookup(tid, si.uv, m, si=si, among=self._p_among_normal)
             else:
-                rgb = dr.gather(Array3f, self._p_const, row, m)
+                rgb = gather(Array3f, self._p_const, row, m)
                 if self.textures is not None:
                     rgb = dr.select(tid != NONE, self.textures.lookup(tid, si.uv, m & (tid != NONE), si=si,
                                                                       among=self._p_among_normal), rgb)
@@ -325,7 +328,7 @@ class MaterialTable:
         if self._has_bump:
             m = mask & (code == 2)
             grad = self.textures.gradient(tid, si.uv, m, among=self._p_among_bump)
-            grad = grad * dr.gather(Float, self._p_scale, row, m)
+            grad = grad * gather(Float, self._p_scale, row, m)
             nb = perturb.bump_normal(grad, si.ns, si.ng, si.dp_du, si.dp_dv, sh_frame)
             if flip is not False:
                 nb = dr.select(flip, perturb.flip_invalid(nb, wi_l), nb)
@@ -373,7 +376,7 @@ class MaterialTable:
         """Radiance leaving ``si`` toward ``si.wi`` (zero on back faces)."""
         if not self.has_emission:
             return Array3f(0.0)
-        le = dr.gather(Array3f, self.emission, si.material, si.valid)
+        le = gather(Array3f, self.emission, si.material, si.valid)
         if self._emit_tex is not None:
             le = self.textured_emission(si.material, si.uv, le, si.valid)
         front = si.valid & (dr.dot(si.ns, si.wi) > 0.0)
@@ -385,12 +388,12 @@ class MaterialTable:
         if not self.has_emission:
             return Bool(False)
         hit = active & si.valid
-        return hit & dr.gather(Bool, self._emissive, si.material, hit)
+        return hit & gather(Bool, self._emissive, si.material, hit)
 
     def textured_emission(self, material: UInt32, uv: Array2f, le: Array3f, active: Bool) -> Array3f:
         """``le`` where the material's emission is constant, its texture at OBJ ``uv`` where
         it has one (only traced for scenes with a textured emitter)."""
-        ids = dr.gather(UInt32, self._emit_tex, material, active)
+        ids = gather(UInt32, self._emit_tex, material, active)
         textured = active & (ids != NONE)
         return dr.select(textured, self.textures.lookup(ids, uv, textured, among=self._emit_among), le)
 
@@ -410,7 +413,7 @@ class MaterialTable:
             return Bool(False)
         if self._all_delta:
             return Bool(si.valid)
-        return si.valid & dr.gather(Bool, self._mat_delta, si.material, si.valid)
+        return si.valid & gather(Bool, self._mat_delta, si.material, si.valid)
 
     def diffuse_color(self, si: Interaction, active: Bool) -> Array3f:
         """The diffuse color of the lanes' first component (its kind's ``COLOR``
@@ -466,16 +469,16 @@ class MaterialTable:
         if self.K == 1:  # a material's one row is its index
             return si.material, None, si.valid
         s = self._slots[j]
-        row = dr.gather(UInt32, s.row, si.material, si.valid)
+        row = gather(UInt32, s.row, si.material, si.valid)
         present = si.valid & (row != NONE) if s.partial else si.valid
-        w = dr.gather(Float, s.weight, si.material, present)
+        w = gather(Float, s.weight, si.material, present)
         if s.texture is not None:
             # looked up on every valid lane (w is 0 where the slot is absent): the same
             # expression for every slot sharing the texture array, traced once
-            ids = dr.gather(UInt32, s.texture, si.material, si.valid)
+            ids = gather(UInt32, s.texture, si.material, si.valid)
             textured = si.valid & (ids != NONE)
             t = _luminance(self.textures.lookup(ids, si.uv, textured, scalar=True, si=si, among=s.among))
-            comp = dr.gather(Bool, s.complement, si.material, present)
+            comp = gather(Bool, s.complement, si.material, present)
             w = dr.select(textured, w * dr.select(comp, 1.0 - t, t), w)
         return row, dr.select(present, w, 0.0), present
 
@@ -496,7 +499,7 @@ class MaterialTable:
                                     and (self.K == 1 or self._one_slot)):
             kind_of = None
         else:
-            kind_of = dr.gather(UInt32, self.kind, row, present)
+            kind_of = gather(UInt32, self.kind, row, present)
         branched = kind_of is not None and self.dispatch == "kinds"
         flip = dr.dot(si.ns, si.wi) < 0.0
         shared: dict[str, Frame] = {}
@@ -530,7 +533,7 @@ class MaterialTable:
             elif two is False:
                 frame = tangent
             else:
-                frame = _z_flipped(tangent, dr.gather(Bool, two, row, mask) & flip)
+                frame = _z_flipped(tangent, gather(Bool, two, row, mask) & flip)
             if kind in self._pkinds:
                 frame = self._perturbed(si, row, mask, frame, tangent)
             return frame
@@ -542,7 +545,7 @@ class MaterialTable:
             if "plain" not in base:
                 base["plain"] = Frame(si.ns)
             return base["plain"]
-        f2 = dr.gather(Bool, two, row, mask) & flip
+        f2 = gather(Bool, two, row, mask) & flip
         return Frame(dr.select(f2, -si.ns, si.ns))
 
     # ------------------------------------------------------------------
@@ -604,7 +607,7 @@ class MaterialTable:
         """The lanes of ``case`` whose two-sided frame may mirror between two directions:
         None for a one-sided kind, True where the kind is two-sided on every row."""
         two = self._two[case.kind]
-        return None if two is False else (True if two is True else dr.gather(Bool, two, row, case.mask))
+        return None if two is False else (True if two is True else gather(Bool, two, row, case.mask))
 
     def prepare_rev(self, si: Interaction) -> Callable[[Array3f], tuple[Array3f, Float, Float]]:
         """:meth:`eval_pdf_rev` of ``si`` toward directions given later: what does not depend
@@ -656,7 +659,7 @@ class MaterialTable:
         if self.K == 1:
             row, present, chosen_w = si.material, si.valid, None
         elif self._one_slot:
-            row, present, chosen_w = dr.gather(UInt32, self._slots[0].row, si.material, si.valid), si.valid, None
+            row, present, chosen_w = gather(UInt32, self._slots[0].row, si.material, si.valid), si.valid, None
         else:
             slots = self._slots_at(si)
             picked, chosen_w, u1 = self._pick(slots, u1)
@@ -741,14 +744,14 @@ class MaterialTable:
         weights' lookups."""
         if self.K == 1 or self._multi is None:
             return [self._slot(si, j) for j in range(self.K)]
-        multi = si.valid & dr.gather(Bool, self._multi, si.material, si.valid)
+        multi = si.valid & gather(Bool, self._multi, si.material, si.valid)
 
         def several():
             return tuple(v for j in range(self.K) for v in self._slot(si, j))
 
         def one():
             rest = (v for _ in range(1, self.K) for v in (UInt32(NONE), Float(0.0), Bool(False)))
-            return (dr.gather(UInt32, self._slots[0].row, si.material, si.valid), Float(1.0), Bool(si.valid),
+            return (gather(UInt32, self._slots[0].row, si.material, si.valid), Float(1.0), Bool(si.valid),
                     *rest)
 
         vals = dr.if_stmt((), multi, several, one, label="drpt_slots")
@@ -785,13 +788,13 @@ class MaterialTable:
             # density its own times its slot's weight w: no second evaluation.
             blends = self._blends_smooth
             if blends is not True:
-                single = smooth if blends is False else smooth & ~dr.gather(Bool, blends, si.material, smooth)
+                single = smooth if blends is False else smooth & ~gather(Bool, blends, si.material, smooth)
                 out.pdf = dr.select(single, out.pdf * chosen_w, out.pdf)
                 out.valid &= ~single | (out.pdf > 0.0)
                 if pdf_rev:
                     pdf_rev = (dr.select(single, pdf_rev[0] * chosen_w, pdf_rev[0]),)
             if blends is not False:
-                mixed = smooth if blends is True else smooth & dr.gather(Bool, blends, si.material, smooth)
+                mixed = smooth if blends is True else smooth & gather(Bool, blends, si.material, smooth)
                 if pdf_rev:
                     f, pdf, mixed_rev = self.eval_pdf_rev(si, wo)
                     pdf_rev = (dr.select(mixed, mixed_rev, pdf_rev[0]),)

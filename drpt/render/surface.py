@@ -28,6 +28,7 @@ from ..accel.device import device_array
 from ..accel.protocol import Hit
 from ..scene.model import Scene
 from .spawn import plane_error, plane_project, plane_shift, sphere_error, triangle_point, triangle_shift
+from .tables import Table, gather
 
 #: a triangle's hit is moved along its plane to a point whose barycentrics are at most this
 #: far outside it (:meth:`SurfaceData.seen_from`): past an edge, the plane of a coplanar
@@ -186,17 +187,18 @@ class SurfaceData:
             # aligned: Dr.Jit reads an unaligned array by one gather per float, not by packets
             self.tri_data = device_array(Float, rec)
         if self.n_sph:
-            self.sph_c = _vec(sph.center)
-            self.sph_r = Float(sph.radius.astype(np.float32))
+            # (small tables: read as literals where they are few, drpt.render.tables)
+            self.sph_c = Table(Array3f, sph.center)
+            self.sph_r = Table(Float, sph.radius)
             self.sph_rot = None
             if tangents and sph.rotation is not None:
                 rot = np.asarray(sph.rotation, np.float64)
                 self.sph_rot = tuple(_vec(rot[:, :, k]) for k in range(3))  # columns: local axes
         if self.n_pl:
-            self.pl_n = _vec(pl.normal)
-            self.pl_o = Float(np.asarray(pl.offset, np.float32))
+            self.pl_n = Table(Array3f, pl.normal)
+            self.pl_o = Table(Float, pl.offset)
         mats = np.concatenate([tris.material, sph.material, pl.material]).astype(np.uint32)
-        self.material = UInt32(mats)
+        self.material = Table(UInt32, mats)
 
     def tri_fields(self, i: UInt32, active: Bool, count: int) -> list[Float]:
         """The first ``count`` floats of triangle ``i``'s record, read as packets of 8 (a
@@ -276,8 +278,8 @@ class SurfaceData:
         if self.n_sph:
             is_sph = valid & (prim >= self.n_tri) & (prim < self.n_tri + self.n_sph)
             j = dr.select(is_sph, prim - self.n_tri, 0)
-            c = dr.gather(Array3f, self.sph_c, j, is_sph)
-            r = dr.gather(Float, self.sph_r, j, is_sph)
+            c = gather(Array3f, self.sph_c, j, is_sph)
+            r = gather(Float, self.sph_r, j, is_sph)
             dt, shift = plane_shift(delta, d, o + d * hit.t - c)
             ok = is_sph & dr.isfinite(dt) & (dr.squared_norm(shift) <= dr.square(r * SPHERE_SHIFT))
             t = dr.select(ok, t + dt, t)
@@ -286,7 +288,7 @@ class SurfaceData:
             first = self.n_tri + self.n_sph
             is_pl = valid & (prim >= first)
             k = dr.select(is_pl, prim - first, 0)
-            dt, _ = plane_shift(delta, d, dr.gather(Array3f, self.pl_n, k, is_pl))
+            dt, _ = plane_shift(delta, d, gather(Array3f, self.pl_n, k, is_pl))
             ok = is_pl & dr.isfinite(dt)
             t = dr.select(ok, t + dt, t)
             moved |= ok
@@ -330,8 +332,8 @@ class SurfaceData:
         if self.n_sph:
             is_sph = valid & (prim >= self.n_tri) & (prim < self.n_tri + self.n_sph)
             j = dr.select(is_sph, prim - self.n_tri, 0)
-            c = dr.gather(Array3f, self.sph_c, j, is_sph)
-            r = dr.gather(Float, self.sph_r, j, is_sph)
+            c = gather(Array3f, self.sph_c, j, is_sph)
+            r = gather(Float, self.sph_r, j, is_sph)
             n = dr.normalize(p - c)
             p = dr.select(is_sph, c + n * r, p)  # re-project onto the sphere
             ng = dr.select(is_sph, n, ng)
@@ -350,13 +352,13 @@ class SurfaceData:
             first = self.n_tri + self.n_sph
             is_pl = valid & (prim >= first)
             k = dr.select(is_pl, prim - first, 0)
-            n = dr.gather(Array3f, self.pl_n, k, is_pl)
-            off = dr.gather(Float, self.pl_o, k, is_pl)
+            n = gather(Array3f, self.pl_n, k, is_pl)
+            off = gather(Float, self.pl_o, k, is_pl)
             p = dr.select(is_pl, plane_project(p, n, off), p)
             ng = dr.select(is_pl, n, ng)
             ns = dr.select(is_pl, n, ns)
             err = dr.select(is_pl, plane_error(p, n, off), err)
-        material = dr.gather(UInt32, self.material, prim, valid)
+        material = gather(UInt32, self.material, prim, valid)
         if self.tangents:
             return TangentInteraction(valid, t, p, ng, ns, prim, material, -d, uv, err, dp_du, dp_dv)
         return Interaction(valid, t, p, ng, ns, prim, material, -d, uv, err)

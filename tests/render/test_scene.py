@@ -78,8 +78,9 @@ def test_a_view_traces_only_its_lobes(scene, monkeypatch):
         monkeypatch.setattr(mod, "sample", spy)
     n = 4
     z = dr.full(Array3f, [0.0, 0.0, 1.0], n)
+    # (the material ids opaque, as a render's: a literal id selects one kind at trace time)
     si = Interaction(dr.full(Bool, True, n), dr.full(Float, 1.0, n), dr.zeros(Array3f, n), z, z,
-                     dr.zeros(UInt32, n), dr.zeros(UInt32, n), z)
+                     dr.zeros(UInt32, n), dr.opaque(UInt32, 0, n), z)
     for kinds in (("dielectric",), ("diffuse",)):
         traced.clear()
         scene.restricted(kinds).sample_bsdf(si, dr.full(Float, 0.5, n), dr.full(Array2f, 0.5, n))

@@ -177,6 +177,7 @@ from ..sampler import LDSampler, next_2d
 from ..scene import DeviceScene
 from ..spawn import origin as spawn_origin
 from ..surface import Interaction, TangentInteraction
+from ..tables import gather
 from ..warp import Frame, square_to_cosine_hemisphere, square_to_uniform_sphere
 from .common import SHADOW_SHRINK
 from .ptracer import camera_segment, correction, refuse_unsupported
@@ -612,8 +613,8 @@ class BDPTIntegrator:
             s = self.scene.surfaces
             is_sph = active & (prim >= lights.n_tri) & (prim < lights.n_tri + s.n_sph)
             j = dr.select(is_sph, prim - lights.n_tri, 0)
-            prob = dr.gather(Float, lights.sph_prob, j, is_sph)
-            r = dr.gather(Float, s.sph_r, j, is_sph)
+            prob = gather(Float, lights.sph_prob, j, is_sph)
+            r = gather(Float, s.sph_r, j, is_sph)
             pdf = dr.select(is_sph, prob / (4.0 * dr.pi * r * r), pdf)
         return pdf
 

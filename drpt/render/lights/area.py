@@ -75,6 +75,7 @@ from ...scene.model import Scene
 from ..spawn import origin as spawn_origin
 from ..spawn import sphere_error, triangle_point
 from ..surface import SurfaceData
+from ..tables import Table, gather, search
 from ..warp import (
     Frame,
     SphericalTriangle,
@@ -176,19 +177,20 @@ class AreaLights:
         self.total_power = float(power[ids].sum())
         #: P(k) of each primitive (triangles, then spheres), for tests and tools
         self.probabilities = prob
-        self.ids = UInt32(ids.astype(np.uint32))
-        self.cdf = Float(cdf.astype(np.float32))
-        self.pdf_area_table = Float(pdf_area[:self.n_tri].astype(np.float32)) if self.n_tri else None
-        self.le = Array3f(*(Float(emission[mats[ids], c].astype(np.float32)) for c in range(3)))
+        # (small tables: read as literals where they are few, drpt.render.tables)
+        self.ids = Table(UInt32, ids)
+        self.cdf = Table(Float, cdf)
+        self.pdf_area_table = Table(Float, pdf_area[:self.n_tri]) if self.n_tri else None
+        self.le = Table(Array3f, emission[mats[ids]])
         self.has_spheres = bool((ids >= self.n_tri).any())
         self.has_triangles = bool((ids < self.n_tri).any())
         self.spherical = self.has_triangles and triangle_sampling_rule(triangle_sampling, scene, integrator)
         if self.has_spheres:
             # per sphere: its selection probability P(k) (its area density is P(k) / 4 pi r^2)
-            self.sph_prob = Float(prob[self.n_tri:].astype(np.float32))
+            self.sph_prob = Table(Float, prob[self.n_tri:])
         if self.n_tri == 0:
             # no triangles: the triangle branch is never traced, but keep a table to gather from
-            self.pdf_area_table = Float(np.zeros(1, np.float32))
+            self.pdf_area_table = Table(Float, np.zeros(1))
         # the slots of the Emitter interface: the primitives of ids, in that order
         self._area = all_area
         self._ids = ids
@@ -223,13 +225,13 @@ class AreaLights:
         full[self._ids] = p
         slot = np.zeros(len(self._area), np.uint32)
         slot[self._ids] = np.arange(self.count, dtype=np.uint32)
-        self._slot = UInt32(slot)
+        self._slot = Table(UInt32, slot)
         tri = full[:self.n_tri] / np.where(full[:self.n_tri] > 0, self._area[:self.n_tri], 1.0)
-        self.nee_pdf_area = Float(tri.astype(np.float32)) if self.n_tri else Float(np.zeros(1, np.float32))
+        self.nee_pdf_area = Table(Float, tri if self.n_tri else np.zeros(1))
         if self.spherical:  # each triangle's probability: the solid-angle density's numerator
-            self.nee_tri_prob = Float(full[:self.n_tri].astype(np.float32))
+            self.nee_tri_prob = Table(Float, full[:self.n_tri])
         if self.has_spheres:
-            self.nee_sph_prob = Float(full[self.n_tri:].astype(np.float32))
+            self.nee_sph_prob = Table(Float, full[self.n_tri:])
 
     def bvh(self, scene: Scene):
         """A :class:`~drpt.render.lights.light_bvh.LightBVH` over this family's slots
@@ -238,13 +240,13 @@ class AreaLights:
 
     def slot_of(self, prim: UInt32, active: Bool) -> UInt32:
         """The slot of primitive ``prim`` (meaningful where :meth:`pdf_direction` is not 0)."""
-        return dr.gather(UInt32, self._slot, prim, active)
+        return gather(UInt32, self._slot, prim, active)
 
     def sample_direction(self, ref: Array3f, slot: UInt32, u: Array2f, active: Bool) -> EmitterSample:
         """A point on the primitive of ``slot`` seen from ``ref`` (a sphere's by the cone it
         subtends), with the solid-angle density times the bound slot probability."""
-        face = dr.gather(UInt32, self.ids, slot, active)
-        le = dr.gather(Array3f, self.le, slot, active)
+        face = gather(UInt32, self.ids, slot, active)
+        le = gather(Array3f, self.le, slot, active)
         ls = self._point(face, u, le, active, ref if self.has_spheres or self.spherical else None,
                          self.nee_pdf_area, getattr(self, "nee_sph_prob", None),
                          getattr(self, "nee_tri_prob", None))
@@ -271,7 +273,7 @@ class AreaLights:
             tri = s.triangle(face, sees_light)
             st = SphericalTriangle(tri.p0, tri.e1, tri.e2, ref)
             solid = sees_light & st.sampled
-            pdf = dr.select(solid, dr.gather(Float, tri_prob, face, solid) / st.omega, pdf)
+            pdf = dr.select(solid, gather(Float, tri_prob, face, solid) / st.omega, pdf)
         if self.has_spheres:
             is_sph, pdf_s = self.pdf_sphere(si.prim, si.p, ref, d, dist, active & si.valid, sph_prob)
             pdf = dr.select(is_sph, pdf_s, pdf)
@@ -280,11 +282,8 @@ class AreaLights:
     # ------------------------------------------------------------ the family's own selection
 
     def _select(self, u_select: Float, active: Bool):
-        cdf = self.cdf
-        n = self.count
-        k = dr.binary_search(0, n - 1, lambda i: dr.gather(Float, cdf, i) <= u_select)
-        k = dr.minimum(k, n - 1)
-        return k, dr.gather(UInt32, self.ids, k, active)
+        k = dr.minimum(search(self.cdf, u_select), self.count - 1)
+        return k, gather(UInt32, self.ids, k, active)
 
     def reuse(self, u: Array2f, active: Bool) -> tuple[Float, Array2f]:
         """The light selection drawn from ``u.x`` and ``u`` with ``u.x`` rescaled to the
@@ -293,8 +292,8 @@ class AreaLights:
         so a stratified 2-D sample stays stratified over the lights' surfaces (the
         low-discrepancy sampler's NEE, :mod:`drpt.render.sampler`)."""
         k, _ = self._select(u.x, active)
-        hi = dr.gather(Float, self.cdf, k, active)
-        lo = dr.select(k > 0, dr.gather(Float, self.cdf, dr.maximum(k, 1) - 1, active & (k > 0)), 0.0)
+        hi = gather(Float, self.cdf, k, active)
+        lo = dr.select(k > 0, gather(Float, self.cdf, dr.maximum(k, 1) - 1, active & (k > 0)), 0.0)
         x = (u.x - lo) / dr.maximum(hi - lo, 1e-30)
         return u.x, Array2f(dr.clip(x, 0.0, 0.99999994), u.y)
 
@@ -303,7 +302,7 @@ class AreaLights:
         point is uniform on it, or with ``ref`` (a shading point outside it) in the
         cone of its cap seen from ``ref``, with the solid-angle density (``solid_angle``)."""
         k, face = self._select(u_select, active)
-        le = dr.gather(Array3f, self.le, k, active)
+        le = gather(Array3f, self.le, k, active)
         return self._point(face, u, le, active, ref, self.pdf_area_table, getattr(self, "sph_prob", None))
 
     def _point(self, face: UInt32, u: Array2f, le: Array3f, active: Bool, ref, table: Float,
@@ -346,14 +345,14 @@ class AreaLights:
         tri = s.triangle(face, active, normals=True, uv=self.materials is not None)
         p0, e1, e2 = tri.p0, tri.e1, tri.e2
         b = square_to_uniform_triangle(u)
-        pdf = dr.gather(Float, table, face, active)
+        pdf = gather(Float, table, face, active)
         solid = None
         if tri_prob is not None and ref is not None:
             st = SphericalTriangle(p0, e1, e2, ref)
             solid = active & st.sampled
             w = spherical_triangle_sample(st, u)
             b = dr.select(solid, ray_triangle_barycentrics(ref, w, p0, e1, e2), b)
-            pdf = dr.select(solid, dr.gather(Float, tri_prob, face, solid) / st.omega, pdf)
+            pdf = dr.select(solid, gather(Float, tri_prob, face, solid) / st.omega, pdf)
         p, ng, err = triangle_point(p0, e1, e2, b.x, b.y)
         n_front = ng
         if tri.n is not None:
@@ -364,7 +363,7 @@ class AreaLights:
             uv = Array2f(0.0, 0.0)
             if tri.uv is not None:
                 uv = tri.uv[0] * (1.0 - b.x - b.y) + tri.uv[1] * b.x + tri.uv[2] * b.y
-            material = dr.gather(UInt32, s.material, face, active)
+            material = gather(UInt32, s.material, face, active)
             le = self.materials.textured_emission(material, uv, le, active)
         return p, n_front, ng, err, pdf, le, solid
 
@@ -372,9 +371,9 @@ class AreaLights:
         """A point on sphere ``j``: ``(p, outward normal, p_error, density, solid_angle)``."""
         s = self.surfaces
         j = dr.select(active, j, 0)
-        c = dr.gather(Array3f, s.sph_c, j, active)
-        r = dr.gather(Float, s.sph_r, j, active)
-        prob = dr.gather(Float, sph_prob, j, active)
+        c = gather(Array3f, s.sph_c, j, active)
+        r = gather(Float, s.sph_r, j, active)
+        prob = gather(Float, sph_prob, j, active)
         n = square_to_uniform_sphere(u)
         pdf = prob / (4.0 * dr.pi * r * r)
         solid = None
@@ -401,7 +400,7 @@ class AreaLights:
         """Area density with which :meth:`sample` picks a point on triangle ``prim``
         (with ``table``: that per-triangle table's)."""
         is_tri = active & (prim < self.surfaces.n_tri)
-        return dr.gather(Float, self.pdf_area_table if table is None else table, prim, is_tri)
+        return gather(Float, self.pdf_area_table if table is None else table, prim, is_tri)
 
     def pdf_sphere(self, prim: UInt32, p: Array3f, ref: Array3f, d: Array3f, dist: Float,
                    active: Bool, sph_prob: Float | None = None) -> tuple[Bool, Float]:
@@ -410,9 +409,9 @@ class AreaLights:
         s = self.surfaces
         is_sph = active & (prim >= self.n_tri) & (prim < self.n_tri + s.n_sph)
         j = dr.select(is_sph, prim - self.n_tri, 0)
-        c = dr.gather(Array3f, s.sph_c, j, is_sph)
-        r = dr.gather(Float, s.sph_r, j, is_sph)
-        prob = dr.gather(Float, self.sph_prob if sph_prob is None else sph_prob, j, is_sph)
+        c = gather(Array3f, s.sph_c, j, is_sph)
+        r = gather(Float, s.sph_r, j, is_sph)
+        prob = gather(Float, self.sph_prob if sph_prob is None else sph_prob, j, is_sph)
         outside, omc, _, _ = cone_of(c, r, ref)
         n = dr.normalize(p - c)
         area = prob / (4.0 * dr.pi * r * r) * dr.square(dist) / dr.abs(dr.dot(n, d))

@@ -38,6 +38,8 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
+from ..tables import Table, gather, search
+
 RULES = ("mixed", "power", "uniform")  # drpt.options.LIGHT_SAMPLERS (also pilot.py's and light_bvh.py's)
 
 
@@ -81,8 +83,9 @@ class LightSelection:
         if self.count:
             cdf = np.cumsum(w) / total
             cdf[-1] = 1.0
-            self._cdf = Float(cdf.astype(np.float32))
-            self._pmf = Float(self.probabilities.astype(np.float32))
+            # (small tables: read as literals where they are few, drpt.render.tables)
+            self._cdf = Table(Float, cdf)
+            self._pmf = Table(Float, self.probabilities)
 
     def family_probabilities(self, i: int) -> np.ndarray:
         """The probabilities of family ``i``'s slots (in :attr:`families`)."""
@@ -93,16 +96,14 @@ class LightSelection:
         """A slot for each lane from ``u`` in [0, 1), and its probability."""
         if self.count == 1:
             return dr.zeros(UInt32, dr.width(u)), dr.full(Float, 1.0, dr.width(u))
-        cdf, n = self._cdf, self.count
-        k = dr.binary_search(0, n - 1, lambda i: dr.gather(Float, cdf, i) <= u)
-        k = dr.minimum(k, n - 1)
-        return k, dr.gather(Float, self._pmf, k, active)
+        k = dr.minimum(search(self._cdf, u), self.count - 1)
+        return k, gather(Float, self._pmf, k, active)
 
     def pmf(self, index: UInt32, ref: Array3f | None = None, active=True) -> Float:
         """The probability that :meth:`sample` returns slot ``index``."""
         if self.count == 1:
             return dr.select(index == 0, 1.0, 0.0)
-        return dr.gather(Float, self._pmf, index, Bool(active) & (index < self.count))
+        return gather(Float, self._pmf, index, Bool(active) & (index < self.count))
 
     def reuse(self, u: Array2f, ref: Array3f | None = None, active=True) -> tuple[Float, Array2f]:
         """The selection drawn from ``u.x`` and ``u`` with ``u.x`` rescaled to the chosen
@@ -113,7 +114,7 @@ class LightSelection:
         if self.count <= 1:
             return u.x, u
         k, _ = self.sample(u.x, ref, active)
-        hi = dr.gather(Float, self._cdf, k, active)
-        lo = dr.select(k > 0, dr.gather(Float, self._cdf, dr.maximum(k, 1) - 1, active & (k > 0)), 0.0)
+        hi = gather(Float, self._cdf, k, active)
+        lo = dr.select(k > 0, gather(Float, self._cdf, dr.maximum(k, 1) - 1, active & (k > 0)), 0.0)
         x = (u.x - lo) / dr.maximum(hi - lo, 1e-30)
         return u.x, Array2f(dr.clip(x, 0.0, 0.99999994), u.y)

@@ -11,6 +11,7 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 from drpt.render.lights import area as area_mod
 from drpt.render.lights.area import AreaLights
 from drpt.render.surface import SurfaceData
+from drpt.render.tables import gather
 from drpt.scene.model import Material, Medium, PerspectiveCamera, Scene, Triangles
 
 CAM = PerspectiveCamera((0, 0, 5), (0, 0, -1), (0, 1, 0), 40)
@@ -62,7 +63,7 @@ def test_mis_density_at_a_hit_is_the_sampled_density():
     slot = UInt32(rng.integers(0, 3, n).astype(np.uint32))
     u = Array2f(rng.random((2, n)).astype(np.float32))
     es = lights.sample_direction(ref, slot, u, Bool(True))
-    face = dr.gather(UInt32, lights.ids, slot)
+    face = gather(UInt32, lights.ids, slot)
     si = _hit(lights, ref, es.wo, face)
     pdf = np.array(lights.pdf_direction(si, es.wo, Bool(True)))
     want, ok = np.array(es.pdf), np.array(es.valid)
@@ -210,7 +211,7 @@ def _wrong_density(monkeypatch):
 
     def area_density(self, face, u, le, active, table, ref=None, tri_prob=None):
         out = list(real(self, face, u, le, active, table, ref, tri_prob))
-        out[4], out[6] = dr.gather(Float, table, face, active), None
+        out[4], out[6] = gather(Float, table, face, active), None
         return tuple(out)
 
     monkeypatch.setattr(area_mod.AreaLights, "_triangle_point", area_density)

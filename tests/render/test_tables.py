@@ -1,0 +1,115 @@
+"""Small constant tables read as literals (drpt/render/tables.py).
+
+* :func:`tables.gather` of a table of a few runs (Float, UInt32, Bool, Array3f; one run, several,
+  masked lanes) equals ``dr.gather`` of the uploaded array, value for value; a table of more
+  than ``RUNS`` runs reads by a gather; negative control: a chain whose run ends are off by
+  one row differs;
+* :func:`tables.search` equals ``dr.binary_search`` on a CDF (ties from zero weights, ``u`` at
+  the CDF's own values); negative control: counting with ``<`` instead of ``<=`` differs;
+* Veach's MIS scene (emitter, sphere and material tables read as literals) renders the same
+  image, bit for bit, as with every table gathered (``RUNS = 0``); Veach's path kernel reads
+  no gather but its surface's per-primitive material (ten runs) and packed triangle records.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import drjit as dr
+import numpy as np
+import pytest
+from drjit.auto import Array3f, Bool, Float, UInt32
+
+from drpt.options import RenderOptions, with_scene_settings
+from drpt.render import tables
+from drpt.render.renderer import Renderer
+from drpt.render.tables import Table
+from drpt.scene import load_scene
+
+VEACH = Path(__file__).resolve().parents[1] / "data" / "xml" / "veach_mis.xml"
+
+
+def _lanes(n: int, size: int, seed: int = 1):
+    rng = np.random.default_rng(seed)
+    return UInt32(rng.integers(0, n, size).astype(np.uint32)), Bool(rng.random(size) < 0.7)
+
+
+@pytest.mark.parametrize("cls, values", [
+    (Float, [0.25]),
+    (Float, [0.1, 0.1, 0.3, 0.3, 0.3, 0.9, 0.1]),
+    (UInt32, [3, 3, 7, 1, 1, 0]),
+    (Bool, [True, False, False, True]),
+    (Array3f, [[0.7, 0.7, 0.7], [0.7, 0.7, 0.7], [0.2, 0.5, 0.9], [1.0, 0.0, 0.0]]),
+])
+def test_literal_gather_equals_dr_gather(cls, values):
+    table = Table(cls, values)
+    assert table.literal and len(table.runs) <= tables.RUNS
+    index, active = _lanes(len(table), 4096)
+    for mask in (True, active):
+        got = tables.gather(cls, table, index, mask)
+        want = dr.gather(cls, table.array, index, mask)
+        assert np.array_equal(np.asarray(got.numpy()), np.asarray(want.numpy()))
+
+
+def test_many_runs_gather():
+    values = np.arange(tables.RUNS + 1, dtype=np.float32) * 0.5
+    table = Table(Float, values)
+    assert not table.literal
+    index, active = _lanes(len(values), 1000)
+    assert np.array_equal(tables.gather(Float, table, index, active).numpy(),
+                          dr.gather(Float, table.array, index, active).numpy())
+    # a plain array gathers
+    assert np.array_equal(tables.gather(Float, table.array, index).numpy(), values[index.numpy()])
+
+
+def test_shifted_runs_differ():
+    """Negative control: the chain with each run's end one row early reads other values."""
+    table = Table(Float, [0.1, 0.1, 0.3, 0.3, 0.3, 0.9])
+    index, _ = _lanes(len(table), 1000)
+    want = dr.gather(Float, table.array, index).numpy()
+    table.runs = [(end - 1, row) for end, row in table.runs]
+    assert not np.array_equal(tables.gather(Float, table, index).numpy(), want)
+
+
+def _cdf(weights) -> np.ndarray:
+    cdf = np.cumsum(np.asarray(weights, np.float64)) / np.sum(weights)
+    cdf[-1] = 1.0
+    return cdf.astype(np.float32)
+
+
+@pytest.mark.parametrize("weights", [[1.0], [0.35, 0.1625, 0.1625, 0.1625, 0.1625],
+                                     [0.2, 0.0, 0.0, 0.5, 0.3, 0.0]])
+def test_search_equals_binary_search(weights):
+    cdf = _cdf(weights)
+    table = Table(Float, cdf)
+    rng = np.random.default_rng(3)
+    u = Float(np.concatenate([rng.random(5000).astype(np.float32), cdf, [0.0, 0.99999994]]).astype(np.float32))
+    got = tables.search(table, u).numpy()
+    want = tables.search(table.array, u).numpy()  # a plain array: dr.binary_search
+    assert np.array_equal(got, want)
+    assert got.max() <= len(cdf) - 1
+
+
+def test_search_strict_compare_differs():
+    """Negative control: a count with ``<`` in place of ``<=`` differs from the binary search
+    where ``u`` is one of the CDF's values (the check above would fail it)."""
+    cdf = _cdf([0.2, 0.5, 0.3])
+    u = Float(cdf)
+    want = tables.search(Float(cdf), u).numpy()
+    strict = sum((np.float32(x) < u.numpy()).astype(np.uint32) for x in cdf[:-1])
+    assert not np.array_equal(strict, want)
+    assert np.array_equal(tables.search(Table(Float, cdf), u).numpy(), want)
+
+
+def _veach(runs: int, monkeypatch) -> np.ndarray:
+    monkeypatch.setattr(tables, "RUNS", runs)
+    opt, scene = with_scene_settings(RenderOptions(progress=False), load_scene(VEACH))
+    opt.width, opt.height, opt.spp, opt.seed = 48, 36, 4, 3
+    return Renderer(scene, opt).render().image
+
+
+def test_veach_image_bit_identical_to_gathers(monkeypatch):
+    literal = _veach(tables.RUNS, monkeypatch)
+    gathered = _veach(0, monkeypatch)
+    assert literal.mean() > 0.0
+    assert np.array_equal(literal, gathered)
