@@ -45,15 +45,19 @@ class Table:
             self.array = cls(v)
         self.cls = cls
         self.size = len(v)
-        #: ``(end, row)`` per run of equal rows, in order: rows ``end`` of the previous run to
-        #: ``end - 1`` hold ``row`` (Python values: the literals)
+        #: ``(end, row)`` per run of equal rows (equal bits: 0.0 and -0.0 differ), in order: rows
+        #: ``end`` of the previous run to ``end - 1`` hold ``row`` (Python values: the literals)
         self.runs: list[tuple[int, tuple]] = []
-        for i, row in enumerate(v.tolist()):
+        bits = v.view(np.uint32) if v.dtype == np.float32 else v
+        last = None
+        for i, (row, key) in enumerate(zip(v.tolist(), bits.tolist())):
             row = tuple(row) if cls is Array3f else (row,)
-            if self.runs and self.runs[-1][1] == row:
+            key = tuple(key) if cls is Array3f else key
+            if self.runs and key == last:
                 self.runs[-1] = (i + 1, row)
             else:
                 self.runs.append((i + 1, row))
+            last = key
 
     def __len__(self) -> int:
         return self.size

@@ -51,6 +51,17 @@ def test_literal_gather_equals_dr_gather(cls, values):
         assert np.array_equal(np.asarray(got.numpy()), np.asarray(want.numpy()))
 
 
+def test_signed_zeros_are_two_runs():
+    """0.0 and -0.0 are other bits: two runs, each read back with its sign (control: the
+    rows compare equal as numbers)."""
+    values = np.array([0.0, -0.0, -0.0, 1.0], np.float32)
+    assert values[0] == values[1]
+    table = Table(Float, values)
+    assert len(table.runs) == 3
+    got = tables.gather(Float, table, UInt32([0, 1, 2, 3])).numpy()
+    assert np.array_equal(got.view(np.uint32), values.view(np.uint32))
+
+
 def test_many_runs_gather():
     values = np.arange(tables.RUNS + 1, dtype=np.float32) * 0.5
     table = Table(Float, values)
