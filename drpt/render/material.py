@@ -93,18 +93,20 @@ def _among(ids) -> tuple[int, ...]:
 
 
 def _flag(v):
-    """A layout flag on the device: a Python bool stays one (decided at trace time)."""
+    """A layout flag on the device: a Python bool stays one (decided at trace time), per-row
+    flags a :class:`~drpt.render.tables.Table` of ``Bool``."""
     return v if isinstance(v, bool) else Table(Bool, v)
 
 
 @dataclass
 class _Slot:
-    """:class:`drpt.materials.layout.Slot` on the device (arrays indexed by material)."""
+    """:class:`drpt.materials.layout.Slot` on the device (tables indexed by material, read
+    with :func:`drpt.render.tables.gather`)."""
 
-    row: UInt32
-    weight: Float
+    row: Table  # UInt32
+    weight: Table  # Float
     texture: UInt32 | None
-    complement: Bool
+    complement: Table  # Bool
     kinds: list[str]
     partial: bool
     among: tuple[int, ...] | None  # the texture ids of the weights

@@ -26,7 +26,9 @@ from drjit.auto import Array2f, Array3f, ArrayXf, Bool, Float, UInt32
 
 from ..accel.device import device_array
 from ..accel.protocol import Hit
+from ..backend import name as backend_name
 from ..scene.model import Scene
+from . import tables
 from .spawn import plane_error, plane_project, plane_shift, sphere_error, triangle_point, triangle_shift
 from .tables import Table, gather
 
@@ -144,6 +146,14 @@ def coordinate_system(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return s, t
 
 
+class TriangleRecords:
+    """Host copies of a few triangles' records (:meth:`SurfaceData.records`): ``ids`` and
+    ``rows[j]`` the record of triangle ``ids[j]``, float32."""
+
+    def __init__(self, ids: list[int], rows: np.ndarray):
+        self.ids, self.rows = ids, rows
+
+
 class TriangleRecord:
     """A triangle's data read by :meth:`SurfaceData.triangle`: corner ``p0`` and edges
     ``e1 = p1 - p0``, ``e2 = p2 - p0``; the vertex normals ``n`` and uvs ``uv`` (three
@@ -200,9 +210,28 @@ class SurfaceData:
         mats = np.concatenate([tris.material, sph.material, pl.material]).astype(np.uint32)
         self.material = Table(UInt32, mats)
 
-    def tri_fields(self, i: UInt32, active: Bool, count: int) -> list[Float]:
+    def records(self, ids) -> TriangleRecords | None:
+        """The records of the triangles ``ids`` (host copies: :meth:`triangle`'s ``among``),
+        or None where they are more than :data:`drpt.render.tables.RUNS` or the backend is
+        not LLVM (then their records are gathered). Read back from the uploaded records (an
+        evaluation: call it while building, not while a kernel is traced)."""
+        ids = [int(k) for k in ids]
+        if not ids or len(ids) > tables.RUNS or backend_name() != "llvm" or not self.n_tri:
+            return None
+        n = self.tri_rows * 8
+        at = np.repeat(np.asarray(ids, np.uint32) * n, n) + np.tile(np.arange(n, dtype=np.uint32), len(ids))
+        rows = dr.gather(Float, self.tri_data, UInt32(at)).numpy().reshape(len(ids), n)
+        return TriangleRecords(ids, rows)
+
+    def tri_fields(self, i: UInt32, active: Bool, count: int,
+                   among: TriangleRecords | None = None) -> list[Float]:
         """The first ``count`` floats of triangle ``i``'s record, read as packets of 8 (a
-        32-byte load per lane and packet, where a gather per float reads one lane at a time)."""
+        32-byte load per lane and packet, where a gather per float reads one lane at a time),
+        or with ``among`` (the records of the few triangles the lanes can hold,
+        :meth:`records`) as compares and selects of their literals
+        (:func:`drpt.render.tables.choose`): the same values."""
+        if among is not None:
+            return [tables.choose(i, among.ids, among.rows[:, k], active) for k in range(count)]
         out: list[Float] = []
         base = i * self.tri_rows
         for r in range(-(-count // 8)):
@@ -211,12 +240,13 @@ class SurfaceData:
         return out[:count]
 
     def triangle(self, i: UInt32, active: Bool, normals: bool = False, uv: bool = False,
-                 tangents: int = 0) -> TriangleRecord:
+                 tangents: int = 0, among: TriangleRecords | None = None) -> TriangleRecord:
         """Triangle ``i``'s data for the ``active`` lanes: always ``p0, e1, e2``; its three
         vertex normals with ``normals`` (None where the mesh has none), its three uvs with
         ``uv`` (None where the interactions carry none), ``dp/du`` with ``tangents`` >= 1 and
         ``dp/dv`` too with 2 (None beyond the tangents the record holds). Only the record's
-        leading floats that these need are read."""
+        leading floats that these need are read; ``among``: the records of the few triangles
+        the lanes can hold (:meth:`records`), read as literals."""
         n_off = 9
         uv_off = n_off + 9 * self.has_normals
         t_off = uv_off + 6 * self.has_uv
@@ -228,7 +258,7 @@ class SurfaceData:
             count = t_off
         if tangents:
             count = t_off + 3 * tangents
-        f = self.tri_fields(i, active, count)
+        f = self.tri_fields(i, active, count, among)
         rec = TriangleRecord(*(Array3f(*f[k:k + 3]) for k in (0, 3, 6)))
         if normals and self.has_normals:
             rec.n = tuple(Array3f(*f[k:k + 3]) for k in range(n_off, uv_off, 3))

@@ -115,3 +115,21 @@ def search(cdf, u: Float) -> UInt32:
     k = dr.binary_search(0, n - 1, lambda i: dr.gather(Float, source, i) <= u)
     return dr.minimum(k, n - 1)
 
+
+def choose(index: UInt32, keys: list[int], values, active=True) -> Float:
+    """``values[j]`` on the lanes whose ``index`` is ``keys[j]`` (a few distinct keys; float32
+    ``values``), as compares and selects of literals, zero on the lanes not ``active``: the
+    value a gather at ``index`` from an array that holds ``values[j]`` at ``keys[j]`` reads.
+    A lane whose index is none of the keys reads the last value. A key whose value has the
+    last one's bits needs no select; all alike, the value is the literal."""
+    vals = np.asarray(values, np.float32)
+    bits = vals.view(np.uint32).tolist()
+    n = max(dr.width(index), dr.width(active))
+    v = dr.full(Float, float(vals[-1]), n)
+    i = UInt32(index)
+    for j in range(len(keys) - 2, -1, -1):
+        if bits[j] != bits[-1]:
+            v = dr.select(i == keys[j], Float(float(vals[j])), v)
+    if active is True:
+        return v
+    return dr.select(Bool(active), v, 0.0)

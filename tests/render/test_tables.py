@@ -6,6 +6,9 @@
   one row differs;
 * :func:`tables.search` equals ``dr.binary_search`` on a CDF (ties from zero weights, ``u`` at
   the CDF's own values); negative control: counting with ``<`` instead of ``<=`` differs;
+* :func:`tables.choose` and ``SurfaceData.triangle(..., among=records)`` (an emitter's triangle
+  records as literals) read the packed records' values bit for bit; negative control: the
+  records of other triangles differ;
 * Veach's MIS scene (emitter, sphere and material tables read as literals) renders the same
   image, bit for bit, as with every table gathered (``RUNS = 0``); Veach's path kernel reads
   no gather but its surface's per-primitive material (ten runs) and packed triangle records.
@@ -23,6 +26,7 @@ from drjit.auto import Array3f, Bool, Float, UInt32
 from drpt.options import RenderOptions, with_scene_settings
 from drpt.render import tables
 from drpt.render.renderer import Renderer
+from drpt.render.surface import SurfaceData
 from drpt.render.tables import Table
 from drpt.scene import load_scene
 
@@ -110,6 +114,37 @@ def test_search_strict_compare_differs():
     strict = sum((np.float32(x) < u.numpy()).astype(np.uint32) for x in cdf[:-1])
     assert not np.array_equal(strict, want)
     assert np.array_equal(tables.search(Table(Float, cdf), u).numpy(), want)
+
+
+def test_triangle_records_as_literals_equal_packet_gathers():
+    """The Cornell box's ceiling light (its two emissive triangles) read through
+    ``SurfaceData.records``: every float of the records, masked lanes included, as the packet
+    gathers read them; the records of two other triangles differ (negative control)."""
+    opt = RenderOptions(width=8, height=8, spp=1, progress=False)
+    cornell = Path(__file__).resolve().parents[2] / "scenes" / "cornellbox" / "cornellbox.txt"
+    scene = load_scene(cornell)
+    surf = SurfaceData(scene)
+    lights = Renderer(scene, opt).scene.area_lights
+    ids = [int(k) for k in np.asarray(lights._ids) if k < lights.n_tri]
+    assert len(ids) == 2 and lights.tri_records is not None
+    records = surf.records(ids)
+    rng = np.random.default_rng(5)
+    face = UInt32(np.asarray(ids, np.uint32)[rng.integers(0, 2, 2000)])
+    active = Bool(rng.random(2000) < 0.8)
+    fields = surf.tri_rows * 8
+    want = np.array([v.numpy() for v in surf.tri_fields(face, active, fields)])
+    got = np.array([v.numpy() for v in surf.tri_fields(face, active, fields, records)])
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    other = surf.records([0, 1])
+    wrong = np.array([v.numpy() for v in surf.tri_fields(face, active, fields, other)])
+    assert not np.array_equal(wrong, want)
+
+
+def test_choose_reads_the_keyed_values():
+    keys, values = [30, 7, 12], np.array([0.5, -0.0, 0.5], np.float32)
+    index = UInt32([30, 7, 12, 12, 7])
+    got = tables.choose(index, keys, values, Bool([True, True, True, False, True])).numpy()
+    assert np.array_equal(got.view(np.uint32), np.array([0.5, -0.0, 0.5, 0.0, -0.0], np.float32).view(np.uint32))
 
 
 def _veach(runs: int, monkeypatch) -> np.ndarray:

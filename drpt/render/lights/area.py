@@ -185,6 +185,9 @@ class AreaLights:
         self.has_spheres = bool((ids >= self.n_tri).any())
         self.has_triangles = bool((ids < self.n_tri).any())
         self.spherical = self.has_triangles and triangle_sampling_rule(triangle_sampling, scene, integrator)
+        #: the records of the emissive triangles where they are few (literals in the kernel,
+        #: :meth:`SurfaceData.records <drpt.render.surface.SurfaceData.records>`), else None
+        self.tri_records = surfaces.records(ids[ids < self.n_tri]) if self.has_triangles else None
         if self.has_spheres:
             # per sphere: its selection probability P(k) (its area density is P(k) / 4 pi r^2)
             self.sph_prob = Table(Float, prob[self.n_tri:])
@@ -342,7 +345,7 @@ class AreaLights:
         """A point on triangle ``face``: ``(p, front normal, ng, p_error, density, le,
         solid)``, ``solid`` the lanes whose density is in solid angle (None: none)."""
         s = self.surfaces
-        tri = s.triangle(face, active, normals=True, uv=self.materials is not None)
+        tri = s.triangle(face, active, normals=True, uv=self.materials is not None, among=self.tri_records)
         p0, e1, e2 = tri.p0, tri.e1, tri.e2
         b = square_to_uniform_triangle(u)
         pdf = gather(Float, table, face, active)
