@@ -85,6 +85,7 @@ from .lights.envmap import (
 )
 from .lights.light_bvh import BVHSelection
 from .lights.pilot import LIGHT_TRACERS, pilot_selection
+from .lights.reach import receivers
 from .lights.selection import LightSelection
 from .loops import loops_once
 from .material import MaterialTable
@@ -309,7 +310,8 @@ class DeviceScene:
         if self.has_environment:
             lo, hi = scene.bounds()
             radius = float(np.linalg.norm(hi - lo)) / 2.0 if np.all(np.isfinite(lo)) else 1.0
-            self.sky = SkyEmitter(nee_environment or self.environment, radius)
+            lit = receivers(scene)  # its power over the lit geometry (drpt.render.lights.reach)
+            self.sky = SkyEmitter(nee_environment or self.environment, radius if lit is None else lit.radius)
         families = [self.area_lights, self.delta_lights] + ([self.sky] if self.sky is not None else [])
         families += [f for f in (build(self, scene) for build in EMITTER_FAMILIES) if f is not None]
         rule = options.light_sampler
