@@ -310,8 +310,9 @@ class DeviceScene:
         if self.has_environment:
             lo, hi = scene.bounds()
             radius = float(np.linalg.norm(hi - lo)) / 2.0 if np.all(np.isfinite(lo)) else 1.0
-            lit = receivers(scene)  # its power over the lit geometry (drpt.render.lights.reach)
-            self.sky = SkyEmitter(nee_environment or self.environment, radius if lit is None else lit.radius)
+            lit = receivers(scene)  # its power over the lit geometry's cross-section (drpt.render.lights.reach)
+            self.sky = SkyEmitter(nee_environment or self.environment,
+                                  radius if lit is None else float(np.sqrt(lit.cross_section / np.pi)))
         families = [self.area_lights, self.delta_lights] + ([self.sky] if self.sky is not None else [])
         families += [f for f in (build(self, scene) for build in EMITTER_FAMILIES) if f is not None]
         rule = options.light_sampler

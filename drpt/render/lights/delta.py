@@ -34,8 +34,8 @@ for the light selection: ``4 pi I`` for a point light (its attenuation aside), p
 for a projector (``A`` its image's area at distance 1, ``v`` its mean value), ``pi R^2
 E`` for a directional light (``R`` the radius of the scene's bounding sphere); luminances
 of the colors, textures counted by their mean; each the part that reaches the lit
-geometry (:mod:`drpt.render.lights.reach`: ``R`` that geometry's radius, the others times
-their share of directions toward it).
+geometry (:mod:`drpt.render.lights.reach`: a directional light's ``pi R^2`` that
+geometry's cross-section along it, the others times their share of directions toward it).
 """
 
 from __future__ import annotations
@@ -114,7 +114,8 @@ class DeltaLights:
             reach = 1.0 if rec is None else rec.cone(l.position, min(4.0 * t * t / l.aspect, 4.0 * math.pi)
                                                      / (4.0 * math.pi))
             out.append(math.pi * float(l.scale) * 4.0 * t * t / l.aspect * v * reach)
-        out += [math.pi * self._radius ** 2 * _lum(l.color) for l in self.directionals]
+        out += [(math.pi * self._radius ** 2 if rec is None else rec.across(l.direction)) * _lum(l.color)
+                for l in self.directionals]
         return np.maximum(np.nan_to_num(np.array(out, float), nan=0.0, posinf=0.0), 0.0)
 
     def units(self) -> tuple[np.ndarray, np.ndarray]:

@@ -19,7 +19,13 @@ radius ``r``) of the scene's bounded shapes that emit nothing (:func:`receivers`
   is below (``cos <= -r / d``) (:meth:`Receivers.flat`); 1 inside.
 * A spot or a projector: the isotropic share over its cone's share of all directions,
   at most 1.
-* The sky and directional lights: ``pi r^2`` instead of the whole scene's ``pi R^2``.
+* The sky and directional lights: the lit geometry's cross-section instead of the whole
+  scene's ``pi R^2``: seen along a directional light, the triangles' ``sum A |n . d|``
+  (both sides) plus the spheres' ``pi s^2``; for the sky its mean over all directions,
+  ``sum A / 2`` plus the spheres' (Cauchy's: a convex body's mean cross-section is a
+  quarter of its surface; a flat triangle's surface is both of its sides); each at most
+  ``pi r^2``, the sphere's (a closed mesh counts both sides of its triangles, twice its
+  cross-section, and shapes hide each other: the sphere's is the bound).
 
 Where every emitter lies inside the receivers (a room, a box, a floor under its lights)
 the estimates are the emitted powers, as before; they differ where an emitter is
@@ -40,10 +46,22 @@ from ...scene.model import Scene
 
 @dataclass(frozen=True)
 class Receivers:
-    """The sphere that bounds the scene's lit geometry."""
+    """The sphere that bounds the scene's lit geometry, and that geometry's cross-section."""
 
     center: np.ndarray
     radius: float
+    #: the lit geometry's mean cross-section over all directions, at most the sphere's
+    cross_section: float = 0.0
+    #: the triangles' area-weighted unit normals (for a directional light's cross-section)
+    normals: np.ndarray | None = None
+    #: the spheres' cross-sections, summed
+    spheres: float = 0.0
+
+    def across(self, d) -> float:
+        """The lit geometry's cross-section seen along ``d``, at most the sphere's."""
+        d = np.asarray(d, np.float64) / max(float(np.linalg.norm(d)), 1e-30)
+        tri = 0.0 if self.normals is None else float(np.abs(self.normals @ d).sum())
+        return min(np.pi * self.radius ** 2, tri + self.spheres)
 
     def _distance(self, p) -> np.ndarray:
         return np.linalg.norm(np.asarray(p, np.float64).reshape(-1, 3) - self.center, axis=1)
@@ -76,8 +94,8 @@ class Receivers:
 
 
 def receivers(scene: Scene) -> Receivers | None:
-    """The bounding sphere of ``scene``'s triangles and spheres whose material emits
-    nothing (``None``: the scene has infinite planes, or no such shape)."""
+    """The bounding sphere and the cross-section of ``scene``'s triangles and spheres whose
+    material emits nothing (``None``: the scene has infinite planes, or no such shape)."""
     if len(scene.planes):
         return None
     emits = np.array([m.is_emissive for m in scene.materials] or [False], bool)
@@ -96,4 +114,16 @@ def receivers(scene: Scene) -> Receivers | None:
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         return None
     radius = float(np.linalg.norm(hi - lo)) / 2.0
-    return Receivers((lo + hi) / 2.0, radius) if radius > 0.0 else None
+    if radius <= 0.0:
+        return None
+    normals, spheres = None, 0.0
+    if len(tris) and (~emits[np.asarray(tris.material, np.int64)]).any():
+        p = tris.positions[~emits[np.asarray(tris.material, np.int64)]]
+        normals = 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])  # area times unit normal
+    if len(sph):
+        keep = ~emits[np.asarray(sph.material, np.int64)]
+        spheres = float(np.pi * (np.asarray(sph.radius, np.float64)[keep] ** 2).sum())
+    # a flat triangle's mean cross-section over all directions is half its area (both sides)
+    tri = 0.0 if normals is None else 0.5 * float(np.linalg.norm(normals, axis=1).sum())
+    cross = min(np.pi * radius ** 2, tri + spheres)
+    return Receivers((lo + hi) / 2.0, radius, cross, normals, spheres)
