@@ -217,6 +217,7 @@ class _Misreported(LightSelection):
         self._pmf = Float(self.probabilities.astype(np.float32))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("control", [False, True])
 def test_mixed_renders_the_uniform_image(tmp_path, control):
     scene = far_lights_scene(tmp_path)
