@@ -113,12 +113,11 @@ def selection_weights(area: np.ndarray, lum: np.ndarray, emitter: np.ndarray,
     return w
 
 
-def _reach(scene: Scene, ids: np.ndarray, n_tri: int) -> np.ndarray:
+def _reach(scene: Scene, ids: np.ndarray, n_tri: int, rec) -> np.ndarray:
     """The share of the power of each primitive of ``ids`` (triangles, then spheres) that
-    reaches the scene's receivers (:func:`~drpt.render.lights.reach.receivers`; 1 where
-    there are none)."""
+    reaches ``rec``, the scene's lit geometry (:func:`~drpt.render.lights.reach.receivers`;
+    1 where there is none)."""
     out = np.ones(len(ids))
-    rec = receivers(scene)
     if rec is None:
         return out
     tri = ids < n_tri
@@ -151,7 +150,8 @@ class AreaLights:
     infinite = False
 
     def __init__(self, scene: Scene, surfaces: SurfaceData, materials=None, sampler: str = "power",
-                 triangle_sampling: str = "area", integrator: str = "path"):
+                 triangle_sampling: str = "area", integrator: str = "path", lit="scene"):
+        # lit: the scene's lit geometry (drpt.render.lights.reach.receivers; "scene": computed here)
         tris, sph = scene.triangles, scene.spheres
         emission = np.array([m.emission for m in scene.materials], float).reshape(-1, 3)
         self.surfaces = surfaces
@@ -215,7 +215,7 @@ class AreaLights:
         self._ids = ids
         self._lum = lum
         #: each slot's power that reaches the lit geometry (:mod:`drpt.render.lights.reach`)
-        self._power = np.pi * power[ids] * _reach(scene, ids, self.n_tri)
+        self._power = np.pi * power[ids] * _reach(scene, ids, self.n_tri, receivers(scene) if lit == "scene" else lit)
         _, self._unit = np.unique(emitter[ids], return_inverse=True)
         unit_area = np.bincount(self._unit, weights=all_area[ids])
         self._share = all_area[ids] / unit_area[self._unit]

@@ -76,7 +76,9 @@ class DeltaSample:
 class DeltaLights:
     delta = True
 
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene, lit="scene"):
+        """``lit``: the scene's lit geometry (:func:`~drpt.render.lights.reach.receivers`;
+        ``"scene"``: computed here)."""
         self.points = [l for l in scene.lights if isinstance(l, PointLight)]
         self.directionals = [l for l in scene.lights if isinstance(l, DirectionalLight)]
         self.spots = [l for l in scene.lights if isinstance(l, SpotLight)]
@@ -89,10 +91,12 @@ class DeltaLights:
         self.infinite = bool(self.directionals)
         lo, hi = scene.bounds()
         self._radius = float(np.linalg.norm(hi - lo)) / 2.0 if np.all(np.isfinite(lo)) else 1.0
-        #: the lit geometry (:mod:`drpt.render.lights.reach`; None: the powers are the emitted ones)
-        self._receivers = receivers(scene)
-        if self._receivers is not None:
-            self._radius = self._receivers.radius
+        rec = receivers(scene) if lit == "scene" else lit
+        #: the sphere of the lit geometry (:mod:`drpt.render.lights.reach`; None: the powers
+        #: are the emitted ones) and its cross-section along each directional light
+        self._receivers = None if rec is None else rec.bare()
+        self._across = [math.pi * self._radius ** 2 if rec is None else rec.across(l.direction)
+                        for l in self.directionals]
         self.bind(None)
 
     # ------------------------------------------------------------ Emitter interface
@@ -114,8 +118,7 @@ class DeltaLights:
             reach = 1.0 if rec is None else rec.cone(l.position, min(4.0 * t * t / l.aspect, 4.0 * math.pi)
                                                      / (4.0 * math.pi))
             out.append(math.pi * float(l.scale) * 4.0 * t * t / l.aspect * v * reach)
-        out += [(math.pi * self._radius ** 2 if rec is None else rec.across(l.direction)) * _lum(l.color)
-                for l in self.directionals]
+        out += [a * _lum(l.color) for a, l in zip(self._across, self.directionals)]
         return np.maximum(np.nan_to_num(np.array(out, float), nan=0.0, posinf=0.0), 0.0)
 
     def units(self) -> tuple[np.ndarray, np.ndarray]:

@@ -37,31 +37,50 @@ is ``None`` and the families estimate their emitted powers.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from ...scene.model import Scene
 
 
-@dataclass(frozen=True)
 class Receivers:
-    """The sphere that bounds the scene's lit geometry, and that geometry's cross-section."""
+    """The sphere (``center``, ``radius``) that bounds the scene's lit geometry, and that
+    geometry's cross-sections: ``triangles`` the scene's triangle corners ``(F, 3, 3)`` and
+    ``keep`` those of the lit ones (a mask; neither copied), ``spheres`` the lit spheres'
+    summed cross-section. The triangles' normals are computed on first use (a directional
+    light's or the sky's cross-section), once."""
 
-    center: np.ndarray
-    radius: float
-    #: the lit geometry's mean cross-section over all directions, at most the sphere's
-    cross_section: float = 0.0
-    #: the triangles' area-weighted unit normals (for a directional light's cross-section)
-    normals: np.ndarray | None = None
-    #: the spheres' cross-sections, summed
-    spheres: float = 0.0
+    def __init__(self, center, radius: float, triangles: np.ndarray | None = None, keep: np.ndarray | None = None,
+                 spheres: float = 0.0):
+        self.center = np.asarray(center, np.float64)
+        self.radius = float(radius)
+        self._triangles, self._keep = triangles, keep
+        self.spheres = float(spheres)
+
+    @cached_property
+    def _area_normals(self) -> np.ndarray:
+        """The lit triangles' unit normals times their areas ``(F, 3)``."""
+        if self._triangles is None:
+            return np.zeros((0, 3))
+        p = self._triangles if self._keep is None else self._triangles[self._keep]
+        return 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+
+    @cached_property
+    def cross_section(self) -> float:
+        """The lit geometry's mean cross-section over all directions (a flat triangle's:
+        half its area, both sides), at most the sphere's."""
+        tri = 0.5 * float(np.linalg.norm(self._area_normals, axis=1).sum())
+        return min(np.pi * self.radius ** 2, tri + self.spheres)
 
     def across(self, d) -> float:
         """The lit geometry's cross-section seen along ``d``, at most the sphere's."""
         d = np.asarray(d, np.float64) / max(float(np.linalg.norm(d)), 1e-30)
-        tri = 0.0 if self.normals is None else float(np.abs(self.normals @ d).sum())
-        return min(np.pi * self.radius ** 2, tri + self.spheres)
+        return min(np.pi * self.radius ** 2, float(np.abs(self._area_normals @ d).sum()) + self.spheres)
+
+    def bare(self) -> "Receivers":
+        """The sphere alone (for a family that keeps it: no reference to the triangles)."""
+        return Receivers(self.center, self.radius)
 
     def _distance(self, p) -> np.ndarray:
         return np.linalg.norm(np.asarray(p, np.float64).reshape(-1, 3) - self.center, axis=1)
@@ -94,36 +113,32 @@ class Receivers:
 
 
 def receivers(scene: Scene) -> Receivers | None:
-    """The bounding sphere and the cross-section of ``scene``'s triangles and spheres whose
-    material emits nothing (``None``: the scene has infinite planes, or no such shape)."""
+    """The bounding sphere and the cross-sections of ``scene``'s triangles and spheres
+    whose material emits nothing (``None``: the scene has infinite planes, or no such
+    shape)."""
     if len(scene.planes):
         return None
     emits = np.array([m.is_emissive for m in scene.materials] or [False], bool)
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     tris, sph = scene.triangles, scene.spheres
+    keep, spheres = None, 0.0
     if len(tris):
         keep = ~emits[np.asarray(tris.material, np.int64)]
-        if keep.any():
-            p = tris.positions[keep].reshape(-1, 3)
-            lo, hi = np.minimum(lo, p.min(0)), np.maximum(hi, p.max(0))
+        if keep.all():
+            keep = None  # (every triangle: no mask, no copy)
+        if keep is None or keep.any():  # coordinate by coordinate (numpy's fastest reduction here)
+            axes = [tris.positions[:, :, k] if keep is None else tris.positions[:, :, k][keep] for k in range(3)]
+            lo, hi = np.array([a.min() for a in axes]), np.array([a.max() for a in axes])
     if len(sph):
-        keep = ~emits[np.asarray(sph.material, np.int64)]
-        if keep.any():
-            c, r = sph.center[keep], np.asarray(sph.radius, np.float64)[keep, None]
+        lit = ~emits[np.asarray(sph.material, np.int64)]
+        if lit.any():
+            c, r = sph.center[lit], np.asarray(sph.radius, np.float64)[lit, None]
             lo, hi = np.minimum(lo, (c - r).min(0)), np.maximum(hi, (c + r).max(0))
+            spheres = float(np.pi * (r ** 2).sum())
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         return None
     radius = float(np.linalg.norm(hi - lo)) / 2.0
     if radius <= 0.0:
         return None
-    normals, spheres = None, 0.0
-    if len(tris) and (~emits[np.asarray(tris.material, np.int64)]).any():
-        p = tris.positions[~emits[np.asarray(tris.material, np.int64)]]
-        normals = 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])  # area times unit normal
-    if len(sph):
-        keep = ~emits[np.asarray(sph.material, np.int64)]
-        spheres = float(np.pi * (np.asarray(sph.radius, np.float64)[keep] ** 2).sum())
-    # a flat triangle's mean cross-section over all directions is half its area (both sides)
-    tri = 0.0 if normals is None else 0.5 * float(np.linalg.norm(normals, axis=1).sum())
-    cross = min(np.pi * radius ** 2, tri + spheres)
-    return Receivers((lo + hi) / 2.0, radius, cross, normals, spheres)
+    has_tris = len(tris) and (keep is None or keep.any())
+    return Receivers((lo + hi) / 2.0, radius, tris.positions if has_tris else None, keep, spheres)

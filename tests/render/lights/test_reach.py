@@ -132,8 +132,8 @@ def test_cross_sections_are_the_triangles_projected_areas(scale):
     assert (abs(scale * rec.cross_section / mean - 1.0) < 0.005) == (scale == 1.0), (rec.cross_section, mean)
     assert rec.cross_section < np.pi * rec.radius ** 2  # (not the bound)
     # a closed mesh counts both sides: the bounding sphere's cross-section bounds it
-    big = Receivers(rec.center, 0.1, rec.cross_section, rec.normals, rec.spheres)
-    assert big.across(d) == pytest.approx(np.pi * 0.01)
+    small = Receivers(rec.center, 0.1, tris, None, rec.spheres)
+    assert small.across(d) == pytest.approx(np.pi * 0.01) and small.cross_section == pytest.approx(np.pi * 0.01)
 
 
 def _tri(lo, hi):
