@@ -27,12 +27,17 @@ radius ``r``) of the scene's bounded shapes that emit nothing (:func:`receivers`
   ``pi r^2``, the sphere's (a closed mesh counts both sides of its triangles, twice its
   cross-section, and shapes hide each other: the sphere's is the bound).
 
-Where every emitter lies inside the receivers (a room, a box, a floor under its lights)
-the estimates are the emitted powers, as before; they differ where an emitter is
-outside them (the corpus's sphere grids: a point light and a rectangle light several
-radii from the spheres, and the sky). Where the scene has infinite planes (which
+Emitters inside the receivers (a room's, a box's, a floor's lights) count all of their
+power; those outside them (the corpus's sphere grids: a point light and a rectangle light
+several radii from the spheres) their share, and the sky and directional lights the
+cross-section wherever the geometry is. Where the scene has infinite planes (which
 receive from every emitter) or no bounded shape that emits nothing, :func:`receivers`
-is ``None`` and the families estimate their emitted powers.
+is ``None`` and the families estimate their emitted powers (the sky and directional
+lights over the whole scene's bounding sphere).
+
+:class:`~drpt.render.scene.DeviceScene` computes the receivers once and hands them to the
+families; the triangles' normals are computed only where a sky or a directional light
+asks for a cross-section.
 """
 
 from __future__ import annotations
