@@ -85,6 +85,7 @@ from .lights.envmap import (
 )
 from .lights.light_bvh import BVHSelection
 from .lights.pilot import LIGHT_TRACERS, pilot_selection
+from .lights.reach import receivers
 from .lights.selection import LightSelection
 from .loops import loops_once
 from .material import MaterialTable
@@ -263,13 +264,14 @@ class DeviceScene:
             uv_aov = any(k == "uv" for _, k in getattr(options, "aovs", ()))
             self.surfaces = SurfaceData(scene, with_uv=self.materials.textures is not None or uv_aov,
                                         tangents=self.materials.tangents)
+        lit = receivers(scene)  # the lit geometry, for the emitters' power (drpt.render.lights.reach)
         self.area_lights = AreaLights(scene, self.surfaces, self.materials, sampler=options.light_sampler,
                                       triangle_sampling=options.triangle_sampling,
-                                      integrator=options.integrator)
+                                      integrator=options.integrator, lit=lit)
         #: the emissive surfaces alone, where they are few triangles
         #: (:func:`emissive_inline`), else None
         self.emissive = emissive_inline(scene)
-        self.delta_lights = DeltaLights(scene)
+        self.delta_lights = DeltaLights(scene, lit)
         self.warnings: list[str] = list(self.materials.notes)
         if self.is_empty:
             self.warnings.append(EMPTY_SCENE_WARNING)
@@ -309,7 +311,9 @@ class DeviceScene:
         if self.has_environment:
             lo, hi = scene.bounds()
             radius = float(np.linalg.norm(hi - lo)) / 2.0 if np.all(np.isfinite(lo)) else 1.0
-            self.sky = SkyEmitter(nee_environment or self.environment, radius)
+            # its power over the lit geometry's cross-section (drpt.render.lights.reach)
+            self.sky = SkyEmitter(nee_environment or self.environment,
+                                  radius if lit is None else float(np.sqrt(lit.cross_section / np.pi)))
         families = [self.area_lights, self.delta_lights] + ([self.sky] if self.sky is not None else [])
         families += [f for f in (build(self, scene) for build in EMITTER_FAMILIES) if f is not None]
         rule = options.light_sampler

@@ -78,7 +78,8 @@ class Emitter(Protocol):
     infinite: bool
 
     def power(self) -> np.ndarray:
-        """Each slot's emitted power in watts (an estimate: the selection's weight)."""
+        """Each slot's power in watts that reaches the lit geometry (an estimate: the
+        selection's weight; :mod:`drpt.render.lights.reach`)."""
         ...
 
     def units(self) -> tuple[np.ndarray, np.ndarray]:

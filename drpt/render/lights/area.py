@@ -55,7 +55,8 @@ Emissive planes are not sampled here; they are found by BSDF sampling only
 As an :class:`~drpt.render.lights.Emitter` (next-event estimation through
 :class:`~drpt.render.lights.selection.LightSelection`) a slot is one emissive
 primitive with positive selection weight, in the order of :attr:`AreaLights.ids`; its
-power is ``pi * area * luminance`` (one-sided Lambertian emission). :meth:`AreaLights.bind`
+power is ``pi * area * luminance`` (one-sided Lambertian emission), times its share that
+reaches the lit geometry (:mod:`drpt.render.lights.reach`). :meth:`AreaLights.bind`
 gives the family the scene-wide selection's slot probabilities, and
 :meth:`~AreaLights.sample_direction` / :meth:`~AreaLights.pdf_direction` use them where
 :meth:`~AreaLights.sample` / :meth:`~AreaLights.pdf_area` use the family's own ``P(k)``
@@ -86,6 +87,7 @@ from ..warp import (
 )
 from . import EmitterSample
 from .light_bvh import area_light_bvh
+from .reach import receivers
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh", "pilot")  # drpt.options.LIGHT_SAMPLERS
@@ -112,6 +114,24 @@ def selection_weights(area: np.ndarray, lum: np.ndarray, emitter: np.ndarray,
     return w
 
 
+def _reach(scene: Scene, ids: np.ndarray, n_tri: int, rec) -> np.ndarray:
+    """The share of the power of each primitive of ``ids`` (triangles, then spheres) that
+    reaches ``rec``, the scene's lit geometry (:func:`~drpt.render.lights.reach.receivers`;
+    1 where there is none)."""
+    out = np.ones(len(ids))
+    if rec is None:
+        return out
+    tri = ids < n_tri
+    if tri.any():
+        p = scene.triangles.positions[ids[tri]]
+        normals = scene.triangles.normals  # the side it emits toward: its shading normal's
+        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) if normals is None else normals[ids[tri]].mean(1)
+        out[tri] = rec.flat(p.mean(1), n)
+    if (~tri).any():
+        out[~tri] = rec.isotropic(scene.spheres.center[ids[~tri] - n_tri])
+    return out
+
+
 class LightSample:
     def __init__(self, p, n, ng, le, pdf_area, valid, p_error, solid_angle=None):
         self.p: Array3f = p  # point on the light
@@ -131,7 +151,8 @@ class AreaLights:
     infinite = False
 
     def __init__(self, scene: Scene, surfaces: SurfaceData, materials=None, sampler: str = "power",
-                 triangle_sampling: str = "area", integrator: str = "path"):
+                 triangle_sampling: str = "area", integrator: str = "path", lit="scene"):
+        # lit: the scene's lit geometry (drpt.render.lights.reach.receivers; "scene": computed here)
         tris, sph = scene.triangles, scene.spheres
         emission = np.array([m.emission for m in scene.materials], float).reshape(-1, 3)
         self.surfaces = surfaces
@@ -198,7 +219,8 @@ class AreaLights:
         self._area = all_area
         self._ids = ids
         self._lum = lum
-        self._power = np.pi * power[ids]
+        #: each slot's power that reaches the lit geometry (:mod:`drpt.render.lights.reach`)
+        self._power = np.pi * power[ids] * _reach(scene, ids, self.n_tri, receivers(scene) if lit == "scene" else lit)
         _, self._unit = np.unique(emitter[ids], return_inverse=True)
         unit_area = np.bincount(self._unit, weights=all_area[ids])
         self._share = all_area[ids] / unit_area[self._unit]
@@ -206,7 +228,8 @@ class AreaLights:
 
     # ------------------------------------------------------------ Emitter interface
     def power(self) -> np.ndarray:
-        """Each slot's power, ``pi * area * luminance`` (W; a textured emitter's mean)."""
+        """Each slot's power, ``pi * area * luminance`` (W; a textured emitter's mean), times
+        its share that reaches the lit geometry (:mod:`drpt.render.lights.reach`)."""
         return self._power if self.count else np.zeros(0)
 
     def units(self) -> tuple[np.ndarray, np.ndarray]:

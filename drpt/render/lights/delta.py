@@ -33,7 +33,9 @@ for the light selection: ``4 pi I`` for a point light (its attenuation aside), p
 ``2 pi I ((1 - cos beam) + (cos beam - cos cutoff) / 2)`` for a spot, ``pi scale A v``
 for a projector (``A`` its image's area at distance 1, ``v`` its mean value), ``pi R^2
 E`` for a directional light (``R`` the radius of the scene's bounding sphere); luminances
-of the colors, textures counted by their mean.
+of the colors, textures counted by their mean; each the part that reaches the lit
+geometry (:mod:`drpt.render.lights.reach`: a directional light's ``pi R^2`` that
+geometry's cross-section along it, the others times their share of directions toward it).
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 from ...scene.model import DirectionalLight, PointLight, ProjectorLight, Scene, SpotLight
 from ..texture import Bitmap
 from . import EmitterSample
+from .reach import receivers
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -73,7 +76,9 @@ class DeltaSample:
 class DeltaLights:
     delta = True
 
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene, lit="scene"):
+        """``lit``: the scene's lit geometry (:func:`~drpt.render.lights.reach.receivers`;
+        ``"scene"``: computed here)."""
         self.points = [l for l in scene.lights if isinstance(l, PointLight)]
         self.directionals = [l for l in scene.lights if isinstance(l, DirectionalLight)]
         self.spots = [l for l in scene.lights if isinstance(l, SpotLight)]
@@ -86,21 +91,34 @@ class DeltaLights:
         self.infinite = bool(self.directionals)
         lo, hi = scene.bounds()
         self._radius = float(np.linalg.norm(hi - lo)) / 2.0 if np.all(np.isfinite(lo)) else 1.0
+        rec = receivers(scene) if lit == "scene" else lit
+        #: the sphere of the lit geometry (:mod:`drpt.render.lights.reach`; None: the powers
+        #: are the emitted ones) and its cross-section along each directional light
+        self._receivers = None if rec is None else rec.bare()
+        self._across = [math.pi * self._radius ** 2 if rec is None else rec.across(l.direction)
+                        for l in self.directionals]
         self.bind(None)
 
     # ------------------------------------------------------------ Emitter interface
     def power(self) -> np.ndarray:
-        """Each light's power (W), estimated as the module's docs say."""
-        out = [4.0 * math.pi * _lum(l.color) for l in self.points]
+        """Each light's power (W) that reaches the lit geometry, estimated as the module's
+        docs say."""
+        rec = self._receivers
+        out = [4.0 * math.pi * _lum(l.color) * (1.0 if rec is None else float(rec.isotropic(l.position)[0]))
+               for l in self.points]
         for l in self.spots:
             cb, cc = math.cos(math.radians(l.beam_width)), math.cos(math.radians(l.cutoff_angle))
             tex = 1.0 if l.texture is None else _mean_lum(self._bitmaps[id(l)])
-            out.append(2.0 * math.pi * ((1.0 - cb) + (cb - cc) / 2.0) * _lum(l.color) * tex)
+            cone = (1.0 - cb) + (cb - cc) / 2.0  # the cone's steradians over 2 pi
+            reach = 1.0 if rec is None else rec.cone(l.position, cone / 2.0)
+            out.append(2.0 * math.pi * cone * _lum(l.color) * tex * reach)
         for l in self.projectors:
             t = math.tan(math.radians(l.fov_x) / 2.0)
             v = _lum(l.irradiance) if isinstance(l.irradiance, tuple) else _mean_lum(self._bitmaps[id(l)])
-            out.append(math.pi * float(l.scale) * 4.0 * t * t / l.aspect * v)
-        out += [math.pi * self._radius ** 2 * _lum(l.color) for l in self.directionals]
+            reach = 1.0 if rec is None else rec.cone(l.position, min(4.0 * t * t / l.aspect, 4.0 * math.pi)
+                                                     / (4.0 * math.pi))
+            out.append(math.pi * float(l.scale) * 4.0 * t * t / l.aspect * v * reach)
+        out += [a * _lum(l.color) for a, l in zip(self._across, self.directionals)]
         return np.maximum(np.nan_to_num(np.array(out, float), nan=0.0, posinf=0.0), 0.0)
 
     def units(self) -> tuple[np.ndarray, np.ndarray]:

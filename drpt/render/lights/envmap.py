@@ -677,9 +677,11 @@ class SkyEmitter:
     """The sky as an :class:`~drpt.render.lights.Emitter` of one slot (next-event
     estimation through the scene's light selection): ``env`` is an
     :class:`EnvironmentLight` (or its :class:`UniformSphereSampling` or
-    :class:`RotatedEnvironment`), ``radius`` that of the scene's bounding sphere. Its
-    power is ``pi R^2`` times the integral of its luminance over the sphere: what
-    enters the bounding sphere (pbrt-v4's ``ImageInfiniteLight::Phi``)."""
+    :class:`RotatedEnvironment`), ``radius`` that of a sphere of the lit geometry's mean
+    cross-section (:func:`drpt.render.lights.reach.receivers`; else the scene's bounding
+    sphere's). Its power is ``pi R^2`` times the integral of its luminance over the sphere:
+    what enters that sphere (pbrt-v4's ``ImageInfiniteLight::Phi``, over the scene's
+    bounding sphere)."""
 
     count = 1
     delta = False

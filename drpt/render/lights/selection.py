@@ -5,18 +5,19 @@ delta light, the sky: the slots of the :class:`~drpt.render.lights.Emitter` fami
 then samples a direction toward it. :class:`LightSelection` is that choice, by one of
 the rules of ``--light-sampler``:
 
-* ``power``: each slot by its emitted power (:meth:`Emitter.power
+* ``power``: each slot by its power (:meth:`Emitter.power
   <drpt.render.lights.Emitter.power>`: ``pi A L`` for a triangle, ``4 pi I`` for a point
-  light, ``pi R^2`` times the integrated luminance for the sky, ...), so a dim emitter
-  costs few shadow rays;
+  light, ``pi R^2`` times the integrated luminance for the sky, ...), the part of it that
+  reaches the lit geometry (:mod:`drpt.render.lights.reach`), so a dim emitter costs few
+  shadow rays;
 * ``uniform`` (Mitsuba's): each *emitter* (a shape, a delta light, the sky) alike, a
   shape's slots by their share of its area;
 * ``mixed`` (the default): the mean of the two (a defensive mixture): power's
   allocation, but every emitter keeps at least half of its uniform share. Power's
-  estimate fails where much of an emitter's power never reaches what the camera sees
-  (the sky and directional lights are weighed by the scene's bounding sphere, ``pi
-  R^2``), and ``uniform`` where emitters differ much in power; ``mixed`` bounds both
-  failures (measured in docs/performance.md, "Light selection").
+  estimate fails where much of what reaches the lit geometry never reaches what the camera
+  sees (occluded, or on surfaces out of view), and ``uniform`` where emitters differ much
+  in power; ``mixed`` bounds both failures (measured in docs/performance.md, "Light
+  selection").
 
 The selection is *static*: its probabilities do not depend on the shading point, so the
 families fold them into their density tables (:meth:`Emitter.bind
