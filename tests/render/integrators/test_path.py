@@ -316,7 +316,7 @@ def _sky_through_occluders(self, scene, s, L):
     return (add_emission(scene, self.opt, si, s, L, s.active),)
 
 
-@pytest.mark.parametrize("accel", ["auto", pytest.param("embree", marks=needs_embree)])
+@pytest.mark.parametrize("accel", ["auto", "bvh", pytest.param("embree", marks=needs_embree)])
 @pytest.mark.parametrize("light", [True, False])
 @pytest.mark.parametrize("depth", [2, 3])
 def test_last_segment_with_a_sky_finds_emitters_first_as_the_closest_hit_does(tmp_path, monkeypatch, depth,
@@ -328,7 +328,8 @@ def test_last_segment_with_a_sky_finds_emitters_first_as_the_closest_hit_does(tm
     emissive surface: the shadow ray alone). The images agree with the closest hit's to float
     rounding (every pixel within 1e-5 relative; without emissive surfaces bit for bit: the
     same accelerator's hit or no hit). Negative control: a blocked ray that still sees the
-    sky (the shadow ray's answer dropped for the sky) differs beyond that."""
+    sky (the shadow ray's answer dropped for the sky) differs beyond that. Through the inline
+    list (``auto`` here), drpt's BVH and Embree."""
     xml = MIXED_XML.format(depth=depth, left="diffuse")
     if not light:
         xml = xml[:xml.index('  <shape type="rectangle">')] + "</scene>"
