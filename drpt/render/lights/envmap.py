@@ -591,8 +591,8 @@ def _alias_rows(w: np.ndarray, q_out: np.ndarray, alias_out: np.ndarray, prob_ou
 def _interleaved(q: np.ndarray, alias: np.ndarray) -> UInt32:
     """An alias table's thresholds ``q`` (float32, their bits) and aliases (uint32) in one
     device array, each cell's two side by side (:func:`_pick`): the alias, read after the
-    threshold, is in the cache line the threshold's read brought in. (In two arrays, a pick
-    on a large table missed the cache twice.)"""
+    threshold, is in the cache line the threshold's read brought in, where two arrays would
+    make a pick on a large table miss the cache twice."""
     out = np.empty((len(q), 2), np.uint32)
     out[:, 0] = np.asarray(q, np.float32).view(np.uint32)
     out[:, 1] = alias
