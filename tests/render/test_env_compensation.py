@@ -292,7 +292,7 @@ def test_sky_sampled_by_its_tables_agrees_with_uniform_sphere_sampling(tmp_path,
     z = _sky_z(tmp_path)
     assert z < ZMAX, z
 
-    def no_alias(q, alias, base, n, u):
+    def no_alias(table, base, n, u):
         x = u * n
         i = envmap.dr.minimum(UInt32(x), n - 1)
         return i, x - envmap.Float(i)

@@ -74,6 +74,7 @@ from dataclasses import dataclass
 import drjit as dr
 from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32
 
+from ...accel.protocol import INVALID, Hit
 from ...options import PathOptions
 from ..bsdf import BSDFSample
 from ..loops import loops_once
@@ -163,7 +164,8 @@ class PathIntegrator:
     #: their live lanes (:meth:`bounce`'s ``branch``, :meth:`last_segment`); False:
     #: straight-line, masked (for A/B comparisons)
     branched = True
-    #: the unrolled path's last segment looks for a few emissive triangles first where they
+    #: the unrolled path's last segment looks for a few emissive triangles first, then traces
+    #: a shadow ray up to the one it hits or to the sky, where they, the sky and the background
     #: are all a ray can see (:attr:`emitters_first`); False: the closest hit (A/B comparisons)
     emitter_first = True
     #: in the unrolled path's vertex branches (:attr:`branched`), what only the branch's lanes
@@ -242,37 +244,58 @@ class PathIntegrator:
     @property
     def emitters_first(self) -> bool:
         """Whether the unrolled path's last segment (after a vertex) looks for emitters first
-        (:meth:`_look_at_emitters`): read at trace time, with :attr:`emitter_first` on, where
-        the only things a ray can see are a few emissive triangles
-        (:attr:`~drpt.render.scene.DeviceScene.emissive`: no sky, background, or emissive
-        sphere)."""
+        (:meth:`_look_at_emitters`) instead of finding its closest hit: read at trace time,
+        with :attr:`emitter_first` on, where the emissive surfaces a ray can see are a few
+        triangles (:attr:`~drpt.render.scene.DeviceScene.emissive`: no emissive sphere or
+        plane, no more triangles than the backend compiles inline) or none, beside the sky
+        and the background if any (a scene where the ray can see nothing traces no last
+        segment at all: :func:`nothing_seen`)."""
         scene = self.scene
-        if not (self.emitter_first and self.opt.max_depth > 1 and getattr(scene, "emissive", None) is not None):
+        if not (self.emitter_first and self.opt.max_depth > 1):
             return False
-        infinite = any(f.infinite and not f.delta for f in scene.emitter_selection.families)
-        return not (infinite or scene.has_background)
+        return getattr(scene, "emissive", None) is not None or not getattr(scene.materials, "has_emission", True)
 
     def _look_at_emitters(self, scene: DeviceScene, s: PathState, L: Array3f) -> tuple[Array3f]:
         """``(L plus the emission the ray s.d sees,)``, found emitter first: the nearest
-        emissive triangle along the ray (the scene's few, compiled inline), then one shadow
-        ray (any hit) up to it. The shadow ray ends where the ray crosses the emitter's plane
-        moved toward ``s.o`` by the hit point's error bound ``p_error``
-        (:mod:`~drpt.render.spawn`'s offset, ``t - p_error / |cos|``): an occluder farther
-        from the emitter than that bound (a few float spacings) blocks it, as the closest hit
-        would find it first; there is no relative margin such as next-event estimation's
-        :data:`~drpt.render.integrators.common.SHADOW_SHRINK`. A ray that misses every
-        emitter (most rays, with a small light) traces nothing in the scene; one that
-        reaches an emitter sees what the closest hit would have found there, so the estimate
-        is the closest hit's up to float rounding (the distance and barycentrics of another
-        triangle test, and occluders within ``p_error`` of the emitter)."""
-        hit = scene.emissive.intersect(s.o, s.d, s.active)
+        emissive triangle along the ray (the scene's few, compiled inline; none where the
+        scene has no emissive surface), then one shadow ray (any hit) up to it, or to
+        infinity where the ray misses them and the scene has a sky or a background. The
+        shadow ray up to an emitter ends where the ray crosses the emitter's plane moved
+        toward ``s.o`` by the hit point's error bound ``p_error`` (:mod:`~drpt.render.spawn`'s
+        offset, ``t - p_error / |cos|``): an occluder farther from the emitter than that bound
+        (a few float spacings) blocks it, as the closest hit would find it first; there is no
+        relative margin such as next-event estimation's
+        :data:`~drpt.render.integrators.common.SHADOW_SHRINK`. Without a sky or background,
+        a ray that misses every emitter (most rays, with a small light) traces nothing in
+        the scene; with one, every ray traces its shadow ray, an any-hit query, which costs
+        less than the closest hit it replaces (docs/performance.md, "The sphere scenes'
+        last segment"), and a ray that nothing blocks sees the sky. The estimate is the
+        closest hit's up to float rounding (the distance and barycentrics of another
+        triangle test, and occluders within ``p_error`` of the emitter); without emissive
+        surfaces, the same image bit for bit where the accelerator's any-hit and closest-hit
+        queries agree on whether a ray hits (Embree's and drpt's BVH do)."""
+        n = dr.width(s.active)
+        sky = scene.has_background or any(f.infinite and not f.delta for f in scene.emitter_selection.families)
+        if scene.emissive is not None:
+            hit = scene.emissive.intersect(s.o, s.d, s.active)
+        else:  # (no emissive surface: every ray misses them)
+            hit = Hit(dr.full(Float, float("inf"), n), dr.full(UInt32, INVALID, n), dr.zeros(Float, n),
+                      dr.zeros(Float, n), dr.zeros(Bool, n))
         near = s.active & hit.valid
         si = scene.interaction(s.o, s.d, hit)
-        cos = dr.abs(dr.dot(si.ng, s.d))
-        tmax = si.t - si.p_error / dr.maximum(cos, 1e-30)
-        blocked = scene.occluded(s.o, s.d, tmax, near)
+        if not sky:
+            cos = dr.abs(dr.dot(si.ng, s.d))
+            tmax = si.t - si.p_error / dr.maximum(cos, 1e-30)
+            si.valid = near & ~scene.occluded(s.o, s.d, tmax, near)
+            return (add_emission(scene, self.opt, si, s, L, s.active),)
+        if scene.emissive is not None:
+            cos = dr.abs(dr.dot(si.ng, s.d))
+            tmax = dr.select(near, si.t - si.p_error / dr.maximum(cos, 1e-30), dr.largest(Float))
+        else:
+            tmax = dr.full(Float, dr.largest(Float), n)
+        blocked = scene.occluded(s.o, s.d, tmax, s.active, coherent=self.pixel_coherent)
         si.valid = near & ~blocked
-        return (add_emission(scene, self.opt, si, s, L, s.active),)
+        return (add_emission(scene, self.opt, si, s, L, s.active & ~blocked),)
 
     @loops_once
     def sample(self, rng: PCG32, o: Array3f, d: Array3f, active: Bool) -> Array3f:

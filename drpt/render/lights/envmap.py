@@ -280,15 +280,15 @@ class EnvironmentLight:
 
         if self.is_black:
             pdf = np.zeros((ny, W), np.float32)
-            self._rows = (Float(np.ones(ny, np.float32)), UInt32(np.arange(ny, dtype=np.uint32)))
-            self._cols = (Float(np.ones(ny * W, np.float32)), UInt32(np.tile(np.arange(W, dtype=np.uint32), ny)))
+            self._rows = _interleaved(np.ones(ny, np.float32), np.arange(ny, dtype=np.uint32))
+            self._cols = _interleaved(np.ones(ny * W, np.float32), np.tile(np.arange(W, dtype=np.uint32), ny))
         else:
             w = _floored(w.astype(np.float64))
             q_cols, a_cols, p_cols = alias_tables(w)
             q_rows, a_rows, p_rows = alias_tables(_floored(w.sum(axis=1)[None, :]))
             pdf = (p_cols * (p_rows[0] / omega)[:, None]).astype(np.float32)
-            self._rows = (Float(q_rows[0]), UInt32(a_rows[0]))
-            self._cols = (Float(q_cols.ravel()), UInt32(a_cols.ravel()))
+            self._rows = _interleaved(q_rows[0], a_rows[0])
+            self._cols = _interleaved(q_cols.ravel(), a_cols.ravel())
         self._pdf = Float(pdf.ravel())
 
     def _compensate(self, lum: np.ndarray) -> None:
@@ -410,8 +410,8 @@ class EnvironmentLight:
             return Array3f(z, z + 1.0, z), Array3f(z, z, z), z
         ny, W = self._ny, self.width
         # row from the marginal alias table, column from that row's conditional one
-        row, sy = _pick(*self._rows, 0, ny, u.y)
-        col, sx = _pick(*self._cols, row * W, W, u.x)
+        row, sy = _pick(self._rows, 0, ny, u.y)
+        col, sx = _pick(self._cols, row * W, W, u.x)
 
         # inside the cell: the bilinear density of the corner luminances,
         # ft (fraction of the band's cos(theta) range) from its linear
@@ -588,15 +588,28 @@ def _alias_rows(w: np.ndarray, q_out: np.ndarray, alias_out: np.ndarray, prob_ou
     alias_out.reshape(-1)[:] = alias
 
 
-def _pick(q: Float, alias: UInt32, base, n: int, u: Float) -> tuple[UInt32, Float]:
-    """A cell of the alias table at ``base`` (``n`` cells; :func:`alias_tables`) from uniform
-    ``u``, and ``u`` remapped to a uniform number in [0, 1) for use inside the cell."""
+def _interleaved(q: np.ndarray, alias: np.ndarray) -> UInt32:
+    """An alias table's thresholds ``q`` (float32, their bits) and aliases (uint32) in one
+    device array, each cell's two side by side (:func:`_pick`): the alias, read after the
+    threshold, is in the cache line the threshold's read brought in, where two arrays would
+    make a pick on a large table miss the cache twice."""
+    out = np.empty((len(q), 2), np.uint32)
+    out[:, 0] = np.asarray(q, np.float32).view(np.uint32)
+    out[:, 1] = alias
+    return UInt32(out.ravel())
+
+
+def _pick(table: UInt32, base, n: int, u: Float) -> tuple[UInt32, Float]:
+    """A cell of the alias table at ``base`` (``n`` cells; :func:`alias_tables`, stored by
+    :func:`_interleaved`) from uniform ``u``, and ``u`` remapped to a uniform number in
+    [0, 1) for use inside the cell."""
     x = u * n
     i = dr.minimum(UInt32(x), n - 1)
     f = x - Float(i)
-    qi = dr.gather(Float, q, base + i)
+    j = (base + i) * 2
+    qi = dr.reinterpret_array(Float, dr.gather(UInt32, table, j))
     keep = f < qi
-    cell = dr.select(keep, i, dr.gather(UInt32, alias, base + i))
+    cell = dr.select(keep, i, dr.gather(UInt32, table, j + 1))
     s = dr.select(keep, f / qi, (f - qi) / (1.0 - qi))
     return cell, dr.clip(s, 0.0, _ONE_MINUS_EPS)
 

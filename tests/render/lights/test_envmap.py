@@ -666,10 +666,10 @@ def test_alias_tables_realise_their_probabilities():
 
     n = 1 << 22
     u = Float(rng.random(n, dtype=np.float32))
-    tq, ta = Float(q[0]), UInt32(alias[0])
+    table = envmap._interleaved(q[0], alias[0])
 
     def stats(pick):
-        cell, s = pick(tq, ta, 0, 40, u)
+        cell, s = pick(table, 0, 40, u)
         cell, s = np.array(cell), np.array(s, np.float64)
         counts = np.bincount(cell, minlength=40)
         p = prob[0]
@@ -684,14 +684,14 @@ def test_alias_tables_realise_their_probabilities():
     zc, zs = stats(envmap._pick)
     assert zc < Z_MAX and zs < Z_MAX, (zc, zs)
 
-    def no_alias(q_, a_, base, m, u_):
+    def no_alias(table_, base, m, u_):
         x = u_ * m
         i = dr.minimum(UInt32(x), m - 1)
         f = x - Float(i)
         return i, f
 
-    def no_rescale(q_, a_, base, m, u_):
-        cell, _ = envmap._pick(q_, a_, base, m, u_)
+    def no_rescale(table_, base, m, u_):
+        cell, _ = envmap._pick(table_, base, m, u_)
         x = u_ * m
         return cell, x - dr.floor(x)
 
