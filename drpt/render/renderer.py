@@ -75,7 +75,7 @@ from ..scene.model import Camera, Scene
 from .aov import aov_values, index_arrays
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
-from .film import SplatFilm, gather_splats, lane_sums
+from .film import SplatFilm, gather_splats, lane_sums, splat_weights
 from .filter_sampling import sample_position
 from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
 from .integrators.path import PathIntegrator
@@ -662,10 +662,12 @@ class Renderer:
         L = self.integrator.sample(rng, o, d, Bool(True))
         bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
         L = dr.select(bad, 0.0, L)
+        flt, moment = self.opt.pixel_filter, self.opt.moment
+        # the film's per-sample filter weights, where it reads them, in this kernel
+        weights = splat_weights(flt, W, rows, k, moment, x, y, px, py, ~bad)
         with llvm_tuning.blocks_for(n):
-            dr.eval(L, bad, px, py)
-        y0, img, sq, wts = gather_splats(self.opt.pixel_filter, W, H, r0, rows, k, px, py, L, ~bad,
-                                         self.opt.moment)
+            dr.eval(L, bad, weights if weights is not None else (px, py))
+        y0, img, sq, wts = gather_splats(flt, W, H, r0, rows, k, px, py, L, ~bad, moment, weights)
         return PassSums(y0, img, sq, int(dr.sum(UInt32(bad))[0]), wts)
 
     @property
