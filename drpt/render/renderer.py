@@ -723,18 +723,18 @@ class Renderer:
         samples of the chunk traced so far.
 
         ``into``, a merge whose next chunk is ``index``: where each pass of the
-        chunk adds to its own rows only, once (one sample step per chunk; no
-        splatting film, light tracing or AOVs), the passes' sums are added straight
-        into the merge's sums, the very float64 additions that adding the chunk's
-        sums would make (each pixel's chunk sum is one pass's), without the chunk's
-        own full-image arrays; the result is then :attr:`ChunkResult.direct`. Until
-        it is pushed, ``into.dirty`` is set."""
+        chunk adds to its own rows only, once (one sample step per chunk and no
+        splatting film, or a splatting chunk of one pass; no light tracing or AOVs),
+        the passes' sums are added straight into the merge's sums, the very float64
+        additions that adding the chunk's sums would make (each pixel's chunk sum is
+        one pass's), without the chunk's own full-image arrays; the result is then
+        :attr:`ChunkResult.direct`. Until it is pushed, ``into.dirty`` is set."""
         t0 = time.perf_counter()
         chunks = self.chunks
         plan = chunks.passes
         W, H = self.opt.width, self.opt.height
-        if (into is not None and into.next == index and chunks.steps == 1 and not self.splatting
-                and not self.light_tracing and not self.aov_kinds):
+        own_rows = len(chunks.passes_of(index)) == 1 if self.splatting else chunks.steps == 1
+        if into is not None and into.next == index and own_rows and not self.light_tracing and not self.aov_kinds:
             return self._render_chunk_into(index, on_pass, into, t0)
         acc = np.zeros((H, W, 3), np.float64)
         # squares; with moment (Mitsuba's moment integrator) also the channel products
@@ -768,9 +768,14 @@ class Renderer:
         chunks = self.chunks
         plan = chunks.passes
         W, H = self.opt.width, self.opt.height
-        channels = 6 if self.opt.moment else 3
-        if into.sumsq.shape[-1] != channels and not into.sumsq.any():
+        # squares; with moment also the channel products (rg, rb, gb) or, splatted, the
+        # weighted r^2 .. gb (as render_chunk's own arrays); a merge of no chunk yet has no sums
+        # to keep (and its zeros are not read, which would map their pages)
+        channels = (9 if self.splatting else 6) if self.opt.moment else 3
+        if into.sumsq.shape[-1] != channels and (into.next == 0 or not into.sumsq.any()):
             into.sumsq = np.zeros((H, W, channels), np.float64)
+        if self.splatting and into.weight is None:
+            into.weight = np.zeros((H, W, 2), np.float64)
         nonfinite = 0
         for i in chunks.passes_of(index):
             _s0, k, r0, rows = plan[i]
@@ -779,6 +784,8 @@ class Renderer:
             into.dirty = True
             into.sum[p.lo:hi] += p.sum
             into.sumsq[p.lo:hi] += p.sumsq
+            if p.weight is not None:
+                into.weight[p.lo:hi] += p.weight
             nonfinite += p.nonfinite
             if on_pass is not None:
                 on_pass((_s0 - chunks.spp_before(index)) * H * W + (r0 + rows) * W * k)
