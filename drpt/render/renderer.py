@@ -652,8 +652,12 @@ class Renderer:
         (:class:`~drpt.render.film.SplatFilm`), as Mitsuba's film does. One sample
         per lane."""
         W, H = self.opt.width, self.opt.height
-        n, lane, x, y = self._pass_lanes(k, r0, rows)
-        rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1)
+        n = rows * W * k
+        # (each lane's pixel and sample without an opaque integer division, drpt.render.lanes)
+        pixel, j = divmod_opaque(dr.arange(UInt32, n), k)
+        x = pixel % W
+        y = pixel // W + dr.opaque(UInt32, r0)
+        rng = self._sampler(pass_index, n, x, y, j, 1)
         u = next_2d(rng)
         px = Float(x) + u.x
         py = Float(y) + u.y
