@@ -16,7 +16,9 @@ pure speed change must keep them so). It prints each side's median seconds (``Re
 tracing included) and the median and quartiles of the per-round ratios ``COMMIT / this``
 (above 1: this checkout is faster), the measure to quote on a loaded machine, and the same
 ratios of the process's CPU seconds (all its threads: the kernels' too), which waiting for a
-core that another process holds does not inflate.
+core that another process holds does not inflate, and of the main thread's CPU seconds
+(``time.thread_time``: the Python, the tracing, the host's numpy work and the main thread's
+share of the kernels).
 
 The commit's package resolves its relative imports inside itself; the few absolute ``drpt``
 imports in it (the Mitsuba exporter) reach this checkout's, which rendering does not use.
@@ -103,24 +105,31 @@ def main(argv: list[str]) -> int:
                 r.render()
             ts: dict[str, list[float]] = {"A": [], "B": []}
             cpu: dict[str, list[float]] = {"A": [], "B": []}
+            main: dict[str, list[float]] = {"A": [], "B": []}
             same = True
             for k in range(a.rounds):
                 imgs = {}
                 for side in ("A", "B") if k % 2 == 0 else ("B", "A"):
                     r = rs[side]
-                    t0, c0 = time.perf_counter(), time.process_time()
+                    t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
                     imgs[side] = r.derive(replace(r.opt, seed=k)).render().image
                     ts[side].append(time.perf_counter() - t0)
                     cpu[side].append(time.process_time() - c0)
+                    main[side].append(time.thread_time() - m0)
                 same &= bool(np.array_equal(imgs["A"], imgs["B"]))
             ta, tb = np.array(ts["A"]), np.array(ts["B"])
             ratio = ta / tb
             q1, q3 = np.quantile(ratio, [0.25, 0.75])
             cr = np.array(cpu["A"]) / np.array(cpu["B"])
             c1, c3 = np.quantile(cr, [0.25, 0.75])
+            mr = np.array(main["A"]) / np.array(main["B"])
+            m1, m3 = np.quantile(mr, [0.25, 0.75])
+            ma, mb = (np.median(main[s]) * 1e3 for s in ("A", "B"))
             print(f"{path.name}: A {np.median(ta):.3f} s, B {np.median(tb):.3f} s; A / B per round: median "
                   f"{np.median(ratio):.3f} (quartiles {q1:.3f}-{q3:.3f}); process CPU A / B: median "
-                  f"{np.median(cr):.3f} (quartiles {c1:.3f}-{c3:.3f}); images bit-identical: {same}")
+                  f"{np.median(cr):.3f} (quartiles {c1:.3f}-{c3:.3f}); main-thread CPU A "
+                  f"{ma:.1f} ms, B {mb:.1f} ms, A / B: median {np.median(mr):.3f} (quartiles "
+                  f"{m1:.3f}-{m3:.3f}); images bit-identical: {same}")
     return 0
 
 

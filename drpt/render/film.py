@@ -147,7 +147,8 @@ class SplatFilm:
 
 
 def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: int,
-                  px: Float, py: Float, L: Array3f, ok: Bool, moment: bool = False):
+                  px: Float, py: Float, L: Array3f, ok: Bool, moment: bool = False,
+                  weights: tuple[Float, Float] | None = None):
     """What :class:`SplatFilm` with ``weights`` sums for camera samples, computed per
     *receiving* pixel: no atomics, the same sums in the same order every run.
 
@@ -160,6 +161,8 @@ def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int,
     conversions), and these partial sums added in float64. Where a float32 partial sum
     (or square) overflows, the pass is gathered again with float64 partial sums.
     Returns ``(y0, sum, sumsq, weight)`` as :meth:`SplatFilm.arrays` (rows from ``y0``).
+    ``weights``, where given, are :func:`splat_weights`' arrays of these samples (the
+    per-receiving-pixel way then reads them, not ``px`` and ``py``).
 
     Two ways compute these very sums, bit for bit: each receiving pixel's loop over its
     source pixels' samples (:func:`_gather`: every sample read once per pixel it reaches,
@@ -174,11 +177,13 @@ def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int,
     def run(Partial):
         groups = _source_groups(flt, width, rows, k, moment, Partial)
         if groups is None:
-            return _gather(flt, width, height, r0, rows, k, px, py, L, ok, moment, Partial)
+            return _gather(flt, width, height, r0, rows, k, px, py, L, ok, moment, Partial, weights)
         return _by_source(flt, width, height, r0, rows, k, px, py, L, ok, moment, Partial, groups)
 
     out = run(Float)
-    if not all(np.isfinite(a).all() for a in out[1:]):  # (radiance near the float32 maximum)
+    # (radiance near the float32 maximum; a NaN or an infinity passes into the largest or
+    # smallest value: no temporary per element)
+    if not all(np.isfinite(a.max()) and np.isfinite(a.min()) for a in out[1:]):
         out = run(Float64)
     return out
 
@@ -248,8 +253,6 @@ def _by_source(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k:
     :func:`_gather`'s inner loop), one packs each offset's channels into one array (a record
     per source pixel, :func:`_packet` wide), and one adds them to the receiving pixels' float64
     sums, in :func:`_gather`'s order."""
-    import numpy as np
-
     W = width
     R = _reach(flt)
     side = 2 * R + 1
@@ -282,11 +285,7 @@ def _by_source(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k:
                 rec = dr.gather(ArrayX, packed[g * side + R - dx], src, inside, shape=(size, n))
                 total = [total[i] + Float64(rec[i]) for i in range(channels)]
         dr.eval(total)
-
-    def stack(cs):
-        return np.stack([c.numpy() for c in cs], axis=-1).reshape(y1 - y0, W, len(cs))
-
-    return y0, stack(total[:3]), stack(total[3:6] + total[8:]), stack(total[6:8])
+    return (y0, *_interleaved(total, y1 - y0, W))
 
 
 @loops_once
@@ -359,7 +358,21 @@ def _source_terms(part: list, first: UInt32, step: int, cxs: list, cys: list, we
     return part
 
 
-def _axis_weights(flt: PixelFilter, width: int, r0: int, k: int, px: Float, py: Float, ok: Bool
+def splat_weights(flt: PixelFilter, width: int, rows: int, k: int, moment: bool, x: UInt32,
+                  y: UInt32, px: Float, py: Float, ok: Bool) -> tuple[Float, Float] | None:
+    """The arrays that :func:`gather_splats` reads besides the radiance where it gathers per
+    receiving pixel: :func:`_axis_weights` of the pass's samples (sample ``s`` of pixel
+    column ``x`` and row ``y``), unevaluated, so that the kernel that traces the samples
+    computes them too (no kernel of their own, which would read ``px``, ``py`` and ``ok``
+    back and divide each lane's index by ``k`` again); None where it sums per source pixel
+    (:func:`_source_groups`: it reads ``px`` and ``py``)."""
+    if _source_groups(flt, width, rows, k, moment, Float) is not None:
+        return None
+    return _axis_weights(flt, width, 0, k, px, py, ok, Int32(x), Int32(y), evaluate=False)
+
+
+def _axis_weights(flt: PixelFilter, width: int, r0: int, k: int, px: Float, py: Float, ok: Bool,
+                  sx: Int32 | None = None, sy: Int32 | None = None, evaluate: bool = True
                   ) -> tuple[Float, Float]:
     """Each sample's filter weights along each axis at the centers of the ``2R + 1`` columns
     and rows it reaches, for :func:`_gather`: ``w(c_e - x)`` with ``c_e`` the center of column
@@ -367,31 +380,35 @@ def _axis_weights(flt: PixelFilter, width: int, r0: int, k: int, px: Float, py: 
     not count (not ``ok``: its weight ``w_x w_y`` is then 0), and ``w(c_e - y)`` along ``y``.
     Two arrays, sample-major (element ``s (2R + 1) + e + R``), evaluated: each sample weighted
     once per axis and offset, not for every receiving pixel, and without a gather of ``ok``
-    there (a gather of bytes, which the CPU has no instruction for)."""
+    there (a gather of bytes, which the CPU has no instruction for). ``sx`` and ``sy``, the
+    samples' pixel columns and rows (``r0`` included), where the caller has them (else from
+    the lane's index, pixel-major); without ``evaluate`` the arrays are returned unevaluated."""
     R = _reach(flt)
-    n = dr.width(px)
-    lane = dr.arange(UInt32, n)
-    p = lane // dr.opaque(UInt32, k)
-    sx = Int32(p % width)
-    sy = Int32(p // width) + r0
+    if sx is None:
+        n = dr.width(px)
+        lane = dr.arange(UInt32, n)
+        p = lane // dr.opaque(UInt32, k)
+        sx = Int32(p % width)
+        sy = Int32(p // width) + r0
     # the receiving pixels' centers, as _source_partials computes them
     wxs = dr.ravel(ArrayXf(*[dr.select(ok, filter_weight(flt, (Float(sx + e) + 0.5) - px), 0.0)
                              for e in range(-R, R + 1)]))
     wys = dr.ravel(ArrayXf(*[filter_weight(flt, (Float(sy + e) + 0.5) - py) for e in range(-R, R + 1)]))
-    dr.eval(wxs, wys)
+    if evaluate:
+        dr.eval(wxs, wys)
     return wxs, wys
 
 
 @loops_once
 @dr.syntax
 def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: int,
-            px: Float, py: Float, L: Array3f, ok: Bool, moment: bool, Partial: type):
+            px: Float, py: Float, L: Array3f, ok: Bool, moment: bool, Partial: type,
+            weights: tuple[Float, Float] | None = None):
     """:func:`gather_splats` with partial sums (per source pixel) of type ``Partial``
     (``Float`` or ``Float64``): an outer loop over the source pixels, an inner one over
     each one's samples, each recorded once (:func:`~drpt.render.loops.loops_once`), which
-    reads each sample's radiance and its two weights for this pixel (:func:`_axis_weights`)."""
-    import numpy as np
-
+    reads each sample's radiance and its two weights for this pixel (:func:`_axis_weights`,
+    or ``weights``, :func:`splat_weights`' arrays of the samples)."""
     W = width
     R = int(math.ceil(flt.radius + 0.5)) - 1
     y0, y1 = max(0, r0 - R), min(height, r0 + rows + R)
@@ -403,7 +420,7 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
     kk = dr.opaque(UInt32, k)
     sources = dr.opaque(UInt32, side * side)
     channels = _channels(moment)
-    wxs, wys = _axis_weights(flt, width, r0, k, px, py, ok)
+    wxs, wys = _axis_weights(flt, width, r0, k, px, py, ok) if weights is None else weights
 
     total = [dr.zeros(Float64, n) for _ in range(channels)]
     src = dr.zeros(UInt32, n)
@@ -429,12 +446,19 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
             j += 1
         total = [total[i] + Float64(part[i]) for i in range(channels)]
         src += 1
-    dr.eval(total)
+    return (y0, *_interleaved(total, y1 - y0, W))
 
-    def stack(cs):
-        return np.stack([c.numpy() for c in cs], axis=-1).reshape(y1 - y0, W, len(cs))
 
-    return y0, stack(total[:3]), stack(total[3:6] + total[8:]), stack(total[6:8])
+def _interleaved(total: list, rows: int, width: int) -> tuple:
+    """The gathered float64 sums ``total`` (in :func:`_channels`' order) as
+    :func:`gather_splats` returns them: the sums, the squares (and channel products) and the
+    weights, each ``(rows, width, C)``, interleaved on the device by ``dr.ravel`` (in the
+    kernel that computes ``total`` where it is not evaluated yet) and read back as numpy
+    views, without a copy on the host."""
+    groups = (total[:3], total[3:6] + total[8:], total[6:8])
+    tables = [dr.ravel(ArrayXf64(*g)) for g in groups]
+    dr.eval(tables)
+    return tuple(t.numpy().reshape(rows, width, len(g)) for t, g in zip(tables, groups))
 
 
 #: the most lanes per pixel that :func:`lane_sums` adds up in one kernel (its gathers are

@@ -75,7 +75,7 @@ from ..scene.model import Camera, Scene
 from .aov import aov_values, index_arrays
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
-from .film import SplatFilm, gather_splats, lane_sums
+from .film import SplatFilm, gather_splats, lane_sums, splat_weights
 from .filter_sampling import sample_position
 from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
 from .integrators.path import PathIntegrator
@@ -652,8 +652,12 @@ class Renderer:
         (:class:`~drpt.render.film.SplatFilm`), as Mitsuba's film does. One sample
         per lane."""
         W, H = self.opt.width, self.opt.height
-        n, lane, x, y = self._pass_lanes(k, r0, rows)
-        rng = self._sampler(pass_index, n, x, y, lane % dr.opaque(UInt32, k), 1)
+        n = rows * W * k
+        # (each lane's pixel and sample without an opaque integer division, drpt.render.lanes)
+        pixel, j = divmod_opaque(dr.arange(UInt32, n), k)
+        x = pixel % W
+        y = pixel // W + dr.opaque(UInt32, r0)
+        rng = self._sampler(pass_index, n, x, y, j, 1)
         u = next_2d(rng)
         px = Float(x) + u.x
         py = Float(y) + u.y
@@ -662,10 +666,12 @@ class Renderer:
         L = self.integrator.sample(rng, o, d, Bool(True))
         bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
         L = dr.select(bad, 0.0, L)
+        flt, moment = self.opt.pixel_filter, self.opt.moment
+        # the film's per-sample filter weights, where it reads them, in this kernel
+        weights = splat_weights(flt, W, rows, k, moment, x, y, px, py, ~bad)
         with llvm_tuning.blocks_for(n):
-            dr.eval(L, bad, px, py)
-        y0, img, sq, wts = gather_splats(self.opt.pixel_filter, W, H, r0, rows, k, px, py, L, ~bad,
-                                         self.opt.moment)
+            dr.eval(L, bad, weights if weights is not None else (px, py))
+        y0, img, sq, wts = gather_splats(flt, W, H, r0, rows, k, px, py, L, ~bad, moment, weights)
         return PassSums(y0, img, sq, int(dr.sum(UInt32(bad))[0]), wts)
 
     @property
@@ -721,18 +727,18 @@ class Renderer:
         samples of the chunk traced so far.
 
         ``into``, a merge whose next chunk is ``index``: where each pass of the
-        chunk adds to its own rows only, once (one sample step per chunk; no
-        splatting film, light tracing or AOVs), the passes' sums are added straight
-        into the merge's sums, the very float64 additions that adding the chunk's
-        sums would make (each pixel's chunk sum is one pass's), without the chunk's
-        own full-image arrays; the result is then :attr:`ChunkResult.direct`. Until
-        it is pushed, ``into.dirty`` is set."""
+        chunk adds to its own rows only, once (one sample step per chunk and no
+        splatting film, or a splatting chunk of one pass; no light tracing or AOVs),
+        the passes' sums are added straight into the merge's sums, the very float64
+        additions that adding the chunk's sums would make (each pixel's chunk sum is
+        one pass's), without the chunk's own full-image arrays; the result is then
+        :attr:`ChunkResult.direct`. Until it is pushed, ``into.dirty`` is set."""
         t0 = time.perf_counter()
         chunks = self.chunks
         plan = chunks.passes
         W, H = self.opt.width, self.opt.height
-        if (into is not None and into.next == index and chunks.steps == 1 and not self.splatting
-                and not self.light_tracing and not self.aov_kinds):
+        own_rows = len(chunks.passes_of(index)) == 1 if self.splatting else chunks.steps == 1
+        if into is not None and into.next == index and own_rows and not self.light_tracing and not self.aov_kinds:
             return self._render_chunk_into(index, on_pass, into, t0)
         acc = np.zeros((H, W, 3), np.float64)
         # squares; with moment (Mitsuba's moment integrator) also the channel products
@@ -766,9 +772,14 @@ class Renderer:
         chunks = self.chunks
         plan = chunks.passes
         W, H = self.opt.width, self.opt.height
-        channels = 6 if self.opt.moment else 3
-        if into.sumsq.shape[-1] != channels and not into.sumsq.any():
+        # squares; with moment also the channel products (rg, rb, gb) or, splatted, the
+        # weighted r^2 .. gb (as render_chunk's own arrays); a merge of no chunk yet has no sums
+        # to keep (and its zeros are not read, which would map their pages)
+        channels = (9 if self.splatting else 6) if self.opt.moment else 3
+        if into.sumsq.shape[-1] != channels and (into.next == 0 or not into.sumsq.any()):
             into.sumsq = np.zeros((H, W, channels), np.float64)
+        if self.splatting and into.weight is None:
+            into.weight = np.zeros((H, W, 2), np.float64)
         nonfinite = 0
         for i in chunks.passes_of(index):
             _s0, k, r0, rows = plan[i]
@@ -777,6 +788,8 @@ class Renderer:
             into.dirty = True
             into.sum[p.lo:hi] += p.sum
             into.sumsq[p.lo:hi] += p.sumsq
+            if p.weight is not None:
+                into.weight[p.lo:hi] += p.weight
             nonfinite += p.nonfinite
             if on_pass is not None:
                 on_pass((_s0 - chunks.spp_before(index)) * H * W + (r0 + rows) * W * k)
@@ -914,13 +927,13 @@ def _finish_weighted(merged: ChunkMerge, seconds: float, build_seconds: float,
     else:
         ws, ws2 = np.where(ok, merged.weight[..., :1], 1.0), np.where(ok, merged.weight[..., 1:], 1.0)
     none = None if every else np.broadcast_to(~ok, merged.sum.shape)
-    mean = np.divide(merged.sum, ws, out=merged.sum if consume else None)
+    mean = _per_pixel_divide(merged.sum, ws, merged.sum if consume else None)
     if none is not None:
         mean[none] = 0.0
     _check_range(mean)
     n_eff = ws * ws / ws2  # (1 where no weight)
     sq = merged.sumsq
-    var = np.divide(sq[..., :3], ws2)
+    var = _per_pixel_divide(sq[..., :3], ws2)
     if none is not None:
         var[none] = 0.0
     var -= mean * mean
@@ -929,12 +942,24 @@ def _finish_weighted(merged: ChunkMerge, seconds: float, build_seconds: float,
     var /= np.maximum(n_eff, 1.0, out=n_eff)
     moment2 = None
     if sq.shape[-1] == 9:  # the weighted r^2 .. gb, as Mitsuba's film develops its m2_
-        second = np.divide(sq[..., 3:], ws, out=sq[..., 3:] if consume else None)
+        second = _per_pixel_divide(sq[..., 3:], ws, sq[..., 3:] if consume else None)
         if none is not None:
             second[np.broadcast_to(~ok, second.shape)] = 0.0
         moment2 = xyz_second_moment(second)
     return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, W * H * spp,
                         merged.nonfinite, moment2)
+
+
+def _per_pixel_divide(a: np.ndarray, w: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``a / w`` for ``(H, W, C)`` values and ``(H, W, 1)`` per-pixel divisors, into ``out``
+    (a fresh array if None): numpy's broadcast division's very quotients, a channel at a time,
+    whose loops run over the pixels where the broadcast's inner loops run over ``C`` values
+    (half the time for ``C`` of 3 to 6: docs/performance.md)."""
+    out = np.empty(a.shape) if out is None else out
+    d = w[..., 0]
+    for c in range(a.shape[-1]):
+        np.divide(a[..., c], d, out=out[..., c])
+    return out
 
 
 def stop_estimate(merged: ChunkMerge, opts: RenderOptions, seconds: float,

@@ -111,6 +111,28 @@ def test_per_source_sums_with_several_samples_an_iteration(k, monkeypatch):
         assert not np.array_equal(off[1], want[1])
 
 
+@pytest.mark.parametrize("flt", [PixelFilter("gaussian", 0.5), PixelFilter("tent", 1.5)])
+def test_splat_weights_given_are_the_gathers_own(flt):
+    """:func:`film.splat_weights` (the pass's kernel computes them) give :func:`gather_splats`
+    the sums it computes itself, bit for bit, with the samples' pixel columns and rows given
+    (a band of rows from ``r0`` 2); where the film sums per source pixel (``K`` at least
+    ``SOURCE_MIN_SAMPLES``) there are none. Negative control: the weights of positions moved by
+    0.01 pixel give other sums."""
+    x, y, L, ok = _samples(1.0)
+    pix = dr.arange(UInt32, W * H * K) // K
+    col, row = pix % W, pix // W + 2
+    y = y + 2.0
+    own = gather_splats(flt, W, H + 4, 2, H, K, x, y, L, ok, moment=True)
+    weights = film.splat_weights(flt, W, H, K, True, col, row, x, y, ok)
+    given = gather_splats(flt, W, H + 4, 2, H, K, x, y, L, ok, True, weights)
+    assert own[0] == given[0]
+    assert all(np.array_equal(a, b) for a, b in zip(own[1:], given[1:]))
+    moved = film.splat_weights(flt, W, H, K, True, col, row, x + 0.01, y, ok)
+    off = gather_splats(flt, W, H + 4, 2, H, K, x, y, L, ok, True, moved)
+    assert not np.array_equal(off[1], own[1])
+    assert film.splat_weights(flt, W, H, film.SOURCE_MIN_SAMPLES, True, col, row, x, y, ok) is None
+
+
 def test_per_source_way_where_it_pays():
     """:func:`_source_groups` sums per source pixel from SOURCE_MIN_SAMPLES samples per pixel
     on, in groups of offset rows within SOURCE_PARTIALS_BYTES, and not where one row does

@@ -79,6 +79,45 @@ def test_render_passes_sum_to_the_render(cornell):
     assert not np.array_equal(past.sum, r.render_pass(7).sum)  # same rows, another sample step
 
 
+@pytest.mark.parametrize("chunk_spp,max_lanes", [(None, 1 << 20), (2, 1 << 20), (2, 40)])
+def test_splatted_chunks_added_into_the_merge_are_the_merged_chunks(cornell, chunk_spp, max_lanes):
+    """A splatting render (Gaussian filter, the moment integrator's products) adds a chunk of
+    one pass straight into its merge (``render_chunk(into=...)``, :attr:`ChunkResult.direct`):
+    the same sums, squares and weights, bit for bit, as the chunks' own arrays merged
+    (``render_chunk`` without ``into``), and the render's image is theirs; a chunk of several
+    passes (bands of rows, ``max_lanes`` 40) keeps its own arrays. Negative control: the
+    chunks of another seed, merged, give other weights and sums."""
+    from dataclasses import replace
+
+    from drpt.options import RenderOptions
+    from drpt.render.chunks import ChunkMerge
+    from drpt.render.renderer import Renderer, finish
+    from drpt.scene import load_scene
+
+    r = Renderer(load_scene(cornell), RenderOptions(
+        width=9, height=7, spp=4, seed=3, max_lanes=max_lanes, chunk_spp=chunk_spp, moment=True,
+        filter="gaussian", progress=False))
+    assert r.splatting and r.chunks.count == (2 if chunk_spp else 1)
+    one_pass = len(r.chunks.passes_of(0)) == 1
+    assert one_pass == (max_lanes > 40)
+
+    def merged(renderer, into: bool) -> ChunkMerge:
+        m = ChunkMerge(renderer.chunks)
+        for c in range(renderer.chunks.count):
+            result = renderer.render_chunk(c, into=m if into else None)
+            assert result.direct == (into and one_pass)
+            m.push(result)
+        return m
+
+    apart, direct = merged(r, False), merged(r, True)
+    arrays = lambda m: (m.sum, m.sumsq, m.weight)  # noqa: E731
+    assert direct.sumsq.shape == (7, 9, 9)
+    assert all(np.array_equal(a, b) for a, b in zip(arrays(apart), arrays(direct)))
+    assert np.array_equal(finish(apart, 0.0, 0.0).image, r.render().image)
+    other = merged(r.derive(replace(r.opt, seed=4)), True)
+    assert not any(np.array_equal(a, b) for a, b in zip(arrays(other), arrays(direct)))
+
+
 def test_xyz_second_moment_is_the_square_of_each_samples_xyz():
     """From the products ``(r^2, g^2, b^2, rg, rb, gb)`` of one sample the XYZ second moment
     is ``(A rgb)^2`` for each sample, and means of several samples are the mean of those.
