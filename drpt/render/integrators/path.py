@@ -26,7 +26,10 @@ crossed), so paths inside glass are not killed for their radiance scaling.
 
 Delta lobes (glass, mirrors) have nothing to evaluate: next-event estimation
 contributes nothing there and the emitter their ray hits counts in full
-(``prev_delta``); in a scene that also has smooth materials the estimate runs in a
+(``prev_delta``), except after two smooth refractions where the scene has next-event
+estimation through glass (:mod:`~drpt.render.integrators.glass`, :attr:`PathIntegrator.glass_nee`:
+an occluded shadow ray followed through a glass body, and MIS between it and the BSDF
+sample that passes the glass; :attr:`PathState.glass`); in a scene that also has smooth materials the estimate runs in a
 symbolic ``if`` on the lanes off delta-only materials, so that a packet on mirrors and glass
 skips it. A scene of only delta materials traces no NEE code, and its
 paths are *pixel-coherent* (:attr:`PathIntegrator.pixel_coherent`): the renderer
