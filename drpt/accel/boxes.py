@@ -76,6 +76,29 @@ class ShapeBoxes:
             lo, hi = lo.min(0, keepdims=True), hi.max(0, keepdims=True)
         return cls(lo, hi)
 
+    @classmethod
+    def of_materials(cls, scene, materials) -> ShapeBoxes | None:
+        """One box around the triangles of each of ``materials`` (indices into
+        ``scene.materials``; a :class:`~drpt.scene.model.Scene`), or one around all of them where
+        they are more than :data:`MAX_BOXES`; None where no triangle has one of them."""
+        tris = scene.triangles
+        if not len(tris) or not len(materials):
+            return None
+        mat = np.asarray(tris.material)
+        p = np.asarray(tris.positions, np.float64).reshape(-1, 3, 3)
+        lo, hi = [], []
+        for m in materials:
+            q = p[mat == m]
+            if len(q):
+                lo.append(q.min((0, 1)))
+                hi.append(q.max((0, 1)))
+        if not lo:
+            return None
+        lo, hi = np.array(lo), np.array(hi)
+        if len(lo) > MAX_BOXES:
+            lo, hi = lo.min(0, keepdims=True), hi.max(0, keepdims=True)
+        return cls(lo, hi)
+
     def __len__(self) -> int:
         return len(self.lo)
 

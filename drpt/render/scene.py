@@ -271,6 +271,11 @@ class DeviceScene:
         #: the emissive surfaces alone, where they are few triangles
         #: (:func:`emissive_inline`), else None
         self.emissive = emissive_inline(scene)
+        #: boxes around the triangles of each smooth-dielectric material (only a ``dielectric``
+        #: lobe), else None: the path tracer follows through glass only the occluded shadow
+        #: rays that reach one (:mod:`drpt.render.integrators.glass`)
+        glass = [i for i, ks in enumerate(getattr(self.materials, "material_kinds", ())) if ks == ("dielectric",)]
+        self.glass_boxes = ShapeBoxes.of_materials(scene, glass) if glass else None
         self.delta_lights = DeltaLights(scene, lit)
         self.warnings: list[str] = list(self.materials.notes)
         if self.is_empty:

@@ -26,7 +26,10 @@ crossed), so paths inside glass are not killed for their radiance scaling.
 
 Delta lobes (glass, mirrors) have nothing to evaluate: next-event estimation
 contributes nothing there and the emitter their ray hits counts in full
-(``prev_delta``); in a scene that also has smooth materials the estimate runs in a
+(``prev_delta``), except after two smooth refractions where the scene has next-event
+estimation through glass (:mod:`~drpt.render.integrators.glass`, :attr:`PathIntegrator.glass_nee`:
+an occluded shadow ray followed through a glass body, and MIS between it and the BSDF
+sample that passes the glass; :attr:`PathState.glass`); in a scene that also has smooth materials the estimate runs in a
 symbolic ``if`` on the lanes off delta-only materials, so that a packet on mirrors and glass
 skips it. A scene of only delta materials traces no NEE code, and its
 paths are *pixel-coherent* (:attr:`PathIntegrator.pixel_coherent`): the renderer
@@ -81,6 +84,7 @@ from ..loops import loops_once
 from ..sampler import light_sample, next_2d, next_path, skip_draws
 from ..scene import DeviceScene
 from .common import DirectLight, power_heuristic
+from .glass import GlassNEE, GlassState, applies
 
 #: the largest ``max_depth`` whose paths are traced as straight-line code (``0 < max_depth``)
 UNROLLED_MAX_DEPTH = 3
@@ -106,6 +110,9 @@ class PathState:
     #: the point the density of the emitter ``d`` hits is seen from (MIS); ``None`` where
     #: that density does not depend on the point (:func:`sees_from_vertex`)
     ref_p: Array3f | None = None
+    #: what the through-glass weight reads (:mod:`~drpt.render.integrators.glass`); ``None``
+    #: where the scene has no such technique (:meth:`PathIntegrator.glass_nee`)
+    glass: GlassState | None = None
 
 
 def bank(sums: tuple, dropped: UInt32, L: Array3f, Sum: type) -> tuple[tuple, UInt32]:
@@ -180,11 +187,22 @@ class PathIntegrator:
     #: (:meth:`~drpt.render.scene.DeviceScene.intersect_preliminary`'s ``cull``): the same
     #: hits. False: every camera ray queries the accelerator (A/B)
     cull = True
+    #: next-event estimation through glass where the scene needs it (:attr:`glass_nee`);
+    #: False: not traced (A/B comparisons, the tests' reference)
+    through_glass = True
 
     def __init__(self, scene: DeviceScene, options: PathOptions):
         self.scene = scene
         self.direct = DirectLight(scene)
         self.opt = options
+
+    @property
+    def glass_nee(self) -> GlassNEE | None:
+        """Next-event estimation through glass (:mod:`~drpt.render.integrators.glass`) where
+        the scene needs it and this class's own bounce traces the paths (read at trace time;
+        :func:`~drpt.render.integrators.glass.applies`), else None."""
+        own = type(self).bounce is PathIntegrator.bounce
+        return GlassNEE(self.scene) if self.through_glass and applies(self.scene, self.opt, own) else None
 
     @property
     def straight(self) -> bool:
@@ -407,7 +425,8 @@ class PathIntegrator:
         return PathState(o=o, d=d, L=dr.zeros(Array3f, w), beta=beta,
                          eta=dr.full(Float, 1.0, w), depth=dr.zeros(UInt32, w),
                          prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
-                         active=Bool(active), ref_p=Array3f(o) if sees_from_vertex(self.scene) else None)
+                         active=Bool(active), ref_p=Array3f(o) if sees_from_vertex(self.scene) else None,
+                         glass=GlassState.start(o, w) if self.glass_nee is not None else None)
 
     def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32, branch: bool = False,
                camera: bool = False) -> PathState:
@@ -428,7 +447,11 @@ class PathIntegrator:
         si = skip_hidden_emitters(scene, opt, si, s, s.active)
 
         # ---- emitter hit by the previous ray (or seen by the camera)
-        L = add_emission(scene, opt, si, s, s.L, s.active)
+        glass = self.glass_nee if s.glass is not None else None
+        through = None  # (a path through glass since its last smooth vertex: its MIS weight)
+        if glass is not None:
+            through = glass.weight(s.glass, si, scene.materials.is_emissive(si, s.active))
+        L = add_emission(scene, opt, si, s, s.L, s.active, through)
 
         active = s.active & si.valid
         if opt.max_depth >= 0:
@@ -457,28 +480,34 @@ class PathIntegrator:
             if nee:
                 coherent_shadow = (s.depth == 0) if coherent_shadows(scene) else False
                 L, *sampled = self._nee(scene, hit_si, s.beta, L, u_sel, u_light, u_path, active,
-                                        coherent_shadow)
+                                        coherent_shadow, glass)
             # ---- BSDF sampling and Russian roulette: continue the path
             wo, bs, beta, eta, depth, live = continue_path(scene, opt, hit_si, s, None, u_path, sampled)
-            return (scene.spawn(hit_si, wo), Array3f(wo), L, beta, eta, depth, Float(bs.pdf),
-                    Bool(bs.delta), active & live) + ((Array3f(hit_si.p),) if carry else ())
+            out = (scene.spawn(hit_si, wo), Array3f(wo), L, beta, eta, depth, Float(bs.pdf),
+                   Bool(bs.delta), active & live) + ((Array3f(hit_si.p),) if carry else ())
+            if glass is not None:
+                delta = active & scene.materials.is_delta(hit_si)
+                out += (GlassNEE.step(s.glass, active & ~delta, delta, hit_si, s.d, wo, bs),)
+            return out
 
         carry = s.ref_p is not None  # (the vertex the next hit's density is seen from)
         if branch:
             def skip(L):
                 return (Array3f(s.o), Array3f(s.d), L, Array3f(s.beta), Float(s.eta), s.depth + 1,
-                        Float(s.prev_pdf), Bool(s.prev_delta), Bool(False)) + ((Array3f(s.ref_p),) if carry else ())
+                        Float(s.prev_pdf), Bool(s.prev_delta), Bool(False)) + ((Array3f(s.ref_p),) if carry else ()) \
+                    + ((s.glass,) if glass is not None else ())
 
             out = dr.if_stmt((L,), active, shade, skip, label="drpt_vertex")
         else:
             out = shade(L)
-        o, d, L, beta, eta, depth, prev_pdf, prev_delta, active, *ref_p = out
+        o, d, L, beta, eta, depth, prev_pdf, prev_delta, active, *rest = out
         return PathState(o=o, d=d, L=L, beta=beta, eta=eta, depth=depth, prev_pdf=prev_pdf,
-                         prev_delta=prev_delta, active=active, ref_p=ref_p[0] if carry else None)
+                         prev_delta=prev_delta, active=active, ref_p=rest[0] if carry else None,
+                         glass=rest[-1] if glass is not None else None)
 
 
     def _nee(self, scene: DeviceScene, si, beta: Array3f, L: Array3f, u_sel: Float, u_light,
-             u_path: tuple, active: Bool, coherent: Bool | bool = False) -> tuple:
+             u_path: tuple, active: Bool, coherent: Bool | bool = False, glass: GlassNEE | None = None) -> tuple:
         """``(L, wo, bs)``: ``L`` plus next-event estimation's MIS-weighted direct light at
         ``si`` (the random numbers already drawn), its shadow ray a coherent query on the
         lanes ``coherent`` (the vertices that camera rays hit), and the BSDF sample that
@@ -491,16 +520,31 @@ class PathIntegrator:
         mirrors or glass, where the estimate is zero, skips the emitter sample, the BSDF
         evaluation and the shadow ray, and samples only the delta-only materials' kinds
         (:meth:`~drpt.render.material.MaterialTable.specular`) in a symbolic ``if`` of its
-        own (label ``drpt_specular``) on the active lanes of those materials."""
+        own (label ``drpt_specular``) on the active lanes of those materials. With ``glass``
+        (:mod:`~drpt.render.integrators.glass`) a shadow ray that glass occludes is followed
+        through it, in a symbolic ``if`` on those lanes (label ``drpt_glass_nee``)."""
         mats = scene.materials
         u_lobe, u_bsdf = u_path[0], u_path[1]
         mixed = getattr(mats, "mixes_delta", False)  # (the empty scene's stand-in has none)
         lanes = active & ~mats.is_delta(si) if mixed else active
 
         def estimate(L):
-            q, wo, bs = self.direct.emitter_query_sample(si, u_sel, u_light, u_lobe, u_bsdf, lanes,
-                                                         mis=True, coherent=coherent)
-            return L + beta * q.resolve(scene), wo, bs
+            if glass is None:
+                q, wo, bs = self.direct.emitter_query_sample(si, u_sel, u_light, u_lobe, u_bsdf, lanes,
+                                                             mis=True, coherent=coherent)
+                return L + beta * q.resolve(scene), wo, bs
+            es = scene.sample_emitter(si, u_sel, u_light, lanes)
+            f, pdf_b, wo, bs = scene.eval_sample_bsdf(si, es.wo, u_lobe, u_bsdf)
+            q = self.direct._query(si, es, f, pdf_b, True, coherent)
+            blocked = q.ok & scene.occluded(q.o, q.d, q.tmax, q.ok, q.coherent)
+            seen = dr.select(q.ok & ~blocked, q.value, 0.0)
+            glassy = blocked & scene.glass_boxes.reach(q.o, es.wo)  # (the rays that may meet glass)
+
+            def through(L):
+                return (L + beta * glass.estimate(si, es, f, pdf_b, q.o, glassy),)
+
+            L = dr.if_stmt((L,), glassy, through, lambda L: (L,), label="drpt_glass_nee")[0]
+            return L + beta * seen, wo, bs
 
         if not mixed:
             return estimate(L)
@@ -532,12 +576,16 @@ def skip_hidden_emitters(scene: DeviceScene, opt: PathOptions, si, s, active: Bo
     return scene.skip_area_emitters(s.o, s.d, si, camera, coherent=True)
 
 
-def add_emission(scene: DeviceScene, opt: PathOptions, si, s, L: Array3f, active: Bool | None) -> Array3f:
+def add_emission(scene: DeviceScene, opt: PathOptions, si, s, L: Array3f, active: Bool | None,
+                 through: tuple | None = None) -> Array3f:
     """``L`` plus what the ray ``s.d`` of path state ``s`` sees at ``si``: the
     emitter it hits (MIS-weighted against the previous BSDF sample unless that
     was a delta lobe), or the background and the sky it escapes to, times
     ``s.beta``. ``active`` masks the lanes (``None``: every lane is a live path).
-    Shared by the megakernel and the wavefront integrator: one estimator."""
+    ``through``: ``(lanes, w)``, the lanes whose path reached the emitter through glass
+    and their weight against next-event estimation through it
+    (:meth:`~drpt.render.integrators.glass.GlassNEE.weight`). Shared by the megakernel and
+    the wavefront integrator: one estimator."""
     nee = scene.has_emitters and scene.has_smooth_bsdfs
     seen = None if active is None else Bool(active)  # (None: every lane)
     if opt.hide_emitters:  # Mitsuba's hide_emitters: the camera sees no emitter or sky
@@ -548,6 +596,8 @@ def add_emission(scene: DeviceScene, opt: PathOptions, si, s, L: Array3f, active
         return L + s.beta * le
     # MIS against next-event estimation (none after a delta lobe or the camera)
     w = dr.select(s.prev_delta, 1.0, power_heuristic(s.prev_pdf, pdf_l))
+    if through is not None:
+        w = dr.select(through[0], through[1], w)
     return L + s.beta * le * w
 
 
