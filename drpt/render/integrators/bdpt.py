@@ -215,14 +215,15 @@ CAMERA_STRIDE = 32
 #: the dimensions of a camera vertex's BSDF lobe, direction and Russian roulette
 CAMERA_TAIL = 4
 
-#: with a low-discrepancy sampler the MIS weights count the light-tracing strategy (``t = 1``)
-#: as this many samples per light subpath (the power heuristic over ``n_i p_i`` with ``n = 1``
-#: for the others; :func:`splat_share`): a pixel's camera samples are stratified, so its camera
-#: strategies have less variance than their densities say, while the splats that land in it
-#: come from light subpaths stratified over other pixels, and their count in the pixel is as
-#: random as with independent samples. 0.5 lowered the Cornell box's relMSE 18-29% at 16-256
-#: spp, 1/3 and 1/4 less (docs/performance.md, "Light tracing counted half")
-LD_SPLAT_SHARE = 0.5
+#: with a low-discrepancy sampler the MIS weights count every strategy that takes vertices
+#: from the light subpath (``s >= 2``: the connections and the ``t = 1`` splats) as this many
+#: samples against the camera subpath's own (``s = 0``, ``s = 1``: :attr:`BDPTIntegrator.share`):
+#: a pixel's camera samples are stratified, so the strategies the camera subpath samples alone
+#: have less variance than their densities say, while the splats that land in a pixel come from
+#: light subpaths stratified over the whole image, their number in it as random as with
+#: independent samples (docs/performance.md, "Light subpaths counted less with a
+#: low-discrepancy sampler")
+LD_LIGHT_SHARE = 0.4
 
 # the worst case fits: the light subpath (its emitter and at most MAX_DEPTH - 1 vertices, 5
 # dimensions each, after the pixel's 2) ends before the camera subpath's first dimension,
@@ -356,15 +357,6 @@ def emission_weight(pdf_nee: Float, emit: Float, dvcm: Float, dvc: Float, k: flo
     :attr:`BDPTIntegrator.k`."""
     w = dr.rcp(1.0 + _term(pdf_nee, dvcm) + _term(emit, dvc) / k)
     return dr.select(dr.isfinite(w), w, 0.0)
-
-
-def splat_share(rng) -> float:
-    """How many samples per light subpath the MIS weights count the ``t = 1`` strategy as:
-    :data:`LD_SPLAT_SHARE` for a low-discrepancy sampler, 1 for independent samples (whose
-    camera strategies gain nothing from stratification). Carried as ``m(share)`` on the camera
-    subpath's starting ``dvcm`` (the ``t = 1`` term of the camera side's sum) and ``1 /
-    m(share)`` on the splat's sum of the other strategies, so the weights still sum to 1."""
-    return LD_SPLAT_SHARE if isinstance(rng, LDSampler) else 1.0
 
 
 def connection_room(k: UInt32, depth: int) -> UInt32:
@@ -546,7 +538,7 @@ class BDPTIntegrator:
     pinhole camera."""
 
     def __init__(self, scene: DeviceScene, rays: EmitterRays, camera: RayCamera, options: PathOptions,
-                 merge: bool = True):
+                 merge: bool = True, low_discrepancy: bool = False):
         refuse_unsupported(scene, camera, "bidirectional path tracing (bdpt)")
         for kind, light in rays.sources:
             if kind not in SUPPORTED_SOURCES or (kind == "spot" and getattr(light, "texture", None) is not None):
@@ -581,9 +573,15 @@ class BDPTIntegrator:
         #: connections saved)
         kinds = getattr(scene.materials, "kinds", ())
         self.one_connection = not any(scene.materials.lobes[kind].DELTA for kind in kinds)
-        #: the MIS weights' factor for connections: ``m(CONNECTION_CHOICES)`` with
-        #: :attr:`one_connection`, else 1 (see :data:`CONNECTION_CHOICES`)
-        self.k = mis(CONNECTION_CHOICES) if self.one_connection else 1.0
+        #: how many samples the MIS weights count each strategy that takes light-subpath
+        #: vertices as, against the camera subpath's own: :data:`LD_LIGHT_SHARE` where the
+        #: camera samples come from a ``low_discrepancy`` sampler, else 1
+        self.share = LD_LIGHT_SHARE if low_discrepancy else 1.0
+        #: the MIS weights' factor for connections: ``m(c / share)``, ``c`` =
+        #: :data:`CONNECTION_CHOICES` with :attr:`one_connection`, else 1 (see
+        #: :data:`CONNECTION_CHOICES`); the splats' weights and the camera subpath's starting
+        #: ``dvcm`` take ``k m(share)`` (the splats counted ``share`` times, as the connections)
+        self.k = mis((CONNECTION_CHOICES if self.one_connection else 1.0) / self.share)
         #: the scene seen by the BSDF evaluations of connections, splats, next-event estimation
         #: and merging (:func:`smooth_view`)
         self.smooth = smooth_view(scene)
@@ -724,9 +722,9 @@ class BDPTIntegrator:
 
     def _splat(self, si: Interaction, beta: Array3f, dvcm: Float, dvc: Float, film: SplatFilm,
                active: Bool, depth: UInt32, strategies: StrategyFilm | None, u_rr: Float,
-               threshold: Float, share: float = 1.0) -> None:
+               threshold: Float) -> None:
         """``t = 1``: light vertex ``si`` joined to the camera, splatted into ``film`` (after
-        :func:`roulette` with ``u_rr`` and ``threshold``); ``share``: :func:`splat_share`."""
+        :func:`roulette` with ``u_rr`` and ``threshold``)."""
         scene, cam = self.scene, self.camera
         x, y, wc, dist, importance, visible = cam.connect(si.p)
         ok = active & visible
@@ -734,7 +732,7 @@ class BDPTIntegrator:
         corr, sides = correction(si, wc)
         pdf_cam = importance * dr.abs(dr.dot(si.ng, wc))
         w = self._weight(connection_weight(pdf_cam, dvcm, dvc, rev, Float(0.0), Float(0.0), Float(0.0),
-                                           Float(0.0), self.k * mis(share)), depth + 1, 1)
+                                           Float(0.0), self.k * mis(self.share)), depth + 1, 1)
         value = beta * f * (corr * importance * w)
         ok &= sides & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         value, ok = roulette(value, ok, u_rr, threshold)
@@ -1029,7 +1027,6 @@ class BDPTIntegrator:
         D = self.depth
         NL = D - 1
         has_deltas = len(self.deltas) > 0 and scene.has_smooth_bsdfs
-        share = splat_share(rng)
         dropped = dr.zeros(UInt32, n)
         stored = dr.zeros(UInt32, n)
         lverts = None
@@ -1058,7 +1055,7 @@ class BDPTIntegrator:
                     lverts.write(dr.minimum(stored, NL - 1), si, beta, dvcm, dvc, depth)
                     stored += 1
                 self._splat(si, beta, dvcm, dvc, film, connectible, depth, strategies, rng.next_float32(),
-                            threshold, share)
+                            threshold)
 
                 u_lobe = rng.next_float32()
                 u_bsdf = next_2d(rng)
@@ -1084,8 +1081,8 @@ class BDPTIntegrator:
         ref = dr.zeros(Array3f, n) + o  # the camera's position (as wide as the loop)
         cos_cam = dr.dot(d, cam.f)
         area = 4.0 * dr.sqrt(dr.squared_norm(cam.r) * dr.squared_norm(cam.u))
-        a_cos3 = area * cos_cam * cos_cam * cos_cam
-        dvcm = self.k * mis(a_cos3 * share if share != 1.0 else a_cos3)
+        # (k m(share): the splats' count against the connections, CONNECTION_CHOICES's alone)
+        dvcm = self.k * mis(self.share) * mis(area * cos_cam * cos_cam * cos_cam)
         dvc = dr.zeros(Float, n)
         beta = dr.full(Array3f, 1.0, n)
         eta = dr.full(Float, 1.0, n)

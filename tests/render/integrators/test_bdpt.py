@@ -88,9 +88,9 @@ def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False, choices=1.
     """Each strategy's weight from the integrator's functions, per path (Dr.Jit lanes), with
     connections counted as chosen among ``choices`` (the subpaths' starting quantities times
     ``K = choices^2``, as the integrator's) and the ``t = 1`` strategy counted ``share``
-    times (:func:`~drpt.render.integrators.bdpt.splat_share`: the camera's starting ``dvcm``
-    times ``m(share)``, the splat's weight's ``k`` too; ``share_weights``: the negative
-    control's factor in the splat's weight)."""
+    times as often as the connections (:attr:`~drpt.render.integrators.bdpt.BDPTIntegrator.share`:
+    the camera's starting ``dvcm`` times ``m(share)``, the splat's weight's ``k`` too;
+    ``share_weights``: the negative control's factor in the splat's weight)."""
     SW = share if share_weights is None else share_weights
     K = choices * choices
     KW = K if k_weights is None else k_weights  # (the negative control's: another one in the weights)
@@ -194,20 +194,21 @@ def test_mis_weights_connection_factor_negative_control():
 
 @pytest.mark.parametrize("k", [2, 3, 5])
 @pytest.mark.parametrize("light", ["area", "sky"])
-def test_mis_weights_with_light_tracing_counted_as_a_share_match_pbrts(k, light):
-    """With a low-discrepancy sampler the ``t = 1`` strategy is counted
-    ``LD_SPLAT_SHARE`` times (the camera's starting ``dvcm`` and the splat's weight): the
-    weights are pbrt's with ``N LD_SPLAT_SHARE`` light paths and sum to 1, with the connections'
-    factor too."""
+def test_mis_weights_with_the_light_subpath_counted_as_a_share_match_pbrts(k, light):
+    """With a low-discrepancy sampler every strategy with ``s >= 2`` is counted
+    ``LD_LIGHT_SHARE`` times against ``s = 0, 1`` (the integrator's ``k = m(choices /
+    share)`` on both subpaths' starting quantities, ``k m(share)`` on the camera's starting
+    ``dvcm`` and in the splat's weight): the weights are pbrt's with ``N LD_LIGHT_SHARE``
+    light paths and the connections counted ``LD_LIGHT_SHARE / choices`` times, and sum to 1."""
     infinite = light == "sky"
-    share = B.LD_SPLAT_SHARE
+    share = B.LD_LIGHT_SHARE
     assert share != 1.0
     rng = np.random.default_rng(100 + 10 * k + len(light))
     n, N = 300, 64.0
     P = _random_paths(rng, n, k, False, infinite)
     for choices in (1.0, B.CONNECTION_CHOICES):
-        got = _recursive(P, k, False, N, infinite=infinite, choices=choices, share=share)
-        ref = np.array([_pbrt_weights(P, j, k, False, N * share, choices) for j in range(n)])
+        got = _recursive(P, k, False, N, infinite=infinite, choices=choices / share, share=share)
+        ref = np.array([_pbrt_weights(P, j, k, False, N * share, choices / share) for j in range(n)])
         possible = ref.sum(1) > 0
         assert possible.mean() > 0.5
         assert np.allclose(got[possible].sum(1), 1.0, atol=2e-4), np.abs(got[possible].sum(1) - 1).max()
@@ -215,6 +216,7 @@ def test_mis_weights_with_light_tracing_counted_as_a_share_match_pbrts(k, light)
         # the weights do move: light tracing's is not the one of N light paths
         plain = np.array([_pbrt_weights(P, j, k, False, N, choices) for j in range(n)])
         assert np.abs(got[:, k] - plain[:, k]).max() > 1e-2
+        assert np.abs(got[:, 1] - plain[:, 1]).max() > 1e-2
 
 
 def test_mis_weights_share_negative_control():
@@ -222,17 +224,22 @@ def test_mis_weights_share_negative_control():
     breaks the sum."""
     k, n = 4, 300
     P = _random_paths(np.random.default_rng(5), n, k, False)
-    got = _recursive(P, k, False, 64.0, share=B.LD_SPLAT_SHARE, share_weights=1.0)
+    share = B.LD_LIGHT_SHARE
+    got = _recursive(P, k, False, 64.0, choices=1.0 / share, share=share, share_weights=1.0)
     assert np.abs(got.sum(1) - 1.0).max() > 1e-2
 
 
-def test_splat_share_is_the_low_discrepancy_samplers_only():
+@pytest.mark.parametrize("sampler", ["independent", "auto", "ldsampler", "zsobol", "stratified"])
+def test_the_light_share_is_the_low_discrepancy_samplers_only(sampler):
     """Independent samples keep the power heuristic over the plain densities (their kernels and
-    images unchanged); every low-discrepancy sampler counts light tracing ``LD_SPLAT_SHARE``."""
-    from drpt.render.sampler import pcg_streams
-
-    assert B.splat_share(pcg_streams(4, 7)) == 1.0
-    assert B.splat_share(LDSampler(UInt32(0), UInt32(0))) == B.LD_SPLAT_SHARE
+    images unchanged); every low-discrepancy sampler (``auto`` is ``ldsampler`` for bdpt) counts
+    the light subpath's strategies ``LD_LIGHT_SHARE`` times, its connections' factor with it."""
+    scene = load_scene(REPO / "scenes" / "cornellbox" / "cornellbox.txt")
+    r = Renderer(scene, RenderOptions(width=8, height=8, spp=4, integrator="bdpt", sampler=sampler,
+                                      progress=False))
+    share = 1.0 if sampler == "independent" else B.LD_LIGHT_SHARE
+    assert r.integrator.share == share
+    assert r.integrator.k == pytest.approx(B.mis(B.CONNECTION_CHOICES / share))
 
 
 # ------------------------------------------------------------ images
@@ -580,7 +587,7 @@ def test_strategy_images_sum_to_the_image(tmp_path, capsys):
     """``--bdpt-strategies`` at ``--max-depth 4``: the 13 used strategies of paths of 1..4
     segments (``(1, 1)`` is not used), each image non-negative, the direct view (``s = 0,
     t = 2``) and light tracing's direct light (``s = 2, t = 1``) not black (its mean here is
-    about 0.007, light tracing counted ``LD_SPLAT_SHARE`` times by the default
+    about 0.006, the light subpath counted ``LD_LIGHT_SHARE`` times by the default
     ``ldsampler``), and their sum the image; refused without bdpt and with workers (one line,
     exit status 2)."""
     import glob
@@ -844,13 +851,14 @@ def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, mo
     (|z| > 6): the sequence's 2-D points put on the diagonal (both coordinates the first
     one's) for the integrator's draws, and every camera vertex drawing from the same
     dimensions (``CAMERA_STRIDE = 0``: a dimension reused at each bounce), and light tracing
-    counted ``LD_SPLAT_SHARE`` times in the camera subpath's weights but once in the splats'
-    (:func:`~drpt.render.integrators.bdpt.splat_share`: the weights no longer sum to 1)."""
+    counted ``LD_LIGHT_SHARE`` times in the camera subpath's weights but not in the splats'
+    (their ``k`` without ``m(share)``: the weights no longer sum to 1)."""
     if control == "reused":
         monkeypatch.setattr(B, "CAMERA_STRIDE", 0)
     elif control == "share":
-        splat = B.BDPTIntegrator._splat
-        monkeypatch.setattr(B.BDPTIntegrator, "_splat", lambda self, *a: splat(self, *a[:-1], 1.0))
+        weight = B.connection_weight  # (the splat's call is the one that passes its k)
+        monkeypatch.setattr(B, "connection_weight",
+                            lambda *a: weight(*a[:-1], a[-1] / B.mis(B.LD_LIGHT_SHARE)) if len(a) == 9 else weight(*a))
     elif control:
         from drpt.render.sampler import next_2d
 
