@@ -135,7 +135,12 @@ vertex is joined to one light vertex, the weights count the connections' densiti
 :data:`CONNECTION_CHOICES`: the starting ``dvcm`` and ``dvc`` of both subpaths (the
 terms of the strategies that are not connections) are multiplied by ``k =
 m(CONNECTION_CHOICES)``, and the weights of those strategies divide their other
-subpath's sum by ``k``.
+subpath's sum by ``k``. With a low-discrepancy sampler the weights count every strategy
+with ``s >= 2`` (connections and splats) :data:`LD_LIGHT_SHARE` times against ``s = 0, 1``
+(:attr:`BDPTIntegrator.share`): ``k = m(CONNECTION_CHOICES / share)`` (``m(1 / share)``
+where every pair is joined), and the camera's starting ``dvcm`` and the splats' weights take
+``k m(share)``; any such counts keep weights that sum to 1 (Veach's power heuristic over
+``n_i p_i``).
 
 **Limits.** The light subpath is stored, so paths are at most ``max_depth``
 segments, and at most :data:`MAX_DEPTH`; ``max_depth = -1`` means
@@ -220,9 +225,10 @@ CAMERA_TAIL = 4
 #: samples against the camera subpath's own (``s = 0``, ``s = 1``: :attr:`BDPTIntegrator.share`):
 #: a pixel's camera samples are stratified, so the strategies the camera subpath samples alone
 #: have less variance than their densities say, while the splats that land in a pixel come from
-#: light subpaths stratified over the whole image, their number in it as random as with
-#: independent samples (docs/performance.md, "Light subpaths counted less with a
-#: low-discrepancy sampler")
+#: the light subpaths of every pixel's samples, each sequence stratified over its own pixel's
+#: only, so their number in it is about as random as with independent samples; 0.4 was the
+#: best of 1, 0.5, 0.4, 0.33 and 0.25 on the Cornell box (docs/performance.md, "Light
+#: subpaths counted less with a low-discrepancy sampler")
 LD_LIGHT_SHARE = 0.4
 
 # the worst case fits: the light subpath (its emitter and at most MAX_DEPTH - 1 vertices, 5
