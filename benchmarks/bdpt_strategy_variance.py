@@ -1,8 +1,10 @@
 """Which of bdpt's strategies its error on the seed's glass Cornell box is made of (not a test).
 
-Renders SEEDS seeds of the glass Cornell box (:func:`bdpt_equal_time.seed_glass_cornell`)
-with bdpt at SPP with ``bdpt_strategies`` (each strategy's image, paths of up to DEPTH
-segments; without caustic merging, as the strategy images are), and prints for each
+Renders SEEDS seeds of the glass Cornell box (:func:`bdpt_equal_time.seed_glass_cornell`;
+``--scene``: another of ``bdpt_equal_time.py``'s scenes, all of whose pixels then count as
+"elsewhere") with bdpt on ``--sampler`` (``independent`` unless named) at SPP with
+``bdpt_strategies`` (each strategy's image, paths of up to DEPTH segments; without caustic
+merging, as the strategy images are), and prints for each
 strategy ``(s, t)`` the variance of its image over the seeds as a share of the relMSE
 (per pixel ``var / (ref^2 + 0.01)``, averaged over the channels, summed over the pixels and
 divided by their count), split between the pixels seen through the glass sphere
@@ -13,7 +15,7 @@ image's variance is printed beside them). The reference is ``bdpt_equal_time.py`
 (``--reference`` shares it).
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/bdpt_strategy_variance.py [--seeds 8] [--spp 64]
-[--depth 8] [--reference PATH]
+[--depth 8] [--scene glass] [--sampler independent] [--reference PATH]
 """
 
 from __future__ import annotations
@@ -42,15 +44,18 @@ def main() -> None:
     p.add_argument("--depth", type=int, default=8)
     p.add_argument("--ref-spp", type=int, default=2048)
     p.add_argument("--reference", type=Path, default=None)
+    p.add_argument("--scene", default="glass")
+    p.add_argument("--sampler", default="independent")
     a = p.parse_args()
-    a.size, a.sampler = 64, "independent"
+    a.size = 64
     renderer_module.STRATEGY_SEGMENTS = a.depth  # every strategy of the paths rendered
-    scene = load_scene(eq.scene_files(Path(tempfile.mkdtemp()))["glass"])
-    base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth))
-    ref, _ = eq.reference(scene, base, "glass", a)
+    scene = load_scene(eq.scene_files(Path(tempfile.mkdtemp()))[a.scene])
+    base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth),
+                         sampler=a.sampler)
+    ref, _ = eq.reference(scene, base, a.scene, a)
     r0 = renderer_module.Renderer(scene, replace(base, integrator="bdpt", spp=1, seed=1, bdpt_strategies=True))
     r0.render()  # compiles the kernels
-    mask = gf.glass_mask(r0, a.size)
+    mask = gf.glass_mask(r0, a.size) if a.scene == "glass" else np.zeros((a.size, a.size), bool)
     images, strategies = [], []
     for seed in range(2, a.seeds + 2):
         r = r0.derive(replace(r0.opt, spp=a.spp, seed=seed))

@@ -298,7 +298,8 @@ class Renderer:
                 raise DrptError("the moment integrator cannot wrap bdpt (its light paths have no "
                                 "per-pixel samples)")
             bdpt = BDPTIntegrator(self.scene, EmitterRays(self.scene, self.scene_model), self.camera,
-                                  options.path, merge=options.bdpt_merge)
+                                  options.path, merge=options.bdpt_merge,
+                                  low_discrepancy=uses_ld(options.sampler))
             self.warnings += [w for w in bdpt.warnings if w not in self.warnings]
             return bdpt
         if options.integrator == "whitted":

@@ -135,7 +135,12 @@ vertex is joined to one light vertex, the weights count the connections' densiti
 :data:`CONNECTION_CHOICES`: the starting ``dvcm`` and ``dvc`` of both subpaths (the
 terms of the strategies that are not connections) are multiplied by ``k =
 m(CONNECTION_CHOICES)``, and the weights of those strategies divide their other
-subpath's sum by ``k``.
+subpath's sum by ``k``. With a low-discrepancy sampler the weights count every strategy
+with ``s >= 2`` (connections and splats) :data:`LD_LIGHT_SHARE` times against ``s = 0, 1``
+(:attr:`BDPTIntegrator.share`): ``k = m(CONNECTION_CHOICES / share)`` (``m(1 / share)``
+where every pair is joined), and the camera's starting ``dvcm`` and the splats' weights take
+``k m(share)``; any such counts keep weights that sum to 1 (Veach's power heuristic over
+``n_i p_i``).
 
 **Limits.** The light subpath is stored, so paths are at most ``max_depth``
 segments, and at most :data:`MAX_DEPTH`; ``max_depth = -1`` means
@@ -215,6 +220,17 @@ CAMERA_STRIDE = 32
 
 #: the dimensions of a camera vertex's BSDF lobe, direction and Russian roulette
 CAMERA_TAIL = 4
+
+#: with a low-discrepancy sampler the MIS weights count every strategy that takes vertices
+#: from the light subpath (``s >= 2``: the connections and the ``t = 1`` splats) as this many
+#: samples against the camera subpath's own (``s = 0``, ``s = 1``: :attr:`BDPTIntegrator.share`):
+#: a pixel's camera samples are stratified, so the strategies the camera subpath samples alone
+#: have less variance than their densities say, while the splats that land in a pixel come from
+#: the light subpaths of every pixel's samples, each sequence stratified over its own pixel's
+#: only, so their number in it is about as random as with independent samples; 0.4 was the
+#: best of 1, 0.5, 0.4, 0.33 and 0.25 on the Cornell box (docs/performance.md, "Light
+#: subpaths counted less with a low-discrepancy sampler")
+LD_LIGHT_SHARE = 0.4
 
 # the worst case fits: the light subpath (its emitter and at most MAX_DEPTH - 1 vertices, 5
 # dimensions each, after the pixel's 2) ends before the camera subpath's first dimension,
@@ -529,7 +545,7 @@ class BDPTIntegrator:
     pinhole camera."""
 
     def __init__(self, scene: DeviceScene, rays: EmitterRays, camera: RayCamera, options: PathOptions,
-                 merge: bool = True):
+                 merge: bool = True, low_discrepancy: bool = False):
         refuse_unsupported(scene, camera, "bidirectional path tracing (bdpt)")
         for kind, light in rays.sources:
             if kind not in SUPPORTED_SOURCES or (kind == "spot" and getattr(light, "texture", None) is not None):
@@ -564,9 +580,15 @@ class BDPTIntegrator:
         #: connections saved)
         kinds = getattr(scene.materials, "kinds", ())
         self.one_connection = not any(scene.materials.lobes[kind].DELTA for kind in kinds)
-        #: the MIS weights' factor for connections: ``m(CONNECTION_CHOICES)`` with
-        #: :attr:`one_connection`, else 1 (see :data:`CONNECTION_CHOICES`)
-        self.k = mis(CONNECTION_CHOICES) if self.one_connection else 1.0
+        #: how many samples the MIS weights count each strategy that takes light-subpath
+        #: vertices as, against the camera subpath's own: :data:`LD_LIGHT_SHARE` where the
+        #: camera samples come from a ``low_discrepancy`` sampler, else 1
+        self.share = LD_LIGHT_SHARE if low_discrepancy else 1.0
+        #: the MIS weights' factor for connections: ``m(c / share)``, ``c`` =
+        #: :data:`CONNECTION_CHOICES` with :attr:`one_connection`, else 1 (see
+        #: :data:`CONNECTION_CHOICES`); the splats' weights and the camera subpath's starting
+        #: ``dvcm`` take ``k m(share)`` (the splats counted ``share`` times, as the connections)
+        self.k = mis((CONNECTION_CHOICES if self.one_connection else 1.0) / self.share)
         #: the scene seen by the BSDF evaluations of connections, splats, next-event estimation
         #: and merging (:func:`smooth_view`)
         self.smooth = smooth_view(scene)
@@ -717,7 +739,7 @@ class BDPTIntegrator:
         corr, sides = correction(si, wc)
         pdf_cam = importance * dr.abs(dr.dot(si.ng, wc))
         w = self._weight(connection_weight(pdf_cam, dvcm, dvc, rev, Float(0.0), Float(0.0), Float(0.0),
-                                           Float(0.0), self.k), depth + 1, 1)
+                                           Float(0.0), self.k * mis(self.share)), depth + 1, 1)
         value = beta * f * (corr * importance * w)
         ok &= sides & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))
         value, ok = roulette(value, ok, u_rr, threshold)
@@ -1066,7 +1088,8 @@ class BDPTIntegrator:
         ref = dr.zeros(Array3f, n) + o  # the camera's position (as wide as the loop)
         cos_cam = dr.dot(d, cam.f)
         area = 4.0 * dr.sqrt(dr.squared_norm(cam.r) * dr.squared_norm(cam.u))
-        dvcm = self.k * mis(area * cos_cam * cos_cam * cos_cam)
+        # (k m(share): the splats' count against the connections, CONNECTION_CHOICES's alone)
+        dvcm = self.k * mis(self.share) * mis(area * cos_cam * cos_cam * cos_cam)
         dvc = dr.zeros(Float, n)
         beta = dr.full(Array3f, 1.0, n)
         eta = dr.full(Float, 1.0, n)

@@ -83,10 +83,15 @@ def _pbrt_weights(P, j, k, delta_light, N, choices=1.0):
     return B.mis_weights_reference(fwd, rev, list(P["delta"][j]), P["pnee"][j], delta_light, N, 1.0 / choices)
 
 
-def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False, choices=1.0, k_weights=None):
+def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False, choices=1.0, k_weights=None,
+               share=1.0, share_weights=None):
     """Each strategy's weight from the integrator's functions, per path (Dr.Jit lanes), with
     connections counted as chosen among ``choices`` (the subpaths' starting quantities times
-    ``K = choices^2``, as the integrator's)."""
+    ``K = choices^2``, as the integrator's) and the ``t = 1`` strategy counted ``share``
+    times as often as the connections (:attr:`~drpt.render.integrators.bdpt.BDPTIntegrator.share`:
+    the camera's starting ``dvcm`` times ``m(share)``, the splat's weight's ``k`` too;
+    ``share_weights``: the negative control's factor in the splat's weight)."""
+    SW = share if share_weights is None else share_weights
     K = choices * choices
     KW = K if k_weights is None else k_weights  # (the negative control's: another one in the weights)
     F = {key: (Float(v.astype(np.float32)) if v.ndim == 1 else [Float(v[:, i].astype(np.float32))
@@ -108,7 +113,7 @@ def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False, choices=1.
         return dvcm, dvc
 
     def camera_side(s):  # dvcm, dvc at x_s
-        dvcm, dvc = K * B.mis(N / F["cdir"]), Float(0.0)
+        dvcm, dvc = K * B.mis(N * share / F["cdir"]), Float(0.0)
         for i in range(k - 1, s - 1, -1):
             if i == 0 and infinite:
                 break  # an escaped ray: nothing to convert
@@ -134,7 +139,7 @@ def _recursive(P, k, delta_light, N, wrong_rev=False, infinite=False, choices=1.
             pdf_l = (F["cdir"] / N if s == k else F["b"][s]) * F["cp"][s - 1] / F["d2"][s - 1]
             if s == k:
                 w = B.connection_weight(pdf_l, dvcm_l, dvc_l, F["b"][s - 1], Float(0.0), Float(0.0),
-                                        Float(0.0), Float(0.0), KW)
+                                        Float(0.0), Float(0.0), KW * B.mis(SW))
             else:
                 dvcm_c, dvc_c = camera_side(s)
                 pdf_c = F["a"][s - 1] * F["cm"][s] / F["d2"][s - 1]
@@ -185,6 +190,56 @@ def test_mis_weights_connection_factor_negative_control():
     assert np.abs(_recursive(P, k, False, 64.0, choices=2.0).sum(1) - 1.0).max() < 2e-4
     got = _recursive(P, k, False, 64.0, choices=2.0, k_weights=1.0)
     assert np.abs(got.sum(1) - 1.0).max() > 1e-2
+
+
+@pytest.mark.parametrize("k", [2, 3, 5])
+@pytest.mark.parametrize("light", ["area", "sky"])
+def test_mis_weights_with_the_light_subpath_counted_as_a_share_match_pbrts(k, light):
+    """With a low-discrepancy sampler every strategy with ``s >= 2`` is counted
+    ``LD_LIGHT_SHARE`` times against ``s = 0, 1`` (the integrator's ``k = m(choices /
+    share)`` on both subpaths' starting quantities, ``k m(share)`` on the camera's starting
+    ``dvcm`` and in the splat's weight): the weights are pbrt's with ``N LD_LIGHT_SHARE``
+    light paths and the connections counted ``LD_LIGHT_SHARE / choices`` times, and sum to 1."""
+    infinite = light == "sky"
+    share = B.LD_LIGHT_SHARE
+    assert share != 1.0
+    rng = np.random.default_rng(100 + 10 * k + len(light))
+    n, N = 300, 64.0
+    P = _random_paths(rng, n, k, False, infinite)
+    for choices in (1.0, B.CONNECTION_CHOICES):
+        got = _recursive(P, k, False, N, infinite=infinite, choices=choices / share, share=share)
+        ref = np.array([_pbrt_weights(P, j, k, False, N * share, choices / share) for j in range(n)])
+        possible = ref.sum(1) > 0
+        assert possible.mean() > 0.5
+        assert np.allclose(got[possible].sum(1), 1.0, atol=2e-4), np.abs(got[possible].sum(1) - 1).max()
+        assert np.allclose(got, ref, rtol=1e-3, atol=1e-5), np.abs(got - ref).max()
+        # the weights do move: light tracing's is not the one of N light paths
+        plain = np.array([_pbrt_weights(P, j, k, False, N, choices) for j in range(n)])
+        assert np.abs(got[:, k] - plain[:, k]).max() > 1e-2
+        assert np.abs(got[:, 1] - plain[:, 1]).max() > 1e-2
+
+
+def test_mis_weights_share_negative_control():
+    """The share on the camera's starting ``dvcm`` without its factor in the splat's weight
+    breaks the sum."""
+    k, n = 4, 300
+    P = _random_paths(np.random.default_rng(5), n, k, False)
+    share = B.LD_LIGHT_SHARE
+    got = _recursive(P, k, False, 64.0, choices=1.0 / share, share=share, share_weights=1.0)
+    assert np.abs(got.sum(1) - 1.0).max() > 1e-2
+
+
+@pytest.mark.parametrize("sampler", ["independent", "auto", "ldsampler", "zsobol", "stratified"])
+def test_the_light_share_is_the_low_discrepancy_samplers_only(sampler):
+    """Independent samples keep the power heuristic over the plain densities (their kernels and
+    images unchanged); every low-discrepancy sampler (``auto`` is ``ldsampler`` for bdpt) counts
+    the light subpath's strategies ``LD_LIGHT_SHARE`` times, its connections' factor with it."""
+    scene = load_scene(REPO / "scenes" / "cornellbox" / "cornellbox.txt")
+    r = Renderer(scene, RenderOptions(width=8, height=8, spp=4, integrator="bdpt", sampler=sampler,
+                                      progress=False))
+    share = 1.0 if sampler == "independent" else B.LD_LIGHT_SHARE
+    assert r.integrator.share == share
+    assert r.integrator.k == pytest.approx(B.mis(B.CONNECTION_CHOICES / share))
 
 
 # ------------------------------------------------------------ images
@@ -531,8 +586,10 @@ def test_bdpt_of_an_xml_scene_agrees_with_mitsubas_path(name):
 def test_strategy_images_sum_to_the_image(tmp_path, capsys):
     """``--bdpt-strategies`` at ``--max-depth 4``: the 13 used strategies of paths of 1..4
     segments (``(1, 1)`` is not used), each image non-negative, the direct view (``s = 0,
-    t = 2``) and light tracing's direct light (``s = 2, t = 1``) not black, and their sum
-    the image; refused without bdpt and with workers (one line, exit status 2)."""
+    t = 2``) and light tracing's direct light (``s = 2, t = 1``) not black (its mean here is
+    about 0.006, the light subpath counted ``LD_LIGHT_SHARE`` times by the default
+    ``ldsampler``), and their sum the image; refused without bdpt and with workers (one line,
+    exit status 2)."""
     import glob
 
     from drpt.cli import main
@@ -543,7 +600,7 @@ def test_strategy_images_sum_to_the_image(tmp_path, capsys):
     assert len(files) == 13
     parts = {Path(f).name.split(".")[1]: read_image(f) for f in files}
     assert all(p.min() >= 0.0 for p in parts.values())
-    assert parts["bdpt_d0_s0_t2"].max() > 1.0 and parts["bdpt_d1_s2_t1"].mean() > 0.01
+    assert parts["bdpt_d0_s0_t2"].max() > 1.0 and parts["bdpt_d1_s2_t1"].mean() > 0.002
     total = sum(parts.values())
     assert np.allclose(total, image, rtol=1e-5, atol=1e-6), np.abs(total - image).max()
     scene = str(REPO / "scenes" / "cornellbox" / "cornellbox.txt")
@@ -783,7 +840,8 @@ def test_pilot_sets_a_power_of_two_threshold_near_the_mean(scenes):
 @pytest.mark.parametrize("name,sampler,control", [("cornell", "ldsampler", None), ("cornell", "zsobol", None),
                                                   ("specular", "ldsampler", None),
                                                   ("cornell", "ldsampler", "diagonal"),
-                                                  ("cornell", "ldsampler", "reused")])
+                                                  ("cornell", "ldsampler", "reused"),
+                                                  ("cornell", "ldsampler", "share")])
 def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, monkeypatch, name, sampler, control):
     """bdpt draws from the scene's sampler: the Cornell box with ``ldsampler`` and ``zsobol``,
     and the specular scene (every light vertex joined, in a loop) with ``ldsampler``,
@@ -792,9 +850,15 @@ def test_low_discrepancy_samplers_agree_with_path_tracing(scenes, references, mo
     image's error, so the test is conservative), with no warning. Negative controls fail
     (|z| > 6): the sequence's 2-D points put on the diagonal (both coordinates the first
     one's) for the integrator's draws, and every camera vertex drawing from the same
-    dimensions (``CAMERA_STRIDE = 0``: a dimension reused at each bounce)."""
+    dimensions (``CAMERA_STRIDE = 0``: a dimension reused at each bounce), and light tracing
+    counted ``LD_LIGHT_SHARE`` times in the camera subpath's weights but not in the splats'
+    (their ``k`` without ``m(share)``: the weights no longer sum to 1)."""
     if control == "reused":
         monkeypatch.setattr(B, "CAMERA_STRIDE", 0)
+    elif control == "share":
+        weight = B.connection_weight  # (the splat's call is the one that passes its k)
+        monkeypatch.setattr(B, "connection_weight",
+                            lambda *a: weight(*a[:-1], a[-1] / B.mis(B.LD_LIGHT_SHARE)) if len(a) == 9 else weight(*a))
     elif control:
         from drpt.render.sampler import next_2d
 
