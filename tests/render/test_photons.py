@@ -107,12 +107,12 @@ def _heavy_kernels(build) -> int:
     return sum(1 for k in history if k["type"] == dr.KernelType.JIT and k["operation_count"] > HEAVY)
 
 
-#: the operations of :func:`_expensive`'s chain, well above the grid's own kernels
+#: well below the operations of :func:`_expensive`'s chain, well above the grid's own kernels (42)
 HEAVY = 400
 
 
 def _expensive(n: int):
-    """Unevaluated photon positions, validity and a field behind a chain of about 500
+    """Unevaluated photon positions, validity and a field behind a chain of about 3600
     operations (as bdpt's photon subpaths reach the grid: traced, not evaluated)."""
     x = dr.arange(Float, n) * (1.0 / n)
     for _ in range(100):
