@@ -20,7 +20,12 @@ seed's error is heavy-tailed where caustics are; the ratio of sums is the equal-
 ratio of the N-seed renders). ``--reference PATH`` keeps the references in the folder
 ``PATH`` (``SCENE-SIZE-DEPTH-REFSPP.npz``: the image and its estimated relMSE), rendered
 there the first time and read afterwards, so that runs of two commits are scored against
-the same images.
+the same images. A reference must hold every pixel's rare paths many times over: on the
+caustic scene the camera sees the small light through the glass sphere in a few pixels, a
+hit in about 1 of 250-1000 samples there, which a 2048-spp reference holds 2-8 times on average (its
+values there 0.3-1.2x the converged ones, and a render's hit there then reads as a
+firefly); score that scene against ``--ref-spp 131072`` (docs/performance.md, "The caustic
+scene's reference").
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/bdpt_equal_time.py [--size 64] [--depth 8]
 [--path-spp 256] [--bdpt-spp 64] [--ref-spp 2048] [--scenes cornell,caustic,glass] [--repeat 3]

@@ -22,7 +22,11 @@ same load for both), from one renderer per variant whose kernels are compiled by
 * ``prepare``: the camera vertex's fields and shading frame gathered and built once for
   all its connections (B, :func:`~drpt.render.integrators.bdpt.prepare_both`) against once
   per connection (A, :func:`~drpt.render.integrators.bdpt.eval_both`);
-* ``sampler``: ``--sampler ldsampler`` (B) against ``independent`` (A).
+* ``sampler``: ``--sampler ldsampler`` (B) against ``independent`` (A);
+* ``photons``: caustic merging's photon subpaths traced once per pass (B: the grid evaluates
+  them in the kernel that counts them, :class:`~drpt.render.photons.PhotonGrid`) against twice
+  (A: their validity evaluated in a kernel of its own first, which traces them, then the grid,
+  which traces them again, as the grid's two kernels each did before).
 
 Prints per part the CPU seconds (the process's, summed over the seeds; steadier than wall
 seconds on a loaded machine), the relMSE (summed, against the reference of
@@ -30,12 +34,14 @@ seconds on a loaded machine), the relMSE (summed, against the reference of
 and of their product (the error at equal time: below 1, B is better), and the median over the
 seeds of B / A of one seed's seconds (the two renders of a seed run one after the other) and of
 its error (where a rare firefly decides a seed's error, as on the caustic scene, the sums are a
-lottery and the median is the typical seed). Images are the same
-for ``variance``, ``reverse``, ``smooth`` and ``prepare`` (checked) and equal in expectation for the others.
+lottery and the median is the typical seed). Images are the same for ``variance``,
+``reverse``, ``smooth`` and ``prepare`` (checked) and equal in expectation for the others
+(``photons``: the same photons, but A's counting kernel may give a bucket's photons other
+places, so merging sums them in another order: equal up to rounding).
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/bdpt_parts_ab.py [--scenes cornell,glass]
-[--parts variance,occluded,roulette,reverse,smooth,prepare,sampler] [--size 64] [--depth 8] [--spp 64] [--ref-spp 2048]
-[--seeds 4] [--reference PATH]
+[--parts variance,occluded,roulette,reverse,smooth,prepare,sampler,photons] [--size 64] [--depth 8]
+[--spp 64] [--ref-spp 2048] [--seeds 4] [--reference PATH]
 """
 
 from __future__ import annotations
@@ -52,7 +58,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bdpt_equal_time as eq  # noqa: E402 (the sibling benchmark: its scenes and references)
 
-PARTS = ("variance", "occluded", "roulette", "reverse", "smooth", "prepare", "sampler")
+PARTS = ("variance", "occluded", "roulette", "reverse", "smooth", "prepare", "sampler", "photons")
 SAME_IMAGES = ("variance", "reverse", "smooth", "prepare")  # the parts whose images are compared
 
 
@@ -106,6 +112,22 @@ def _whole_table(scene):
     return scene
 
 
+def _traced_twice():
+    """A :class:`~drpt.render.photons.PhotonGrid` whose photons are traced twice: their
+    validity evaluated alone first (a kernel that traces the photon subpaths), then the grid
+    (which traces them again)."""
+    import drjit as dr
+
+    from drpt.render.photons import PhotonGrid
+
+    class TracedTwice(PhotonGrid):
+        def __init__(self, p, valid, radius, fields=None):
+            dr.eval(valid)
+            super().__init__(p, valid, radius, fields)
+
+    return TracedTwice
+
+
 def main() -> None:
     import numpy as np
 
@@ -130,7 +152,8 @@ def main() -> None:
     patches = {"occluded": [("occluded_where", _masked_occluded)], "roulette": [("light_survival", _old_survival)],
                "reverse": [("eval_both", _two_evaluations), ("sample_both", _sample_then_evaluate),
                            ("prepare_both", _prepared_two_evaluations)],
-               "smooth": [("smooth_view", _whole_table)], "prepare": [("prepare_both", _per_connection)]}
+               "smooth": [("smooth_view", _whole_table)], "prepare": [("prepare_both", _per_connection)],
+               "photons": [("PhotonGrid", _traced_twice())]}
     for name in a.scenes.split(","):
         scene = load_scene(files[name])
         base = RenderOptions(width=a.size, height=a.size, progress=False, path=PathOptions(max_depth=a.depth),

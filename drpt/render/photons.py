@@ -4,7 +4,9 @@
 stores) sorted by the cell of a uniform grid of cell size ``2 r`` that each falls in, a cell
 found through a hash table of ``T`` buckets (a power of 2): a counting sort, the photons'
 buckets counted with ``dr.scatter_inc`` (whose old value is each photon's place in its
-bucket), the counts' exclusive prefix sum giving each bucket's start. Cells that share a
+bucket), the counts' exclusive prefix sum giving each bucket's start. The photons' arrays
+are evaluated in the kernel that counts them, so whatever computed them (bdpt's photon
+subpaths) runs once, not again in the kernel that writes their sorted copies. Cells that share a
 bucket share its range; a query tells them apart by the cell each photon lies in.
 
 :meth:`PhotonGrid.gather` visits, per lane, the photons within distance ``r`` of a point,
@@ -57,7 +59,9 @@ class PhotonGrid:
         h = bucket(cell_of(p, self.inv_cell), self.mask)
         counts = dr.zeros(UInt32, self.table)
         slot = dr.scatter_inc(counts, h, valid)
-        dr.eval(counts, slot)
+        # the photons and their fields with the counts, in one kernel: evaluated later, the
+        # sorted copies below would trace the caller's photon subpaths again
+        dr.eval(counts, slot, p, valid, fields or {})
         self.size = counts
         self.start = dr.prefix_sum(counts)  # (exclusive)
         dst = dr.gather(UInt32, self.start, h, valid) + slot

@@ -94,3 +94,48 @@ def test_the_negative_control_a_wrong_radius_fails():
     # the sort was by the old cells: the buckets no longer match either
     got = query(grid, grid.fields["id"], queries)[:, 0]
     assert (got < want).any()
+
+
+def _heavy_kernels(build) -> int:
+    """How many kernels ``build()`` launches that hold the inputs' computation (more than
+    ``HEAVY`` operations), from Dr.Jit's kernel history (load-free)."""
+    dr.eval()  # (nothing queued from before)
+    dr.kernel_history()  # (cleared)
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        build()
+        history = dr.kernel_history()
+    return sum(1 for k in history if k["type"] == dr.KernelType.JIT and k["operation_count"] > HEAVY)
+
+
+#: well below the operations of :func:`_expensive`'s chain, well above the grid's own kernels (42)
+HEAVY = 400
+
+
+def _expensive(n: int):
+    """Unevaluated photon positions, validity and a field behind a chain of about 3600
+    operations (as bdpt's photon subpaths reach the grid: traced, not evaluated)."""
+    x = dr.arange(Float, n) * (1.0 / n)
+    for _ in range(100):
+        x = dr.fma(dr.sin(x), 0.5, x * 0.25) + 0.125
+    return Array3f(x, x * 2.0, -x), x > 0.3, {"v": x + 1.0}
+
+
+def test_the_photons_are_computed_once():
+    """The grid evaluates its photons' positions, validity and fields in the kernel that counts
+    them, so a chain that computed them (bdpt's photon subpaths) runs in one kernel, not
+    again in the kernel that writes the sorted copies. Control: the same chain evaluated in
+    two steps (the counts first, the fields after) is counted twice."""
+    n = 1000
+
+    def grid():
+        p, valid, fields = _expensive(n)
+        PhotonGrid(p, valid, 0.05, fields)
+
+    assert _heavy_kernels(grid) == 1
+
+    def two_steps():
+        p, valid, fields = _expensive(n)
+        dr.eval(dr.sum(UInt32(valid)))
+        dr.eval(p, fields)
+
+    assert _heavy_kernels(two_steps) == 2
