@@ -210,6 +210,8 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--no-corpus", "--mitsuba-sampler",  # (benchmarks/equal_time_vs_mitsuba.py)
                   "--scale", "--grid",  # (benchmarks/variance_vs_mitsuba.py)
                   "--all-textures",  # (benchmarks/kernel_ops.py)
+                  "--variants", "--first",  # (benchmarks/bdpt_ld_share.py)
+                  "--runs",  # (benchmarks/small_tables_ab.py)
                   "--integrators",  # (benchmarks/far_light_paths.py)
                   "--seconds", "--renderer",  # (benchmarks/jit_hotspots.py)
                   "--agree",  # (benchmarks/env_compensation.py)
