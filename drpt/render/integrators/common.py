@@ -39,6 +39,12 @@ class ShadowQuery:
         ok = self.ok & ~scene.occluded(self.o, self.d, self.tmax, self.ok, self.coherent)
         return dr.select(ok, self.value, 0.0)
 
+    def resolve_blocked(self, scene) -> tuple[Array3f, Bool]:
+        """``(estimate, blocked)``: :meth:`resolve`'s estimate and the lanes of ``ok`` whose
+        segment is occluded (where a caller follows the ray on)."""
+        blocked = self.ok & scene.occluded(self.o, self.d, self.tmax, self.ok, self.coherent)
+        return dr.select(self.ok & ~blocked, self.value, 0.0), blocked
+
 
 def shadow_segment(o: Array3f, es) -> tuple[Array3f, Float]:
     """The shadow ray from ``o`` toward the emitter sample ``es``
@@ -80,9 +86,16 @@ class DirectLight:
         the BSDF evaluated and sampled in one material dispatch
         (:meth:`~drpt.render.scene.DeviceScene.eval_sample_bsdf`): ``(query, wo, bs)``,
         the same values as the two separate calls."""
+        return self.sample_and_query(si, u_sel, u2, u_lobe, u_bsdf, active, mis, coherent)[3:]
+
+    def sample_and_query(self, si, u_sel: Float, u2: Array2f, u_lobe: Float, u_bsdf: Array2f,
+                         active: Bool, mis: bool, coherent: Bool | bool = False):
+        """:meth:`emitter_query_sample` with the parts it is made of: ``(es, f, pdf_b,
+        query, wo, bs)``, the emitter sample, the BSDF's ``f * |cos|`` and density toward
+        it, then the query and the BSDF sample."""
         es = self.scene.sample_emitter(si, u_sel, u2, active)
         f, pdf_b, wo, bs = self.scene.eval_sample_bsdf(si, es.wo, u_lobe, u_bsdf)
-        return self._query(si, es, f, pdf_b, mis, coherent), wo, bs
+        return es, f, pdf_b, self._query(si, es, f, pdf_b, mis, coherent), wo, bs
 
     def _query(self, si, es, f: Array3f, pdf_b: Float, mis: bool, coherent: Bool | bool) -> ShadowQuery:
         """The :class:`ShadowQuery` of emitter sample ``es`` at ``si`` given the BSDF's

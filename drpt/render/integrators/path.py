@@ -301,14 +301,15 @@ class PathIntegrator:
                       dr.zeros(Float, n), dr.zeros(Bool, n))
         near = s.active & hit.valid
         si = scene.interaction(s.o, s.d, hit)
+
+        def before_emitter():  # (where the ray crosses the emitter's plane, less p_error)
+            return si.t - si.p_error / dr.maximum(dr.abs(dr.dot(si.ng, s.d)), 1e-30)
+
         if not sky:
-            cos = dr.abs(dr.dot(si.ng, s.d))
-            tmax = si.t - si.p_error / dr.maximum(cos, 1e-30)
-            si.valid = near & ~scene.occluded(s.o, s.d, tmax, near)
+            si.valid = near & ~scene.occluded(s.o, s.d, before_emitter(), near)
             return (add_emission(scene, self.opt, si, s, L, s.active),)
         if scene.emissive is not None:
-            cos = dr.abs(dr.dot(si.ng, s.d))
-            tmax = dr.select(near, si.t - si.p_error / dr.maximum(cos, 1e-30), dr.largest(Float))
+            tmax = dr.select(near, before_emitter(), dr.largest(Float))
         else:
             tmax = dr.full(Float, dr.largest(Float), n)
         blocked = scene.occluded(s.o, s.d, tmax, s.active, coherent=self.pixel_coherent)
@@ -533,11 +534,9 @@ class PathIntegrator:
                 q, wo, bs = self.direct.emitter_query_sample(si, u_sel, u_light, u_lobe, u_bsdf, lanes,
                                                              mis=True, coherent=coherent)
                 return L + beta * q.resolve(scene), wo, bs
-            es = scene.sample_emitter(si, u_sel, u_light, lanes)
-            f, pdf_b, wo, bs = scene.eval_sample_bsdf(si, es.wo, u_lobe, u_bsdf)
-            q = self.direct._query(si, es, f, pdf_b, True, coherent)
-            blocked = q.ok & scene.occluded(q.o, q.d, q.tmax, q.ok, q.coherent)
-            seen = dr.select(q.ok & ~blocked, q.value, 0.0)
+            es, f, pdf_b, q, wo, bs = self.direct.sample_and_query(si, u_sel, u_light, u_lobe, u_bsdf, lanes,
+                                                                   mis=True, coherent=coherent)
+            seen, blocked = q.resolve_blocked(scene)
             glassy = blocked & scene.glass_boxes.reach(q.o, es.wo)  # (the rays that may meet glass)
 
             def through(L):
