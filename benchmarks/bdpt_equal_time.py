@@ -5,7 +5,8 @@ For each scene (the bundled Cornell box; the caustic scene of
 spherical area light, with a back wall; and the seed's Cornell box with a glass sphere,
 authored here from its report, :func:`seed_glass_cornell`), both
 integrators render SIZE x SIZE at their spp after a warm-up render of 1 spp that
-compiles the kernels; a bdpt render of REF_SPP spp and another seed is the reference.
+compiles the kernels; a bdpt render of REF_SPP spp and another seed is the reference
+(by default 16384 spp for the Cornell boxes and 131072 for the caustic scene, below).
 Prints per integrator the seconds (the fastest of REPEAT renders; also the process's CPU
 seconds, steadier on a loaded machine), the relMSE against the reference (minus the
 reference's own estimated relMSE) and relMSE x seconds (lower is better: the relMSE at
@@ -24,12 +25,13 @@ the same images. A reference must hold every pixel's rare paths many times over:
 caustic scene the camera sees the small light through the glass sphere in a few pixels, a
 hit in about 1 of 250-1000 samples there, which a 2048-spp reference holds 2-8 times on average (its
 values there 0.3-1.2x the converged ones, and a render's hit there then reads as a
-firefly); score that scene against ``--ref-spp 131072`` (docs/performance.md, "The caustic
-scene's reference").
+firefly), so that scene's default reference has 131072 spp (docs/performance.md, "The caustic
+scene's reference"; about 5 minutes on 2 cores: keep it with ``--reference``). ``--ref-spp``
+sets every scene's.
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/bdpt_equal_time.py [--size 64] [--depth 8]
-[--path-spp 256] [--bdpt-spp 64] [--ref-spp 2048] [--scenes cornell,caustic,glass] [--repeat 3]
-[--sampler independent] [--path-sampler S] [--bdpt-sampler S] [--seeds 1] [--reference PATH]
+[--path-spp 256] [--bdpt-spp 64] [--ref-spp N] [--scenes cornell,caustic,glass] [--repeat 3]
+[--sampler auto] [--path-sampler S] [--bdpt-sampler S] [--seeds 1] [--reference PATH]
 """
 
 from __future__ import annotations
@@ -90,6 +92,9 @@ def seed_glass_cornell() -> str:
         f"Group {{ numObjects {count}", *body, "}", ""])
 
 
+REF_SPP = {"cornell": 16384, "glass": 16384, "caustic": 131072}  # the references' default spp
+
+
 def scene_files(folder: Path) -> dict[str, Path]:
     """The scene files by ``--scenes`` name: the bundled Cornell box, and the caustic scene and
     the glass Cornell box written into ``folder``."""
@@ -111,10 +116,11 @@ def main() -> None:
     p.add_argument("--depth", type=int, default=8)
     p.add_argument("--path-spp", type=int, default=256)
     p.add_argument("--bdpt-spp", type=int, default=64)
-    p.add_argument("--ref-spp", type=int, default=2048)
+    p.add_argument("--ref-spp", type=int, default=None,
+                   help="the references' spp (default: REF_SPP, per scene)")
     p.add_argument("--scenes", default="cornell,caustic,glass")
     p.add_argument("--repeat", type=int, default=3, help="timed renders; the fastest counts")
-    p.add_argument("--sampler", default="independent", help="both integrators' --sampler")
+    p.add_argument("--sampler", default="auto", help="both integrators' --sampler (default: each one's own)")
     p.add_argument("--path-sampler", default=None, help="the path tracer's --sampler (default: --sampler)")
     p.add_argument("--bdpt-sampler", default=None, help="bdpt's --sampler (default: --sampler)")
     p.add_argument("--seeds", type=int, default=1, help="renders of seeds 2 .. N + 1 each, in turns")
@@ -155,11 +161,16 @@ def main() -> None:
                   f"relMSE (mean) {err / a.seeds:.4g}")
         print(f"{name}: bdpt / path relMSE at equal time {rows['bdpt'][0] / rows['path'][0]:.3f} "
               f"(by CPU seconds {rows['bdpt'][1] / rows['path'][1]:.3f}; {a.seeds} seeds; reference: bdpt "
-              f"{a.ref_spp} spp, its estimated relMSE {ref_err:.3g})", flush=True)
+              f"{ref_spp(name, a)} spp, its estimated relMSE {ref_err:.3g})", flush=True)
+
+
+def ref_spp(name: str, a) -> int:
+    """The reference's spp: ``--ref-spp`` where given, else the scene's :data:`REF_SPP`."""
+    return a.ref_spp if a.ref_spp is not None else REF_SPP[name]
 
 
 def reference(scene, base, name: str, a) -> tuple:
-    """``(image, estimated relMSE)`` of the reference: a bdpt render of ``a.ref_spp`` spp,
+    """``(image, estimated relMSE)`` of the reference: a bdpt render of :func:`ref_spp` spp,
     seed 99, ``independent``, without caustic merging, with its variance; kept in (or read from) the folder
     ``a.reference`` when given."""
     import numpy as np
@@ -168,11 +179,11 @@ def reference(scene, base, name: str, a) -> tuple:
 
     path = None
     if a.reference is not None:
-        path = a.reference / f"{name}-{a.size}-{a.depth}-{a.ref_spp}.npz"
+        path = a.reference / f"{name}-{a.size}-{a.depth}-{ref_spp(name, a)}.npz"
         if path.exists():
             data = np.load(path)
             return data["image"], float(data["rel_mse"])
-    opt = replace(base, integrator="bdpt", spp=a.ref_spp, seed=99, sampler="independent")
+    opt = replace(base, integrator="bdpt", spp=ref_spp(name, a), seed=99, sampler="independent")
     names = {f.name for f in dataclasses.fields(opt)}
     if "variance" in names:
         opt = replace(opt, variance=True)  # (its estimated relMSE is subtracted)
