@@ -167,8 +167,10 @@ def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int,
     Two ways compute these very sums, bit for bit: each receiving pixel's loop over its
     source pixels' samples (:func:`_gather`: every sample read once per pixel it reaches,
     ``(2R + 1)^2`` times, with its weights along each axis computed beforehand,
-    :func:`_axis_weights`), or, where a pass has :data:`SOURCE_MIN_SAMPLES` or more
-    samples per pixel and the partial sums fit :data:`SOURCE_PARTIALS_BYTES`
+    :func:`_axis_weights`; where a pass has :data:`PACKET_SAMPLES` samples per pixel,
+    :func:`_gather_packets`, which reads a source pixel's samples as one record), or, where a
+    pass has :data:`SOURCE_MIN_SAMPLES` or more samples per pixel and the partial sums fit
+    :data:`SOURCE_PARTIALS_BYTES`
     (:func:`_source_groups`), each source pixel's loop over its own samples, which weights
     each sample once for all the pixels it reaches and keeps one partial sum per receiving
     offset (:func:`_by_source`); the receiving pixels then add their neighbours' partial sums."""
@@ -177,7 +179,8 @@ def gather_splats(flt: PixelFilter, width: int, height: int, r0: int, rows: int,
     def run(Partial):
         groups = _source_groups(flt, width, rows, k, moment, Partial)
         if groups is None:
-            return _gather(flt, width, height, r0, rows, k, px, py, L, ok, moment, Partial, weights)
+            gather = _gather_packets if k in PACKET_SAMPLES else _gather
+            return gather(flt, width, height, r0, rows, k, px, py, L, ok, moment, Partial, weights)
         return _by_source(flt, width, height, r0, rows, k, px, py, L, ok, moment, Partial, groups)
 
     out = run(Float)
@@ -378,7 +381,9 @@ def _axis_weights(flt: PixelFilter, width: int, r0: int, k: int, px: Float, py: 
     and rows it reaches, for :func:`_gather`: ``w(c_e - x)`` with ``c_e`` the center of column
     ``sx + e`` (``e`` in ``-R .. R``, ``sx`` the sample's own column), 0 where the sample does
     not count (not ``ok``: its weight ``w_x w_y`` is then 0), and ``w(c_e - y)`` along ``y``.
-    Two arrays, sample-major (element ``s (2R + 1) + e + R``), evaluated: each sample weighted
+    Two arrays, offset-major (element ``(e + R) n + s`` of ``n`` samples: for each offset the
+    samples in lane order, so that a pixel's ``k`` samples' weights at one offset are one
+    record of ``k``, :func:`_gather_packets`), evaluated: each sample weighted
     once per axis and offset, not for every receiving pixel, and without a gather of ``ok``
     there (a gather of bytes, which the CPU has no instruction for). ``sx`` and ``sy``, the
     samples' pixel columns and rows (``r0`` included), where the caller has them (else from
@@ -391,9 +396,9 @@ def _axis_weights(flt: PixelFilter, width: int, r0: int, k: int, px: Float, py: 
         sx = Int32(p % width)
         sy = Int32(p // width) + r0
     # the receiving pixels' centers, as _source_partials computes them
-    wxs = dr.ravel(ArrayXf(*[dr.select(ok, filter_weight(flt, (Float(sx + e) + 0.5) - px), 0.0)
-                             for e in range(-R, R + 1)]))
-    wys = dr.ravel(ArrayXf(*[filter_weight(flt, (Float(sy + e) + 0.5) - py) for e in range(-R, R + 1)]))
+    wxs = dr.concat([dr.select(ok, filter_weight(flt, (Float(sx + e) + 0.5) - px), 0.0)
+                     for e in range(-R, R + 1)])
+    wys = dr.concat([filter_weight(flt, (Float(sy + e) + 0.5) - py) for e in range(-R, R + 1)])
     if evaluate:
         dr.eval(wxs, wys)
     return wxs, wys
@@ -418,6 +423,7 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
     oy = Int32(out // W) + y0
     side = 2 * R + 1
     kk = dr.opaque(UInt32, k)
+    ns = dr.opaque(UInt32, rows * W * k)  # the pass's samples: the weights' offsets' stride
     sources = dr.opaque(UInt32, side * side)
     channels = _channels(moment)
     wxs, wys = _axis_weights(flt, width, r0, k, px, py, ok) if weights is None else weights
@@ -426,7 +432,7 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
     src = dr.zeros(UInt32, n)
     # the samples and the counts are read, not changed, and of another width than the loops:
     # outside their state (as loop variables they would make Dr.Jit record each loop again)
-    while dr.hint(src < sources, exclude=[wxs, wys, L, kk, sources]):
+    while dr.hint(src < sources, exclude=[wxs, wys, L, kk, ns, sources]):
         sx = ox + Int32(src % side) - R
         sy = oy + Int32(src // side) - R
         inside = (sx >= 0) & (sx < W) & (sy >= r0) & (sy < r0 + rows)
@@ -436,14 +442,69 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
         ey = UInt32(2 * R) - src // side
         part = [dr.zeros(Partial, n) for _ in range(channels)]
         j = dr.zeros(UInt32, n)
-        while dr.hint(inside & (j < kk), exclude=[wxs, wys, L, kk]):
+        while dr.hint(inside & (j < kk), exclude=[wxs, wys, L, kk, ns]):
             lane = first + j
             # (a sample that does not count has weight 0, and finite radiance: its terms are 0)
-            w = Partial(dr.gather(Float, wxs, lane * side + ex) * dr.gather(Float, wys, lane * side + ey))
+            w = Partial(dr.gather(Float, wxs, ex * ns + lane) * dr.gather(Float, wys, ey * ns + lane))
             v = dr.gather(Array3f, L, lane)
             terms = _terms(w, Partial(v.x), Partial(v.y), Partial(v.z), moment)
             part = [part[i] + terms[i] for i in range(channels)]
             j += 1
+        total = [total[i] + Float64(part[i]) for i in range(channels)]
+        src += 1
+    return (y0, *_interleaved(total, y1 - y0, W))
+
+
+#: the samples per pixel of a pass for which :func:`gather_splats` (per receiving pixel) reads a
+#: source pixel's samples as records (:func:`_gather_packets`): Dr.Jit's packet gathers take a
+#: power of two, and :func:`_gather_packets` traces its ``k`` samples' terms one after another
+PACKET_SAMPLES = (2, 4, 8)
+
+
+@loops_once
+@dr.syntax
+def _gather_packets(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: int,
+                    px: Float, py: Float, L: Array3f, ok: Bool, moment: bool, Partial: type,
+                    weights: tuple[Float, Float] | None = None):
+    """:func:`_gather`'s sums, bit for bit, for ``k`` in :data:`PACKET_SAMPLES`: the same loop
+    over the source pixels, but a source pixel's ``k`` samples are adjacent in each array (its
+    radiance's channels, and at each offset its weights along each axis, :func:`_axis_weights`),
+    so each is read as one record of ``k`` (Dr.Jit's packet gather: aligned loads and a
+    transpose, where :func:`_gather`'s inner loop runs ``k`` gathers of each), and the samples'
+    terms are added in the same order, traced one after another."""
+    W = width
+    R = _reach(flt)
+    y0, y1 = max(0, r0 - R), min(height, r0 + rows + R)
+    n = (y1 - y0) * W
+    out = dr.arange(UInt32, n)
+    ox = Int32(out % W)
+    oy = Int32(out // W) + y0
+    side = 2 * R + 1
+    npix = dr.opaque(UInt32, rows * W)  # the pass's source pixels: records of k samples
+    sources = dr.opaque(UInt32, side * side)
+    channels = _channels(moment)
+    wxs, wys = _axis_weights(flt, width, r0, k, px, py, ok) if weights is None else weights
+
+    total = [dr.zeros(Float64, n) for _ in range(channels)]
+    src = dr.zeros(UInt32, n)
+    # (the samples and the counts are read, not changed: outside the loop's state, as _gather's)
+    while dr.hint(src < sources, exclude=[wxs, wys, L, npix, sources]):
+        sx = ox + Int32(src % side) - R
+        sy = oy + Int32(src // side) - R
+        inside = (sx >= 0) & (sx < W) & (sy >= r0) & (sy < r0 + rows)
+        pixel = dr.select(inside, UInt32((sy - r0) * W + sx), 0)
+        ex = UInt32(2 * R) - src % side
+        ey = UInt32(2 * R) - src // side
+        # (outside the pass the records read 0: terms of 0, as _gather's loop adds none)
+        wx = dr.gather(ArrayXf, wxs, ex * npix + pixel, inside, shape=(k, n))
+        wy = dr.gather(ArrayXf, wys, ey * npix + pixel, inside, shape=(k, n))
+        r_ = dr.gather(ArrayXf, L.x, pixel, inside, shape=(k, n))
+        g_ = dr.gather(ArrayXf, L.y, pixel, inside, shape=(k, n))
+        b_ = dr.gather(ArrayXf, L.z, pixel, inside, shape=(k, n))
+        part = [dr.zeros(Partial, n) for _ in range(channels)]
+        for j in range(k):
+            terms = _terms(Partial(wx[j] * wy[j]), Partial(r_[j]), Partial(g_[j]), Partial(b_[j]), moment)
+            part = [part[i] + terms[i] for i in range(channels)]
         total = [total[i] + Float64(part[i]) for i in range(channels)]
         src += 1
     return (y0, *_interleaved(total, y1 - y0, W))

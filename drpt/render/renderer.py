@@ -732,7 +732,9 @@ class Renderer:
         splatting film, or a splatting chunk of one pass; no light tracing or AOVs),
         the passes' sums are added straight into the merge's sums, the very float64
         additions that adding the chunk's sums would make (each pixel's chunk sum is
-        one pass's), without the chunk's own full-image arrays; the result is then
+        one pass's), without the chunk's own full-image arrays; a merge that holds no
+        sums yet takes a splatting pass's arrays as they are (:func:`_takes`: the same
+        bits as their additions into its zeros). The result is then
         :attr:`ChunkResult.direct`. Until it is pushed, ``into.dirty`` is set."""
         t0 = time.perf_counter()
         chunks = self.chunks
@@ -786,11 +788,18 @@ class Renderer:
             _s0, k, r0, rows = plan[i]
             p = self.render_pass(i)
             hi = p.lo + p.sum.shape[0]
+            empty = into.next == 0 and not into.dirty  # (the merge's sums are still zeros)
             into.dirty = True
-            into.sum[p.lo:hi] += p.sum
-            into.sumsq[p.lo:hi] += p.sumsq
-            if p.weight is not None:
-                into.weight[p.lo:hi] += p.weight
+            if empty and self.splatting and _takes(into, p):
+                # a splatting pass's gathered float64 sums start from +0.0, so none is -0.0
+                # and each is 0.0 + itself bit for bit: the merge takes the arrays (no
+                # image-sized additions into fresh pages)
+                into.sum, into.sumsq, into.weight = p.sum, p.sumsq, p.weight
+            else:
+                into.sum[p.lo:hi] += p.sum
+                into.sumsq[p.lo:hi] += p.sumsq
+                if p.weight is not None:
+                    into.weight[p.lo:hi] += p.weight
             nonfinite += p.nonfinite
             if on_pass is not None:
                 on_pass((_s0 - chunks.spp_before(index)) * H * W + (r0 + rows) * W * k)
@@ -830,6 +839,16 @@ class Renderer:
                         break
         return finish(merged, time.perf_counter() - t0, self.build_seconds, self.light_tracing, consume=True,
                       variance=self.opt.light_variance)
+
+
+def _takes(into: ChunkMerge, p: PassSums) -> bool:
+    """Whether the merge ``into`` can take the pass's arrays as its own sums: they cover the
+    whole image in the merge's shapes, float64 and writable (:func:`finish` divides in them)."""
+    pairs = ((into.sum, p.sum), (into.sumsq, p.sumsq), (into.weight, p.weight))
+    return p.lo == 0 and all(
+        (a is None) == (b is None) and (a is None or (a.shape == b.shape and b.dtype == np.float64
+                                                       and b.flags.writeable))
+        for a, b in pairs)
 
 
 def finish(merged: ChunkMerge, seconds: float, build_seconds: float,

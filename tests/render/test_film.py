@@ -172,3 +172,54 @@ def test_lane_sums_add_each_pixels_lanes_in_lane_order(m, wide):
         for j in range(m - 2, -1, -1):
             back = back + blocks[..., j]
         assert not np.array_equal(got, back)
+
+
+@pytest.mark.parametrize("k", film.PACKET_SAMPLES)
+@pytest.mark.parametrize("flt", [PixelFilter("gaussian", 0.5), PixelFilter("tent", 1.5)])
+def test_packet_gather_sums_are_the_loops(k, flt):
+    """:func:`film._gather_packets` (a source pixel's ``k`` samples read as one record) gives
+    :func:`_gather`'s sums bit for bit, in float32 and float64, on a band of rows (``r0`` 2),
+    with the weights computed by the film and given by :func:`film.splat_weights`, and
+    :func:`gather_splats` takes it for these ``k``. Negative controls: one sample's radiance
+    changed in its last bits changes the sums, and so do weights laid out sample-major (each
+    sample's offsets adjacent), which the records would read across samples."""
+    r0, n = 2, W * H * k
+    rng = PCG32(n, initstate=7)
+    pix = dr.arange(UInt32, n) // k
+    col, row = pix % W, pix // W + r0
+    x = Float(col) + rng.next_float32()
+    y = Float(row) + rng.next_float32()
+    L = Array3f(rng.next_float32(), rng.next_float32() * 2.0, 1.0)
+    ok = rng.next_float32() < 0.9
+    weights = film.splat_weights(flt, W, H, k, True, col, row, x, y, ok)
+    for Partial in (Float, Float64):
+        for moment in (False, True):
+            want = _gather(flt, W, H + 4, r0, H, k, x, y, L, ok, moment, Partial)
+            for given in (None, weights if moment else None):
+                got = film._gather_packets(flt, W, H + 4, r0, H, k, x, y, L, ok, moment, Partial, given)
+                assert got[0] == want[0] and all(np.array_equal(a, b) for a, b in zip(got[1:], want[1:]))
+    calls = []
+    real = film._gather_packets
+
+    def spy(*a):
+        calls.append(a[5])
+        return real(*a)
+
+    film._gather_packets = spy
+    try:
+        gather_splats(flt, W, H + 4, r0, H, k, x, y, L, ok, moment=True)
+    finally:
+        film._gather_packets = real
+    assert calls == [k]
+    want = _gather(flt, W, H + 4, r0, H, k, x, y, L, ok, True, Float)
+    bumped = Array3f(L)
+    counts = int(np.flatnonzero(ok.numpy())[3])  # a sample that counts
+    bumped.x = dr.select(dr.arange(UInt32, n) == counts, L.x * (1.0 + 2.0**-22), L.x)
+    off = film._gather_packets(flt, W, H + 4, r0, H, k, x, y, bumped, ok, True, Float)
+    assert not np.array_equal(off[1], want[1])
+    side = 2 * film._reach(flt) + 1
+    # the same values, each sample's offsets adjacent (element s side + e)
+    swapped = tuple(dr.gather(Float, w, (dr.arange(UInt32, n * side) % side) * n + dr.arange(UInt32, n * side) // side)
+                    for w in weights)
+    off = film._gather_packets(flt, W, H + 4, r0, H, k, x, y, L, ok, True, Float, swapped)
+    assert not np.array_equal(off[1], want[1])

@@ -118,6 +118,41 @@ def test_splatted_chunks_added_into_the_merge_are_the_merged_chunks(cornell, chu
     assert not any(np.array_equal(a, b) for a, b in zip(arrays(other), arrays(direct)))
 
 
+
+def test_a_splatting_merge_takes_its_first_pass_sums(cornell):
+    """A splatting render of one chunk of one pass: the merge takes the pass's float64 arrays as
+    its sums (no additions into its zeros: ``0.0 + x`` is ``x`` bit for bit, the gathered sums
+    starting from +0.0 are never -0.0), and the image is that of the chunk's own arrays merged
+    (the test above compares the sums); ``_takes`` refuses a pass that does not cover the
+    image, float32 sums, read-only ones and other shapes. Negative control: ``0.0 + -0.0`` is
+    +0.0, the one value whose bits a taken array would not share with the sum."""
+    from drpt.options import RenderOptions
+    from drpt.render import renderer
+    from drpt.render.chunks import ChunkMerge
+    from drpt.scene import load_scene
+
+    r = renderer.Renderer(load_scene(cornell), RenderOptions(
+        width=9, height=7, spp=4, seed=3, moment=True, filter="gaussian", progress=False))
+    m = ChunkMerge(r.chunks)
+    zeros = m.sum
+    m.push(r.render_chunk(0, into=m))
+    assert m.sum is not zeros and not m.sum.flags.owndata and m.sum.dtype == np.float64
+    apart = ChunkMerge(r.chunks)
+    apart.push(r.render_chunk(0))
+    assert all(np.array_equal(a, b) for a, b in zip((m.sum, m.sumsq, m.weight),
+                                                    (apart.sum, apart.sumsq, apart.weight)))
+    fresh = ChunkMerge(r.chunks)
+    fresh.sumsq, fresh.weight = np.zeros((7, 9, 9)), np.zeros((7, 9, 2))
+    p = renderer.PassSums(0, m.sum, m.sumsq, 0, m.weight)
+    assert renderer._takes(fresh, p)
+    assert not renderer._takes(fresh, renderer.PassSums(1, m.sum, m.sumsq, 0, m.weight))
+    assert not renderer._takes(fresh, renderer.PassSums(0, m.sum.astype(np.float32), m.sumsq, 0, m.weight))
+    frozen = m.sum.copy()
+    frozen.flags.writeable = False
+    assert not renderer._takes(fresh, renderer.PassSums(0, frozen, m.sumsq, 0, m.weight))
+    assert not renderer._takes(fresh, renderer.PassSums(0, m.sum, m.sumsq[..., :3], 0, m.weight))
+    assert np.signbit(np.float64(-0.0)) and not np.signbit(np.float64(0.0) + np.float64(-0.0))
+
 def test_xyz_second_moment_is_the_square_of_each_samples_xyz():
     """From the products ``(r^2, g^2, b^2, rg, rb, gb)`` of one sample the XYZ second moment
     is ``(A rgb)^2`` for each sample, and means of several samples are the mean of those.
