@@ -483,8 +483,7 @@ def test_sampling_matches_pdf_front(name, theta):
     # The corpus's cells are sharp and anisotropic (alpha_y 0.012 for roughness 0.15,
     # anisotropic 0.8): the 121 grid's pdf integration does not resolve them (corpus2 at 45
     # degrees: chi^2 4120 for 3392 d.o.f.; 8452 for 8290 on the 241 grid, and 361 at
-    # grazing angles). Mitsuba's own principled sample/pdf pair is rejected for corpus2 on
-    # every one of these grids (chi^2 23967 for 8290 d.o.f. at 45 degrees, 241 grid).
+    # grazing angles).
     res, ires = ((361, 24) if theta >= 80.0 else (241, 16)) if name.startswith("corpus") else (121, 8)
     ok, msg = _chi2(pr.from_params(CHI2_CASES[name]), theta, res=res, ires=ires)
     assert ok, msg
