@@ -2,7 +2,7 @@
 
     PYTHONPATH=. .venv/bin/python benchmarks/variance_vs_mitsuba.py SCENE [FILTER SIZE SPP ROUNDS [MAX_DEPTH]]
         [--scale K] [--grid COLSxROWS] [--light-sampler NAME] [--bsdf MODE] [--env-compensation on|off]
-        [--sampler NAME] [--mitsuba-sampler NAME]
+        [--sampler NAME] [--mitsuba-sampler NAME] [--blocks N]
 
 Renders ``SCENE`` (drpt's format: at ``SIZE`` (``N`` for N x N or ``WxH``) with ``--filter
 FILTER``, default gaussian 128; a Mitsuba XML file: its own film, filter and integrator) with ``SPP`` samples
@@ -34,6 +34,9 @@ Mitsuba's variance in each cell of a ``COLS`` x ``ROWS`` grid over the image (th
 ``bsdf_spheres`` grid is ``5x3``: one BSDF a cell), to find the region that holds an excess,
 with the ratio of the cell's mean images and the z of their difference (the rounds' cell
 sums; a cell without noise is listed only where that z exceeds 4);
+``--blocks N`` also prints the ratio of each run of ``N`` consecutive rounds (seeds 0 to
+``N - 1``, ``N`` to ``2N - 1``, ...): how far an ``N``-round figure, such as
+``equal_time_vs_mitsuba.py --rounds 8``'s, scatters from one set of seeds to the next;
 ``--light-sampler NAME`` sets drpt's (default: drpt's default), ``--env-compensation on|off``
 drpt's MIS compensation of the sky (default: drpt's default); ``--bsdf MODE`` how drpt
 and the exported scene read a drpt-format scene's MTL materials (``drpt render --bsdf``);
@@ -85,7 +88,7 @@ def _options(argv: list[str]) -> tuple[list[str], dict]:
     it = iter(argv)
     for arg in it:
         if arg in ("--scale", "--grid", "--light-sampler", "--bsdf", "--env-compensation", "--sampler",
-                   "--mitsuba-sampler"):
+                   "--mitsuba-sampler", "--blocks"):
             opts[arg[2:]] = next(it)
         else:
             pos.append(arg)
@@ -101,6 +104,12 @@ def _size(text: str) -> tuple[int, int]:
 def _scored(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The ``(H, W)`` mask of the pixels finite in every round of both ``a`` and ``b``."""
     return finite_in_every_round(a) & finite_in_every_round(b)
+
+
+def _blocks(a: np.ndarray, b: np.ndarray, n: int, mask=None) -> list[float]:
+    """The variance ratio of each run of ``n`` consecutive rounds (seeds ``k n`` to ``k n +
+    n - 1``): what an ``n``-round benchmark with those seeds reads."""
+    return [_ratio(a[k:k + n], b[k:k + n], mask) for k in range(0, len(a) - n + 1, n)]
 
 
 def _grid(a: np.ndarray, b: np.ndarray, spec: str, mask=None) -> None:
@@ -214,6 +223,11 @@ def main(argv: list[str]) -> None:
     print(f"  variance drpt / Mitsuba {ratio:.3f} +- {err:.3f}; the top 1% of pixels hold "
           f"{share:.0%} of the variance, outside them {_ratio(a, b, scored & ~top):.3f}; "
           f"mean image drpt / Mitsuba {a[:, scored].mean() / b[:, scored].mean():.4f}")
+    if "blocks" in extra:
+        n = int(extra["blocks"])
+        blocks = _blocks(a, b, n, scored)
+        print(f"  each {n} rounds (seeds 0-{n - 1}, {n}-{2 * n - 1}, ...): "
+              + ", ".join(f"{r:.2f}" for r in blocks))
     if "grid" in extra:
         _grid(a, b, extra["grid"], scored)
 

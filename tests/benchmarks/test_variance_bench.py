@@ -75,3 +75,20 @@ def test_pixels_not_finite_in_a_round_are_left_out_of_both():
     want = a[:, keep].var(0, ddof=1).mean() / b[:, keep].var(0, ddof=1).mean()
     assert bench._ratio(a, b, mask) == want and np.isfinite(bench._jackknife(a, b, mask))
     assert np.isnan(bench._ratio(a, b))  # control: every pixel
+
+
+def test_blocks_are_the_ratios_of_consecutive_rounds():
+    """``--blocks N``: each entry is the ratio over rounds ``k N`` to ``k N + N - 1``, so a
+    single heavy-tailed pixel (one round in 8 of its ``a`` rounds holds a spike) scatters
+    the blocks far apart while identical rounds read 1 in every block."""
+    rng = np.random.default_rng(6)
+    a, b = rng.normal(size=(32, 4, 4, 3)), rng.normal(size=(32, 4, 4, 3))
+    assert bench._blocks(a, a, 8) == [1.0] * 4
+    blocks = bench._blocks(a, b, 8)
+    assert len(blocks) == 4
+    assert blocks == [bench._ratio(a[k:k + 8], b[k:k + 8]) for k in (0, 8, 16, 24)]
+    spiky = a.copy()
+    spiky[3, 0, 0] += 40.0  # one round's spike: only the first block sees it
+    blocks = bench._blocks(spiky, b, 8)
+    assert blocks[0] > 3.0 * max(blocks[1:])
+    assert bench._blocks(a, b, 5) == [bench._ratio(a[k:k + 5], b[k:k + 5]) for k in (0, 5, 10, 15, 20, 25)]

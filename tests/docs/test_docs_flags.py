@@ -208,7 +208,7 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--threshold", "--oracle",  # (benchmarks/adaptive_vs_uniform.py)
                   "--only", "--skip", "--min-size", "--max-samples", "--rounds",
                   "--no-corpus", "--mitsuba-sampler",  # (benchmarks/equal_time_vs_mitsuba.py)
-                  "--scale", "--grid",  # (benchmarks/variance_vs_mitsuba.py)
+                  "--scale", "--grid", "--blocks",  # (benchmarks/variance_vs_mitsuba.py)
                   "--all-textures",  # (benchmarks/kernel_ops.py)
                   "--variants", "--first",  # (benchmarks/bdpt_ld_share.py)
                   "--runs",  # (benchmarks/small_tables_ab.py)
