@@ -100,12 +100,14 @@ same reason.
 from the cell it picked and the point ``(fx, ft)`` it drew there: the cell's
 four texels, gathered once for the draw, give the radiance (at ``fx`` and
 ``eval``'s row fraction ``fy``, from ``d.y``) and the density, with no
-second lookup of ``d`` (its ``atan2``, texel gathers and band tables: the
-sample's cost halves). They equal :meth:`eval` and :meth:`pdf` of ``d`` up
-to float rounding (a few ulps: ``d`` re-mapped to ``(x, y)`` lands where it
-was drawn up to the rounding of ``atan2``, ``acos`` and the band fraction),
-so next-event estimation and a BSDF sample that reaches the same direction
-weigh it alike (MIS) to that precision. The density is that of the cell
+second lookup of ``d`` (its ``atan2``, texel gathers and band tables).
+They equal :meth:`eval` and :meth:`pdf` of ``d`` up to float rounding: ``d``
+maps back to where it was drawn up to the rounding of ``atan2``, ``acos`` and
+the band fraction (relative differences of about 1e-6), and of ``cos theta``
+itself within a few texels of a pole, where ``1 - cos theta`` is small (up to
+about 1e-2 there: the density is that of the point drawn, the lookup's that of
+the rounded ``d``). Next-event estimation and a BSDF sample that reaches the
+same direction weigh it alike (MIS) to that precision. The density is that of the cell
 drawn, positive also for a sample that lands by round-off on the edge of a
 zero-weight neighbour (where :meth:`pdf` of ``d`` may read 0). Callers skip
 pdf-0 samples (inactive lanes, a black map).
