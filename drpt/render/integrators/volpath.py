@@ -62,7 +62,9 @@ per vertex). Vertices whose shadow ray starts in a *blind* medium, one enclosed 
 surfaces that block shadow rays with every emitter outside their bounding boxes
 (:mod:`~drpt.render.integrators.enclosure`, decided from the scene when the kernel is
 traced), skip it: its transmittance would be 0. Where every medium is blind, medium events
-trace no next-event estimation at all. A constant background is not sampled: rays that escape see it, with MIS
+trace no next-event estimation at all, and where the surfaces too have delta lobes only, no
+vertex takes one (:attr:`VolPathIntegrator.traces_nee`): an emitter a sampled ray reaches
+then counts in full, its density not looked up. A constant background is not sampled: rays that escape see it, with MIS
 weight 1 (the path integrator's convention). The shadow ray passes ``null`` boundaries
 (factor 1) and ``thindielectric`` sheets (their transmission ``1 - 2R / (1 + R)``), changing
 medium at each transition; any other surface blocks it. (As in Mitsuba, the sky and
@@ -741,7 +743,7 @@ class VolPathIntegrator(PathIntegrator):
         """What the ray's throughput brings back from the emitter or sky it reaches
         (``fl.surf`` lanes), MIS-weighted against next-event estimation from the last real
         scattering vertex (null crossings do not count)."""
-        nee = scene.has_emitters
+        nee = self.traces_nee
         hide = (s.depth == 0) if self.opt.hide_emitters else Bool(False)  # (the segment's depth)
         seen = fl.surf & ~hide
         weight = fl.beta
@@ -756,6 +758,17 @@ class VolPathIntegrator(PathIntegrator):
         if self.splits_sheets:  # (counted at the sheet already: sheet_split)
             w = dr.select(s.prev_pdf < 0.0, 0.0, w)
         return dr.select(seen, weight * le * w, 0.0)
+
+    @property
+    def traces_nee(self) -> bool:
+        """Whether any vertex of the scene's paths can take a next-event estimate (read at
+        trace time): emitters, and surfaces with a smooth BSDF or a medium that is not blind
+        (:meth:`nee_query` traces none otherwise). Without it, every emitter a sampled ray
+        reaches counts in full: its previous real vertex was a delta lobe, or a scattering
+        event in a blind medium, whose next segment ends on the enclosure (no emitter), so
+        :meth:`emitted` looks up no density."""
+        scene = self.scene
+        return scene.has_emitters and (scene.has_smooth_bsdfs or not self.media.all_blind)
 
     @property
     def counts_through(self) -> bool:

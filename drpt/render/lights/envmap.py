@@ -97,10 +97,20 @@ maps). The kernels scale corner luminances before adding them, for the
 same reason.
 
 :meth:`EnvironmentLight.sample` returns ``(d, eval(d), pdf(d))`` computed
-from ``d`` itself, so they agree bit for bit with :meth:`eval` and
-:meth:`pdf`. A sample that lands (by round-off) exactly on the edge of a
-zero-weight cell reads pdf 0 and radiance 0; callers skip pdf-0 samples
-(about 1 in 10^6 samples on maps with black regions, none otherwise).
+from the cell it picked and the point ``(fx, ft)`` it drew there: the cell's
+four texels, gathered once for the draw, give the radiance (at ``fx`` and
+``eval``'s row fraction ``fy``, from ``d.y``) and the density, with no
+second lookup of ``d`` (its ``atan2``, texel gathers and band tables).
+They equal :meth:`eval` and :meth:`pdf` of ``d`` up to float rounding: ``d``
+maps back to where it was drawn up to the rounding of ``atan2``, ``acos`` and
+the band fraction (relative differences of about 1e-6), and of ``cos theta``
+itself within a few texels of a pole, where ``1 - cos theta`` is small (up to
+about 1e-2 there: the density is that of the point drawn, the lookup's that of
+the rounded ``d``). Next-event estimation and a BSDF sample that reaches the
+same direction weigh it alike (MIS) to that precision. The density is that of the cell
+drawn, positive also for a sample that lands by round-off on the edge of a
+zero-weight neighbour (where :meth:`pdf` of ``d`` may read 0). Callers skip
+pdf-0 samples (inactive lanes, a black map).
 
 MIS compensation
 ----------------
@@ -416,7 +426,8 @@ class EnvironmentLight:
         # inside the cell: the bilinear density of the corner luminances,
         # ft (fraction of the band's cos(theta) range) from its linear
         # marginal, then fx from the linear conditional
-        c00, c10, c01, c11 = (self._weight(c) for c in self._corners(col, row, active))
+        corners = self._corners(col, row, active)
+        c00, c10, c01, c11 = (self._weight(c) for c in corners)
         # halved sums (exact; _sample_linear is scale-free): no float32 overflow
         ft = _sample_linear(0.5 * c00 + 0.5 * c10, 0.5 * c01 + 0.5 * c11, sy)
         fx = _sample_linear(dr.lerp(c00, c01, ft), dr.lerp(c10, c11, ft), sx)
@@ -429,9 +440,16 @@ class EnvironmentLight:
         uu = dr.select(uu >= 1.0, uu - 1.0, uu)
         sin_p, cos_p = dr.sincos(uu * (2.0 * math.pi))
         d = Array3f(sin_p * sin_t, cos_t, -cos_p * sin_t)
-        le, pdf = self.eval_pdf(d, active)
-        le = dr.select(pdf > 0.0, le, 0.0)
+        # the radiance and the density from the sampled cell's corners, no lookup of d
+        pdf = dr.select(active, self._pdf_cell(corners, col, row, fx, ft, active), 0.0)
+        le = dr.select(pdf > 0.0, self._eval_cell(corners, fx, self._row_fraction(cos_t, row)), 0.0)
         return d, le, pdf
+
+    def _row_fraction(self, cos_t: Float, row: UInt32) -> Float:
+        """``fy`` of :meth:`_lookup` (linear in theta) for a direction of ``cos theta`` ``cos_t``
+        in band ``row``, clamped to the band."""
+        v = dr.safe_acos(cos_t) * (1.0 / math.pi)
+        return dr.clip(v * self._ny - Float(row), 0.0, 1.0)
 
 
 def compensation_offset(lum: np.ndarray) -> float:

@@ -13,6 +13,10 @@ gray media (:mod:`drpt.render.integrators.enclosure`, ``MediumTable.gray``).
   shadow rays left out carried exactly 0. Negative control: skipping it for the same
   medium behind a ``thindielectric`` sheet (not blind: light passes) darkens the image by
   far more (the mean by more than 5%).
+* No next-event estimation anywhere (a blind medium in a glass sphere under an environment
+  map): the emitter a sampled ray reaches counts in full without its density, the image the
+  one with the lookup bit for bit; negative control: the same shortcut forced beside a
+  diffuse floor counts the sky twice (the mean more than 2% up).
 * Gray media: the one-channel free flight renders the same image as the spectral MIS
   (same random numbers, relative 1e-4); negative control: a chromatic medium rendered as
   gray (its first channel's extinction for all three) has a channel mean more than 10% off.
@@ -220,3 +224,62 @@ def test_gray_free_flight_renders_like_spectral_mis(tmp_path):
     right, wrong = _render(chroma), _render(chroma, forced_gray)
     off = np.abs(wrong.mean((0, 1)) - right.mean((0, 1))) / right.mean((0, 1))
     assert off.max() > 0.1, off  # (0.19 in the green channel)
+
+
+#: a medium in a glass sphere under an environment map, nothing else: no vertex can take a
+#: next-event estimate (a delta surface, a blind medium)
+GLASS_UNDER_SKY = """<scene version="3.0.0">
+    <integrator type="volpath"><integer name="max_depth" value="12"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="40"/>
+        <transform name="to_world"><lookat origin="0, 1, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
+            <rfilter type="box"/></film>
+        <sampler type="independent"><integer name="sample_count" value="32"/></sampler>
+    </sensor>
+    <emitter type="envmap"><string name="filename" value="sky.exr"/></emitter>
+    <medium id="m" type="homogeneous">
+        <rgb name="albedo" value="0.9, 0.6, 0.3"/>
+        <rgb name="sigma_t" value="1, 1, 1"/>
+    </medium>
+    <shape type="sphere"><bsdf type="dielectric"/><ref name="interior" id="m"/></shape>
+    <!-- inner -->
+</scene>
+"""
+
+
+def test_without_next_event_estimation_no_emitter_density_is_looked_up(tmp_path, monkeypatch):
+    """``VolPathIntegrator.traces_nee``: where no vertex can take a next-event estimate (delta
+    surfaces, every medium blind), an emitter a sampled ray reaches counts in full and its
+    density is not looked up; the image is the one with the lookup, bit for bit. Negative
+    control: the same shortcut forced in a scene with a diffuse floor (next-event estimation
+    there) counts the sky twice where both techniques reach it (the mean more than 2% up)."""
+    from drpt.imageio import write_image
+    from drpt.options import RenderOptions, with_scene_settings
+    from drpt.render.integrators import volpath
+    from drpt.render.renderer import Renderer
+
+    sky = np.ones((8, 16, 3), np.float32) * np.linspace(3.0, 0.2, 8, dtype=np.float32)[:, None, None]
+    write_image(tmp_path / "sky.exr", sky)
+
+    def render(scene, nee=None):
+        if nee is not None:
+            monkeypatch.setattr(volpath.VolPathIntegrator, "traces_nee", property(lambda self: nee))
+        opts, scene = with_scene_settings(RenderOptions(progress=False, seed=3), scene)
+        r = Renderer(scene, opts)
+        img = np.asarray(r.render().image, np.float64)
+        monkeypatch.undo()
+        return r.integrator, img
+
+    glass = _scene(tmp_path, body=GLASS_UNDER_SKY)
+    integrator, skipped = render(glass)
+    assert not integrator.traces_nee
+    _, looked_up = render(glass, True)
+    assert skipped.mean() > 0.0 and np.array_equal(skipped, looked_up)
+    floor = ('<shape type="rectangle"><transform name="to_world"><scale value="4"/><rotate x="1" angle="-90"/>'
+             '<translate y="-1"/></transform><bsdf type="diffuse"/></shape>')
+    lit = _scene(tmp_path, body=GLASS_UNDER_SKY, inner=floor)
+    integrator, right = render(lit)
+    assert integrator.traces_nee
+    _, wrong = render(lit, False)
+    assert wrong.mean() > 1.02 * right.mean(), (wrong.mean(), right.mean())
