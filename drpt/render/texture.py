@@ -52,13 +52,13 @@ from os import PathLike
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array2f, Array3f, Bool, Float, TensorXf, Texture2f, UInt32
+from drjit.auto import Array2f, Array3f, Bool, Float, Int32, TensorXf, Texture2f, UInt32
 
 from ..errors import DrptError
-from ..imageio import read_image
+from ..imageio import decoding_table, read_codes, read_image
 from ..materials.spec import Checkerboard, MeshAttribute, Texture
 
-__all__ = ["Bitmap", "TextureSet", "load_rgb"]
+__all__ = ["Bitmap", "Packed8", "TextureSet", "load_rgb"]
 
 
 def load_rgb(path: str | PathLike, raw: bool = False) -> np.ndarray:
@@ -96,6 +96,11 @@ class TextureSet:
             if isinstance(p, Checkerboard):  # a procedural texture
                 self.textures.append(_Checker(p))
                 self.shapes.append((0, 0))
+                continue
+            codes = None if len(self.textures) in gradients else read_codes(getattr(p, "path", p))
+            if codes is not None:  # an 8-bit image: its codes, decoded per lookup
+                self.textures.append(Packed8.of(codes, p))
+                self.shapes.append(codes.shape[:2])
                 continue
             if isinstance(p, Texture):  # an image with Mitsuba bitmap's options
                 self.textures.append(Bitmap(p))
@@ -204,7 +209,7 @@ def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool, si=None) -
         return tex.eval(si, active)
     if isinstance(tex, _Checker):
         return tex.eval(pos, scalar)  # pos = (u, 1 - v): Mitsuba's uv
-    if isinstance(tex, Bitmap):
+    if isinstance(tex, (Bitmap, Packed8)):
         return tex.eval(pos, active)
     return Array3f(tex.eval(pos, active))
 
@@ -231,6 +236,128 @@ class Bitmap:
         if m is not None:
             uv = Array2f(uv.x * m[0] + uv.y * m[1] + m[2], uv.x * m[3] + uv.y * m[4] + m[5])
         return Array3f(self.tex.eval(uv, active))
+
+
+class Packed8:
+    """An 8-bit image (PNG, JPEG, TGA, BMP) kept as its codes, one ``uint32`` per texel
+    (``R | G << 8 | B << 16``, a gray image's code once), a quarter of the bytes of the
+    float32 RGB texture :class:`Bitmap` and the plain textures keep (Dr.Jit stores three
+    channels as four floats), looked up as that texture is, bit for bit.
+
+    A lookup reads the four codes of its bilinear footprint (one 32-bit gather each) and
+    decodes each channel through the image's 256-entry table
+    (:func:`drpt.imageio.decoding_table`: sRGB-decoded, or ``raw`` codes over 255), whose
+    values are :func:`drpt.imageio.read_image`'s for that code; the position, the wrapped
+    corners, the weights and the sum are Dr.Jit's ``Texture2f.eval`` (``tex_eval`` of its
+    ``texture_impl.h``: ``fma(uv, res, -0.5)``, its floor, the corners in the order
+    ``(x0, y0), (x1, y0), (x0, y1), (x1, y1)`` summed by ``fma``; nearest: the texel at
+    ``floor(uv res)``), so the values are the float texture's to the bit
+    (``tests/render/test_texture.py``). A minified texture (a sphere showing a 2048x2048
+    map at 192x192 pixels) misses the caches on nearly every fetch; the codes take 16 MB
+    where the floats take 64 MB. ``to_uv`` (``m``, row-major 2x3) as :class:`Bitmap`'s."""
+
+    def __init__(self, codes: np.ndarray, table: np.ndarray, filter_mode=dr.FilterMode.Linear,
+                 wrap_mode=dr.WrapMode.Repeat, m=None):
+        h, w, c = codes.shape
+        self.shape = (h, w)
+        self.m = m
+        self.gray = c < 3
+        self.nearest = filter_mode == dr.FilterMode.Nearest
+        self._filter, self.wrap = filter_mode, wrap_mode
+        c32 = codes.astype(np.uint32)
+        packed = c32[..., 0] if self.gray else c32[..., 0] | (c32[..., 1] << 8) | (c32[..., 2] << 16)
+        self.texels = UInt32(np.ascontiguousarray(packed).ravel())
+        table = np.asarray(table, np.float32)
+        #: raw codes over 255 are decoded by a division (exact, as the table's float64
+        #: quotient rounded; by an opaque divisor, which Dr.Jit does not turn into a
+        #: multiplication by its reciprocal), other tables by a gather
+        self.divisor = dr.opaque(Float, 255.0) if np.array_equal(table, decoding_table(False)) else None
+        self.table = Float(table)
+
+    @classmethod
+    def of(cls, codes: np.ndarray, p) -> Packed8:
+        """The texture of a scene's image ``p`` (a path: sRGB-decoded, bilinear, repeat; a
+        :class:`~drpt.materials.spec.Texture`: its options) from its codes."""
+        if not isinstance(p, Texture):
+            return cls(codes, decoding_table(True))
+        m = None if p.to_uv is None else [float(x) for x in p.to_uv]
+        return cls(codes, decoding_table(not p.raw), _FILTERS[p.filter_type], _WRAPS[p.wrap_mode], m)
+
+    def filter_mode(self):
+        """The filter, as a Dr.Jit texture's ``filter_mode()``."""
+        return self._filter
+
+    def wrap_mode(self):
+        """The wrap mode, as a Dr.Jit texture's ``wrap_mode()``."""
+        return self.wrap
+
+    def _wrap(self, i: Int32, res: int) -> Int32:
+        """Dr.Jit's ``tex_wrap`` of the integer coordinate ``i`` on an axis of ``res`` texels:
+        clamped, or ``i mod res`` (Euclidean), reflected in the periods ``floor(i / res)`` that
+        are odd (mirror). The period comes from a float estimate corrected by one step
+        either way (exact for ``|i| < 2^23``), not from an integer division, which the CPU's
+        vector units lack (LLVM would divide lane by lane)."""
+        if self.wrap == dr.WrapMode.Clamp:
+            return dr.clip(i, 0, res - 1)
+        q = Int32(dr.floor(Float(i) * (1.0 / res)))
+        mod = i - q * res
+        low, high = mod < 0, mod >= res
+        mod = dr.select(low, mod + res, dr.select(high, mod - res, mod))
+        if self.wrap == dr.WrapMode.Mirror:
+            q = dr.select(low, q - 1, dr.select(high, q + 1, q))
+            mod = dr.select((q & 1) == 0, mod, res - 1 - mod)
+        return mod
+
+    def _texel(self, x: Int32, y: Int32, active: Bool) -> Array3f:
+        code = dr.gather(UInt32, self.texels, UInt32(y * self.shape[1] + x), active)
+        chans = (code,) if self.gray else (code & 0xFF, (code >> 8) & 0xFF, code >> 16)
+        if self.divisor is not None:
+            vals = [Float(c) / self.divisor for c in chans]
+        else:
+            vals = [dr.gather(Float, self.table, c, active) for c in chans]
+        return Array3f(*(vals * 3 if self.gray else vals))
+
+    def _footprint(self, uv: Array2f):
+        h, w = self.shape
+        px = dr.fma(uv.x, w, -0.5)
+        py = dr.fma(uv.y, h, -0.5)
+        ix, iy = Int32(dr.floor(px)), Int32(dr.floor(py))
+        w1x, w1y = px - Float(ix), py - Float(iy)
+        xs = (self._wrap(ix, w), self._wrap(ix + 1, w))
+        ys = (self._wrap(iy, h), self._wrap(iy + 1, h))
+        return xs, ys, (1.0 - w1x, w1x), (1.0 - w1y, w1y)
+
+    def _uv(self, uv: Array2f) -> Array2f:
+        m = self.m
+        if m is None:
+            return uv
+        return Array2f(uv.x * m[0] + uv.y * m[1] + m[2], uv.x * m[3] + uv.y * m[4] + m[5])
+
+    def eval(self, uv: Array2f, active: Bool = True) -> Array3f:
+        """The filtered value at Mitsuba's uv (``(u, 1 - v)`` of drpt's), ``to_uv`` applied."""
+        uv = self._uv(uv)
+        active = Bool(active)
+        h, w = self.shape
+        if self.nearest:
+            x = self._wrap(Int32(dr.floor(uv.x * w)), w)
+            y = self._wrap(Int32(dr.floor(uv.y * h)), h)
+            return self._texel(x, y, active)
+        xs, ys, wx, wy = self._footprint(uv)
+        out = None
+        for corner in range(4):
+            bx, by = corner & 1, corner >> 1
+            c = self._texel(xs[bx], ys[by], active)
+            weight = wx[bx] * wy[by]
+            out = c * weight if out is None else dr.fma(c, weight, out)
+        return out
+
+    def eval_fetch(self, uv: Array2f, active: Bool = True) -> list:
+        """The four texels of the bilinear footprint at ``uv`` (Dr.Jit's ``eval_fetch``:
+        ``(x0, y0), (x1, y0), (x0, y1), (x1, y1)``), each as three channels; ``to_uv`` is
+        the caller's (as for a Dr.Jit texture)."""
+        active = Bool(active)
+        xs, ys, _, _ = self._footprint(uv)
+        return [list(self._texel(xs[c & 1], ys[c >> 1], active)) for c in range(4)]
 
 
 def _vec3(a: np.ndarray) -> Array3f:

@@ -264,7 +264,7 @@ def test_gradient_from_the_luminance_texture_is_the_rgb_ones_to_the_bit(exr, png
     rgb = TextureSet(paths)
     lum = TextureSet(paths, gradients=(0, 1))
     assert set(lum.luminance) == {0, 1} and not rgb.luminance
-    assert lum.luminance[1].wrap_mode() == rgb.textures[1].tex.wrap_mode()
+    assert lum.luminance[1].wrap_mode() == rgb.textures[1].wrap_mode()  # a Packed8 (8-bit codes)
     want = np.array(rgb.gradient(ids, uv, True))
     got = np.array(lum.gradient(ids, uv, True))
     assert np.abs(want).sum() > 0.0
@@ -279,6 +279,80 @@ def test_gradient_from_the_luminance_texture_is_the_rgb_ones_to_the_bit(exr, png
     finally:
         texture._lum = mean
     assert not np.array_equal(np.array(control.gradient(ids, uv, True)), want)
+
+
+_MODES = [pytest.param("RGB", (13, 17, 3), marks=pytest.mark.slow), ("L", (9, 6)), ("RGBA", (7, 11, 4)),
+          ("P", (8, 5))]
+
+
+@pytest.mark.parametrize("mode,shape", _MODES)
+def test_packed_8_bit_texture_is_the_float_texture_to_the_bit(tmp_path, mode, shape):
+    """An 8-bit image kept as its codes (:class:`Packed8`: a uint32 per texel, decoded by the
+    sRGB table or, raw, by a division) looks up what the float32 texture of
+    :func:`load_rgb`'s texels does, bit for bit: bilinear and nearest, the three wrap modes,
+    ``raw`` or sRGB-decoded, gray, RGBA and palette files, at 20,000 points of
+    ``[-3, 3]^2`` (inside the image and across its borders), and its ``eval_fetch`` gives the
+    four corners Dr.Jit's does (every filter and wrap mode on RGB, two of the six on the
+    other layouts). Negative control: the codes decoded as Dr.Jit's own 8-bit
+    textures decode them (``code * (1 / 255)``), 1 ulp off for some codes, differ."""
+    from PIL import Image
+
+    from drpt.imageio import decoding_table, read_codes
+    from drpt.render.texture import Packed8, load_rgb
+
+    rng = np.random.default_rng(7)
+    a = rng.integers(0, 256, shape, dtype=np.uint8)
+    im = Image.fromarray(a, "L").convert("P") if mode == "P" else Image.fromarray(a, mode)
+    path = tmp_path / f"t_{mode}.png"
+    im.save(path)
+    codes = read_codes(path)
+    assert codes.dtype == np.uint8 and codes.shape[:2] == a.shape[:2]
+    n = 20000
+    uv = Array2f(Float(rng.uniform(-3, 3, n).astype(np.float32)), Float(rng.uniform(-3, 3, n).astype(np.float32)))
+    for raw in (False, True):
+        img = load_rgb(path, raw=raw)
+        combos = [(f, w) for f in (dr.FilterMode.Linear, dr.FilterMode.Nearest)
+                  for w in (dr.WrapMode.Repeat, dr.WrapMode.Mirror, dr.WrapMode.Clamp)]
+        for filt, wrap in combos if mode == "RGB" else [combos[0], combos[4]]:
+            ref = dr.auto.Texture2f(dr.auto.TensorXf(img), filter_mode=filt, wrap_mode=wrap)
+            packed = Packed8(codes, decoding_table(not raw), filt, wrap)
+            assert (packed.divisor is not None) == raw
+            want = np.array(ref.eval(uv))
+            np.testing.assert_array_equal(np.array(packed.eval(uv)), want)
+            if filt == dr.FilterMode.Linear:
+                for c_ref, c_got in zip(ref.eval_fetch(uv), packed.eval_fetch(uv)):
+                    np.testing.assert_array_equal(np.array(c_got), np.array(c_ref))
+    # negative control: Dr.Jit's 8-bit decoding of the raw codes
+    img = load_rgb(path, raw=True)
+    ref = dr.auto.Texture2f(dr.auto.TensorXf(img), filter_mode=dr.FilterMode.Nearest)
+    drjit_u8 = np.arange(256, dtype=np.float32) * np.float32(1.0 / 255.0)
+    assert not np.array_equal(drjit_u8, decoding_table(False))
+    control = Packed8(codes, drjit_u8, dr.FilterMode.Nearest, dr.WrapMode.Clamp)
+    assert control.divisor is None
+    assert not np.array_equal(np.array(control.eval(uv)), np.array(ref.eval(uv)))
+
+
+def test_which_textures_are_packed(tmp_path, exr, png):
+    """8-bit images become :class:`Packed8` (plain and with Mitsuba ``bitmap`` options); float
+    images and a bump map's texture (``gradients``: its luminance texture) stay float
+    textures; :func:`drpt.imageio.read_codes` reads no codes from float or 16-bit files."""
+    from PIL import Image
+
+    from drpt.imageio import read_codes
+    from drpt.materials.spec import Texture
+    from drpt.render.texture import Packed8
+
+    (pe, _), (pp, _) = exr, png
+    deep = tmp_path / "deep.png"
+    Image.fromarray(np.full((3, 4), 40000, np.uint16)).save(deep)
+    assert read_codes(pe) is None and read_codes(deep) is None
+    ts = TextureSet([pe, pp, Texture(pp, 0.5, raw=True), pp, deep], gradients=(3,))
+    kinds = [type(t).__name__ for t in ts.textures]
+    assert kinds == ["Texture2f", "Packed8", "Packed8", "Texture2f", "Texture2f"]
+    assert isinstance(ts.textures[2], Packed8) and ts.textures[2].divisor is not None
+    assert ts.shapes[1] == ts.shapes[3]
+    with pytest.raises(SceneError, match="nope.jpg"):
+        read_codes(tmp_path / "nope.jpg")
 
 
 def test_empty_set_traces_nothing():
