@@ -392,10 +392,11 @@ class GrayFootprints:
     the codes of ``(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)`` (wrapped), so that
     :meth:`fetch` reads a footprint with one 32-bit gather, in one cache line, where the
     luminance texture's ``eval_fetch`` makes four gathers in two rows of the image. A
-    code's luminance comes from a 256-entry table computed on the device by the kernel's
-    own expression from :func:`drpt.imageio.decoding_table`'s values, so the four values
-    are the luminance texture's (and the RGB texture's luminances) bit for bit. Same bytes
-    as the luminance texture (4 per texel)."""
+    code's luminance is the kernel's own expression of its decoded value: a raw code's
+    value by an exact division (as :class:`Packed8`'s), an sRGB code's read from a
+    256-entry table computed on the device from :func:`drpt.imageio.decoding_table`'s
+    values; so the four values are the luminance texture's (and the RGB texture's
+    luminances) bit for bit. Same bytes as the luminance texture (4 per texel)."""
 
     def __init__(self, codes: np.ndarray, table: np.ndarray):
         h, w = codes.shape
@@ -404,7 +405,11 @@ class GrayFootprints:
         right = np.roll(c, -1, axis=1)
         packed = c | (right << 8) | (np.roll(c, -1, axis=0) << 16) | (np.roll(right, -1, axis=0) << 24)
         self.records = UInt32(np.ascontiguousarray(packed).ravel())
-        t = Float(np.asarray(table, np.float32))
+        table = np.asarray(table, np.float32)
+        #: raw codes: the luminance computed from the code over 255 (an exact division, as
+        #: :class:`Packed8` decodes them), else read from the table
+        self.divisor = dr.opaque(Float, 255.0) if np.array_equal(table, decoding_table(False)) else None
+        t = Float(table)
         self.lum = _lum(Array3f(t, t, t))
         dr.eval(self.lum)
 
@@ -429,7 +434,10 @@ class GrayFootprints:
         x = _wrap(Int32(dr.floor(dr.fma(uv.x, w, -0.5))), w, dr.WrapMode.Repeat)
         y = _wrap(Int32(dr.floor(dr.fma(uv.y, h, -0.5))), h, dr.WrapMode.Repeat)
         code = dr.gather(UInt32, self.records, UInt32(y * w + x), active)
-        return tuple(dr.gather(Float, self.lum, (code >> s) & 0xFF, active) for s in (0, 8, 16, 24))
+        corners = [(code >> s) & 0xFF for s in (0, 8, 16, 24)]
+        if self.divisor is not None:
+            return tuple(_lum(Array3f(t, t, t)) for t in (Float(c) / self.divisor for c in corners))
+        return tuple(dr.gather(Float, self.lum, c, active) for c in corners)
 
 
 def _vec3(a: np.ndarray) -> Array3f:
