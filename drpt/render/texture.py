@@ -373,7 +373,8 @@ def _wrap(i: Int32, res: int, mode) -> Int32:
     clamped, or ``i mod res`` (Euclidean), reflected in the periods ``floor(i / res)`` that
     are odd (mirror). The period comes from a float estimate corrected by one step either
     way (exact for ``|i| < 2^23``), not from an integer division, which the CPU's vector
-    units lack (LLVM would divide lane by lane)."""
+    units lack (LLVM would divide lane by lane); beyond that the texel may differ from
+    Dr.Jit's but stays inside the image."""
     if mode == dr.WrapMode.Clamp:
         return dr.clip(i, 0, res - 1)
     q = Int32(dr.floor(Float(i) * (1.0 / res)))
@@ -383,7 +384,7 @@ def _wrap(i: Int32, res: int, mode) -> Int32:
     if mode == dr.WrapMode.Mirror:
         q = dr.select(low, q - 1, dr.select(high, q + 1, q))
         mod = dr.select((q & 1) == 0, mod, res - 1 - mod)
-    return mod
+    return dr.clip(mod, 0, res - 1)  # (a no-op for |i| < 2^23: memory safety beyond)
 
 
 class GrayFootprints:
