@@ -83,6 +83,8 @@ READ_EXTENSIONS = (".exr", ".hdr", ".pfm", ".png", ".jpg", ".jpeg", ".tga", ".bm
 __all__ = [
     "write_image",
     "read_image",
+    "read_codes",
+    "decoding_table",
     "srgb_to_linear",
     "linear_to_srgb",
     "WRITE_EXTENSIONS",
@@ -331,21 +333,68 @@ def _read_ldr(path: Path, linear: bool) -> np.ndarray:
         elif mode == "F":
             return np.asarray(im, dtype=np.float32)[..., None]  # already linear
         else:
-            if mode == "P":
-                im = im.convert("RGBA" if "transparency" in im.info else "RGB")
-            elif mode == "LA" or mode == "PA" or mode == "RGBa":
-                im = im.convert("RGBA")
-            elif mode not in ("L", "RGB", "RGBA"):
-                im = im.convert("RGB")
-            a = np.asarray(im, dtype=np.float64) / 255.0
-            if a.ndim == 2:
-                a = a[..., None]
+            a = _ldr_codes(im).astype(np.float64) / 255.0
             alpha = 1 if a.shape[2] == 4 else 0
     a = a.astype(np.float32)
     if linear:
         nc = a.shape[2] - alpha
         a[..., :nc] = srgb_to_linear(a[..., :nc])
     return a
+
+
+def _ldr_codes(im) -> np.ndarray:
+    """The ``(H, W, C)`` 8-bit codes of a loaded Pillow image of 8-bit channels (``C``: 1
+    gray, 3 RGB or 4 RGBA; a palette or other mode converted to RGB or RGBA)."""
+    mode = im.mode
+    if mode == "P":
+        im = im.convert("RGBA" if "transparency" in im.info else "RGB")
+    elif mode == "LA" or mode == "PA" or mode == "RGBa":
+        im = im.convert("RGBA")
+    elif mode not in ("L", "RGB", "RGBA"):
+        im = im.convert("RGB")
+    a = np.asarray(im, dtype=np.uint8)
+    return a[..., None] if a.ndim == 2 else a
+
+
+def decoding_table(linear: bool = True) -> np.ndarray:
+    """The 256 float32 values :func:`read_image` decodes an 8-bit color code to (with
+    ``linear``, sRGB-decoded, else the code over 255): ``table[code]`` is bit for bit the
+    value it returns for a color channel holding ``code``."""
+    t = (np.arange(256, dtype=np.float64) / 255.0).astype(np.float32)
+    return srgb_to_linear(t) if linear else t
+
+
+def read_codes(path: str | PathLike) -> np.ndarray | None:
+    """The ``(H, W, C)`` uint8 codes of an 8-bit image file (PNG, JPEG, TGA, BMP of 8-bit
+    channels; ``C`` as :func:`read_image` returns them), which :func:`decoding_table`
+    turns into :func:`read_image`'s values; None for any other file (float formats,
+    16-bit and float PNG or TIFF modes). Raises :class:`SceneError` as :func:`read_image`
+    does."""
+    named_at = getattr(path, "named_at", None)
+    path = Path(path)
+    if _ext(path) not in _LDR:
+        return None
+    try:
+        check_input(path, what="image file")
+        from PIL import Image
+
+        try:
+            with Image.open(path) as im:
+                im.load()
+                if im.mode in ("I;16", "I;16B", "I;16L", "I", "F"):
+                    return None
+                a = _ldr_codes(im)
+        except OSError as e:
+            raise SceneError(Loc(path), f"cannot read image: {e.strerror or e}") from e
+        except Exception as e:  # malformed data
+            raise SceneError(Loc(path), f"cannot read image: {e}") from e
+        if a.size == 0:
+            raise SceneError(Loc(path), f"empty image ({a.shape[1]}x{a.shape[0]} pixels)")
+        return np.ascontiguousarray(a)
+    except SceneError as e:
+        if named_at is None:
+            raise
+        raise SceneError(named_at, f"{path.name}: {e.message}") from e
 
 
 # The first bytes of each float format Mitsuba reads for us: checked first,

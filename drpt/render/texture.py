@@ -37,13 +37,19 @@ few masked instructions grow linearly with their number; memory traffic only
 occurs on active lanes). One texture needs no mask beyond ``active``. An
 empty set traces nothing and returns 0.
 
+A ``bitmap`` with ``raw`` (a normal map) of 8-bit channels is kept as its codes
+(:class:`Packed8`, a quarter of the float texture's bytes), looked up bit for bit as the
+float texture would be.
+
 Bump maps read only the luminance of the four texels around a point
 (:meth:`TextureSet.gradient`); the ids given as ``gradients`` (the bump maps'
 textures) are also kept as one-channel textures of their texels' luminances,
 computed on the device by the kernel's own float32 expression, so the gradients
 are the same to the bit while each fetch reads a quarter of the bytes (Dr.Jit
 keeps an RGB texture as four channels), which matters where the map is
-minified and nearly every fetch misses the caches.
+minified and nearly every fetch misses the caches. A gray 8-bit bump map with repeat
+wrapping is kept instead as its footprints' codes (:class:`GrayFootprints`): one 32-bit
+gather per lookup, the same luminances to the bit.
 """
 
 from __future__ import annotations
@@ -52,13 +58,13 @@ from os import PathLike
 
 import drjit as dr
 import numpy as np
-from drjit.auto import Array2f, Array3f, Bool, Float, TensorXf, Texture2f, UInt32
+from drjit.auto import Array2f, Array3f, Bool, Float, Int32, TensorXf, Texture2f, UInt32
 
 from ..errors import DrptError
-from ..imageio import read_image
+from ..imageio import decoding_table, read_codes, read_image
 from ..materials.spec import Checkerboard, MeshAttribute, Texture
 
-__all__ = ["Bitmap", "TextureSet", "load_rgb"]
+__all__ = ["Bitmap", "GrayFootprints", "Packed8", "TextureSet", "load_rgb"]
 
 
 def load_rgb(path: str | PathLike, raw: bool = False) -> np.ndarray:
@@ -97,6 +103,12 @@ class TextureSet:
                 self.textures.append(_Checker(p))
                 self.shapes.append((0, 0))
                 continue
+            raw = isinstance(p, Texture) and p.raw
+            codes = read_codes(p.path) if raw and len(self.textures) not in gradients else None
+            if codes is not None:  # a raw 8-bit image: its codes, decoded per lookup
+                self.textures.append(Packed8.of(codes, p))
+                self.shapes.append(codes.shape[:2])
+                continue
             if isinstance(p, Texture):  # an image with Mitsuba bitmap's options
                 self.textures.append(Bitmap(p))
                 self.shapes.append(self.textures[-1].shape)
@@ -105,10 +117,18 @@ class TextureSet:
             self.shapes.append(img.shape[:2])
             self.textures.append(Texture2f(TensorXf(img), filter_mode=dr.FilterMode.Linear,
                                            wrap_mode=dr.WrapMode.Repeat))
+        #: per id in ``gradients`` that is a gray 8-bit image with bilinear filtering and
+        #: repeat wrapping: its footprints' codes (:class:`GrayFootprints`), which
+        #: :meth:`gradient` reads in place of the luminance texture
+        self.footprints: dict[int, GrayFootprints] = {}
         for k in gradients:
             image = getattr(self.textures[k], "tex", self.textures[k])
             if hasattr(image, "eval_fetch") and image.filter_mode() == dr.FilterMode.Linear:
-                self.luminance[k] = _luminance_texture(image)
+                fp = GrayFootprints.of(self.paths[k]) if image.wrap_mode() == dr.WrapMode.Repeat else None
+                if fp is not None:
+                    self.footprints[k] = fp
+                else:
+                    self.luminance[k] = _luminance_texture(image)
 
     def __len__(self) -> int:
         return len(self.textures)
@@ -163,7 +183,9 @@ class TextureSet:
             m = active & (tex_id == k)
             a = getattr(tex, "m", None) or (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)  # a to_uv, row-major
             p = Array2f(pos.x * a[0] + pos.y * a[1] + a[2], pos.x * a[3] + pos.y * a[4] + a[5])
-            if k in self.luminance:  # the texels' luminances, a quarter of the RGB texture's bytes
+            if k in self.footprints:  # a gray 8-bit map: one 32-bit gather per footprint
+                f00, f10, f01, f11 = self.footprints[k].fetch(p, m)
+            elif k in self.luminance:  # the texels' luminances, a quarter of the RGB texture's bytes
                 f00, f10, f01, f11 = (c[0] for c in self.luminance[k].eval_fetch(p, m))
             else:
                 f00, f10, f01, f11 = (_lum(Array3f(*c)) for c in image.eval_fetch(p, m))
@@ -204,7 +226,7 @@ def _eval(tex, pos: Array2f, uv: Array2f, active: Bool, scalar: bool, si=None) -
         return tex.eval(si, active)
     if isinstance(tex, _Checker):
         return tex.eval(pos, scalar)  # pos = (u, 1 - v): Mitsuba's uv
-    if isinstance(tex, Bitmap):
+    if isinstance(tex, (Bitmap, Packed8)):
         return tex.eval(pos, active)
     return Array3f(tex.eval(pos, active))
 
@@ -231,6 +253,192 @@ class Bitmap:
         if m is not None:
             uv = Array2f(uv.x * m[0] + uv.y * m[1] + m[2], uv.x * m[3] + uv.y * m[4] + m[5])
         return Array3f(self.tex.eval(uv, active))
+
+
+class Packed8:
+    """An 8-bit image (PNG, JPEG, TGA, BMP) kept as its codes, one ``uint32`` per texel
+    (``R | G << 8 | B << 16``, a gray image's code once), a quarter of the bytes of the
+    float32 RGB texture :class:`Bitmap` and the plain textures keep (Dr.Jit stores three
+    channels as four floats), looked up as that texture is, bit for bit.
+
+    A lookup reads the four codes of its bilinear footprint (one 32-bit gather each) and
+    decodes each channel through the image's 256-entry table
+    (:func:`drpt.imageio.decoding_table`: sRGB-decoded, or ``raw`` codes over 255), whose
+    values are :func:`drpt.imageio.read_image`'s for that code; the position, the wrapped
+    corners, the weights and the sum are Dr.Jit's ``Texture2f.eval`` (``tex_eval`` of its
+    ``texture_impl.h``: ``fma(uv, res, -0.5)``, its floor, the corners in the order
+    ``(x0, y0), (x1, y0), (x0, y1), (x1, y1)`` summed by ``fma``; nearest: the texel at
+    ``floor(uv res)``), so the values are the float texture's to the bit
+    (``tests/render/test_texture.py``). A minified texture (a sphere showing a 2048x2048
+    map at 192x192 pixels) misses the caches on nearly every fetch; the codes take 16 MB
+    where the floats take 64 MB. ``to_uv`` (``m``, row-major 2x3) as :class:`Bitmap`'s.
+
+    :class:`TextureSet` keeps the ``raw`` bitmaps (normal maps) so, whose codes a division
+    decodes; an sRGB-decoded image stays a float texture: its twelve table gathers per
+    lookup cost more than the bytes they save (docs/performance.md, "Textures: 8-bit
+    codes, bump maps' footprints")."""
+
+    def __init__(self, codes: np.ndarray, table: np.ndarray, filter_mode=dr.FilterMode.Linear,
+                 wrap_mode=dr.WrapMode.Repeat, m=None):
+        h, w, c = codes.shape
+        self.shape = (h, w)
+        self.m = m
+        self.gray = c < 3
+        self.nearest = filter_mode == dr.FilterMode.Nearest
+        self._filter, self.wrap = filter_mode, wrap_mode
+        c32 = codes.astype(np.uint32)
+        packed = c32[..., 0] if self.gray else c32[..., 0] | (c32[..., 1] << 8) | (c32[..., 2] << 16)
+        self.texels = UInt32(np.ascontiguousarray(packed).ravel())
+        table = np.asarray(table, np.float32)
+        #: raw codes over 255 are decoded by a division (exact, as the table's float64
+        #: quotient rounded; by an opaque divisor, which Dr.Jit does not turn into a
+        #: multiplication by its reciprocal), other tables by a gather
+        self.divisor = dr.opaque(Float, 255.0) if np.array_equal(table, decoding_table(False)) else None
+        self.table = Float(table)
+
+    @classmethod
+    def of(cls, codes: np.ndarray, p) -> Packed8:
+        """The texture of a scene's image ``p`` (a path: sRGB-decoded, bilinear, repeat; a
+        :class:`~drpt.materials.spec.Texture`: its options) from its codes."""
+        if not isinstance(p, Texture):
+            return cls(codes, decoding_table(True))
+        m = None if p.to_uv is None else [float(x) for x in p.to_uv]
+        return cls(codes, decoding_table(not p.raw), _FILTERS[p.filter_type], _WRAPS[p.wrap_mode], m)
+
+    def filter_mode(self):
+        """The filter, as a Dr.Jit texture's ``filter_mode()``."""
+        return self._filter
+
+    def wrap_mode(self):
+        """The wrap mode, as a Dr.Jit texture's ``wrap_mode()``."""
+        return self.wrap
+
+    def _wrap(self, i: Int32, res: int) -> Int32:
+        return _wrap(i, res, self.wrap)
+
+    def _texel(self, x: Int32, y: Int32, active: Bool) -> Array3f:
+        code = dr.gather(UInt32, self.texels, UInt32(y * self.shape[1] + x), active)
+        chans = (code,) if self.gray else (code & 0xFF, (code >> 8) & 0xFF, code >> 16)
+        if self.divisor is not None:
+            vals = [Float(c) / self.divisor for c in chans]
+        else:
+            vals = [dr.gather(Float, self.table, c, active) for c in chans]
+        return Array3f(*(vals * 3 if self.gray else vals))
+
+    def _footprint(self, uv: Array2f):
+        h, w = self.shape
+        px = dr.fma(uv.x, w, -0.5)
+        py = dr.fma(uv.y, h, -0.5)
+        ix, iy = Int32(dr.floor(px)), Int32(dr.floor(py))
+        w1x, w1y = px - Float(ix), py - Float(iy)
+        xs = (self._wrap(ix, w), self._wrap(ix + 1, w))
+        ys = (self._wrap(iy, h), self._wrap(iy + 1, h))
+        return xs, ys, (1.0 - w1x, w1x), (1.0 - w1y, w1y)
+
+    def _uv(self, uv: Array2f) -> Array2f:
+        m = self.m
+        if m is None:
+            return uv
+        return Array2f(uv.x * m[0] + uv.y * m[1] + m[2], uv.x * m[3] + uv.y * m[4] + m[5])
+
+    def eval(self, uv: Array2f, active: Bool = True) -> Array3f:
+        """The filtered value at Mitsuba's uv (``(u, 1 - v)`` of drpt's), ``to_uv`` applied."""
+        uv = self._uv(uv)
+        active = Bool(active)
+        h, w = self.shape
+        if self.nearest:
+            x = self._wrap(Int32(dr.floor(uv.x * w)), w)
+            y = self._wrap(Int32(dr.floor(uv.y * h)), h)
+            return self._texel(x, y, active)
+        xs, ys, wx, wy = self._footprint(uv)
+        out = None
+        for corner in range(4):
+            bx, by = corner & 1, corner >> 1
+            c = self._texel(xs[bx], ys[by], active)
+            weight = wx[bx] * wy[by]
+            out = c * weight if out is None else dr.fma(c, weight, out)
+        return out
+
+    def eval_fetch(self, uv: Array2f, active: Bool = True) -> list:
+        """The four texels of the bilinear footprint at ``uv`` (Dr.Jit's ``eval_fetch``:
+        ``(x0, y0), (x1, y0), (x0, y1), (x1, y1)``), each as three channels; ``to_uv`` is
+        the caller's (as for a Dr.Jit texture)."""
+        active = Bool(active)
+        xs, ys, _, _ = self._footprint(uv)
+        return [list(self._texel(xs[c & 1], ys[c >> 1], active)) for c in range(4)]
+
+
+def _wrap(i: Int32, res: int, mode) -> Int32:
+    """Dr.Jit's ``tex_wrap`` of the integer coordinate ``i`` on an axis of ``res`` texels:
+    clamped, or ``i mod res`` (Euclidean), reflected in the periods ``floor(i / res)`` that
+    are odd (mirror). The period comes from a float estimate corrected by one step either
+    way (exact for ``|i| < 2^23``), not from an integer division, which the CPU's vector
+    units lack (LLVM would divide lane by lane); beyond that the texel may differ from
+    Dr.Jit's but stays inside the image."""
+    if mode == dr.WrapMode.Clamp:
+        return dr.clip(i, 0, res - 1)
+    q = Int32(dr.floor(Float(i) * (1.0 / res)))
+    mod = i - q * res
+    low, high = mod < 0, mod >= res
+    mod = dr.select(low, mod + res, dr.select(high, mod - res, mod))
+    if mode == dr.WrapMode.Mirror:
+        q = dr.select(low, q - 1, dr.select(high, q + 1, q))
+        mod = dr.select((q & 1) == 0, mod, res - 1 - mod)
+    return dr.clip(mod, 0, res - 1)  # (a no-op for |i| < 2^23: memory safety beyond)
+
+
+class GrayFootprints:
+    """A gray 8-bit bump map (every texel's channels equal) with repeat wrapping, kept as
+    the codes of each texel's bilinear footprint: texel ``(x, y)`` holds in one ``uint32``
+    the codes of ``(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)`` (wrapped), so that
+    :meth:`fetch` reads a footprint with one 32-bit gather, in one cache line, where the
+    luminance texture's ``eval_fetch`` makes four gathers in two rows of the image. A
+    code's luminance is the kernel's own expression of its decoded value: a raw code's
+    value by an exact division (as :class:`Packed8`'s), an sRGB code's read from a
+    256-entry table computed on the device from :func:`drpt.imageio.decoding_table`'s
+    values; so the four values are the luminance texture's (and the RGB texture's
+    luminances) bit for bit. Same bytes as the luminance texture (4 per texel)."""
+
+    def __init__(self, codes: np.ndarray, table: np.ndarray):
+        h, w = codes.shape
+        self.shape = (h, w)
+        c = codes.astype(np.uint32)
+        right = np.roll(c, -1, axis=1)
+        packed = c | (right << 8) | (np.roll(c, -1, axis=0) << 16) | (np.roll(right, -1, axis=0) << 24)
+        self.records = UInt32(np.ascontiguousarray(packed).ravel())
+        table = np.asarray(table, np.float32)
+        #: raw codes: the luminance computed from the code over 255 (an exact division, as
+        #: :class:`Packed8` decodes them), else read from the table
+        self.divisor = dr.opaque(Float, 255.0) if np.array_equal(table, decoding_table(False)) else None
+        t = Float(table)
+        self.lum = _lum(Array3f(t, t, t))
+        dr.eval(self.lum)
+
+    @classmethod
+    def of(cls, p) -> GrayFootprints | None:
+        """The footprints of the scene's image ``p`` (a path or a
+        :class:`~drpt.materials.spec.Texture`), or None where it is not a gray 8-bit image."""
+        codes = read_codes(getattr(p, "path", p))
+        if codes is None:
+            return None
+        gray = codes[..., 0]
+        if codes.shape[2] >= 3 and not (np.array_equal(gray, codes[..., 1]) and np.array_equal(gray, codes[..., 2])):
+            return None
+        raw = bool(getattr(p, "raw", False))
+        return cls(np.ascontiguousarray(gray), decoding_table(not raw))
+
+    def fetch(self, uv: Array2f, active: Bool) -> tuple[Float, Float, Float, Float]:
+        """The luminances of the footprint's corners ``(x0, y0), (x1, y0), (x0, y1),
+        (x1, y1)`` at the texture position ``uv`` (``to_uv`` applied), as Dr.Jit's
+        ``eval_fetch`` orders them."""
+        h, w = self.shape
+        x = _wrap(Int32(dr.floor(dr.fma(uv.x, w, -0.5))), w, dr.WrapMode.Repeat)
+        y = _wrap(Int32(dr.floor(dr.fma(uv.y, h, -0.5))), h, dr.WrapMode.Repeat)
+        code = dr.gather(UInt32, self.records, UInt32(y * w + x), active)
+        corners = [(code >> s) & 0xFF for s in (0, 8, 16, 24)]
+        if self.divisor is not None:
+            return tuple(_lum(Array3f(t, t, t)) for t in (Float(c) / self.divisor for c in corners))
+        return tuple(dr.gather(Float, self.lum, c, active) for c in corners)
 
 
 def _vec3(a: np.ndarray) -> Array3f:

@@ -13,7 +13,7 @@ from drjit.auto import Array2f, Float, UInt32
 
 from drpt.errors import SceneError
 from drpt.imageio import srgb_to_linear, write_image
-from drpt.render.texture import TextureSet
+from drpt.render.texture import TextureSet, _luminance_texture
 from drpt.testing import mitsuba
 
 H, W = 4, 5
@@ -264,7 +264,7 @@ def test_gradient_from_the_luminance_texture_is_the_rgb_ones_to_the_bit(exr, png
     rgb = TextureSet(paths)
     lum = TextureSet(paths, gradients=(0, 1))
     assert set(lum.luminance) == {0, 1} and not rgb.luminance
-    assert lum.luminance[1].wrap_mode() == rgb.textures[1].tex.wrap_mode()
+    assert lum.luminance[1].wrap_mode() == rgb.textures[1].wrap_mode()  # a Packed8 (8-bit codes)
     want = np.array(rgb.gradient(ids, uv, True))
     got = np.array(lum.gradient(ids, uv, True))
     assert np.abs(want).sum() > 0.0
@@ -279,6 +279,125 @@ def test_gradient_from_the_luminance_texture_is_the_rgb_ones_to_the_bit(exr, png
     finally:
         texture._lum = mean
     assert not np.array_equal(np.array(control.gradient(ids, uv, True)), want)
+
+
+@pytest.mark.parametrize("mode", ["L", "RGB"])
+def test_gray_bump_map_footprints_give_the_luminance_gradients_to_the_bit(tmp_path, mode):
+    """A gray 8-bit bump map with repeat wrapping is read through its footprints' codes
+    (:class:`GrayFootprints`: one 32-bit gather per lookup) and gives the gradients of the
+    luminance texture and of the RGB texture bit for bit: a one-channel PNG and an RGB one
+    with equal channels, plain (sRGB) and as a raw ``bitmap`` with ``to_uv``, at 4096 points
+    inside and across the borders. Not for a mirror-wrapped map (it keeps the luminance
+    texture). Negative control: footprints whose right and lower neighbours are swapped
+    differ."""
+    from PIL import Image
+
+    from drpt.materials.spec import Texture
+    from drpt.render.texture import GrayFootprints
+
+    rng = np.random.default_rng(5)
+    g = rng.integers(0, 256, (9, 13), dtype=np.uint8)
+    path = tmp_path / f"bump_{mode}.png"
+    Image.fromarray(g if mode == "L" else np.repeat(g[..., None], 3, axis=2), mode).save(path)
+    to_uv = (1.5, 0.2, 0.1, -0.3, 2.0, 0.4, 0, 0, 1)
+    paths = [path, Texture(path, 0.5, raw=True, to_uv=to_uv), Texture(path, 0.5, wrap_mode="mirror")]
+    n = 4096
+    uv = Array2f(Float(rng.uniform(-1.2, 2.2, n).astype(np.float32)),
+                 Float(rng.uniform(-1.2, 2.2, n).astype(np.float32)))
+    ids = UInt32(rng.integers(0, 3, n).astype(np.uint32))
+    rgb = TextureSet(paths)
+    fp = TextureSet(paths, gradients=(0, 1, 2))
+    assert set(fp.footprints) == {0, 1} and set(fp.luminance) == {2}
+    want = np.array(rgb.gradient(ids, uv, True))
+    assert np.abs(want).sum() > 0.0
+    np.testing.assert_array_equal(np.array(fp.gradient(ids, uv, True)), want)
+    lum = TextureSet(paths, gradients=(0, 1, 2))
+    lum.luminance.update({k: _luminance_texture(getattr(lum.textures[k], "tex", lum.textures[k]))
+                          for k in (0, 1)})
+    lum.footprints.clear()
+    np.testing.assert_array_equal(np.array(lum.gradient(ids, uv, True)), want)
+    # negative control: the right and lower neighbours swapped in every record
+    r = np.array(fp.footprints[0].records)
+    swapped = (r & 0xFF0000FF) | ((r >> 8) & 0xFF) << 16 | ((r >> 16) & 0xFF) << 8
+    fp.footprints[0].records = UInt32(swapped.astype(np.uint32))
+    assert not np.array_equal(np.array(fp.gradient(ids, uv, True)), want)
+    assert isinstance(fp.footprints[1], GrayFootprints)
+
+
+_MODES = [pytest.param("RGB", (13, 17, 3), marks=pytest.mark.slow), ("L", (9, 6)), ("RGBA", (7, 11, 4)),
+          ("P", (8, 5))]
+
+
+@pytest.mark.parametrize("mode,shape", _MODES)
+def test_packed_8_bit_texture_is_the_float_texture_to_the_bit(tmp_path, mode, shape):
+    """An 8-bit image kept as its codes (:class:`Packed8`: a uint32 per texel, decoded by the
+    sRGB table or, raw, by a division) looks up what the float32 texture of
+    :func:`load_rgb`'s texels does, bit for bit: bilinear and nearest, the three wrap modes,
+    ``raw`` or sRGB-decoded, gray, RGBA and palette files, at 20,000 points of
+    ``[-3, 3]^2`` (inside the image and across its borders), and its ``eval_fetch`` gives the
+    four corners Dr.Jit's does (every filter and wrap mode on RGB, two of the six on the
+    other layouts). Negative control: the codes decoded as Dr.Jit's own 8-bit
+    textures decode them (``code * (1 / 255)``), 1 ulp off for some codes, differ."""
+    from PIL import Image
+
+    from drpt.imageio import decoding_table, read_codes
+    from drpt.render.texture import Packed8, load_rgb
+
+    rng = np.random.default_rng(7)
+    a = rng.integers(0, 256, shape, dtype=np.uint8)
+    im = Image.fromarray(a, "L").convert("P") if mode == "P" else Image.fromarray(a, mode)
+    path = tmp_path / f"t_{mode}.png"
+    im.save(path)
+    codes = read_codes(path)
+    assert codes.dtype == np.uint8 and codes.shape[:2] == a.shape[:2]
+    n = 20000
+    uv = Array2f(Float(rng.uniform(-3, 3, n).astype(np.float32)), Float(rng.uniform(-3, 3, n).astype(np.float32)))
+    for raw in (False, True):
+        img = load_rgb(path, raw=raw)
+        combos = [(f, w) for f in (dr.FilterMode.Linear, dr.FilterMode.Nearest)
+                  for w in (dr.WrapMode.Repeat, dr.WrapMode.Mirror, dr.WrapMode.Clamp)]
+        for filt, wrap in combos if mode == "RGB" else [combos[0], combos[4]]:
+            ref = dr.auto.Texture2f(dr.auto.TensorXf(img), filter_mode=filt, wrap_mode=wrap)
+            packed = Packed8(codes, decoding_table(not raw), filt, wrap)
+            assert (packed.divisor is not None) == raw
+            want = np.array(ref.eval(uv))
+            np.testing.assert_array_equal(np.array(packed.eval(uv)), want)
+            if filt == dr.FilterMode.Linear:
+                for c_ref, c_got in zip(ref.eval_fetch(uv), packed.eval_fetch(uv)):
+                    np.testing.assert_array_equal(np.array(c_got), np.array(c_ref))
+    # negative control: Dr.Jit's 8-bit decoding of the raw codes
+    img = load_rgb(path, raw=True)
+    ref = dr.auto.Texture2f(dr.auto.TensorXf(img), filter_mode=dr.FilterMode.Nearest)
+    drjit_u8 = np.arange(256, dtype=np.float32) * np.float32(1.0 / 255.0)
+    assert not np.array_equal(drjit_u8, decoding_table(False))
+    control = Packed8(codes, drjit_u8, dr.FilterMode.Nearest, dr.WrapMode.Clamp)
+    assert control.divisor is None
+    assert not np.array_equal(np.array(control.eval(uv)), np.array(ref.eval(uv)))
+
+
+def test_which_textures_are_packed(tmp_path, exr, png):
+    """Raw 8-bit images (a ``bitmap`` with ``raw``) become :class:`Packed8`; sRGB-decoded 8-bit
+    images (whose table gathers cost more than the bytes they save), float images and a bump
+    map's texture (``gradients``: its luminance or footprints) stay float textures;
+    :func:`drpt.imageio.read_codes` reads no codes from float or 16-bit files."""
+    from PIL import Image
+
+    from drpt.imageio import read_codes
+    from drpt.materials.spec import Texture
+    from drpt.render.texture import Packed8
+
+    (pe, _), (pp, _) = exr, png
+    deep = tmp_path / "deep.png"
+    Image.fromarray(np.full((3, 4), 40000, np.uint16)).save(deep)
+    assert read_codes(pe) is None and read_codes(deep) is None
+    ts = TextureSet([pe, pp, Texture(pp, 0.5, raw=True), Texture(pp, 0.5), Texture(pp, 0.7, raw=True), deep],
+                    gradients=(4,))
+    kinds = [type(t).__name__ for t in ts.textures]
+    assert kinds == ["Texture2f", "Texture2f", "Packed8", "Bitmap", "Bitmap", "Texture2f"]
+    assert isinstance(ts.textures[2], Packed8) and ts.textures[2].divisor is not None
+    assert ts.shapes[1] == ts.shapes[2] == ts.shapes[4]
+    with pytest.raises(SceneError, match="nope.jpg"):
+        read_codes(tmp_path / "nope.jpg")
 
 
 def test_empty_set_traces_nothing():
