@@ -46,6 +46,7 @@ ENV_SAMPLING = ("luminance", "uniform")
 #: ``--env-compensation``: MIS compensation of the sky's next-event density (:attr:`RenderOptions.env_compensation`)
 ENV_COMPENSATION = ("on", "off")
 LIGHT_SAMPLERS = ("mixed", "power", "uniform", "bvh", "pilot")  # drpt.render.lights.selection
+DELTA_LIGHTS = ("each", "select")  # drpt.render.scene.DeviceScene.delta_each
 #: how next-event estimation samples an emissive triangle (drpt.render.lights.area.triangle_sampling_rule)
 TRIANGLE_SAMPLING = ("auto", "area", "solid-angle")
 #: --sampler names (drpt.render.sampler): independent, drpt's low-discrepancy samplers, and
@@ -100,6 +101,12 @@ class RenderOptions:
     #: how next-event estimation picks an area light: "power" (each emissive primitive by its
     #: power) or "uniform" (Mitsuba's: each emitter alike, then a point by area)
     light_sampler: str = "mixed"
+    #: how the path tracer's next-event estimation reaches delta lights (point, spot,
+    #: projector, directional) in a scene that has other emitters too: "each" (a shadow ray
+    #: toward every delta light at every vertex, outside the light selection, which then
+    #: picks among the other emitters) or "select" (the delta lights in the selection, one
+    #: emitter per vertex), :attr:`drpt.render.scene.DeviceScene.delta_each`
+    delta_lights: str = "each"
     #: how next-event estimation samples a point on an emissive triangle: "area" (uniform
     #: on it, Mitsuba's), "solid-angle" (uniform in the solid angle it subtends, where that
     #: is neither tiny nor near a hemisphere) or "auto" (solid-angle where volpath renders a
@@ -189,6 +196,7 @@ class RenderOptions:
                                      ("--env-sampling", self.env_sampling, ENV_SAMPLING),
                                      ("--env-compensation", self.env_compensation, ENV_COMPENSATION),
                                      ("--light-sampler", self.light_sampler, LIGHT_SAMPLERS),
+                                     ("--delta-lights", self.delta_lights, DELTA_LIGHTS),
                                      ("--triangle-sampling", self.triangle_sampling, TRIANGLE_SAMPLING),
                                      ("--sampler", self.sampler, SAMPLER_CHOICES)):
             if value not in allowed:

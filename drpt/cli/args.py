@@ -29,6 +29,7 @@ from ..errors import DrptError, note, warn
 from ..options import (
     BSDF_MODES,
     BVH_KINDS,
+    DELTA_LIGHTS,
     ENV_COMPENSATION,
     ENV_SAMPLING,
     GIVEN,
@@ -261,6 +262,13 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                                  "by a light BVH: by their importance at the shading point; the "
                                  "others as mixed) "
                                  f"(default {base.light_sampler})")
+        parser.add_argument("--delta-lights", dest="delta_lights", choices=DELTA_LIGHTS,
+                            default=base.delta_lights,
+                            help="how the path tracer reaches delta lights (point, spot, projector, "
+                                 "directional) in a scene with other emitters too: each (a shadow ray "
+                                 "toward every delta light at every vertex; the light selection picks "
+                                 "among the others) or select (in the light selection with the others) "
+                                 f"(default {base.delta_lights})")
         parser.add_argument("--triangle-sampling", dest="triangle_sampling", choices=TRIANGLE_SAMPLING,
                             default=base.triangle_sampling,
                             help="how next-event estimation samples a point on an emissive "
@@ -432,6 +440,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          env_sampling=get("env_sampling", base.env_sampling),
                          env_compensation=get("env_compensation", base.env_compensation),
                          light_sampler=get("light_sampler", base.light_sampler),
+                         delta_lights=get("delta_lights", base.delta_lights),
                          triangle_sampling=get("triangle_sampling", base.triangle_sampling),
                          sampler=get("sampler") or base.sampler,
                          jitter=base.jitter if get("jitter") is None else get("jitter") == "on",

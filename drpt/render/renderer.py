@@ -287,6 +287,11 @@ class Renderer:
         media = getattr(self.scene_model, "media", None)
         if media and options.integrator != "volpath" and MEDIA_IGNORED not in self.warnings:
             self.warnings.append(MEDIA_IGNORED)
+        # only the megakernel path tracer reaches delta lights by shadow rays of their own
+        # (DeviceScene.delta_each); the other integrators find them in the light selection
+        if hasattr(self.scene, "set_delta_each"):
+            self.scene.set_delta_each(options.delta_lights == "each" and options.mode != "wavefront" and (
+                options.integrator == "path" or (options.integrator == "volpath" and not media)))
         if options.integrator == "ptracer":
             if options.moment:
                 raise DrptError("the moment integrator cannot wrap ptracer (light tracing has no "

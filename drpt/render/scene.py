@@ -319,18 +319,49 @@ class DeviceScene:
             # its power over the lit geometry's cross-section (drpt.render.lights.reach)
             self.sky = SkyEmitter(nee_environment or self.environment,
                                   radius if lit is None else float(np.sqrt(lit.cross_section / np.pi)))
-        families = [self.area_lights, self.delta_lights] + ([self.sky] if self.sky is not None else [])
-        families += [f for f in (build(self, scene) for build in EMITTER_FAMILIES) if f is not None]
-        rule = options.light_sampler
-        if rule == "bvh" and self.area_lights.count > 0:
-            selection = BVHSelection(families, self.area_lights, self.area_lights.bvh(scene))
-        else:  # (bvh without area emitters: nothing for a BVH to choose among, mixed's rule)
-            selection = LightSelection(families, "mixed" if rule in ("bvh", "pilot") else rule)
-        self.set_light_selection(selection)
-        if rule == "pilot" and not self.is_empty and options.integrator not in LIGHT_TRACERS:
-            # measured through the scene's camera (light tracers pick as mixed: no pilot)
-            self.set_light_selection(pilot_selection(self, RayCamera(scene.camera, options.width, options.height),
-                                                     options.width, options.height))
+        others = [self.area_lights] + ([self.sky] if self.sky is not None else [])
+        others += [f for f in (build(self, scene) for build in EMITTER_FAMILIES) if f is not None]
+        #: the delta lights that the path tracer's next-event estimation reaches each by a
+        #: shadow ray of its own at every vertex, outside the light selection (``--delta-lights
+        #: each``, :meth:`~drpt.render.integrators.common.DirectLight.delta_each`), else None
+        #: (they are in the selection). Only a delta light's own shadow ray finds it (BSDF
+        #: sampling never does), and the selection's ``1 / p`` multiplies the square of its
+        #: estimate: on a glossy surface its highlight's. So they leave the selection where
+        #: the megakernel path tracer renders (not its wavefront form, the light tracers or
+        #: volpath in media), other emitters remain to select among, and no shadow ray is
+        #: followed through glass (:mod:`~drpt.render.integrators.glass`).
+        self.delta_each = None
+        #: whether the scene allows it: delta lights and other emitters, no glass to follow
+        self._each_ok = (self.delta_lights.count > 0 and any(f.count > 0 for f in others)
+                         and self.glass_boxes is None)
+        self._selection_args = (scene, others, options)
+        self._selections: dict = {}  # whether the delta lights are out -> the selection
+        self.set_delta_each(options.delta_lights == "each" and options.mode != "wavefront"
+                            and (options.integrator == "path" or (options.integrator == "volpath" and not scene.media)))
+
+    def set_delta_each(self, on: bool) -> None:
+        """Take the delta lights out of the light selection (:attr:`delta_each`: the path
+        tracer reaches each by a shadow ray of its own) where ``on`` and the scene allows
+        it, else put them in it. The renderer calls it with the integrator it builds (only
+        the megakernel path tracer reaches them so), which reads both at trace time; each
+        selection is built once."""
+        out = bool(on) and self._each_ok
+        if out not in self._selections:
+            scene, others, options = self._selection_args
+            families = others[:1] + ([] if out else [self.delta_lights]) + others[1:]
+            rule = options.light_sampler
+            if rule == "bvh" and self.area_lights.count > 0:
+                selection = BVHSelection(families, self.area_lights, self.area_lights.bvh(scene))
+            else:  # (bvh without area emitters: nothing for a BVH to choose among, mixed's rule)
+                selection = LightSelection(families, "mixed" if rule in ("bvh", "pilot") else rule)
+            self.set_light_selection(selection)
+            if rule == "pilot" and not self.is_empty and options.integrator not in LIGHT_TRACERS:
+                # measured through the scene's camera (light tracers pick as mixed: no pilot)
+                selection = pilot_selection(self, RayCamera(scene.camera, options.width, options.height),
+                                            options.width, options.height)
+            self._selections[out] = selection
+        self.delta_each = self.delta_lights if out else None
+        self.set_light_selection(self._selections[out])
 
     def _set_flags(self) -> None:
         """The feature flags, from the scene's emitters and the materials it traces

@@ -88,7 +88,7 @@ def test_the_scene_samples_it_through_the_selection(tmp_path, sun_disk):
     from drpt.options import RenderOptions
     from drpt.render.scene import DeviceScene
 
-    ds = DeviceScene(_scene(tmp_path, sun_disk, point=True), RenderOptions())
+    ds = DeviceScene(_scene(tmp_path, sun_disk, point=True), RenderOptions(delta_lights="select"))
     sel = ds.emitter_selection
     assert [type(f).__name__ for f in sel.families] == ["DeltaLights", "SunDiskEmitter"]
     n = 4096

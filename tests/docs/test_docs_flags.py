@@ -212,6 +212,7 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--all-textures",  # (benchmarks/kernel_ops.py)
                   "--variants", "--first",  # (benchmarks/bdpt_ld_share.py)
                   "--runs",  # (benchmarks/small_tables_ab.py)
+                  "--shares", "--sweep", "--split",  # (benchmarks/light_selection_errors.py)
                   "--integrators",  # (benchmarks/far_light_paths.py)
                   "--seconds", "--renderer",  # (benchmarks/jit_hotspots.py)
                   "--agree",  # (benchmarks/env_compensation.py)

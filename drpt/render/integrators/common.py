@@ -14,6 +14,8 @@ from __future__ import annotations
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float
 
+from ..lights import EmitterSample
+
 SHADOW_SHRINK = 1.0 - 2.0**-12  # stop shadow rays just short of their end point
 
 
@@ -96,6 +98,24 @@ class DirectLight:
         es = self.scene.sample_emitter(si, u_sel, u2, active)
         f, pdf_b, wo, bs = self.scene.eval_sample_bsdf(si, es.wo, u_lobe, u_bsdf)
         return es, f, pdf_b, self._query(si, es, f, pdf_b, mis, coherent), wo, bs
+
+    def delta_each(self, si, active: Bool, coherent: Bool | bool = False) -> Array3f:
+        """The direct light at ``si`` from every delta light of the scene's
+        :attr:`~drpt.render.scene.DeviceScene.delta_each`, each by a shadow ray of its own
+        (no selection, no random number: a delta light has one direction), summed; zero
+        where the scene has none (no code traced)."""
+        lights = getattr(self.scene, "delta_each", None)
+        total = Array3f(0.0)
+        if lights is None:
+            return total
+        finite = lights.count - len(lights.directionals)  # (samples(): the directional lights last)
+        for i, ds in enumerate(lights.samples(si.p)):
+            p = si.p + ds.wo * ds.dist if i < finite else Array3f(si.p)
+            es = EmitterSample(ds.wo, p, ds.irradiance, Float(1.0), active & (dr.max(ds.irradiance) > 0.0),
+                               Float(ds.dist), True)
+            f, pdf_b = self.scene.eval_bsdf(si, es.wo)
+            total += self._query(si, es, f, pdf_b, True, coherent).resolve(self.scene)
+        return total
 
     def _query(self, si, es, f: Array3f, pdf_b: Float, mis: bool, coherent: Bool | bool) -> ShadowQuery:
         """The :class:`ShadowQuery` of emitter sample ``es`` at ``si`` given the BSDF's

@@ -530,6 +530,8 @@ class PathIntegrator:
         lanes = active & ~mats.is_delta(si) if mixed else active
 
         def estimate(L):
+            if getattr(scene, "delta_each", None) is not None:  # (every delta light by its own shadow ray)
+                L = L + beta * self.direct.delta_each(si, lanes, coherent)
             if glass is None:
                 q, wo, bs = self.direct.emitter_query_sample(si, u_sel, u_light, u_lobe, u_bsdf, lanes,
                                                              mis=True, coherent=coherent)

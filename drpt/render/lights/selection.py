@@ -30,7 +30,10 @@ conditional density by :meth:`pmf` of the slot (:meth:`Emitter.slot_of
 <drpt.render.lights.area.AreaLights.slot_of>` finds the slot a ray hit).
 
 Slots are numbered family by family, in the order the families are given
-(:attr:`offsets`); a family with no slot is left out.
+(:attr:`offsets`); a family with no slot is left out. Where the path tracer reaches the
+delta lights by shadow rays of their own (``--delta-lights each``,
+:attr:`~drpt.render.scene.DeviceScene.delta_each`) their family is not given: the selection
+picks among the other emitters.
 """
 
 from __future__ import annotations

@@ -78,6 +78,7 @@ def test_same_paths_as_the_megakernel(scenes, name, tail, path):
     """With ``tail``, the last paths finish in one fused loop: still the same paths.
     Also with a depth limit, hidden emitters, a fixed roulette probability."""
     r = Renderer(scenes(name), _opts(path=PathOptions(**path)))
+    r.scene.set_delta_each(False)  # (the wavefront selects delta lights with the other emitters)
     n = 4096
     rng, o, d = _lane_rays(r, n, 5)
     mk = PathIntegrator(r.scene, r.opt.path)

@@ -194,7 +194,7 @@ def _device(scene, rule="bvh"):
     from drpt.options import RenderOptions
     from drpt.render.scene import DeviceScene
 
-    return DeviceScene(scene, RenderOptions(light_sampler=rule))
+    return DeviceScene(scene, RenderOptions(light_sampler=rule, delta_lights="select"))  # (delta lights selected)
 
 
 def _sel_pmf_table(sel, refs):

@@ -184,7 +184,7 @@ def _emitter_shares(sel):
 @pytest.mark.parametrize("control", [False, True])
 def test_power_selection_draws_the_reaching_powers(tmp_path, control):
     scene = far_lights_scene(tmp_path)
-    ds = DeviceScene(scene, RenderOptions(light_sampler="power"))
+    ds = DeviceScene(scene, RenderOptions(light_sampler="power", delta_lights="select"))
     sel = ds.emitter_selection
     assert [type(f).__name__ for f in sel.families] == ["AreaLights", "DeltaLights", "SkyEmitter"]
     # the point light's 4 pi I reaches the square through its share of directions

@@ -88,7 +88,7 @@ def emitter_scene(tmp_path=None, delta=True, sky=True, spheres=True, size=1.0):
 
 
 def device(scene, rule="power"):
-    return DeviceScene(scene, RenderOptions(light_sampler=rule))
+    return DeviceScene(scene, RenderOptions(light_sampler=rule, delta_lights="select"))
 
 
 def _draws(ds, n=200_000, seed=1):
