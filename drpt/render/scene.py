@@ -110,6 +110,9 @@ EMPTY_SCENE_WARNING = ("the scene has no primitives (no triangles, spheres or pl
                        "the image shows only its background or sky")
 
 
+#: the most delta lights that ``--delta-lights each`` reaches by shadow rays of their own
+DELTA_EACH_MAX = 4
+
 class NoSurfaces:
     """The surface data of a scene without primitives: every hit is a miss."""
 
@@ -331,8 +334,10 @@ class DeviceScene:
         #: volpath in media), other emitters remain to select among, and no shadow ray is
         #: followed through glass (:mod:`~drpt.render.integrators.glass`).
         self.delta_each = None
-        #: whether the scene allows it: delta lights and other emitters, no glass to follow
-        self._each_ok = (self.delta_lights.count > 0 and any(f.count > 0 for f in others)
+        #: whether the scene allows it: delta lights and other emitters, no glass to follow, and
+        #: at most DELTA_EACH_MAX delta lights (each is a shadow ray per vertex and its code is
+        #: traced once per light: with many, the selection's one shadow ray is the cheaper)
+        self._each_ok = (0 < self.delta_lights.count <= DELTA_EACH_MAX and any(f.count > 0 for f in others)
                          and self.glass_boxes is None)
         self._selection_args = (scene, others, options)
         self._selections: dict = {}  # whether the delta lights are out -> the selection

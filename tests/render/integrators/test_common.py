@@ -5,8 +5,8 @@
   lights leave the light selection (which picks among the others) and
   :attr:`~drpt.render.scene.DeviceScene.delta_each` holds them; with ``select``, in
   wavefront mode, for the light tracers (also a renderer derived for one from a path
-  tracer's), for a scene whose only emitters are delta lights and where shadow rays follow
-  through glass, they stay in it.
+  tracer's), for a scene whose only emitters are delta lights, one with more than
+  ``DELTA_EACH_MAX`` of them, and where shadow rays follow through glass, they stay in it.
 * Unbiased: the image of a small object lit from afar by a point light, a rectangle light
   and a sky (the corpus's sphere grid in small) is the same with ``each`` and ``select``:
   the two means, 12 seeds of 16 spp each, differ per 4x4 block of pixels by less than 4.5
@@ -26,7 +26,7 @@ import pytest
 
 from drpt.options import RenderOptions
 from drpt.render.renderer import Renderer
-from drpt.render.scene import DeviceScene
+from drpt.render.scene import DELTA_EACH_MAX, DeviceScene
 from drpt.scene.model import Material, PerspectiveCamera, PointLight, Scene, Skybox, Triangles
 
 
@@ -73,6 +73,11 @@ def test_delta_lights_leave_the_selection_where_the_path_tracer_renders(tmp_path
     assert r.scene.delta_each is None and len(r.scene.emitter_selection.families) == 3
     r.derive(r.opt)
     assert r.scene.delta_each is not None and len(r.scene.emitter_selection.families) == 2
+    many = far_lights_scene(tmp_path)  # more delta lights than DELTA_EACH_MAX: one ray, selected
+    many.lights.extend(PointLight((-4.0, 0.1 * i, -6.0), (10.0, 10.0, 10.0)) for i in range(DELTA_EACH_MAX))
+    assert DeviceScene(many, RenderOptions()).delta_each is None
+    many.lights.pop()
+    assert DeviceScene(many, RenderOptions()).delta_each is not None
     alone = DeviceScene(far_lights_scene(tmp_path, lights=False), RenderOptions())
     assert alone.delta_each is None  # (nothing else to select among)
     assert [type(f).__name__ for f in alone.emitter_selection.families] == ["DeltaLights"]
