@@ -106,12 +106,12 @@ COMPENSATED_INTEGRATORS = ("path", "volpath")
 #: the most emissive surfaces :meth:`DeviceScene.skip_area_emitters` passes along one ray
 MAX_EMITTER_SKIPS = 16
 
+#: the most delta lights that ``--delta-lights each`` reaches by shadow rays of their own
+DELTA_EACH_MAX = 4
+
 EMPTY_SCENE_WARNING = ("the scene has no primitives (no triangles, spheres or planes): "
                        "the image shows only its background or sky")
 
-
-#: the most delta lights that ``--delta-lights each`` reaches by shadow rays of their own
-DELTA_EACH_MAX = 4
 
 class NoSurfaces:
     """The surface data of a scene without primitives: every hit is a miss."""
