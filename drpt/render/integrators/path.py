@@ -77,6 +77,7 @@ from dataclasses import dataclass
 import drjit as dr
 from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32
 
+from ...accel.boxes import NO_BOX
 from ...accel.protocol import INVALID, Hit
 from ...options import PathOptions
 from ..bsdf import BSDFSample
@@ -113,6 +114,10 @@ class PathState:
     #: what the through-glass weight reads (:mod:`~drpt.render.integrators.glass`); ``None``
     #: where the scene has no such technique (:meth:`PathIntegrator.glass_nee`)
     glass: GlassState | None = None
+    #: per lane, the box of the convex shape the ray ``d`` leaves outward, which its query
+    #: leaves out (:attr:`PathIntegrator.cull_leaving`, :meth:`ShapeBoxes.leaving
+    #: <drpt.accel.boxes.ShapeBoxes.leaving>`); ``None`` where the scene's queries do not cull
+    leave: UInt32 | None = None
 
 
 def bank(sums: tuple, dropped: UInt32, L: Array3f, Sum: type) -> tuple[tuple, UInt32]:
@@ -223,6 +228,17 @@ class PathIntegrator:
         every ray query, not only the camera's, asks for coherent traversal (Embree's packet
         traversal; the same hits, in less time)."""
         return not self.scene.has_smooth_bsdfs and type(self).bounce is PathIntegrator.bounce
+
+    @property
+    def cull_leaving(self) -> bool:
+        """Whether every ray query of the bounce, not only the camera's, runs on the lanes whose
+        ray reaches a shape's box (:attr:`cull`; read at trace time), the box of the convex
+        shape a ray leaves outward left out (:attr:`PathState.leave`): where the paths are
+        pixel-coherent (mirrors, smooth conductors, glass only) and some shape is convex. Rays
+        off a mirror sphere that pass beside every other shape then skip the accelerator's
+        query (docs/performance.md, "Mirror spheres: rays that leave a convex shape")."""
+        boxes = self.scene.boxes
+        return self.cull and self.pixel_coherent and boxes is not None and boxes.convex
 
     def unrolled_path(self, rng, state: PathState) -> Array3f:
         """The radiance of the paths starting at ``state`` (``max_depth`` segments at most),
@@ -427,7 +443,8 @@ class PathIntegrator:
                          eta=dr.full(Float, 1.0, w), depth=dr.zeros(UInt32, w),
                          prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
                          active=Bool(active), ref_p=Array3f(o) if sees_from_vertex(self.scene) else None,
-                         glass=GlassState.start(o, w) if self.glass_nee is not None else None)
+                         glass=GlassState.start(o, w) if self.glass_nee is not None else None,
+                         leave=dr.full(UInt32, NO_BOX, w) if self.cull_leaving else None)
 
     def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32, branch: bool = False,
                camera: bool = False) -> PathState:
@@ -443,7 +460,9 @@ class PathIntegrator:
         nee = scene.has_emitters and scene.has_smooth_bsdfs
         # camera rays are coherent; with pixel_coherent every ray of a packet is
         coherent = True if self.pixel_coherent else s.depth == 0
-        hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=coherent, cull=camera and self.cull)
+        leaving = s.leave is not None
+        hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=coherent, cull=(camera and self.cull) or leaving,
+                                          skip=s.leave)
         si = scene.interaction(s.o, s.d, hit)
         si = skip_hidden_emitters(scene, opt, si, s, s.active)
 
@@ -489,6 +508,8 @@ class PathIntegrator:
             if glass is not None:
                 delta = active & scene.materials.is_delta(hit_si)
                 out += (GlassNEE.step(s.glass, active & ~delta, delta, hit_si, s.d, wo, bs),)
+            if leaving:
+                out += (scene.boxes.leaving(hit_si.prim, hit_si.ng, Array3f(wo), active),)
             return out
 
         carry = s.ref_p is not None  # (the vertex the next hit's density is seen from)
@@ -496,7 +517,8 @@ class PathIntegrator:
             def skip(L):
                 return (Array3f(s.o), Array3f(s.d), L, Array3f(s.beta), Float(s.eta), s.depth + 1,
                         Float(s.prev_pdf), Bool(s.prev_delta), Bool(False)) + ((Array3f(s.ref_p),) if carry else ()) \
-                    + ((s.glass,) if glass is not None else ())
+                    + ((s.glass,) if glass is not None else ()) \
+                    + ((dr.full(UInt32, NO_BOX, dr.width(s.active)),) if leaving else ())
 
             out = dr.if_stmt((L,), active, shade, skip, label="drpt_vertex")
         else:
@@ -504,7 +526,8 @@ class PathIntegrator:
         o, d, L, beta, eta, depth, prev_pdf, prev_delta, active, *rest = out
         return PathState(o=o, d=d, L=L, beta=beta, eta=eta, depth=depth, prev_pdf=prev_pdf,
                          prev_delta=prev_delta, active=active, ref_p=rest[0] if carry else None,
-                         glass=rest[-1] if glass is not None else None)
+                         glass=rest[1 if carry else 0] if glass is not None else None,
+                         leave=rest[-1] if leaving else None)
 
 
     def _nee(self, scene: DeviceScene, si, beta: Array3f, L: Array3f, u_sel: Float, u_light,
