@@ -47,6 +47,8 @@ SPHERE = "sphere"
 #: a vertex counts as convex where its corners' angles sum to at most ``2 pi`` plus this (a
 #: flat vertex of a rounded mesh sums to ``2 pi`` up to its rounding over its edges' length)
 DEFECT_EPS = 1e-3
+#: :meth:`ShapeBoxes.reach`'s spheres are widened by this fraction of the ray origin's distance
+SPHERE_SLACK = 2.0**-16
 #: each box is padded by this fraction of its largest side and of its coordinates' magnitude
 PAD = 1e-4
 #: the slab test's far distance is multiplied by ``1 + 2 gamma_3`` (``gamma_n = n u / (1 - n u)``,
@@ -69,6 +71,9 @@ class ShapeBoxes:
         self._shapes = shapes
         self._positions = positions
         self._outward = None
+        #: per box, a sphere around its shape (padded by :data:`PAD`), tested beside the box by
+        #: the rays of :meth:`reach` with ``skip``; None: not known
+        self.center = self.radius = None
         size = np.max(hi - lo, axis=1, keepdims=True)
         pad = PAD * (size + np.maximum(np.abs(lo), np.abs(hi)))
         self.lo = (lo - pad).astype(np.float32)
@@ -85,7 +90,7 @@ class ShapeBoxes:
         for a scene with planes (unbounded) or no primitives."""
         if len(scene.planes) or len(scene.triangles) + len(scene.spheres) == 0:
             return None
-        lo, hi, first, end, shapes = [], [], [], [], []
+        lo, hi, first, end, shapes, center, radius = [], [], [], [], [], [], []
         n_tri = len(scene.triangles)
         if n_tri:
             p = np.asarray(scene.triangles.positions, np.float64).reshape(-1, 3, 3)
@@ -95,8 +100,14 @@ class ShapeBoxes:
             tlo, thi = p.min(1), p.max(1)  # per triangle, then per shape: one sort, no loop
             order = np.argsort(shape, kind="stable")
             starts = np.flatnonzero(np.r_[True, np.diff(shape[order]) != 0])
-            lo += list(np.minimum.reduceat(tlo[order], starts))
-            hi += list(np.maximum.reduceat(thi[order], starts))
+            slo, shi = np.minimum.reduceat(tlo[order], starts), np.maximum.reduceat(thi[order], starts)
+            lo += list(slo)
+            hi += list(shi)
+            mid = (slo + shi) / 2  # (each shape's bounding sphere: its box's center, its farthest corner)
+            of_shape = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, len(order)]))
+            reach = np.linalg.norm(p[order] - mid[of_shape][:, None], axis=2).max(1)
+            center += list(mid)
+            radius += list(np.maximum.reduceat(reach, starts))
             ends = np.r_[starts[1:], len(order)]
             for a, b in zip(starts, ends):
                 ids = order[a:b]
@@ -109,13 +120,18 @@ class ShapeBoxes:
             r = np.asarray(scene.spheres.radius, np.float64)[:, None]
             lo += list(c - r)
             hi += list(c + r)
+            center += list(c)
+            radius += list(r[:, 0])
             first += list(n_tri + np.arange(len(c)))
             end += list(n_tri + 1 + np.arange(len(c)))
             shapes += [SPHERE] * len(c)
         lo, hi = np.array(lo), np.array(hi)
         if len(lo) > MAX_BOXES:
             return cls(lo.min(0, keepdims=True), hi.max(0, keepdims=True))
-        return cls(lo, hi, first, end, shapes, scene.triangles.positions if n_tri else None)
+        out = cls(lo, hi, first, end, shapes, scene.triangles.positions if n_tri else None)
+        pad = PAD * (np.array(radius) + np.abs(np.array(center)).max(1))
+        out.center, out.radius = np.array(center, np.float32), (np.array(radius) + pad).astype(np.float32)
+        return out
 
     @classmethod
     def of_materials(cls, scene, materials) -> ShapeBoxes | None:
@@ -195,8 +211,20 @@ class ShapeBoxes:
             meets = (near <= far) & (far >= 0.0)
             if skip is not None and self.outward[i] != 0:
                 meets &= skip != i
+            if skip is not None and self.center is not None:
+                meets &= self._near_sphere(i, o, d)
             out |= meets
         return out
+
+
+    def _near_sphere(self, i: int, o: Array3f, d: Array3f) -> Bool:
+        """Lanes whose ray ``o + t d`` (``t >= 0``) passes within box ``i``'s sphere, its
+        radius widened by :data:`SPHERE_SLACK` of the distance from ``o`` (float32 rounding of
+        the closest approach)."""
+        oc = Array3f(*(float(v) for v in self.center[i])) - o
+        t = dr.maximum(dr.dot(oc, d) / dr.squared_norm(d), 0.0)
+        r = float(self.radius[i]) + SPHERE_SLACK * dr.norm(oc)
+        return dr.squared_norm(oc - t * d) <= r * r
 
 
 def outward_convex(p: np.ndarray) -> int:

@@ -169,9 +169,10 @@ def test_outward_convex_tells_closed_convex_shapes_and_their_side():
 def test_rays_leaving_a_convex_shape_reach_every_other_shape_they_hit():
     """Rays leaving the icosphere (convex, shape 1) outward from points on it hit none of its
     triangles by brute force; with its box left out (``leaving``), every ray that hits another
-    shape still reaches that shape's box, and most of those that hit nothing are culled. Rays
-    leaving inward keep the box. Negative control: those rays leaving inward, with the box left
-    out as if they left outward, are culled though they hit the icosphere."""
+    shape still reaches that shape's box and sphere, and most of those that hit nothing are
+    culled. Rays leaving inward keep the box. Negative controls: the shapes' spheres shrunk by
+    5% lose rays that hit; the rays leaving inward, with the box left out as if they left
+    outward, are culled though they hit the icosphere."""
     sc, ico, quad = _scene()
     boxes = ShapeBoxes.of(sc)
     assert list(boxes.outward) == [1, 0, 1, 1] and boxes.convex  # (the flat quad is not closed)
@@ -197,6 +198,9 @@ def test_rays_leaving_a_convex_shape_reach_every_other_shape_they_hit():
     reach = boxes.reach(O, D, UInt32(skip)).numpy()
     assert np.all(reach[valid]) and valid[out].sum() > 300
     assert (~reach[out & ~valid]).mean() > 0.5
+    tight = ShapeBoxes.of(sc)  # (the spheres around the shapes shrunk: rays that hit are lost)
+    tight.radius = tight.radius * 0.95
+    assert not np.all(tight.reach(O, D, UInt32(skip)).numpy()[valid])
     back = valid & ~out & (prim < len(ico))  # (leaving inward: they hit the icosphere again)
     assert back.sum() > 300
     forced = np.zeros(len(skip), np.uint32)  # (as if they left it outward)
