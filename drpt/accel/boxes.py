@@ -12,7 +12,9 @@ queries the accelerator in a symbolic ``if`` on those lanes where asked to (came
 
 A ray leaving a *convex* shape outward meets nothing of that shape, so its own box, which holds
 the ray's origin, need not count (:meth:`ShapeBoxes.leaving`, then ``reach(o, d, skip)``): a ray
-off a mirror sphere that escapes between the others then skips the query too. A shape is
+off a mirror sphere that escapes between the others then skips the query too. Those rays also
+test a sphere around each shape (its box's center, its farthest corner; padded), which culls the
+rays that pass through a box's corners beside a round shape. A shape is
 convex where every triangle's plane has all of the shape's vertices on one side, the same side
 for all (:func:`outward_convex`, checked on the host when the boxes are made; a sphere always
 is), and its primitive ids are one run of the global ids, so that the box a hit's primitive
@@ -103,18 +105,18 @@ class ShapeBoxes:
             slo, shi = np.minimum.reduceat(tlo[order], starts), np.maximum.reduceat(thi[order], starts)
             lo += list(slo)
             hi += list(shi)
-            mid = (slo + shi) / 2  # (each shape's bounding sphere: its box's center, its farthest corner)
-            of_shape = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, len(order)]))
-            reach = np.linalg.norm(p[order] - mid[of_shape][:, None], axis=2).max(1)
-            center += list(mid)
-            radius += list(np.maximum.reduceat(reach, starts))
-            ends = np.r_[starts[1:], len(order)]
-            for a, b in zip(starts, ends):
-                ids = order[a:b]
-                run = ids[-1] - ids[0] == b - a - 1  # (sorted stably: one run of ids)
-                first.append(ids[0] if run else 0)
-                end.append(ids[-1] + 1 if run else 0)
-                shapes.append(ids if run else None)
+            if len(starts) + len(scene.spheres) <= MAX_BOXES:  # (else one box, for all)
+                mid = (slo + shi) / 2  # (each shape's bounding sphere: its box's center, its farthest corner)
+                of_shape = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, len(order)]))
+                reach = np.linalg.norm(p[order] - mid[of_shape][:, None], axis=2).max(1)
+                center += list(mid)
+                radius += list(np.maximum.reduceat(reach, starts))
+                for a, b in zip(starts, np.r_[starts[1:], len(order)]):
+                    ids = order[a:b]
+                    run = ids[-1] - ids[0] == b - a - 1  # (sorted stably: one run of ids)
+                    first.append(ids[0] if run else 0)
+                    end.append(ids[-1] + 1 if run else 0)
+                    shapes.append(ids if run else None)
         if len(scene.spheres):
             c = np.asarray(scene.spheres.center, np.float64)
             r = np.asarray(scene.spheres.radius, np.float64)[:, None]
