@@ -12,9 +12,10 @@ queries the accelerator in a symbolic ``if`` on those lanes where asked to (came
 
 A ray leaving a *convex* shape outward meets nothing of that shape, so its own box, which holds
 the ray's origin, need not count (:meth:`ShapeBoxes.leaving`, then ``reach(o, d, skip)``): a ray
-off a mirror sphere that escapes between the others then skips the query too. Those rays also
-test a sphere around each shape (its box's center, its farthest corner; padded), which culls the
-rays that pass through a box's corners beside a round shape. A shape is
+off a mirror sphere that escapes between the others then skips the query too. For those rays a
+round shape's box is replaced by a sphere around it (its box's center, its farthest corner;
+padded), where the sphere holds less volume than the box: it culls the rays that pass through
+the box's corners beside the shape. A shape is
 convex where every triangle's plane has all of the shape's vertices on one side, the same side
 for all (:func:`outward_convex`, checked on the host when the boxes are made; a sphere always
 is), and its primitive ids are one run of the global ids, so that the box a hit's primitive
@@ -73,8 +74,8 @@ class ShapeBoxes:
         self._shapes = shapes
         self._positions = positions
         self._outward = None
-        #: per box, a sphere around its shape (padded by :data:`PAD`), tested beside the box by
-        #: the rays of :meth:`reach` with ``skip``; None: not known
+        #: per box, a sphere around its shape (padded by :data:`PAD`), tested instead of a
+        #: larger box by the rays of :meth:`reach` with ``skip`` (:meth:`round`); None: not known
         self.center = self.radius = None
         size = np.max(hi - lo, axis=1, keepdims=True)
         pad = PAD * (size + np.maximum(np.abs(lo), np.abs(hi)))
@@ -206,18 +207,24 @@ class ShapeBoxes:
         inv = 1.0 / d  # (a division, correctly rounded, as the rounding bound assumes)
         out = Bool(False)
         for i, (lo, hi) in enumerate(zip(self.lo, self.hi)):
-            t0 = (Array3f(*(float(v) for v in lo)) - o) * inv
-            t1 = (Array3f(*(float(v) for v in hi)) - o) * inv
-            near = dr.max(dr.minimum(t0, t1))
-            far = dr.min(dr.maximum(t0, t1)) * FAR_SCALE
-            meets = (near <= far) & (far >= 0.0)
+            if skip is not None and self.center is not None and self.round(i):
+                meets = self._near_sphere(i, o, d)  # (inside the box: the box adds nothing)
+            else:
+                t0 = (Array3f(*(float(v) for v in lo)) - o) * inv
+                t1 = (Array3f(*(float(v) for v in hi)) - o) * inv
+                near = dr.max(dr.minimum(t0, t1))
+                far = dr.min(dr.maximum(t0, t1)) * FAR_SCALE
+                meets = (near <= far) & (far >= 0.0)
             if skip is not None and self.outward[i] != 0:
                 meets &= skip != i
-            if skip is not None and self.center is not None:
-                meets &= self._near_sphere(i, o, d)
             out |= meets
         return out
 
+
+    def round(self, i: int) -> bool:
+        """Whether box ``i``'s sphere holds less volume than the box (a round shape's: then
+        :meth:`reach` with ``skip`` tests the sphere alone, else the box alone)."""
+        return 4.0 / 3.0 * np.pi * float(self.radius[i]) ** 3 < float(np.prod(self.hi[i] - self.lo[i]))
 
     def _near_sphere(self, i: int, o: Array3f, d: Array3f) -> Bool:
         """Lanes whose ray ``o + t d`` (``t >= 0``) passes within box ``i``'s sphere, its
