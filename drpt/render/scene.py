@@ -418,13 +418,21 @@ class DeviceScene:
 
     @loops_once
     def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool,
-                 coherent: Bool | bool = False) -> Bool:
+                 coherent: Bool | bool = False, skip: UInt32 | None = None) -> Bool:
         """Lanes whose ray ``(o, d)`` hits anything at ``0 < t < tmax`` (a traversal loop
         recorded once); ``coherent``: the lanes whose rays are coherent, a traversal hint
         (:meth:`drpt.accel.protocol.Accelerator.occluded`), the same answer."""
         if self.instrument is not None:
             self.instrument.occluded(o, d, tmax, active)
-        return self.accel.occluded(o, d, tmax, active, coherent)
+        if skip is None or self.boxes is None:
+            return self.accel.occluded(o, d, tmax, active, coherent)
+        reach = Bool(active) & self.boxes.reach(o, d, skip)
+
+        def query(o, d, tmax, reach):
+            return self.accel.occluded(o, d, tmax, reach, coherent)
+
+        return dr.if_stmt((Array3f(o), Array3f(d), Float(tmax), reach), reach, query,
+                          lambda o, d, tmax, reach: dr.zeros(Bool, dr.width(reach)), label="drpt_cull")
 
     def spawn(self, si: Interaction, d: Array3f) -> Array3f:
         """The origin of a ray leaving ``si`` toward ``d`` without hitting it again."""

@@ -238,7 +238,7 @@ class PathIntegrator:
         off a mirror sphere that pass beside every other shape then skip the accelerator's
         query (docs/performance.md, "Mirror spheres: rays that leave a convex shape")."""
         boxes = self.scene.boxes
-        return self.cull and self.pixel_coherent and boxes is not None and boxes.convex
+        return self.cull and (self.pixel_coherent or self.straight) and boxes is not None and boxes.convex
 
     def unrolled_path(self, rng, state: PathState) -> Array3f:
         """The radiance of the paths starting at ``state`` (``max_depth`` segments at most),
@@ -322,13 +322,13 @@ class PathIntegrator:
             return si.t - si.p_error / dr.maximum(dr.abs(dr.dot(si.ng, s.d)), 1e-30)
 
         if not sky:
-            si.valid = near & ~scene.occluded(s.o, s.d, before_emitter(), near)
+            si.valid = near & ~scene.occluded(s.o, s.d, before_emitter(), near, skip=s.leave)
             return (add_emission(scene, self.opt, si, s, L, s.active),)
         if scene.emissive is not None:
             tmax = dr.select(near, before_emitter(), dr.largest(Float))
         else:
             tmax = dr.full(Float, dr.largest(Float), n)
-        blocked = scene.occluded(s.o, s.d, tmax, s.active, coherent=self.pixel_coherent)
+        blocked = scene.occluded(s.o, s.d, tmax, s.active, coherent=self.pixel_coherent, skip=s.leave)
         si.valid = near & ~blocked
         return (add_emission(scene, self.opt, si, s, L, s.active & ~blocked),)
 
@@ -556,6 +556,8 @@ class PathIntegrator:
             if glass is None:
                 q, wo, bs = self.direct.emitter_query_sample(si, u_sel, u_light, u_lobe, u_bsdf, lanes,
                                                              mis=True, coherent=coherent)
+                if self.cull_leaving:  # (the shadow ray leaving a convex shape: culled by the others)
+                    q.skip = scene.boxes.leaving(si.prim, si.ng, q.d, lanes)
                 return L + beta * q.resolve(scene), wo, bs
             es, f, pdf_b, q, wo, bs = self.direct.sample_and_query(si, u_sel, u_light, u_lobe, u_bsdf, lanes,
                                                                    mis=True, coherent=coherent)
