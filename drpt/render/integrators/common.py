@@ -39,13 +39,18 @@ class ShadowQuery:
         self.coherent, self.skip = coherent, skip
 
     def resolve(self, scene) -> Array3f:
-        ok = self.ok & ~scene.occluded(self.o, self.d, self.tmax, self.ok, self.coherent, skip=self.skip)
+        ok = self.ok & ~self._occluded(scene)
         return dr.select(ok, self.value, 0.0)
+
+    def _occluded(self, scene) -> Bool:
+        if self.skip is None:
+            return scene.occluded(self.o, self.d, self.tmax, self.ok, self.coherent)
+        return scene.occluded(self.o, self.d, self.tmax, self.ok, self.coherent, skip=self.skip)
 
     def resolve_blocked(self, scene) -> tuple[Array3f, Bool]:
         """``(estimate, blocked)``: :meth:`resolve`'s estimate and the lanes of ``ok`` whose
         segment is occluded (where a caller follows the ray on)."""
-        blocked = self.ok & scene.occluded(self.o, self.d, self.tmax, self.ok, self.coherent, skip=self.skip)
+        blocked = self.ok & self._occluded(scene)
         return dr.select(self.ok & ~blocked, self.value, 0.0), blocked
 
 

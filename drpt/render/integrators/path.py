@@ -317,18 +317,20 @@ class PathIntegrator:
                       dr.zeros(Float, n), dr.zeros(Bool, n))
         near = s.active & hit.valid
         si = scene.interaction(s.o, s.d, hit)
+        # (culled by the shapes the ray may reach: :attr:`cull_leaving`)
+        occluded = scene.occluded if s.leave is None else functools.partial(scene.occluded, skip=s.leave)
 
         def before_emitter():  # (where the ray crosses the emitter's plane, less p_error)
             return si.t - si.p_error / dr.maximum(dr.abs(dr.dot(si.ng, s.d)), 1e-30)
 
         if not sky:
-            si.valid = near & ~scene.occluded(s.o, s.d, before_emitter(), near, skip=s.leave)
+            si.valid = near & ~occluded(s.o, s.d, before_emitter(), near)
             return (add_emission(scene, self.opt, si, s, L, s.active),)
         if scene.emissive is not None:
             tmax = dr.select(near, before_emitter(), dr.largest(Float))
         else:
             tmax = dr.full(Float, dr.largest(Float), n)
-        blocked = scene.occluded(s.o, s.d, tmax, s.active, coherent=self.pixel_coherent, skip=s.leave)
+        blocked = occluded(s.o, s.d, tmax, s.active, coherent=self.pixel_coherent)
         si.valid = near & ~blocked
         return (add_emission(scene, self.opt, si, s, L, s.active & ~blocked),)
 
