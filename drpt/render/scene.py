@@ -421,7 +421,11 @@ class DeviceScene:
                  coherent: Bool | bool = False, skip: UInt32 | None = None) -> Bool:
         """Lanes whose ray ``(o, d)`` hits anything at ``0 < t < tmax`` (a traversal loop
         recorded once); ``coherent``: the lanes whose rays are coherent, a traversal hint
-        (:meth:`drpt.accel.protocol.Accelerator.occluded`), the same answer."""
+        (:meth:`drpt.accel.protocol.Accelerator.occluded`), the same answer. With ``skip`` (per
+        lane, the box of the convex shape the ray leaves, :meth:`ShapeBoxes.leaving
+        <drpt.accel.boxes.ShapeBoxes.leaving>`) and the scene's :attr:`boxes`, the query runs
+        in a symbolic ``if`` (label ``drpt_cull``) on the lanes whose ray reaches another
+        shape; the others are not occluded: the same answer."""
         if self.instrument is not None:
             self.instrument.occluded(o, d, tmax, active)
         if skip is None or self.boxes is None:
