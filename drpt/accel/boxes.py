@@ -37,7 +37,8 @@ import numpy as np
 from drjit.auto import Array3f, Bool, UInt32
 
 #: the most shape boxes tested per ray; a scene with more shapes gets one box around them all
-MAX_BOXES = 8
+#: (16: the corpus's sphere grid, twelve spheres and a light, keeps a box each)
+MAX_BOXES = 16
 #: no box (:meth:`ShapeBoxes.leaving`): every box counts
 NO_BOX = 0xFFFFFFFF
 #: a vertex counts as on a triangle's inner side up to this fraction of the shape's largest
