@@ -61,7 +61,9 @@ BSDF sample and the last ray. Every lane traces its camera ray in the same Embre
 query (coherent for the whole packet), on the lanes whose ray reaches a box around a shape
 (:attr:`PathIntegrator.cull`); a vertex makes its random numbers and, without emissive
 surfaces, its hit's interaction inside its branch (:attr:`PathIntegrator.deferred`), so a
-packet of escaped rays pays for neither. The estimator is the loop's and draws the same
+packet of escaped rays pays for neither. Where a shape is convex, the later rays (and, in
+scenes of mirrors only, the loop's) cull likewise, the box of the convex shape they leave left
+out (:attr:`PathIntegrator.cull_leaving`). The estimator is the loop's and draws the same
 random numbers for a path's live vertices, so one path per lane (:meth:`sample`) gives
 the loop's image; :meth:`sample_sequence`'s later paths start at other points of a
 PCG32 stream (the loop also draws at its last vertex), so their images differ by noise.
@@ -231,12 +233,15 @@ class PathIntegrator:
 
     @property
     def cull_leaving(self) -> bool:
-        """Whether every ray query of the bounce, not only the camera's, runs on the lanes whose
-        ray reaches a shape's box (:attr:`cull`; read at trace time), the box of the convex
-        shape a ray leaves outward left out (:attr:`PathState.leave`): where the paths are
-        pixel-coherent (mirrors, smooth conductors, glass only) and some shape is convex. Rays
-        off a mirror sphere that pass beside every other shape then skip the accelerator's
-        query (docs/performance.md, "Mirror spheres: rays that leave a convex shape")."""
+        """Whether every ray query, not only the camera's, runs on the lanes whose ray reaches
+        a shape's box (:attr:`cull`; read at trace time), the box of the convex shape a ray
+        leaves outward left out (:attr:`PathState.leave`, :class:`ShadowQuery.skip
+        <drpt.render.integrators.common.ShadowQuery>`): where some shape is convex and the
+        paths are pixel-coherent (mirrors, smooth conductors, glass only: the bounce loop's
+        queries) or unrolled (:attr:`straight`: the vertices' queries, their shadow rays and
+        the last segment's). Rays off a mirror sphere that pass beside every other shape, and
+        the shadow rays and last rays off a lone sphere, then skip the accelerator's query; the
+        same answers (docs/performance.md, "Rays that leave a convex shape")."""
         boxes = self.scene.boxes
         return self.cull and (self.pixel_coherent or self.straight) and boxes is not None and boxes.convex
 
