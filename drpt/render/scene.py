@@ -424,17 +424,19 @@ class DeviceScene:
 
     @loops_once
     def intersect_preliminary(self, o: Array3f, d: Array3f, active: Bool, tmax: Float | None = None,
-                              coherent: Bool | bool = False, cull: bool = False):
+                              coherent: Bool | bool = False, cull: bool = False, skip: UInt32 | None = None):
         """The accelerator's closest hit (:class:`drpt.accel.Hit`), any distance or closer than ``tmax``
         (a traversal loop recorded once: :func:`~drpt.render.loops.loops_once`). With ``cull``
         (rays that often pass beside every shape: camera rays) and the scene's :attr:`boxes`,
         the query runs in a symbolic ``if`` (label ``drpt_cull``) on the lanes whose ray reaches
         a shape's box; the others are misses (the protocol's: ``t`` inf, ``prim`` INVALID),
-        so a packet of rays passing beside everything skips the query; the same hits."""
+        so a packet of rays passing beside everything skips the query; the same hits. ``skip``:
+        per lane, the box of the convex shape the ray leaves (:meth:`ShapeBoxes.leaving
+        <drpt.accel.boxes.ShapeBoxes.leaving>`), which the ray cannot meet again: not counted."""
         tmax = Float(dr.largest(Float)) if tmax is None else tmax
         if not (cull and self.boxes is not None):
             return self.accel.intersect(o, d, tmax, active, coherent)
-        reach = Bool(active) & self.boxes.reach(o, d)
+        reach = Bool(active) & self.boxes.reach(o, d, skip)
         n = dr.width(reach)
 
         def query(o, d, reach):
@@ -452,13 +454,25 @@ class DeviceScene:
 
     @loops_once
     def occluded(self, o: Array3f, d: Array3f, tmax: Float, active: Bool,
-                 coherent: Bool | bool = False) -> Bool:
+                 coherent: Bool | bool = False, skip: UInt32 | None = None) -> Bool:
         """Lanes whose ray ``(o, d)`` hits anything at ``0 < t < tmax`` (a traversal loop
         recorded once); ``coherent``: the lanes whose rays are coherent, a traversal hint
-        (:meth:`drpt.accel.protocol.Accelerator.occluded`), the same answer."""
+        (:meth:`drpt.accel.protocol.Accelerator.occluded`), the same answer. With ``skip`` (per
+        lane, the box of the convex shape the ray leaves, :meth:`ShapeBoxes.leaving
+        <drpt.accel.boxes.ShapeBoxes.leaving>`) and the scene's :attr:`boxes`, the query runs
+        in a symbolic ``if`` (label ``drpt_cull``) on the lanes whose ray reaches another
+        shape; the others are not occluded: the same answer."""
         if self.instrument is not None:
             self.instrument.occluded(o, d, tmax, active)
-        return self.accel.occluded(o, d, tmax, active, coherent)
+        if skip is None or self.boxes is None:
+            return self.accel.occluded(o, d, tmax, active, coherent)
+        reach = Bool(active) & self.boxes.reach(o, d, skip)
+
+        def query(o, d, tmax, reach):
+            return self.accel.occluded(o, d, tmax, reach, coherent)
+
+        return dr.if_stmt((Array3f(o), Array3f(d), Float(tmax), reach), reach, query,
+                          lambda o, d, tmax, reach: dr.zeros(Bool, dr.width(reach)), label="drpt_cull")
 
     def spawn(self, si: Interaction, d: Array3f) -> Array3f:
         """The origin of a ray leaving ``si`` toward ``d`` without hitting it again."""

@@ -6,9 +6,10 @@ around all, or none (planes)."""
 from __future__ import annotations
 
 import numpy as np
-from drjit.auto import Array3f
+from drjit.auto import Array3f, Bool, UInt32
 
-from drpt.accel.boxes import MAX_BOXES, ShapeBoxes
+from drpt.accel import boxes as boxes_module
+from drpt.accel.boxes import MAX_BOXES, NO_BOX, ShapeBoxes, outward_convex
 from drpt.scene import model as M
 from support.accel import brute_hits, icosphere, make_scene, rays
 
@@ -111,3 +112,96 @@ def test_rays_from_inside_a_box_and_tangent_to_spheres_reach_it():
     hi[2, [0, 2]] -= 0.1
     away = ShapeBoxes(lo, hi)
     assert not np.all(away.reach(O, T).numpy()[hit])
+
+
+def _cube(n: int = 1):
+    """A unit cube's faces, each an ``n x n`` grid of squares split in two coplanar
+    triangles, normals out."""
+    g = np.linspace(0.0, 1.0, n + 1)
+    tris = []
+    for axis in range(3):
+        for side in (0.0, 1.0):
+            u, w = [a for a in range(3) if a != axis]
+            for i in range(n):
+                for j in range(n):
+                    q = np.zeros((4, 3))
+                    q[:, axis] = side
+                    q[:, u] = [g[i], g[i + 1], g[i + 1], g[i]]
+                    q[:, w] = [g[j], g[j], g[j + 1], g[j + 1]]
+                    tris += [q[[0, 1, 2]], q[[0, 2, 3]]]
+    tris = np.array(tris)
+    n_out = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    flip = np.einsum("ij,ij->i", n_out, tris.mean(1) - 0.5) < 0
+    tris[flip] = tris[flip][:, ::-1]
+    return tris
+
+
+def test_outward_convex_tells_closed_convex_shapes_and_their_side():
+    """An icosphere and a cube (coplanar triangles) are convex, their normals out (+1), or in
+    (-1) with the winding reversed; a vertex pushed in or out (a concave edge), a missing
+    triangle (not closed), two spheres as one shape (not a sphere's topology) and a flat quad
+    are not (0). Negative control: with no tolerance, a cube of 7 x 7 squares a face rounded to
+    6 decimals (as an OBJ file writes it) is not convex either, with the tolerance it is."""
+    v, f = icosphere(3)
+    ico = v[f] * 2.0 + [1.0, -2.0, 0.5]
+    assert outward_convex(ico) == 1 and outward_convex(ico[:, ::-1]) == -1
+    assert outward_convex(_cube()) == 1 and outward_convex(_cube()[:, ::-1]) == -1
+    for scale in (0.9, 1.1):  # one vertex (corners equal to it) moved toward / away from the center
+        moved = ico.copy()
+        at = np.all(moved == ico[7, 0], axis=2)
+        moved[at] = (moved[at] - [1.0, -2.0, 0.5]) * scale + [1.0, -2.0, 0.5]
+        assert outward_convex(moved) == 0
+    assert outward_convex(ico[1:]) == 0
+    assert outward_convex(np.concatenate([ico, ico + 10.0])) == 0
+    assert outward_convex(np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0]], [[0, 0, 0], [1, 1, 0], [0, 1, 0]]], float)) == 0
+    a, b = 0.7, 0.3  # (turned: rounding moves corners off their faces' planes)
+    turn = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]) @ \
+        np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+    rounded = np.round(_cube(7) @ turn.T * 1.7 + 0.123456789, 6)
+    assert outward_convex(rounded) == 1
+    boxes_module.CONVEX_EPS, eps = 0.0, boxes_module.CONVEX_EPS
+    try:
+        assert outward_convex(rounded) == 0
+    finally:
+        boxes_module.CONVEX_EPS = eps
+
+
+def test_rays_leaving_a_convex_shape_reach_every_other_shape_they_hit():
+    """Rays leaving the icosphere (convex, shape 1) outward from points on it hit none of its
+    triangles by brute force; with its box left out (``leaving``), every ray that hits another
+    shape still reaches that shape's box and sphere, and most of those that hit nothing are
+    culled. Rays leaving inward keep the box. Negative controls: the shapes' spheres shrunk by
+    5% lose rays that hit; the rays leaving inward, with the box left out as if they left
+    outward, are culled though they hit the icosphere."""
+    sc, ico, quad = _scene()
+    boxes = ShapeBoxes.of(sc)
+    assert list(boxes.outward) == [1, 0, 1, 1] and boxes.convex  # (the flat quad is not closed)
+    rng = np.random.default_rng(3)
+    k = rng.integers(0, len(ico), 3000)
+    b = rng.dirichlet([1, 1, 1], 3000)
+    p = np.einsum("ti,tij->tj", b, ico[k])
+    n = np.cross(ico[k, 1] - ico[k, 0], ico[k, 2] - ico[k, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    d = rng.normal(size=(3000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    out = np.einsum("ij,ij->i", d, n) > 0
+    d[:1000] = (np.array([0.0, 0.0, 3.0]) - p[:1000])  # (toward the sphere at (0, 0, 3))
+    d[:1000] /= np.linalg.norm(d[:1000], axis=1, keepdims=True)
+    out = np.einsum("ij,ij->i", d, n) > 0
+    o = p + n * 1e-4 * np.where(out, 1.0, -1.0)[:, None]
+    hit = brute_hits(sc, o, d)
+    prim, valid = hit.prim.numpy(), hit.valid.numpy()
+    assert not np.any(valid & out & (prim < len(ico)))  # (leaving outward: never the icosphere)
+    O, D = rays(o, d)
+    skip = boxes.leaving(UInt32(k.astype(np.uint32)), Array3f(*np.asarray(n, np.float32).T), D, Bool(True)).numpy()
+    assert np.all(skip[out] == 0) and np.all(skip[~out] == NO_BOX)
+    reach = boxes.reach(O, D, UInt32(skip)).numpy()
+    assert np.all(reach[valid]) and valid[out].sum() > 300
+    assert (~reach[out & ~valid]).mean() > 0.5
+    tight = ShapeBoxes.of(sc)  # (the spheres around the shapes shrunk: rays that hit are lost)
+    tight.radius = tight.radius * 0.95
+    assert not np.all(tight.reach(O, D, UInt32(skip)).numpy()[valid])
+    back = valid & ~out & (prim < len(ico))  # (leaving inward: they hit the icosphere again)
+    assert back.sum() > 300
+    forced = np.zeros(len(skip), np.uint32)  # (as if they left it outward)
+    assert (~boxes.reach(O, D, UInt32(forced)).numpy()[back]).mean() > 0.5

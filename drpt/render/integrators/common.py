@@ -12,7 +12,7 @@ MIS weight) where the sample carries light and zero elsewhere; never NaN.
 from __future__ import annotations
 
 import drjit as dr
-from drjit.auto import Array2f, Array3f, Bool, Float
+from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
 from ..lights import EmitterSample
 
@@ -30,21 +30,29 @@ class ShadowQuery:
     the segment from ``o`` along unit ``d`` is clear up to ``tmax``.
     :meth:`resolve` traces it at once (the megakernel), as a coherent query on the lanes
     ``coherent`` (a traversal hint: the same answer); the wavefront integrator collects
-    the queries of a bounce and traces them as one batch."""
+    the queries of a bounce and traces them as one batch. ``skip``: per lane, the box of the
+    convex shape the ray leaves (:meth:`ShapeBoxes.leaving <drpt.accel.boxes.ShapeBoxes.leaving>`),
+    which the query then culls by (:meth:`DeviceScene.occluded
+    <drpt.render.scene.DeviceScene.occluded>`); None: every lane queries."""
 
     def __init__(self, value: Array3f, o: Array3f, d: Array3f, tmax: Float, ok: Bool,
-                 coherent: Bool | bool = False):
+                 coherent: Bool | bool = False, skip: UInt32 | None = None):
         self.value, self.o, self.d, self.tmax, self.ok = value, o, d, tmax, ok
-        self.coherent = coherent
+        self.coherent, self.skip = coherent, skip
 
     def resolve(self, scene) -> Array3f:
-        ok = self.ok & ~scene.occluded(self.o, self.d, self.tmax, self.ok, self.coherent)
+        ok = self.ok & ~self._occluded(scene)
         return dr.select(ok, self.value, 0.0)
+
+    def _occluded(self, scene) -> Bool:
+        if self.skip is None:
+            return scene.occluded(self.o, self.d, self.tmax, self.ok, self.coherent)
+        return scene.occluded(self.o, self.d, self.tmax, self.ok, self.coherent, skip=self.skip)
 
     def resolve_blocked(self, scene) -> tuple[Array3f, Bool]:
         """``(estimate, blocked)``: :meth:`resolve`'s estimate and the lanes of ``ok`` whose
         segment is occluded (where a caller follows the ray on)."""
-        blocked = self.ok & scene.occluded(self.o, self.d, self.tmax, self.ok, self.coherent)
+        blocked = self.ok & self._occluded(scene)
         return dr.select(self.ok & ~blocked, self.value, 0.0), blocked
 
 

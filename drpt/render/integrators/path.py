@@ -61,7 +61,9 @@ BSDF sample and the last ray. Every lane traces its camera ray in the same Embre
 query (coherent for the whole packet), on the lanes whose ray reaches a box around a shape
 (:attr:`PathIntegrator.cull`); a vertex makes its random numbers and, without emissive
 surfaces, its hit's interaction inside its branch (:attr:`PathIntegrator.deferred`), so a
-packet of escaped rays pays for neither. The estimator is the loop's and draws the same
+packet of escaped rays pays for neither. Where a shape is convex, the later rays (and, in
+scenes of mirrors only, the loop's) cull likewise, the box of the convex shape they leave left
+out (:attr:`PathIntegrator.cull_leaving`). The estimator is the loop's and draws the same
 random numbers for a path's live vertices, so one path per lane (:meth:`sample`) gives
 the loop's image; :meth:`sample_sequence`'s later paths start at other points of a
 PCG32 stream (the loop also draws at its last vertex), so their images differ by noise.
@@ -77,6 +79,7 @@ from dataclasses import dataclass
 import drjit as dr
 from drjit.auto import PCG32, Array3f, Array3f64, Bool, Float, UInt32
 
+from ...accel.boxes import NO_BOX
 from ...accel.protocol import INVALID, Hit
 from ...options import PathOptions
 from ..bsdf import BSDFSample
@@ -113,6 +116,10 @@ class PathState:
     #: what the through-glass weight reads (:mod:`~drpt.render.integrators.glass`); ``None``
     #: where the scene has no such technique (:meth:`PathIntegrator.glass_nee`)
     glass: GlassState | None = None
+    #: per lane, the box of the convex shape the ray ``d`` leaves outward, which its query
+    #: leaves out (:attr:`PathIntegrator.cull_leaving`, :meth:`ShapeBoxes.leaving
+    #: <drpt.accel.boxes.ShapeBoxes.leaving>`); ``None`` where the scene's queries do not cull
+    leave: UInt32 | None = None
 
 
 def bank(sums: tuple, dropped: UInt32, L: Array3f, Sum: type) -> tuple[tuple, UInt32]:
@@ -224,6 +231,20 @@ class PathIntegrator:
         traversal; the same hits, in less time)."""
         return not self.scene.has_smooth_bsdfs and type(self).bounce is PathIntegrator.bounce
 
+    @property
+    def cull_leaving(self) -> bool:
+        """Whether every ray query, not only the camera's, runs on the lanes whose ray reaches
+        a shape's box (:attr:`cull`; read at trace time), the box of the convex shape a ray
+        leaves outward left out (:attr:`PathState.leave`, :class:`ShadowQuery.skip
+        <drpt.render.integrators.common.ShadowQuery>`): where some shape is convex and the
+        paths are pixel-coherent (mirrors, smooth conductors, glass only: the bounce loop's
+        queries) or unrolled (:attr:`straight`: the vertices' queries, their shadow rays and
+        the last segment's). Rays off a mirror sphere that pass beside every other shape, and
+        the shadow rays and last rays off a lone sphere, then skip the accelerator's query; the
+        same answers (docs/performance.md, "Rays that leave a convex shape")."""
+        boxes = self.scene.boxes
+        return self.cull and (self.pixel_coherent or self.straight) and boxes is not None and boxes.convex
+
     def unrolled_path(self, rng, state: PathState) -> Array3f:
         """The radiance of the paths starting at ``state`` (``max_depth`` segments at most),
         traced as straight-line code: ``max_depth - 1`` full vertices, then
@@ -301,18 +322,20 @@ class PathIntegrator:
                       dr.zeros(Float, n), dr.zeros(Bool, n))
         near = s.active & hit.valid
         si = scene.interaction(s.o, s.d, hit)
+        # (culled by the shapes the ray may reach: :attr:`cull_leaving`)
+        occluded = scene.occluded if s.leave is None else functools.partial(scene.occluded, skip=s.leave)
 
         def before_emitter():  # (where the ray crosses the emitter's plane, less p_error)
             return si.t - si.p_error / dr.maximum(dr.abs(dr.dot(si.ng, s.d)), 1e-30)
 
         if not sky:
-            si.valid = near & ~scene.occluded(s.o, s.d, before_emitter(), near)
+            si.valid = near & ~occluded(s.o, s.d, before_emitter(), near)
             return (add_emission(scene, self.opt, si, s, L, s.active),)
         if scene.emissive is not None:
             tmax = dr.select(near, before_emitter(), dr.largest(Float))
         else:
             tmax = dr.full(Float, dr.largest(Float), n)
-        blocked = scene.occluded(s.o, s.d, tmax, s.active, coherent=self.pixel_coherent)
+        blocked = occluded(s.o, s.d, tmax, s.active, coherent=self.pixel_coherent)
         si.valid = near & ~blocked
         return (add_emission(scene, self.opt, si, s, L, s.active & ~blocked),)
 
@@ -427,7 +450,8 @@ class PathIntegrator:
                          eta=dr.full(Float, 1.0, w), depth=dr.zeros(UInt32, w),
                          prev_pdf=dr.full(Float, 1.0, w), prev_delta=dr.full(Bool, True, w),
                          active=Bool(active), ref_p=Array3f(o) if sees_from_vertex(self.scene) else None,
-                         glass=GlassState.start(o, w) if self.glass_nee is not None else None)
+                         glass=GlassState.start(o, w) if self.glass_nee is not None else None,
+                         leave=dr.full(UInt32, NO_BOX, w) if self.cull_leaving else None)
 
     def bounce(self, scene: DeviceScene, s: PathState, rng: PCG32, branch: bool = False,
                camera: bool = False) -> PathState:
@@ -443,7 +467,9 @@ class PathIntegrator:
         nee = scene.has_emitters and scene.has_smooth_bsdfs
         # camera rays are coherent; with pixel_coherent every ray of a packet is
         coherent = True if self.pixel_coherent else s.depth == 0
-        hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=coherent, cull=camera and self.cull)
+        leaving = s.leave is not None
+        hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=coherent, cull=(camera and self.cull) or leaving,
+                                          skip=s.leave)
         si = scene.interaction(s.o, s.d, hit)
         si = skip_hidden_emitters(scene, opt, si, s, s.active)
 
@@ -489,6 +515,8 @@ class PathIntegrator:
             if glass is not None:
                 delta = active & scene.materials.is_delta(hit_si)
                 out += (GlassNEE.step(s.glass, active & ~delta, delta, hit_si, s.d, wo, bs),)
+            if leaving:
+                out += (scene.boxes.leaving(hit_si.prim, hit_si.ng, Array3f(wo), active),)
             return out
 
         carry = s.ref_p is not None  # (the vertex the next hit's density is seen from)
@@ -496,7 +524,8 @@ class PathIntegrator:
             def skip(L):
                 return (Array3f(s.o), Array3f(s.d), L, Array3f(s.beta), Float(s.eta), s.depth + 1,
                         Float(s.prev_pdf), Bool(s.prev_delta), Bool(False)) + ((Array3f(s.ref_p),) if carry else ()) \
-                    + ((s.glass,) if glass is not None else ())
+                    + ((s.glass,) if glass is not None else ()) \
+                    + ((dr.full(UInt32, NO_BOX, dr.width(s.active)),) if leaving else ())
 
             out = dr.if_stmt((L,), active, shade, skip, label="drpt_vertex")
         else:
@@ -504,7 +533,8 @@ class PathIntegrator:
         o, d, L, beta, eta, depth, prev_pdf, prev_delta, active, *rest = out
         return PathState(o=o, d=d, L=L, beta=beta, eta=eta, depth=depth, prev_pdf=prev_pdf,
                          prev_delta=prev_delta, active=active, ref_p=rest[0] if carry else None,
-                         glass=rest[-1] if glass is not None else None)
+                         glass=rest[1 if carry else 0] if glass is not None else None,
+                         leave=rest[-1] if leaving else None)
 
 
     def _nee(self, scene: DeviceScene, si, beta: Array3f, L: Array3f, u_sel: Float, u_light,
@@ -535,6 +565,8 @@ class PathIntegrator:
             if glass is None:
                 q, wo, bs = self.direct.emitter_query_sample(si, u_sel, u_light, u_lobe, u_bsdf, lanes,
                                                              mis=True, coherent=coherent)
+                if self.cull_leaving:  # (the shadow ray leaving a convex shape: culled by the others)
+                    q.skip = scene.boxes.leaving(si.prim, si.ng, q.d, lanes)
                 return L + beta * q.resolve(scene), wo, bs
             es, f, pdf_b, q, wo, bs = self.direct.sample_and_query(si, u_sel, u_light, u_lobe, u_bsdf, lanes,
                                                                    mis=True, coherent=coherent)
