@@ -44,6 +44,7 @@ from drpt.render.integrators import bdpt as B
 from drpt.render.renderer import Renderer
 from drpt.render.sampler import LDSampler
 from drpt.scene import load_scene
+from support import bdpt_bugs
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -372,25 +373,7 @@ def test_negative_controls_fail(scenes, references, monkeypatch, name, what):
     Cornell box's 256 against 1024. That control runs with ``CONNECTION_CHOICES = 1`` (the
     weights of joining every pair): the default's smaller connection weights leave its bias
     at |z| ~ 5.3."""
-    if what.startswith("the camera throughput"):
-        connect = B.BDPTIntegrator._connect
-
-        def twice(self, si, beta, *a):
-            return beta * connect(self, si, beta, *a)
-
-        monkeypatch.setattr(B.BDPTIntegrator, "_connect", twice)
-        monkeypatch.setattr(B, "CONNECTION_CHOICES", 1.0)
-    elif what.startswith("no cosine"):
-        correction = B.correction
-
-        def no_cosine(si, w):  # importance leaving a light vertex without |cos(ns, w)|
-            corr, ok = correction(si, w)
-            return corr / dr.maximum(dr.abs(dr.dot(si.ns, w)), 1e-3), ok
-
-        monkeypatch.setattr(B, "correction", no_cosine)
-    else:
-        nee_weight = B.nee_weight
-        monkeypatch.setattr(B, "nee_weight", lambda fwd, pdf, *a: nee_weight(fwd, pdf * 2.0, *a))
+    bdpt_bugs.put(monkeypatch, what)
     depth, spp, _ = CASES[name]
     zb, _ = _agree(_render(scenes[name], "bdpt", spp, depth).render(), _reference(scenes, references, name))
     assert zb > 6.0, zb

@@ -21,16 +21,15 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
-import drjit as dr
 import numpy as np
 import pytest
 
 from drpt.errors import DrptError
 from drpt.options import PathOptions, RenderOptions
-from drpt.render.integrators import bdpt as B
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
 from drpt.testing import block_z
+from support import bdpt_bugs
 
 REPO = Path(__file__).resolve().parents[3]
 BUNDLED = sorted(p.relative_to(REPO / "scenes").as_posix() for p in (REPO / "scenes").glob("*/*.txt"))
@@ -108,20 +107,10 @@ def test_every_bundled_scene_is_checked():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("what", ["no cosine at the light vertex", "a wrong density in next-event estimation's weight"])
+@pytest.mark.parametrize("what", bdpt_bugs.BUGS[:2])
 def test_negative_controls_fail(path_images, monkeypatch, what):
     """bdpt with a bug (test_bdpt.py's controls) fails the same test."""
-    if what.startswith("no cosine"):
-        correction = B.correction
-
-        def no_cosine(si, w):  # importance leaving a light vertex without |cos(ns, w)|
-            corr, ok = correction(si, w)
-            return corr / dr.maximum(dr.abs(dr.dot(si.ns, w)), 1e-3), ok
-
-        monkeypatch.setattr(B, "correction", no_cosine)
-    else:
-        nee_weight = B.nee_weight
-        monkeypatch.setattr(B, "nee_weight", lambda fwd, pdf, *a: nee_weight(fwd, pdf * 2.0, *a))
+    bdpt_bugs.put(monkeypatch, what)
     name = "newscene/newscene.txt"
     scene = _load(name)
     zb, _ = _agree(_render(scene, "bdpt", 96), _path_image(path_images, name, scene))
