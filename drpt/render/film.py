@@ -208,6 +208,16 @@ def _reach(flt: PixelFilter) -> int:
     return int(math.ceil(flt.radius + 0.5)) - 1
 
 
+def _receivers(flt: PixelFilter, width: int, height: int, r0: int, rows: int) -> tuple:
+    """The pixels that the samples of rows ``[r0, r0 + rows)`` reach through ``flt``: rows
+    ``[y0, y1)`` (the band widened by :func:`_reach`, clipped to the image), as
+    ``(R, y0, y1, ox, oy)`` with each receiving pixel's column and row (one lane each)."""
+    R = _reach(flt)
+    y0, y1 = max(0, r0 - R), min(height, r0 + rows + R)
+    out = dr.arange(UInt32, (y1 - y0) * width)
+    return R, y0, y1, Int32(out % width), Int32(out // width) + y0
+
+
 def _channels(moment: bool) -> int:
     return 3 + 3 + 2 + (6 if moment else 0)  # sum, squares, weights, channel products
 
@@ -257,14 +267,10 @@ def _by_source(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k:
     per source pixel, :func:`_packet` wide), and one adds them to the receiving pixels' float64
     sums, in :func:`_gather`'s order."""
     W = width
-    R = _reach(flt)
+    R, y0, y1, ox, oy = _receivers(flt, W, height, r0, rows)
+    n = (y1 - y0) * W
     side = 2 * R + 1
     channels = _channels(moment)
-    y0, y1 = max(0, r0 - R), min(height, r0 + rows + R)
-    n = (y1 - y0) * W
-    out = dr.arange(UInt32, n)
-    ox = Int32(out % W)
-    oy = Int32(out // W) + y0
     total = [dr.zeros(Float64, n) for _ in range(channels)]
     for dys in groups:
         part = _source_partials(flt, W, r0, rows, k, px, py, L, ok, moment, Partial, [-d for d in dys])
@@ -415,12 +421,8 @@ def _gather(flt: PixelFilter, width: int, height: int, r0: int, rows: int, k: in
     reads each sample's radiance and its two weights for this pixel (:func:`_axis_weights`,
     or ``weights``, :func:`splat_weights`' arrays of the samples)."""
     W = width
-    R = int(math.ceil(flt.radius + 0.5)) - 1
-    y0, y1 = max(0, r0 - R), min(height, r0 + rows + R)
+    R, y0, y1, ox, oy = _receivers(flt, W, height, r0, rows)
     n = (y1 - y0) * W
-    out = dr.arange(UInt32, n)
-    ox = Int32(out % W)
-    oy = Int32(out // W) + y0
     side = 2 * R + 1
     kk = dr.opaque(UInt32, k)
     ns = dr.opaque(UInt32, rows * W * k)  # the pass's samples: the weights' offsets' stride
@@ -473,12 +475,8 @@ def _gather_packets(flt: PixelFilter, width: int, height: int, r0: int, rows: in
     transpose, where :func:`_gather`'s inner loop runs ``k`` gathers of each), and the samples'
     terms are added in the same order, traced one after another."""
     W = width
-    R = _reach(flt)
-    y0, y1 = max(0, r0 - R), min(height, r0 + rows + R)
+    R, y0, y1, ox, oy = _receivers(flt, W, height, r0, rows)
     n = (y1 - y0) * W
-    out = dr.arange(UInt32, n)
-    ox = Int32(out % W)
-    oy = Int32(out // W) + y0
     side = 2 * R + 1
     npix = dr.opaque(UInt32, rows * W)  # the pass's source pixels: records of k samples
     sources = dr.opaque(UInt32, side * side)
