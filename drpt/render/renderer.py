@@ -87,7 +87,7 @@ from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lanes import divmod_opaque
 from .lights.rays import EmitterRays
 from .sampler import STRATA, LDSampler, ZSobolSampler, next_2d, pcg_streams, strata_sampler, uses_ld
-from .scene import DeviceScene
+from .scene import DeviceScene, wants_delta_each
 
 
 @dataclass
@@ -290,8 +290,7 @@ class Renderer:
         # only the megakernel path tracer reaches delta lights by shadow rays of their own
         # (DeviceScene.delta_each); the other integrators find them in the light selection
         if hasattr(self.scene, "set_delta_each"):
-            self.scene.set_delta_each(options.delta_lights == "each" and options.mode != "wavefront" and (
-                options.integrator == "path" or (options.integrator == "volpath" and not media)))
+            self.scene.set_delta_each(wants_delta_each(options, bool(media)))
         if options.integrator == "ptracer":
             if options.moment:
                 raise DrptError("the moment integrator cannot wrap ptracer (light tracing has no "

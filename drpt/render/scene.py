@@ -113,6 +113,15 @@ EMPTY_SCENE_WARNING = ("the scene has no primitives (no triangles, spheres or pl
                        "the image shows only its background or sky")
 
 
+def wants_delta_each(options, media: bool) -> bool:
+    """Whether ``options`` ask for the delta lights' own shadow rays (``--delta-lights each``)
+    and name an integrator that traces them: the megakernel path tracer, and ``volpath`` in a
+    scene without media (``media``: whether it has any). :meth:`DeviceScene.set_delta_each`
+    then decides whether the scene allows it."""
+    return options.delta_lights == "each" and options.mode != "wavefront" and (
+        options.integrator == "path" or (options.integrator == "volpath" and not media))
+
+
 class NoSurfaces:
     """The surface data of a scene without primitives: every hit is a miss."""
 
@@ -341,8 +350,7 @@ class DeviceScene:
                          and self.glass_boxes is None)
         self._selection_args = (scene, others, options)
         self._selections: dict = {}  # whether the delta lights are out -> the selection
-        self.set_delta_each(options.delta_lights == "each" and options.mode != "wavefront"
-                            and (options.integrator == "path" or (options.integrator == "volpath" and not scene.media)))
+        self.set_delta_each(wants_delta_each(options, bool(scene.media)))
 
     def set_delta_each(self, on: bool) -> None:
         """Take the delta lights out of the light selection (:attr:`delta_each`: the path
