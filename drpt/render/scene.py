@@ -367,14 +367,15 @@ class DeviceScene:
                 selection = BVHSelection(families, self.area_lights, self.area_lights.bvh(scene))
             else:  # (bvh without area emitters: nothing for a BVH to choose among, mixed's rule)
                 selection = LightSelection(families, "mixed" if rule in ("bvh", "pilot") else rule)
-            self.set_light_selection(selection)
             if rule == "pilot" and not self.is_empty and options.integrator not in LIGHT_TRACERS:
                 # measured through the scene's camera (light tracers pick as mixed: no pilot)
+                self.set_light_selection(selection)
                 selection = pilot_selection(self, RayCamera(scene.camera, options.width, options.height),
                                             options.width, options.height)
             self._selections[out] = selection
         self.delta_each = self.delta_lights if out else None
-        self.set_light_selection(self._selections[out])
+        if getattr(self, "emitter_selection", None) is not self._selections[out]:
+            self.set_light_selection(self._selections[out])  # (binding the tables is host work)
 
     def _set_flags(self) -> None:
         """The feature flags, from the scene's emitters and the materials it traces

@@ -48,16 +48,14 @@ class Table:
         #: ``(end, row)`` per run of equal rows (equal bits: 0.0 and -0.0 differ), in order: rows
         #: ``end`` of the previous run to ``end - 1`` hold ``row`` (Python values: the literals)
         self.runs: list[tuple[int, tuple]] = []
-        bits = v.view(np.uint32) if v.dtype == np.float32 else v
-        last = None
-        for i, (row, key) in enumerate(zip(v.tolist(), bits.tolist())):
-            row = tuple(row) if cls is Array3f else (row,)
-            key = tuple(key) if cls is Array3f else key
-            if self.runs and key == last:
-                self.runs[-1] = (i + 1, row)
-            else:
-                self.runs.append((i + 1, row))
-            last = key
+        if len(v):
+            bits = v.view(np.uint32) if v.dtype == np.float32 else v
+            change = bits[1:] != bits[:-1]
+            if change.ndim > 1:
+                change = change.any(axis=1)
+            ends = np.append(np.flatnonzero(change) + 1, len(v))
+            rows = v[ends - 1].tolist()
+            self.runs = [(e, tuple(r) if cls is Array3f else (r,)) for e, r in zip(ends.tolist(), rows)]
 
     def __len__(self) -> int:
         return self.size

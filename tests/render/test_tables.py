@@ -4,6 +4,9 @@
   masked lanes) equals ``dr.gather`` of the uploaded array, value for value; a table of more
   than ``RUNS`` runs reads by a gather; negative control: a chain whose run ends are off by
   one row differs;
+* a table's runs, expanded, give back its rows bit for bit, one run per change of row (random
+  tables of long runs; Array3f rows that differ in one component only; control: the count of
+  changes read from the first component alone is smaller);
 * :func:`tables.search` equals ``dr.binary_search`` on a CDF (ties from zero weights, ``u`` at
   the CDF's own values); negative control: counting with ``<`` instead of ``<=`` differs;
 * :func:`tables.choose` and ``SurfaceData.triangle(..., among=records)`` (an emitter's triangle
@@ -84,6 +87,34 @@ def test_shifted_runs_differ():
     want = dr.gather(Float, table.array, index).numpy()
     table.runs = [(end - 1, row) for end, row in table.runs]
     assert not np.array_equal(tables.gather(Float, table, index).numpy(), want)
+
+
+def _expand(table: Table) -> list[tuple]:
+    rows, start = [], 0
+    for end, row in table.runs:
+        rows += [row] * (end - start)
+        start = end
+    return rows
+
+
+@pytest.mark.parametrize("cls, dims", [(Float, 1), (UInt32, 1), (Array3f, 3)])
+def test_runs_expand_to_rows(cls, dims):
+    rng = np.random.default_rng(7)
+    lengths = rng.integers(1, 40, 200)
+    dtype = np.uint32 if cls is UInt32 else np.float32
+    distinct = rng.integers(0, 3, (len(lengths), dims)).astype(dtype)
+    if cls is Array3f:
+        distinct[:, :2] = 0.5  # rows differ in their last component only
+    values = np.repeat(distinct, lengths, axis=0)
+    if dims == 1:
+        values = values[:, 0]
+    table = Table(cls, values)
+    rows = [tuple(r) if dims == 3 else (r,) for r in values.tolist()]
+    assert _expand(table) == rows
+    changes = sum(1 for a, b in zip(rows, rows[1:]) if a != b)
+    assert len(table.runs) == changes + 1
+    if cls is Array3f:  # control: the first component alone sees no change at all
+        assert changes + 1 > len({r[0] for r in rows})
 
 
 def _cdf(weights) -> np.ndarray:
