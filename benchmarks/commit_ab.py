@@ -11,7 +11,8 @@ default the scene's own; ``--bsdf``, the material mode of drpt's own format, e.g
 as the gallery renders the dining room; ``--integrator``, e.g. ``ptracer``), which renders once to
 compile, then ``--rounds`` rounds of one render each, the
 order alternating (AB, BA, ...) so that load from other processes falls on both. Round ``k``
-uses seed ``k`` for both; the script says whether every pair of images was bit-identical (a
+uses seed ``k`` for both; the script says whether every pair of images (with their variance
+and second moments) was bit-identical (a
 pure speed change must keep them so). It prints each side's median seconds (``Renderer.render``,
 tracing included) and the median and quartiles of the per-round ratios ``COMMIT / this``
 (above 1: this checkout is faster), the measure to quote on a loaded machine, and the same
@@ -112,11 +113,13 @@ def main(argv: list[str]) -> int:
                 for side in ("A", "B") if k % 2 == 0 else ("B", "A"):
                     r = rs[side]
                     t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
-                    imgs[side] = r.derive(replace(r.opt, seed=k)).render().image
+                    res = r.derive(replace(r.opt, seed=k)).render()
+                    imgs[side] = (res.image, res.variance, res.moment2)
                     ts[side].append(time.perf_counter() - t0)
                     cpu[side].append(time.process_time() - c0)
                     main[side].append(time.thread_time() - m0)
-                same &= bool(np.array_equal(imgs["A"], imgs["B"]))
+                same &= all(x is None and y is None or x is not None and y is not None
+                            and np.array_equal(x, y, equal_nan=True) for x, y in zip(imgs["A"], imgs["B"]))
             ta, tb = np.array(ts["A"]), np.array(ts["B"])
             ratio = ta / tb
             q1, q3 = np.quantile(ratio, [0.25, 0.75])

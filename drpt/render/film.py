@@ -525,7 +525,8 @@ def _interleaved(total: list, rows: int, width: int) -> tuple:
 LANE_SUMS_UNROLLED = 32
 
 
-def lane_sums(groups: list[list], counts: UInt32, m: int, pixels: int) -> tuple[list, UInt32]:
+def lane_sums(groups: list[list], counts: UInt32, m: int, pixels: int,
+              products: list[tuple[int, int]] | None = None) -> tuple[list, UInt32]:
     """Each pixel's sums of a pass's lanes, a group of channels to an array: the box filter's film.
 
     ``groups`` are lists of per-lane values of one type (``Float`` or ``Float64``), a sum
@@ -538,19 +539,34 @@ def lane_sums(groups: list[list], counts: UInt32, m: int, pixels: int) -> tuple[
     lanes in lane order (``((l_0 + l_1) + l_2) + ...``), every channel in one kernel of
     ``pixels`` lanes, which replaces a block reduction per channel (each its own launch over
     the whole pass) and the host's stacking of the channels; the order is fixed, so the
-    sums are the same in every run, chunk, worker and resumed render."""
+    sums are the same in every run, chunk, worker and resumed render.
+
+    ``products`` (``(a, b)`` pairs of the first group's channels; 2 to
+    :data:`LANE_SUMS_UNROLLED` lanes a pixel) adds a last group: per pair, the sum over the
+    pixel's lanes of each lane's ``a * b``, multiplied here from the gathered values, so the
+    kernel that made the lanes need not write them (where each lane holds one sample, its
+    squares and channel products are these products, bit for bit)."""
     columns = [c for g in groups for c in g]
     Value = type(columns[0])
+    pairs = list(products or [])
+    if pairs and not 1 < m <= LANE_SUMS_UNROLLED:
+        raise ValueError(f"lane_sums: products need 2 to {LANE_SUMS_UNROLLED} lanes a pixel, not {m}")
     if m == 1:
         sums, per_pixel = columns, counts
     elif m <= LANE_SUMS_UNROLLED:
         first = dr.arange(UInt32, pixels) * m
-        sums = [dr.gather(Value, c, first) for c in columns]
-        per_pixel = dr.gather(UInt32, counts, first)
-        for j in range(1, m):
-            lane = first + j
-            sums = [s + dr.gather(Value, c, lane) for s, c in zip(sums, columns)]
-            per_pixel += dr.gather(UInt32, counts, lane)
+        for j in range(m):
+            lane = first if j == 0 else first + j
+            values = [dr.gather(Value, c, lane) for c in columns]
+            values += [values[a] * values[b] for a, b in pairs]
+            count = dr.gather(UInt32, counts, lane)
+            if j == 0:
+                sums, per_pixel = values, count
+            else:
+                sums = [s + v for s, v in zip(sums, values)]
+                per_pixel += count
+        if pairs:
+            groups = [*groups, pairs]
     else:
         sums = [dr.block_sum(c, m) for c in columns]
         per_pixel = dr.block_sum(counts, m)

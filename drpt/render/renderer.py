@@ -75,7 +75,7 @@ from ..scene.model import Camera, Scene
 from .aov import aov_values, index_arrays
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
-from .film import SplatFilm, gather_splats, lane_sums, splat_weights
+from .film import LANE_SUMS_UNROLLED, SplatFilm, gather_splats, lane_sums, splat_weights
 from .filter_sampling import sample_position
 from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
 from .integrators.path import PathIntegrator
@@ -471,9 +471,14 @@ class Renderer:
         rng = self._sampler(pass_index, n, x, y, j, dr.opaque(UInt32, m) if sequential else 1)
 
         camera_ray = self._camera_ray(x, y)
+        # lanes of one sample each: the squares (and products) are the sums', multiplied
+        # where the lanes are added (film.lane_sums' products), not written by the path kernel
+        one_each = sequential and m == k and 1 < m <= LANE_SUMS_UNROLLED
         if sequential:
             count = dr.opaque(UInt32, k // m) + dr.select(j < dr.opaque(UInt32, k % m), 1, 0)
             extra = {"moment": True} if self.opt.moment else {}
+            if one_each:
+                extra["squares"] = False
             acc, acc2, bad, *cross = self.integrator.sample_sequence(rng, camera_ray, count, wide=wide,
                                                                      **extra)
             # evaluate the path loop once (the reductions below would each
@@ -496,6 +501,12 @@ class Renderer:
         # a pixel's lanes summed, every channel in one kernel (film.lane_sums): the sums, and
         # in an array of their own (contiguous for the merge's additions) the squares, then with
         # RenderOptions.moment (a Mitsuba moment integrator) the products rg, rb, gb
+        if one_each:
+            pairs = [(0, 0), (1, 1), (2, 2)] + ([(0, 1), (0, 2), (1, 2)] if self.opt.moment else [])
+            (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z]], bad, m, pixels, products=pairs)
+            dr.eval(sums, sqsums, nbad)
+            return (sums.numpy().reshape(rows, W, 3), sqsums.numpy().reshape(rows, W, len(pairs)),
+                    int(nbad.numpy().sum(dtype=np.int64)))
         squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
         if m == 1:  # one lane per pixel: nothing to add, and no interleaved copy (peak memory)
             dr.eval(acc, squares, bad)

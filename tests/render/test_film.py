@@ -3,7 +3,9 @@ float64 give the float64 sums to float32 rounding, radiance near the float32 max
 float32 partial sums overflow, is gathered again in float64, and the per-source way gives the
 per-receiving-pixel way's sums bit for bit (with one sample or several an iteration of its
 loop). lane_sums (the box film's per-pixel sums of a pass's lanes) adds each pixel's lanes
-in lane order, interleaves each group's channels, and counts per pixel."""
+in lane order, interleaves each group's channels, and counts per pixel; its products (each
+lane's channel products, multiplied where the lanes are added) equal the sums of the products
+written per lane, bit for bit (control: another pair of channels differs)."""
 
 import drjit as dr
 import numpy as np
@@ -223,3 +225,26 @@ def test_packet_gather_sums_are_the_loops(k, flt):
                     for w in weights)
     off = film._gather_packets(flt, W, H + 4, r0, H, k, x, y, L, ok, True, Float, swapped)
     assert not np.array_equal(off[1], want[1])
+
+
+@pytest.mark.parametrize("wide", [False, True])
+def test_lane_sums_products_equal_written_products(wide):
+    pixels, m = 41, 27
+    rng = np.random.default_rng(5)
+    dtype = np.float64 if wide else np.float32
+    cols = (rng.random((3, pixels * m)) * 1e3).astype(dtype)
+    cols[0, ::7] = 0.0  # zeros, as a dropped sample leaves
+    Value = Float64 if wide else Float
+    pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
+    written = [Value(cols[a] * cols[b]) for a, b in pairs]  # (numpy's product: one rounding)
+    counts = UInt32(np.zeros(pixels * m, np.uint32))
+    (s1, p1), n1 = film.lane_sums([[Value(c) for c in cols]], counts, m, pixels, products=pairs)
+    (s2, p2), n2 = film.lane_sums([[Value(c) for c in cols], written], counts, m, pixels)
+    np.testing.assert_array_equal(s1.numpy(), s2.numpy())
+    np.testing.assert_array_equal(p1.numpy(), p2.numpy())
+    # control: (1, 0) in place of (0, 0) is another product
+    (_, p3), _ = film.lane_sums([[Value(c) for c in cols]], counts, m, pixels,
+                                products=[(1, 0)] + pairs[1:])
+    assert not np.array_equal(p3.numpy(), p2.numpy())
+    with pytest.raises(ValueError):
+        film.lane_sums([[Value(c) for c in cols]], counts, 1, pixels * m, products=pairs)
