@@ -29,7 +29,9 @@ drpt/Mitsuba is what to read: the rounds interleave, so load from other processe
 The variance ratio comes with its jackknife error over the rounds (``+- E``,
 :func:`drpt.tools.converge.variance_ratio_error`): the seeds are fixed, so a row whose
 variance sits in a few pixels (a sub-pixel highlight) reads the same draw of that tail in
-every run, and the error says how far the draw may be from the expectation.
+every run, and the error says how far the draw may be from the expectation. A row whose error
+is above ``--max-error`` (default 0.1) of its ratio renders more rounds, doubling, up to
+``--max-rounds`` (default 64; round ``k`` still seed ``k``), and the table says how many it read.
 The target is issue 27's: 2x on the bundled and corpus scenes, 1.5x on Veach's and the room.
 A pixel that is NaN or infinite in any round of either renderer is left out of both renderers'
 variance (the two are scored on the same pixels), and the table lists how many each lost.
@@ -37,7 +39,8 @@ variance (the two are scored on the same pixels), and the table lists how many e
 Output: a Markdown table (stdout), the skipped scenes, and with ``--json FILE`` the numbers
 (rewritten after every scene).
 
-Run: PYTHONPATH=. .venv/bin/python benchmarks/equal_time_vs_mitsuba.py [--rounds 5]
+Run: PYTHONPATH=. .venv/bin/python benchmarks/equal_time_vs_mitsuba.py [--rounds 5] [--max-rounds 64]
+[--max-error 0.1]
 [--min-size 192] [--max-samples 1000000] [--only WORD,...] [--skip WORD,...] [--no-corpus]
 [--json FILE] [--light-sampler RULE] [--env-compensation on|off] [--sampler NAME]
 [--mitsuba-sampler NAME]
@@ -220,6 +223,10 @@ def main(argv=None) -> list[dict]:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--max-rounds", type=int, default=64,
+                    help="a row whose variance ratio's error is above --max-error renders more rounds, up to this")
+    ap.add_argument("--max-error", type=float, default=0.1,
+                    help="relative jackknife error of the variance ratio that asks for more rounds (0: never)")
     ap.add_argument("--min-size", type=int, default=192)
     ap.add_argument("--max-samples", type=int, default=1_000_000)
     ap.add_argument("--only", default="", help="comma-separated words; keep scenes whose name has one")
@@ -246,7 +253,8 @@ def main(argv=None) -> list[dict]:
             try:
                 ways, info = prepare(case, a.min_size, a.max_samples, a.light_sampler, a.env_compensation,
                                      a.sampler, a.mitsuba_sampler)
-                res = efficiency_rounds(ways, a.rounds)
+                res = efficiency_rounds(ways, a.rounds, more=_still_uncertain(a.max_error),
+                                        max_rounds=a.max_rounds)
             except DrptError as e:
                 skipped.append((case.name, str(e).splitlines()[0].replace(f"{CORPUS}/", "")))
                 print(f"{case.name}: skipped: {skipped[-1][1]}", file=sys.stderr, flush=True)
@@ -257,7 +265,7 @@ def main(argv=None) -> list[dict]:
                    "drpt_variance": d["variance"], "mitsuba_variance": m["variance"],
                    "time_ratio": m["seconds"] / d["seconds"],
                    "variance_ratio": d["variance"] / m["variance"] if m["variance"] > 0 else float("nan"),
-                   "variance_ratio_error": variance_ratio_error(d, m),
+                   "variance_ratio_error": variance_ratio_error(d, m), "rounds": d["rounds"], "first_rounds": a.rounds,
                    "efficiency_ratio": d["efficiency"] / m["efficiency"],
                    "drpt_nonfinite_pixels": d["nonfinite_pixels"],
                    "mitsuba_nonfinite_pixels": m["nonfinite_pixels"],
@@ -274,6 +282,20 @@ def main(argv=None) -> list[dict]:
     return rows
 
 
+def _still_uncertain(max_error: float):
+    """``more`` for :func:`~drpt.tools.converge.efficiency_rounds`: whether the variance
+    ratio's jackknife error is above ``max_error`` of the ratio (0: never)."""
+    from drpt.tools.converge import variance_ratio_error
+
+    def more(res: dict) -> bool:
+        d, m = res["drpt"], res["mitsuba"]
+        if max_error <= 0 or not m["variance"] > 0:
+            return False
+        ratio = d["variance"] / m["variance"]
+        return variance_ratio_error(d, m) > max_error * ratio
+    return more
+
+
 def _write_json(a, rows: list[dict], skipped: list, load0: float) -> None:
     a.json.write_text(json.dumps({"commit": a.commit, "cpu": _cpu(), "load_at_start": load0,
                                   "args": {**vars(a), "json": str(a.json)}, "rows": rows,
@@ -283,7 +305,9 @@ def _write_json(a, rows: list[dict], skipped: list, load0: float) -> None:
 def _error(row: dict) -> str:
     """`` +- E``: the variance ratio's jackknife error over the rounds (none below 3 rounds)."""
     e = row.get("variance_ratio_error", float("nan"))
-    return f" +- {e:.2f}" if math.isfinite(e) else ""
+    n = row.get("rounds")
+    more = f" ({n} rounds)" if n and n != row.get("first_rounds", n) else ""
+    return (f" +- {e:.2f}" if math.isfinite(e) else "") + more
 
 
 def _same_image(row: dict, factor: float) -> bool:
@@ -308,6 +332,8 @@ def _why_not_measured(rows: list[dict]) -> str:
 
 def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
     lines = [f"commit {getattr(a, 'commit', None) or _commit()}, {_cpu()}, {os.cpu_count()} cores; {a.rounds} rounds, "
+             f"(more, up to {getattr(a, 'max_rounds', a.rounds)}, where the variance ratio's error is above "
+             f"{getattr(a, 'max_error', 0):g} of it), "
              f"min size {a.min_size}, max samples {a.max_samples}; load average {load0:.1f} at the start"
              + (f"; drpt's light sampler {a.light_sampler}" if getattr(a, "light_sampler", None) else "")
              + (f"; drpt's env compensation {a.env_compensation}" if getattr(a, "env_compensation", None) else "")

@@ -81,6 +81,7 @@ import argparse
 import csv
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -283,7 +284,8 @@ def time_to_error_ratios(t_a, e_a, t_b, e_b, levels) -> list[dict]:
     return rows
 
 
-def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict:
+def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999,
+                      more: Callable[[dict], bool] | None = None, max_rounds: int = 0) -> dict:
     """Equal-spp efficiency of several ways of rendering one image, measured interleaved.
 
     ``ways``: name -> ``render(seed) -> image`` (an ``(H, W, C)`` array; all ways at the
@@ -299,7 +301,11 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
     second; :func:`variance_ratio_error` reads ``loo_variances``. A pixel that is not finite
     in some round of any way is left out of every way's variance, leave-one-out variances
     and mean (all ways are scored on the same pixels; the count says how many each way
-    lost); with no such pixel every pixel counts.
+    lost); with no such pixel every pixel counts; ``"rounds"``: how many rounds it read.
+
+    With ``more`` (``more(result) -> bool``, e.g. whether a variance ratio's error is still
+    large) the rounds go on, doubling, while ``more`` says so and they are fewer than
+    ``max_rounds``: round ``k`` still seed ``k``, so a longer run extends a shorter one.
     """
     if rounds < 2:
         raise DrptError(f"efficiency needs at least 2 rounds, got {rounds}")
@@ -307,13 +313,24 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
         render(warm_seed)
     times: dict = {name: [] for name in ways}
     images: dict = {name: [] for name in ways}
-    for k in range(rounds):
-        for name, render in ways.items():
-            t = time.perf_counter()
-            img = np.asarray(render(k), np.float64)
-            times[name].append(time.perf_counter() - t)
-            images[name].append(img)
-    stacks = {name: np.stack(images[name]) for name in ways}
+    done, total = 0, rounds
+    while True:
+        for k in range(done, total):
+            for name, render in ways.items():
+                t = time.perf_counter()
+                img = np.asarray(render(k), np.float64)
+                times[name].append(time.perf_counter() - t)
+                images[name].append(img)
+        done = total
+        out = _efficiency_of(times, images)
+        if more is None or total >= max_rounds or not more(out):
+            return out
+        total = min(2 * total, max_rounds)
+
+
+def _efficiency_of(times: dict, images: dict) -> dict:
+    """:func:`efficiency_rounds`' result from each way's times and images so far."""
+    stacks = {name: np.stack(images[name]) for name in images}
     finite = {name: finite_in_every_round(st) for name, st in stacks.items()}
     scored = np.logical_and.reduce(list(finite.values()))
     out = {}
@@ -325,7 +342,7 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999) -> dict
                                     float("inf") if var == 0 else float("nan")),
                      "loo_variances": _loo_variances(st[:, scored]) if scored.any() else [],
                      "mean": float(st[:, scored].mean()) if scored.any() else float("nan"),
-                     "nonfinite_pixels": int((~finite[name]).sum())}
+                     "nonfinite_pixels": int((~finite[name]).sum()), "rounds": len(st)}
     return out
 
 

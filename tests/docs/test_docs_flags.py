@@ -206,7 +206,7 @@ def test_wavefront_is_the_megakernel_s_image_exactly_as_far_as_the_docs_say():
 # cli.md's example of a mistyped one
 OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "--sizee", "--sp",
                   "--threshold", "--oracle",  # (benchmarks/adaptive_vs_uniform.py)
-                  "--only", "--skip", "--min-size", "--max-samples", "--rounds",
+                  "--only", "--skip", "--min-size", "--max-samples", "--rounds", "--max-rounds", "--max-error",
                   "--no-corpus", "--mitsuba-sampler",  # (benchmarks/equal_time_vs_mitsuba.py)
                   "--scale", "--grid", "--blocks",  # (benchmarks/variance_vs_mitsuba.py)
                   "--all-textures",  # (benchmarks/kernel_ops.py)

@@ -162,6 +162,34 @@ def test_efficiency_rounds_on_known_noise_and_time(monkeypatch):
         converge.efficiency_rounds({"a": way(1.0, 1.0)}, 1)
 
 
+def test_efficiency_rounds_go_on_while_more_asks(monkeypatch):
+    """With ``more``, rounds double (seeds 8-15, then 16-31) while ``more`` says so, up to
+    ``max_rounds``, and the result is the longer run's, the same as asking for those rounds at
+    once; ``rounds`` says how many. Control: a ``more`` that never asks stops at the first 8."""
+    clock = [0.0]
+    monkeypatch.setattr(converge.time, "perf_counter", lambda: clock[0])
+
+    def way(sd):
+        def render(seed):
+            clock[0] += 1.0
+            return np.random.default_rng(seed * 2 + (sd > 1)).normal(5.0, sd, (8, 8, 3))
+        return render
+
+    asked = []
+
+    def more(res):
+        asked.append(res["a"]["rounds"])
+        return True
+
+    ways = {"a": way(1.0), "b": way(2.0)}
+    res = converge.efficiency_rounds(ways, 8, warm_seed=99, more=more, max_rounds=32)
+    assert asked == [8, 16] and res["a"]["rounds"] == res["b"]["rounds"] == 32
+    once = converge.efficiency_rounds(ways, 32, warm_seed=99)
+    assert res["a"]["variance"] == once["a"]["variance"] and res["b"]["loo_variances"] == once["b"]["loo_variances"]
+    never = converge.efficiency_rounds(ways, 8, warm_seed=99, more=lambda r: False, max_rounds=32)
+    assert never["a"]["rounds"] == 8 and never["a"]["variance"] != res["a"]["variance"]
+
+
 def test_efficiency_rounds_scores_every_way_on_the_pixels_finite_in_all(monkeypatch):
     """A way whose image has a NaN pixel in one round (as Mitsuba's ldsampler image of the
     dining room has) and an infinite one in another: both ways' variances are taken over the
