@@ -15,6 +15,9 @@
   counted twice (its own shadow ray *and* the selection, the scene's ``delta_each`` set on
   a ``select`` render) reads z up to 66 there and a sum 28% too bright (the test itself: 2.2,
   0.16%; the blocks' squared standard errors sum to 1/12 of ``select``'s).
+* The selection is bound (its tables built on the host) only where it changes: not again
+  for each seed's derived renderer (control: a scene that forgot what it bound binds on
+  every derive).
 """
 
 from __future__ import annotations
@@ -81,6 +84,35 @@ def test_delta_lights_leave_the_selection_where_the_path_tracer_renders(tmp_path
     alone = DeviceScene(far_lights_scene(tmp_path, lights=False), RenderOptions())
     assert alone.delta_each is None  # (nothing else to select among)
     assert [type(f).__name__ for f in alone.emitter_selection.families] == ["DeltaLights"]
+
+
+def test_the_selection_is_bound_where_it_changes(tmp_path, monkeypatch):
+    """Binding a light selection builds its tables on the host: a renderer derived again with
+    the same integrator (each seed of a study) binds none, a switch to the light tracer binds
+    the other selection once and the switch back the first again. Control: a scene that
+    forgot what it bound binds on every derive."""
+    scene = far_lights_scene(tmp_path)
+    binds = []
+    bind = DeviceScene.set_light_selection
+
+    def counting(self, selection):
+        binds.append(selection)
+        return bind(self, selection)
+
+    monkeypatch.setattr(DeviceScene, "set_light_selection", counting)
+    opts = RenderOptions(width=8, height=8, spp=1, progress=False)
+    r = Renderer(scene, opts)
+    first = len(binds)
+    for seed in range(3):
+        r.derive(replace(opts, seed=seed)).render()
+    assert len(binds) == first
+    r.derive(replace(opts, integrator="ptracer"))
+    r.derive(opts)
+    assert len(binds) == first + 2 and binds[-1] is binds[first - 1]
+    for seed in range(3):  # control: a scene that forgot what it bound binds on every derive
+        r.scene.emitter_selection = None
+        r.derive(replace(opts, seed=seed))
+    assert len(binds) == first + 5
 
 
 def _mean_and_error(renderer, seeds):
