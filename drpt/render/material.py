@@ -551,8 +551,11 @@ class MaterialTable:
         return Frame(dr.select(f2, -si.ns, si.ns))
 
     # ------------------------------------------------------------------
-    def eval_pdf(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float]:
-        """``f * |cos|`` and the sampling density (solid angle) for world ``wo``."""
+    def eval_pdf(self, si: Interaction, wo: Array3f, importance: bool = False) -> tuple[Array3f, Float]:
+        """``f * |cos|`` and the sampling density (solid angle) for world ``wo``. With
+        ``importance`` (read at trace time) ``f`` is importance mode's, for a light subpath's
+        vertex: a lobe whose transmission scales radiance (its module's ``importance_scale``:
+        rough dielectrics, principled) has that scaling undone."""
         f, pdf = Array3f(0.0), Float(0.0)
         for j, (row, w, present) in enumerate(self._slots_at(si)):
             for case in self._cases(si, j, row, present):
@@ -561,12 +564,12 @@ class MaterialTable:
 
                 def evaluate(f, pdf, case=case, w=w):
                     p, frame = case.bsdf.params(case.rows, si, case.mask), case.frame()
-                    return _eval_case(case, p, frame, frame.to_local(si.wi), wo, w, f, pdf)
+                    return _eval_case(case, p, frame, frame.to_local(si.wi), wo, w, f, pdf, importance)
 
                 f, pdf = case.run(evaluate, (f, pdf))
         return f, pdf
 
-    def eval_pdf_rev(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float, Float]:
+    def eval_pdf_rev(self, si: Interaction, wo: Array3f, importance: bool = False) -> tuple[Array3f, Float, Float]:
         """:meth:`eval_pdf` toward ``wo`` and the reverse density: the density of sampling
         ``si.wi`` seen from ``wo`` (what ``eval_pdf`` of ``si`` with ``wi = wo`` toward
         ``si.wi`` returns), in one dispatch over the kinds (bidirectional path tracing's MIS
@@ -576,9 +579,9 @@ class MaterialTable:
         swapped pair is mirrored in ``z``, as :func:`_z_flipped` mirrors the frame (an
         isotropic lobe's density is the same in any frame of the flipped normal).
         Perturbed frames (normal and bump maps) depend on ``wi``: tables with them take
-        the two evaluations."""
+        the two evaluations. ``importance``: :meth:`eval_pdf`'s."""
         if self._pkinds:
-            return self._two_evaluations(si, wo)
+            return self._two_evaluations(si, wo, importance)
         f, pdf, rev = Array3f(0.0), Float(0.0), Float(0.0)
         # the lanes whose two-sided frame would flip for the reverse direction
         across = (dr.dot(si.ns, si.wi) < 0.0) != (dr.dot(si.ns, wo) < 0.0)
@@ -589,7 +592,7 @@ class MaterialTable:
                 frame = case.frame()
                 p = case.bsdf.params(case.rows, si, case.mask)
                 return _merge(case.mask, w, (f, pdf, rev),
-                                  _lobe_rev(case.bsdf, p, frame, frame.to_local(si.wi), wo, mirror))
+                                  _lobe_rev(case.bsdf, p, frame, frame.to_local(si.wi), wo, mirror, importance))
 
             f, pdf, rev = case.run(evaluate, (f, pdf, rev))
         return f, pdf, rev
@@ -611,7 +614,8 @@ class MaterialTable:
         two = self._two[case.kind]
         return None if two is False else (True if two is True else gather(Bool, two, row, case.mask))
 
-    def prepare_rev(self, si: Interaction) -> Callable[[Array3f], tuple[Array3f, Float, Float]]:
+    def prepare_rev(self, si: Interaction, importance: bool = False
+                    ) -> Callable[[Array3f], tuple[Array3f, Float, Float]]:
         """:meth:`eval_pdf_rev` of ``si`` toward directions given later: what does not depend
         on the direction (each case's fields, its shading frame and ``si.wi`` in it) is traced
         now, once, for every lane of the case, and the returned function traces the rest per
@@ -620,7 +624,7 @@ class MaterialTable:
         (bdpt's camera vertex joined to each light vertex): prepared outside the loop, the
         loop's body no longer gathers the fields nor builds the frame."""
         if self._pkinds:
-            return lambda wo: self._two_evaluations(si, wo)
+            return lambda wo: self._two_evaluations(si, wo, importance)
         prepared = []
         for case, w, lanes in self._smooth_cases(si):
             frame = case.frame()
@@ -634,16 +638,18 @@ class MaterialTable:
                 mirror = None if lanes is None else (across if lanes is True else across & lanes)
 
                 def one(f, pdf, rev, case=case, w=w, mirror=mirror, frame=frame, p=p, wi_l=wi_l):
-                    return _merge(case.mask, w, (f, pdf, rev), _lobe_rev(case.bsdf, p, frame, wi_l, wo, mirror))
+                    return _merge(case.mask, w, (f, pdf, rev),
+                                  _lobe_rev(case.bsdf, p, frame, wi_l, wo, mirror, importance))
 
                 f, pdf, rev = case.run(one, (f, pdf, rev))
             return f, pdf, rev
 
         return evaluate
 
-    def _two_evaluations(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float, Float]:
+    def _two_evaluations(self, si: Interaction, wo: Array3f, importance: bool = False
+                         ) -> tuple[Array3f, Float, Float]:
         """:meth:`eval_pdf_rev` by two :meth:`eval_pdf` (tables with perturbed frames)."""
-        return (*self.eval_pdf(si, wo), self._pdf_seen_from(si, wo))
+        return (*self.eval_pdf(si, wo, importance), self._pdf_seen_from(si, wo))
 
     def _pdf_seen_from(self, si: Interaction, wo: Array3f) -> Float:
         """The density of sampling ``si.wi`` at ``si`` seen from ``wo``, by a second
@@ -809,12 +815,13 @@ class MaterialTable:
         return (wo, out, *pdf_rev)
 
 
-def _lobe_rev(bsdf: BSDF, p, frame, wi_l: Array3f, wo: Array3f, mirror: Bool | None):
+def _lobe_rev(bsdf: BSDF, p, frame, wi_l: Array3f, wo: Array3f, mirror: Bool | None,
+              importance: bool = False):
     """One lobe's ``(f, pdf, pdf_rev)`` toward world ``wo`` in ``frame`` (``wi_l``: ``si.wi`` in
     it), the swapped pair mirrored in ``z`` on the lanes ``mirror``
-    (:meth:`MaterialTable.eval_pdf_rev`)."""
+    (:meth:`MaterialTable.eval_pdf_rev`); ``f`` in importance mode with ``importance``."""
     wo_l = frame.to_local(wo)
-    fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
+    fj, pj = _value(bsdf, p, wi_l, wo_l, importance), bsdf.pdf(p, wi_l, wo_l)
     wi_l, wo_l = _mirrored(mirror, wi_l, wo_l)
     return fj, pj, bsdf.pdf(p, wo_l, wi_l)
 
@@ -842,14 +849,22 @@ def _any(masks: list[Bool]) -> Bool:
     return out
 
 
+def _value(bsdf: BSDF, p, wi_l: Array3f, wo_l: Array3f, importance: bool) -> Array3f:
+    """The lobe's ``f * |cos|``, with ``importance`` in importance mode (its module's
+    ``importance_scale``, where it has one; other lobes are the same in both modes)."""
+    fj = bsdf.eval(p, wi_l, wo_l)
+    scale = getattr(bsdf, "importance_scale", None) if importance else None
+    return fj if scale is None else fj * scale(p, wi_l, wo_l)
+
+
 def _eval_case(case: _Case, p, frame: Frame, wi_l: Array3f, wo: Array3f, w: Float | None,
-               f: Array3f, pdf: Float) -> tuple[Array3f, Float]:
+               f: Array3f, pdf: Float, importance: bool = False) -> tuple[Array3f, Float]:
     """``(f, pdf)`` with ``case``'s lobe toward world ``wo`` added on its lanes (weighted
     by its slot's ``w``; ``None``: the one component), given its fields ``p``, its frame
-    and ``wi`` in it."""
+    and ``wi`` in it; ``f`` in importance mode with ``importance``."""
     bsdf, mask = case.bsdf, case.mask
     wo_l = frame.to_local(wo)
-    fj, pj = bsdf.eval(p, wi_l, wo_l), bsdf.pdf(p, wi_l, wo_l)
+    fj, pj = _value(bsdf, p, wi_l, wo_l, importance), bsdf.pdf(p, wi_l, wo_l)
     if isinstance(frame, PerturbedFrame):
         fac = frame.factor(wo)
         fj, pj = fj * fac, dr.select(fac > 0.0, pj, 0.0)

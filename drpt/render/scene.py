@@ -147,11 +147,12 @@ class NoMaterials:
     def emitted(self, si: Interaction) -> Array3f:
         return dr.zeros(Array3f, dr.width(si.valid))
 
-    def eval_pdf(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float]:
+    def eval_pdf(self, si: Interaction, wo: Array3f, importance: bool = False) -> tuple[Array3f, Float]:
         n = dr.width(si.valid)
         return dr.zeros(Array3f, n), dr.zeros(Float, n)
 
-    def eval_pdf_rev(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float, Float]:
+    def eval_pdf_rev(self, si: Interaction, wo: Array3f, importance: bool = False
+                     ) -> tuple[Array3f, Float, Float]:
         n = dr.width(si.valid)
         return dr.zeros(Array3f, n), dr.zeros(Float, n), dr.zeros(Float, n)
 
@@ -515,19 +516,22 @@ class DeviceScene:
         """Radiance leaving ``si`` toward ``si.wi`` (zero on back faces)."""
         return self.materials.emitted(si)
 
-    def eval_bsdf(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float]:
-        """``f * |cos|`` toward world ``wo`` and the density of sampling it."""
-        return self.materials.eval_pdf(si, wo)
+    def eval_bsdf(self, si: Interaction, wo: Array3f, importance: bool = False) -> tuple[Array3f, Float]:
+        """``f * |cos|`` toward world ``wo`` and the density of sampling it; with
+        ``importance`` in importance mode (a light subpath's vertex:
+        :meth:`~drpt.render.material.MaterialTable.eval_pdf`)."""
+        return self.materials.eval_pdf(si, wo, importance)
 
-    def eval_bsdf_rev(self, si: Interaction, wo: Array3f) -> tuple[Array3f, Float, Float]:
+    def eval_bsdf_rev(self, si: Interaction, wo: Array3f, importance: bool = False
+                      ) -> tuple[Array3f, Float, Float]:
         """:meth:`eval_bsdf` and the reverse density (of sampling ``si.wi`` seen from
         ``wo``), in one evaluation (:meth:`~drpt.render.material.MaterialTable.eval_pdf_rev`)."""
-        return self.materials.eval_pdf_rev(si, wo)
+        return self.materials.eval_pdf_rev(si, wo, importance)
 
-    def prepare_bsdf_rev(self, si: Interaction):
+    def prepare_bsdf_rev(self, si: Interaction, importance: bool = False):
         """:meth:`eval_bsdf_rev` of ``si`` as a function of ``wo``, what does not depend on
         ``wo`` traced once (:meth:`~drpt.render.material.MaterialTable.prepare_rev`)."""
-        return self.materials.prepare_rev(si)
+        return self.materials.prepare_rev(si, importance)
 
     def sample_bsdf(self, si: Interaction, u1: Float, u2: Array2f):
         """A world direction and its :class:`~drpt.render.bsdf.BSDFSample`."""

@@ -578,6 +578,15 @@ def _probabilities(p: PrincipledParams, front, F, bsdf, brdf):
     return pd * inv, pc * inv, pt * inv, ps * inv, ok
 
 
+
+def importance_scale(p: PrincipledParams, wi: Array3f, wo: Array3f) -> Float:
+    """The factor from :func:`eval`'s radiance-mode value to importance mode's (a light
+    subpath's vertex): ``eta_p^2`` where ``wi`` and ``wo`` lie on opposite sides (the
+    specular transmission, the one lobe there; its radiance scaling undone), else 1."""
+    eta_p = dr.select(wi.z > 0.0, p.eta, dr.rcp(p.eta))
+    return dr.select(wi.z * wo.z < 0.0, dr.square(eta_p), 1.0)
+
+
 def pdf(p: PrincipledParams, wi: Array3f, wo: Array3f) -> Float:
     g = _Geometry(p, wi, wo)
     lb = p.lobes

@@ -261,6 +261,15 @@ def eval(p: RoughDielectricParams, wi: Array3f, wo: Array3f) -> Array3f:
     return dr.select(ok, dr.select(h.reflect, p.r, p.t) * val, 0.0)
 
 
+def importance_scale(p: RoughDielectricParams, wi: Array3f, wo: Array3f) -> Float:
+    """The factor from :func:`eval`'s radiance-mode value to importance mode's (a light
+    subpath's vertex: Mitsuba's ``TransportMode::Importance``): ``eta_i^2`` on transmission
+    (``eta_i`` the IOR ratio seen from ``wi``'s side: the radiance scaling eval leaves in
+    is undone), 1 on reflection."""
+    eta_i = dr.select(wi.z > 0.0, p.eta, dr.rcp(p.eta))
+    return dr.select(wi.z * wo.z < 0.0, dr.square(eta_i), 1.0)
+
+
 def pdf(p: RoughDielectricParams, wi: Array3f, wo: Array3f) -> Float:
     h = _Half(p, wi, wo)
     d = _distr(p)

@@ -147,9 +147,9 @@ segments, and at most :data:`MAX_DEPTH`; ``max_depth = -1`` means
 :data:`MAX_DEPTH` (with a warning). Pinhole perspective cameras only (the
 ``t = 1`` strategy needs the camera's importance). Emitters: emissive triangles
 and spheres (textured too), point, spot and directional lights, the sky and a
-background color; projectors and textured spots are refused, as are rough
-dielectric and principled materials (their transmission is not symmetric: see
-:mod:`~drpt.render.integrators.ptracer`).
+background color; projectors and textured spots are refused. A light subpath's vertex is
+evaluated in importance mode (rough transmission's radiance scaling undone:
+:mod:`~drpt.render.integrators.ptracer`), a camera subpath's in radiance mode.
 
 Debugging: with ``--bdpt-strategies`` (:class:`StrategyFilm`) every contribution is also
 added to its strategy's image, as pbrt-v4 writes them.
@@ -260,12 +260,15 @@ def mis(x: Float) -> Float:
     return x * x
 
 
-def eval_both(scene: DeviceScene, si: Interaction, wo: Array3f) -> tuple[Array3f, Float, Float]:
+def eval_both(scene: DeviceScene, si: Interaction, wo: Array3f, importance: bool = False
+              ) -> tuple[Array3f, Float, Float]:
     """``(f, pdf, pdf_rev)`` at ``si`` toward ``wo``: the BSDF value, its density of ``wo`` and
     the reverse density (of ``si.wi`` seen from ``wo``), which the MIS weights of a
     connection, a splat or next-event estimation read, in one evaluation
-    (:meth:`~drpt.render.scene.DeviceScene.eval_bsdf_rev`)."""
-    return scene.eval_bsdf_rev(si, wo)
+    (:meth:`~drpt.render.scene.DeviceScene.eval_bsdf_rev`); ``importance`` at a light
+    subpath's vertex (the value in importance mode: rough transmission's radiance scaling
+    undone)."""
+    return scene.eval_bsdf_rev(si, wo, importance)
 
 
 def prepare_both(scene: DeviceScene, si: Interaction):
@@ -735,7 +738,7 @@ class BDPTIntegrator:
         scene, cam = self.scene, self.camera
         x, y, wc, dist, importance, visible = cam.connect(si.p)
         ok = active & visible
-        f, _, rev = eval_both(self.smooth, si, wc)
+        f, _, rev = eval_both(self.smooth, si, wc, importance=True)
         corr, sides = correction(si, wc)
         pdf_cam = importance * dr.abs(dr.dot(si.ng, wc))
         w = self._weight(connection_weight(pdf_cam, dvcm, dvc, rev, Float(0.0), Float(0.0), Float(0.0),
@@ -885,7 +888,7 @@ class BDPTIntegrator:
         dist2 = dr.squared_norm(to)
         w = to * dr.rsqrt(dist2)
         f_c, fwd_c, rev_c = eval_both(self.smooth, si, w) if eval_c is None else eval_c(w)
-        f_l, fwd_l, rev_l = eval_both(self.smooth, lv, -w)
+        f_l, fwd_l, rev_l = eval_both(self.smooth, lv, -w, importance=True)
         corr, sides = correction(lv, -w)
         inv_d2 = dr.rcp(dist2)
         pdf_l = fwd_c * dr.abs(dr.dot(lv.ng, w)) * inv_d2

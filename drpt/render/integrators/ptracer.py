@@ -34,10 +34,11 @@ included), so ``1`` shows emitters only; Russian roulette after
 The image of ``N = W H spp`` light paths is ``sum / spp`` of the splats (each
 pixel's share of the film's importance is ``1 / (W H)``). Pinhole
 perspective cameras only: a thin lens, an orthographic camera or a crop
-window is refused, as are rough dielectric and principled materials (their
-rough transmission needs the importance-mode evaluation drpt's BSDFs do not
-have; smooth and thin dielectrics and mirrors are sampled, never evaluated,
-so they are fine).
+window is refused. A vertex joined to the camera is evaluated in importance mode
+(``eval_bsdf(..., importance=True)``): rough transmission (``roughdielectric``,
+``principled``) has its radiance scaling undone, as Mitsuba's
+``TransportMode::Importance`` evaluates it; smooth and thin dielectrics and mirrors
+are sampled, never evaluated.
 """
 
 from __future__ import annotations
@@ -55,22 +56,13 @@ from ..loops import loops_once
 from ..sampler import next_2d
 from ..scene import DeviceScene
 
-#: lobes whose evaluation in importance mode would differ from radiance mode
-NONSYMMETRIC_LOBES = ("roughdielectric", "principled")
-
 
 def refuse_unsupported(scene, camera, what: str) -> None:
     """Raise :class:`~drpt.errors.DrptError` where ``what`` (an integrator that traces
     paths from the lights, named for the message) cannot render the scene: a camera
-    other than a pinhole without a crop window (no point to connect to), or a material
-    whose transmission is not symmetric (:data:`NONSYMMETRIC_LOBES`)."""
+    other than a pinhole without a crop window (no point to connect to)."""
     if camera.orthographic or camera.thin_lens or camera.window is not None:
         raise DrptError(f"{what} needs a pinhole perspective camera without a crop window")
-    kinds = set(getattr(scene.materials, "kinds", ()))
-    bad = sorted(kinds & set(NONSYMMETRIC_LOBES))
-    if bad:
-        raise DrptError(f"{what} does not support {', '.join(bad)} materials "
-                        "(their transmission is not symmetric)")
 
 
 #: a connection's shadow ray, traced from the camera toward a surface point, stops short of
@@ -121,7 +113,7 @@ class ParticleTracer:
         scene, cam = self.scene, self.camera
         x, y, wc, dist, importance, visible = cam.connect(si.p)
         ok = active & visible
-        f, _ = scene.eval_bsdf(si, wc)
+        f, _ = scene.eval_bsdf(si, wc, importance=True)
         corr, sides = correction(si, wc)
         value = beta * f * (corr * importance)
         ok &= sides & (dr.max(value) > 0.0)

@@ -192,9 +192,9 @@ def test_light_tracing_refuses_what_it_cannot_render(cornell, tmp_path):
     lens = replace(cornell, camera=replace(cornell.camera, aperture_radius=0.1, focus_distance=3.0))
     with pytest.raises(DrptError, match="pinhole"):
         _render(lens, "ptracer", 1)
-    xml = tmp_path / "glass.xml"
+    xml = tmp_path / "glass.xml"  # (rough glass it renders; an orthographic camera it refuses)
     xml.write_text("""<scene version="3.0.0"><integrator type="ptracer"/>
-        <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="8"/>
+        <sensor type="orthographic"><film type="hdrfilm"><integer name="width" value="8"/>
         <integer name="height" value="8"/></film></sensor>
         <shape type="sphere"><bsdf type="roughdielectric"/></shape>
         <emitter type="point"><point name="position" x="0" y="0" z="3"/></emitter></scene>""")
@@ -203,7 +203,7 @@ def test_light_tracing_refuses_what_it_cannot_render(cornell, tmp_path):
 
     r = subprocess.run([sys.executable, "-m", "drpt", "render", str(xml), "-o", str(tmp_path / "g.exr"), "-q"],
                        capture_output=True, text=True, cwd=REPO)
-    assert r.returncode == 2 and "roughdielectric" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert r.returncode == 2 and "pinhole" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "g.exr").exists()
 
 
