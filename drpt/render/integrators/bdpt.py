@@ -102,7 +102,7 @@ whose BPT part this is): each subpath vertex carries two numbers, ``dvcm`` and
 follows in O(1):
 
 * at an emitter: ``dvcm = m(p_nee / p_emit)``, ``dvc = m(|cos_g| / p_emit)``
-  (``0`` for a point, spot or directional light: the camera cannot hit it), ``m(x) =
+  (``0`` for a point, spot, projector or directional light: the camera cannot hit it), ``m(x) =
   x^2``, ``p_emit`` the light subpath's density of its origin and direction (source
   choice, area density, cosine density), ``p_nee`` next-event estimation's area
   density of the point (1 for delta lights, which it samples every time; 0 for the
@@ -146,8 +146,9 @@ where every pair is joined), and the camera's starting ``dvcm`` and the splats' 
 segments, and at most :data:`MAX_DEPTH`; ``max_depth = -1`` means
 :data:`MAX_DEPTH` (with a warning). Pinhole perspective cameras only (the
 ``t = 1`` strategy needs the camera's importance). Emitters: emissive triangles
-and spheres (textured too), point, spot and directional lights, the sky and a
-background color; projectors and textured spots are refused. A light subpath's vertex is
+and spheres (textured too), point, spot (textured too), projector and directional
+lights (a projector's direction density ``1 / (A cos^3)``: a point uniform on its image
+plane of area ``A`` at distance 1), the sky and a background color. A light subpath's vertex is
 evaluated in importance mode (rough transmission's radiance scaling undone:
 :mod:`~drpt.render.integrators.ptracer`), a camera subpath's in radiance mode.
 
@@ -175,6 +176,7 @@ from ...options import PathOptions
 from ..camera import RayCamera
 from ..film import SplatFilm
 from ..instrument import HIT_CAMERA, HIT_LIGHT, SHADOW_CAMERA, SHADOW_CONNECT, SHADOW_NEE, SPLAT, count
+from ..lights.delta import in_light_frame
 from ..lights.rays import INV_FOUR_PI, EmitterRays
 from ..loops import loops_once
 from ..photons import PhotonGrid
@@ -238,7 +240,7 @@ LD_LIGHT_SHARE = 0.4
 assert 2 + 5 * MAX_DEPTH <= CAMERA_DIMENSION
 assert 5 + MAX_DEPTH - 1 <= CAMERA_STRIDE - CAMERA_TAIL
 
-SUPPORTED_SOURCES = ("area", "point", "spot", "directional", "sky", "background")
+SUPPORTED_SOURCES = ("area", "point", "spot", "projector", "directional", "sky", "background")
 
 #: caustic merging's radius at the first sample per pixel, as a fraction of the scene's bounding
 #: radius (:meth:`BDPTIntegrator.merge_radius`)
@@ -550,10 +552,9 @@ class BDPTIntegrator:
     def __init__(self, scene: DeviceScene, rays: EmitterRays, camera: RayCamera, options: PathOptions,
                  merge: bool = True, low_discrepancy: bool = False):
         refuse_unsupported(scene, camera, "bidirectional path tracing (bdpt)")
-        for kind, light in rays.sources:
-            if kind not in SUPPORTED_SOURCES or (kind == "spot" and getattr(light, "texture", None) is not None):
-                name = f"{'textured ' if kind == 'spot' else ''}{kind} lights"
-                raise DrptError(f"bidirectional path tracing (bdpt) does not support {name}: use the "
+        for kind, _ in rays.sources:
+            if kind not in SUPPORTED_SOURCES:
+                raise DrptError(f"bidirectional path tracing (bdpt) does not support {kind} lights: use the "
                                 "path integrator")
         self.warnings: list[str] = []
         depth = options.max_depth
@@ -570,9 +571,9 @@ class BDPTIntegrator:
         self.camera = camera
         self.opt = options
         self.pick = 1.0 / rays.count if rays.count else 0.0
-        # the order of DeltaLights.samples: points, spots (projectors are refused), directionals
-        self.deltas = ([light for kind, light in rays.sources if kind in ("point", "spot")]
-                       + [light for kind, light in rays.sources if kind == "directional"])
+        # the order of DeltaLights.samples (and of the sources): points, spots, projectors, directionals
+        self.deltas = [light for kind, light in rays.sources
+                       if kind in ("point", "spot", "projector", "directional")]
         #: a test hook: ``(s, t)``, the one strategy that counts, with weight 1 (None: all,
         #: MIS-weighted); the image is then that strategy's unweighted estimate
         self.only: tuple[int, int] | None = None
@@ -619,10 +620,17 @@ class BDPTIntegrator:
         self.threshold = 2.0 ** round(math.log2(t)) if t > 0.0 and math.isfinite(t) else 0.0
 
     # ------------------------------------------------------------ emitter densities
-    def _delta_emit(self, light) -> float:
+    def _delta_emit(self, light, d: Array3f | None = None):
         """The light subpath's density of leaving a delta light: a point light's direction
-        (uniform sphere), a spot's (uniform cone), a directional light's origin (the disk),
-        times the source's choice."""
+        (uniform sphere), a spot's (uniform cone, textured or not), a directional light's
+        origin (the disk), times the source's choice; a projector's direction ``d`` (unit,
+        away from it: a point drawn uniformly on its image plane at distance 1, of area ``A``,
+        is the direction density ``1 / (A cos^3)``, ``cos`` the angle to its axis), per lane."""
+        if getattr(light, "fov_x", None) is not None:
+            t = math.tan(math.radians(light.fov_x) / 2.0)
+            plane = 4.0 * t * t / light.aspect
+            cos = in_light_frame(light.frame, d)[2]
+            return dr.select(cos > 0.0, self.pick / (plane * cos * cos * cos), 0.0)
         if getattr(light, "cutoff_angle", None) is not None:
             return self.pick / (2.0 * math.pi * (1.0 - math.cos(math.radians(light.cutoff_angle))))
         if getattr(light, "position", None) is None:
@@ -707,9 +715,10 @@ class BDPTIntegrator:
             else:
                 oi, di, w = rays._source_ray(kind, light, u_reuse, u_pos, u_dir, mine)
                 pi = oi
-                emit = self._delta_emit(light)
+                emit = self._delta_emit(light, di)
                 bi = w * float(rays.count)
-                vcm = Float(self.k * mis(1.0 / emit))
+                vcm = (Float(self.k * mis(1.0 / emit)) if isinstance(emit, float)
+                       else self.k * mis(dr.select(emit > 0.0, dr.rcp(emit), 0.0)))
                 vc = Float(0.0)
                 if kind == "directional":
                     infinite |= mine
@@ -838,7 +847,7 @@ class BDPTIntegrator:
             # directional light (infinitely far: no distance, no cosine)
             far = getattr(light, "position", None) is None
             pdf_light = Float(1.0) if far else dr.square(ds.dist)
-            w = self._weight(nee_weight(Float(0.0), pdf_light, Float(self._delta_emit(light)), cos_c,
+            w = self._weight(nee_weight(Float(0.0), pdf_light, Float(self._delta_emit(light, -ds.wo)), cos_c,
                                         Float(1.0), dvcm, dvc, rev, self.k), 1, t)
             value = f * ds.irradiance * w
             ok = active & (dr.max(value) > 0.0) & dr.isfinite(dr.max(value))

@@ -176,7 +176,7 @@ class DeltaLights:
             falloff = dr.select(cos_t > math.cos(cutoff), falloff, 0.0)
             E = Array3f(*map(float, light.color)) * falloff / dr.maximum(d2, 1e-30)
             if light.texture is not None:
-                x, y, z = _local(light.frame, -to)
+                x, y, z = in_light_frame(light.frame, -to)
                 k = 0.5 / math.tan(cutoff)
                 lit = falloff > 0.0
                 uv = Array2f(0.5 + k * x / z, 0.5 + k * y / z)
@@ -185,7 +185,7 @@ class DeltaLights:
         for light in self.projectors:
             to = Array3f(*map(float, light.position)) - p
             d = dr.norm(to)
-            x, y, z = _local(light.frame, -to)
+            x, y, z = in_light_frame(light.frame, -to)
             t = math.tan(math.radians(light.fov_x) / 2.0)
             uv = Array2f(0.5 - (0.5 / t) * x / z, 0.5 - (0.5 * light.aspect / t) * y / z)
             ok = (z > 0.0) & (uv.x >= 0.0) & (uv.x <= 1.0) & (uv.y >= 0.0) & (uv.y <= 1.0)
@@ -202,7 +202,7 @@ class DeltaLights:
                               Array3f(*map(float, light.color)))
 
 
-def _local(frame, v: Array3f):
+def in_light_frame(frame, v: Array3f):
     """``(x, y, z)`` of world vector ``v`` in a light's frame (a row-major rotation whose
     columns are the local axes): the columns' dot products."""
     f = [float(a) for a in frame]
