@@ -328,6 +328,20 @@ def block_z_correlated(x, var_x, runs, block=4):
     return (blk(x) - blk(ref)) / np.sqrt(var), f
 
 
+def agreement(a, b, block=8, floor=0.0) -> tuple[float, float]:
+    """Two renders' agreement (``RenderResult``-like: ``image`` and per-pixel ``variance``):
+    the largest :func:`block_z` over the blocks and channels and the largest z of the
+    channels' image means, each ``|z|``. ``floor``: a relative floor on the blocks' variances
+    (``variance + (floor * image)^2``: pixels of one constant value, such as a background,
+    have no variance but float rounding)."""
+    z = block_z(a.image, a.variance + (floor * a.image) ** 2, b.image, b.variance + (floor * b.image) ** 2,
+                block=block)
+    n = a.image.shape[0] * a.image.shape[1]
+    zmean = (a.image.mean((0, 1)) - b.image.mean((0, 1))) / np.sqrt(
+        a.variance.mean((0, 1)) / n + b.variance.mean((0, 1)) / n)
+    return float(np.abs(z).max()), float(np.abs(zmean).max())
+
+
 def assert_agree(r, ref, ref_var, zmax=4.5, block=8):
     """Assert that a drpt ``RenderResult`` ``r`` is finite (no non-finite samples) and agrees
     with a reference mean ``ref`` of per-pixel variance ``ref_var``: every

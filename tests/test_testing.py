@@ -10,7 +10,7 @@ from drjit.auto import Array3f
 
 from drpt.render.bsdf import diffuse
 from drpt.render.bsdf.diffuse import DiffuseParams
-from drpt.testing import block_z, bsdf_chi2, furnace, z_test
+from drpt.testing import agreement, block_z, bsdf_chi2, furnace, z_test
 
 WIS = [(0.0, 0.0, 1.0), (0.6, 0.0, 0.8), (0.999, 0.0, 0.0447)]
 
@@ -63,3 +63,21 @@ def test_block_z_and_z_test_negative_controls():
     img = ref + rng.normal(0.0, 0.0625, ref.shape)
     assert z_test(img, 64, ref, np.full_like(ref, 0.25)).passed
     assert not z_test(img + 0.4, 64, ref, np.full_like(ref, 0.25)).passed
+
+
+def test_agreement_of_two_renders():
+    """Two noisy estimates of one image agree (block and mean |z| small); one 3% brighter
+    does not (control)."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(3)
+    truth = rng.random((32, 32, 3)) + 0.5
+    var = np.full_like(truth, 1e-3)
+
+    def render(scale=1.0):
+        return SimpleNamespace(image=scale * truth + rng.normal(0.0, np.sqrt(1e-3), truth.shape), variance=var)
+
+    zb, zm = agreement(render(), render())
+    assert zb < 4.5 and zm < 4.0
+    zb, zm = agreement(render(1.03), render())
+    assert zb > 6.0 and zm > 6.0

@@ -308,13 +308,9 @@ def _render(scene, integrator, spp, depth, seed=1, size=32):
 def _agree(a, b):
     """Block z and the means' z; pixels of one constant value (the background) have no
     variance but float rounding: a floor of 1e-5 relative."""
-    from drpt.testing import block_z
+    from drpt.testing import agreement
 
-    z = block_z(a.image, a.variance + (1e-5 * a.image) ** 2, b.image, b.variance + (1e-5 * b.image) ** 2)
-    n = a.image.shape[0] * a.image.shape[1]
-    zmean = (a.image.mean((0, 1)) - b.image.mean((0, 1))) / np.sqrt(
-        a.variance.mean((0, 1)) / n + b.variance.mean((0, 1)) / n)
-    return float(np.abs(z).max()), float(np.abs(zmean).max())
+    return agreement(a, b, floor=1e-5)
 
 
 #: (scene, max_depth, bdpt spp, path spp): the path tracer's caustics need many samples

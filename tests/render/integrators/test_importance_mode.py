@@ -30,7 +30,7 @@ from drpt.render import material
 from drpt.render.bsdf import principled, roughdielectric
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-from drpt.testing import block_z
+from drpt.testing import agreement
 
 SCENE = Path(__file__).resolve().parents[2] / "data" / "xml" / "rough_glass_light_tracing.xml"
 
@@ -41,12 +41,6 @@ def _render(integrator, spp, seed=1):
     return Renderer(load_scene(SCENE), opts).render()
 
 
-def _agree(a, b):
-    z = block_z(a.image, a.variance, b.image, b.variance)
-    n = a.image.shape[0] * a.image.shape[1]
-    zmean = (a.image.mean((0, 1)) - b.image.mean((0, 1))) / np.sqrt(
-        a.variance.mean((0, 1)) / n + b.variance.mean((0, 1)) / n)
-    return float(np.abs(z).max()), float(np.abs(zmean).max())
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +53,7 @@ def path_image():
 def test_light_tracers_agree_with_path_tracing_through_rough_transmission(path_image, integrator, spp):
     r = _render(integrator, spp)
     assert r.nonfinite == 0 and np.all(np.isfinite(r.image)) and r.image.mean() > 1e-2
-    zb, zm = _agree(r, path_image)
+    zb, zm = agreement(r, path_image)
     assert zb < 4.5 and zm < 4.0, (zb, zm)
 
 
@@ -68,7 +62,7 @@ def test_light_tracers_agree_with_path_tracing_through_rough_transmission(path_i
 def test_radiance_mode_at_light_vertices_fails(path_image, monkeypatch, integrator, spp):
     value = material._value
     monkeypatch.setattr(material, "_value", lambda bsdf, p, wi, wo, importance: value(bsdf, p, wi, wo, False))
-    zb, zm = _agree(_render(integrator, spp), path_image)
+    zb, zm = agreement(_render(integrator, spp), path_image)
     assert max(zb, zm) > 6.0, (zb, zm)
 
 

@@ -29,7 +29,7 @@ from drpt.errors import DrptError
 from drpt.options import PathOptions, RenderOptions
 from drpt.render.renderer import Renderer
 from drpt.scene import load_scene
-from drpt.testing import block_z
+from drpt.testing import agreement
 from support import bdpt_bugs
 
 REPO = Path(__file__).resolve().parents[3]
@@ -59,12 +59,7 @@ def _render(scene, integrator, spp, seed=1):
 
 
 def _agree(a, b):
-    floor = lambda r: r.variance + (1e-5 * r.image) ** 2  # noqa: E731 (constant background pixels)
-    z = block_z(a.image, floor(a), b.image, floor(b))
-    n = a.image.shape[0] * a.image.shape[1]
-    zmean = (a.image.mean((0, 1)) - b.image.mean((0, 1))) / np.sqrt(
-        a.variance.mean((0, 1)) / n + b.variance.mean((0, 1)) / n)
-    return float(np.abs(z).max()), float(np.abs(zmean).max())
+    return agreement(a, b, floor=1e-5)  # (constant background pixels: float rounding alone)
 
 
 def _refusal(scene, integrator):

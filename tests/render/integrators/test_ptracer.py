@@ -27,6 +27,7 @@ from drpt.render.film import SplatFilm
 from drpt.render.renderer import Renderer
 from drpt.render.scene import DeviceScene
 from drpt.scene import load_scene
+from drpt.testing import agreement
 
 REPO = Path(__file__).resolve().parents[3]
 XML = REPO / "tests" / "data" / "xml"
@@ -104,14 +105,6 @@ def _render(scene, integrator, spp, seed=1, **kw):
     return Renderer(scene, opts)
 
 
-def _agree(a, b, zmax=4.5):
-    from drpt.testing import block_z
-
-    z = block_z(a.image, a.variance, b.image, b.variance)
-    n = a.image.shape[0] * a.image.shape[1]
-    zmean = (a.image.mean((0, 1)) - b.image.mean((0, 1))) / np.sqrt(
-        a.variance.mean((0, 1)) / n + b.variance.mean((0, 1)) / n)
-    return float(np.abs(z).max()), float(np.abs(zmean).max())
 
 
 @pytest.fixture(scope="module")
@@ -128,7 +121,7 @@ def cornell_path(cornell):
 def test_light_tracing_agrees_with_path_tracing_on_the_cornell_box(cornell, cornell_path):
     r = _render(cornell, "ptracer", 256).render()
     assert r.nonfinite == 0 and np.all(np.isfinite(r.image))
-    zb, zm = _agree(r, cornell_path)
+    zb, zm = agreement(r, cornell_path)
     assert zb < 4.5 and zm < 4.0, (zb, zm)
 
 
@@ -148,7 +141,7 @@ def test_negative_controls_fail(cornell, cornell_path, what):
         cam.connect = flat
     else:
         renderer = renderer.derive(replace(renderer.opt, path=replace(renderer.opt.path, hide_emitters=True)))
-    zb, _ = _agree(renderer.render(), cornell_path)
+    zb, _ = agreement(renderer.render(), cornell_path)
     assert zb > 6.0, zb
 
 
@@ -183,7 +176,7 @@ def test_light_tracing_of_an_xml_scene_agrees_with_mitsubas_path(name):
     class Ref:
         image, variance = ref, var
 
-    zb, zm = _agree(r, Ref)
+    zb, zm = agreement(r, Ref)
     assert zb < 4.5 and zm < 4.0, (zb, zm)
 
 
