@@ -504,19 +504,19 @@ class Renderer:
         if one_each:
             pairs = [(0, 0), (1, 1), (2, 2)] + ([(0, 1), (0, 2), (1, 2)] if self.opt.moment else [])
             (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z]], bad, m, pixels, products=pairs)
-            dr.eval(sums, sqsums, nbad)
-            return (sums.numpy().reshape(rows, W, 3), sqsums.numpy().reshape(rows, W, len(pairs)),
-                    int(nbad.numpy().sum(dtype=np.int64)))
-        squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
-        if m == 1:  # one lane per pixel: nothing to add, and no interleaved copy (peak memory)
-            dr.eval(acc, squares, bad)
-            img = np.stack([c.numpy() for c in (acc.x, acc.y, acc.z)], axis=-1).reshape(rows, W, 3)
-            sq = np.stack([c.numpy() for c in squares], axis=-1).reshape(rows, W, len(squares))
-            return img, sq, int(dr.sum(bad)[0])
-        (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m, pixels)
+            channels = len(pairs)
+        else:
+            squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
+            if m == 1:  # one lane per pixel: nothing to add, and no interleaved copy (peak memory)
+                dr.eval(acc, squares, bad)
+                img = np.stack([c.numpy() for c in (acc.x, acc.y, acc.z)], axis=-1).reshape(rows, W, 3)
+                sq = np.stack([c.numpy() for c in squares], axis=-1).reshape(rows, W, len(squares))
+                return img, sq, int(dr.sum(bad)[0])
+            (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m, pixels)
+            channels = len(squares)
         dr.eval(sums, sqsums, nbad)
         img = sums.numpy().reshape(rows, W, 3)
-        sq = sqsums.numpy().reshape(rows, W, len(squares))
+        sq = sqsums.numpy().reshape(rows, W, channels)
         return img, sq, int(nbad.numpy().sum(dtype=np.int64))
 
     @property

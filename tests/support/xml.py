@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from drpt.scene import load_scene
+from drpt.testing import mean_z  # noqa: F401 (the z of two image means: the tests import it from here)
 
 from . import DATA
 
@@ -61,14 +62,6 @@ def render_xml_both(scene, path: Path, spp: int, defines: dict | None = None, se
     # blocks that see only a constant background have no variance in either image: allow
     # float32 rounding (1e-5 relative) there instead of dividing by zero
     return r, ref, runs.var(0, ddof=1) / batches + (1e-5 * ref) ** 2
-
-
-def mean_z(r, ref, var):
-    """z of the difference of the images' means, per channel (a bias of a fraction of a
-    percent over the whole image shows here before it shows in any one block)."""
-    n = ref.shape[0] * ref.shape[1]
-    se = np.sqrt(r.variance.mean((0, 1)) / n + var.mean((0, 1)) / n)
-    return (r.image.astype(np.float64).mean((0, 1)) - ref.mean((0, 1))) / se
 
 
 SAMPLER_SCENE = """<scene version="3.0.0">

@@ -111,6 +111,15 @@ def params(table, si, active) -> DielectricParams:
                             tint(table, "dielectric", "specular_transmittance", si, active))
 
 
+
+def transmission_importance(eta: Float, wi: Array3f, wo: Array3f) -> Float:
+    """The factor from a rough interface's radiance-mode value (its transmission scaled by
+    ``1 / eta_i^2``) to importance mode's (a light subpath's vertex: Mitsuba's
+    ``TransportMode::Importance``): ``eta_i^2`` where ``wi`` and ``wo`` lie on opposite sides
+    (``eta_i`` the IOR ratio ``eta`` seen from ``wi``'s side), else 1."""
+    eta_i = dr.select(wi.z > 0.0, eta, dr.rcp(eta))
+    return dr.select(wi.z * wo.z < 0.0, dr.square(eta_i), 1.0)
+
 def fresnel_dielectric(cos_i: Float, eta: Float):
     """Unpolarized Fresnel reflectance of a smooth dielectric interface.
 

@@ -200,6 +200,7 @@ from ...materials.bsdf_kinds import defaults, given
 from ..warp import INV_PI, concentric_polar, disk_to_cosine_hemisphere, polar_to_disk, square_to_cosine_hemisphere
 from . import BSDFSample
 from . import microfacet as mf
+from .dielectric import transmission_importance
 
 #: GGX widths are clamped to this (principled's ``max(0.001, ...)``).
 ALPHA_MIN = 1e-3
@@ -578,13 +579,12 @@ def _probabilities(p: PrincipledParams, front, F, bsdf, brdf):
     return pd * inv, pc * inv, pt * inv, ps * inv, ok
 
 
-
 def importance_scale(p: PrincipledParams, wi: Array3f, wo: Array3f) -> Float:
     """The factor from :func:`eval`'s radiance-mode value to importance mode's (a light
     subpath's vertex): ``eta_p^2`` where ``wi`` and ``wo`` lie on opposite sides (the
-    specular transmission, the one lobe there; its radiance scaling undone), else 1."""
-    eta_p = dr.select(wi.z > 0.0, p.eta, dr.rcp(p.eta))
-    return dr.select(wi.z * wo.z < 0.0, dr.square(eta_p), 1.0)
+    specular transmission, the one lobe there; its radiance scaling undone), else 1:
+    :func:`~drpt.render.bsdf.dielectric.transmission_importance`."""
+    return transmission_importance(p.eta, wi, wo)
 
 
 def pdf(p: PrincipledParams, wi: Array3f, wo: Array3f) -> Float:

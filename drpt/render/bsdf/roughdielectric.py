@@ -95,7 +95,7 @@ from drjit.auto import Array2f, Array3f, Bool, Float
 from ...materials.bsdf_kinds import defaults
 from ...materials.iors import relative_ior
 from . import BSDFSample
-from .dielectric import fresnel_dielectric, tint
+from .dielectric import fresnel_dielectric, tint, transmission_importance
 from .microfacet import Distribution
 
 KIND = "roughdielectric"
@@ -265,9 +265,8 @@ def importance_scale(p: RoughDielectricParams, wi: Array3f, wo: Array3f) -> Floa
     """The factor from :func:`eval`'s radiance-mode value to importance mode's (a light
     subpath's vertex: Mitsuba's ``TransportMode::Importance``): ``eta_i^2`` on transmission
     (``eta_i`` the IOR ratio seen from ``wi``'s side: the radiance scaling eval leaves in
-    is undone), 1 on reflection."""
-    eta_i = dr.select(wi.z > 0.0, p.eta, dr.rcp(p.eta))
-    return dr.select(wi.z * wo.z < 0.0, dr.square(eta_i), 1.0)
+    is undone), 1 on reflection: :func:`~drpt.render.bsdf.dielectric.transmission_importance`."""
+    return transmission_importance(p.eta, wi, wo)
 
 
 def pdf(p: RoughDielectricParams, wi: Array3f, wo: Array3f) -> Float:

@@ -400,7 +400,7 @@ class PathIntegrator:
         their state as wide as ``count``).
         """
         run = self._unrolled_sequence if self.straight else self._loop_sequence
-        return run(rng, camera_ray, UInt32(count), wide, moment and squares, bounces, squares)
+        return run(rng, camera_ray, UInt32(count), wide, moment, bounces, squares)
 
     @dr.syntax
     def _loop_sequence(self, rng, camera_ray: Callable, left: UInt32, wide: bool, moment: bool,
