@@ -73,8 +73,8 @@ def _reap():
     """Release the retired Embree scenes that nothing refers to any more: the
     scene's pointer variable holds only the accelerator's reference (no
     unevaluated query uses it), and after ``dr.sync_thread()`` no queued kernel
-    does. (The function pointers are one variable for all accelerators: Dr.Jit
-    numbers equal pointer values alike.)"""
+    does. (The handles' arrays go with the retired record, after the pointer variables
+    that depend on them.)"""
     free = [r for r in _retired if r[0].var_ref(r[2][0]) == 1]
     if not free:
         return
@@ -141,10 +141,14 @@ class EmbreeAccel:
             L.rtcReleaseScene(esc)
             raise lib.EmbreeUnavailable(f"Dr.Jit's vector width {width} has no Embree 3 query")
         f_int, f_occ = L.queries[width]
-        self._scene = L.pointer(esc)
-        self._f_int, self._f_occ = L.pointer(f_int), L.pointer(f_occ)
+        # the scene and the two queries as mapped one-element arrays (self.handles, which
+        # dr.freeze must find among a frozen function's inputs) and pointer variables on them
+        (h_scene, self._scene), (h_int, self._f_int), (h_occ, self._f_occ) = (
+            L.handle(a) for a in (esc, f_int, f_occ))
+        self.handles = [h_scene, h_int, h_occ]
         self._finalizer = weakref.finalize(self, _retire, L, esc,
-                                           (self._scene, self._f_int, self._f_occ), self._arrays)
+                                           (self._scene, self._f_int, self._f_occ),
+                                           (self._arrays, list(self.handles)))
         self._finalizer.atexit = False
         self.build_seconds = time.perf_counter() - t0
 

@@ -85,6 +85,9 @@ class Lib:
                                ctypes.cast(getattr(emb, "rtcOccluded" + suffix), vp).value)
         self.var_pointer = core._Z15jit_var_pointer10JitBackendPKvji
         self.var_pointer.restype, self.var_pointer.argtypes = u32, [u32, vp, u32, cint]
+        self.mem_map = core._Z15jit_var_mem_map10JitBackend7VarTypePvmi
+        self.mem_map.restype = u32
+        self.mem_map.argtypes = [u32, u32, vp, ctypes.c_size_t, cint]
         self.ray_trace = core._Z18jit_llvm_ray_tracejjiPKjPj
         self.ray_trace.restype = None
         self.ray_trace.argtypes = [u32, u32, cint, ctypes.POINTER(u32), ctypes.POINTER(u32)]
@@ -111,9 +114,21 @@ class Lib:
         emb.rtcSetDeviceMemoryMonitorFunction.argtypes = [vp, vp, vp]
         emb.rtcSetDeviceMemoryMonitorFunction(self.device, ctypes.cast(self._monitor, vp), None)
 
-    def pointer(self, address: int) -> int:
-        """A new Dr.Jit pointer variable (LLVM) holding ``address``; its index."""
-        return self.var_pointer(dr.JitBackend.LLVM.value, address, 0, 0)
+    def handle(self, address: int):
+        """``address`` as Dr.Jit sees a buffer: a ``UInt64`` array of one element mapped at
+        ``address`` (not copied, never freed by Dr.Jit), and a pointer variable that holds
+        ``address`` and depends on that array; returns ``(array, pointer index)``. A kernel
+        that calls Embree through the pointer names the array as the source of that
+        kernel parameter, which is what ``dr.freeze`` needs: the array is an input the
+        frozen function finds among its arguments (:mod:`drpt.render.frozen`), so that a
+        replay passes the same address (Mitsuba 3.9 maps its Embree handles the same way).
+        The caller owns the pointer variable's reference."""
+        from drjit.llvm import UInt64
+
+        index = self.mem_map(dr.JitBackend.LLVM.value, int(dr.VarType.UInt64.value), address, 1, 0)
+        (array,) = dr.detail.update_indices((UInt64(),), [index])  # takes a reference
+        self.dec_ref(index)
+        return array, self.var_pointer(dr.JitBackend.LLVM.value, address, array.index, 0)
 
 
 def _library_path() -> str | None:
