@@ -77,6 +77,23 @@ def mix32(x: UInt32) -> UInt32:
     return x ^ (x >> 16)
 
 
+def ld_stream_key(seed: int) -> tuple[UInt32, UInt32]:
+    """The 64-bit key of a render's low-discrepancy sequences, a hash of its ``seed``, as
+    its low and high 32 bits in opaque ``UInt32``: what :meth:`LDSampler.for_pixels` and
+    :meth:`ZSobolSampler.for_pixels_xy` take in place of the seed where it must be a
+    device input (a frozen pass's, :mod:`drpt.render.frozen`)."""
+    from .renderer import _mix_seed  # cycle: the renderer imports this module
+
+    s = _mix_seed(seed, LD_STREAM)
+    return dr.opaque(UInt32, s & 0xFFFFFFFF), dr.opaque(UInt32, s >> 32)
+
+
+def _stream_key_halves(seed) -> tuple[UInt32, UInt32]:
+    """The low and high 32 bits of the low-discrepancy key of ``seed``: the render's seed
+    (an ``int``) or its :func:`ld_stream_key`."""
+    return ld_stream_key(seed) if isinstance(seed, int) else seed
+
+
 def laine_karras(x: UInt32, seed: UInt32) -> UInt32:
     """Burley's hash-based Laine-Karras permutation: each bit is flipped by a
     hash of the bits *below* it (and ``seed``), an Owen scramble of the
@@ -144,13 +161,11 @@ class LDSampler:
         self.dim = dr.zeros(UInt32, n)
 
     @classmethod
-    def for_pixels(cls, seed: int, pixel: UInt32, index: UInt32, step: UInt32 | int = 1) -> LDSampler:
+    def for_pixels(cls, seed, pixel: UInt32, index: UInt32, step: UInt32 | int = 1) -> LDSampler:
         """A sampler of pixels ``pixel`` (their ids in the image), at sample
-        ``index``; ``seed`` is the render's."""
-        from .renderer import _mix_seed  # cycle: the renderer imports this module
-
-        s = _mix_seed(seed, LD_STREAM)  # 64 bits: both halves go into the key
-        key = mix32(mix32(UInt32(pixel) ^ dr.opaque(UInt32, s & 0xFFFFFFFF)) + dr.opaque(UInt32, s >> 32))
+        ``index``; ``seed`` is the render's (or its :func:`ld_stream_key`)."""
+        lo, hi = _stream_key_halves(seed)  # 64 bits: both halves go into the key
+        key = mix32(mix32(UInt32(pixel) ^ lo) + hi)
         return cls(key, index, UInt32(step))
 
     def _seed(self) -> UInt32:
@@ -199,11 +214,21 @@ def _splitmix64(z):
     return z ^ (z >> 31)
 
 
-def pcg_streams(n: int, key: int):
+def pcg_keys(key: int) -> tuple:
+    """The two opaque ``UInt64`` keys of :func:`pcg_streams` for ``key`` (made outside a
+    frozen pass, whose inputs they are: :mod:`drpt.render.frozen`)."""
+    from drjit.auto import UInt64
+
+    return (dr.opaque(UInt64, key & 0xFFFFFFFFFFFFFFFF),
+            dr.opaque(UInt64, _splitmix64((key ^ _SEQ_KEY) & 0xFFFFFFFFFFFFFFFF)))
+
+
+def pcg_streams(n: int, key):
     """``n`` PCG32 streams, one per lane, for the 64-bit ``key`` (a hash of the seed and
-    the pass): lane ``i``'s initial state and increment are SplitMix64 hashes of ``key +
-    (i + 1) * gamma`` (the increment's with a second key), computed on the device from
-    opaque keys (one kernel for every pass).
+    the pass; an ``int``, or its :func:`pcg_keys`): lane ``i``'s initial
+    state and increment are SplitMix64 hashes of ``key + (i + 1) * gamma`` (the
+    increment's with a second key), computed on the device from opaque keys (one kernel
+    for every pass).
 
     Not :class:`drjit.auto.PCG32`'s ``PCG32(n, initstate, initseq)``: it gives lane ``i``
     the state ``initstate + i`` and the increment ``initseq + i``, and such streams are
@@ -217,8 +242,7 @@ def pcg_streams(n: int, key: int):
     from drjit.auto import PCG32, UInt64
 
     lane = UInt64(dr.arange(UInt32, n)) + 1
-    k_state = dr.opaque(UInt64, key & 0xFFFFFFFFFFFFFFFF)
-    k_seq = dr.opaque(UInt64, _splitmix64((key ^ _SEQ_KEY) & 0xFFFFFFFFFFFFFFFF))
+    k_state, k_seq = pcg_keys(key) if isinstance(key, int) else key
     step = lane * _GOLDEN64
     rng = PCG32(n)
     rng.seed(_splitmix64(k_state + step), _splitmix64(k_seq + step))
@@ -309,17 +333,22 @@ class ZSobolSampler(LDSampler):
         if 2 * log2res + log2spp > 32:
             return None
         return type(f"ZSobol_{log2res}_{log2spp}", (cls,),
-                    {"log2spp": log2spp, "digits": log2res + (log2spp + 1) // 2})
+                    {"log2spp": log2spp, "digits": log2res + (log2spp + 1) // 2,
+                     "perms": UInt32(_PERMS)})
+
+    #: the 24 permutations of a base-4 digit, 2 bits per entry (a device array of the
+    #: class :meth:`for_image` makes, created with it: a frozen pass's input,
+    #: :mod:`drpt.render.frozen`, that its recording cannot upload itself)
+    perms = None
 
     @classmethod
-    def for_pixels_xy(cls, seed: int, x: UInt32, y: UInt32, index: UInt32, step: UInt32 | int = 1):
+    def for_pixels_xy(cls, seed, x: UInt32, y: UInt32, index: UInt32, step: UInt32 | int = 1):
         """A sampler of pixels ``(x, y)`` at sample ``index`` (``step``: as
-        :meth:`LDSampler.for_pixels`); ``seed`` is the render's."""
-        from .renderer import _mix_seed  # cycle: the renderer imports this module
-
-        s = _mix_seed(seed, LD_STREAM) & 0xFFFFFFFF
+        :meth:`LDSampler.for_pixels`); ``seed`` is the render's (or its
+        :func:`ld_stream_key`)."""
+        lo, _ = _stream_key_halves(seed)
         out = cls(_morton2(x, y) << cls.log2spp, index, UInt32(step))
-        out.seed = dr.opaque(UInt32, s) + dr.zeros(UInt32, dr.width(out.index))
+        out.seed = lo + dr.zeros(UInt32, dr.width(out.index))
         return out
 
     DRJIT_STRUCT = {"key": UInt32, "index": UInt32, "step": UInt32, "dim": UInt32, "seed": UInt32}
@@ -334,7 +363,7 @@ class ZSobolSampler(LDSampler):
         odd = self.log2spp & 1
         dimhash = self.dim * 0x55555555
         out = dr.zeros(UInt32, dr.width(m))
-        table = UInt32(_PERMS)
+        table = self.perms if self.perms is not None else UInt32(_PERMS)
         for i in range(self.digits - 1, odd - 1, -1):
             shift = 2 * i - odd
             digit = (m >> shift) & 3
