@@ -1,5 +1,6 @@
 """Loops recorded once against twice: Python tracing and CPU seconds per render, A/B in one
-process (not a test).
+process (not a test). Passes are not frozen here (:mod:`drpt.render.frozen`): every render
+traces them.
 
 drpt traces its loops under :func:`drpt.render.loops.loops_once` (``OptimizeLoops`` off, each
 body recorded once). Variant ``twice`` traces the same methods with the flag on, as Dr.Jit does
@@ -93,13 +94,24 @@ class Variants:
 
 
 def main(argv=None) -> int:
-    from drpt.errors import DrptError
-    from drpt.render.renderer import Renderer
-
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=8)
     ap.add_argument("--only", default="")
     a = ap.parse_args(argv)
+    from drpt.render import frozen
+
+    enabled, frozen.ENABLED = frozen.ENABLED, False  # every render traces its passes: the
+    # tracing is what is measured (put back at the end: tests run main() in their process)
+    try:
+        return _run(a)
+    finally:
+        frozen.ENABLED = enabled
+
+
+def _run(a) -> int:
+    from drpt.errors import DrptError
+    from drpt.render.renderer import Renderer
+
     only = [w for w in a.only.split(",") if w]
     variants = Variants()
     print(f"commit {_commit()}, {_cpu()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; "

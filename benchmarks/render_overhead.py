@@ -12,7 +12,8 @@ that the kernel's execution is a phase of its own:
   given without them);
 * ``setup``: the rest before the launch (the pass's lanes, the sampler, the camera rays);
 * ``launch``: ``dr.eval`` of the kernel (code generation, the kernel cache's look-up, the
-  launch);
+  launch); where the pass is frozen (:mod:`drpt.render.frozen`: every render after the
+  first), the replay's call: its inputs' traversal and the recorded kernels' launches;
 * ``kernel``: its execution, to the ``dr.sync_thread()``;
 * ``readback``: the pixel sums to numpy (``Renderer._trace_pass`` after the kernel: where a
   pixel has several lanes, mostly the kernel that adds them, :func:`drpt.render.film.lane_sums`,
@@ -75,6 +76,12 @@ class Clock:
 
         blocks_for = R.llvm_tuning.blocks_for
         t = self.t
+        # what __init__ replaces, put back by close() (tests run main() in their process)
+        self._saved = [(R, "llvm_tuning", R.llvm_tuning), (R, "finish", R.finish),
+                       (R.Renderer, "_trace_pass", R.Renderer._trace_pass),
+                       (R.Renderer, "_trace_splat_pass", R.Renderer._trace_splat_pass),
+                       (R.FrozenPass, "__call__", R.FrozenPass.__call__)]
+        self._saved += [(owner, name, owner.__dict__[name]) for owner, name in decorated()]
 
         @contextlib.contextmanager
         def stamped(n):
@@ -89,6 +96,20 @@ class Clock:
                 t["done"] = clock()
 
         R.llvm_tuning = type("Tuning", (), {"blocks_for": staticmethod(stamped)})
+        replay = R.FrozenPass.__call__
+
+        def stamped_replay(self_, *a, **kw):  # a frozen pass: its replay is the launch
+            first = "enter" not in t
+            if first:
+                t["enter"] = clock()
+            out = replay(self_, *a, **kw)
+            if first:
+                t["launched"] = clock()
+                dr.sync_thread()
+                t["done"] = clock()
+            return out
+
+        R.FrozenPass.__call__ = stamped_replay
 
         def read_stamped(fn):  # a pass's kernel and readback (the splatting film's gather too)
             def call(*a, **kw):
@@ -110,6 +131,11 @@ class Clock:
         R.finish = timed_finish
         for owner, name in decorated():  # every integrator's, the film's, the ray queries'
             setattr(owner, name, self._timed(owner.__dict__[name]))
+
+    def close(self) -> None:
+        """Put back what :meth:`__init__` replaced."""
+        for owner, name, value in self._saved:
+            setattr(owner, name, value)
 
     def _timed(self, fn):
         """``fn`` with its outermost calls' intervals kept in :attr:`traced`."""
@@ -162,27 +188,30 @@ def main(argv=None) -> int:
     print(f"commit {_commit()}, drpt {Path(drpt.__file__).parent.parent}, {_cpu()}, {os.cpu_count()} cores, "
           f"load {os.getloadavg()[0]:.1f}; {a.rounds} renders each; ms, main-thread CPU (wall); {given or ''}")
     print("\n| scene | " + " | ".join(PHASES) + " | total |\n|---|" + "---|" * (len(PHASES) + 1))
-    with tempfile.TemporaryDirectory() as tmp:
-        found = cases(only, True, Path(tmp))
-        names = {c.name for c in found}
-        exact = [w for w in only if w in names]  # a word that names a case picks that case alone
-        for case in found:
-            if any(w in case.name and w != case.name and w in exact for w in only):
-                continue
-            scene, opts, _ = setup(case, 192, 1_000_000)
-            if given:
-                opts = replace(opts, **given).validate()
-            _, render = make_drpt(scene, opts)
-            render(opts.spp, 0)
-            rows = {"cpu": [], "wall": []}
-            for k in range(a.rounds):  # the two clocks in turns: each render timed by one
-                clock = "cpu" if k % 2 == 0 else "wall"
-                timer.clock = time.thread_time if clock == "cpu" else time.perf_counter
-                rows[clock].append(timer.render(render, opts.spp, k + 1))
-            med = {c: {p: statistics.median(r[p] for r in rows[c]) * 1e3 for p in (*PHASES, "total")}
-                   for c in rows}
-            print(f"| {case.name} | " + " | ".join(f"{med['cpu'][p]:.1f} ({med['wall'][p]:.1f})"
-                                                  for p in (*PHASES, "total")) + " |", flush=True)
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            found = cases(only, True, Path(tmp))
+            names = {c.name for c in found}
+            exact = [w for w in only if w in names]  # a word that names a case picks that case alone
+            for case in found:
+                if any(w in case.name and w != case.name and w in exact for w in only):
+                    continue
+                scene, opts, _ = setup(case, 192, 1_000_000)
+                if given:
+                    opts = replace(opts, **given).validate()
+                _, render = make_drpt(scene, opts)
+                render(opts.spp, 0)
+                rows = {"cpu": [], "wall": []}
+                for k in range(a.rounds):  # the two clocks in turns: each render timed by one
+                    clock = "cpu" if k % 2 == 0 else "wall"
+                    timer.clock = time.thread_time if clock == "cpu" else time.perf_counter
+                    rows[clock].append(timer.render(render, opts.spp, k + 1))
+                med = {c: {p: statistics.median(r[p] for r in rows[c]) * 1e3 for p in (*PHASES, "total")}
+                       for c in rows}
+                print(f"| {case.name} | " + " | ".join(f"{med['cpu'][p]:.1f} ({med['wall'][p]:.1f})"
+                                                      for p in (*PHASES, "total")) + " |", flush=True)
+    finally:
+        timer.close()
     return 0
 
 

@@ -77,6 +77,7 @@ from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
 from .film import LANE_SUMS_UNROLLED, SplatFilm, gather_splats, lane_sums, splat_weights
 from .filter_sampling import sample_position
+from .frozen import FrozenPass, freezes
 from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
 from .integrators.path import PathIntegrator
 from .integrators.ptracer import ParticleTracer
@@ -86,7 +87,17 @@ from .integrators.wavefront import WavefrontIntegrator
 from .integrators.whitted import WhittedIntegrator, WhittedOptions
 from .lanes import divmod_opaque
 from .lights.rays import EmitterRays
-from .sampler import STRATA, LDSampler, ZSobolSampler, next_2d, pcg_streams, strata_sampler, uses_ld
+from .sampler import (
+    STRATA,
+    LDSampler,
+    ZSobolSampler,
+    ld_stream_key,
+    next_2d,
+    pcg_keys,
+    pcg_streams,
+    strata_sampler,
+    uses_ld,
+)
 from .scene import DeviceScene, wants_delta_each
 
 
@@ -274,7 +285,14 @@ class Renderer:
         #: with ``bdpt_strategies``: the sums of each strategy's contributions, ``(count, H, W,
         #: 3)`` (:class:`~drpt.render.integrators.bdpt.StrategyFilm`), over the passes traced
         self.strategy_sums = None
+        self._reset_frozen()
         self.build_seconds = time.perf_counter() - t0
+
+    def _reset_frozen(self) -> None:
+        """No pass traced yet, none frozen (:meth:`_frozen_pass`; a derived renderer
+        starts so: its passes are its own integrator's)."""
+        self._traced_args: set = set()
+        self._frozen: dict = {}
 
     def _aov_index_arrays(self):
         """The ``(shape, prim)`` tables of the index AOVs (None when none is asked for)."""
@@ -342,6 +360,7 @@ class Renderer:
         new.camera = RayCamera(new.camera_model, options.width, options.height)
         new.integrator = new._make_integrator()
         new.strategy_sums = None
+        new._reset_frozen()
         return new
 
     @property
@@ -439,10 +458,33 @@ class Renderer:
 
     def _trace_pass(self, pass_index: int, k: int, r0: int, rows: int, wide: bool
                     ) -> tuple[np.ndarray, np.ndarray, int]:
-        """:meth:`render_pass`'s sums, float64 with ``wide``, else float32."""
+        """:meth:`render_pass`'s sums, float64 with ``wide``, else float32: the kernels of
+        :meth:`_pass_arrays`, traced, or replayed where this pass geometry was traced
+        before (:mod:`drpt.render.frozen`), then read back."""
         W = self.opt.width
-        pixels = rows * W
-        sequential = hasattr(self.integrator, "sample_sequence")
+        m, one_each = self._pass_lanes_per_pixel(k, rows * W)
+        keys = self._pass_keys(pass_index, r0)
+        args = (k, rows, wide)
+        frozen = self._frozen_pass("pass", self._pass_arrays, args)
+        out = frozen(keys, self._frozen_signature(), *args) if frozen else None
+        if out is None:  # traced (the first time, or where recording failed)
+            out = self._pass_arrays(keys, *args)
+        if m == 1:  # one lane per pixel: nothing to add, and no interleaved copy (peak memory)
+            acc, squares, bad = out
+            dr.eval(acc, squares, bad)
+            img = np.stack([c.numpy() for c in (acc.x, acc.y, acc.z)], axis=-1).reshape(rows, W, 3)
+            sq = np.stack([c.numpy() for c in squares], axis=-1).reshape(rows, W, len(squares))
+            return img, sq, int(dr.sum(bad)[0])
+        sums, sqsums, nbad = out
+        dr.eval(sums, sqsums, nbad)
+        img = sums.numpy().reshape(rows, W, 3)
+        sq = sqsums.numpy().reshape(rows, W, -1)
+        return img, sq, int(nbad.numpy().sum(dtype=np.int64))
+
+    def _pass_lanes_per_pixel(self, k: int, pixels: int) -> tuple[int, bool]:
+        """A camera pass's lanes per pixel ``m`` for its ``k`` samples of ``pixels``
+        pixels, and whether its lanes hold one sample each (squares multiplied where the
+        lanes are added)."""
         # Lanes per pixel: with path regeneration m = ceil(min_lanes / pixels)
         # (at most k), each running about k / m samples, else one lane per
         # sample. Fewer, longer lanes balance better (docs/performance.md,
@@ -454,26 +496,52 @@ class Renderer:
         # paths share their hits and misses: m = ceil(k / STRAIGHT_PATHS_PER_LANE) lanes
         # keep a 16-lane packet on one or two pixels' paths (whole packets skip what their
         # escaped paths need not trace) at few lanes' overhead (docs/performance.md).
+        sequential = hasattr(self.integrator, "sample_sequence")
         min_lanes = policy().min_lanes
         m = min(k, -(-min_lanes // pixels)) if sequential else k
         if sequential and getattr(self.integrator, "pixel_coherent", False):
             m = k
         elif sequential and getattr(self.integrator, "straight", False):
             m = max(m, -(-k // STRAIGHT_PATHS_PER_LANE))
+        # lanes of one sample each: the squares (and products) are the sums', multiplied
+        # where the lanes are added (film.lane_sums' products), not written by the path kernel
+        return m, sequential and m == k and 1 < m <= LANE_SUMS_UNROLLED
+
+    def _pass_keys(self, pass_index: int, r0: int) -> dict:
+        """What differs between a render's passes of one pass geometry, and between
+        renders, as opaque arrays (a frozen pass's inputs): the pass's first row ``r0``
+        and its random-number keys, the PCG32 streams' key of ``(seed, pass)``, or the
+        low-discrepancy sequences' key and the pass's first sample."""
+        keys = {"r0": dr.opaque(UInt32, r0)}
+        if not self.ld_sampling:
+            return keys | {"pcg": pcg_keys(_mix_seed(self.opt.seed, pass_index))}
+        plan = self.chunks.passes
+        s0 = pass_index // plan.bands * plan.k  # plan[pass_index]'s first sample (also past spp:
+        # a live view's frames go on)
+        return keys | {"ld": ld_stream_key(self.opt.seed), "s0": dr.opaque(UInt32, s0)}
+
+    def _pass_arrays(self, keys: dict, k: int, rows: int, wide: bool):
+        """The camera pass of ``k`` samples of each pixel of ``rows`` rows from ``keys["r0"]``:
+        its device arrays, unevaluated: with one lane per pixel the
+        lanes' sums, their squares (and products) and bad-sample flags, else the pixels'
+        sums, squares and bad-sample counts (:func:`~drpt.render.film.lane_sums`). A pure
+        function of ``keys``, its ``int`` arguments and the renderer's device state (the
+        contract of :mod:`drpt.render.frozen`)."""
+        W = self.opt.width
+        pixels = rows * W
+        sequential = hasattr(self.integrator, "sample_sequence")
+        m, one_each = self._pass_lanes_per_pixel(k, pixels)
         n = pixels * m
         lane = dr.arange(UInt32, n)
         # (the lane's pixel and its place among the pixel's m lanes without an opaque integer
         # division, drpt.render.lanes; the pass's k // m and k % m are the host's)
         pixel, j = divmod_opaque(lane, m)
         x = pixel % W
-        y = pixel // W + dr.opaque(UInt32, r0)
+        y = pixel // W + keys["r0"]
         # with path regeneration lane j of a pixel's m traces its samples j, j + m, ...
-        rng = self._sampler(pass_index, n, x, y, j, dr.opaque(UInt32, m) if sequential else 1)
+        rng = self._sampler(None, n, x, y, j, dr.opaque(UInt32, m) if sequential else 1, keys=keys)
 
         camera_ray = self._camera_ray(x, y)
-        # lanes of one sample each: the squares (and products) are the sums', multiplied
-        # where the lanes are added (film.lane_sums' products), not written by the path kernel
-        one_each = sequential and m == k and 1 < m <= LANE_SUMS_UNROLLED
         if sequential:
             count = dr.opaque(UInt32, k // m) + dr.select(j < dr.opaque(UInt32, k % m), 1, 0)
             extra = {"moment": True} if self.opt.moment else {}
@@ -504,20 +572,41 @@ class Renderer:
         if one_each:
             pairs = [(0, 0), (1, 1), (2, 2)] + ([(0, 1), (0, 2), (1, 2)] if self.opt.moment else [])
             (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z]], bad, m, pixels, products=pairs)
-            channels = len(pairs)
-        else:
-            squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
-            if m == 1:  # one lane per pixel: nothing to add, and no interleaved copy (peak memory)
-                dr.eval(acc, squares, bad)
-                img = np.stack([c.numpy() for c in (acc.x, acc.y, acc.z)], axis=-1).reshape(rows, W, 3)
-                sq = np.stack([c.numpy() for c in squares], axis=-1).reshape(rows, W, len(squares))
-                return img, sq, int(dr.sum(bad)[0])
-            (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m, pixels)
-            channels = len(squares)
-        dr.eval(sums, sqsums, nbad)
-        img = sums.numpy().reshape(rows, W, 3)
-        sq = sqsums.numpy().reshape(rows, W, channels)
-        return img, sq, int(nbad.numpy().sum(dtype=np.int64))
+            return sums, sqsums, nbad
+        squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
+        if m == 1:
+            return acc, squares, bad
+        (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m, pixels)
+        return sums, sqsums, nbad
+
+    def _frozen_pass(self, name: str, body: Callable, args: tuple):
+        """The :class:`~drpt.render.frozen.FrozenPass` of ``body`` (``name``: which) where
+        this pass geometry ``args`` was traced before by this renderer (a render of one
+        pass traces it as before: recording costs more than tracing), else None; None also
+        where passes are not frozen (:func:`~drpt.render.frozen.freezes`)."""
+        if not freezes(self.integrator):
+            return None
+        if (name, args) not in self._traced_args:
+            self._traced_args.add((name, args))
+            return None
+        if name not in self._frozen:
+            self._frozen[name] = FrozenPass(body, self._frozen_roots)
+        fp = self._frozen[name]
+        return None if fp.failed else fp
+
+    def _frozen_roots(self) -> tuple:
+        """Where a frozen pass's device inputs are found (:func:`~drpt.render.frozen.device_arrays`):
+        the device scene, the integrator, the camera and the sampler class's tables."""
+        zsobol = self._zsobol
+        return self.scene, self.integrator, self.camera, (zsobol.perms if zsobol is not None else None)
+
+    def _frozen_signature(self) -> tuple:
+        """What of the renderer's Python state its pass kernels depend on, for the frozen
+        pass's key: the options but the seed (which enters as keys), and the identities
+        of the device scene's, the integrator's and the camera's attributes (one replaced,
+        as a light selection is, records the pass again)."""
+        return (replace(self.opt, seed=0),
+                tuple(id(v) for r in (self.scene, self.integrator, self.camera) for v in vars(r).values()))
 
     @property
     def ld_sampling(self) -> bool:
@@ -530,20 +619,27 @@ class Renderer:
             return uses_ld(o.sampler)
         return uses_ld(o.sampler) and (not self.light_tracing or o.width * o.height * o.spp <= 1 << 32)
 
-    def _sampler(self, pass_index: int, n: int, x: UInt32, y: UInt32, j: UInt32, step,
-                 seed: int | None = None):
+    def _sampler(self, pass_index: int | None, n: int, x: UInt32, y: UInt32, j: UInt32, step,
+                 seed: int | None = None, keys: dict | None = None):
         """The random numbers of a camera pass's ``n`` lanes: the lane's PCG32 stream
         of ``(seed, pass, lane)``, or with :attr:`ld_sampling` an
         :class:`~drpt.render.sampler.LDSampler` of pixel ``(x, y)`` whose first sample
         is the pass's first sample plus ``j``, its next ``step`` further on (``seed``:
-        the render's unless given)."""
-        seed = self.opt.seed if seed is None else seed
+        the render's unless given; ``keys``: :meth:`_pass_keys` of the pass, in place of
+        ``pass_index`` and ``seed``)."""
+        if keys is None:
+            seed = self.opt.seed if seed is None else seed
+            if not self.ld_sampling:
+                keys = {"pcg": _mix_seed(seed, pass_index)}
+            else:
+                plan = self.chunks.passes
+                s0 = pass_index // plan.bands * plan.k  # plan[pass_index]'s first sample (also
+                # past spp: a live view's frames go on)
+                keys = {"ld": seed, "s0": dr.opaque(UInt32, s0)}
         if not self.ld_sampling:
-            return pcg_streams(n, _mix_seed(seed, pass_index))
-        plan = self.chunks.passes
-        s0 = pass_index // plan.bands * plan.k  # plan[pass_index]'s first sample (also past spp:
-        # a live view's frames go on)
-        index = j + dr.opaque(UInt32, s0)
+            return pcg_streams(n, keys["pcg"])
+        seed = keys["ld"]
+        index = j + keys["s0"]
         zsobol = self._zsobol
         if zsobol is not None:
             return zsobol.for_pixels_xy(seed, x, y, index, step)
@@ -564,9 +660,15 @@ class Renderer:
     def _zsobol(self):
         """With ``--sampler zsobol``: the :class:`~drpt.render.sampler.ZSobolSampler` class of
         this image size and spp (None otherwise, or where its index does not fit 32 bits:
-        then ``ldsampler``'s sequences, with a warning)."""
+        then ``ldsampler``'s sequences, with a warning); made once per size and spp."""
         o = self.opt
-        return ZSobolSampler.for_image(o.width, o.height, o.spp) if o.sampler == "zsobol" else None
+        if o.sampler != "zsobol":
+            return None
+        key = (o.width, o.height, o.spp)
+        cached = self.__dict__.get("_zsobol_class")
+        if cached is None or cached[0] != key:
+            cached = self._zsobol_class = (key, ZSobolSampler.for_image(*key))
+        return cached[1]
 
     def _trace_light_pass(self, pass_index: int, n: int, k: int = 0, r0: int = 0, rows: int = 0
                           ) -> tuple[np.ndarray, np.ndarray, int]:
@@ -666,14 +768,33 @@ class Renderer:
         pixel of rows ``r0..r0+rows`` lies uniformly in its pixel, and its radiance
         is splatted into the pixels its filter covers with the filter's weights
         (:class:`~drpt.render.film.SplatFilm`), as Mitsuba's film does. One sample
-        per lane."""
+        per lane. The samples' kernel is :meth:`_splat_samples`' (traced, or replayed as
+        :meth:`_trace_pass`'s), the film's gather is traced each pass (it decides on the
+        host, from the sums, whether to gather again in float64)."""
         W, H = self.opt.width, self.opt.height
+        keys = self._pass_keys(pass_index, r0)
+        args = (k, rows)
+        frozen = self._frozen_pass("splat", self._splat_samples, args)
+        out = frozen(keys, self._frozen_signature(), *args) if frozen else None
+        if out is None:  # traced (the first time, or where recording failed)
+            out = self._splat_samples(keys, *args)
+        px, py, L, bad, weights = out
+        y0, img, sq, wts = gather_splats(self.opt.pixel_filter, W, H, r0, rows, k, px, py, L, ~bad,
+                                         self.opt.moment, weights)
+        return PassSums(y0, img, sq, int(dr.sum(UInt32(bad))[0]), wts)
+
+    def _splat_samples(self, keys: dict, k: int, rows: int):
+        """A splatting pass's samples (``k`` per pixel of ``rows`` rows from ``keys["r0"]``),
+        evaluated: positions ``px, py``, radiance ``L``
+        (zero where not finite), ``bad`` and the film's per-sample filter weights (or
+        None); a pure function as :meth:`_pass_arrays` is."""
+        W = self.opt.width
         n = rows * W * k
         # (each lane's pixel and sample without an opaque integer division, drpt.render.lanes)
         pixel, j = divmod_opaque(dr.arange(UInt32, n), k)
         x = pixel % W
-        y = pixel // W + dr.opaque(UInt32, r0)
-        rng = self._sampler(pass_index, n, x, y, j, 1)
+        y = pixel // W + keys["r0"]
+        rng = self._sampler(None, n, x, y, j, 1, keys=keys)
         u = next_2d(rng)
         px = Float(x) + u.x
         py = Float(y) + u.y
@@ -682,13 +803,11 @@ class Renderer:
         L = self.integrator.sample(rng, o, d, Bool(True))
         bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
         L = dr.select(bad, 0.0, L)
-        flt, moment = self.opt.pixel_filter, self.opt.moment
         # the film's per-sample filter weights, where it reads them, in this kernel
-        weights = splat_weights(flt, W, rows, k, moment, x, y, px, py, ~bad)
+        weights = splat_weights(self.opt.pixel_filter, W, rows, k, self.opt.moment, x, y, px, py, ~bad)
         with llvm_tuning.blocks_for(n):
-            dr.eval(L, bad, weights if weights is not None else (px, py))
-        y0, img, sq, wts = gather_splats(flt, W, H, r0, rows, k, px, py, L, ~bad, moment, weights)
-        return PassSums(y0, img, sq, int(dr.sum(UInt32(bad))[0]), wts)
+            dr.eval(px, py, L, bad, weights)
+        return px, py, L, bad, weights
 
     @property
     def light_tracing(self) -> bool:

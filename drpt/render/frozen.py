@@ -1,0 +1,150 @@
+"""A camera pass replayed without tracing it again: ``dr.freeze`` of the pass's kernels.
+
+Tracing a pass (the Python of the integrator's loop, the camera, the sampler and the
+lane sums) costs milliseconds per render whatever its size; on a small render that is a
+fifth of it (docs/performance.md, "Frozen passes"). :class:`FrozenPass` wraps the
+renderer's pass body in :func:`drjit.freeze`: the first call (per pass geometry: lanes per
+pixel, rows, precision) traces and records its kernel launches, later calls launch the
+recorded kernels on the current inputs.
+
+Contract of a body frozen here (what Dr.Jit 1.5's recording needs, and what keeps a
+replay equal to a trace):
+
+* **Inputs.** Every Dr.Jit array a kernel reads must be an input of the frozen call or
+  made inside it. The body's own arguments are inputs, and so is every array reachable
+  from the ``roots`` (the device scene, the integrator, the camera): :func:`device_arrays`
+  walks their attributes, lists, tuples and dicts on each call (an array replaced between
+  renders, as :meth:`~drpt.render.scene.DeviceScene.set_delta_each` may replace the light
+  selection, is the new one at the next replay). Embree's scene and query functions are
+  such inputs (:meth:`drpt.accel.embree_lib.Lib.handle`).
+* **What varies per render is an array.** Python values are part of the recording's key:
+  a different ``int`` argument records again, and a value the body reads from Python state
+  (an ``int`` made opaque inside the body, say) would be replayed as recorded. The seed
+  therefore enters as opaque ``UInt64`` keys made outside (``pcg_streams``' key,
+  :func:`~drpt.render.sampler.ld_stream_key`), and the body's ``int`` arguments (samples
+  per lane, rows, first row) are exactly what shapes its kernels.
+* **Outputs are arrays**; the host reads them back after the call.
+* **Nothing made outside is freed inside.** Dr.Jit 1.5 aborts the process when an array
+  made before the recording is freed during it (its memory is released by a host function,
+  which a recording cannot hold): the body must not drop the last reference to one (a cache
+  replaced while tracing), and :meth:`FrozenPass.__call__` holds the garbage collector off
+  while it runs (a collected renderer's arrays would be such frees).
+
+The integrator's and the options' Python state that shapes the kernels (depths, the
+sampler, the integrator kind) is fixed for a :class:`~drpt.render.renderer.Renderer`
+(``derive`` makes a new one); :meth:`FrozenPass.__call__` also passes the options as an
+argument, so a change to them records again rather than replaying stale kernels.
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import types
+import weakref
+from collections.abc import Callable
+
+import drjit as dr
+import numpy as np
+
+#: object kinds the walk does not enter (host data, code)
+_LEAVES = (str, bytes, int, float, bool, complex, np.ndarray, np.generic, types.ModuleType,
+           types.FunctionType, types.BuiltinFunctionType, types.MethodType, type)
+
+
+#: Dr.Jit's texture classes (their tensors are inputs too)
+_TEXTURES = tuple(getattr(dr.auto, f"Texture{d}f{p}") for d in (1, 2, 3) for p in ("", "16", "64", "8u")
+                  if hasattr(dr.auto, f"Texture{d}f{p}"))
+
+#: ``DRPT_FREEZE=0`` traces every pass (for measuring what freezing saves)
+ENABLED = os.environ.get("DRPT_FREEZE", "1") != "0"
+
+
+def freezes(integrator) -> bool:
+    """Whether the renderer freezes ``integrator``'s camera passes: on the LLVM backend
+    (where drpt's kernels, Embree's queries included, are recorded and replayed; not tried
+    on CUDA), for the megakernel integrators (one path loop per lane,
+    ``sample_sequence``: the wavefront's queues have data-dependent sizes), unless
+    :data:`ENABLED` is off."""
+    return ENABLED and dr.backend_v(dr.auto.Float) == dr.JitBackend.LLVM and hasattr(
+        integrator, "sample_sequence")
+
+
+def device_arrays(*roots) -> list:
+    """The Dr.Jit arrays and textures reachable from ``roots`` through object attributes (``__dict__``
+    and ``__slots__``), lists, tuples, sets and dict values, each once, in a fixed order."""
+    out: list = []
+    seen: set[int] = set()
+    stack = list(reversed(roots))
+    while stack:
+        obj = stack.pop()
+        if obj is None or id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, _LEAVES):
+            continue
+        if dr.is_array_v(obj) or isinstance(obj, _TEXTURES):
+            out.append(obj)
+            continue
+        if isinstance(obj, (list, tuple, set, frozenset)):
+            items = list(obj)
+        elif isinstance(obj, dict):
+            items = list(obj.values())
+        else:
+            items = []
+            d = getattr(obj, "__dict__", None)
+            if isinstance(d, dict):
+                items += list(d.values())
+            for cls in type(obj).__mro__:
+                for name in getattr(cls, "__slots__", ()):
+                    if isinstance(name, str) and hasattr(obj, name):
+                        items.append(getattr(obj, name))
+        stack.extend(reversed(items))
+    return out
+
+
+def _weak(f: Callable) -> Callable[[], Callable]:
+    """A weak reference to bound method ``f`` (a strong one to any other callable)."""
+    if hasattr(f, "__self__") and hasattr(f, "__func__"):
+        return weakref.WeakMethod(f)
+    return lambda: f
+
+
+class FrozenPass:
+    """``body(keys, *args)`` frozen with the arrays of ``roots`` as extra inputs; calls
+    are ``frozen(keys, options, *args)``: ``keys`` the per-render arrays (the seed's),
+    ``options`` any hashable description of the Python state the kernels depend on."""
+
+    def __init__(self, body: Callable, roots: Callable[[], tuple]):
+        # bound methods of the renderer that owns this object, held weakly: no reference
+        # cycle keeps a renderer (and its recordings) alive until a garbage collection
+        body_ref, roots_ref = _weak(body), _weak(roots)
+        #: why recording failed (then every call returns None), or None
+        self.failed: str | None = None
+        self.frozen = dr.freeze(lambda keys, options, *args: body_ref()(keys, *args),
+                                state_fn=lambda *a, **k: device_arrays(*roots_ref()()))
+
+    def __call__(self, keys, options, *args):
+        """The body's outputs, replayed or recorded now; None where Dr.Jit could not record
+        it (an array the body uploads itself, say: the caller traces the body instead, and
+        this pass is not frozen again)."""
+        if self.failed:
+            return None
+        collecting = gc.isenabled()
+        gc.disable()  # an array made outside and freed while recording aborts the process
+        try:
+            return self.frozen(keys, options, *args)
+        except RuntimeError as e:
+            cause = str(e.__cause__ or e)
+            if not cause.startswith("record()"):
+                raise
+            self.failed = cause.splitlines()[0]
+            return None
+        finally:
+            if collecting:
+                gc.enable()
+
+    @property
+    def recordings(self) -> int:
+        """How many times the body was traced and recorded."""
+        return self.frozen.n_recordings

@@ -1,0 +1,154 @@
+"""Frozen camera passes (drpt/render/frozen.py): a pass traced once and replayed gives the
+images a traced pass gives, bit for bit, for every seed and pass; what varies per render
+enters as inputs (a control with the seed baked into the recording repeats its image);
+changed options record again; Embree's queries replay."""
+
+import dataclasses
+
+import drjit as dr
+import numpy as np
+import pytest
+
+from drpt.options import PathOptions, RenderOptions
+from drpt.render import frozen
+from drpt.render.renderer import Renderer
+from drpt.scene import load_scene
+
+
+def _renders(renderer, seeds, enabled):
+    old = frozen.ENABLED
+    frozen.ENABLED = enabled
+    try:
+        out = []
+        for s in seeds:
+            renderer.opt.seed = s
+            out.append(renderer.render().image.copy())
+        return out
+    finally:
+        frozen.ENABLED = old
+
+
+def _recordings(renderer):
+    return {name: f.recordings for name, f in renderer._frozen.items()}
+
+
+OPTIONS = {
+    # one pass of lanes per sample (squares multiplied in lane_sums), the inline BVH
+    "lanes_inline": dict(width=24, height=18, spp=6, accel="inline"),
+    # several passes (bands of rows and sample steps), path regeneration's longer lanes
+    "passes": dict(width=24, height=18, spp=40, max_lanes=24 * 6 * 8, accel="inline"),
+    # Embree's queries inside the recorded kernels (handles as inputs)
+    "embree": dict(width=24, height=18, spp=6, accel="embree"),
+    "ldsampler": dict(width=24, height=18, spp=8, sampler="ldsampler", accel="inline"),
+    "zsobol_moment": dict(width=24, height=18, spp=8, sampler="zsobol", moment=True, accel="inline"),
+    "gaussian_splat": dict(width=24, height=18, spp=4, filter="gaussian", accel="inline"),
+}
+
+
+@pytest.mark.parametrize("name", OPTIONS)
+def test_replayed_passes_equal_traced_ones(cornell, name):
+    if name == "embree":
+        from drpt.accel import embree_lib
+
+        if embree_lib.reason():
+            pytest.skip(embree_lib.reason())
+    r = Renderer(load_scene(cornell), RenderOptions(progress=False, **OPTIONS[name]))
+    seeds = [3, 4, 5, 4]
+    replayed = _renders(r, seeds, True)
+    recs = _recordings(r)
+    assert recs and all(v == 1 for v in recs.values()), recs  # recorded once, then replayed
+    assert all(f.failed is None for f in r._frozen.values())
+    traced = _renders(r, seeds, False)
+    for a, b in zip(replayed, traced):
+        assert np.array_equal(a, b)
+    assert not np.array_equal(replayed[1], replayed[2])  # the seeds' images differ
+    assert np.array_equal(replayed[1], replayed[3])
+
+
+def test_control_a_seed_baked_into_the_recording_repeats_its_image(cornell, monkeypatch):
+    """The keys are what makes a replay follow the seed: made opaque inside the body (a
+    value from Python state), the replay draws the recorded seed's numbers."""
+    r = Renderer(load_scene(cornell), RenderOptions(progress=False, width=16, height=12, spp=4,
+                                                    sampler="independent", accel="inline"))
+    inner = r._pass_arrays
+
+    def baked(keys, *args):
+        from drpt.render.renderer import _mix_seed
+        from drpt.render.sampler import pcg_keys
+        return inner(keys | {"pcg": pcg_keys(_mix_seed(r.opt.seed, 0))}, *args)
+
+    monkeypatch.setattr(r, "_pass_arrays", baked)
+    a, b, c = _renders(r, [1, 2, 3], True)
+    assert not np.array_equal(a, b)  # traced: the seed's own numbers
+    assert np.array_equal(b, c)  # replayed: the recording's
+
+
+def test_a_pass_that_cannot_be_recorded_is_traced(cornell, monkeypatch):
+    """Dr.Jit 1.5 cannot record a body that uploads an array itself (``UInt32(list)``):
+    the renderer then traces every pass, with the same images."""
+    from drjit.auto import UInt32
+
+    r = Renderer(load_scene(cornell), RenderOptions(progress=False, width=16, height=12, spp=4,
+                                                    sampler="independent", accel="inline"))
+    inner = r._pass_arrays
+
+    def uploading(keys, *args):
+        sums, sqsums, nbad = inner(keys, *args)
+        return sums, sqsums, nbad + dr.gather(UInt32, UInt32([0, 0]), UInt32(0) * nbad)
+
+    monkeypatch.setattr(r, "_pass_arrays", uploading)
+    images = _renders(r, [1, 2, 3], True)
+    assert r._frozen["pass"].failed.startswith("record()")
+    for a, b in zip(images, _renders(r, [1, 2, 3], False)):
+        assert np.array_equal(a, b)
+
+
+def test_changed_options_record_again(cornell):
+    r = Renderer(load_scene(cornell), RenderOptions(progress=False, width=16, height=12, spp=4,
+                                                    accel="inline", path=PathOptions(max_depth=5)))
+    _renders(r, [1, 2, 3], True)
+    assert _recordings(r) == {"pass": 1}
+    r.opt = dataclasses.replace(r.opt, path=PathOptions(max_depth=2))
+    r.integrator = r._make_integrator()
+    shallow = _renders(r, [1, 2], True)
+    assert _recordings(r) == {"pass": 2}
+    assert np.array_equal(shallow[1], _renders(r, [2], False)[0])
+
+
+def test_derived_renderer_freezes_its_own_passes(cornell):
+    r = Renderer(load_scene(cornell), RenderOptions(progress=False, width=16, height=12, spp=4,
+                                                    accel="inline"))
+    _renders(r, [1, 2, 3], True)
+    d = r.derive(dataclasses.replace(r.opt, path=PathOptions(max_depth=1)))
+    assert _recordings(d) == {}
+    a = _renders(d, [1, 2, 3], True)
+    assert np.array_equal(a[2], _renders(d, [3], False)[0])
+
+
+def test_device_arrays_walks_attributes_containers_and_slots():
+    from drjit.auto import Float, UInt32
+
+    class Slotted:
+        __slots__ = ("a", "b")
+
+    class Plain:
+        pass
+
+    x, y, z = Float(1, 2), UInt32(3), Float(4)
+    s = Slotted()
+    s.a, s.b = x, [y, {"k": z, "n": np.zeros(3)}]
+    p = Plain()
+    p.s, p.again, p.number, p.kind = s, x, 5, Float
+    p.cycle = p
+    found = frozen.device_arrays(p)
+    assert len(found) == 3 and {id(v) for v in found} == {id(x), id(y), id(z)}
+
+
+def test_freezes_only_megakernel_camera_passes(cornell, monkeypatch):
+    monkeypatch.setattr(frozen, "ENABLED", True)
+    scene = load_scene(cornell)
+    for integrator, mode, expect in [("path", "megakernel", True), ("path", "wavefront", False),
+                                     ("ptracer", "megakernel", False)]:
+        r = Renderer(scene, RenderOptions(progress=False, width=8, height=8, spp=2,
+                                          integrator=integrator, mode=mode))
+        assert frozen.freezes(r.integrator) is expect
