@@ -11,7 +11,8 @@ default the scene's own; ``--bsdf``, the material mode of drpt's own format, e.g
 as the gallery renders the dining room; ``--integrator``, e.g. ``ptracer``), which renders once to
 compile, then ``--rounds`` rounds of one render each, the
 order alternating (AB, BA, ...) so that load from other processes falls on both. Round ``k``
-uses seed ``k`` for both; the script says whether every pair of images (with their variance
+uses seed ``k`` for both, set on the same renderer (as ``drpt.tools.converge.make_drpt``
+renders: a pass traced before replays its recorded kernels, :mod:`drpt.render.frozen`); the script says whether every pair of images (with their variance
 and second moments) was bit-identical (a
 pure speed change must keep them so). It prints each side's median seconds (``Renderer.render``,
 tracing included) and the median and quartiles of the per-round ratios ``COMMIT / this``
@@ -113,7 +114,8 @@ def main(argv: list[str]) -> int:
                 for side in ("A", "B") if k % 2 == 0 else ("B", "A"):
                     r = rs[side]
                     t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
-                    res = r.derive(replace(r.opt, seed=k)).render()
+                    r.opt = replace(r.opt, seed=k)  # the same renderer, as make_drpt renders
+                    res = r.render()
                     imgs[side] = (res.image, res.variance, res.moment2)
                     ts[side].append(time.perf_counter() - t0)
                     cpu[side].append(time.process_time() - c0)
