@@ -583,8 +583,10 @@ class Renderer:
         """The :class:`~drpt.render.frozen.FrozenPass` of ``body`` (``name``: which) where
         this pass geometry ``args`` was traced before by this renderer (a render of one
         pass traces it as before: recording costs more than tracing), else None; None also
-        where passes are not frozen (:func:`~drpt.render.frozen.freezes`)."""
-        if not freezes(self.integrator):
+        where passes are not frozen (:func:`~drpt.render.frozen.freezes`) and while an
+        :class:`~drpt.render.instrument.Instrument` is attached (it observes each trace: a
+        replay would not call it)."""
+        if not freezes(self.integrator) or getattr(self.scene, "instrument", None) is not None:
             return None
         if (name, args) not in self._traced_args:
             self._traced_args.add((name, args))

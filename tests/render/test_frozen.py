@@ -125,6 +125,24 @@ def test_derived_renderer_freezes_its_own_passes(cornell):
     assert np.array_equal(a[2], _renders(d, [3], False)[0])
 
 
+def test_an_instrumented_render_traces_every_pass(cornell):
+    """An instrument observes each trace (drpt.render.instrument): with one attached the
+    passes are traced, and it sees every one."""
+    from drpt.render.instrument import Instrument
+
+    class Counting(Instrument):
+        calls = 0
+
+        def paths(self, lanes, kinds=()):
+            Counting.calls += 1
+
+    r = Renderer(load_scene(cornell), RenderOptions(progress=False, width=16, height=12, spp=4,
+                                                    accel="inline"))
+    r.scene.instrument = Counting()
+    _renders(r, [1, 2, 3], True)
+    assert Counting.calls == 3 and r._frozen == {}
+
+
 def test_device_arrays_walks_attributes_containers_and_slots():
     from drjit.auto import Float, UInt32
 
