@@ -12,9 +12,9 @@ as the gallery renders the dining room; ``--integrator``, e.g. ``ptracer``), whi
 compile, then ``--rounds`` rounds of one render each, the
 order alternating (AB, BA, ...) so that load from other processes falls on both. Round ``k``
 uses seed ``k`` for both, set on the same renderer (as ``drpt.tools.converge.make_drpt``
-renders: a pass traced before replays its recorded kernels, :mod:`drpt.render.frozen`); the script says whether every pair of images (with their variance
-and second moments) was bit-identical (a
-pure speed change must keep them so). It prints each side's median seconds (``Renderer.render``,
+renders: a pass traced before replays its recorded kernels, :mod:`drpt.render.frozen`); the
+script says whether every pair of images (with their variance and second moments) was
+bit-identical (a pure speed change must keep them so). It prints each side's median seconds (``Renderer.render``,
 tracing included) and the median and quartiles of the per-round ratios ``COMMIT / this``
 (above 1: this checkout is faster), the measure to quote on a loaded machine, and the same
 ratios of the process's CPU seconds (all its threads: the kernels' too), which waiting for a
