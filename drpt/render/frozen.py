@@ -3,9 +3,10 @@
 Tracing a pass (the Python of the integrator's loop, the camera, the sampler and the
 lane sums) costs milliseconds per render whatever its size; on a small render that is a
 fifth of it (docs/performance.md, "Frozen passes"). :class:`FrozenPass` wraps the
-renderer's pass body in :func:`drjit.freeze`: the first call (per pass geometry: lanes per
-pixel, rows, precision) traces and records its kernel launches, later calls launch the
-recorded kernels on the current inputs.
+renderer's pass body in :func:`drjit.freeze`. The renderer traces a pass shape's first pass
+(samples per pixel, rows, precision) as before and calls the frozen body from its second:
+that call traces and records the kernel launches, later calls launch the recorded kernels on
+the current inputs (:meth:`Renderer._frozen_pass <drpt.render.renderer.Renderer._frozen_pass>`).
 
 Contract of a body frozen here (what Dr.Jit 1.5's recording needs, and what keeps a
 replay equal to a trace):
@@ -20,9 +21,10 @@ replay equal to a trace):
 * **What varies per render is an array.** Python values are part of the recording's key:
   a different ``int`` argument records again, and a value the body reads from Python state
   (an ``int`` made opaque inside the body, say) would be replayed as recorded. The seed
-  therefore enters as opaque ``UInt64`` keys made outside (``pcg_streams``' key,
-  :func:`~drpt.render.sampler.ld_stream_key`), and the body's ``int`` arguments (samples
-  per lane, rows, first row) are exactly what shapes its kernels.
+  and the pass's first row therefore enter as opaque keys made outside
+  (:func:`~drpt.render.sampler.pcg_keys`, :func:`~drpt.render.sampler.ld_stream_key`),
+  and the body's ``int`` arguments (samples per pixel, rows, precision) are exactly what
+  shapes its kernels.
 * **Outputs are arrays**; the host reads them back after the call.
 * **Nothing made outside is freed inside.** Dr.Jit 1.5 aborts the process when an array
   made before the recording is freed during it (its memory is released by a host function,
@@ -32,8 +34,10 @@ replay equal to a trace):
 
 The integrator's and the options' Python state that shapes the kernels (depths, the
 sampler, the integrator kind) is fixed for a :class:`~drpt.render.renderer.Renderer`
-(``derive`` makes a new one); :meth:`FrozenPass.__call__` also passes the options as an
-argument, so a change to them records again rather than replaying stale kernels.
+(``derive`` makes a new one); the renderer also passes the options (as their ``repr``: a
+dataclass argument hid the arguments after it from Dr.Jit 1.5's key) and the identities of
+its objects' attributes as an argument, so a change to them records again rather than
+replaying stale kernels.
 """
 
 from __future__ import annotations
