@@ -84,30 +84,27 @@ class Clock:
         self._saved += [(owner, name, owner.__dict__[name]) for owner, name in decorated()]
 
         @contextlib.contextmanager
-        def stamped(n):
+        def launch():  # the render's first launch: its start, its return, its kernel's end
             first = "enter" not in t
             if first:
                 t["enter"] = clock()
-            with blocks_for(n):
-                yield
+            yield
             if first:
                 t["launched"] = clock()
                 dr.sync_thread()
                 t["done"] = clock()
+
+        @contextlib.contextmanager
+        def stamped(n):
+            with launch(), blocks_for(n):
+                yield
 
         R.llvm_tuning = type("Tuning", (), {"blocks_for": staticmethod(stamped)})
         replay = R.FrozenPass.__call__
 
         def stamped_replay(self_, *a, **kw):  # a frozen pass: its replay is the launch
-            first = "enter" not in t
-            if first:
-                t["enter"] = clock()
-            out = replay(self_, *a, **kw)
-            if first:
-                t["launched"] = clock()
-                dr.sync_thread()
-                t["done"] = clock()
-            return out
+            with launch():
+                return replay(self_, *a, **kw)
 
         R.FrozenPass.__call__ = stamped_replay
 

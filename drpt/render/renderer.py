@@ -507,18 +507,20 @@ class Renderer:
         # where the lanes are added (film.lane_sums' products), not written by the path kernel
         return m, sequential and m == k and 1 < m <= LANE_SUMS_UNROLLED
 
-    def _pass_keys(self, pass_index: int, r0: int) -> dict:
+    def _pass_keys(self, pass_index: int, r0: int | None = None, seed: int | None = None) -> dict:
         """What differs between a render's passes of one pass geometry, and between
         renders, as opaque arrays (a frozen pass's inputs): the pass's first row ``r0``
-        and its random-number keys, the PCG32 streams' key of ``(seed, pass)``, or the
-        low-discrepancy sequences' key and the pass's first sample."""
-        keys = {"r0": dr.opaque(UInt32, r0)}
+        (where given) and its random-number keys of ``seed`` (the render's unless given),
+        the PCG32 streams' key of ``(seed, pass)``, or the low-discrepancy sequences' key
+        and the pass's first sample."""
+        seed = self.opt.seed if seed is None else seed
+        keys = {} if r0 is None else {"r0": dr.opaque(UInt32, r0)}
         if not self.ld_sampling:
-            return keys | {"pcg": pcg_keys(_mix_seed(self.opt.seed, pass_index))}
+            return keys | {"pcg": pcg_keys(_mix_seed(seed, pass_index))}
         plan = self.chunks.passes
         s0 = pass_index // plan.bands * plan.k  # plan[pass_index]'s first sample (also past spp:
         # a live view's frames go on)
-        return keys | {"ld": ld_stream_key(self.opt.seed), "s0": dr.opaque(UInt32, s0)}
+        return keys | {"ld": ld_stream_key(seed), "s0": dr.opaque(UInt32, s0)}
 
     def _pass_arrays(self, keys: dict, k: int, rows: int, wide: bool):
         """The camera pass of ``k`` samples of each pixel of ``rows`` rows from ``keys["r0"]``:
@@ -586,7 +588,7 @@ class Renderer:
         where passes are not frozen (:func:`~drpt.render.frozen.freezes`) and while an
         :class:`~drpt.render.instrument.Instrument` is attached (it observes each trace: a
         replay would not call it)."""
-        if not freezes(self.integrator) or getattr(self.scene, "instrument", None) is not None:
+        if not freezes(self.integrator) or self.scene.instrument is not None:
             return None
         if (name, args) not in self._traced_args:
             self._traced_args.add((name, args))
@@ -632,14 +634,7 @@ class Renderer:
         the render's unless given; ``keys``: :meth:`_pass_keys` of the pass, in place of
         ``pass_index`` and ``seed``)."""
         if keys is None:
-            seed = self.opt.seed if seed is None else seed
-            if not self.ld_sampling:
-                keys = {"pcg": _mix_seed(seed, pass_index)}
-            else:
-                plan = self.chunks.passes
-                s0 = pass_index // plan.bands * plan.k  # plan[pass_index]'s first sample (also
-                # past spp: a live view's frames go on)
-                keys = {"ld": seed, "s0": dr.opaque(UInt32, s0)}
+            keys = self._pass_keys(pass_index, seed=seed)
         if not self.ld_sampling:
             return pcg_streams(n, keys["pcg"])
         seed = keys["ld"]
@@ -782,14 +777,14 @@ class Renderer:
         out = frozen(keys, self._frozen_signature(), *args) if frozen else None
         if out is None:  # traced (the first time, or where recording failed)
             out = self._splat_samples(keys, *args)
-        px, py, L, bad, weights = out
+        (px, py), L, bad, weights = out
         y0, img, sq, wts = gather_splats(self.opt.pixel_filter, W, H, r0, rows, k, px, py, L, ~bad,
                                          self.opt.moment, weights)
         return PassSums(y0, img, sq, int(dr.sum(UInt32(bad))[0]), wts)
 
     def _splat_samples(self, keys: dict, k: int, rows: int):
         """A splatting pass's samples (``k`` per pixel of ``rows`` rows from ``keys["r0"]``),
-        evaluated: positions ``px, py``, radiance ``L``
+        evaluated: positions ``(px, py)`` (``(None, None)`` where the film has weights), radiance ``L``
         (zero where not finite), ``bad`` and the film's per-sample filter weights (or
         None); a pure function as :meth:`_pass_arrays` is."""
         W = self.opt.width
@@ -810,8 +805,9 @@ class Renderer:
         # the film's per-sample filter weights, where it reads them, in this kernel
         weights = splat_weights(self.opt.pixel_filter, W, rows, k, self.opt.moment, x, y, px, py, ~bad)
         with llvm_tuning.blocks_for(n):
-            dr.eval(px, py, L, bad, weights)
-        return px, py, L, bad, weights
+            dr.eval(L, bad, weights if weights is not None else (px, py))
+        # (the film reads the positions only where it has no weights)
+        return (px, py) if weights is None else (None, None), L, bad, weights
 
     @property
     def light_tracing(self) -> bool:
