@@ -520,57 +520,34 @@ def _interleaved(total: list, rows: int, width: int) -> tuple:
     return tuple(t.numpy().reshape(rows, width, len(g)) for t, g in zip(tables, groups))
 
 
-#: the most lanes per pixel that :func:`lane_sums` adds up in one kernel (its gathers are
-#: unrolled, one per lane and channel); past it each channel is a ``dr.block_sum`` of its own
-LANE_SUMS_UNROLLED = 32
-
-
-def lane_sums(groups: list[list], counts: UInt32, m: int, pixels: int,
-              products: list[tuple[int, int]] | None = None) -> tuple[list, UInt32]:
+def lane_sums(groups: list[list], counts: UInt32, m: int, pixels: int) -> tuple[list, UInt32]:
     """Each pixel's sums of a pass's lanes, a group of channels to an array: the box filter's film.
 
-    ``groups`` are lists of per-lane values of one type (``Float`` or ``Float64``), a sum
-    per channel; ``counts`` a per-lane ``UInt32`` (the dropped non-finite samples), ``m``
-    lanes per pixel, pixel-major (lanes ``p m .. p m + m - 1`` are pixel ``p``'s).
+    ``groups`` are lists of per-lane values of one type (``Float`` or ``Float64``),
+    a sum per channel; ``counts`` a per-lane ``UInt32`` (the dropped non-finite samples),
+    ``m`` lanes per pixel, pixel-major (lanes ``p m .. p m + m - 1`` are pixel ``p``'s).
     Returns ``(tables, counts)``: for each group of ``C`` channels an array whose element
     ``p C + c`` is the sum of its channel ``c`` over pixel ``p``'s lanes (its numpy view
     ``(pixels, C)`` is the group's image, read back in one copy), and the per-pixel sums
-    of ``counts``; all unevaluated. Up to :data:`LANE_SUMS_UNROLLED` lanes a pixel adds its
-    lanes in lane order (``((l_0 + l_1) + l_2) + ...``), every channel in one kernel of
-    ``pixels`` lanes, which replaces a block reduction per channel (each its own launch over
-    the whole pass) and the host's stacking of the channels; the order is fixed, so the
-    sums are the same in every run, chunk, worker and resumed render.
+    of ``counts``.
 
-    ``products`` (``(a, b)`` pairs of the first group's channels; 2 to
-    :data:`LANE_SUMS_UNROLLED` lanes a pixel) adds a last group: per pair, the sum over the
-    pixel's lanes of each lane's ``a * b``, multiplied here from the gathered values, so the
-    kernel that made the lanes need not write them (where each lane holds one sample, its
-    squares and channel products are these products, bit for bit)."""
+    Each channel is a ``dr.block_sum`` of blocks of ``m`` (Dr.Jit's precompiled block
+    reduction, which reads each block's lanes contiguously): Dr.Jit adds a block's ``m``
+    values in an order of its own, not lane order, that neither the block's place in the
+    array, the pass's size, the CPU's vector width nor the thread count changes, so a pixel's
+    sum is a function of its own lanes alone, the same in every run, chunk, worker and
+    resumed render (``tests/render/test_film.py``). Adding the lanes in a kernel of one
+    lane per pixel instead (a gather per lane and channel) cost about twice as much
+    (docs/performance.md, "A pixel's lanes added by block sums")."""
     columns = [c for g in groups for c in g]
     Value = type(columns[0])
-    pairs = list(products or [])
-    if pairs and not 1 < m <= LANE_SUMS_UNROLLED:
-        raise ValueError(f"lane_sums: products need 2 to {LANE_SUMS_UNROLLED} lanes a pixel, not {m}")
     if m == 1:
         sums, per_pixel = columns, counts
-    elif m <= LANE_SUMS_UNROLLED:
-        first = dr.arange(UInt32, pixels) * m
-        for j in range(m):
-            lane = first if j == 0 else first + j
-            values = [dr.gather(Value, c, lane) for c in columns]
-            values += [values[a] * values[b] for a, b in pairs]
-            count = dr.gather(UInt32, counts, lane)
-            if j == 0:
-                sums, per_pixel = values, count
-            else:
-                sums = [s + v for s, v in zip(sums, values)]
-                per_pixel += count
-        if pairs:
-            groups = [*groups, pairs]
     else:
+        dr.eval(columns, counts)  # (one kernel for what is not evaluated yet, not one per channel)
         sums = [dr.block_sum(c, m) for c in columns]
         per_pixel = dr.block_sum(counts, m)
-    # each group interleaved by dr.ravel, in the same kernel (a scatter per channel into one
+    # each group interleaved by dr.ravel, in one kernel (a scatter per channel into one
     # array would launch a kernel per channel: Dr.Jit evaluates a dirty scatter target first)
     ArrayX = ArrayXf64 if Value is Float64 else ArrayXf
     tables, i = [], 0

@@ -11,9 +11,9 @@ see :meth:`Renderer._trace_pass`), each lane traces its
 share of the ``k`` samples one path after another and sums them, so a SIMD
 packet no longer waits for its longest path at every bounce (its gain:
 docs/performance.md, "Execution model"). The Whitted integrator runs one sample per lane. Lanes are
-ordered pixel-major, so a pixel's lanes are adjacent and one kernel adds
-them in lane order, every channel at once (:func:`~drpt.render.film.lane_sums`;
-a pixel is the mean of its own samples). Each
+ordered pixel-major, so a pixel's lanes are adjacent and a block sum per channel
+adds them (:func:`~drpt.render.film.lane_sums`; a pixel is the mean of its own
+samples, added in an order that depends on nothing else). Each
 lane draws from its own PCG32 stream, selected by ``(seed, pass, lane)``
 (:func:`~drpt.render.sampler.pcg_streams`: state and increment hashed from them, so
 neighbouring lanes' streams are independent), so a render is deterministic for a
@@ -75,7 +75,7 @@ from ..scene.model import Camera, Scene
 from .aov import aov_values, index_arrays
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
-from .film import LANE_SUMS_UNROLLED, SplatFilm, gather_splats, lane_sums, splat_weights
+from .film import SplatFilm, gather_splats, lane_sums, splat_weights
 from .filter_sampling import sample_position
 from .frozen import FrozenPass, freezes
 from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
@@ -462,7 +462,7 @@ class Renderer:
         :meth:`_pass_arrays`, traced, or replayed where this pass geometry was traced
         before (:mod:`drpt.render.frozen`), then read back."""
         W = self.opt.width
-        m, one_each = self._pass_lanes_per_pixel(k, rows * W)
+        m = self._pass_lanes_per_pixel(k, rows * W)
         keys = self._pass_keys(pass_index, r0)
         args = (k, rows, wide)
         frozen = self._frozen_pass("pass", self._pass_arrays, args)
@@ -481,10 +481,9 @@ class Renderer:
         sq = sqsums.numpy().reshape(rows, W, -1)
         return img, sq, int(nbad.numpy().sum(dtype=np.int64))
 
-    def _pass_lanes_per_pixel(self, k: int, pixels: int) -> tuple[int, bool]:
+    def _pass_lanes_per_pixel(self, k: int, pixels: int) -> int:
         """A camera pass's lanes per pixel ``m`` for its ``k`` samples of ``pixels``
-        pixels, and whether its lanes hold one sample each (squares multiplied where the
-        lanes are added)."""
+        pixels."""
         # Lanes per pixel: with path regeneration m = ceil(min_lanes / pixels)
         # (at most k), each running about k / m samples, else one lane per
         # sample. Fewer, longer lanes balance better (docs/performance.md,
@@ -503,9 +502,7 @@ class Renderer:
             m = k
         elif sequential and getattr(self.integrator, "straight", False):
             m = max(m, -(-k // STRAIGHT_PATHS_PER_LANE))
-        # lanes of one sample each: the squares (and products) are the sums', multiplied
-        # where the lanes are added (film.lane_sums' products), not written by the path kernel
-        return m, sequential and m == k and 1 < m <= LANE_SUMS_UNROLLED
+        return m
 
     def _pass_keys(self, pass_index: int, r0: int | None = None, seed: int | None = None) -> dict:
         """What differs between a render's passes of one pass geometry, and between
@@ -524,7 +521,7 @@ class Renderer:
 
     def _pass_arrays(self, keys: dict, k: int, rows: int, wide: bool):
         """The camera pass of ``k`` samples of each pixel of ``rows`` rows from ``keys["r0"]``:
-        its device arrays, unevaluated: with one lane per pixel the
+        its device arrays: with one lane per pixel the
         lanes' sums, their squares (and products) and bad-sample flags, else the pixels'
         sums, squares and bad-sample counts (:func:`~drpt.render.film.lane_sums`). A pure
         function of ``keys``, its ``int`` arguments and the renderer's device state (the
@@ -532,7 +529,7 @@ class Renderer:
         W = self.opt.width
         pixels = rows * W
         sequential = hasattr(self.integrator, "sample_sequence")
-        m, one_each = self._pass_lanes_per_pixel(k, pixels)
+        m = self._pass_lanes_per_pixel(k, pixels)
         n = pixels * m
         lane = dr.arange(UInt32, n)
         # (the lane's pixel and its place among the pixel's m lanes without an opaque integer
@@ -547,8 +544,6 @@ class Renderer:
         if sequential:
             count = dr.opaque(UInt32, k // m) + dr.select(j < dr.opaque(UInt32, k % m), 1, 0)
             extra = {"moment": True} if self.opt.moment else {}
-            if one_each:
-                extra["squares"] = False
             acc, acc2, bad, *cross = self.integrator.sample_sequence(rng, camera_ray, count, wide=wide,
                                                                      **extra)
             # evaluate the path loop once (the reductions below would each
@@ -568,13 +563,9 @@ class Renderer:
             acc2 = acc * acc
             cross = [type(acc)(acc.x * acc.y, acc.x * acc.z, acc.y * acc.z)] if self.opt.moment else []
             bad = UInt32(bad)
-        # a pixel's lanes summed, every channel in one kernel (film.lane_sums): the sums, and
-        # in an array of their own (contiguous for the merge's additions) the squares, then with
-        # RenderOptions.moment (a Mitsuba moment integrator) the products rg, rb, gb
-        if one_each:
-            pairs = [(0, 0), (1, 1), (2, 2)] + ([(0, 1), (0, 2), (1, 2)] if self.opt.moment else [])
-            (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z]], bad, m, pixels, products=pairs)
-            return sums, sqsums, nbad
+        # a pixel's lanes summed (film.lane_sums): the sums, and in an array of their own
+        # (contiguous for the merge's additions) the squares, then with RenderOptions.moment
+        # (a Mitsuba moment integrator) the products rg, rb, gb
         squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
         if m == 1:
             return acc, squares, bad

@@ -3,9 +3,9 @@ float64 give the float64 sums to float32 rounding, radiance near the float32 max
 float32 partial sums overflow, is gathered again in float64, and the per-source way gives the
 per-receiving-pixel way's sums bit for bit (with one sample or several an iteration of its
 loop). lane_sums (the box film's per-pixel sums of a pass's lanes) adds each pixel's lanes
-in lane order, interleaves each group's channels, and counts per pixel; its products (each
-lane's channel products, multiplied where the lanes are added) equal the sums of the products
-written per lane, bit for bit (control: another pair of channels differs)."""
+(to within their roundings), each pixel's sum the same bit for bit wherever the pixel lies in
+the pass and whatever the pass's size, interleaves each group's channels, and counts per pixel
+(control: one lane changed changes its pixel's sum alone)."""
 
 import drjit as dr
 import numpy as np
@@ -148,32 +148,48 @@ def test_per_source_way_where_it_pays():
     assert _source_groups(g, big + 1, 1, 16, True, Float) is None
 
 
-@pytest.mark.parametrize("m", [1, 3, 9, film.LANE_SUMS_UNROLLED + 3])
+@pytest.mark.parametrize("m", [1, 3, 9, 27, 40])
 @pytest.mark.parametrize("wide", [False, True])
-def test_lane_sums_add_each_pixels_lanes_in_lane_order(m, wide):
+def test_lane_sums_are_each_pixels_own(m, wide):
+    """Each pixel's sums of its ``m`` lanes (``dr.block_sum``'s order, not lane order: the
+    exact sums to within ``m`` roundings), bit for bit the same wherever the pixel lies in the pass and
+    whatever the pass's size (the bands, chunks and resumed renders of one image add the same
+    lanes), the counts exact. Control: one lane's value changed in its last bit changes its
+    pixel's sum and no other."""
     pixels, C = 37, 5
     rng = np.random.default_rng(m)
-    cols = rng.random((C, pixels * m)).astype(np.float64 if wide else np.float32) * 1e3
+    dtype = np.float64 if wide else np.float32
+    cols = (rng.standard_normal((C, pixels * m)) * 10.0 ** rng.uniform(-3, 3, (C, pixels * m))).astype(dtype)
     counts = rng.integers(0, 3, pixels * m).astype(np.uint32)
     Value = Float64 if wide else Float
-    (a, b), per_pixel = film.lane_sums([[Value(c) for c in cols[:2]], [Value(c) for c in cols[2:]]],
-                                       UInt32(counts), m, pixels)
-    blocks = cols.reshape(C, pixels, m)
-    want = blocks[..., 0].copy()
-    for j in range(1, m):  # left to right, in the columns' precision
-        want = want + blocks[..., j]
-    got = np.concatenate([a.numpy().reshape(pixels, 2), b.numpy().reshape(pixels, 3)], axis=1).T
-    np.testing.assert_array_equal(per_pixel.numpy(), counts.reshape(pixels, m).sum(1))
-    if m <= film.LANE_SUMS_UNROLLED:
-        np.testing.assert_array_equal(got, want)  # bit for bit: the order is lane order
-    else:  # dr.block_sum's own order: the same sums to rounding
-        np.testing.assert_allclose(got, want, rtol=1e-6)
-    # negative control: another order (right to left) differs somewhere in float32
-    if m == 9 and not wide:
-        back = blocks[..., m - 1].copy()
-        for j in range(m - 2, -1, -1):
-            back = back + blocks[..., j]
-        assert not np.array_equal(got, back)
+
+    def sums(c, n):
+        (a, b), per_pixel = film.lane_sums([[Value(x) for x in c[:2]], [Value(x) for x in c[2:]]],
+                                           UInt32(n), m, c.shape[1] // m)
+        p = c.shape[1] // m
+        return np.concatenate([a.numpy().reshape(p, 2), b.numpy().reshape(p, 3)], axis=1).T, per_pixel.numpy()
+
+    got, per_pixel = sums(cols, counts)
+    np.testing.assert_array_equal(per_pixel, counts.reshape(pixels, m).sum(1))
+    blocks = cols.reshape(C, pixels, m).astype(np.float64)
+    # a sum of m terms in any order: within m roundings of the terms' magnitudes
+    bound = m * np.finfo(dtype).eps * np.abs(blocks).sum(-1)
+    assert np.all(np.abs(got - blocks.sum(-1)) <= bound)
+    # the same pixels after 11 others, and pixels 5-9 alone
+    before = (rng.standard_normal((C, 11 * m)) * 100.0).astype(dtype)
+    shifted, _ = sums(np.concatenate([before, cols], axis=1), np.zeros(12 * m + cols.shape[1] - m, np.uint32))
+    np.testing.assert_array_equal(shifted[:, 11:], got)
+    part, _ = sums(cols[:, 5 * m:10 * m], counts[5 * m:10 * m])
+    np.testing.assert_array_equal(part, got[:, 5:10])
+    if m > 1:  # control
+        bumped = cols.copy()
+        bumped[0, 7 * m + 1] = np.nextafter(bumped[0, 7 * m + 1], np.inf)
+        other, _ = sums(bumped, counts)
+        differs = np.flatnonzero((other != got).any(axis=0))
+        assert list(differs) in ([7], [])  # a change below the sum's last bit may round away
+        bumped[0, 7 * m + 1] += np.abs(cols[0, 7 * m:8 * m]).sum()
+        other, _ = sums(bumped, counts)
+        assert list(np.flatnonzero((other != got).any(axis=0))) == [7]
 
 
 @pytest.mark.parametrize("k", film.PACKET_SAMPLES)
@@ -225,26 +241,3 @@ def test_packet_gather_sums_are_the_loops(k, flt):
                     for w in weights)
     off = film._gather_packets(flt, W, H + 4, r0, H, k, x, y, L, ok, True, Float, swapped)
     assert not np.array_equal(off[1], want[1])
-
-
-@pytest.mark.parametrize("wide", [False, True])
-def test_lane_sums_products_equal_written_products(wide):
-    pixels, m = 41, 27
-    rng = np.random.default_rng(5)
-    dtype = np.float64 if wide else np.float32
-    cols = (rng.random((3, pixels * m)) * 1e3).astype(dtype)
-    cols[0, ::7] = 0.0  # zeros, as a dropped sample leaves
-    Value = Float64 if wide else Float
-    pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
-    written = [Value(cols[a] * cols[b]) for a, b in pairs]  # (numpy's product: one rounding)
-    counts = UInt32(np.zeros(pixels * m, np.uint32))
-    (s1, p1), n1 = film.lane_sums([[Value(c) for c in cols]], counts, m, pixels, products=pairs)
-    (s2, p2), n2 = film.lane_sums([[Value(c) for c in cols], written], counts, m, pixels)
-    np.testing.assert_array_equal(s1.numpy(), s2.numpy())
-    np.testing.assert_array_equal(p1.numpy(), p2.numpy())
-    # control: (1, 0) in place of (0, 0) is another product
-    (_, p3), _ = film.lane_sums([[Value(c) for c in cols]], counts, m, pixels,
-                                products=[(1, 0)] + pairs[1:])
-    assert not np.array_equal(p3.numpy(), p2.numpy())
-    with pytest.raises(ValueError):
-        film.lane_sums([[Value(c) for c in cols]], counts, 1, pixels * m, products=pairs)

@@ -272,53 +272,6 @@ def test_coherent_queries_change_no_pixel_of_a_mirror_scene(tmp_path, monkeypatc
     np.testing.assert_array_equal(plain, coherent)
 
 
-@pytest.mark.parametrize("moment", [False, True])
-def test_one_sample_lanes_take_their_squares_from_the_sums(tmp_path, monkeypatch, moment):
-    """A lane per sample (``pixel_coherent``): the path kernel sums the samples alone and the
-    squares (and with ``moment`` the channel products) are multiplied where a pixel's lanes
-    are added (``film.lane_sums``' products): image, variance and second moments bit-identical
-    to the squares written by the kernel (``LANE_SUMS_UNROLLED`` 1 here: no lane counts as
-    one sample's). Control: the products of other channels give another variance."""
-    from drpt.render import film, renderer
-    from drpt.render.integrators.path import PathIntegrator
-    from drpt.scene import load_scene
-
-    (tmp_path / "s.xml").write_text(MIRROR_XML.format(bsdf="conductor").replace(
-        '<bsdf type="conductor"/>', '<bsdf type="conductor"><string name="material" value="Au"/></bsdf>'))
-    scene = load_scene(tmp_path / "s.xml")
-    asked = []
-    sequence = PathIntegrator.sample_sequence
-
-    def spy(self, *a, **kw):
-        asked.append(kw.get("squares", True))
-        return sequence(self, *a, **kw)
-
-    monkeypatch.setattr(PathIntegrator, "sample_sequence", spy)
-
-    def render():
-        return renderer.Renderer(scene, renderer.RenderOptions(width=7, height=5, spp=6, moment=moment,
-                                                               progress=False)).render()
-
-    derived = render()
-    assert asked == [False]
-    with monkeypatch.context() as mp:
-        mp.setattr(renderer, "LANE_SUMS_UNROLLED", 1)
-        written = render()
-    assert asked == [False, True]
-    assert derived.variance.max() > 0.0
-    np.testing.assert_array_equal(derived.image, written.image)
-    np.testing.assert_array_equal(derived.variance, written.variance)
-    if moment:
-        np.testing.assert_array_equal(derived.moment2, written.moment2)
-    lane_sums = film.lane_sums
-
-    def other_channels(groups, counts, m, pixels, products=None):
-        return lane_sums(groups, counts, m, pixels, products and [(1, 1), (2, 2), (0, 0)] + products[3:])
-
-    monkeypatch.setattr(renderer, "lane_sums", other_channels)
-    assert not np.array_equal(render().variance, written.variance)
-
-
 SKY_XML = """<scene version="3.0.0">
   <sensor type="perspective">
     <transform name="to_world"><lookat origin="0, 0, 0" target="0, 0, 1" up="0, 1, 0"/></transform>

@@ -122,11 +122,10 @@ class PathState:
     leave: UInt32 | None = None
 
 
-def _zero_sums(Sum: type, n: int, squares: bool, moment: bool) -> tuple:
-    """:func:`bank`'s sums at zero: of samples, with ``squares`` of their squares, with
-    ``moment`` too of their channels' products."""
-    k = 1 + squares + (squares and moment)
-    return tuple(dr.zeros(Sum, n) for _ in range(k))
+def _zero_sums(Sum: type, n: int, moment: bool) -> tuple:
+    """:func:`bank`'s sums at zero: of samples, of their squares, with ``moment`` too of
+    their channels' products."""
+    return tuple(dr.zeros(Sum, n) for _ in range(2 + moment))
 
 
 def bank(sums: tuple, dropped: UInt32, L: Array3f, Sum: type) -> tuple[tuple, UInt32]:
@@ -372,7 +371,7 @@ class PathIntegrator:
 
     @loops_once
     def sample_sequence(self, rng: PCG32, camera_ray: Callable, count: UInt32, wide: bool = False,
-                        moment: bool = False, bounces: bool = False, squares: bool = True) -> tuple:
+                        moment: bool = False, bounces: bool = False) -> tuple:
         """``count`` paths per lane, one after another (path regeneration).
 
         A lane starts a path at ``camera_ray(rng) -> (o, d)`` or ``(o, d,
@@ -393,25 +392,22 @@ class PathIntegrator:
         color spaces; without it the kernel has no such sum). With ``bounces`` the last
         value is the number of bounces the lane traced, its work (adaptive sampling's cost
         estimate, :mod:`drpt.render.adaptive`; without it the kernel has no such counter).
-        Without ``squares`` the kernel sums the samples alone: the squares are ``None`` and
-        ``moment`` adds nothing (for lanes of one sample each, whose squares and products
-        the caller takes from the sums: :func:`~drpt.render.film.lane_sums`' ``products``).
         The loops are recorded once (:func:`~drpt.render.loops.loops_once`:
         their state as wide as ``count``).
         """
         run = self._unrolled_sequence if self.straight else self._loop_sequence
-        return run(rng, camera_ray, UInt32(count), wide, moment, bounces, squares)
+        return run(rng, camera_ray, UInt32(count), wide, moment, bounces)
 
     @dr.syntax
     def _loop_sequence(self, rng, camera_ray: Callable, left: UInt32, wide: bool, moment: bool,
-                       bounces: bool, squares: bool = True) -> tuple:
+                       bounces: bool) -> tuple:
         """:meth:`sample_sequence` by the bounce loop."""
         scene = self.scene
         n = dr.width(left)
         o, d, *weight = camera_ray(rng)
         state = self._start(o, d, left > 0, *weight)
         Sum = Array3f64 if wide else Array3f
-        sums = _zero_sums(Sum, n, squares, moment)
+        sums = _zero_sums(Sum, n, moment)
         dropped = dr.zeros(UInt32, n)
         steps = (dr.zeros(UInt32, n),) if bounces else ()
         inst = scene.instrument
@@ -429,17 +425,17 @@ class PathIntegrator:
                 next_path(rng)
                 o, d, *weight = camera_ray(rng)
                 state = self._start(o, d, left > 0, *weight)
-        return (sums[0], sums[1] if squares else None, dropped, *sums[2:], *steps)
+        return (sums[0], sums[1], dropped, *sums[2:], *steps)
 
     @dr.syntax
     def _unrolled_sequence(self, rng, camera_ray: Callable, left: UInt32, wide: bool, moment: bool,
-                           bounces: bool, squares: bool = True) -> tuple:
+                           bounces: bool) -> tuple:
         """:meth:`sample_sequence` with each path traced unrolled (:meth:`unrolled_path`):
         a loop over a lane's paths, one whole path per iteration. ``bounces`` counts
         ``max_depth`` per path."""
         n = dr.width(left)
         Sum = Array3f64 if wide else Array3f
-        sums = _zero_sums(Sum, n, squares, moment)
+        sums = _zero_sums(Sum, n, moment)
         dropped = dr.zeros(UInt32, n)
         steps = (dr.zeros(UInt32, n),) if bounces else ()
         while left > 0:
@@ -450,7 +446,7 @@ class PathIntegrator:
                 steps = (steps[0] + self.opt.max_depth,)
             left -= 1
             next_path(rng)
-        return (sums[0], sums[1] if squares else None, dropped, *sums[2:], *steps)
+        return (sums[0], sums[1], dropped, *sums[2:], *steps)
 
     def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> PathState:
         """A new path along the ray ``(o, d)``: no radiance, throughput
