@@ -42,6 +42,7 @@ replaying stale kernels.
 
 from __future__ import annotations
 
+import ctypes
 import gc
 import os
 import types
@@ -51,9 +52,10 @@ from collections.abc import Callable
 import drjit as dr
 import numpy as np
 
-#: object kinds the walk does not enter (host data, code)
+#: object kinds the walk does not enter (host data, code, a C library's bound functions)
 _LEAVES = (str, bytes, int, float, bool, complex, np.ndarray, np.generic, types.ModuleType,
-           types.FunctionType, types.BuiltinFunctionType, types.MethodType, type)
+           types.FunctionType, types.BuiltinFunctionType, types.MethodType, type,
+           ctypes.CDLL, ctypes._CFuncPtr)
 
 
 #: Dr.Jit's texture classes (their tensors are inputs too)
@@ -74,9 +76,15 @@ def freezes(integrator) -> bool:
         integrator, "sample_sequence")
 
 
-def device_arrays(*roots) -> list:
+def device_arrays(*roots, inert: dict | None = None) -> list:
     """The Dr.Jit arrays and textures reachable from ``roots`` through object attributes (``__dict__``
-    and ``__slots__``), lists, tuples, sets and dict values, each once, in a fixed order."""
+    and ``__slots__``), lists, tuples, sets and dict values, each once, in a fixed order.
+
+    ``inert`` (kept by the caller from one walk to the next) maps ``id`` to each tuple or
+    frozenset found to hold only what the walk does not enter (numbers, strings, host arrays,
+    or tuples so found): immutable, so they hold no array on any later walk either, which
+    skips them (a scene's tables hold thousands of such tuples). The map holds the objects,
+    so an ``id`` in it is never another object's."""
     out: list = []
     seen: set[int] = set()
     stack = list(reversed(roots))
@@ -85,10 +93,14 @@ def device_arrays(*roots) -> list:
         if obj is None or id(obj) in seen:
             continue
         seen.add(id(obj))
-        if isinstance(obj, _LEAVES):
+        if isinstance(obj, _LEAVES) or (inert is not None and id(obj) in inert):
             continue
         if dr.is_array_v(obj) or isinstance(obj, _TEXTURES):
             out.append(obj)
+            continue
+        if isinstance(obj, (tuple, frozenset)) and inert is not None and all(
+                isinstance(x, _LEAVES) or id(x) in inert for x in obj):
+            inert[id(obj)] = obj
             continue
         if isinstance(obj, (list, tuple, set, frozenset)):
             items = list(obj)
@@ -125,8 +137,9 @@ class FrozenPass:
         body_ref, roots_ref = _weak(body), _weak(roots)
         #: why recording failed (then every call returns None), or None
         self.failed: str | None = None
+        inert: dict = {}  # device_arrays' immutable host tuples, from one call to the next
         self.frozen = dr.freeze(lambda keys, options, *args: body_ref()(keys, *args),
-                                state_fn=lambda *a, **k: device_arrays(*roots_ref()()))
+                                state_fn=lambda *a, **k: device_arrays(*roots_ref()(), inert=inert))
 
     def __call__(self, keys, options, *args):
         """The body's outputs, replayed or recorded now; None where Dr.Jit could not record

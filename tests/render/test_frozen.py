@@ -166,6 +166,30 @@ def test_device_arrays_walks_attributes_containers_and_slots():
     assert len(found) == 3 and {id(v) for v in found} == {id(x), id(y), id(z)}
 
 
+def test_device_arrays_skips_tuples_of_host_values_on_later_walks():
+    """With ``inert`` the walk remembers the tuples that hold host values only (nested too)
+    and skips them later, with the same arrays found: a tuple holding an array is never
+    remembered, and an array added to a list (mutable) is found by the next walk. Control: a
+    tuple wrongly remembered hides its array, so the list compared is the walk's."""
+    from drjit.auto import Float
+
+    class Plain:
+        pass
+
+    x, y = Float(1, 2), Float(3)
+    runs = ((1, 2.0, "a"), (3, (4.0, 5)), np.zeros(2))
+    p = Plain()
+    p.runs, p.mixed, p.rows = runs, (1, x), [(7, 8)]
+    inert: dict = {}
+    for _ in range(3):
+        assert [id(v) for v in frozen.device_arrays(p, inert=inert)] == [id(x)]
+    assert id(runs) in inert and id(runs[1]) in inert and id(p.mixed) not in inert
+    p.rows.append((9, y))
+    assert [id(v) for v in frozen.device_arrays(p, inert=inert)] == [id(x), id(y)]
+    inert[id(p.mixed)] = p.mixed  # control
+    assert [id(v) for v in frozen.device_arrays(p, inert=inert)] == [id(y)]
+
+
 def test_freezes_only_megakernel_camera_passes(cornell, monkeypatch):
     monkeypatch.setattr(frozen, "ENABLED", True)
     scene = load_scene(cornell)
