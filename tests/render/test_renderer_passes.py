@@ -201,10 +201,10 @@ MIRROR_XML = """<scene version="3.0.0">
 @pytest.mark.parametrize("bsdf,per_sample", [("conductor", True), ("diffuse", False)])
 def test_a_mirror_only_scene_traces_a_lane_per_sample(tmp_path, monkeypatch, bsdf, per_sample):
     """Where no BSDF is smooth (``PathIntegrator.pixel_coherent``) a pixel's samples each get
-    a lane (a packet follows one pixel's mirror paths), whatever ``min_lanes`` asks, and every
-    ray query asks for coherent traversal; a diffuse scene (the negative control) keeps
-    ``min_lanes``' one lane per pixel here and coherence for camera rays only (a per-lane
-    mask). Both trace every sample once."""
+    a lane (a packet follows one pixel's mirror paths), whatever ``min_lanes`` asks, and the
+    rays to ``COHERENT_DEPTH`` (the camera's and the first bounce's) ask for coherent
+    traversal; a diffuse scene (the negative control) keeps ``min_lanes``' one lane per pixel
+    here and coherence for camera rays only. Both trace every sample once."""
     import dataclasses
 
     from drpt import backend
@@ -230,15 +230,22 @@ def test_a_mirror_only_scene_traces_a_lane_per_sample(tmp_path, monkeypatch, bsd
     assert rend.integrator.pixel_coherent == per_sample
     r = rend.render()
     assert widths == [7 * 5 * (spp if per_sample else 1)]
-    assert coherent and all((c is True) == per_sample for c in coherent), coherent
+    assert coherent and all(c is not False for c in coherent), coherent
+    from drjit.auto import UInt32
+
+    from drpt.render.integrators import path
+    rule = rend.integrator.coherent_queries(UInt32(0, 1, 2, 3)).numpy().tolist()
+    assert path.COHERENT_DEPTH == 1
+    assert rule == ([True, True, False, False] if per_sample else [True, False, False, False])
     assert r.samples == 7 * 5 * spp
     assert np.all(np.isfinite(r.image)) and r.image.max() > 0.0
 
 
 def test_coherent_queries_change_no_pixel_of_a_mirror_scene(tmp_path, monkeypatch):
     """``pixel_coherent``'s coherent traversal is a hint to Embree: the same hits, so a mirror
-    scene's image is bit-identical with every query incoherent (the same random numbers are
-    drawn either way). The spheres face each other, so paths bounce between them."""
+    scene's image is bit-identical with every query incoherent, and with every query coherent
+    (the same random numbers are drawn either way). The spheres face each other, so paths
+    bounce between them."""
     from drpt.accel import embree_lib
     from drpt.render import renderer
     from drpt.render.scene import DeviceScene
@@ -267,9 +274,13 @@ def test_coherent_queries_change_no_pixel_of_a_mirror_scene(tmp_path, monkeypatc
 
     monkeypatch.setattr(DeviceScene, "intersect_preliminary", incoherent)
     plain = image()
-    assert asked and all(c is True for c in asked)
+    assert asked and all(c is not False for c in asked)
     assert coherent.max() > 0.0
     np.testing.assert_array_equal(plain, coherent)
+    monkeypatch.undo()
+    from drpt.render.integrators import path
+    monkeypatch.setattr(path, "COHERENT_DEPTH", 100)
+    np.testing.assert_array_equal(image(), coherent)
 
 
 SKY_XML = """<scene version="3.0.0">

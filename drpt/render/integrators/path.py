@@ -34,7 +34,7 @@ symbolic ``if`` on the lanes off delta-only materials, so that a packet on mirro
 skips it. A scene of only delta materials traces no NEE code, and its
 paths are *pixel-coherent* (:attr:`PathIntegrator.pixel_coherent`): the renderer
 gives each sample its own lane, so a SIMD packet holds one pixel's nearly identical
-paths, and every ray query asks for coherent traversal, not only the camera's.
+paths, and the first bounce's ray queries ask for coherent traversal, not only the camera's.
 
 Two entry points run the same bounce (:meth:`PathIntegrator.bounce`,
 ``bounce(scene, state, rng) -> state``, the loop state a :class:`PathState`;
@@ -88,6 +88,13 @@ from ..sampler import light_sample, next_2d, next_path, skip_draws
 from ..scene import DeviceScene
 from .common import DirectLight, power_heuristic
 from .glass import GlassNEE, GlassState, applies
+
+#: with :attr:`PathIntegrator.pixel_coherent`, the deepest ray (the camera's is depth 0) whose
+#: query asks for Embree's coherent traversal: a pixel's samples leave the first mirror or glass
+#: surface nearly parallel, and spread after the next curved one, where the coherent traversal
+#: costs more than the default (docs/performance.md, "Coherent queries of mirror and glass
+#: paths")
+COHERENT_DEPTH = 1
 
 #: the largest ``max_depth`` whose paths are traced as straight-line code (``0 < max_depth``)
 UNROLLED_MAX_DEPTH = 3
@@ -231,13 +238,21 @@ class PathIntegrator:
     def pixel_coherent(self) -> bool:
         """Whether a pixel's paths follow nearly the same surfaces (read at trace time): a
         scene without smooth BSDFs (every vertex a mirror, smooth conductor or glass) traced
-        by this class's own bounce (volpath's media scatter: not so). Path lengths then vary
+        by this class's own bounce (volpath has a rule of its own for its media:
+        :attr:`VolPathIntegrator.pixel_coherent <drpt.render.integrators.volpath.VolPathIntegrator.pixel_coherent>`).
+        Path lengths then vary
         from pixel to pixel far more than between one pixel's samples, so the renderer gives
         each of a pixel's samples its own lane (:meth:`~drpt.render.renderer.Renderer.render_pass`):
         a SIMD packet's lanes trace one pixel's nearly identical paths and end together, and
-        every ray query, not only the camera's, asks for coherent traversal (Embree's packet
-        traversal; the same hits, in less time)."""
+        the first bounce's ray queries, not only the camera's, ask for coherent traversal
+        (Embree's packet traversal; the same hits, in less time: :data:`COHERENT_DEPTH`)."""
         return not self.scene.has_smooth_bsdfs and type(self).bounce is PathIntegrator.bounce
+
+    def coherent_queries(self, depth):
+        """Where a ray of ``depth`` (an ``int`` or the lanes' ``UInt32``; the camera's is 0)
+        asks Embree for coherent traversal: the camera's rays, and with :attr:`pixel_coherent`
+        the rays to :data:`COHERENT_DEPTH` (a packet's lanes are one pixel's samples)."""
+        return depth <= COHERENT_DEPTH if self.pixel_coherent else depth == 0
 
     @property
     def cull_leaving(self) -> bool:
@@ -275,8 +290,8 @@ class PathIntegrator:
         camera = self.opt.max_depth == 1
 
         def look(L):
-            hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=camera or self.pixel_coherent,
-                                              cull=camera and self.cull)
+            coherent = self.coherent_queries(self.opt.max_depth - 1)
+            hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=coherent, cull=camera and self.cull)
             si = scene.interaction(s.o, s.d, hit)
             if camera:
                 si = skip_hidden_emitters(scene, self.opt, si, s, s.active)
@@ -473,8 +488,7 @@ class PathIntegrator:
         whose query skips the rays passing beside every shape (:attr:`cull`)."""
         opt = self.opt
         nee = scene.has_emitters and scene.has_smooth_bsdfs
-        # camera rays are coherent; with pixel_coherent every ray of a packet is
-        coherent = True if self.pixel_coherent else s.depth == 0
+        coherent = self.coherent_queries(s.depth)
         leaving = s.leave is not None
         hit = scene.intersect_preliminary(s.o, s.d, s.active, coherent=coherent, cull=(camera and self.cull) or leaving,
                                           skip=s.leave)

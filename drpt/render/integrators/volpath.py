@@ -488,6 +488,10 @@ class VolPathState:
     active: Bool
 
 
+#: the material kinds that bend every ray they meet, Dirac lobes only (:attr:`VolPathIntegrator.pixel_coherent`)
+BENDING = frozenset({"dielectric", "conductor", "mirror"})
+
+
 class VolPathIntegrator(PathIntegrator):
     """Mitsuba's ``volpath`` (see the module's docs). Its
     ``sample`` and ``sample_sequence`` are :class:`PathIntegrator`'s."""
@@ -513,6 +517,20 @@ class VolPathIntegrator(PathIntegrator):
             self.sky_radius = float(np.linalg.norm(hi - lo) / 2)
         else:
             self.sky_center, self.sky_radius = (0.0, 0.0, 0.0), 0.0
+
+    @property
+    def pixel_coherent(self) -> bool:
+        """Whether a pixel's paths stay together for their first segments (read at trace
+        time): every surface a mirror, smooth conductor or glass (media, if any, behind
+        refracting boundaries), as :attr:`PathIntegrator.pixel_coherent` asks of the path
+        tracer's scenes, and no ``null`` or ``thindielectric`` surface, through which the
+        paths go straight on into a medium that scatters each at its own place. There the
+        renderer gives each sample its own lane and the rays to :data:`~.path.COHERENT_DEPTH`
+        ask for coherent traversal; a fog behind ``null`` boundaries keeps path regeneration,
+        which balances its paths' lengths (docs/performance.md, "Coherent queries of mirror
+        and glass paths")."""
+        kinds = set(getattr(self.scene.materials, "kinds", ()))
+        return bool(kinds) and not self.scene.has_smooth_bsdfs and kinds <= BENDING
 
     def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> VolPathState:
         w = dr.width(active)
@@ -616,7 +634,8 @@ class VolPathIntegrator(PathIntegrator):
         :meth:`next_ray`."""
         active, beta = self.roulette(s, rng)
         draw = self.flight_draw(s, active, rng)
-        si = scene.intersect(s.o, s.d, active, self.query_reach(draw[2]))
+        si = scene.intersect(s.o, s.d, active, self.query_reach(draw[2]),
+                             coherent=self.coherent_queries(s.depth) if self.pixel_coherent else False)
         fl = self.free_flight(s, si, active, beta, rng, draw)
         si = self.skip_emitters(scene, s, si, fl)
         L = s.L + self.emitted(scene, s, si, fl)

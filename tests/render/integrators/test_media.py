@@ -221,6 +221,23 @@ def _renderer(tmp_path: Path, **defines):
     return Renderer(scene, opts)
 
 
+@pytest.mark.parametrize("bsdf, coherent", [("dielectric", True), ("conductor", True), ("null", False),
+                                             ("thindielectric", False), ("diffuse", False)])
+def test_media_behind_glass_trace_a_lane_per_sample(tmp_path, bsdf, coherent):
+    """volpath's ``pixel_coherent``: where every surface bends the rays it meets by a Dirac
+    lobe (glass, a mirror: the corpus's ``homo_dielectric_envmap``) a pixel's samples get a
+    lane each and the first bounce's queries ask for coherent traversal; behind ``null`` or
+    ``thindielectric`` boundaries, or with a smooth BSDF (the controls), path regeneration's
+    lane per pixel stays (at a size where ``min_lanes`` gives one)."""
+    from drjit.auto import UInt32
+
+    r = _renderer(tmp_path, bsdf=bsdf)
+    assert r.integrator.pixel_coherent is coherent
+    assert r._pass_lanes_per_pixel(16, 1 << 20) == (16 if coherent else 1)
+    rule = r.integrator.coherent_queries(UInt32(0, 1, 2)).numpy().tolist()
+    assert rule == ([True, True, False] if coherent else [True, False, False])
+
+
 def test_distance_sampling_gives_the_analytic_transmittance(tmp_path):
     """Rays through the center of an absorbing unit sphere (chord 2) in a white furnace:
     the mean of 2^16 paths is ``exp(-2 sigma_t)`` per channel, chromatic extinction
