@@ -16,9 +16,9 @@ that the kernel's execution is a phase of its own:
   first), the replay's call: its inputs' traversal and the recorded kernels' launches;
 * ``kernel``: its execution, to the ``dr.sync_thread()``;
 * ``readback``: the pixel sums to numpy (``Renderer._trace_pass`` after the kernel: where a
-  pixel has several lanes, mostly the kernel that adds them, :func:`drpt.render.film.lane_sums`,
-  whose tracing and launch a render overlaps with the path kernel; with a tent or gaussian
-  filter ``Renderer._trace_splat_pass``'s film gather, its kernel too);
+  pixel has several lanes, mostly the block sums that add them, :func:`drpt.render.film.lane_sums`;
+  in a frozen pass they are among the replayed launches, so in ``kernel``; with a tent or
+  gaussian filter ``Renderer._trace_splat_pass``'s film gather, its kernel too);
 * ``finish``: the image, its variance and moments from the merged sums
   (:func:`drpt.render.renderer.finish`);
 * ``rest``: the render less all of the above (the plan, the chunk merge, the checks).
