@@ -122,6 +122,10 @@ PERTURBING: dict[str, str] = {"normalmap": "normalmap", "bumpmap": "texture"}
 #: (black from behind: its lobe sees the unflipped frame) unless wrapped in ``twosided``.
 TRANSMISSIVE = frozenset({"dielectric", "thindielectric", "roughdielectric", "null", "principledthin"})
 
+#: Dirac-lobe kinds that send every ray they meet on in another direction (reflect or
+#: refract); ``null`` and ``thindielectric``, Dirac too, let rays pass straight on.
+BENDING = frozenset({"dielectric", "mirror", "conductor"})
+
 LEAF_KINDS = tuple(PARAMS)
 ALL_KINDS = LEAF_KINDS + tuple(COMPOSITES)
 

@@ -520,7 +520,7 @@ def _interleaved(total: list, rows: int, width: int) -> tuple:
     return tuple(t.numpy().reshape(rows, width, len(g)) for t, g in zip(tables, groups))
 
 
-def lane_sums(groups: list[list], counts: UInt32, m: int, pixels: int) -> tuple[list, UInt32]:
+def lane_sums(groups: list[list], counts: UInt32, m: int) -> tuple[list, UInt32]:
     """Each pixel's sums of a pass's lanes, a group of channels to an array: the box filter's film.
 
     ``groups`` are lists of per-lane values of one type (``Float`` or ``Float64``),

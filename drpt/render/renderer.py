@@ -463,12 +463,7 @@ class Renderer:
         before (:mod:`drpt.render.frozen`), then read back."""
         W = self.opt.width
         m = self._pass_lanes_per_pixel(k, rows * W)
-        keys = self._pass_keys(pass_index, r0)
-        args = (k, rows, wide)
-        frozen = self._frozen_pass("pass", self._pass_arrays, args)
-        out = frozen(keys, self._frozen_signature(), *args) if frozen else None
-        if out is None:  # traced (the first time, or where recording failed)
-            out = self._pass_arrays(keys, *args)
+        out = self._pass_outputs("pass", self._pass_arrays, self._pass_keys(pass_index, r0), (k, rows, wide))
         if m == 1:  # one lane per pixel: nothing to add, and no interleaved copy (peak memory)
             acc, squares, bad = out
             dr.eval(acc, squares, bad)
@@ -569,8 +564,15 @@ class Renderer:
         squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
         if m == 1:
             return acc, squares, bad
-        (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m, pixels)
+        (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m)
         return sums, sqsums, nbad
+
+    def _pass_outputs(self, name: str, body: Callable, keys: dict, args: tuple):
+        """``body(keys, *args)``'s outputs: replayed where this renderer froze the pass
+        (:meth:`_frozen_pass`), else traced (the first time, or where recording failed)."""
+        frozen = self._frozen_pass(name, body, args)
+        out = frozen(keys, self._frozen_signature(), *args) if frozen else None
+        return body(keys, *args) if out is None else out
 
     def _frozen_pass(self, name: str, body: Callable, args: tuple):
         """The :class:`~drpt.render.frozen.FrozenPass` of ``body`` (``name``: which) where
@@ -762,13 +764,8 @@ class Renderer:
         :meth:`_trace_pass`'s), the film's gather is traced each pass (it decides on the
         host, from the sums, whether to gather again in float64)."""
         W, H = self.opt.width, self.opt.height
-        keys = self._pass_keys(pass_index, r0)
-        args = (k, rows)
-        frozen = self._frozen_pass("splat", self._splat_samples, args)
-        out = frozen(keys, self._frozen_signature(), *args) if frozen else None
-        if out is None:  # traced (the first time, or where recording failed)
-            out = self._splat_samples(keys, *args)
-        (px, py), L, bad, weights = out
+        (px, py), L, bad, weights = self._pass_outputs("splat", self._splat_samples,
+                                                       self._pass_keys(pass_index, r0), (k, rows))
         y0, img, sq, wts = gather_splats(self.opt.pixel_filter, W, H, r0, rows, k, px, py, L, ~bad,
                                          self.opt.moment, weights)
         return PassSums(y0, img, sq, int(dr.sum(UInt32(bad))[0]), wts)

@@ -165,7 +165,7 @@ def test_lane_sums_are_each_pixels_own(m, wide):
 
     def sums(c, n):
         (a, b), per_pixel = film.lane_sums([[Value(x) for x in c[:2]], [Value(x) for x in c[2:]]],
-                                           UInt32(n), m, c.shape[1] // m)
+                                           UInt32(n), m)
         p = c.shape[1] // m
         return np.concatenate([a.numpy().reshape(p, 2), b.numpy().reshape(p, 3)], axis=1).T, per_pixel.numpy()
 

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import drjit as dr
 from drjit.auto import Array2f, Array3f, Bool, Float, UInt32
 
+from ...materials.bsdf_kinds import BENDING
 from ..bsdf.dielectric import fresnel_dielectric
 from .common import power_heuristic
 
@@ -57,7 +58,7 @@ from .common import power_heuristic
 #: a through-glass path: no weight to change where it hits an emitter
 NONE = 3
 #: the delta-only kinds a scene may have for the technique (only ``dielectric`` refracts)
-KINDS = frozenset({"dielectric", "mirror", "conductor"})
+KINDS = BENDING
 #: the nearest emissive triangle on the line counts as the sample's own where it is this
 #: close to the sample's distance (relative): float rounding of two triangle tests
 SAME_POINT = 1e-4

@@ -109,7 +109,7 @@ import numpy as np
 from drjit.auto import PCG32, Array2f, Array3f, Bool, Float, UInt32
 
 from ...errors import Loc, SceneError
-from ...materials.bsdf_kinds import PARAMS
+from ...materials.bsdf_kinds import BENDING, PARAMS
 from ...materials.iors import relative_ior
 from ...options import PathOptions
 from ...scene.model import Scene
@@ -488,10 +488,6 @@ class VolPathState:
     active: Bool
 
 
-#: the material kinds that bend every ray they meet, Dirac lobes only (:attr:`VolPathIntegrator.pixel_coherent`)
-BENDING = frozenset({"dielectric", "conductor", "mirror"})
-
-
 class VolPathIntegrator(PathIntegrator):
     """Mitsuba's ``volpath`` (see the module's docs). Its
     ``sample`` and ``sample_sequence`` are :class:`PathIntegrator`'s."""
@@ -530,7 +526,13 @@ class VolPathIntegrator(PathIntegrator):
         which balances its paths' lengths (docs/performance.md, "Coherent queries of mirror
         and glass paths")."""
         kinds = set(getattr(self.scene.materials, "kinds", ()))
-        return bool(kinds) and not self.scene.has_smooth_bsdfs and kinds <= BENDING
+        return bool(kinds) and kinds <= BENDING  # (all Dirac lobes: no smooth BSDF)
+
+    def coherent_queries(self, depth):
+        """:meth:`PathIntegrator.coherent_queries` where :attr:`pixel_coherent`; elsewhere no
+        query asks for coherent traversal (volpath's camera rays gained nothing by it:
+        docs/performance.md, "The sphere scenes' last segment", tried and not kept)."""
+        return super().coherent_queries(depth) if self.pixel_coherent else False
 
     def _start(self, o: Array3f, d: Array3f, active: Bool, weight: Float | None = None) -> VolPathState:
         w = dr.width(active)
@@ -635,7 +637,7 @@ class VolPathIntegrator(PathIntegrator):
         active, beta = self.roulette(s, rng)
         draw = self.flight_draw(s, active, rng)
         si = scene.intersect(s.o, s.d, active, self.query_reach(draw[2]),
-                             coherent=self.coherent_queries(s.depth) if self.pixel_coherent else False)
+                             coherent=self.coherent_queries(s.depth))
         fl = self.free_flight(s, si, active, beta, rng, draw)
         si = self.skip_emitters(scene, s, si, fl)
         L = s.L + self.emitted(scene, s, si, fl)
