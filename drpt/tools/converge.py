@@ -291,7 +291,9 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999,
     ``ways``: name -> ``render(seed) -> image`` (an ``(H, W, C)`` array; all ways at the
     same spp). Each way renders once with ``warm_seed`` (discarded: it compiles the
     kernels), then the ways take turns for ``rounds`` rounds, round ``k`` with seed ``k``,
-    so that load from other processes falls on all of them alike. Returns name ->
+    so that load from other processes falls on all of them alike. A render's time is its
+    call alone: the images are kept (in float64) in room made before the rounds start, so
+    that the bookkeeping's memory is not paged in during a timed render. Returns name ->
     ``{"seconds": median wall seconds of a render, "variance": per-pixel variance across
     the rounds' images (ddof 1) averaged over pixels and channels, "efficiency":
     1 / (seconds * variance), "loo_variances": the variance with each round left out in
@@ -309,18 +311,27 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999,
     """
     if rounds < 2:
         raise DrptError(f"efficiency needs at least 2 rounds, got {rounds}")
-    for render in ways.values():
-        render(warm_seed)
+    shapes = {name: np.shape(np.asarray(render(warm_seed))) for name, render in ways.items()}
     times: dict = {name: [] for name in ways}
-    images: dict = {name: [] for name in ways}
+    images: dict = {name: np.empty((0, *shape)) for name, shape in shapes.items()}
     done, total = 0, rounds
     while True:
+        for name, shape in shapes.items():
+            # room for this stretch's images, its pages written now: a render's timed
+            # span allocates nothing of the bookkeeping's (kept images that grow the
+            # heap as the rounds go would leave fresh pages, and their faults, to
+            # whichever render next allocates memory of its own)
+            grown = np.empty((total, *shape))
+            grown[:done] = images[name]
+            grown[done:] = 0.0
+            images[name] = grown
         for k in range(done, total):
             for name, render in ways.items():
                 t = time.perf_counter()
-                img = np.asarray(render(k), np.float64)
+                img = np.asarray(render(k))  # (a lazy array is evaluated inside the span)
                 times[name].append(time.perf_counter() - t)
-                images[name].append(img)
+                images[name][k] = img
+                del img  # (freed before the next render, which may reuse its memory)
         done = total
         out = _efficiency_of(times, images)
         if more is None or total >= max_rounds or not more(out):
@@ -328,9 +339,9 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999,
         total = min(2 * total, max_rounds)
 
 
-def _efficiency_of(times: dict, images: dict) -> dict:
-    """:func:`efficiency_rounds`' result from each way's times and images so far."""
-    stacks = {name: np.stack(images[name]) for name in images}
+def _efficiency_of(times: dict, stacks: dict) -> dict:
+    """:func:`efficiency_rounds`' result from each way's times and images so far (a stack
+    of ``(H, W, C)`` images, one a round)."""
     finite = {name: finite_in_every_round(st) for name, st in stacks.items()}
     scored = np.logical_and.reduce(list(finite.values()))
     out = {}

@@ -231,6 +231,42 @@ def test_efficiency_rounds_scores_every_way_on_the_pixels_finite_in_all(monkeypa
     assert math.isnan(res["b"]["variance"]) and math.isfinite(res["a"]["variance"])
 
 
+def test_efficiency_rounds_keep_their_images_outside_the_timed_renders(monkeypatch):
+    """The images of a stretch of rounds are kept in room made before its first timed render:
+    the memory Python's allocators hold (``tracemalloc``, which counts numpy's buffers) is the
+    same at the start of every timed render of a stretch, and grows only between stretches
+    (``more``: 4 rounds, then 8). Negative control: a way that keeps its own images grows it
+    by one image a render, which the same probe reads."""
+    import tracemalloc
+
+    seen: list = []
+
+    def way(keep: list | None):
+        def render(seed):
+            seen.append(tracemalloc.get_traced_memory()[0])
+            img = np.random.default_rng(seed).normal(5.0, 1.0, (64, 64, 3))
+            if keep is not None:
+                keep.append(img.copy())
+            return img
+        return render
+
+    tracemalloc.start()
+    try:
+        converge.efficiency_rounds({"a": way(None)}, 4, warm_seed=99, more=lambda r: True, max_rounds=8)
+        probes = list(seen)
+        seen.clear()
+        kept: list = []
+        converge.efficiency_rounds({"a": way(kept)}, 4, warm_seed=99)
+        control = list(seen)
+    finally:
+        tracemalloc.stop()
+    image = 64 * 64 * 3 * 8
+    first, second = probes[1:5], probes[5:13]  # (probes[0]: the warm-up render)
+    assert max(first) - min(first) < image / 4 and max(second) - min(second) < image / 4
+    assert second[0] - first[0] > 3 * image  # the second stretch's room: 8 images where 4 were
+    assert all(b - a > image / 2 for a, b in zip(control[1:], control[2:]))
+
+
 def test_adaptive_ratio_against_uniform_drpt():
     from drpt.tools.converge import adaptive_ratio
 
