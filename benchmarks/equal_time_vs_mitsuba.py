@@ -31,7 +31,9 @@ The variance ratio comes with its jackknife error over the rounds (``+- E``,
 variance sits in a few pixels (a sub-pixel highlight) reads the same draw of that tail in
 every run, and the error says how far the draw may be from the expectation. A row whose error
 is above ``--max-error`` (default 0.1) of its ratio renders more rounds, doubling, up to
-``--max-rounds`` (default 64; round ``k`` still seed ``k``), and the table says how many it read.
+``--max-rounds`` (default 256; round ``k`` still seed ``k``), and the table says how many it read
+(a variance held by one sample in millions, a caustic path through glass, needs hundreds of rounds
+before its draw says anything: docs/performance.md).
 The target is issue 27's: 2x on the bundled and corpus scenes, 1.5x on Veach's and the room.
 A pixel that is NaN or infinite in any round of either renderer is left out of both renderers'
 variance (the two are scored on the same pixels), and the table lists how many each lost.
@@ -39,7 +41,7 @@ variance (the two are scored on the same pixels), and the table lists how many e
 Output: a Markdown table (stdout), the skipped scenes, and with ``--json FILE`` the numbers
 (rewritten after every scene).
 
-Run: PYTHONPATH=. .venv/bin/python benchmarks/equal_time_vs_mitsuba.py [--rounds 5] [--max-rounds 64]
+Run: PYTHONPATH=. .venv/bin/python benchmarks/equal_time_vs_mitsuba.py [--rounds 5] [--max-rounds 256]
 [--max-error 0.1]
 [--min-size 192] [--max-samples 1000000] [--only WORD,...] [--skip WORD,...] [--no-corpus]
 [--json FILE] [--light-sampler RULE] [--env-compensation on|off] [--sampler NAME]
@@ -223,7 +225,7 @@ def main(argv=None) -> list[dict]:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--max-rounds", type=int, default=64,
+    ap.add_argument("--max-rounds", type=int, default=256,
                     help="a row whose variance ratio's error is above --max-error renders more rounds, up to this")
     ap.add_argument("--max-error", type=float, default=0.1,
                     help="relative jackknife error of the variance ratio that asks for more rounds (0: never)")

@@ -89,15 +89,20 @@ def main(argv=None) -> dict:
         scene, opts, _ = et.setup(found[0], 192, 1_000_000)
         renders = {v: make_drpt(scene, apply(opts, v))[1] for v in a.variants}
         for render in renders.values():
-            render(opts.spp, 999_999)  # compile
-        images: dict = {v: [] for v in renders}
+            shape = render(opts.spp, 999_999).image.shape  # compile
+        # the rounds' images kept in room made (and paged in) before the timed renders, as
+        # drpt.tools.converge.efficiency_rounds keeps them
+        stacks: dict = {v: np.zeros((a.rounds, *shape)) for v in renders}
+        for st in stacks.values():
+            st[...] = 0.0
         seconds: dict = {v: [] for v in renders}
         for k in range(a.rounds):
             for v, render in renders.items():
                 t = time.process_time()
-                images[v].append(np.asarray(render(opts.spp, k).image, np.float64))
+                img = render(opts.spp, k).image
                 seconds[v].append(time.process_time() - t)
-    stacks = {v: np.stack(images[v]) for v in renders}
+                stacks[v][k] = img
+                del img
     if a.npz is not None:
         np.savez_compressed(a.npz, **{v: s.astype(np.float32) for v, s in stacks.items()})
     base = a.variants[0]

@@ -8,9 +8,11 @@ in one process (not a test).
 ``emitter_inside``, ...), set up as that benchmark sets it up (size, spp, the file's settings);
 ``MODULE:CLASS.ATTR`` a class attribute read when a kernel is traced (an A/B switch such as
 ``drpt.render.integrators.volpath:VolPathIntegrator.split_sheets``), set to each of
-``--values`` (Python literals, default ``False True``: A, then B) before each render. Both
-ways render once to compile, then take turns for ``--rounds`` rounds (AB, BA, ...), round
-``k`` with seed ``k`` for both. Prints each way's median wall seconds, the median and
+``--values`` (Python literals, default ``False True``: A, then B) before each render. Each
+way has a renderer of its own (a renderer replays its frozen passes, recorded with the value
+set when it traced them: :mod:`drpt.render.frozen`), which renders twice to compile and record
+with its value; then the ways take turns for ``--rounds`` rounds (AB, BA, ...), round ``k``
+with seed ``k`` for both. Prints each way's median wall seconds, the median and
 quartiles of the per-round ratios A / B (above 1: B is faster) by wall and by CPU seconds of
 the process (``time.process_time``, all threads: the measure to quote on a loaded machine),
 the mean per-pixel variance across the rounds of each way (B / A) and the efficiency B / A.
@@ -47,23 +49,32 @@ def main(argv=None) -> dict:
     values = [ast.literal_eval(v) for v in args.values]
     case = next(c for c in eq.cases([args.scene], True, Path("/tmp/flag_ab_room")) if args.scene in c.name)
     scene, opts, _ = eq.setup(case, 192, 1_000_000)
-    _, render = make_drpt(scene, opts)
     before = getattr(cls, attr)
-    imgs, wall, cpu = ([], []), ([], []), ([], [])
+    wall, cpu = ([], []), ([], [])
+    renders = []
     try:
-        for w in (0, 1):  # (compile both)
+        for w in (0, 1):  # (compile both, and record each one's frozen pass with its value)
             setattr(cls, attr, values[w])
-            render(opts.spp, 1000)
+            renders.append(make_drpt(scene, opts)[1])
+            shape = renders[w](opts.spp, 1000).image.shape
+            renders[w](opts.spp, 1001)
+        # the rounds' images kept in room made (and paged in) before the timed renders, as
+        # drpt.tools.converge.efficiency_rounds keeps them
+        imgs = (np.zeros((args.rounds, *shape)), np.zeros((args.rounds, *shape)))
+        for st in imgs:
+            st[...] = 0.0
         for k in range(args.rounds):
             for w in ((0, 1) if k % 2 == 0 else (1, 0)):
                 setattr(cls, attr, values[w])
                 t0, c0 = time.perf_counter(), time.process_time()
-                imgs[w].append(np.array(render(opts.spp, k).image, np.float64))
+                img = renders[w](opts.spp, k).image
                 wall[w].append(time.perf_counter() - t0)
                 cpu[w].append(time.process_time() - c0)
+                imgs[w][k] = img
+                del img
     finally:
         setattr(cls, attr, before)
-    var = [float(np.mean(np.var(np.stack(i), axis=0, ddof=1))) for i in imgs]
+    var = [float(np.mean(np.var(i, axis=0, ddof=1))) for i in imgs]
     r_wall = np.array(wall[0]) / np.array(wall[1])
     r_cpu = np.array(cpu[0]) / np.array(cpu[1])
     out = {"wall": [float(np.median(w)) for w in wall], "ratio_wall": float(np.median(r_wall)),
