@@ -48,6 +48,7 @@ import os
 import types
 import weakref
 from collections.abc import Callable
+from pathlib import PurePath
 
 import drjit as dr
 import numpy as np
@@ -56,6 +57,27 @@ import numpy as np
 _LEAVES = (str, bytes, int, float, bool, complex, np.ndarray, np.generic, types.ModuleType,
            types.FunctionType, types.BuiltinFunctionType, types.MethodType, type,
            ctypes.CDLL, ctypes._CFuncPtr)
+
+
+#: packages whose objects hold host data only: they import no Dr.Jit (the scene model and the
+#: material specifications the device tables are made from; ``tests/render/test_frozen.py``
+#: checks that they import none), so the walk does not enter their objects (a device scene
+#: keeps its host scene to rebuild its light selection)
+HOST_PACKAGES = ("drpt.scene", "drpt.materials")
+
+_host_types: dict[type, bool] = {}
+
+
+def _host_only(t: type) -> bool:
+    """Whether the walk does not enter objects of type ``t``: :data:`_LEAVES` and the classes
+    of :data:`HOST_PACKAGES` (and the paths of ``pathlib``), remembered by type."""
+    known = _host_types.get(t)
+    if known is None:
+        module = getattr(t, "__module__", None) or ""
+        known = (issubclass(t, _LEAVES + (PurePath,))
+                 or any(module == p or module.startswith(p + ".") for p in HOST_PACKAGES))
+        _host_types[t] = known
+    return known
 
 
 #: Dr.Jit's texture classes (their tensors are inputs too)
@@ -78,7 +100,8 @@ def freezes(integrator) -> bool:
 
 def device_arrays(*roots, inert: dict | None = None) -> list:
     """The Dr.Jit arrays and textures reachable from ``roots`` through object attributes (``__dict__``
-    and ``__slots__``), lists, tuples, sets and dict values, each once, in a fixed order.
+    and ``__slots__``), lists, tuples, sets and dict values, each once, in a fixed order; host
+    values and the objects of :data:`HOST_PACKAGES` are not entered.
 
     ``inert`` (kept by the caller from one walk to the next) maps ``id`` to each tuple or
     frozenset found to hold only what the walk does not enter (numbers, strings, host arrays,
@@ -93,13 +116,13 @@ def device_arrays(*roots, inert: dict | None = None) -> list:
         if obj is None or id(obj) in seen:
             continue
         seen.add(id(obj))
-        if isinstance(obj, _LEAVES) or (inert is not None and id(obj) in inert):
+        if _host_only(type(obj)) or (inert is not None and id(obj) in inert):
             continue
         if dr.is_array_v(obj) or isinstance(obj, _TEXTURES):
             out.append(obj)
             continue
         if isinstance(obj, (tuple, frozenset)) and inert is not None and all(
-                isinstance(x, _LEAVES) or id(x) in inert for x in obj):
+                _host_only(type(x)) or id(x) in inert for x in obj):
             inert[id(obj)] = obj
             continue
         if isinstance(obj, (list, tuple, set, frozenset)):

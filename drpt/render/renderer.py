@@ -1035,8 +1035,9 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
         return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, paths,
                             merged.nonfinite)
     # Unbiased sample variance of one sample, divided by spp: variance of the mean,
-    # max(sumsq / spp - mean^2, 0) * spp / max(spp - 1, 1) / spp, in that order, in place
-    # (consume: the squares' means in the merge's own array, the same division as sumsq / spp)
+    # max(sumsq / spp - mean^2, 0) * spp / max(spp - 1, 1) / spp = max(...) / max(spp - 1, 1),
+    # in place (consume: the squares' means in the merge's own array, the same division as
+    # sumsq / spp)
     second = np.divide(merged.sumsq, spp, out=merged.sumsq if consume else None)
     moment2 = xyz_second_moment(second) if second.shape[-1] == 6 else None
     # (with the channel products after the squares, var is a fresh array: each channel's
@@ -1046,9 +1047,7 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
     for c in range(3):
         np.subtract(second[..., c], np.square(mean[..., c], out=square), out=var[..., c])
     np.maximum(var, 0.0, out=var)
-    var *= spp
     var /= max(spp - 1, 1)
-    var /= spp
     return RenderResult(mean.astype(np.float32), var, seconds,
                         build_seconds, W * H * spp, merged.nonfinite, moment2)
 

@@ -190,6 +190,44 @@ def test_device_arrays_skips_tuples_of_host_values_on_later_walks():
     assert [id(v) for v in frozen.device_arrays(p, inert=inert)] == [id(y)]
 
 
+def test_device_arrays_does_not_enter_the_host_packages():
+    """The walk does not enter objects of the host packages (``frozen.HOST_PACKAGES``: the
+    scene model, the material specifications), which it may do because no module of theirs
+    imports Dr.Jit (read from their sources: an import added there fails this test). Control:
+    an array put on such an object is not found, and the same array on a plain object is."""
+    import ast
+    import importlib
+    import pkgutil
+
+    from drjit.auto import Float
+
+    from drpt.scene.model import Scene
+
+    for name in frozen.HOST_PACKAGES:
+        package = importlib.import_module(name)
+        modules = [package.__file__] + [importlib.util.find_spec(m.name).origin
+                                        for m in pkgutil.walk_packages(package.__path__, name + ".")]
+        assert len(modules) > 1
+        for path in modules:
+            tree = ast.parse(open(path).read())
+            imported = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+            imported |= {(n.module or "").split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+            assert "drjit" not in imported, path
+
+    class Plain:
+        pass
+
+    x = Float(1, 2)
+    host = object.__new__(Scene)  # (its fields do not matter here)
+    host.stray = x
+    p = Plain()
+    p.host = host
+    assert frozen.device_arrays(p) == []
+    p.plain = Plain()
+    p.plain.stray = x
+    assert [id(v) for v in frozen.device_arrays(p)] == [id(x)]
+
+
 def test_freezes_only_megakernel_camera_passes(cornell, monkeypatch):
     monkeypatch.setattr(frozen, "ENABLED", True)
     scene = load_scene(cornell)

@@ -89,14 +89,14 @@ def test_finish_of_a_pixels_own_samples_is_its_definition(channels):
     """A box film's merge (each pixel the mean of its own spp samples; with 6 channels the
     moment integrator's products after the squares): the image, variance and second moments
     of ``consume`` and of ``consume=False`` are, bit for bit, the definition written in the
-    operations' order (``max(sumsq / spp - mean^2, 0) * spp / max(spp - 1, 1) / spp``).
-    Negative control: the variance as ``(sumsq / spp - mean^2) / (spp - 1)``, the same in exact
-    arithmetic, differs in its bits."""
+    operations' order (``max(sumsq / spp - mean^2, 0) / max(spp - 1, 1)``). Negative control:
+    the variance as ``max(sumsq / spp - mean^2, 0) * spp / max(spp - 1, 1) / spp``, the same in
+    exact arithmetic, differs in its bits."""
     m = _plain(channels)
     spp = m.spp
     mean = m.sum / spp
     second = m.sumsq / spp
-    var = np.maximum(second[..., :3] - mean * mean, 0.0) * spp / max(spp - 1, 1) / spp
+    var = np.maximum(second[..., :3] - mean * mean, 0.0) / max(spp - 1, 1)
     for consume in (False, True):
         got = finish(copy.deepcopy(m), 1.0, 0.0, consume=consume)
         assert np.array_equal(got.image, mean.astype(np.float32))
@@ -104,7 +104,7 @@ def test_finish_of_a_pixels_own_samples_is_its_definition(channels):
         assert (got.moment2 is None) == (channels == 3)
         if channels == 6:
             assert np.array_equal(got.moment2, xyz_second_moment(second))
-    other = np.maximum(second[..., :3] - mean * mean, 0.0) / (spp - 1)
+    other = np.maximum(second[..., :3] - mean * mean, 0.0) * spp / max(spp - 1, 1) / spp
     assert not np.array_equal(other, got.variance)
 
 
