@@ -520,16 +520,14 @@ def _interleaved(total: list, rows: int, width: int) -> tuple:
     return tuple(t.numpy().reshape(rows, width, len(g)) for t, g in zip(tables, groups))
 
 
-def lane_sums(groups: list[list], counts: UInt32, m: int) -> tuple[list, UInt32]:
+def lane_sums(groups: list[list], m: int) -> list:
     """Each pixel's sums of a pass's lanes, a group of channels to an array: the box filter's film.
 
     ``groups`` are lists of per-lane values of one type (``Float`` or ``Float64``),
-    a sum per channel; ``counts`` a per-lane ``UInt32`` (the dropped non-finite samples),
-    ``m`` lanes per pixel, pixel-major (lanes ``p m .. p m + m - 1`` are pixel ``p``'s).
-    Returns ``(tables, counts)``: for each group of ``C`` channels an array whose element
+    a sum per channel, ``m`` lanes per pixel, pixel-major (lanes ``p m .. p m + m - 1`` are
+    pixel ``p``'s). Returns for each group of ``C`` channels an array whose element
     ``p C + c`` is the sum of its channel ``c`` over pixel ``p``'s lanes (its numpy view
-    ``(pixels, C)`` is the group's image, read back in one copy), and the per-pixel sums
-    of ``counts``.
+    ``(pixels, C)`` is the group's image, read back in one copy).
 
     Each channel is a ``dr.block_sum`` of blocks of ``m`` (Dr.Jit's precompiled block
     reduction, which reads each block's lanes contiguously): Dr.Jit adds a block's ``m``
@@ -542,11 +540,10 @@ def lane_sums(groups: list[list], counts: UInt32, m: int) -> tuple[list, UInt32]
     columns = [c for g in groups for c in g]
     Value = type(columns[0])
     if m == 1:
-        sums, per_pixel = columns, counts
+        sums = columns
     else:
-        dr.eval(columns, counts)  # (one kernel for what is not evaluated yet, not one per channel)
+        dr.eval(columns)  # (one kernel for what is not evaluated yet, not one per channel)
         sums = [dr.block_sum(c, m) for c in columns]
-        per_pixel = dr.block_sum(counts, m)
     # each group interleaved by dr.ravel, in one kernel (a scatter per channel into one
     # array would launch a kernel per channel: Dr.Jit evaluates a dirty scatter target first)
     ArrayX = ArrayXf64 if Value is Float64 else ArrayXf
@@ -554,4 +551,14 @@ def lane_sums(groups: list[list], counts: UInt32, m: int) -> tuple[list, UInt32]
     for g in groups:
         tables.append(dr.ravel(ArrayX(*sums[i:i + len(g)])))
         i += len(g)
-    return tables, per_pixel
+    return tables
+
+
+def dropped_total(flags: UInt32) -> UInt32:
+    """The sum of the per-lane counts ``flags`` (the non-finite samples a lane dropped), as a
+    one-element array added in the kernel that computes them (a masked atomic addition on
+    the lanes with a count, so a pass without one stores nothing; integers, so the order of
+    the additions does not matter): no per-lane array is written."""
+    total = dr.zeros(UInt32, 1)
+    dr.scatter_reduce(dr.ReduceOp.Add, total, flags, UInt32(0), active=flags > 0)
+    return total

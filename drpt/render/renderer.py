@@ -75,7 +75,7 @@ from ..scene.model import Camera, Scene
 from .aov import aov_values, index_arrays
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
-from .film import SplatFilm, gather_splats, lane_sums, splat_weights
+from .film import SplatFilm, dropped_total, gather_splats, lane_sums, splat_weights
 from .filter_sampling import sample_position
 from .frozen import FrozenPass, freezes
 from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
@@ -465,16 +465,16 @@ class Renderer:
         m = self._pass_lanes_per_pixel(k, rows * W)
         out = self._pass_outputs("pass", self._pass_arrays, self._pass_keys(pass_index, r0), (k, rows, wide))
         if m == 1:  # one lane per pixel: nothing to add, and no interleaved copy (peak memory)
-            acc, squares, bad = out
-            dr.eval(acc, squares, bad)
+            acc, squares, nbad = out
+            dr.eval(acc, squares, nbad)
             img = np.stack([c.numpy() for c in (acc.x, acc.y, acc.z)], axis=-1).reshape(rows, W, 3)
             sq = np.stack([c.numpy() for c in squares], axis=-1).reshape(rows, W, len(squares))
-            return img, sq, int(dr.sum(bad)[0])
+            return img, sq, int(nbad.numpy()[0])
         sums, sqsums, nbad = out
         dr.eval(sums, sqsums, nbad)
         img = sums.numpy().reshape(rows, W, 3)
         sq = sqsums.numpy().reshape(rows, W, -1)
-        return img, sq, int(nbad.numpy().sum(dtype=np.int64))
+        return img, sq, int(nbad.numpy()[0])
 
     def _pass_lanes_per_pixel(self, k: int, pixels: int) -> int:
         """A camera pass's lanes per pixel ``m`` for its ``k`` samples of ``pixels``
@@ -517,8 +517,9 @@ class Renderer:
     def _pass_arrays(self, keys: dict, k: int, rows: int, wide: bool):
         """The camera pass of ``k`` samples of each pixel of ``rows`` rows from ``keys["r0"]``:
         its device arrays: with one lane per pixel the
-        lanes' sums, their squares (and products) and bad-sample flags, else the pixels'
-        sums, squares and bad-sample counts (:func:`~drpt.render.film.lane_sums`). A pure
+        lanes' sums and their squares (and products), else the pixels' sums and squares
+        (:func:`~drpt.render.film.lane_sums`), then the pass's count of dropped non-finite
+        samples (:func:`~drpt.render.film.dropped_total`, one element). A pure
         function of ``keys``, its ``int`` arguments and the renderer's device state (the
         contract of :mod:`drpt.render.frozen`)."""
         W = self.opt.width
@@ -541,11 +542,12 @@ class Renderer:
             extra = {"moment": True} if self.opt.moment else {}
             acc, acc2, bad, *cross = self.integrator.sample_sequence(rng, camera_ray, count, wide=wide,
                                                                      **extra)
+            nbad = dropped_total(bad)  # (the pass's total, added in the path kernel)
             # evaluate the path loop once (the reductions below would each
             # re-run it), in blocks that keep every
             # thread busy to the end (drpt.llvm_tuning.blocks_for)
             with llvm_tuning.blocks_for(n):
-                dr.eval(acc, acc2, bad, cross)
+                dr.eval(acc, acc2, nbad, cross)
         else:
             o, d, weight = camera_ray(rng)
             L = self.integrator.sample(rng, o, d, Bool(True))
@@ -557,14 +559,14 @@ class Renderer:
             acc = (Array3f64 if wide else Array3f)(dr.select(bad, 0.0, L))
             acc2 = acc * acc
             cross = [type(acc)(acc.x * acc.y, acc.x * acc.z, acc.y * acc.z)] if self.opt.moment else []
-            bad = UInt32(bad)
+            nbad = dropped_total(UInt32(bad))
         # a pixel's lanes summed (film.lane_sums): the sums, and in an array of their own
         # (contiguous for the merge's additions) the squares, then with RenderOptions.moment
         # (a Mitsuba moment integrator) the products rg, rb, gb
         squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
         if m == 1:
-            return acc, squares, bad
-        (sums, sqsums), nbad = lane_sums([[acc.x, acc.y, acc.z], squares], bad, m)
+            return acc, squares, nbad
+        sums, sqsums = lane_sums([[acc.x, acc.y, acc.z], squares], m)
         return sums, sqsums, nbad
 
     def _pass_outputs(self, name: str, body: Callable, keys: dict, args: tuple):

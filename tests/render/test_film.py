@@ -4,8 +4,9 @@ float32 partial sums overflow, is gathered again in float64, and the per-source 
 per-receiving-pixel way's sums bit for bit (with one sample or several an iteration of its
 loop). lane_sums (the box film's per-pixel sums of a pass's lanes) adds each pixel's lanes
 (to within their roundings), each pixel's sum the same bit for bit wherever the pixel lies in
-the pass and whatever the pass's size, interleaves each group's channels, and counts per pixel
-(control: one lane changed changes its pixel's sum alone)."""
+the pass and whatever the pass's size, and interleaves each group's channels (control: one
+lane changed changes its pixel's sum alone); dropped_total adds the lanes' dropped-sample
+counts in the kernel that makes them."""
 
 import drjit as dr
 import numpy as np
@@ -154,42 +155,68 @@ def test_lane_sums_are_each_pixels_own(m, wide):
     """Each pixel's sums of its ``m`` lanes (``dr.block_sum``'s order, not lane order: the
     exact sums to within ``m`` roundings), bit for bit the same wherever the pixel lies in the pass and
     whatever the pass's size (the bands, chunks and resumed renders of one image add the same
-    lanes), the counts exact. Control: one lane's value changed in its last bit changes its
-    pixel's sum and no other."""
+    lanes). Control: one lane's value changed in its last bit changes its pixel's sum and no
+    other."""
     pixels, C = 37, 5
     rng = np.random.default_rng(m)
     dtype = np.float64 if wide else np.float32
     cols = (rng.standard_normal((C, pixels * m)) * 10.0 ** rng.uniform(-3, 3, (C, pixels * m))).astype(dtype)
-    counts = rng.integers(0, 3, pixels * m).astype(np.uint32)
     Value = Float64 if wide else Float
 
-    def sums(c, n):
-        (a, b), per_pixel = film.lane_sums([[Value(x) for x in c[:2]], [Value(x) for x in c[2:]]],
-                                           UInt32(n), m)
+    def sums(c):
+        a, b = film.lane_sums([[Value(x) for x in c[:2]], [Value(x) for x in c[2:]]], m)
         p = c.shape[1] // m
-        return np.concatenate([a.numpy().reshape(p, 2), b.numpy().reshape(p, 3)], axis=1).T, per_pixel.numpy()
+        return np.concatenate([a.numpy().reshape(p, 2), b.numpy().reshape(p, 3)], axis=1).T
 
-    got, per_pixel = sums(cols, counts)
-    np.testing.assert_array_equal(per_pixel, counts.reshape(pixels, m).sum(1))
+    got = sums(cols)
     blocks = cols.reshape(C, pixels, m).astype(np.float64)
     # a sum of m terms in any order: within m roundings of the terms' magnitudes
     bound = m * np.finfo(dtype).eps * np.abs(blocks).sum(-1)
     assert np.all(np.abs(got - blocks.sum(-1)) <= bound)
     # the same pixels after 11 others, and pixels 5-9 alone
     before = (rng.standard_normal((C, 11 * m)) * 100.0).astype(dtype)
-    shifted, _ = sums(np.concatenate([before, cols], axis=1), np.zeros(12 * m + cols.shape[1] - m, np.uint32))
+    shifted = sums(np.concatenate([before, cols], axis=1))
     np.testing.assert_array_equal(shifted[:, 11:], got)
-    part, _ = sums(cols[:, 5 * m:10 * m], counts[5 * m:10 * m])
+    part = sums(cols[:, 5 * m:10 * m])
     np.testing.assert_array_equal(part, got[:, 5:10])
     if m > 1:  # control
         bumped = cols.copy()
         bumped[0, 7 * m + 1] = np.nextafter(bumped[0, 7 * m + 1], np.inf)
-        other, _ = sums(bumped, counts)
+        other = sums(bumped)
         differs = np.flatnonzero((other != got).any(axis=0))
         assert list(differs) in ([7], [])  # a change below the sum's last bit may round away
         bumped[0, 7 * m + 1] += np.abs(cols[0, 7 * m:8 * m]).sum()
-        other, _ = sums(bumped, counts)
+        other = sums(bumped)
         assert list(np.flatnonzero((other != got).any(axis=0))) == [7]
+
+
+def test_dropped_total_adds_the_lanes_counts_in_their_kernel():
+    """The total of per-lane counts, exact, for counts that are all zero, a few and many, made
+    in the kernel that computes the counts: one kernel over the lanes, and no reduction that
+    reads a per-lane array (Dr.Jit may launch a memset and a reduction of its threads' copies
+    of the one-element total). Control: the same counts evaluated, then summed by ``dr.sum``,
+    take a reduction over the lanes."""
+    n = 100_003
+    for every in (0, 7, 1):
+        lane = dr.arange(UInt32, n)
+        # (every 0: counts computed in the kernel, none of them above zero)
+        flags = dr.select(lane % 5 == 7, UInt32(1), 0) if every == 0 else dr.select(lane % every == 0, lane % 3, 0)
+        want = 0 if every == 0 else int(sum(i % 3 for i in range(0, n, every)))
+        flags = flags + dr.zeros(UInt32, n)
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        dr.kernel_history()  # (clears it)
+        total = film.dropped_total(flags)
+        dr.eval(total)
+        wide = [e["type"] for e in dr.kernel_history() if e.get("size", 0) >= n]
+        assert total.numpy().tolist() == [want] and wide == [dr.KernelType.JIT]
+        if every == 7:  # control
+            flags = dr.select(lane % every == 0, lane % 3, 0) + dr.zeros(UInt32, n)
+            dr.eval(flags)
+            other = dr.sum(flags)
+            dr.eval(other)
+            wide = [e["type"] for e in dr.kernel_history() if e.get("size", 0) >= n]
+            assert int(other[0]) == want and len(wide) > 1 and dr.KernelType.JIT in wide
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
 
 
 @pytest.mark.parametrize("k", film.PACKET_SAMPLES)
