@@ -525,9 +525,10 @@ def lane_sums(groups: list[list], m: int) -> list:
 
     ``groups`` are lists of per-lane values of one type (``Float`` or ``Float64``),
     a sum per channel, ``m`` lanes per pixel, pixel-major (lanes ``p m .. p m + m - 1`` are
-    pixel ``p``'s). Returns for each group of ``C`` channels an array whose element
-    ``p C + c`` is the sum of its channel ``c`` over pixel ``p``'s lanes (its numpy view
-    ``(pixels, C)`` is the group's image, read back in one copy).
+    pixel ``p``'s). Returns for each group its channels' per-pixel sums, an array a channel
+    (element ``p`` the sum over pixel ``p``'s lanes), which the host reads and stacks into the
+    group's ``(pixels, C)`` image: a kernel that interleaved them on the device
+    (``dr.ravel``) cost more than ``np.stack`` (docs/performance.md).
 
     Each channel is a ``dr.block_sum`` of blocks of ``m`` (Dr.Jit's precompiled block
     reduction, which reads each block's lanes contiguously): Dr.Jit adds a block's ``m``
@@ -538,18 +539,14 @@ def lane_sums(groups: list[list], m: int) -> list:
     lane per pixel instead (a gather per lane and channel) cost about twice as much
     (docs/performance.md, "A pixel's lanes added by block sums")."""
     columns = [c for g in groups for c in g]
-    Value = type(columns[0])
     if m == 1:
         sums = columns
     else:
         dr.eval(columns)  # (one kernel for what is not evaluated yet, not one per channel)
         sums = [dr.block_sum(c, m) for c in columns]
-    # each group interleaved by dr.ravel, in one kernel (a scatter per channel into one
-    # array would launch a kernel per channel: Dr.Jit evaluates a dirty scatter target first)
-    ArrayX = ArrayXf64 if Value is Float64 else ArrayXf
     tables, i = [], 0
     for g in groups:
-        tables.append(dr.ravel(ArrayX(*sums[i:i + len(g)])))
+        tables.append(sums[i:i + len(g)])
         i += len(g)
     return tables
 

@@ -472,8 +472,8 @@ class Renderer:
             return img, sq, int(nbad.numpy()[0])
         sums, sqsums, nbad = out
         dr.eval(sums, sqsums, nbad)
-        img = sums.numpy().reshape(rows, W, 3)
-        sq = sqsums.numpy().reshape(rows, W, -1)
+        img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)
+        sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, -1)
         return img, sq, int(nbad.numpy()[0])
 
     def _pass_lanes_per_pixel(self, k: int, pixels: int) -> int:
