@@ -919,6 +919,13 @@ class Renderer:
                 # and each is 0.0 + itself bit for bit: the merge takes the arrays (no
                 # image-sized additions into fresh pages)
                 into.sum, into.sumsq, into.weight = p.sum, p.sumsq, p.weight
+            elif empty and p.weight is None and p.lo == 0 and p.sum.shape == into.sum.shape \
+                    and p.sumsq.shape == into.sumsq.shape:
+                # a box pass of the whole image into zeros: 0.0 + each float32 sum in
+                # float64, the additions' own values (-0.0 too becomes +0.0), in new arrays
+                # rather than into the zeros
+                into.sum = np.add(p.sum, 0.0, dtype=np.float64)
+                into.sumsq = np.add(p.sumsq, 0.0, dtype=np.float64)
             else:
                 into.sum[p.lo:hi] += p.sum
                 into.sumsq[p.lo:hi] += p.sumsq

@@ -153,6 +153,38 @@ def test_a_splatting_merge_takes_its_first_pass_sums(cornell):
     assert not renderer._takes(fresh, renderer.PassSums(0, m.sum, m.sumsq[..., :3], 0, m.weight))
     assert np.signbit(np.float64(-0.0)) and not np.signbit(np.float64(0.0) + np.float64(-0.0))
 
+
+def test_a_box_merge_makes_its_first_whole_image_pass_its_sums(cornell):
+    """A box render of one chunk of one pass (the moment integrator's products too): the merge's
+    sums are new float64 arrays of ``0.0 + x`` of the pass's float32 sums, not additions into
+    its zeros, and equal, bit for bit, the chunk's own arrays merged; with bands of rows (passes
+    of part of the image, chunks of a sample each) the additions go into the zeros as before. ``0.0 + x`` in float64 is
+    the additions' value for every float32 ``x``, -0.0 (made +0.0), infinities and NaN
+    included. Negative control: a plain float64 copy keeps -0.0's sign, which the sums merged
+    into zeros do not."""
+    from drpt.options import RenderOptions
+    from drpt.render import renderer
+    from drpt.render.chunks import ChunkMerge
+    from drpt.scene import load_scene
+
+    for max_lanes in (1 << 20, 40):
+        r = renderer.Renderer(load_scene(cornell), RenderOptions(
+            width=9, height=7, spp=4, seed=3, moment=True, max_lanes=max_lanes, progress=False))
+        assert not r.splatting and (r.chunks.count == 1) == (max_lanes > 40)
+        m, apart = ChunkMerge(r.chunks), ChunkMerge(r.chunks)
+        zeros = m.sum
+        for c in range(r.chunks.count):
+            m.push(r.render_chunk(c, into=m))
+            apart.push(r.render_chunk(c))
+        assert (m.sum is zeros) == (max_lanes == 40) and m.sum.dtype == np.float64
+        assert np.array_equal(m.sum, apart.sum) and np.array_equal(m.sumsq, apart.sumsq)
+        assert m.sumsq.shape == (7, 9, 6)
+    x = np.array([-0.0, 0.0, 1.5, -3e38, np.inf, -np.inf, np.nan, 1e-45], np.float32)
+    into_zeros = np.zeros(x.shape) + x
+    made = np.add(x, 0.0, dtype=np.float64)
+    assert made.tobytes() == into_zeros.tobytes()
+    assert x.astype(np.float64).tobytes() != into_zeros.tobytes()  # control
+
 def test_xyz_second_moment_is_the_square_of_each_samples_xyz():
     """From the products ``(r^2, g^2, b^2, rg, rb, gb)`` of one sample the XYZ second moment
     is ``(A rgb)^2`` for each sample, and means of several samples are the mean of those.
