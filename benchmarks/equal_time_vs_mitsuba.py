@@ -286,12 +286,16 @@ def main(argv=None) -> list[dict]:
 
 def _still_uncertain(max_error: float):
     """``more`` for :func:`~drpt.tools.converge.efficiency_rounds`: whether the variance
-    ratio's jackknife error is above ``max_error`` of the ratio (0: never)."""
+    ratio's jackknife error is above ``max_error`` of the ratio (0: never), on a row whose two
+    mean images are within 2x of each other (a row without an efficiency gains nothing from
+    more rounds)."""
     from drpt.tools.converge import variance_ratio_error
 
     def more(res: dict) -> bool:
         d, m = res["drpt"], res["mitsuba"]
         if max_error <= 0 or not m["variance"] > 0:
+            return False
+        if not _same_image({"mean_ratio": m["mean"] / d["mean"] if d["mean"] else float("nan")}, 2.0):
             return False
         ratio = d["variance"] / m["variance"]
         return variance_ratio_error(d, m) > max_error * ratio

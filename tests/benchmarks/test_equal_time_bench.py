@@ -111,3 +111,18 @@ def test_a_row_whose_mean_images_differ_has_no_efficiency():
                                [], a, 0.5)
     assert "n/a (no pixel finite in every round of both)" in empty and "nanx" not in empty
     assert "(over 1: 1 without a finite variance)" in empty
+
+
+def test_more_rounds_only_where_the_ratio_is_uncertain_and_the_images_agree():
+    """``_still_uncertain`` asks for more rounds where the variance ratio's jackknife error is
+    above ``max_error`` of it, not where the two mean images are more than 2x apart (a row
+    without an efficiency, which more rounds do not give one), nor with ``max_error`` 0.
+    Control: the same uncertain row with equal means asks for more."""
+    d = {"variance": 1.0, "mean": 1.0, "loo_variances": [1.0, 2.0, 0.5, 3.0]}
+    m = {"variance": 1.0, "mean": 1.0, "loo_variances": [1.0, 1.0, 1.0, 1.0]}
+    assert bench._still_uncertain(0.1)({"drpt": d, "mitsuba": m})  # control
+    assert not bench._still_uncertain(0.0)({"drpt": d, "mitsuba": m})
+    assert not bench._still_uncertain(0.1)({"drpt": d, "mitsuba": {**m, "mean": 1e30}})
+    assert not bench._still_uncertain(0.1)({"drpt": {**d, "mean": 0.0}, "mitsuba": m})
+    steady = {**d, "loo_variances": [1.0, 1.0, 1.0, 1.0]}
+    assert not bench._still_uncertain(0.1)({"drpt": steady, "mitsuba": m})
