@@ -33,7 +33,10 @@ every run, and the error says how far the draw may be from the expectation. A ro
 is above ``--max-error`` (default 0.1) of its ratio renders more rounds, doubling, up to
 ``--max-rounds`` (default 256; round ``k`` still seed ``k``), and the table says how many it read
 (a variance held by one sample in millions, a caustic path through glass, needs hundreds of rounds
-before its draw says anything: docs/performance.md).
+before its draw says anything: docs/performance.md). A row whose error is still above its ratio
+(leaving out one round moves the ratio by more than its value) is *undecided*: its efficiency is
+one round's draw, neither a pass nor a failure, and it is left out of the count of decided rows
+and of the mean.
 The target is issue 27's: 2x on the bundled and corpus scenes, 1.5x on Veach's and the room.
 A pixel that is NaN or infinite in any round of either renderer is left out of both renderers'
 variance (the two are scored on the same pixels), and the table lists how many each lost.
@@ -328,6 +331,15 @@ def _measured(row: dict) -> bool:
             and _same_image(row, 2.0))
 
 
+def _undecided(row: dict) -> bool:
+    """Whether a measured row's variance ratio has a jackknife error above the ratio itself:
+    leaving out one round moves it by more than its value, so one round's samples hold most
+    of a renderer's variance, and the row's efficiency is that round's draw (neither a pass
+    nor a failure; more rounds, ``--max-rounds``, may decide it)."""
+    e = row.get("variance_ratio_error", float("nan"))
+    return _measured(row) and math.isfinite(e) and e > row["variance_ratio"]
+
+
 def _why_not_measured(rows: list[dict]) -> str:
     """Why the rows that are not :func:`_measured` are left out of the mean, by cause."""
     out = [r for r in rows if not _measured(r)]
@@ -352,6 +364,8 @@ def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
              "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         ok = "yes" if _measured(r) and r["efficiency_ratio"] >= r["target"] else "**no**"
+        if _undecided(r):
+            ok = "undecided (the variance ratio's error is above the ratio)"
         var, eff = f"{r['variance_ratio']:.2f}{_error(r)}", f"{r['efficiency_ratio']:.2f}"
         if not math.isfinite(r.get("mean_ratio", 1.0)):
             var = eff = "n/a (no pixel finite in every round of both)"
@@ -364,13 +378,18 @@ def format_table(rows: list[dict], skipped: list, a, load0: float) -> str:
     # renderers' variance, and listed below; a row with no pixel left has no variance to
     # compare, nor one whose renderers' mean images differ by more than 2x: such a row is
     # listed, counted as short of its target and left out of the mean)
-    measured = [r for r in rows if _measured(r)]
+    # (an undecided row is neither met nor short, and out of the mean)
+    undecided = [r for r in rows if _undecided(r)]
+    measured = [r for r in rows if _measured(r) and not _undecided(r)]
     if measured:
         g = math.exp(sum(math.log(r["efficiency_ratio"]) for r in measured) / len(measured))
-        lines.append(f"\n{sum(r['efficiency_ratio'] >= r['target'] for r in measured)} of {len(rows)} scenes "
-                     f"meet their target; geometric mean of the efficiency ratios {g:.2f}"
-                     + (f" (over {len(measured)}: {_why_not_measured(rows)})"
-                        if len(measured) < len(rows) else ""))
+        why = [_why_not_measured(rows)] if any(not _measured(r) for r in rows) else []
+        why += [f"{len(undecided)} undecided"] if undecided else []
+        lines.append(f"\n{sum(r['efficiency_ratio'] >= r['target'] for r in measured)} of "
+                     + (f"{len(rows) - len(undecided)} decided scenes meet their target ({len(undecided)} "
+                        f"of {len(rows)} undecided)" if undecided else f"{len(rows)} scenes meet their target")
+                     + f"; geometric mean of the efficiency ratios {g:.2f}"
+                     + (f" (over {len(measured)}: {', '.join(why)})" if len(measured) < len(rows) else ""))
     apart = [r for r in rows if not _same_image(r, 1.1)]
     if apart:
         lines.append("\nMean images more than 10% apart (Mitsuba's / drpt's):")

@@ -126,3 +126,24 @@ def test_more_rounds_only_where_the_ratio_is_uncertain_and_the_images_agree():
     assert not bench._still_uncertain(0.1)({"drpt": {**d, "mean": 0.0}, "mitsuba": m})
     steady = {**d, "loo_variances": [1.0, 1.0, 1.0, 1.0]}
     assert not bench._still_uncertain(0.1)({"drpt": steady, "mitsuba": m})
+
+
+def test_a_row_whose_variance_ratio_is_one_rounds_draw_is_undecided():
+    """A measured row whose variance ratio's jackknife error is above the ratio (one round
+    holds most of a renderer's variance) reads "undecided": neither met nor short, out of the
+    count of decided rows and of the mean. Negative control: the same row with an error below
+    its ratio is met, counted and in the mean."""
+    from types import SimpleNamespace
+
+    a = SimpleNamespace(rounds=8, min_size=192, max_samples=1_000_000, commit="abc")
+    base = {"target": 2.0, "width": 192, "height": 192, "spp": 16, "drpt_seconds": 0.4,
+            "mitsuba_seconds": 1.0, "time_ratio": 2.5, "mean_ratio": 1.0, "rounds": 256, "first_rounds": 8}
+    draw = {**base, "scene": "media", "variance_ratio": 0.2, "variance_ratio_error": 5.3, "efficiency_ratio": 12.0}
+    plain = {**base, "scene": "plain", "variance_ratio": 1.0, "variance_ratio_error": 0.05, "efficiency_ratio": 2.5}
+    text = bench.format_table([draw, plain], [], a, 0.5)
+    assert "| media | " in text and "| 2x undecided (the variance ratio's error is above the ratio) |" in text
+    assert "1 of 1 decided scenes meet their target (1 of 2 undecided); geometric mean of the " \
+           "efficiency ratios 2.50 (over 1: 1 undecided)" in text
+    decided = bench.format_table([{**draw, "variance_ratio_error": 0.1}, plain], [], a, 0.5)  # control
+    assert "undecided" not in decided and "2 of 2 scenes meet their target" in decided
+    assert "efficiency ratios 5.48" in decided
