@@ -147,3 +147,43 @@ def test_a_row_whose_variance_ratio_is_one_rounds_draw_is_undecided():
     decided = bench.format_table([{**draw, "variance_ratio_error": 0.1}, plain], [], a, 0.5)  # control
     assert "undecided" not in decided and "2 of 2 scenes meet their target" in decided
     assert "efficiency ratios 5.48" in decided
+
+
+def test_a_bundled_row_falls_back_to_mitsubas_independent_sampler(monkeypatch, capsys):
+    """On a bundled scene where Mitsuba drew with its ldsampler (drpt's sampler's plugin) and
+    the two mean images are more than 2x apart (Mitsuba's ldsampler is not an estimate of the
+    dining room), the row is measured again against Mitsuba's independent sampler, drpt's
+    settings kept, and the table names the plugin and the first mean ratio. Negative controls:
+    an XML row and a bundled row whose images agree are measured once; ``--mitsuba-sampler``
+    given is kept."""
+    calls = []
+
+    def way(mean, variance, seconds=1.0):
+        return {"seconds": seconds, "variance": variance, "efficiency": 1.0 / (seconds * variance),
+                "loo_variances": [variance] * 8, "mean": mean, "nonfinite_pixels": 0, "rounds": 8}
+
+    def rounds(case, a, mitsuba_sampler):
+        calls.append((case.name, mitsuba_sampler))
+        used = mitsuba_sampler or ("ldsampler" if case.bundled else None)
+        info = {"width": 8, "height": 8, "spp": 16, "integrator": "path"}
+        if case.bundled:
+            info["mitsuba_sampler"] = used
+        bad = case.name == "room" and used == "ldsampler"
+        return info, {"drpt": way(1.0, 1.0), "mitsuba": way(1e30 if bad else 1.0, 4.0, 1.5)}
+
+    own = (8, 8, -1, "auto")
+    fake = [bench.Case("room", 2.0, bench.ROOT, own), bench.Case("box", 2.0, bench.ROOT, own),
+            bench.Case("file.xml", 2.0, bench.ROOT)]
+    monkeypatch.setattr(bench, "_rounds", rounds)
+    monkeypatch.setattr(bench, "cases", lambda *a, **k: fake)
+    rows = bench.main(["--rounds", "8"])
+    assert calls == [("room", None), ("room", "independent"), ("box", None), ("file.xml", None)]
+    room = rows[0]
+    assert room["mitsuba_sampler"] == "independent" and room["mitsuba_ldsampler_mean_ratio"] == 1e30
+    assert room["efficiency_ratio"] == pytest.approx(6.0) and room["mean_ratio"] == 1.0
+    assert "| room (Mitsuba's independent sampler: its ldsampler's mean image 1e+30x drpt's) |" \
+        in capsys.readouterr().out
+    assert "mitsuba_ldsampler_mean_ratio" not in rows[1] and rows[1]["mitsuba_sampler"] == "ldsampler"
+    calls.clear()
+    rows = bench.main(["--rounds", "8", "--mitsuba-sampler", "ldsampler"])  # control
+    assert calls[:2] == [("room", "ldsampler"), ("box", "ldsampler")] and "mitsuba_ldsampler_mean_ratio" not in rows[0]
