@@ -526,9 +526,10 @@ def lane_sums(groups: list[list], m: int) -> list:
     ``groups`` are lists of per-lane values of one type (``Float`` or ``Float64``),
     a sum per channel, ``m`` lanes per pixel, pixel-major (lanes ``p m .. p m + m - 1`` are
     pixel ``p``'s). Returns for each group its channels' per-pixel sums, an array a channel
-    (element ``p`` the sum over pixel ``p``'s lanes), which the host reads and stacks into the
-    group's ``(pixels, C)`` image: a kernel that interleaved them on the device
-    (``dr.ravel``) cost more than ``np.stack`` (docs/performance.md).
+    (element ``p`` the sum over pixel ``p``'s lanes; with ``m`` 1 the channels themselves),
+    which the host reads and stacks into the group's ``(pixels, C)`` image: a kernel that
+    interleaved them on the device (``dr.ravel``) cost more than ``np.stack``
+    (docs/performance.md).
 
     Each channel is a ``dr.block_sum`` of blocks of ``m`` (Dr.Jit's precompiled block
     reduction, which reads each block's lanes contiguously): Dr.Jit adds a block's ``m``

@@ -53,8 +53,8 @@ from pathlib import PurePath
 import drjit as dr
 import numpy as np
 
-#: object kinds the walk does not enter (host data, code, a C library's bound functions)
-_LEAVES = (str, bytes, int, float, bool, complex, np.ndarray, np.generic, types.ModuleType,
+#: object kinds the walk does not enter (host data, paths, code, a C library's bound functions)
+_LEAVES = (str, bytes, int, float, bool, complex, np.ndarray, np.generic, PurePath, types.ModuleType,
            types.FunctionType, types.BuiltinFunctionType, types.MethodType, type,
            ctypes.CDLL, ctypes._CFuncPtr)
 
@@ -70,11 +70,11 @@ _host_types: dict[type, bool] = {}
 
 def _host_only(t: type) -> bool:
     """Whether the walk does not enter objects of type ``t``: :data:`_LEAVES` and the classes
-    of :data:`HOST_PACKAGES` (and the paths of ``pathlib``), remembered by type."""
+    of :data:`HOST_PACKAGES`, remembered by type."""
     known = _host_types.get(t)
     if known is None:
         module = getattr(t, "__module__", None) or ""
-        known = (issubclass(t, _LEAVES + (PurePath,))
+        known = (issubclass(t, _LEAVES)
                  or any(module == p or module.startswith(p + ".") for p in HOST_PACKAGES))
         _host_types[t] = known
     return known

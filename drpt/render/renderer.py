@@ -462,15 +462,8 @@ class Renderer:
         :meth:`_pass_arrays`, traced, or replayed where this pass geometry was traced
         before (:mod:`drpt.render.frozen`), then read back."""
         W = self.opt.width
-        m = self._pass_lanes_per_pixel(k, rows * W)
-        out = self._pass_outputs("pass", self._pass_arrays, self._pass_keys(pass_index, r0), (k, rows, wide))
-        if m == 1:  # one lane per pixel: nothing to add, and no interleaved copy (peak memory)
-            acc, squares, nbad = out
-            dr.eval(acc, squares, nbad)
-            img = np.stack([c.numpy() for c in (acc.x, acc.y, acc.z)], axis=-1).reshape(rows, W, 3)
-            sq = np.stack([c.numpy() for c in squares], axis=-1).reshape(rows, W, len(squares))
-            return img, sq, int(nbad.numpy()[0])
-        sums, sqsums, nbad = out
+        sums, sqsums, nbad = self._pass_outputs("pass", self._pass_arrays, self._pass_keys(pass_index, r0),
+                                                (k, rows, wide))
         dr.eval(sums, sqsums, nbad)
         img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)
         sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, -1)
@@ -516,8 +509,7 @@ class Renderer:
 
     def _pass_arrays(self, keys: dict, k: int, rows: int, wide: bool):
         """The camera pass of ``k`` samples of each pixel of ``rows`` rows from ``keys["r0"]``:
-        its device arrays: with one lane per pixel the
-        lanes' sums and their squares (and products), else the pixels' sums and squares
+        its device arrays: the pixels' sums and squares (and products), an array a channel
         (:func:`~drpt.render.film.lane_sums`), then the pass's count of dropped non-finite
         samples (:func:`~drpt.render.film.dropped_total`, one element). A pure
         function of ``keys``, its ``int`` arguments and the renderer's device state (the
@@ -560,12 +552,11 @@ class Renderer:
             acc2 = acc * acc
             cross = [type(acc)(acc.x * acc.y, acc.x * acc.z, acc.y * acc.z)] if self.opt.moment else []
             nbad = dropped_total(UInt32(bad))
-        # a pixel's lanes summed (film.lane_sums): the sums, and in an array of their own
-        # (contiguous for the merge's additions) the squares, then with RenderOptions.moment
-        # (a Mitsuba moment integrator) the products rg, rb, gb
+        # a pixel's lanes summed (film.lane_sums; with one lane a pixel, the lanes' own
+        # values): the sums, and as a group of their own (contiguous for the merge's
+        # additions) the squares, then with RenderOptions.moment (a Mitsuba moment
+        # integrator) the products rg, rb, gb
         squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
-        if m == 1:
-            return acc, squares, nbad
         sums, sqsums = lane_sums([[acc.x, acc.y, acc.z], squares], m)
         return sums, sqsums, nbad
 
