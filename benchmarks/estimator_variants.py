@@ -71,7 +71,7 @@ def main(argv=None) -> dict:
     import equal_time_vs_mitsuba as et
 
     from drpt.backend import ensure
-    from drpt.tools.converge import make_drpt
+    from drpt.tools.converge import image_room, make_drpt
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scene")
@@ -90,11 +90,7 @@ def main(argv=None) -> dict:
         renders = {v: make_drpt(scene, apply(opts, v))[1] for v in a.variants}
         for render in renders.values():
             shape = render(opts.spp, 999_999).image.shape  # compile
-        # the rounds' images kept in room made (and paged in) before the timed renders, as
-        # drpt.tools.converge.efficiency_rounds keeps them
-        stacks: dict = {v: np.zeros((a.rounds, *shape)) for v in renders}
-        for st in stacks.values():
-            st[...] = 0.0
+        stacks: dict = {v: image_room(a.rounds, shape) for v in renders}  # (paged in before timing)
         seconds: dict = {v: [] for v in renders}
         for k in range(a.rounds):
             for v, render in renders.items():

@@ -31,7 +31,7 @@ import equal_time_vs_mitsuba as eq
 import numpy as np
 
 from drpt.backend import ensure
-from drpt.tools.converge import make_drpt
+from drpt.tools.converge import image_room, make_drpt
 
 
 def main(argv=None) -> dict:
@@ -58,11 +58,7 @@ def main(argv=None) -> dict:
             renders.append(make_drpt(scene, opts)[1])
             shape = renders[w](opts.spp, 1000).image.shape
             renders[w](opts.spp, 1001)
-        # the rounds' images kept in room made (and paged in) before the timed renders, as
-        # drpt.tools.converge.efficiency_rounds keeps them
-        imgs = (np.zeros((args.rounds, *shape)), np.zeros((args.rounds, *shape)))
-        for st in imgs:
-            st[...] = 0.0
+        imgs = (image_room(args.rounds, shape), image_room(args.rounds, shape))  # (paged in before timing)
         for k in range(args.rounds):
             for w in ((0, 1) if k % 2 == 0 else (1, 0)):
                 setattr(cls, attr, values[w])

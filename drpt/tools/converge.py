@@ -284,6 +284,20 @@ def time_to_error_ratios(t_a, e_a, t_b, e_b, levels) -> list[dict]:
     return rows
 
 
+def image_room(rounds: int, shape: tuple, kept: np.ndarray | None = None) -> np.ndarray:
+    """A float64 stack of ``rounds`` images of ``shape`` to keep a timed loop's images in, its
+    pages written now (zeros, after the images of ``kept``, the rounds so far): a loop that
+    kept a new array each round would grow the heap, and a timed render that then allocates
+    memory of its own would pay for the fresh pages (docs/performance.md, "The benchmark's
+    kept images")."""
+    room = np.empty((rounds, *shape))
+    done = 0 if kept is None else len(kept)
+    if done:
+        room[:done] = kept
+    room[done:] = 0.0
+    return room
+
+
 def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999,
                       more: Callable[[dict], bool] | None = None, max_rounds: int = 0) -> dict:
     """Equal-spp efficiency of several ways of rendering one image, measured interleaved.
@@ -313,18 +327,12 @@ def efficiency_rounds(ways: dict, rounds: int, warm_seed: int = 999_999,
         raise DrptError(f"efficiency needs at least 2 rounds, got {rounds}")
     shapes = {name: np.shape(np.asarray(render(warm_seed))) for name, render in ways.items()}
     times: dict = {name: [] for name in ways}
-    images: dict = {name: np.empty((0, *shape)) for name, shape in shapes.items()}
+    images: dict = {name: None for name in ways}
     done, total = 0, rounds
     while True:
-        for name, shape in shapes.items():
-            # room for this stretch's images, its pages written now: a render's timed
-            # span allocates nothing of the bookkeeping's (kept images that grow the
-            # heap as the rounds go would leave fresh pages, and their faults, to
-            # whichever render next allocates memory of its own)
-            grown = np.empty((total, *shape))
-            grown[:done] = images[name]
-            grown[done:] = 0.0
-            images[name] = grown
+        # room for this stretch's images: a render's timed span allocates nothing of the
+        # bookkeeping's
+        images = {name: image_room(total, shapes[name], images[name]) for name in ways}
         for k in range(done, total):
             for name, render in ways.items():
                 t = time.perf_counter()
