@@ -160,7 +160,7 @@ def test_a_box_merge_makes_its_first_whole_image_pass_its_sums(cornell):
     its zeros, and equal, bit for bit, the chunk's own arrays merged; with bands of rows (passes
     of part of the image, chunks of a sample each) the additions go into the zeros as before. ``0.0 + x`` in float64 is
     the additions' value for every float32 ``x``, -0.0 (made +0.0), infinities and NaN
-    included. Negative control: a plain float64 copy keeps -0.0's sign, which the sums merged
+    included, also in the merge of a pass that holds them. Negative control: a plain float64 copy keeps -0.0's sign, which the sums merged
     into zeros do not."""
     from drpt.options import RenderOptions
     from drpt.render import renderer
@@ -184,6 +184,15 @@ def test_a_box_merge_makes_its_first_whole_image_pass_its_sums(cornell):
     made = np.add(x, 0.0, dtype=np.float64)
     assert made.tobytes() == into_zeros.tobytes()
     assert x.astype(np.float64).tobytes() != into_zeros.tobytes()  # control
+    # the renderer's own merge of a whole-image float32 pass holding -0.0: the zeros' bits
+    r = renderer.Renderer(load_scene(cornell), RenderOptions(width=4, height=2, spp=1, moment=True, progress=False))
+    sums = np.resize(x[:6], (2, 4, 3)).astype(np.float32)
+    squares = np.resize(x, (2, 4, 6)).astype(np.float32)
+    r.render_pass = lambda i: renderer.PassSums(0, sums, squares, 0)
+    m = ChunkMerge(r.chunks)
+    m.push(r.render_chunk(0, into=m))
+    assert m.sum.tobytes() == (np.zeros((2, 4, 3)) + sums).tobytes()
+    assert m.sumsq.tobytes() == (np.zeros((2, 4, 6)) + squares).tobytes()
 
 def test_xyz_second_moment_is_the_square_of_each_samples_xyz():
     """From the products ``(r^2, g^2, b^2, rg, rb, gb)`` of one sample the XYZ second moment
