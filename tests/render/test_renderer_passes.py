@@ -158,10 +158,10 @@ def test_a_box_merge_makes_its_first_whole_image_pass_its_sums(cornell):
     """A box render of one chunk of one pass (the moment integrator's products too): the merge's
     sums are new float64 arrays of ``0.0 + x`` of the pass's float32 sums, not additions into
     its zeros, and equal, bit for bit, the chunk's own arrays merged; with bands of rows (passes
-    of part of the image, chunks of a sample each) the additions go into the zeros as before. ``0.0 + x`` in float64 is
-    the additions' value for every float32 ``x``, -0.0 (made +0.0), infinities and NaN
-    included, also in the merge of a pass that holds them. Negative control: a plain float64 copy keeps -0.0's sign, which the sums merged
-    into zeros do not."""
+    of part of the image, chunks of a sample each) the additions go into the zeros as before.
+    ``0.0 + x`` in float64 is the additions' value for every float32 ``x``, -0.0 (made +0.0),
+    infinities and NaN included, also in the merge of a pass that holds them. Negative
+    control: a plain float64 copy keeps -0.0's sign, which the sums merged into zeros do not."""
     from drpt.options import RenderOptions
     from drpt.render import renderer
     from drpt.render.chunks import ChunkMerge
