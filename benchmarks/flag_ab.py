@@ -7,7 +7,8 @@ in one process (not a test).
 ``SCENE`` is a word of a scene name of ``equal_time_vs_mitsuba.py`` (``null_envmap``,
 ``emitter_inside``, ...), set up as that benchmark sets it up (size, spp, the file's settings);
 ``MODULE:CLASS.ATTR`` a class attribute read when a kernel is traced (an A/B switch such as
-``drpt.render.integrators.volpath:VolPathIntegrator.split_sheets``), set to each of
+``drpt.render.integrators.volpath:VolPathIntegrator.split_sheets``), or ``MODULE:ATTR`` a
+module's constant (``drpt.render.renderer:STRAIGHT_PATHS_PER_LANE``), set to each of
 ``--values`` (Python literals, default ``False True``: A, then B) before each render. Each
 way has a renderer of its own (a renderer replays its frozen passes, recorded with the value
 set when it traced them: :mod:`drpt.render.frozen`), which renders twice to compile and record
@@ -44,8 +45,10 @@ def main(argv=None) -> dict:
     ensure()
     warnings.simplefilter("ignore")
     module, attr = args.flag.split(":")
-    cls_name, attr = attr.rsplit(".", 1)
-    cls = getattr(importlib.import_module(module), cls_name)
+    cls = importlib.import_module(module)
+    if "." in attr:
+        cls_name, attr = attr.rsplit(".", 1)
+        cls = getattr(cls, cls_name)
     values = [ast.literal_eval(v) for v in args.values]
     case = next(c for c in eq.cases([args.scene], True, Path("/tmp/flag_ab_room")) if args.scene in c.name)
     scene, opts, _ = eq.setup(case, 192, 1_000_000)

@@ -218,6 +218,7 @@ OTHER_PROGRAMS = {"--nworkers", "--nthreads", "--short", "--tris", "--chunks", "
                   "--agree",  # (benchmarks/env_compensation.py)
                   "--sort",  # (perf report, quoted in performance.md)
                   "--npz",  # (benchmarks/estimator_variants.py)
+                  "--values",  # (benchmarks/flag_ab.py)
                   "--mitsuba", "--dump",  # (benchmarks/render_loop.py)
                   "--scenes", "--scene", "--seeds", "--repeat", "--reference", "--parts", "--depth",
                   "--path-sampler", "--bdpt-sampler",  # (bdpt_*.py)
