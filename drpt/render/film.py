@@ -520,28 +520,55 @@ def _interleaved(total: list, rows: int, width: int) -> tuple:
     return tuple(t.numpy().reshape(rows, width, len(g)) for t, g in zip(tables, groups))
 
 
-def lane_sums(groups: list[list], m: int) -> list:
+#: values in a record of Dr.Jit's packet gathers, as :func:`lane_sums` reads a pass's lanes
+RECORD = 8
+
+#: the most lanes per pixel that :func:`lane_sums` adds from records; above it, Dr.Jit's
+#: block sums (docs/performance.md, "A pixel's lanes read as records")
+RECORD_LANES = 16
+
+
+def by_records(m: int) -> bool:
+    """Whether :func:`lane_sums` reads ``m`` lanes per pixel as records (from 2 to
+    :data:`RECORD_LANES` lanes)."""
+    return 2 <= m <= RECORD_LANES
+
+
+def pass_lanes(pixels: int, m: int) -> int:
+    """The lanes of a camera pass of ``pixels`` pixels of ``m`` lanes each: ``pixels m``, rounded
+    up to a multiple of :data:`RECORD` where :func:`lane_sums` reads them as records (a packet
+    gather reads an array of whole records). The lanes past ``pixels m`` trace nothing."""
+    n = pixels * m
+    return -(-n // RECORD) * RECORD if by_records(m) else n
+
+
+def lane_sums(groups: list[list], m: int, pixels: int) -> list:
     """Each pixel's sums of a pass's lanes, a group of channels to an array: the box filter's film.
 
     ``groups`` are lists of per-lane values of one type (``Float`` or ``Float64``),
-    a sum per channel, ``m`` lanes per pixel, pixel-major (lanes ``p m .. p m + m - 1`` are
-    pixel ``p``'s). Returns for each group its channels' per-pixel sums, an array a channel
-    (element ``p`` the sum over pixel ``p``'s lanes; with ``m`` 1 the channels themselves),
-    which the host reads and stacks into the group's ``(pixels, C)`` image: a kernel that
-    interleaved them on the device (``dr.ravel``) cost more than ``np.stack``
-    (docs/performance.md).
+    a sum per channel, ``m`` lanes per pixel of ``pixels`` pixels, pixel-major (lanes ``p m ..
+    p m + m - 1`` are pixel ``p``'s), :func:`pass_lanes` lanes in all. Returns for each group
+    its channels' per-pixel sums, an array a channel (element ``p`` the sum over pixel ``p``'s
+    lanes; with ``m`` 1 the channels themselves), which the host reads and stacks into the
+    group's ``(pixels, C)`` image: a kernel that interleaved them on the device (``dr.ravel``)
+    cost more than ``np.stack`` (docs/performance.md).
 
-    Each channel is a ``dr.block_sum`` of blocks of ``m`` (Dr.Jit's precompiled block
-    reduction, which reads each block's lanes contiguously): Dr.Jit adds a block's ``m``
-    values in an order of its own, not lane order, that neither the block's place in the
-    array, the pass's size, the CPU's vector width nor the thread count changes, so a pixel's
-    sum is a function of its own lanes alone, the same in every run, chunk, worker and
-    resumed render (``tests/render/test_film.py``). Adding the lanes in a kernel of one
-    lane per pixel instead (a gather per lane and channel) cost about twice as much
-    (docs/performance.md, "A pixel's lanes added by block sums")."""
+    Where :func:`by_records`, one kernel adds every channel's lanes (:func:`_record_sums`):
+    each pixel reads the aligned records of :data:`RECORD` lanes that its lanes lie in, by
+    packet gathers, and adds its own lanes in lane order, ``((l_0 + l_1) + l_2) + ...``.
+    Otherwise each channel is a ``dr.block_sum`` of blocks of ``m`` (Dr.Jit's block reduction,
+    which adds a block in an order of its own that neither the block's place in the array,
+    the pass's size, the CPU's vector width nor the thread count changes). Either way a
+    pixel's sum is a function of its own lanes alone, the same in every run, chunk, worker
+    and resumed render (``tests/render/test_film.py``), up to the sign of a zero sum, which the
+    host's float64 merge makes +0.0. Adding the lanes by a plain gather per lane and channel
+    costs more than either (docs/performance.md, "A pixel's lanes read as records")."""
     columns = [c for g in groups for c in g]
     if m == 1:
         sums = columns
+    elif by_records(m):
+        dr.eval(columns)  # (the path kernel, once, before the sums' kernel reads it)
+        sums = _record_sums(columns, m, pixels)
     else:
         dr.eval(columns)  # (one kernel for what is not evaluated yet, not one per channel)
         sums = [dr.block_sum(c, m) for c in columns]
@@ -550,6 +577,43 @@ def lane_sums(groups: list[list], m: int) -> list:
         tables.append(sums[i:i + len(g)])
         i += len(g)
     return tables
+
+
+def _record_sums(columns: list, m: int, pixels: int) -> list:
+    """:func:`lane_sums` by records: pixel ``p``'s lanes start at offset ``o = m p mod 8`` of
+    record ``m p // 8`` and fill ``m`` slots from there. A slot of the ``K`` records a pixel
+    may reach is added where it is one of the pixel's lanes and 0.0 where not (in the first
+    record before ``o``, in the last after ``o + m``): the nonzero terms are the pixel's lanes
+    in order, and ``x + 0.0`` is ``x``. The offsets are multiples of ``g = gcd(m, 8)`` up to
+    ``8 - g``, so which slots are always, never or sometimes a pixel's is known when tracing:
+    only the sometimes slots are selected. An index past the array's last record (read only
+    for slots no pixel uses) is clamped to it."""
+    n = dr.width(columns[0])
+    if n % RECORD != 0 or n < pixels * m:
+        raise ValueError(f"lane_sums: {n} lanes for {pixels} pixels of {m} (pass_lanes: {pass_lanes(pixels, m)})")
+    o_max = RECORD - math.gcd(m, RECORD)
+    K = (o_max + m - 1) // RECORD + 1
+    first = dr.arange(UInt32, pixels) * m
+    rec0 = first // RECORD
+    o = first - rec0 * RECORD
+    last = dr.opaque(UInt32, n // RECORD - 1)
+    index = [dr.minimum(rec0 + k, last) for k in range(K)]
+    sums = []
+    for c in columns:
+        Rec = ArrayXf64 if isinstance(c, Float64) else ArrayXf
+        s = None
+        for k in range(K):
+            rec = dr.gather(Rec, c, index[k], shape=(RECORD, pixels))
+            for j in range(RECORD):
+                slot = k * RECORD + j
+                if slot >= o_max + m:
+                    break  # (no pixel's lane from here on)
+                v = rec[j]
+                if slot < o_max or slot >= m:  # (a lane of some pixels only)
+                    v = dr.select((o <= slot) & (o + m > slot), v, 0.0)
+                s = v if s is None else s + v
+        sums.append(s)
+    return sums
 
 
 def dropped_total(flags: UInt32) -> UInt32:

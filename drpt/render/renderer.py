@@ -11,9 +11,10 @@ see :meth:`Renderer._trace_pass`), each lane traces its
 share of the ``k`` samples one path after another and sums them, so a SIMD
 packet no longer waits for its longest path at every bounce (its gain:
 docs/performance.md, "Execution model"). The Whitted integrator runs one sample per lane. Lanes are
-ordered pixel-major, so a pixel's lanes are adjacent and a block sum per channel
-adds them (:func:`~drpt.render.film.lane_sums`; a pixel is the mean of its own
-samples, added in an order that depends on nothing else). Each
+ordered pixel-major, so a pixel's lanes are adjacent, and one kernel reads them as
+records by packet gathers and adds them in lane order, or a block sum per channel adds
+them (:func:`~drpt.render.film.lane_sums`; a pixel is the mean of its own samples, added
+in an order that depends on nothing else). Each
 lane draws from its own PCG32 stream, selected by ``(seed, pass, lane)``
 (:func:`~drpt.render.sampler.pcg_streams`: state and increment hashed from them, so
 neighbouring lanes' streams are independent), so a render is deterministic for a
@@ -75,7 +76,7 @@ from ..scene.model import Camera, Scene
 from .aov import aov_values, index_arrays
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
-from .film import SplatFilm, dropped_total, gather_splats, lane_sums, splat_weights
+from .film import SplatFilm, dropped_total, gather_splats, lane_sums, pass_lanes, splat_weights
 from .filter_sampling import sample_position
 from .frozen import FrozenPass, freezes
 from .integrators.bdpt import STRATEGY_SEGMENTS, BDPTIntegrator, StrategyFilm, strategies
@@ -518,11 +519,16 @@ class Renderer:
         pixels = rows * W
         sequential = hasattr(self.integrator, "sample_sequence")
         m = self._pass_lanes_per_pixel(k, pixels)
-        n = pixels * m
+        n = pass_lanes(pixels, m)
         lane = dr.arange(UInt32, n)
         # (the lane's pixel and its place among the pixel's m lanes without an opaque integer
         # division, drpt.render.lanes; the pass's k // m and k % m are the host's)
         pixel, j = divmod_opaque(lane, m)
+        # lanes past the pixels' (film.pass_lanes rounds up to whole records) are pixel 0's
+        # lanes with no sample
+        real = None if n == pixels * m else lane < dr.opaque(UInt32, pixels * m)
+        if real is not None:
+            pixel = dr.select(real, pixel, 0)
         x = pixel % W
         y = pixel // W + keys["r0"]
         # with path regeneration lane j of a pixel's m traces its samples j, j + m, ...
@@ -531,6 +537,8 @@ class Renderer:
         camera_ray = self._camera_ray(x, y)
         if sequential:
             count = dr.opaque(UInt32, k // m) + dr.select(j < dr.opaque(UInt32, k % m), 1, 0)
+            if real is not None:
+                count = dr.select(real, count, 0)
             extra = {"moment": True} if self.opt.moment else {}
             acc, acc2, bad, *cross = self.integrator.sample_sequence(rng, camera_ray, count, wide=wide,
                                                                      **extra)
@@ -542,12 +550,14 @@ class Renderer:
                 dr.eval(acc, acc2, nbad, cross)
         else:
             o, d, weight = camera_ray(rng)
-            L = self.integrator.sample(rng, o, d, Bool(True))
+            L = self.integrator.sample(rng, o, d, Bool(True) if real is None else real)
             if weight is not None:
                 L = L * weight
             with llvm_tuning.blocks_for(n):
                 dr.eval(L)
             bad = ~(dr.isfinite(L.x) & dr.isfinite(L.y) & dr.isfinite(L.z))
+            if real is not None:
+                bad &= real
             acc = (Array3f64 if wide else Array3f)(dr.select(bad, 0.0, L))
             acc2 = acc * acc
             cross = [type(acc)(acc.x * acc.y, acc.x * acc.z, acc.y * acc.z)] if self.opt.moment else []
@@ -557,7 +567,7 @@ class Renderer:
         # additions) the squares, then with RenderOptions.moment (a Mitsuba moment
         # integrator) the products rg, rb, gb
         squares = [c for a in (acc2, *cross) for c in (a.x, a.y, a.z)]
-        sums, sqsums = lane_sums([[acc.x, acc.y, acc.z], squares], m)
+        sums, sqsums = lane_sums([[acc.x, acc.y, acc.z], squares], m, pixels)
         return sums, sqsums, nbad
 
     def _pass_outputs(self, name: str, body: Callable, keys: dict, args: tuple):

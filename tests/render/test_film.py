@@ -149,13 +149,16 @@ def test_per_source_way_where_it_pays():
     assert _source_groups(g, big + 1, 1, 16, True, Float) is None
 
 
-@pytest.mark.parametrize("m", [1, 3, 9, 27, 40])
+@pytest.mark.parametrize("m", [1, 2, 3, 8, 9, 16, 27, 40])
 @pytest.mark.parametrize("wide", [False, True])
 def test_lane_sums_are_each_pixels_own(m, wide):
-    """Each pixel's sums of its ``m`` lanes (``dr.block_sum``'s order, not lane order: the
-    exact sums to within ``m`` roundings), bit for bit the same wherever the pixel lies in the pass and
-    whatever the pass's size (the bands, chunks and resumed renders of one image add the same
-    lanes). Control: one lane's value changed in its last bit changes its pixel's sum and no
+    """Each pixel's sums of its ``m`` lanes, bit for bit the same wherever the pixel lies in the
+    pass and whatever the pass's size (the bands, chunks and resumed renders of one image add
+    the same lanes): read as records (2 to ``film.RECORD_LANES`` lanes, whose offsets in their
+    records move with the pixel's place), the lanes added in lane order; else by
+    ``dr.block_sum`` (in its own order: the exact sums to within ``m`` roundings). The lanes
+    past the pixels' (``film.pass_lanes`` pads to whole records) hold NaN, which no sum may
+    read. Control: one lane's value changed in its last bit changes its pixel's sum and no
     other."""
     pixels, C = 37, 5
     rng = np.random.default_rng(m)
@@ -164,15 +167,24 @@ def test_lane_sums_are_each_pixels_own(m, wide):
     Value = Float64 if wide else Float
 
     def sums(c):
-        a, b = film.lane_sums([[Value(x) for x in c[:2]], [Value(x) for x in c[2:]]], m)
+        p = c.shape[1] // m
+        padded = np.full((C, film.pass_lanes(p, m)), np.nan, dtype)
+        padded[:, :c.shape[1]] = c
+        a, b = film.lane_sums([[Value(x) for x in padded[:2]], [Value(x) for x in padded[2:]]], m, p)
         assert len(a) == 2 and len(b) == 3
         return np.stack([x.numpy() for x in (*a, *b)])
 
     got = sums(cols)
-    blocks = cols.reshape(C, pixels, m).astype(np.float64)
-    # a sum of m terms in any order: within m roundings of the terms' magnitudes
-    bound = m * np.finfo(dtype).eps * np.abs(blocks).sum(-1)
-    assert np.all(np.abs(got - blocks.sum(-1)) <= bound)
+    blocks = cols.reshape(C, pixels, m)
+    if film.by_records(m):
+        in_order = np.zeros((C, pixels), dtype)
+        for j in range(m):
+            in_order = (in_order + blocks[..., j]).astype(dtype)
+        np.testing.assert_array_equal(got, in_order)
+    else:
+        # a sum of m terms in any order: within m roundings of the terms' magnitudes
+        bound = m * np.finfo(dtype).eps * np.abs(blocks.astype(np.float64)).sum(-1)
+        assert np.all(np.abs(got - blocks.astype(np.float64).sum(-1)) <= bound)
     # the same pixels after 11 others, and pixels 5-9 alone
     before = (rng.standard_normal((C, 11 * m)) * 100.0).astype(dtype)
     shifted = sums(np.concatenate([before, cols], axis=1))
@@ -188,6 +200,16 @@ def test_lane_sums_are_each_pixels_own(m, wide):
         bumped[0, 7 * m + 1] += np.abs(cols[0, 7 * m:8 * m]).sum()
         other = sums(bumped)
         assert list(np.flatnonzero((other != got).any(axis=0))) == [7]
+
+
+def test_pass_lanes_are_whole_records_where_read_as_records():
+    """``pass_lanes``: the pixels' lanes, rounded up to whole records where ``lane_sums`` reads
+    records (a packet gather reads whole records), not otherwise. Control: an array of lanes
+    that is not whole records is refused, not read past its end."""
+    assert film.pass_lanes(37, 9) == 336 and film.pass_lanes(40, 9) == 360
+    assert film.pass_lanes(37, 1) == 37 and film.pass_lanes(37, 27) == 37 * 27
+    with pytest.raises(ValueError, match="lanes"):
+        film.lane_sums([[Float(np.ones(37 * 9, np.float32))]], 9, 37)
 
 
 def test_dropped_total_adds_the_lanes_counts_in_their_kernel():

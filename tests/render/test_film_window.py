@@ -148,7 +148,7 @@ def test_kernel_op_count_unchanged_without_a_window(sampler, count):
     small per-material, per-primitive and emitter tables, and the ceiling light's two triangle
     records, read as compares and selects of literals instead of gathers (``drpt.render.tables``:
     more operations, less time), its four lanes a pixel of one sample each summing the
-    samples and their squares (``film.lane_sums`` adds a pixel's lanes by block sums), and the
+    samples and their squares (``film.lane_sums`` adds a pixel's lanes in a kernel of its own), and the
     pass's dropped non-finite samples added in the kernel (``film.dropped_total``: a masked
     atomic addition, ten operations, where a per-lane array was written); with
     the default ``auto``, which is ``ldsampler`` for the path integrator: 4690, the same kernel drawing

@@ -5,6 +5,7 @@ never more than the lane budget at a time; the public per-pass API (``Renderer.r
 import numpy as np
 import pytest
 
+from drpt.render import film
 from drpt.render.renderer import plan_passes
 
 
@@ -209,10 +210,12 @@ def test_xyz_second_moment_is_the_square_of_each_samples_xyz():
     assert not np.allclose(xyz_second_moment(m[..., [0, 1, 2, 5, 4, 3]]), want, rtol=1e-3)
 
 
-def _record_lane_widths(monkeypatch) -> list:
+def _record_lane_widths(monkeypatch, paths: list | None = None) -> list:
     """The lane count of every ``PathIntegrator.sample_sequence`` traced from now on (the
-    method wrapped for the test), in order."""
+    method wrapped for the test), in order; with ``paths``, each call's total of its lanes'
+    path counts appended to it."""
     import drjit as dr
+    from drjit.auto import UInt32
 
     from drpt.render.integrators.path import PathIntegrator
 
@@ -221,6 +224,8 @@ def _record_lane_widths(monkeypatch) -> list:
 
     def recording(self, rng, camera_ray, count, *args, **kw):
         widths.append(dr.width(count))
+        if paths is not None:
+            paths.append(int(dr.sum(UInt32(count)).numpy()[0]))
         return traced(self, rng, camera_ray, count, *args, **kw)
 
     monkeypatch.setattr(PathIntegrator, "sample_sequence", recording)
@@ -270,7 +275,8 @@ def test_a_mirror_only_scene_traces_a_lane_per_sample(tmp_path, monkeypatch, bsd
         width=7, height=5, spp=spp, progress=False))
     assert rend.integrator.pixel_coherent == per_sample
     r = rend.render()
-    assert widths == [7 * 5 * (spp if per_sample else 1)]
+    # (the pixels' lanes, padded to whole records where film.lane_sums reads records)
+    assert widths == [film.pass_lanes(7 * 5, spp if per_sample else 1)]
     assert coherent and all(c is not False for c in coherent), coherent
     from drjit.auto import UInt32
 
@@ -351,14 +357,17 @@ def test_unrolled_paths_trace_a_few_paths_per_lane(tmp_path, monkeypatch, depth,
 
     policy = dataclasses.replace(backend.policy(), min_lanes=1)
     monkeypatch.setattr(renderer, "policy", lambda: policy)
-    widths = _record_lane_widths(monkeypatch)
+    paths = []
+    widths = _record_lane_widths(monkeypatch, paths)
     (tmp_path / "s.xml").write_text(SKY_XML)
     rend = renderer.Renderer(load_scene(tmp_path / "s.xml"), renderer.RenderOptions(
         width=7, height=5, spp=spp, progress=False, path=PathOptions(max_depth=depth)))
     assert rend.integrator.straight == (depth <= 3)
     r = rend.render()
     per_pixel = -(-spp // renderer.STRAIGHT_PATHS_PER_LANE) if depth <= 3 else 1
-    assert widths == [7 * 5 * per_pixel]
+    # (padded to whole records: the lanes past the pixels' trace no path, and add nothing to
+    # the exact 0.5 below)
+    assert widths == [film.pass_lanes(7 * 5, per_pixel)] and paths == [7 * 5 * spp]
     assert r.samples == 7 * 5 * spp
     assert np.array_equal(r.image, np.full((5, 7, 3), 0.5, np.float32))
     assert np.all(r.variance == 0.0)
