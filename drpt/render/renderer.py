@@ -387,7 +387,7 @@ class Renderer:
         splatting pass (:attr:`splatting`) also reaches the rows its filter covers,
         a light-tracing pass the whole image (``lo = 0``).
 
-        The sums are float32; where one overflowed, the pass is traced again
+        The device's sums are float32 (read back as float64); where one overflowed, the pass is traced again
         with float64 sums (a second kernel, compiled only then), since float64
         sums in every pass cost time (docs/performance.md, "Execution model")."""
         _s0, k, r0, rows = self.plan.at(pass_index)
@@ -459,16 +459,14 @@ class Renderer:
 
     def _trace_pass(self, pass_index: int, k: int, r0: int, rows: int, wide: bool
                     ) -> tuple[np.ndarray, np.ndarray, int]:
-        """:meth:`render_pass`'s sums, float64 with ``wide``, else float32: the kernels of
-        :meth:`_pass_arrays`, traced, or replayed where this pass geometry was traced
-        before (:mod:`drpt.render.frozen`), then read back."""
+        """:meth:`render_pass`'s sums (the device's float64 with ``wide``, else float32, read
+        back as float64, :func:`_sums64`): the kernels of :meth:`_pass_arrays`, traced, or
+        replayed where this pass geometry was traced before (:mod:`drpt.render.frozen`)."""
         W = self.opt.width
         sums, sqsums, nbad = self._pass_outputs("pass", self._pass_arrays, self._pass_keys(pass_index, r0),
                                                 (k, rows, wide))
         dr.eval(sums, sqsums, nbad)
-        img = np.stack([c.numpy() for c in sums], axis=-1).reshape(rows, W, 3)
-        sq = np.stack([c.numpy() for c in sqsums], axis=-1).reshape(rows, W, -1)
-        return img, sq, int(nbad.numpy()[0])
+        return _sums64(sums, rows, W), _sums64(sqsums, rows, W), int(nbad.numpy()[0])
 
     def _pass_lanes_per_pixel(self, k: int, pixels: int) -> int:
         """A camera pass's lanes per pixel ``m`` for its ``k`` samples of ``pixels``
@@ -915,18 +913,12 @@ class Renderer:
             hi = p.lo + p.sum.shape[0]
             empty = into.next == 0 and not into.dirty  # (the merge's sums are still zeros)
             into.dirty = True
-            if empty and self.splatting and _takes(into, p):
-                # a splatting pass's gathered float64 sums start from +0.0, so none is -0.0
-                # and each is 0.0 + itself bit for bit: the merge takes the arrays (no
+            if empty and _takes(into, p):
+                # a pass's float64 sums are each 0.0 + itself bit for bit (a splatting pass's
+                # gathered sums start from +0.0, a box pass's are read back so, _sums64): the
+                # values of additions into the zeros, taken as the merge's arrays (no
                 # image-sized additions into fresh pages)
                 into.sum, into.sumsq, into.weight = p.sum, p.sumsq, p.weight
-            elif empty and p.weight is None and p.lo == 0 and p.sum.shape == into.sum.shape \
-                    and p.sumsq.shape == into.sumsq.shape:
-                # a box pass of the whole image into zeros: 0.0 + each float32 sum in
-                # float64, the additions' own values (-0.0 too becomes +0.0), in new arrays
-                # rather than into the zeros
-                into.sum = np.add(p.sum, 0.0, dtype=np.float64)
-                into.sumsq = np.add(p.sumsq, 0.0, dtype=np.float64)
             else:
                 into.sum[p.lo:hi] += p.sum
                 into.sumsq[p.lo:hi] += p.sumsq
@@ -971,6 +963,17 @@ class Renderer:
                         break
         return finish(merged, time.perf_counter() - t0, self.build_seconds, self.light_tracing, consume=True,
                       variance=self.opt.light_variance)
+
+
+def _sums64(columns: list, rows: int, W: int) -> np.ndarray:
+    """A pass's per-pixel sums, a Dr.Jit array a channel, read back into one float64 ``(rows,
+    W, C)`` array of ``0.0 + sum`` (the values that the merge's additions into its zeros give:
+    -0.0 becomes +0.0), a channel at a time: a float32 stack and a float64 copy of it cost
+    more (docs/performance.md)."""
+    out = np.empty((rows * W, len(columns)))
+    for i, c in enumerate(columns):
+        np.add(c.numpy(), 0.0, out=out[:, i], dtype=np.float64)
+    return out.reshape(rows, W, len(columns))
 
 
 def _takes(into: ChunkMerge, p: PassSums) -> bool:
@@ -1138,11 +1141,11 @@ def stops(estimate: float | None, merged: ChunkMerge, opts: RenderOptions, secon
 
 
 def all_finite(*arrays: np.ndarray) -> bool:
-    """Whether every value of the arrays is finite: a pass's float32 sums did not overflow
-    (:meth:`Renderer.render_pass`). Each array's largest and smallest value (a NaN propagates
-    through both): vectorized passes in the arrays' own precision, no temporary per element,
-    no float64 conversion, and no false alarm where the finite values' sum would pass the
-    float32 maximum."""
+    """Whether every value of the arrays is finite: a pass's float32 sums (read back as
+    float64, where an overflow stays infinite) did not overflow (:meth:`Renderer.render_pass`).
+    Each array's largest and smallest value (a NaN propagates through both): vectorized
+    passes in the arrays' own precision, no temporary per element, and no false alarm where
+    the finite values' sum would pass the float32 maximum."""
     return all(np.isfinite(a.max()) and np.isfinite(a.min()) for a in arrays)
 
 
