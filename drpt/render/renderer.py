@@ -459,14 +459,16 @@ class Renderer:
 
     def _trace_pass(self, pass_index: int, k: int, r0: int, rows: int, wide: bool
                     ) -> tuple[np.ndarray, np.ndarray, int]:
-        """:meth:`render_pass`'s sums (the device's float64 with ``wide``, else float32, read
-        back as float64, :func:`_sums64`): the kernels of :meth:`_pass_arrays`, traced, or
-        replayed where this pass geometry was traced before (:mod:`drpt.render.frozen`)."""
+        """:meth:`render_pass`'s sums (the device's float64 with ``wide``, else float32; read
+        back by :func:`_read_sums`, as float64 where the pass covers the whole image): the
+        kernels of :meth:`_pass_arrays`, traced, or replayed where this pass geometry was
+        traced before (:mod:`drpt.render.frozen`)."""
         W = self.opt.width
         sums, sqsums, nbad = self._pass_outputs("pass", self._pass_arrays, self._pass_keys(pass_index, r0),
                                                 (k, rows, wide))
         dr.eval(sums, sqsums, nbad)
-        return _sums64(sums, rows, W), _sums64(sqsums, rows, W), int(nbad.numpy()[0])
+        whole = rows == self.opt.height  # (a merge takes a whole image's float64 sums as its own)
+        return _read_sums(sums, rows, W, whole), _read_sums(sqsums, rows, W, whole), int(nbad.numpy()[0])
 
     def _pass_lanes_per_pixel(self, k: int, pixels: int) -> int:
         """A camera pass's lanes per pixel ``m`` for its ``k`` samples of ``pixels``
@@ -915,9 +917,9 @@ class Renderer:
             into.dirty = True
             if empty and _takes(into, p):
                 # a pass's float64 sums are each 0.0 + itself bit for bit (a splatting pass's
-                # gathered sums start from +0.0, a box pass's are read back so, _sums64): the
-                # values of additions into the zeros, taken as the merge's arrays (no
-                # image-sized additions into fresh pages)
+                # gathered sums start from +0.0, a box pass's of the whole image are read back
+                # so, _read_sums): the values of additions into the zeros, taken as the
+                # merge's arrays (no image-sized additions into fresh pages)
                 into.sum, into.sumsq, into.weight = p.sum, p.sumsq, p.weight
             else:
                 into.sum[p.lo:hi] += p.sum
@@ -965,11 +967,18 @@ class Renderer:
                       variance=self.opt.light_variance)
 
 
-def _sums64(columns: list, rows: int, W: int) -> np.ndarray:
-    """A pass's per-pixel sums, a Dr.Jit array a channel, read back into one float64 ``(rows,
-    W, C)`` array of ``0.0 + sum`` (the values that the merge's additions into its zeros give:
-    -0.0 becomes +0.0), a channel at a time: a float32 stack and a float64 copy of it cost
-    more (docs/performance.md)."""
+def _read_sums(columns: list, rows: int, W: int, whole: bool) -> np.ndarray:
+    """A pass's per-pixel sums, a Dr.Jit array a channel, read back a channel at a time into one
+    ``(rows, W, C)`` array: with ``whole`` (the pass covers the image) float64 values of ``0.0 +
+    sum``, the values that a merge's additions into its zeros give (-0.0 becomes +0.0), which
+    an empty merge takes as its own sums (a float32 stack and a float64 copy of it cost more:
+    docs/performance.md); else in the device's precision, which the merge adds into its float64
+    sums (a band of the image: float64 there would hold twice the memory beside the merge's)."""
+    if not whole:
+        out = np.empty((rows * W, len(columns)), columns[0].numpy().dtype)
+        for i, c in enumerate(columns):
+            out[:, i] = c.numpy()
+        return out.reshape(rows, W, len(columns))
     out = np.empty((rows * W, len(columns)))
     for i, c in enumerate(columns):
         np.add(c.numpy(), 0.0, out=out[:, i], dtype=np.float64)
