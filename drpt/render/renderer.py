@@ -387,7 +387,7 @@ class Renderer:
         splatting pass (:attr:`splatting`) also reaches the rows its filter covers,
         a light-tracing pass the whole image (``lo = 0``).
 
-        The device's sums are float32 (read back as float64); where one overflowed, the pass is traced again
+        The device's sums are float32; where one overflowed, the pass is traced again
         with float64 sums (a second kernel, compiled only then), since float64
         sums in every pass cost time (docs/performance.md, "Execution model")."""
         _s0, k, r0, rows = self.plan.at(pass_index)
@@ -858,8 +858,9 @@ class Renderer:
         the passes' sums are added straight into the merge's sums, the very float64
         additions that adding the chunk's sums would make (each pixel's chunk sum is
         one pass's), without the chunk's own full-image arrays; a merge that holds no
-        sums yet takes a splatting pass's arrays as they are (:func:`_takes`: the same
-        bits as their additions into its zeros). The result is then
+        sums yet takes a whole-image pass's float64 arrays as they are (a splatting pass's,
+        a box pass's: :func:`_takes`, the same bits as their additions into its zeros). The
+        result is then
         :attr:`ChunkResult.direct`. Until it is pushed, ``into.dirty`` is set."""
         t0 = time.perf_counter()
         chunks = self.chunks
