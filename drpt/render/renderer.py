@@ -982,7 +982,8 @@ def _read_sums(columns: list, rows: int, W: int, whole: bool) -> np.ndarray:
         return out.reshape(rows, W, len(columns))
     out = np.empty((rows * W, len(columns)))
     for i, c in enumerate(columns):
-        np.add(c.numpy(), 0.0, out=out[:, i], dtype=np.float64)
+        out[:, i] = c.numpy()
+    out += 0.0  # (in place, contiguous: faster than adding into the strided columns)
     return out.reshape(rows, W, len(columns))
 
 
