@@ -99,7 +99,8 @@ def main(argv: list[str]) -> int:
         from drpt.backend import ensure
 
         ensure()
-        print(f"{short} (A) against this checkout (B), {a.rounds} rounds alternating, film x{a.scale}")
+        film = f"film {a.size[0]}x{a.size[1]}" if a.size else f"film x{a.scale}"
+        print(f"{short} (A) against this checkout (B), {a.rounds} rounds alternating, {film}")
         for path in a.scenes:
             rs = {"A": renderer("drpt_ab", path, a.scale, a.spp, a.size, a.bsdf, a.integrator),
                   "B": renderer("drpt", path, a.scale, a.spp, a.size, a.bsdf, a.integrator)}
