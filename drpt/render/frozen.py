@@ -59,11 +59,12 @@ _LEAVES = (str, bytes, int, float, bool, complex, np.ndarray, np.generic, PurePa
            ctypes.CDLL, ctypes._CFuncPtr)
 
 
-#: packages whose objects hold host data only: they import no Dr.Jit (the scene model and the
-#: material specifications the device tables are made from; ``tests/render/test_frozen.py``
-#: checks that they import none), so the walk does not enter their objects (a device scene
-#: keeps its host scene to rebuild its light selection)
-HOST_PACKAGES = ("drpt.scene", "drpt.materials")
+#: packages and modules whose objects hold host data only: they import no Dr.Jit (the scene
+#: model and the material specifications the device tables are made from, the render options;
+#: ``tests/render/test_frozen.py`` checks that they import none), so the walk does not enter
+#: their objects (a device scene keeps its host scene to rebuild its light selection, the
+#: renderer's objects their options)
+HOST_PACKAGES = ("drpt.scene", "drpt.materials", "drpt.options")
 
 _host_types: dict[type, bool] = {}
 
@@ -111,35 +112,75 @@ def device_arrays(*roots, inert: dict | None = None) -> list:
     out: list = []
     seen: set[int] = set()
     stack = list(reversed(roots))
+    kinds = _kinds
     while stack:
         obj = stack.pop()
-        if obj is None or id(obj) in seen:
+        i = id(obj)
+        if i in seen:
             continue
-        seen.add(id(obj))
-        if _host_only(type(obj)) or (inert is not None and id(obj) in inert):
+        seen.add(i)
+        t = type(obj)
+        kind = kinds.get(t)
+        if kind is None:
+            kind = _kind(t)
+        if kind == _LEAF or (inert is not None and i in inert):
             continue
-        if dr.is_array_v(obj) or isinstance(obj, _TEXTURES):
+        if kind == _ARRAY:
             out.append(obj)
             continue
-        if isinstance(obj, (tuple, frozenset)) and inert is not None and all(
-                _host_only(type(x)) or id(x) in inert for x in obj):
-            inert[id(obj)] = obj
-            continue
-        if isinstance(obj, (list, tuple, set, frozenset)):
+        if kind == _IMMUTABLE:
+            if inert is not None and all(kinds.get(type(x)) == _LEAF or id(x) in inert for x in obj):
+                inert[i] = obj
+                continue
             items = list(obj)
-        elif isinstance(obj, dict):
+        elif kind == _SEQUENCE:
+            items = list(obj)
+        elif kind == _DICT:
             items = list(obj.values())
         else:
-            items = []
             d = getattr(obj, "__dict__", None)
-            if isinstance(d, dict):
-                items += list(d.values())
-            for cls in type(obj).__mro__:
-                for name in getattr(cls, "__slots__", ()):
-                    if isinstance(name, str) and hasattr(obj, name):
-                        items.append(getattr(obj, name))
+            items = list(d.values()) if isinstance(d, dict) else []
+            for name in _slots(t):
+                if hasattr(obj, name):
+                    items.append(getattr(obj, name))
         stack.extend(reversed(items))
     return out
+
+
+#: what :func:`device_arrays` does with an object of a type: not entered, kept (an array or
+#: texture), entered as an immutable sequence (a tuple or frozenset, which may be found
+#: inert), as a list or set, as a dict's values, or as an object's attributes
+_LEAF, _ARRAY, _IMMUTABLE, _SEQUENCE, _DICT, _OBJECT = range(6)
+_kinds: dict[type, int] = {}
+_slot_names: dict[type, tuple[str, ...]] = {}
+
+
+def _kind(t: type) -> int:
+    """:func:`device_arrays`' way with objects of type ``t`` (remembered by type)."""
+    if t is type(None) or _host_only(t):
+        kind = _LEAF
+    elif dr.is_array_v(t) or issubclass(t, _TEXTURES):
+        kind = _ARRAY
+    elif issubclass(t, (tuple, frozenset)):
+        kind = _IMMUTABLE
+    elif issubclass(t, (list, set)):
+        kind = _SEQUENCE
+    elif issubclass(t, dict):
+        kind = _DICT
+    else:
+        kind = _OBJECT
+    _kinds[t] = kind
+    return kind
+
+
+def _slots(t: type) -> tuple[str, ...]:
+    """The ``__slots__`` names of ``t`` and its bases, in method resolution order
+    (remembered by type)."""
+    names = _slot_names.get(t)
+    if names is None:
+        names = tuple(n for cls in t.__mro__ for n in getattr(cls, "__slots__", ()) if isinstance(n, str))
+        _slot_names[t] = names
+    return names
 
 
 def _weak(f: Callable) -> Callable[[], Callable]:

@@ -192,9 +192,10 @@ def test_device_arrays_skips_tuples_of_host_values_on_later_walks():
 
 def test_device_arrays_does_not_enter_the_host_packages():
     """The walk does not enter objects of the host packages (``frozen.HOST_PACKAGES``: the
-    scene model, the material specifications), which it may do because no module of theirs
-    imports Dr.Jit (read from their sources: an import added there fails this test). Control:
-    an array put on such an object is not found, and the same array on a plain object is."""
+    scene model, the material specifications, the options), which it may do because no module
+    of theirs imports Dr.Jit (read from their sources: an import added there fails this test).
+    Control: an array put on such an object is not found, and the same array on a plain object
+    is."""
     import ast
     import importlib
     import pkgutil
@@ -205,9 +206,11 @@ def test_device_arrays_does_not_enter_the_host_packages():
 
     for name in frozen.HOST_PACKAGES:
         package = importlib.import_module(name)
-        modules = [package.__file__] + [importlib.util.find_spec(m.name).origin
-                                        for m in pkgutil.walk_packages(package.__path__, name + ".")]
-        assert len(modules) > 1
+        modules = [package.__file__]
+        if hasattr(package, "__path__"):  # (a package: its modules too)
+            modules += [importlib.util.find_spec(m.name).origin
+                        for m in pkgutil.walk_packages(package.__path__, name + ".")]
+            assert len(modules) > 1
         for path in modules:
             tree = ast.parse(open(path).read())
             imported = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
