@@ -130,8 +130,17 @@ class ChunkMerge:
         shape = (p.height, p.width, 3)
         self.chunks = chunks
         self.next = next
-        self.sum = np.zeros(shape, np.float64) if sum is None else np.array(sum, np.float64)
-        self.sumsq = np.zeros(shape, np.float64) if sumsq is None else np.array(sumsq, np.float64)
+        #: the shapes of the sums that are zeros not made yet (:meth:`zeros`)
+        self._unmade: dict[str, tuple] = {}
+        self._sum = self._sumsq = None
+        if sum is None:
+            self.zeros("sum", shape)
+        else:
+            self.sum = np.array(sum, np.float64)
+        if sumsq is None:
+            self.zeros("sumsq", shape)
+        else:
+            self.sumsq = np.array(sumsq, np.float64)
         self.nonfinite = nonfinite
         self.weight = None if weight is None else np.array(weight, np.float64)
         self.aov = None if aov is None else np.array(aov, np.float64)
@@ -139,6 +148,34 @@ class ChunkMerge:
         #: a direct chunk (:attr:`ChunkResult.direct`) is being added into the sums: until it
         #: is pushed they are no merged prefix of chunks (no checkpoint may be written)
         self.dirty = False
+
+    def zeros(self, name: str, shape: tuple) -> None:
+        """Sums ``name`` (``"sum"``, ``"sumsq"``) become zeros of ``shape``, made where they are
+        first read: a merge that takes a pass's arrays as its sums (the renderer's direct
+        chunks) never clears them (``np.zeros`` of memory the heap reuses writes every byte)."""
+        setattr(self, "_" + name, None)
+        self._unmade[name] = tuple(shape)
+
+    def shape_of(self, name: str) -> tuple:
+        """The shape of sums ``name``, without making zeros not made yet."""
+        shape = self._unmade.get(name)
+        return shape if shape is not None else getattr(self, name).shape
+
+    def _sums(self, name: str) -> np.ndarray:
+        a = getattr(self, "_" + name)
+        if a is None:
+            a = np.zeros(self._unmade.pop(name), np.float64)
+            setattr(self, "_" + name, a)
+        return a
+
+    def _set_sums(self, name: str, a: np.ndarray) -> None:
+        self._unmade.pop(name, None)
+        setattr(self, "_" + name, a)
+
+    #: the per-pixel sums of the samples (float64)
+    sum = property(lambda self: self._sums("sum"), lambda self, a: self._set_sums("sum", a))
+    #: the per-pixel sums of their squares (with a moment render the channel products after them)
+    sumsq = property(lambda self: self._sums("sumsq"), lambda self, a: self._set_sums("sumsq", a))
 
     @property
     def done(self) -> bool:
@@ -165,8 +202,8 @@ class ChunkMerge:
                 self.next += 1
                 continue
             self.sum += r.sum
-            if r.sumsq.shape != self.sumsq.shape and not self.sumsq.any():
-                self.sumsq = np.zeros_like(r.sumsq)  # with the channel products of a moment render
+            if r.sumsq.shape != self.shape_of("sumsq") and ("sumsq" in self._unmade or not self.sumsq.any()):
+                self.zeros("sumsq", r.sumsq.shape)  # with the channel products of a moment render
             self.sumsq += r.sumsq
             if r.weight is not None:
                 if self.weight is None:

@@ -903,10 +903,10 @@ class Renderer:
         W, H = self.opt.width, self.opt.height
         # squares; with moment also the channel products (rg, rb, gb) or, splatted, the
         # weighted r^2 .. gb (as render_chunk's own arrays); a merge of no chunk yet has no sums
-        # to keep (and its zeros are not read, which would map their pages)
+        # to keep (its zeros are made only where read: ChunkMerge.zeros)
         channels = (9 if self.splatting else 6) if self.opt.moment else 3
-        if into.sumsq.shape[-1] != channels and (into.next == 0 or not into.sumsq.any()):
-            into.sumsq = np.zeros((H, W, channels), np.float64)
+        if into.shape_of("sumsq")[-1] != channels and (into.next == 0 or not into.sumsq.any()):
+            into.zeros("sumsq", (H, W, channels))
         if self.splatting and into.weight is None:
             into.weight = np.zeros((H, W, 2), np.float64)
         nonfinite = 0
@@ -990,9 +990,10 @@ def _read_sums(columns: list, rows: int, W: int, whole: bool) -> np.ndarray:
 def _takes(into: ChunkMerge, p: PassSums) -> bool:
     """Whether the merge ``into`` can take the pass's arrays as its own sums: they cover the
     whole image in the merge's shapes, float64 and writable (:func:`finish` divides in them)."""
-    pairs = ((into.sum, p.sum), (into.sumsq, p.sumsq), (into.weight, p.weight))
+    pairs = ((into.shape_of("sum"), p.sum), (into.shape_of("sumsq"), p.sumsq),
+             (None if into.weight is None else into.weight.shape, p.weight))
     return p.lo == 0 and all(
-        (a is None) == (b is None) and (a is None or (a.shape == b.shape and b.dtype == np.float64
+        (a is None) == (b is None) and (a is None or (a == b.shape and b.dtype == np.float64
                                                        and b.flags.writeable))
         for a, b in pairs)
 

@@ -195,6 +195,40 @@ def test_a_box_merge_makes_its_first_whole_image_pass_its_sums(cornell):
     assert m.sum.tobytes() == (np.zeros((2, 4, 3)) + sums).tobytes()
     assert m.sumsq.tobytes() == (np.zeros((2, 4, 6)) + squares).tobytes()
 
+def test_a_merge_makes_its_zeros_only_where_read(cornell, monkeypatch):
+    """A merge's sums are zeros made where first read (``ChunkMerge.zeros``): a box render whose
+    one whole-image pass the merge takes as its sums makes no image-sized zeros (``np.zeros`` of
+    memory the heap reuses writes every byte), and an unmade sum reads as zeros of its shape.
+    Control: a render of bands of rows adds into the zeros, which it makes."""
+    from drpt.options import RenderOptions
+    from drpt.render import renderer
+    from drpt.render.chunks import ChunkMerge
+    from drpt.scene import load_scene
+
+    made = []
+    zeros = np.zeros
+
+    def counting(shape, *a, **kw):
+        made.append(tuple(np.atleast_1d(shape)))
+        return zeros(shape, *a, **kw)
+
+    for max_lanes, expect in ((1 << 20, []), (40, [(7, 9, 3), (7, 9, 6)])):
+        r = renderer.Renderer(load_scene(cornell), RenderOptions(
+            width=9, height=7, spp=4, seed=3, moment=True, max_lanes=max_lanes, progress=False))
+        m = ChunkMerge(r.chunks)
+        assert m.shape_of("sum") == (7, 9, 3) and m.shape_of("sumsq") == (7, 9, 3)
+        made.clear()
+        monkeypatch.setattr(np, "zeros", counting)
+        m.push(r.render_chunk(0, into=m))
+        monkeypatch.setattr(np, "zeros", zeros)
+        assert sorted(s for s in made if len(s) == 3) == expect, made
+    m = ChunkMerge(r.chunks)
+    m.zeros("sumsq", (7, 9, 6))
+    assert m.shape_of("sumsq") == (7, 9, 6)
+    assert m.sumsq.shape == (7, 9, 6) and m.sumsq.dtype == np.float64 and not m.sumsq.any()
+    assert m.sumsq is m.sumsq  # (made once)
+
+
 def test_xyz_second_moment_is_the_square_of_each_samples_xyz():
     """From the products ``(r^2, g^2, b^2, rg, rb, gb)`` of one sample the XYZ second moment
     is ``(A rgb)^2`` for each sample, and means of several samples are the mean of those.
