@@ -549,9 +549,9 @@ def lane_sums(groups: list[list], m: int, pixels: int) -> list:
     a sum per channel, ``m`` lanes per pixel of ``pixels`` pixels, pixel-major (lanes ``p m ..
     p m + m - 1`` are pixel ``p``'s), :func:`pass_lanes` lanes in all. Returns for each group
     its channels' per-pixel sums, an array a channel (element ``p`` the sum over pixel ``p``'s
-    lanes; with ``m`` 1 the channels themselves), which the host reads and stacks into the
-    group's ``(pixels, C)`` image: a kernel that interleaved them on the device (``dr.ravel``)
-    cost more than ``np.stack`` (docs/performance.md).
+    lanes; with ``m`` 1 the channels themselves), which the host reads into the group's
+    ``(pixels, C)`` image a channel at a time: a kernel that interleaved them on the device
+    (``dr.ravel``) cost more (docs/performance.md).
 
     Where :func:`by_records`, one kernel adds every channel's lanes (:func:`_record_sums`):
     each pixel reads the aligned records of :data:`RECORD` lanes that its lanes lie in, by
@@ -566,12 +566,9 @@ def lane_sums(groups: list[list], m: int, pixels: int) -> list:
     columns = [c for g in groups for c in g]
     if m == 1:
         sums = columns
-    elif by_records(m):
-        dr.eval(columns)  # (the path kernel, once, before the sums' kernel reads it)
-        sums = _record_sums(columns, m, pixels)
     else:
-        dr.eval(columns)  # (one kernel for what is not evaluated yet, not one per channel)
-        sums = [dr.block_sum(c, m) for c in columns]
+        dr.eval(columns)  # (the path kernel once, not once per channel's sum)
+        sums = _record_sums(columns, m, pixels) if by_records(m) else [dr.block_sum(c, m) for c in columns]
     tables, i = [], 0
     for g in groups:
         tables.append(sums[i:i + len(g)])

@@ -66,21 +66,6 @@ _LEAVES = (str, bytes, int, float, bool, complex, np.ndarray, np.generic, PurePa
 #: renderer's objects their options)
 HOST_PACKAGES = ("drpt.scene", "drpt.materials", "drpt.options")
 
-_host_types: dict[type, bool] = {}
-
-
-def _host_only(t: type) -> bool:
-    """Whether the walk does not enter objects of type ``t``: :data:`_LEAVES` and the classes
-    of :data:`HOST_PACKAGES`, remembered by type."""
-    known = _host_types.get(t)
-    if known is None:
-        module = getattr(t, "__module__", None) or ""
-        known = (issubclass(t, _LEAVES)
-                 or any(module == p or module.startswith(p + ".") for p in HOST_PACKAGES))
-        _host_types[t] = known
-    return known
-
-
 #: Dr.Jit's texture classes (their tensors are inputs too)
 _TEXTURES = tuple(getattr(dr.auto, f"Texture{d}f{p}") for d in (1, 2, 3) for p in ("", "16", "64", "8u")
                   if hasattr(dr.auto, f"Texture{d}f{p}"))
@@ -156,8 +141,11 @@ _slot_names: dict[type, tuple[str, ...]] = {}
 
 
 def _kind(t: type) -> int:
-    """:func:`device_arrays`' way with objects of type ``t`` (remembered by type)."""
-    if t is type(None) or _host_only(t):
+    """:func:`device_arrays`' way with objects of type ``t`` (remembered by type): not entered
+    for ``None``, :data:`_LEAVES` and the classes of :data:`HOST_PACKAGES`."""
+    module = getattr(t, "__module__", None) or ""
+    if t is type(None) or issubclass(t, _LEAVES) or any(module == p or module.startswith(p + ".")
+                                                         for p in HOST_PACKAGES):
         kind = _LEAF
     elif dr.is_array_v(t) or issubclass(t, _TEXTURES):
         kind = _ARRAY

@@ -975,15 +975,11 @@ def _read_sums(columns: list, rows: int, W: int, whole: bool) -> np.ndarray:
     an empty merge takes as its own sums (a float32 stack and a float64 copy of it cost more:
     docs/performance.md); else in the device's precision, which the merge adds into its float64
     sums (a band of the image: float64 there would hold twice the memory beside the merge's)."""
-    if not whole:
-        out = np.empty((rows * W, len(columns)), columns[0].numpy().dtype)
-        for i, c in enumerate(columns):
-            out[:, i] = c.numpy()
-        return out.reshape(rows, W, len(columns))
-    out = np.empty((rows * W, len(columns)))
+    out = np.empty((rows * W, len(columns)), np.float64 if whole else columns[0].numpy().dtype)
     for i, c in enumerate(columns):
         out[:, i] = c.numpy()
-    out += 0.0  # (in place, contiguous: faster than adding into the strided columns)
+    if whole:
+        out += 0.0  # (in place, contiguous: faster than adding into the strided columns)
     return out.reshape(rows, W, len(columns))
 
 
@@ -1154,7 +1150,8 @@ def stops(estimate: float | None, merged: ChunkMerge, opts: RenderOptions, secon
 
 def all_finite(*arrays: np.ndarray) -> bool:
     """Whether every value of the arrays is finite: a pass's float32 sums (read back as
-    float64, where an overflow stays infinite) did not overflow (:meth:`Renderer.render_pass`).
+    float64 where the pass covers the image: an overflow stays infinite) did not overflow
+    (:meth:`Renderer.render_pass`).
     Each array's largest and smallest value (a NaN propagates through both): vectorized
     passes in the arrays' own precision, no temporary per element, and no false alarm where
     the finite values' sum would pass the float32 maximum."""
