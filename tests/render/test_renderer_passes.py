@@ -195,6 +195,27 @@ def test_a_box_merge_makes_its_first_whole_image_pass_its_sums(cornell):
     assert m.sum.tobytes() == (np.zeros((2, 4, 3)) + sums).tobytes()
     assert m.sumsq.tobytes() == (np.zeros((2, 4, 6)) + squares).tobytes()
 
+def test_read_sums_of_a_whole_image_are_a_merges_additions_into_zeros():
+    """``_read_sums`` of a whole image: one float64 ``(rows, W, C)`` array whose bits are the
+    merge's additions of the float32 sums into its zeros (-0.0 made +0.0, infinities and NaN
+    kept), which an empty merge may therefore take as its own; of a band of rows: the device's
+    float32 values as they are (the merge adds them). Control: a plain float64 copy keeps
+    -0.0's sign, which the additions into zeros do not."""
+    from drjit.auto import Float
+
+    from drpt.render.renderer import _read_sums
+
+    x = np.array([-0.0, 0.0, 1.5, -3e38, np.inf, -np.inf, np.nan, 1e-45], np.float32)
+    cols = [x, x[::-1].copy(), np.roll(x, 3)]
+    whole = _read_sums([Float(c) for c in cols], 2, 4, True)
+    into_zeros = np.zeros((8, 3)) + np.stack(cols, -1)
+    assert whole.shape == (2, 4, 3) and whole.dtype == np.float64
+    assert whole.tobytes() == into_zeros.reshape(2, 4, 3).tobytes()
+    band = _read_sums([Float(c) for c in cols], 2, 4, False)
+    assert band.dtype == np.float32 and band.tobytes() == np.stack(cols, -1).reshape(2, 4, 3).tobytes()
+    assert np.stack(cols, -1).astype(np.float64).tobytes() != into_zeros.tobytes()  # control
+
+
 def test_a_merge_makes_its_zeros_only_where_read(cornell, monkeypatch):
     """A merge's sums are zeros made where first read (``ChunkMerge.zeros``): a box render whose
     one whole-image pass the merge takes as its sums makes no image-sized zeros (``np.zeros`` of
