@@ -56,6 +56,9 @@ class Policy:
             (bounds memory: one pass holds this many paths).
         min_lanes: lanes per pass with path regeneration (enough to fill the
             device; fewer, longer lanes balance better on a CPU).
+        sample_lanes: whether a camera pass on an accelerator whose packets of
+            coherent rays cost less (``coherent_gain``) gives each sample its own
+            lane rather than regenerating paths (measured on the CPU).
         inline_max_prims: the largest scene ``--accel auto`` compiles inline
             (every primitive's test unrolled into the kernel).
         local_chunk: entries per ``dr.alloc_local`` array of the BVH stack.
@@ -67,6 +70,7 @@ class Policy:
     name: str
     max_lanes: int
     min_lanes: int
+    sample_lanes: bool
     inline_max_prims: int
     local_chunk: int
     align_bytes: int
@@ -77,11 +81,11 @@ POLICIES = {
     # LLVM (CPU, 2 cores measured): see drpt/render/renderer.py for min_lanes
     # and drpt/accel/bvh4.py for local_chunk (larger local arrays crashed
     # Dr.Jit 1.5's LLVM backend).
-    "llvm": Policy("llvm", max_lanes=1 << 21, min_lanes=1 << 14, inline_max_prims=64,
+    "llvm": Policy("llvm", max_lanes=1 << 21, min_lanes=1 << 14, sample_lanes=True, inline_max_prims=64,
                    local_chunk=16, align_bytes=64, mitsuba_variant="llvm_ad_rgb"),
     # CUDA: a GPU needs far more threads in flight than a CPU has lanes.
     # Not tuned by measurement on this project's machines (none has a GPU).
-    "cuda": Policy("cuda", max_lanes=1 << 22, min_lanes=1 << 20, inline_max_prims=64,
+    "cuda": Policy("cuda", max_lanes=1 << 22, min_lanes=1 << 20, sample_lanes=False, inline_max_prims=64,
                    local_chunk=16, align_bytes=64, mitsuba_variant="cuda_ad_rgb"),
 }
 

@@ -31,6 +31,8 @@ class BruteForce:
     :class:`~drpt.accel.primitives.SceneGeometry`, in the scene's order).
     """
 
+    coherent_gain = False  # (every primitive tested by every ray: protocol.Accelerator)
+
     def __init__(self, scene):
         t0 = time.perf_counter()
         self.geo = geo = SceneGeometry(scene)

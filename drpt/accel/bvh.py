@@ -74,6 +74,8 @@ class BVH:
             primitive buffers in BVH order).
     """
 
+    coherent_gain = True  # (a traversal: protocol.Accelerator)
+
     def __init__(self, scene, method: str = "auto", leaf_size: int = 4, bins: int = 16,
                  min_leaf: int = 1, sah_threshold: int | None = None):
         t0 = time.perf_counter()

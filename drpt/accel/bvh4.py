@@ -202,6 +202,8 @@ class BVH4:
             stack pointer any lane reached (a UInt32 of size 1).
     """
 
+    coherent_gain = True  # (a traversal: protocol.Accelerator)
+
     track_stack = False
 
     def __init__(self, scene, method: str = "auto", leaf_size: int = 4, bins: int = 16,

@@ -102,6 +102,8 @@ class EmbreeAccel:
         geo: the :class:`~drpt.accel.primitives.SceneGeometry` (planes).
     """
 
+    coherent_gain = True  # (a traversal: protocol.Accelerator)
+
     def __init__(self, scene):
         t0 = time.perf_counter()
         L = self._lib = lib.load()

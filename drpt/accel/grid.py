@@ -222,6 +222,8 @@ class UniformGrid:
             interface parity with the BVH).
     """
 
+    coherent_gain = True  # (a traversal: protocol.Accelerator)
+
     def __init__(self, scene, resolution: int | None = None,
                  cells_per_prim: float = CELLS_PER_PRIM):
         t0 = time.perf_counter()

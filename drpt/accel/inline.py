@@ -50,6 +50,8 @@ class InlineList:
     Attributes: ``build_seconds``, ``nbytes`` (0: no device data), ``stats``, ``quads``.
     """
 
+    coherent_gain = False  # (every primitive tested by every ray: protocol.Accelerator)
+
     #: test two triangles that form a separate parallelogram (a rectangle) as one
     #: (:mod:`drpt.geometry.parallelogram`); False: every triangle by the watertight test,
     #: bit for bit brute force's hits (A/B measurements, tests)

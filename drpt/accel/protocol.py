@@ -65,11 +65,17 @@ class Accelerator(Protocol):
         nbytes: bytes of device arrays.
         stats: ``nodes``, ``leaves``, ``max_depth``, ``prims`` and the
             accelerator's own counts.
+        coherent_gain: whether a SIMD packet of coherent rays (one pixel's camera rays)
+            costs less than a packet of scattered ones: True for a traversal of a tree or
+            grid, whose lanes then visit the same nodes; False where every ray costs the same
+            (every primitive tested). The renderer gives each camera sample its own lane where
+            it is True (:meth:`~drpt.render.renderer.Renderer._pass_lanes_per_pixel`).
     """
 
     build_seconds: float
     nbytes: int
     stats: dict
+    coherent_gain: bool
 
     def intersect(self, o: Array3f, d: Array3f, tmax: Float, active: Bool | bool = True,
                   coherent: Bool | bool = False) -> Hit:

@@ -484,13 +484,20 @@ class Renderer:
         # paths share their hits and misses: m = ceil(k / STRAIGHT_PATHS_PER_LANE) lanes
         # keep a 16-lane packet on one or two pixels' paths (whole packets skip what their
         # escaped paths need not trace) at few lanes' overhead (docs/performance.md).
+        # Other paths through a tree or grid (the accelerator's coherent_gain, on a
+        # backend whose policy says sample_lanes): a lane per sample too, so that a
+        # packet's first rays are one or two pixels' camera rays, which a traversal
+        # serves in far less time than scattered ones; that outweighs the lanes that
+        # idle in a packet until its longest path ends ("Lanes per pixel on a tree").
         sequential = hasattr(self.integrator, "sample_sequence")
-        min_lanes = policy().min_lanes
-        m = min(k, -(-min_lanes // pixels)) if sequential else k
+        pol = policy()
+        m = min(k, -(-pol.min_lanes // pixels)) if sequential else k
         if sequential and getattr(self.integrator, "pixel_coherent", False):
             m = k
         elif sequential and getattr(self.integrator, "straight", False):
             m = max(m, -(-k // STRAIGHT_PATHS_PER_LANE))
+        elif sequential and pol.sample_lanes and self.scene.accel.coherent_gain:
+            m = k
         return m
 
     def _pass_keys(self, pass_index: int, r0: int | None = None, seed: int | None = None) -> dict:
