@@ -426,3 +426,40 @@ def test_unrolled_paths_trace_a_few_paths_per_lane(tmp_path, monkeypatch, depth,
     assert r.samples == 7 * 5 * spp
     assert np.array_equal(r.image, np.full((5, 7, 3), 0.5, np.float32))
     assert np.all(r.variance == 0.0)
+
+
+@pytest.mark.parametrize("accel,lanes_rule,per_sample", [
+    ("bvh", True, True), ("grid", True, True), ("embree", True, True),
+    ("inline", True, False), ("bvh", False, False)])
+def test_a_tree_accelerator_traces_a_lane_per_sample(tmp_path, monkeypatch, accel, lanes_rule, per_sample):
+    """On an accelerator that traverses a tree or grid (``coherent_gain``), where the backend's
+    policy says ``sample_lanes``, the bounce loop's samples each get a lane (a packet's camera
+    rays are then one pixel's), whatever ``min_lanes`` asks; every pixel still sums exactly
+    ``spp`` samples (a constant sky, nothing in view: 0.5 and zero variance only then).
+    Negative controls: the inline list (every ray costs the same) and a policy without
+    ``sample_lanes`` keep ``min_lanes``' one lane per pixel."""
+    import dataclasses
+
+    from drpt import backend
+    from drpt.accel import embree_lib
+    from drpt.options import PathOptions
+    from drpt.render import renderer
+    from drpt.scene import load_scene
+
+    if accel == "embree" and embree_lib.reason() is not None:
+        pytest.skip(f"Embree unavailable: {embree_lib.reason()}")
+    policy = dataclasses.replace(backend.policy(), min_lanes=1, sample_lanes=lanes_rule)
+    monkeypatch.setattr(renderer, "policy", lambda: policy)
+    paths = []
+    widths = _record_lane_widths(monkeypatch, paths)
+    (tmp_path / "s.xml").write_text(SKY_XML)
+    spp = 13
+    rend = renderer.Renderer(load_scene(tmp_path / "s.xml"), renderer.RenderOptions(
+        width=7, height=5, spp=spp, progress=False, accel=accel, path=PathOptions(max_depth=8)))
+    assert not rend.integrator.straight and not rend.integrator.pixel_coherent
+    assert rend.scene.accel.coherent_gain == (accel != "inline")
+    r = rend.render()
+    assert widths == [film.pass_lanes(7 * 5, spp if per_sample else 1)] and paths == [7 * 5 * spp]
+    assert r.samples == 7 * 5 * spp
+    assert np.array_equal(r.image, np.full((5, 7, 3), 0.5, np.float32))
+    assert np.all(r.variance == 0.0)
