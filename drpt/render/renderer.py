@@ -6,8 +6,9 @@ bounded at any image size and sample count: a pass covers a band of rows with
 tracer runs them with *path regeneration*
 (:meth:`~drpt.render.integrators.path.PathIntegrator.sample_sequence`): each
 pixel gets ``m`` Dr.Jit lanes (from ``drpt.backend.policy().min_lanes``; short
-unrolled paths at least ``ceil(k / 3)``, :data:`STRAIGHT_PATHS_PER_LANE`;
-see :meth:`Renderer._trace_pass`), each lane traces its
+unrolled paths at least ``ceil(k / 3)``, :data:`STRAIGHT_PATHS_PER_LANE`; on a tree
+or grid accelerator, and where every BSDF is a mirror or glass, ``k``: a lane per sample;
+see :meth:`Renderer._pass_lanes_per_pixel`), each lane traces its
 share of the ``k`` samples one path after another and sums them, so a SIMD
 packet no longer waits for its longest path at every bounce (its gain:
 docs/performance.md, "Execution model"). The Whitted integrator runs one sample per lane. Lanes are

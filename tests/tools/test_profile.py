@@ -57,7 +57,12 @@ def test_both_modes_launch_kernels(run):
         # the watermark covers at least the 16x16 RGB float32 film the render accumulates
         assert m["peak_bytes"] >= 16 * 16 * 3 * 4
         assert len(m["kernels"]) == m["launches"]
-        assert all(k["execution_ms"] > 0 for k in m["kernels"])  # every launch was timed
+        # every launch carries its time from Dr.Jit's kernel history, a JIT kernel's above 0 (a
+        # single launch may read 0.0: nanothread's task_time returns 0 where a task's start or
+        # end stamp is missing or out of order; seen once in a full run of the tests)
+        times = [k["execution_ms"] for k in m["kernels"]]
+        assert all(t >= 0.0 for t in times)
+        assert max(k["execution_ms"] for k in m["kernels"] if k["type"] == "JIT") > 0.0
     # Between its kernels the wavefront keeps each path's state in memory (at least ray
     # origin, direction, throughput and radiance: 12 floats); the megakernel in registers.
     assert wf["peak_bytes"] >= 16 * 16 * 2 * 12 * 4 and wf["peak_bytes"] > mk["peak_bytes"]
