@@ -549,7 +549,7 @@ class Renderer:
                 count = dr.select(real, count, 0)
             extra = {"moment": True} if self.opt.moment else {}
             acc, acc2, bad, *cross = self.integrator.sample_sequence(rng, camera_ray, count, wide=wide,
-                                                                     **extra)
+                                                                     single=m == k, **extra)
             nbad = dropped_total(bad)  # (the pass's total, added in the path kernel)
             # evaluate the path loop once (the reductions below would each
             # re-run it), in blocks that keep every

@@ -463,3 +463,52 @@ def test_a_tree_accelerator_traces_a_lane_per_sample(tmp_path, monkeypatch, acce
     assert r.samples == 7 * 5 * spp
     assert np.array_equal(r.image, np.full((5, 7, 3), 0.5, np.float32))
     assert np.all(r.variance == 0.0)
+
+
+def test_a_lane_per_sample_traces_the_loop_without_restarts(tmp_path, monkeypatch):
+    """Where each lane traces one sample (a tree accelerator), the bounce loop is traced
+    without the code that starts a lane's next path (``PathIntegrator._loop_single``), and
+    the image, variance and sample count are those of the regenerating loop given one path a
+    lane, bit for bit (two diffuse spheres side by side under a constant sky, paths to depth
+    8, some bouncing between the spheres). Control: the
+    inline list with ``min_lanes`` 1 regenerates paths and does not call it."""
+    import dataclasses
+
+    from drpt import backend
+    from drpt.options import PathOptions
+    from drpt.render import renderer
+    from drpt.render.integrators.path import PathIntegrator
+    from drpt.scene import load_scene
+
+    xml = MIRROR_XML.format(bsdf="diffuse").replace(
+        '<shape type="sphere">', '<shape type="sphere"><point name="center" x="0.9" y="0" z="0"/>'
+    ).replace('</scene>', '<shape type="sphere"><point name="center" x="-1.1" y="0" z="0"/>'
+              '<bsdf type="diffuse"/></shape></scene>')
+    (tmp_path / "s.xml").write_text(xml)
+    scene = load_scene(tmp_path / "s.xml")
+    single = PathIntegrator._loop_single
+    calls = []
+
+    def spy(self, *args):
+        calls.append(dr.width(args[2]))
+        return single(self, *args)
+
+    def render(accel):
+        return renderer.Renderer(scene, renderer.RenderOptions(
+            width=7, height=5, spp=6, progress=False, accel=accel, path=PathOptions(max_depth=8))).render()
+
+    import drjit as dr
+
+    policy = dataclasses.replace(backend.policy(), min_lanes=1)
+    monkeypatch.setattr(renderer, "policy", lambda: policy)
+    monkeypatch.setattr(PathIntegrator, "_loop_single", spy)
+    inline = render("inline")
+    assert calls == []
+    fast = render("bvh")
+    assert calls == [film.pass_lanes(7 * 5, 6)]
+    monkeypatch.setattr(PathIntegrator, "_loop_single", PathIntegrator._loop_sequence)
+    plain = render("bvh")
+    assert fast.samples == plain.samples == inline.samples == 7 * 5 * 6
+    assert fast.image.max() > 0.0 and fast.image.min() < fast.image.max()
+    np.testing.assert_array_equal(fast.image, plain.image)
+    np.testing.assert_array_equal(fast.variance, plain.variance)

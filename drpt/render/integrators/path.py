@@ -386,7 +386,7 @@ class PathIntegrator:
 
     @loops_once
     def sample_sequence(self, rng: PCG32, camera_ray: Callable, count: UInt32, wide: bool = False,
-                        moment: bool = False, bounces: bool = False) -> tuple:
+                        moment: bool = False, bounces: bool = False, single: bool = False) -> tuple:
         """``count`` paths per lane, one after another (path regeneration).
 
         A lane starts a path at ``camera_ray(rng) -> (o, d)`` or ``(o, d,
@@ -407,11 +407,40 @@ class PathIntegrator:
         color spaces; without it the kernel has no such sum). With ``bounces`` the last
         value is the number of bounces the lane traced, its work (adaptive sampling's cost
         estimate, :mod:`drpt.render.adaptive`; without it the kernel has no such counter).
+        ``single`` (the caller's promise that ``count`` is at most 1 on every lane: a lane per
+        sample) traces the bounce loop without the code that starts a lane's next path, which
+        a packet otherwise runs whenever one of its lanes ends its path; the sums are the same.
         The loops are recorded once (:func:`~drpt.render.loops.loops_once`:
         their state as wide as ``count``).
         """
-        run = self._unrolled_sequence if self.straight else self._loop_sequence
+        if self.straight:
+            run = self._unrolled_sequence
+        else:
+            run = self._loop_single if single else self._loop_sequence
         return run(rng, camera_ray, UInt32(count), wide, moment, bounces)
+
+    @dr.syntax
+    def _loop_single(self, rng, camera_ray: Callable, left: UInt32, wide: bool, moment: bool,
+                     bounces: bool) -> tuple:
+        """:meth:`sample_sequence` by the bounce loop where ``left`` is 0 or 1: the lanes'
+        paths, then their sums."""
+        scene = self.scene
+        n = dr.width(left)
+        o, d, *weight = camera_ray(rng)
+        state = self._start(o, d, left > 0, *weight)
+        Sum = Array3f64 if wide else Array3f
+        steps = (dr.zeros(UInt32, n),) if bounces else ()
+        inst = scene.instrument
+        if inst is not None:
+            inst.paths(dr.width(left))
+        while state.active:
+            if inst is not None:
+                inst.bounce(state)
+            state = self.bounce(scene, state, rng)
+            if bounces:
+                steps = (steps[0] + 1,)
+        sums, dropped = bank(_zero_sums(Sum, n, moment), dr.zeros(UInt32, n), state.L, Sum)
+        return (sums[0], sums[1], dropped, *sums[2:], *steps)
 
     @dr.syntax
     def _loop_sequence(self, rng, camera_ray: Callable, left: UInt32, wide: bool, moment: bool,
