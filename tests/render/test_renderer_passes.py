@@ -299,6 +299,14 @@ MIRROR_XML = """<scene version="3.0.0">
 </scene>"""
 
 
+def _two_spheres(bsdf: str) -> str:
+    """:data:`MIRROR_XML` with two spheres of ``bsdf`` side by side, facing each other."""
+    return MIRROR_XML.format(bsdf=bsdf).replace(
+        '<shape type="sphere">', '<shape type="sphere"><point name="center" x="0.9" y="0" z="0"/>'
+    ).replace('</scene>', '<shape type="sphere"><point name="center" x="-1.1" y="0" z="0"/>'
+              f'<bsdf type="{bsdf}"/></shape></scene>')
+
+
 @pytest.mark.parametrize("bsdf,per_sample", [("conductor", True), ("diffuse", False)])
 def test_a_mirror_only_scene_traces_a_lane_per_sample(tmp_path, monkeypatch, bsdf, per_sample):
     """Where no BSDF is smooth (``PathIntegrator.pixel_coherent``) a pixel's samples each get
@@ -355,11 +363,7 @@ def test_coherent_queries_change_no_pixel_of_a_mirror_scene(tmp_path, monkeypatc
 
     if embree_lib.reason() is not None:
         pytest.skip(f"Embree unavailable: {embree_lib.reason()}")
-    xml = MIRROR_XML.format(bsdf="conductor").replace(
-        '<shape type="sphere">', '<shape type="sphere"><point name="center" x="0.9" y="0" z="0"/>'
-    ).replace('</scene>', '<shape type="sphere"><point name="center" x="-1.1" y="0" z="0"/>'
-              '<bsdf type="conductor"/></shape></scene>')
-    (tmp_path / "s.xml").write_text(xml)
+    (tmp_path / "s.xml").write_text(_two_spheres("conductor"))
     scene = load_scene(tmp_path / "s.xml")
 
     def image():
@@ -480,11 +484,7 @@ def test_a_lane_per_sample_traces_the_loop_without_restarts(tmp_path, monkeypatc
     from drpt.render.integrators.path import PathIntegrator
     from drpt.scene import load_scene
 
-    xml = MIRROR_XML.format(bsdf="diffuse").replace(
-        '<shape type="sphere">', '<shape type="sphere"><point name="center" x="0.9" y="0" z="0"/>'
-    ).replace('</scene>', '<shape type="sphere"><point name="center" x="-1.1" y="0" z="0"/>'
-              '<bsdf type="diffuse"/></shape></scene>')
-    (tmp_path / "s.xml").write_text(xml)
+    (tmp_path / "s.xml").write_text(_two_spheres("diffuse"))
     scene = load_scene(tmp_path / "s.xml")
     single = PathIntegrator._loop_single
     calls = []
