@@ -193,6 +193,11 @@ class PathIntegrator:
     #: their live lanes (:meth:`bounce`'s ``branch``, :meth:`last_segment`); False:
     #: straight-line, masked (for A/B comparisons)
     branched = True
+    #: the vertices of the bounce loop without restarts (:meth:`_loop_single`) run in a
+    #: symbolic ``if`` on their live lanes as the unrolled path's do (:meth:`bounce`'s
+    #: ``branch``): a packet, one pixel's samples, whose rays all escaped skips the vertex.
+    #: False: masked straight-line code (A/B comparisons)
+    loop_branched = True
     #: the unrolled path's last segment looks for a few emissive triangles first, then traces
     #: a shadow ray up to the one it hits or to the sky, where they, the sky and the background
     #: are all a ray can see (:attr:`emitters_first`); False: the closest hit (A/B comparisons)
@@ -371,6 +376,13 @@ class PathIntegrator:
             return self.unrolled_path(rng, state)
         return self._loop_sample(rng, state)
 
+    def _loop_branch(self) -> dict:
+        """The keywords of :meth:`bounce` in a loop whose lanes do not restart:
+        ``branch=True`` with :attr:`loop_branched` where the bounce is this class's (a
+        subclass's own, volpath's, has no branch)."""
+        own = type(self).bounce is PathIntegrator.bounce
+        return {"branch": True} if self.loop_branched and own else {}
+
     @dr.syntax
     def _loop_sample(self, rng: PCG32, state: PathState) -> Array3f:
         """:meth:`sample` by the bounce loop."""
@@ -378,10 +390,11 @@ class PathIntegrator:
         inst = scene.instrument
         if inst is not None:
             inst.paths(dr.width(state.active))
+        branch = self._loop_branch()
         while state.active:
             if inst is not None:
                 inst.bounce(state)
-            state = self.bounce(scene, state, rng)
+            state = self.bounce(scene, state, rng, **branch)
         return state.L
 
     @loops_once
@@ -435,10 +448,11 @@ class PathIntegrator:
         inst = scene.instrument
         if inst is not None:
             inst.paths(dr.width(left))
+        branch = self._loop_branch()
         while state.active:
             if inst is not None:
                 inst.bounce(state)
-            state = self.bounce(scene, state, rng)
+            state = self.bounce(scene, state, rng, **branch)
             if bounces:
                 steps = (steps[0] + 1,)
         sums, dropped = bank(_zero_sums(Sum, n, moment), dr.zeros(UInt32, n), state.L, Sum)

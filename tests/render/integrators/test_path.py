@@ -264,6 +264,41 @@ def test_branched_vertex_is_the_straight_line_vertex(tmp_path, monkeypatch, dept
     assert not np.array_equal(branch, image(True, seed=1)[0])
 
 
+def test_the_loops_vertices_run_in_a_branch_as_the_masked_loop(tmp_path, monkeypatch):
+    """Where a lane traces one sample (a tree accelerator), the bounce loop's vertices run in
+    a symbolic ``if`` on their live lanes (``drpt_vertex``; :attr:`PathIntegrator.loop_branched`),
+    their random numbers drawn before it: the image and variance are the masked loop's bit
+    for bit (paths to depth 6 between a mirror and a diffuse sphere under a sky, most camera
+    rays escaping, so that whole packets skip). Negative control: another seed's image
+    differs. A medium's bounce (volpath's own) traces no such branch and renders."""
+    (tmp_path / "s.xml").write_text(MIXED_XML.format(depth=6, left="conductor"))
+    scene = load_scene(tmp_path / "s.xml")
+    labels = _record_if_labels(monkeypatch)
+
+    def render(branched, seed=0, xml_scene=scene, integrator="path"):
+        monkeypatch.setattr(PathIntegrator, "loop_branched", branched)
+        labels.clear()
+        r = Renderer(xml_scene, RenderOptions(width=24, height=16, spp=8, seed=seed, progress=False, accel="bvh",
+                                              integrator=integrator, path=PathOptions(max_depth=6)))
+        assert not r.integrator.straight
+        return r.render(), labels.count("drpt_vertex")
+
+    (branch, n_branch), (masked, n_masked) = render(True), render(False)
+    assert n_branch > 0 and n_masked == 0
+    assert masked.image.max() > 0.0 and (masked.image == 0.0).mean() < 0.5
+    np.testing.assert_array_equal(branch.image, masked.image)
+    np.testing.assert_array_equal(branch.variance, masked.variance)
+    assert not np.array_equal(branch.image, render(True, seed=1)[0].image)
+    fog = MIXED_XML.format(depth=6, left="diffuse").replace(
+        '<integrator type="path">', '<integrator type="volpath">').replace(
+        '<bsdf type="diffuse"/></shape>\n  <shape type="rectangle">',
+        '<bsdf type="null"/><medium type="homogeneous" name="interior"><float name="sigma_t" value="2"/>'
+        '</medium></shape>\n  <shape type="rectangle">')
+    (tmp_path / "fog.xml").write_text(fog)
+    volume, n_volume = render(True, xml_scene=load_scene(tmp_path / "fog.xml"), integrator="volpath")
+    assert n_volume == 0 and volume.image.max() > 0.0 and np.all(np.isfinite(volume.image))
+
+
 def _unoccluded(self, scene, s, L):
     """``_look_at_emitters`` without its shadow ray: the negative control's bug."""
     from drpt.render.integrators.path import add_emission
