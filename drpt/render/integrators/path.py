@@ -525,7 +525,8 @@ class PathIntegrator:
                camera: bool = False) -> PathState:
         """One vertex of the path: the emission the ray sees, next-event
         estimation, BSDF sampling and Russian roulette. With ``branch`` (the unrolled
-        path's vertices) the vertex's shading, everything after the emission, runs in a
+        path's vertices; the loop's where a lane traces one path, :attr:`loop_branched`)
+        the vertex's shading, everything after the emission, runs in a
         symbolic ``if`` on the lanes whose path goes on (label ``drpt_vertex``): a SIMD
         packet whose rays all escaped or ended skips it. The vertex's random numbers are
         drawn in the loop's order (in the branch: :attr:`deferred`), so the image is the same
