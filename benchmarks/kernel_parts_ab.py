@@ -18,7 +18,11 @@ share). The parts (class attributes patched while the variant traces its kernel)
   the second on a direction multiplied by an opaque 1 so that Dr.Jit cannot share the two;
 * ``beckmann``: Beckmann's visible-normal routine replaced by GGX's (what its Halley steps on
   ``erf``/``erfinv`` cost);
-* ``spheres``: the inline accelerator leaves the spheres out (closest hit and shadow test).
+* ``spheres``: the inline accelerator leaves the spheres out (closest hit and shadow test);
+* ``embree_shadows``, ``embree_camera``, ``embree_bounces``: Embree's any-hit queries, its
+  closest-hit queries of coherent packets (camera rays) or of the others run twice (what each
+  kind of query costs; the second on a direction times an opaque 1, its answer folded into
+  the first's so that it is not dropped).
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from drjit.auto import Bool, Float
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from equal_time_vs_mitsuba import _commit, _cpu, cases, setup  # noqa: E402
 
+import drpt.accel.embree as embree  # noqa: E402
 import drpt.accel.inline as inline  # noqa: E402
 import drpt.render.bsdf.microfacet as microfacet  # noqa: E402
 from drpt.tools.converge import make_drpt  # noqa: E402
@@ -68,11 +73,31 @@ def _no_spheres(self, o, d):
 
 _ggx = microfacet.Distribution._slopes11_ggx
 
+_query = embree.EmbreeAccel._query
+
+
+def _embree_twice(kind: str):
+    """``EmbreeAccel._query`` tracing the queries of ``kind`` (``shadows``, ``camera``:
+    coherent closest hits, ``bounces``: the other closest hits) a second time."""
+    def query(self, o, d, tfar, active, shadow, coherent=False):
+        out = _query(self, o, d, tfar, active, shadow, coherent)
+        if shadow != (kind == "shadows"):
+            return out
+        lanes = Bool(active) if shadow else Bool(active) & (Bool(coherent) if kind == "camera" else ~Bool(coherent))
+        again = _query(self, o, d * dr.opaque(Float, 1.0), tfar, lanes, shadow, coherent)
+        if shadow:
+            return (out[0] | (again[0] & ~again[0]),)
+        return (out[0] | (again[0] & (again[1] < 0.0)), *out[1:])
+    return query
+
 PARTS = {
     "shadows": (inline.InlineList, "occluded", _no_shadows),
     "closest": (inline.InlineList, "_trace", _trace_twice),
     "beckmann": (microfacet.Distribution, "_slopes11_beckmann", lambda self, cos_i, u: _ggx(self, cos_i, u)),
     "spheres": (inline.InlineList, "_tests", _no_spheres),
+    "embree_shadows": (embree.EmbreeAccel, "_query", _embree_twice("shadows")),
+    "embree_camera": (embree.EmbreeAccel, "_query", _embree_twice("camera")),
+    "embree_bounces": (embree.EmbreeAccel, "_query", _embree_twice("bounces")),
 }
 
 
