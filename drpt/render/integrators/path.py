@@ -61,7 +61,8 @@ BSDF sample and the last ray. Every lane traces its camera ray in the same Embre
 query (coherent for the whole packet), on the lanes whose ray reaches a box around a shape
 (:attr:`PathIntegrator.cull`); a vertex makes its random numbers and, without emissive
 surfaces, its hit's interaction inside its branch (:attr:`PathIntegrator.deferred`), so a
-packet of escaped rays pays for neither. Where a shape is convex, the later rays (and, in
+packet of escaped rays pays for neither; the bounce loop's vertices do the same where a lane
+traces one path (:attr:`PathIntegrator.loop_branched`). Where a shape is convex, the later rays (and, in
 scenes of mirrors only, the loop's) cull likewise, the box of the convex shape they leave left
 out (:attr:`PathIntegrator.cull_leaving`). The estimator is the loop's and draws the same
 random numbers for a path's live vertices, so one path per lane (:meth:`sample`) gives
