@@ -67,7 +67,7 @@ import drjit as dr
 import numpy as np
 from drjit.auto import Array2f, Array3f, Array3f64, Bool, Float, UInt32
 
-from .. import llvm_tuning
+from .. import heap, llvm_tuning
 from ..aovs import INDEX_KINDS, channel_count, traced
 from ..backend import policy
 from ..errors import DrptError
@@ -256,6 +256,7 @@ class Renderer:
     def __init__(self, scene: Scene, options: RenderOptions):
         options = resolve_sampler(options)  # --sampler auto: the sampler it means
         self.opt = options
+        heap.keep_freed_memory()  # the host arrays of one render reused by the next
         t0 = time.perf_counter()
         self.scene = DeviceScene(scene, options)
         self.scene_model = scene
