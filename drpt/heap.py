@@ -6,11 +6,12 @@ each an image-sized allocation of 0.1-2 MB at the sizes the equal-time benchmark
 glibc's malloc returns freed memory at the top of its heap to the operating system once more
 than ``M_TRIM_THRESHOLD`` bytes are free there (by default twice its mmap threshold, a few
 megabytes once that threshold has adapted), and serves allocations above ``M_MMAP_THRESHOLD``
-(128 KiB, rising up to 32 MiB as such blocks are freed) with fresh mappings. Either way the
-next render's arrays are fresh pages, and the kernel faults in and zeroes each 4 KiB page on
-its first write: 790-1230 page faults a render on the corpus's 192x192 ``moment`` renders
-(their six squared channels) and the Cornell box, 1-2 ms of a 3-10 ms render
-(docs/performance.md, "A small render's cost outside its kernel").
+(128 KiB, rising up to 32 MiB as such blocks are freed) with fresh mappings. Both adapt to
+what the process has freed, so whether a render's arrays reuse mapped pages or get fresh ones,
+which the kernel faults in and zeroes on their first write, depends on the process's history.
+Where it left them low, every render of a loop faults: 1050-1230 page faults a render on the
+corpus's 192x192 ``moment`` renders (their six squared channels) and the Cornell box, 2-4 ms
+of a 7-20 ms render (docs/performance.md, "The finish's page faults").
 
 :func:`keep_freed_memory` sets both thresholds (:data:`MMAP_THRESHOLD`,
 :data:`TRIM_THRESHOLD`) once per process; the renderer calls it when it is built. Blocks
