@@ -14,8 +14,9 @@ order alternating (AB, BA, ...) so that load from other processes falls on both.
 uses seed ``k`` for both, set on the same renderer (as ``drpt.tools.converge.make_drpt``
 renders: a pass traced before replays its recorded kernels, :mod:`drpt.render.frozen`); the
 script says whether every pair of images (with their variance and second moments) was
-bit-identical (a pure speed change must keep them so). It prints each side's median seconds (``Renderer.render``,
-tracing included) and the median and quartiles of the per-round ratios ``COMMIT / this``
+bit-identical (a pure speed change must keep them so). It prints each side's median
+seconds (``Renderer.render``, tracing included; the variance and moments read after it) and
+the median and quartiles of the per-round ratios ``COMMIT / this``
 (above 1: this checkout is faster), the measure to quote on a loaded machine, and the same
 ratios of the process's CPU seconds (all its threads: the kernels' too), which waiting for a
 core that another process holds does not inflate, and of the main thread's CPU seconds
@@ -117,10 +118,12 @@ def main(argv: list[str]) -> int:
                     t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
                     r.opt = replace(r.opt, seed=k)  # the same renderer, as make_drpt renders
                     res = r.render()
-                    imgs[side] = (res.image, res.variance, res.moment2)
                     ts[side].append(time.perf_counter() - t0)
                     cpu[side].append(time.process_time() - c0)
                     main[side].append(time.thread_time() - m0)
+                    # (read after the clock: a result computes its variance and moments when
+                    # first read, drpt.render.deferred)
+                    imgs[side] = (res.image, res.variance, res.moment2)
                 same &= all(x is None and y is None or x is not None and y is not None
                             and np.array_equal(x, y, equal_nan=True) for x, y in zip(imgs["A"], imgs["B"]))
             ta, tb = np.array(ts["A"]), np.array(ts["B"])

@@ -77,6 +77,7 @@ from ..scene.model import Camera, Scene
 from .aov import aov_values, index_arrays
 from .camera import RayCamera
 from .chunks import ChunkMerge, ChunkPlan, ChunkResult, plan_chunks
+from .deferred import DeferredField, Later
 from .film import SplatFilm, dropped_total, gather_splats, lane_sums, pass_lanes, splat_weights
 from .filter_sampling import sample_position
 from .frozen import FrozenPass, freezes
@@ -106,7 +107,9 @@ from .scene import DeviceScene, wants_delta_each
 @dataclass
 class RenderResult:
     image: np.ndarray  # (H, W, 3) float32, linear radiance
-    variance: np.ndarray  # (H, W, 3) float64, estimated variance of each pixel's mean
+    #: (H, W, 3) float64, estimated variance of each pixel's mean (computed on first read:
+    #: :mod:`drpt.render.deferred`)
+    variance: np.ndarray = DeferredField()
     # (NaN for light tracing without RenderOptions.light_variance: its squares were not summed)
     # (float64: the square of radiance near the float32 maximum is beyond float32)
     seconds: float
@@ -114,8 +117,9 @@ class RenderResult:
     samples: int
     nonfinite: int  # samples discarded because they were NaN/Inf (should be 0)
     #: with ``RenderOptions.moment``: (H, W, 3) float64, each pixel's mean of its samples'
-    #: squared CIE XYZ values (Mitsuba's ``moment`` integrator's ``m2_`` channels)
-    moment2: np.ndarray | None = None
+    #: squared CIE XYZ values (Mitsuba's ``moment`` integrator's ``m2_`` channels; computed
+    #: on first read)
+    moment2: np.ndarray | None = DeferredField(default=None)
     #: with AOVs or denoising (``RenderOptions.aovs``, ``denoise``): (H, W, C) float32, each
     #: pixel's mean of the traced AOVs' channels (:func:`drpt.aovs.traced` gives their order)
     aov: np.ndarray | None = None
@@ -1022,6 +1026,14 @@ def finish(merged: ChunkMerge, seconds: float, build_seconds: float,
     return result
 
 
+#: films of at most this many pixels get their variance and moments computed when first read
+#: (:mod:`drpt.render.deferred`): there the finish is a visible share of a render, and the
+#: float64 mean that the result keeps until then (24 bytes a pixel) is at most 6 MB; a larger
+#: render computes them at once, so its peak memory is not raised by the mean kept beside
+#: what follows the render (writing the image)
+DEFER_MAX_PIXELS = 1 << 18
+
+
 def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
                   light_tracing: bool = False, consume: bool = False) -> RenderResult:
     """The image and variance of a finished merge.
@@ -1064,11 +1076,29 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
         var = np.maximum(second - mean * mean, 0.0) / max(paths - 1, 1)
         return RenderResult(mean.astype(np.float32), var, seconds, build_seconds, paths,
                             merged.nonfinite)
+    image = mean.astype(np.float32)
+    if not consume or H * W > DEFER_MAX_PIXELS:
+        var, moment2 = _variance_and_moment(merged.sumsq, mean, spp, consume)
+        return RenderResult(image, var, seconds, build_seconds, W * H * spp, merged.nonfinite, moment2)
+    # a small render's own result: its variance and moments computed when first read, from
+    # the merge's mean and squares (kept by the closure until then)
+    both = Later(lambda sumsq=merged.sumsq: _variance_and_moment(sumsq, mean, spp, True))
+    moment2 = Later(lambda: both.value()[1]) if merged.sumsq.shape[-1] == 6 else None
+    return RenderResult(image, Later(lambda: both.value()[0]), seconds, build_seconds, W * H * spp,
+                        merged.nonfinite, moment2)
+
+
+def _variance_and_moment(sumsq: np.ndarray, mean: np.ndarray, spp: int,
+                         consume: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """The variance of each pixel's mean of ``spp`` samples, from the sums of their squares
+    (``sumsq``: the squares, then with a ``moment`` render the channel products) and the
+    means; and the second moments of a ``moment`` render (else None). With ``consume`` in
+    ``sumsq``'s own array."""
     # Unbiased sample variance of one sample, divided by spp: variance of the mean,
     # max(sumsq / spp - mean^2, 0) * spp / max(spp - 1, 1) / spp = max(...) / max(spp - 1, 1),
     # in place (consume: the squares' means in the merge's own array, the same division as
     # sumsq / spp)
-    second = np.divide(merged.sumsq, spp, out=merged.sumsq if consume else None)
+    second = np.divide(sumsq, spp, out=sumsq if consume else None)
     moment2 = xyz_second_moment(second) if second.shape[-1] == 6 else None
     # (with the channel products after the squares, var is a fresh array: each channel's
     # difference written into it, with no copy of the squares first)
@@ -1078,8 +1108,7 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
         np.subtract(second[..., c], np.square(mean[..., c], out=square), out=var[..., c])
     np.maximum(var, 0.0, out=var)
     var /= max(spp - 1, 1)
-    return RenderResult(mean.astype(np.float32), var, seconds,
-                        build_seconds, W * H * spp, merged.nonfinite, moment2)
+    return var, moment2
 
 
 def _finish_weighted(merged: ChunkMerge, seconds: float, build_seconds: float,

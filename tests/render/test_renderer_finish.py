@@ -132,3 +132,35 @@ def test_all_finite_sees_every_overflow_and_no_finite_sum():
 
     with pytest.raises(AssertionError):
         _check_all_finite(by_float32_sum)
+
+
+@pytest.mark.parametrize("channels", [3, 6])
+def test_the_renders_own_finish_computes_variance_and_moments_on_first_read(channels, monkeypatch):
+    """``consume`` (a render's own result, a film of at most ``DEFER_MAX_PIXELS``): the variance
+    and moments are computed when first read, once for both, and are then ``consume=False``'s
+    bit for bit; a pickled result holds them computed. Negative controls: ``consume=False``
+    and a larger film compute them at once."""
+    import pickle
+
+    calls = []
+    real = renderer._variance_and_moment
+    monkeypatch.setattr(renderer, "_variance_and_moment", lambda *a: calls.append(1) or real(*a))
+    m = _plain(channels)
+    want = finish(copy.deepcopy(m), 1.0, 0.0, consume=False)
+    assert len(calls) == 1  # (the control: at once)
+    got = finish(copy.deepcopy(m), 1.0, 0.0, consume=True)
+    assert len(calls) == 1 and np.array_equal(got.image, want.image)
+    assert np.array_equal(got.variance, want.variance) and len(calls) == 2
+    if channels == 6:
+        assert np.array_equal(got.moment2, want.moment2)
+    else:
+        assert got.moment2 is None
+    assert len(calls) == 2
+    late = finish(copy.deepcopy(m), 1.0, 0.0, consume=True)
+    back = pickle.loads(pickle.dumps(late))
+    assert len(calls) == 3 and np.array_equal(back.variance, want.variance)
+    assert isinstance(back.__dict__["_variance"], np.ndarray)
+    # a film above DEFER_MAX_PIXELS computes them at once (the same values)
+    monkeypatch.setattr(renderer, "DEFER_MAX_PIXELS", H * W - 1)
+    big = finish(copy.deepcopy(m), 1.0, 0.0, consume=True)
+    assert len(calls) == 4 and np.array_equal(big.variance, want.variance)
