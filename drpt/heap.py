@@ -26,7 +26,6 @@ longer uses. Where the C library is not glibc (no ``mallopt``), nothing changes.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 from functools import lru_cache
 
 #: ``mallopt`` parameters (glibc's ``malloc.h``)
@@ -43,8 +42,9 @@ TRIM_THRESHOLD = 64 << 20
 def keep_freed_memory() -> bool:
     """Set glibc's trim and mmap thresholds (once); True where they were set."""
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
+        # the process's own symbols, the C library's among them (``find_library`` would run
+        # ``ldconfig``: 4 ms at the first render)
+        mallopt = ctypes.CDLL(None).mallopt
     except (OSError, AttributeError):
         return False
     mallopt.restype, mallopt.argtypes = ctypes.c_int, [ctypes.c_int, ctypes.c_int]

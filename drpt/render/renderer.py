@@ -1081,9 +1081,10 @@ def _finish_image(merged: ChunkMerge, seconds: float, build_seconds: float,
         var, moment2 = _variance_and_moment(merged.sumsq, mean, spp, consume)
         return RenderResult(image, var, seconds, build_seconds, W * H * spp, merged.nonfinite, moment2)
     # a small render's own result: its variance and moments computed when first read, from
-    # the merge's mean and squares (kept by the closure until then)
-    both = Later(lambda sumsq=merged.sumsq: _variance_and_moment(sumsq, mean, spp, True))
-    moment2 = Later(lambda: both.value()[1]) if merged.sumsq.shape[-1] == 6 else None
+    # the merge's mean and squares (the closure keeps those two arrays until then, not the merge)
+    sumsq = merged.sumsq
+    both = Later(lambda: _variance_and_moment(sumsq, mean, spp, True))
+    moment2 = Later(lambda: both.value()[1]) if sumsq.shape[-1] == 6 else None
     return RenderResult(image, Later(lambda: both.value()[0]), seconds, build_seconds, W * H * spp,
                         merged.nonfinite, moment2)
 

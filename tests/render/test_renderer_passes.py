@@ -478,6 +478,8 @@ def test_a_lane_per_sample_traces_the_loop_without_restarts(tmp_path, monkeypatc
     inline list with ``min_lanes`` 1 regenerates paths and does not call it."""
     import dataclasses
 
+    import drjit as dr
+
     from drpt import backend
     from drpt.options import PathOptions
     from drpt.render import renderer
@@ -496,8 +498,6 @@ def test_a_lane_per_sample_traces_the_loop_without_restarts(tmp_path, monkeypatc
     def render(accel):
         return renderer.Renderer(scene, renderer.RenderOptions(
             width=7, height=5, spp=6, progress=False, accel=accel, path=PathOptions(max_depth=8))).render()
-
-    import drjit as dr
 
     policy = dataclasses.replace(backend.policy(), min_lanes=1)
     monkeypatch.setattr(renderer, "policy", lambda: policy)
