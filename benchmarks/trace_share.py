@@ -35,16 +35,14 @@ def _copy(o, d):
     return Array3f(o) * one, Array3f(d) * one
 
 
-def closest_twice(self, o, d, active, tmax=None, coherent=False):
-    far = Float(dr.largest(Float)) if tmax is None else tmax
-    h1 = self.accel.intersect(o, d, far, active, coherent)
-    h2 = self.accel.intersect(*_copy(o, d), far, active, coherent)
+def closest_twice(self, o, d, active, *args, **kw):
+    h1 = ONCE[0](self, o, d, active, *args, **kw)
+    h2 = ONCE[0](self, *_copy(o, d), active, *args, **kw)
     return dr.select(h2.t < h1.t, h2, h1)
 
 
-def shadow_twice(self, o, d, tmax, active, coherent=False):
-    return (self.accel.occluded(o, d, tmax, active, coherent)
-            | self.accel.occluded(*_copy(o, d), tmax, active, coherent))
+def shadow_twice(self, o, d, tmax, active, *args, **kw):
+    return ONCE[1](self, o, d, tmax, active, *args, **kw) | ONCE[1](self, *_copy(o, d), tmax, active, *args, **kw)
 
 
 VARIANTS = {"as is": ONCE, "closest hit twice": (closest_twice, ONCE[1]),

@@ -10,9 +10,14 @@ sphere), or one box around them all where there are more than :data:`MAX_BOXES` 
 operations per box and ray); :meth:`~drpt.render.scene.DeviceScene.intersect_preliminary`
 queries the accelerator in a symbolic ``if`` on those lanes where asked to (camera rays).
 
-A ray leaving a *convex* shape outward meets nothing of that shape, so its own box, which holds
-the ray's origin, need not count (:meth:`ShapeBoxes.leaving`, then ``reach(o, d, skip)``): a ray
-off a mirror sphere that escapes between the others then skips the query too. For those rays a
+A ray leaving a *convex* shape outward, or a *flat* one (every corner in one plane: a ground, a
+floor, a light's rectangle) to either side, meets nothing of that shape, so its own box, which
+holds the ray's origin, need not count (:meth:`ShapeBoxes.leaving`, then ``reach(o, d, skip)``): a
+ray off a mirror sphere that escapes between the others, or off the ground beside the car that
+stands on it, then skips the query too. drpt's own format gives its meshes no shapes (one
+emitter per material): there the boxes are per group of materials (:func:`material_groups`:
+materials merged where their common box costs no more surface area than their two boxes),
+so that a car's parts are one box and the ground another. For those rays a
 round shape's box is replaced by a sphere around it (its box's center, its farthest corner;
 padded), where the sphere holds less volume than the box: it culls the rays that pass through
 the box's corners beside the shape. A shape is
@@ -46,6 +51,13 @@ NO_BOX = 0xFFFFFFFF
 CONVEX_EPS = 2.0**-16
 #: the most triangles of a shape whose convexity is checked (:attr:`ShapeBoxes.outward`)
 CONVEX_MAX = 1 << 20
+#: a corner counts as in a flat shape's plane up to this fraction of the shape's largest
+#: coordinate magnitude (float32 rounding of the coordinates, a few ulps)
+FLAT_EPS = 2.0**-21
+#: :attr:`ShapeBoxes.outward` of a flat shape: rays leave it to either side
+FLAT = 2
+#: the most materials :func:`material_groups` groups (more: one group)
+MAX_GROUPS = 256
 #: the stand-in for a sphere in :class:`ShapeBoxes`' shapes (always convex)
 SPHERE = "sphere"
 #: a vertex counts as convex where its corners' angles sum to at most ``2 pi`` plus this (a
@@ -88,10 +100,10 @@ class ShapeBoxes:
 
     @classmethod
     def of(cls, scene) -> ShapeBoxes | None:
-        """The boxes of ``scene``'s shapes (a :class:`~drpt.scene.model.Scene`): one per
-        shape of triangles (``shape_index``, else ``shape``; else one for all) and per
-        sphere, or one around all of them where they are more than :data:`MAX_BOXES`; None
-        for a scene with planes (unbounded) or no primitives."""
+        """The boxes of ``scene``'s shapes (a :class:`~drpt.scene.model.Scene`): per shape of
+        triangles (``shape_index``, else ``shape``; else, drpt's own format, per material:
+        :func:`material_groups`) and per sphere, or one around all of them where they are more
+        than :data:`MAX_BOXES`; None for a scene with planes (unbounded) or no primitives."""
         if len(scene.planes) or len(scene.triangles) + len(scene.spheres) == 0:
             return None
         lo, hi, first, end, shapes, center, radius = [], [], [], [], [], [], []
@@ -100,7 +112,9 @@ class ShapeBoxes:
             p = np.asarray(scene.triangles.positions, np.float64).reshape(-1, 3, 3)
             tris = scene.triangles
             shape = tris.shape_index if tris.shape_index is not None else tris.shape
-            shape = np.zeros(len(p), np.int64) if shape is None else np.asarray(shape)
+            if shape is None:
+                shape = material_groups(p, np.asarray(tris.material, np.int64))
+            shape = np.asarray(shape)
             tlo, thi = p.min(1), p.max(1)  # per triangle, then per shape: one sort, no loop
             order = np.argsort(shape, kind="stable")
             starts = np.flatnonzero(np.r_[True, np.diff(shape[order]) != 0])
@@ -172,34 +186,43 @@ class ShapeBoxes:
     @property
     def outward(self) -> np.ndarray:
         """Per box, the side its shape's geometric normals face where the shape is convex
-        (+1 out, -1 in; 0: not convex, not one shape or not one run of ids, or more than
-        :data:`CONVEX_MAX` triangles): :func:`outward_convex`, computed when first asked."""
+        (+1 out, -1 in; :data:`FLAT`: a flat shape, either side; 0: not convex, not one shape
+        or not one run of ids, or more than :data:`CONVEX_MAX` triangles):
+        :func:`outward_convex`, :func:`flat`, computed when first asked."""
         if self._outward is None:
             def side(shape):
                 if shape is SPHERE:
                     return 1  # (a sphere's normal faces out)
                 if shape is None or len(shape) > CONVEX_MAX:
                     return 0
-                return outward_convex(np.asarray(self._positions).reshape(-1, 3, 3)[shape].astype(np.float64))
+                p = np.asarray(self._positions).reshape(-1, 3, 3)[shape].astype(np.float64)
+                return FLAT if flat(p) else outward_convex(p)
             shapes = self._shapes or [None] * len(self.lo)
             self._outward = np.array([side(sh) for sh in shapes], np.int64)
         return self._outward
 
     @property
     def convex(self) -> bool:
-        """Whether some box is a convex shape's (:meth:`leaving` can name it)."""
+        """Whether some box is a convex or flat shape's (:meth:`leaving` can name it)."""
         return bool(np.any(self.outward != 0))
+
+    @property
+    def flat(self) -> bool:
+        """Whether some box is a flat shape's (a ground: :data:`FLAT`)."""
+        return bool(np.any(self.outward == FLAT))
 
     def leaving(self, prim: UInt32, ng: Array3f, d: Array3f, active: Bool) -> UInt32:
         """Per lane, the box of the convex shape that primitive ``prim`` belongs to where
         the ray ``d`` leaves it outward (``ng`` the hit's geometric normal in its defining
-        orientation; ``active`` lanes), else :data:`NO_BOX`: ``reach(o, d, skip)`` then
-        leaves that box out. Compares only, no gather (at most :data:`MAX_BOXES` boxes)."""
+        orientation; ``active`` lanes; a flat shape: to either side), else :data:`NO_BOX`:
+        ``reach(o, d, skip)`` then leaves that box out. Compares only, no gather (at most
+        :data:`MAX_BOXES` boxes)."""
         out = UInt32(NO_BOX)
         side = dr.dot(ng, d)
         for i in np.flatnonzero(self.outward != 0):
             mine = active & (prim >= int(self.first[i])) & (prim < int(self.end[i]))
-            out = dr.select(mine & (side * float(self.outward[i]) > 0.0), int(i), out)
+            off = side != 0.0 if self.outward[i] == FLAT else side * float(self.outward[i]) > 0.0
+            out = dr.select(mine & off, int(i), out)
         return out
 
     def reach(self, o: Array3f, d: Array3f, skip: UInt32 | None = None) -> Bool:
@@ -235,6 +258,57 @@ class ShapeBoxes:
         t = dr.maximum(dr.dot(oc, d) / dr.squared_norm(d), 0.0)
         r = float(self.radius[i]) + SPHERE_SLACK * dr.norm(oc)
         return dr.squared_norm(oc - t * d) <= r * r
+
+
+def _area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Surface areas of the boxes ``lo .. hi`` (the last axis: x, y, z)."""
+    e = hi - lo
+    return 2.0 * (e[..., 0] * e[..., 1] + e[..., 1] * e[..., 2] + e[..., 2] * e[..., 0])
+
+
+def material_groups(p: np.ndarray, material: np.ndarray) -> np.ndarray:
+    """Per triangle of ``p`` (``(T, 3, 3)``), a group label for drpt's own format, whose
+    triangles carry no shape: the triangles of each material, and then, while two groups'
+    common box has no more surface area than their two boxes together (a ray that reaches
+    either box would mostly test both), those two merged, the pair that saves the most area
+    first. A car's parts become one group and the ground under it another; the walls, floor
+    and lights of a room one. More than :data:`MAX_GROUPS` materials: one group."""
+    mats, inverse = np.unique(material, return_inverse=True)
+    if len(mats) > MAX_GROUPS:
+        return np.zeros(len(p), np.int64)
+    tlo, thi = p.min(1), p.max(1)
+    lo = np.array([tlo[inverse == i].min(0) for i in range(len(mats))])
+    hi = np.array([thi[inverse == i].max(0) for i in range(len(mats))])
+    label = np.arange(len(mats))
+    alive = list(range(len(mats)))
+    while len(alive) > 1:
+        a = np.array(alive)
+        ulo, uhi = np.minimum(lo[a][:, None], lo[a][None]), np.maximum(hi[a][:, None], hi[a][None])
+        own = _area(lo[a], hi[a])
+        gain = _area(ulo, uhi) - (own[:, None] + own[None])
+        gain[np.tril_indices(len(a))] = np.inf
+        i, j = np.unravel_index(np.argmin(gain), gain.shape)
+        if gain[i, j] > 0.0:
+            break
+        keep, gone = a[i], a[j]
+        lo[keep], hi[keep] = ulo[i, j], uhi[i, j]
+        label[label == gone] = keep
+        alive.remove(gone)
+    return label[inverse]
+
+
+def flat(p: np.ndarray) -> bool:
+    """Whether the triangles ``p`` (``(T, 3, 3)``, no degenerate one) lie in one plane: every
+    corner within :data:`FLAT_EPS` of the largest coordinate magnitude of the plane of the
+    largest triangle. A ray leaving such a shape to either side meets none of it."""
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    length = np.linalg.norm(n, axis=1)
+    if not len(p) or np.any(length == 0):
+        return False
+    k = int(np.argmax(length))
+    unit = n[k] / length[k]
+    dist = np.abs((p.reshape(-1, 3) - p[k, 0]) @ unit)
+    return bool(np.all(dist <= FLAT_EPS * float(np.abs(p).max())))
 
 
 def outward_convex(p: np.ndarray) -> int:

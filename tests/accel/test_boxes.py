@@ -9,7 +9,7 @@ import numpy as np
 from drjit.auto import Array3f, Bool, UInt32
 
 from drpt.accel import boxes as boxes_module
-from drpt.accel.boxes import MAX_BOXES, NO_BOX, ShapeBoxes, outward_convex
+from drpt.accel.boxes import FLAT, MAX_BOXES, MAX_GROUPS, NO_BOX, ShapeBoxes, flat, material_groups, outward_convex
 from drpt.scene import model as M
 from support.accel import brute_hits, icosphere, make_scene, rays
 
@@ -175,7 +175,7 @@ def test_rays_leaving_a_convex_shape_reach_every_other_shape_they_hit():
     outward, are culled though they hit the icosphere."""
     sc, ico, quad = _scene()
     boxes = ShapeBoxes.of(sc)
-    assert list(boxes.outward) == [1, 0, 1, 1] and boxes.convex  # (the flat quad is not closed)
+    assert list(boxes.outward) == [1, FLAT, 1, 1] and boxes.convex and boxes.flat
     rng = np.random.default_rng(3)
     k = rng.integers(0, len(ico), 3000)
     b = rng.dirichlet([1, 1, 1], 3000)
@@ -205,3 +205,90 @@ def test_rays_leaving_a_convex_shape_reach_every_other_shape_they_hit():
     assert back.sum() > 300
     forced = np.zeros(len(skip), np.uint32)  # (as if they left it outward)
     assert (~boxes.reach(O, D, UInt32(forced)).numpy()[back]).mean() > 0.5
+
+
+def test_flat_shapes_are_left_to_either_side():
+    """A quad, a single triangle and a fan of coplanar triangles are flat; a quad with a corner
+    raised by a millionth of its size is not (nor a cube). Rays leaving the scene's flat quad
+    to either side from points on it hit none of its triangles by brute force; ``leaving``
+    names its box for them and for no ray in its plane, and every ray that hits another
+    shape still reaches that shape's box. Negative control: a quad bent along its diagonal by a
+    thousandth is not flat, and a ray leaving its flat half upward meets its raised half,
+    which a flat box would have culled."""
+    sc, ico, quad = _scene()
+    assert flat(quad) and flat(quad[:1]) and flat(quad * 1e3 + [5e3, -2e4, 0.0])
+    fan = np.array([[[0, 0, 0], [np.cos(a), np.sin(a), 0], [np.cos(a + 0.5), np.sin(a + 0.5), 0]]
+                    for a in np.arange(0, 6, 0.5)]) @ _turn().T + [0.3, 7.0, -2.0]
+    assert flat(fan)
+    bent = quad.copy()
+    bent[1, 2, 2] = 2e-6  # (the corner (-1, 1) of the second triangle only)
+    assert not flat(bent) and not flat(_cube())
+    boxes = ShapeBoxes.of(sc)
+    assert boxes.outward[1] == FLAT
+    rng = np.random.default_rng(11)
+    k = rng.integers(0, 2, 3000)
+    p = np.einsum("ti,tij->tj", rng.dirichlet([1, 1, 1], 3000), quad[k])
+    d = rng.normal(size=(3000, 3))
+    d[:500] = np.array([0.0, 0.0, 3.0]) - p[:500]  # (toward the sphere above the quad)
+    d[500:800, 2] = 0.0  # (in the quad's plane: not leaving it)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    side = np.sign(d[:, 2])
+    o = p + np.c_[np.zeros((3000, 2)), 1e-5 * side]
+    hit = brute_hits(sc, o, d)
+    prim, valid = hit.prim.numpy(), hit.valid.numpy()
+    ids = len(ico) + k
+    O, D = rays(o, d)
+    skip = boxes.leaving(UInt32(ids.astype(np.uint32)), Array3f(0.0, 0.0, 1.0), D, Bool(True)).numpy()
+    assert np.all(skip[side != 0] == 1) and np.all(skip[side == 0] == NO_BOX)
+    assert not np.any(valid & (side != 0) & (prim >= len(ico)) & (prim < len(ico) + 2))
+    reach = boxes.reach(O, D, UInt32(skip)).numpy()
+    assert np.all(reach[valid]) and valid[:500].sum() > 400
+    # a quad bent up along its diagonal by a thousandth: a ray leaving its flat half upward,
+    # grazing, meets the raised half
+    valley = quad.copy()
+    valley[1, 2, 2] = 1e-3  # (the corner (-1, 1): a shallow valley along y = x)
+    assert not flat(valley)
+    start, target = np.array([0.5, -0.5, 1e-6]), np.array([-0.9, 0.8, 5e-4])
+    to = (target - start) / np.linalg.norm(target - start)
+    again = brute_hits(make_scene(valley), start[None], to[None])
+    assert to[2] > 0 and again.valid.numpy()[0] and again.prim.numpy()[0] == 1
+
+
+def _turn():
+    a, b = 0.7, 0.3
+    return np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]) @ \
+        np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+
+
+def test_material_groups_merge_overlapping_parts_and_keep_a_ground_apart():
+    """drpt's own format (no shapes): a car's parts (body, four wheels, a bumper: materials 0, 1,
+    2) become one group, the ground under it (material 3) another, and a room's walls and
+    its ceiling light one; two far-apart objects stay apart; more than MAX_GROUPS materials are
+    one group. ``ShapeBoxes.of`` then boxes each group, the ground's flat. Negative control:
+    the ground shrunk to the car's own size merges with it (their common box costs no more)."""
+    cube = _cube(2) * 2.0 - 1.0  # (a cube [-1, 1]^3 of coplanar triangles)
+    body = cube * [2.0, 0.6, 0.8] + [0.0, 0.9, 0.0]
+    wheels = np.concatenate([cube * 0.3 + [x, 0.3, z] for x in (-1.4, 1.4) for z in (-0.8, 0.8)])
+    bumper = cube * [0.1, 0.1, 0.8] + [1.9, 0.5, 0.0]
+    ground = np.array([[[-100, 0, -100], [100, 0, -100], [100, 0, 100]],
+                       [[-100, 0, -100], [100, 0, 100], [-100, 0, 100]]], float)
+    tris = np.concatenate([body, wheels, bumper, ground])
+    mat = np.r_[np.zeros(len(body)), np.ones(len(wheels)), np.full(len(bumper), 2), [3, 3]].astype(np.int64)
+    g = material_groups(tris, mat)
+    assert len(set(g[mat < 3])) == 1 and len(set(g[mat == 3])) == 1 and g[0] != g[-1]
+    small = tris.copy()
+    small[-2:] *= [0.03, 1.0, 0.01]  # (a 6 x 2 ground: inside the car's extent, nearly)
+    assert len(set(material_groups(small, mat))) == 1
+    room = cube * 5.0
+    light = cube[:2] * [1.0, 1.0, 0.0] + [0.0, 0.0, 4.99]
+    assert len(set(material_groups(np.concatenate([room, light]), np.r_[np.zeros(len(room)), [1, 1]]))) == 1
+    apart = material_groups(np.concatenate([cube, cube + 50.0]), np.r_[np.zeros(len(cube)), np.ones(len(cube))])
+    assert len(set(apart)) == 2
+    many = np.concatenate([cube + 10.0 * i for i in range(MAX_GROUPS + 1)])
+    assert len(set(material_groups(many, np.repeat(np.arange(MAX_GROUPS + 1), len(cube))))) == 1
+    sc = make_scene(tris)
+    sc.triangles.material = mat.astype(np.int32)
+    sc.materials = [M.Material(f"m{i}") for i in range(4)]
+    boxes = ShapeBoxes.of(sc)
+    assert len(boxes) == 2 and list(boxes.outward) == [0, FLAT]
+    assert list(boxes.first) == [0, len(tris) - 2] and list(boxes.end) == [len(tris) - 2, len(tris)]

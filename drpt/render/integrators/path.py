@@ -265,14 +265,17 @@ class PathIntegrator:
         """Whether every ray query, not only the camera's, runs on the lanes whose ray reaches
         a shape's box (:attr:`cull`; read at trace time), the box of the convex shape a ray
         leaves outward left out (:attr:`PathState.leave`, :class:`ShadowQuery.skip
-        <drpt.render.integrators.common.ShadowQuery>`): where some shape is convex and the
+        <drpt.render.integrators.common.ShadowQuery>`): where some shape is convex or flat and the
         paths are pixel-coherent (mirrors, smooth conductors, glass only: the bounce loop's
         queries) or unrolled (:attr:`straight`: the vertices' queries, their shadow rays and
-        the last segment's). Rays off a mirror sphere that pass beside every other shape, and
-        the shadow rays and last rays off a lone sphere, then skip the accelerator's query; the
-        same answers (docs/performance.md, "Rays that leave a convex shape")."""
+        the last segment's), or some shape is flat (a ground: the bounce loop's queries, whose
+        rays off the ground mostly pass beside what stands on it). Rays off a mirror sphere that
+        pass beside every other shape, the shadow rays and last rays off a lone sphere, and the
+        rays off a ground toward the sky then skip the accelerator's query; the same answers
+        (docs/performance.md, "Rays that leave a convex shape", "Rays that leave a ground")."""
         boxes = self.scene.boxes
-        return self.cull and (self.pixel_coherent or self.straight) and boxes is not None and boxes.convex
+        return (self.cull and boxes is not None and boxes.convex
+                and (self.pixel_coherent or self.straight or boxes.flat))
 
     def unrolled_path(self, rng, state: PathState) -> Array3f:
         """The radiance of the paths starting at ``state`` (``max_depth`` segments at most),

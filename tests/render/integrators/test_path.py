@@ -488,9 +488,9 @@ def test_coherent_shadow_rays_change_no_pixel(tmp_path, monkeypatch, depth):
     seen = []
     occluded = DeviceScene.occluded
 
-    def spy(self, o, d, tmax, active, coherent=False):
+    def spy(self, o, d, tmax, active, coherent=False, **kw):
         seen.append(coherent)
-        return occluded(self, o, d, tmax, active, coherent)
+        return occluded(self, o, d, tmax, active, coherent, **kw)
 
     monkeypatch.setattr(DeviceScene, "occluded", spy)
     (tmp_path / "s.xml").write_text(SPHERE_LIT_XML.format(sky="", obj=obj))
