@@ -88,18 +88,9 @@ def test_rays_leaving_convex_shapes_skip_their_boxes_the_same_image(tmp_path, mo
     assert (diff > 0).sum() >= 4 and diff.max() > 0.05
 
 
-#: a rough metal sphere and bowl (two-sided) on a floor rectangle (flat) under a constant sky and a point
-#: light, unbounded depth: the bounce loop of a scene with glossy BSDFs
-GROUND_XML = """<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="-1"/></integrator>
-  <sensor type="perspective">
-    <transform name="to_world"><lookat origin="1, 3, 2" target="0, 0, -0.3" up="0, 0, 1"/></transform>
-    <film type="hdrfilm"><integer name="width" value="40"/><integer name="height" value="32"/>
-      <rfilter type="box"/></film>
-    <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
-  </sensor>
-  <emitter type="constant"><rgb name="radiance" value="1, 0.8, 0.6"/></emitter>
-  <emitter type="point"><point name="position" x="0.3" y="0.2" z="3"/><rgb name="intensity" value="3"/></emitter>
+#: the mirrors' camera and lights, a rough metal sphere and bowl (two-sided) on a floor rectangle
+#: (flat), unbounded depth: the bounce loop of a scene with glossy BSDFs
+GROUND_XML = MIRRORS_XML[:MIRRORS_XML.index("  {bsdf}")].replace("{depth}", "-1") + """\
   <bsdf type="twosided" id="m"><bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf></bsdf>
   <bsdf type="twosided" id="floor"><bsdf type="roughplastic"><float name="alpha" value="0.1"/></bsdf></bsdf>
   <shape type="sphere"><point name="center" x="1.5" y="-0.6" z="0.3"/><float name="radius" value="0.3"/>
