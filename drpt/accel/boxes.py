@@ -112,13 +112,10 @@ class ShapeBoxes:
             p = np.asarray(scene.triangles.positions, np.float64).reshape(-1, 3, 3)
             tris = scene.triangles
             shape = tris.shape_index if tris.shape_index is not None else tris.shape
+            tlo, thi = p.min(1), p.max(1)  # per triangle, then per shape
             if shape is None:
-                shape = material_groups(p, np.asarray(tris.material, np.int64))
-            shape = np.asarray(shape)
-            tlo, thi = p.min(1), p.max(1)  # per triangle, then per shape: one sort, no loop
-            order = np.argsort(shape, kind="stable")
-            starts = np.flatnonzero(np.r_[True, np.diff(shape[order]) != 0])
-            slo, shi = np.minimum.reduceat(tlo[order], starts), np.maximum.reduceat(thi[order], starts)
+                shape = material_groups(tlo, thi, np.asarray(tris.material, np.int64))
+            order, starts, slo, shi = _label_boxes(np.asarray(shape), tlo, thi)
             lo += list(slo)
             hi += list(shi)
             if len(starts) + len(scene.spheres) <= MAX_BOXES:  # (else one box, for all)
@@ -266,20 +263,27 @@ def _area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return 2.0 * (e[..., 0] * e[..., 1] + e[..., 1] * e[..., 2] + e[..., 2] * e[..., 0])
 
 
-def material_groups(p: np.ndarray, material: np.ndarray) -> np.ndarray:
-    """Per triangle of ``p`` (``(T, 3, 3)``), a group label for drpt's own format, whose
-    triangles carry no shape: the triangles of each material, and then, while two groups'
-    common box has no more surface area than their two boxes together (a ray that reaches
-    either box would mostly test both), those two merged, the pair that saves the most area
-    first. A car's parts become one group and the ground under it another; the walls, floor
-    and lights of a room one. More than :data:`MAX_GROUPS` materials: one group."""
+def _label_boxes(label: np.ndarray, tlo: np.ndarray, thi: np.ndarray):
+    """The box of each label's triangles (``tlo``, ``thi``: per triangle, ``(T, 3)``), by one
+    stable sort and no loop: ``(order, starts, lo, hi)``, the triangles sorted by label,
+    where each label's run starts in that order, and the runs' boxes, by increasing label."""
+    order = np.argsort(label, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(label[order]) != 0])
+    return order, starts, np.minimum.reduceat(tlo[order], starts), np.maximum.reduceat(thi[order], starts)
+
+
+def material_groups(tlo: np.ndarray, thi: np.ndarray, material: np.ndarray) -> np.ndarray:
+    """Per triangle (``tlo``, ``thi``: its box, ``(T, 3)``), a group label for drpt's own
+    format, whose triangles carry no shape: the triangles of each material, and then, while
+    two groups' common box has no more surface area than their two boxes together (a ray
+    that reaches either box would mostly test both), those two merged, the pair that saves
+    the most area first. A car's parts become one group and the ground under it another; the
+    walls, floor and lights of a room one. More than :data:`MAX_GROUPS` materials: one group."""
     mats, inverse = np.unique(material, return_inverse=True)
     if len(mats) > MAX_GROUPS:
-        return np.zeros(len(p), np.int64)
+        return np.zeros(len(tlo), np.int64)
     inverse = inverse.ravel()
-    order = np.argsort(inverse, kind="stable")  # (per material: one sort, no loop)
-    starts = np.flatnonzero(np.r_[True, np.diff(inverse[order]) != 0])
-    lo, hi = np.minimum.reduceat(p.min(1)[order], starts), np.maximum.reduceat(p.max(1)[order], starts)
+    _, _, lo, hi = _label_boxes(inverse, tlo, thi)
     label = np.arange(len(mats))
     alive = list(range(len(mats)))
     while len(alive) > 1:

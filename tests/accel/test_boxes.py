@@ -260,6 +260,11 @@ def _turn():
         np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
 
 
+def _groups(p, material):
+    """:func:`material_groups` of the triangles ``p`` (``(T, 3, 3)``)."""
+    return material_groups(p.min(1), p.max(1), material)
+
+
 def test_material_groups_merge_overlapping_parts_and_keep_a_ground_apart():
     """drpt's own format (no shapes): a car's parts (body, four wheels, a bumper: materials 0, 1,
     2) become one group, the ground under it (material 3) another, and a room's walls and
@@ -274,18 +279,18 @@ def test_material_groups_merge_overlapping_parts_and_keep_a_ground_apart():
                        [[-100, 0, -100], [100, 0, 100], [-100, 0, 100]]], float)
     tris = np.concatenate([body, wheels, bumper, ground])
     mat = np.r_[np.zeros(len(body)), np.ones(len(wheels)), np.full(len(bumper), 2), [3, 3]].astype(np.int64)
-    g = material_groups(tris, mat)
+    g = _groups(tris, mat)
     assert len(set(g[mat < 3])) == 1 and len(set(g[mat == 3])) == 1 and g[0] != g[-1]
     small = tris.copy()
     small[-2:] *= [0.03, 1.0, 0.01]  # (a 6 x 2 ground: inside the car's extent, nearly)
-    assert len(set(material_groups(small, mat))) == 1
+    assert len(set(_groups(small, mat))) == 1
     room = cube * 5.0
     light = cube[:2] * [1.0, 1.0, 0.0] + [0.0, 0.0, 4.99]
-    assert len(set(material_groups(np.concatenate([room, light]), np.r_[np.zeros(len(room)), [1, 1]]))) == 1
-    apart = material_groups(np.concatenate([cube, cube + 50.0]), np.r_[np.zeros(len(cube)), np.ones(len(cube))])
+    assert len(set(_groups(np.concatenate([room, light]), np.r_[np.zeros(len(room)), [1, 1]]))) == 1
+    apart = _groups(np.concatenate([cube, cube + 50.0]), np.r_[np.zeros(len(cube)), np.ones(len(cube))])
     assert len(set(apart)) == 2
     many = np.concatenate([cube + 10.0 * i for i in range(MAX_GROUPS + 1)])
-    assert len(set(material_groups(many, np.repeat(np.arange(MAX_GROUPS + 1), len(cube))))) == 1
+    assert len(set(_groups(many, np.repeat(np.arange(MAX_GROUPS + 1), len(cube))))) == 1
     sc = make_scene(tris)
     sc.triangles.material = mat.astype(np.int32)
     sc.materials = [M.Material(f"m{i}") for i in range(4)]
