@@ -67,6 +67,9 @@ MAX_SEED = (1 << 64) - 1  # the seed is hashed as a 64-bit integer
 
 #: the most samples per pixel of a --target-error or --time-limit render without --spp
 TARGET_SPP = 65536
+#: PathOptions.rr_threshold's default, chosen by measurement on the bundled scenes
+#: (docs/performance.md, "Russian roulette below a throughput")
+RR_THRESHOLD = 0.1
 
 
 @dataclass
@@ -74,6 +77,12 @@ class PathOptions:
     max_depth: int = -1
     rr_depth: int = 5
     rr_prob: float | None = None  # fixed continuation probability, or adaptive
+    #: before ``rr_depth``, a path whose throughput (its largest channel, times ``eta^2``) is
+    #: below this plays Russian roulette too, surviving with probability throughput /
+    #: ``rr_threshold`` (:func:`drpt.render.integrators.path.continue_path`); 0: only Mitsuba's
+    #: roulette from ``rr_depth``. A Mitsuba XML scene's integrator is Mitsuba's, so it
+    #: renders with 0 unless ``--rr-threshold`` is given (:func:`with_scene_settings`)
+    rr_threshold: float = RR_THRESHOLD
     hide_emitters: bool = False  # camera rays do not see emitters or the sky (Mitsuba's hide_emitters)
 
 
@@ -188,6 +197,8 @@ class RenderOptions:
             raise DrptError(f"--rr-depth must be between 0 and {MAX_DEPTH}, got {p.rr_depth}")
         if p.rr_prob is not None and not (0.0 < p.rr_prob <= 1.0):
             raise DrptError(f"Russian roulette probability must be in (0, 1], got {p.rr_prob}")
+        if not (math.isfinite(p.rr_threshold) and 0.0 <= p.rr_threshold <= 1.0):
+            raise DrptError(f"--rr-threshold must be between 0 and 1, got {p.rr_threshold}")
         for name, value, allowed in (("--accel", self.accel, KINDS),
                                      ("--bvh", self.bvh_method, METHODS),
                                      ("--bsdf", self.bsdf, BSDF_MODES),
@@ -310,7 +321,7 @@ def filter_spelling(name: str, params: dict) -> str:
 
 #: the names of :func:`with_scene_settings`'s ``given``: settings the caller fixed
 GIVEN = ("size", "spp", "seed", "sampler", "jitter", "strength", "integrator", "max_depth", "rr_depth",
-         "hide_emitters", "filter")
+         "rr_threshold", "hide_emitters", "filter")
 
 
 def with_scene_settings(opts: RenderOptions, scene,
@@ -318,7 +329,9 @@ def with_scene_settings(opts: RenderOptions, scene,
     """``(options, scene)`` with the render settings the scene file gives (a
     Mitsuba XML's film size, sample count, sampler and seed, integrator and its
     depths, ``hide_emitters``, moment and AOV integrators) where ``given`` (names
-    of :data:`GIVEN`: what the command line set) does not fix them.
+    of :data:`GIVEN`: what the command line set) does not fix them. A file with settings
+    (Mitsuba XML) names Mitsuba's integrator, whose Russian roulette starts at
+    ``rr_depth`` only: ``rr_threshold`` becomes 0 unless given.
 
     The file's reconstruction filter (Mitsuba's default: gaussian) becomes
     ``filter`` unless ``"filter"`` is given. A render of another aspect than the
@@ -347,6 +360,8 @@ def with_scene_settings(opts: RenderOptions, scene,
         path["max_depth"] = st.max_depth
     if "rr_depth" not in given and st.rr_depth is not None:
         path["rr_depth"] = st.rr_depth
+    if "rr_threshold" not in given:  # (the file's integrator is Mitsuba's: its roulette only)
+        path["rr_threshold"] = 0.0
     if st.hide_emitters is not None and "hide_emitters" not in given:
         path["hide_emitters"] = st.hide_emitters
     if getattr(st, "moment", None) is not None:

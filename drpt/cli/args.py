@@ -116,6 +116,7 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
     base = RenderOptions()  # drpt's defaults: no flags give RenderOptions()
     d = {"size": (base.width, base.height), "spp": base.spp, "seed": base.seed,
          "max_depth": base.path.max_depth, "rr_depth": base.path.rr_depth,
+         "rr_threshold": base.path.rr_threshold,
          "accel": None, "integrator": None, "bsdf": None, "env_sampling": base.env_sampling,
          "filter": base.filter}
     d.update(defaults)
@@ -148,6 +149,12 @@ def add_render_flags(parser: argparse.ArgumentParser, *, omit=(), seed_flags: bo
                             help="fixed path continuation probability for Russian roulette "
                                  "(default: adaptive, min(max(throughput) * eta^2, 0.95), "
                                  "Mitsuba's rule)")
+        parser.add_argument("--rr-threshold", type=float, default=d["rr_threshold"], action=_Given,
+                            help="before --rr-depth, a path whose throughput (times eta^2) is "
+                                 "below T continues with probability throughput / T, "
+                                 "unbiased; 0: Russian roulette only from --rr-depth, "
+                                 "Mitsuba's rule (default "
+                                 f"{d['rr_threshold']:g}, 0 for a Mitsuba XML scene)")
         if seed_flags:
             parser.add_argument("-RR_cutdown", dest="rr_cutdown", type=float, default=None,
                                 help="seed flag: fixed continuation probability p at every "
@@ -449,6 +456,7 @@ def options_from_args(args: argparse.Namespace, *, seed_mode: bool = False,
                          filter_sampling=bool(get("filter_sampling", base.filter_sampling)),
                          path=PathOptions(max_depth=get("max_depth", base.path.max_depth),
                                           rr_depth=rr_depth, rr_prob=rr_prob,
+                                          rr_threshold=get("rr_threshold", base.path.rr_threshold),
                                           hide_emitters=get("hide_emitters") == "on"),
                          max_lanes=get("max_lanes"), chunk_spp=get("chunk_spp"),
                          target_error=get("target_error"), time_limit=get("time_limit"),

@@ -97,7 +97,7 @@ from .. import metrics
 from ..cli.args import add_render_flags, options_from_args
 from ..denoise import available, denoise_result, require
 from ..errors import DrptError
-from ..options import LIGHT_TRACED, PathOptions, RenderOptions, resolve_sampler
+from ..options import LIGHT_TRACED, RR_THRESHOLD, PathOptions, RenderOptions, resolve_sampler
 from ..render.adaptive import check
 from ..render.lights.area import triangle_sampling_rule
 from ..render.lights.envmap import EnvironmentLight
@@ -134,6 +134,7 @@ class Config:
     max_depth: int = -1
     rr_depth: int = 5
     rr_prob: float | None = None
+    rr_threshold: float | None = None  # None: the default row's (the options')
     denoise: bool = False
     integrator: str = "path"
     light_sampler: str = RenderOptions.light_sampler
@@ -226,9 +227,12 @@ def triangle_sampling_knob(scene, options: RenderOptions) -> str | None:
 
 def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10),
             rr_probs=(0.5, 0.8), filtered: bool = False, sampler: str = "independent",
-            env_compensation: str | None = None, triangle_sampling: str | None = None) -> list[Config]:
+            env_compensation: str | None = None, triangle_sampling: str | None = None,
+            rr_threshold: float = RR_THRESHOLD, rr_thresholds=(0.0, 0.1, 0.3)) -> list[Config]:
     """The default row, then one row per knob setting (``filter`` only for a tent or
     Gaussian filter, ``filtered``; ``sampler``: the default row's ``--sampler``;
+    ``rr_threshold``: the default row's ``--rr-threshold``, whose other settings
+    ``rr_thresholds`` are rows of the ``rr`` knob;
     ``env_compensation`` and ``triangle_sampling``: the default row's settings
     (:func:`env_compensation_knob`, :func:`triangle_sampling_knob`), None where the scene
     has no such feature: no row)."""
@@ -243,8 +247,11 @@ def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10
                  for k in rr_depths if k != 5]
         rows += [Config("RR", f"from depth 1, fixed p = {p:g}", bsdf, rr_depth=1, rr_prob=p)
                  for p in rr_probs]
+        rows += [Config("RR", f"below throughput {t:g} before depth 5" if t > 0.0
+                        else "none before depth 5 (Mitsuba's rule)", bsdf, rr_threshold=t)
+                 for t in rr_thresholds if t != rr_threshold]
         rows.append(Config("RR", f"off (depth <= {RR_OFF_DEPTH})", bsdf,
-                           max_depth=RR_OFF_DEPTH, rr_depth=RR_OFF_DEPTH + 1))
+                           max_depth=RR_OFF_DEPTH, rr_depth=RR_OFF_DEPTH + 1, rr_threshold=0.0))
     if "accel" in knobs:
         rows += [Config("accel", a, bsdf, accel=a) for a in ("bvh", "grid")]
     if "bsdf" in knobs:
@@ -346,7 +353,8 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
     cfgs = configs(bsdf, knobs, depths, rr_depths, rr_probs,
                    filtered=not options.pixel_filter.is_box, sampler=resolve_sampler(options).sampler,
                    env_compensation=env_compensation_knob(scene, options),
-                   triangle_sampling=triangle_sampling_knob(scene, options))
+                   triangle_sampling=triangle_sampling_knob(scene, options),
+                   rr_threshold=options.path.rr_threshold)
     renderers = []
     skipped = []
     for c in list(cfgs):
@@ -362,7 +370,9 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
                        env_compensation=c.env_compensation or options.env_compensation,
                        triangle_sampling=c.triangle_sampling or options.triangle_sampling,
                        path=PathOptions(max_depth=c.max_depth, rr_depth=c.rr_depth,
-                                        rr_prob=c.rr_prob))
+                                        rr_prob=c.rr_prob,
+                                        rr_threshold=options.path.rr_threshold if c.rr_threshold is None
+                                        else c.rr_threshold))
         try:
             if c.adaptive:
                 check(opts)  # (a splatting filter, light tracing, ...: one line, the row skipped)
@@ -412,6 +422,7 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
         rows.append({
             "knob": c.knob, "setting": c.setting, "bsdf": c.bsdf, "accel": c.accel,
             "max_depth": c.max_depth, "rr_depth": c.rr_depth, "rr_prob": c.rr_prob,
+            "rr_threshold": renderer.opt.path.rr_threshold,
             "spp": int(spp), "seconds": best, "build_seconds": renderer.build_seconds,
             "samples_per_second": width * height * spp / max(best, 1e-9),
             "rel_mse": rel, "excess_rel_mse": excess, "noise_rel_mse": pred,
@@ -433,7 +444,7 @@ def knobs_study(scene_path: Path, out: Path, options, ref_spp: int = 4096,
         "references": {m: dict(r["info"], noise_floor=r["floor"]) for m, r in refs.items()},
         "markdown_table": table, "skipped": skipped,
     }
-    fields = ["knob", "setting", "bsdf", "accel", "max_depth", "rr_depth", "rr_prob", "spp",
+    fields = ["knob", "setting", "bsdf", "accel", "max_depth", "rr_depth", "rr_prob", "rr_threshold", "spp",
               "seconds", "build_seconds", "samples_per_second", "rel_mse", "excess_rel_mse",
               "noise_rel_mse", "bias_rel_mse", "efficiency", "mean_bias", "mean_bias_se",
               "bias_spp", "biased", "nonfinite"]

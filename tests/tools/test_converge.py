@@ -724,7 +724,11 @@ def test_knobs_configs_and_bias():
     assert rows[0].knob == "default" and rows[0].max_depth == -1 and rows[0].rr_depth == 5
     assert [c.max_depth for c in rows if c.knob == "max depth"] == [2, 3, 5, 8]
     off = [c for c in rows if c.setting.startswith("off")][0]
-    assert off.rr_depth > off.max_depth > 0  # roulette never starts
+    assert off.rr_depth > off.max_depth > 0 and off.rr_threshold == 0.0  # roulette never starts
+    # the early roulette's thresholds other than the default row's (None: the options')
+    assert rows[0].rr_threshold is None
+    assert [c.rr_threshold for c in rows if "before depth 5" in c.setting] == [0.0, 0.3]
+    assert [c.rr_threshold for c in configs("phong", rr_threshold=0.0) if "before depth 5" in c.setting] == [0.1, 0.3]
     assert [c.bsdf for c in rows if c.knob == "material"] == ["cook-torrance"]
     assert [c.bsdf for c in configs("cook-torrance", knobs=["bsdf"])] == [
         "cook-torrance", "phong"]

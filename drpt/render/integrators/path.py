@@ -19,9 +19,13 @@ emitters it hits (:func:`skip_hidden_emitters`): the camera sees what lies behin
 an area light. Russian roulette starts once ``depth >=
 rr_depth``: by default a path continues with probability
 ``min(max(throughput), 0.95)``; with ``rr_prob`` set (the seed's
-``-RR_cutdown``) it continues with that fixed probability. Surviving paths are
-divided by the probability, so neither choice adds bias. As in Mitsuba, the
-adaptive probability uses the throughput times ``eta^2`` (the relative IORs
+``-RR_cutdown``) it continues with that fixed probability. Before ``rr_depth`` a path
+whose throughput is below ``rr_threshold`` (drpt's own formats; 0, Mitsuba's rule alone,
+for a Mitsuba XML scene) continues with probability ``max(throughput) / rr_threshold``:
+a path off a dark surface (a tyre, a car's interior) stops early unless it survives, where
+its few percent of the light cost a full bounce's queries. Surviving paths are
+divided by the probability, so no choice adds bias. As in Mitsuba, the
+adaptive probabilities use the throughput times ``eta^2`` (the relative IORs
 crossed), so paths inside glass are not killed for their radiance scaling.
 
 Delta lobes (glass, mirrors) have nothing to evaluate: next-event estimation
@@ -733,7 +737,11 @@ def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32 | None
     else:
         q = dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
     rr_on = depth >= opt.rr_depth
+    if opt.rr_threshold > 0.0:  # (before rr_depth: below the threshold only)
+        early = dr.max(beta) * dr.square(eta) * (1.0 / opt.rr_threshold)
+        q = dr.select(rr_on, q, early)
+        rr_on |= early < 1.0
     survive = u_rr < q
-    beta = dr.select(rr_on, beta / q, beta)
+    beta = dr.select(rr_on & survive, beta / q, beta)  # (q > 0 where a path survives)
     live = bs.valid & (~rr_on | survive) & (dr.max(beta) > 0.0)
     return wo, bs, beta, eta, depth, live
