@@ -236,7 +236,8 @@ def configs(bsdf: str, knobs=KNOBS[:4], depths=(2, 3, 5, 8), rr_depths=(1, 3, 10
     ``env_compensation`` and ``triangle_sampling``: the default row's settings
     (:func:`env_compensation_knob`, :func:`triangle_sampling_knob`), None where the scene
     has no such feature: no row)."""
-    rows = [Config("default", "auto accel, unbounded depth, RR from depth 5 (adaptive)", bsdf)]
+    below = f", below throughput {rr_threshold:g} before it" if rr_threshold > 0.0 else ""
+    rows = [Config("default", f"auto accel, unbounded depth, RR from depth 5 (adaptive){below}", bsdf)]
     # light tracing (ptracer) and adaptive sampling draw independent samples (drpt.options.resolve_sampler):
     # where the default row's sampler is another, their rows say so, as that is part of their change
     indep = "" if sampler == "independent" else "; independent samples"

@@ -684,8 +684,9 @@ def test_knobs_cli_smoke(tmp_path, capsys, cornell):
     with open(out / "knobs.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [(r["knob"], r["setting"]) for r in rows] == [
-        ("default", "auto accel, unbounded depth, RR from depth 5 (adaptive)"),
+        ("default", "auto accel, unbounded depth, RR from depth 5 (adaptive), below throughput 0.1 before it"),
         ("max depth", "2"), ("accel", "bvh"), ("accel", "grid")]
+    assert {r["rr_threshold"] for r in rows} == {"0.1"}  # (drpt's own format: the default)
     assert all(float(r["seconds"]) > 0 and float(r["samples_per_second"]) > 0 for r in rows)
     # direct light only loses a lot of light: a clear, significant negative bias
     depth2 = rows[1]
