@@ -732,13 +732,14 @@ def continue_path(scene: DeviceScene, opt: PathOptions, si, s, rng: PCG32 | None
     beta = s.beta * bs.weight
     eta = s.eta * bs.eta
     depth = s.depth + 1
+    scaled = dr.max(beta) * dr.square(eta)  # (the throughput both roulette rules read)
     if opt.rr_prob is not None:
         q = Float(opt.rr_prob)
     else:
-        q = dr.minimum(dr.max(beta) * dr.square(eta), 0.95)
+        q = dr.minimum(scaled, 0.95)
     rr_on = depth >= opt.rr_depth
     if opt.rr_threshold > 0.0:  # (before rr_depth: below the threshold only)
-        early = dr.max(beta) * dr.square(eta) * (1.0 / opt.rr_threshold)
+        early = scaled * (1.0 / opt.rr_threshold)
         q = dr.select(rr_on, q, early)
         rr_on |= early < 1.0
     survive = u_rr < q
